@@ -1,0 +1,200 @@
+"""Input guards shared by every public function.
+
+Each guard raises :class:`~robopercept.errors.InputError` whose message names what was
+expected, what came, and the fix. Guards return the (possibly converted) value so that
+call sites read ``image = check_image(image)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import InputError
+
+__all__ = [
+    "as_float",
+    "check_choice",
+    "check_dtype",
+    "check_finite",
+    "check_image",
+    "check_kernel",
+    "check_ndim",
+    "check_nonempty",
+    "check_odd_size",
+    "check_positive",
+    "check_range",
+    "check_shape",
+]
+
+IMAGE_DTYPES = (np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64, np.bool_)
+
+
+def _as_array(value: Any, name: str) -> np.ndarray:
+    if isinstance(value, np.ndarray):
+        return value
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # pragma: no cover - numpy raises many kinds
+        raise InputError(f"{name} must be array-like; got {type(value).__name__}: {exc}") from exc
+    if arr.dtype == object:
+        raise InputError(
+            f"{name} must be a numeric array; got {type(value).__name__} that NumPy reads "
+            "as dtype=object: pass a rectangular list or a numpy array"
+        )
+    return arr
+
+
+def check_ndim(value: Any, name: str, ndims: Iterable[int]) -> np.ndarray:
+    """Return ``value`` as an array whose number of dimensions is one of ``ndims``."""
+    arr = _as_array(value, name)
+    ndims = tuple(ndims)
+    if arr.ndim not in ndims:
+        expected = " or ".join(f"{d}-D" for d in ndims)
+        raise InputError(
+            f"{name} must be {expected}; got {arr.ndim}-D with shape {arr.shape}: "
+            "reshape it or pass one item at a time"
+        )
+    return arr
+
+
+def check_shape(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    """Return ``value`` as an array of ``shape`` (``None`` matches any length)."""
+    arr = _as_array(value, name)
+    ok = arr.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, arr.shape))
+    if not ok:
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise InputError(f"{name} must have shape {want}; got {arr.shape}")
+    return arr
+
+
+def check_dtype(value: Any, name: str, dtypes: Iterable[Any] = IMAGE_DTYPES) -> np.ndarray:
+    """Return ``value`` as an array whose dtype is one of ``dtypes``."""
+    arr = _as_array(value, name)
+    dtypes = tuple(np.dtype(d) for d in dtypes)
+    if arr.dtype not in dtypes:
+        names = ", ".join(d.name for d in dtypes)
+        raise InputError(
+            f"{name} must have dtype in ({names}); got {arr.dtype}: "
+            f"convert with {name}.astype(np.float32) (values in [0, 1]) or np.uint8"
+        )
+    return arr
+
+
+def check_finite(value: Any, name: str) -> np.ndarray:
+    """Return ``value`` as an array with no NaN or infinity."""
+    arr = _as_array(value, name)
+    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        bad = int(arr.size - np.count_nonzero(np.isfinite(arr)))
+        raise InputError(
+            f"{name} must be finite; got {bad} NaN/inf value(s): "
+            f"replace them first, e.g. np.nan_to_num({name})"
+        )
+    return arr
+
+
+def check_nonempty(value: Any, name: str) -> np.ndarray:
+    """Return ``value`` as an array with at least one element along every axis."""
+    arr = _as_array(value, name)
+    if arr.size == 0:
+        raise InputError(f"{name} must not be empty; got shape {arr.shape}")
+    return arr
+
+
+def check_range(value: float, name: str, low: float | None = None, high: float | None = None,
+                *, low_inclusive: bool = True, high_inclusive: bool = True) -> float:
+    """Return the scalar ``value`` after checking ``low <= value <= high``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name} must be a number; got {value!r}") from exc
+    if not np.isfinite(v):
+        raise InputError(f"{name} must be finite; got {value!r}")
+    too_low = low is not None and (v < low if low_inclusive else v <= low)
+    too_high = high is not None and (v > high if high_inclusive else v >= high)
+    if too_low or too_high:
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        lb = "[" if low_inclusive else "("
+        hb = "]" if high_inclusive else ")"
+        raise InputError(f"{name} must be in {lb}{lo}, {hi}{hb}; got {value!r}")
+    return v
+
+
+def check_positive(value: float, name: str) -> float:
+    """Return the scalar ``value`` after checking that it is > 0."""
+    return check_range(value, name, 0.0, None, low_inclusive=False)
+
+
+def check_odd_size(value: Any, name: str, minimum: int = 1) -> int:
+    """Return ``value`` as an int after checking that it is odd and >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InputError(f"{name} must be an odd integer; got {value!r}")
+    v = int(value)
+    if v < minimum or v % 2 == 0:
+        raise InputError(f"{name} must be an odd integer >= {minimum}; got {v}: try {max(minimum, v | 1)}")
+    return v
+
+
+def check_choice(value: Any, name: str, choices: Iterable[Any]) -> Any:
+    """Return ``value`` after checking that it is one of ``choices``."""
+    choices = tuple(choices)
+    if value not in choices:
+        raise InputError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
+    return value
+
+
+def check_image(image: Any, name: str = "image", *, allow_color: bool = True,
+                allow_bool: bool = False) -> np.ndarray:
+    """Return ``image`` as an ``(H, W)`` or ``(H, W, 3)`` array of a supported dtype.
+
+    Refuses channels-first arrays, empty images, NaN/inf and unsupported dtypes with a
+    message that names the fix.
+    """
+    arr = _as_array(image, name)
+    if arr.ndim == 3 and arr.shape[2] != 3:
+        hint = ""
+        if arr.shape[0] in (1, 3, 4) and arr.shape[2] > 4:
+            hint = f": channels-first? use {name}.transpose(1, 2, 0)"
+        elif arr.shape[2] == 4:
+            hint = f": RGBA? drop alpha with {name}[..., :3]"
+        elif arr.shape[2] == 1:
+            hint = f": use {name}[..., 0]"
+        raise InputError(f"{name} must be (H, W) or (H, W, 3); got {arr.shape}{hint}")
+    if arr.ndim == 3 and not allow_color:
+        raise InputError(
+            f"{name} must be a gray (H, W) image; got {arr.shape}: "
+            "convert with robopercept.imaging.rgb_to_gray"
+        )
+    if arr.ndim not in (2, 3):
+        raise InputError(
+            f"{name} must be (H, W)" + (" or (H, W, 3)" if allow_color else "")
+            + f"; got {arr.ndim}-D with shape {arr.shape}"
+        )
+    if arr.shape[0] == 0 or arr.shape[1] == 0:
+        raise InputError(f"{name} must not be empty; got shape {arr.shape}")
+    if arr.dtype == np.bool_ and not allow_bool:
+        raise InputError(f"{name} must be numeric; got dtype bool: use {name}.astype(np.uint8)")
+    check_dtype(arr, name)
+    return check_finite(arr, name)
+
+
+def check_kernel(kernel: Any, name: str = "kernel", ndim: int = 2) -> np.ndarray:
+    """Return ``kernel`` as a finite, non-empty float64 array of ``ndim`` dimensions."""
+    arr = check_ndim(kernel, name, (ndim,))
+    if arr.dtype.kind not in "biuf":
+        raise InputError(f"{name} must be numeric; got dtype {arr.dtype}")
+    arr = check_nonempty(arr, name).astype(np.float64)
+    return check_finite(arr, name)
+
+
+def as_float(image: np.ndarray) -> np.ndarray:
+    """Return a floating view/copy: float32 and float64 stay; integers become float32.
+
+    Values are not rescaled: a uint8 255 becomes 255.0.
+    """
+    if image.dtype in (np.float32, np.float64):
+        return image
+    return image.astype(np.float32)

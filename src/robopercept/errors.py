@@ -1,0 +1,29 @@
+"""Typed exceptions used across robopercept.
+
+Every error raised at a public boundary is one of these, and its message says what was
+expected, what came, and how to fix it.
+"""
+
+from __future__ import annotations
+
+__all__ = ["DegenerateError", "FileFormatError", "InputError", "RoboperceptError"]
+
+
+class RoboperceptError(Exception):
+    """Base class of every robopercept error."""
+
+
+class InputError(RoboperceptError, ValueError):
+    """An argument has the wrong shape, dtype, range or value.
+
+    Subclasses :class:`ValueError` so that code written against NumPy or OpenCV
+    conventions (``except ValueError``) keeps working.
+    """
+
+
+class DegenerateError(RoboperceptError, ArithmeticError):
+    """The data cannot determine the result (collinear samples, singular system, ...)."""
+
+
+class FileFormatError(RoboperceptError, OSError):
+    """A file is missing, truncated, corrupt or not of a supported format."""

@@ -1,0 +1,59 @@
+"""2-D image processing: filters, edges, colour, morphology, blobs, pyramids, I/O."""
+
+from robopercept.imaging.blobs import BlobFeatures, blob_features, label_components, otsu_threshold
+from robopercept.imaging.color import hsv_range_mask, hsv_to_rgb, rgb_to_gray, rgb_to_hsv
+from robopercept.imaging.edges import canny
+from robopercept.imaging.filters import (
+    box_filter,
+    convolve,
+    convolve_separable,
+    correlate,
+    correlate_separable,
+    derivative_kernel,
+    gaussian_blur,
+    gaussian_kernel,
+    gradient,
+    laplacian,
+    laplacian_of_gaussian,
+    median_filter,
+    sobel,
+)
+from robopercept.imaging.io import VideoReader, VideoWriter, read_image, write_image
+from robopercept.imaging.morphology import closing, dilate, erode, opening, structuring_element
+from robopercept.imaging.pyramids import gaussian_pyramid, pyr_down
+
+__all__ = [
+    "BlobFeatures",
+    "VideoReader",
+    "VideoWriter",
+    "blob_features",
+    "box_filter",
+    "canny",
+    "closing",
+    "convolve",
+    "convolve_separable",
+    "correlate",
+    "correlate_separable",
+    "derivative_kernel",
+    "dilate",
+    "erode",
+    "gaussian_blur",
+    "gaussian_kernel",
+    "gaussian_pyramid",
+    "gradient",
+    "hsv_range_mask",
+    "hsv_to_rgb",
+    "label_components",
+    "laplacian",
+    "laplacian_of_gaussian",
+    "median_filter",
+    "opening",
+    "otsu_threshold",
+    "pyr_down",
+    "read_image",
+    "rgb_to_gray",
+    "rgb_to_hsv",
+    "sobel",
+    "structuring_element",
+    "write_image",
+]

@@ -1,0 +1,339 @@
+"""Connected-component labelling and blob features.
+
+:func:`label_components` is a two-pass union-find labelling (Rosenfeld & Pfaltz): the
+first raster pass gives each foreground pixel a provisional label and records the
+equivalences of touching labels in a union-find forest whose roots are always the
+smallest label; the second pass replaces each label by its root's final number. Labels
+are therefore numbered in raster order of each blob's first pixel, as OpenCV does.
+
+:func:`blob_features` measures every blob at once with ``np.bincount`` (area, bounding
+box, centroid), a weighted count of border-pixel configurations (perimeter) and the
+Euler number from 2x2 bit-quads (holes).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from robopercept._checks import check_ndim
+from robopercept.errors import InputError
+
+__all__ = ["BlobFeatures", "blob_features", "label_components", "otsu_threshold"]
+
+
+@njit(cache=True, nogil=True)
+def _find(parent, i):  # pragma: no cover - compiled
+    root = i
+    while parent[root] != root:
+        root = parent[root]
+    while parent[i] != root:  # path compression
+        nxt = parent[i]
+        parent[i] = root
+        i = nxt
+    return root
+
+
+@njit(cache=True, nogil=True)
+def _union(parent, a, b):  # pragma: no cover - compiled
+    ra = _find(parent, a)
+    rb = _find(parent, b)
+    if ra < rb:
+        parent[rb] = ra
+        return ra
+    if rb < ra:
+        parent[ra] = rb
+    return rb
+
+
+@njit(cache=True, nogil=True)
+def _label_kernel(mask, eight, labels):  # pragma: no cover - compiled
+    h, w = mask.shape
+    parent = np.empty(h * w // 2 + 2, dtype=np.int32)
+    parent[0] = 0
+    n = 0
+    for y in range(h):
+        for x in range(w):
+            if not mask[y, x]:
+                labels[y, x] = 0
+                continue
+            cur = 0
+            # neighbours already visited: W, N (and NW, NE with 8-connectivity)
+            if x > 0 and labels[y, x - 1] > 0:
+                cur = labels[y, x - 1]
+            if y > 0:
+                up = labels[y - 1, x]
+                if up > 0:
+                    cur = up if cur == 0 else _union(parent, cur, up)
+                if eight:
+                    if x > 0:
+                        nw = labels[y - 1, x - 1]
+                        if nw > 0:
+                            cur = nw if cur == 0 else _union(parent, cur, nw)
+                    if x + 1 < w:
+                        ne = labels[y - 1, x + 1]
+                        if ne > 0:
+                            cur = ne if cur == 0 else _union(parent, cur, ne)
+            if cur == 0:
+                n += 1
+                if n >= parent.shape[0]:
+                    grown = np.empty(parent.shape[0] * 2, dtype=np.int32)
+                    grown[: parent.shape[0]] = parent
+                    parent = grown
+                parent[n] = n
+                cur = n
+            labels[y, x] = cur
+    # final numbering: roots in increasing order = raster order of first pixels
+    final = np.zeros(n + 1, dtype=np.int32)
+    count = 0
+    for i in range(1, n + 1):
+        r = _find(parent, i)
+        if r == i:
+            count += 1
+            final[i] = count
+        else:
+            final[i] = final[r]
+    for y in range(h):
+        for x in range(w):
+            labels[y, x] = final[labels[y, x]]
+    return count
+
+
+def label_components(mask: np.ndarray, connectivity: int = 8) -> tuple[np.ndarray, int]:
+    """Label the connected components of a binary mask.
+
+    Parameters
+    ----------
+    mask : (H, W) array_like
+        Nonzero pixels are foreground.
+    connectivity : {4, 8}
+        8 joins diagonal neighbours too (OpenCV's default).
+
+    Returns
+    -------
+    labels : (H, W) int32 ndarray
+        0 for background, ``1..n`` for the components in raster order of their first
+        pixel: the same numbering as ``cv2.connectedComponents(mask, connectivity=...)``.
+    n : int
+        Number of components (background not counted).
+    """
+    mask = check_ndim(mask, "mask", (2,))
+    if mask.dtype.kind not in "biuf":
+        raise InputError(f"mask must be bool or numeric; got dtype {mask.dtype}")
+    if connectivity not in (4, 8):
+        raise InputError(f"connectivity must be 4 or 8; got {connectivity!r}")
+    fg = np.ascontiguousarray(mask != 0)
+    labels = np.empty(fg.shape, dtype=np.int32)
+    if fg.size == 0:
+        return labels, 0
+    n = _label_kernel(fg, connectivity == 8, labels)
+    return labels, int(n)
+
+
+@dataclass(frozen=True)
+class BlobFeatures:
+    """Per-blob measurements; every array has one row per blob, in label order.
+
+    Attributes
+    ----------
+    labels : (n,) int ndarray
+        The blob labels.
+    area : (n,) int ndarray
+        Pixel count A.
+    bbox : (n, 4) int ndarray
+        ``x, y, width, height`` of the bounding box (OpenCV's ``CC_STAT_*`` order).
+    centroid : (n, 2) float ndarray
+        ``(x, y)`` mean pixel position.
+    aspect_ratio : (n,) float ndarray
+        Bounding-box height / width.
+    perimeter : (n,) float ndarray
+        Boundary length P in pixels (see :func:`blob_features`).
+    circularity : (n,) float ndarray
+        :math:`4 \\pi A / P^2` (1 for a disc, smaller for elongated or ragged shapes).
+    holes : (n,) int ndarray
+        Number of holes, ``1 - Euler number`` of the blob.
+    """
+
+    labels: np.ndarray
+    area: np.ndarray
+    bbox: np.ndarray
+    centroid: np.ndarray
+    aspect_ratio: np.ndarray
+    perimeter: np.ndarray
+    circularity: np.ndarray
+    holes: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.labels.shape[0])
+
+    def to_records(self) -> list[dict[str, Any]]:
+        """One plain dict per blob (JSON-serializable)."""
+        return [
+            {
+                "label": int(self.labels[i]),
+                "area": int(self.area[i]),
+                "bbox": [int(v) for v in self.bbox[i]],
+                "centroid": [float(v) for v in self.centroid[i]],
+                "aspect_ratio": float(self.aspect_ratio[i]),
+                "perimeter": float(self.perimeter[i]),
+                "circularity": float(self.circularity[i]),
+                "holes": int(self.holes[i]),
+            }
+            for i in range(len(self))
+        ]
+
+
+# Weights of the border-pixel configurations: code = 1 (the pixel) + 2 per 4-neighbour
+# and 10 per diagonal neighbour that is also a border pixel of the same blob.
+_PERIMETER_WEIGHTS = np.zeros(50)
+_PERIMETER_WEIGHTS[[5, 7, 15, 17, 25, 27]] = 1.0
+_PERIMETER_WEIGHTS[[21, 33]] = math.sqrt(2.0)
+_PERIMETER_WEIGHTS[[13, 23]] = (1.0 + math.sqrt(2.0)) / 2.0
+
+
+def _perimeter(padded: np.ndarray, n: int) -> np.ndarray:
+    c = padded[1:-1, 1:-1]
+    inner = (c > 0) & (padded[:-2, 1:-1] == c) & (padded[2:, 1:-1] == c)
+    inner &= (padded[1:-1, :-2] == c) & (padded[1:-1, 2:] == c)
+    border = np.where((c > 0) & ~inner, c, 0)
+    bp = np.pad(border, 1)
+    code = (border > 0).astype(np.int32)
+    for dy, dx, wgt in ((-1, 0, 2), (1, 0, 2), (0, -1, 2), (0, 1, 2),
+                        (-1, -1, 10), (-1, 1, 10), (1, -1, 10), (1, 1, 10)):
+        nb = bp[1 + dy : bp.shape[0] - 1 + dy, 1 + dx : bp.shape[1] - 1 + dx]
+        code += wgt * ((nb == border) & (border > 0))
+    sel = border > 0
+    return np.bincount(border[sel], weights=_PERIMETER_WEIGHTS[code[sel]], minlength=n + 1)
+
+
+def _euler(padded: np.ndarray, n: int) -> np.ndarray:
+    a, b = padded[:-1, :-1], padded[:-1, 1:]
+    c, d = padded[1:, :-1], padded[1:, 1:]
+    total = np.zeros(n + 1)
+    earlier: list[np.ndarray] = []
+    for lab in (a, b, c, d):
+        valid = lab > 0
+        for prev in earlier:
+            valid &= lab != prev
+        earlier.append(lab)
+        ea, eb, ec, ed = (a == lab), (b == lab), (c == lab), (d == lab)
+        count = ea.astype(np.int8) + eb + ec + ed
+        diag = (count == 2) & ((ea & ed) | (eb & ec))
+        contrib = np.where(count == 1, 1.0, np.where(count == 3, -1.0, np.where(diag, -2.0, 0.0)))
+        total += np.bincount(lab[valid], weights=contrib[valid], minlength=n + 1)
+    return total / 4.0
+
+
+def blob_features(labels: np.ndarray) -> BlobFeatures:
+    r"""Measure every labelled blob.
+
+    - area :math:`A`, bounding box and centroid from pixel counts;
+    - perimeter :math:`P`: the border pixels (foreground pixels with a 4-neighbour
+      outside the blob) weighted by their local configuration (1 for straight runs,
+      :math:`\sqrt 2` for diagonal steps, :math:`(1 + \sqrt 2)/2` for corners): the
+      estimator of ``skimage.measure.perimeter(..., neighborhood=4)``, which
+      ``regionprops`` reports, and which this matches exactly;
+    - circularity :math:`4 \pi A / P^2`;
+    - holes :math:`1 - E`, with the Euler number of the 8-connected blob from 2x2
+      bit-quads, :math:`E = (n_{Q1} - n_{Q3} - 2 n_{QD}) / 4` (Gray 1971).
+
+    Parameters
+    ----------
+    labels : (H, W) int ndarray
+        From :func:`label_components`: 0 background, blobs ``1..n``. Labels that do not
+        occur are skipped.
+
+    Returns
+    -------
+    BlobFeatures
+    """
+    labels = check_ndim(labels, "labels", (2,))
+    if labels.dtype.kind not in "iu":
+        raise InputError(f"labels must be an integer array; got {labels.dtype}: "
+                         "label a mask first with label_components(mask)")
+    if labels.size and labels.min() < 0:
+        raise InputError("labels must be >= 0 (0 is background)")
+    lab = labels.astype(np.int64, copy=False)
+    n = int(lab.max()) if lab.size else 0
+    h, w = lab.shape
+    flat = lab.ravel()
+    area = np.bincount(flat, minlength=n + 1)
+    present = np.nonzero(area[1:])[0] + 1
+    ys, xs = np.divmod(np.arange(flat.size), w) if flat.size else (np.zeros(0), np.zeros(0))
+    cx = np.bincount(flat, weights=xs, minlength=n + 1)
+    cy = np.bincount(flat, weights=ys, minlength=n + 1)
+    fg = flat > 0
+    big = np.iinfo(np.int64).max
+    xmin = np.full(n + 1, big)
+    ymin = np.full(n + 1, big)
+    xmax = np.full(n + 1, -1)
+    ymax = np.full(n + 1, -1)
+    np.minimum.at(xmin, flat[fg], xs[fg].astype(np.int64))
+    np.minimum.at(ymin, flat[fg], ys[fg].astype(np.int64))
+    np.maximum.at(xmax, flat[fg], xs[fg].astype(np.int64))
+    np.maximum.at(ymax, flat[fg], ys[fg].astype(np.int64))
+    padded = np.pad(lab, 1)
+    perimeter = _perimeter(padded, n)
+    euler = _euler(padded, n)
+    sel = present
+    a = area[sel]
+    bw = xmax[sel] - xmin[sel] + 1
+    bh = ymax[sel] - ymin[sel] + 1
+    per = perimeter[sel]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        circ = np.where(per > 0, 4.0 * np.pi * a / np.maximum(per, 1e-300) ** 2, 0.0)
+    return BlobFeatures(
+        labels=sel.astype(np.int64),
+        area=a.astype(np.int64),
+        bbox=np.stack([xmin[sel], ymin[sel], bw, bh], axis=1).astype(np.int64).reshape(-1, 4),
+        centroid=np.stack([cx[sel] / np.maximum(a, 1), cy[sel] / np.maximum(a, 1)],
+                          axis=1).reshape(-1, 2),
+        aspect_ratio=(bh / bw).astype(np.float64),
+        perimeter=per.astype(np.float64),
+        circularity=circ.astype(np.float64),
+        holes=np.rint(1.0 - euler[sel]).astype(np.int64),
+    )
+
+
+def otsu_threshold(image: np.ndarray) -> float:
+    r"""Otsu's threshold: the level :math:`t` maximizing the between-class variance
+    :math:`\omega_0(t) \omega_1(t) (\mu_0(t) - \mu_1(t))^2` of the grey-level histogram.
+
+    Integer images use one bin per level (uint8: 256 bins), like
+    ``cv2.threshold(..., cv2.THRESH_OTSU)``, which returns the same level; float images use
+    256 bins over their range. Pixels ``> t`` are foreground.
+
+    Parameters
+    ----------
+    image : (H, W) ndarray
+
+    Returns
+    -------
+    float
+    """
+    from robopercept._checks import check_image
+
+    image = check_image(image, allow_color=False)
+    if image.dtype == np.uint8:
+        hist = np.bincount(image.ravel(), minlength=256).astype(np.float64)
+        centers = np.arange(256, dtype=np.float64)
+    else:
+        lo, hi = float(image.min()), float(image.max())
+        if hi <= lo:
+            return lo
+        hist, edges = np.histogram(image, bins=256, range=(lo, hi))
+        hist = hist.astype(np.float64)
+        centers = edges[:-1]
+    p = hist / hist.sum()
+    w0 = np.cumsum(p)
+    mu = np.cumsum(p * centers)
+    mu_t = mu[-1]
+    w1 = 1.0 - w0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        between = (mu_t * w0 - mu) ** 2 / (w0 * w1)
+    between[~np.isfinite(between)] = -1.0
+    return float(centers[int(np.argmax(between))])

@@ -1,0 +1,216 @@
+"""Colour conversions: RGB <-> HSV, RGB -> gray, and HSV range masks.
+
+Colour order is RGB everywhere in robopercept (OpenCV's readers give BGR: convert at the
+I/O boundary).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numba import njit
+
+from robopercept._checks import check_choice, check_image, check_shape
+from robopercept.errors import InputError
+
+__all__ = ["hsv_range_mask", "hsv_to_rgb", "rgb_to_gray", "rgb_to_hsv"]
+
+Scale = Literal["opencv", "unit"]
+
+
+@njit(cache=True, nogil=True)
+def _rgb_to_hsv_kernel(rgb, vmax, out, hscale, sscale, vscale, round_out):  # pragma: no cover
+    n = rgb.shape[0]
+    for i in range(n):
+        r = rgb[i, 0] / vmax
+        g = rgb[i, 1] / vmax
+        b = rgb[i, 2] / vmax
+        v = max(r, g, b)
+        mn = min(r, g, b)
+        diff = v - mn
+        s = diff / v if v > 0 else 0.0
+        if diff <= 0:
+            h = 0.0
+        elif v == r:
+            h = 60.0 * (g - b) / diff
+        elif v == g:
+            h = 120.0 + 60.0 * (b - r) / diff
+        else:
+            h = 240.0 + 60.0 * (r - g) / diff
+        if h < 0:
+            h += 360.0
+        h *= hscale
+        s *= sscale
+        v *= vscale
+        if round_out:
+            h = np.floor(h + 0.5)
+            if h >= 180.0:  # 359.5 deg rounds to 180 -> wrap like cv2 (H in 0..179)
+                h -= 180.0
+            s = np.floor(s + 0.5)
+            v = np.floor(v + 0.5)
+        out[i, 0] = h
+        out[i, 1] = s
+        out[i, 2] = v
+
+
+def _scales(scale: str) -> tuple[float, float, float]:
+    # the kernel computes H in degrees, S and V in [0, 1]
+    if scale == "opencv":
+        return 0.5, 255.0, 255.0
+    return 1.0 / 360.0, 1.0, 1.0
+
+
+def rgb_to_hsv(image: np.ndarray, scale: Scale = "opencv") -> np.ndarray:
+    r"""Convert RGB to HSV.
+
+    With :math:`V = \max(R, G, B)`, :math:`m = \min(R, G, B)`, :math:`\Delta = V - m`:
+
+    .. math::
+        S = \Delta / V \; (0 \text{ if } V = 0), \qquad
+        H = 60^\circ \times \begin{cases}
+            (G - B)/\Delta & V = R \\ 2 + (B - R)/\Delta & V = G \\ 4 + (R - G)/\Delta & V = B
+        \end{cases} \pmod{360^\circ}
+
+    ``scale="opencv"`` gives H in [0, 180) (degrees / 2), S and V in [0, 255], as
+    ``cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)`` on uint8; the result is uint8 (rounded) for
+    uint8 input and float32 otherwise. ``scale="unit"`` gives H, S, V in [0, 1] as float32
+    (float64 stays float64), like ``skimage.color.rgb2hsv``.
+
+    Parameters
+    ----------
+    image : (H, W, 3) ndarray
+        RGB; uint8 (0..255), uint16 (0..65535) or float in [0, 1].
+    scale : {'opencv', 'unit'}
+
+    Returns
+    -------
+    (H, W, 3) ndarray
+    """
+    image = check_image(image)
+    check_choice(scale, "scale", ("opencv", "unit"))
+    if image.ndim != 3:
+        raise InputError(f"image must be RGB (H, W, 3); got {image.shape}: a gray image has no hue")
+    if image.dtype.kind in "ui":
+        vmax = float(np.iinfo(image.dtype).max)
+    else:
+        vmax = 1.0
+    round_out = scale == "opencv" and image.dtype == np.uint8
+    if round_out:
+        out_dtype = np.dtype(np.uint8)
+    elif image.dtype == np.float64:
+        out_dtype = np.dtype(np.float64)
+    else:
+        out_dtype = np.dtype(np.float32)
+    rgb = np.ascontiguousarray(image).reshape(-1, 3)
+    out = np.empty(rgb.shape, dtype=out_dtype)
+    _rgb_to_hsv_kernel(rgb, vmax, out, *_scales(scale), round_out)
+    return out.reshape(image.shape)
+
+
+def hsv_to_rgb(hsv: np.ndarray, scale: Scale = "opencv") -> np.ndarray:
+    r"""Convert HSV back to RGB (the inverse of :func:`rgb_to_hsv`).
+
+    With :math:`C = V S`, :math:`H' = H / 60^\circ`, :math:`X = C (1 - |H' \bmod 2 - 1|)`,
+    :math:`(R, G, B) = (R_1, G_1, B_1) + (V - C)` where :math:`(R_1, G_1, B_1)` is
+    :math:`(C, X, 0)`, :math:`(X, C, 0)`, ... by the sextant of :math:`H'`.
+
+    Parameters
+    ----------
+    hsv : (H, W, 3) ndarray
+        In the ranges of ``scale``.
+    scale : {'opencv', 'unit'}
+
+    Returns
+    -------
+    (H, W, 3) ndarray
+        uint8 for uint8 OpenCV-scaled input; otherwise float in [0, 1].
+    """
+    hsv = check_image(hsv, "hsv")
+    check_choice(scale, "scale", ("opencv", "unit"))
+    if hsv.ndim != 3:
+        raise InputError(f"hsv must be (H, W, 3); got {hsv.shape}")
+    work = hsv.astype(np.float64)
+    if scale == "opencv":
+        h, s, v = work[..., 0] * 2.0, work[..., 1] / 255.0, work[..., 2] / 255.0
+    else:
+        h, s, v = work[..., 0] * 360.0, work[..., 1], work[..., 2]
+    c = v * s
+    hp = np.mod(h, 360.0) / 60.0
+    x = c * (1.0 - np.abs(np.mod(hp, 2.0) - 1.0))
+    zero = np.zeros_like(c)
+    sextant = np.floor(hp).astype(np.int64) % 6
+    r1 = np.choose(sextant, [c, x, zero, zero, x, c])
+    g1 = np.choose(sextant, [x, c, c, x, zero, zero])
+    b1 = np.choose(sextant, [zero, zero, x, c, c, x])
+    m = v - c
+    rgb = np.stack([r1 + m, g1 + m, b1 + m], axis=-1)
+    if hsv.dtype == np.uint8 and scale == "opencv":
+        return np.clip(np.floor(rgb * 255.0 + 0.5), 0, 255).astype(np.uint8)
+    return rgb.astype(np.float64 if hsv.dtype == np.float64 else np.float32)
+
+
+def rgb_to_gray(image: np.ndarray) -> np.ndarray:
+    r"""Luma :math:`Y = 0.299 R + 0.587 G + 0.114 B` (ITU-R BT.601), as ``cv2.COLOR_RGB2GRAY``.
+
+    Gray input is returned unchanged. Integer input is rounded back to its dtype.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) ndarray
+
+    Returns
+    -------
+    (H, W) ndarray
+        Same dtype as ``image``.
+    """
+    image = check_image(image)
+    if image.ndim == 2:
+        return image
+    y = image[..., 0] * np.float32(0.299) + image[..., 1] * np.float32(0.587)
+    y += image[..., 2] * np.float32(0.114)
+    if image.dtype.kind in "ui":
+        info = np.iinfo(image.dtype)
+        return np.clip(np.floor(y + 0.5), info.min, info.max).astype(image.dtype)
+    return y.astype(image.dtype)
+
+
+def hsv_range_mask(hsv: np.ndarray, low: tuple[float, float, float] | np.ndarray,
+                   high: tuple[float, float, float] | np.ndarray) -> np.ndarray:
+    r"""Pixels whose HSV lies in the box ``low <= (H, S, V) <= high`` (bounds inclusive).
+
+    Hue is circular: when ``low[0] > high[0]`` the hue range wraps around, so
+    ``low=(170, 50, 50), high=(10, 255, 255)`` on the OpenCV scale selects red, i.e.
+    :math:`H \ge 170 \lor H \le 10`. Without wrap-around this is
+    ``cv2.inRange(hsv, low, high) > 0``.
+
+    Parameters
+    ----------
+    hsv : (H, W, 3) ndarray
+        An image from :func:`rgb_to_hsv` (any scale; the bounds use the same scale).
+    low, high : (3,) array_like
+        Lower and upper bounds of H, S, V.
+
+    Returns
+    -------
+    (H, W) bool ndarray
+    """
+    hsv = check_image(hsv, "hsv")
+    if hsv.ndim != 3:
+        raise InputError(f"hsv must be (H, W, 3); got {hsv.shape}: convert with rgb_to_hsv")
+    low = check_shape(np.asarray(low, dtype=np.float64), "low", (3,))
+    high = check_shape(np.asarray(high, dtype=np.float64), "high", (3,))
+    if not (np.isfinite(low).all() and np.isfinite(high).all()):
+        raise InputError(f"low and high must be finite; got low={low}, high={high}")
+    if low[1] > high[1] or low[2] > high[2]:
+        raise InputError(
+            f"low must be <= high for S and V; got low={low.tolist()}, high={high.tolist()}: "
+            "swap them (only hue may wrap around)"
+        )
+    h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
+    sv = (s >= low[1]) & (s <= high[1]) & (v >= low[2]) & (v <= high[2])
+    if low[0] <= high[0]:
+        hue = (h >= low[0]) & (h <= high[0])
+    else:
+        hue = (h >= low[0]) | (h <= high[0])
+    return hue & sv

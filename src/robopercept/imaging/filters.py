@@ -1,0 +1,823 @@
+"""Linear and rank filters: correlation, convolution, Gaussian, box, median, derivatives.
+
+All filters work per channel on ``(H, W)`` and ``(H, W, 3)`` images and share one border
+convention, named as in OpenCV:
+
+=============  ==========================  ======================
+``border``     padding of ``abcdefgh``     OpenCV / SciPy name
+=============  ==========================  ======================
+``reflect101`` ``gfedcb|abcdefgh|gfedcba`` BORDER_REFLECT_101 / ``mirror``
+``reflect``    ``fedcba|abcdefgh|hgfedcb`` BORDER_REFLECT / ``reflect``
+``replicate``  ``aaaaaa|abcdefgh|hhhhhhh`` BORDER_REPLICATE / ``nearest``
+``constant``   ``cccccc|abcdefgh|ccccccc`` BORDER_CONSTANT / ``constant``
+=============  ==========================  ======================
+
+``reflect101`` is the default, as in OpenCV.
+
+Output dtypes: linear filters that can produce negative or fractional values
+(:func:`correlate`, :func:`convolve`, derivatives) return float32 for integer input and
+keep float32/float64 as they are; smoothing filters (:func:`gaussian_blur`,
+:func:`box_filter`, :func:`median_filter`) keep the input dtype, rounding and saturating
+integers as OpenCV does. Values are never rescaled.
+
+The two numba kernels below loop over the kernel taps outside and over a contiguous image
+row inside, so the inner loop vectorizes; an ``(H, W, C)`` image is seen as an
+``(H, W*C)`` array whose horizontal tap stride is ``C``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from numba import njit
+
+from robopercept._checks import (
+    check_choice,
+    check_image,
+    check_kernel,
+    check_odd_size,
+    check_positive,
+    check_range,
+)
+from robopercept.errors import InputError
+
+__all__ = [
+    "BORDERS",
+    "box_filter",
+    "convolve",
+    "convolve_separable",
+    "correlate",
+    "correlate_separable",
+    "derivative_kernel",
+    "gaussian_blur",
+    "gaussian_kernel",
+    "gradient",
+    "laplacian",
+    "laplacian_of_gaussian",
+    "median_filter",
+    "sobel",
+]
+
+Border = Literal["reflect101", "reflect", "replicate", "constant"]
+BORDERS: tuple[str, ...] = ("reflect101", "reflect", "replicate", "constant")
+
+
+# --------------------------------------------------------------------------- borders
+def border_indices(n: int, before: int, after: int, border: str) -> np.ndarray:
+    """Source index for each position of a padded axis.
+
+    Parameters
+    ----------
+    n : int
+        Length of the axis.
+    before, after : int
+        Padding added before and after.
+    border : str
+        One of :data:`BORDERS`.
+
+    Returns
+    -------
+    (before + n + after,) int64 ndarray
+        Index into ``0 .. n-1``, or ``-1`` where the constant value is used.
+    """
+    i = np.arange(-before, n + after, dtype=np.int64)
+    if border == "constant":
+        return np.where((i >= 0) & (i < n), i, -1)
+    if border == "replicate" or n == 1:
+        return np.clip(i, 0, n - 1)
+    if border == "reflect101":
+        period = 2 * n - 2
+        m = np.mod(i, period)
+        return np.where(m >= n, period - m, m)
+    # reflect: period 2n, the edge sample repeated
+    m = np.mod(i, 2 * n)
+    return np.where(m >= n, 2 * n - 1 - m, m)
+
+
+# --------------------------------------------------------------------------- kernels
+@njit(cache=True, nogil=True)
+def _store_row(dst, acc, is_int, lo, hi):  # pragma: no cover - compiled
+    if is_int:
+        for x in range(acc.shape[0]):
+            v = math.floor(acc[x] + 0.5)
+            if v < lo:
+                v = lo
+            elif v > hi:
+                v = hi
+            dst[x] = v
+    else:
+        for x in range(acc.shape[0]):
+            dst[x] = acc[x]
+
+
+@njit(cache=True, nogil=True)
+def _pad_row(srow, cidx, channels, cval, buf):  # pragma: no cover - compiled
+    for j in range(cidx.shape[0]):
+        s = cidx[j]
+        if s < 0:
+            for c in range(channels):
+                buf[j * channels + c] = cval
+        else:
+            for c in range(channels):
+                buf[j * channels + c] = srow[s * channels + c]
+
+
+@njit(cache=True, nogil=True)
+def _taps1(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
+    """res[x] = sum_k kx[k] acc[x + (k - ax) 1], the border pixels through ``cidx``.
+
+    Tap stride 1 (gray): a literal, so LLVM vectorizes the loop.
+    """
+    n = kx.shape[0]
+    width = cidx.shape[0] - n + 1
+    lo = ax * 1
+    hi = (width - (n - 1 - ax)) * 1
+    if hi > lo:
+        w0 = kx[0]
+        dst = res[lo:hi]
+        seg = acc[lo - ax * 1 :]
+        for x in range(hi - lo):
+            dst[x] = w0 * seg[x]
+        for k in range(1, n):
+            wk = kx[k]
+            seg = acc[lo + (k - ax) * 1 :]
+            for x in range(hi - lo):
+                dst[x] += wk * seg[x]
+    else:
+        lo = hi = 0
+    for p in range(width):
+        if lo <= p * 1 < hi:
+            continue
+        for c in range(1):
+            v = 0.0
+            for k in range(n):
+                s = cidx[p + k]
+                v += kx[k] * (const if s < 0 else acc[s * 1 + c])
+            res[p * 1 + c] = v
+
+
+@njit(cache=True, nogil=True)
+def _taps3(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
+    """res[x] = sum_k kx[k] acc[x + (k - ax) 3], the border pixels through ``cidx``.
+
+    Tap stride 3 (RGB): a literal, so LLVM vectorizes the loop.
+    """
+    n = kx.shape[0]
+    width = cidx.shape[0] - n + 1
+    lo = ax * 3
+    hi = (width - (n - 1 - ax)) * 3
+    if hi > lo:
+        w0 = kx[0]
+        dst = res[lo:hi]
+        seg = acc[lo - ax * 3 :]
+        for x in range(hi - lo):
+            dst[x] = w0 * seg[x]
+        for k in range(1, n):
+            wk = kx[k]
+            seg = acc[lo + (k - ax) * 3 :]
+            for x in range(hi - lo):
+                dst[x] += wk * seg[x]
+    else:
+        lo = hi = 0
+    for p in range(width):
+        if lo <= p * 3 < hi:
+            continue
+        for c in range(3):
+            v = 0.0
+            for k in range(n):
+                s = cidx[p + k]
+                v += kx[k] * (const if s < 0 else acc[s * 3 + c])
+            res[p * 3 + c] = v
+
+
+@njit(cache=True, nogil=True)
+def _taps_any(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
+    """res[x] = sum_k kx[k] acc[x + (k - ax) channels], the border pixels through ``cidx``.
+
+    Any tap stride (slower: not vectorized).
+    """
+    n = kx.shape[0]
+    width = cidx.shape[0] - n + 1
+    lo = ax * channels
+    hi = (width - (n - 1 - ax)) * channels
+    if hi > lo:
+        w0 = kx[0]
+        dst = res[lo:hi]
+        seg = acc[lo - ax * channels :]
+        for x in range(hi - lo):
+            dst[x] = w0 * seg[x]
+        for k in range(1, n):
+            wk = kx[k]
+            seg = acc[lo + (k - ax) * channels :]
+            for x in range(hi - lo):
+                dst[x] += wk * seg[x]
+    else:
+        lo = hi = 0
+    for p in range(width):
+        if lo <= p * channels < hi:
+            continue
+        for c in range(channels):
+            v = 0.0
+            for k in range(n):
+                s = cidx[p + k]
+                v += kx[k] * (const if s < 0 else acc[s * channels + c])
+            res[p * channels + c] = v
+
+
+@njit(cache=True, nogil=True)
+def _separable_kernel(src, kx, ky, ax, cidx, ridx, channels, cval, out, is_int, lo, hi):  # pragma: no cover
+    """out = kx (horizontal) o ky (vertical) correlation of src; src, out: (H, W*C).
+
+    One fused pass per output row: the vertical taps accumulate source rows into ``acc``,
+    then the horizontal taps write ``res``; the branches on ``channels`` give LLVM a
+    literal tap stride, which it needs to vectorize.
+    """
+    height, length = out.shape
+    ny = ky.shape[0]
+    acc = np.empty(length, dtype=kx.dtype)
+    res = np.empty(length, dtype=kx.dtype)
+    const_row = cval * ky.sum()
+    for y in range(height):
+        r = ridx[y]
+        w0 = ky[0]
+        if r < 0:
+            for x in range(length):
+                acc[x] = w0 * cval
+        else:
+            srow = src[r]
+            for x in range(length):
+                acc[x] = w0 * srow[x]
+        for k in range(1, ny):
+            r = ridx[y + k]
+            wk = ky[k]
+            if r < 0:
+                c = wk * cval
+                for x in range(length):
+                    acc[x] += c
+            else:
+                srow = src[r]
+                for x in range(length):
+                    acc[x] += wk * srow[x]
+        if channels == 1:
+            _taps1(acc, kx, ax, cidx, 1, const_row, res)
+        elif channels == 3:
+            _taps3(acc, kx, ax, cidx, 3, const_row, res)
+        else:
+            _taps_any(acc, kx, ax, cidx, channels, const_row, res)
+        _store_row(out[y], res, is_int, lo, hi)
+
+
+@njit(cache=True, nogil=True)
+def _correlate_kernel(src, kernel, cidx, ridx, channels, cval, out, is_int, lo, hi):  # pragma: no cover
+    """Full 2-D correlation; src, out: (H, W*C); kernel: (kh, kw)."""
+    height, length = out.shape
+    src_h = src.shape[0]
+    kh, kw = kernel.shape
+    plen = cidx.shape[0] * channels
+    padded = np.empty((src_h + 1, plen), dtype=kernel.dtype)
+    for y in range(src_h):
+        _pad_row(src[y], cidx, channels, cval, padded[y])
+    for x in range(plen):
+        padded[src_h, x] = cval
+    acc = np.empty(length, dtype=kernel.dtype)
+    for y in range(height):
+        for x in range(length):
+            acc[x] = 0
+        for i in range(kh):
+            r = ridx[y + i]
+            prow = padded[src_h] if r < 0 else padded[r]
+            for j in range(kw):
+                wk = kernel[i, j]
+                if wk == 0:
+                    continue
+                seg = prow[j * channels :]
+                for x in range(length):
+                    acc[x] += wk * seg[x]
+        _store_row(out[y], acc, is_int, lo, hi)
+
+
+# --------------------------------------------------------------------------- drivers
+def _out_dtype(image: np.ndarray, keep_dtype: bool) -> np.dtype:
+    if keep_dtype or image.dtype.kind == "f":
+        return image.dtype
+    return np.dtype(np.float32)
+
+
+def _work_dtype(image: np.ndarray) -> np.dtype:
+    return np.dtype(np.float64) if image.dtype == np.float64 else np.dtype(np.float32)
+
+
+def _int_limits(dtype: np.dtype) -> tuple[bool, float, float]:
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        return True, float(info.min), float(info.max)
+    return False, 0.0, 0.0
+
+
+def _as_rows(image: np.ndarray) -> tuple[np.ndarray, int]:
+    """View an (H, W) or (H, W, C) image as a contiguous (H, W*C) array."""
+    channels = 1 if image.ndim == 2 else image.shape[2]
+    src = np.ascontiguousarray(image).reshape(image.shape[0], image.shape[1] * channels)
+    return src, channels
+
+
+def _check_border(border: str, cval: float) -> float:
+    check_choice(border, "border", BORDERS)
+    return check_range(cval, "cval")
+
+
+def _anchor(size: int, anchor: int | None, name: str) -> int:
+    if anchor is None:
+        return size // 2
+    if not 0 <= int(anchor) < size:
+        raise InputError(f"{name} must be in [0, {size - 1}] for a kernel of {size}; got {anchor}")
+    return int(anchor)
+
+
+def _run_separable(image: np.ndarray, kx: np.ndarray, ky: np.ndarray, border: str,
+                   cval: float, out_dtype: np.dtype, ax: int | None = None,
+                   ay: int | None = None) -> np.ndarray:
+    work = _work_dtype(image)
+    ax = _anchor(kx.size, ax, "anchor x")
+    ay = _anchor(ky.size, ay, "anchor y")
+    src, channels = _as_rows(image)
+    h, w = image.shape[:2]
+    cidx = border_indices(w, ax, kx.size - 1 - ax, border)
+    ridx = border_indices(h, ay, ky.size - 1 - ay, border)
+    out = np.empty(src.shape, dtype=out_dtype)
+    is_int, lo, hi = _int_limits(out_dtype)
+    _separable_kernel(src, kx.astype(work), ky.astype(work), ax, cidx, ridx, channels,
+                      work.type(cval), out, is_int, lo, hi)
+    return out.reshape(image.shape)
+
+
+def _run_correlate(image: np.ndarray, kernel: np.ndarray, border: str, cval: float,
+                   out_dtype: np.dtype, anchor: tuple[int, int] | None = None) -> np.ndarray:
+    work = _work_dtype(image)
+    kh, kw = kernel.shape
+    ax, ay = (None, None) if anchor is None else anchor
+    ax = _anchor(kw, ax, "anchor x")
+    ay = _anchor(kh, ay, "anchor y")
+    src, channels = _as_rows(image)
+    h, w = image.shape[:2]
+    cidx = border_indices(w, ax, kw - 1 - ax, border)
+    ridx = border_indices(h, ay, kh - 1 - ay, border)
+    out = np.empty(src.shape, dtype=out_dtype)
+    is_int, lo, hi = _int_limits(out_dtype)
+    _correlate_kernel(src, np.ascontiguousarray(kernel, dtype=work), cidx, ridx, channels,
+                      work.type(cval), out, is_int, lo, hi)
+    return out.reshape(image.shape)
+
+
+# --------------------------------------------------------------------------- public API
+def correlate(image: np.ndarray, kernel: np.ndarray, *, border: Border = "reflect101",
+              cval: float = 0.0, anchor: tuple[int, int] | None = None) -> np.ndarray:
+    r"""2-D correlation of each channel with ``kernel``.
+
+    .. math:: g(x, y) = \sum_{i, j} K(i, j)\, f(x + j - a_x,\; y + i - a_y)
+
+    with the anchor ``(a_x, a_y)`` at the kernel centre ``(kw // 2, kh // 2)`` by default.
+    This is ``cv2.filter2D(image, -1, kernel, borderType=...)`` (which correlates, despite
+    its name) with float output for integer input.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        uint8/uint16/int16/int32 or float32/float64.
+    kernel : (kh, kw) array_like
+        Correlation kernel.
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+        How the image is extended past its edges.
+    cval : float
+        Value outside the image with ``border='constant'``.
+    anchor : (int, int), optional
+        ``(a_x, a_y)`` kernel element placed over the output pixel.
+
+    Returns
+    -------
+    ndarray
+        Same shape; float32 for integer input, else the input dtype.
+    """
+    image = check_image(image)
+    kernel = check_kernel(kernel)
+    cval = _check_border(border, cval)
+    return _run_correlate(image, kernel, border, cval, _out_dtype(image, False), anchor)
+
+
+def convolve(image: np.ndarray, kernel: np.ndarray, *, border: Border = "reflect101",
+             cval: float = 0.0) -> np.ndarray:
+    r"""2-D convolution of each channel with ``kernel``.
+
+    .. math:: g(x, y) = \sum_{i, j} K(i, j)\, f(x - j + a_x,\; y - i + a_y)
+
+    i.e. :func:`correlate` with the kernel flipped in both axes (the anchor, the kernel
+    centre, flips with it). Matches ``cv2.filter2D(image, -1, cv2.flip(kernel, -1))``
+    for odd kernels, and ``scipy.ndimage.convolve``.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    kernel : (kh, kw) array_like
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+    cval : float
+
+    Returns
+    -------
+    ndarray
+        Same shape; float32 for integer input, else the input dtype.
+    """
+    image = check_image(image)
+    kernel = check_kernel(kernel)
+    cval = _check_border(border, cval)
+    kh, kw = kernel.shape
+    anchor = (kw - 1 - kw // 2, kh - 1 - kh // 2)
+    return _run_correlate(image, kernel[::-1, ::-1], border, cval, _out_dtype(image, False),
+                          anchor)
+
+
+def correlate_separable(image: np.ndarray, kernel_x: np.ndarray, kernel_y: np.ndarray, *,
+                        border: Border = "reflect101", cval: float = 0.0) -> np.ndarray:
+    r"""Correlation with the separable kernel ``K = k_y k_x^T``: rows first, then columns.
+
+    .. math:: g = k_y \star_y (k_x \star_x f)
+
+    costs ``kw + kh`` instead of ``kw kh`` operations per pixel. Matches
+    ``cv2.sepFilter2D(image, -1, kernel_x, kernel_y)`` with float output for integer input.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    kernel_x, kernel_y : 1-D array_like
+        Horizontal and vertical kernels (anchors at their centres).
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+    cval : float
+
+    Returns
+    -------
+    ndarray
+        Same shape; float32 for integer input, else the input dtype.
+    """
+    image = check_image(image)
+    kx = check_kernel(kernel_x, "kernel_x", 1)
+    ky = check_kernel(kernel_y, "kernel_y", 1)
+    cval = _check_border(border, cval)
+    return _run_separable(image, kx, ky, border, cval, _out_dtype(image, False))
+
+
+def convolve_separable(image: np.ndarray, kernel_x: np.ndarray, kernel_y: np.ndarray, *,
+                       border: Border = "reflect101", cval: float = 0.0) -> np.ndarray:
+    """Convolution with the separable kernel ``k_y k_x^T`` (both kernels flipped).
+
+    See :func:`correlate_separable`; this flips each 1-D kernel and its anchor.
+    """
+    image = check_image(image)
+    kx = check_kernel(kernel_x, "kernel_x", 1)
+    ky = check_kernel(kernel_y, "kernel_y", 1)
+    cval = _check_border(border, cval)
+    return _run_separable(image, kx[::-1], ky[::-1], border, cval, _out_dtype(image, False),
+                          kx.size - 1 - kx.size // 2, ky.size - 1 - ky.size // 2)
+
+
+def gaussian_kernel(sigma: float, size: int | None = None) -> np.ndarray:
+    r"""Normalized 1-D Gaussian kernel.
+
+    .. math:: w_i = \frac{\exp(-x_i^2 / 2\sigma^2)}{\sum_j \exp(-x_j^2 / 2\sigma^2)},
+              \quad x_i = i - \frac{n - 1}{2}
+
+    which is ``cv2.getGaussianKernel(size, sigma)`` for ``sigma > 0``.
+
+    Parameters
+    ----------
+    sigma : float
+        Standard deviation in pixels, > 0.
+    size : int, optional
+        Odd kernel length; by default ``2 ceil(3 sigma) + 1`` (covers +-3 sigma).
+
+    Returns
+    -------
+    (size,) float64 ndarray
+    """
+    sigma = check_positive(sigma, "sigma")
+    if size is None:
+        size = 2 * math.ceil(3.0 * sigma) + 1
+    size = check_odd_size(size, "size")
+    x = np.arange(size, dtype=np.float64) - (size - 1) / 2.0
+    w = np.exp(-(x * x) / (2.0 * sigma * sigma))
+    return w / w.sum()
+
+
+def gaussian_blur(image: np.ndarray, sigma: float, *, ksize: int | None = None,
+                  sigma_y: float | None = None, border: Border = "reflect101") -> np.ndarray:
+    r"""Gaussian smoothing, separable: :func:`gaussian_kernel` along x, then along y.
+
+    .. math:: g = G_{\sigma_y} \star_y (G_{\sigma_x} \star_x f)
+
+    Matches ``cv2.GaussianBlur(image, (ksize, ksize), sigma, sigmaY=sigma_y)``: exactly
+    (to float rounding) for float input, within 1 grey level for uint8 (OpenCV uses an
+    8-bit fixed-point kernel there).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    sigma : float
+        Standard deviation along x (and y unless ``sigma_y``), > 0.
+    ksize : int, optional
+        Odd kernel size for both axes; default ``2 ceil(3 sigma) + 1`` per axis.
+    sigma_y : float, optional
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+
+    Returns
+    -------
+    ndarray
+        Same shape and dtype as ``image``.
+    """
+    image = check_image(image)
+    check_choice(border, "border", BORDERS)
+    kx = gaussian_kernel(sigma, ksize)
+    ky = kx if sigma_y is None else gaussian_kernel(sigma_y, ksize)
+    return _run_separable(image, kx, ky, border, 0.0, image.dtype)
+
+
+def box_filter(image: np.ndarray, ksize: int | tuple[int, int], *, normalize: bool = True,
+               border: Border = "reflect101") -> np.ndarray:
+    r"""Box (mean) filter: the sum over a ``kw x kh`` window, divided by ``kw kh``.
+
+    .. math:: g(x, y) = \frac{1}{k_w k_h} \sum_{|i| \le k_h/2,\,|j| \le k_w/2} f(x + j, y + i)
+
+    Matches ``cv2.blur`` (``normalize=True``) and ``cv2.boxFilter``. With
+    ``normalize=False`` the window sum is returned as float32 (float64 for float64 input).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    ksize : int or (kw, kh)
+        Window size (any positive size; even sizes anchor at ``k // 2``).
+    normalize : bool
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+
+    Returns
+    -------
+    ndarray
+        Same dtype as ``image`` when normalized.
+    """
+    image = check_image(image)
+    check_choice(border, "border", BORDERS)
+    kw, kh = (ksize, ksize) if np.isscalar(ksize) else tuple(ksize)
+    for name, k in (("ksize (width)", kw), ("ksize (height)", kh)):
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise InputError(f"{name} must be a positive integer; got {k!r}")
+    scale_x = 1.0 / kw if normalize else 1.0
+    scale_y = 1.0 / kh if normalize else 1.0
+    kx = np.full(int(kw), scale_x)
+    ky = np.full(int(kh), scale_y)
+    out_dtype = image.dtype if normalize else _out_dtype(image, False)
+    return _run_separable(image, kx, ky, border, 0.0, out_dtype)
+
+
+@njit(cache=True, nogil=True)
+def _median_kernel(src, cidx, ridx, channels, k, out):  # pragma: no cover - compiled
+    height = out.shape[0]
+    width = cidx.shape[0] - k + 1
+    win = np.empty(k * k, dtype=src.dtype)
+    half = (k * k) // 2
+    for y in range(height):
+        for x in range(width):
+            for c in range(channels):
+                n = 0
+                for i in range(k):
+                    srow = src[ridx[y + i]]
+                    for j in range(k):
+                        v = srow[cidx[x + j] * channels + c]
+                        # insertion sort keeps win[:n] ordered
+                        m = n
+                        while m > 0 and win[m - 1] > v:
+                            win[m] = win[m - 1]
+                            m -= 1
+                        win[m] = v
+                        n += 1
+                out[y, x * channels + c] = win[half]
+
+
+def median_filter(image: np.ndarray, ksize: int = 3, *,
+                  border: Literal["replicate", "reflect101", "reflect"] = "replicate") -> np.ndarray:
+    """Median of each ``ksize x ksize`` window, per channel.
+
+    Matches ``cv2.medianBlur(image, ksize)`` (which replicates the border) exactly.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    ksize : int
+        Odd window size >= 3 (a small window: the cost grows with ``ksize**2``).
+    border : {'replicate', 'reflect101', 'reflect'}
+
+    Returns
+    -------
+    ndarray
+        Same shape and dtype as ``image``.
+    """
+    image = check_image(image)
+    ksize = check_odd_size(ksize, "ksize", 3)
+    check_choice(border, "border", ("replicate", "reflect101", "reflect"))
+    src, channels = _as_rows(image)
+    h, w = image.shape[:2]
+    r = ksize // 2
+    cidx = border_indices(w, r, r, border)
+    ridx = border_indices(h, r, r, border)
+    out = np.empty_like(src)
+    _median_kernel(src, cidx, ridx, channels, ksize, out)
+    return out.reshape(image.shape)
+
+
+# --------------------------------------------------------------------------- derivatives
+def derivative_kernel(order: int, ksize: int) -> np.ndarray:
+    r"""1-D Sobel kernel: binomial smoothing of length ``ksize - order`` convolved
+    ``order`` times with the difference ``[-1, 1]``.
+
+    ``ksize=3`` gives ``[1, 2, 1]``, ``[-1, 0, 1]`` and ``[1, -2, 1]`` for orders 0, 1, 2:
+    the kernels of ``cv2.getDerivKernels``. ``ksize=1`` means no smoothing: ``[1]`` for
+    order 0, a 3-tap difference otherwise.
+
+    Parameters
+    ----------
+    order : int
+        Derivative order, 0 <= order < ksize (or <= 2 with ksize 1).
+    ksize : int
+        1, 3, 5 or 7.
+
+    Returns
+    -------
+    (n,) float64 ndarray
+    """
+    if ksize == 1:
+        if order == 0:
+            return np.ones(1)
+        ksize = 3
+    if order < 0 or order >= ksize:
+        raise InputError(f"derivative order must be in [0, {ksize - 1}] for ksize {ksize}; "
+                         f"got {order}")
+    k = np.ones(1)
+    for _ in range(ksize - order - 1):
+        k = np.convolve(k, [1.0, 1.0])
+    for _ in range(order):
+        k = np.convolve(k, [-1.0, 1.0])
+    return k
+
+
+def _check_ksize(ksize: int) -> int:
+    if isinstance(ksize, bool) or ksize not in (1, 3, 5, 7):
+        raise InputError(f"ksize must be 1, 3, 5 or 7; got {ksize!r}")
+    return int(ksize)
+
+
+def sobel(image: np.ndarray, dx: int, dy: int, ksize: int = 3, *, scale: float = 1.0,
+          border: Border = "reflect101") -> np.ndarray:
+    r"""Sobel derivative :math:`\partial^{dx+dy} f / \partial x^{dx} \partial y^{dy}`.
+
+    The separable kernel is ``derivative_kernel(dx, ksize)`` along x times
+    ``derivative_kernel(dy, ksize)`` along y (for ``ksize=3, dx=1``:
+    ``[[-1, 0, 1], [-2, 0, 2], [-1, 0, 1]]``), applied as a correlation, so a brightness
+    that grows to the right gives a positive ``dx``. Matches
+    ``cv2.Sobel(image, cv2.CV_32F, dx, dy, ksize=ksize, scale=scale)``.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    dx, dy : int
+        Derivative orders, ``dx + dy >= 1``.
+    ksize : {1, 3, 5, 7}
+    scale : float
+        Factor applied to the result.
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+
+    Returns
+    -------
+    ndarray
+        float32 for integer input, else the input dtype.
+    """
+    image = check_image(image)
+    check_choice(border, "border", BORDERS)
+    ksize = _check_ksize(ksize)
+    for name, v in (("dx", dx), ("dy", dy)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise InputError(f"{name} must be a non-negative integer; got {v!r}")
+    if dx + dy < 1:
+        raise InputError(f"dx + dy must be >= 1; got dx={dx}, dy={dy}")
+    kx = derivative_kernel(int(dx), ksize) * float(scale)
+    ky = derivative_kernel(int(dy), ksize)
+    return _run_separable(image, kx, ky, border, 0.0, _out_dtype(image, False))
+
+
+def gradient(image: np.ndarray, ksize: int = 3, *,
+             border: Border = "reflect101") -> tuple[np.ndarray, np.ndarray]:
+    r"""Gradient magnitude and direction from Sobel derivatives.
+
+    .. math:: |\nabla f| = \sqrt{f_x^2 + f_y^2}, \qquad \theta = \operatorname{atan2}(f_y, f_x)
+
+    ``theta`` is in radians in ``(-pi, pi]``, measured from +x towards +y (image down).
+    A colour image is reduced per pixel to the channel of largest magnitude.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    ksize : {1, 3, 5, 7}
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+
+    Returns
+    -------
+    magnitude, direction : (H, W) ndarray
+        float32 for integer input, else the input dtype.
+    """
+    gx = sobel(image, 1, 0, ksize, border=border)
+    gy = sobel(image, 0, 1, ksize, border=border)
+    mag = np.hypot(gx, gy)
+    if mag.ndim == 3:
+        best = np.argmax(mag, axis=2)[..., None]
+        gx = np.take_along_axis(gx, best, 2)[..., 0]
+        gy = np.take_along_axis(gy, best, 2)[..., 0]
+        mag = np.take_along_axis(mag, best, 2)[..., 0]
+    return mag, np.arctan2(gy, gx)
+
+
+_LAPLACE_1 = np.array([[0.0, 1.0, 0.0], [1.0, -4.0, 1.0], [0.0, 1.0, 0.0]])
+_LAPLACE_3 = np.array([[2.0, 0.0, 2.0], [0.0, -8.0, 0.0], [2.0, 0.0, 2.0]])
+
+
+def laplacian(image: np.ndarray, ksize: int = 1, *, scale: float = 1.0,
+              border: Border = "reflect101") -> np.ndarray:
+    r"""Laplacian :math:`\nabla^2 f = f_{xx} + f_{yy}`.
+
+    ``ksize=1`` uses the 5-point stencil ``[[0, 1, 0], [1, -4, 1], [0, 1, 0]]``,
+    ``ksize=3`` the kernel ``[[2, 0, 2], [0, -8, 0], [2, 0, 2]]``, larger sizes the sum of
+    the second Sobel derivatives: the kernels of ``cv2.Laplacian(image, cv2.CV_32F,
+    ksize=ksize)``, which this matches.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    ksize : {1, 3, 5, 7}
+    scale : float
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+
+    Returns
+    -------
+    ndarray
+        float32 for integer input, else the input dtype.
+    """
+    image = check_image(image)
+    check_choice(border, "border", BORDERS)
+    ksize = _check_ksize(ksize)
+    out_dtype = _out_dtype(image, False)
+    if ksize in (1, 3):
+        kernel = (_LAPLACE_1 if ksize == 1 else _LAPLACE_3) * float(scale)
+        return _run_correlate(image, kernel, border, 0.0, out_dtype)
+    d2 = derivative_kernel(2, ksize) * float(scale)
+    d0 = derivative_kernel(0, ksize)
+    return (_run_separable(image, d2, d0, border, 0.0, out_dtype)
+            + _run_separable(image, d0, d2, border, 0.0, out_dtype))
+
+
+def laplacian_of_gaussian(image: np.ndarray, sigma: float, *, normalized: bool = False,
+                          truncate: float = 4.0, border: Border = "reflect") -> np.ndarray:
+    r"""Laplacian of Gaussian, by two separable passes.
+
+    .. math:: \nabla^2 (G_\sigma * f) = G''_\sigma(x) G_\sigma(y) * f + G_\sigma(x) G''_\sigma(y) * f,
+              \qquad G''_\sigma(x) = G_\sigma(x) \left(\frac{x^2}{\sigma^4} - \frac{1}{\sigma^2}\right)
+
+    with :math:`G_\sigma` sampled on ``|x| <= truncate * sigma`` and normalized to sum 1,
+    exactly as ``scipy.ndimage.gaussian_laplace`` (whose default border ``reflect`` is the
+    default here too). ``normalized=True`` multiplies by :math:`\sigma^2`, the
+    scale-normalized LoG used for blob detection (its extrema at :math:`\sigma = r/\sqrt 2`).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    sigma : float
+        > 0.
+    normalized : bool
+    truncate : float
+        Kernel half-width in units of sigma.
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+
+    Returns
+    -------
+    ndarray
+        float32 for integer input, else the input dtype.
+    """
+    image = check_image(image)
+    sigma = check_positive(sigma, "sigma")
+    truncate = check_positive(truncate, "truncate")
+    check_choice(border, "border", BORDERS)
+    radius = int(truncate * sigma + 0.5)
+    x = np.arange(-radius, radius + 1, dtype=np.float64)
+    g = np.exp(-0.5 * x * x / (sigma * sigma))
+    g /= g.sum()
+    g2 = g * (x * x / sigma**4 - 1.0 / sigma**2)
+    if normalized:
+        g2 = g2 * sigma * sigma
+    out_dtype = _out_dtype(image, False)
+    # both kernels are symmetric, so correlation equals convolution here
+    return (_run_separable(image, g2, g, border, 0.0, out_dtype)
+            + _run_separable(image, g, g2, border, 0.0, out_dtype))

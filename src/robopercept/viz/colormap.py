@@ -1,0 +1,109 @@
+"""Colour maps for depth, signed fields and labels (RGB uint8 out)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robopercept._checks import check_ndim
+from robopercept.errors import InputError
+
+__all__ = ["colorize_depth", "colorize_signed", "label_colors", "turbo"]
+
+# Turbo (Mikhailov 2019) as the published polynomial fit: each channel a degree-5
+# polynomial of t in [0, 1].
+_TURBO = np.array([
+    [0.13572138, 4.61539260, -42.66032258, 132.13108234, -152.94239396, 59.28637943],
+    [0.09140261, 2.19418839, 4.84296658, -14.18503333, 4.27729857, 2.82956604],
+    [0.10667330, 12.64194608, -60.58204836, 110.36276771, -89.90310912, 27.34824973],
+])
+
+
+def turbo(t: np.ndarray) -> np.ndarray:
+    """Map ``t`` in [0, 1] to Turbo RGB uint8 (values outside are clipped)."""
+    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
+    powers = np.stack([t**k for k in range(6)], axis=-1)
+    rgb = np.clip(powers @ _TURBO.T, 0.0, 1.0)
+    return np.round(rgb * 255.0).astype(np.uint8)
+
+
+def colorize_depth(depth: np.ndarray, min_depth: float | None = None,
+                   max_depth: float | None = None, *, invalid: float = 0) -> np.ndarray:
+    """Colour a depth map with Turbo: near blue, far red; invalid pixels black.
+
+    Parameters
+    ----------
+    depth : (H, W) ndarray
+        Any numeric dtype; pixels equal to ``invalid`` or non-finite are invalid.
+    min_depth, max_depth : float, optional
+        Range mapped to the colours; by default the 1st and 99th percentiles of valid depth.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+    """
+    d = check_ndim(depth, "depth", (2,)).astype(np.float64)
+    valid = np.isfinite(d) & (d != invalid)
+    out = np.zeros((*d.shape, 3), dtype=np.uint8)
+    if not valid.any():
+        return out
+    lo = float(np.percentile(d[valid], 1)) if min_depth is None else float(min_depth)
+    hi = float(np.percentile(d[valid], 99)) if max_depth is None else float(max_depth)
+    if hi <= lo:
+        hi = lo + 1e-9
+    out[valid] = turbo((d[valid] - lo) / (hi - lo))
+    return out
+
+
+def colorize_signed(field: np.ndarray, limit: float | None = None) -> np.ndarray:
+    """Diverging map for signed values: negative blue, zero white, positive red.
+
+    Parameters
+    ----------
+    field : (H, W) ndarray
+    limit : float, optional
+        Magnitude mapped to full colour; default the 99th percentile of ``|field|``.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+    """
+    f = check_ndim(field, "field", (2,)).astype(np.float64)
+    f = np.where(np.isfinite(f), f, 0.0)
+    if limit is None:
+        limit = float(np.percentile(np.abs(f), 99)) if f.size else 1.0
+    if limit <= 0:
+        limit = 1.0
+    t = np.clip(f / limit, -1.0, 1.0)[..., None]
+    white = np.array([255.0, 255.0, 255.0])
+    red = np.array([178.0, 24.0, 43.0])
+    blue = np.array([33.0, 102.0, 172.0])
+    rgb = np.where(t >= 0, white + t * (red - white), white + (-t) * (blue - white))
+    return np.round(rgb).astype(np.uint8)
+
+
+def label_colors(labels: np.ndarray, *, background: tuple[int, int, int] = (0, 0, 0)) -> np.ndarray:
+    """Distinct colours per integer label (golden-ratio hues); label 0 (and < 0) is background.
+
+    Parameters
+    ----------
+    labels : (H, W) or (N,) int ndarray
+
+    Returns
+    -------
+    (..., 3) uint8 ndarray
+    """
+    lab = np.asarray(labels)
+    if lab.dtype.kind not in "iu":
+        raise InputError(f"labels must be integers; got {lab.dtype}")
+    hue = np.mod(lab.astype(np.float64) * 0.618033988749895, 1.0)
+    h6 = hue * 6.0
+    x = 1.0 - np.abs(np.mod(h6, 2.0) - 1.0)
+    sextant = np.floor(h6).astype(np.int64) % 6
+    one, zero = np.ones_like(x), np.zeros_like(x)
+    r = np.choose(sextant, [one, x, zero, zero, x, one])
+    g = np.choose(sextant, [x, one, one, x, zero, zero])
+    b = np.choose(sextant, [zero, zero, x, one, one, x])
+    rgb = np.stack([r, g, b], axis=-1) * 0.85 + 0.15
+    out = np.round(rgb * 255.0).astype(np.uint8)
+    out[lab <= 0] = background
+    return out
