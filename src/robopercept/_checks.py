@@ -63,7 +63,9 @@ def check_ndim(value: Any, name: str, ndims: Iterable[int]) -> np.ndarray:
 def check_shape(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
     """Return ``value`` as an array of ``shape`` (``None`` matches any length)."""
     arr = _as_array(value, name)
-    ok = arr.ndim == len(shape) and all(s is None or s == a for s, a in zip(shape, arr.shape))
+    ok = arr.ndim == len(shape) and all(
+        s is None or s == a for s, a in zip(shape, arr.shape, strict=False)
+    )
     if not ok:
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise InputError(f"{name} must have shape {want}; got {arr.shape}")
@@ -103,8 +105,15 @@ def check_nonempty(value: Any, name: str) -> np.ndarray:
     return arr
 
 
-def check_range(value: float, name: str, low: float | None = None, high: float | None = None,
-                *, low_inclusive: bool = True, high_inclusive: bool = True) -> float:
+def check_range(
+    value: float,
+    name: str,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+) -> float:
     """Return the scalar ``value`` after checking ``low <= value <= high``."""
     try:
         v = float(value)
@@ -134,7 +143,9 @@ def check_odd_size(value: Any, name: str, minimum: int = 1) -> int:
         raise InputError(f"{name} must be an odd integer; got {value!r}")
     v = int(value)
     if v < minimum or v % 2 == 0:
-        raise InputError(f"{name} must be an odd integer >= {minimum}; got {v}: try {max(minimum, v | 1)}")
+        raise InputError(
+            f"{name} must be an odd integer >= {minimum}; got {v}: try {max(minimum, v | 1)}"
+        )
     return v
 
 
@@ -146,8 +157,9 @@ def check_choice(value: Any, name: str, choices: Iterable[Any]) -> Any:
     return value
 
 
-def check_image(image: Any, name: str = "image", *, allow_color: bool = True,
-                allow_bool: bool = False) -> np.ndarray:
+def check_image(
+    image: Any, name: str = "image", *, allow_color: bool = True, allow_bool: bool = False
+) -> np.ndarray:
     """Return ``image`` as an ``(H, W)`` or ``(H, W, 3)`` array of a supported dtype.
 
     Refuses channels-first arrays, empty images, NaN/inf and unsupported dtypes with a
@@ -170,7 +182,8 @@ def check_image(image: Any, name: str = "image", *, allow_color: bool = True,
         )
     if arr.ndim not in (2, 3):
         raise InputError(
-            f"{name} must be (H, W)" + (" or (H, W, 3)" if allow_color else "")
+            f"{name} must be (H, W)"
+            + (" or (H, W, 3)" if allow_color else "")
             + f"; got {arr.ndim}-D with shape {arr.shape}"
         )
     if arr.shape[0] == 0 or arr.shape[1] == 0:

@@ -4,7 +4,8 @@
 first raster pass gives each foreground pixel a provisional label and records the
 equivalences of touching labels in a union-find forest whose roots are always the
 smallest label; the second pass replaces each label by its root's final number. Labels
-are therefore numbered in raster order of each blob's first pixel, as OpenCV does.
+are therefore numbered in raster order of each blob's first pixel (OpenCV's block-based
+scan numbers them in another order; the partition is the same).
 
 :func:`blob_features` measures every blob at once with ``np.bincount`` (area, bounding
 box, centroid), a weighted count of border-pixel configurations (perimeter) and the
@@ -117,7 +118,8 @@ def label_components(mask: np.ndarray, connectivity: int = 8) -> tuple[np.ndarra
     -------
     labels : (H, W) int32 ndarray
         0 for background, ``1..n`` for the components in raster order of their first
-        pixel: the same numbering as ``cv2.connectedComponents(mask, connectivity=...)``.
+        pixel. The partition equals ``cv2.connectedComponents(mask, connectivity=...)``'s
+        (its numbering follows OpenCV's 2x2-block scan instead).
     n : int
         Number of components (background not counted).
     """
@@ -202,8 +204,16 @@ def _perimeter(padded: np.ndarray, n: int) -> np.ndarray:
     border = np.where((c > 0) & ~inner, c, 0)
     bp = np.pad(border, 1)
     code = (border > 0).astype(np.int32)
-    for dy, dx, wgt in ((-1, 0, 2), (1, 0, 2), (0, -1, 2), (0, 1, 2),
-                        (-1, -1, 10), (-1, 1, 10), (1, -1, 10), (1, 1, 10)):
+    for dy, dx, wgt in (
+        (-1, 0, 2),
+        (1, 0, 2),
+        (0, -1, 2),
+        (0, 1, 2),
+        (-1, -1, 10),
+        (-1, 1, 10),
+        (1, -1, 10),
+        (1, 1, 10),
+    ):
         nb = bp[1 + dy : bp.shape[0] - 1 + dy, 1 + dx : bp.shape[1] - 1 + dx]
         code += wgt * ((nb == border) & (border > 0))
     sel = border > 0
@@ -253,13 +263,15 @@ def blob_features(labels: np.ndarray) -> BlobFeatures:
     """
     labels = check_ndim(labels, "labels", (2,))
     if labels.dtype.kind not in "iu":
-        raise InputError(f"labels must be an integer array; got {labels.dtype}: "
-                         "label a mask first with label_components(mask)")
+        raise InputError(
+            f"labels must be an integer array; got {labels.dtype}: "
+            "label a mask first with label_components(mask)"
+        )
     if labels.size and labels.min() < 0:
         raise InputError("labels must be >= 0 (0 is background)")
     lab = labels.astype(np.int64, copy=False)
     n = int(lab.max()) if lab.size else 0
-    h, w = lab.shape
+    w = lab.shape[1]
     flat = lab.ravel()
     area = np.bincount(flat, minlength=n + 1)
     present = np.nonzero(area[1:])[0] + 1
@@ -290,8 +302,9 @@ def blob_features(labels: np.ndarray) -> BlobFeatures:
         labels=sel.astype(np.int64),
         area=a.astype(np.int64),
         bbox=np.stack([xmin[sel], ymin[sel], bw, bh], axis=1).astype(np.int64).reshape(-1, 4),
-        centroid=np.stack([cx[sel] / np.maximum(a, 1), cy[sel] / np.maximum(a, 1)],
-                          axis=1).reshape(-1, 2),
+        centroid=np.stack([cx[sel] / np.maximum(a, 1), cy[sel] / np.maximum(a, 1)], axis=1).reshape(
+            -1, 2
+        ),
         aspect_ratio=(bh / bw).astype(np.float64),
         perimeter=per.astype(np.float64),
         circularity=circ.astype(np.float64),

@@ -175,8 +175,11 @@ def rgb_to_gray(image: np.ndarray) -> np.ndarray:
     return y.astype(image.dtype)
 
 
-def hsv_range_mask(hsv: np.ndarray, low: tuple[float, float, float] | np.ndarray,
-                   high: tuple[float, float, float] | np.ndarray) -> np.ndarray:
+def hsv_range_mask(
+    hsv: np.ndarray,
+    low: tuple[float, float, float] | np.ndarray,
+    high: tuple[float, float, float] | np.ndarray,
+) -> np.ndarray:
     r"""Pixels whose HSV lies in the box ``low <= (H, S, V) <= high`` (bounds inclusive).
 
     Hue is circular: when ``low[0] > high[0]`` the hue range wraps around, so

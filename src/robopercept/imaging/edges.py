@@ -1,4 +1,4 @@
-"""Canny edge detection.
+r"""Canny edge detection.
 
 The five steps (Canny 1986):
 
@@ -106,8 +106,9 @@ def _hysteresis(state, n_strong):  # pragma: no cover - compiled
     return out
 
 
-def canny(image: np.ndarray, low: float, high: float, *, sigma: float = 1.0,
-          l2_gradient: bool = True) -> np.ndarray:
+def canny(
+    image: np.ndarray, low: float, high: float, *, sigma: float = 1.0, l2_gradient: bool = True
+) -> np.ndarray:
     """Canny edges.
 
     Thresholds are in the units of the gradient magnitude of ``image`` as given (a uint8
@@ -144,6 +145,12 @@ def canny(image: np.ndarray, low: float, high: float, *, sigma: float = 1.0,
     gx = sobel(work, 1, 0, 3, border="replicate")
     gy = sobel(work, 0, 1, 3, border="replicate")
     state = np.empty(work.shape, dtype=np.uint8)
-    n_strong = _nms_threshold(np.ascontiguousarray(gx), np.ascontiguousarray(gy),
-                              bool(l2_gradient), float(low), float(high), state)
+    n_strong = _nms_threshold(
+        np.ascontiguousarray(gx),
+        np.ascontiguousarray(gy),
+        bool(l2_gradient),
+        float(low),
+        float(high),
+        state,
+    )
     return _hysteresis(state, n_strong)

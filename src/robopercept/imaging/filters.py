@@ -227,7 +227,9 @@ def _taps_any(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - co
 
 
 @njit(cache=True, nogil=True)
-def _separable_kernel(src, kx, ky, ax, cidx, ridx, channels, cval, out, is_int, lo, hi):  # pragma: no cover
+def _separable_kernel(
+    src, kx, ky, ax, cidx, ridx, channels, cval, out, is_int, lo, hi
+):  # pragma: no cover
     """out = kx (horizontal) o ky (vertical) correlation of src; src, out: (H, W*C).
 
     One fused pass per output row: the vertical taps accumulate source rows into ``acc``,
@@ -270,7 +272,9 @@ def _separable_kernel(src, kx, ky, ax, cidx, ridx, channels, cval, out, is_int, 
 
 
 @njit(cache=True, nogil=True)
-def _correlate_kernel(src, kernel, cidx, ridx, channels, cval, out, is_int, lo, hi):  # pragma: no cover
+def _correlate_kernel(
+    src, kernel, cidx, ridx, channels, cval, out, is_int, lo, hi
+):  # pragma: no cover
     """Full 2-D correlation; src, out: (H, W*C); kernel: (kh, kw)."""
     height, length = out.shape
     src_h = src.shape[0]
@@ -336,9 +340,16 @@ def _anchor(size: int, anchor: int | None, name: str) -> int:
     return int(anchor)
 
 
-def _run_separable(image: np.ndarray, kx: np.ndarray, ky: np.ndarray, border: str,
-                   cval: float, out_dtype: np.dtype, ax: int | None = None,
-                   ay: int | None = None) -> np.ndarray:
+def _run_separable(
+    image: np.ndarray,
+    kx: np.ndarray,
+    ky: np.ndarray,
+    border: str,
+    cval: float,
+    out_dtype: np.dtype,
+    ax: int | None = None,
+    ay: int | None = None,
+) -> np.ndarray:
     work = _work_dtype(image)
     ax = _anchor(kx.size, ax, "anchor x")
     ay = _anchor(ky.size, ay, "anchor y")
@@ -348,13 +359,31 @@ def _run_separable(image: np.ndarray, kx: np.ndarray, ky: np.ndarray, border: st
     ridx = border_indices(h, ay, ky.size - 1 - ay, border)
     out = np.empty(src.shape, dtype=out_dtype)
     is_int, lo, hi = _int_limits(out_dtype)
-    _separable_kernel(src, kx.astype(work), ky.astype(work), ax, cidx, ridx, channels,
-                      work.type(cval), out, is_int, lo, hi)
+    _separable_kernel(
+        src,
+        kx.astype(work),
+        ky.astype(work),
+        ax,
+        cidx,
+        ridx,
+        channels,
+        work.type(cval),
+        out,
+        is_int,
+        lo,
+        hi,
+    )
     return out.reshape(image.shape)
 
 
-def _run_correlate(image: np.ndarray, kernel: np.ndarray, border: str, cval: float,
-                   out_dtype: np.dtype, anchor: tuple[int, int] | None = None) -> np.ndarray:
+def _run_correlate(
+    image: np.ndarray,
+    kernel: np.ndarray,
+    border: str,
+    cval: float,
+    out_dtype: np.dtype,
+    anchor: tuple[int, int] | None = None,
+) -> np.ndarray:
     work = _work_dtype(image)
     kh, kw = kernel.shape
     ax, ay = (None, None) if anchor is None else anchor
@@ -366,14 +395,30 @@ def _run_correlate(image: np.ndarray, kernel: np.ndarray, border: str, cval: flo
     ridx = border_indices(h, ay, kh - 1 - ay, border)
     out = np.empty(src.shape, dtype=out_dtype)
     is_int, lo, hi = _int_limits(out_dtype)
-    _correlate_kernel(src, np.ascontiguousarray(kernel, dtype=work), cidx, ridx, channels,
-                      work.type(cval), out, is_int, lo, hi)
+    _correlate_kernel(
+        src,
+        np.ascontiguousarray(kernel, dtype=work),
+        cidx,
+        ridx,
+        channels,
+        work.type(cval),
+        out,
+        is_int,
+        lo,
+        hi,
+    )
     return out.reshape(image.shape)
 
 
 # --------------------------------------------------------------------------- public API
-def correlate(image: np.ndarray, kernel: np.ndarray, *, border: Border = "reflect101",
-              cval: float = 0.0, anchor: tuple[int, int] | None = None) -> np.ndarray:
+def correlate(
+    image: np.ndarray,
+    kernel: np.ndarray,
+    *,
+    border: Border = "reflect101",
+    cval: float = 0.0,
+    anchor: tuple[int, int] | None = None,
+) -> np.ndarray:
     r"""2-D correlation of each channel with ``kernel``.
 
     .. math:: g(x, y) = \sum_{i, j} K(i, j)\, f(x + j - a_x,\; y + i - a_y)
@@ -406,8 +451,9 @@ def correlate(image: np.ndarray, kernel: np.ndarray, *, border: Border = "reflec
     return _run_correlate(image, kernel, border, cval, _out_dtype(image, False), anchor)
 
 
-def convolve(image: np.ndarray, kernel: np.ndarray, *, border: Border = "reflect101",
-             cval: float = 0.0) -> np.ndarray:
+def convolve(
+    image: np.ndarray, kernel: np.ndarray, *, border: Border = "reflect101", cval: float = 0.0
+) -> np.ndarray:
     r"""2-D convolution of each channel with ``kernel``.
 
     .. math:: g(x, y) = \sum_{i, j} K(i, j)\, f(x - j + a_x,\; y - i + a_y)
@@ -433,12 +479,17 @@ def convolve(image: np.ndarray, kernel: np.ndarray, *, border: Border = "reflect
     cval = _check_border(border, cval)
     kh, kw = kernel.shape
     anchor = (kw - 1 - kw // 2, kh - 1 - kh // 2)
-    return _run_correlate(image, kernel[::-1, ::-1], border, cval, _out_dtype(image, False),
-                          anchor)
+    return _run_correlate(image, kernel[::-1, ::-1], border, cval, _out_dtype(image, False), anchor)
 
 
-def correlate_separable(image: np.ndarray, kernel_x: np.ndarray, kernel_y: np.ndarray, *,
-                        border: Border = "reflect101", cval: float = 0.0) -> np.ndarray:
+def correlate_separable(
+    image: np.ndarray,
+    kernel_x: np.ndarray,
+    kernel_y: np.ndarray,
+    *,
+    border: Border = "reflect101",
+    cval: float = 0.0,
+) -> np.ndarray:
     r"""Correlation with the separable kernel ``K = k_y k_x^T``: rows first, then columns.
 
     .. math:: g = k_y \star_y (k_x \star_x f)
@@ -466,8 +517,14 @@ def correlate_separable(image: np.ndarray, kernel_x: np.ndarray, kernel_y: np.nd
     return _run_separable(image, kx, ky, border, cval, _out_dtype(image, False))
 
 
-def convolve_separable(image: np.ndarray, kernel_x: np.ndarray, kernel_y: np.ndarray, *,
-                       border: Border = "reflect101", cval: float = 0.0) -> np.ndarray:
+def convolve_separable(
+    image: np.ndarray,
+    kernel_x: np.ndarray,
+    kernel_y: np.ndarray,
+    *,
+    border: Border = "reflect101",
+    cval: float = 0.0,
+) -> np.ndarray:
     """Convolution with the separable kernel ``k_y k_x^T`` (both kernels flipped).
 
     See :func:`correlate_separable`; this flips each 1-D kernel and its anchor.
@@ -476,8 +533,16 @@ def convolve_separable(image: np.ndarray, kernel_x: np.ndarray, kernel_y: np.nda
     kx = check_kernel(kernel_x, "kernel_x", 1)
     ky = check_kernel(kernel_y, "kernel_y", 1)
     cval = _check_border(border, cval)
-    return _run_separable(image, kx[::-1], ky[::-1], border, cval, _out_dtype(image, False),
-                          kx.size - 1 - kx.size // 2, ky.size - 1 - ky.size // 2)
+    return _run_separable(
+        image,
+        kx[::-1],
+        ky[::-1],
+        border,
+        cval,
+        _out_dtype(image, False),
+        kx.size - 1 - kx.size // 2,
+        ky.size - 1 - ky.size // 2,
+    )
 
 
 def gaussian_kernel(sigma: float, size: int | None = None) -> np.ndarray:
@@ -508,8 +573,14 @@ def gaussian_kernel(sigma: float, size: int | None = None) -> np.ndarray:
     return w / w.sum()
 
 
-def gaussian_blur(image: np.ndarray, sigma: float, *, ksize: int | None = None,
-                  sigma_y: float | None = None, border: Border = "reflect101") -> np.ndarray:
+def gaussian_blur(
+    image: np.ndarray,
+    sigma: float,
+    *,
+    ksize: int | None = None,
+    sigma_y: float | None = None,
+    border: Border = "reflect101",
+) -> np.ndarray:
     r"""Gaussian smoothing, separable: :func:`gaussian_kernel` along x, then along y.
 
     .. math:: g = G_{\sigma_y} \star_y (G_{\sigma_x} \star_x f)
@@ -540,8 +611,13 @@ def gaussian_blur(image: np.ndarray, sigma: float, *, ksize: int | None = None,
     return _run_separable(image, kx, ky, border, 0.0, image.dtype)
 
 
-def box_filter(image: np.ndarray, ksize: int | tuple[int, int], *, normalize: bool = True,
-               border: Border = "reflect101") -> np.ndarray:
+def box_filter(
+    image: np.ndarray,
+    ksize: int | tuple[int, int],
+    *,
+    normalize: bool = True,
+    border: Border = "reflect101",
+) -> np.ndarray:
     r"""Box (mean) filter: the sum over a ``kw x kh`` window, divided by ``kw kh``.
 
     .. math:: g(x, y) = \frac{1}{k_w k_h} \sum_{|i| \le k_h/2,\,|j| \le k_w/2} f(x + j, y + i)
@@ -600,8 +676,12 @@ def _median_kernel(src, cidx, ridx, channels, k, out):  # pragma: no cover - com
                 out[y, x * channels + c] = win[half]
 
 
-def median_filter(image: np.ndarray, ksize: int = 3, *,
-                  border: Literal["replicate", "reflect101", "reflect"] = "replicate") -> np.ndarray:
+def median_filter(
+    image: np.ndarray,
+    ksize: int = 3,
+    *,
+    border: Literal["replicate", "reflect101", "reflect"] = "replicate",
+) -> np.ndarray:
     """Median of each ``ksize x ksize`` window, per channel.
 
     Matches ``cv2.medianBlur(image, ksize)`` (which replicates the border) exactly.
@@ -656,8 +736,9 @@ def derivative_kernel(order: int, ksize: int) -> np.ndarray:
             return np.ones(1)
         ksize = 3
     if order < 0 or order >= ksize:
-        raise InputError(f"derivative order must be in [0, {ksize - 1}] for ksize {ksize}; "
-                         f"got {order}")
+        raise InputError(
+            f"derivative order must be in [0, {ksize - 1}] for ksize {ksize}; got {order}"
+        )
     k = np.ones(1)
     for _ in range(ksize - order - 1):
         k = np.convolve(k, [1.0, 1.0])
@@ -672,8 +753,15 @@ def _check_ksize(ksize: int) -> int:
     return int(ksize)
 
 
-def sobel(image: np.ndarray, dx: int, dy: int, ksize: int = 3, *, scale: float = 1.0,
-          border: Border = "reflect101") -> np.ndarray:
+def sobel(
+    image: np.ndarray,
+    dx: int,
+    dy: int,
+    ksize: int = 3,
+    *,
+    scale: float = 1.0,
+    border: Border = "reflect101",
+) -> np.ndarray:
     r"""Sobel derivative :math:`\partial^{dx+dy} f / \partial x^{dx} \partial y^{dy}`.
 
     The separable kernel is ``derivative_kernel(dx, ksize)`` along x times
@@ -710,8 +798,9 @@ def sobel(image: np.ndarray, dx: int, dy: int, ksize: int = 3, *, scale: float =
     return _run_separable(image, kx, ky, border, 0.0, _out_dtype(image, False))
 
 
-def gradient(image: np.ndarray, ksize: int = 3, *,
-             border: Border = "reflect101") -> tuple[np.ndarray, np.ndarray]:
+def gradient(
+    image: np.ndarray, ksize: int = 3, *, border: Border = "reflect101"
+) -> tuple[np.ndarray, np.ndarray]:
     r"""Gradient magnitude and direction from Sobel derivatives.
 
     .. math:: |\nabla f| = \sqrt{f_x^2 + f_y^2}, \qquad \theta = \operatorname{atan2}(f_y, f_x)
@@ -745,8 +834,9 @@ _LAPLACE_1 = np.array([[0.0, 1.0, 0.0], [1.0, -4.0, 1.0], [0.0, 1.0, 0.0]])
 _LAPLACE_3 = np.array([[2.0, 0.0, 2.0], [0.0, -8.0, 0.0], [2.0, 0.0, 2.0]])
 
 
-def laplacian(image: np.ndarray, ksize: int = 1, *, scale: float = 1.0,
-              border: Border = "reflect101") -> np.ndarray:
+def laplacian(
+    image: np.ndarray, ksize: int = 1, *, scale: float = 1.0, border: Border = "reflect101"
+) -> np.ndarray:
     r"""Laplacian :math:`\nabla^2 f = f_{xx} + f_{yy}`.
 
     ``ksize=1`` uses the 5-point stencil ``[[0, 1, 0], [1, -4, 1], [0, 1, 0]]``,
@@ -775,16 +865,24 @@ def laplacian(image: np.ndarray, ksize: int = 1, *, scale: float = 1.0,
         return _run_correlate(image, kernel, border, 0.0, out_dtype)
     d2 = derivative_kernel(2, ksize) * float(scale)
     d0 = derivative_kernel(0, ksize)
-    return (_run_separable(image, d2, d0, border, 0.0, out_dtype)
-            + _run_separable(image, d0, d2, border, 0.0, out_dtype))
+    return _run_separable(image, d2, d0, border, 0.0, out_dtype) + _run_separable(
+        image, d0, d2, border, 0.0, out_dtype
+    )
 
 
-def laplacian_of_gaussian(image: np.ndarray, sigma: float, *, normalized: bool = False,
-                          truncate: float = 4.0, border: Border = "reflect") -> np.ndarray:
+def laplacian_of_gaussian(
+    image: np.ndarray,
+    sigma: float,
+    *,
+    normalized: bool = False,
+    truncate: float = 4.0,
+    border: Border = "reflect",
+) -> np.ndarray:
     r"""Laplacian of Gaussian, by two separable passes.
 
-    .. math:: \nabla^2 (G_\sigma * f) = G''_\sigma(x) G_\sigma(y) * f + G_\sigma(x) G''_\sigma(y) * f,
-              \qquad G''_\sigma(x) = G_\sigma(x) \left(\frac{x^2}{\sigma^4} - \frac{1}{\sigma^2}\right)
+    .. math::
+        \nabla^2 (G_\sigma * f) = G''_\sigma(x) G_\sigma(y) * f + G_\sigma(x) G''_\sigma(y) * f,
+        \qquad G''_\sigma(x) = G_\sigma(x) \left(\frac{x^2}{\sigma^4} - \frac{1}{\sigma^2}\right)
 
     with :math:`G_\sigma` sampled on ``|x| <= truncate * sigma`` and normalized to sum 1,
     exactly as ``scipy.ndimage.gaussian_laplace`` (whose default border ``reflect`` is the
@@ -819,5 +917,6 @@ def laplacian_of_gaussian(image: np.ndarray, sigma: float, *, normalized: bool =
         g2 = g2 * sigma * sigma
     out_dtype = _out_dtype(image, False)
     # both kernels are symmetric, so correlation equals convolution here
-    return (_run_separable(image, g2, g, border, 0.0, out_dtype)
-            + _run_separable(image, g, g2, border, 0.0, out_dtype))
+    return _run_separable(image, g2, g, border, 0.0, out_dtype) + _run_separable(
+        image, g, g2, border, 0.0, out_dtype
+    )

@@ -57,7 +57,9 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     try:
         img = np.asarray(iio.imread(p))
     except Exception as exc:  # decoders raise many kinds
-        raise FileFormatError(f"{p}: cannot decode as an image ({type(exc).__name__}: {exc})") from exc
+        raise FileFormatError(
+            f"{p}: cannot decode as an image ({type(exc).__name__}: {exc})"
+        ) from exc
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
     if img.ndim not in (2, 3) or img.size == 0:
@@ -212,7 +214,9 @@ class VideoWriter:
         0..10 (imageio-ffmpeg's scale; higher is better).
     """
 
-    def __init__(self, path: str | os.PathLike[str], fps: float = 30.0, quality: float = 7.0) -> None:
+    def __init__(
+        self, path: str | os.PathLike[str], fps: float = 30.0, quality: float = 7.0
+    ) -> None:
         self.path = Path(path)
         self.fps = check_positive(fps, "fps")
         self.quality = float(quality)
@@ -234,13 +238,18 @@ class VideoWriter:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._size = (w, h)
             self._gen = imageio_ffmpeg.write_frames(
-                str(self.path), (w, h), fps=self.fps, quality=self.quality,
-                macro_block_size=1, pix_fmt_out="yuv420p" if w % 2 == 0 and h % 2 == 0 else "yuv444p",
+                str(self.path),
+                (w, h),
+                fps=self.fps,
+                quality=self.quality,
+                macro_block_size=1,
+                pix_fmt_out="yuv420p" if w % 2 == 0 and h % 2 == 0 else "yuv444p",
             )
             self._gen.send(None)
         elif (w, h) != self._size:
-            raise InputError(f"frame size {w}x{h} differs from the first frame's "
-                             f"{self._size[0]}x{self._size[1]}")
+            raise InputError(
+                f"frame size {w}x{h} differs from the first frame's {self._size[0]}x{self._size[1]}"
+            )
         self._gen.send(np.ascontiguousarray(frame))
         self.frames_written += 1
 

@@ -1,4 +1,4 @@
-"""Binary and grey-level morphology with a structuring element.
+r"""Binary and grey-level morphology with a structuring element.
 
 Erosion and dilation are the minimum and maximum over the structuring element
 :math:`B` (anchored at its centre):
@@ -52,7 +52,7 @@ def structuring_element(shape: str, size: int | tuple[int, int]) -> np.ndarray:
     for i in range(h):
         dy = i - r
         if abs(dy) <= r:
-            dx = int(round(c * np.sqrt(max(0.0, (r * r - dy * dy) * inv_r2)))) if r > 0 else c
+            dx = round(c * np.sqrt(max(0.0, (r * r - dy * dy) * inv_r2))) if r > 0 else c
             se[i, max(c - dx, 0) : min(c + dx + 1, w)] = True
     return se
 

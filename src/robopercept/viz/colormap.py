@@ -11,11 +11,13 @@ __all__ = ["colorize_depth", "colorize_signed", "label_colors", "turbo"]
 
 # Turbo (Mikhailov 2019) as the published polynomial fit: each channel a degree-5
 # polynomial of t in [0, 1].
-_TURBO = np.array([
-    [0.13572138, 4.61539260, -42.66032258, 132.13108234, -152.94239396, 59.28637943],
-    [0.09140261, 2.19418839, 4.84296658, -14.18503333, 4.27729857, 2.82956604],
-    [0.10667330, 12.64194608, -60.58204836, 110.36276771, -89.90310912, 27.34824973],
-])
+_TURBO = np.array(
+    [
+        [0.13572138, 4.61539260, -42.66032258, 132.13108234, -152.94239396, 59.28637943],
+        [0.09140261, 2.19418839, 4.84296658, -14.18503333, 4.27729857, 2.82956604],
+        [0.10667330, 12.64194608, -60.58204836, 110.36276771, -89.90310912, 27.34824973],
+    ]
+)
 
 
 def turbo(t: np.ndarray) -> np.ndarray:
@@ -26,8 +28,13 @@ def turbo(t: np.ndarray) -> np.ndarray:
     return np.round(rgb * 255.0).astype(np.uint8)
 
 
-def colorize_depth(depth: np.ndarray, min_depth: float | None = None,
-                   max_depth: float | None = None, *, invalid: float = 0) -> np.ndarray:
+def colorize_depth(
+    depth: np.ndarray,
+    min_depth: float | None = None,
+    max_depth: float | None = None,
+    *,
+    invalid: float = 0,
+) -> np.ndarray:
     """Colour a depth map with Turbo: near blue, far red; invalid pixels black.
 
     Parameters

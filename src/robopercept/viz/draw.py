@@ -46,15 +46,21 @@ def _color(color: Sequence[int]) -> Color:
     return c  # type: ignore[return-value]
 
 
-def _canvas(image: np.ndarray):  # noqa: ANN202 - Pillow types
+def _canvas(image: np.ndarray):
     from PIL import Image, ImageDraw
 
     pil = Image.fromarray(to_rgb8(image))
     return pil, ImageDraw.Draw(pil)
 
 
-def draw_points(image: np.ndarray, points: np.ndarray, *, color: Sequence[int] = (255, 0, 0),
-                radius: float = 3.0, filled: bool = False) -> np.ndarray:
+def draw_points(
+    image: np.ndarray,
+    points: np.ndarray,
+    *,
+    color: Sequence[int] = (255, 0, 0),
+    radius: float = 3.0,
+    filled: bool = False,
+) -> np.ndarray:
     """Draw circles of ``radius`` at ``(x, y)`` points.
 
     Parameters
@@ -79,8 +85,9 @@ def draw_points(image: np.ndarray, points: np.ndarray, *, color: Sequence[int] =
     return np.asarray(pil)
 
 
-def draw_lines(image: np.ndarray, segments: np.ndarray, *, color: Sequence[int] = (0, 255, 0),
-               width: int = 1) -> np.ndarray:
+def draw_lines(
+    image: np.ndarray, segments: np.ndarray, *, color: Sequence[int] = (0, 255, 0), width: int = 1
+) -> np.ndarray:
     """Draw line segments.
 
     Parameters
@@ -103,8 +110,14 @@ def draw_lines(image: np.ndarray, segments: np.ndarray, *, color: Sequence[int] 
     return np.asarray(pil)
 
 
-def draw_boxes(image: np.ndarray, boxes: np.ndarray, *, color: Sequence[int] = (255, 255, 0),
-               width: int = 2, labels: Sequence[str] | None = None) -> np.ndarray:
+def draw_boxes(
+    image: np.ndarray,
+    boxes: np.ndarray,
+    *,
+    color: Sequence[int] = (255, 255, 0),
+    width: int = 2,
+    labels: Sequence[str] | None = None,
+) -> np.ndarray:
     """Draw axis-aligned boxes ``(x, y, w, h)``, optionally captioned.
 
     Parameters
@@ -133,9 +146,15 @@ def draw_boxes(image: np.ndarray, boxes: np.ndarray, *, color: Sequence[int] = (
     return np.asarray(pil)
 
 
-def draw_text(image: np.ndarray, text: str, origin: tuple[float, float] = (5, 5), *,
-              color: Sequence[int] = (255, 255, 255), size: int = 14,
-              background: Sequence[int] | None = (0, 0, 0)) -> np.ndarray:
+def draw_text(
+    image: np.ndarray,
+    text: str,
+    origin: tuple[float, float] = (5, 5),
+    *,
+    color: Sequence[int] = (255, 255, 255),
+    size: int = 14,
+    background: Sequence[int] | None = (0, 0, 0),
+) -> np.ndarray:
     """Write ``text`` with its top-left corner at ``origin`` = (x, y).
 
     Uses Pillow's built-in font at ``size`` pixels, on a filled background box unless
@@ -156,8 +175,9 @@ def draw_text(image: np.ndarray, text: str, origin: tuple[float, float] = (5, 5)
     return np.asarray(pil)
 
 
-def draw_mask(image: np.ndarray, mask: np.ndarray, *, color: Sequence[int] = (0, 255, 0),
-              alpha: float = 0.5) -> np.ndarray:
+def draw_mask(
+    image: np.ndarray, mask: np.ndarray, *, color: Sequence[int] = (0, 255, 0), alpha: float = 0.5
+) -> np.ndarray:
     """Blend ``color`` over the pixels where ``mask`` is true: ``(1 - a) I + a c``.
 
     Parameters

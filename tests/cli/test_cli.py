@@ -1,0 +1,84 @@
+"""The robopercept command: outputs, JSON, and one-line errors with exit code 2."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from robopercept import __version__
+from robopercept.cli.main import main
+from robopercept.imaging import read_image, write_image
+
+
+def run_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "robopercept.cli.main", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_help_version_info(capsys):
+    r = run_cli("--help")
+    assert r.returncode == 0 and "edges" in r.stdout and "blobs" in r.stdout
+    r = run_cli("--version")
+    assert r.returncode == 0 and __version__ in r.stdout
+    assert main(["info"]) == 0
+    out = capsys.readouterr().out
+    assert "numpy" in out and "torch" in out
+
+
+@pytest.mark.parametrize("method", ["canny", "sobel", "log"])
+def test_edges_writes_png(tmp_path, capsys, method):
+    out = tmp_path / f"{method}.png"
+    assert main(["edges", "-o", str(out), "--method", method]) == 0
+    img = read_image(out)
+    assert img.dtype == np.uint8 and img.ndim == 2 and img.max() == 255
+    assert method in capsys.readouterr().out
+
+
+def test_blobs_table_json_and_overlay(tmp_path, capsys):
+    mask = np.zeros((60, 80), np.uint8)
+    mask[10:20, 10:30] = 255
+    mask[40:50, 50:60] = 255
+    mask[43:47, 53:57] = 0
+    src = write_image(tmp_path / "m.png", mask)
+    overlay = tmp_path / "o.png"
+    assert main(["blobs", str(src), "--json", "-o", str(overlay), "--min-area", "1"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [b["area"] for b in data["blobs"]] == [200, 84]
+    assert [b["holes"] for b in data["blobs"]] == [0, 1]
+    assert read_image(overlay).shape == (60, 80, 3)
+    assert main(["blobs", str(src), "--min-area", "1"]) == 0
+    table = capsys.readouterr().out
+    assert "2 blobs" in table and "circ" in table
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["edges", "nonexistent.png"], "no such file"),
+        (["edges", "--method", "magic"], "invalid choice"),
+        (["blobs", "--min-area", "-3"], "min-area"),
+        (["edges", "--low", "200", "--high", "100"], "swap"),
+        (["frobnicate"], "invalid choice"),
+    ],
+)
+def test_errors_are_one_line_exit_2(args, needle):
+    r = run_cli(*args)
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and needle in lines[0], r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_corrupt_file_is_one_line(tmp_path):
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n garbage")
+    r = run_cli("blobs", str(bad))
+    assert r.returncode == 2 and "bad.png" in r.stderr and "Traceback" not in r.stderr

@@ -1,0 +1,47 @@
+"""Shared fixtures: real images and the ../shared/data folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+def data_path(*parts: str) -> Path:
+    """Path into ../shared/data; skips the test (with the reason) if it is absent."""
+    p = DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real data not available: {p} (the ../shared/data folder is absent)")
+    return p
+
+
+@pytest.fixture(scope="session")
+def camera() -> np.ndarray:
+    """skimage's 512x512 'camera' (uint8 gray), shipped inside scikit-image."""
+    from skimage import data
+
+    return data.camera()
+
+
+@pytest.fixture(scope="session")
+def astronaut() -> np.ndarray:
+    """skimage's 512x512 'astronaut' (uint8 RGB)."""
+    from skimage import data
+
+    return data.astronaut()
+
+
+@pytest.fixture(scope="session")
+def graf() -> np.ndarray:
+    """Oxford affine 'graf' img1 (real photo, RGB uint8) from ../shared/data."""
+    from robopercept.imaging import read_image
+
+    return read_image(data_path("features", "oxford_affine", "graf", "img1.png"), mode="rgb")
+
+
+@pytest.fixture(scope="session")
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)

@@ -1,0 +1,145 @@
+"""Connected components and blob features."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from skimage import measure
+
+from robopercept.errors import InputError
+from robopercept.imaging import blob_features, label_components, otsu_threshold
+from tests.conftest import data_path
+
+
+def same_partition(a: np.ndarray, b: np.ndarray) -> bool:
+    """True if label images a and b split the pixels identically (a bijection of labels)."""
+    if not np.array_equal(a == 0, b == 0):
+        return False
+    pairs = np.unique(np.stack([a.ravel(), b.ravel()]), axis=1)
+    return len(np.unique(pairs[0])) == pairs.shape[1] == len(np.unique(pairs[1]))
+
+
+def test_square_features_hand():
+    mask = np.zeros((20, 20), np.uint8)
+    mask[5:15, 3:13] = 1
+    labels, n = label_components(mask)
+    assert n == 1
+    f = blob_features(labels)
+    assert f.area.tolist() == [100]
+    assert f.bbox.tolist() == [[3, 5, 10, 10]]
+    np.testing.assert_allclose(f.centroid, [[7.5, 9.5]])
+    assert f.aspect_ratio[0] == 1.0
+    # 36 border pixels, each in a straight run or an L corner (weight 1): the estimator
+    # follows pixel centres, 4 sides of 9 pixel steps
+    assert f.perimeter[0] == pytest.approx(36.0)
+    # a 45-degree step edge costs sqrt(2) per step
+    tri = np.tril(np.ones((6, 6), np.uint8))
+    assert blob_features(label_components(tri)[0]).perimeter[0] > 5 + 5
+    assert f.circularity[0] == pytest.approx(4 * np.pi * 100 / f.perimeter[0] ** 2)
+    assert f.holes[0] == 0
+
+
+def test_ring_has_one_hole_and_figure_eight_two():
+    ring = np.zeros((12, 12), bool)
+    ring[2:10, 2:10] = True
+    ring[4:8, 4:8] = False
+    assert blob_features(label_components(ring)[0]).holes.tolist() == [1]
+    eight = np.zeros((12, 20), bool)
+    eight[2:10, 2:18] = True
+    eight[4:8, 4:8] = False
+    eight[4:8, 12:16] = False
+    assert blob_features(label_components(eight)[0]).holes.tolist() == [2]
+
+
+def test_connectivity_4_vs_8():
+    diag = np.eye(5, dtype=bool)
+    assert label_components(diag, 8)[1] == 1
+    assert label_components(diag, 4)[1] == 5
+
+
+def test_labels_in_raster_order_same_partition_as_opencv(rng):
+    mask = rng.random((60, 80)) > 0.6
+    ours, n = label_components(mask)
+    n_cv, ref = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    assert n == n_cv - 1
+    assert same_partition(ours, ref)
+    # numbered by first pixel in raster order (OpenCV's block scan numbers differently)
+    flat = ours.ravel()
+    firsts = [flat.tolist().index(lab) for lab in range(1, n + 1)]
+    assert firsts == sorted(firsts)
+
+
+def to_ref_order(labels: np.ndarray, ref: np.ndarray, n: int) -> np.ndarray:
+    """For each of our labels 1..n, the reference label of the same blob."""
+    idx = np.zeros(n + 1, dtype=np.int64)
+    idx[labels.ravel()] = ref.ravel()
+    return idx[1:]
+
+
+def _real_masks(camera, astronaut):
+    masks = []
+    for img in (camera, cv2.cvtColor(astronaut, cv2.COLOR_RGB2GRAY)):
+        masks.append(img > otsu_threshold(img))
+    for name in ("box.png", "box_in_scene.png"):
+        img = cv2.imread(str(data_path("features", "opencv_box", name)), cv2.IMREAD_GRAYSCALE)
+        masks.append(img > otsu_threshold(img))
+    return masks
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("connectivity", [4, 8])
+def test_partition_and_stats_match_opencv(camera, astronaut, connectivity):
+    for mask in _real_masks(camera, astronaut):
+        labels, n = label_components(mask, connectivity)
+        n_cv, ref, stats, centroids = cv2.connectedComponentsWithStats(
+            mask.astype(np.uint8), connectivity=connectivity
+        )
+        assert n == n_cv - 1
+        assert same_partition(labels, ref)
+        f = blob_features(labels)
+        order = to_ref_order(labels, ref, n)
+        np.testing.assert_array_equal(f.area, stats[order, cv2.CC_STAT_AREA])
+        np.testing.assert_array_equal(f.bbox, stats[order, :4])
+        np.testing.assert_allclose(f.centroid, centroids[order], atol=1e-9)
+
+
+@pytest.mark.realdata
+def test_perimeter_and_holes_match_skimage(camera, astronaut):
+    for mask in _real_masks(camera, astronaut):
+        labels, _ = label_components(mask, 8)
+        f = blob_features(labels)
+        props = measure.regionprops(labels)
+        # Same estimator (weighted border-pixel configurations), so equal up to float
+        # summation order: 1e-9 relative.
+        np.testing.assert_allclose(f.perimeter, [p.perimeter for p in props], rtol=1e-9)
+        # holes = 1 - Euler number (8-connected foreground, 4-connected background)
+        np.testing.assert_array_equal(f.holes, [1 - p.euler_number for p in props])
+
+
+def test_otsu_matches_opencv(camera, astronaut):
+    for img in (camera, cv2.cvtColor(astronaut, cv2.COLOR_RGB2GRAY)):
+        t_cv, _ = cv2.threshold(img, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+        assert otsu_threshold(img) == t_cv
+
+
+def test_empty_and_full_masks():
+    labels, n = label_components(np.zeros((5, 5), bool))
+    assert n == 0 and len(blob_features(labels)) == 0
+    labels, n = label_components(np.ones((5, 5), bool))
+    assert n == 1 and blob_features(labels).area.tolist() == [25]
+    assert len(blob_features(np.zeros((0, 0), np.int32))) == 0
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: label_components(np.zeros((3, 3, 3))), "2-D"),
+        (lambda: label_components(np.zeros((3, 3)), 6), "connectivity"),
+        (lambda: blob_features(np.zeros((3, 3)) + 0.5), "integer"),
+        (lambda: blob_features(-np.ones((3, 3), int)), ">= 0"),
+    ],
+)
+def test_bad_input(call, match):
+    with pytest.raises(InputError, match=match):
+        call()

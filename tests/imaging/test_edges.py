@@ -1,0 +1,90 @@
+"""Canny: hand case, parity with cv2.Canny, properties, bad input."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from robopercept.errors import InputError
+from robopercept.imaging import canny
+from tests.conftest import data_path
+
+
+def f1(a: np.ndarray, b: np.ndarray) -> float:
+    tp = np.count_nonzero(a & b)
+    return 2 * tp / max(np.count_nonzero(a) + np.count_nonzero(b), 1)
+
+
+def test_square_edges_are_its_outline():
+    img = np.zeros((40, 40), np.uint8)
+    img[10:30, 10:30] = 200
+    edges = canny(img, 100, 300, sigma=0)
+    ys, xs = np.nonzero(edges)
+    # a one-pixel-wide closed outline hugging the square's boundary
+    assert set(np.unique(xs)) <= set(range(9, 31)) and set(np.unique(ys)) <= set(range(9, 31))
+    assert not edges[12:28, 12:28].any()  # nothing inside
+    assert not edges[:8].any() and not edges[32:].any()
+    assert 70 <= edges.sum() <= 90  # ~4 sides of 20 pixels
+    assert canny(np.full((20, 20), 7, np.uint8), 1, 2).sum() == 0  # flat image: no edges
+
+
+def _real_images(camera, astronaut):
+    imgs = [camera, cv2.cvtColor(astronaut, cv2.COLOR_RGB2GRAY)]
+    for name in ("graf", "boat"):
+        p = data_path("features", "oxford_affine", name, "img1.png")
+        imgs.append(cv2.imread(str(p), cv2.IMREAD_GRAYSCALE))
+    return imgs
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize(("low", "high"), [(50, 150), (100, 200), (30, 90)])
+def test_matches_opencv_canny(camera, astronaut, low, high):
+    for img in _real_images(camera, astronaut):
+        ours = canny(img, low, high, sigma=0, l2_gradient=True)
+        ref = cv2.Canny(img, low, high, L2gradient=True) > 0
+        assert f1(ours, ref) >= 0.95, (img.shape, low, high, f1(ours, ref))
+
+
+def test_l1_gradient_also_matches(camera):
+    ours = canny(camera, 80, 160, sigma=0, l2_gradient=False)
+    ref = cv2.Canny(camera, 80, 160, L2gradient=False) > 0
+    assert f1(ours, ref) >= 0.95
+
+
+def test_hysteresis_properties(camera):
+    strong_only = canny(camera, 150, 150, sigma=1.0)
+    with_weak = canny(camera, 50, 150, sigma=1.0)
+    # lowering `low` only adds pixels connected to the same strong seeds
+    assert (strong_only <= with_weak).all()
+    assert with_weak.sum() > strong_only.sum()
+    # higher thresholds never add edges
+    assert (canny(camera, 100, 250) <= canny(camera, 50, 250)).all()
+
+
+def test_transpose_equivariance(camera):
+    a = canny(camera, 50, 150, sigma=1.0)
+    b = canny(np.ascontiguousarray(camera.T), 50, 150, sigma=1.0)
+    assert f1(a, b.T) >= 0.99  # ties in NMS may break differently
+
+
+def test_color_input_and_float_input(astronaut):
+    assert canny(astronaut, 50, 150).shape == astronaut.shape[:2]
+    f = astronaut[..., 1].astype(np.float32) / 255
+    # same image in [0, 1]: thresholds scale with it
+    a = canny(astronaut[..., 1], 50, 150)
+    b = canny(f, 50 / 255, 150 / 255)
+    assert f1(a, b) >= 0.99
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"low": 200, "high": 100}, "swap"),
+        ({"low": -1, "high": 10}, "low must be"),
+        ({"low": 1, "high": 2, "sigma": -1}, "sigma"),
+    ],
+)
+def test_bad_input(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        canny(np.zeros((10, 10), np.uint8), **kwargs)

@@ -1,0 +1,289 @@
+"""Filters: hand-computed impulses, parity with OpenCV/SciPy, properties, bad input."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from robopercept.errors import InputError
+from robopercept.imaging import (
+    box_filter,
+    convolve,
+    convolve_separable,
+    correlate,
+    correlate_separable,
+    derivative_kernel,
+    gaussian_blur,
+    gaussian_kernel,
+    gradient,
+    laplacian,
+    laplacian_of_gaussian,
+    median_filter,
+    sobel,
+)
+from robopercept.imaging.filters import border_indices
+
+CV_BORDER = {
+    "reflect101": cv2.BORDER_REFLECT_101,
+    "reflect": cv2.BORDER_REFLECT,
+    "replicate": cv2.BORDER_REPLICATE,
+    "constant": cv2.BORDER_CONSTANT,
+}
+
+
+def impulse(h: int = 9, w: int = 9, dtype=np.float64) -> np.ndarray:
+    img = np.zeros((h, w), dtype=dtype)
+    img[h // 2, w // 2] = 1
+    return img
+
+
+# ----------------------------------------------------------------- hand-computed
+def test_border_indices_hand():
+    # abcd with 3 padded each side
+    assert border_indices(4, 3, 3, "reflect101").tolist() == [3, 2, 1, 0, 1, 2, 3, 2, 1, 0]
+    assert border_indices(4, 3, 3, "reflect").tolist() == [2, 1, 0, 0, 1, 2, 3, 3, 2, 1]
+    assert border_indices(4, 2, 2, "replicate").tolist() == [0, 0, 0, 1, 2, 3, 3, 3]
+    assert border_indices(4, 1, 1, "constant").tolist() == [-1, 0, 1, 2, 3, -1]
+    # padding wider than the image still maps into range
+    assert border_indices(2, 5, 5, "reflect101").min() >= 0
+
+
+def test_correlate_impulse_gives_flipped_kernel_convolve_gives_kernel():
+    k = np.arange(9, dtype=np.float64).reshape(3, 3)
+    out_c = correlate(impulse(), k)
+    out_v = convolve(impulse(), k)
+    np.testing.assert_allclose(out_v[3:6, 3:6], k)
+    np.testing.assert_allclose(out_c[3:6, 3:6], k[::-1, ::-1])
+    assert out_c.sum() == pytest.approx(k.sum())
+
+
+def test_gaussian_kernel_hand():
+    k = gaussian_kernel(1.0, 3)
+    e = np.exp(-0.5)
+    np.testing.assert_allclose(k, [e / (1 + 2 * e), 1 / (1 + 2 * e), e / (1 + 2 * e)])
+    assert gaussian_kernel(2.0).size == 13  # 2 ceil(3 sigma) + 1
+    np.testing.assert_allclose(gaussian_kernel(1.5, 9), cv2.getGaussianKernel(9, 1.5).ravel())
+
+
+def test_gaussian_impulse_is_outer_product():
+    k = gaussian_kernel(1.0, 5)
+    out = gaussian_blur(impulse(), 1.0, ksize=5)
+    np.testing.assert_allclose(out[2:7, 2:7], np.outer(k, k), atol=1e-15)
+
+
+def test_sobel_impulse_and_ramp():
+    out = sobel(impulse(), 1, 0)
+    np.testing.assert_array_equal(out[3:6, 3:6], [[1, 0, -1], [2, 0, -2], [1, 0, -1]])
+    ramp = np.tile(np.arange(10, dtype=np.float32) * 3, (6, 1))
+    gx = sobel(ramp, 1, 0)
+    np.testing.assert_allclose(gx[:, 1:-1], 8 * 3)  # 4 (smoothing) * 2 (central diff) * slope
+    np.testing.assert_allclose(sobel(ramp, 0, 1), 0)
+
+
+def test_derivative_kernels_match_opencv():
+    for ksize in (1, 3, 5, 7):
+        for order in range(0, 3):
+            if ksize > 1 and order >= ksize:
+                continue
+            # OpenCV needs dx + dy > 0: read order 0 from the y kernel of (1, 0)
+            ref = (
+                cv2.getDerivKernels(order, 1, ksize)[0]
+                if order
+                else cv2.getDerivKernels(1, 0, ksize)[1]
+            )
+            np.testing.assert_array_equal(derivative_kernel(order, ksize), ref.ravel())
+
+
+def test_laplacian_impulse():
+    out = laplacian(impulse(), 1)
+    np.testing.assert_array_equal(out[3:6, 3:6], [[0, 1, 0], [1, -4, 1], [0, 1, 0]])
+    # a quadratic x^2 + y^2 has Laplacian 4 everywhere inside
+    y, x = np.mgrid[0:12, 0:12].astype(np.float64)
+    np.testing.assert_allclose(laplacian(x**2 + y**2)[1:-1, 1:-1], 4.0)
+
+
+def test_box_and_median_hand():
+    img = np.array([[1, 2, 3], [4, 5, 6], [7, 8, 9]], dtype=np.float64)
+    assert box_filter(img, 3, border="constant")[1, 1] == pytest.approx(5.0)
+    assert box_filter(img, 3, normalize=False, border="constant")[0, 0] == pytest.approx(12.0)
+    speck = np.zeros((7, 7), np.uint8)
+    speck[3, 3] = 255
+    assert median_filter(speck, 3).max() == 0  # salt removed
+
+
+def test_log_impulse_matches_formula():
+    sigma = 1.5
+    out = laplacian_of_gaussian(impulse(21, 21), sigma)
+    r = int(4 * sigma + 0.5)
+    x = np.arange(-r, r + 1)
+    g = np.exp(-0.5 * x**2 / sigma**2)
+    g /= g.sum()
+    g2 = g * (x**2 / sigma**4 - 1 / sigma**2)
+    expect = np.outer(g, g2) + np.outer(g2, g)
+    np.testing.assert_allclose(out[10 - r : 11 + r, 10 - r : 11 + r], expect, atol=1e-15)
+
+
+# ----------------------------------------------------------------- parity with OpenCV
+@pytest.mark.parametrize("border", list(CV_BORDER))
+def test_correlate_matches_filter2d(camera, astronaut, rng, border):
+    kernel = rng.normal(size=(5, 7))
+    for img in (camera, astronaut):
+        f = img.astype(np.float32) / 255.0
+        ours = correlate(f, kernel, border=border)
+        ref = cv2.filter2D(f, -1, kernel, borderType=CV_BORDER[border])
+        assert ours.dtype == np.float32
+        # tolerance: float32 accumulation of 35 products of |values| <= ~3 (eps 6e-8)
+        assert np.abs(ours - ref).max() <= 1e-5
+
+
+def test_convolve_matches_filter2d_flipped(camera, rng):
+    kernel = rng.normal(size=(3, 5))
+    f = camera.astype(np.float32) / 255.0
+    ref = cv2.filter2D(f, -1, cv2.flip(kernel, -1))
+    assert np.abs(convolve(f, kernel) - ref).max() <= 1e-5
+    np.testing.assert_allclose(
+        convolve(f.astype(np.float64), kernel),
+        ndimage.convolve(f.astype(np.float64), kernel, mode="mirror"),
+        atol=1e-12,
+    )
+
+
+def test_separable_matches_sepfilter2d(astronaut, rng):
+    kx, ky = rng.normal(size=7), rng.normal(size=5)
+    f = astronaut.astype(np.float32) / 255.0
+    ref = cv2.sepFilter2D(f, -1, kx, ky)
+    assert np.abs(correlate_separable(f, kx, ky) - ref).max() <= 1e-5
+    # separable == full 2-D kernel; convolve_separable == convolve with outer product
+    np.testing.assert_allclose(
+        correlate_separable(f, kx, ky), correlate(f, np.outer(ky, kx)), atol=1e-5
+    )
+    np.testing.assert_allclose(
+        convolve_separable(f, kx, ky), convolve(f, np.outer(ky, kx)), atol=1e-5
+    )
+
+
+def test_gaussian_blur_matches_opencv(camera, astronaut, graf):
+    for img in (camera, astronaut, graf):
+        f = img.astype(np.float32) / 255.0
+        ref = cv2.GaussianBlur(f, (9, 9), 1.7)
+        assert np.abs(gaussian_blur(f, 1.7, ksize=9) - ref).max() <= 1e-6
+        # uint8: OpenCV uses an 8-bit fixed-point kernel, so allow one grey level
+        out8 = gaussian_blur(img, 1.7, ksize=9)
+        assert out8.dtype == np.uint8
+        diff = np.abs(out8.astype(int) - cv2.GaussianBlur(img, (9, 9), 1.7))
+        # at most one grey level anywhere; off-by-one on < 10% of pixels (rounding of
+        # the fixed-point kernel vs our float32 one)
+        assert diff.max() <= 1 and diff.mean() < 0.1
+
+
+@pytest.mark.parametrize("ksize", [1, 3, 5, 7])
+@pytest.mark.parametrize(("dx", "dy"), [(1, 0), (0, 1), (1, 1), (2, 0)])
+def test_sobel_matches_opencv(camera, graf, ksize, dx, dy):
+    if ksize == 1 and (dx, dy) == (1, 1):
+        pytest.skip("cv2.Sobel with ksize=1 uses a 3x3 kernel for mixed derivatives")
+    for img in (camera, graf):
+        ours = sobel(img, dx, dy, ksize)
+        ref = cv2.Sobel(img, cv2.CV_32F, dx, dy, ksize=ksize)
+        # exact integer sums in float32 (uint8 input): identical
+        np.testing.assert_array_equal(ours, ref)
+
+
+@pytest.mark.parametrize("ksize", [1, 3, 5])
+def test_laplacian_matches_opencv(camera, astronaut, ksize):
+    for img in (camera, astronaut):
+        ref = cv2.Laplacian(img, cv2.CV_32F, ksize=ksize)
+        np.testing.assert_array_equal(laplacian(img, ksize), ref)
+
+
+def test_box_and_median_match_opencv(astronaut, camera):
+    np.testing.assert_allclose(
+        box_filter(astronaut.astype(np.float32), (5, 3)),
+        cv2.blur(astronaut.astype(np.float32), (5, 3)),
+        atol=1e-4,
+    )
+    assert np.abs(box_filter(camera, 5).astype(int) - cv2.blur(camera, (5, 5))).max() <= 1
+    for k in (3, 5):
+        np.testing.assert_array_equal(median_filter(camera, k), cv2.medianBlur(camera, k))
+        np.testing.assert_array_equal(median_filter(astronaut, k), cv2.medianBlur(astronaut, k))
+
+
+def test_log_matches_scipy(camera):
+    f = camera.astype(np.float64)
+    for sigma in (1.0, 2.5):
+        np.testing.assert_allclose(
+            laplacian_of_gaussian(f, sigma), ndimage.gaussian_laplace(f, sigma), atol=1e-9
+        )
+
+
+def test_gradient_direction_and_magnitude():
+    y, x = np.mgrid[0:20, 0:20].astype(np.float64)
+    mag, ang = gradient(x + y)  # gradient along (1, 1): 45 degrees, image-down positive
+    np.testing.assert_allclose(ang[2:-2, 2:-2], np.pi / 4, atol=1e-12)
+    np.testing.assert_allclose(mag[2:-2, 2:-2], 8 * np.sqrt(2), atol=1e-12)
+
+
+# ----------------------------------------------------------------- properties
+def test_linear_filters_are_linear_and_shift_equivariant(rng):
+    a, b = rng.random((30, 40)), rng.random((30, 40))
+    k = rng.normal(size=(3, 3))
+    np.testing.assert_allclose(
+        correlate(2 * a + 3 * b, k), 2 * correlate(a, k) + 3 * correlate(b, k), atol=1e-12
+    )
+    shifted = np.roll(a, (2, 3), axis=(0, 1))
+    np.testing.assert_allclose(
+        correlate(shifted, k)[5:-5, 5:-5],
+        np.roll(correlate(a, k), (2, 3), axis=(0, 1))[5:-5, 5:-5],
+        atol=1e-12,
+    )
+
+
+def test_gaussian_preserves_mean_and_dtype(astronaut):
+    f = astronaut.astype(np.float32) / 255
+    out = gaussian_blur(f, 2.0)
+    assert out.dtype == np.float32 and out.shape == f.shape
+    assert abs(out.mean() - f.mean()) < 2e-3
+    assert gaussian_blur(f.astype(np.float64), 2.0).dtype == np.float64
+
+
+def test_color_channels_filtered_independently(astronaut):
+    f = astronaut.astype(np.float32)
+    out = gaussian_blur(f, 1.2)
+    for c in range(3):
+        np.testing.assert_allclose(out[..., c], gaussian_blur(f[..., c].copy(), 1.2), atol=1e-4)
+
+
+def test_tiny_images_all_borders():
+    for shape in ((1, 1), (1, 5), (5, 1), (2, 2)):
+        img = np.arange(np.prod(shape), dtype=np.float32).reshape(shape)
+        for border in CV_BORDER:
+            ours = correlate(img, np.ones((3, 3)), border=border)
+            ref = cv2.filter2D(img, -1, np.ones((3, 3)), borderType=CV_BORDER[border])
+            np.testing.assert_allclose(ours, ref, atol=1e-5)
+
+
+# ----------------------------------------------------------------- bad input
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: correlate(np.zeros((3, 4, 5)), np.ones((3, 3))), r"\(H, W\) or \(H, W, 3\)"),
+        (lambda: correlate(np.zeros((3, 64, 64)), np.ones((3, 3))), "channels-first"),
+        (lambda: correlate(np.zeros((0, 4)), np.ones((3, 3))), "empty"),
+        (lambda: correlate(np.full((4, 4), np.nan), np.ones((3, 3))), "finite"),
+        (lambda: correlate(np.zeros((4, 4)), np.ones(3)), "2-D"),
+        (lambda: correlate(np.zeros((4, 4)), np.ones((3, 3)), border="wrap"), "border must be"),
+        (lambda: correlate(np.zeros((4, 4), np.complex64), np.ones((3, 3))), "dtype"),
+        (lambda: gaussian_kernel(-1.0), r"sigma must be in \(0"),
+        (lambda: gaussian_kernel(1.0, 4), "odd"),
+        (lambda: sobel(np.zeros((4, 4)), 0, 0), "dx \\+ dy"),
+        (lambda: sobel(np.zeros((4, 4)), 1, 0, ksize=4), "ksize must be 1, 3, 5 or 7"),
+        (lambda: median_filter(np.zeros((4, 4)), 2), "odd"),
+        (lambda: box_filter(np.zeros((4, 4)), 0), "positive"),
+        (lambda: laplacian_of_gaussian(np.zeros((4, 4)), 0), "sigma"),
+        (lambda: correlate(np.zeros((4, 4)), np.ones((3, 3)), anchor=(5, 0)), "anchor"),
+    ],
+)
+def test_bad_input_raises_input_error(call, match):
+    with pytest.raises(InputError, match=match):
+        call()

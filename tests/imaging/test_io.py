@@ -1,0 +1,91 @@
+"""Image and video I/O."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robopercept.errors import FileFormatError, InputError
+from robopercept.imaging import VideoReader, VideoWriter, read_image, write_image
+from tests.conftest import data_path
+
+
+def test_png_round_trips_uint8_and_uint16(tmp_path, rng):
+    rgb = (rng.random((20, 30, 3)) * 255).astype(np.uint8)
+    depth = (rng.random((20, 30)) * 60000).astype(np.uint16)
+    np.testing.assert_array_equal(read_image(write_image(tmp_path / "a.png", rgb)), rgb)
+    back = read_image(write_image(tmp_path / "d.png", depth))
+    assert back.dtype == np.uint16
+    np.testing.assert_array_equal(back, depth)
+    tif = read_image(write_image(tmp_path / "d.tiff", depth))
+    np.testing.assert_array_equal(tif, depth)
+
+
+@pytest.mark.realdata
+def test_reads_real_depth_png_as_uint16():
+    depth = read_image(data_path("rgbd", "single_frames_open3d", "TUM_depth.png"))
+    assert depth.dtype == np.uint16 and depth.ndim == 2 and depth.max() > 255
+    color = read_image(data_path("rgbd", "single_frames_open3d", "TUM_color.png"), mode="rgb")
+    assert color.shape[2] == 3 and color.shape[:2] == depth.shape
+    gray = read_image(data_path("rgbd", "single_frames_open3d", "SUN_color.jpg"), mode="gray")
+    assert gray.ndim == 2
+
+
+def test_errors_name_the_file(tmp_path):
+    with pytest.raises(FileFormatError, match="no such file"):
+        read_image(tmp_path / "missing.png")
+    (tmp_path / "empty.png").write_bytes(b"")
+    with pytest.raises(FileFormatError, match="empty"):
+        read_image(tmp_path / "empty.png")
+    good = write_image(tmp_path / "g.png", np.zeros((50, 50), np.uint8) + 9)
+    bad = tmp_path / "truncated.png"
+    bad.write_bytes(good.read_bytes()[:40])
+    with pytest.raises(FileFormatError, match=r"truncated\.png"):
+        read_image(bad)
+    with pytest.raises(InputError, match="uint8 or uint16"):
+        write_image(tmp_path / "f.png", np.zeros((4, 4), np.float32))
+    with pytest.raises(InputError, match="extension"):
+        write_image(tmp_path / "f.xyz", np.zeros((4, 4), np.uint8))
+
+
+def test_video_round_trip(tmp_path):
+    frames = []
+    for i in range(12):
+        f = np.zeros((48, 64, 3), np.uint8)
+        f[:, i * 4 : i * 4 + 8] = (255, 128, 0)
+        frames.append(f)
+    path = tmp_path / "clip.mp4"
+    with VideoWriter(path, fps=10) as w:
+        for f in frames:
+            w.write(f)
+    assert w.frames_written == 12
+    reader = VideoReader(path)
+    assert reader.size == (64, 48) and reader.fps == pytest.approx(10.0)
+    assert reader.frame_count == 12
+    got = list(reader)
+    assert len(got) == 12
+    # lossy codec: bright bar where it was written, within compression error
+    assert np.abs(got[5].astype(int) - frames[5]).mean() < 6
+
+
+@pytest.mark.realdata
+def test_reads_real_video():
+    reader = VideoReader(data_path("video", "opencv_tree", "tree.avi"))
+    assert reader.size == (320, 240)
+    first = next(iter(reader))
+    assert first.shape == (240, 320, 3) and first.dtype == np.uint8
+    reader.close()
+
+
+def test_video_errors(tmp_path):
+    with pytest.raises(FileFormatError, match="no such file"):
+        VideoReader(tmp_path / "none.mp4")
+    junk = tmp_path / "junk.mp4"
+    junk.write_bytes(b"not a video at all")
+    with pytest.raises(FileFormatError, match=r"junk\.mp4"):
+        VideoReader(junk)
+    w = VideoWriter(tmp_path / "x.mp4")
+    w.write(np.zeros((16, 16, 3), np.uint8))
+    with pytest.raises(InputError, match="differs"):
+        w.write(np.zeros((8, 8, 3), np.uint8))
+    w.close()
