@@ -53,32 +53,45 @@ def _union(parent, a, b):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _label_kernel(mask, eight, labels):  # pragma: no cover - compiled
+    """First pass with the decision tree of Wu, Otoo & Suzuki (2009) over the visited
+    neighbours a = NW, b = N, c = NE, d = W: when N is foreground every other neighbour
+    is already joined to it, so most pixels need no union at all."""
     h, w = mask.shape
     parent = np.empty(h * w // 2 + 2, dtype=np.int32)
     parent[0] = 0
     n = 0
     for y in range(h):
+        row = labels[y]
+        up = labels[y - 1] if y > 0 else labels[y]
         for x in range(w):
             if not mask[y, x]:
-                labels[y, x] = 0
+                row[x] = 0
                 continue
+            d = row[x - 1] if x > 0 else 0
+            b = up[x] if y > 0 else 0
             cur = 0
-            # neighbours already visited: W, N (and NW, NE with 8-connectivity)
-            if x > 0 and labels[y, x - 1] > 0:
-                cur = labels[y, x - 1]
-            if y > 0:
-                up = labels[y - 1, x]
-                if up > 0:
-                    cur = up if cur == 0 else _union(parent, cur, up)
-                if eight:
-                    if x > 0:
-                        nw = labels[y - 1, x - 1]
-                        if nw > 0:
-                            cur = nw if cur == 0 else _union(parent, cur, nw)
-                    if x + 1 < w:
-                        ne = labels[y - 1, x + 1]
-                        if ne > 0:
-                            cur = ne if cur == 0 else _union(parent, cur, ne)
+            if eight:
+                a = up[x - 1] if (y > 0 and x > 0) else 0
+                c = up[x + 1] if (y > 0 and x + 1 < w) else 0
+                if b > 0:
+                    cur = b
+                elif c > 0:
+                    cur = c
+                    if a > 0 and a != c:
+                        cur = _union(parent, c, a)
+                    elif d > 0 and d != c:
+                        cur = _union(parent, c, d)
+                elif a > 0:
+                    cur = a
+                elif d > 0:
+                    cur = d
+            else:
+                if b > 0:
+                    cur = b
+                    if d > 0 and d != b:
+                        cur = _union(parent, b, d)
+                elif d > 0:
+                    cur = d
             if cur == 0:
                 n += 1
                 if n >= parent.shape[0]:
@@ -87,7 +100,7 @@ def _label_kernel(mask, eight, labels):  # pragma: no cover - compiled
                     parent = grown
                 parent[n] = n
                 cur = n
-            labels[y, x] = cur
+            row[x] = cur
     # final numbering: roots in increasing order = raster order of first pixels
     final = np.zeros(n + 1, dtype=np.int32)
     count = 0
@@ -238,6 +251,32 @@ def _euler(padded: np.ndarray, n: int) -> np.ndarray:
     return total / 4.0
 
 
+@njit(cache=True, nogil=True)
+def _stats_kernel(labels, n):  # pragma: no cover - compiled
+    area = np.zeros(n + 1, dtype=np.int64)
+    sx = np.zeros(n + 1)
+    sy = np.zeros(n + 1)
+    big = np.iinfo(np.int64).max
+    xmin = np.full(n + 1, big, dtype=np.int64)
+    ymin = np.full(n + 1, big, dtype=np.int64)
+    xmax = np.full(n + 1, -1, dtype=np.int64)
+    ymax = np.full(n + 1, -1, dtype=np.int64)
+    h, w = labels.shape
+    for y in range(h):
+        for x in range(w):
+            lab = labels[y, x]
+            if lab <= 0:
+                continue
+            area[lab] += 1
+            sx[lab] += x
+            sy[lab] += y
+            xmin[lab] = min(xmin[lab], x)
+            xmax[lab] = max(xmax[lab], x)
+            ymin[lab] = min(ymin[lab], y)
+            ymax[lab] = max(ymax[lab], y)
+    return area, sx, sy, xmin, ymin, xmax, ymax
+
+
 def blob_features(labels: np.ndarray) -> BlobFeatures:
     r"""Measure every labelled blob.
 
@@ -271,23 +310,8 @@ def blob_features(labels: np.ndarray) -> BlobFeatures:
         raise InputError("labels must be >= 0 (0 is background)")
     lab = labels.astype(np.int64, copy=False)
     n = int(lab.max()) if lab.size else 0
-    w = lab.shape[1]
-    flat = lab.ravel()
-    area = np.bincount(flat, minlength=n + 1)
+    area, cx, cy, xmin, ymin, xmax, ymax = _stats_kernel(np.ascontiguousarray(lab), n)
     present = np.nonzero(area[1:])[0] + 1
-    ys, xs = np.divmod(np.arange(flat.size), w) if flat.size else (np.zeros(0), np.zeros(0))
-    cx = np.bincount(flat, weights=xs, minlength=n + 1)
-    cy = np.bincount(flat, weights=ys, minlength=n + 1)
-    fg = flat > 0
-    big = np.iinfo(np.int64).max
-    xmin = np.full(n + 1, big)
-    ymin = np.full(n + 1, big)
-    xmax = np.full(n + 1, -1)
-    ymax = np.full(n + 1, -1)
-    np.minimum.at(xmin, flat[fg], xs[fg].astype(np.int64))
-    np.minimum.at(ymin, flat[fg], ys[fg].astype(np.int64))
-    np.maximum.at(xmax, flat[fg], xs[fg].astype(np.int64))
-    np.maximum.at(ymax, flat[fg], ys[fg].astype(np.int64))
     padded = np.pad(lab, 1)
     perimeter = _perimeter(padded, n)
     euler = _euler(padded, n)

@@ -54,6 +54,40 @@ def _rgb_to_hsv_kernel(rgb, vmax, out, hscale, sscale, vscale, round_out):  # pr
         out[i, 2] = v
 
 
+_HSV_SHIFT = 12
+_SDIV = np.zeros(256, dtype=np.int32)
+_HDIV = np.zeros(256, dtype=np.int32)
+_SDIV[1:] = np.round((255 << _HSV_SHIFT) / np.arange(1, 256, dtype=np.float64)).astype(np.int32)
+_HDIV[1:] = np.round((180 << _HSV_SHIFT) / (6.0 * np.arange(1, 256))).astype(np.int32)
+
+
+@njit(cache=True, nogil=True)
+def _rgb_to_hsv_u8_kernel(rgb, sdiv, hdiv, out):  # pragma: no cover - compiled
+    """uint8 fast path: the same formulas with the divisions by V and by Delta done as
+    12-bit fixed-point multiplications by tabulated reciprocals (OpenCV's method, which
+    this reproduces bit for bit)."""
+    half = 1 << (_HSV_SHIFT - 1)
+    for i in range(rgb.shape[0]):
+        r = np.int32(rgb[i, 0])
+        g = np.int32(rgb[i, 1])
+        b = np.int32(rgb[i, 2])
+        v = max(r, g, b)
+        diff = v - min(r, g, b)
+        s = (diff * sdiv[v] + half) >> _HSV_SHIFT
+        if v == r:
+            h = g - b
+        elif v == g:
+            h = b - r + 2 * diff
+        else:
+            h = r - g + 4 * diff
+        h = (h * hdiv[diff] + half) >> _HSV_SHIFT
+        if h < 0:
+            h += 180
+        out[i, 0] = h
+        out[i, 1] = s
+        out[i, 2] = v
+
+
 def _scales(scale: str) -> tuple[float, float, float]:
     # the kernel computes H in degrees, S and V in [0, 1]
     if scale == "opencv":
@@ -72,9 +106,10 @@ def rgb_to_hsv(image: np.ndarray, scale: Scale = "opencv") -> np.ndarray:
             (G - B)/\Delta & V = R \\ 2 + (B - R)/\Delta & V = G \\ 4 + (R - G)/\Delta & V = B
         \end{cases} \pmod{360^\circ}
 
-    ``scale="opencv"`` gives H in [0, 180) (degrees / 2), S and V in [0, 255], as
-    ``cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)`` on uint8; the result is uint8 (rounded) for
-    uint8 input and float32 otherwise. ``scale="unit"`` gives H, S, V in [0, 1] as float32
+    ``scale="opencv"`` gives H in [0, 180) (degrees / 2), S and V in [0, 255]; for uint8
+    input the result is uint8 and bit-identical to ``cv2.cvtColor(rgb,
+    cv2.COLOR_RGB2HSV)`` (the divisions use the same 12-bit fixed-point reciprocals), for
+    other input float32 (exact division). ``scale="unit"`` gives H, S, V in [0, 1] as float32
     (float64 stays float64), like ``skimage.color.rgb2hsv``.
 
     Parameters
@@ -104,7 +139,10 @@ def rgb_to_hsv(image: np.ndarray, scale: Scale = "opencv") -> np.ndarray:
         out_dtype = np.dtype(np.float32)
     rgb = np.ascontiguousarray(image).reshape(-1, 3)
     out = np.empty(rgb.shape, dtype=out_dtype)
-    _rgb_to_hsv_kernel(rgb, vmax, out, *_scales(scale), round_out)
+    if round_out:
+        _rgb_to_hsv_u8_kernel(rgb, _SDIV, _HDIV, out)
+    else:
+        _rgb_to_hsv_kernel(rgb, vmax, out, *_scales(scale), round_out)
     return out.reshape(image.shape)
 
 

@@ -1,0 +1,77 @@
+"""Timing helpers shared by the benchmark modules."""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+@dataclass
+class Record:
+    name: str
+    case: str
+    ours_ms: float
+    ref_ms: float
+    reference: str
+    accuracy: str
+    accuracy_value: float
+    target_ratio: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ratio(self) -> float:
+        return self.ours_ms / self.ref_ms if self.ref_ms > 0 else float("inf")
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["ratio"] = round(self.ratio, 3)
+        d["meets_target"] = None if self.target_ratio is None else self.ratio <= self.target_ratio
+        return d
+
+
+def median_ms(fn: Callable[[], object], repeats: int = 30, warmup: int = 3) -> float:
+    """Median wall time of ``fn()`` in milliseconds after ``warmup`` untimed calls
+    (which also absorb JIT compilation)."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return float(np.median(times) * 1e3)
+
+
+def machine() -> dict[str, Any]:
+    import os
+
+    return {
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "numpy": np.__version__,
+    }
+
+
+def save(name: str, records: list[Record], settings: dict[str, Any]) -> Path:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path = RESULTS / f"{name}.json"
+    payload = {
+        "benchmark": name,
+        "date": time.strftime("%Y-%m-%d"),
+        "machine": machine(),
+        "settings": settings,
+        "records": [r.to_json() for r in records],
+    }
+    path.write_text(json.dumps(payload, indent=2) + "\n")
+    return path
