@@ -65,6 +65,18 @@ def _nms_threshold(gx, gy, l2, low, high, state):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _push(stack, top, y, x):  # pragma: no cover - compiled
+    """Store (y, x) at stack[top], doubling the stack when full; returns the stack."""
+    if top >= stack.shape[0]:
+        grown = np.empty((stack.shape[0] * 2, 2), dtype=np.int64)
+        grown[:top] = stack[:top]
+        stack = grown
+    stack[top, 0] = y
+    stack[top, 1] = x
+    return stack
+
+
+@njit(cache=True, nogil=True)
 def _hysteresis(state, n_strong):  # pragma: no cover - compiled
     h, w = state.shape
     stack = np.empty((max(n_strong, 1) + 16, 2), dtype=np.int64)
@@ -72,12 +84,7 @@ def _hysteresis(state, n_strong):  # pragma: no cover - compiled
     for y in range(h):
         for x in range(w):
             if state[y, x] == 2:
-                if top >= stack.shape[0]:
-                    grown = np.empty((stack.shape[0] * 2, 2), dtype=np.int64)
-                    grown[:top] = stack[:top]
-                    stack = grown
-                stack[top, 0] = y
-                stack[top, 1] = x
+                stack = _push(stack, top, y, x)
                 top += 1
     while top > 0:
         top -= 1
@@ -92,12 +99,7 @@ def _hysteresis(state, n_strong):  # pragma: no cover - compiled
                 if xx < 0 or xx >= w or state[yy, xx] != 1:
                     continue
                 state[yy, xx] = 2
-                if top >= stack.shape[0]:
-                    grown = np.empty((stack.shape[0] * 2, 2), dtype=np.int64)
-                    grown[:top] = stack[:top]
-                    stack = grown
-                stack[top, 0] = yy
-                stack[top, 1] = xx
+                stack = _push(stack, top, yy, xx)
                 top += 1
     out = np.empty((h, w), dtype=np.bool_)
     for y in range(h):

@@ -340,6 +340,26 @@ def _anchor(size: int, anchor: int | None, name: str) -> int:
     return int(anchor)
 
 
+def _plan(
+    image: np.ndarray,
+    kw: int,
+    kh: int,
+    ax: int | None,
+    ay: int | None,
+    border: str,
+    out_dtype: np.dtype,
+) -> tuple:
+    """Shared setup of the kernels: row view, anchors, border maps, output and limits."""
+    ax = _anchor(kw, ax, "anchor x")
+    ay = _anchor(kh, ay, "anchor y")
+    src, channels = _as_rows(image)
+    h, w = image.shape[:2]
+    cidx = border_indices(w, ax, kw - 1 - ax, border)
+    ridx = border_indices(h, ay, kh - 1 - ay, border)
+    out = np.empty(src.shape, dtype=out_dtype)
+    return src, channels, ax, cidx, ridx, out, *_int_limits(out_dtype)
+
+
 def _run_separable(
     image: np.ndarray,
     kx: np.ndarray,
@@ -351,28 +371,11 @@ def _run_separable(
     ay: int | None = None,
 ) -> np.ndarray:
     work = _work_dtype(image)
-    ax = _anchor(kx.size, ax, "anchor x")
-    ay = _anchor(ky.size, ay, "anchor y")
-    src, channels = _as_rows(image)
-    h, w = image.shape[:2]
-    cidx = border_indices(w, ax, kx.size - 1 - ax, border)
-    ridx = border_indices(h, ay, ky.size - 1 - ay, border)
-    out = np.empty(src.shape, dtype=out_dtype)
-    is_int, lo, hi = _int_limits(out_dtype)
-    _separable_kernel(
-        src,
-        kx.astype(work),
-        ky.astype(work),
-        ax,
-        cidx,
-        ridx,
-        channels,
-        work.type(cval),
-        out,
-        is_int,
-        lo,
-        hi,
+    src, channels, ax, cidx, ridx, out, is_int, lo, hi = _plan(
+        image, kx.size, ky.size, ax, ay, border, out_dtype
     )
+    kx, ky, cv = kx.astype(work), ky.astype(work), work.type(cval)
+    _separable_kernel(src, kx, ky, ax, cidx, ridx, channels, cv, out, is_int, lo, hi)
     return out.reshape(image.shape)
 
 
@@ -387,26 +390,11 @@ def _run_correlate(
     work = _work_dtype(image)
     kh, kw = kernel.shape
     ax, ay = (None, None) if anchor is None else anchor
-    ax = _anchor(kw, ax, "anchor x")
-    ay = _anchor(kh, ay, "anchor y")
-    src, channels = _as_rows(image)
-    h, w = image.shape[:2]
-    cidx = border_indices(w, ax, kw - 1 - ax, border)
-    ridx = border_indices(h, ay, kh - 1 - ay, border)
-    out = np.empty(src.shape, dtype=out_dtype)
-    is_int, lo, hi = _int_limits(out_dtype)
-    _correlate_kernel(
-        src,
-        np.ascontiguousarray(kernel, dtype=work),
-        cidx,
-        ridx,
-        channels,
-        work.type(cval),
-        out,
-        is_int,
-        lo,
-        hi,
+    src, channels, _, cidx, ridx, out, is_int, lo, hi = _plan(
+        image, kw, kh, ax, ay, border, out_dtype
     )
+    k, cv = np.ascontiguousarray(kernel, dtype=work), work.type(cval)
+    _correlate_kernel(src, k, cidx, ridx, channels, cv, out, is_int, lo, hi)
     return out.reshape(image.shape)
 
 
