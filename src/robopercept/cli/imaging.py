@@ -117,7 +117,8 @@ def run_edges(args: argparse.Namespace) -> int:
 
 def run_blobs(args: argparse.Namespace) -> int:
     from robopercept.imaging import blob_features, label_components, otsu_threshold, write_image
-    from robopercept.viz import draw_boxes, draw_mask, label_colors
+    from robopercept.viz import draw_boxes, label_colors
+    from robopercept.viz.draw import to_rgb8
 
     if args.min_area < 0:
         raise ValueError(f"--min-area must be >= 0; got {args.min_area}")
@@ -131,7 +132,7 @@ def run_blobs(args: argparse.Namespace) -> int:
     if args.output:
         colors = label_colors(labels)
         kept = np.isin(labels, feats.labels[keep])
-        overlay = draw_mask(gray, kept, color=(0, 0, 0), alpha=0.0)
+        overlay = to_rgb8(gray)
         overlay[kept] = colors[kept]
         overlay = draw_boxes(
             overlay,

@@ -20,7 +20,7 @@ Scale = Literal["opencv", "unit"]
 
 
 @njit(cache=True, nogil=True)
-def _rgb_to_hsv_kernel(rgb, vmax, out, hscale, sscale, vscale, round_out):  # pragma: no cover
+def _rgb_to_hsv_kernel(rgb, vmax, out, hscale, sscale, vscale):  # pragma: no cover
     n = rgb.shape[0]
     for i in range(n):
         r = rgb[i, 0] / vmax
@@ -43,12 +43,6 @@ def _rgb_to_hsv_kernel(rgb, vmax, out, hscale, sscale, vscale, round_out):  # pr
         h *= hscale
         s *= sscale
         v *= vscale
-        if round_out:
-            h = np.floor(h + 0.5)
-            if h >= 180.0:  # 359.5 deg rounds to 180 -> wrap like cv2 (H in 0..179)
-                h -= 180.0
-            s = np.floor(s + 0.5)
-            v = np.floor(v + 0.5)
         out[i, 0] = h
         out[i, 1] = s
         out[i, 2] = v
@@ -142,7 +136,7 @@ def rgb_to_hsv(image: np.ndarray, scale: Scale = "opencv") -> np.ndarray:
     if round_out:
         _rgb_to_hsv_u8_kernel(rgb, _SDIV, _HDIV, out)
     else:
-        _rgb_to_hsv_kernel(rgb, vmax, out, *_scales(scale), round_out)
+        _rgb_to_hsv_kernel(rgb, vmax, out, *_scales(scale))
     return out.reshape(image.shape)
 
 
