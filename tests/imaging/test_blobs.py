@@ -70,6 +70,21 @@ def test_labels_in_raster_order_same_partition_as_opencv(rng):
     assert firsts == sorted(firsts)
 
 
+@pytest.mark.parametrize("connectivity", [4, 8])
+@pytest.mark.parametrize("shape", [(1, 1), (7, 13), (33, 64), (40, 121)])
+@pytest.mark.parametrize("density", [0.2, 0.5, 0.9])
+def test_random_masks_same_partition_as_opencv(rng, connectivity, shape, density):
+    # widths that are and are not whole 8-byte words (the run scan reads 8 at a time),
+    # bool, uint8 and strided (non-contiguous) masks
+    mask = rng.random(shape) < density
+    for m in (mask, mask.astype(np.uint8) * 7, np.asfortranarray(mask)):
+        ours, n = label_components(m, connectivity)
+        n_cv, ref = cv2.connectedComponents(mask.astype(np.uint8), connectivity=connectivity)
+        assert n == n_cv - 1
+        assert same_partition(ours, ref)
+        assert ((ours > 0) == mask).all()
+
+
 def to_ref_order(labels: np.ndarray, ref: np.ndarray, n: int) -> np.ndarray:
     """For each of our labels 1..n, the reference label of the same blob."""
     idx = np.zeros(n + 1, dtype=np.int64)

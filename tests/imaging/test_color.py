@@ -40,6 +40,15 @@ def test_matches_opencv_on_real_images(astronaut, graf):
     assert d.max() <= 1.0 + 1e-4
 
 
+def test_every_uint8_colour_is_bit_exact():
+    # all 2^24 RGB triples: this covers every V and Delta in 0..255, so the float32
+    # reciprocals of the kernel are checked against OpenCV's tables for every input
+    c = np.arange(1 << 24, dtype=np.uint32)
+    img = np.stack([c >> 16, (c >> 8) & 255, c & 255], axis=1).astype(np.uint8)
+    img = img.reshape(4096, 4096, 3)
+    np.testing.assert_array_equal(rgb_to_hsv(img), cv2.cvtColor(img, cv2.COLOR_RGB2HSV))
+
+
 def test_unit_scale_matches_skimage(astronaut):
     f = astronaut.astype(np.float64) / 255
     np.testing.assert_allclose(rgb_to_hsv(f, "unit"), skcolor.rgb2hsv(f), atol=1e-12)

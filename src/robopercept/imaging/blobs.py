@@ -1,9 +1,10 @@
 """Connected-component labelling and blob features.
 
-:func:`label_components` is a two-pass union-find labelling (Rosenfeld & Pfaltz): the
-first raster pass gives each foreground pixel a provisional label and records the
-equivalences of touching labels in a union-find forest whose roots are always the
-smallest label; the second pass replaces each label by its root's final number. Labels
+:func:`label_components` is a run-based two-pass union-find labelling (Rosenfeld &
+Pfaltz; He, Chao & Suzuki): the first raster pass gives each run of foreground pixels a
+provisional label and records the equivalences of touching labels in a union-find forest
+whose roots are always the smallest label; the second pass fills each run with its root's
+final number. Labels
 are therefore numbered in raster order of each blob's first pixel (OpenCV's block-based
 scan numbers them in another order; the partition is the same).
 
@@ -51,56 +52,82 @@ def _union(parent, a, b):  # pragma: no cover - compiled
     return rb
 
 
+_ONES64 = np.uint64(0x0101010101010101)
+
+
 @njit(cache=True, nogil=True)
-def _label_kernel(mask, eight, labels):  # pragma: no cover - compiled
-    """First pass with the decision tree of Wu, Otoo & Suzuki (2009) over the visited
-    neighbours a = NW, b = N, c = NE, d = W: when N is foreground every other neighbour
-    is already joined to it, so most pixels need no union at all."""
-    h, w = mask.shape
-    parent = np.empty(h * w // 2 + 2, dtype=np.int32)
+def _runs(m8, m64, w, run_s, run_e, nr):  # pragma: no cover - compiled
+    """Append the foreground runs ``[s, e)`` of the 0/1 byte row ``m8`` to ``run_s``,
+    ``run_e`` from index ``nr``; returns the new count. Whole 8-byte words equal to the
+    current state (``m64``, the row seen as uint64) are skipped at once."""
+    state = 0
+    start = 0
+    for wi in range(m64.shape[0]):
+        if m64[wi] == (_ONES64 if state else np.uint64(0)):
+            continue
+        for x in range(wi * 8, wi * 8 + 8):
+            v = m8[x]
+            if v != state:
+                if v:
+                    start = x
+                else:
+                    run_s[nr] = start
+                    run_e[nr] = x
+                    nr += 1
+                state = v
+    if state:
+        run_s[nr] = start
+        run_e[nr] = w
+        nr += 1
+    return nr
+
+
+@njit(cache=True, nogil=True)
+def _label_kernel(mask, mask64, eight, labels):  # pragma: no cover - compiled
+    """Run-based two-pass labelling (He, Chao & Suzuki 2008).
+
+    First pass: each row is cut into runs of foreground ``[s, e)``; a run takes the label
+    of the first run above it that touches it (overlapping columns, or diagonal contact
+    with 8-connectivity) and unites it with every other such run's label, or opens a new
+    label. Second pass: each row is written once, runs with their root's final number.
+    Per pixel there is only the run scan (8 pixels at a time) and the final store; the
+    union-find works once per pair of touching runs.
+    """
+    h, w = labels.shape
+    max_runs = h * ((w + 1) // 2)
+    parent = np.empty(max_runs + 1, dtype=np.int32)
     parent[0] = 0
+    run_s = np.empty(max_runs, dtype=np.int32)
+    run_e = np.empty(max_runs, dtype=np.int32)
+    run_l = np.empty(max_runs, dtype=np.int32)
+    row_start = np.zeros(h + 1, dtype=np.int64)
+    reach = 1 if eight else 0
     n = 0
+    nr = 0
     for y in range(h):
-        row = labels[y]
-        up = labels[y - 1] if y > 0 else labels[y]
-        for x in range(w):
-            if not mask[y, x]:
-                row[x] = 0
-                continue
-            d = row[x - 1] if x > 0 else 0
-            b = up[x] if y > 0 else 0
+        row_start[y] = nr
+        nr = _runs(mask[y], mask64[y], w, run_s, run_e, nr)
+        p = row_start[y - 1] if y > 0 else 0
+        p_end = row_start[y]
+        for j in range(row_start[y], nr):
+            s = run_s[j]
+            e = run_e[j]
+            # runs above touch [s, e) iff they start before e + reach and end after
+            # s - reach; both bounds only grow along the row
+            while p < p_end and run_e[p] <= s - reach:
+                p += 1
             cur = 0
-            if eight:
-                a = up[x - 1] if (y > 0 and x > 0) else 0
-                c = up[x + 1] if (y > 0 and x + 1 < w) else 0
-                if b > 0:
-                    cur = b
-                elif c > 0:
-                    cur = c
-                    if a > 0 and a != c:
-                        cur = _union(parent, c, a)
-                    elif d > 0 and d != c:
-                        cur = _union(parent, c, d)
-                elif a > 0:
-                    cur = a
-                elif d > 0:
-                    cur = d
-            else:
-                if b > 0:
-                    cur = b
-                    if d > 0 and d != b:
-                        cur = _union(parent, b, d)
-                elif d > 0:
-                    cur = d
+            q = p
+            while q < p_end and run_s[q] < e + reach:
+                lab = run_l[q]
+                cur = lab if cur == 0 else _union(parent, cur, lab)
+                q += 1
             if cur == 0:
                 n += 1
-                if n >= parent.shape[0]:
-                    grown = np.empty(parent.shape[0] * 2, dtype=np.int32)
-                    grown[: parent.shape[0]] = parent
-                    parent = grown
                 parent[n] = n
                 cur = n
-            row[x] = cur
+            run_l[j] = cur
+    row_start[h] = nr
     # final numbering: roots in increasing order = raster order of first pixels
     final = np.zeros(n + 1, dtype=np.int32)
     count = 0
@@ -112,8 +139,17 @@ def _label_kernel(mask, eight, labels):  # pragma: no cover - compiled
         else:
             final[i] = final[r]
     for y in range(h):
-        for x in range(w):
-            labels[y, x] = final[labels[y, x]]
+        row = labels[y]
+        x = 0
+        for j in range(row_start[y], row_start[y + 1]):
+            for k in range(x, run_s[j]):
+                row[k] = 0
+            lab = final[run_l[j]]
+            x = run_e[j]
+            for k in range(run_s[j], x):
+                row[k] = lab
+        for k in range(x, w):
+            row[k] = 0
     return count
 
 
@@ -141,11 +177,16 @@ def label_components(mask: np.ndarray, connectivity: int = 8) -> tuple[np.ndarra
         raise InputError(f"mask must be bool or numeric; got dtype {mask.dtype}")
     if connectivity not in (4, 8):
         raise InputError(f"connectivity must be 4 or 8; got {connectivity!r}")
-    fg = np.ascontiguousarray(mask != 0)
-    labels = np.empty(fg.shape, dtype=np.int32)
-    if fg.size == 0:
+    labels = np.empty(mask.shape, dtype=np.int32)
+    if mask.size == 0:
         return labels, 0
-    n = _label_kernel(fg, connectivity == 8, labels)
+    h, w = mask.shape
+    if mask.dtype == np.bool_ and w % 8 == 0 and mask.flags.c_contiguous:
+        fg = mask.view(np.uint8)
+    else:  # a 0/1 byte copy, its rows padded with background to whole 8-byte words
+        fg = np.zeros((h, -(-w // 8) * 8), dtype=np.uint8)
+        np.not_equal(mask, 0, out=fg[:, :w], casting="unsafe")
+    n = _label_kernel(fg, fg.view(np.uint64), connectivity == 8, labels)
     return labels, int(n)
 
 

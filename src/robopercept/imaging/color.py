@@ -49,37 +49,42 @@ def _rgb_to_hsv_kernel(rgb, vmax, out, hscale, sscale, vscale):  # pragma: no co
 
 
 _HSV_SHIFT = 12
-_SDIV = np.zeros(256, dtype=np.int32)
-_HDIV = np.zeros(256, dtype=np.int32)
-_SDIV[1:] = np.round((255 << _HSV_SHIFT) / np.arange(1, 256, dtype=np.float64)).astype(np.int32)
-_HDIV[1:] = np.round((180 << _HSV_SHIFT) / (6.0 * np.arange(1, 256))).astype(np.int32)
+_SNUM = float(255 << _HSV_SHIFT)  # S = Delta * round(2^12 * 255 / V) / 2^12
+_HNUM = float((180 << _HSV_SHIFT) // 6)  # H = h' * round(2^12 * 180 / (6 Delta)) / 2^12
 
 
 @njit(cache=True, nogil=True)
-def _rgb_to_hsv_u8_kernel(rgb, sdiv, hdiv, out):  # pragma: no cover - compiled
-    """uint8 fast path: the same formulas with the divisions by V and by Delta done as
-    12-bit fixed-point multiplications by tabulated reciprocals (OpenCV's method, which
-    this reproduces bit for bit)."""
+def _rgb_to_hsv_u8_kernel(rgb, out):  # pragma: no cover - compiled
+    """uint8 fast path on flat ``(3 N,)`` arrays: OpenCV's 12-bit fixed-point method,
+    reproduced bit for bit.
+
+    The divisions by V and by Delta become multiplications by the rounded reciprocals
+    ``round(2^12 * 255 / V)`` and ``round(2^12 * 30 / Delta)``. OpenCV tabulates them;
+    here they are computed in float32, which gives the same integers for every V and
+    Delta in 1..255 (checked exhaustively in the tests) and, unlike a table lookup,
+    lets the loop vectorize.
+    """
     half = 1 << (_HSV_SHIFT - 1)
-    for i in range(rgb.shape[0]):
-        r = np.int32(rgb[i, 0])
-        g = np.int32(rgb[i, 1])
-        b = np.int32(rgb[i, 2])
-        v = max(r, g, b)
-        diff = v - min(r, g, b)
-        s = (diff * sdiv[v] + half) >> _HSV_SHIFT
-        if v == r:
-            h = g - b
-        elif v == g:
-            h = b - r + 2 * diff
-        else:
-            h = r - g + 4 * diff
-        h = (h * hdiv[diff] + half) >> _HSV_SHIFT
-        if h < 0:
-            h += 180
-        out[i, 0] = h
-        out[i, 1] = s
-        out[i, 2] = v
+    snum = np.float32(_SNUM)
+    hnum = np.float32(_HNUM)
+    for i in range(rgb.shape[0] // 3):
+        r = np.int32(rgb[3 * i])
+        g = np.int32(rgb[3 * i + 1])
+        b = np.int32(rgb[3 * i + 2])
+        v = max(r, max(g, b))
+        diff = v - min(r, min(g, b))
+        h = r - g + 4 * diff  # V = B
+        h = b - r + 2 * diff if v == g else h
+        h = g - b if v == r else h
+        sdiv = np.int32(np.rint(snum / np.float32(max(v, 1))))
+        hdiv = np.int32(np.rint(hnum / np.float32(max(diff, 1))))
+        hdiv = hdiv if diff > 0 else 0
+        s = (diff * sdiv + half) >> _HSV_SHIFT
+        h = (h * hdiv + half) >> _HSV_SHIFT
+        h += (h >> 31) & 180  # negative hue wraps around
+        out[3 * i] = h
+        out[3 * i + 1] = s
+        out[3 * i + 2] = v
 
 
 def _scales(scale: str) -> tuple[float, float, float]:
@@ -134,7 +139,7 @@ def rgb_to_hsv(image: np.ndarray, scale: Scale = "opencv") -> np.ndarray:
     rgb = np.ascontiguousarray(image).reshape(-1, 3)
     out = np.empty(rgb.shape, dtype=out_dtype)
     if round_out:
-        _rgb_to_hsv_u8_kernel(rgb, _SDIV, _HDIV, out)
+        _rgb_to_hsv_u8_kernel(rgb.reshape(-1), out.reshape(-1))
     else:
         _rgb_to_hsv_kernel(rgb, vmax, out, *_scales(scale))
     return out.reshape(image.shape)

@@ -20,7 +20,7 @@ from numba import njit
 from robopercept._checks import check_image, check_range
 from robopercept.errors import InputError
 from robopercept.imaging.color import rgb_to_gray
-from robopercept.imaging.filters import gaussian_blur, sobel
+from robopercept.imaging.filters import gaussian_blur
 
 __all__ = ["canny"]
 
@@ -29,83 +29,118 @@ _TAN_67_5 = float(np.tan(np.deg2rad(67.5)))
 
 
 @njit(cache=True, nogil=True)
-def _nms_threshold(gx, gy, l2, low, high, state):  # pragma: no cover - compiled
-    """state: 0 none, 1 weak candidate, 2 strong; returns the strong pixels' count."""
-    h, w = gx.shape
-    mag = np.zeros((h + 2, w + 2), dtype=np.float32)
-    for y in range(h):
+def _gradient_row(r0, r1, r2, l2, s, d, gx, gy, mag):  # pragma: no cover - compiled
+    """One row of the 3x3 Sobel ``gx``, ``gy`` (replicated border) and its magnitude.
+
+    ``s = r0 + 2 r1 + r2`` and ``d = r2 - r0`` down the columns (``s``, ``d`` have one
+    replicated sample each side), then ``gx = s[x+1] - s[x-1]`` and
+    ``gy = d[x-1] + 2 d[x] + d[x+1]`` along the row; ``mag[1 + x]`` gets the magnitude.
+    """
+    w = gx.shape[0]
+    one = gx.dtype.type(1)
+    two = gx.dtype.type(2)
+    sv = s[1:]
+    dv = d[1:]
+    for x in range(w):
+        a = one * r0[x]
+        b = one * r1[x]
+        c = one * r2[x]
+        sv[x] = a + two * b + c
+        dv[x] = c - a
+    s[0] = s[1]
+    s[w + 1] = s[w]
+    d[0] = d[1]
+    d[w + 1] = d[w]
+    mr = mag[1:]
+    s2 = s[2:]
+    d1 = d[1:]
+    d2 = d[2:]
+    if l2:
         for x in range(w):
-            if l2:
-                mag[y + 1, x + 1] = np.sqrt(gx[y, x] * gx[y, x] + gy[y, x] * gy[y, x])
-            else:
-                mag[y + 1, x + 1] = abs(gx[y, x]) + abs(gy[y, x])
-    n_strong = 0
-    for y in range(h):
+            a = s2[x] - s[x]
+            b = d[x] + two * d1[x] + d2[x]
+            gx[x] = a
+            gy[x] = b
+            mr[x] = np.sqrt(a * a + b * b)
+    else:
         for x in range(w):
-            state[y, x] = 0
-            m = mag[y + 1, x + 1]
+            a = s2[x] - s[x]
+            b = d[x] + two * d1[x] + d2[x]
+            gx[x] = a
+            gy[x] = b
+            mr[x] = abs(a) + abs(b)
+
+
+@njit(cache=True, nogil=True)
+def _canny_kernel(src, l2, low, high, proto):  # pragma: no cover - compiled
+    """Gradient, non-maximum suppression, double threshold and hysteresis.
+
+    Rows stream through small ring buffers (three magnitude rows with a zero frame, two
+    gradient rows), as in OpenCV, so the only full-size array is ``state`` (framed by one
+    pixel): 0 none, 1 weak candidate, 2 edge. Strong pixels go on a stack as they are
+    found; popping one promotes its weak 8-neighbours, which are pushed in turn. Each
+    pixel is pushed at most once, so the stack never outgrows the candidates.
+    """
+    h, w = src.shape
+    stride = w + 2
+    work = proto.dtype
+    s = np.empty(w + 2, dtype=work)
+    d = np.empty(w + 2, dtype=work)
+    mag = np.zeros((4, w + 2), dtype=work)  # ring of 3 + a zero row (outside the image)
+    gx = np.empty((2, w), dtype=work)
+    gy = np.empty((2, w), dtype=work)
+    state = np.zeros((h + 2) * stride, dtype=np.uint8)
+    stack = np.empty(h * w, dtype=np.int32)
+    top = 0
+    for y in range(h + 1):
+        if y < h:
+            _gradient_row(
+                src[max(y - 1, 0)], src[y], src[min(y + 1, h - 1)], l2, s, d,
+                gx[y % 2], gy[y % 2], mag[y % 3],
+            )  # fmt: skip
+        if y == 0:
+            continue
+        # suppression of row yy = y - 1 between magnitude rows yy - 1 and yy + 1
+        yy = y - 1
+        up = mag[3] if yy == 0 else mag[(yy - 1) % 3]
+        mid = mag[yy % 3]
+        dn = mag[3] if yy == h - 1 else mag[y % 3]
+        gxr = gx[yy % 2]
+        gyr = gy[yy % 2]
+        base = (yy + 1) * stride + 1
+        for x in range(w):
+            m = mid[x + 1]
             if m <= low:
                 continue
-            ax = abs(gx[y, x])
-            ay = abs(gy[y, x])
+            ax = abs(gxr[x])
+            ay = abs(gyr[x])
             if ay < ax * _TAN_22_5:  # gradient ~ horizontal: compare left/right
-                keep = m > mag[y + 1, x] and m >= mag[y + 1, x + 2]
+                keep = m > mid[x] and m >= mid[x + 2]
             elif ay > ax * _TAN_67_5:  # gradient ~ vertical: compare up/down
-                keep = m > mag[y, x + 1] and m >= mag[y + 2, x + 1]
+                keep = m > up[x + 1] and m >= dn[x + 1]
             else:  # diagonal: along (1, 1) if the signs agree, else (1, -1)
-                s = 1 if (gx[y, x] >= 0) == (gy[y, x] >= 0) else -1
-                keep = m > mag[y, x + 1 - s] and m > mag[y + 2, x + 1 + s]
+                sg = 1 if (gxr[x] >= 0) == (gyr[x] >= 0) else -1
+                keep = m > up[x + 1 - sg] and m > dn[x + 1 + sg]
             if keep:
+                i = base + x
                 if m > high:
-                    state[y, x] = 2
-                    n_strong += 1
+                    state[i] = 2
+                    stack[top] = i
+                    top += 1
                 else:
-                    state[y, x] = 1
-    return n_strong
-
-
-@njit(cache=True, nogil=True)
-def _push(stack, top, y, x):  # pragma: no cover - compiled
-    """Store (y, x) at stack[top], doubling the stack when full; returns the stack."""
-    if top >= stack.shape[0]:
-        grown = np.empty((stack.shape[0] * 2, 2), dtype=np.int64)
-        grown[:top] = stack[:top]
-        stack = grown
-    stack[top, 0] = y
-    stack[top, 1] = x
-    return stack
-
-
-@njit(cache=True, nogil=True)
-def _hysteresis(state, n_strong):  # pragma: no cover - compiled
-    h, w = state.shape
-    stack = np.empty((max(n_strong, 1) + 16, 2), dtype=np.int64)
-    top = 0
-    for y in range(h):
-        for x in range(w):
-            if state[y, x] == 2:
-                stack = _push(stack, top, y, x)
-                top += 1
+                    state[i] = 1
     while top > 0:
         top -= 1
-        y = stack[top, 0]
-        x = stack[top, 1]
-        for dy in range(-1, 2):
-            yy = y + dy
-            if yy < 0 or yy >= h:
-                continue
-            for dx in range(-1, 2):
-                xx = x + dx
-                if xx < 0 or xx >= w or state[yy, xx] != 1:
-                    continue
-                state[yy, xx] = 2
-                stack = _push(stack, top, yy, xx)
+        i = stack[top]
+        for j in (
+            i - stride - 1, i - stride, i - stride + 1, i - 1, i + 1,
+            i + stride - 1, i + stride, i + stride + 1,
+        ):  # fmt: skip
+            if state[j] == 1:
+                state[j] = 2
+                stack[top] = j
                 top += 1
-    out = np.empty((h, w), dtype=np.bool_)
-    for y in range(h):
-        for x in range(w):
-            out[y, x] = state[y, x] == 2
-    return out
+    return state.reshape(h + 2, stride)
 
 
 def canny(
@@ -141,18 +176,9 @@ def canny(
     if low > high:
         raise InputError(f"low must be <= high; got low={low:g}, high={high:g}: swap them")
     gray = rgb_to_gray(image) if image.ndim == 3 else image
-    work = gray.astype(np.float32) if gray.dtype != np.float64 else gray
+    work = gray
     if sigma > 0:
-        work = gaussian_blur(work, sigma)
-    gx = sobel(work, 1, 0, 3, border="replicate")
-    gy = sobel(work, 0, 1, 3, border="replicate")
-    state = np.empty(work.shape, dtype=np.uint8)
-    n_strong = _nms_threshold(
-        np.ascontiguousarray(gx),
-        np.ascontiguousarray(gy),
-        bool(l2_gradient),
-        float(low),
-        float(high),
-        state,
-    )
-    return _hysteresis(state, n_strong)
+        work = gaussian_blur(gray if gray.dtype.kind == "f" else gray.astype(np.float32), sigma)
+    proto = np.empty(0, dtype=np.float64 if work.dtype == np.float64 else np.float32)
+    state = _canny_kernel(np.ascontiguousarray(work), bool(l2_gradient), low, high, proto)
+    return state[1:-1, 1:-1] == 2

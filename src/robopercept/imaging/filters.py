@@ -99,7 +99,17 @@ def border_indices(n: int, before: int, after: int, border: str) -> np.ndarray:
 # --------------------------------------------------------------------------- kernels
 @njit(cache=True, nogil=True)
 def _store_row(dst, acc, is_int, lo, hi):  # pragma: no cover - compiled
-    if is_int:
+    """dst = acc, rounded half up and saturated to [lo, hi] when ``is_int``."""
+    if is_int and hi <= 65535.0 and lo >= -65536.0:
+        # 8/16-bit output: round and clamp in the float type, then convert through
+        # int32 (a conversion AVX2 vectorizes; the int64 one below it cannot)
+        flo = acc.dtype.type(lo)
+        fhi = acc.dtype.type(hi)
+        half = acc.dtype.type(0.5)
+        for x in range(acc.shape[0]):
+            v = np.floor(acc[x] + half)
+            dst[x] = np.int32(min(max(v, flo), fhi))
+    elif is_int:
         for x in range(acc.shape[0]):
             v = math.floor(acc[x] + 0.5)
             if v < lo:
@@ -147,9 +157,9 @@ def _taps1(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compi
                 dst[x] += wk * seg[x]
     else:
         lo = hi = 0
-    for p in range(width):
-        if lo <= p * 1 < hi:
-            continue
+    nb = lo // 1  # the border pixels only: left of lo, right of hi
+    for q in range(nb + width - hi // 1):
+        p = q if q < nb else hi // 1 + q - nb
         for c in range(1):
             v = 0.0
             for k in range(n):
@@ -181,9 +191,9 @@ def _taps3(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compi
                 dst[x] += wk * seg[x]
     else:
         lo = hi = 0
-    for p in range(width):
-        if lo <= p * 3 < hi:
-            continue
+    nb = lo // 3  # the border pixels only: left of lo, right of hi
+    for q in range(nb + width - hi // 3):
+        p = q if q < nb else hi // 3 + q - nb
         for c in range(3):
             v = 0.0
             for k in range(n):
@@ -215,9 +225,9 @@ def _taps_any(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - co
                 dst[x] += wk * seg[x]
     else:
         lo = hi = 0
-    for p in range(width):
-        if lo <= p * channels < hi:
-            continue
+    nb = lo // channels  # the border pixels only: left of lo, right of hi
+    for q in range(nb + width - hi // channels):
+        p = q if q < nb else hi // channels + q - nb
         for c in range(channels):
             v = 0.0
             for k in range(n):
@@ -227,20 +237,33 @@ def _taps_any(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - co
 
 
 @njit(cache=True, nogil=True)
+def _taps(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
+    """Dispatch on the tap stride so that LLVM sees it as a literal."""
+    if channels == 1:
+        _taps1(acc, kx, ax, cidx, 1, const, res)
+    elif channels == 3:
+        _taps3(acc, kx, ax, cidx, 3, const, res)
+    else:
+        _taps_any(acc, kx, ax, cidx, channels, const, res)
+
+
+@njit(cache=True, nogil=True)
 def _separable_kernel(
     src, kx, ky, ax, cidx, ridx, channels, cval, out, is_int, lo, hi
 ):  # pragma: no cover
     """out = kx (horizontal) o ky (vertical) correlation of src; src, out: (H, W*C).
 
     One fused pass per output row: the vertical taps accumulate source rows into ``acc``,
-    then the horizontal taps write ``res``; the branches on ``channels`` give LLVM a
-    literal tap stride, which it needs to vectorize.
+    then the horizontal taps write the output row (float output) or ``res``, which
+    :func:`_store_row` rounds and saturates (integer output); the branches on
+    ``channels`` give LLVM a literal tap stride, which it needs to vectorize.
     """
     height, length = out.shape
     ny = ky.shape[0]
     acc = np.empty(length, dtype=kx.dtype)
     res = np.empty(length, dtype=kx.dtype)
     const_row = cval * ky.sum()
+    direct = not is_int and out.dtype == acc.dtype
     for y in range(height):
         r = ridx[y]
         w0 = ky[0]
@@ -262,13 +285,11 @@ def _separable_kernel(
                 srow = src[r]
                 for x in range(length):
                     acc[x] += wk * srow[x]
-        if channels == 1:
-            _taps1(acc, kx, ax, cidx, 1, const_row, res)
-        elif channels == 3:
-            _taps3(acc, kx, ax, cidx, 3, const_row, res)
+        if direct:  # float output: the taps write the output row itself
+            _taps(acc, kx, ax, cidx, channels, const_row, out[y])
         else:
-            _taps_any(acc, kx, ax, cidx, channels, const_row, res)
-        _store_row(out[y], res, is_int, lo, hi)
+            _taps(acc, kx, ax, cidx, channels, const_row, res)
+            _store_row(out[y], res, is_int, lo, hi)
 
 
 @njit(cache=True, nogil=True)
