@@ -211,3 +211,41 @@ def as_float(image: np.ndarray) -> np.ndarray:
     if image.dtype in (np.float32, np.float64):
         return image
     return image.astype(np.float32)
+
+
+def check_int(value: Any, name: str, minimum: int | None = None) -> int:
+    """Return ``value`` as an int after checking that it is an integer >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InputError(f"{name} must be an integer; got {value!r}")
+    v = int(value)
+    if minimum is not None and v < minimum:
+        raise InputError(f"{name} must be >= {minimum}; got {v}")
+    return v
+
+
+def check_points(value: Any, name: str = "points", dim: int | None = 3) -> np.ndarray:
+    """Return ``value`` as a float64 ``(N, dim)`` array (NaN/inf allowed: callers decide).
+
+    ``dim=None`` accepts any number of columns.
+    """
+    arr = _as_array(value, name)
+    if arr.ndim != 2 or (dim is not None and arr.shape[1] != dim):
+        want = f"(N, {dim})" if dim is not None else "(N, D)"
+        hint = ""
+        if dim is not None and arr.ndim == 2 and arr.shape[0] == dim:
+            hint = f": points as columns? use {name}.T"
+        elif dim is not None and arr.ndim == 1 and arr.size == dim:
+            hint = f": a single point? use {name}[None, :]"
+        raise InputError(f"{name} must have shape {want}; got {arr.shape}{hint}")
+    if arr.dtype.kind not in "biuf":
+        raise InputError(f"{name} must be numeric; got dtype {arr.dtype}")
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def as_rng(rng: Any) -> np.random.Generator:
+    """``rng`` as a NumPy Generator: an int seed, a Generator, or None (fresh entropy)."""
+    if isinstance(rng, np.random.Generator):
+        return rng
+    if rng is None or (isinstance(rng, (int, np.integer)) and not isinstance(rng, bool)):
+        return np.random.default_rng(rng)
+    raise InputError(f"rng must be an int seed, a numpy.random.Generator or None; got {rng!r}")

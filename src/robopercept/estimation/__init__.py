@@ -1,0 +1,35 @@
+"""Robust estimation: least squares, the RANSAC engine and its models."""
+
+from robopercept.estimation.least_squares import (
+    Line,
+    LineFit,
+    Plane,
+    PlaneFit,
+    fit_line,
+    fit_plane,
+)
+from robopercept.estimation.models import (
+    AffineModel,
+    HomographyModel,
+    LineModel,
+    Model,
+    PlaneModel,
+)
+from robopercept.estimation.ransac import RansacResult, ransac, required_iterations
+
+__all__ = [
+    "AffineModel",
+    "HomographyModel",
+    "Line",
+    "LineFit",
+    "LineModel",
+    "Model",
+    "Plane",
+    "PlaneFit",
+    "PlaneModel",
+    "RansacResult",
+    "fit_line",
+    "fit_plane",
+    "ransac",
+    "required_iterations",
+]

@@ -1,0 +1,272 @@
+r"""Least-squares fits of 2-D lines and 3-D planes, and the :class:`Line` / :class:`Plane`
+results shared by the RANSAC models and the point-cloud code.
+
+Two kinds of fit:
+
+- **ordinary** least squares treats one coordinate as a function of the others and
+  minimizes vertical residuals: :math:`\min_w \|y - X w\|^2`, solved by
+  ``numpy.linalg.lstsq`` (an SVD, no normal equations);
+- **total** least squares minimizes the orthogonal distances. For a plane
+  :math:`n^\top x + d = 0` with :math:`\|n\| = 1`,
+
+  .. math:: \min_{n, d} \sum_i (n^\top x_i + d)^2
+            \;\Rightarrow\; d = -n^\top \bar x,\quad
+            n = \text{right singular vector of } [x_i - \bar x]
+            \text{ with the smallest singular value,}
+
+  and likewise for a 2-D line (the normal is the smallest singular direction).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from robopercept._checks import check_choice, check_points
+from robopercept.errors import DegenerateError, InputError
+
+__all__ = ["Line", "LineFit", "Plane", "PlaneFit", "fit_line", "fit_plane"]
+
+Method = Literal["total", "ordinary"]
+
+
+@dataclass(frozen=True)
+class Line:
+    r"""A 2-D line :math:`a x + b y + c = 0` with :math:`a^2 + b^2 = 1`.
+
+    Attributes
+    ----------
+    coefficients : (3,) float ndarray
+        ``(a, b, c)``; ``(a, b)`` is the unit normal, ``|c|`` the distance to the origin.
+    """
+
+    coefficients: np.ndarray
+
+    @property
+    def normal(self) -> np.ndarray:
+        """(2,) unit normal ``(a, b)``."""
+        return self.coefficients[:2]
+
+    @property
+    def direction(self) -> np.ndarray:
+        """(2,) unit direction ``(-b, a)``."""
+        a, b = self.coefficients[:2]
+        return np.array([-b, a])
+
+    @property
+    def point(self) -> np.ndarray:
+        """(2,) the point of the line closest to the origin, ``-c (a, b)``."""
+        return -self.coefficients[2] * self.coefficients[:2]
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(N,) signed distances of ``(N, 2)`` points (positive on the normal's side)."""
+        p = check_points(points, "points", 2)
+        return p @ self.coefficients[:2] + self.coefficients[2]
+
+
+@dataclass(frozen=True)
+class Plane:
+    r"""A plane :math:`n^\top x + d = 0` with :math:`\|n\| = 1`.
+
+    ``equation`` is ``(a, b, c, d)``, the form Open3D's ``segment_plane`` returns.
+
+    Attributes
+    ----------
+    normal : (3,) float ndarray
+        Unit normal.
+    offset : float
+        ``d``; the plane is ``|d|`` from the origin.
+    """
+
+    normal: np.ndarray
+    offset: float
+
+    @classmethod
+    def from_equation(cls, equation: np.ndarray) -> Plane:
+        """Plane from ``(a, b, c, d)`` (any scale; normalized here)."""
+        e = np.asarray(equation, dtype=np.float64).reshape(-1)
+        if e.shape != (4,) or not np.isfinite(e).all():
+            raise InputError(f"equation must be 4 finite numbers (a, b, c, d); got {equation!r}")
+        norm = float(np.linalg.norm(e[:3]))
+        if norm == 0.0:
+            raise DegenerateError("equation has a zero normal (a, b, c) = 0: not a plane")
+        return cls(e[:3] / norm, float(e[3] / norm))
+
+    @classmethod
+    def from_point_normal(cls, point: np.ndarray, normal: np.ndarray) -> Plane:
+        """Plane through ``point`` with normal ``normal`` (normalized here)."""
+        n = np.asarray(normal, dtype=np.float64).reshape(3)
+        p = np.asarray(point, dtype=np.float64).reshape(3)
+        return cls.from_equation(np.append(n, -float(n @ p)))
+
+    @property
+    def equation(self) -> np.ndarray:
+        """(4,) ``(a, b, c, d)``."""
+        return np.append(self.normal, self.offset)
+
+    @property
+    def point(self) -> np.ndarray:
+        """(3,) the point of the plane closest to the origin, ``-d n``."""
+        return -self.offset * self.normal
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(N,) signed distances of ``(N, 3)`` points (positive on the normal's side)."""
+        p = check_points(points, "points", 3)
+        return p @ self.normal + self.offset
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) orthogonal projections of ``(N, 3)`` points onto the plane."""
+        p = check_points(points, "points", 3)
+        return p - np.outer(p @ self.normal + self.offset, self.normal)
+
+    def angle_to(self, other: Plane) -> float:
+        """Angle between the two planes in radians, in ``[0, pi/2]`` (normal sign ignored)."""
+        c = abs(float(np.clip(self.normal @ other.normal, -1.0, 1.0)))
+        return float(np.arccos(min(c, 1.0)))
+
+    def flipped(self) -> Plane:
+        """The same plane with the normal reversed."""
+        return Plane(-self.normal, -self.offset)
+
+
+@dataclass(frozen=True)
+class LineFit:
+    """Result of :func:`fit_line`: the line, the per-point residuals and their RMS."""
+
+    line: Line
+    residuals: np.ndarray
+    rms: float
+    method: str = field(default="total")
+
+
+@dataclass(frozen=True)
+class PlaneFit:
+    """Result of :func:`fit_plane`: the plane, the per-point residuals and their RMS."""
+
+    plane: Plane
+    residuals: np.ndarray
+    rms: float
+    method: str = field(default="total")
+
+
+def _checked(points: np.ndarray, dim: int, need: int, what: str) -> np.ndarray:
+    p = check_points(points, "points", dim)
+    if not np.isfinite(p).all():
+        raise InputError(
+            "points must be finite; drop NaN/inf rows first: points[np.isfinite(points).all(1)]"
+        )
+    if p.shape[0] < need:
+        raise DegenerateError(f"a {what} needs at least {need} points; got {p.shape[0]}")
+    return p
+
+
+def _smallest_direction(centered: np.ndarray, what: str, rank_needed: int) -> np.ndarray:
+    """Unit direction of least spread of ``centered``, after checking its rank.
+
+    The right singular vectors of ``centered`` are the eigenvectors of the small scatter
+    matrix :math:`S = X^T X` (eigenvalues: the squared singular values), which costs one pass
+    over the points and no ``N x D`` temporary.
+    """
+    scatter = centered.T @ centered
+    evals, evecs = np.linalg.eigh(scatter)  # ascending
+    top = float(evals[-1])
+    if top <= 0.0:
+        raise DegenerateError(f"the points do not determine a {what}: they are all the same point")
+    if evals[-rank_needed] <= 1e-12 * top:
+        raise DegenerateError(f"the points do not determine a {what}: they are collinear")
+    return evecs[:, 0]
+
+
+def fit_line(points: np.ndarray, method: Method = "total") -> LineFit:
+    r"""Least-squares 2-D line.
+
+    ``method="total"``: orthogonal regression, the line through the centroid whose normal
+    is the smallest singular direction of the centred points (residuals: signed
+    orthogonal distances). ``method="ordinary"``: :math:`y = w_0 + w_1 x` by
+    ``numpy.linalg.lstsq`` (residuals: :math:`y_i - \hat y_i`); a vertical line has no such
+    form and raises :class:`DegenerateError`.
+
+    Parameters
+    ----------
+    points : (N, 2) array_like
+        N >= 2 finite points.
+    method : {'total', 'ordinary'}
+
+    Returns
+    -------
+    LineFit
+    """
+    check_choice(method, "method", ("total", "ordinary"))
+    p = _checked(points, 2, 2, "line")
+    if method == "ordinary":
+        x, y = p[:, 0], p[:, 1]
+        if np.ptp(x) == 0.0:
+            raise DegenerateError(
+                "all x are equal: y = w0 + w1 x cannot describe a vertical line; use method='total'"
+            )
+        design = np.column_stack([np.ones_like(x), x])
+        w = np.linalg.lstsq(design, y, rcond=None)[0]
+        res = y - design @ w
+        coef = np.array([-w[1], 1.0, -w[0]]) / np.hypot(w[1], 1.0)
+        return LineFit(Line(coef), res, float(np.sqrt(np.mean(res**2))), method)
+    c = p.mean(axis=0)
+    n = _smallest_direction(p - c, "line", 1)
+    coef = np.append(n, -float(n @ c))
+    res = p @ n + coef[2]
+    return LineFit(Line(coef), res, float(np.sqrt(np.mean(res**2))), method)
+
+
+def fit_plane(
+    points: np.ndarray, method: Method = "total", weights: np.ndarray | None = None
+) -> PlaneFit:
+    r"""Least-squares plane.
+
+    ``method="total"``: the plane through the (weighted) centroid whose normal is the
+    smallest singular direction of the centred points; residuals are signed orthogonal
+    distances. ``method="ordinary"``: :math:`z = w_0 + w_1 x + w_2 y` by
+    ``numpy.linalg.lstsq``; residuals are :math:`z_i - \hat z_i`.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+        N >= 3 finite points, not all collinear.
+    method : {'total', 'ordinary'}
+    weights : (N,) array_like, optional
+        Non-negative weights (total least squares only).
+
+    Returns
+    -------
+    PlaneFit
+    """
+    check_choice(method, "method", ("total", "ordinary"))
+    p = _checked(points, 3, 3, "plane")
+    if method == "ordinary":
+        design = np.column_stack([np.ones(len(p)), p[:, 0], p[:, 1]])
+        w, _, rank, _ = np.linalg.lstsq(design, p[:, 2], rcond=None)
+        if rank < 3:
+            raise DegenerateError(
+                "the (x, y) of the points are collinear: z = w0 + w1 x + w2 y is not "
+                "determined; use method='total'"
+            )
+        res = p[:, 2] - design @ w
+        plane = Plane.from_equation(np.array([w[1], w[2], -1.0, w[0]]))
+        return PlaneFit(plane, res, float(np.sqrt(np.mean(res**2))), method)
+    if weights is None:
+        c = p.mean(axis=0)
+        centered = p - c
+    else:
+        wts = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if wts.shape[0] != p.shape[0] or (wts < 0).any() or not np.isfinite(wts).all():
+            raise InputError(
+                f"weights must be {p.shape[0]} finite non-negative numbers; got {wts.shape}"
+            )
+        if wts.sum() <= 0:
+            raise DegenerateError("all weights are zero")
+        c = (wts[:, None] * p).sum(axis=0) / wts.sum()
+        centered = (p - c) * np.sqrt(wts)[:, None]
+    n = _smallest_direction(centered, "plane", 2)
+    plane = Plane(n, -float(n @ c))
+    res = p @ n + plane.offset
+    return PlaneFit(plane, res, float(np.sqrt(np.mean(res**2))), method)

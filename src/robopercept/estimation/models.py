@@ -1,0 +1,397 @@
+r"""Models for the RANSAC engine: 2-D line, plane, 2-D affine map, homography.
+
+Every model works on a data matrix with one row per observation and implements:
+
+``fit_minimal(samples)``
+    ``(B, n, D)`` minimal samples -> ``(B, P)`` parameters and a ``(B,)`` validity mask;
+    degenerate samples (coincident or collinear points) are marked invalid, never fitted.
+``fit(data)``
+    least-squares parameters from all rows (raises :class:`DegenerateError`).
+``residuals(params, data)``
+    ``(B, P)`` hypotheses and ``(N, D)`` data -> ``(B, N)`` non-negative errors, all
+    hypotheses at once.
+``check(data)``
+    raises :class:`DegenerateError` when no sample of ``data`` can be non-degenerate.
+``result(params)``
+    the typed result (:class:`Line`, :class:`Plane`, a 3x3 matrix).
+
+Correspondence models (affine, homography) take rows ``(x, y, x', y')`` and their residual
+is the transfer error :math:`\|H(x, y) - (x', y')\|`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+from numba import njit
+
+from robopercept.errors import DegenerateError
+from robopercept.estimation.least_squares import Line, Plane, fit_line, fit_plane
+
+__all__ = ["AffineModel", "HomographyModel", "LineModel", "Model", "PlaneModel"]
+
+_EPS = 1e-12
+_CHUNK = 1 << 17  # rows per scoring chunk: B x 131072 float64 residuals at a time
+
+
+@njit(cache=True, nogil=True)
+def _plane_score_kernel(params, x, y, z, threshold, msac, counts, loss):  # pragma: no cover
+    """Inlier counts and MSAC losses of plane hypotheses over coordinate arrays."""
+    t2 = threshold * threshold
+    for h in range(params.shape[0]):
+        a = params[h, 0]
+        b = params[h, 1]
+        c = params[h, 2]
+        d = params[h, 3]
+        cnt = 0
+        acc = 0.0
+        if msac:
+            for i in range(x.shape[0]):
+                r = abs(a * x[i] + b * y[i] + c * z[i] + d)
+                inside = r < threshold
+                cnt += inside
+                acc += r * r if inside else t2
+        else:
+            for i in range(x.shape[0]):
+                cnt += abs(a * x[i] + b * y[i] + c * z[i] + d) < threshold
+        counts[h] = cnt
+        loss[h] = acc
+
+
+@njit(cache=True, nogil=True)
+def _plane_mask_kernel(params, x, y, z, threshold, mask):  # pragma: no cover - compiled
+    a, b, c, d = params[0], params[1], params[2], params[3]
+    for i in range(x.shape[0]):
+        mask[i] = abs(a * x[i] + b * y[i] + c * z[i] + d) < threshold
+
+
+class Model:
+    """Base class: the interface the RANSAC engine uses (see the module docstring)."""
+
+    sample_size: ClassVar[int]
+    dim: ClassVar[int]
+    name: ClassVar[str]
+
+    def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def fit(self, data: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def check(self, data: np.ndarray) -> None:
+        """Raise :class:`DegenerateError` if ``data`` cannot determine the model."""
+
+    def result(self, params: np.ndarray) -> Any:
+        return params
+
+    # scoring hooks: the engine calls prepare() once, then score()/inlier_mask(); the
+    # defaults go through residuals() in chunks of rows, a model may override them
+    def prepare(self, data: np.ndarray) -> Any:
+        """Data in the layout :meth:`score` reads (the default: ``data`` itself)."""
+        return data
+
+    def score(
+        self, params: np.ndarray, prepared: Any, threshold: float, msac: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(B,) scores, higher is better (inlier count, or minus the MSAC loss), and (B,)
+        inlier counts."""
+        data = prepared
+        b = params.shape[0]
+        counts = np.zeros(b, dtype=np.int64)
+        loss = np.zeros(b)
+        t2 = threshold * threshold
+        for start in range(0, data.shape[0], _CHUNK):
+            r = self.residuals(params, data[start : start + _CHUNK])
+            counts += np.count_nonzero(r < threshold, axis=1)
+            if msac:
+                np.square(r, out=r)
+                np.minimum(r, t2, out=r)
+                loss += r.sum(axis=1)
+        return (-loss if msac else counts.astype(np.float64)), counts
+
+    def inlier_mask(self, params: np.ndarray, prepared: Any, threshold: float) -> np.ndarray:
+        """(N,) bool: residual of the single hypothesis ``params`` (P,) below threshold."""
+        data = prepared
+        mask = np.empty(data.shape[0], dtype=bool)
+        for start in range(0, data.shape[0], _CHUNK):
+            stop = start + _CHUNK
+            mask[start:stop] = self.residuals(params[None], data[start:stop])[0] < threshold
+        return mask
+
+
+def _scale(points: np.ndarray) -> float:
+    return max(float(np.abs(points).max()) if points.size else 0.0, 1.0)
+
+
+class LineModel(Model):
+    r"""2-D line :math:`a x + b y + c = 0`, :math:`a^2 + b^2 = 1`; data ``(N, 2)``.
+
+    Minimal sample: 2 distinct points, normal :math:`\perp (p_1 - p_0)`. Residual: the
+    orthogonal distance. Least squares: total least squares (:func:`fit_line`).
+    """
+
+    sample_size = 2
+    dim = 2
+    name = "line"
+
+    def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = samples[:, 1] - samples[:, 0]
+        length = np.hypot(d[:, 0], d[:, 1])
+        valid = length > _EPS * _scale(samples)
+        n = np.stack([-d[:, 1], d[:, 0]], axis=1) / np.where(valid, length, 1.0)[:, None]
+        c = -(n * samples[:, 0]).sum(axis=1)
+        return np.column_stack([n, c]), valid
+
+    def fit(self, data: np.ndarray) -> np.ndarray:
+        return fit_line(data).line.coefficients
+
+    def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
+        return np.abs(params[:, :2] @ data.T + params[:, 2:3])
+
+    def check(self, data: np.ndarray) -> None:
+        if np.ptp(data, axis=0).max() == 0.0:
+            raise DegenerateError("all points are the same point: no line is determined")
+
+    def result(self, params: np.ndarray) -> Line:
+        return Line(np.asarray(params, dtype=np.float64))
+
+
+class PlaneModel(Model):
+    r"""Plane :math:`n^\top x + d = 0`, :math:`\|n\| = 1`; data ``(N, 3)``.
+
+    Minimal sample: 3 non-collinear points, :math:`n \propto (p_1 - p_0) \times
+    (p_2 - p_0)`. Residual: the orthogonal distance :math:`|n^\top x + d|`. Least squares:
+    total least squares (:func:`fit_plane`).
+    """
+
+    sample_size = 3
+    dim = 3
+    name = "plane"
+
+    def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p0 = samples[:, 0]
+        e1 = samples[:, 1] - p0
+        e2 = samples[:, 2] - p0
+        n = np.cross(e1, e2)
+        norm = np.sqrt((n * n).sum(axis=1))
+        # collinear (or repeated) points: the cross product is tiny relative to the edges
+        edges = np.sqrt((e1 * e1).sum(axis=1) * (e2 * e2).sum(axis=1))
+        valid = norm > 1e-9 * np.maximum(edges, _EPS)
+        valid &= edges > 0
+        n = n / np.where(valid, norm, 1.0)[:, None]
+        d = -(n * p0).sum(axis=1)
+        return np.column_stack([n, d]), valid
+
+    def fit(self, data: np.ndarray) -> np.ndarray:
+        return fit_plane(data).plane.equation
+
+    def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
+        r = params[:, :3] @ data.T
+        r += params[:, 3:4]
+        return np.abs(r, out=r)
+
+    def check(self, data: np.ndarray) -> None:
+        # every sample is degenerate exactly when all points lie on one line
+        c = data.mean(axis=0)
+        centered = data - c
+        evals = np.linalg.eigvalsh(centered.T @ centered)
+        if evals[-1] <= 0.0:
+            raise DegenerateError("all points are the same point: no plane is determined")
+        if evals[-2] <= 1e-12 * evals[-1]:
+            raise DegenerateError("all points are collinear: no plane is determined")
+
+    def result(self, params: np.ndarray) -> Plane:
+        return Plane(np.asarray(params[:3], dtype=np.float64), float(params[3]))
+
+    # scoring on x, y, z coordinate arrays with a compiled loop: one pass per hypothesis
+    # and no residual matrix (about 10x faster than the chunked NumPy default)
+    def prepare(self, data: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return tuple(np.ascontiguousarray(data[:, i]) for i in range(3))  # type: ignore[return-value]
+
+    def score(
+        self, params: np.ndarray, prepared: Any, threshold: float, msac: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        counts = np.zeros(params.shape[0], dtype=np.int64)
+        loss = np.zeros(params.shape[0])
+        p = np.ascontiguousarray(params, dtype=np.float64)
+        _plane_score_kernel(p, *prepared, float(threshold), bool(msac), counts, loss)
+        return (-loss if msac else counts.astype(np.float64)), counts
+
+    def inlier_mask(self, params: np.ndarray, prepared: Any, threshold: float) -> np.ndarray:
+        mask = np.empty(prepared[0].shape[0], dtype=bool)
+        p = np.ascontiguousarray(params, dtype=np.float64)
+        _plane_mask_kernel(p, *prepared, float(threshold), mask)
+        return mask
+
+
+def _triangle_area2(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Twice the signed area of triangles ``(B, 2)`` a, b, c."""
+    return (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+
+
+def _apply(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Map ``(N, 2)`` points by ``(B, 3, 3)`` matrices -> ``(B, N, 2)``."""
+    x = h[:, :, 0:1] * xy[:, 0] + h[:, :, 1:2] * xy[:, 1] + h[:, :, 2:3]  # (B, 3, N)
+    w = x[:, 2]
+    w = np.where(np.abs(w) < _EPS, _EPS, w)
+    return np.stack([x[:, 0] / w, x[:, 1] / w], axis=2)
+
+
+class AffineModel(Model):
+    r"""2-D affine map :math:`x' = A x + t` from correspondences ``(x, y, x', y')``.
+
+    Parameters are the 6 entries of the top two rows of the 3x3 matrix. Minimal sample: 3
+    correspondences whose source points are not collinear (one 6x6 linear system).
+    Least squares: ``numpy.linalg.lstsq`` on all rows, as ``cv2.estimateAffine2D``'s
+    refinement. Residual: transfer error.
+    """
+
+    sample_size = 3
+    dim = 4
+    name = "affine"
+
+    def _design(self, src: np.ndarray) -> np.ndarray:
+        return np.concatenate([src, np.ones((*src.shape[:-1], 1))], axis=-1)
+
+    def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        src, dst = samples[:, :, :2], samples[:, :, 2:]
+        area = np.abs(_triangle_area2(src[:, 0], src[:, 1], src[:, 2]))
+        valid = area > 1e-9 * _scale(src) ** 2
+        a = self._design(src)  # (B, 3, 3)
+        a = np.where(valid[:, None, None], a, np.eye(3))
+        m = np.linalg.solve(a, dst)  # (B, 3, 2): columns are the two output rows
+        return m.transpose(0, 2, 1).reshape(-1, 6), valid
+
+    def fit(self, data: np.ndarray) -> np.ndarray:
+        self.check(data)
+        a = self._design(data[:, :2])
+        m = np.linalg.lstsq(a, data[:, 2:], rcond=None)[0]
+        return m.T.reshape(6)
+
+    def _matrices(self, params: np.ndarray) -> np.ndarray:
+        h = np.zeros((params.shape[0], 3, 3))
+        h[:, :2, :] = params.reshape(-1, 2, 3)
+        h[:, 2, 2] = 1.0
+        return h
+
+    def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
+        m = params.reshape(-1, 2, 3)
+        x = m[:, :, 0:1] * data[:, 0] + m[:, :, 1:2] * data[:, 1] + m[:, :, 2:3]
+        return np.hypot(x[:, 0] - data[:, 2], x[:, 1] - data[:, 3])
+
+    def check(self, data: np.ndarray) -> None:
+        c = data[:, :2] - data[:, :2].mean(axis=0)
+        evals = np.linalg.eigvalsh(c.T @ c)
+        if evals[0] <= 1e-12 * max(evals[1], 1e-300):
+            raise DegenerateError(
+                "the source points are collinear: an affine map is not determined"
+            )
+
+    def result(self, params: np.ndarray) -> np.ndarray:
+        return self._matrices(params[None])[0]
+
+
+def _normalizing(xy: np.ndarray) -> np.ndarray:
+    """Hartley normalization ``(B, 3, 3)``: centroid to 0, mean distance sqrt(2)."""
+    c = xy.mean(axis=1)
+    d = np.sqrt(((xy - c[:, None]) ** 2).sum(axis=2)).mean(axis=1)
+    s = np.sqrt(2.0) / np.maximum(d, _EPS)
+    t = np.zeros((xy.shape[0], 3, 3))
+    t[:, 0, 0] = s
+    t[:, 1, 1] = s
+    t[:, 0, 2] = -s * c[:, 0]
+    t[:, 1, 2] = -s * c[:, 1]
+    t[:, 2, 2] = 1.0
+    return t
+
+
+def _dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    r"""Normalized DLT for ``(B, n, 2)`` correspondences -> ``(B, 3, 3)`` with
+    :math:`h_{33} = 1` where possible.
+
+    Each correspondence gives two rows of :math:`A h = 0`,
+    :math:`[-x, -y, -1, 0, 0, 0, x' x, x' y, x'] h = 0` and
+    :math:`[0, 0, 0, -x, -y, -1, y' x, y' y, y'] h = 0`; :math:`h` is the right singular
+    vector of the smallest singular value, computed on Hartley-normalized points and
+    mapped back: :math:`H = T'^{-1} \hat H T`.
+    """
+    ts, td = _normalizing(src), _normalizing(dst)
+    s = src @ ts[:, :2, :2].transpose(0, 2, 1) + ts[:, None, :2, 2]
+    d = dst @ td[:, :2, :2].transpose(0, 2, 1) + td[:, None, :2, 2]
+    b, n = s.shape[:2]
+    a = np.zeros((b, 2 * n, 9))
+    x, y = s[..., 0], s[..., 1]
+    u, v = d[..., 0], d[..., 1]
+    a[:, 0::2, 0] = -x
+    a[:, 0::2, 1] = -y
+    a[:, 0::2, 2] = -1
+    a[:, 0::2, 6] = u * x
+    a[:, 0::2, 7] = u * y
+    a[:, 0::2, 8] = u
+    a[:, 1::2, 3] = -x
+    a[:, 1::2, 4] = -y
+    a[:, 1::2, 5] = -1
+    a[:, 1::2, 6] = v * x
+    a[:, 1::2, 7] = v * y
+    a[:, 1::2, 8] = v
+    if n == 4:  # square system padded: the null vector of the 8x9 matrix
+        a = np.concatenate([a, np.zeros((b, 1, 9))], axis=1)
+    _, _, vt = np.linalg.svd(a)
+    h = vt[:, -1].reshape(b, 3, 3)
+    h = np.linalg.inv(td) @ h @ ts
+    scale = h[:, 2:3, 2:3]
+    h = h / np.where(np.abs(scale) > _EPS, scale, 1.0)
+    return h
+
+
+class HomographyModel(Model):
+    r"""Homography :math:`x' \sim H x` from correspondences ``(x, y, x', y')``.
+
+    Minimal sample: 4 correspondences with no 3 source (or destination) points collinear.
+    Fit: the normalized DLT (Hartley & Zisserman, Alg. 4.2), for the minimal sample and
+    the least-squares refit alike; parameters are the 9 entries of H with
+    :math:`h_{33} = 1`. Residual: transfer error :math:`\|\pi(H x) - x'\|`.
+    """
+
+    sample_size = 4
+    dim = 4
+    name = "homography"
+
+    def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        src, dst = samples[:, :, :2], samples[:, :, 2:]
+        valid = np.ones(samples.shape[0], dtype=bool)
+        for pts in (src, dst):
+            tol = 1e-9 * _scale(pts) ** 2
+            for i, j, k in ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)):
+                valid &= np.abs(_triangle_area2(pts[:, i], pts[:, j], pts[:, k])) > tol
+        h = np.tile(np.eye(3), (samples.shape[0], 1, 1))
+        if valid.any():
+            h[valid] = _dlt(src[valid], dst[valid])
+        valid &= np.isfinite(h).all(axis=(1, 2))
+        return h.reshape(-1, 9), valid
+
+    def fit(self, data: np.ndarray) -> np.ndarray:
+        if data.shape[0] < 4:
+            raise DegenerateError(f"a homography needs 4 correspondences; got {data.shape[0]}")
+        self.check(data)
+        return _dlt(data[None, :, :2], data[None, :, 2:])[0].reshape(9)
+
+    def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
+        p = _apply(params.reshape(-1, 3, 3), data[:, :2])
+        return np.hypot(p[..., 0] - data[:, 2], p[..., 1] - data[:, 3])
+
+    def check(self, data: np.ndarray) -> None:
+        for name, xy in (("source", data[:, :2]), ("destination", data[:, 2:])):
+            c = xy - xy.mean(axis=0)
+            evals = np.linalg.eigvalsh(c.T @ c)
+            if evals[0] <= 1e-12 * max(evals[1], 1e-300):
+                raise DegenerateError(
+                    f"the {name} points are collinear: a homography is not determined"
+                )
+
+    def result(self, params: np.ndarray) -> np.ndarray:
+        return np.asarray(params, dtype=np.float64).reshape(3, 3)
