@@ -82,3 +82,54 @@ def test_corrupt_file_is_one_line(tmp_path):
     bad.write_bytes(b"\x89PNG\r\n\x1a\n garbage")
     r = run_cli("blobs", str(bad))
     assert r.returncode == 2 and "bad.png" in r.stderr and "Traceback" not in r.stderr
+
+
+# ----------------------------------------------------------------------------- cloud
+def _scene_ply(tmp_path, rng):
+    """A floor plane z = 0 with two boxes of points above it, written as PLY."""
+    from robopercept.pointcloud import PointCloud, write_point_cloud
+
+    floor = np.column_stack([rng.uniform(-1, 1, (4000, 2)), rng.normal(0, 0.001, 4000)])
+    box1 = rng.uniform([0.2, 0.2, 0.05], [0.4, 0.4, 0.25], (800, 3))
+    box2 = rng.uniform([-0.6, -0.5, 0.05], [-0.4, -0.3, 0.2], (600, 3))
+    path = tmp_path / "scene.ply"
+    write_point_cloud(path, PointCloud(np.vstack([floor, box1, box2])))
+    return path
+
+
+def test_cloud_command_pipeline_and_json(tmp_path):
+    rng = np.random.default_rng(0)
+    src = _scene_ply(tmp_path, rng)
+    out = tmp_path / "seg.ply"
+    r = run_cli(
+        "cloud", str(src), "-o", str(out), "--pass-through", "z:-0.5:1", "--voxel", "0.005",
+        "--sor", "20:2.0", "--planes", "1:0.01", "--clusters", "0.05:50:100000", "--json",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    names = [s["step"].split()[0] for s in summary["steps"]]
+    assert names == ["read", "pass-through", "voxel", "sor", "planes", "clusters"]
+    plane = summary["steps"][4]["planes"][0]
+    assert abs(abs(plane["equation"][2]) - 1) < 1e-3  # the floor z = 0
+    assert len(summary["steps"][5]["cluster_sizes"]) == 2  # the two boxes
+    from robopercept.pointcloud import read_point_cloud
+
+    seg = read_point_cloud(out)
+    assert seg.colors is not None and len(np.unique(seg.colors, axis=0)) == 3
+    r = run_cli("cloud", str(src), "-o", str(tmp_path / "t.ply"), "--planes", "2:0.01")
+    assert r.returncode == 0 and "plane 1:" in r.stdout and "wrote" in r.stdout
+
+
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        (["cloud", "missing.pcd"], "cannot read"),
+        (["cloud", "x.ply", "--planes", "1"], "N:THRESHOLD"),
+        (["cloud", "x.ply", "--pass-through", "q:0:1"], "AXIS"),
+        (["cloud", "x.ply", "-o", "out.txt"], "output must end"),
+    ],
+)
+def test_cloud_command_errors(tmp_path, args, match):
+    r = run_cli(*args)
+    assert r.returncode == 2 and match in r.stderr
+    assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1

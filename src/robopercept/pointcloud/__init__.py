@@ -1,0 +1,30 @@
+"""Point clouds: the container, file I/O, filters, normals, clustering, plane segmentation."""
+
+from robopercept.pointcloud.cloud import PointCloud
+from robopercept.pointcloud.clustering import euclidean_clusters
+from robopercept.pointcloud.filters import (
+    pass_through,
+    radius_outlier_removal,
+    statistical_outlier_removal,
+    voxel_downsample,
+)
+from robopercept.pointcloud.io import PcdData, read_pcd, read_point_cloud, write_point_cloud
+from robopercept.pointcloud.normals import estimate_normals
+from robopercept.pointcloud.segmentation import PlaneSegment, segment_plane, segment_planes
+
+__all__ = [
+    "PcdData",
+    "PlaneSegment",
+    "PointCloud",
+    "estimate_normals",
+    "euclidean_clusters",
+    "pass_through",
+    "radius_outlier_removal",
+    "read_pcd",
+    "read_point_cloud",
+    "segment_plane",
+    "segment_planes",
+    "statistical_outlier_removal",
+    "voxel_downsample",
+    "write_point_cloud",
+]

@@ -1,0 +1,285 @@
+r"""Point-cloud filters: pass-through, voxel grid, statistical and radius outlier removal.
+
+Each filter returns ``(filtered_cloud, indices)``; ``indices`` are positions in the input
+cloud (for :func:`voxel_downsample`, the voxel of each input point). Non-finite points
+are never kept: they are dropped first and do not appear in ``indices``. Neighbour
+queries go through ``scipy.spatial.cKDTree``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+from numba import njit
+from scipy.spatial import cKDTree
+
+from robopercept._checks import check_int, check_positive, check_range
+from robopercept.errors import InputError
+from robopercept.pointcloud.cloud import PointCloud
+
+__all__ = [
+    "pass_through",
+    "radius_outlier_removal",
+    "statistical_outlier_removal",
+    "voxel_downsample",
+]
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def _check_cloud(cloud: PointCloud) -> PointCloud:
+    if not isinstance(cloud, PointCloud):
+        raise InputError(
+            f"cloud must be a PointCloud; got {type(cloud).__name__}: "
+            "wrap an (N, 3) array with PointCloud(points)"
+        )
+    return cloud
+
+
+def _finite_index(cloud: PointCloud) -> np.ndarray:
+    return np.flatnonzero(cloud.finite_mask())
+
+
+def pass_through(
+    cloud: PointCloud,
+    axis: Literal["x", "y", "z"] | int,
+    min_value: float,
+    max_value: float,
+    *,
+    invert: bool = False,
+) -> tuple[PointCloud, np.ndarray]:
+    """Keep the points whose coordinate on ``axis`` lies in ``[min_value, max_value]``.
+
+    PCL's ``PassThrough`` filter (``setFilterLimitsNegative`` is ``invert``).
+
+    Parameters
+    ----------
+    cloud : PointCloud
+    axis : {'x', 'y', 'z'} or {0, 1, 2}
+    min_value, max_value : float
+        Inclusive limits, ``min_value <= max_value``.
+    invert : bool
+        Keep the finite points *outside* the limits instead.
+
+    Returns
+    -------
+    cloud : PointCloud
+    indices : (M,) int64 ndarray
+        Kept input positions, in input order.
+    """
+    cloud = _check_cloud(cloud)
+    ax = _AXES.get(axis, axis) if isinstance(axis, str) else axis
+    if isinstance(ax, bool) or ax not in (0, 1, 2):
+        raise InputError(f"axis must be 'x', 'y', 'z' or 0, 1, 2; got {axis!r}")
+    lo = check_range(min_value, "min_value")
+    hi = check_range(max_value, "max_value")
+    if lo > hi:
+        raise InputError(f"min_value must be <= max_value; got {lo:g} > {hi:g}: swap them")
+    v = cloud.points[:, ax]
+    inside = (v >= lo) & (v <= hi)
+    keep = (~inside if invert else inside) & cloud.finite_mask()
+    idx = np.flatnonzero(keep)
+    return cloud.select(idx), idx
+
+
+@njit(cache=True, nogil=True)
+def _bounds(pts):  # pragma: no cover - compiled
+    """(3,) minimum and maximum of ``(N, 3)`` points in one pass."""
+    lo = pts[0].copy()
+    hi = pts[0].copy()
+    for i in range(1, pts.shape[0]):
+        for j in range(3):
+            v = pts[i, j]
+            if v < lo[j]:
+                lo[j] = v
+            elif v > hi[j]:
+                hi[j] = v
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def _group_sums(values, ids, m):  # pragma: no cover - compiled
+    """(m, D) sums of the rows of ``values`` per group id."""
+    out = np.zeros((m, values.shape[1]))
+    for i in range(values.shape[0]):
+        g = ids[i]
+        for j in range(values.shape[1]):
+            out[g, j] += values[i, j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _voxel_ids(pts, base, size, dims):  # pragma: no cover - compiled
+    """Voxel id of each point, ids numbered by first occurrence; returns (ids, count).
+
+    The voxel ``floor((p - base) / size)`` is packed into one int64 key and looked up in
+    an open-addressing hash table (multiplicative hashing, linear probing): one pass,
+    no sort.
+    """
+    n = pts.shape[0]
+    bits = 1
+    while (1 << bits) < 2 * n:
+        bits += 1
+    mask = (1 << bits) - 1
+    keys = np.full(1 << bits, -1, dtype=np.int64)
+    slot_id = np.empty(1 << bits, dtype=np.int64)
+    ids = np.empty(n, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        cx = np.int64(math.floor((pts[i, 0] - base[0]) / size))
+        cy = np.int64(math.floor((pts[i, 1] - base[1]) / size))
+        cz = np.int64(math.floor((pts[i, 2] - base[2]) / size))
+        key = (cz * dims[1] + cy) * dims[0] + cx
+        h = np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(64 - bits))
+        while keys[h] != -1 and keys[h] != key:
+            h = (h + 1) & mask
+        if keys[h] == -1:
+            keys[h] = key
+            slot_id[h] = m
+            m += 1
+        ids[i] = slot_id[h]
+    return ids, m
+
+
+def voxel_downsample(cloud: PointCloud, voxel_size: float) -> tuple[PointCloud, np.ndarray]:
+    r"""Replace the points of each occupied voxel by their centroid.
+
+        Voxels are cubes of side ``s`` anchored as in Open3D's ``voxel_down_sample``: point
+        ``p`` goes to voxel :math:`\lfloor (p - b) / s \rfloor` with
+        :math:`b = \min_i p_i - s/2`. Colours and normals are averaged per voxel (normals
+        re-normalized). Output points are in the order of each voxel's first input point
+    (Open3D's order is its hash map's; compare the two as sets).
+
+        Parameters
+        ----------
+        cloud : PointCloud
+        voxel_size : float
+            > 0, in the cloud's units.
+
+        Returns
+        -------
+        cloud : PointCloud
+            One point per occupied voxel.
+        voxel_of_point : (N,) int64 ndarray
+            For each input point, the output point it went into (-1 for non-finite points).
+    """
+    cloud = _check_cloud(cloud)
+    s = check_positive(voxel_size, "voxel_size")
+    fin = _finite_index(cloud)
+    inverse = np.full(len(cloud), -1, dtype=np.int64)
+    if fin.size == 0:
+        return PointCloud(np.empty((0, 3))), inverse
+    pts = cloud.points if fin.size == len(cloud) else cloud.points[fin]
+    lo, hi = _bounds(pts)
+    base = lo - 0.5 * s
+    dims = np.floor((hi - base) / s).astype(np.int64) + 1
+    if float(np.prod(dims.astype(np.float64))) < 2.0**62:
+        inv, m = _voxel_ids(pts, base, s, dims)
+        inv = inv[: pts.shape[0]]
+        counts = np.bincount(inv, minlength=m).astype(np.float64)
+    else:  # a huge extent for the voxel size: unique rows instead of a packed key
+        cell = np.floor((pts - base) / s).astype(np.int64)
+        _, inv, counts = np.unique(cell, axis=0, return_inverse=True, return_counts=True)
+        inv = inv.reshape(-1)
+    m = counts.shape[0]
+
+    def mean(values: np.ndarray) -> np.ndarray:
+        return _group_sums(np.ascontiguousarray(values, dtype=np.float64), inv, m) / counts[:, None]
+
+    colors = None if cloud.colors is None else mean(cloud.colors[fin])
+    normals = None
+    if cloud.normals is not None:
+        normals = mean(cloud.normals[fin])
+        norm = np.linalg.norm(normals, axis=1, keepdims=True)
+        normals = np.divide(normals, norm, out=np.zeros_like(normals), where=norm > 0)
+    inverse[fin] = inv
+    return PointCloud(mean(pts), colors, normals), inverse
+
+
+def _tree(points: np.ndarray) -> cKDTree:
+    return cKDTree(points, balanced_tree=False, compact_nodes=False)
+
+
+def statistical_outlier_removal(
+    cloud: PointCloud, k: int = 50, std_ratio: float = 1.0
+) -> tuple[PointCloud, np.ndarray]:
+    r"""Drop points whose mean distance to their neighbours is unusually large.
+
+    For each point, :math:`\bar d_i` is the mean distance to its ``k`` nearest points
+    counting the point itself (distance 0), exactly as Open3D's
+    ``remove_statistical_outlier(k, std_ratio)``; PCL's ``StatisticalOutlierRemoval``
+    uses the same statistic over ``k`` neighbours excluding the point. With :math:`\mu`
+    and :math:`\sigma` the mean and sample standard deviation of the :math:`\bar d_i`,
+    a point is kept when
+
+    .. math:: 0 < \bar d_i < \mu + \text{std\_ratio}\; \sigma
+
+    (Open3D's rule; the lower bound drops points that coincide with all their
+    neighbours).
+
+    Parameters
+    ----------
+    cloud : PointCloud
+    k : int
+        Neighbours per point, >= 2.
+    std_ratio : float
+        >= 0.
+
+    Returns
+    -------
+    cloud : PointCloud
+    indices : (M,) int64 ndarray
+        Kept input positions, in input order.
+    """
+    cloud = _check_cloud(cloud)
+    k = check_int(k, "k", 2)
+    ratio = check_range(std_ratio, "std_ratio", 0.0)
+    fin = _finite_index(cloud)
+    if fin.size == 0:
+        return PointCloud(np.empty((0, 3))), fin
+    pts = cloud.points[fin]
+    kk = min(k, pts.shape[0])
+    dist, _ = _tree(pts).query(pts, k=kk, workers=-1)
+    dist = dist.reshape(pts.shape[0], kk)
+    mean_d = dist.sum(axis=1) / kk
+    mu = mean_d.mean()
+    sigma = mean_d.std(ddof=1) if mean_d.size > 1 else 0.0
+    keep = (mean_d > 0) & (mean_d < mu + ratio * sigma)
+    idx = fin[keep]
+    return cloud.select(idx), idx
+
+
+def radius_outlier_removal(
+    cloud: PointCloud, radius: float, min_neighbors: int
+) -> tuple[PointCloud, np.ndarray]:
+    """Keep points with at least ``min_neighbors`` other points within ``radius``.
+
+    The point itself is not counted. Matches Open3D's
+    ``remove_radius_outlier(nb_points=min_neighbors, radius)`` index for index (checked
+    on the PCL table scene) and PCL's ``RadiusOutlierRemoval``.
+
+    Parameters
+    ----------
+    cloud : PointCloud
+    radius : float
+        > 0.
+    min_neighbors : int
+        >= 0.
+
+    Returns
+    -------
+    cloud : PointCloud
+    indices : (M,) int64 ndarray
+    """
+    cloud = _check_cloud(cloud)
+    r = check_positive(radius, "radius")
+    need = check_int(min_neighbors, "min_neighbors", 0)
+    fin = _finite_index(cloud)
+    if fin.size == 0:
+        return PointCloud(np.empty((0, 3))), fin
+    pts = cloud.points[fin]
+    counts = _tree(pts).query_ball_point(pts, r, return_length=True, workers=-1)
+    idx = fin[np.asarray(counts) - 1 >= need]
+    return cloud.select(idx), idx

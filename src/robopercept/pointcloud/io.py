@@ -1,0 +1,526 @@
+"""Point-cloud files: PLY (through ``plyfile``) and PCD (a careful reader and writer here).
+
+PCD (PCL's format, v0.7): a text header (``FIELDS``, ``SIZE``, ``TYPE``, ``COUNT``,
+``WIDTH``, ``HEIGHT``, ``POINTS``, ``DATA``) and the data as ``ascii`` rows, ``binary``
+records (one packed record per point), or ``binary_compressed``: two uint32 sizes and an
+LZF stream that expands to the fields one after another (all x, then all y, ...).
+Colours are PCL's packed ``rgb``/``rgba`` (``0x00RRGGBB`` in a float or uint32).
+
+Every size a header claims is checked against the bytes actually in the file before
+anything is allocated, so a corrupt or hostile header (say ``POINTS 1000000000000``) is
+refused with :class:`FileFormatError` instead of exhausting memory.
+"""
+
+from __future__ import annotations
+
+import io as _io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from robopercept.errors import FileFormatError, InputError
+from robopercept.pointcloud.cloud import PointCloud
+
+__all__ = ["PcdData", "read_pcd", "read_point_cloud", "write_point_cloud"]
+
+_MAX_HEADER = 1 << 16
+_PCD_TYPES = {
+    ("F", 4): "f4",
+    ("F", 8): "f8",
+    ("U", 1): "u1",
+    ("U", 2): "u2",
+    ("U", 4): "u4",
+    ("U", 8): "u8",
+    ("I", 1): "i1",
+    ("I", 2): "i2",
+    ("I", 4): "i4",
+    ("I", 8): "i8",
+}
+_LZF_MAX_RATIO = 100  # an LZF stream cannot expand more than ~88x (264 bytes per 3)
+
+
+def _fail(path: Path, what: str) -> FileFormatError:
+    return FileFormatError(f"{path}: {what}")
+
+
+# --------------------------------------------------------------------------- LZF
+@njit(cache=True, nogil=True)
+def _lzf_decompress(src, dst):  # pragma: no cover - compiled
+    """Expand the LZF stream ``src`` into ``dst``; returns bytes written, -1 if corrupt.
+
+    Each control byte ``c`` is a literal run (``c < 32``: copy the next ``c + 1`` bytes) or
+    a back reference (length ``c >> 5`` plus 2, extended by one byte when 7; offset from
+    the low 5 bits and the next byte, plus 1) into the output written so far.
+    """
+    ip = 0
+    op = 0
+    n_in = src.shape[0]
+    n_out = dst.shape[0]
+    while ip < n_in:
+        ctrl = np.int64(src[ip])
+        ip += 1
+        if ctrl < 32:
+            run = ctrl + 1
+            if ip + run > n_in or op + run > n_out:
+                return -1
+            for k in range(run):
+                dst[op + k] = src[ip + k]
+            ip += run
+            op += run
+        else:
+            length = ctrl >> 5
+            ref = op - ((ctrl & 0x1F) << 8) - 1
+            if length == 7:
+                if ip >= n_in:
+                    return -1
+                length += np.int64(src[ip])
+                ip += 1
+            if ip >= n_in:
+                return -1
+            ref -= np.int64(src[ip])
+            ip += 1
+            length += 2
+            if ref < 0 or op + length > n_out:
+                return -1
+            for k in range(length):  # byte by byte: the reference may overlap the output
+                dst[op + k] = dst[ref + k]
+            op += length
+    return op
+
+
+# --------------------------------------------------------------------------- PCD
+@dataclass(frozen=True)
+class PcdData:
+    """Everything a PCD file holds.
+
+    Attributes
+    ----------
+    fields : dict of str -> ndarray
+        One array per field, ``(N,)`` or ``(N, count)``, in the file's dtype.
+    width, height : int
+        ``height > 1`` for organized clouds (``N = width * height``, row-major).
+    viewpoint : (7,) float ndarray
+        ``tx ty tz qw qx qy qz`` of the acquisition viewpoint.
+    data : str
+        ``'ascii'``, ``'binary'`` or ``'binary_compressed'``.
+    """
+
+    fields: dict[str, np.ndarray]
+    width: int
+    height: int
+    viewpoint: np.ndarray
+    data: str
+
+
+def _read_header(raw: bytes, path: Path) -> tuple[dict[str, list[str]], int]:
+    """Header entries and the offset of the data section."""
+    header: dict[str, list[str]] = {}
+    pos = 0
+    while True:
+        end = raw.find(b"\n", pos)
+        if end < 0 or end > _MAX_HEADER:
+            raise _fail(path, "no DATA line within the first 64 KiB: not a PCD file?")
+        line = raw[pos:end].decode("ascii", errors="replace").strip()
+        pos = end + 1
+        if not line or line.startswith("#"):
+            continue
+        key, *vals = line.split()
+        header[key.upper()] = vals
+        if key.upper() == "DATA":
+            return header, pos
+
+
+def _int_entry(header: dict[str, list[str]], key: str, path: Path, default: int | None = None):
+    vals = header.get(key)
+    if not vals:
+        if default is not None:
+            return default
+        raise _fail(path, f"header has no {key} line")
+    try:
+        v = int(vals[0])
+    except ValueError:
+        raise _fail(path, f"{key} must be an integer; got {vals[0]!r}") from None
+    if v < 0:
+        raise _fail(path, f"{key} must be >= 0; got {v}")
+    return v
+
+
+def read_pcd(path: str | os.PathLike[str]) -> PcdData:
+    """Read every field of a PCD file (ascii, binary or binary_compressed).
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    PcdData
+
+    Raises
+    ------
+    FileFormatError
+        Missing, truncated or corrupt file, or a header that does not match the data.
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot read ({exc.strerror or exc})") from exc
+    header, offset = _read_header(raw, p)
+    names = header.get("FIELDS") or header.get("COLUMNS")
+    if not names:
+        raise _fail(p, "header has no FIELDS line")
+    n_fields = len(names)
+    sizes = header.get("SIZE", ["4"] * n_fields)
+    types = header.get("TYPE", ["F"] * n_fields)
+    counts = header.get("COUNT", ["1"] * n_fields)
+    if not len(sizes) == len(types) == len(counts) == n_fields:
+        raise _fail(
+            p,
+            f"FIELDS ({n_fields}), SIZE ({len(sizes)}), TYPE ({len(types)}) and COUNT "
+            f"({len(counts)}) must have one entry per field",
+        )
+    formats = []
+    for name, size, typ, count in zip(names, sizes, types, counts, strict=True):
+        try:
+            code = _PCD_TYPES[(typ.upper(), int(size))]
+            cnt = int(count)
+        except (KeyError, ValueError):
+            raise _fail(p, f"field {name!r} has unsupported TYPE {typ} SIZE {size}") from None
+        if cnt < 1:
+            raise _fail(p, f"field {name!r} has COUNT {cnt}")
+        formats.append((name, "<" + code, (cnt,)) if cnt > 1 else (name, "<" + code))
+    # unique names: PCL pads with "_" fields; numpy needs distinct names
+    seen: dict[str, int] = {}
+    uniq = []
+    for f in formats:
+        k = seen.get(f[0], 0)
+        seen[f[0]] = k + 1
+        uniq.append((f[0] if k == 0 else f"{f[0]}_{k}", *f[1:]))
+    dtype = np.dtype(uniq)
+    width = _int_entry(header, "WIDTH", p)
+    height = _int_entry(header, "HEIGHT", p, 1)
+    n = _int_entry(header, "POINTS", p, width * height)
+    if n != width * height:
+        raise _fail(p, f"POINTS ({n}) must equal WIDTH x HEIGHT ({width} x {height})")
+    vp = np.array([0, 0, 0, 1, 0, 0, 0], dtype=np.float64)
+    if "VIEWPOINT" in header:
+        try:
+            vp = np.array([float(v) for v in header["VIEWPOINT"]], dtype=np.float64)
+        except ValueError:
+            raise _fail(p, "VIEWPOINT must be 7 numbers") from None
+    kind = (header["DATA"] or ["?"])[0].lower()
+    body = memoryview(raw)[offset:]
+    if kind == "ascii":
+        arr = _read_ascii(bytes(body), dtype, n, p)
+    elif kind == "binary":
+        need = n * dtype.itemsize
+        if len(body) < need:
+            raise _fail(
+                p,
+                f"truncated: {n} points of {dtype.itemsize} bytes need {need} bytes of "
+                f"data, the file has {len(body)}",
+            )
+        arr = np.frombuffer(body, dtype=dtype, count=n)
+    elif kind == "binary_compressed":
+        arr = _read_compressed(body, dtype, n, p)
+    else:
+        raise _fail(p, f"DATA must be ascii, binary or binary_compressed; got {kind!r}")
+    fields = {name: np.array(arr[name]) for name in dtype.names}  # type: ignore[union-attr]
+    return PcdData(fields, width, height, vp, kind)
+
+
+def _read_ascii(body: bytes, dtype: np.dtype, n: int, path: Path) -> np.ndarray:
+    cols = sum(int(np.prod(dtype[i].shape or (1,))) for i in range(len(dtype)))
+    if n * 2 * cols > len(body) + 1:  # every value needs a digit and a separator
+        raise _fail(
+            path, f"header claims {n} points; {len(body)} bytes of ascii data cannot hold them"
+        )
+    if n == 0:
+        return np.zeros(0, dtype=dtype)
+    try:
+        table = np.loadtxt(_io.BytesIO(body), dtype=np.float64, ndmin=2, max_rows=n)
+    except ValueError as exc:
+        raise _fail(path, f"corrupt ascii data: {exc}") from None
+    if table.shape != (n, cols):
+        raise _fail(
+            path,
+            f"ascii data has {table.shape[0]} rows of {table.shape[1]} values; "
+            f"the header says {n} rows of {cols}",
+        )
+    # float fields keep the decimal text's float64 value (as Open3D and PCL's strtod do)
+    wide = np.dtype(
+        [
+            (name, "<f8" if dtype[name].base.kind == "f" else dtype[name].base, dtype[name].shape)
+            for name in dtype.names  # type: ignore[union-attr]
+        ]
+    )
+    out = np.zeros(n, dtype=wide)
+    c = 0
+    for name in dtype.names:  # type: ignore[union-attr]
+        width = int(np.prod(out[name].shape[1:] or (1,)))
+        block = table[:, c : c + width]
+        out[name] = block if width > 1 else block[:, 0]
+        c += width
+    return out
+
+
+def _read_compressed(body: memoryview, dtype: np.dtype, n: int, path: Path) -> np.ndarray:
+    if len(body) < 8:
+        raise _fail(path, "truncated: binary_compressed data has no size header")
+    comp, uncomp = (int(v) for v in np.frombuffer(body[:8], dtype="<u4"))
+    need = n * dtype.itemsize
+    if uncomp != need:
+        raise _fail(
+            path,
+            f"compressed block expands to {uncomp} bytes, the header's {n} points need {need}",
+        )
+    if comp > len(body) - 8:
+        raise _fail(path, f"truncated: compressed block of {comp} bytes, {len(body) - 8} present")
+    if need > _LZF_MAX_RATIO * comp + 1024:
+        raise _fail(path, f"{comp} compressed bytes cannot expand to {need}: corrupt header")
+    out = np.empty(need, dtype=np.uint8)
+    if need:
+        src = np.frombuffer(body[8 : 8 + comp], dtype=np.uint8)
+        if _lzf_decompress(src, out) != need:
+            raise _fail(path, "corrupt LZF stream in binary_compressed data")
+    # the expanded bytes hold each field for all points, one field after another
+    arr = np.empty(n, dtype=dtype)
+    pos = 0
+    for name in dtype.names:  # type: ignore[union-attr]
+        sub = dtype.fields[name][0]  # type: ignore[index]
+        nbytes = n * sub.itemsize
+        arr[name] = np.frombuffer(out[pos : pos + nbytes].tobytes(), dtype=sub.base).reshape(
+            (n, *sub.shape)
+        )
+        pos += nbytes
+    return arr
+
+
+def _unpack_rgb(values: np.ndarray) -> np.ndarray:
+    """PCL packed colour (float or uint32 holding 0x(AA)RRGGBB) -> (N, 3) float in [0, 1]."""
+    v = np.ascontiguousarray(values).view(np.uint32).reshape(-1)
+    rgb = np.stack([(v >> 16) & 255, (v >> 8) & 255, v & 255], axis=1)
+    return rgb.astype(np.float64) / 255.0
+
+
+def _cloud_from_pcd(pcd: PcdData, path: Path) -> PointCloud:
+    f = pcd.fields
+    if not {"x", "y", "z"} <= f.keys():
+        raise _fail(path, f"no x, y, z fields (fields: {', '.join(f)})")
+    pts = np.column_stack([f["x"], f["y"], f["z"]]).astype(np.float64)
+    colors = None
+    for key in ("rgb", "rgba"):
+        if key in f and f[key].ndim == 1 and f[key].dtype.itemsize == 4:
+            colors = _unpack_rgb(f[key])
+            break
+    normals = None
+    if {"normal_x", "normal_y", "normal_z"} <= f.keys():
+        normals = np.column_stack([f["normal_x"], f["normal_y"], f["normal_z"]]).astype(np.float64)
+    shape = (pcd.height, pcd.width) if pcd.height > 1 else None
+    return PointCloud(pts, colors, normals, shape)
+
+
+# --------------------------------------------------------------------------- PLY
+def _check_ply_header(raw_head: bytes, size: int, path: Path) -> None:
+    """Refuse element counts the file cannot hold before plyfile allocates them."""
+    text = raw_head.decode("ascii", errors="replace")
+    end = text.find("end_header")
+    if not text.startswith("ply") or end < 0:
+        raise _fail(path, "not a PLY file (no 'ply' magic or no end_header in 64 KiB)")
+    lines = text[:end].splitlines()
+    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format ")), "ascii")
+    sizes = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2}
+    sizes.update({"int16": 2, "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4})
+    sizes.update({"float": 4, "float32": 4, "double": 8, "float64": 8})
+    min_bytes = 0
+    count = 0
+    row = 0
+    for ln in [*lines, "element end 0"]:
+        parts = ln.split()
+        if not parts:
+            continue
+        if parts[0] == "element":
+            min_bytes += count * max(row, 1)
+            try:
+                count = int(parts[2])
+            except (IndexError, ValueError):
+                raise _fail(path, f"bad element line {ln!r}") from None
+            if count < 0:
+                raise _fail(path, f"negative element count in {ln!r}")
+            row = 0
+        elif parts[0] == "property":
+            if fmt == "ascii":
+                row += 2  # a digit and a separator at least
+            elif parts[1] == "list" and len(parts) > 2:
+                row += sizes.get(parts[2], 1)
+            elif len(parts) > 1:
+                row += sizes.get(parts[1], 1)
+    if min_bytes > size:
+        raise _fail(
+            path,
+            f"header claims elements needing at least {min_bytes} bytes; the file has {size}",
+        )
+
+
+def _read_ply(path: Path) -> PointCloud:
+    try:
+        from plyfile import PlyData
+    except ImportError as exc:  # pragma: no cover - plyfile is a core dependency
+        raise ImportError("reading PLY needs plyfile: pip install plyfile") from exc
+    try:
+        size = path.stat().st_size
+        with path.open("rb") as fh:
+            _check_ply_header(fh.read(_MAX_HEADER), size, path)
+        ply = PlyData.read(str(path))
+    except FileFormatError:
+        raise
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    except Exception as exc:  # plyfile raises several parse errors
+        raise _fail(path, f"corrupt PLY ({type(exc).__name__}: {exc})") from None
+    if "vertex" not in ply:
+        raise _fail(path, "no 'vertex' element")
+    v = ply["vertex"].data
+    names = v.dtype.names or ()
+    if not {"x", "y", "z"} <= set(names):
+        raise _fail(path, f"vertex element has no x, y, z (properties: {', '.join(names)})")
+    pts = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
+    colors = None
+    for r, g, b in (("red", "green", "blue"), ("r", "g", "b")):
+        if {r, g, b} <= set(names):
+            c = np.column_stack([v[r], v[g], v[b]])
+            colors = c / 255.0 if c.dtype.kind in "iu" else c.astype(np.float64)
+            break
+    normals = None
+    if {"nx", "ny", "nz"} <= set(names):
+        normals = np.column_stack([v["nx"], v["ny"], v["nz"]]).astype(np.float64)
+    return PointCloud(pts, colors, normals)
+
+
+def _records(cloud: PointCloud, normal_names: tuple[str, ...], color_cols: list) -> np.ndarray:
+    """float32 x, y, z (and normals under ``normal_names``) plus empty colour columns."""
+    cols = [(k, "<f4") for k in ("x", "y", "z")]
+    if cloud.normals is not None:
+        cols += [(k, "<f4") for k in normal_names]
+    if cloud.colors is not None:
+        cols += color_cols
+    rec = np.empty(len(cloud), dtype=cols)
+    for i, k in enumerate("xyz"):
+        rec[k] = cloud.points[:, i]
+    if cloud.normals is not None:
+        for i, k in enumerate(normal_names):
+            rec[k] = cloud.normals[:, i]
+    return rec
+
+
+def _colors8(cloud: PointCloud) -> np.ndarray:
+    return np.clip(np.rint(cloud.colors * 255.0), 0, 255).astype(np.uint32)  # type: ignore[operator]
+
+
+def _write_ply(path: Path, cloud: PointCloud, binary: bool) -> None:
+    from plyfile import PlyData, PlyElement
+
+    rgb = ("red", "green", "blue")
+    rec = _records(cloud, ("nx", "ny", "nz"), [(k, "u1") for k in rgb])
+    if cloud.colors is not None:
+        c8 = _colors8(cloud)
+        for i, k in enumerate(rgb):
+            rec[k] = c8[:, i]
+    PlyData([PlyElement.describe(rec, "vertex")], text=not binary).write(str(path))
+
+
+def _write_pcd(path: Path, cloud: PointCloud, binary: bool) -> None:
+    normal_names = ("normal_x", "normal_y", "normal_z")
+    rec = _records(cloud, normal_names, [("rgb", "<u4")])
+    names = list(rec.dtype.names)  # type: ignore[arg-type]
+    if cloud.colors is not None:
+        c8 = _colors8(cloud)
+        rec["rgb"] = (c8[:, 0] << 16) | (c8[:, 1] << 8) | c8[:, 2]
+    h, w = cloud.shape if cloud.shape is not None else (1, len(cloud))
+    types = ["U" if k == "rgb" else "F" for k in names]
+    head = (
+        "# .PCD v0.7 - Point Cloud Data file format (robopercept)\nVERSION 0.7\n"
+        f"FIELDS {' '.join(names)}\nSIZE {' '.join('4' for _ in names)}\n"
+        f"TYPE {' '.join(types)}\nCOUNT {' '.join('1' for _ in names)}\n"
+        f"WIDTH {w}\nHEIGHT {h}\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(cloud)}\n"
+        f"DATA {'binary' if binary else 'ascii'}\n"
+    )
+    with path.open("wb") as fh:
+        fh.write(head.encode("ascii"))
+        if binary:
+            fh.write(rec.tobytes())
+        else:
+            fmt = ["%.9g"] * len(names)
+            if cloud.colors is not None:
+                fmt[-1] = "%d"
+            rows = np.column_stack([rec[k].astype(np.float64) for k in names])
+            np.savetxt(fh, rows, fmt=fmt)
+
+
+# --------------------------------------------------------------------------- public API
+def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:
+    """Read a ``.ply`` or ``.pcd`` file.
+
+    Points are returned as stored, NaN included (Open3D's ``read_point_cloud`` default);
+    an organized PCD (``HEIGHT > 1``) keeps its ``(H, W)`` shape. Use
+    :meth:`PointCloud.finite` to drop the invalid points.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A PLY (ascii, binary little or big endian) or PCD (ascii, binary,
+        binary_compressed) file.
+
+    Returns
+    -------
+    PointCloud
+        Colours in [0, 1] when the file has them (PLY ``red green blue``, PCD
+        ``rgb``/``rgba``), normals when it has ``nx ny nz`` / ``normal_x ...``.
+
+    Raises
+    ------
+    FileFormatError
+        Missing, truncated or corrupt file, unknown extension.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix == ".pcd":
+        return _cloud_from_pcd(read_pcd(p), p)
+    if suffix == ".ply":
+        return _read_ply(p)
+    raise FileFormatError(f"{p}: unknown point-cloud extension {suffix!r}: use .ply or .pcd")
+
+
+def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: bool = True) -> Path:
+    """Write ``cloud`` as ``.ply`` or ``.pcd`` (float32 coordinates, 8-bit colours).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The extension picks the format.
+    cloud : PointCloud
+    binary : bool
+        Binary (little endian) or ascii.
+
+    Returns
+    -------
+    Path
+        The path written.
+    """
+    if not isinstance(cloud, PointCloud):
+        raise InputError(f"cloud must be a PointCloud; got {type(cloud).__name__}")
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in (".ply", ".pcd"):
+        raise InputError(f"unknown point-cloud extension {suffix!r} in {p}: use .ply or .pcd")
+    if p.parent and not p.parent.exists():
+        p.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".ply":
+        _write_ply(p, cloud, binary)
+    else:
+        _write_pcd(p, cloud, binary)
+    return p

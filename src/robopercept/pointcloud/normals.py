@@ -1,0 +1,124 @@
+r"""Surface normals by PCA of each point's neighbourhood.
+
+For the neighbours :math:`q_j` of a point, the covariance
+:math:`C = \frac{1}{k} \sum_j (q_j - \bar q)(q_j - \bar q)^\top` has its smallest
+eigenvalue along the surface normal; the normal is that eigenvector, flipped to face the
+viewpoint :math:`v`: :math:`n^\top (v - p) \ge 0`. The curvature estimate
+:math:`\lambda_0 / (\lambda_0 + \lambda_1 + \lambda_2)` is PCL's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from robopercept._checks import check_int, check_positive
+from robopercept.errors import InputError
+from robopercept.pointcloud.cloud import PointCloud
+
+__all__ = ["estimate_normals"]
+
+_CHUNK = 65536
+
+
+def estimate_normals(
+    cloud: PointCloud,
+    k: int | None = 30,
+    radius: float | None = None,
+    viewpoint: tuple[float, float, float] | np.ndarray = (0.0, 0.0, 0.0),
+) -> tuple[PointCloud, np.ndarray]:
+    """Estimate unit normals oriented toward ``viewpoint``.
+
+    Parameters
+    ----------
+    cloud : PointCloud
+    k : int, optional
+        Neighbours per point (the point included), >= 3. With ``radius`` as well, the
+        ``k`` nearest within ``radius`` (Open3D's hybrid search).
+    radius : float, optional
+        Neighbourhood radius; alone, every point within it.
+    viewpoint : (3,) array_like
+        The sensor position; normals point toward it (camera frame: the origin).
+
+    Returns
+    -------
+    cloud : PointCloud
+        The input with ``normals`` set (NaN for non-finite points and for points with
+        fewer than 3 neighbours).
+    curvature : (N,) float ndarray
+        Surface variation :math:`\\lambda_0 / \\sum \\lambda`.
+    """
+    if not isinstance(cloud, PointCloud):
+        raise InputError(f"cloud must be a PointCloud; got {type(cloud).__name__}")
+    if k is None and radius is None:
+        raise InputError("give k, radius or both")
+    if k is not None:
+        k = check_int(k, "k", 3)
+    if radius is not None:
+        radius = check_positive(radius, "radius")
+    vp = np.asarray(viewpoint, dtype=np.float64).reshape(-1)
+    if vp.shape != (3,) or not np.isfinite(vp).all():
+        raise InputError(f"viewpoint must be 3 finite numbers; got {viewpoint!r}")
+    n = len(cloud)
+    normals = np.full((n, 3), np.nan)
+    curvature = np.full(n, np.nan)
+    fin = np.flatnonzero(cloud.finite_mask())
+    if fin.size < 3:
+        return cloud.with_normals(normals), curvature
+    pts = cloud.points[fin]
+    tree = cKDTree(pts)
+    out_n = np.full((pts.shape[0], 3), np.nan)
+    out_c = np.full(pts.shape[0], np.nan)
+    if k is not None:
+        kk = min(k, pts.shape[0])
+        for s in range(0, pts.shape[0], _CHUNK):
+            q = pts[s : s + _CHUNK]
+            ub = np.inf if radius is None else radius
+            d, idx = tree.query(q, k=kk, distance_upper_bound=ub, workers=-1)
+            valid = np.isfinite(d.reshape(q.shape[0], kk))
+            idx = np.where(valid, idx.reshape(q.shape[0], kk), 0)
+            nb = pts[idx]  # (m, k, 3)
+            w = valid[..., None].astype(np.float64)
+            cnt = w.sum(axis=1)  # (m, 1)
+            mean = (nb * w).sum(axis=1) / np.maximum(cnt, 1)
+            dev = (nb - mean[:, None]) * w
+            cov = np.einsum("mki,mkj->mij", dev, dev) / np.maximum(cnt, 1)[:, :, None]
+            _fill(cov, cnt[:, 0], out_n, out_c, s)
+    else:
+        for s in range(0, pts.shape[0], _CHUNK):
+            q = pts[s : s + _CHUNK]
+            lists = tree.query_ball_point(q, radius, workers=-1)
+            cnt = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(lists))
+            owner = np.repeat(np.arange(q.shape[0]), cnt)
+            # offsets from the query point keep the moment sums well conditioned
+            dev = pts[np.concatenate(lists).astype(np.int64)] - q[owner]
+            c = np.maximum(cnt, 1).astype(np.float64)
+            m1 = (
+                np.stack([np.bincount(owner, dev[:, i], q.shape[0]) for i in range(3)], axis=1)
+                / c[:, None]
+            )
+            cov = np.empty((q.shape[0], 3, 3))
+            for i in range(3):
+                for j in range(i, 3):
+                    m2 = np.bincount(owner, dev[:, i] * dev[:, j], q.shape[0]) / c
+                    cov[:, i, j] = cov[:, j, i] = m2 - m1[:, i] * m1[:, j]
+            _fill(cov, cnt.astype(np.float64), out_n, out_c, s)
+    # orient toward the viewpoint
+    flip = ((vp - pts) * out_n).sum(axis=1) < 0
+    out_n[flip] *= -1
+    normals[fin] = out_n
+    curvature[fin] = out_c
+    return cloud.with_normals(normals), curvature
+
+
+def _fill(
+    cov: np.ndarray, cnt: np.ndarray, out_n: np.ndarray, out_c: np.ndarray, start: int
+) -> None:
+    evals, evecs = np.linalg.eigh(cov)  # ascending
+    ok = cnt >= 3
+    stop = start + cov.shape[0]
+    nrm = evecs[:, :, 0]
+    total = evals.sum(axis=1)
+    curv = np.divide(evals[:, 0], total, out=np.zeros_like(total), where=total > 0)
+    out_n[start:stop] = np.where(ok[:, None], nrm, np.nan)
+    out_c[start:stop] = np.where(ok, curv, np.nan)

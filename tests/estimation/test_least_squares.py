@@ -1,0 +1,107 @@
+"""Least-squares lines and planes: hand cases, parity with NumPy, degenerate input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robopercept.errors import DegenerateError, InputError
+from robopercept.estimation import Line, Plane, fit_line, fit_plane
+
+
+def test_line_hand_case():
+    # y = 2x + 1 exactly: both methods recover it, residuals zero
+    x = np.arange(5.0)
+    pts = np.column_stack([x, 2 * x + 1])
+    for method in ("total", "ordinary"):
+        fit = fit_line(pts, method)
+        a, b, c = fit.line.coefficients
+        assert np.isclose(a * a + b * b, 1.0)
+        np.testing.assert_allclose([-a / b, -c / b], [2.0, 1.0], atol=1e-12)
+        assert fit.rms < 1e-12
+    # hand case: the corners of a 4 x 2 rectangle; the scatter is diag(16, 4) about the
+    # centre (2, 0), so the TLS line is y = 0 with residuals +-1 and RMS 1
+    fit = fit_line([[0, 1], [0, -1], [4, 1], [4, -1]], "total")
+    np.testing.assert_allclose(np.abs(fit.line.distance([[5, 0], [7, 3]])), [0.0, 3.0], atol=1e-12)
+    np.testing.assert_allclose(np.abs(fit.residuals), 1.0)
+    assert np.isclose(fit.rms, 1.0)
+
+
+def test_ordinary_line_matches_polyfit(rng):
+    x = rng.uniform(-3, 3, 50)
+    y = 0.7 * x - 2 + rng.normal(0, 0.1, 50)
+    fit = fit_line(np.column_stack([x, y]), "ordinary")
+    slope, icpt = np.polyfit(x, y, 1)
+    a, b, c = fit.line.coefficients
+    np.testing.assert_allclose([-a / b, -c / b], [slope, icpt], rtol=1e-10)
+    np.testing.assert_allclose(fit.residuals, y - (slope * x + icpt), atol=1e-10)
+
+
+def test_total_line_is_orthogonal_regression(rng):
+    # points along a steep line: TLS finds it, OLS in y = f(x) is biased by x noise
+    t = rng.uniform(-1, 1, 400)
+    pts = np.column_stack([0.2 * t, 3 * t]) + rng.normal(0, 0.02, (400, 2))
+    d = fit_line(pts, "total").line.direction
+    true = np.array([0.2, 3.0]) / np.hypot(0.2, 3.0)
+    assert abs(abs(d @ true) - 1) < 1e-4
+
+
+def test_plane_hand_case_and_equation():
+    pts = np.array([[0, 0, 1.0], [1, 0, 1], [0, 1, 1], [1, 1, 1]])
+    fit = fit_plane(pts)
+    np.testing.assert_allclose(np.abs(fit.plane.normal), [0, 0, 1], atol=1e-12)
+    assert np.isclose(abs(fit.plane.offset), 1.0)
+    eq = fit.plane.equation
+    np.testing.assert_allclose(pts @ eq[:3] + eq[3], 0, atol=1e-12)
+    # ordinary: z = 1 + 0 x + 0 y
+    fo = fit_plane(pts, "ordinary")
+    np.testing.assert_allclose(fo.residuals, 0, atol=1e-12)
+
+
+def test_plane_recovers_noisy_plane(rng):
+    true = Plane.from_equation([1.0, -2.0, 0.5, 3.0])
+    p = true.project(rng.uniform(-5, 5, (2000, 3))) + rng.normal(0, 0.01, (2000, 1)) * true.normal
+    fit = fit_plane(p)
+    assert fit.plane.angle_to(true) < np.radians(0.05)
+    assert abs(fit.rms - 0.01) < 0.001
+    # weights: zero weight on a gross outlier removes its influence
+    q = np.vstack([p, [[100.0, 100.0, 100.0]]])
+    w = np.r_[np.ones(len(p)), 0.0]
+    assert fit_plane(q, weights=w).plane.angle_to(true) < np.radians(0.05)
+
+
+def test_plane_helpers():
+    pl = Plane.from_point_normal([0, 0, 2], [0, 0, 3])
+    np.testing.assert_allclose(pl.equation, [0, 0, 1, -2])
+    np.testing.assert_allclose(pl.distance([[0, 0, 5]]), [3.0])
+    np.testing.assert_allclose(pl.project([[1, 2, 5]]), [[1, 2, 2]])
+    np.testing.assert_allclose(pl.point, [0, 0, 2])
+    assert pl.angle_to(pl.flipped()) == 0.0
+    assert np.isclose(pl.angle_to(Plane.from_equation([1, 0, 0, 0])), np.pi / 2)
+    line = Line(np.array([0.0, 1.0, -1.0]))  # y = 1
+    np.testing.assert_allclose(line.point, [0, 1])
+    np.testing.assert_allclose(line.direction, [-1, 0])
+
+
+@pytest.mark.parametrize(
+    ("call", "exc", "match"),
+    [
+        (lambda: fit_line([[0, 0]]), DegenerateError, "at least 2"),
+        (lambda: fit_line([[1, 1], [1, 1]]), DegenerateError, "same point"),
+        (lambda: fit_line([[1, 0], [1, 5]], "ordinary"), DegenerateError, "vertical"),
+        (lambda: fit_plane([[0, 0, 0], [1, 1, 1]]), DegenerateError, "at least 3"),
+        (
+            lambda: fit_plane([[0, 0, 0], [1, 1, 1], [2, 2, 2], [3, 3, 3]]),
+            DegenerateError,
+            "collinear",
+        ),
+        (lambda: fit_plane(np.ones((3, 2))), InputError, "shape"),
+        (lambda: fit_plane([[0, 0, np.nan]] * 4), InputError, "finite"),
+        (lambda: fit_plane(np.eye(3), method="robust"), InputError, "method"),
+        (lambda: fit_plane(np.eye(3), weights=[1, -1, 1]), InputError, "weights"),
+        (lambda: Plane.from_equation([0, 0, 0, 1]), DegenerateError, "zero normal"),
+    ],
+)
+def test_bad_input(call, exc, match):
+    with pytest.raises(exc, match=match):
+        call()

@@ -1,0 +1,164 @@
+"""The RANSAC engine and its models: synthetic ground truth, OpenCV parity, determinism."""
+
+from __future__ import annotations
+
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from robopercept.errors import DegenerateError, InputError
+from robopercept.estimation import (
+    AffineModel,
+    HomographyModel,
+    LineModel,
+    Plane,
+    PlaneModel,
+    ransac,
+    required_iterations,
+)
+
+
+def plane_data(rng, n=5000, outlier_ratio=0.7, noise=0.002):
+    """Inliers on a known plane (Gaussian noise along the normal) and uniform outliers."""
+    true = Plane.from_equation([0.3, -0.5, 1.0, -0.4])
+    m = round(n * (1 - outlier_ratio))
+    inl = true.project(rng.uniform(-1, 1, (m, 3))) + rng.normal(0, noise, (m, 1)) * true.normal
+    out = rng.uniform(-1, 1, (n - m, 3))
+    pts = np.vstack([inl, out])
+    # ground truth inliers: the generated ones (outliers inside the band are rare)
+    truth = np.r_[np.ones(m, bool), np.zeros(n - m, bool)]
+    return pts, truth, true
+
+
+def f1(a, b):
+    return 2 * np.count_nonzero(a & b) / (np.count_nonzero(a) + np.count_nonzero(b))
+
+
+@pytest.mark.parametrize("scoring", ["ransac", "msac"])
+@pytest.mark.parametrize("lo", [False, True])
+def test_plane_with_70_percent_outliers(rng, scoring, lo):
+    pts, truth, true = plane_data(rng)
+    res = ransac(pts, PlaneModel(), 0.008, scoring=scoring, local_optimization=lo, rng=7)
+    assert np.degrees(res.model.angle_to(true)) < 0.5
+    assert f1(res.inliers, truth) >= 0.99
+    # adaptive stopping: far fewer than max_iterations for w = 0.3, n = 3
+    assert res.n_iterations <= 3 * required_iterations(0.3, 3, 0.99)
+
+
+def test_required_iterations_formula():
+    # log(1 - p) / log(1 - w^n), hand-computed: w = 0.5, n = 3, p = 0.99 -> 34.5
+    assert np.isclose(required_iterations(0.5, 3, 0.99), np.log(0.01) / np.log(1 - 0.125))
+    assert required_iterations(1.0, 3, 0.99) == 0.0
+    assert required_iterations(0.0, 3, 0.99) == np.inf
+
+
+def test_line_and_min_inliers_stop(rng):
+    t = rng.uniform(-1, 1, 200)
+    pts = np.column_stack([t, -0.5 * t + 0.2])
+    pts[:60] = rng.uniform(-1, 1, (60, 2))
+    res = ransac(pts, LineModel(), 0.01, rng=0)
+    a, b, c = res.model.coefficients
+    np.testing.assert_allclose([-a / b, -c / b], [-0.5, 0.2], atol=1e-9)
+    assert res.inliers[60:].all()
+    early = ransac(pts, LineModel(), 0.01, rng=0, min_inliers=100, batch_size=1)
+    assert early.n_iterations <= res.n_iterations
+
+
+def test_homography_matches_opencv(rng):
+    h_true = np.array([[0.9, 0.1, 20.0], [-0.05, 1.1, -10.0], [2e-4, -1e-4, 1.0]])
+    src = rng.uniform(0, 640, (300, 2))
+    d = np.c_[src, np.ones(300)] @ h_true.T
+    dst = d[:, :2] / d[:, 2:] + rng.normal(0, 0.3, (300, 2))
+    dst[:120] = rng.uniform(0, 640, (120, 2))  # 40% outliers
+    res = ransac(np.c_[src, dst], HomographyModel(), 2.0, rng=1)
+    h_cv, mask = cv2.findHomography(src, dst, cv2.RANSAC, 2.0)
+    # the same inliers (up to points near the threshold) and matrices that map the
+    # image corners within a pixel of each other (both refit on their inliers)
+    agree = np.mean(res.inliers == mask.ravel().astype(bool))
+    assert agree > 0.98
+    corners = np.array([[0, 0], [640, 0], [640, 640], [0, 640]], float)
+
+    def warp(h):
+        q = np.c_[corners, np.ones(4)] @ h.T
+        return q[:, :2] / q[:, 2:]
+
+    assert np.abs(warp(res.model) - warp(h_cv)).max() < 1.0
+    assert np.abs(warp(res.model) - warp(h_true)).max() < 1.0
+
+
+def test_affine_matches_opencv(rng):
+    a_true = np.array([[1.2, -0.3, 5.0], [0.25, 0.9, -7.0]])
+    src = rng.uniform(0, 100, (200, 2))
+    dst = src @ a_true[:, :2].T + a_true[:, 2] + rng.normal(0, 0.1, (200, 2))
+    dst[:50] += rng.uniform(10, 50, (50, 2))
+    res = ransac(np.c_[src, dst], AffineModel(), 0.5, rng=2)
+    a_cv, _ = cv2.estimateAffine2D(src, dst, ransacReprojThreshold=0.5)
+    np.testing.assert_allclose(res.model[:2], a_true, atol=0.05)
+    np.testing.assert_allclose(res.model[:2], a_cv, atol=0.05)
+    assert res.inliers[50:].mean() > 0.99 and not res.inliers[:50].any()
+
+
+def test_seeded_determinism_across_threads(rng):
+    pts, _, _ = plane_data(rng, n=20000, outlier_ratio=0.6)
+    ref = ransac(pts, PlaneModel(), 0.01, rng=42)
+    again = ransac(pts, PlaneModel(), 0.01, rng=np.random.default_rng(42))
+    assert np.array_equal(ref.inliers, again.inliers) and np.array_equal(ref.params, again.params)
+    results = [None] * 4
+
+    def work(i):
+        results[i] = ransac(pts, PlaneModel(), 0.01, rng=42)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for r in results:
+        assert np.array_equal(r.inliers, ref.inliers) and np.array_equal(r.params, ref.params)
+    other = ransac(pts, PlaneModel(), 0.01, rng=43)
+    assert other.n_iterations != ref.n_iterations or not np.array_equal(other.params, ref.params)
+
+
+def test_degenerate_samples_are_redrawn(rng):
+    # half the points are copies of one point: samples with repeats are degenerate
+    pts, _truth, true = plane_data(rng, n=2000, outlier_ratio=0.2)
+    pts[1000:] = pts[0]
+    res = ransac(pts, PlaneModel(), 0.008, rng=3)
+    assert np.degrees(res.model.angle_to(true)) < 0.5
+
+
+def test_minimal_fits_flag_degenerate_samples():
+    collinear = np.array([[[0, 0, 0], [1, 1, 1], [2, 2, 2.0]], [[0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    _, valid = PlaneModel().fit_minimal(collinear)
+    assert valid.tolist() == [False, True]
+    same = np.array([[[1.0, 1.0], [1.0, 1.0]]])
+    assert not LineModel().fit_minimal(same)[1][0]
+    corr = np.array([[[0, 0, 0, 0], [1, 1, 1, 1], [2, 2, 2, 2], [0, 1, 0, 1.0]]])
+    assert not HomographyModel().fit_minimal(corr)[1][0]
+
+
+@pytest.mark.parametrize(
+    ("call", "exc", "match"),
+    [
+        (lambda: ransac(np.zeros((2, 3)), PlaneModel(), 0.1), DegenerateError, "only 2"),
+        (
+            lambda: ransac(np.outer(np.arange(10.0), [1, 2, 3]), PlaneModel(), 0.1),
+            DegenerateError,
+            "collinear",
+        ),
+        (lambda: ransac(np.ones((10, 3)), PlaneModel(), 0.1), DegenerateError, "same point"),
+        (lambda: ransac(np.ones((10, 2)), PlaneModel(), 0.1), InputError, "shape"),
+        (lambda: ransac(np.full((10, 3), np.nan), PlaneModel(), 0.1), InputError, "finite"),
+        (lambda: ransac(np.eye(3), PlaneModel(), 0.0), InputError, "threshold"),
+        (lambda: ransac(np.eye(3), PlaneModel(), 0.1, probability=1.0), InputError, "probability"),
+        (lambda: ransac(np.eye(3), PlaneModel(), 0.1, scoring="lmeds"), InputError, "scoring"),
+        (lambda: ransac(np.eye(3), "plane", 0.1), InputError, "Model"),
+        (lambda: ransac(np.eye(3), PlaneModel(), 0.1, rng="seed"), InputError, "rng"),
+        (lambda: ransac(np.eye(3), PlaneModel(), 0.1, sample_size=2), InputError, "sample_size"),
+    ],
+)
+def test_bad_input(call, exc, match):
+    with pytest.raises(exc, match=match):
+        call()

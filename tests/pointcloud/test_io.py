@@ -1,0 +1,206 @@
+"""PLY/PCD reading and writing: Open3D parity on every PCL file, round trips, bad files."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from robopercept.errors import FileFormatError, InputError
+from robopercept.pointcloud import PointCloud, read_pcd, read_point_cloud, write_point_cloud
+from robopercept.pointcloud.io import _lzf_decompress
+from tests.conftest import data_path
+
+o3d = pytest.importorskip("open3d")
+
+PCL_FILES = [
+    ("pcl", "bun0.pcd"),
+    ("pcl", "bun4.pcd"),
+    ("pcl", "bunny.pcd"),
+    ("pcl", "car6.pcd"),
+    ("pcl", "five_people.pcd"),
+    ("pcl", "lamppost.pcd"),
+    ("pcl", "milk.pcd"),
+    ("pcl", "milk_cartoon_all_small_clorox.pcd"),
+    ("pcl", "office1.pcd"),
+    ("pcl", "table_scene_mug_stereo_textured.pcd"),
+    ("pcl_mOSD", "test0.pcd"),
+    ("pcl_terrain", "CSite1_red2-utm.pcd"),
+]
+
+
+def finite_points(points):
+    return points[np.isfinite(points).all(axis=1)]
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize(("folder", "name"), PCL_FILES)
+def test_pcl_files_match_open3d_and_round_trip(tmp_path, folder, name):
+    path = data_path("pointcloud", folder, name)
+    ours = read_point_cloud(path)
+    ref = o3d.io.read_point_cloud(str(path))
+    # the same finite points in the same order, bit for bit (both widen float32)
+    np.testing.assert_array_equal(finite_points(ours.points), finite_points(np.asarray(ref.points)))
+    fin = ours.finite_mask()
+    if ref.has_colors():
+        np.testing.assert_allclose(ours.colors[fin], np.asarray(ref.colors)[fin], atol=1e-12)
+    if ref.has_normals():
+        np.testing.assert_allclose(ours.normals[fin], np.asarray(ref.normals)[fin], atol=1e-6)
+    header = read_pcd(path)
+    if header.height > 1:
+        assert ours.shape == (header.height, header.width)
+    # round trips through our writer, read back by us and by Open3D (ascii on the first
+    # 5000 points: text I/O of 300k points would only slow the suite down)
+    full = ours.finite()
+    for ext in (".ply", ".pcd"):
+        for binary in (True, False):
+            clean = full if binary else full.select(np.arange(min(len(full), 5000)))
+            out = write_point_cloud(tmp_path / f"rt{int(binary)}{ext}", clean, binary=binary)
+            back = read_point_cloud(out)
+            np.testing.assert_allclose(back.points, clean.points, rtol=1e-6, atol=1e-6)
+            o3d_back = np.asarray(o3d.io.read_point_cloud(str(out)).points)
+            np.testing.assert_allclose(o3d_back, back.points, rtol=1e-6, atol=1e-6)
+            if clean.colors is not None:
+                np.testing.assert_allclose(back.colors, clean.colors, atol=0.5 / 255 + 1e-12)
+
+
+@pytest.mark.realdata
+def test_mosd_labels_are_read():
+    pcd = read_pcd(data_path("pointcloud", "pcl_mOSD", "test0.pcd"))
+    assert pcd.data == "binary_compressed" and (pcd.width, pcd.height) == (640, 480)
+    labels = pcd.fields["label"]
+    assert labels.shape == (640 * 480,) and set(np.unique(labels)) >= {1, 20, 30}
+
+
+def test_lzf_hand_stream():
+    # literal "abc" (ctrl 2), then a back reference of length 3 + 2 = 5 at offset 3:
+    # ctrl = (3 << 5) | 0, next byte 2 -> ref = op - 0 - 1 - 2
+    stream = np.frombuffer(bytes([2]) + b"abc" + bytes([3 << 5, 2]), dtype=np.uint8)
+    out = np.zeros(8, dtype=np.uint8)
+    assert _lzf_decompress(stream, out) == 8
+    assert out.tobytes() == b"abcabcab"
+    bad = np.frombuffer(bytes([3 << 5, 200]), dtype=np.uint8)  # reference before the start
+    assert _lzf_decompress(bad, np.zeros(8, np.uint8)) == -1
+
+
+def test_organized_cloud_keeps_nan_and_shape(tmp_path):
+    pts = np.arange(24, dtype=np.float64).reshape(8, 3)
+    pts[3] = np.nan
+    cloud = PointCloud(pts, shape=(2, 4))
+    out = write_point_cloud(tmp_path / "org.pcd", cloud)
+    back = read_point_cloud(out)
+    assert back.shape == (2, 4)
+    np.testing.assert_array_equal(np.isnan(back.points), np.isnan(pts))
+    assert len(back.finite()) == 7 and back.finite().shape is None
+
+
+def _pcd_header(points: int, data: str = "binary") -> bytes:
+    return (
+        "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+        f"WIDTH {points}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {points}\nDATA {data}\n"
+    ).encode()
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        (_pcd_header(10) + b"\x00" * 12, "truncated"),
+        (_pcd_header(10**12) + b"\x00" * 12, "truncated"),
+        (_pcd_header(10**12, "ascii") + b"1 2 3\n", "cannot hold"),
+        (_pcd_header(2, "ascii") + b"1 2 3\n4 5\n", "ascii"),
+        (_pcd_header(2, "binary_compressed") + struct.pack("<II", 5, 24) + b"\x00", "truncated"),
+        (
+            _pcd_header(10**9, "binary_compressed") + struct.pack("<II", 4, 12 * 10**9 % 2**32),
+            "expands to",
+        ),
+        (
+            _pcd_header(200, "binary_compressed") + struct.pack("<II", 4, 2400) + b"\0" * 4,
+            "cannot expand",
+        ),
+        (_pcd_header(2, "lzma"), "DATA must be"),
+        (b"garbage without a header", "no DATA"),
+        (_pcd_header(2).replace(b"SIZE 4 4 4", b"SIZE 4 4"), "one entry per field"),
+        (_pcd_header(2).replace(b"POINTS 2", b"POINTS 3"), "WIDTH x HEIGHT"),
+    ],
+)
+def test_corrupt_pcd_is_refused_with_the_file_name(tmp_path, content, match):
+    path = tmp_path / "bad.pcd"
+    path.write_bytes(content)
+    with pytest.raises(FileFormatError, match=match) as info:
+        read_point_cloud(path)
+    assert "bad.pcd" in str(info.value)
+
+
+def test_corrupt_lzf_stream(tmp_path):
+    body = struct.pack("<II", 3, 24) + bytes([3 << 5, 250, 0])
+    path = tmp_path / "lzf.pcd"
+    path.write_bytes(_pcd_header(2, "binary_compressed") + body)
+    with pytest.raises(FileFormatError, match="LZF"):
+        read_point_cloud(path)
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        (
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\n"
+            b"property float x\nproperty float y\nproperty float z\nend_header\n" + b"\0" * 24,
+            "at least",
+        ),
+        (
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 10\n"
+            b"property float x\nproperty float y\nproperty float z\nend_header\n" + b"\0" * 24,
+            "corrupt PLY|at least",
+        ),
+        (b"not a ply file at all", "not a PLY"),
+        (
+            b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+            b"property float z\nend_header\n1 2 3\n4 5 oops\n",
+            "corrupt PLY",
+        ),
+        (
+            b"ply\nformat ascii 1.0\nelement face 1\nproperty float q\nend_header\n1\n",
+            "vertex",
+        ),
+    ],
+)
+def test_corrupt_ply_is_refused(tmp_path, content, match):
+    path = tmp_path / "bad.ply"
+    path.write_bytes(content)
+    with pytest.raises(FileFormatError, match=match) as info:
+        read_point_cloud(path)
+    assert "bad.ply" in str(info.value)
+
+
+def test_missing_and_unknown_files(tmp_path):
+    with pytest.raises(FileFormatError, match="cannot read"):
+        read_point_cloud(tmp_path / "none.pcd")
+    with pytest.raises(FileFormatError, match="extension"):
+        read_point_cloud(tmp_path / "cloud.xyz")
+    with pytest.raises(InputError, match="extension"):
+        write_point_cloud(tmp_path / "cloud.xyz", PointCloud(np.zeros((1, 3))))
+    with pytest.raises(InputError, match="PointCloud"):
+        write_point_cloud(tmp_path / "c.ply", np.zeros((1, 3)))
+
+
+def test_empty_cloud_round_trip(tmp_path):
+    empty = PointCloud(np.empty((0, 3)))
+    for ext in (".ply", ".pcd"):
+        back = read_point_cloud(write_point_cloud(tmp_path / f"e{ext}", empty))
+        assert len(back) == 0
+
+
+@pytest.mark.realdata
+def test_stanford_ascii_ply_with_faces():
+    # the zippered bunny: ascii vertices with extra properties, then a face list
+    cloud = read_point_cloud(
+        data_path("pointcloud", "stanford_bunny", "reconstruction", "bun_zipper.ply")
+    )
+    ref = np.asarray(
+        o3d.io.read_point_cloud(
+            str(data_path("pointcloud", "stanford_bunny", "reconstruction", "bun_zipper.ply"))
+        ).points
+    )
+    assert len(cloud) == 35947
+    np.testing.assert_allclose(cloud.points, ref, rtol=1e-6)
