@@ -8,7 +8,7 @@ import sys
 
 from benchmarks._harness import save
 
-BENCHMARKS = {"imaging": "benchmarks.imaging"}
+BENCHMARKS = {"imaging": "benchmarks.imaging", "pointcloud": "benchmarks.pointcloud"}
 
 
 def main(argv: list[str] | None = None) -> int:

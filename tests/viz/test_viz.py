@@ -64,3 +64,20 @@ def test_colormaps():
 def test_bad_input(call, match):
     with pytest.raises(InputError, match=match):
         call()
+
+
+def test_render_points_projects_with_a_pinhole_and_zbuffer():
+    from robopercept.viz import render_points
+
+    # a point on the optical axis lands at the image centre; a nearer point on the same
+    # ray hides a farther one; points behind the camera are skipped
+    pts = np.array([[0, 0, 2.0], [0, 0, 1.0], [0, 0, -1.0], [1.0, 0, 1.0]])
+    cols = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [9, 9, 9]], dtype=np.uint8)
+    img = render_points(pts, cols, size=(100, 80), fov_deg=90, point_size=1)
+    assert img.shape == (80, 100, 3)
+    assert img[40, 50].tolist() == [0, 255, 0]
+    # x/z = 1 at 90 degrees -> the right edge (u = f + W/2 = 100): outside
+    assert (img == [9, 9, 9]).all(axis=2).sum() == 0
+    assert (img != 255).any(axis=2).sum() == 1
+    with pytest.raises(InputError, match="colors"):
+        render_points(pts, cols[:2])

@@ -82,6 +82,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="TOL:MIN:MAX",
         help="Euclidean clusters of the points off the planes (e.g. 0.02:100:25000)",
     )
+    p.add_argument(
+        "--image", default=None, metavar="PNG", help="also render the coloured cloud to a PNG"
+    )
     p.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run_cloud)
@@ -181,6 +184,11 @@ def run_cloud(args: argparse.Namespace) -> int:
     if args.planes is None and args.clusters is None and cloud.colors is not None:
         colors = cloud.colors
     write_point_cloud(out, cloud.with_colors(colors))
+    if args.image:
+        from robopercept.imaging import write_image
+        from robopercept.viz import render_points
+
+        write_image(args.image, render_points(cloud.points, colors))
     summary = {"input": str(args.input), "output": str(out), "steps": steps}
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
@@ -196,5 +204,5 @@ def run_cloud(args: argparse.Namespace) -> int:
         )
     if clusters_out:
         print(f"clusters: {len(clusters_out)}, sizes {clusters_out}")
-    print(f"wrote {out}")
+    print(f"wrote {out}" + (f" and {args.image}" if args.image else ""))
     return 0

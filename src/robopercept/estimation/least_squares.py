@@ -27,7 +27,16 @@ import numpy as np
 from robopercept._checks import check_choice, check_points
 from robopercept.errors import DegenerateError, InputError
 
-__all__ = ["Line", "LineFit", "Plane", "PlaneFit", "fit_line", "fit_plane"]
+__all__ = [
+    "Line",
+    "LineFit",
+    "Plane",
+    "PlaneFit",
+    "fit_line",
+    "fit_plane",
+    "fit_plane_from_scatter",
+    "scatter_matrix",
+]
 
 Method = Literal["total", "ordinary"]
 
@@ -162,14 +171,47 @@ def _checked(points: np.ndarray, dim: int, need: int, what: str) -> np.ndarray:
     return p
 
 
-def _smallest_direction(centered: np.ndarray, what: str, rank_needed: int) -> np.ndarray:
-    """Unit direction of least spread of ``centered``, after checking its rank.
+_CHUNK = 1 << 18
 
-    The right singular vectors of ``centered`` are the eigenvectors of the small scatter
-    matrix :math:`S = X^T X` (eigenvalues: the squared singular values), which costs one pass
-    over the points and no ``N x D`` temporary.
+
+def scatter_matrix(
+    points: np.ndarray, mask: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Centroid :math:`\bar x` and scatter :math:`S = \sum_i (x_i - \bar x)(x_i - \bar x)^\top`
+    of the ``(N, D)`` points (those where ``mask`` is True), chunk by chunk so that no
+    ``N x D`` temporary is made."""
+    d = points.shape[1]
+    total = np.zeros(d)
+    count = 0
+    for start in range(0, points.shape[0], _CHUNK):
+        block = points[start : start + _CHUNK]
+        if mask is not None:
+            block = block[mask[start : start + _CHUNK]]
+        total += block.sum(axis=0)
+        count += block.shape[0]
+    c = total / max(count, 1)
+    s = np.zeros((d, d))
+    for start in range(0, points.shape[0], _CHUNK):
+        block = points[start : start + _CHUNK]
+        if mask is not None:
+            block = block[mask[start : start + _CHUNK]]
+        dev = block - c
+        s += dev.T @ dev
+    return c, s
+
+
+def fit_plane_from_scatter(centroid: np.ndarray, scatter: np.ndarray) -> np.ndarray:
+    """Plane equation ``(a, b, c, d)`` through ``centroid`` with the normal of least scatter."""
+    n = _smallest_direction(scatter, "plane", 2)
+    return np.append(n, -float(n @ centroid))
+
+
+def _smallest_direction(scatter: np.ndarray, what: str, rank_needed: int) -> np.ndarray:
+    """Unit direction of least spread, from the scatter matrix, after checking its rank.
+
+    The right singular vectors of the centred points are the eigenvectors of their small
+    scatter matrix :math:`S = X^T X` (eigenvalues: the squared singular values).
     """
-    scatter = centered.T @ centered
     evals, evecs = np.linalg.eigh(scatter)  # ascending
     top = float(evals[-1])
     if top <= 0.0:
@@ -211,8 +253,8 @@ def fit_line(points: np.ndarray, method: Method = "total") -> LineFit:
         res = y - design @ w
         coef = np.array([-w[1], 1.0, -w[0]]) / np.hypot(w[1], 1.0)
         return LineFit(Line(coef), res, float(np.sqrt(np.mean(res**2))), method)
-    c = p.mean(axis=0)
-    n = _smallest_direction(p - c, "line", 1)
+    c, scatter = scatter_matrix(p)
+    n = _smallest_direction(scatter, "line", 1)
     coef = np.append(n, -float(n @ c))
     res = p @ n + coef[2]
     return LineFit(Line(coef), res, float(np.sqrt(np.mean(res**2))), method)
@@ -254,8 +296,7 @@ def fit_plane(
         plane = Plane.from_equation(np.array([w[1], w[2], -1.0, w[0]]))
         return PlaneFit(plane, res, float(np.sqrt(np.mean(res**2))), method)
     if weights is None:
-        c = p.mean(axis=0)
-        centered = p - c
+        c, scatter = scatter_matrix(p)
     else:
         wts = np.asarray(weights, dtype=np.float64).reshape(-1)
         if wts.shape[0] != p.shape[0] or (wts < 0).any() or not np.isfinite(wts).all():
@@ -266,7 +307,8 @@ def fit_plane(
             raise DegenerateError("all weights are zero")
         c = (wts[:, None] * p).sum(axis=0) / wts.sum()
         centered = (p - c) * np.sqrt(wts)[:, None]
-    n = _smallest_direction(centered, "plane", 2)
+        scatter = centered.T @ centered
+    n = _smallest_direction(scatter, "plane", 2)
     plane = Plane(n, -float(n @ c))
     res = p @ n + plane.offset
     return PlaneFit(plane, res, float(np.sqrt(np.mean(res**2))), method)

@@ -27,7 +27,14 @@ import numpy as np
 from numba import njit
 
 from robopercept.errors import DegenerateError
-from robopercept.estimation.least_squares import Line, Plane, fit_line, fit_plane
+from robopercept.estimation.least_squares import (
+    Line,
+    Plane,
+    fit_line,
+    fit_plane,
+    fit_plane_from_scatter,
+    scatter_matrix,
+)
 
 __all__ = ["AffineModel", "HomographyModel", "LineModel", "Model", "PlaneModel"]
 
@@ -87,6 +94,10 @@ class Model:
 
     def result(self, params: np.ndarray) -> Any:
         return params
+
+    def fit_inliers(self, data: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """Least-squares parameters from the rows where ``mask`` is True."""
+        return self.fit(data[mask])
 
     # scoring hooks: the engine calls prepare() once, then score()/inlier_mask(); the
     # defaults go through residuals() in chunks of rows, a model may override them
@@ -194,11 +205,14 @@ class PlaneModel(Model):
         r += params[:, 3:4]
         return np.abs(r, out=r)
 
+    def fit_inliers(self, data: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        # the moments of the selected rows chunk by chunk: no copy of the inliers
+        c, s = scatter_matrix(data, mask)
+        return fit_plane_from_scatter(c, s)
+
     def check(self, data: np.ndarray) -> None:
         # every sample is degenerate exactly when all points lie on one line
-        c = data.mean(axis=0)
-        centered = data - c
-        evals = np.linalg.eigvalsh(centered.T @ centered)
+        evals = np.linalg.eigvalsh(scatter_matrix(data)[1])
         if evals[-1] <= 0.0:
             raise DegenerateError("all points are the same point: no plane is determined")
         if evals[-2] <= 1e-12 * evals[-1]:

@@ -126,7 +126,7 @@ def _refine(
         if np.count_nonzero(mask) <= model.sample_size:
             break
         try:
-            cand = np.asarray(model.fit(x[mask]), dtype=np.float64)
+            cand = np.asarray(model.fit_inliers(x, mask), dtype=np.float64)
         except DegenerateError:
             break
         if not np.isfinite(cand).all():

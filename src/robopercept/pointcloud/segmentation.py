@@ -82,13 +82,16 @@ def segment_plane(
         Fewer than 3 finite points, or all of them collinear.
     """
     threshold = _check(cloud, threshold)
-    fin = np.flatnonzero(cloud.finite_mask())
-    if fin.size < 3:
+    finite = cloud.finite_mask()
+    n_fin = int(np.count_nonzero(finite))
+    if n_fin < 3:
         raise DegenerateError(
-            f"a plane needs 3 finite points; the cloud has {fin.size} "
-            f"({len(cloud) - fin.size} non-finite dropped)"
+            f"a plane needs 3 finite points; the cloud has {n_fin} "
+            f"({len(cloud) - n_fin} non-finite dropped)"
         )
-    pts = cloud.points if fin.size == len(cloud) else cloud.points[fin]
+    # all finite (the usual case): no index array, no copy of the points
+    fin = None if n_fin == len(cloud) else np.flatnonzero(finite)
+    pts = cloud.points if fin is None else cloud.points[fin]
     res = ransac(
         pts,
         PlaneModel(),
@@ -99,7 +102,8 @@ def segment_plane(
         local_optimization=local_optimization,
         rng=rng,
     )
-    return res.model, fin[res.inliers]
+    inliers = np.flatnonzero(res.inliers)
+    return res.model, (inliers if fin is None else fin[inliers])
 
 
 def segment_planes(

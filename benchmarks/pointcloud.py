@@ -1,0 +1,169 @@
+"""Point-cloud processing against Open3D (issue 3), same inputs, one process.
+
+Open3D runs with its default OpenMP threads and ours with cKDTree ``workers=-1``: both
+use the machine's 2 cores. Inputs: a synthetic 1M-point plane scene with known ground
+truth, and PCL's table scene (209,280 finite points) from ../shared/data.
+"""
+
+from __future__ import annotations
+
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import open3d as o3d
+
+from benchmarks._harness import Record, median_ms
+from robopercept.estimation import Plane
+from robopercept.pointcloud import (
+    PointCloud,
+    euclidean_clusters,
+    read_point_cloud,
+    segment_plane,
+    statistical_outlier_removal,
+    voxel_downsample,
+)
+
+TABLE = (
+    Path(__file__).resolve().parents[2]
+    / "shared/data/pointcloud/pcl/table_scene_mug_stereo_textured.pcd"
+)
+TRUE_PLANE = Plane.from_equation([0.2, -0.4, 1.0, -1.5])
+
+
+def plane_scene(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """n points, half on TRUE_PLANE (1 cm Gaussian noise), half uniform in a 10 m cube."""
+    rng = np.random.default_rng(seed)
+    m = n // 2
+    inl = TRUE_PLANE.project(rng.uniform(-5, 5, (m, 3)))
+    inl += rng.normal(0, 0.01, (m, 1)) * TRUE_PLANE.normal
+    pts = np.vstack([inl, rng.uniform(-5, 5, (n - m, 3))])
+    truth = np.zeros(n, dtype=bool)
+    truth[:m] = True
+    return pts, truth
+
+
+def _f1(found: np.ndarray, truth: np.ndarray) -> float:
+    mask = np.zeros(truth.shape[0], dtype=bool)
+    mask[found] = True
+    return 2 * np.count_nonzero(mask & truth) / (np.count_nonzero(mask) + np.count_nonzero(truth))
+
+
+def run(repeats: int = 30) -> tuple[list[Record], dict]:
+    recs: list[Record] = []
+    few = max(3, repeats // 6)
+
+    # --- segment_plane, 1M points, 50% inliers, threshold 3 cm
+    pts, truth = plane_scene(1_000_000)
+    cloud = PointCloud(pts)
+    pc = cloud.to_open3d()
+    eq, ref_idx = pc.segment_plane(0.03, 3, 1000)
+    ref_angle = np.degrees(Plane.from_equation(eq).angle_to(TRUE_PLANE))
+    ref_f1 = _f1(np.asarray(ref_idx), truth)
+    ref_ms = median_ms(lambda: pc.segment_plane(0.03, 3, 1000), few, warmup=1)
+    for p in (0.99999999, 0.99):
+        plane, idx = segment_plane(cloud, 0.03, probability=p, rng=0)
+        recs.append(
+            Record(
+                "segment_plane",
+                f"1M pts, 50% inliers, p={p:g}",
+                median_ms(lambda p=p: segment_plane(cloud, 0.03, probability=p, rng=0), few),
+                ref_ms,
+                "open3d segment_plane(0.03, 3, 1000) [p=0.99999999]",
+                "normal error deg (ours)",
+                float(np.degrees(plane.angle_to(TRUE_PLANE))),
+                0.2 if p == 0.99999999 else None,
+                {
+                    "ours_inlier_f1": _f1(idx, truth),
+                    "ref_inlier_f1": ref_f1,
+                    "ref_normal_error_deg": float(ref_angle),
+                },
+            )
+        )
+
+    # --- extra peak memory of segment_plane on 10M points
+    big, _ = plane_scene(10_000_000, seed=1)
+    big_cloud = PointCloud(big)
+    segment_plane(big_cloud, 0.03, rng=0)  # compile / warm
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    plane, _ = segment_plane(big_cloud, 0.03, rng=0)
+    seconds = time.perf_counter() - t0
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    recs.append(
+        Record(
+            "segment_plane memory",
+            "10M pts: extra peak / cloud bytes",
+            seconds * 1e3,
+            float("nan"),
+            "target: extra peak < 2x the cloud (tracemalloc)",
+            "extra peak / cloud",
+            peak / big.nbytes,
+            None,
+            {"cloud_mb": big.nbytes / 2**20, "extra_peak_mb": peak / 2**20},
+        )
+    )
+    del big, big_cloud
+
+    # --- table scene: SOR, voxel grid, Euclidean clusters
+    table = read_point_cloud(TABLE).finite()
+    tpc = table.to_open3d()
+    _, ours_idx = statistical_outlier_removal(table, 50, 1.0)
+    _, ref_idx = tpc.remove_statistical_outlier(50, 1.0)
+    agree = 1 - np.setxor1d(ours_idx, np.asarray(ref_idx)).size / len(table)
+    recs.append(
+        Record(
+            "statistical_outlier",
+            "table scene 209k pts, k=50, std 1.0",
+            median_ms(lambda: statistical_outlier_removal(table, 50, 1.0), few, warmup=1),
+            median_ms(lambda: tpc.remove_statistical_outlier(50, 1.0), few, warmup=1),
+            "open3d remove_statistical_outlier",
+            "kept-index agreement",
+            float(agree),
+            1.0,
+        )
+    )
+    for size in (0.005, 0.01):
+        ours, _ = voxel_downsample(table, size)
+        ref = tpc.voxel_down_sample(size)
+        a = ours.points[np.lexsort(ours.points.T)]
+        b = np.asarray(ref.points)
+        b = b[np.lexsort(b.T)]
+        err = float(np.abs(a - b).max()) if a.shape == b.shape else float("inf")
+        recs.append(
+            Record(
+                "voxel_downsample",
+                f"table scene, voxel {size * 1000:g} mm -> {len(ours)} pts",
+                median_ms(lambda size=size: voxel_downsample(table, size), repeats),
+                median_ms(lambda size=size: tpc.voxel_down_sample(size), repeats),
+                "open3d voxel_down_sample",
+                "max centroid diff m",
+                err,
+                2.0,
+            )
+        )
+    _, inl = segment_plane(table, 0.01, rng=0)
+    rest = table.select(inl, invert=True)
+    rpc = rest.to_open3d()
+    ours_lab = euclidean_clusters(rest, 0.02)
+    ref_lab = np.asarray(rpc.cluster_dbscan(0.02, 1))
+    same = np.unique(np.stack([ours_lab, ref_lab]), axis=1).shape[1] == ours_lab.max() + 1
+    recs.append(
+        Record(
+            "euclidean_clusters",
+            f"table scene minus table ({len(rest)} pts), tol 2 cm",
+            median_ms(lambda: euclidean_clusters(rest, 0.02), few, warmup=1),
+            median_ms(lambda: rpc.cluster_dbscan(0.02, 1), few, warmup=1),
+            "open3d cluster_dbscan(0.02, min_points=1)",
+            "identical partition (1 = yes)",
+            float(same),
+            1.0,
+        )
+    )
+    return recs, {
+        "threads": "2 cores for both (Open3D OpenMP, cKDTree workers=-1)",
+        "repeats": few,
+        "open3d": o3d.__version__,
+    }
