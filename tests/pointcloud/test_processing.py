@@ -135,6 +135,13 @@ def test_normals_match_open3d(table):
     # identical neighbourhoods give identical PCA normals; equidistant neighbours may be
     # ordered differently by the two k-d trees, which moves a few normals slightly
     assert np.median(ang) < 1e-6 and np.percentile(ang, 99) < 2.0
+    # radius neighbourhoods are sets (no ties to break): the same normals everywhere
+    ours, _ = estimate_normals(sub, k=None, radius=0.02)
+    ref.estimate_normals(o3d.geometry.KDTreeSearchParamRadius(0.02))
+    ref.orient_normals_towards_camera_location(np.zeros(3))
+    ok = ~np.isnan(ours.normals).any(axis=1)
+    cos = (ours.normals[ok] * np.asarray(ref.normals)[ok]).sum(1)
+    assert ok.mean() > 0.99 and np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 1e-3
 
 
 # ----------------------------------------------------------------------------- clusters

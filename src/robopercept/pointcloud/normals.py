@@ -19,6 +19,7 @@ from robopercept.pointcloud.cloud import PointCloud
 __all__ = ["estimate_normals"]
 
 _CHUNK = 65536
+_PAIR_CHUNK = 1 << 21
 
 
 def estimate_normals(
@@ -85,24 +86,32 @@ def estimate_normals(
             cov = np.einsum("mki,mkj->mij", dev, dev) / np.maximum(cnt, 1)[:, :, None]
             _fill(cov, cnt[:, 0], out_n, out_c, s)
     else:
-        for s in range(0, pts.shape[0], _CHUNK):
-            q = pts[s : s + _CHUNK]
-            lists = tree.query_ball_point(q, radius, workers=-1)
-            cnt = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(lists))
-            owner = np.repeat(np.arange(q.shape[0]), cnt)
-            # offsets from the query point keep the moment sums well conditioned
-            dev = pts[np.concatenate(lists).astype(np.int64)] - q[owner]
-            c = np.maximum(cnt, 1).astype(np.float64)
-            m1 = (
-                np.stack([np.bincount(owner, dev[:, i], q.shape[0]) for i in range(3)], axis=1)
-                / c[:, None]
-            )
-            cov = np.empty((q.shape[0], 3, 3))
-            for i in range(3):
-                for j in range(i, 3):
-                    m2 = np.bincount(owner, dev[:, i] * dev[:, j], q.shape[0]) / c
-                    cov[:, i, j] = cov[:, j, i] = m2 - m1[:, i] * m1[:, j]
-            _fill(cov, cnt.astype(np.float64), out_n, out_c, s)
+        # every pair closer than the radius, once (i < j); each point also counts itself
+        pairs = tree.query_pairs(radius, output_type="ndarray")
+        m = pts.shape[0]
+        cnt = (
+            np.ones(m)
+            + np.bincount(pairs[:, 0], minlength=m)
+            + np.bincount(pairs[:, 1], minlength=m)
+        )
+        m1 = np.zeros((m, 3))
+        m2 = np.zeros((m, 6))
+        upper = [(i, j) for i in range(3) for j in range(i, 3)]
+        for s in range(0, pairs.shape[0], _PAIR_CHUNK):
+            pi, pj = pairs[s : s + _PAIR_CHUNK, 0], pairs[s : s + _PAIR_CHUNK, 1]
+            # offsets from each point to its neighbour: d for i, -d for j (moments about
+            # the query point keep the sums well conditioned)
+            d = pts[pj] - pts[pi]
+            for c in range(3):
+                m1[:, c] += np.bincount(pi, d[:, c], m) - np.bincount(pj, d[:, c], m)
+            for c, (i, j) in enumerate(upper):
+                w = d[:, i] * d[:, j]
+                m2[:, c] += np.bincount(pi, w, m) + np.bincount(pj, w, m)
+        m1 /= cnt[:, None]
+        cov = np.empty((m, 3, 3))
+        for c, (i, j) in enumerate(upper):
+            cov[:, i, j] = cov[:, j, i] = m2[:, c] / cnt - m1[:, i] * m1[:, j]
+        _fill(cov, cnt, out_n, out_c, 0)
     # orient toward the viewpoint
     flip = ((vp - pts) * out_n).sum(axis=1) < 0
     out_n[flip] *= -1
