@@ -1,0 +1,23 @@
+"""Tracking: Kalman filters (linear and extended) and motion models."""
+
+from robopercept.tracking.kalman import (
+    ExtendedKalmanFilter,
+    KalmanFilter,
+    UpdateResult,
+    constant_acceleration,
+    constant_position,
+    constant_velocity,
+    kf_predict,
+    kf_update,
+)
+
+__all__ = [
+    "ExtendedKalmanFilter",
+    "KalmanFilter",
+    "UpdateResult",
+    "constant_acceleration",
+    "constant_position",
+    "constant_velocity",
+    "kf_predict",
+    "kf_update",
+]

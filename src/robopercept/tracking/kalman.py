@@ -1,0 +1,403 @@
+r"""Kalman filters: linear (:class:`KalmanFilter`), extended (:class:`ExtendedKalmanFilter`),
+the pure :func:`kf_predict` / :func:`kf_update` steps, and motion-model builders.
+
+Linear-Gaussian model: :math:`x_k = A x_{k-1} + B u_k + w_k`, :math:`w_k \sim N(0, Q)`;
+:math:`z_k = H x_k + v_k`, :math:`v_k \sim N(0, R)`.
+
+Predict:
+
+.. math:: \hat x^- = A \hat x + B u, \qquad P^- = A P A^\top + Q
+
+Update, with the innovation :math:`y = z - H \hat x^-` and its covariance
+:math:`S = H P^- H^\top + R`:
+
+.. math:: K = P^- H^\top S^{-1}, \qquad \hat x = \hat x^- + K y,
+
+.. math:: P = (I - K H) P^- (I - K H)^\top + K R K^\top \quad\text{(Joseph form, default)}
+          \qquad\text{or}\qquad P = (I - K H) P^-
+
+The Joseph form keeps P symmetric positive semi-definite under rounding and is what
+filterpy's ``KalmanFilter.update`` computes, which this matches step by step. The
+squared Mahalanobis distance :math:`d^2 = y^\top S^{-1} y` follows a chi-square law with
+``dim_z`` degrees of freedom for a consistent filter; :meth:`KalmanFilter.gate` accepts a
+measurement when :math:`d^2` is below that law's ``probability`` quantile.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+from scipy.stats import chi2
+
+from robopercept._checks import check_int, check_positive, check_range
+from robopercept.errors import DegenerateError, InputError
+
+__all__ = [
+    "ExtendedKalmanFilter",
+    "KalmanFilter",
+    "UpdateResult",
+    "constant_acceleration",
+    "constant_position",
+    "constant_velocity",
+    "kf_predict",
+    "kf_update",
+]
+
+
+def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64)
+    if a.ndim == 0:
+        a = a * np.eye(shape[0]) if shape[0] == shape[1] else np.full(shape, float(a))
+    if a.shape != shape:
+        raise InputError(f"{name} must have shape {shape}; got {a.shape}")
+    if not np.isfinite(a).all():
+        raise InputError(f"{name} must be finite")
+    return a
+
+
+def _vec(value: object, name: str, n: int) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64).reshape(-1)
+    if a.shape != (n,):
+        raise InputError(f"{name} must have {n} elements; got shape {np.shape(value)}")
+    if not np.isfinite(a).all():
+        raise InputError(f"{name} must be finite; got {value!r}")
+    return a
+
+
+@dataclass(frozen=True)
+class UpdateResult:
+    """Everything one update computed.
+
+    Attributes
+    ----------
+    x, P : ndarray
+        Posterior state and covariance.
+    y : (dim_z,) ndarray
+        Innovation :math:`z - H \\hat x^-`.
+    S : (dim_z, dim_z) ndarray
+        Innovation covariance.
+    K : (dim_x, dim_z) ndarray
+        Kalman gain.
+    mahalanobis2 : float
+        :math:`y^\\top S^{-1} y`.
+    """
+
+    x: np.ndarray
+    P: np.ndarray
+    y: np.ndarray
+    S: np.ndarray
+    K: np.ndarray
+    mahalanobis2: float
+
+
+def kf_predict(
+    x: np.ndarray,
+    P: np.ndarray,
+    A: np.ndarray,
+    Q: np.ndarray,
+    B: np.ndarray | None = None,
+    u: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One prediction: ``x = A x + B u``, ``P = A P A^T + Q`` (pure function)."""
+    x = A @ x
+    if B is not None and u is not None:
+        x = x + B @ u
+    return x, A @ P @ A.T + Q
+
+
+def _solve_s(S: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    try:
+        return cho_solve(cho_factor(S), rhs)
+    except np.linalg.LinAlgError:
+        raise DegenerateError(
+            "the innovation covariance H P H^T + R is not positive definite: "
+            "check that R is positive definite"
+        ) from None
+
+
+def kf_update(
+    x: np.ndarray,
+    P: np.ndarray,
+    z: np.ndarray,
+    H: np.ndarray,
+    R: np.ndarray,
+    joseph: bool = True,
+) -> UpdateResult:
+    """One measurement update (pure function); see the module docstring."""
+    y = z - H @ x
+    PHt = P @ H.T
+    S = H @ PHt + R
+    K = _solve_s(S, PHt.T).T  # P H^T S^-1, through a Cholesky solve
+    x = x + K @ y
+    ikh = np.eye(P.shape[0]) - K @ H
+    P = ikh @ P @ ikh.T + K @ R @ K.T if joseph else ikh @ P
+    d2 = float(y @ _solve_s(S, y))
+    return UpdateResult(x, P, y, S, K, d2)
+
+
+class KalmanFilter:
+    """Linear Kalman filter (see the module docstring for the equations).
+
+    Parameters
+    ----------
+    dim_x, dim_z : int
+        State and measurement sizes.
+    dim_u : int
+        Control size (0: no control).
+    x : (dim_x,) array_like, optional
+        Initial state (zeros).
+    P : (dim_x, dim_x) array_like or float, optional
+        Initial covariance (identity); a scalar means that multiple of the identity.
+    A, Q, H, R, B : array_like, optional
+        Transition (identity), process noise (identity), measurement matrix (zeros),
+        measurement noise (identity), control matrix (zeros). Scalars are multiples of the
+        identity. ``F`` is accepted as filterpy's name for ``A``.
+    joseph : bool
+        Joseph-form covariance update (default, as filterpy).
+
+    Attributes
+    ----------
+    x, P, A, Q, H, R, B : ndarray
+        The current state, covariance and model (assignable).
+    y, S, K : ndarray or None
+        Innovation, its covariance and the gain of the last update.
+
+    Examples
+    --------
+    >>> kf = constant_velocity(dim=1, dt=0.1, q=1.0, r=0.01)
+    >>> x, P = kf.predict()
+    >>> result = kf.update([0.5])
+    """
+
+    def __init__(
+        self,
+        dim_x: int,
+        dim_z: int,
+        dim_u: int = 0,
+        *,
+        x: np.ndarray | None = None,
+        P: np.ndarray | float | None = None,
+        A: np.ndarray | None = None,
+        Q: np.ndarray | float | None = None,
+        H: np.ndarray | None = None,
+        R: np.ndarray | float | None = None,
+        B: np.ndarray | None = None,
+        F: np.ndarray | None = None,
+        joseph: bool = True,
+    ) -> None:
+        self.dim_x = check_int(dim_x, "dim_x", 1)
+        self.dim_z = check_int(dim_z, "dim_z", 1)
+        self.dim_u = check_int(dim_u, "dim_u", 0)
+        if A is not None and F is not None:
+            raise InputError("give A or F (the same matrix), not both")
+        A = F if A is None else A
+        nx, nz = self.dim_x, self.dim_z
+        self.x = np.zeros(nx) if x is None else _vec(x, "x", nx)
+        self.P = np.eye(nx) if P is None else _mat(P, "P", (nx, nx))
+        self.A = np.eye(nx) if A is None else _mat(A, "A", (nx, nx))
+        self.Q = np.eye(nx) if Q is None else _mat(Q, "Q", (nx, nx))
+        self.H = np.zeros((nz, nx)) if H is None else _mat(H, "H", (nz, nx))
+        self.R = np.eye(nz) if R is None else _mat(R, "R", (nz, nz))
+        self.B = None if B is None or self.dim_u == 0 else _mat(B, "B", (nx, self.dim_u))
+        self.joseph = bool(joseph)
+        self.y: np.ndarray | None = None
+        self.S: np.ndarray | None = None
+        self.K: np.ndarray | None = None
+
+    @property
+    def F(self) -> np.ndarray:
+        """filterpy's name for the transition matrix ``A``."""
+        return self.A
+
+    def predict(
+        self,
+        u: np.ndarray | None = None,
+        *,
+        A: np.ndarray | None = None,
+        Q: np.ndarray | float | None = None,
+        B: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Propagate the state one step; ``A``, ``Q``, ``B`` override the model for this
+        call only. Returns the prior ``(x, P)``."""
+        nx = self.dim_x
+        a = self.A if A is None else _mat(A, "A", (nx, nx))
+        q = self.Q if Q is None else _mat(Q, "Q", (nx, nx))
+        b, uu = None, None
+        if u is not None:
+            if self.dim_u == 0 and B is None:
+                raise InputError("this filter has no control input (dim_u=0)")
+            uu = _vec(u, "u", self.dim_u if self.dim_u else np.size(u))
+            b = self.B if B is None else _mat(B, "B", (nx, uu.size))
+            if b is None:
+                raise InputError("a control input needs B (set it or pass B=...)")
+        self.x, self.P = kf_predict(self.x, self.P, a, q, b, uu)
+        return self.x, self.P
+
+    def _parts(
+        self, z: np.ndarray, R: np.ndarray | float | None, H: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        zz = _vec(z, "z", self.dim_z)
+        r = self.R if R is None else _mat(R, "R", (self.dim_z, self.dim_z))
+        h = self.H if H is None else _mat(H, "H", (self.dim_z, self.dim_x))
+        return zz, r, h
+
+    def update(
+        self,
+        z: np.ndarray,
+        *,
+        R: np.ndarray | float | None = None,
+        H: np.ndarray | None = None,
+    ) -> UpdateResult:
+        """Correct with the measurement ``z``; ``R``, ``H`` override the model for this
+        call only."""
+        zz, r, h = self._parts(z, R, H)
+        res = kf_update(self.x, self.P, zz, h, r, self.joseph)
+        self.x, self.P = res.x, res.P
+        self.y, self.S, self.K = res.y, res.S, res.K
+        return res
+
+    def innovation(
+        self, z: np.ndarray, *, R: np.ndarray | float | None = None, H: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(y, S)`` that :meth:`update` would use for ``z``, without updating."""
+        zz, r, h = self._parts(z, R, H)
+        return zz - h @ self.x, h @ self.P @ h.T + r
+
+    def mahalanobis(self, z: np.ndarray, **overrides: np.ndarray) -> float:
+        """Mahalanobis distance :math:`\\sqrt{y^\\top S^{-1} y}` of ``z`` from the prediction."""
+        y, S = self.innovation(z, **overrides)
+        return float(np.sqrt(y @ _solve_s(S, y)))
+
+    def gate(self, z: np.ndarray, probability: float = 0.99, **overrides: np.ndarray) -> bool:
+        """True if ``z`` passes the chi-square gate: :math:`d^2 \\le
+        \\chi^2_{\\text{dim\\_z}}(\\text{probability})`."""
+        p = check_range(
+            probability, "probability", 0.0, 1.0, low_inclusive=False, high_inclusive=False
+        )
+        return self.mahalanobis(z, **overrides) ** 2 <= float(chi2.ppf(p, self.dim_z))
+
+
+class ExtendedKalmanFilter:
+    r"""Extended Kalman filter for :math:`x_k = f(x_{k-1}, u_k) + w_k`,
+    :math:`z_k = h(x_k) + v_k`.
+
+    The prediction propagates the mean through ``f`` and the covariance through its
+    Jacobian :math:`F = \partial f / \partial x`: :math:`P^- = F P F^\top + Q`; the update
+    linearizes ``h`` at the prior (:math:`H = \partial h / \partial x`) and applies the
+    linear update with :math:`y = z - h(\hat x^-)`. Matches filterpy's
+    ``ExtendedKalmanFilter`` (``predict_x`` through ``f``; Joseph-form update).
+
+    Parameters
+    ----------
+    dim_x, dim_z : int
+    f, F_jacobian : callable, optional
+        ``f(x, u) -> x``; ``F_jacobian(x, u) -> (dim_x, dim_x)``. Default: identity.
+    h, H_jacobian : callable
+        ``h(x) -> z``; ``H_jacobian(x) -> (dim_z, dim_x)``.
+    x, P, Q, R : array_like, optional
+    """
+
+    def __init__(
+        self,
+        dim_x: int,
+        dim_z: int,
+        *,
+        h: Callable[[np.ndarray], np.ndarray],
+        H_jacobian: Callable[[np.ndarray], np.ndarray],
+        f: Callable[[np.ndarray, np.ndarray | None], np.ndarray] | None = None,
+        F_jacobian: Callable[[np.ndarray, np.ndarray | None], np.ndarray] | None = None,
+        x: np.ndarray | None = None,
+        P: np.ndarray | float | None = None,
+        Q: np.ndarray | float | None = None,
+        R: np.ndarray | float | None = None,
+        joseph: bool = True,
+    ) -> None:
+        if (f is None) != (F_jacobian is None):
+            raise InputError("give both f and F_jacobian, or neither (identity motion)")
+        self.dim_x = check_int(dim_x, "dim_x", 1)
+        self.dim_z = check_int(dim_z, "dim_z", 1)
+        nx, nz = self.dim_x, self.dim_z
+        self.f, self.F_jacobian, self.h, self.H_jacobian = f, F_jacobian, h, H_jacobian
+        self.x = np.zeros(nx) if x is None else _vec(x, "x", nx)
+        self.P = np.eye(nx) if P is None else _mat(P, "P", (nx, nx))
+        self.Q = np.eye(nx) if Q is None else _mat(Q, "Q", (nx, nx))
+        self.R = np.eye(nz) if R is None else _mat(R, "R", (nz, nz))
+        self.joseph = bool(joseph)
+
+    def predict(
+        self, u: np.ndarray | None = None, *, Q: np.ndarray | float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Prior ``(x, P)``: ``x = f(x, u)``, ``P = F P F^T + Q`` (``Q`` for this call)."""
+        q = self.Q if Q is None else _mat(Q, "Q", (self.dim_x, self.dim_x))
+        if self.f is None:
+            self.P = self.P + q
+            return self.x, self.P
+        nx = self.dim_x
+        jac = _mat(self.F_jacobian(self.x, u), "F_jacobian(x, u)", (nx, nx))  # type: ignore[misc]
+        self.x = _vec(self.f(self.x, u), "f(x, u)", self.dim_x)
+        self.P = jac @ self.P @ jac.T + q
+        return self.x, self.P
+
+    def update(self, z: np.ndarray, *, R: np.ndarray | float | None = None) -> UpdateResult:
+        """Correct with ``z`` (``R`` for this call only)."""
+        zz = _vec(z, "z", self.dim_z)
+        r = self.R if R is None else _mat(R, "R", (self.dim_z, self.dim_z))
+        hj = _mat(self.H_jacobian(self.x), "H_jacobian(x)", (self.dim_z, self.dim_x))
+        hx = _vec(self.h(self.x), "h(x)", self.dim_z)
+        # the linear update around the prior, with y = z - h(x) instead of z - H x
+        res = kf_update(self.x, self.P, zz - hx + hj @ self.x, hj, r, self.joseph)
+        self.x, self.P = res.x, res.P
+        return res
+
+
+# --------------------------------------------------------------------------- builders
+def _kinematic(order: int, dim: int, dt: float, q: float, r: float) -> KalmanFilter:
+    """State ``[p (dim), v (dim), a (dim)]`` up to ``order``; position measured."""
+    dt = check_positive(dt, "dt")
+    q = check_range(q, "q", 0.0)
+    r = check_positive(r, "r")
+    dim = check_int(dim, "dim", 1)
+    n = order + 1
+    # 1-D blocks: transition of a Taylor expansion, and the discrete white-noise
+    # acceleration models of Bar-Shalom (Q = q G G^T with G = [dt^2/2, dt] for constant
+    # velocity, [dt^2/2, dt, 1] for constant acceleration), as filterpy's
+    # Q_discrete_white_noise
+    a1 = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            a1[i, j] = dt ** (j - i) / float(np.prod(np.arange(1, j - i + 1)))
+    if order == 0:
+        q1 = np.array([[q * dt]])  # random walk: variance grows with time
+    else:
+        g = np.array([dt ** (2 - j) / (2.0 if j == 0 else 1.0) for j in range(n)])
+        q1 = q * np.outer(g, g)
+    eye = np.eye(dim)
+    A = np.kron(a1, eye)
+    Q = np.kron(q1, eye)
+    H = np.zeros((dim, n * dim))
+    H[:, :dim] = eye
+    return KalmanFilter(n * dim, dim, A=A, Q=Q, H=H, R=r * eye, P=np.eye(n * dim))
+
+
+def constant_position(dim: int, dt: float, q: float, r: float) -> KalmanFilter:
+    """Random-walk model: state ``p``, ``A = I``, ``Q = q dt I``, ``H = I``, ``R = r I``."""
+    return _kinematic(0, dim, dt, q, r)
+
+
+def constant_velocity(dim: int, dt: float, q: float, r: float) -> KalmanFilter:
+    r"""Constant velocity: state ``[p, v]`` (each ``dim`` long),
+    :math:`A = \begin{bmatrix} I & \Delta t I \\ 0 & I \end{bmatrix}`, white-noise
+    acceleration of variance ``q``:
+    :math:`Q = q\, G G^\top \otimes I`, :math:`G = [\Delta t^2 / 2, \Delta t]`;
+    position measured with variance ``r``."""
+    return _kinematic(1, dim, dt, q, r)
+
+
+def constant_acceleration(dim: int, dt: float, q: float, r: float) -> KalmanFilter:
+    r"""Constant acceleration: state ``[p, v, a]``, white acceleration increments of
+    variance ``q`` (discrete Wiener-process acceleration):
+    :math:`Q = q\, G G^\top \otimes I`, :math:`G = [\Delta t^2 / 2, \Delta t, 1]`."""
+    return _kinematic(2, dim, dt, q, r)

@@ -1,0 +1,167 @@
+"""Kalman filters: hand-computed steps, filterpy parity step by step, gating, builders."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from filterpy.common import Q_discrete_white_noise
+from filterpy.kalman import ExtendedKalmanFilter as FpEKF
+from filterpy.kalman import KalmanFilter as FpKF
+from scipy.stats import chi2
+
+from robopercept.errors import DegenerateError, InputError
+from robopercept.tracking import (
+    ExtendedKalmanFilter,
+    KalmanFilter,
+    constant_acceleration,
+    constant_position,
+    constant_velocity,
+    kf_predict,
+    kf_update,
+)
+
+
+def test_scalar_hand_case():
+    # x0 = 0, P0 = 1, A = 1, Q = 1 -> P- = 2; z = 1, R = 2: S = 4, K = 0.5,
+    # x = 0.5, P = (1 - 0.5)^2 2 + 0.25 2 = 1 (Joseph) = (1 - 0.5) 2 (simple)
+    for joseph in (True, False):
+        kf = KalmanFilter(1, 1, x=[0.0], P=1.0, A=1.0, Q=1.0, H=[[1.0]], R=2.0, joseph=joseph)
+        _, P = kf.predict()
+        assert P[0, 0] == 2.0
+        res = kf.update([1.0])
+        assert res.K[0, 0] == 0.5 and res.S[0, 0] == 4.0 and res.y[0] == 1.0
+        assert kf.x[0] == 0.5 and np.isclose(kf.P[0, 0], 1.0)
+        assert np.isclose(res.mahalanobis2, 0.25)
+
+
+def test_matches_filterpy_step_by_step():
+    rng = np.random.default_rng(0)
+    dt = 0.1
+    ours = constant_velocity(dim=2, dt=dt, q=0.5, r=0.04)
+    ref = FpKF(dim_x=4, dim_z=2)
+    # filterpy with the same model in our state order [px, py, vx, vy]
+    ref.F = ours.A.copy()
+    ref.Q = ours.Q.copy()
+    ref.H = ours.H.copy()
+    ref.R = ours.R.copy()
+    ref.P = ours.P.copy()
+    ref.x = ours.x.reshape(-1, 1).copy()
+    truth = np.zeros(4)
+    truth[2:] = [1.0, -0.5]
+    for k in range(200):
+        truth = ours.A @ truth
+        z = truth[:2] + rng.normal(0, 0.2, 2)
+        ours.predict()
+        ref.predict()
+        np.testing.assert_allclose(ours.x, ref.x.ravel(), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ours.P, ref.P, rtol=0, atol=1e-9)
+        if k % 7 == 3:  # missed detections: predict only
+            continue
+        ours.update(z)
+        ref.update(z)
+        np.testing.assert_allclose(ours.x, ref.x.ravel(), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ours.P, ref.P, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ours.K, ref.K, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(ours.S, ref.S, rtol=0, atol=1e-9)
+    # the filter actually tracks: velocity estimate near the truth
+    np.testing.assert_allclose(ours.x[2:], [1.0, -0.5], atol=0.2)
+
+
+def test_builders_match_filterpy_noise_and_shapes():
+    kf = constant_velocity(dim=1, dt=0.5, q=2.0, r=1.0)
+    np.testing.assert_allclose(kf.Q, Q_discrete_white_noise(2, dt=0.5, var=2.0))
+    np.testing.assert_allclose(kf.A, [[1, 0.5], [0, 1]])
+    ca = constant_acceleration(dim=3, dt=0.1, q=1.0, r=1.0)
+    assert ca.A.shape == (9, 9) and ca.H.shape == (3, 9)
+    np.testing.assert_allclose(ca.A[:3, 6:], 0.005 * np.eye(3))
+    np.testing.assert_allclose(
+        ca.Q[::3, ::3], Q_discrete_white_noise(3, dt=0.1, var=1.0), rtol=1e-12
+    )
+    cp = constant_position(dim=2, dt=0.1, q=3.0, r=1.0)
+    np.testing.assert_allclose(cp.Q, 0.3 * np.eye(2))
+
+
+def test_overrides_control_and_pure_functions():
+    kf = KalmanFilter(2, 1, dim_u=1, A=np.eye(2), B=[[1.0], [0.0]], H=[[1.0, 0.0]], Q=0.0)
+    kf.predict(u=[2.0])
+    assert kf.x.tolist() == [2.0, 0.0]
+    kf.predict(A=[[1.0, 1.0], [0.0, 1.0]], Q=0.0)  # a one-off transition
+    assert kf.x.tolist() == [2.0, 0.0]
+    before = kf.P.copy()
+    kf.update([2.0], R=1e12)  # a nearly useless measurement barely changes P
+    np.testing.assert_allclose(kf.P, before, rtol=1e-9)
+    x, P = kf_predict(np.ones(2), np.eye(2), np.eye(2), np.eye(2))
+    assert P[0, 0] == 2.0
+    res = kf_update(x, P, np.array([3.0]), np.array([[1.0, 0.0]]), np.eye(1))
+    assert np.isclose(res.x[0], 1 + 2 / 3 * 2)
+
+
+def test_gate_uses_the_chi_square_quantile():
+    kf = KalmanFilter(2, 2, H=np.eye(2), P=np.zeros((2, 2)), R=np.eye(2))
+    limit = np.sqrt(chi2.ppf(0.99, 2))
+    assert kf.gate([0.99 * limit, 0.0]) and not kf.gate([1.01 * limit, 0.0])
+    assert np.isclose(kf.mahalanobis([3.0, 4.0]), 5.0)
+    y, S = kf.innovation([1.0, 2.0])
+    assert y.tolist() == [1.0, 2.0] and np.allclose(S, np.eye(2))
+
+
+def test_ekf_matches_filterpy_range_bearing():
+    # a target moving at constant velocity, measured in range and bearing from the origin
+    dt = 0.1
+    A = np.array([[1, 0, dt, 0], [0, 1, 0, dt], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+
+    def h(x):
+        return np.array([np.hypot(x[0], x[1]), np.arctan2(x[1], x[0])])
+
+    def H_jac(x):
+        r2 = x[0] ** 2 + x[1] ** 2
+        r = np.sqrt(r2)
+        return np.array([[x[0] / r, x[1] / r, 0, 0], [-x[1] / r2, x[0] / r2, 0, 0]])
+
+    x0 = np.array([10.0, 5.0, 1.0, 0.5])
+    R = np.diag([0.1, 0.01])
+    Q = 0.01 * np.eye(4)
+    ours = ExtendedKalmanFilter(
+        4, 2, h=h, H_jacobian=H_jac, f=lambda x, u: A @ x, F_jacobian=lambda x, u: A,
+        x=x0, P=np.eye(4), Q=Q, R=R,
+    )  # fmt: skip
+    ref = FpEKF(4, 2)
+    ref.x = x0.reshape(-1, 1).copy()
+    ref.F, ref.P, ref.Q, ref.R = A, np.eye(4), Q, R
+    rng = np.random.default_rng(1)
+    truth = x0.copy()
+    for _ in range(100):
+        truth = A @ truth
+        z = h(truth) + rng.normal(0, [0.3, 0.1])
+        ours.predict()
+        ref.predict()
+        ours.update(z)
+        ref.update(
+            z.reshape(-1, 1), lambda x: H_jac(x.ravel()), lambda x: h(x.ravel()).reshape(-1, 1)
+        )
+        np.testing.assert_allclose(ours.x, ref.x.ravel(), atol=1e-9)
+        np.testing.assert_allclose(ours.P, ref.P, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("call", "exc", "match"),
+    [
+        (lambda: KalmanFilter(2, 1, A=np.eye(3)), InputError, "A must have shape"),
+        (lambda: KalmanFilter(2, 1, x=[1, 2, 3]), InputError, "x must have 2"),
+        (lambda: KalmanFilter(2, 1, A=np.eye(2), F=np.eye(2)), InputError, "not both"),
+        (lambda: KalmanFilter(0, 1), InputError, "dim_x"),
+        (lambda: KalmanFilter(2, 1).predict(u=[1.0]), InputError, "no control"),
+        (lambda: KalmanFilter(2, 1).update([1.0, 2.0]), InputError, "z must have 1"),
+        (lambda: KalmanFilter(2, 1).update([np.nan]), InputError, "finite"),
+        (
+            lambda: KalmanFilter(1, 1, H=[[0.0]], R=0.0).update([1.0]),
+            DegenerateError,
+            "positive definite",
+        ),
+        (lambda: constant_velocity(2, 0.0, 1.0, 1.0), InputError, "dt"),
+        (lambda: KalmanFilter(1, 1).gate([0.0], probability=1.0), InputError, "probability"),
+    ],
+)
+def test_bad_input(call, exc, match):
+    with pytest.raises(exc, match=match):
+        call()
