@@ -12,10 +12,11 @@ import numpy as np
 
 from robopercept.errors import InputError
 
-__all__ = ["apply", "compose", "invert", "rotation_from_rotvec", "se3"]
+__all__ = ["apply", "check_transform", "compose", "invert", "rotation_from_rotvec", "se3"]
 
 
-def _check_T(T: np.ndarray, name: str = "T") -> np.ndarray:
+def check_transform(T: np.ndarray, name: str = "T") -> np.ndarray:
+    """``T`` as a float64 4x4 array after checking its shape and last row."""
     m = np.asarray(T, dtype=np.float64)
     if m.shape != (4, 4) or not np.isfinite(m).all():
         raise InputError(f"{name} must be a finite 4x4 matrix; got shape {m.shape}")
@@ -63,7 +64,7 @@ def rotation_from_rotvec(rotvec: np.ndarray) -> np.ndarray:
 
 def invert(T: np.ndarray) -> np.ndarray:
     """Inverse of a rigid transform (exact: transpose of the rotation)."""
-    m = _check_T(T)
+    m = check_transform(T)
     out = np.eye(4)
     out[:3, :3] = m[:3, :3].T
     out[:3, 3] = -m[:3, :3].T @ m[:3, 3]
@@ -74,13 +75,13 @@ def compose(*transforms: np.ndarray) -> np.ndarray:
     """``compose(T_a_b, T_b_c, ...) == T_a_b @ T_b_c @ ...``."""
     out = np.eye(4)
     for i, t in enumerate(transforms):
-        out = out @ _check_T(t, f"transform {i}")
+        out = out @ check_transform(t, f"transform {i}")
     return out
 
 
 def apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Map ``(..., 3)`` points by ``T``: :math:`R p + t`."""
-    m = _check_T(T)
+    m = check_transform(T)
     p = np.asarray(points, dtype=np.float64)
     if p.shape[-1:] != (3,):
         raise InputError(f"points must have shape (..., 3); got {p.shape}")

@@ -1,0 +1,235 @@
+r"""RGB-D geometry: depth images to points, colour through texture (UV) coordinates, and
+alignment of one camera's image to the other's, with librealsense's conventions.
+
+A depth pixel :math:`(u, v)` (pixel centres at integer coordinates) with raw value
+:math:`D` is the point :math:`z = s D`,
+
+.. math:: X = z \frac{u - c_x}{f_x}, \quad Y = z \frac{v - c_y}{f_y}, \quad Z = z
+
+(without lens distortion; with it, :func:`~robopercept.geometry.deproject` undistorts
+first), where :math:`s` is the depth scale (metres per unit; 0.001 on a D435). Its colour
+is found by moving it into the colour camera, :math:`p_c = T_{cd}\, p`, and projecting:
+the texture coordinate is the colour pixel divided by the image size,
+:math:`(u_c / W_c, v_c / H_c)`, as ``rs2::pointcloud`` computes it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robopercept._checks import check_positive
+from robopercept.errors import InputError
+from robopercept.geometry import CameraIntrinsics, apply, deproject, project
+from robopercept.geometry.transforms import check_transform
+
+__all__ = [
+    "align_color_to_depth",
+    "align_depth_to_color",
+    "depth_to_points",
+    "sample_colors",
+    "texture_coordinates",
+]
+
+
+def _check_depth(depth: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
+    d = np.asarray(depth)
+    if d.ndim != 2:
+        raise InputError(f"depth must be a 2-D image; got shape {d.shape}")
+    if d.shape != (intrinsics.height, intrinsics.width):
+        raise InputError(
+            f"depth is {d.shape[1]}x{d.shape[0]} but the intrinsics describe "
+            f"{intrinsics.width}x{intrinsics.height}: use matching intrinsics "
+            "(CameraIntrinsics.scaled for another resolution)"
+        )
+    if d.dtype.kind not in "uif":
+        raise InputError(f"depth must be numeric (uint16 raw units or float); got {d.dtype}")
+    return d
+
+
+def depth_to_points(
+    depth: np.ndarray,
+    intrinsics: CameraIntrinsics,
+    depth_scale: float = 0.001,
+    *,
+    organized: bool = True,
+) -> np.ndarray:
+    """Back-project a depth image.
+
+    Parameters
+    ----------
+    depth : (H, W) ndarray
+        Raw depth (uint16 units) or metres (float with ``depth_scale=1``); 0 (and NaN)
+        means no measurement.
+    intrinsics : CameraIntrinsics
+        Of the depth camera, matching the image size.
+    depth_scale : float
+        Metres per unit.
+    organized : bool
+        ``(H, W, 3)`` with NaN where there is no depth (True), or ``(N, 3)`` of the valid
+        pixels in row-major order (False).
+
+    Returns
+    -------
+    ndarray
+        float64 points in the depth camera frame, metres. Equal to the vertices of
+        ``rs2::pointcloud`` where the depth is valid.
+    """
+    d = _check_depth(depth, intrinsics)
+    s = check_positive(depth_scale, "depth_scale")
+    z = d.astype(np.float64) * s
+    valid = np.isfinite(z) & (z > 0)
+    if organized:
+        v, u = np.mgrid[0 : d.shape[0], 0 : d.shape[1]]
+        pts = deproject(np.stack([u, v], axis=-1).astype(np.float64), z, intrinsics)
+        pts[~valid] = np.nan
+        return pts
+    v, u = np.nonzero(valid)
+    return deproject(np.column_stack([u, v]).astype(np.float64), z[v, u], intrinsics)
+
+
+def texture_coordinates(
+    points: np.ndarray,
+    T_color_depth: np.ndarray,
+    color_intrinsics: CameraIntrinsics,
+    *,
+    occlusion_tolerance: float | None = 0.02,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Texture coordinates of depth-frame points in the colour image, and which are usable.
+
+    Parameters
+    ----------
+    points : (..., 3) array_like
+        Depth-camera-frame points (NaN for none), e.g. from :func:`depth_to_points`.
+    T_color_depth : (4, 4) array_like
+        Depth frame to colour frame (librealsense's depth-to-colour extrinsics).
+    color_intrinsics : CameraIntrinsics
+    occlusion_tolerance : float or None
+        A point is occluded when another point lands on the same colour pixel more than
+        this many metres nearer to the colour camera (a z-buffer); None skips the test.
+
+    Returns
+    -------
+    uv : (..., 2) float64 ndarray
+        ``(u_c / W_c, v_c / H_c)``; ``rs2::pointcloud``'s texture coordinates.
+    valid : (...) bool ndarray
+        False for points without depth, outside the colour image, or occluded.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[-1:] != (3,):
+        raise InputError(f"points must have shape (..., 3); got {p.shape}")
+    T = check_transform(T_color_depth, "T_color_depth")
+    k = color_intrinsics
+    pc = apply(T, p)
+    pix = project(pc, k)
+    uv = pix / np.array([k.width, k.height], dtype=np.float64)
+    col = np.rint(pix[..., 0])
+    row = np.rint(pix[..., 1])
+    with np.errstate(invalid="ignore"):
+        valid = (
+            np.isfinite(p).all(axis=-1)
+            & (p[..., 2] > 0)
+            & (pc[..., 2] > 0)
+            & (col >= 0)
+            & (col < k.width)
+            & (row >= 0)
+            & (row < k.height)
+        )
+    if occlusion_tolerance is not None and valid.any():
+        flat_valid = valid.reshape(-1)
+        idx = np.flatnonzero(flat_valid)
+        pix_id = (row.reshape(-1)[idx] * k.width + col.reshape(-1)[idx]).astype(np.int64)
+        zc = pc[..., 2].reshape(-1)[idx]
+        zbuf = np.full(k.width * k.height, np.inf)
+        np.minimum.at(zbuf, pix_id, zc)
+        hidden = zc > zbuf[pix_id] + occlusion_tolerance
+        flat_valid[idx[hidden]] = False
+        valid = flat_valid.reshape(valid.shape)
+    return uv, valid
+
+
+def sample_colors(
+    color_image: np.ndarray, uv: np.ndarray, valid: np.ndarray | None = None
+) -> np.ndarray:
+    """Colour of each texture coordinate (the nearest colour pixel).
+
+    Parameters
+    ----------
+    color_image : (H, W, 3) ndarray
+    uv : (..., 2) array_like
+        From :func:`texture_coordinates`.
+    valid : (...) bool array_like, optional
+        Where False (or where ``uv`` falls outside the image) the colour is 0.
+
+    Returns
+    -------
+    (..., 3) ndarray
+        Same dtype as ``color_image``.
+    """
+    img = np.asarray(color_image)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise InputError(f"color_image must be (H, W, 3); got {img.shape}")
+    t = np.asarray(uv, dtype=np.float64)
+    h, w = img.shape[:2]
+    with np.errstate(invalid="ignore"):
+        col = np.rint(t[..., 0] * w)
+        row = np.rint(t[..., 1] * h)
+        ok = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool)
+    out = np.zeros((*t.shape[:-1], 3), dtype=img.dtype)
+    out[ok] = img[row[ok].astype(np.int64), col[ok].astype(np.int64)]
+    return out
+
+
+def align_color_to_depth(
+    color_image: np.ndarray,
+    depth: np.ndarray,
+    depth_intrinsics: CameraIntrinsics,
+    color_intrinsics: CameraIntrinsics,
+    T_color_depth: np.ndarray,
+    depth_scale: float = 0.001,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The colour image resampled on the depth pixel grid (``rs2::align`` to depth).
+
+    Returns
+    -------
+    color : (Hd, Wd, 3) ndarray
+        Black where there is no depth or no colour.
+    valid : (Hd, Wd) bool ndarray
+    """
+    pts = depth_to_points(depth, depth_intrinsics, depth_scale)
+    uv, valid = texture_coordinates(pts, T_color_depth, color_intrinsics)
+    return sample_colors(color_image, uv, valid), valid
+
+
+def align_depth_to_color(
+    depth: np.ndarray,
+    depth_intrinsics: CameraIntrinsics,
+    color_intrinsics: CameraIntrinsics,
+    T_color_depth: np.ndarray,
+    depth_scale: float = 0.001,
+) -> np.ndarray:
+    """The depth image re-rendered in the colour camera (``rs2::align`` to colour).
+
+    Each depth pixel is moved into the colour frame and splatted on the colour pixel it
+    projects to, nearest surface winning; colour pixels that no depth pixel reaches are 0.
+
+    Returns
+    -------
+    (Hc, Wc) ndarray
+        Depth in the input's units and dtype, measured along the colour camera's z.
+    """
+    d = _check_depth(depth, depth_intrinsics)
+    pts = depth_to_points(d, depth_intrinsics, depth_scale, organized=False)
+    pc = apply(check_transform(T_color_depth, "T_color_depth"), pts)
+    pix = np.rint(project(pc, color_intrinsics))
+    k = color_intrinsics
+    with np.errstate(invalid="ignore"):
+        ok = (pix[:, 0] >= 0) & (pix[:, 0] < k.width) & (pix[:, 1] >= 0) & (pix[:, 1] < k.height)
+    ids = (pix[ok, 1] * k.width + pix[ok, 0]).astype(np.int64)
+    zbuf = np.full(k.width * k.height, np.inf)
+    np.minimum.at(zbuf, ids, pc[ok, 2])
+    out = np.where(np.isfinite(zbuf), zbuf / depth_scale, 0.0).reshape(k.height, k.width)
+    if d.dtype.kind in "ui":
+        return np.clip(np.rint(out), 0, np.iinfo(d.dtype).max).astype(d.dtype)
+    return out.astype(d.dtype)

@@ -1,0 +1,146 @@
+"""RGB-D geometry: librealsense pointcloud parity on the real recording, hand cases,
+occlusion, alignment, bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robopercept.depth import (
+    align_color_to_depth,
+    align_depth_to_color,
+    depth_to_points,
+    sample_colors,
+    texture_coordinates,
+)
+from robopercept.errors import InputError
+from robopercept.geometry import CameraIntrinsics, se3
+from tests.conftest import data_path
+
+rs = pytest.importorskip("pyrealsense2")
+
+
+def _intrinsics(i) -> CameraIntrinsics:
+    model = {"brown_conrady": "brown_conrady", "none": "none"}.get(i.model.name, "none")
+    return CameraIntrinsics(i.width, i.height, i.fx, i.fy, i.ppx, i.ppy, model, tuple(i.coeffs))
+
+
+def _extrinsics(e) -> np.ndarray:
+    # librealsense stores the rotation column-major
+    return se3(np.array(e.rotation).reshape(3, 3).T, e.translation)
+
+
+@pytest.fixture(scope="module")
+def bag_frame():
+    """The one depth + colour frame of librealsense's unit-test recording, read with
+    pyrealsense2, and its rs2::pointcloud vertices and texture coordinates."""
+    path = data_path("rgbd", "realsense_bag", "single_depth_color_640x480.bag")
+    pipe = rs.pipeline()
+    cfg = rs.config()
+    cfg.enable_device_from_file(str(path), repeat_playback=False)
+    profile = pipe.start(cfg)
+    profile.get_device().as_playback().set_real_time(False)
+    try:
+        frames = pipe.wait_for_frames(5000)
+        depth, color = frames.get_depth_frame(), frames.get_color_frame()
+        pc = rs.pointcloud()
+        pc.map_to(color)
+        cloud = pc.calculate(depth)
+        out = {
+            "depth": np.asanyarray(depth.get_data()).copy(),
+            "color": np.asanyarray(color.get_data()).copy(),
+            "K_depth": _intrinsics(depth.profile.as_video_stream_profile().intrinsics),
+            "K_color": _intrinsics(color.profile.as_video_stream_profile().intrinsics),
+            "T": _extrinsics(depth.profile.get_extrinsics_to(color.profile)),
+            "scale": profile.get_device().first_depth_sensor().get_depth_scale(),
+            "vertices": np.asanyarray(cloud.get_vertices()).view(np.float32).reshape(-1, 3).copy(),
+            "uv": np.asanyarray(cloud.get_texture_coordinates())
+            .view(np.float32)
+            .reshape(-1, 2)
+            .copy(),
+        }
+    finally:
+        pipe.stop()
+    return out
+
+
+@pytest.mark.realdata
+def test_points_and_uv_match_librealsense_pointcloud(bag_frame):
+    f = bag_frame
+    pts = depth_to_points(f["depth"], f["K_depth"], f["scale"])
+    flat = pts.reshape(-1, 3)
+    has = f["depth"].reshape(-1) > 0
+    # rs2::pointcloud leaves a vertex at 0 where its occlusion filter removes it; it
+    # keeps the others, including those that map outside the colour image
+    kept = f["vertices"][:, 2] > 0
+    assert kept.sum() > 100_000 and not (kept & ~has).any()
+    np.testing.assert_allclose(flat[kept], f["vertices"][kept], atol=1e-6)
+    assert np.isnan(flat[~has]).all()
+    uv, valid = texture_coordinates(pts, f["T"], f["K_color"])
+    uv_flat = uv.reshape(-1, 2)
+    np.testing.assert_allclose(uv_flat[kept], f["uv"][kept], atol=1e-3)
+    # our validity (inside the colour image, not occluded) against librealsense's kept
+    # points that land inside the colour image
+    rs_inside = kept & (f["uv"] >= 0).all(axis=1) & (f["uv"] < 1).all(axis=1)
+    assert np.mean(valid.reshape(-1)[has] == rs_inside[has]) > 0.99
+    # flat output: the same points, valid pixels only
+    np.testing.assert_allclose(
+        depth_to_points(f["depth"], f["K_depth"], f["scale"], organized=False), flat[has]
+    )
+    colors = sample_colors(f["color"], uv, valid)
+    assert colors.shape == (480, 640, 3) and colors.dtype == np.uint8
+    assert valid.mean() > 0.3 and colors[valid].mean() > 10 and (colors[~valid] == 0).all()
+
+
+def test_hand_case_and_occlusion():
+    k = CameraIntrinsics(4, 3, 2.0, 2.0, 1.5, 1.0)
+    depth = np.zeros((3, 4), np.uint16)
+    depth[1, 1] = 2000  # 2 m at pixel (1, 1)
+    pts = depth_to_points(depth, k)
+    np.testing.assert_allclose(pts[1, 1], [2 * (1 - 1.5) / 2, 0.0, 2.0])
+    assert np.isnan(pts[0, 0]).all()
+    # identity extrinsics, same camera: uv is the pixel over the size
+    uv, valid = texture_coordinates(pts, np.eye(4), k)
+    np.testing.assert_allclose(uv[1, 1], [1 / 4, 1 / 3])
+    assert valid.sum() == 1
+    # a near point in front of a far one on the same ray: the far one is occluded
+    two = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 3.0], [0.0, 0.0, np.nan]])
+    _, v = texture_coordinates(two, np.eye(4), k)
+    assert v.tolist() == [True, False, False]
+    _, v = texture_coordinates(two, np.eye(4), k, occlusion_tolerance=None)
+    assert v.tolist() == [True, True, False]
+
+
+def test_alignment_round_trip_with_a_baseline():
+    # a fronto-parallel wall at 1.5 m seen by a depth camera and a colour camera 15 mm
+    # to its side: aligned depth is the wall depth wherever the colour camera sees it
+    kd = CameraIntrinsics(64, 48, 40.0, 40.0, 31.5, 23.5)
+    kc = CameraIntrinsics(80, 60, 50.0, 50.0, 39.5, 29.5)
+    T = se3(None, [-0.015, 0.0, 0.0])
+    depth = np.full((48, 64), 1500, np.uint16)
+    aligned = align_depth_to_color(depth, kd, kc, T)
+    assert aligned.shape == (60, 80) and aligned.dtype == np.uint16
+    hit = aligned > 0
+    assert hit.mean() > 0.5 and (aligned[hit] == 1500).all()
+    color = np.zeros((60, 80, 3), np.uint8)
+    color[:, 40:] = 255  # right half white in the colour image
+    resampled, valid = align_color_to_depth(color, depth, kd, kc, T)
+    assert resampled.shape == (48, 64, 3) and valid.all()
+    # the colour edge lands near the depth image's middle, shifted by the baseline
+    # parallax f_d * b / z = 40 * 0.015 / 1.5 = 0.4 px
+    edge = np.argmax(resampled[24, :, 0] > 0)
+    assert abs(edge - 32) <= 1
+
+
+def test_bad_input():
+    k = CameraIntrinsics(4, 3, 2.0, 2.0, 1.5, 1.0)
+    with pytest.raises(InputError, match="intrinsics describe"):
+        depth_to_points(np.zeros((4, 4), np.uint16), k)
+    with pytest.raises(InputError, match="2-D"):
+        depth_to_points(np.zeros((3, 4, 1)), k)
+    with pytest.raises(InputError, match="depth_scale"):
+        depth_to_points(np.zeros((3, 4)), k, 0.0)
+    with pytest.raises(InputError, match="4x4"):
+        texture_coordinates(np.zeros((1, 3)), np.eye(3), k)
+    with pytest.raises(InputError, match="color_image"):
+        sample_colors(np.zeros((3, 4)), np.zeros((1, 2)))
