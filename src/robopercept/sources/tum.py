@@ -1,0 +1,265 @@
+"""RGB-D sequences in the TUM RGB-D folder layout, with a ``camera.json`` calibration.
+
+Layout (the TUM benchmark's, plus two files of ours)::
+
+    rgb.txt        "timestamp rgb/<name>.png" per line ('#' comments)
+    depth.txt      "timestamp depth/<name>.png" per line (16-bit PNG)
+    rgb/, depth/   the images
+    camera.json    {"depth": {"width", "height", "fx", "fy", "cx", "cy", "model", "coeffs"},
+                    "color": {same}, "T_color_depth": 4x4 list, "depth_scale": m per unit}
+    planes.csv     optional ground truth: "frame,nx,ny,nz,d" (n . x = d on the plane)
+
+Colour and depth images are associated by nearest timestamp (each depth image to the
+closest colour image within ``max_difference`` seconds), like the benchmark's
+``associate.py``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import warnings
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import FileFormatError, InputError
+from robopercept.geometry import CameraIntrinsics
+from robopercept.imaging.io import read_image, write_image
+from robopercept.sources.frames import RGBDFrame
+
+__all__ = ["TUMFolderSource", "read_camera_json", "write_tum_folder"]
+
+
+def _intrinsics(d: dict[str, Any], what: str, path: Path) -> CameraIntrinsics:
+    try:
+        return CameraIntrinsics(
+            int(d["width"]),
+            int(d["height"]),
+            float(d["fx"]),
+            float(d["fy"]),
+            float(d["cx"]),
+            float(d["cy"]),
+            d.get("model", "none"),
+            tuple(d.get("coeffs", (0.0,) * 5)),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FileFormatError(f"{path}: bad '{what}' camera ({exc})") from None
+
+
+def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """``camera.json`` as ``{"depth": CameraIntrinsics, "color": ..., "T_color_depth":
+    (4, 4) ndarray, "depth_scale": float}``."""
+    p = Path(path)
+    try:
+        raw = json.loads(p.read_text())
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot read ({exc.strerror or exc})") from None
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"{p}: not valid JSON ({exc})") from None
+    try:
+        T = np.asarray(raw["T_color_depth"], dtype=np.float64)
+        scale = float(raw["depth_scale"])
+        out = {
+            "depth": _intrinsics(raw["depth"], "depth", p),
+            "color": _intrinsics(raw["color"], "color", p),
+            "T_color_depth": T,
+            "depth_scale": scale,
+        }
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FileFormatError(
+            f"{p}: needs depth, color, T_color_depth and depth_scale ({exc})"
+        ) from None
+    if T.shape != (4, 4) or not scale > 0:
+        raise FileFormatError(f"{p}: T_color_depth must be 4x4 and depth_scale > 0")
+    return out
+
+
+def _read_list(path: Path) -> list[tuple[float, str]]:
+    if not path.exists():
+        raise FileFormatError(f"{path}: missing (a TUM folder needs rgb.txt and depth.txt)")
+    rows = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.split()
+        try:
+            rows.append((float(parts[0]), parts[1]))
+        except (IndexError, ValueError):
+            raise FileFormatError(f"{path}:{n}: expected 'timestamp file', got {line!r}") from None
+    return rows
+
+
+def _associate(
+    depth: list[tuple[float, str]], rgb: list[tuple[float, str]], max_difference: float
+) -> list[tuple[float, str, str]]:
+    """Each depth image with the nearest colour image (within ``max_difference`` s)."""
+    if not rgb:
+        return []
+    t_rgb = np.array([t for t, _ in rgb])
+    order = np.argsort(t_rgb)
+    t_sorted = t_rgb[order]
+    out = []
+    for t, dname in depth:
+        i = int(np.searchsorted(t_sorted, t))
+        best = min(
+            (j for j in (i - 1, i) if 0 <= j < len(t_sorted)), key=lambda j: abs(t_sorted[j] - t)
+        )
+        if abs(t_sorted[best] - t) <= max_difference:
+            out.append((t, dname, rgb[order[best]][1]))
+    return out
+
+
+class TUMFolderSource:
+    """Frames of a TUM-layout folder (see the module docstring).
+
+    Iterating yields :class:`RGBDFrame` objects. A frame whose image cannot be decoded is
+    skipped with a warning and recorded in :attr:`skipped`; a frame file that is missing
+    raises :class:`FileFormatError` naming it; images whose size disagrees with
+    ``camera.json`` raise :class:`InputError`.
+
+    Parameters
+    ----------
+    path : str or path-like
+    max_difference : float
+        Largest colour/depth timestamp gap, seconds.
+
+    Attributes
+    ----------
+    camera : dict
+        The parsed ``camera.json``.
+    planes : dict of int -> (n, d)
+        Ground truth from ``planes.csv`` (empty if absent).
+    skipped : list of (int, str)
+        Frame index and reason of every skipped frame.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], max_difference: float = 0.02) -> None:
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise FileFormatError(f"{self.path}: not a folder")
+        self.camera = read_camera_json(self.path / "camera.json")
+        self.pairs = _associate(
+            _read_list(self.path / "depth.txt"), _read_list(self.path / "rgb.txt"), max_difference
+        )
+        self.planes = self._read_planes(self.path / "planes.csv")
+        self.skipped: list[tuple[int, str]] = []
+
+    @staticmethod
+    def _read_planes(path: Path) -> dict[int, tuple[np.ndarray, float]]:
+        if not path.exists():
+            return {}
+        planes = {}
+        with path.open(newline="") as fh:
+            for n, row in enumerate(csv.DictReader(fh), 2):
+                try:
+                    normal = np.array([float(row["nx"]), float(row["ny"]), float(row["nz"])])
+                    planes[int(row["frame"])] = (normal, float(row["d"]))
+                except (KeyError, TypeError, ValueError):
+                    raise FileFormatError(f"{path}:{n}: expected frame,nx,ny,nz,d") from None
+        return planes
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    def __iter__(self) -> Iterator[RGBDFrame]:
+        cam = self.camera
+        for index, (t, dname, cname) in enumerate(self.pairs):
+            dpath, cpath = self.path / dname, self.path / cname
+            for p in (dpath, cpath):
+                if not p.exists():
+                    raise FileFormatError(f"{p}: frame {index} file is missing")
+            try:
+                depth = read_image(dpath)
+                color = read_image(cpath, mode="rgb")
+            except FileFormatError as exc:
+                warnings.warn(f"skipping frame {index}: {exc}", stacklevel=2)
+                self.skipped.append((index, str(exc)))
+                continue
+            if depth.dtype != np.uint16 or depth.ndim != 2:
+                reason = f"{dpath}: depth must be a 16-bit single-channel PNG; got {depth.dtype}"
+                warnings.warn(f"skipping frame {index}: {reason}", stacklevel=2)
+                self.skipped.append((index, reason))
+                continue
+            truth = {}
+            if index in self.planes:
+                truth["plane"] = self.planes[index]
+            yield RGBDFrame(
+                index,
+                t,
+                depth,
+                np.ascontiguousarray(color[..., :3]),
+                cam["depth"],
+                cam["color"],
+                cam["T_color_depth"],
+                cam["depth_scale"],
+                truth,
+            )
+
+
+def _camera_dict(k: CameraIntrinsics) -> dict[str, Any]:
+    return {
+        "width": k.width,
+        "height": k.height,
+        "fx": k.fx,
+        "fy": k.fy,
+        "cx": k.cx,
+        "cy": k.cy,
+        "model": k.model,
+        "coeffs": list(k.coeffs),
+    }
+
+
+def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) -> Path:
+    """Write frames as a TUM folder with ``camera.json`` (from the first frame) and, when
+    the frames carry ``ground_truth["plane"] = (n, d)``, ``planes.csv``.
+
+    Files are written frame by frame, and the lists are flushed as they grow, so an
+    interrupted write leaves a readable folder with the frames written so far.
+    """
+    out = Path(path)
+    (out / "rgb").mkdir(parents=True, exist_ok=True)
+    (out / "depth").mkdir(parents=True, exist_ok=True)
+    header = "# written by robopercept\n"
+    with (
+        (out / "rgb.txt").open("w") as rgb_list,
+        (out / "depth.txt").open("w") as depth_list,
+        (out / "planes.csv").open("w", newline="") as planes,
+    ):
+        rgb_list.write(header)
+        depth_list.write(header)
+        writer = csv.writer(planes)
+        writer.writerow(["frame", "nx", "ny", "nz", "d"])
+        wrote_camera = False
+        has_planes = False
+        for f in frames:
+            if not isinstance(f, RGBDFrame):
+                raise InputError(f"frames must be RGBDFrame objects; got {type(f).__name__}")
+            if not wrote_camera:
+                cam = {
+                    "depth": _camera_dict(f.depth_intrinsics),
+                    "color": _camera_dict(f.color_intrinsics),
+                    "T_color_depth": f.T_color_depth.tolist(),
+                    "depth_scale": f.depth_scale,
+                }
+                (out / "camera.json").write_text(json.dumps(cam, indent=2))
+                wrote_camera = True
+            name = f"{f.timestamp:.6f}.png"
+            write_image(out / "depth" / name, f.depth)
+            write_image(out / "rgb" / name, f.color)
+            depth_list.write(f"{f.timestamp:.6f} depth/{name}\n")
+            rgb_list.write(f"{f.timestamp:.6f} rgb/{name}\n")
+            depth_list.flush()
+            rgb_list.flush()
+            if "plane" in f.ground_truth:
+                n, d = f.ground_truth["plane"]
+                writer.writerow([f.index, *(f"{v:.9g}" for v in n), f"{d:.9g}"])
+                planes.flush()
+                has_planes = True
+    if not has_planes:
+        (out / "planes.csv").unlink()
+    return out

@@ -1,0 +1,114 @@
+"""TUM-layout folders: write and read back, association, and every documented failure."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from robopercept.errors import FileFormatError, InputError
+from robopercept.geometry import CameraIntrinsics, se3
+from robopercept.sources import RGBDFrame, TUMFolderSource, read_camera_json, write_tum_folder
+
+KD = CameraIntrinsics(32, 24, 30.0, 30.0, 15.5, 11.5, "brown_conrady", (0.01, 0, 0, 0, 0))
+KC = CameraIntrinsics(40, 30, 36.0, 36.5, 19.5, 14.5)
+T = se3([0.0, 0.01, 0.0], [-0.015, 0.0, 0.0])
+
+
+def frames(n=4, seed=0):
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        yield RGBDFrame(
+            i,
+            1000.0 + i / 30,
+            rng.integers(0, 4000, (24, 32)).astype(np.uint16),
+            rng.integers(0, 255, (30, 40, 3), dtype=np.uint8),
+            KD,
+            KC,
+            T,
+            0.001,
+            {"plane": (np.array([0.0, 0.6, -0.8]), 1.25 + i)} if i != 2 else {},
+        )
+
+
+def test_round_trip(tmp_path):
+    written = list(frames())
+    folder = write_tum_folder(tmp_path / "seq", written)
+    src = TUMFolderSource(folder)
+    assert len(src) == 4
+    back = list(src)
+    for a, b in zip(written, back, strict=True):
+        np.testing.assert_array_equal(a.depth, b.depth)
+        np.testing.assert_array_equal(a.color, b.color)
+        assert abs(a.timestamp - b.timestamp) < 1e-6
+        np.testing.assert_allclose(b.T_color_depth, T)
+        assert b.depth_intrinsics == KD and b.color_intrinsics == KC and b.depth_scale == 0.001
+    assert sorted(src.planes) == [0, 1, 3] and "plane" not in back[2].ground_truth
+    np.testing.assert_allclose(back[3].ground_truth["plane"][0], [0, 0.6, -0.8])
+    assert src.skipped == []
+    cam = read_camera_json(folder / "camera.json")
+    assert cam["depth"].model == "brown_conrady"
+
+
+def test_association_by_nearest_timestamp(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(3))
+    # shift the colour timestamps by 10 ms and drop one colour image from the list
+    lines = (folder / "rgb.txt").read_text().splitlines()
+    shifted = [lines[0]] + [
+        f"{float(ln.split()[0]) + 0.01:.6f} {ln.split()[1]}"
+        for ln in lines[1:]
+        if "1000.0333" not in ln
+    ]
+    (folder / "rgb.txt").write_text("\n".join(shifted) + "\n")
+    src = TUMFolderSource(folder, max_difference=0.02)
+    # depth 1000.0333 has no colour within 20 ms except its neighbours (23 ms away)
+    assert len(src) == 2
+    assert [round(t, 4) for t, _, _ in src.pairs] == [1000.0, 1000.0667]
+
+
+def test_corrupt_frame_is_skipped_and_counted(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(3))
+    bad = sorted((folder / "rgb").iterdir())[1]
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n not really a png")
+    src = TUMFolderSource(folder)
+    with pytest.warns(UserWarning, match="skipping frame 1"):
+        got = [f.index for f in src]
+    assert got == [0, 2] and [i for i, _ in src.skipped] == [1]
+
+
+def test_missing_frame_file_is_named(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(2))
+    victim = sorted((folder / "depth").iterdir())[1]
+    victim.unlink()
+    with pytest.raises(FileFormatError, match=re.escape(victim.name)):
+        list(TUMFolderSource(folder))
+
+
+def test_sizes_must_match_camera_json(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(1))
+    cam = json.loads((folder / "camera.json").read_text())
+    cam["depth"]["width"] = 64
+    (folder / "camera.json").write_text(json.dumps(cam))
+    with pytest.raises(InputError, match=r"camera\.json"):
+        list(TUMFolderSource(folder))
+
+
+@pytest.mark.parametrize(
+    ("damage", "match"),
+    [
+        (lambda f: (f / "depth.txt").unlink(), "depth.txt"),
+        (lambda f: (f / "camera.json").write_text("{"), "JSON"),
+        (lambda f: (f / "camera.json").write_text('{"depth": {}}'), "needs depth"),
+        (lambda f: (f / "rgb.txt").write_text("oops\n"), "timestamp file"),
+        (lambda f: (f / "planes.csv").write_text("frame,nx\n0,1\n"), "frame,nx,ny,nz,d"),
+    ],
+)
+def test_bad_folders(tmp_path, damage, match):
+    folder = write_tum_folder(tmp_path / "seq", frames(1))
+    damage(folder)
+    with pytest.raises(FileFormatError, match=match):
+        TUMFolderSource(folder)
+    with pytest.raises(FileFormatError, match="not a folder"):
+        TUMFolderSource(tmp_path / "nothing")
