@@ -19,6 +19,7 @@ Two kinds of fit:
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -180,21 +181,21 @@ def scatter_matrix(
     r"""Centroid :math:`\bar x` and scatter :math:`S = \sum_i (x_i - \bar x)(x_i - \bar x)^\top`
     of the ``(N, D)`` points (those where ``mask`` is True), chunk by chunk so that no
     ``N x D`` temporary is made."""
+
+    def blocks() -> Iterator[np.ndarray]:
+        for start in range(0, points.shape[0], _CHUNK):
+            block = points[start : start + _CHUNK]
+            yield block if mask is None else block[mask[start : start + _CHUNK]]
+
     d = points.shape[1]
     total = np.zeros(d)
     count = 0
-    for start in range(0, points.shape[0], _CHUNK):
-        block = points[start : start + _CHUNK]
-        if mask is not None:
-            block = block[mask[start : start + _CHUNK]]
+    for block in blocks():
         total += block.sum(axis=0)
         count += block.shape[0]
     c = total / max(count, 1)
     s = np.zeros((d, d))
-    for start in range(0, points.shape[0], _CHUNK):
-        block = points[start : start + _CHUNK]
-        if mask is not None:
-            block = block[mask[start : start + _CHUNK]]
+    for block in blocks():  # a second pass: deviations from the exact centroid
         dev = block - c
         s += dev.T @ dev
     return c, s
