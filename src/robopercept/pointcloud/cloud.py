@@ -11,7 +11,7 @@ import numpy as np
 from robopercept._checks import check_points
 from robopercept.errors import InputError
 
-__all__ = ["PointCloud"]
+__all__ = ["PointCloud", "check_cloud"]
 
 
 def _optional(value: Any, name: str, n: int) -> np.ndarray | None:
@@ -182,3 +182,13 @@ class PointCloud:
         cols = np.asarray(pc.colors, dtype=np.float64) if pc.has_colors() else None
         nrm = np.asarray(pc.normals, dtype=np.float64) if pc.has_normals() else None
         return PointCloud(pts, cols, nrm)
+
+
+def check_cloud(cloud: object) -> PointCloud:
+    """``cloud`` itself if it is a :class:`PointCloud`, else :class:`InputError` with the fix."""
+    if not isinstance(cloud, PointCloud):
+        raise InputError(
+            f"cloud must be a PointCloud; got {type(cloud).__name__}: "
+            "wrap an (N, 3) array with PointCloud(points)"
+        )
+    return cloud

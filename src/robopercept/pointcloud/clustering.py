@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 
 from robopercept._checks import check_int, check_positive
 from robopercept.errors import InputError
-from robopercept.pointcloud.cloud import PointCloud
+from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = ["euclidean_clusters"]
 
@@ -79,8 +79,7 @@ def euclidean_clusters(
         Cluster label per point: ``0 .. n-1`` ordered by decreasing size (ties by first
         point), ``-1`` for rejected clusters and non-finite points.
     """
-    if not isinstance(cloud, PointCloud):
-        raise InputError(f"cloud must be a PointCloud; got {type(cloud).__name__}")
+    check_cloud(cloud)
     tol = check_positive(tolerance, "tolerance")
     min_size = check_int(min_size, "min_size", 1)
     max_size = max(len(cloud), 1) if max_size is None else check_int(max_size, "max_size", 1)

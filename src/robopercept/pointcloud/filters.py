@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 
 from robopercept._checks import check_int, check_positive, check_range
 from robopercept.errors import InputError
-from robopercept.pointcloud.cloud import PointCloud
+from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = [
     "pass_through",
@@ -27,15 +27,6 @@ __all__ = [
 ]
 
 _AXES = {"x": 0, "y": 1, "z": 2}
-
-
-def _check_cloud(cloud: PointCloud) -> PointCloud:
-    if not isinstance(cloud, PointCloud):
-        raise InputError(
-            f"cloud must be a PointCloud; got {type(cloud).__name__}: "
-            "wrap an (N, 3) array with PointCloud(points)"
-        )
-    return cloud
 
 
 def _finite_index(cloud: PointCloud) -> np.ndarray:
@@ -69,7 +60,7 @@ def pass_through(
     indices : (M,) int64 ndarray
         Kept input positions, in input order.
     """
-    cloud = _check_cloud(cloud)
+    cloud = check_cloud(cloud)
     ax = _AXES.get(axis, axis) if isinstance(axis, str) else axis
     if isinstance(ax, bool) or ax not in (0, 1, 2):
         raise InputError(f"axis must be 'x', 'y', 'z' or 0, 1, 2; got {axis!r}")
@@ -165,7 +156,7 @@ def voxel_downsample(cloud: PointCloud, voxel_size: float) -> tuple[PointCloud, 
         voxel_of_point : (N,) int64 ndarray
             For each input point, the output point it went into (-1 for non-finite points).
     """
-    cloud = _check_cloud(cloud)
+    cloud = check_cloud(cloud)
     s = check_positive(voxel_size, "voxel_size")
     fin = _finite_index(cloud)
     inverse = np.full(len(cloud), -1, dtype=np.int64)
@@ -233,7 +224,7 @@ def statistical_outlier_removal(
     indices : (M,) int64 ndarray
         Kept input positions, in input order.
     """
-    cloud = _check_cloud(cloud)
+    cloud = check_cloud(cloud)
     k = check_int(k, "k", 2)
     ratio = check_range(std_ratio, "std_ratio", 0.0)
     fin = _finite_index(cloud)
@@ -273,7 +264,7 @@ def radius_outlier_removal(
     cloud : PointCloud
     indices : (M,) int64 ndarray
     """
-    cloud = _check_cloud(cloud)
+    cloud = check_cloud(cloud)
     r = check_positive(radius, "radius")
     need = check_int(min_neighbors, "min_neighbors", 0)
     fin = _finite_index(cloud)

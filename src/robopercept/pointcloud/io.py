@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from robopercept.errors import FileFormatError, InputError
-from robopercept.pointcloud.cloud import PointCloud
+from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = ["PcdData", "read_pcd", "read_point_cloud", "write_point_cloud"]
 
@@ -511,8 +511,7 @@ def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: b
     Path
         The path written.
     """
-    if not isinstance(cloud, PointCloud):
-        raise InputError(f"cloud must be a PointCloud; got {type(cloud).__name__}")
+    check_cloud(cloud)
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in (".ply", ".pcd"):

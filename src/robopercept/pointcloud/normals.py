@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 from robopercept._checks import check_int, check_positive
 from robopercept.errors import InputError
-from robopercept.pointcloud.cloud import PointCloud
+from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = ["estimate_normals"]
 
@@ -49,8 +49,7 @@ def estimate_normals(
     curvature : (N,) float ndarray
         Surface variation :math:`\\lambda_0 / \\sum \\lambda`.
     """
-    if not isinstance(cloud, PointCloud):
-        raise InputError(f"cloud must be a PointCloud; got {type(cloud).__name__}")
+    check_cloud(cloud)
     if k is None and radius is None:
         raise InputError("give k, radius or both")
     if k is not None:

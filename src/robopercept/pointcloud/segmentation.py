@@ -6,10 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robopercept._checks import check_int, check_range
-from robopercept.errors import DegenerateError, InputError
+from robopercept._checks import as_rng, check_int, check_range
+from robopercept.errors import DegenerateError
 from robopercept.estimation import Plane, PlaneModel, ransac
-from robopercept.pointcloud.cloud import PointCloud
+from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = ["PlaneSegment", "segment_plane", "segment_planes"]
 
@@ -33,11 +33,7 @@ class PlaneSegment:
 
 
 def _check(cloud: PointCloud, threshold: float) -> float:
-    if not isinstance(cloud, PointCloud):
-        raise InputError(
-            f"cloud must be a PointCloud; got {type(cloud).__name__}: "
-            "wrap an (N, 3) array with PointCloud(points)"
-        )
+    check_cloud(cloud)
     return check_range(threshold, "threshold", 0.0, None, low_inclusive=False)
 
 
@@ -139,7 +135,7 @@ def segment_planes(
     threshold = _check(cloud, threshold)
     max_planes = check_int(max_planes, "max_planes", 1)
     min_inliers = check_int(min_inliers, "min_inliers", 3)
-    gen = np.random.default_rng(rng) if not isinstance(rng, np.random.Generator) else rng
+    gen = as_rng(rng)
     remaining = np.flatnonzero(cloud.finite_mask())
     found: list[PlaneSegment] = []
     while len(found) < max_planes and remaining.size >= max(3, min_inliers):
