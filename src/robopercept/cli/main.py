@@ -30,7 +30,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from robopercept.cli import cloud, imaging, info
+    from robopercept.cli import cloud, imaging, info, tracking
 
     parser = _Parser(
         prog="robopercept",
@@ -42,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     info.register(sub)
     imaging.register(sub)
     cloud.register(sub)
+    tracking.register(sub)
     return parser
 
 

@@ -16,6 +16,7 @@ the texture coordinate is the colour pixel divided by the image size,
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from robopercept._checks import check_positive
 from robopercept.errors import InputError
@@ -87,6 +88,67 @@ def depth_to_points(
     return deproject(np.column_stack([u, v]).astype(np.float64), z[v, u], intrinsics)
 
 
+_MODEL_CODE = {"none": 0, "brown_conrady": 1, "modified_brown_conrady": 2}
+
+
+@njit(cache=True, nogil=True)
+def _texture_kernel(p, R, t, k, model, c, width, height, tol, uv, valid):  # pragma: no cover
+    # one pass: move into the colour frame, project (librealsense's forward lens models;
+    # the inverse model projects with the modified formula), bounds, z-buffer; then a
+    # second pass for occlusion. k = (fx, fy, cx, cy), c = (k1, k2, p1, p2, k3).
+    n = p.shape[0]
+    zc = np.empty(n)
+    pix = np.full(n, -1, dtype=np.int64)
+    zbuf = np.full(width * height if tol >= 0 else 0, np.inf)
+    for i in range(n):
+        x0 = p[i, 0]
+        y0 = p[i, 1]
+        z0 = p[i, 2]
+        valid[i] = False
+        uv[i, 0] = np.nan
+        uv[i, 1] = np.nan
+        if not (np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0)):
+            continue
+        X = R[0, 0] * x0 + R[0, 1] * y0 + R[0, 2] * z0 + t[0]
+        Y = R[1, 0] * x0 + R[1, 1] * y0 + R[1, 2] * z0 + t[1]
+        Z = R[2, 0] * x0 + R[2, 1] * y0 + R[2, 2] * z0 + t[2]
+        if not Z > 0:
+            continue
+        x = X / Z
+        y = Y / Z
+        if model != 0:
+            r2 = x * x + y * y
+            f = 1 + c[0] * r2 + c[1] * r2 * r2 + c[4] * r2 * r2 * r2
+            if model == 2:
+                x = x * f
+                y = y * f
+                xd = x + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
+                yd = y + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
+            else:
+                xd = x * f + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
+                yd = y * f + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
+            x = xd
+            y = yd
+        u = x * k[0] + k[2]
+        v = y * k[1] + k[3]
+        uv[i, 0] = u / width
+        uv[i, 1] = v / height
+        col = np.rint(u)
+        row = np.rint(v)
+        if z0 > 0 and col >= 0 and col < width and row >= 0 and row < height:
+            valid[i] = True
+            if tol >= 0:
+                j = int(row) * width + int(col)
+                pix[i] = j
+                zc[i] = Z
+                if Z < zbuf[j]:
+                    zbuf[j] = Z
+    if tol >= 0:
+        for i in range(n):
+            if valid[i] and zc[i] > zbuf[pix[i]] + tol:
+                valid[i] = False
+
+
 def texture_coordinates(
     points: np.ndarray,
     T_color_depth: np.ndarray,
@@ -119,32 +181,26 @@ def texture_coordinates(
         raise InputError(f"points must have shape (..., 3); got {p.shape}")
     T = check_transform(T_color_depth, "T_color_depth")
     k = color_intrinsics
-    pc = apply(T, p)
-    pix = project(pc, k)
-    uv = pix / np.array([k.width, k.height], dtype=np.float64)
-    col = np.rint(pix[..., 0])
-    row = np.rint(pix[..., 1])
-    with np.errstate(invalid="ignore"):
-        valid = (
-            np.isfinite(p).all(axis=-1)
-            & (p[..., 2] > 0)
-            & (pc[..., 2] > 0)
-            & (col >= 0)
-            & (col < k.width)
-            & (row >= 0)
-            & (row < k.height)
-        )
-    if occlusion_tolerance is not None and valid.any():
-        flat_valid = valid.reshape(-1)
-        idx = np.flatnonzero(flat_valid)
-        pix_id = (row.reshape(-1)[idx] * k.width + col.reshape(-1)[idx]).astype(np.int64)
-        zc = pc[..., 2].reshape(-1)[idx]
-        zbuf = np.full(k.width * k.height, np.inf)
-        np.minimum.at(zbuf, pix_id, zc)
-        hidden = zc > zbuf[pix_id] + occlusion_tolerance
-        flat_valid[idx[hidden]] = False
-        valid = flat_valid.reshape(valid.shape)
-    return uv, valid
+    tol = -1.0 if occlusion_tolerance is None else float(occlusion_tolerance)
+    if occlusion_tolerance is not None and not tol >= 0:
+        raise InputError(f"occlusion_tolerance must be >= 0 or None; got {occlusion_tolerance}")
+    flat = np.ascontiguousarray(p.reshape(-1, 3))
+    uv = np.empty((flat.shape[0], 2))
+    valid = np.empty(flat.shape[0], dtype=bool)
+    _texture_kernel(
+        flat,
+        np.ascontiguousarray(T[:3, :3]),
+        np.ascontiguousarray(T[:3, 3]),
+        np.array([k.fx, k.fy, k.cx, k.cy]),
+        _MODEL_CODE.get(k.model, 2),
+        np.array(k.coeffs, dtype=np.float64),
+        k.width,
+        k.height,
+        tol,
+        uv,
+        valid,
+    )
+    return uv.reshape(*p.shape[:-1], 2), valid.reshape(p.shape[:-1])
 
 
 def sample_colors(

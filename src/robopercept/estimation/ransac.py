@@ -150,6 +150,7 @@ def ransac(
     scoring: Scoring = "ransac",
     local_optimization: bool = False,
     batch_size: int = 8,
+    initial: np.ndarray | None = None,
     rng: int | np.random.Generator | None = None,
 ) -> RansacResult:
     r"""Robustly fit ``model`` to ``data`` (see the module docstring for the algorithm).
@@ -178,6 +179,10 @@ def ransac(
         LO-RANSAC: refine each new best by iterated least squares on its inliers.
     batch_size : int
         Hypotheses drawn and scored together.
+    initial : (K, P) array_like, optional
+        Hypotheses in the model's parameter form (e.g. a plane predicted by a tracker)
+        scored before any random sample; each counts as one iteration, and a good one
+        stops the search at once through ``min_inliers`` or the adaptive bound.
     rng : int, Generator or None
         Seed or generator; the same seed gives the same result.
 
@@ -228,6 +233,18 @@ def ransac(
     needed = float(max_iterations)
     drawn = 0
     redraws = 0
+    if initial is not None:
+        init = np.atleast_2d(np.asarray(initial, dtype=np.float64))
+        if init.ndim != 2 or not np.isfinite(init).all():
+            raise InputError(f"initial must be finite (K, P) model parameters; got {init.shape}")
+        scores, counts = model.score(init, prepared, threshold, msac)
+        k = int(np.argmax(scores))
+        best_params, best_score, best_count = init[k], float(scores[k]), int(counts[k])
+        drawn = init.shape[0]
+        if best_count > 0:
+            needed = required_iterations(best_count / n, model.sample_size, probability)
+        if min_inliers is not None and best_count >= min_inliers:
+            needed = 0.0
     while drawn < min(needed, max_iterations):
         b = int(min(batch_size, max_iterations - drawn, max(math.ceil(needed) - drawn, 1)))
         idx = _draw(gen, n, n_sample, b)

@@ -150,7 +150,7 @@ class TUMFolderSource:
         self.skipped: list[tuple[int, str]] = []
 
     @staticmethod
-    def _read_planes(path: Path) -> dict[int, tuple[np.ndarray, float]]:
+    def _read_planes(path: Path) -> dict[int, dict[str, Any]]:
         if not path.exists():
             return {}
         planes = {}
@@ -158,9 +158,14 @@ class TUMFolderSource:
             for n, row in enumerate(csv.DictReader(fh), 2):
                 try:
                     normal = np.array([float(row["nx"]), float(row["ny"]), float(row["nz"])])
-                    planes[int(row["frame"])] = (normal, float(row["d"]))
+                    truth: dict[str, Any] = {"plane": (normal, float(row["d"]))}
+                    if row.get("board_pixels") not in (None, ""):
+                        truth["valid_board_pixels"] = int(row["board_pixels"])
+                    planes[int(row["frame"])] = truth
                 except (KeyError, TypeError, ValueError):
-                    raise FileFormatError(f"{path}:{n}: expected frame,nx,ny,nz,d") from None
+                    raise FileFormatError(
+                        f"{path}:{n}: expected frame,nx,ny,nz,d[,board_pixels]"
+                    ) from None
         return planes
 
     def __len__(self) -> int:
@@ -185,9 +190,7 @@ class TUMFolderSource:
                 warnings.warn(f"skipping frame {index}: {reason}", stacklevel=2)
                 self.skipped.append((index, reason))
                 continue
-            truth = {}
-            if index in self.planes:
-                truth["plane"] = self.planes[index]
+            truth = dict(self.planes.get(index, {}))
             yield RGBDFrame(
                 index,
                 t,
@@ -233,7 +236,7 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
         rgb_list.write(header)
         depth_list.write(header)
         writer = csv.writer(planes)
-        writer.writerow(["frame", "nx", "ny", "nz", "d"])
+        writer.writerow(["frame", "nx", "ny", "nz", "d", "board_pixels"])
         wrote_camera = False
         has_planes = False
         for f in frames:
@@ -257,7 +260,8 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
             rgb_list.flush()
             if "plane" in f.ground_truth:
                 n, d = f.ground_truth["plane"]
-                writer.writerow([f.index, *(f"{v:.9g}" for v in n), f"{d:.9g}"])
+                pixels = f.ground_truth.get("valid_board_pixels", "")
+                writer.writerow([f.index, *(f"{v:.9g}" for v in n), f"{d:.9g}", pixels])
                 planes.flush()
                 has_planes = True
     if not has_planes:

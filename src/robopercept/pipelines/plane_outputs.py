@@ -1,0 +1,332 @@
+"""Outputs of a plane-tracking run, and the run itself.
+
+:func:`run_plane_tracking` drives a :class:`~robopercept.pipelines.PlaneTracker` over a
+frame source and writes, into one folder:
+
+* ``plane.csv``: one row per input frame, flushed as it is written;
+  columns :data:`CSV_COLUMNS`; ``n`` is the unit normal and ``d`` the distance in metres
+  with ``n . x = d`` for points ``x`` of the plane in the depth camera frame;
+* ``tracking.mp4``: the colour image with the board's inliers, the tracked plane's
+  outline and normal, and a status line (optional);
+* ``summary.json``: :func:`~robopercept.pipelines.summarize`'s figures;
+* ``plane.png``: raw, tracked and (when known) true plane parameters over time.
+
+The run stops cleanly on Ctrl-C or when the source fails (a camera unplugged): the
+outputs written so far are finalized (the video closed, the summary and the plot
+written) and the summary says why it stopped.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time
+import warnings
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import InputError, RoboperceptError
+from robopercept.geometry import apply, project
+from robopercept.pipelines.plane_tracking import (
+    PlaneTracker,
+    PlaneTrackerConfig,
+    PlaneTrackResult,
+    summarize,
+)
+from robopercept.sources.frames import RGBDFrame
+from robopercept.viz import draw_lines, draw_text
+from robopercept.viz.plot import Panel, Series, plot_series
+
+__all__ = ["CSV_COLUMNS", "PlaneTrackOutputs", "annotate_frame", "run_plane_tracking"]
+
+CSV_COLUMNS = (
+    "frame",
+    "timestamp",
+    "detected",
+    "nx",
+    "ny",
+    "nz",
+    "d",
+    "inliers",
+    "track_nx",
+    "track_ny",
+    "track_nz",
+    "track_d",
+    "ms",
+)
+
+
+def _fmt(v: float) -> str:
+    return "" if not np.isfinite(v) else f"{v:.6f}"
+
+
+def _plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(n, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n, e1)
+
+
+def annotate_frame(
+    frame: RGBDFrame, result: PlaneTrackResult, extent: np.ndarray | None = None
+) -> np.ndarray:
+    """The colour image with the board's inliers (magenta), the tracked plane's outline
+    (yellow) and normal (cyan) and a status line.
+
+    Parameters
+    ----------
+    frame : RGBDFrame
+    result : PlaneTrackResult
+    extent : (4,) ndarray, optional
+        ``(c1, c2, h1, h2)``: centre and half sizes of the board in the tracked plane's
+        basis, for the outline (from the inliers when None).
+
+    Returns
+    -------
+    (Hc, Wc, 3) uint8 ndarray
+    """
+    img = frame.color.copy()
+    kc = frame.color_intrinsics
+    T = frame.T_color_depth
+    pts = result.inlier_points
+    if pts.shape[0]:
+        step = max(1, pts.shape[0] // 200000)
+        pix = np.rint(project(apply(T, pts[::step]), kc))
+        ok = np.isfinite(pix).all(1)
+        pix = pix[ok].astype(np.int64)
+        ok = (pix[:, 0] >= 0) & (pix[:, 0] < kc.width) & (pix[:, 1] >= 0) & (pix[:, 1] < kc.height)
+        r, c = pix[ok, 1], pix[ok, 0]
+        img[r, c] = (0.4 * img[r, c] + 0.6 * np.array([255, 0, 255])).astype(np.uint8)
+    n, d = result.track_normal, result.track_d
+    if np.isfinite(d) and extent is not None:
+        e1, e2 = _plane_basis(n)
+        c1, c2, h1, h2 = extent
+        center = d * n + c1 * e1 + c2 * e2
+        corners = np.array(
+            [
+                center + s1 * h1 * e1 + s2 * h2 * e2
+                for s1, s2 in ((-1, -1), (1, -1), (1, 1), (-1, 1))
+            ]
+        )
+        cp = project(apply(T, corners), kc)
+        seg = np.column_stack([cp, np.roll(cp, -1, axis=0)])
+        img = draw_lines(img, seg, color=(255, 220, 0), width=3)
+        arrow = project(apply(T, np.array([center, center - 0.2 * n])), kc)
+        img = draw_lines(img, arrow.reshape(1, 4), color=(0, 220, 255), width=3)
+    status = result.status + ("" if result.detected else (" (gated)" if result.gated else ""))
+    text = f"frame {result.index}  {status}  inliers {result.inliers}"
+    if np.isfinite(d):
+        text += f"  n=({n[0]:+.3f}, {n[1]:+.3f}, {n[2]:+.3f})  d={d:.3f} m"
+    text += f"  {result.ms['total']:.1f} ms"
+    return draw_text(img, text, (8, 8), size=max(12, kc.height // 40))
+
+
+class PlaneTrackOutputs:
+    """Writes ``plane.csv``, ``tracking.mp4``, ``summary.json`` and ``plane.png`` into
+    ``out_dir`` (see the module docstring). Use as a context manager or call
+    :meth:`close`; every row is flushed as written."""
+
+    def __init__(self, out_dir: str | os.PathLike[str], *, video: bool = True, fps: float = 30.0):
+        self.out = Path(out_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self._csv_fh = (self.out / "plane.csv").open("w", newline="")
+        self._csv = csv.writer(self._csv_fh)
+        self._csv.writerow(CSV_COLUMNS)
+        self._csv_fh.flush()
+        self._video_on = video
+        self._fps = fps
+        self._video: Any = None
+        self._rows: list[tuple[PlaneTrackResult, dict[str, Any]]] = []
+        self._extent: np.ndarray | None = None
+        self.closed = False
+
+    def __enter__(self) -> PlaneTrackOutputs:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if not self.closed:
+            self.close({})
+
+    def _update_extent(self, result: PlaneTrackResult) -> None:
+        pts = result.inlier_points
+        n, d = result.track_normal, result.track_d
+        if pts.shape[0] < 3 or not np.isfinite(d):
+            return
+        e1, e2 = _plane_basis(n)
+        a, b = pts @ e1, pts @ e2
+        lo1, hi1 = np.percentile(a, [1, 99])
+        lo2, hi2 = np.percentile(b, [1, 99])
+        self._extent = np.array(
+            [(lo1 + hi1) / 2, (lo2 + hi2) / 2, (hi1 - lo1) / 2, (hi2 - lo2) / 2]
+        )
+
+    def add(self, frame: RGBDFrame, result: PlaneTrackResult) -> None:
+        """Write the row (and the video frame) of one processed frame."""
+        r = result
+        self._csv.writerow(
+            [
+                r.index,
+                f"{r.timestamp:.6f}",
+                int(r.detected),
+                *(_fmt(v) for v in r.normal),
+                _fmt(r.d),
+                r.inliers,
+                *(_fmt(v) for v in r.track_normal),
+                _fmt(r.track_d),
+                f"{r.ms['total']:.3f}",
+            ]
+        )
+        self._csv_fh.flush()
+        truth = {
+            k: v for k, v in frame.ground_truth.items() if k in ("plane", "valid_board_pixels")
+        }
+        self._rows.append((r, truth))
+        if self._video_on:
+            if r.detected:
+                self._update_extent(r)
+            elif not np.isfinite(r.track_d):
+                self._extent = None
+            if self._video is None:
+                import imageio.v2 as imageio
+
+                self._video = imageio.get_writer(
+                    self.out / "tracking.mp4",
+                    fps=self._fps,
+                    codec="libx264",
+                    quality=6,
+                    macro_block_size=2,
+                    ffmpeg_log_level="error",
+                )
+            self._video.append_data(annotate_frame(frame, r, self._extent))
+
+    @property
+    def results(self) -> list[PlaneTrackResult]:
+        return [r for r, _ in self._rows]
+
+    def summary(self, **extra: Any) -> dict[str, Any]:
+        """The run's figures (with ground truth when every frame has a plane)."""
+        results = self.results
+        truths = [t for _, t in self._rows]
+        has_truth = bool(truths) and all("plane" in t for t in truths)
+        out = summarize(results, truths if has_truth else None, **extra)
+        return out
+
+    def close(self, summary: dict[str, Any]) -> None:
+        """Finish the video, write ``summary.json`` and ``plane.png``."""
+        if self.closed:
+            return
+        self.closed = True
+        self._csv_fh.close()
+        if self._video is not None:
+            self._video.close()
+        (self.out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+        if self._rows:
+            from robopercept.imaging import write_image
+
+            write_image(self.out / "plane.png", self._plot())
+
+    def _plot(self) -> np.ndarray:
+        res = self.results
+        t = np.array([r.index for r in res], dtype=np.float64)
+        raw = np.array([np.append(r.normal, r.d) if r.detected else [np.nan] * 4 for r in res])
+        trk = np.array([np.append(r.track_normal, r.track_d) for r in res])
+        truth = np.array(
+            [np.append(*tr["plane"]) if "plane" in tr else [np.nan] * 4 for _, tr in self._rows]
+        )
+        panels = []
+        for k, name in enumerate(("n_x", "n_y", "n_z", "d [m]")):
+            series = []
+            if np.isfinite(truth[:, k]).any():
+                series.append(Series(t, truth[:, k], "truth", (0, 0, 0)))
+            series.append(Series(t, raw[:, k], "raw", (214, 39, 40), "dots"))
+            series.append(Series(t, trk[:, k], "tracked", (31, 119, 180)))
+            panels.append(Panel(name, series))
+        return plot_series(panels, xlabel="frame")
+
+
+def run_plane_tracking(
+    frames: Iterable[RGBDFrame],
+    out_dir: str | os.PathLike[str],
+    *,
+    config: PlaneTrackerConfig | None = None,
+    max_frames: int | None = None,
+    video: bool = True,
+    fps: float = 30.0,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Track the board through ``frames`` and write the outputs into ``out_dir``.
+
+    Parameters
+    ----------
+    frames : iterable of RGBDFrame
+        Any source; its ``skipped`` attribute (if any) is reported.
+    out_dir : path
+    config : PlaneTrackerConfig, optional
+    max_frames : int, optional
+        Stop after this many frames.
+    video : bool
+        Write ``tracking.mp4``.
+    fps : float
+        Frame rate of the video.
+    progress : bool
+        Show a progress bar (tqdm) on stderr.
+
+    Returns
+    -------
+    dict
+        The summary also written to ``summary.json``; ``"stopped"`` says why a run ended
+        early (``"interrupted"`` for Ctrl-C, or the source's error).
+    """
+    from tqdm import tqdm
+
+    if max_frames is not None and max_frames < 1:
+        raise InputError(f"max_frames must be >= 1; got {max_frames}")
+    tracker = PlaneTracker(config)
+    total = len(frames) if hasattr(frames, "__len__") else None  # type: ignore[arg-type]
+    if total is not None and max_frames is not None:
+        total = min(total, max_frames)
+    stopped: str | None = None
+    start = time.perf_counter()
+    outputs = PlaneTrackOutputs(out_dir, video=video, fps=fps)
+    bar = tqdm(total=total, unit="frame", disable=not progress, desc="plane tracking")
+    try:
+        it = iter(frames)
+        count = 0
+        while max_frames is None or count < max_frames:
+            try:
+                frame = next(it)
+            except StopIteration:
+                break
+            except KeyboardInterrupt:
+                raise
+            except (RoboperceptError, RuntimeError, OSError) as exc:
+                stopped = f"source failed: {exc}"
+                warnings.warn(f"stopping: {stopped}", stacklevel=2)
+                break
+            result = tracker.process(frame)
+            outputs.add(frame, result)
+            count += 1
+            bar.update(1)
+            if count % 10 == 0:
+                bar.set_postfix(detected=sum(r.detected for r in outputs.results[-10:]))
+    except KeyboardInterrupt:
+        stopped = "interrupted"
+    finally:
+        bar.close()
+        skipped = getattr(frames, "skipped", [])
+        n_skipped = len(skipped) if not isinstance(skipped, int) else skipped
+        summary = outputs.summary(skipped=n_skipped, wall_seconds=time.perf_counter() - start)
+        summary["wall_fps_including_source"] = summary.pop("fps", math.nan)
+        ms = summary.get("ms_per_stage_median", {}).get("total")
+        summary["fps"] = 1000.0 / ms if ms else None
+        if stopped:
+            summary["stopped"] = stopped
+        names = ["plane.csv", "tracking.mp4", "summary.json", "plane.png"]
+        summary["outputs"] = [n for n in names if video or n != "tracking.mp4"]
+        outputs.close(summary)
+    return summary

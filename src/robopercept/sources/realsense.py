@@ -1,0 +1,234 @@
+"""RGB-D frames from an Intel RealSense camera or a recording of one (pyrealsense2).
+
+pyrealsense2 is an optional dependency: ``pip install 'robopercept[realsense]'``.
+Recordings (``.bag``; ``.db3`` where the installed librealsense reads ROS 2 bags) are
+played back not in real time, so no frame is dropped however slow the consumer is.
+Intrinsics, the depth-to-colour extrinsics and the depth scale come from the stream
+profiles and the depth sensor, as the camera reports them.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import FileFormatError, InputError, RoboperceptError
+from robopercept.geometry import CameraIntrinsics
+from robopercept.geometry.transforms import se3
+from robopercept.sources.frames import RGBDFrame
+
+__all__ = ["RealSenseSource", "SourceError", "import_pyrealsense2"]
+
+_MODELS = {
+    "none": "none",
+    "brown_conrady": "brown_conrady",
+    "modified_brown_conrady": "modified_brown_conrady",
+    "inverse_brown_conrady": "inverse_brown_conrady",
+}
+
+
+class SourceError(RoboperceptError, RuntimeError):
+    """A frame source failed while running (e.g. the camera was unplugged)."""
+
+
+def import_pyrealsense2() -> Any:
+    """Import pyrealsense2, or raise an :class:`InputError` that names the extra."""
+    try:
+        import pyrealsense2 as rs
+    except ImportError:
+        raise InputError(
+            "RealSense sources need pyrealsense2: pip install 'robopercept[realsense]'"
+        ) from None
+    return rs
+
+
+def intrinsics_from_rs(intr: Any) -> CameraIntrinsics:
+    """:class:`CameraIntrinsics` from a ``pyrealsense2.intrinsics``."""
+    model = str(intr.model).split(".")[-1]
+    if model not in _MODELS:
+        raise InputError(f"unsupported RealSense distortion model {model!r}")
+    return CameraIntrinsics(
+        int(intr.width),
+        int(intr.height),
+        float(intr.fx),
+        float(intr.fy),
+        float(intr.ppx),
+        float(intr.ppy),
+        _MODELS[model],  # type: ignore[arg-type]
+        tuple(float(c) for c in intr.coeffs),  # type: ignore[arg-type]
+    )
+
+
+def transform_from_rs(extr: Any) -> np.ndarray:
+    """4x4 transform from ``pyrealsense2.extrinsics`` (rotation stored column-major)."""
+    r = np.asarray(extr.rotation, dtype=np.float64).reshape(3, 3).T
+    return se3(r, np.asarray(extr.translation, dtype=np.float64))
+
+
+def _to_rgb(data: np.ndarray, fmt: str) -> np.ndarray:
+    if fmt == "rgb8":
+        return data
+    if fmt == "bgr8":
+        return data[..., ::-1]
+    if fmt == "rgba8":
+        return data[..., :3]
+    if fmt == "bgra8":
+        return data[..., 2::-1]
+    raise InputError(
+        f"colour stream format {fmt!r} is not supported; record colour as rgb8, bgr8, "
+        "rgba8 or bgra8"
+    )
+
+
+class RealSenseSource:
+    """Frames from a live RealSense camera or a recording.
+
+    Parameters
+    ----------
+    device : str, path or None
+        None: the first connected camera; a path ending in ``.bag`` or ``.db3``: that
+        recording; any other string: the serial number of a connected camera.
+    depth_size, color_size : (width, height)
+        Live camera only: the stream resolutions (default 848x480 and 1280x720).
+    fps : int
+        Live camera only.
+    timeout : float
+        Seconds to wait for a frame before deciding the camera is gone (live) or the
+        recording has ended.
+    max_frames : int, optional
+        Stop after this many frames (a live camera never ends on its own).
+
+    Raises
+    ------
+    InputError
+        pyrealsense2 missing, or a recording without a depth or colour stream.
+    FileFormatError
+        A recording that cannot be opened.
+
+    Notes
+    -----
+    Iteration stops at the end of a recording; if a live camera stops delivering frames
+    (unplugged), iteration raises :class:`SourceError`, which
+    :func:`~robopercept.pipelines.run_plane_tracking` turns into a clean stop.
+    """
+
+    def __init__(
+        self,
+        device: str | os.PathLike[str] | None = None,
+        *,
+        depth_size: tuple[int, int] = (848, 480),
+        color_size: tuple[int, int] = (1280, 720),
+        fps: int = 30,
+        timeout: float = 5.0,
+        max_frames: int | None = None,
+    ) -> None:
+        self.rs = import_pyrealsense2()
+        self.device = device
+        self.path: Path | None = None
+        if device is not None and Path(device).suffix.lower() in (".bag", ".db3"):
+            self.path = Path(device)
+            if not self.path.is_file():
+                raise FileFormatError(f"{self.path}: recording not found")
+        self.depth_size = tuple(depth_size)
+        self.color_size = tuple(color_size)
+        self.fps = int(fps)
+        self.timeout = float(timeout)
+        self.max_frames = max_frames
+        self.skipped: list[tuple[int, str]] = []
+
+    def _start(self) -> tuple[Any, Any]:
+        rs = self.rs
+        pipe = rs.pipeline()
+        cfg = rs.config()
+        if self.path is not None:
+            try:
+                cfg.enable_device_from_file(str(self.path), repeat_playback=False)
+            except RuntimeError as exc:
+                raise FileFormatError(f"{self.path}: cannot open the recording: {exc}") from None
+        else:
+            if self.device is not None:
+                cfg.enable_device(str(self.device))
+            w, h = self.depth_size
+            cfg.enable_stream(rs.stream.depth, w, h, rs.format.z16, self.fps)
+            w, h = self.color_size
+            cfg.enable_stream(rs.stream.color, w, h, rs.format.rgb8, self.fps)
+        try:
+            profile = pipe.start(cfg)
+        except RuntimeError as exc:
+            where = self.path or "the RealSense camera"
+            raise FileFormatError(f"{where}: cannot start streaming: {exc}") from None
+        if self.path is not None:
+            playback = profile.get_device().as_playback()
+            playback.set_real_time(False)
+        kinds = {s.stream_type() for s in profile.get_streams()}
+        for kind, name in ((rs.stream.depth, "depth"), (rs.stream.color, "colour")):
+            if kind not in kinds:
+                pipe.stop()
+                raise InputError(
+                    f"{self.path or 'the camera'} has no {name} stream; the plane tracker "
+                    "needs depth and colour (record both)"
+                )
+        return pipe, profile
+
+    def __iter__(self) -> Iterator[RGBDFrame]:
+        rs = self.rs
+        pipe, profile = self._start()
+        try:
+            depth_sensor = profile.get_device().first_depth_sensor()
+            scale = float(depth_sensor.get_depth_scale())
+            dprof = profile.get_stream(rs.stream.depth).as_video_stream_profile()
+            cprof = profile.get_stream(rs.stream.color).as_video_stream_profile()
+            kd = intrinsics_from_rs(dprof.get_intrinsics())
+            kc = intrinsics_from_rs(cprof.get_intrinsics())
+            T = transform_from_rs(dprof.get_extrinsics_to(cprof))
+            index = 0
+            t0: float | None = None
+            last_number: int | None = None
+            while self.max_frames is None or index < self.max_frames:
+                try:
+                    ok, frames = pipe.try_wait_for_frames(int(self.timeout * 1000))
+                except RuntimeError as exc:
+                    raise SourceError(f"the RealSense stream failed: {exc}") from None
+                if not ok:
+                    if self.path is not None:
+                        return  # end of the recording
+                    raise SourceError(
+                        f"no frame from the RealSense camera for {self.timeout:g} s (unplugged?)"
+                    )
+                depth = frames.get_depth_frame()
+                color = frames.get_color_frame()
+                if not depth or not color:
+                    reason = "frameset without both depth and colour"
+                    warnings.warn(f"skipping frame {index}: {reason}", stacklevel=2)
+                    self.skipped.append((index, reason))
+                    index += 1
+                    continue
+                number = depth.get_frame_number()
+                if self.path is not None and last_number is not None and number <= last_number:
+                    return  # playback wrapped around
+                last_number = number
+                ts = depth.get_timestamp() / 1000.0
+                t0 = ts if t0 is None else t0
+                fmt = str(color.profile.format()).split(".")[-1]
+                rgb = _to_rgb(np.asanyarray(color.get_data()), fmt)
+                yield RGBDFrame(
+                    index,
+                    ts - t0,
+                    np.asanyarray(depth.get_data()).copy(),
+                    np.ascontiguousarray(rgb).copy(),
+                    kd,
+                    kc,
+                    T,
+                    scale,
+                )
+                index += 1
+        finally:
+            try:
+                pipe.stop()
+            except RuntimeError:  # pragma: no cover - already stopped
+                pass
