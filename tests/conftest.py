@@ -42,6 +42,8 @@ def graf() -> np.ndarray:
     return read_image(data_path("features", "oxford_affine", "graf", "img1.png"), mode="rgb")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture
 def rng() -> np.random.Generator:
+    """A fresh seeded generator per test, so no test's data depends on which tests ran
+    before it."""
     return np.random.default_rng(12345)

@@ -57,7 +57,10 @@ def test_required_iterations_formula():
 def test_line_and_min_inliers_stop(rng):
     t = rng.uniform(-1, 1, 200)
     pts = np.column_stack([t, -0.5 * t + 0.2])
-    pts[:60] = rng.uniform(-1, 1, (60, 2))
+    out = rng.uniform(-1, 1, (400, 2))
+    # outliers clear of the line (distance > 0.05), so the inliers are exactly the line's
+    far = np.abs(0.5 * out[:, 0] + out[:, 1] - 0.2) / np.hypot(0.5, 1.0) > 0.05
+    pts[:60] = out[far][:60]
     res = ransac(pts, LineModel(), 0.01, rng=0)
     a, b, c = res.model.coefficients
     np.testing.assert_allclose([-a / b, -c / b], [-0.5, 0.2], atol=1e-9)
@@ -162,3 +165,21 @@ def test_minimal_fits_flag_degenerate_samples():
 def test_bad_input(call, exc, match):
     with pytest.raises(exc, match=match):
         call()
+
+
+def test_initial_hypothesis_is_scored_first_and_can_end_the_search():
+    # a tracker's predicted plane: exact, so it is the best hypothesis and with
+    # min_inliers reached no random sample is drawn
+    rng = np.random.default_rng(3)
+    pts = np.column_stack([rng.uniform(-1, 1, (300, 2)), np.full(300, 2.0)])
+    pts = np.vstack([pts, rng.uniform(-1, 3, (100, 3))])
+    init = np.array([[0.0, 0.0, 1.0, -2.0]])
+    res = ransac(pts, PlaneModel(), 0.01, initial=init, min_inliers=300, rng=0)
+    assert res.n_iterations == 1
+    assert res.inliers[:300].all()
+    # a wrong initial plane does not stop the search, which still finds the plane
+    bad = np.array([[1.0, 0.0, 0.0, 5.0]])
+    res = ransac(pts, PlaneModel(), 0.01, initial=bad, rng=0)
+    assert res.n_iterations > 1 and res.inliers[:300].all()
+    with pytest.raises(InputError, match="initial"):
+        ransac(pts, PlaneModel(), 0.01, initial=np.array([[np.nan, 0, 1, 0]]))

@@ -89,3 +89,17 @@ def test_video_errors(tmp_path):
     with pytest.raises(InputError, match="differs"):
         w.write(np.zeros((8, 8, 3), np.uint8))
     w.close()
+
+
+def test_png_compression_level_is_lossless_and_checked(tmp_path, rng):
+    img = rng.integers(0, 255, (30, 40, 3), dtype=np.uint8)
+    for level in (0, 1, 9):
+        p = write_image(tmp_path / f"c{level}.png", img, png_compression=level)
+        assert np.array_equal(read_image(p), img)
+    # level 0 stores, level 9 compresses a smooth image much better
+    smooth = np.tile(np.arange(40, dtype=np.uint8), (30, 1))
+    a = write_image(tmp_path / "s0.png", smooth, png_compression=0).stat().st_size
+    b = write_image(tmp_path / "s9.png", smooth, png_compression=9).stat().st_size
+    assert b < a / 2
+    with pytest.raises(InputError, match="png_compression"):
+        write_image(tmp_path / "bad.png", img, png_compression=12)

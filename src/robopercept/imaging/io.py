@@ -75,7 +75,9 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     return img
 
 
-def write_image(path: str | os.PathLike[str], image: np.ndarray) -> Path:
+def write_image(
+    path: str | os.PathLike[str], image: np.ndarray, *, png_compression: int | None = None
+) -> Path:
     """Write an image; the format follows the extension.
 
     uint16 is kept by PNG and TIFF (depth maps); JPEG takes uint8 only. Float images are
@@ -86,6 +88,9 @@ def write_image(path: str | os.PathLike[str], image: np.ndarray) -> Path:
     ----------
     path : path-like
     image : (H, W), (H, W, 3) or (H, W, 4) ndarray, uint8 or uint16 (or bool: 0/255)
+    png_compression : int, optional
+        zlib level 0..9 for PNG (the writer's default when None; 1 is about 5x faster
+        than the default for 20% larger files, what sequences of frames want).
 
     Returns
     -------
@@ -113,8 +118,13 @@ def write_image(path: str | os.PathLike[str], image: np.ndarray) -> Path:
     if arr.dtype == np.uint16 and ext in (".jpg", ".jpeg", ".bmp"):
         raise InputError(f"{ext} cannot hold uint16; write a .png or .tiff")
     p.parent.mkdir(parents=True, exist_ok=True)
+    extra = {}
+    if png_compression is not None and ext == ".png":
+        if not 0 <= int(png_compression) <= 9:
+            raise InputError(f"png_compression must be in 0..9; got {png_compression}")
+        extra["compress_level"] = int(png_compression)
     try:
-        iio.imwrite(p, np.ascontiguousarray(arr))
+        iio.imwrite(p, np.ascontiguousarray(arr), **extra)
     except Exception as exc:
         raise FileFormatError(f"{p}: cannot write ({type(exc).__name__}: {exc})") from exc
     return p

@@ -252,8 +252,8 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
                 (out / "camera.json").write_text(json.dumps(cam, indent=2))
                 wrote_camera = True
             name = f"{f.timestamp:.6f}.png"
-            write_image(out / "depth" / name, f.depth)
-            write_image(out / "rgb" / name, f.color)
+            write_image(out / "depth" / name, f.depth, png_compression=1)
+            write_image(out / "rgb" / name, f.color, png_compression=1)
             depth_list.write(f"{f.timestamp:.6f} depth/{name}\n")
             rgb_list.write(f"{f.timestamp:.6f} rgb/{name}\n")
             depth_list.flush()

@@ -1,0 +1,147 @@
+"""RealSenseSource on the real recording and on recordings written at test time with a
+pyrealsense2 software device and its recorder."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robopercept.errors import FileFormatError, InputError
+from robopercept.pipelines import PlaneTracker
+
+rs = pytest.importorskip("pyrealsense2")
+
+from robopercept.sources.realsense import (  # noqa: E402
+    RealSenseSource,
+    import_pyrealsense2,
+    intrinsics_from_rs,
+    transform_from_rs,
+)
+
+BAG = Path(__file__).parents[2] / ".." / "shared" / "data" / "rgbd" / "realsense_bag"
+BAG = BAG / "single_depth_color_640x480.bag"
+
+
+def _intr(w, h, model=rs.distortion.none):
+    i = rs.intrinsics()
+    i.width, i.height, i.fx, i.fy, i.ppx, i.ppy = w, h, 50.0, 51.0, w / 2 - 0.3, h / 2 + 0.2
+    i.model, i.coeffs = model, [0.0] * 5
+    return i
+
+
+def record(path, n=5, with_color=True, w=64, h=48):
+    """Write a .db3 recording of n depth (+ colour) frames through a software device."""
+    dev = rs.software_device()
+    ds = dev.add_sensor("Depth")
+    vs = rs.video_stream()
+    vs.type, vs.index, vs.uid, vs.width, vs.height = rs.stream.depth, 0, 0, w, h
+    vs.fps, vs.bpp, vs.fmt, vs.intrinsics = 30, 2, rs.format.z16, _intr(w, h)
+    dprof = ds.add_video_stream(vs)
+    ds.add_read_only_option(rs.option.depth_units, 0.001)
+    sensors = [(ds, dprof, 2)]
+    if with_color:
+        cs = dev.add_sensor("Color")
+        vs = rs.video_stream()
+        vs.type, vs.index, vs.uid, vs.width, vs.height = rs.stream.color, 0, 1, w, h
+        vs.fps, vs.bpp, vs.fmt = 30, 3, rs.format.rgb8
+        vs.intrinsics = _intr(w, h, rs.distortion.inverse_brown_conrady)
+        cprof = cs.add_video_stream(vs)
+        ex = rs.extrinsics()
+        ex.rotation = [1, 0, 0, 0, 1, 0, 0, 0, 1]
+        ex.translation = [0.015, 0.001, 0.0]
+        dprof.register_extrinsics_to(cprof, ex)
+        sensors.append((cs, cprof, 3))
+    rec = rs.recorder(str(path), dev)
+    queue = rs.frame_queue(100)
+    for s, p, _ in sensors:
+        s.open(p)
+        s.start(queue)
+    for i in range(n):
+        for s, p, bpp in sensors:
+            f = rs.software_video_frame()
+            pix = (
+                np.full((h, w), 1000 + i, np.uint16)
+                if bpp == 2
+                else np.full((h, w, 3), i, np.uint8)
+            )
+            if bpp == 3:
+                pix[..., 1] = 200  # R, G, B distinguishable
+            f.pixels, f.bpp, f.stride = pix, bpp, bpp * w
+            f.timestamp, f.domain, f.frame_number = (
+                i * 1000 / 30,
+                rs.timestamp_domain.hardware_clock,
+                i,
+            )
+            f.profile = p.as_video_stream_profile()
+            s.on_video_frame(f)
+        time.sleep(0.03)
+    time.sleep(0.3)  # let the recorder write the last frames before the sensors stop
+    for s, _, _ in sensors:
+        s.stop()
+        s.close()
+    del rec
+
+
+@pytest.mark.realdata
+def test_real_recording():
+    if not BAG.exists():
+        pytest.skip(f"{BAG} absent")
+    frames = list(RealSenseSource(BAG, timeout=1.0))
+    assert len(frames) == 1
+    f = frames[0]
+    assert f.depth.shape == (480, 640) and f.depth.dtype == np.uint16
+    assert f.color.shape == (480, 640, 3) and f.color.dtype == np.uint8
+    assert f.depth_scale == pytest.approx(0.001)
+    assert (f.depth > 0).mean() > 0.5
+    # the intrinsics and extrinsics are librealsense's own, read back through pyrealsense2
+    pipe, cfg = rs.pipeline(), rs.config()
+    cfg.enable_device_from_file(str(BAG), repeat_playback=False)
+    prof = pipe.start(cfg)
+    try:
+        d = prof.get_stream(rs.stream.depth).as_video_stream_profile()
+        c = prof.get_stream(rs.stream.color).as_video_stream_profile()
+        assert intrinsics_from_rs(d.get_intrinsics()) == f.depth_intrinsics
+        np.testing.assert_allclose(transform_from_rs(d.get_extrinsics_to(c)), f.T_color_depth)
+    finally:
+        pipe.stop()
+    # the tracker runs on it (no green board in this scene: a row, no crash)
+    r = PlaneTracker().process(f)
+    assert r.n_points == int((f.depth > 0).sum())
+
+
+def test_software_device_recording_plays_back_every_frame(tmp_path):
+    path = tmp_path / "rec.db3"
+    record(path, n=6)
+    src = RealSenseSource(path, timeout=1.0)
+    frames = list(src)
+    assert [f.index for f in frames] == list(range(6))
+    for i, f in enumerate(frames):
+        assert (f.depth == 1000 + i).all()
+        assert (f.color[..., 0] == i).all() and (f.color[..., 1] == 200).all()
+    np.testing.assert_allclose([f.timestamp for f in frames], np.arange(6) / 30, atol=1e-3)
+    f = frames[0]
+    assert f.color_intrinsics.model == "inverse_brown_conrady"
+    assert (f.depth_intrinsics.fx, f.depth_intrinsics.fy) == (50.0, 51.0)
+    np.testing.assert_allclose(f.T_color_depth[:3, 3], [0.015, 0.001, 0.0], atol=1e-7)
+    assert src.skipped == []
+
+
+def test_recording_without_colour_is_refused(tmp_path):
+    path = tmp_path / "depth_only.db3"
+    record(path, n=2, with_color=False)
+    with pytest.raises(InputError, match="no colour stream"):
+        list(RealSenseSource(path, timeout=1.0))
+
+
+def test_missing_recording_and_missing_pyrealsense2(tmp_path, monkeypatch):
+    with pytest.raises(FileFormatError, match="not found"):
+        RealSenseSource(tmp_path / "nope.bag")
+    monkeypatch.setitem(sys.modules, "pyrealsense2", None)
+    with pytest.raises(InputError, match=r"robopercept\[realsense\]"):
+        import_pyrealsense2()
+    with pytest.raises(InputError, match=r"robopercept\[realsense\]"):
+        RealSenseSource(tmp_path / "x.bag")
