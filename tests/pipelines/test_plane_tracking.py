@@ -156,7 +156,7 @@ def test_plane_covariance_matches_monte_carlo():
     e1 = np.cross(n_true, [1.0, 0, 0])
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(n_true, e1)
-    uv = rng.uniform(-0.3, 0.3, (400, 2)) + [0.2, 0.1]
+    uv = rng.uniform(-0.3, 0.3, (400, 2)) + np.array([0.2, 0.1])
     base = d_true * n_true + uv[:, :1] * e1 + uv[:, 1:] * e2
     pis, covs = [], []
     for _ in range(400):
