@@ -17,11 +17,9 @@ $(VENV)/.dev: $(VENV)/.core pyproject.toml
 	$(PIP) install -e ".[dev]"
 	touch $@
 
-# Main job. Until the plane tracker lands: edges and blobs of the bundled sample image.
+# Main job: the RGB-D plane tracker on the built-in synthetic scene -> robopercept-out/
 demo: $(VENV)/.core
-	mkdir -p robopercept-out
-	$(VENV)/bin/robopercept edges -o robopercept-out/edges.png
-	$(VENV)/bin/robopercept blobs -o robopercept-out/blobs.png
+	$(VENV)/bin/robopercept demo --out robopercept-out
 
 # Every test, with the reference libraries installed.
 test: $(VENV)/.dev

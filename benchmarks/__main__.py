@@ -8,7 +8,11 @@ import sys
 
 from benchmarks._harness import save
 
-BENCHMARKS = {"imaging": "benchmarks.imaging", "pointcloud": "benchmarks.pointcloud"}
+BENCHMARKS = {
+    "imaging": "benchmarks.imaging",
+    "pointcloud": "benchmarks.pointcloud",
+    "plane_tracking": "benchmarks.plane_tracking",
+}
 
 
 def main(argv: list[str] | None = None) -> int:
