@@ -4,6 +4,7 @@ from robopercept.depth.rgbd import (
     align_color_to_depth,
     align_depth_to_color,
     depth_to_points,
+    pixel_rays,
     sample_colors,
     texture_coordinates,
 )
@@ -12,6 +13,7 @@ __all__ = [
     "align_color_to_depth",
     "align_depth_to_color",
     "depth_to_points",
+    "pixel_rays",
     "sample_colors",
     "texture_coordinates",
 ]

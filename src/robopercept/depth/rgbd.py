@@ -27,6 +27,7 @@ __all__ = [
     "align_color_to_depth",
     "align_depth_to_color",
     "depth_to_points",
+    "pixel_rays",
     "sample_colors",
     "texture_coordinates",
 ]
@@ -45,6 +46,15 @@ def _check_depth(depth: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
     if d.dtype.kind not in "uif":
         raise InputError(f"depth must be numeric (uint16 raw units or float); got {d.dtype}")
     return d
+
+
+def pixel_rays(intrinsics: CameraIntrinsics) -> np.ndarray:
+    """``(H * W, 3)`` unit-depth rays of every pixel in row-major order,
+    ``deproject((u, v), 1)``: the point at depth ``z`` behind pixel ``i`` is
+    ``z * rays[i]`` (undistortion does not depend on depth)."""
+    v, u = np.mgrid[0 : intrinsics.height, 0 : intrinsics.width]
+    pix = np.stack([u, v], axis=-1).reshape(-1, 2).astype(np.float64)
+    return np.ascontiguousarray(deproject(pix, 1.0, intrinsics))
 
 
 def depth_to_points(

@@ -44,12 +44,12 @@ import numpy as np
 from numba import njit
 from scipy.stats import chi2
 
-from robopercept.depth import texture_coordinates
+from robopercept.depth import pixel_rays, texture_coordinates
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation import PlaneModel, ransac
 from robopercept.estimation.least_squares import scatter_matrix
 from robopercept.estimation.models import Model
-from robopercept.geometry import CameraIntrinsics, deproject
+from robopercept.geometry import CameraIntrinsics
 from robopercept.imaging import hsv_range_mask, rgb_to_hsv
 from robopercept.sources.frames import RGBDFrame
 from robopercept.tracking import KalmanFilter, constant_velocity
@@ -320,9 +320,7 @@ class PlaneTracker:
     # ---------------------------------------------------------------- stages
     def _unit_rays(self, k: CameraIntrinsics) -> np.ndarray:
         if self._rays_key != (k,):
-            v, u = np.mgrid[0 : k.height, 0 : k.width]
-            pix = np.stack([u, v], axis=-1).reshape(-1, 2).astype(np.float64)
-            self._rays = np.ascontiguousarray(deproject(pix, 1.0, k))
+            self._rays = pixel_rays(k)
             self._rays_key = (k,)
         assert self._rays is not None
         return self._rays
@@ -385,9 +383,11 @@ class PlaneTracker:
                 dt = None
         predicted = None
         if self.kf is not None:
-            F = self.kf.F if dt is None else _cv_F(dt)
-            Q = None if dt is None else _cv_Q(dt, c.process_noise)
-            self.kf.predict(A=F, Q=Q)
+            if dt is None:
+                self.kf.predict()
+            else:  # the model for this frame's time step
+                model = constant_velocity(3, dt, c.process_noise, 1.0)
+                self.kf.predict(A=model.A, Q=model.Q)
             predicted = self.kf.x[:3].copy()
 
         # ---- RANSAC
@@ -507,17 +507,6 @@ class PlaneTracker:
         """:meth:`process` every frame of ``frames``."""
         for frame in frames:
             yield self.process(frame)
-
-
-def _cv_F(dt: float) -> np.ndarray:
-    F = np.eye(6)
-    F[:3, 3:] = np.eye(3) * dt
-    return F
-
-
-def _cv_Q(dt: float, q: float) -> np.ndarray:
-    g = np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]) * q
-    return np.kron(g, np.eye(3))
 
 
 # -------------------------------------------------------------------- evaluation

@@ -43,8 +43,9 @@ import numpy as np
 from numba import njit, prange
 
 from robopercept._checks import check_int, check_positive
+from robopercept.depth import pixel_rays
 from robopercept.errors import InputError
-from robopercept.geometry import CameraIntrinsics, deproject
+from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.transforms import invert, rotation_from_rotvec, se3
 from robopercept.sources.frames import RGBDFrame
 
@@ -383,12 +384,6 @@ class SyntheticRGBDScene:
             yield self.frame(i)
 
     # -------------------------------------------------------------- rendering
-    @staticmethod
-    def _rays(k: CameraIntrinsics) -> np.ndarray:
-        v, u = np.mgrid[0 : k.height, 0 : k.width]
-        pix = np.stack([u, v], axis=-1).reshape(-1, 2).astype(np.float64)
-        return np.ascontiguousarray(deproject(pix, 1.0, k))
-
     def _scene(
         self, t: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, tuple[np.ndarray, float]]:
@@ -424,8 +419,8 @@ class SyntheticRGBDScene:
         rng = np.random.default_rng([self.seed, i])
         kd, kc = self.depth_intrinsics, self.color_intrinsics
         if self._rays_d is None:  # type: ignore[attr-defined]
-            object.__setattr__(self, "_rays_d", self._rays(kd))
-            object.__setattr__(self, "_rays_c", self._rays(kc))
+            object.__setattr__(self, "_rays_d", pixel_rays(kd))
+            object.__setattr__(self, "_rays_c", pixel_rays(kc))
         depth, board_mask = self._render_depth(rects, groups, board_id, rng)
         color = self._render_color(rects, groups, colors, rng)
         return RGBDFrame(
