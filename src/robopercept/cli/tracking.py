@@ -146,14 +146,13 @@ def summary_table(summary: dict[str, Any]) -> str:
 def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
     from robopercept.pipelines.plane_outputs import run_plane_tracking
 
-    fps = 30.0
     summary = run_plane_tracking(
         source,
         args.out,
         config=config,
         max_frames=getattr(args, "max_frames", None),
         video=not args.no_video,
-        fps=fps,
+        fps=30.0,
         progress=not args.quiet,
     )
     print(summary_table(summary))

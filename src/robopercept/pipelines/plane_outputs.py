@@ -213,8 +213,7 @@ class PlaneTrackOutputs:
         results = self.results
         truths = [t for _, t in self._rows]
         has_truth = bool(truths) and all("plane" in t for t in truths)
-        out = summarize(results, truths if has_truth else None, **extra)
-        return out
+        return summarize(results, truths if has_truth else None, **extra)
 
     def close(self, summary: dict[str, Any]) -> None:
         """Finish the video, write ``summary.json`` and ``plane.png``."""
@@ -302,8 +301,6 @@ def run_plane_tracking(
                 frame = next(it)
             except StopIteration:
                 break
-            except KeyboardInterrupt:
-                raise
             except (RoboperceptError, RuntimeError, OSError) as exc:
                 stopped = f"source failed: {exc}"
                 warnings.warn(f"stopping: {stopped}", stacklevel=2)

@@ -465,7 +465,8 @@ class PlaneTracker:
             else:
                 gated = True
         if not accepted:
-            self._prev_ratio = None if not found else self._prev_ratio
+            if not found:
+                self._prev_ratio = None
             if self.kf is not None:
                 self._coast += 1
                 status = "coasting"
