@@ -147,6 +147,42 @@ def test_hue_feature_keeps_other_greens_out():
     assert r[0, 0] == pytest.approx(0.0)
 
 
+@pytest.mark.parametrize(
+    ("low", "high", "tol"),
+    [
+        ((45, 35, 35), (65, 255, 255), 0.02),  # the default green box, z-buffer on
+        ((45, 35, 35), (65, 255, 255), None),  # no occlusion test
+        ((170, 50, 50), (10, 255, 255), 0.02),  # red: the hue range wraps around
+    ],
+)
+def test_green_points_equal_the_library_path(low, high, tol):
+    # the tracker's fused compiled passes select exactly what the public functions do:
+    # depth_to_points -> texture_coordinates (z-buffer) -> sample_colors -> rgb_to_hsv
+    # -> hsv_range_mask; same points in the same (row-major) order, same hues
+    from robopercept.depth import depth_to_points, sample_colors, texture_coordinates
+    from robopercept.imaging import hsv_range_mask, rgb_to_hsv
+
+    scene = SyntheticRGBDScene(n_frames=300, **SMALL)
+    config = PlaneTrackerConfig(hsv_low=low, hsv_high=high, occlusion_tolerance=tol)
+    tracker = PlaneTracker(config)
+    for i in (0, 95, 190):  # near, half out of view, far
+        f = scene.frame(i)
+        pix, zc, n_points = tracker._project(f)
+        green, hue = tracker._green(f, pix, zc)
+        assert np.isinf(tracker._zbuf).all()  # the z-buffer is clean for the next frame
+        pts = depth_to_points(f.depth, f.depth_intrinsics, f.depth_scale).reshape(-1, 3)
+        pts = pts[f.depth.reshape(-1) > 0]
+        uv, valid = texture_coordinates(
+            pts, f.T_color_depth, f.color_intrinsics, occlusion_tolerance=tol
+        )
+        hsv = rgb_to_hsv(sample_colors(f.color, uv, valid)[:, None, :])
+        mask = hsv_range_mask(hsv, low, high)[:, 0] & valid
+        assert n_points == pts.shape[0]
+        assert mask.sum() > 100
+        np.testing.assert_array_equal(green, pts[mask])
+        np.testing.assert_array_equal(hue, hsv[mask, 0, 0])
+
+
 def test_plane_covariance_matches_monte_carlo():
     # fit many noisy samples of one plane; the spread of pi = d n matches the formula
     rng = np.random.default_rng(1)

@@ -101,11 +101,38 @@ def depth_to_points(
 _MODEL_CODE = {"none": 0, "brown_conrady": 1, "modified_brown_conrady": 2}
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _project_color(x0, y0, z0, R, t, k, model, c):  # pragma: no cover - compiled
+    # a depth-frame point into the colour frame, then onto the colour image (librealsense's
+    # forward lens models; the inverse model projects with the modified formula).
+    # k = (fx, fy, cx, cy), c = (k1, k2, p1, p2, k3). Returns (u, v, Z); Z <= 0 or NaN:
+    # behind the camera or not a point.
+    X = R[0, 0] * x0 + R[0, 1] * y0 + R[0, 2] * z0 + t[0]
+    Y = R[1, 0] * x0 + R[1, 1] * y0 + R[1, 2] * z0 + t[1]
+    Z = R[2, 0] * x0 + R[2, 1] * y0 + R[2, 2] * z0 + t[2]
+    if not Z > 0:
+        return np.nan, np.nan, Z
+    x = X / Z
+    y = Y / Z
+    if model != 0:
+        r2 = x * x + y * y
+        f = 1 + c[0] * r2 + c[1] * r2 * r2 + c[4] * r2 * r2 * r2
+        if model == 2:
+            x = x * f
+            y = y * f
+            xd = x + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
+            yd = y + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
+        else:
+            xd = x * f + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
+            yd = y * f + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
+        x = xd
+        y = yd
+    return x * k[0] + k[2], y * k[1] + k[3], Z
+
+
 @njit(cache=True, nogil=True)
 def _texture_kernel(p, R, t, k, model, c, width, height, tol, uv, valid):  # pragma: no cover
-    # one pass: move into the colour frame, project (librealsense's forward lens models;
-    # the inverse model projects with the modified formula), bounds, z-buffer; then a
-    # second pass for occlusion. k = (fx, fy, cx, cy), c = (k1, k2, p1, p2, k3).
+    # one pass: project, bounds, z-buffer; then a second pass for occlusion
     n = p.shape[0]
     zc = np.empty(n)
     pix = np.full(n, -1, dtype=np.int64)
@@ -119,28 +146,9 @@ def _texture_kernel(p, R, t, k, model, c, width, height, tol, uv, valid):  # pra
         uv[i, 1] = np.nan
         if not (np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0)):
             continue
-        X = R[0, 0] * x0 + R[0, 1] * y0 + R[0, 2] * z0 + t[0]
-        Y = R[1, 0] * x0 + R[1, 1] * y0 + R[1, 2] * z0 + t[1]
-        Z = R[2, 0] * x0 + R[2, 1] * y0 + R[2, 2] * z0 + t[2]
+        u, v, Z = _project_color(x0, y0, z0, R, t, k, model, c)
         if not Z > 0:
             continue
-        x = X / Z
-        y = Y / Z
-        if model != 0:
-            r2 = x * x + y * y
-            f = 1 + c[0] * r2 + c[1] * r2 * r2 + c[4] * r2 * r2 * r2
-            if model == 2:
-                x = x * f
-                y = y * f
-                xd = x + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
-                yd = y + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
-            else:
-                xd = x * f + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
-                yd = y * f + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
-            x = xd
-            y = yd
-        u = x * k[0] + k[2]
-        v = y * k[1] + k[3]
         uv[i, 0] = u / width
         uv[i, 1] = v / height
         col = np.rint(u)
@@ -157,6 +165,16 @@ def _texture_kernel(p, R, t, k, model, c, width, height, tol, uv, valid):  # pra
         for i in range(n):
             if valid[i] and zc[i] > zbuf[pix[i]] + tol:
                 valid[i] = False
+
+
+def _color_params(color_intrinsics: CameraIntrinsics) -> tuple[np.ndarray, int, np.ndarray]:
+    """(fx, fy, cx, cy), lens-model code and coefficients for :func:`_project_color`."""
+    k = color_intrinsics
+    return (
+        np.array([k.fx, k.fy, k.cx, k.cy]),
+        _MODEL_CODE.get(k.model, 2),
+        np.array(k.coeffs, dtype=np.float64),
+    )
 
 
 def texture_coordinates(
@@ -197,13 +215,14 @@ def texture_coordinates(
     flat = np.ascontiguousarray(p.reshape(-1, 3))
     uv = np.empty((flat.shape[0], 2))
     valid = np.empty(flat.shape[0], dtype=bool)
+    kk, model, coeffs = _color_params(k)
     _texture_kernel(
         flat,
         np.ascontiguousarray(T[:3, :3]),
         np.ascontiguousarray(T[:3, 3]),
-        np.array([k.fx, k.fy, k.cx, k.cy]),
-        _MODEL_CODE.get(k.model, 2),
-        np.array(k.coeffs, dtype=np.float64),
+        kk,
+        model,
+        coeffs,
         k.width,
         k.height,
         tol,

@@ -53,6 +53,24 @@ _SNUM = float(255 << _HSV_SHIFT)  # S = Delta * round(2^12 * 255 / V) / 2^12
 _HNUM = float((180 << _HSV_SHIFT) // 6)  # H = h' * round(2^12 * 180 / (6 Delta)) / 2^12
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _hsv_u8(r, g, b):  # pragma: no cover - compiled
+    """HSV (OpenCV scale) of one uint8 RGB pixel given as int32s; see the kernel below."""
+    half = 1 << (_HSV_SHIFT - 1)
+    v = max(r, max(g, b))
+    diff = v - min(r, min(g, b))
+    h = r - g + 4 * diff  # V = B
+    h = b - r + 2 * diff if v == g else h
+    h = g - b if v == r else h
+    sdiv = np.int32(np.rint(np.float32(_SNUM) / np.float32(max(v, 1))))
+    hdiv = np.int32(np.rint(np.float32(_HNUM) / np.float32(max(diff, 1))))
+    hdiv = hdiv if diff > 0 else 0
+    s = (diff * sdiv + half) >> _HSV_SHIFT
+    h = (h * hdiv + half) >> _HSV_SHIFT
+    h += (h >> 31) & 180  # negative hue wraps around
+    return h, s, v
+
+
 @njit(cache=True, nogil=True)
 def _rgb_to_hsv_u8_kernel(rgb, out):  # pragma: no cover - compiled
     """uint8 fast path on flat ``(3 N,)`` arrays: OpenCV's 12-bit fixed-point method,
@@ -64,24 +82,8 @@ def _rgb_to_hsv_u8_kernel(rgb, out):  # pragma: no cover - compiled
     Delta in 1..255 (checked exhaustively in the tests) and, unlike a table lookup,
     lets the loop vectorize.
     """
-    half = 1 << (_HSV_SHIFT - 1)
-    snum = np.float32(_SNUM)
-    hnum = np.float32(_HNUM)
     for i in range(rgb.shape[0] // 3):
-        r = np.int32(rgb[3 * i])
-        g = np.int32(rgb[3 * i + 1])
-        b = np.int32(rgb[3 * i + 2])
-        v = max(r, max(g, b))
-        diff = v - min(r, min(g, b))
-        h = r - g + 4 * diff  # V = B
-        h = b - r + 2 * diff if v == g else h
-        h = g - b if v == r else h
-        sdiv = np.int32(np.rint(snum / np.float32(max(v, 1))))
-        hdiv = np.int32(np.rint(hnum / np.float32(max(diff, 1))))
-        hdiv = hdiv if diff > 0 else 0
-        s = (diff * sdiv + half) >> _HSV_SHIFT
-        h = (h * hdiv + half) >> _HSV_SHIFT
-        h += (h >> 31) & 180  # negative hue wraps around
+        h, s, v = _hsv_u8(np.int32(rgb[3 * i]), np.int32(rgb[3 * i + 1]), np.int32(rgb[3 * i + 2]))
         out[3 * i] = h
         out[3 * i + 1] = s
         out[3 * i + 2] = v

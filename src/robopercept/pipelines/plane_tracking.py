@@ -5,11 +5,14 @@ Per frame (:meth:`PlaneTracker.process`):
 1. **Points.** Depth to points, :math:`p = s D\, r(u, v)` with the unit-depth ray
    :math:`r(u, v)` of each depth pixel (``deproject(pixel, 1)``, computed once per
    camera), for the pixels with depth.
-2. **Colour.** Texture coordinates of the points in the colour image (through
-   ``T_color_depth`` and the colour intrinsics, with the z-buffer occlusion test of
-   :func:`~robopercept.depth.texture_coordinates`); the HSV mask of the colour image
-   (OpenCV scale, default H 45..65, S 35..255, V 35..255) is sampled at them, so a point
-   is "green" when its colour pixel is.
+2. **Colour.** Each point is projected into the colour image (through
+   ``T_color_depth`` and the colour intrinsics) and takes the colour of its pixel,
+   unless the z-buffer occlusion test of :func:`~robopercept.depth.texture_coordinates`
+   says another point hides it there; a point is "green" when that colour's HSV
+   (OpenCV scale, default H 45..65, S 35..255, V 35..255) is in the box. This is the
+   library path ``depth_to_points`` -> ``texture_coordinates`` -> ``sample_colors`` ->
+   ``rgb_to_hsv`` -> ``hsv_range_mask``, point for point, fused into three compiled
+   passes (projection, z-buffer, selection) so that only the green points are stored.
 3. **Plane.** RANSAC on the green points (:func:`~robopercept.estimation.ransac` with
    :class:`~robopercept.estimation.PlaneModel`: 3 points, normal by cross product):
    the plane predicted by the tracker is scored first, the search stops early once a
@@ -41,16 +44,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from scipy.stats import chi2
 
-from robopercept.depth import pixel_rays, texture_coordinates
+from robopercept.depth import pixel_rays
+from robopercept.depth.rgbd import _color_params, _project_color
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation import PlaneModel, ransac
 from robopercept.estimation.least_squares import scatter_matrix
 from robopercept.estimation.models import Model
 from robopercept.geometry import CameraIntrinsics
-from robopercept.imaging import hsv_range_mask, rgb_to_hsv
+from robopercept.imaging.color import _hsv_u8
 from robopercept.sources.frames import RGBDFrame
 from robopercept.tracking import KalmanFilter, constant_velocity
 
@@ -67,19 +71,100 @@ __all__ = [
 STAGES = ("points", "color", "ransac", "kalman")
 
 
+_CHUNKS = 64  # row blocks of the parallel per-pixel passes
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _project_kernel(
+    depth, rays, scale, R, t, k, model, c, width, height, pix, zc
+):  # pragma: no cover
+    # For every depth pixel i with depth: the point p = s D r(u, v), its colour pixel
+    # pix[i] = row * width + col (-1: no depth, behind the colour camera or outside its
+    # image) and its depth zc[i] in the colour frame. Pixels are independent: parallel.
+    n = depth.shape[0]
+    for b in prange(_CHUNKS):
+        for i in range(b * n // _CHUNKS, (b + 1) * n // _CHUNKS):
+            z = depth[i] * scale
+            u, v, zcol = _project_color(
+                rays[i, 0] * z, rays[i, 1] * z, rays[i, 2] * z, R, t, k, model, c
+            )
+            col = np.rint(u)
+            row = np.rint(v)
+            j = -1
+            if depth[i] > 0 and zcol > 0 and col >= 0 and col < width and row >= 0 and row < height:
+                j = int(row) * width + int(col)
+            pix[i] = j
+            zc[i] = zcol
+
+
 @njit(cache=True, nogil=True)
-def _points_kernel(depth, rays, scale, out):  # pragma: no cover - compiled
-    # p = s D r(u, v) for the pixels with depth, in row-major order; returns the count
-    n = 0
-    for i in range(depth.shape[0]):
-        d = depth[i]
-        if d > 0:
-            z = d * scale
-            out[n, 0] = rays[i, 0] * z
-            out[n, 1] = rays[i, 1] * z
-            out[n, 2] = rays[i, 2] * z
-            n += 1
-    return n
+def _zbuffer_kernel(pix, zc, zbuf):  # pragma: no cover - compiled
+    # nearest colour-frame depth per colour pixel (serial: pixels collide)
+    for i in range(pix.shape[0]):
+        j = pix[i]
+        if j >= 0 and zc[i] < zbuf[j]:
+            zbuf[j] = zc[i]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _select_kernel(
+    depth, rays, scale, rgb, pix, zc, zbuf, tol, low, high, out, hue
+):  # pragma: no cover - compiled
+    # The points whose colour pixel is theirs (no other point nearer there by more than
+    # tol; tol < 0: no test) and whose HSV (OpenCV's uint8 conversion, bit for bit) lies
+    # in the box low..high (hue wraps around when low[0] > high[0]). Each row block
+    # writes from its own first pixel on, then the blocks are packed in order, so the
+    # result is in row-major order whatever the threads. Returns the number selected.
+    n = pix.shape[0]
+    counts = np.zeros(_CHUNKS, dtype=np.int64)
+    wrap = low[0] > high[0]
+    for b in prange(_CHUNKS):
+        a = b * n // _CHUNKS
+        g = a
+        for i in range(a, (b + 1) * n // _CHUNKS):
+            j = pix[i]
+            if j < 0:
+                continue
+            if tol >= 0 and zc[i] > zbuf[j] + tol:
+                continue
+            h, s, v = _hsv_u8(
+                np.int32(rgb[3 * j]), np.int32(rgb[3 * j + 1]), np.int32(rgb[3 * j + 2])
+            )
+            if s < low[1] or s > high[1] or v < low[2] or v > high[2]:
+                continue
+            if wrap:
+                if h < low[0] and h > high[0]:
+                    continue
+            elif h < low[0] or h > high[0]:
+                continue
+            z = depth[i] * scale
+            out[g, 0] = rays[i, 0] * z
+            out[g, 1] = rays[i, 1] * z
+            out[g, 2] = rays[i, 2] * z
+            hue[g] = h
+            g += 1
+        counts[b] = g - a
+    m = 0
+    for b in range(_CHUNKS):
+        a = b * n // _CHUNKS
+        for g in range(a, a + counts[b]):
+            out[m, 0] = out[g, 0]
+            out[m, 1] = out[g, 1]
+            out[m, 2] = out[g, 2]
+            hue[m] = hue[g]
+            m += 1
+    return m
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _reset_kernel(pix, zbuf):  # pragma: no cover - compiled
+    # back to +inf for the next frame (only the touched pixels; racing writes store the
+    # same value)
+    n = pix.shape[0]
+    for b in prange(_CHUNKS):
+        for i in range(b * n // _CHUNKS, (b + 1) * n // _CHUNKS):
+            if pix[i] >= 0:
+                zbuf[pix[i]] = np.inf
 
 
 @dataclass(frozen=True)
@@ -303,6 +388,7 @@ class PlaneTracker:
         self.config = config or PlaneTrackerConfig()
         self._rays_key: tuple | None = None
         self._rays: np.ndarray | None = None
+        self._zbuf = np.zeros(0)  # colour-image z-buffer, +inf between frames
         self.kf: KalmanFilter | None = None
         self._last_t: float | None = None
         self._coast = 0
@@ -325,32 +411,65 @@ class PlaneTracker:
         assert self._rays is not None
         return self._rays
 
-    def _points(self, frame: RGBDFrame) -> np.ndarray:
+    def _project(self, frame: RGBDFrame) -> tuple[np.ndarray, np.ndarray, int]:
+        # each depth pixel's colour pixel and colour-frame depth; the z-buffer filled
         rays = self._unit_rays(frame.depth_intrinsics)
         flat = np.ascontiguousarray(frame.depth).reshape(-1)
-        out = np.empty((flat.shape[0], 3))
-        n = _points_kernel(flat, rays, float(frame.depth_scale), out)
-        return out[:n]
-
-    def _green(self, frame: RGBDFrame, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # colour of each point through its texture coordinate, then HSV of just those
-        # colours (the same bit-exact conversion as for a whole image, on fewer pixels)
-        c = self.config
         kc = frame.color_intrinsics
-        uv, valid = texture_coordinates(
-            pts,
-            frame.T_color_depth,
-            kc,
-            occlusion_tolerance=c.occlusion_tolerance,
+        if self._zbuf.shape[0] != kc.width * kc.height:
+            self._zbuf = np.full(kc.width * kc.height, np.inf)
+        T = frame.T_color_depth
+        k, model, coeffs = _color_params(kc)
+        pix = np.empty(flat.shape[0], dtype=np.int64)
+        zc = np.empty(flat.shape[0])
+        _project_kernel(
+            flat,
+            rays,
+            float(frame.depth_scale),
+            np.ascontiguousarray(T[:3, :3]),
+            np.ascontiguousarray(T[:3, 3]),
+            k,
+            model,
+            coeffs,
+            kc.width,
+            kc.height,
+            pix,
+            zc,
         )
-        idx = np.flatnonzero(valid)
-        col = np.rint(uv[idx, 0] * kc.width).astype(np.intp)
-        row = np.rint(uv[idx, 1] * kc.height).astype(np.intp)
-        flat = np.ascontiguousarray(frame.color).reshape(-1, 3)
-        rgb = np.take(flat, row * kc.width + col, axis=0)  # 4x faster than color[row, col]
-        hsv = rgb_to_hsv(rgb[:, None, :])
-        green = hsv_range_mask(hsv, c.hsv_low, c.hsv_high)[:, 0]
-        return idx[green], hsv[green, 0, 0].astype(np.float64)
+        if self.config.occlusion_tolerance is not None:
+            _zbuffer_kernel(pix, zc, self._zbuf)
+        return pix, zc, int(np.count_nonzero(flat))
+
+    def _green(
+        self, frame: RGBDFrame, pix: np.ndarray, zc: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        # the colour of each point at its colour pixel, unless another point hides it
+        # there (the z-buffer test of texture_coordinates), then the HSV box: the same
+        # bit-exact conversion as rgb_to_hsv, on just those pixels; the green points
+        c = self.config
+        n = pix.shape[0]
+        out = np.empty((n, 3))
+        hue = np.empty(n)
+        tol = c.occlusion_tolerance
+        try:
+            g = _select_kernel(
+                np.ascontiguousarray(frame.depth).reshape(-1),
+                self._unit_rays(frame.depth_intrinsics),
+                float(frame.depth_scale),
+                np.ascontiguousarray(frame.color).reshape(-1),
+                pix,
+                zc,
+                self._zbuf,
+                -1.0 if tol is None else float(tol),
+                np.asarray(c.hsv_low, dtype=np.float64),
+                np.asarray(c.hsv_high, dtype=np.float64),
+                out,
+                hue,
+            )
+        finally:
+            if tol is not None:
+                _reset_kernel(pix, self._zbuf)
+        return out[:g], hue[:g]
 
     def _threshold(self, pts: np.ndarray) -> float:
         c = self.config
@@ -365,13 +484,10 @@ class PlaneTracker:
         c = self.config
         ms: dict[str, float] = {}
         t0 = time.perf_counter()
-        pts = self._points(frame)
+        pix, zc, n_points = self._project(frame)
         t1 = time.perf_counter()
         ms["points"] = (t1 - t0) * 1e3
-        if pts.shape[0]:
-            sel, hue = self._green(frame, pts)
-        else:
-            sel, hue = np.zeros(0, dtype=np.int64), np.zeros(0)
+        green, hue = self._green(frame, pix, zc)
         t2 = time.perf_counter()
         ms["color"] = (t2 - t1) * 1e3
 
@@ -395,7 +511,6 @@ class PlaneTracker:
         d = math.nan
         n_in = 0
         inlier_points = np.zeros((0, 3))
-        green = pts[sel]
         if green.shape[0] >= c.min_points:
             thr = self._threshold(green)
             initial = None
@@ -498,8 +613,8 @@ class PlaneTracker:
             track_d=track_d,
             covariance_trace=cov,
             status=status,
-            n_points=int(pts.shape[0]),
-            n_green=int(sel.shape[0]),
+            n_points=n_points,
+            n_green=int(green.shape[0]),
             ms=ms,
             inlier_points=inlier_points,
         )
