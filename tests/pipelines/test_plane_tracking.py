@@ -125,6 +125,40 @@ def test_track_is_dropped_after_max_coast_and_restarts():
     assert tracker.process(scene.frame(1)).status == "new"
 
 
+@pytest.mark.parametrize("reacquire", [3, None])
+def test_a_track_on_a_wrong_plane_is_replaced(reacquire):
+    # the track follows frames 0..4; then, with consecutive timestamps, frames 270.. where
+    # the board is 40 degrees away: the gate rejects those planes. Three agreeing
+    # rejected measurements replace the track (reacquire_frames=3); with None the old
+    # track coasts on
+    scene = SyntheticRGBDScene(n_frames=300, **SMALL)
+    tracker = PlaneTracker(PlaneTrackerConfig(reacquire_frames=reacquire))
+    for i in range(5):
+        tracker.process(scene.frame(i))
+    results, truths = [], []
+    for k in range(5):
+        f = dataclasses.replace(scene.frame(270 + k), timestamp=(5 + k) / 30)
+        results.append(tracker.process(f))
+        truths.append(f.ground_truth["plane"])
+    errors = [
+        plane_errors(r.track_normal, r.track_d, *t)[0] for r, t in zip(results, truths, strict=True)
+    ]
+    assert [r.gated for r in results[:2]] == [True, True]
+    if reacquire == 3:
+        assert [r.status for r in results] == [
+            "coasting",
+            "coasting",
+            "new",
+            "tracking",
+            "tracking",
+        ]
+        assert results[2].detected and not results[2].gated
+        assert max(errors[2:]) < 1.0
+    else:
+        assert all(r.status == "coasting" and r.gated for r in results)
+        assert min(errors) > 30
+
+
 def test_hue_feature_keeps_other_greens_out():
     # two parallel planes of green points 0.5 m apart, hues 60 and 50; with hue as a
     # feature a hypothesis built on hue-60 points only counts hue-60 inliers
@@ -216,6 +250,8 @@ def test_seeded_determinism():
 
 
 def test_bad_config_and_input():
+    with pytest.raises(InputError, match="reacquire_frames"):
+        PlaneTrackerConfig(reacquire_frames=1)
     with pytest.raises(InputError, match="OpenCV scale"):
         PlaneTrackerConfig(hsv_low=(45, 35, 300))
     with pytest.raises(InputError, match="3 values"):

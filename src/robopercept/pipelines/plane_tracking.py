@@ -15,9 +15,13 @@ Per frame (:meth:`PlaneTracker.process`):
    passes (projection, z-buffer, selection) so that only the green points are stored.
 3. **Plane.** RANSAC on the green points (:func:`~robopercept.estimation.ransac` with
    :class:`~robopercept.estimation.PlaneModel`: 3 points, normal by cross product):
-   the plane predicted by the tracker is scored first, the search stops early once a
-   hypothesis has as large a share of inliers as the previous frame had, and the best
-   hypothesis is refitted by total least squares on its inliers. The inlier threshold
+   hypotheses are scored by MSAC, :math:`\sum_i \min(r_i^2, \tau^2)`, so that among
+   planes with as many inliers the one nearer them wins (plain inlier counting lets a
+   plane tilt toward the background points that the colour image's parallax paints
+   green at the board's edges); the plane predicted by the tracker is scored first, the
+   search stops early once a hypothesis has as large a share of inliers as the previous
+   frame had, and the best hypothesis is refitted by total least squares on its
+   inliers. The inlier threshold
    grows with the squared distance like stereo depth noise,
    :math:`\tau(z) = \max(\tau_{min}, \tau_1 z^2)` at the green points' median depth
    :math:`z` in metres. Optionally (``hue_tolerance``) hue is an extra feature in the
@@ -30,7 +34,10 @@ Per frame (:meth:`PlaneTracker.process`):
    :math:`y^\top S^{-1} y` exceeds the chi-square quantile (3 degrees of freedom,
    ``gate_probability``) is rejected; without an accepted measurement the track coasts
    on its prediction, and after ``max_coast`` such frames it is dropped, so that the
-   next detection starts a new one (re-acquisition).
+   next detection starts a new one (re-acquisition). A rejected measurement also feeds
+   a tentative track (the same filter and gate); when ``reacquire_frames`` consecutive
+   rejected measurements agree with it, it replaces the track, which had locked on to
+   a wrong plane.
 
 The tracked plane is :math:`n = \pi / \|\pi\|`, :math:`d = \|\pi\|`.
 """
@@ -198,6 +205,10 @@ class PlaneTrackerConfig:
         Chi-square gate; measurements outside are rejected.
     max_coast : int
         Frames a track survives without an accepted measurement.
+    reacquire_frames : int or None
+        A measurement the gate rejects starts a tentative track (the same filter, gated
+        the same way); when this many consecutive rejected measurements agree with it,
+        it replaces the track (the old one had followed a wrong plane). None: never.
     occlusion_tolerance : float
         Z-buffer tolerance of the colour lookup, metres.
     rng : int
@@ -216,6 +227,7 @@ class PlaneTrackerConfig:
     measurement_noise: float = 0.004
     gate_probability: float = 0.9999
     max_coast: int = 15
+    reacquire_frames: int | None = 3
     occlusion_tolerance: float = 0.02
     rng: int = 0
 
@@ -240,6 +252,10 @@ class PlaneTrackerConfig:
             raise InputError("gate_probability and probability must be in (0, 1)")
         if self.min_points < 3 or self.max_iterations < 1 or self.max_coast < 0:
             raise InputError("min_points >= 3, max_iterations >= 1 and max_coast >= 0 required")
+        if self.reacquire_frames is not None and self.reacquire_frames < 2:
+            raise InputError(
+                f"reacquire_frames must be >= 2 or None (never); got {self.reacquire_frames}"
+            )
 
 
 @dataclass(frozen=True)
@@ -393,6 +409,8 @@ class PlaneTracker:
         self._last_t: float | None = None
         self._coast = 0
         self._prev_ratio: float | None = None
+        self._candidate: KalmanFilter | None = None  # tentative track (reacquire_frames)
+        self._candidate_hits = 0
         # chi-square quantile of the gate, 3 degrees of freedom (computed once)
         self._gate = float(chi2.ppf(self.config.gate_probability, 3))
 
@@ -402,6 +420,8 @@ class PlaneTracker:
         self._last_t = None
         self._coast = 0
         self._prev_ratio = None
+        self._candidate = None
+        self._candidate_hits = 0
 
     # ---------------------------------------------------------------- stages
     def _unit_rays(self, k: CameraIntrinsics) -> np.ndarray:
@@ -476,6 +496,30 @@ class PlaneTracker:
         z = float(np.median(pts[:: max(1, pts.shape[0] // 4096), 2]))  # a sample suffices
         return max(c.threshold_min, c.threshold_1m * z * z)
 
+    def _new_filter(self, z: np.ndarray, R: np.ndarray) -> KalmanFilter:
+        # a constant-velocity filter on pi started at the measurement z (covariance R)
+        kf = constant_velocity(3, 1.0 / 30.0, self.config.process_noise, 1.0)
+        kf.x[:3] = z
+        kf.P = np.zeros((6, 6))
+        kf.P[:3, :3] = R
+        kf.P[3:, 3:] = np.eye(3)  # velocity unknown: 1 m/s standard deviation
+        return kf
+
+    def _reacquire(self, z: np.ndarray, R: np.ndarray) -> bool:
+        # a measurement the track's gate rejected: feed the tentative track (or start
+        # one); True when it has reacquire_frames consecutive agreeing measurements
+        n = self.config.reacquire_frames
+        if n is None:
+            return False
+        cand = self._candidate
+        if cand is not None and cand.mahalanobis(z, R=R) ** 2 <= self._gate:
+            cand.update(z, R=R)
+            self._candidate_hits += 1
+        else:
+            self._candidate = self._new_filter(z, R)
+            self._candidate_hits = 1
+        return self._candidate_hits >= n
+
     # ---------------------------------------------------------------- per frame
     def process(self, frame: RGBDFrame) -> PlaneTrackResult:
         """Detect the board in ``frame`` and update the track (see the module docstring)."""
@@ -498,12 +542,14 @@ class PlaneTracker:
             if not dt > 0:
                 dt = None
         predicted = None
+        model = None if dt is None else constant_velocity(3, dt, c.process_noise, 1.0)
+        for kf in (self.kf, self._candidate):
+            if kf is not None:
+                if model is None:
+                    kf.predict()
+                else:  # the model for this frame's time step
+                    kf.predict(A=model.A, Q=model.Q)
         if self.kf is not None:
-            if dt is None:
-                self.kf.predict()
-            else:  # the model for this frame's time step
-                model = constant_velocity(3, dt, c.process_noise, 1.0)
-                self.kf.predict(A=model.A, Q=model.Q)
             predicted = self.kf.x[:3].copy()
 
         # ---- RANSAC
@@ -529,6 +575,7 @@ class PlaneTracker:
                         thr,
                         max_iterations=c.max_iterations,
                         probability=c.probability,
+                        scoring="msac",
                         min_inliers=min_inl,
                         initial=initial,
                         rng=rng,
@@ -544,6 +591,7 @@ class PlaneTracker:
                         thr,
                         max_iterations=c.max_iterations,
                         probability=c.probability,
+                        scoring="msac",
                         min_inliers=min_inl,
                         initial=init,
                         rng=rng,
@@ -568,17 +616,18 @@ class PlaneTracker:
             R = plane_covariance(inlier_points, normal, d)
             R += np.eye(3) * (c.measurement_noise * max(d, 1.0) ** 2) ** 2
             if self.kf is None:
-                self.kf = constant_velocity(3, 1.0 / 30.0, c.process_noise, 1.0)
-                self.kf.x[:3] = z
-                self.kf.P = np.zeros((6, 6))
-                self.kf.P[:3, :3] = R
-                self.kf.P[3:, 3:] = np.eye(3)  # velocity unknown: 1 m/s standard deviation
+                self.kf = self._new_filter(z, R)
                 accepted, status = True, "new"
             elif self.kf.mahalanobis(z, R=R) ** 2 <= self._gate:
                 self.kf.update(z, R=R)
                 accepted, status = True, "tracking"
+            elif self._reacquire(z, R):
+                self.kf, self._candidate = self._candidate, None
+                accepted, status = True, "new"
             else:
                 gated = True
+        if not gated:
+            self._candidate = None
         if not accepted:
             if not found:
                 self._prev_ratio = None
