@@ -51,6 +51,29 @@ def median_ms(fn: Callable[[], object], repeats: int = 30, warmup: int = 3) -> f
     return float(np.median(times) * 1e3)
 
 
+def paired_ms(
+    ours: Callable[[], object],
+    ref: Callable[[], object],
+    repeats: int = 30,
+    warmup: int = 3,
+) -> tuple[float, float]:
+    """Median wall times of ``ours()`` and ``ref()`` in milliseconds, the calls
+    alternating (ours, ref, ours, ref, ...) so that a slow spell of a shared machine
+    falls on both sides rather than on whichever ran during it."""
+    for _ in range(warmup):
+        ours()
+        ref()
+    a, b = [], []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        ours()
+        a.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        ref()
+        b.append(time.perf_counter() - t)
+    return float(np.median(a) * 1e3), float(np.median(b) * 1e3)
+
+
 def machine() -> dict[str, Any]:
     import os
 
