@@ -12,6 +12,7 @@ BENCHMARKS = {
     "imaging": "benchmarks.imaging",
     "pointcloud": "benchmarks.pointcloud",
     "plane_tracking": "benchmarks.plane_tracking",
+    "features": "benchmarks.features",
 }
 
 

@@ -30,7 +30,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from robopercept.cli import cloud, imaging, info, tracking
+    from robopercept.cli import cloud, features, imaging, info, tracking
 
     parser = _Parser(
         prog="robopercept",
@@ -41,6 +41,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     info.register(sub)
     imaging.register(sub)
+    features.register(sub)
     cloud.register(sub)
     tracking.register(sub)
     return parser

@@ -89,109 +89,138 @@ def _fast_path(
 
 
 @njit(cache=True, nogil=True)
-def _box_response_kernel(
-    img, ridx, cidx, kd, ks, scale, block, bidx_r, bidx_c, k, mode, out
-):  # pragma: no cover - compiled
-    # The structure tensor with a box window and its response in two fused passes
-    # (float32 throughout, like OpenCV):
-    # 1. per row: the separable Sobel pair (down the padded rows ridx the smoothing and
-    #    derivative kernels, then along the columns, padded through cidx) and the three
-    #    products A = gx^2, B = gx gy, C = gy^2 of the scaled derivatives;
-    # 2. per row: the unnormalized block x block box sum of A, B, C (rows bidx_r, columns
-    #    bidx_c, anchored at block // 2, borders as in pass 1), then
-    #    mode 0: A C - B^2 - k (A + C)^2, mode 1: the smaller eigenvalue.
-    # ridx / cidx / bidx_* hold the source index of every padded position (-1: zero).
-    # Every inner loop runs along a contiguous row, so it vectorizes.
-    h, w = img.shape
+def _product_row(img, ridx, cidx, kd, ks, scale, y, sm, dv, gx, gy, pa, pb, pc):  # pragma: no cover
+    # row y of A = gx^2, B = gx gy, C = gy^2: the separable Sobel pair (down the padded
+    # rows ridx the smoothing and derivative kernels, then along the columns, padded
+    # through cidx; -1 means zero), scaled. Inner loops run along contiguous rows.
+    w = img.shape[1]
     nk = kd.shape[0]
     r = nk // 2
     wp = w + 2 * r
-    sm = np.empty(wp, dtype=np.float32)
-    dv = np.empty(wp, dtype=np.float32)
+    zero = np.float32(0.0)
+    for x in range(wp):
+        sm[x] = zero
+        dv[x] = zero
+    for t in range(nk):
+        yy = ridx[y + t]
+        if yy < 0:
+            continue
+        a = ks[t]
+        b = kd[t]
+        row = img[yy]
+        for x in range(w):
+            v = row[x]
+            sm[r + x] += a * v
+            dv[r + x] += b * v
+    for q in range(wp):  # the padded columns
+        if q < r or q >= r + w:
+            x = cidx[q]
+            sm[q] = sm[r + x] if x >= 0 else zero
+            dv[q] = dv[r + x] if x >= 0 else zero
+    for x in range(w):
+        gx[x] = zero
+        gy[x] = zero
+    for t in range(nk):
+        a = kd[t]
+        b = ks[t]
+        for x in range(w):
+            gx[x] += a * sm[x + t]
+            gy[x] += b * dv[x + t]
+    for x in range(w):
+        u = gx[x] * scale
+        v = gy[x] * scale
+        pa[x] = u * u
+        pb[x] = u * v
+        pc[x] = v * v
+
+
+@njit(cache=True, nogil=True)
+def _box_response_kernel(
+    img, ridx, cidx, kd, ks, scale, block, bidx_r, bidx_c, k, mode, out
+):  # pragma: no cover - compiled
+    # The structure tensor with a box window and its response, streamed row by row
+    # (float32 throughout, like OpenCV): product rows (_product_row) are kept in a ring
+    # of 2 block + 1 rows, computed when first needed; output row y sums the block rows
+    # bidx_r[y .. y + block - 1] (anchored at block // 2, borders as the derivatives),
+    # then the block columns, then mode 0: A C - B^2 - k (A + C)^2, mode 1: the smaller
+    # eigenvalue. No image-sized temporary: only the output is allocated.
+    h, w = img.shape
+    r = kd.shape[0] // 2
+    sm = np.empty(w + 2 * r, dtype=np.float32)
+    dv = np.empty(w + 2 * r, dtype=np.float32)
     gx = np.empty(w, dtype=np.float32)
     gy = np.empty(w, dtype=np.float32)
-    prod = np.empty((3, h, w), dtype=np.float32)
-    zero = np.float32(0.0)
-    for y in range(h):
-        for x in range(wp):
-            sm[x] = zero
-            dv[x] = zero
-        for t in range(nk):
-            yy = ridx[y + t]
-            if yy < 0:
-                continue
-            a = ks[t]
-            b = kd[t]
-            row = img[yy]
-            for x in range(w):
-                v = row[x]
-                sm[r + x] += a * v
-                dv[r + x] += b * v
-        for xp in range(r):  # the padded columns
-            for q in (xp, wp - 1 - xp):
-                x = cidx[q]
-                sm[q] = sm[r + x] if x >= 0 else zero
-                dv[q] = dv[r + x] if x >= 0 else zero
-        for x in range(w):
-            gx[x] = zero
-            gy[x] = zero
-        for t in range(nk):
-            a = kd[t]
-            b = ks[t]
-            for x in range(w):
-                gx[x] += a * sm[x + t]
-                gy[x] += b * dv[x + t]
-        pa = prod[0, y]
-        pb = prod[1, y]
-        pc = prod[2, y]
-        for x in range(w):
-            u = gx[x] * scale
-            v = gy[x] * scale
-            pa[x] = u * u
-            pb[x] = u * v
-            pc[x] = v * v
+    ring = 2 * block + 1
+    prod = np.empty((ring, 3, w), dtype=np.float32)
+    tag = np.full(ring, -1, dtype=np.int64)
     anchor = block // 2
     bw = w + block - 1
     col = np.empty((3, bw), dtype=np.float32)
+    sa = np.empty(w, dtype=np.float32)
+    sb = np.empty(w, dtype=np.float32)
+    sc = np.empty(w, dtype=np.float32)
+    zero = np.float32(0.0)
     kk = np.float32(k)
     half = np.float32(0.5)
     for y in range(h):
         for c in range(3):
-            cc = col[c]
             for x in range(bw):
-                cc[x] = zero
-            for t in range(block):
-                yy = bidx_r[y + t]
-                if yy < 0:
-                    continue
-                src = prod[c, yy]
+                col[c, x] = zero
+        for t in range(block):
+            yy = bidx_r[y + t]
+            if yy < 0:
+                continue
+            slot = yy % ring
+            if tag[slot] != yy:
+                _product_row(
+                    img,
+                    ridx,
+                    cidx,
+                    kd,
+                    ks,
+                    scale,
+                    yy,
+                    sm,
+                    dv,
+                    gx,
+                    gy,
+                    prod[slot, 0],
+                    prod[slot, 1],
+                    prod[slot, 2],
+                )
+                tag[slot] = yy
+            for c in range(3):
+                src = prod[slot, c]
+                cc = col[c]
                 for x in range(w):
                     cc[anchor + x] += src[x]
+        for c in range(3):
+            cc = col[c]
             for q in range(bw):
                 if q < anchor or q >= anchor + w:
                     x = bidx_c[q]
                     cc[q] = cc[anchor + x] if x >= 0 else zero
-        orow = out[y]
         for x in range(w):
-            gx[x] = zero
-            gy[x] = zero
-            dv[x] = zero
+            sa[x] = zero
+            sb[x] = zero
+            sc[x] = zero
         for t in range(block):
             for x in range(w):
-                gx[x] += col[0, x + t]
-                gy[x] += col[1, x + t]
-                dv[x] += col[2, x + t]
+                sa[x] += col[0, x + t]
+                sb[x] += col[1, x + t]
+                sc[x] += col[2, x + t]
+        orow = out[y]
         if mode == 0:
             for x in range(w):
-                a = gx[x]
-                b = gy[x]
-                c2 = dv[x]
+                a = sa[x]
+                b = sb[x]
+                c2 = sc[x]
                 orow[x] = a * c2 - b * b - kk * (a + c2) * (a + c2)
         else:
             for x in range(w):
-                a = gx[x] * half
-                b = gy[x]
-                c2 = dv[x] * half
+                a = sa[x] * half
+                b = sb[x]
+                c2 = sc[x] * half
                 d = a - c2
                 orow[x] = (a + c2) - np.sqrt(d * d + b * b)
 
