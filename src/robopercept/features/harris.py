@@ -72,17 +72,31 @@ def _gray(image: np.ndarray) -> np.ndarray:
     return rgb_to_gray(image) if image.ndim == 3 else image
 
 
+def _checked(
+    image: np.ndarray, block_size: int, ksize: int, window: str, border: str
+) -> tuple[np.ndarray, int, float]:
+    # the gray image, the block size and the derivative scale (_scale)
+    gray = _gray(image)
+    block_size = check_int(block_size, "block_size", 1)
+    check_choice(window, "window", ("box", "gaussian"))
+    check_choice(border, "border", BORDERS)
+    if ksize not in (1, 3, 5, 7):
+        raise InputError(f"ksize must be 1, 3, 5 or 7; got {ksize!r}")
+    return gray, block_size, _scale(gray.dtype, ksize, block_size)
+
+
+def _scale(dtype: np.dtype, ksize: int, block_size: int) -> float:
+    # OpenCV's derivative scale 1 / (2^(ksize - 1) * block_size [* 255 for uint8])
+    s = float(1 << (ksize - 1)) * block_size
+    return 1.0 / (s * 255.0 if dtype == np.uint8 else s)
+
+
 def _fast_path(
     image: np.ndarray, block_size: int, ksize: int, window: str, border: str
 ) -> np.ndarray | None:
     # the gray image when the fused float32 box-window kernel applies (OpenCV's case:
     # uint8 or float32 input, box window), else None (then the composed filters run)
-    gray = _gray(image)
-    block_size = check_int(block_size, "block_size", 1)
-    check_choice(border, "border", BORDERS)
-    check_choice(window, "window", ("box", "gaussian"))
-    if ksize not in (1, 3, 5, 7):
-        raise InputError(f"ksize must be 1, 3, 5 or 7; got {ksize!r}")
+    gray, _, _ = _checked(image, block_size, ksize, window, border)
     if window != "box" or gray.dtype not in (np.uint8, np.float32):
         return None
     return gray
@@ -228,9 +242,7 @@ def _box_response_kernel(
 def _fast_response(
     gray: np.ndarray, block_size: int, ksize: int, k: float, mode: int, border: str
 ) -> np.ndarray:
-    scale = float(1 << (ksize - 1)) * block_size
-    if gray.dtype == np.uint8:
-        scale *= 255.0
+    scale = _scale(gray.dtype, ksize, block_size)
     img = np.ascontiguousarray(gray, dtype=np.float32)
     kd = derivative_kernel(1, ksize).astype(np.float32)
     ks = derivative_kernel(0, ksize).astype(np.float32)
@@ -246,7 +258,7 @@ def _fast_response(
         border_indices(w, r, r, border),
         kd,
         ks,
-        np.float32(1.0 / scale),
+        np.float32(scale),
         block_size,
         border_indices(h, anchor, block_size - 1 - anchor, border),
         border_indices(w, anchor, block_size - 1 - anchor, border),
@@ -292,16 +304,7 @@ def structure_tensor(
         (float64 for float64 input). Derivatives scaled as OpenCV scales them (see the
         module docstring).
     """
-    gray = _gray(image)
-    block_size = check_int(block_size, "block_size", 1)
-    check_choice(window, "window", ("box", "gaussian"))
-    check_choice(border, "border", BORDERS)
-    if ksize not in (1, 3, 5, 7):
-        raise InputError(f"ksize must be 1, 3, 5 or 7; got {ksize!r}")
-    scale = float(1 << (ksize - 1)) * block_size
-    if gray.dtype == np.uint8:
-        scale *= 255.0  # uint8 is read as [0, 1], as OpenCV does
-    scale = 1.0 / scale
+    gray, block_size, scale = _checked(image, block_size, ksize, window, border)
     gx = sobel(gray, 1, 0, ksize, scale=scale, border=border)
     gy = sobel(gray, 0, 1, ksize, scale=scale, border=border)
     # the three products as one 3-channel image: one separable pass filters all three
