@@ -41,3 +41,23 @@ def test_features_text_and_bad_arguments(tmp_path, capsys):
     assert main(["features", "--max", "0", "-o", str(tmp_path / "g.png")]) == 2
     assert "--max" in capsys.readouterr().err
     assert main(["features", str(tmp_path / "missing.png")]) == 2
+
+
+def test_hog_picture_and_json(tmp_path, capsys):
+    from robopercept.features import hog
+
+    img = np.zeros((64, 48), dtype=np.uint8)
+    img[:, 24:] = 200  # one vertical edge
+    src = write_image(tmp_path / "edge.png", img)
+    out = tmp_path / "hog.png"
+    assert main(["hog", str(src), "-o", str(out), "--json", "--scale", "1"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["cells"] == [8, 6]
+    assert report["descriptor_length"] == hog(img).shape[0] == 7 * 5 * 36
+    pic = read_image(out)
+    assert pic.shape == (64, 48, 3)
+    # glyphs only in the two cell columns beside the edge (columns 16..31)
+    lit = np.nonzero(pic.max(axis=(0, 2)))[0]
+    assert lit.min() >= 16 and lit.max() <= 31
+    assert main(["hog", str(src), "--cell", "100", "-o", str(out)]) == 2
+    assert "smaller than one" in capsys.readouterr().err

@@ -3,6 +3,7 @@
 from robopercept.viz.cloud import render_points
 from robopercept.viz.colormap import colorize_depth, colorize_signed, label_colors
 from robopercept.viz.draw import draw_boxes, draw_lines, draw_mask, draw_points, draw_text
+from robopercept.viz.features import draw_matches, hog_picture
 
 __all__ = [
     "colorize_depth",
@@ -10,8 +11,10 @@ __all__ = [
     "draw_boxes",
     "draw_lines",
     "draw_mask",
+    "draw_matches",
     "draw_points",
     "draw_text",
+    "hog_picture",
     "label_colors",
     "render_points",
 ]
