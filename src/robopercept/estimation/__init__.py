@@ -1,5 +1,7 @@
-"""Robust estimation: least squares, the RANSAC engine and its models."""
+"""Robust estimation: least squares, the RANSAC engine and its models, homographies
+from matches."""
 
+from robopercept.estimation.homography import HomographyFit, find_homography
 from robopercept.estimation.least_squares import (
     Line,
     LineFit,
@@ -19,6 +21,7 @@ from robopercept.estimation.ransac import RansacResult, ransac, required_iterati
 
 __all__ = [
     "AffineModel",
+    "HomographyFit",
     "HomographyModel",
     "Line",
     "LineFit",
@@ -28,6 +31,7 @@ __all__ = [
     "PlaneFit",
     "PlaneModel",
     "RansacResult",
+    "find_homography",
     "fit_line",
     "fit_plane",
     "ransac",

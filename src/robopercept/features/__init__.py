@@ -1,4 +1,5 @@
-"""2-D features: corners (Harris, Shi-Tomasi), HOG, descriptor matching (SIFT to come)."""
+"""2-D features: corners (Harris, Shi-Tomasi), HOG, SIFT, descriptor matching, and
+two-image matching and stitching."""
 
 from robopercept.features.harris import (
     harris_corners,
@@ -10,10 +11,15 @@ from robopercept.features.harris import (
 from robopercept.features.hog import cell_histograms, hog, hog_windows
 from robopercept.features.keypoints import Keypoints
 from robopercept.features.matching import Matches, knn_match, match_descriptors
+from robopercept.features.sift import Features, sift
+from robopercept.features.stitching import ImageMatch, Panorama, match_images, stitch
 
 __all__ = [
+    "Features",
+    "ImageMatch",
     "Keypoints",
     "Matches",
+    "Panorama",
     "cell_histograms",
     "harris_corners",
     "harris_response",
@@ -21,7 +27,10 @@ __all__ = [
     "hog_windows",
     "knn_match",
     "match_descriptors",
+    "match_images",
     "min_eigenvalue",
     "refine_corners",
+    "sift",
+    "stitch",
     "structure_tensor",
 ]

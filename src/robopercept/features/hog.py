@@ -54,6 +54,7 @@ from numba import njit, prange
 
 from robopercept._checks import check_choice, check_image, check_int, check_positive
 from robopercept.errors import InputError
+from robopercept.features._atan import atan2_deg
 
 __all__ = ["cell_histograms", "hog", "hog_windows"]
 
@@ -76,35 +77,6 @@ def _pair(value: int | tuple[int, int], name: str) -> tuple[int, int]:
 
 
 # --------------------------------------------------------------------------- gradients
-
-
-_P1 = np.float32(0.9997878412794807 * 180 / math.pi)
-_P3 = np.float32(-0.3258083974640975 * 180 / math.pi)
-_P5 = np.float32(0.1555786518463281 * 180 / math.pi)
-_P7 = np.float32(-0.04432655554792128 * 180 / math.pi)
-
-
-@njit(cache=True, nogil=True)
-def _atan2_opencv(y, x):  # pragma: no cover - compiled
-    # OpenCV's float32 atan2 (cv::cartToPolar): an odd minimax polynomial of degree 7
-    # in c = min(|x|, |y|) / max(|x|, |y|) on [0, 1], in degrees (max error ~0.01 deg),
-    # unfolded by octant; returns radians in [0, 2 pi)
-    ax = abs(x)
-    ay = abs(y)
-    eps = np.float32(2.220446049250313e-16)
-    if ax >= ay:
-        c = np.float32(ay / (ax + eps))
-        c2 = c * c
-        a = (((_P7 * c2 + _P5) * c2 + _P3) * c2 + _P1) * c
-    else:
-        c = np.float32(ax / (ay + eps))
-        c2 = c * c
-        a = np.float32(90.0) - (((_P7 * c2 + _P5) * c2 + _P3) * c2 + _P1) * c
-    if x < 0:
-        a = np.float32(180.0) - a
-    if y < 0:
-        a = np.float32(360.0) - a
-    return np.float32(a * np.float32(math.pi / 180.0))
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -143,7 +115,7 @@ def _opencv_votes(img, gamma, nbins, signed, bins, votes):  # pragma: no cover -
                     bdx = dx
                     bdy = dy
             mag = np.float32(math.sqrt(best))
-            ang = _atan2_opencv(bdy, bdx)
+            ang = atan2_deg(bdy, bdx) * np.float32(math.pi / 180.0)
             t = np.float32(ang * ascale) - np.float32(0.5)
             hidx = math.floor(t)
             t -= np.float32(hidx)

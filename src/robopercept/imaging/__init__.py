@@ -21,6 +21,7 @@ from robopercept.imaging.filters import (
 from robopercept.imaging.io import VideoReader, VideoWriter, read_image, write_image
 from robopercept.imaging.morphology import closing, dilate, erode, opening, structuring_element
 from robopercept.imaging.pyramids import gaussian_pyramid, pyr_down
+from robopercept.imaging.warp import transform_points, warp_perspective
 
 __all__ = [
     "BlobFeatures",
@@ -55,5 +56,7 @@ __all__ = [
     "rgb_to_hsv",
     "sobel",
     "structuring_element",
+    "transform_points",
+    "warp_perspective",
     "write_image",
 ]
