@@ -61,3 +61,59 @@ def test_hog_picture_and_json(tmp_path, capsys):
     assert lit.min() >= 16 and lit.max() <= 31
     assert main(["hog", str(src), "--cell", "100", "-o", str(out)]) == 2
     assert "smaller than one" in capsys.readouterr().err
+
+
+def _crops(tmp_path):
+    from skimage import data
+
+    img = data.astronaut()
+    a = write_image(tmp_path / "a.png", img[40:360, 0:330])
+    b = write_image(tmp_path / "b.png", img[80:400, 150:480])
+    return a, b
+
+
+def test_sift_detector_json(tmp_path, capsys):
+    from skimage import data
+
+    from robopercept.features import sift
+
+    src = write_image(tmp_path / "cam.png", data.camera()[100:300, 100:300])
+    assert (
+        main(["features", str(src), "--detector", "sift", "--json", "-o", str(tmp_path / "s.png")])
+        == 0
+    )
+    report = json.loads(capsys.readouterr().out)
+    kp = sift(read_image(src, mode="gray"), n_features=500).keypoints
+    got = np.array([[k["x"], k["y"], k["size"]] for k in report["keypoints"]])
+    np.testing.assert_allclose(got, np.c_[kp.xy, kp.scale])
+    assert all(k["angle_deg"] is not None for k in report["keypoints"])
+
+
+def test_match_prints_translation_and_draws(tmp_path, capsys):
+    a, b = _crops(tmp_path)
+    out = tmp_path / "m.png"
+    assert main(["match", str(a), str(b), "-o", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    h = np.array(report["H"])
+    # B is A shifted by (-150, -40): x_b = x_a - 150, y_b = y_a - 40
+    from robopercept.imaging import transform_points
+
+    grid = np.array([[x, y] for x in (160, 240, 320) for y in (60, 160, 300)], float)
+    np.testing.assert_allclose(transform_points(h, grid), grid - [150, 40], atol=0.3)
+    assert report["inliers"] > 100 and report["inliers"] <= report["matches"]
+    pic = read_image(out)
+    assert pic.shape == (320, 660, 3)
+    assert main(["match", str(a), str(b), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "inliers" in text and "H (A -> B)" in text
+
+
+def test_stitch_writes_panorama(tmp_path, capsys):
+    a, b = _crops(tmp_path)
+    out = tmp_path / "p.png"
+    assert main(["stitch", str(a), str(b), "-o", str(out)]) == 0
+    assert "panorama 480x360" in capsys.readouterr().out
+    assert read_image(out).shape == (360, 480, 3)
+    flat = write_image(tmp_path / "flat.png", np.full((100, 100, 3), 80, np.uint8))
+    assert main(["stitch", str(a), str(flat), "-o", str(out)]) == 2
+    assert "homography needs 4" in capsys.readouterr().err

@@ -1,5 +1,6 @@
-"""``robopercept features`` (detect keypoints and draw them) and ``robopercept hog``
-(the HOG picture of an image)."""
+"""``robopercept features`` (detect keypoints and draw them), ``robopercept hog`` (the
+HOG picture of an image), ``robopercept match`` (SIFT matches and their homography) and
+``robopercept stitch`` (a two-image panorama)."""
 
 from __future__ import annotations
 
@@ -7,15 +8,17 @@ import argparse
 import json
 import time
 
+import numpy as np
+
 __all__ = ["register"]
 
-DETECTORS = ("harris", "shi-tomasi")
+DETECTORS = ("harris", "shi-tomasi", "sift")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "features",
-        help="detect corners (Harris, Shi-Tomasi) and draw them",
+        help="detect keypoints (Harris, Shi-Tomasi corners, SIFT) and draw them",
         description="Detect keypoints in IMAGE and write a PNG with them drawn; "
         "--json prints them as JSON.",
     )
@@ -59,28 +62,74 @@ def register(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--json", action="store_true", help="print sizes and timing as JSON")
     h.set_defaults(func=run_hog)
 
+    m = sub.add_parser(
+        "match",
+        help="match SIFT features of two images and fit a homography",
+        description="SIFT in A and B, Lowe's ratio test, RANSAC homography A -> B; writes "
+        "the two images side by side with inlier matches in green and outliers in red, and "
+        "prints the match and inlier counts and H.",
+    )
+    m.add_argument("image_a")
+    m.add_argument("image_b")
+    m.add_argument("-o", "--output", default="matches.png", help="output PNG")
+    m.add_argument("--ratio", type=float, default=0.8, help="ratio test (default: 0.8)")
+    m.add_argument("--threshold", type=float, default=3.0, help="RANSAC pixels (default: 3)")
+    m.add_argument("--json", action="store_true", help="print counts and H as JSON")
+    m.set_defaults(func=run_match)
+
+    st = sub.add_parser(
+        "stitch",
+        help="stitch two overlapping images into a panorama",
+        description="SIFT matches, a RANSAC homography and a feathered blend in A's frame.",
+    )
+    st.add_argument("image_a")
+    st.add_argument("image_b")
+    st.add_argument("-o", "--output", default="panorama.png", help="output PNG")
+    st.add_argument("--blend", choices=("feather", "average", "none"), default="feather")
+    st.add_argument("--ratio", type=float, default=0.8, help="ratio test (default: 0.8)")
+    st.add_argument("--threshold", type=float, default=3.0, help="RANSAC pixels (default: 3)")
+    st.set_defaults(func=run_stitch)
+
 
 def run_features(args: argparse.Namespace) -> int:
     from robopercept.cli.imaging import _load_gray
     from robopercept.features import harris_corners
     from robopercept.imaging import write_image
-    from robopercept.viz import draw_points
+    from robopercept.viz import draw_lines, draw_points
 
     if args.max < 1:
         raise ValueError(f"--max must be >= 1; got {args.max}")
     src, gray = _load_gray(args.image)
     t0 = time.perf_counter()
-    kp = harris_corners(
-        gray,
-        method=args.detector,
-        block_size=args.block_size,
-        threshold=args.quality,
-        min_distance=args.min_distance,
-        max_corners=args.max,
-        subpixel=args.subpixel,
-    )
+    if args.detector == "sift":
+        from robopercept.features import sift
+
+        kp = sift(gray, n_features=args.max).keypoints
+    else:
+        kp = harris_corners(
+            gray,
+            method=args.detector,
+            block_size=args.block_size,
+            threshold=args.quality,
+            min_distance=args.min_distance,
+            max_corners=args.max,
+            subpixel=args.subpixel,
+        )
     ms = (time.perf_counter() - t0) * 1e3
-    written = write_image(args.output, draw_points(gray, kp.xy, color=(255, 0, 0), radius=3))
+    if args.detector == "sift":
+        # a circle of the keypoint's size and a radius along its orientation
+        pic = gray
+        for r in sorted(set(np.clip(np.round(kp.scale / 2), 2, 40).astype(int).tolist())):
+            sel = np.clip(np.round(kp.scale / 2), 2, 40).astype(int) == r
+            pic = draw_points(pic, kp.xy[sel], color=(255, 0, 0), radius=r)
+        tip = (
+            kp.xy
+            + (np.clip(kp.scale / 2, 2, 40) * [np.cos(kp.orientation), np.sin(kp.orientation)]).T
+        )
+        pic = draw_lines(pic, np.hstack([kp.xy, tip]), color=(255, 0, 0))
+    else:
+        pic = draw_points(gray, kp.xy, color=(255, 0, 0), radius=3)
+    written = write_image(args.output, pic)
     if args.json:
         print(
             json.dumps(
@@ -89,8 +138,16 @@ def run_features(args: argparse.Namespace) -> int:
                     "detector": args.detector,
                     "ms": round(ms, 3),
                     "keypoints": [
-                        {"x": float(x), "y": float(y), "response": float(r)}
-                        for (x, y), r in zip(kp.xy, kp.response, strict=True)
+                        {
+                            "x": float(x),
+                            "y": float(y),
+                            "size": float(sz),
+                            "angle_deg": None if np.isnan(a) else float(np.degrees(a)),
+                            "response": float(r),
+                        }
+                        for (x, y), sz, a, r in zip(
+                            kp.xy, kp.scale, kp.orientation, kp.response, strict=True
+                        )
                     ],
                 }
             )
@@ -129,4 +186,60 @@ def run_hog(args: argparse.Namespace) -> int:
             f"hog: {cells.shape[1]}x{cells.shape[0]} cells of {args.cell} px, {args.bins} bins, "
             f"descriptor of {desc.shape[0]} values in {ms:.1f} ms -> {written}"
         )
+    return 0
+
+
+def _load_pair(args: argparse.Namespace):
+    from robopercept.imaging import read_image
+
+    return read_image(args.image_a, mode="rgb"), read_image(args.image_b, mode="rgb")
+
+
+def run_match(args: argparse.Namespace) -> int:
+    from robopercept.features import match_images
+    from robopercept.imaging import write_image
+    from robopercept.viz import draw_matches
+
+    a, b = _load_pair(args)
+    t0 = time.perf_counter()
+    m = match_images(a, b, ratio=args.ratio, threshold=args.threshold)
+    ms = (time.perf_counter() - t0) * 1e3
+    pic = draw_matches(a, m.xy_a, b, m.xy_b, inliers=m.fit.inliers)
+    written = write_image(args.output, pic)
+    report = {
+        "keypoints": [len(m.features_a), len(m.features_b)],
+        "matches": len(m.matches.query_idx),
+        "inliers": m.fit.n_inliers,
+        "rms_px": round(m.fit.rms, 4),
+        "H": np.round(m.fit.H, 8).tolist(),
+        "ms": round(ms, 1),
+        "picture": str(written),
+    }
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(
+            f"match: {report['keypoints'][0]} / {report['keypoints'][1]} SIFT keypoints, "
+            f"{report['matches']} matches, {report['inliers']} inliers "
+            f"(rms {m.fit.rms:.2f} px), {ms:.0f} ms -> {written}"
+        )
+        print("H (A -> B) =")
+        for row in m.fit.H:
+            print("  " + "  ".join(f"{v: .6g}" for v in row))
+    return 0
+
+
+def run_stitch(args: argparse.Namespace) -> int:
+    from robopercept.features import stitch
+    from robopercept.imaging import write_image
+
+    a, b = _load_pair(args)
+    t0 = time.perf_counter()
+    p = stitch(a, b, blend=args.blend, ratio=args.ratio, threshold=args.threshold)
+    ms = (time.perf_counter() - t0) * 1e3
+    written = write_image(args.output, p.image)
+    print(
+        f"stitch: {p.match.fit.n_inliers} inliers of {len(p.match.matches.query_idx)} "
+        f"matches, panorama {p.image.shape[1]}x{p.image.shape[0]}, {ms:.0f} ms -> {written}"
+    )
     return 0

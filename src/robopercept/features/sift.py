@@ -193,20 +193,19 @@ def _derivatives(dog, s, r, c, grad, hess):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True)
 def _is_extremum(dog, s, r, c, val):  # pragma: no cover - compiled
-    # val >= all 26 neighbours (val > 0) or <= all of them (val < 0)
+    # val >= all 26 neighbours (val > 0) or <= all of them (val < 0); the same layer
+    # first, where most candidates fail
     if val > 0:
-        for ds in range(-1, 2):
-            img = dog[s + ds]
+        for ds in (0, -1, 1):
             for dr in range(-1, 2):
                 for dc in range(-1, 2):
-                    if img[r + dr, c + dc] > val:
+                    if dog[s + ds, r + dr, c + dc] > val:
                         return False
         return True
-    for ds in range(-1, 2):
-        img = dog[s + ds]
+    for ds in (0, -1, 1):
         for dr in range(-1, 2):
             for dc in range(-1, 2):
-                if img[r + dr, c + dc] < val:
+                if dog[s + ds, r + dr, c + dc] < val:
                     return False
     return True
 
