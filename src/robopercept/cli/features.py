@@ -69,11 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the two images side by side with inlier matches in green and outliers in red, and "
         "prints the match and inlier counts and H.",
     )
-    m.add_argument("image_a")
-    m.add_argument("image_b")
-    m.add_argument("-o", "--output", default="matches.png", help="output PNG")
-    m.add_argument("--ratio", type=float, default=0.8, help="ratio test (default: 0.8)")
-    m.add_argument("--threshold", type=float, default=3.0, help="RANSAC pixels (default: 3)")
+    _pair_arguments(m, "matches.png")
     m.add_argument("--json", action="store_true", help="print counts and H as JSON")
     m.set_defaults(func=run_match)
 
@@ -82,13 +78,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="stitch two overlapping images into a panorama",
         description="SIFT matches, a RANSAC homography and a feathered blend in A's frame.",
     )
-    st.add_argument("image_a")
-    st.add_argument("image_b")
-    st.add_argument("-o", "--output", default="panorama.png", help="output PNG")
+    _pair_arguments(st, "panorama.png")
     st.add_argument("--blend", choices=("feather", "average", "none"), default="feather")
-    st.add_argument("--ratio", type=float, default=0.8, help="ratio test (default: 0.8)")
-    st.add_argument("--threshold", type=float, default=3.0, help="RANSAC pixels (default: 3)")
     st.set_defaults(func=run_stitch)
+
+
+def _pair_arguments(p: argparse.ArgumentParser, output: str) -> None:
+    # the two images, the output picture and the matching options of match / stitch
+    p.add_argument("image_a")
+    p.add_argument("image_b")
+    p.add_argument("-o", "--output", default=output, help="output PNG (default: %(default)s)")
+    p.add_argument("--ratio", type=float, default=0.8, help="ratio test (default: 0.8)")
+    p.add_argument("--threshold", type=float, default=3.0, help="RANSAC pixels (default: 3)")
 
 
 def run_features(args: argparse.Namespace) -> int:
