@@ -165,3 +165,27 @@ def test_bad_input():
         sift(np.zeros((40, 40), np.uint8), descriptor_dtype=np.int16)
     with pytest.raises(InputError, match="n_features"):
         sift(np.zeros((40, 40), np.uint8), n_features=-1)
+
+
+def test_rows_fuller_than_the_parallel_store(monkeypatch):
+    # a row of 32 blobs puts up to 31 extrema on one scan row, more than the parallel
+    # scan keeps per row (16): those rows are rescanned, with the same result as a
+    # store large enough for all of them
+    import importlib
+
+    # (the package's `sift` attribute is the function, so fetch the module by name)
+    sift_module = importlib.import_module("robopercept.features.sift")
+
+    y, x = np.mgrid[0:40, 0:400]
+    gain = np.random.default_rng(1).uniform(0.5, 1, 32)
+    img = sum(
+        g * np.exp(-((x - cx) ** 2 + (y - 20) ** 2) / (2 * 1.5**2))
+        for g, cx in zip(gain, range(10, 390, 12), strict=True)
+    )
+    img = (img / img.max() * 255).astype(np.uint8)
+    small = sift(img)
+    monkeypatch.setattr(sift_module, "_ROW_CAP", 1000)
+    large = sift(img)
+    assert len(small) > 100
+    np.testing.assert_array_equal(small.keypoints.xy, large.keypoints.xy)
+    np.testing.assert_array_equal(small.descriptors, large.descriptors)

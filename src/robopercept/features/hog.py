@@ -130,6 +130,23 @@ def _opencv_votes(img, gamma, nbins, signed, bins, votes):  # pragma: no cover -
             bins[y, x, 1] = hidx if hidx < nbins else 0
 
 
+def _votes(
+    image: np.ndarray, nbins: int, gamma: bool, signed: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    # (H, W, 2) bins and votes of every pixel (_opencv_votes) on the 0..255 scale:
+    # uint8 as it is, float images in [0, 1] times 255
+    img = image.astype(np.float32)
+    if image.dtype != np.uint8:
+        img *= np.float32(255.0)
+    if img.ndim == 2:
+        img = img[:, :, None]
+    h, w = img.shape[:2]
+    votes = np.empty((h, w, 2), np.float32)
+    bins = np.empty((h, w, 2), np.uint8)
+    _opencv_votes(np.ascontiguousarray(img), gamma, nbins, signed, bins, votes)
+    return bins, votes
+
+
 def _skimage_gradient(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # skimage's gradient: centred differences, zero on the outer rows/columns, the
     # channel of the largest magnitude (the first on ties); returns magnitude and
@@ -344,16 +361,7 @@ class _Params:
         # the normalized block histograms on the block grid, (ny, nx, block_len),
         # each in the convention's block layout
         if self.convention == "opencv":
-            img = image.astype(np.float32)
-            if image.dtype != np.uint8:
-                img *= np.float32(255.0)
-            if img.ndim == 2:
-                img = img[:, :, None]
-            h, w = img.shape[:2]
-            votes = np.empty((h, w, 2), np.float32)
-            bins = np.empty((h, w, 2), np.uint8)
-            img = np.ascontiguousarray(img)
-            _opencv_votes(img, self.gamma, self.nbins, self.signed, bins, votes)
+            bins, votes = _votes(image, self.nbins, self.gamma, self.signed)
             idx, wts = _cell_weights(self.block_px, self.cell, self.block, self.sigma)
             out = np.empty((ny, nx, self.block_len), np.float32)
             sy, sx = self.stride_px
@@ -625,14 +633,7 @@ def cell_histograms(
             f"image of {h}x{w} pixels is smaller than one {cell[0]}x{cell[1]} cell: "
             "use a larger image or smaller cells"
         )
-    img = image.astype(np.float32)
-    if image.dtype != np.uint8:
-        img *= np.float32(255.0)
-    if img.ndim == 2:
-        img = img[:, :, None]
-    votes = np.empty((h, w, 2), np.float32)
-    bins = np.empty((h, w, 2), np.uint8)
-    _opencv_votes(np.ascontiguousarray(img), False, nbins, False, bins, votes)
+    bins, votes = _votes(image, nbins, False, False)
     hh, ww = ny * cell[0], nx * cell[1]
     cy = np.arange(hh) // cell[0]
     cx = np.arange(ww) // cell[1]

@@ -263,67 +263,61 @@ def _refine(dog, layers, s, r, c, contrast, edge, out):  # pragma: no cover - co
     return True
 
 
+@njit(cache=True, nogil=True)
+def _scan_row(dog, layers, s, r, threshold, contrast, edge, out):  # pragma: no cover
+    # the refined extrema of row r of DoG layer s, rows of (r, c, layer, xr, xc, xi,
+    # response) written to out as far as it holds them; returns how many there are
+    w = dog.shape[2]
+    cur = dog[s, r]
+    buf = np.empty(7)
+    n = 0
+    for c in range(_BORDER, w - _BORDER):
+        val = cur[c]
+        if abs(val) > threshold and _is_extremum(dog, s, r, c, val):
+            if _refine(dog, layers, s, r, c, contrast, edge, buf):
+                if n < out.shape[0]:
+                    out[n] = buf
+                n += 1
+    return n
+
+
 @njit(cache=True, nogil=True, parallel=True)
-def _find_extrema(dog, layers, threshold, contrast, edge, found):  # pragma: no cover
-    # every refined extremum of one octave: rows of (r, c, layer, xr, xc, xi, response),
-    # scanned in parallel over rows, gathered in (layer, row, column) order
-    h, w = dog.shape[1], dog.shape[2]
-    rows = h - 2 * _BORDER
-    nscan = layers * max(rows, 0)
-    counts = np.zeros(nscan + 1, np.int64)
-    cap = 16
-    store = np.zeros((nscan, cap, 7))
-    for t in prange(nscan):
+def _scan_rows(dog, layers, threshold, contrast, edge, store, counts):  # pragma: no cover
+    # every scanned row (layers 1..s, rows inside the border) in parallel
+    rows = dog.shape[1] - 2 * _BORDER
+    for t in prange(counts.shape[0]):
         s = 1 + t // rows
         r = _BORDER + t % rows
-        cur = dog[s, r]
-        buf = np.empty(7)
-        n = 0
-        for c in range(_BORDER, w - _BORDER):
-            val = cur[c]
-            if abs(val) > threshold and _is_extremum(dog, s, r, c, val):
-                if _refine(dog, layers, s, r, c, contrast, edge, buf):
-                    if n < cap:
-                        store[t, n] = buf
-                    n += 1
-        counts[t + 1] = n
-    total = 0
-    over = False
-    for t in range(nscan):
-        total += counts[t + 1]
-        if counts[t + 1] > cap:
-            over = True
-    found[0] = total
-    found[1] = 1 if over else 0
-    out = np.empty((total if not over else 0, 7))
-    if not over:
-        k = 0
-        for t in range(nscan):
-            for i in range(counts[t + 1]):
-                out[k] = store[t, i]
-                k += 1
-    return out
+        counts[t] = _scan_row(dog, layers, s, r, threshold, contrast, edge, store[t])
 
 
-@njit(cache=True, nogil=True)
-def _find_extrema_serial(dog, layers, threshold, contrast, edge):  # pragma: no cover
-    # the same scan serially, used when a row holds more extrema than the parallel
-    # scan's per-row store
-    h, w = dog.shape[1], dog.shape[2]
-    buf = np.empty(7)
-    res = []
-    for s in range(1, layers + 1):
-        for r in range(_BORDER, h - _BORDER):
-            cur = dog[s, r]
-            for c in range(_BORDER, w - _BORDER):
-                val = cur[c]
-                if abs(val) > threshold and _is_extremum(dog, s, r, c, val):
-                    if _refine(dog, layers, s, r, c, contrast, edge, buf):
-                        res.append(buf.copy())
-    out = np.empty((len(res), 7))
-    for i in range(len(res)):
-        out[i] = res[i]
-    return out
+_ROW_CAP = 16  # extrema kept per row by the parallel scan; fuller rows are rescanned
+
+
+def _find_extrema(
+    dog: np.ndarray, layers: int, threshold: float, contrast: float, edge: float
+) -> np.ndarray:
+    # every refined extremum of one octave in (layer, row, column) order, (K, 7)
+    rows = max(dog.shape[1] - 2 * _BORDER, 0)
+    nscan = layers * rows
+    store = np.empty((nscan, _ROW_CAP, 7))
+    counts = np.zeros(nscan, np.int64)
+    if nscan:
+        _scan_rows(dog, layers, threshold, contrast, edge, store, counts)
+    if (counts <= _ROW_CAP).all():
+        t_idx = np.repeat(np.arange(nscan), counts)
+        i_idx = np.arange(t_idx.size) - np.repeat(np.cumsum(counts) - counts, counts)
+        return store[t_idx, i_idx]
+    parts = []
+    for t in np.flatnonzero(counts):
+        if counts[t] <= _ROW_CAP:
+            parts.append(store[t, : counts[t]])
+        else:
+            full = np.empty((counts[t], 7))
+            s, r = 1 + t // rows, _BORDER + t % rows
+            _scan_row(dog, layers, s, r, threshold, contrast, edge, full)
+            parts.append(full)
+    return np.concatenate(parts)
 
 
 # ------------------------------------------------------------------------ orientation
@@ -599,10 +593,7 @@ def sift(
     cols: dict[str, list[np.ndarray]] = {k: [] for k in ("x", "y", "size", "ang", "resp", "oct")}
     desc_parts: list[np.ndarray] = []
     for o in range(n_oct):
-        found = np.zeros(2, np.int64)
-        kp = _find_extrema(dogs[o], layers, threshold, contrast, edge, found)
-        if found[1]:
-            kp = _find_extrema_serial(dogs[o], layers, threshold, contrast, edge)
+        kp = _find_extrema(dogs[o], layers, threshold, contrast, edge)
         if kp.shape[0] == 0:
             continue
         angles = np.zeros((kp.shape[0], _ORI_BINS))
