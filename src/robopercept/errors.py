@@ -6,7 +6,13 @@ expected, what came, and how to fix it.
 
 from __future__ import annotations
 
-__all__ = ["DegenerateError", "FileFormatError", "InputError", "RoboperceptError"]
+__all__ = [
+    "DegenerateError",
+    "FileFormatError",
+    "InputError",
+    "NotFittedError",
+    "RoboperceptError",
+]
 
 
 class RoboperceptError(Exception):
@@ -27,3 +33,11 @@ class DegenerateError(RoboperceptError, ArithmeticError):
 
 class FileFormatError(RoboperceptError, OSError):
     """A file is missing, truncated, corrupt or not of a supported format."""
+
+
+class NotFittedError(RoboperceptError, ValueError, AttributeError):
+    """An estimator was asked to predict or transform before ``fit`` was called.
+
+    Subclasses :class:`ValueError` and :class:`AttributeError` like scikit-learn's
+    ``NotFittedError``, so code written for scikit-learn catches it.
+    """

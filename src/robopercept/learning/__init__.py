@@ -1,0 +1,54 @@
+"""Classical machine learning: dimensionality reduction, clustering, classifiers, metrics.
+
+Every estimator keeps scikit-learn's contract (``fit`` returns self, learned attributes
+end in ``_``, ``get_params``/``set_params``), so scikit-learn's ``clone``, ``Pipeline``
+and ``cross_val_score`` accept them; scikit-learn is not needed to use them.
+"""
+
+from __future__ import annotations
+
+from robopercept.learning._base import clone
+from robopercept.learning.lda import LDA
+from robopercept.learning.metrics import (
+    accuracy_score,
+    auc,
+    average_precision_score,
+    classification_report,
+    confusion_matrix,
+    f1_score,
+    precision_recall_curve,
+    precision_score,
+    recall_score,
+    roc_auc_score,
+    roc_curve,
+)
+from robopercept.learning.model_selection import (
+    GridSearch,
+    KFold,
+    StratifiedKFold,
+    cross_val_score,
+    train_test_split,
+)
+from robopercept.learning.pca import PCA
+
+__all__ = [
+    "LDA",
+    "PCA",
+    "GridSearch",
+    "KFold",
+    "StratifiedKFold",
+    "accuracy_score",
+    "auc",
+    "average_precision_score",
+    "classification_report",
+    "clone",
+    "confusion_matrix",
+    "cross_val_score",
+    "f1_score",
+    "precision_recall_curve",
+    "precision_score",
+    "recall_score",
+    "roc_auc_score",
+    "roc_curve",
+    "train_test_split",
+]

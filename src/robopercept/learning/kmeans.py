@@ -1,0 +1,243 @@
+r"""k-means clustering (Lloyd's algorithm with k-means++ seeding).
+
+k-means looks for :math:`k` centres :math:`\mu_j` minimizing the inertia
+
+.. math::
+
+    J = \sum_i \min_j \lVert x_i - \mu_j \rVert^2 .
+
+Lloyd's algorithm alternates the two steps that each lower :math:`J`: assign every
+sample to its nearest centre, then move every centre to the mean of its samples. It
+stops when the assignment no longer changes, when the centres moved by less than
+``tol`` (in total squared distance, relative to the mean feature variance), or after
+``max_iter`` rounds; the result is a local minimum, so ``n_init`` seedings are tried
+and the lowest inertia kept.
+
+k-means++ (Arthur and Vassilvitskii, 2007) seeds the first centre at a random sample
+and each next one at a sample drawn with probability proportional to its squared
+distance :math:`D(x)^2` to the nearest centre chosen so far; the greedy variant tries
+:math:`2 + \lfloor \ln k \rfloor` candidates per step and keeps the one that lowers
+the potential :math:`\sum_x D(x)^2` most. A cluster left empty is moved to the sample
+farthest from its centre.
+
+The loop, the stopping rules and the greedy seeding are those of
+``sklearn.cluster.KMeans(algorithm="lloyd")``: with the same initial centres both give
+the same labels and inertia.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from robopercept._checks import check_choice, check_int
+from robopercept.errors import InputError
+from robopercept.learning._base import ClusterMixin, Estimator, TransformerMixin, seed_from
+
+__all__ = ["KMeans", "kmeans_plusplus"]
+
+_CHUNK = 8192
+
+
+def _sq_dist(X: np.ndarray, C: np.ndarray, x_sq: np.ndarray) -> np.ndarray:
+    """Squared distances ``(len(X), len(C))`` by :math:`|x|^2 - 2 x\\cdot c + |c|^2`."""
+    d = x_sq[:, None] - 2.0 * (X @ C.T) + np.einsum("ij,ij->i", C, C)[None, :]
+    return np.maximum(d, 0.0, out=d)
+
+
+def _assign(X: np.ndarray, C: np.ndarray, x_sq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest centre and its squared distance for every sample, in bounded chunks."""
+    n = X.shape[0]
+    labels = np.empty(n, dtype=np.int64)
+    dist = np.empty(n)
+    c_sq = np.einsum("ij,ij->i", C, C)
+    for s in range(0, n, _CHUNK):
+        e = min(s + _CHUNK, n)
+        d = c_sq[None, :] - 2.0 * (X[s:e] @ C.T)
+        lab = np.argmin(d, axis=1)
+        labels[s:e] = lab
+        dist[s:e] = np.maximum(d[np.arange(e - s), lab] + x_sq[s:e], 0.0)
+    return labels, dist
+
+
+def kmeans_plusplus(
+    X: Any, n_clusters: int, *, rng: Any = None, n_local_trials: int | None = None
+) -> np.ndarray:
+    """Greedy k-means++ seeding: ``(n_clusters, d)`` initial centres drawn from ``X``."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    gen = seed_from(rng)
+    n = X.shape[0]
+    trials = n_local_trials if n_local_trials is not None else 2 + int(np.log(n_clusters))
+    x_sq = np.einsum("ij,ij->i", X, X)
+    centers = np.empty((n_clusters, X.shape[1]))
+    first = gen.choice(n)
+    centers[0] = X[first]
+    closest = np.maximum(x_sq - 2 * X @ X[first] + x_sq[first], 0.0)
+    potential = closest.sum()
+    for c in range(1, n_clusters):
+        draws = gen.uniform(size=trials) * potential
+        cand = np.minimum(np.searchsorted(np.cumsum(closest), draws), n - 1)
+        d = np.maximum(x_sq[cand][:, None] - 2.0 * X[cand] @ X.T + x_sq[None, :], 0.0)
+        np.minimum(closest, d, out=d)
+        pots = d.sum(axis=1)
+        best = int(np.argmin(pots))
+        potential, closest = pots[best], d[best]
+        centers[c] = X[cand[best]]
+    return centers
+
+
+class KMeans(ClusterMixin, TransformerMixin, Estimator):
+    """k-means clustering.
+
+    Parameters
+    ----------
+    n_clusters : int
+    init : {"k-means++", "random"} or (n_clusters, d) array
+        Seeding: greedy k-means++, ``n_clusters`` distinct random samples, or given
+        centres (then a single run).
+    n_init : int or "auto"
+        Seedings tried; ``"auto"``: 1 for k-means++ and given centres, 10 for random.
+    max_iter : int
+    tol : float
+        Convergence when the centres' total squared shift is at most
+        ``tol * mean(var(X, axis=0))``.
+    rng : int, Generator or None
+
+    Attributes
+    ----------
+    cluster_centers_ : (k, d) ndarray
+    labels_ : (N,) ndarray
+    inertia_ : float
+        Sum of squared distances of the samples to their centres.
+    n_iter_ : int
+    """
+
+    def __init__(
+        self,
+        n_clusters: int = 8,
+        *,
+        init: str | np.ndarray = "k-means++",
+        n_init: int | str = "auto",
+        max_iter: int = 300,
+        tol: float = 1e-4,
+        rng: Any = None,
+    ) -> None:
+        self.n_clusters = n_clusters
+        self.init = init
+        self.n_init = n_init
+        self.max_iter = max_iter
+        self.tol = tol
+        self.rng = rng
+
+    def _seeds(self, X: np.ndarray) -> tuple[list[np.ndarray] | None, int]:
+        k = check_int(self.n_clusters, "n_clusters", 1)
+        if k > X.shape[0]:
+            raise InputError(
+                f"n_clusters={k} is more than the {X.shape[0]} samples; lower n_clusters"
+            )
+        if isinstance(self.init, str):
+            check_choice(self.init, "init", ("k-means++", "random"))
+            if self.n_init == "auto":
+                runs = 1 if self.init == "k-means++" else 10
+            else:
+                runs = check_int(self.n_init, "n_init", 1)
+            return None, runs
+        C = np.asarray(self.init, dtype=np.float64)
+        if C.shape != (k, X.shape[1]):
+            raise InputError(f"init centres must have shape ({k}, {X.shape[1]}); got {C.shape}")
+        return [C.copy()], 1
+
+    def fit(self, X: Any, y: Any = None) -> KMeans:
+        """Cluster ``X`` (N, d); keeps the best of ``n_init`` runs."""
+        X = self._check_X(X, fitting=True)
+        check_int(self.max_iter, "max_iter", 1)
+        if not np.isfinite(self.tol) or self.tol < 0:
+            raise InputError(f"tol must be a finite number >= 0; got {self.tol}")
+        given, runs = self._seeds(X)
+        gen = seed_from(self.rng)
+        # centred data give more accurate |x|^2 - 2 x.c + |c|^2 distances (as sklearn)
+        offset = X.mean(axis=0)
+        X = X - offset
+        x_sq = np.einsum("ij,ij->i", X, X)
+        tol = float(np.mean(np.var(X, axis=0))) * float(self.tol)
+        best: tuple | None = None
+        k = int(self.n_clusters)
+        for _ in range(runs):
+            if given is not None:
+                C = given[0] - offset
+            elif self.init == "k-means++":
+                C = kmeans_plusplus(X, k, rng=gen)
+            else:
+                C = X[gen.choice(X.shape[0], size=k, replace=False)].copy()
+            labels, centers, inertia, n_iter = self._lloyd(X, C, x_sq, tol)
+            if best is None or inertia < best[2]:
+                best = (labels, centers, inertia, n_iter)
+        assert best is not None
+        self.labels_, centers, self.inertia_, self.n_iter_ = best
+        self.cluster_centers_ = centers + offset
+        self.inertia_ = float(self.inertia_)
+        return self
+
+    def _lloyd(
+        self, X: np.ndarray, centers: np.ndarray, x_sq: np.ndarray, tol: float
+    ) -> tuple[np.ndarray, np.ndarray, float, int]:
+        k = centers.shape[0]
+        labels_old = np.full(X.shape[0], -1)
+        n_iter = 0
+        for n_iter in range(1, int(self.max_iter) + 1):  # noqa: B007 (read after the loop)
+            labels, dist = _assign(X, centers, x_sq)
+            new = self._means(X, labels, dist, k)
+            shift = float(np.sum((new - centers) ** 2))
+            centers = new
+            if np.array_equal(labels, labels_old):
+                break
+            if shift <= tol:
+                break
+            labels_old = labels
+        # the final assignment to the final centres (unchanged if the labels converged)
+        labels, dist = _assign(X, centers, x_sq)
+        return labels, centers, float(dist.sum()), n_iter
+
+    @staticmethod
+    def _means(X: np.ndarray, labels: np.ndarray, dist: np.ndarray, k: int) -> np.ndarray:
+        counts = np.bincount(labels, minlength=k).astype(np.float64)
+        sums = np.zeros((k, X.shape[1]))
+        _scatter_add(sums, labels, X)
+        empty = np.flatnonzero(counts == 0)
+        if empty.size:  # move each empty cluster to one of the farthest samples
+            far = np.argsort(dist, kind="stable")[::-1][: empty.size]
+            for j, i in zip(empty, far, strict=False):
+                old = labels[i]
+                sums[old] -= X[i]
+                counts[old] -= 1
+                sums[j] = X[i]
+                counts[j] = 1
+        return sums / counts[:, None]
+
+    def predict(self, X: Any) -> np.ndarray:
+        """Index of the nearest centre for every sample."""
+        self._check_fitted("cluster_centers_")
+        X = self._check_X(X)
+        return _assign(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X))[0]
+
+    def transform(self, X: Any) -> np.ndarray:
+        """Euclidean distance of every sample to every centre, ``(N, k)``."""
+        self._check_fitted("cluster_centers_")
+        X = self._check_X(X)
+        return np.sqrt(_sq_dist(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X)))
+
+    def score(self, X: Any, y: Any = None) -> float:
+        """Minus the inertia of ``X`` with the fitted centres (higher is better)."""
+        self._check_fitted("cluster_centers_")
+        X = self._check_X(X)
+        return -float(_assign(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X))[1].sum())
+
+
+def _scatter_add(sums: np.ndarray, labels: np.ndarray, X: np.ndarray) -> None:
+    """``sums[labels[i]] += X[i]`` as one sparse product (much faster than ``add.at``)."""
+    from scipy.sparse import csr_matrix
+
+    n = labels.size
+    onehot = csr_matrix((np.ones(n), (labels, np.arange(n))), shape=(sums.shape[0], n))
+    sums += onehot @ X

@@ -1,0 +1,341 @@
+r"""Classification metrics: confusion matrix, precision, recall, F1, ROC and PR curves.
+
+With TP, FP, FN, TN the counts of the confusion matrix for one class,
+
+.. math::
+
+    \text{precision} = \frac{TP}{TP + FP},\quad
+    \text{recall} = \frac{TP}{TP + FN},\quad
+    F_1 = \frac{2\,\text{precision}\cdot\text{recall}}{\text{precision} + \text{recall}}.
+
+A score threshold :math:`t` turns scores into decisions (positive when
+:math:`s \ge t`); sweeping :math:`t` over every distinct score gives the ROC curve
+(FPR = FP / N against TPR = TP / P), whose trapezoid area is the AUC, and the
+precision-recall curve, whose step integral
+:math:`AP = \sum_k (R_k - R_{k-1}) P_k` is the average precision. Ties share one
+threshold, so tied scores move the curve diagonally.
+
+The definitions, the conventions at the ends (the ROC curve starts at a threshold of
+:math:`+\infty`; the PR curve ends at precision 1, recall 0; an undefined ratio is 0)
+and the order of the floating-point operations are scikit-learn's, so the numbers are
+equal to ``sklearn.metrics`` to the last bits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from robopercept.errors import InputError
+
+__all__ = [
+    "ClassificationReport",
+    "accuracy_score",
+    "auc",
+    "average_precision_score",
+    "classification_report",
+    "confusion_matrix",
+    "f1_score",
+    "precision_recall_curve",
+    "precision_score",
+    "recall_score",
+    "roc_auc_score",
+    "roc_curve",
+]
+
+Average = Literal["binary", "macro", "micro", "weighted"] | None
+
+
+def _pair(y_true: Any, y_pred: Any, second: str = "y_pred") -> tuple[np.ndarray, np.ndarray]:
+    a, b = np.asarray(y_true), np.asarray(y_pred)
+    if a.ndim != 1 or b.ndim != 1:
+        raise InputError(f"y_true and {second} must be 1-D; got shapes {a.shape} and {b.shape}")
+    if a.shape != b.shape:
+        raise InputError(
+            f"y_true and {second} must have the same length; got {a.size} and {b.size}"
+        )
+    if a.size == 0:
+        raise InputError("y_true is empty; metrics need at least one sample")
+    return a, b
+
+
+def confusion_matrix(y_true: Any, y_pred: Any, labels: Any = None) -> np.ndarray:
+    """Counts ``C[i, j]`` of samples of true class ``labels[i]`` predicted as ``labels[j]``.
+
+    Parameters
+    ----------
+    y_true, y_pred : (N,) array_like
+    labels : (K,) array_like, optional
+        Row and column order; default the sorted union of both label sets.
+
+    Returns
+    -------
+    (K, K) int64 array, rows true, columns predicted (``sklearn.metrics.confusion_matrix``).
+    """
+    y_true, y_pred = _pair(y_true, y_pred)
+    labels = np.union1d(y_true, y_pred) if labels is None else np.asarray(labels)
+    k = labels.size
+    order = np.argsort(labels, kind="stable")
+    sorted_labels = labels[order]
+
+    def code(y: np.ndarray) -> np.ndarray:
+        pos = np.clip(np.searchsorted(sorted_labels, y), 0, k - 1)
+        found = sorted_labels[pos] == y
+        return np.where(found, order[pos], -1)
+
+    t, p = code(y_true), code(y_pred)
+    keep = (t >= 0) & (p >= 0)
+    return np.bincount(t[keep] * k + p[keep], minlength=k * k).reshape(k, k).astype(np.int64)
+
+
+def accuracy_score(y_true: Any, y_pred: Any) -> float:
+    """Fraction of samples whose prediction equals the truth."""
+    y_true, y_pred = _pair(y_true, y_pred)
+    return float(np.mean(y_true == y_pred))
+
+
+def _prf(
+    y_true: Any, y_pred: Any, average: Average, pos_label: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-class true positives, predicted counts and true counts (support)."""
+    y_true, y_pred = _pair(y_true, y_pred)
+    labels = np.union1d(y_true, y_pred)
+    cm = confusion_matrix(y_true, y_pred, labels=labels)
+    tp = np.diag(cm).astype(np.float64)
+    pred = cm.sum(axis=0).astype(np.float64)
+    true = cm.sum(axis=1).astype(np.float64)
+    if average == "binary":
+        if labels.size > 2:
+            raise InputError(
+                f"average='binary' needs two classes; got {labels.size}: choose average="
+                "'macro', 'micro', 'weighted' or None"
+            )
+        hit = np.flatnonzero(labels == pos_label)
+        if hit.size == 0:
+            if labels.size == 2:
+                raise InputError(
+                    f"pos_label={pos_label!r} is not one of the labels {labels.tolist()}"
+                )
+            return np.zeros(1), np.zeros(1), np.zeros(1)
+        tp, pred, true = tp[hit], pred[hit], true[hit]
+    elif average == "micro":
+        tp, pred, true = tp.sum(keepdims=True), pred.sum(keepdims=True), true.sum(keepdims=True)
+    return tp, pred, true
+
+
+def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+    out = np.zeros_like(num)
+    np.divide(num, den, out=out, where=den != 0)
+    return out
+
+
+def _average(values: np.ndarray, support: np.ndarray, average: Average) -> float | np.ndarray:
+    if average is None:
+        return values
+    if average == "weighted":
+        return float(np.average(values, weights=support)) if support.sum() > 0 else 0.0
+    return float(np.mean(values))
+
+
+def _check_average(average: Average) -> None:
+    if average not in ("binary", "macro", "micro", "weighted", None):
+        raise InputError(
+            f"average must be 'binary', 'macro', 'micro', 'weighted' or None; got {average!r}"
+        )
+
+
+def precision_score(
+    y_true: Any, y_pred: Any, *, average: Average = "binary", pos_label: Any = 1
+) -> float | np.ndarray:
+    """TP / (TP + FP) per class, averaged as ``average`` says (0 where undefined)."""
+    _check_average(average)
+    tp, pred, true = _prf(y_true, y_pred, average, pos_label)
+    return _average(_ratio(tp, pred), true, average)
+
+
+def recall_score(
+    y_true: Any, y_pred: Any, *, average: Average = "binary", pos_label: Any = 1
+) -> float | np.ndarray:
+    """TP / (TP + FN) per class, averaged as ``average`` says (0 where undefined)."""
+    _check_average(average)
+    tp, _, true = _prf(y_true, y_pred, average, pos_label)
+    return _average(_ratio(tp, true), true, average)
+
+
+def f1_score(
+    y_true: Any, y_pred: Any, *, average: Average = "binary", pos_label: Any = 1
+) -> float | np.ndarray:
+    """2 TP / (2 TP + FP + FN) per class (the harmonic mean of precision and recall)."""
+    _check_average(average)
+    tp, pred, true = _prf(y_true, y_pred, average, pos_label)
+    return _average(_ratio(2 * tp, pred + true), true, average)
+
+
+@dataclass(frozen=True)
+class ClassificationReport:
+    """Per-class precision, recall, F1 and support, plus accuracy and the matrix."""
+
+    labels: np.ndarray
+    precision: np.ndarray
+    recall: np.ndarray
+    f1: np.ndarray
+    support: np.ndarray
+    accuracy: float
+    confusion: np.ndarray
+
+    def table(self) -> str:
+        """The report as a text table (one row per class, then macro and weighted means)."""
+        names = [str(x) for x in self.labels]
+        w = max(12, *(len(n) for n in names))
+        lines = [f"{'class':>{w}} {'precision':>9} {'recall':>9} {'f1':>9} {'support':>8}"]
+        for n, p, r, f, s in zip(
+            names, self.precision, self.recall, self.f1, self.support, strict=True
+        ):
+            lines.append(f"{n:>{w}} {p:>9.4f} {r:>9.4f} {f:>9.4f} {s:>8d}")
+        total = int(self.support.sum())
+        wts = self.support / max(total, 1)
+        for name, agg in (("macro avg", np.mean), ("weighted avg", None)):
+            vals = [
+                agg(v) if agg else float(np.sum(v * wts))
+                for v in (self.precision, self.recall, self.f1)
+            ]
+            lines.append(f"{name:>{w}} {vals[0]:>9.4f} {vals[1]:>9.4f} {vals[2]:>9.4f} {total:>8d}")
+        lines.append(f"{'accuracy':>{w}} {'':>9} {'':>9} {self.accuracy:>9.4f} {total:>8d}")
+        return "\n".join(lines)
+
+
+def classification_report(y_true: Any, y_pred: Any) -> ClassificationReport:
+    """Precision, recall, F1 and support of every class (``average=None``)."""
+    y_true, y_pred = _pair(y_true, y_pred)
+    labels = np.union1d(y_true, y_pred)
+    cm = confusion_matrix(y_true, y_pred, labels=labels)
+    tp = np.diag(cm).astype(np.float64)
+    pred, true = cm.sum(axis=0).astype(np.float64), cm.sum(axis=1).astype(np.float64)
+    return ClassificationReport(
+        labels=labels,
+        precision=_ratio(tp, pred),
+        recall=_ratio(tp, true),
+        f1=_ratio(2 * tp, pred + true),
+        support=cm.sum(axis=1),
+        accuracy=accuracy_score(y_true, y_pred),
+        confusion=cm,
+    )
+
+
+# --------------------------------------------------------------------------- ranking
+
+
+def _binary_truth(y_true: Any, y_score: Any, pos_label: Any) -> tuple[np.ndarray, np.ndarray]:
+    y_true, y_score = _pair(y_true, y_score, "y_score")
+    score = np.asarray(y_score, dtype=np.float64)
+    if not np.all(np.isfinite(score)):
+        raise InputError("y_score contains NaN or inf; scores must be finite")
+    classes = np.unique(y_true)
+    if classes.size > 2:
+        raise InputError(
+            f"y_true must be binary for a curve; got {classes.size} classes: binarize it "
+            "(y_true == positive_class) for a one-vs-rest curve"
+        )
+    if pos_label is None:
+        if classes.size == 2 and not (
+            np.array_equal(classes, [0, 1])
+            or np.array_equal(classes, [-1, 1])
+            or np.array_equal(classes, [0])
+            or np.array_equal(classes, [1])
+        ):
+            raise InputError(
+                f"y_true has labels {classes.tolist()}; say which is positive with pos_label"
+            )
+        pos_label = 1
+    return (y_true == pos_label).astype(np.float64), score
+
+
+def _counts_at_thresholds(
+    truth: np.ndarray, score: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """False and true positive counts when thresholding at each distinct score."""
+    order = np.argsort(score, kind="mergesort")[::-1]
+    score, truth = score[order], truth[order]
+    distinct = np.where(np.diff(score))[0]
+    idx = np.r_[distinct, truth.size - 1]
+    tps = np.cumsum(truth)[idx]
+    fps = 1 + idx - tps
+    return fps, tps, score[idx]
+
+
+def roc_curve(
+    y_true: Any, y_score: Any, *, pos_label: Any = None, drop_intermediate: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Receiver operating characteristic: ``(fpr, tpr, thresholds)``.
+
+    Points strictly between collinear neighbours are dropped when ``drop_intermediate``
+    (they do not change the curve or its area). The first threshold is ``inf`` so the
+    curve starts at (0, 0). Equal to ``sklearn.metrics.roc_curve``.
+    """
+    truth, score = _binary_truth(y_true, y_score, pos_label)
+    fps, tps, thr = _counts_at_thresholds(truth, score)
+    if drop_intermediate and fps.size > 2:
+        keep = np.where(np.r_[True, np.logical_or(np.diff(fps, 2), np.diff(tps, 2)), True])[0]
+        fps, tps, thr = fps[keep], tps[keep], thr[keep]
+    tps = np.r_[0.0, tps]
+    fps = np.r_[0.0, fps]
+    thr = np.r_[np.inf, thr]
+    fpr = fps / fps[-1] if fps[-1] > 0 else np.full(fps.shape, np.nan)
+    tpr = tps / tps[-1] if tps[-1] > 0 else np.full(tps.shape, np.nan)
+    return fpr, tpr, thr
+
+
+def auc(x: Any, y: Any) -> float:
+    """Area under a curve by the trapezoid rule (``x`` monotonic)."""
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if x.shape != y.shape or x.ndim != 1 or x.size < 2:
+        raise InputError(
+            f"auc needs two 1-D arrays of >= 2 equal lengths; got {x.shape}, {y.shape}"
+        )
+    dx = np.diff(x)
+    direction = 1.0
+    if np.any(dx < 0):
+        if np.all(dx <= 0):
+            direction = -1.0
+        else:
+            raise InputError("x must be monotonic (increasing or decreasing) for auc")
+    from scipy.integrate import trapezoid
+
+    return float(direction * trapezoid(y, x))
+
+
+def roc_auc_score(y_true: Any, y_score: Any, *, pos_label: Any = None) -> float:
+    """Area under the ROC curve: the probability that a random positive outranks a
+    random negative (ties count one half). Needs both classes in ``y_true``."""
+    truth, _ = _binary_truth(y_true, y_score, pos_label)
+    if truth.min() == truth.max():
+        raise InputError("roc_auc_score needs positive and negative samples in y_true")
+    fpr, tpr, _ = roc_curve(y_true, y_score, pos_label=pos_label)
+    return auc(fpr, tpr)
+
+
+def precision_recall_curve(
+    y_true: Any, y_score: Any, *, pos_label: Any = None, drop_intermediate: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Precision and recall at every distinct threshold: ``(precision, recall, thresholds)``.
+
+    Recall decreases along the arrays; the last point is (recall 0, precision 1) and has
+    no threshold. Equal to ``sklearn.metrics.precision_recall_curve``.
+    """
+    truth, score = _binary_truth(y_true, y_score, pos_label)
+    fps, tps, thr = _counts_at_thresholds(truth, score)
+    if drop_intermediate and fps.size > 2:
+        keep = np.where(np.r_[True, np.logical_or(np.diff(tps[:-1]), np.diff(tps[1:])), True])[0]
+        fps, tps, thr = fps[keep], tps[keep], thr[keep]
+    ps = tps + fps
+    precision = np.where(ps != 0, np.divide(tps, ps, where=ps != 0, out=np.zeros_like(tps)), 0.0)
+    recall = np.ones_like(tps) if tps[-1] == 0 else tps / tps[-1]
+    return np.r_[precision[::-1], 1.0], np.r_[recall[::-1], 0.0], thr[::-1]
+
+
+def average_precision_score(y_true: Any, y_score: Any, *, pos_label: Any = None) -> float:
+    r"""Average precision :math:`\sum_k (R_k - R_{k-1}) P_k` (no interpolation)."""
+    precision, recall, _ = precision_recall_curve(y_true, y_score, pos_label=pos_label)
+    return float(max(0.0, -np.sum(np.diff(recall) * precision[:-1])))

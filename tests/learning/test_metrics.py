@@ -1,0 +1,86 @@
+"""Metrics: hand cases and equality with sklearn.metrics (to 1e-12) with tied scores."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sklearn.metrics as skm
+
+from robopercept.errors import InputError
+from robopercept.learning import metrics as m
+
+
+def test_hand_computed_binary():
+    y = [1, 1, 1, 0, 0, 0, 0, 1]
+    p = [1, 0, 1, 0, 1, 0, 0, 1]  # TP 3, FN 1, FP 1, TN 3
+    np.testing.assert_array_equal(m.confusion_matrix(y, p), [[3, 1], [1, 3]])
+    assert m.precision_score(y, p) == 0.75
+    assert m.recall_score(y, p) == 0.75
+    assert m.f1_score(y, p) == 0.75
+    assert m.accuracy_score(y, p) == 0.75
+
+
+def test_hand_computed_curves():
+    # scores 0.9(+) 0.8(-) 0.7(+) 0.6(-): one swapped pair of four -> AUC 3/4
+    y = [1, 0, 1, 0]
+    s = [0.9, 0.8, 0.7, 0.6]
+    assert m.roc_auc_score(y, s) == 0.75
+    # AP = 1/2 * 1 + 1/2 * 2/3
+    assert m.average_precision_score(y, s) == pytest.approx(0.5 + 1 / 3, abs=1e-15)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_ranking_metrics_equal_sklearn_with_ties(seed):
+    gen = np.random.default_rng(seed)
+    y = gen.integers(0, 2, 700)
+    s = np.round(gen.normal(size=700) + y, 1)  # rounding makes many ties
+    assert abs(m.roc_auc_score(y, s) - skm.roc_auc_score(y, s)) <= 1e-12
+    assert abs(m.average_precision_score(y, s) - skm.average_precision_score(y, s)) <= 1e-12
+    for ours, ref in zip(
+        m.precision_recall_curve(y, s), skm.precision_recall_curve(y, s), strict=True
+    ):
+        np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-12)
+    for ours, ref in zip(m.roc_curve(y, s), skm.roc_curve(y, s), strict=True):
+        np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("average", ["macro", "micro", "weighted", None])
+def test_multiclass_scores_equal_sklearn(average):
+    gen = np.random.default_rng(3)
+    y, p = gen.integers(0, 4, 300), gen.integers(0, 4, 300)
+    p[p == 3] = 2  # class 3 never predicted: precision 0 by convention
+    for ours, ref in (
+        (m.precision_score, skm.precision_score),
+        (m.recall_score, skm.recall_score),
+        (m.f1_score, skm.f1_score),
+    ):
+        kw = {"zero_division": 0} if ref is skm.precision_score else {}
+        np.testing.assert_allclose(
+            ours(y, p, average=average), ref(y, p, average=average, **kw), atol=1e-15
+        )
+    np.testing.assert_array_equal(m.confusion_matrix(y, p), skm.confusion_matrix(y, p))
+
+
+def test_report_and_string_labels():
+    y = np.array(["cat", "dog", "dog", "cat", "bird"])
+    p = np.array(["cat", "dog", "cat", "cat", "dog"])
+    rep = m.classification_report(y, p)
+    assert rep.labels.tolist() == ["bird", "cat", "dog"]
+    np.testing.assert_array_equal(rep.support, [1, 2, 2])
+    assert "weighted avg" in rep.table()
+    np.testing.assert_allclose(
+        rep.precision, skm.precision_score(y, p, average=None, zero_division=0)
+    )
+
+
+def test_bad_input():
+    with pytest.raises(InputError, match="same length"):
+        m.accuracy_score([1, 0], [1])
+    with pytest.raises(InputError, match="two classes"):
+        m.f1_score([0, 1, 2], [0, 1, 2])
+    with pytest.raises(InputError, match="positive and negative"):
+        m.roc_auc_score([1, 1, 1], [0.1, 0.2, 0.3])
+    with pytest.raises(InputError, match="pos_label"):
+        m.roc_curve(["a", "b"], [0.1, 0.2])
+    with pytest.raises(InputError, match="NaN"):
+        m.roc_curve([0, 1], [0.1, np.nan])
