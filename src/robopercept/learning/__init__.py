@@ -8,7 +8,11 @@ and ``cross_val_score`` accept them; scikit-learn is not needed to use them.
 from __future__ import annotations
 
 from robopercept.learning._base import clone
+from robopercept.learning.dbscan import DBSCAN
+from robopercept.learning.forest import RandomForestClassifier, RandomForestRegressor
+from robopercept.learning.kmeans import KMeans, kmeans_plusplus
 from robopercept.learning.lda import LDA
+from robopercept.learning.meanshift import MeanShift, estimate_bandwidth
 from robopercept.learning.metrics import (
     accuracy_score,
     auc,
@@ -30,12 +34,23 @@ from robopercept.learning.model_selection import (
     train_test_split,
 )
 from robopercept.learning.pca import PCA
+from robopercept.learning.svm import SVC, LinearSVC
+from robopercept.learning.tree import DecisionTreeClassifier, DecisionTreeRegressor
 
 __all__ = [
+    "DBSCAN",
     "LDA",
     "PCA",
+    "SVC",
+    "DecisionTreeClassifier",
+    "DecisionTreeRegressor",
     "GridSearch",
     "KFold",
+    "KMeans",
+    "LinearSVC",
+    "MeanShift",
+    "RandomForestClassifier",
+    "RandomForestRegressor",
     "StratifiedKFold",
     "accuracy_score",
     "auc",
@@ -44,7 +59,9 @@ __all__ = [
     "clone",
     "confusion_matrix",
     "cross_val_score",
+    "estimate_bandwidth",
     "f1_score",
+    "kmeans_plusplus",
     "precision_recall_curve",
     "precision_score",
     "recall_score",

@@ -1,0 +1,492 @@
+r"""Support vector machines: the kernel SVC (SMO) and a linear fast path.
+
+A soft-margin SVM separates two classes :math:`y_i \in \{-1, +1\}` with the decision
+function :math:`f(x) = \sum_i \alpha_i y_i K(x_i, x) + b`, where :math:`\alpha` solves
+the dual quadratic programme
+
+.. math::
+
+    \min_\alpha \tfrac12 \alpha^\top Q \alpha - \mathbf 1^\top \alpha
+    \quad \text{s.t.} \quad 0 \le \alpha_i \le C,\; y^\top \alpha = 0,
+    \qquad Q_{ij} = y_i y_j K(x_i, x_j).
+
+The samples with :math:`\alpha_i > 0` are the support vectors. Kernels:
+``"linear"`` :math:`x \cdot z`; ``"rbf"`` :math:`\exp(-\gamma \lVert x - z \rVert^2)`;
+``"poly"`` :math:`(\gamma\, x \cdot z + r)^d`. ``gamma="scale"`` is
+:math:`1 / (M \operatorname{var}(X))`, ``"auto"`` is :math:`1 / M`.
+
+:class:`SVC` solves the dual by sequential minimal optimization (Platt, 1998) with the
+second-order working-set selection of Fan, Chen and Lin (2005), libsvm's algorithm:
+each step picks the pair :math:`(i, j)` that violates the optimality conditions most,
+:math:`i = \arg\max_{t \in I_{up}} -y_t \nabla_t` and :math:`j` the one whose
+analytic two-variable update lowers the objective most, updates both in closed form
+(clipped to the box), and stops when the violation
+:math:`\max_{I_{up}} -y \nabla - \min_{I_{low}} -y \nabla` is below ``tol``. The
+bias is the mean of :math:`y_i \nabla_i` over the free support vectors. Several
+classes are handled one-vs-one (a machine per pair of classes, prediction by votes;
+``decision_function`` gives scikit-learn's one-vs-rest shaped scores by default).
+
+:class:`LinearSVC` is the fast path for the linear kernel: dual coordinate descent
+(Hsieh et al., 2008, liblinear's solver) on the primal weight vector :math:`w`,
+one-vs-rest, with the hinge or squared hinge loss.
+
+Matches ``sklearn.svm.SVC`` (same dual, same stopping rule) and ``LinearSVC``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from robopercept._checks import check_choice, check_int, check_positive
+from robopercept.errors import InputError
+from robopercept.learning._base import ClassifierMixin, Estimator, seed_from
+
+__all__ = ["SVC", "LinearSVC", "kernel_matrix"]
+
+_TAU = 1e-12
+
+
+def kernel_matrix(
+    A: np.ndarray, B: np.ndarray, kernel: str, gamma: float, degree: int, coef0: float
+) -> np.ndarray:
+    """:math:`K(a_i, b_j)` for all pairs, ``(len(A), len(B))``."""
+    G = A @ B.T
+    if kernel == "linear":
+        return G
+    if kernel == "poly":
+        return (gamma * G + coef0) ** degree
+    a2 = np.einsum("ij,ij->i", A, A)
+    b2 = np.einsum("ij,ij->i", B, B)
+    G *= -2.0
+    G += a2[:, None]
+    G += b2[None, :]
+    np.maximum(G, 0.0, out=G)
+    G *= -gamma
+    return np.exp(G, out=G)
+
+
+@njit(cache=True, nogil=True)
+def _smo(K: np.ndarray, y: np.ndarray, C: float, tol: float, max_iter: int):
+    """libsvm's solver on the kernel matrix ``K`` (n, n) and labels ``y`` in {-1, +1}.
+
+    Returns (alpha, b, iterations)."""
+    n = y.size
+    alpha = np.zeros(n)
+    G = -np.ones(n)  # gradient of the dual objective, Q alpha - 1
+    QD = np.empty(n)
+    for t in range(n):
+        QD[t] = K[t, t]
+    it = 0
+    while it < max_iter:
+        # select i: the most violating index in I_up
+        gmax = -np.inf
+        i = -1
+        for t in range(n):
+            if y[t] > 0:
+                if alpha[t] < C and -G[t] >= gmax:
+                    gmax = -G[t]
+                    i = t
+            else:
+                if alpha[t] > 0 and G[t] >= gmax:
+                    gmax = G[t]
+                    i = t
+        if i < 0:
+            break
+        # select j: the largest second-order decrease in I_low
+        gmax2 = -np.inf
+        j = -1
+        best = np.inf
+        for t in range(n):
+            qit = y[i] * y[t] * K[i, t]
+            if y[t] > 0:
+                if alpha[t] > 0:
+                    diff = gmax + G[t]
+                    if G[t] >= gmax2:
+                        gmax2 = G[t]
+                    if diff > 0:
+                        quad = QD[i] + QD[t] - 2.0 * y[i] * qit
+                        obj = -(diff * diff) / (quad if quad > 0 else _TAU)
+                        if obj <= best:
+                            j = t
+                            best = obj
+            else:
+                if alpha[t] < C:
+                    diff = gmax - G[t]
+                    if -G[t] >= gmax2:
+                        gmax2 = -G[t]
+                    if diff > 0:
+                        quad = QD[i] + QD[t] + 2.0 * y[i] * qit
+                        obj = -(diff * diff) / (quad if quad > 0 else _TAU)
+                        if obj <= best:
+                            j = t
+                            best = obj
+        if gmax + gmax2 < tol or j < 0:
+            break
+        it += 1
+        qij = y[i] * y[j] * K[i, j]
+        old_i = alpha[i]
+        old_j = alpha[j]
+        if y[i] != y[j]:
+            quad = QD[i] + QD[j] + 2.0 * qij
+            if quad <= 0:
+                quad = _TAU
+            delta = (-G[i] - G[j]) / quad
+            diff = alpha[i] - alpha[j]
+            alpha[i] += delta
+            alpha[j] += delta
+            if diff > 0:
+                if alpha[j] < 0:
+                    alpha[j] = 0.0
+                    alpha[i] = diff
+            else:
+                if alpha[i] < 0:
+                    alpha[i] = 0.0
+                    alpha[j] = -diff
+            if diff > 0:
+                if alpha[i] > C:
+                    alpha[i] = C
+                    alpha[j] = C - diff
+            else:
+                if alpha[j] > C:
+                    alpha[j] = C
+                    alpha[i] = C + diff
+        else:
+            quad = QD[i] + QD[j] - 2.0 * qij
+            if quad <= 0:
+                quad = _TAU
+            delta = (G[i] - G[j]) / quad
+            total = alpha[i] + alpha[j]
+            alpha[i] -= delta
+            alpha[j] += delta
+            if total > C:
+                if alpha[i] > C:
+                    alpha[i] = C
+                    alpha[j] = total - C
+            else:
+                if alpha[j] < 0:
+                    alpha[j] = 0.0
+                    alpha[i] = total
+            if total > C:
+                if alpha[j] > C:
+                    alpha[j] = C
+                    alpha[i] = total - C
+            else:
+                if alpha[i] < 0:
+                    alpha[i] = 0.0
+                    alpha[j] = total
+        di = (alpha[i] - old_i) * y[i]
+        dj = (alpha[j] - old_j) * y[j]
+        for t in range(n):
+            G[t] += y[t] * (K[i, t] * di + K[j, t] * dj)
+    # bias: -rho, rho the mean of y G over free vectors (else the middle of the bounds)
+    n_free = 0
+    s_free = 0.0
+    ub = np.inf
+    lb = -np.inf
+    for t in range(n):
+        yg = y[t] * G[t]
+        if alpha[t] >= C:
+            if y[t] < 0:
+                ub = min(ub, yg)
+            else:
+                lb = max(lb, yg)
+        elif alpha[t] <= 0:
+            if y[t] > 0:
+                ub = min(ub, yg)
+            else:
+                lb = max(lb, yg)
+        else:
+            n_free += 1
+            s_free += yg
+    rho = s_free / n_free if n_free > 0 else 0.5 * (ub + lb)
+    return alpha, -rho, it
+
+
+def _gamma(gamma: Any, X: np.ndarray) -> float:
+    if gamma == "scale":
+        var = float(X.var())
+        return 1.0 / (X.shape[1] * var) if var > 0 else 1.0
+    if gamma == "auto":
+        return 1.0 / X.shape[1]
+    if isinstance(gamma, str):
+        raise InputError(f"gamma must be 'scale', 'auto' or a positive number; got {gamma!r}")
+    return check_positive(gamma, "gamma")
+
+
+class SVC(ClassifierMixin, Estimator):
+    """Kernel support vector classifier (soft margin, SMO, one-vs-one).
+
+    Parameters
+    ----------
+    C : float
+        Box constraint: the price of a margin violation.
+    kernel : {"rbf", "linear", "poly"}
+    gamma : "scale", "auto" or float
+    degree : int
+        Degree of the polynomial kernel.
+    coef0 : float
+        :math:`r` of the polynomial kernel.
+    tol : float
+        Stop when the largest violation of the optimality conditions is below it.
+    max_iter : int or None
+        SMO steps per machine (None: ``max(10^7, 100 N)``, libsvm's bound).
+    decision_function_shape : {"ovr", "ovo"}
+
+    Attributes
+    ----------
+    support_ : (S,) ndarray
+        Indices of the support vectors in the training data (sorted by class).
+    support_vectors_ : (S, d) ndarray
+    n_support_ : (c,) ndarray
+    dual_coef_ : list of (machine pairs) -> arrays of :math:`\\alpha_i y_i`
+    intercept_ : (c (c - 1) / 2,) ndarray
+    coef_ : (c (c - 1) / 2, d) ndarray, linear kernel only
+    classes_ : (c,) ndarray
+    """
+
+    def __init__(
+        self,
+        C: float = 1.0,
+        kernel: str = "rbf",
+        gamma: str | float = "scale",
+        degree: int = 3,
+        coef0: float = 0.0,
+        tol: float = 1e-3,
+        max_iter: int | None = None,
+        decision_function_shape: str = "ovr",
+    ) -> None:
+        self.C = C
+        self.kernel = kernel
+        self.gamma = gamma
+        self.degree = degree
+        self.coef0 = coef0
+        self.tol = tol
+        self.max_iter = max_iter
+        self.decision_function_shape = decision_function_shape
+
+    def _kernel(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+        return kernel_matrix(A, B, self.kernel, self._gamma, int(self.degree), float(self.coef0))
+
+    def fit(self, X: Any, y: Any) -> SVC:
+        """Train one machine per pair of classes on ``X`` (N, d), ``y`` (N,)."""
+        X = self._check_X(X, fitting=True)
+        codes = self._encode_labels(y, X.shape[0])
+        C = check_positive(self.C, "C")
+        tol = check_positive(self.tol, "tol")
+        check_choice(self.kernel, "kernel", ("rbf", "linear", "poly"))
+        check_choice(self.decision_function_shape, "decision_function_shape", ("ovr", "ovo"))
+        check_int(self.degree, "degree", 1)
+        n = X.shape[0]
+        max_iter = max(10_000_000, 100 * n) if self.max_iter is None else self.max_iter
+        max_iter = check_int(max_iter, "max_iter", 1)
+        self._gamma = _gamma(self.gamma, X)
+        K = self._kernel(X, X)
+        c = self.classes_.size
+        pairs = list(itertools.combinations(range(c), 2))
+        machines = []
+        used = np.zeros(n, dtype=bool)
+        self.n_iter_ = np.zeros(len(pairs), dtype=np.int64)
+        for k, (a, b) in enumerate(pairs):
+            # binary: classes_[1] positive; one-vs-one: the first class of the pair
+            pos, neg = (b, a) if c == 2 else (a, b)
+            idx = np.flatnonzero((codes == a) | (codes == b))
+            yy = np.where(codes[idx] == pos, 1.0, -1.0)
+            alpha, bias, iters = _smo(
+                np.ascontiguousarray(K[np.ix_(idx, idx)]), yy, C, tol, max_iter
+            )
+            sv = alpha > 0
+            machines.append((idx[sv], alpha[sv] * yy[sv], bias))
+            used[idx[sv]] = True
+            self.n_iter_[k] = iters
+            del neg
+        # support vectors sorted by class, then by index (scikit-learn's order)
+        order = np.lexsort((np.arange(n), codes))
+        self.support_ = order[used[order]]
+        self.support_vectors_ = X[self.support_]
+        self.n_support_ = np.bincount(codes[self.support_], minlength=c)
+        position = np.full(n, -1, dtype=np.int64)
+        position[self.support_] = np.arange(self.support_.size)
+        self._machines = [(position[i], coef, b) for i, coef, b in machines]
+        self.dual_coef_ = [coef for _, coef, _ in self._machines]
+        self.intercept_ = np.array([b for _, _, b in self._machines])
+        if self.kernel == "linear":
+            self.coef_ = np.array(
+                [coef @ self.support_vectors_[i] for i, coef, _ in self._machines]
+            )
+        return self
+
+    def _ovo(self, X: Any) -> np.ndarray:
+        self._check_fitted("support_vectors_")
+        X = self._check_X(X)
+        Ks = self._kernel(X, self.support_vectors_)
+        return np.stack([Ks[:, i] @ coef + b for i, coef, b in self._machines], axis=1)
+
+    def decision_function(self, X: Any) -> np.ndarray:
+        """:math:`f(x)`: ``(N,)`` for two classes (positive: ``classes_[1]``); for more,
+        ``(N, c)`` one-vs-rest scores (votes plus a confidence in (-1/3, 1/3), as
+        scikit-learn) or ``(N, c (c-1) / 2)`` with ``decision_function_shape="ovo"``
+        (positive: the first class of the pair)."""
+        f = self._ovo(X)
+        c = self.classes_.size
+        if c == 2:
+            return f[:, 0]
+        if self.decision_function_shape == "ovo":
+            return f
+        votes = np.zeros((f.shape[0], c))
+        conf = np.zeros((f.shape[0], c))
+        for k, (a, b) in enumerate(itertools.combinations(range(c), 2)):
+            conf[:, a] += f[:, k]
+            conf[:, b] -= f[:, k]
+            votes[f[:, k] > 0, a] += 1
+            votes[f[:, k] <= 0, b] += 1
+        return votes + conf / (3 * (np.abs(conf) + 1))
+
+    def predict(self, X: Any) -> np.ndarray:
+        """The class with most one-vs-one votes (ties: the lower class)."""
+        f = self._ovo(X)
+        c = self.classes_.size
+        if c == 2:
+            return self.classes_[(f[:, 0] > 0).astype(np.int64)]
+        votes = np.zeros((f.shape[0], c), dtype=np.int64)
+        for k, (a, b) in enumerate(itertools.combinations(range(c), 2)):
+            win = f[:, k] > 0
+            votes[win, a] += 1
+            votes[~win, b] += 1
+        return self.classes_[np.argmax(votes, axis=1)]
+
+
+@njit(cache=True, nogil=True)
+def _dual_cd(
+    X: np.ndarray, y: np.ndarray, C: float, squared: bool, tol: float, max_iter: int, seed: int
+):
+    """Dual coordinate descent for the L2-regularized (squared) hinge loss; the last
+    column of X is the constant bias feature if one is wanted. Returns (w, epochs)."""
+    n, d = X.shape
+    w = np.zeros(d)
+    alpha = np.zeros(n)
+    diag = 0.5 / C if squared else 0.0
+    upper = np.inf if squared else C
+    qd = np.empty(n)
+    for i in range(n):
+        s = diag
+        for k in range(d):
+            s += X[i, k] * X[i, k]
+        qd[i] = s
+    order = np.arange(n)
+    state = np.array([np.uint64(seed)], dtype=np.uint64)
+    epoch = 0
+    for epoch in range(1, max_iter + 1):  # noqa: B007 (returned)
+        for i in range(n - 1, 0, -1):  # Fisher-Yates shuffle with splitmix64
+            state[0] += np.uint64(0x9E3779B97F4A7C15)
+            z = state[0]
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            z = z ^ (z >> np.uint64(31))
+            j = np.int64(z % np.uint64(i + 1))
+            order[i], order[j] = order[j], order[i]
+        pg_max = -np.inf
+        pg_min = np.inf
+        for t in range(n):
+            i = order[t]
+            g = 0.0
+            for k in range(d):
+                g += w[k] * X[i, k]
+            g = y[i] * g - 1.0 + diag * alpha[i]
+            if alpha[i] <= 0:
+                pg = min(g, 0.0)
+            elif alpha[i] >= upper:
+                pg = max(g, 0.0)
+            else:
+                pg = g
+            pg_max = max(pg_max, pg)
+            pg_min = min(pg_min, pg)
+            if pg != 0.0 and qd[i] > 0:
+                old = alpha[i]
+                alpha[i] = min(max(old - g / qd[i], 0.0), upper)
+                step = (alpha[i] - old) * y[i]
+                for k in range(d):
+                    w[k] += step * X[i, k]
+        if pg_max - pg_min < tol:
+            break
+    return w, epoch
+
+
+class LinearSVC(ClassifierMixin, Estimator):
+    """Linear SVM by dual coordinate descent (liblinear's solver), one-vs-rest.
+
+    Minimizes :math:`\\tfrac12 \\lVert w \\rVert^2 + C \\sum_i \\ell(y_i (w \\cdot x_i + b))`
+    with :math:`\\ell(m) = \\max(0, 1 - m)` (``loss="hinge"``) or its square
+    (``"squared_hinge"``, the default). The intercept is learned as the weight of a
+    constant feature ``intercept_scaling`` (so it is regularized too, like liblinear).
+
+    Attributes
+    ----------
+    coef_ : (1, d) or (c, d) ndarray
+    intercept_ : (1,) or (c,) ndarray
+    n_iter_ : int
+        Most epochs any one-vs-rest problem took.
+    """
+
+    def __init__(
+        self,
+        C: float = 1.0,
+        loss: str = "squared_hinge",
+        fit_intercept: bool = True,
+        intercept_scaling: float = 1.0,
+        tol: float = 1e-4,
+        max_iter: int = 1000,
+        rng: Any = None,
+    ) -> None:
+        self.C = C
+        self.loss = loss
+        self.fit_intercept = fit_intercept
+        self.intercept_scaling = intercept_scaling
+        self.tol = tol
+        self.max_iter = max_iter
+        self.rng = rng
+
+    def fit(self, X: Any, y: Any) -> LinearSVC:
+        """Train on ``X`` (N, d) and labels ``y`` (N,)."""
+        X = self._check_X(X, fitting=True)
+        codes = self._encode_labels(y, X.shape[0])
+        C = check_positive(self.C, "C")
+        check_choice(self.loss, "loss", ("hinge", "squared_hinge"))
+        tol = check_positive(self.tol, "tol")
+        max_iter = check_int(self.max_iter, "max_iter", 1)
+        scale = float(self.intercept_scaling)
+        Xa = np.c_[X, np.full(X.shape[0], scale)] if self.fit_intercept else X
+        Xa = np.ascontiguousarray(Xa)
+        c = self.classes_.size
+        targets = [1] if c == 2 else list(range(c))
+        seed = int(seed_from(self.rng).integers(0, 2**63))
+        W = []
+        epochs = 0
+        for k in targets:
+            yy = np.where(codes == k, 1.0, -1.0)
+            w, e = _dual_cd(Xa, yy, C, self.loss == "squared_hinge", tol, max_iter, seed)
+            W.append(w)
+            epochs = max(epochs, e)
+        W = np.array(W)
+        if self.fit_intercept:
+            self.coef_, self.intercept_ = W[:, :-1].copy(), W[:, -1] * scale
+        else:
+            self.coef_, self.intercept_ = W, np.zeros(W.shape[0])
+        self.n_iter_ = epochs
+        return self
+
+    def decision_function(self, X: Any) -> np.ndarray:
+        """:math:`w \\cdot x + b`: ``(N,)`` for two classes, else ``(N, c)``."""
+        self._check_fitted("coef_")
+        X = self._check_X(X)
+        f = X @ self.coef_.T + self.intercept_
+        return f[:, 0] if self.classes_.size == 2 else f
+
+    def predict(self, X: Any) -> np.ndarray:
+        f = self.decision_function(X)
+        if f.ndim == 1:
+            return self.classes_[(f > 0).astype(np.int64)]
+        return self.classes_[np.argmax(f, axis=1)]
