@@ -13,6 +13,7 @@ BENCHMARKS = {
     "pointcloud": "benchmarks.pointcloud",
     "plane_tracking": "benchmarks.plane_tracking",
     "features": "benchmarks.features",
+    "learning": "benchmarks.learning",
 }
 
 
