@@ -53,7 +53,12 @@ class _BaseForest(Estimator):
     _default_features: Any = "sqrt"
 
     def _grow_all(
-        self, X: np.ndarray, y_class: np.ndarray, y_value: np.ndarray, n_classes: int
+        self,
+        X: np.ndarray,
+        y_class: np.ndarray,
+        y_value: np.ndarray,
+        n_classes: int,
+        target: np.ndarray,
     ) -> None:
         n, d = X.shape
         n_trees = check_int(self.n_estimators, "n_estimators", 1)
@@ -91,7 +96,7 @@ class _BaseForest(Estimator):
         imp = np.mean([t.importances(d) for t in self.estimators_], axis=0)
         self.feature_importances_ = imp / imp.sum() if imp.sum() > 0 else imp
         if self.oob_score:
-            self._oob(X, [s for _, s in grown])
+            self._oob(X, [s for _, s in grown], target)
 
     def _tree_outputs(self, X: np.ndarray) -> np.ndarray:
         """Leaf values of every tree, ``(n_trees, N, n_out)``."""
@@ -99,7 +104,9 @@ class _BaseForest(Estimator):
 
     def _oob_values(
         self, X: np.ndarray, samples: list[np.ndarray]
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+        """Sums of out-of-bag leaf values and of votes per sample, and how many trees
+        left each sample out."""
         n = X.shape[0]
         n_out = self.estimators_[0].value.shape[1]
         total = np.zeros((n, n_out))
@@ -186,12 +193,10 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         if self.voting not in ("hard", "soft"):
             raise InputError(f"voting must be 'hard' or 'soft'; got {self.voting!r}")
         codes = self._encode_labels(y, X.shape[0])
-        self._codes = codes
-        self._grow_all(X, codes, np.zeros(1), self.classes_.size)
-        del self._codes
+        self._grow_all(X, codes, np.zeros(1), self.classes_.size, codes)
         return self
 
-    def _oob(self, X: np.ndarray, samples: list[np.ndarray]) -> None:
+    def _oob(self, X: np.ndarray, samples: list[np.ndarray], codes: np.ndarray) -> None:
         (total, votes), seen = self._oob_values(X, samples)
         ok = seen > 0
         source = votes if self.voting == "hard" else total
@@ -199,7 +204,7 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         shares[ok] = total[ok] / seen[ok, None]
         self.oob_decision_function_ = shares
         pred = np.argmax(source[ok], axis=1)
-        self.oob_score_ = float(np.mean(pred == self._codes[ok]))
+        self.oob_score_ = float(np.mean(pred == codes[ok]))
 
     def predict_proba(self, X: Any) -> np.ndarray:
         """Mean of the trees' leaf class shares, ``(N, c)``."""
@@ -261,18 +266,16 @@ class RandomForestRegressor(RegressorMixin, _BaseForest):
         """Grow the forest on ``X`` (N, d) and targets ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         y = check_target(y, X.shape[0])
-        self._y = y
-        self._grow_all(X, np.zeros(1, dtype=np.int64), y, 0)
-        del self._y
+        self._grow_all(X, np.zeros(1, dtype=np.int64), y, 0, y)
         return self
 
-    def _oob(self, X: np.ndarray, samples: list[np.ndarray]) -> None:
+    def _oob(self, X: np.ndarray, samples: list[np.ndarray], y_all: np.ndarray) -> None:
         (total, _), seen = self._oob_values(X, samples)
         ok = seen > 0
         pred = np.full(X.shape[0], np.nan)
         pred[ok] = total[ok, 0] / seen[ok]
         self.oob_prediction_ = pred
-        y = self._y[ok]
+        y = y_all[ok]
         ss_tot = float(np.sum((y - y.mean()) ** 2))
         self.oob_score_ = 1.0 - float(np.sum((y - pred[ok]) ** 2)) / ss_tot if ss_tot else 0.0
 

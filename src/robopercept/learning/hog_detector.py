@@ -268,15 +268,20 @@ class HogDetector:
 def face_training_data() -> tuple[np.ndarray, np.ndarray]:
     """scikit-image's ``lfw_subset``: ``(200, 24, 24)`` patches (top-left crop of the
     25 x 25 images) and labels (the first 100 are faces). Needs scikit-image."""
+    images = _lfw_subset()[:, :24, :24]
+    labels = np.r_[np.ones(100, dtype=int), np.zeros(100, dtype=int)]
+    return images, labels
+
+
+def _lfw_subset() -> np.ndarray:
+    """The 200 25 x 25 ``lfw_subset`` images (scikit-image's bundled data)."""
     try:
         from skimage import data
     except ImportError:
         raise InputError(
             "training the face model needs scikit-image: pip install scikit-image"
         ) from None
-    images = data.lfw_subset()[:, :24, :24]
-    labels = np.r_[np.ones(100, dtype=int), np.zeros(100, dtype=int)]
-    return images, labels
+    return data.lfw_subset()
 
 
 def _negative_pictures() -> list[np.ndarray]:
@@ -296,7 +301,9 @@ def train_face_detector(*, mining_rounds: int = 2, rng: Any = 0, progress: bool 
     from robopercept.learning.metrics import precision_score, recall_score
     from robopercept.learning.model_selection import StratifiedKFold
 
-    patches, labels = face_training_data()
+    full = _lfw_subset()
+    patches = full[:, :24, :24]
+    labels = np.r_[np.ones(100, dtype=int), np.zeros(100, dtype=int)]
     det = HogDetector()
     X = det.describe(patches)
     preds = np.empty_like(labels)
@@ -309,9 +316,6 @@ def train_face_detector(*, mining_rounds: int = 2, rng: Any = 0, progress: bool 
         "recall": float(recall_score(labels, preds)),
     }
     # positives: the four 24 x 24 crops of each 25 x 25 face, and their mirror images
-    from skimage import data
-
-    full = data.lfw_subset()
     faces = np.concatenate(
         [full[:100, dy : dy + 24, dx : dx + 24] for dy in (0, 1) for dx in (0, 1)]
     )

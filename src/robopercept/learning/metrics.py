@@ -330,7 +330,7 @@ def precision_recall_curve(
         keep = np.where(np.r_[True, np.logical_or(np.diff(tps[:-1]), np.diff(tps[1:])), True])[0]
         fps, tps, thr = fps[keep], tps[keep], thr[keep]
     ps = tps + fps
-    precision = np.where(ps != 0, np.divide(tps, ps, where=ps != 0, out=np.zeros_like(tps)), 0.0)
+    precision = _ratio(tps, ps)
     recall = np.ones_like(tps) if tps[-1] == 0 else tps / tps[-1]
     return np.r_[precision[::-1], 1.0], np.r_[recall[::-1], 0.0], thr[::-1]
 

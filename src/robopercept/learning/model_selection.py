@@ -126,18 +126,13 @@ def train_test_split(
             raise InputError(f"stratify must have {n} labels; got {y.shape[0]}")
         if not shuffle:
             raise InputError("stratified splits are shuffled; pass shuffle=True")
-        parts = _stratified_pick(y, [n_val, n_test], gen) if n_val else None
-        if parts is None:
-            (test,) = _stratified_pick(y, [n_test], gen)[:1]
-            mask = np.ones(n, bool)
-            mask[test] = False
-            train, val = gen.permutation(np.flatnonzero(mask)), np.empty(0, np.int64)
-        else:
-            val, test = parts[0], parts[1]
-            mask = np.ones(n, bool)
-            mask[val] = False
-            mask[test] = False
-            train = gen.permutation(np.flatnonzero(mask))
+        picks = _stratified_pick(y, [n_val, n_test] if n_val else [n_test], gen)
+        test = picks[-1]
+        val = picks[0] if n_val else np.empty(0, np.int64)
+        mask = np.ones(n, bool)
+        mask[val] = False
+        mask[test] = False
+        train = gen.permutation(np.flatnonzero(mask))
     else:
         order = gen.permutation(n) if shuffle else np.arange(n)
         train, val, test = (

@@ -292,7 +292,7 @@ class SVC(ClassifierMixin, Estimator):
         self.n_iter_ = np.zeros(len(pairs), dtype=np.int64)
         for k, (a, b) in enumerate(pairs):
             # binary: classes_[1] positive; one-vs-one: the first class of the pair
-            pos, neg = (b, a) if c == 2 else (a, b)
+            pos = b if c == 2 else a
             idx = np.flatnonzero((codes == a) | (codes == b))
             yy = np.where(codes[idx] == pos, 1.0, -1.0)
             alpha, bias, iters = _smo(
@@ -302,7 +302,6 @@ class SVC(ClassifierMixin, Estimator):
             machines.append((idx[sv], alpha[sv] * yy[sv], bias))
             used[idx[sv]] = True
             self.n_iter_[k] = iters
-            del neg
         # support vectors sorted by class, then by index (scikit-learn's order)
         order = np.lexsort((np.arange(n), codes))
         self.support_ = order[used[order]]

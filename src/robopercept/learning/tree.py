@@ -384,17 +384,6 @@ class _Tree:
         total = out.sum()
         return out / total if total > 0 else out
 
-    def to_dict(self) -> dict[str, np.ndarray]:
-        return {
-            "feature": self.feature,
-            "threshold": self.threshold,
-            "left": self.left,
-            "right": self.right,
-            "value": self.value,
-            "impurity": self.impurity,
-            "n_node_samples": self.n_node_samples,
-        }
-
 
 class _BaseTree(Estimator):
     _criteria: tuple[str, ...] = ()
