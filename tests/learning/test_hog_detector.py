@@ -9,8 +9,10 @@ from robopercept.errors import FileFormatError, InputError, NotFittedError
 from robopercept.learning.hog_detector import (
     HogDetector,
     box_iou,
+    default_face_detector,
     face_training_data,
     non_max_suppression,
+    train_face_detector,
 )
 from robopercept.learning.model_selection import cross_val_score
 from robopercept.learning.svm import LinearSVC
@@ -27,14 +29,37 @@ def test_iou_and_nms_hand_case():
 
 
 def test_hog_svm_cross_validated_accuracy_on_lfw_subset():
-    """Real faces vs non-faces (scikit-image's lfw_subset): 5-fold accuracy >= 0.9."""
+    """Real faces vs non-faces (scikit-image's lfw_subset): 5-fold accuracy >= 0.9, with
+    the shipped model's HOG (signed, 18 bins) and the plain unsigned 9-bin one."""
     patches, labels = face_training_data()
-    X = HogDetector().describe(patches)
-    scores = cross_val_score(LinearSVC(C=0.1, rng=0), X, labels, cv=5)
-    assert scores.mean() >= 0.9, scores
-    precision = cross_val_score(LinearSVC(C=0.1, rng=0), X, labels, cv=5, scoring="precision")
-    recall = cross_val_score(LinearSVC(C=0.1, rng=0), X, labels, cv=5, scoring="recall")
-    assert precision.mean() > 0.85 and recall.mean() > 0.85
+    for det in (HogDetector(orientations=18, signed=True, C=1.0), HogDetector(C=0.1)):
+        X = det.describe(patches)
+        svm = LinearSVC(C=det.C, rng=0)
+        assert cross_val_score(svm, X, labels, cv=5).mean() >= 0.9
+        precision = cross_val_score(svm, X, labels, cv=5, scoring="precision")
+        recall = cross_val_score(svm, X, labels, cv=5, scoring="recall")
+        assert precision.mean() > 0.85 and recall.mean() > 0.85
+
+
+ASTRONAUT_FACE = np.array([165, 70, 100, 120.0])  # x, y, w, h, read off the picture
+
+
+def test_shipped_face_model_best_box_is_the_astronauts_face(astronaut):
+    """The acceptance item: the best box on skimage's astronaut overlaps her face."""
+    found = default_face_detector().detect(astronaut, threshold=0.0)
+    assert len(found) >= 1
+    assert box_iou(ASTRONAUT_FACE, found.boxes[:1])[0] > 0.5, found.boxes[:3]
+
+
+def test_training_reproduces_the_shipped_model():
+    """train_face_detector() with its defaults gives the bundled weights (seeded, so
+    exactly: the hard negatives and the SVM's coordinate order are drawn from rng=0),
+    and its cross-validated accuracy is >= 0.9."""
+    det, cv = train_face_detector(rng=0)
+    shipped = default_face_detector()
+    np.testing.assert_allclose(det.coef_, shipped.coef_, atol=1e-9)
+    assert det.intercept_ == pytest.approx(shipped.intercept_, abs=1e-9)
+    assert cv["accuracy"] >= 0.9 and cv["recall"] >= 0.9
 
 
 def test_detector_finds_a_trained_pattern_and_round_trips(tmp_path):
