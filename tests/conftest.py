@@ -47,3 +47,18 @@ def rng() -> np.random.Generator:
     """A fresh seeded generator per test, so no test's data depends on which tests ran
     before it."""
     return np.random.default_rng(12345)
+
+
+# scikit-learn's bundled datasets (the learning reference), loaded once
+@pytest.fixture(scope="session")
+def iris() -> tuple[np.ndarray, np.ndarray]:
+    from sklearn.datasets import load_iris
+
+    return load_iris(return_X_y=True)
+
+
+@pytest.fixture(scope="session")
+def digits() -> tuple[np.ndarray, np.ndarray]:
+    from sklearn.datasets import load_digits
+
+    return load_digits(return_X_y=True)

@@ -84,3 +84,21 @@ def test_bad_input():
         m.roc_curve(["a", "b"], [0.1, 0.2])
     with pytest.raises(InputError, match="NaN"):
         m.roc_curve([0, 1], [0.1, np.nan])
+
+
+def test_adjusted_rand_score_equals_sklearn():
+    """ARI is sklearn's to 1e-12 on random labelings, renamings and the edge cases."""
+    from sklearn.metrics import adjusted_rand_score as ref
+
+    from robopercept.learning.metrics import adjusted_rand_score
+
+    gen = np.random.default_rng(3)
+    for n, ka, kb in ((50, 3, 4), (500, 10, 7), (7, 2, 2)):
+        a, b = gen.integers(0, ka, n), gen.integers(-1, kb, n)
+        assert adjusted_rand_score(a, b) == pytest.approx(ref(a, b), abs=1e-12)
+    a = gen.integers(0, 4, 100)
+    assert adjusted_rand_score(a, (a + 1) * 7) == 1.0  # a renaming
+    assert adjusted_rand_score([0, 0, 0], [1, 1, 1]) == ref([0, 0, 0], [1, 1, 1])
+    assert adjusted_rand_score([0, 1, 2], [5, 6, 7]) == ref([0, 1, 2], [5, 6, 7])
+    with pytest.raises(InputError):
+        adjusted_rand_score([0, 1], [0])

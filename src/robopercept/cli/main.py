@@ -30,7 +30,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from robopercept.cli import cloud, features, imaging, info, tracking
+    from robopercept.cli import cloud, features, imaging, info, learn, tracking
 
     parser = _Parser(
         prog="robopercept",
@@ -43,6 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     imaging.register(sub)
     features.register(sub)
     cloud.register(sub)
+    learn.register(sub)
     tracking.register(sub)
     return parser
 

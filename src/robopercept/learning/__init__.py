@@ -15,6 +15,7 @@ from robopercept.learning.lda import LDA
 from robopercept.learning.meanshift import MeanShift, estimate_bandwidth
 from robopercept.learning.metrics import (
     accuracy_score,
+    adjusted_rand_score,
     auc,
     average_precision_score,
     classification_report,
@@ -53,6 +54,7 @@ __all__ = [
     "RandomForestRegressor",
     "StratifiedKFold",
     "accuracy_score",
+    "adjusted_rand_score",
     "auc",
     "average_precision_score",
     "classification_report",

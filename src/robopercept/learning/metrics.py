@@ -33,6 +33,7 @@ from robopercept.errors import InputError
 __all__ = [
     "ClassificationReport",
     "accuracy_score",
+    "adjusted_rand_score",
     "auc",
     "average_precision_score",
     "classification_report",
@@ -339,3 +340,38 @@ def average_precision_score(y_true: Any, y_score: Any, *, pos_label: Any = None)
     r"""Average precision :math:`\sum_k (R_k - R_{k-1}) P_k` (no interpolation)."""
     precision, recall, _ = precision_recall_curve(y_true, y_score, pos_label=pos_label)
     return float(max(0.0, -np.sum(np.diff(recall) * precision[:-1])))
+
+
+def adjusted_rand_score(labels_true: Any, labels_pred: Any) -> float:
+    r"""Agreement of two clusterings, corrected for chance (Hubert and Arabie's ARI).
+
+    With the contingency table :math:`n_{ij}` (samples in class :math:`i` and cluster
+    :math:`j`), its row sums :math:`a_i`, column sums :math:`b_j` and
+    :math:`\binom{\cdot}{2}` pair counts,
+
+    .. math::
+
+        \text{ARI} = \frac{\sum_{ij} \binom{n_{ij}}{2} - E}
+                          {\tfrac12 [\sum_i \binom{a_i}{2} + \sum_j \binom{b_j}{2}] - E},
+        \qquad E = \frac{\sum_i \binom{a_i}{2} \sum_j \binom{b_j}{2}}{\binom{n}{2}}.
+
+    1 for identical partitions (whatever the label names), about 0 for random ones.
+    Noise labels (-1) count as one more cluster, as in scikit-learn.
+    """
+    a, b = _pair(labels_true, labels_pred, "labels_pred")
+    _, ia = np.unique(a, return_inverse=True)
+    _, ib = np.unique(b, return_inverse=True)
+    table = np.zeros((ia.max() + 1, ib.max() + 1), dtype=np.int64)
+    np.add.at(table, (ia, ib), 1)
+
+    def pairs(v: np.ndarray) -> float:
+        v = v.astype(np.float64)
+        return float(np.sum(v * (v - 1) / 2))
+
+    n = a.size
+    index, rows, cols = pairs(table.ravel()), pairs(table.sum(1)), pairs(table.sum(0))
+    if table.shape[0] == table.shape[1] == 1 or (table.shape[0] == table.shape[1] == n and n > 0):
+        return 1.0  # one cluster each, or every sample alone in both: the same partition
+    expected = rows * cols / (n * (n - 1) / 2)
+    top = 0.5 * (rows + cols) - expected
+    return float((index - expected) / top) if top != 0 else 1.0

@@ -4,10 +4,13 @@ from robopercept.viz.cloud import render_points
 from robopercept.viz.colormap import colorize_depth, colorize_signed, label_colors
 from robopercept.viz.draw import draw_boxes, draw_lines, draw_mask, draw_points, draw_text
 from robopercept.viz.features import draw_matches, hog_picture
+from robopercept.viz.learning import confusion_picture, curves_picture, scatter_picture
 
 __all__ = [
     "colorize_depth",
     "colorize_signed",
+    "confusion_picture",
+    "curves_picture",
     "draw_boxes",
     "draw_lines",
     "draw_mask",
@@ -17,4 +20,5 @@ __all__ = [
     "hog_picture",
     "label_colors",
     "render_points",
+    "scatter_picture",
 ]

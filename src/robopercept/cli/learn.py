@@ -1,0 +1,509 @@
+"""``robopercept learn cluster|classify|reduce`` (CSV tables in, tables and pictures
+out), ``robopercept detect-hog`` (the HOG + linear SVM face detector) and
+``robopercept train-hog`` (rebuild its model)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import FileFormatError, InputError
+
+__all__ = ["read_table", "register"]
+
+CLUSTER_METHODS = ("kmeans", "meanshift", "dbscan")
+MODELS = ("tree", "forest", "svm", "lda")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    d = sub.add_parser(
+        "detect-hog",
+        help="find faces with the HOG + linear SVM sliding-window detector",
+        description="Scan IMAGE with the HOG + linear SVM detector (an image pyramid, "
+        "non-maximum suppression) and write it with the boxes drawn. The bundled model "
+        "finds faces; --model loads one written by `robopercept train-hog`.",
+    )
+    d.add_argument("image")
+    d.add_argument("-o", "--output", default="detections.png", help="output PNG")
+    d.add_argument("--model", help="model .npz (default: the bundled face model)")
+    d.add_argument("--threshold", type=float, default=0.0, help="lowest SVM score (default 0)")
+    d.add_argument("--min-size", type=int, help="smallest object in pixels (default: window)")
+    d.add_argument("--max-size", type=int, help="largest object in pixels (default: image)")
+    d.add_argument("--max", type=int, default=10, help="draw at most this many boxes")
+    d.add_argument("--json", action="store_true", help="print the boxes as JSON")
+    d.set_defaults(func=run_detect_hog)
+
+    t = sub.add_parser(
+        "train-hog",
+        help="train the HOG + linear SVM face model (needs scikit-image)",
+        description="Train the face model on scikit-image's lfw_subset with hard negatives "
+        "mined from face-free scikit-image pictures; prints its 5-fold cross-validated "
+        "accuracy, precision and recall. The defaults rebuild the bundled model exactly.",
+    )
+    t.add_argument("-o", "--output", default="face_hog_svm.npz", help="model file (.npz)")
+    t.add_argument("--rounds", type=int, default=4, help="hard-negative mining rounds")
+    t.add_argument("--seed", type=int, default=0)
+    t.set_defaults(func=run_train_hog)
+
+    learn = sub.add_parser(
+        "learn",
+        help="cluster, classify or reduce a CSV table",
+        description="Classical machine learning on a CSV table with a header row: every "
+        "column is a feature except the one named by --label.",
+    )
+    ls = learn.add_subparsers(dest="learn_command", metavar="TASK", parser_class=type(learn))
+    ls.required = True
+
+    c = ls.add_parser(
+        "cluster",
+        help="k-means, mean-shift or DBSCAN clusters of the rows",
+        description="Cluster the rows of DATA; prints the cluster sizes (and the adjusted "
+        "Rand index when --label names true classes) and draws the clusters in 2-D (the "
+        "two features, or the first two principal components).",
+    )
+    c.add_argument("data")
+    c.add_argument("--method", choices=CLUSTER_METHODS, default="kmeans")
+    c.add_argument("--label", help="a column of true classes: left out, and scored by ARI")
+    c.add_argument("-k", "--clusters", type=int, default=3, help="k-means: k (default 3)")
+    c.add_argument("--bandwidth", type=float, help="mean-shift: bandwidth (default: estimated)")
+    c.add_argument("--eps", type=float, default=0.5, help="DBSCAN: radius (default 0.5)")
+    c.add_argument("--min-samples", type=int, default=5, help="DBSCAN: core size (default 5)")
+    c.add_argument("--standardize", action="store_true", help="scale features to unit variance")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("-o", "--output", default="clusters.png", help="output PNG")
+    c.add_argument("--labels-out", help="write one cluster label per row to this CSV")
+    c.add_argument("--json", action="store_true", help="print the summary as JSON")
+    c.set_defaults(func=run_cluster)
+
+    k = ls.add_parser(
+        "classify",
+        help="train a classifier and report precision, recall, ROC and PR curves",
+        description="Train on TRAIN (or on a stratified split of it when no TEST is "
+        "given) and report on the test rows: per-class precision, recall, F1, the "
+        "confusion matrix, ROC AUC and average precision (one-vs-rest). Writes "
+        "confusion.png, roc.png, pr.png and report.json into --output.",
+    )
+    k.add_argument("train")
+    k.add_argument("test", nargs="?")
+    k.add_argument("--label", required=True, help="the column of classes")
+    k.add_argument("--model", choices=MODELS, default="forest")
+    k.add_argument("--test-size", type=float, default=0.25, help="held-out share (no TEST)")
+    k.add_argument("--cv", type=int, default=0, help="also report k-fold CV accuracy on TRAIN")
+    k.add_argument("--max-depth", type=int, help="tree/forest: depth limit")
+    k.add_argument("--trees", type=int, default=100, help="forest: trees (default 100)")
+    k.add_argument("-C", type=float, default=1.0, help="svm: box constraint (default 1)")
+    k.add_argument("--kernel", choices=("rbf", "linear", "poly"), default="rbf")
+    k.add_argument("--standardize", action="store_true", help="scale features (fit on train)")
+    k.add_argument("--seed", type=int, default=0)
+    k.add_argument("-o", "--output", default="classify_out", help="output folder")
+    k.add_argument("--json", action="store_true", help="print the report as JSON")
+    k.set_defaults(func=run_classify)
+
+    r = ls.add_parser(
+        "reduce",
+        help="project the rows to 2-D by PCA or LDA and draw them",
+        description="PCA (unsupervised) or LDA (needs --label) to two dimensions; prints "
+        "the explained variance of each axis and writes the 2-D scatter, coloured by "
+        "--label when given.",
+    )
+    r.add_argument("data")
+    r.add_argument("--method", choices=("pca", "lda"), default="pca")
+    r.add_argument("--label", help="the column of classes (required by LDA)")
+    r.add_argument("--standardize", action="store_true", help="PCA on unit-variance features")
+    r.add_argument("-o", "--output", default="reduced.png", help="output PNG")
+    r.add_argument("--transformed", help="write the 2-D coordinates to this CSV")
+    r.add_argument("--json", action="store_true", help="print the summary as JSON")
+    r.set_defaults(func=run_reduce)
+
+
+# -- tables ---------------------------------------------------------------------------
+def read_table(
+    path: str | Path, label: str | None = None
+) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
+    """A CSV file with a header row: ``(X, y, feature names)``.
+
+    Every column but ``label`` must be numeric (empty cells and NaN are refused, by the
+    estimators, with the row named); ``y`` keeps the label column's text.
+    """
+    path = Path(path)
+    try:
+        with path.open(newline="") as fh:
+            rows = [row for row in csv.reader(fh) if row]
+    except UnicodeDecodeError:
+        raise FileFormatError(f"{path}: not a text CSV file") from None
+    if len(rows) < 2:
+        raise FileFormatError(f"{path}: needs a header row and at least one data row")
+    header = [h.strip() for h in rows[0]]
+    body = rows[1:]
+    for i, row in enumerate(body, start=2):
+        if len(row) != len(header):
+            raise FileFormatError(
+                f"{path}: line {i} has {len(row)} fields, the header {len(header)}"
+            )
+    if label is not None and label not in header:
+        raise InputError(f"{path}: no column {label!r}; columns are {', '.join(header)}")
+    y = None
+    if label is not None:
+        j = header.index(label)
+        y = np.array([row[j].strip() for row in body])
+    names = [h for h in header if h != label]
+    cols = [header.index(n) for n in names]
+    if not cols:
+        raise InputError(f"{path}: no feature columns besides the label")
+    X = np.empty((len(body), len(cols)))
+    for c, (j, name) in enumerate(zip(cols, names, strict=True)):
+        try:
+            X[:, c] = [float(row[j]) if row[j].strip() else np.nan for row in body]
+        except ValueError:
+            raise InputError(
+                f"{path}: column {name!r} is not numeric; name it with --label if it "
+                "holds the classes, or drop it"
+            ) from None
+    return X, y, names
+
+
+def _standardize(train: np.ndarray, *others: np.ndarray) -> list[np.ndarray]:
+    mean, std = train.mean(axis=0), train.std(axis=0)
+    std = np.where(std > 0, std, 1.0)
+    return [(a - mean) / std for a in (train, *others)]
+
+
+def _codes(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Integer codes of labels, with the names sorted numerically when they all are
+    numbers (so classes 2 and 10 come in that order)."""
+    names = np.unique(y)
+    try:
+        names = names[np.argsort([float(v) for v in names], kind="stable")]
+    except ValueError:
+        pass
+    lookup = {v: i for i, v in enumerate(names)}
+    return np.array([lookup[v] for v in y], dtype=np.int64), names
+
+
+def _write(path: str | Path, image: np.ndarray) -> Path:
+    from robopercept.imaging import write_image
+
+    return write_image(path, image)
+
+
+# -- detect-hog / train-hog -----------------------------------------------------------
+def run_detect_hog(args: argparse.Namespace) -> int:
+    from robopercept.imaging import read_image
+    from robopercept.learning.hog_detector import HogDetector, default_face_detector
+    from robopercept.viz import draw_boxes
+
+    image = read_image(args.image, mode="rgb")
+    det = HogDetector.load(args.model) if args.model else default_face_detector()
+    t0 = time.perf_counter()
+    found = det.detect(
+        image,
+        threshold=args.threshold,
+        min_size=args.min_size,
+        max_size=args.max_size,
+        progress=not args.json,
+    )
+    ms = (time.perf_counter() - t0) * 1e3
+    n = min(len(found), max(args.max, 0))
+    boxes, scores = found.boxes[:n], found.scores[:n]
+    labels = [f"{s:.2f}" for s in scores]
+    pic = draw_boxes(image, boxes, color=(0, 255, 0), width=3, labels=labels)
+    written = _write(args.output, pic)
+    rows = [
+        dict(zip(("x", "y", "size"), np.round(b[:3], 1).tolist(), strict=True), score=round(s, 4))
+        for b, s in zip(boxes, scores.tolist(), strict=True)
+    ]
+    if args.json:
+        print(json.dumps({"image": args.image, "ms": round(ms, 1), "detections": rows}))
+    else:
+        print(f"detect-hog: {len(found)} boxes above {args.threshold} in {ms:.0f} ms")
+        for r in rows:
+            print(
+                f"  x {r['x']:7.1f}  y {r['y']:7.1f}  size {r['size']:6.1f}  score {r['score']:.3f}"
+            )
+        print(f"-> {written}")
+    return 0
+
+
+def run_train_hog(args: argparse.Namespace) -> int:
+    from robopercept.learning.hog_detector import train_face_detector
+
+    if args.rounds < 0:
+        raise InputError(f"--rounds must be >= 0; got {args.rounds}")
+    t0 = time.perf_counter()
+    det, cv = train_face_detector(mining_rounds=args.rounds, rng=args.seed, progress=True)
+    det.save(args.output)
+    print(
+        f"train-hog: lfw_subset 5-fold CV accuracy {cv['accuracy']:.3f}, precision "
+        f"{cv['precision']:.3f}, recall {cv['recall']:.3f}; {det.coef_.size} weights, "
+        f"{time.perf_counter() - t0:.1f} s -> {args.output}"
+    )
+    return 0
+
+
+# -- learn cluster --------------------------------------------------------------------
+def _to_2d(X: np.ndarray) -> tuple[np.ndarray, str]:
+    from robopercept.learning import PCA
+
+    if X.shape[1] == 1:
+        return np.c_[X[:, 0], np.zeros(len(X))], "feature"
+    if X.shape[1] == 2:
+        return X, "the two features"
+    return PCA(2).fit_transform(X), "first two principal components"
+
+
+def run_cluster(args: argparse.Namespace) -> int:
+    from robopercept.learning import DBSCAN, KMeans, MeanShift, adjusted_rand_score
+
+    X, y, names = read_table(args.data, args.label)
+    if args.standardize:
+        (X,) = _standardize(X)
+    if args.method == "kmeans":
+        model: Any = KMeans(args.clusters, rng=args.seed)
+    elif args.method == "meanshift":
+        model = MeanShift(bandwidth=args.bandwidth)
+    else:
+        model = DBSCAN(eps=args.eps, min_samples=args.min_samples)
+    t0 = time.perf_counter()
+    labels = model.fit(X).labels_
+    ms = (time.perf_counter() - t0) * 1e3
+    ids, sizes = np.unique(labels[labels >= 0], return_counts=True)
+    report: dict[str, Any] = {
+        "data": args.data,
+        "rows": len(X),
+        "features": names,
+        "method": args.method,
+        "clusters": int(ids.size),
+        "sizes": {int(i): int(s) for i, s in zip(ids, sizes, strict=True)},
+        "noise": int(np.sum(labels < 0)),
+        "ms": round(ms, 1),
+    }
+    if args.method == "kmeans":
+        report["inertia"] = float(model.inertia_)
+    if args.method == "meanshift":
+        report["bandwidth"] = float(model.bandwidth_)
+    if y is not None:
+        report["adjusted_rand_index"] = adjusted_rand_score(y, labels)
+    pts, how = _to_2d(X)
+    pic = _write(
+        args.output,
+        _scatter(pts, labels, f"{args.method}: {ids.size} clusters ({how})"),
+    )
+    report["picture"] = str(pic)
+    if args.labels_out:
+        with open(args.labels_out, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["cluster"])
+            w.writerows([[int(v)] for v in labels])
+        report["labels_out"] = args.labels_out
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    shape = f"{len(X)} rows x {len(names)} features"
+    print(f"{args.method}: {shape} -> {ids.size} clusters in {ms:.1f} ms")
+    for i, s in report["sizes"].items():
+        print(f"  cluster {i:>3}: {s} rows")
+    if report["noise"]:
+        print(f"  noise      : {report['noise']} rows")
+    for key in ("inertia", "bandwidth", "adjusted_rand_index"):
+        if key in report:
+            print(f"  {key.replace('_', ' ')}: {report[key]:.4g}")
+    print(f"-> {pic}")
+    return 0
+
+
+def _scatter(pts: np.ndarray, labels: np.ndarray, title: str, names: Any = None) -> np.ndarray:
+    from robopercept.viz import scatter_picture
+
+    return scatter_picture(pts, labels, title=title, names=names)
+
+
+# -- learn classify -------------------------------------------------------------------
+def _model(args: argparse.Namespace) -> Any:
+    from robopercept.learning import LDA, SVC, DecisionTreeClassifier, RandomForestClassifier
+
+    if args.model == "tree":
+        return DecisionTreeClassifier(max_depth=args.max_depth, rng=args.seed)
+    if args.model == "forest":
+        return RandomForestClassifier(
+            n_estimators=args.trees, max_depth=args.max_depth, n_jobs=-1, rng=args.seed
+        )
+    if args.model == "svm":
+        return SVC(C=args.C, kernel=args.kernel)
+    return LDA()
+
+
+def _scores(model: Any, X: np.ndarray, n_classes: int) -> np.ndarray:
+    """Per-class scores ``(N, c)`` for ROC/PR: probabilities, else decision values."""
+    if hasattr(model, "predict_proba"):
+        return model.predict_proba(X)
+    f = model.decision_function(X)
+    return np.c_[-f, f] if n_classes == 2 else f
+
+
+def run_classify(args: argparse.Namespace) -> int:
+    from robopercept.learning import (
+        average_precision_score,
+        classification_report,
+        cross_val_score,
+        precision_recall_curve,
+        roc_auc_score,
+        roc_curve,
+        train_test_split,
+    )
+    from robopercept.viz import confusion_picture, curves_picture
+
+    X, y, names = read_table(args.train, args.label)
+    assert y is not None
+    if args.test:
+        Xt, yt, names_t = read_table(args.test, args.label)
+        assert yt is not None
+        if names_t != names:
+            raise InputError(f"{args.test}: columns differ from {args.train}'s")
+        Xtr, ytr = X, y
+    else:
+        if not 0.0 < args.test_size < 1.0:
+            raise InputError(f"--test-size must be in (0, 1); got {args.test_size}")
+        Xtr, Xt, ytr, yt = train_test_split(
+            X, y, test_size=args.test_size, stratify=y, rng=args.seed
+        )
+    codes, classes = _codes(np.r_[ytr, yt])
+    ctr, cte = codes[: len(ytr)], codes[len(ytr) :]
+    if args.standardize:
+        Xtr, Xt = _standardize(Xtr, Xt)
+    model = _model(args)
+    t0 = time.perf_counter()
+    model.fit(Xtr, ctr)
+    fit_ms = (time.perf_counter() - t0) * 1e3
+    pred = model.predict(Xt)
+    rep = classification_report(cte, pred)  # codes: classes in numeric order
+    rep = dataclasses.replace(rep, labels=classes[rep.labels])
+    # the report's classes are the ones seen in test; the scores cover the model's
+    scores = _scores(model, Xt, model.classes_.size)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    roc, pr, per_class = [], [], {}
+    columns = list(enumerate(model.classes_))
+    if len(columns) == 2:
+        columns = columns[1:]  # one curve says it all: the second class is the positive
+    for col, code in columns:
+        truth = (cte == code).astype(int)
+        if truth.min() == truth.max():
+            continue  # the class is absent from (or alone in) the test rows
+        name = str(classes[code])
+        fpr, tpr, _ = roc_curve(truth, scores[:, col])
+        prec, rec, _ = precision_recall_curve(truth, scores[:, col])
+        auc_v = roc_auc_score(truth, scores[:, col])
+        ap_v = average_precision_score(truth, scores[:, col])
+        per_class[name] = {"roc_auc": auc_v, "average_precision": ap_v}
+        roc.append((fpr, tpr, f"{name} AUC {auc_v:.3f}"))
+        pr.append((rec, prec, f"{name} AP {ap_v:.3f}"))
+    label_names = [str(v) for v in rep.labels]
+    confusion = confusion_picture(rep.confusion, label_names)
+    written = {"confusion": str(_write(out / "confusion.png", confusion))}
+    if roc:
+        ovr = " (one vs rest)" if len(roc) > 1 else ""
+        pics = (
+            ("roc", roc, "ROC", "false positive rate", "TPR"),
+            ("pr", pr, "precision-recall", "recall", "precision"),
+        )
+        for key, curves, what, xlabel, ylabel in pics:
+            pic = curves_picture(
+                curves, title=f"{args.model}: {what}{ovr}", xlabel=xlabel, ylabel=ylabel
+            )
+            written[key] = str(_write(out / f"{key}.png", pic))
+    report: dict[str, Any] = {
+        "train": args.train,
+        "test": args.test or f"stratified {args.test_size:.0%} of train (seed {args.seed})",
+        "model": args.model,
+        "train_rows": len(Xtr),
+        "test_rows": len(Xt),
+        "fit_ms": round(fit_ms, 1),
+        "accuracy": rep.accuracy,
+        "classes": label_names,
+        "precision": rep.precision.tolist(),
+        "recall": rep.recall.tolist(),
+        "f1": rep.f1.tolist(),
+        "support": rep.support.tolist(),
+        "confusion": rep.confusion.tolist(),
+        "curves": per_class,
+        "pictures": written,
+    }
+    if args.cv:
+        if args.cv < 2:
+            raise InputError(f"--cv must be >= 2; got {args.cv}")
+        cv = cross_val_score(_model(args), Xtr, ctr, cv=args.cv)
+        report["cv_accuracy"] = {"mean": float(cv.mean()), "std": float(cv.std())}
+    (out / "report.json").write_text(json.dumps(report, indent=2))
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"{args.model}: trained on {len(Xtr)} rows in {fit_ms:.0f} ms, tested on {len(Xt)}")
+    print(rep.table())
+    print("confusion matrix (rows: true, columns: predicted)")
+    w = max(6, *(len(n) for n in label_names))
+    print(" " * w + " " + " ".join(f"{n:>{w}}" for n in label_names))
+    for n, row in zip(label_names, rep.confusion, strict=True):
+        print(f"{n:>{w}} " + " ".join(f"{v:>{w}d}" for v in row))
+    for n, v in per_class.items():
+        print(f"  {n}: ROC AUC {v['roc_auc']:.4f}, average precision {v['average_precision']:.4f}")
+    if "cv_accuracy" in report:
+        cvr = report["cv_accuracy"]
+        print(f"  {args.cv}-fold CV accuracy on train: {cvr['mean']:.4f} +- {cvr['std']:.4f}")
+    print(f"-> {out}/ (confusion.png, roc.png, pr.png, report.json)")
+    return 0
+
+
+# -- learn reduce ---------------------------------------------------------------------
+def run_reduce(args: argparse.Namespace) -> int:
+    from robopercept.learning import LDA, PCA
+
+    X, y, names = read_table(args.data, args.label)
+    codes = classes = None
+    if y is not None:
+        codes, classes = _codes(y)
+    if args.method == "lda":
+        if codes is None:
+            raise InputError("LDA needs the classes: name their column with --label")
+        if classes is not None and classes.size < 3:
+            raise InputError(
+                f"LDA gives at most c - 1 = {classes.size - 1} axis for {classes.size} "
+                "classes; a 2-D picture needs 3 or more (use --method pca)"
+            )
+        model: Any = LDA(n_components=2).fit(X, codes)
+    else:
+        if X.shape[1] < 2:
+            raise InputError("PCA to 2-D needs at least two feature columns")
+        model = PCA(2, standardize=args.standardize).fit(X)
+    Z = model.transform(X)[:, :2]
+    ratio = [float(v) for v in model.explained_variance_ratio_[:2]]
+    what = "variance" if args.method == "pca" else "between-class variance"
+    title = f"{args.method.upper()}: axis 1 {ratio[0]:.1%}, axis 2 {ratio[1]:.1%} of the {what}"
+    pic = _write(args.output, _scatter(Z, codes, title, classes))
+    report = {
+        "data": args.data,
+        "rows": len(X),
+        "features": names,
+        "method": args.method,
+        "explained_variance_ratio": ratio,
+        "picture": str(pic),
+    }
+    if args.transformed:
+        with open(args.transformed, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["axis1", "axis2"] + (["label"] if y is not None else []))
+            for k, z in enumerate(Z):
+                w.writerow([f"{z[0]:.9g}", f"{z[1]:.9g}"] + ([y[k]] if y is not None else []))
+        report["transformed"] = args.transformed
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(f"{args.method}: {len(X)} rows x {len(names)} features -> 2-D; {title}")
+        print(f"-> {pic}")
+    return 0
