@@ -30,6 +30,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from robopercept._checks import check_choice, check_int
 from robopercept.errors import InputError
@@ -59,6 +60,45 @@ def _assign(X: np.ndarray, C: np.ndarray, x_sq: np.ndarray) -> tuple[np.ndarray,
         labels[s:e] = lab
         dist[s:e] = np.maximum(d[np.arange(e - s), lab] + x_sq[s:e], 0.0)
     return labels, dist
+
+
+@njit(cache=True, nogil=True)
+def _nearest_sums(dots, c_sq, x_sq, X, labels, dist, sums, counts):  # pragma: no cover
+    # one pass over a chunk: nearest centre (the first of equals, as argmin), its
+    # squared distance |x|^2 - 2 x.c + |c|^2, and the per-cluster sums and counts
+    n, k = dots.shape
+    d = X.shape[1]
+    for i in range(n):
+        best = 0
+        bd = c_sq[0] - 2.0 * dots[i, 0]
+        for j in range(1, k):
+            v = c_sq[j] - 2.0 * dots[i, j]
+            if v < bd:
+                bd = v
+                best = j
+        labels[i] = best
+        dist[i] = max(bd + x_sq[i], 0.0)
+        counts[best] += 1.0
+        for t in range(d):
+            sums[best, t] += X[i, t]
+
+
+def _assign_sums(
+    X: np.ndarray, C: np.ndarray, x_sq: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One Lloyd pass: labels, squared distances, per-cluster sums and counts (the
+    distances' cross terms by BLAS in chunks, the rest fused in one compiled loop)."""
+    n, k = X.shape[0], C.shape[0]
+    labels = np.empty(n, dtype=np.int64)
+    dist = np.empty(n)
+    sums = np.zeros((k, X.shape[1]))
+    counts = np.zeros(k)
+    c_sq = np.einsum("ij,ij->i", C, C)
+    for s in range(0, n, _CHUNK):
+        e = min(s + _CHUNK, n)
+        _nearest_sums(X[s:e] @ C.T, c_sq, x_sq[s:e], X[s:e], labels[s:e], dist[s:e], sums,
+                      counts)  # fmt: skip
+    return labels, dist, sums, counts
 
 
 def kmeans_plusplus(
@@ -182,12 +222,11 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
     def _lloyd(
         self, X: np.ndarray, centers: np.ndarray, x_sq: np.ndarray, tol: float
     ) -> tuple[np.ndarray, np.ndarray, float, int]:
-        k = centers.shape[0]
         labels_old = np.full(X.shape[0], -1)
         n_iter = 0
         for n_iter in range(1, int(self.max_iter) + 1):  # noqa: B007 (read after the loop)
-            labels, dist = _assign(X, centers, x_sq)
-            new = self._means(X, labels, dist, k)
+            labels, dist, sums, counts = _assign_sums(X, centers, x_sq)
+            new = self._means(X, labels, dist, sums, counts)
             shift = float(np.sum((new - centers) ** 2))
             centers = new
             if np.array_equal(labels, labels_old):
@@ -200,10 +239,9 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
         return labels, centers, float(dist.sum()), n_iter
 
     @staticmethod
-    def _means(X: np.ndarray, labels: np.ndarray, dist: np.ndarray, k: int) -> np.ndarray:
-        counts = np.bincount(labels, minlength=k).astype(np.float64)
-        sums = np.zeros((k, X.shape[1]))
-        _scatter_add(sums, labels, X)
+    def _means(
+        X: np.ndarray, labels: np.ndarray, dist: np.ndarray, sums: np.ndarray, counts: np.ndarray
+    ) -> np.ndarray:
         empty = np.flatnonzero(counts == 0)
         if empty.size:  # move each empty cluster to one of the farthest samples
             far = np.argsort(dist, kind="stable")[::-1][: empty.size]
@@ -232,12 +270,3 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
         self._check_fitted("cluster_centers_")
         X = self._check_X(X)
         return -float(_assign(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X))[1].sum())
-
-
-def _scatter_add(sums: np.ndarray, labels: np.ndarray, X: np.ndarray) -> None:
-    """``sums[labels[i]] += X[i]`` as one sparse product (much faster than ``add.at``)."""
-    from scipy.sparse import csr_matrix
-
-    n = labels.size
-    onehot = csr_matrix((np.ones(n), (labels, np.arange(n))), shape=(sums.shape[0], n))
-    sums += onehot @ X
