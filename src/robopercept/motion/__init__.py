@@ -1,5 +1,13 @@
 """Motion analysis: background subtraction, image differencing, optical flow."""
 
+from robopercept.motion.background import (
+    AveragedBackground,
+    GaussianBackground,
+    StaticBackground,
+    clean_mask,
+)
+from robopercept.motion.detections import MaskDetections, detections_from_mask, moving_blobs
+from robopercept.motion.differencing import FrameDifference, ThreeFrameDifference
 from robopercept.motion.flow import (
     FlowStatus,
     SparseFlow,
@@ -8,4 +16,19 @@ from robopercept.motion.flow import (
     lucas_kanade,
 )
 
-__all__ = ["FlowStatus", "SparseFlow", "dense_flow", "good_features_to_track", "lucas_kanade"]
+__all__ = [
+    "AveragedBackground",
+    "FlowStatus",
+    "FrameDifference",
+    "GaussianBackground",
+    "MaskDetections",
+    "SparseFlow",
+    "StaticBackground",
+    "ThreeFrameDifference",
+    "clean_mask",
+    "dense_flow",
+    "detections_from_mask",
+    "good_features_to_track",
+    "lucas_kanade",
+    "moving_blobs",
+]
