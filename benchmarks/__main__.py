@@ -14,6 +14,7 @@ BENCHMARKS = {
     "plane_tracking": "benchmarks.plane_tracking",
     "features": "benchmarks.features",
     "learning": "benchmarks.learning",
+    "motion": "benchmarks.motion",
 }
 
 

@@ -34,6 +34,7 @@ window area, threshold ``1e-4``).
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -112,24 +113,65 @@ def _gray255(image: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def _scharr(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Scharr derivatives divided by 32 (intensity per pixel), border reflect101."""
-    p = np.pad(img, 1, mode="reflect")
-    ix = np.empty_like(img)
-    iy = np.empty_like(img)
-    _scharr_kernel(p, ix, iy)
-    return ix, iy
+_WORK = threading.local()
+
+
+def _buffers(shape: tuple[int, int]) -> list[np.ndarray]:
+    """Four float32 work images of ``shape``, kept per thread between calls: writing
+    fresh memory (page faults) cost more than the filtering itself."""
+    cached = getattr(_WORK, "buffers", None)
+    if cached is None or cached[0].shape != shape:
+        cached = [np.empty(shape, dtype=np.float32) for _ in range(4)]
+        _WORK.buffers = cached
+    return cached
+
+
+def _padded(img: np.ndarray, pad: int, out: np.ndarray) -> np.ndarray:
+    """``img`` with a border of ``pad`` pixels, reflect101 (OpenCV's default), in ``out``."""
+    h, w = img.shape
+    rows = _reflect101(np.arange(-pad, h + pad), h)
+    cols = _reflect101(np.arange(-pad, w + pad), w)
+    _gather(img, rows, cols, out)
+    return out
+
+
+def _reflect101(i: np.ndarray, n: int) -> np.ndarray:
+    period = max(2 * n - 2, 1)
+    i = np.mod(i, period)
+    return np.where(i < n, i, period - i)
 
 
 @njit(cache=True, nogil=True)
-def _scharr_kernel(p, ix, iy):  # pragma: no cover - compiled
-    h, w = ix.shape
-    for y in range(h):
-        for x in range(w):
-            ix[y, x] = (3.0 * (p[y, x + 2] - p[y, x] + p[y + 2, x + 2] - p[y + 2, x])
-                        + 10.0 * (p[y + 1, x + 2] - p[y + 1, x])) / 32.0  # fmt: skip
-            iy[y, x] = (3.0 * (p[y + 2, x] - p[y, x] + p[y + 2, x + 2] - p[y, x + 2])
-                        + 10.0 * (p[y + 2, x + 1] - p[y, x + 1])) / 32.0  # fmt: skip
+def _gather(img, rows, cols, out):  # pragma: no cover - compiled
+    w = img.shape[1]
+    pad = (cols.size - w) // 2
+    for y in range(rows.size):
+        src = img[rows[y]]
+        dst = out[y]
+        for x in range(pad):
+            dst[x] = src[cols[x]]
+            dst[pad + w + x] = src[cols[pad + w + x]]
+        dst[pad : pad + w] = src
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _scharr_padded(src, pad, ix, iy):  # pragma: no cover - compiled
+    # Scharr derivatives / 32 of the image inside src's border (whose reflect101
+    # pixels give OpenCV's border), zero outside it, as OpenCV pads the derivatives
+    hp, wp = src.shape
+    ix[:] = 0.0
+    iy[:] = 0.0
+    for r in range(pad, hp - pad):
+        up = src[r - 1]
+        mid = src[r]
+        down = src[r + 1]
+        ox = ix[r]
+        oy = iy[r]
+        for c in range(pad, wp - pad):
+            ox[c] = (np.float32(3.0) * (up[c + 1] - up[c - 1] + down[c + 1] - down[c - 1])
+                     + np.float32(10.0) * (mid[c + 1] - mid[c - 1])) * np.float32(0.03125)  # fmt: skip
+            oy[c] = (np.float32(3.0) * (down[c - 1] - up[c - 1] + down[c + 1] - up[c + 1])
+                     + np.float32(10.0) * (down[c] - up[c])) * np.float32(0.03125)  # fmt: skip
 
 
 def _pyramid(img: np.ndarray, levels: int, window: int) -> list[np.ndarray]:
@@ -143,156 +185,165 @@ def _pyramid(img: np.ndarray, levels: int, window: int) -> list[np.ndarray]:
     return pyr
 
 
-@njit(cache=True, nogil=True, parallel=True, fastmath=True)
-def _lk_level(ii, Ix, Iy, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, min_eig, finest,
-              reason, err, eig, rel):  # fmt: skip  # pragma: no cover - compiled
+@njit(cache=True, nogil=True, fastmath=True)
+def _interp_row(src, r, c0, n, w00, w01, w10, w11, out):  # pragma: no cover - compiled
+    # bilinear samples src(r + b, c0 + x + a), x = 0..n-1, with the four weights
+    top = src[r]
+    bottom = src[r + 1]
+    for x in range(n):
+        c = c0 + x
+        out[x] = w00 * top[c] + w01 * top[c + 1] + w10 * bottom[c] + w11 * bottom[c + 1]
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _weights(fx, fy):  # pragma: no cover - compiled
+    a = np.float32(fx)
+    b = np.float32(fy)
+    one = np.float32(1.0)
+    return (one - a) * (one - b), a * (one - b), (one - a) * b, a * b
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, min_eig,
+           finest, reason, err, eig, rel, iwin, gx, gy, row):  # fmt: skip  # pragma: no cover
+    # one point at one level (Bouguet's algorithm, the comments of lucas_kanade)
     half = (win - 1) * 0.5
     area = win * win
-    n = prev.shape[0]
-    for p in prange(n):
-        if reason[p] != 0:
-            continue
-        px = prev[p, 0] * scale - half
-        py = prev[p, 1] * scale - half
-        ipx = np.floor(px)
-        ipy = np.floor(py)
-        if ipx < -win or ipx >= w or ipy < -win or ipy >= h:
+    px = prev[p, 0] * scale - half
+    py = prev[p, 1] * scale - half
+    ipx = np.floor(px)
+    ipy = np.floor(py)
+    if ipx < -win or ipx >= w or ipy < -win or ipy >= h:
+        if finest:
+            reason[p] = 2
+        return
+    w00, w01, w10, w11 = _weights(px - ipx, py - ipy)
+    r0 = int(ipy) + pad
+    c0 = int(ipx) + pad
+    a11 = 0.0
+    a12 = 0.0
+    a22 = 0.0
+    for y in range(win):
+        _interp_row(ii, r0 + y, c0, win, w00, w01, w10, w11, iwin[y])
+        _interp_row(gxi, r0 + y, c0, win, w00, w01, w10, w11, gx[y])
+        _interp_row(gyi, r0 + y, c0, win, w00, w01, w10, w11, gy[y])
+        s11 = np.float32(0.0)
+        s12 = np.float32(0.0)
+        s22 = np.float32(0.0)
+        gxy = gx[y]
+        gyy = gy[y]
+        for x in range(win):
+            s11 += gxy[x] * gxy[x]
+            s12 += gxy[x] * gyy[x]
+            s22 += gyy[x] * gyy[x]
+        a11 += s11
+        a12 += s12
+        a22 += s22
+    # OpenCV's scale: derivatives x32 squared, / 2^20; the eigenvalue also / area
+    a11 /= 1024.0
+    a12 /= 1024.0
+    a22 /= 1024.0
+    det = a11 * a22 - a12 * a12
+    me = (a22 + a11 - np.sqrt((a11 - a22) ** 2 + 4.0 * a12 * a12)) / (2.0 * area)
+    if finest:
+        eig[p] = me
+    if me < min_eig or det < 1.1920929e-07:
+        if finest:
+            reason[p] = 1
+        return
+    nx = nxt[p, 0] - half
+    ny = nxt[p, 1] - half
+    pdx = 0.0
+    pdy = 0.0
+    converged = False
+    for j in range(iters):
+        inx = np.floor(nx)
+        iny = np.floor(ny)
+        if inx < -win or inx >= w or iny < -win or iny >= h:
             if finest:
                 reason[p] = 2
-            continue
-        a = np.float32(px - ipx)
-        b = np.float32(py - ipy)
-        one = np.float32(1.0)
-        w00 = (one - a) * (one - b)
-        w01 = a * (one - b)
-        w10 = (one - a) * b
-        w11 = a * b
+            break
+        v00, v01, v10, v11 = _weights(nx - inx, ny - iny)
+        r0 = int(iny) + pad
+        c0 = int(inx) + pad
+        b1 = 0.0
+        b2 = 0.0
+        for y in range(win):
+            _interp_row(jj, r0 + y, c0, win, v00, v01, v10, v11, row)
+            irow = iwin[y]
+            gxy = gx[y]
+            gyy = gy[y]
+            t1 = np.float32(0.0)
+            t2 = np.float32(0.0)
+            for x in range(win):
+                diff = row[x] - irow[x]
+                t1 += diff * gxy[x]
+                t2 += diff * gyy[x]
+            b1 += t1
+            b2 += t2
+        b1 /= 1024.0
+        b2 /= 1024.0
+        dx = (a12 * b2 - a22 * b1) / det
+        dy = (a12 * b1 - a11 * b2) / det
+        nx += dx
+        ny += dy
+        if dx * dx + dy * dy <= eps2:
+            converged = True
+            break
+        if j > 0 and abs(dx + pdx) < 0.01 and abs(dy + pdy) < 0.01:
+            nx -= dx * 0.5  # oscillating between two positions: take the middle
+            ny -= dy * 0.5
+            converged = True
+            break
+        pdx = dx
+        pdy = dy
+    nxt[p, 0] = nx + half
+    nxt[p, 1] = ny + half
+    if not finest or reason[p] != 0:
+        return
+    if not converged:
+        reason[p] = 3
+    inx = np.floor(nx)
+    iny = np.floor(ny)
+    if inx < -win or inx >= w or iny < -win or iny >= h:
+        reason[p] = 2
+        return
+    # the error (mean |J - I|, as OpenCV) and the residual relative to the contrast
+    v00, v01, v10, v11 = _weights(nx - inx, ny - iny)
+    r0 = int(iny) + pad
+    c0 = int(inx) + pad
+    mean = 0.0
+    for y in range(win):
+        for x in range(win):
+            mean += iwin[y, x]
+    mean /= area
+    e = 0.0
+    spread = 0.0
+    for y in range(win):
+        _interp_row(jj, r0 + y, c0, win, v00, v01, v10, v11, row)
+        for x in range(win):
+            e += abs(row[x] - iwin[y, x])
+            spread += abs(iwin[y, x] - mean)
+    err[p] = e / area
+    rel[p] = e / max(spread, 1e-6)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _lk_level(ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, min_eig, finest,
+              reason, err, eig, rel):  # fmt: skip  # pragma: no cover - compiled
+    # points in chunks, each with its own window buffers; points are independent, so
+    # the result does not depend on the number of threads
+    n = prev.shape[0]
+    chunks = min(n, 64)
+    for k in prange(chunks):
         iwin = np.empty((win, win), dtype=np.float32)
         gx = np.empty((win, win), dtype=np.float32)
         gy = np.empty((win, win), dtype=np.float32)
-        r0 = int(ipy) + pad
-        c0 = int(ipx) + pad
-        for y in range(win):
-            r = r0 + y
-            for x in range(win):
-                c = c0 + x
-                iwin[y, x] = (w00 * ii[r, c] + w01 * ii[r, c + 1] + w10 * ii[r + 1, c]
-                              + w11 * ii[r + 1, c + 1])  # fmt: skip
-                gx[y, x] = (w00 * Ix[r, c] + w01 * Ix[r, c + 1] + w10 * Ix[r + 1, c]
-                            + w11 * Ix[r + 1, c + 1])  # fmt: skip
-                gy[y, x] = (w00 * Iy[r, c] + w01 * Iy[r, c + 1] + w10 * Iy[r + 1, c]
-                            + w11 * Iy[r + 1, c + 1])  # fmt: skip
-        a11 = 0.0
-        a12 = 0.0
-        a22 = 0.0
-        for y in range(win):
-            s11 = np.float32(0.0)
-            s12 = np.float32(0.0)
-            s22 = np.float32(0.0)
-            for x in range(win):
-                s11 += gx[y, x] * gx[y, x]
-                s12 += gx[y, x] * gy[y, x]
-                s22 += gy[y, x] * gy[y, x]
-            a11 += s11
-            a12 += s12
-            a22 += s22
-        # OpenCV's scale: derivatives x32 squared, / 2^20, then / area
-        a11 /= 1024.0
-        a12 /= 1024.0
-        a22 /= 1024.0
-        det = a11 * a22 - a12 * a12
-        me = (a22 + a11 - np.sqrt((a11 - a22) ** 2 + 4.0 * a12 * a12)) / (2.0 * area)
-        if finest:
-            eig[p] = me
-        if me < min_eig or det < 1.1920929e-07:
-            if finest:
-                reason[p] = 1
-            continue
-        nx = nxt[p, 0] - half
-        ny = nxt[p, 1] - half
-        pdx = 0.0
-        pdy = 0.0
-        converged = False
-        for j in range(iters):
-            inx = np.floor(nx)
-            iny = np.floor(ny)
-            if inx < -win or inx >= w or iny < -win or iny >= h:
-                if finest:
-                    reason[p] = 2
-                break
-            a = np.float32(nx - inx)
-            b = np.float32(ny - iny)
-            v00 = (one - a) * (one - b)
-            v01 = a * (one - b)
-            v10 = (one - a) * b
-            v11 = a * b
-            b1 = 0.0
-            b2 = 0.0
-            r0 = int(iny) + pad
-            c0 = int(inx) + pad
-            for y in range(win):
-                r = r0 + y
-                t1 = np.float32(0.0)
-                t2 = np.float32(0.0)
-                for x in range(win):
-                    c = c0 + x
-                    diff = (v00 * jj[r, c] + v01 * jj[r, c + 1] + v10 * jj[r + 1, c]
-                            + v11 * jj[r + 1, c + 1]) - iwin[y, x]  # fmt: skip
-                    t1 += diff * gx[y, x]
-                    t2 += diff * gy[y, x]
-                b1 += t1
-                b2 += t2
-            b1 /= 1024.0
-            b2 /= 1024.0
-            dx = (a12 * b2 - a22 * b1) / det
-            dy = (a12 * b1 - a11 * b2) / det
-            nx += dx
-            ny += dy
-            if dx * dx + dy * dy <= eps2:
-                converged = True
-                break
-            if j > 0 and abs(dx + pdx) < 0.01 and abs(dy + pdy) < 0.01:
-                nx -= dx * 0.5  # oscillating between two positions: take the middle
-                ny -= dy * 0.5
-                converged = True
-                break
-            pdx = dx
-            pdy = dy
-        nxt[p, 0] = nx + half
-        nxt[p, 1] = ny + half
-        if finest and reason[p] == 0:
-            if not converged:
-                reason[p] = 3
-            inx = np.floor(nx)
-            iny = np.floor(ny)
-            if inx < -win or inx >= w or iny < -win or iny >= h:
-                reason[p] = 2
-                continue
-            a = np.float32(nx - inx)
-            b = np.float32(ny - iny)
-            v00 = (one - a) * (one - b)
-            v01 = a * (one - b)
-            v10 = (one - a) * b
-            v11 = a * b
-            e = 0.0
-            mean = 0.0
-            for y in range(win):
-                for x in range(win):
-                    mean += iwin[y, x]
-            mean /= area
-            spread = 0.0
-            r0 = int(iny) + pad
-            c0 = int(inx) + pad
-            for y in range(win):
-                r = r0 + y
-                for x in range(win):
-                    c = c0 + x
-                    jv = (v00 * jj[r, c] + v01 * jj[r, c + 1] + v10 * jj[r + 1, c]
-                          + v11 * jj[r + 1, c + 1])  # fmt: skip
-                    e += abs(jv - iwin[y, x])
-                    spread += abs(iwin[y, x] - mean)
-            err[p] = e / area
-            rel[p] = e / max(spread, 1e-6)
+        row = np.empty(win, dtype=np.float32)
+        for p in range(k * n // chunks, (k + 1) * n // chunks):
+            if reason[p] == 0:
+                _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2,
+                       min_eig, finest, reason, err, eig, rel, iwin, gx, gy, row)  # fmt: skip
 
 
 def lucas_kanade(
@@ -375,11 +426,14 @@ def lucas_kanade(
     pad = window + 2
     for level in range(top, -1, -1):
         img_i, img_j = pyr_i[level], pyr_j[level]
-        ix, iy = _scharr(img_i)
-        Ip = np.pad(img_i, pad, mode="reflect")
-        Jp = np.pad(img_j, pad, mode="reflect")
-        ixp = np.pad(ix, pad)  # derivatives outside the image are 0, as OpenCV
-        iyp = np.pad(iy, pad)
+        shape = (img_i.shape[0] + 2 * pad, img_i.shape[1] + 2 * pad)
+        if level == 0:  # the large level reuses this thread's buffers
+            Ip, Jp, ixp, iyp = _buffers(shape)
+        else:
+            Ip, Jp, ixp, iyp = (np.empty(shape, dtype=np.float32) for _ in range(4))
+        _padded(img_i, pad, Ip)
+        _padded(img_j, pad, Jp)
+        _scharr_padded(Ip, pad, ixp, iyp)
         _lk_level(Ip, ixp, iyp, Jp, pad, img_i.shape[0], img_i.shape[1], pts, nxt, 1.0 / 2.0**level,
                   window, int(iterations), float(eps) ** 2, float(min_eigenvalue), level == 0,
                   reason, err, eig, rel)  # fmt: skip
