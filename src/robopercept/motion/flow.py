@@ -167,11 +167,12 @@ def _scharr_padded(src, pad, ix, iy):  # pragma: no cover - compiled
         down = src[r + 1]
         ox = ix[r]
         oy = iy[r]
+        three, ten, scale = np.float32(3.0), np.float32(10.0), np.float32(1.0 / 32.0)
         for c in range(pad, wp - pad):
-            ox[c] = (np.float32(3.0) * (up[c + 1] - up[c - 1] + down[c + 1] - down[c - 1])
-                     + np.float32(10.0) * (mid[c + 1] - mid[c - 1])) * np.float32(0.03125)  # fmt: skip
-            oy[c] = (np.float32(3.0) * (down[c - 1] - up[c - 1] + down[c + 1] - up[c + 1])
-                     + np.float32(10.0) * (down[c] - up[c])) * np.float32(0.03125)  # fmt: skip
+            dx = three * (up[c + 1] - up[c - 1] + down[c + 1] - down[c - 1])
+            ox[c] = (dx + ten * (mid[c + 1] - mid[c - 1])) * scale
+            dy = three * (down[c - 1] - up[c - 1] + down[c + 1] - up[c + 1])
+            oy[c] = (dy + ten * (down[c] - up[c])) * scale
 
 
 def _pyramid(img: np.ndarray, levels: int, window: int) -> list[np.ndarray]:
