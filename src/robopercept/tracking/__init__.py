@@ -10,10 +10,13 @@ from robopercept.tracking.kalman import (
     kf_predict,
     kf_update,
 )
+from robopercept.tracking.meanshift import MeanShiftResult, MeanShiftTracker
 
 __all__ = [
     "ExtendedKalmanFilter",
     "KalmanFilter",
+    "MeanShiftResult",
+    "MeanShiftTracker",
     "UpdateResult",
     "constant_acceleration",
     "constant_position",
