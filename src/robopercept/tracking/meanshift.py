@@ -207,8 +207,8 @@ class MeanShiftTracker:
         prob = np.where(valid, self._lut[codes], np.float32(0.0))
         H, W = prob.shape
         x, y, w, h = self.box
-        x, y = int(round(x)), int(round(y))
-        w, h = max(int(round(w)), 1), max(int(round(h)), 1)
+        x, y = round(x), round(y)
+        w, h = max(round(w), 1), max(round(h), 1)
         iterations, converged = 0, False
         for iterations in range(1, self.max_iter + 1):  # noqa: B007 (reported)
             x0, y0 = max(x, 0), max(y, 0)
@@ -218,8 +218,8 @@ class MeanShiftTracker:
             if m00 <= 0:
                 break  # nothing of the target under the window: stay
             ys, xs = np.mgrid[y0:y1, x0:x1]
-            dx = int(round(float((win * xs).sum()) / m00 - (x + (w - 1) / 2)))
-            dy = int(round(float((win * ys).sum()) / m00 - (y + (h - 1) / 2)))
+            dx = round(float((win * xs).sum()) / m00 - (x + (w - 1) / 2))
+            dy = round(float((win * ys).sum()) / m00 - (y + (h - 1) / 2))
             x = int(np.clip(x + dx, 0, max(W - w, 0)))
             y = int(np.clip(y + dy, 0, max(H - h, 0)))
             if dx * dx + dy * dy < self.eps * self.eps:
@@ -260,8 +260,8 @@ class MeanShiftTracker:
             theta += np.pi / 2
         # the rotated ellipse box's axis-aligned bounding box, centred at the mode
         cs, sn = abs(np.cos(theta)), abs(np.sin(theta))
-        bw = max(int(round(length * cs + width * sn)), 1)
-        bh = max(int(round(length * sn + width * cs)), 1)
+        bw = max(round(length * cs + width * sn), 1)
+        bh = max(round(length * sn + width * cs), 1)
         cx, cy = x0 + xc, y0 + yc
         nx = int(np.clip(round(cx - bw / 2), 0, W - 1))
         ny = int(np.clip(round(cy - bh / 2), 0, H - 1))
