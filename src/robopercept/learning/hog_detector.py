@@ -29,6 +29,7 @@ from tqdm import tqdm
 from robopercept._checks import check_image, check_positive
 from robopercept.errors import FileFormatError, InputError
 from robopercept.features.hog import hog, hog_windows
+from robopercept.geometry.boxes import box_iou_matrix
 from robopercept.learning.svm import LinearSVC
 
 __all__ = [
@@ -59,13 +60,7 @@ class Detections:
 
 def box_iou(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     """Intersection over union of one ``(x, y, w, h)`` box with each of ``boxes``."""
-    x0 = np.maximum(box[0], boxes[:, 0])
-    y0 = np.maximum(box[1], boxes[:, 1])
-    x1 = np.minimum(box[0] + box[2], boxes[:, 0] + boxes[:, 2])
-    y1 = np.minimum(box[1] + box[3], boxes[:, 1] + boxes[:, 3])
-    inter = np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)
-    union = box[2] * box[3] + boxes[:, 2] * boxes[:, 3] - inter
-    return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
+    return box_iou_matrix(box, boxes)[0]
 
 
 def non_max_suppression(boxes: Any, scores: Any, iou: float = 0.3) -> np.ndarray:

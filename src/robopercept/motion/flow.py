@@ -205,22 +205,30 @@ def _weights(fx, fy):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, fastmath=True)
+def _window_at(x, y, win, w, h, pad):  # pragma: no cover - compiled
+    # the window whose top-left corner is (x, y): whether it is still on the (padded)
+    # level, as OpenCV's bounds, its integer corner in the padded arrays and the
+    # bilinear weights of the fractional part
+    ix = np.floor(x)
+    iy = np.floor(y)
+    inside = not (ix < -win or ix >= w or iy < -win or iy >= h)
+    w00, w01, w10, w11 = _weights(x - ix, y - iy)
+    return inside, int(iy) + pad, int(ix) + pad, w00, w01, w10, w11
+
+
+@njit(cache=True, nogil=True, fastmath=True)
 def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, min_eig,
            finest, reason, err, eig, rel, iwin, gx, gy, row):  # fmt: skip  # pragma: no cover
     # one point at one level (Bouguet's algorithm, the comments of lucas_kanade)
     half = (win - 1) * 0.5
     area = win * win
-    px = prev[p, 0] * scale - half
-    py = prev[p, 1] * scale - half
-    ipx = np.floor(px)
-    ipy = np.floor(py)
-    if ipx < -win or ipx >= w or ipy < -win or ipy >= h:
+    inside, r0, c0, w00, w01, w10, w11 = _window_at(
+        prev[p, 0] * scale - half, prev[p, 1] * scale - half, win, w, h, pad
+    )
+    if not inside:
         if finest:
             reason[p] = 2
         return
-    w00, w01, w10, w11 = _weights(px - ipx, py - ipy)
-    r0 = int(ipy) + pad
-    c0 = int(ipx) + pad
     a11 = 0.0
     a12 = 0.0
     a22 = 0.0
@@ -258,15 +266,11 @@ def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
     pdy = 0.0
     converged = False
     for j in range(iters):
-        inx = np.floor(nx)
-        iny = np.floor(ny)
-        if inx < -win or inx >= w or iny < -win or iny >= h:
+        inside, r0, c0, v00, v01, v10, v11 = _window_at(nx, ny, win, w, h, pad)
+        if not inside:
             if finest:
                 reason[p] = 2
             break
-        v00, v01, v10, v11 = _weights(nx - inx, ny - iny)
-        r0 = int(iny) + pad
-        c0 = int(inx) + pad
         b1 = 0.0
         b2 = 0.0
         for y in range(win):
@@ -304,15 +308,11 @@ def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
         return
     if not converged:
         reason[p] = 3
-    inx = np.floor(nx)
-    iny = np.floor(ny)
-    if inx < -win or inx >= w or iny < -win or iny >= h:
+    inside, r0, c0, v00, v01, v10, v11 = _window_at(nx, ny, win, w, h, pad)
+    if not inside:
         reason[p] = 2
         return
     # the error (mean |J - I|, as OpenCV) and the residual relative to the contrast
-    v00, v01, v10, v11 = _weights(nx - inx, ny - iny)
-    r0 = int(iny) + pad
-    c0 = int(inx) + pad
     mean = 0.0
     for y in range(win):
         for x in range(win):

@@ -42,6 +42,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from robopercept.errors import InputError
+from robopercept.geometry.boxes import box_iou_matrix
 from robopercept.tracking.kalman import KalmanFilter, constant_velocity
 
 __all__ = ["MultiObjectTracker", "Track"]
@@ -102,17 +103,6 @@ def _xywh_to_z(boxes: np.ndarray) -> np.ndarray:
 def _z_to_xywh(z: np.ndarray) -> np.ndarray:
     w, h = np.maximum(z[..., 2], 0.0), np.maximum(z[..., 3], 0.0)
     return np.stack([z[..., 0] - w / 2, z[..., 1] - h / 2, w, h], axis=-1)
-
-
-def _iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU of every ``(x, y, w, h)`` box in ``a`` with every box in ``b``."""
-    x0 = np.maximum(a[:, None, 0], b[None, :, 0])
-    y0 = np.maximum(a[:, None, 1], b[None, :, 1])
-    x1 = np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])
-    y1 = np.minimum(a[:, None, 1] + a[:, None, 3], b[None, :, 1] + b[None, :, 3])
-    inter = np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)
-    union = (a[:, 2] * a[:, 3])[:, None] + (b[:, 2] * b[:, 3])[None, :] - inter
-    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
 
 class MultiObjectTracker:
@@ -277,7 +267,7 @@ class MultiObjectTracker:
 
     def _cost(self, X: np.ndarray, P: np.ndarray, z: np.ndarray, boxes: np.ndarray) -> np.ndarray:
         if self.cost == "iou":
-            iou = _iou_matrix(_z_to_xywh(X[:, :4]), boxes)
+            iou = box_iou_matrix(_z_to_xywh(X[:, :4]), boxes)
             return np.where(iou >= self.gate, 1.0 - iou, _FORBIDDEN)
         if self.cost == "euclidean":
             d = np.linalg.norm(X[:, None, :2] - z[None, :, :2], axis=2)
