@@ -30,7 +30,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from robopercept.cli import cloud, features, imaging, info, learn, tracking
+    from robopercept.cli import cloud, features, imaging, info, learn, motion, tracking
 
     parser = _Parser(
         prog="robopercept",
@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     cloud.register(sub)
     learn.register(sub)
     tracking.register(sub)
+    motion.register(sub)
     return parser
 
 

@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from robopercept.cli._args import positive_int
+
 __all__ = ["register", "summary_table"]
 
 DEMO_FRAMES = 300
@@ -23,16 +25,6 @@ def _hsv(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects an integer; got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1; got {v}")
-    return v
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
@@ -42,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "summary.json, plane.png) and print the figures against the ground truth.",
     )
     p.add_argument("--out", default="robopercept-out", help="output folder")
-    p.add_argument("--frames", type=_positive_int, default=DEMO_FRAMES, help="frames")
+    p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES, help="frames")
     p.add_argument("--seed", type=int, default=0, help="scene seed")
     p.add_argument("--no-video", action="store_true", help="skip tracking.mp4")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -59,8 +51,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--source", required=True, help="synthetic | DIR | FILE.bag | FILE.db3 | realsense"
     )
     p.add_argument("--out", default="robopercept-out", help="output folder")
-    p.add_argument("--max-frames", type=_positive_int, default=None, help="stop after N frames")
-    p.add_argument("--frames", type=_positive_int, default=DEMO_FRAMES, help="synthetic: frames")
+    p.add_argument("--max-frames", type=positive_int, default=None, help="stop after N frames")
+    p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES, help="synthetic: frames")
     p.add_argument("--seed", type=int, default=0, help="synthetic: scene seed")
     p.add_argument("--hsv-low", type=_hsv, default=(45, 35, 35), metavar="H,S,V")
     p.add_argument("--hsv-high", type=_hsv, default=(65, 255, 255), metavar="H,S,V")
@@ -77,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "`robopercept plane-track --source OUT_DIR`.",
     )
     p.add_argument("out_dir", help="output folder")
-    p.add_argument("--frames", type=_positive_int, default=DEMO_FRAMES)
+    p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_synth)

@@ -35,19 +35,21 @@ window area, threshold ``1e-4``).
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numba import njit, prange
 
 from robopercept._checks import check_image
-from robopercept.errors import InputError
+from robopercept.errors import DegenerateError, InputError
 from robopercept.imaging.pyramids import pyr_down
 
 __all__ = [
     "FlowStatus",
+    "MotionClass",
     "SparseFlow",
+    "classify_motion",
     "dense_flow",
     "good_features_to_track",
     "lucas_kanade",
@@ -495,3 +497,134 @@ def dense_flow(
     res = lucas_kanade(prev, next, grid.reshape(-1, 2), **kwargs)
     flow = np.where(res.status[:, None], res.flow, np.nan).reshape(grid.shape)
     return grid, flow, res
+
+
+@dataclass(frozen=True)
+class MotionClass:
+    """What :func:`classify_motion` found.
+
+    Attributes
+    ----------
+    kind : str
+        ``"translation"``, ``"rotation"`` or ``"zoom"``: the component that moves the
+        points most; ``"static"`` when nothing moves ``min_motion`` pixels;
+        ``"complex"`` when the vectors are no similarity transform (the residual is
+        as large as the largest component: independent motions, a non-rigid scene).
+    translation : (2,) ndarray
+        Motion of the points' centroid ``(dx, dy)`` in pixels.
+    rotation : float
+        Angle in radians, positive from +x toward +y (clockwise on screen, y down).
+    scale : float
+        Zoom factor (> 1: zoom in, objects grow).
+    displacement : dict
+        Pixels each component moves a point at the RMS radius of the points:
+        ``|t|``, :math:`2 r \\sin(|\\theta|/2)` and :math:`|s - 1| r`.
+    residual : float
+        RMS distance of the flow end points from the fitted similarity (inliers).
+    inliers : (N,) bool ndarray
+        Vectors kept by the fit (finite ones, after trimming outliers).
+    """
+
+    kind: str
+    translation: np.ndarray
+    rotation: float
+    scale: float
+    displacement: dict[str, float]
+    residual: float
+    inliers: np.ndarray = field(repr=False)
+
+
+def _similarity(p: np.ndarray, q: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray]:
+    pm, qm = p.mean(axis=0), q.mean(axis=0)
+    pc, qc = p - pm, q - qm
+    norm = float((pc**2).sum())
+    if norm <= 1e-12:
+        raise DegenerateError(
+            "classify_motion needs points at different positions; all of them coincide"
+        )
+    a = float((pc * qc).sum()) / norm
+    b = float((pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0]).sum()) / norm
+    pred = qm + pc @ np.array([[a, b], [-b, a]])
+    return a, b, qm - pm, np.hypot(*(q - pred).T)
+
+
+def classify_motion(
+    points: Any, flow: Any, *, min_motion: float = 0.5, trim: float = 3.0
+) -> MotionClass:
+    r"""Tell translation, rotation and zoom apart by fitting a similarity transform.
+
+    The end points :math:`q_i = p_i + f_i` are fitted, in the least-squares sense, by
+    :math:`q = s R(\theta) (p - \bar p) + \bar p + t`. With centred coordinates
+    :math:`p'_i, q'_i` the solution is closed form:
+
+    .. math::
+
+        a = s\cos\theta = \frac{\sum p'_i \cdot q'_i}{\sum |p'_i|^2},\quad
+        b = s\sin\theta = \frac{\sum p'_i \times q'_i}{\sum |p'_i|^2},\quad
+        t = \bar q - \bar p.
+
+    Each component is then measured in pixels at the RMS radius :math:`r` of the
+    points about their centroid (translation :math:`|t|`, rotation
+    :math:`2 r \sin(|\theta|/2)`, zoom :math:`|s - 1| r`), and the largest names the
+    motion; below ``min_motion`` pixels it is ``"static"``, and when the RMS residual
+    of the fit is at least as large (and at least ``min_motion``) it is ``"complex"``:
+    no single camera-like motion explains the vectors. The fit is repeated without the
+    vectors whose residual exceeds ``trim`` times the median residual (and 1 px) until
+    no more are dropped (at most 10 rounds), so a few independently moving objects do
+    not decide the answer.
+
+    Parameters
+    ----------
+    points : (N, 2) array_like
+        Positions ``(x, y)``.
+    flow : (N, 2) array_like
+        Their displacements; rows with NaN (failed tracks) are ignored.
+    min_motion : float
+        Pixels below which nothing is said to move.
+    trim : float
+        Outlier cut, in median residuals.
+
+    Returns
+    -------
+    MotionClass
+
+    Raises
+    ------
+    DegenerateError
+        Fewer than two usable vectors, or all at one position.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    f = np.asarray(flow, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or f.shape != p.shape:
+        raise InputError(f"points and flow must both be (N, 2); got shapes {p.shape} and {f.shape}")
+    usable = np.isfinite(p).all(axis=1) & np.isfinite(f).all(axis=1)
+    if usable.sum() < 2:
+        raise DegenerateError(
+            f"classify_motion needs at least 2 finite flow vectors; got {int(usable.sum())}"
+        )
+    q = p + f
+    idx = np.flatnonzero(usable)
+    a, b, t, res = _similarity(p[idx], q[idx])
+    for _ in range(10):  # refit without the outliers until the kept set is stable
+        keep = res <= max(float(trim) * float(np.median(res)), 1.0)
+        if keep.all() or keep.sum() < 2:
+            break
+        idx = idx[keep]
+        a, b, t, res = _similarity(p[idx], q[idx])
+    inliers = np.zeros(len(p), dtype=bool)
+    inliers[idx] = True
+    pc = p[idx] - p[idx].mean(axis=0)
+    r = float(np.sqrt((pc**2).sum(axis=1).mean()))
+    s, theta = float(np.hypot(a, b)), float(np.arctan2(b, a))
+    disp = {
+        "translation": float(np.hypot(*t)),
+        "rotation": 2.0 * r * abs(float(np.sin(theta / 2.0))),
+        "zoom": abs(s - 1.0) * r,
+    }
+    rms = float(np.sqrt(np.mean(res**2)))
+    kind = max(disp, key=disp.__getitem__)
+    if rms >= max(disp[kind], min_motion):
+        kind = "complex"
+    elif disp[kind] < min_motion:
+        kind = "static"
+    return MotionClass(kind, t, theta, s, disp, rms, inliers)

@@ -1,0 +1,72 @@
+"""Flow pictures: the HSV wheel coding, arrows and trails."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robopercept.errors import InputError
+from robopercept.viz import draw_flow, draw_trails, flow_to_color, flow_wheel
+
+
+def test_wheel_colours_by_direction_and_speed():
+    flow = np.array(
+        [[[2.0, 0.0], [0.0, 2.0], [-2.0, 0.0], [0.0, -2.0], [0.0, 0.0], [1.0, 0.0], [np.nan, 0]]]
+    )
+    rgb = flow_to_color(flow, max_magnitude=2.0)[0]
+    # hue = atan2(v, u): 0 red, 90 deg (down on screen) yellow-green, 180 cyan, 270 violet
+    assert rgb[0].tolist() == [255, 0, 0]
+    assert rgb[1].tolist() == [128, 255, 0]
+    assert rgb[2].tolist() == [0, 255, 255]
+    assert rgb[3].tolist() == [128, 0, 255]
+    assert rgb[4].tolist() == [255, 255, 255]  # still: white
+    assert rgb[5].tolist() == [255, 128, 128]  # half speed: half saturation
+    assert rgb[6].tolist() == [0, 0, 0]  # unknown: black
+
+
+def test_default_top_speed_is_the_99th_percentile():
+    flow = np.zeros((20, 20, 2))
+    flow[..., 0] = 1.0
+    flow[0, 0, 0] = 100.0  # one wild vector does not wash out the rest
+    rgb = flow_to_color(flow)
+    assert rgb[5, 5].tolist() == [255, 0, 0]
+
+
+def test_wheel_legend():
+    wheel = flow_wheel(51)
+    assert wheel.shape == (51, 51, 3)
+    assert wheel[25, 25].tolist() == [255, 255, 255]
+    assert wheel[0, 0].tolist() == [0, 0, 0]
+    assert wheel[25, 50].tolist() == [255, 0, 0]
+    with pytest.raises(InputError):
+        flow_to_color(np.zeros((4, 4, 3)))
+    with pytest.raises(InputError):
+        flow_to_color(np.zeros((4, 4, 2)), max_magnitude=0)
+
+
+def test_arrows_follow_the_vectors():
+    img = np.zeros((40, 60), dtype=np.uint8)
+    out = draw_flow(img, [[10, 20], [50, 5]], [[30, 20], [50, 5]], status=[True, False])
+    assert out.shape == (40, 60, 3)
+    row = out[20, 10:31]
+    assert (row == [0, 255, 0]).all()  # the shaft, start to tip
+    assert (out[17:24, 26:30] == [0, 255, 0]).all(axis=2).sum() >= 4  # barbs near the tip
+    assert out[5, 50].tolist() == [255, 0, 0]  # a failed point: a red dot
+    assert (out[:, 35:45] == 0).all()  # nothing else
+    scaled = draw_flow(img, [[10, 20]], [[14, 20]], scale=5.0)
+    assert (scaled[20, 10:31] == [0, 255, 0]).all()
+    with pytest.raises(InputError, match="one entry per point"):
+        draw_flow(img, [[1, 2]], [[2, 3]], status=[True, False])
+    with pytest.raises(InputError, match="same shape"):
+        draw_flow(img, [[1, 2]], [[2, 3], [4, 5]])
+
+
+def test_trails():
+    img = np.zeros((30, 30, 3), dtype=np.uint8)
+    out = draw_trails(
+        img, [np.array([[2, 2], [2, 20]]), np.zeros((0, 2))], colors=[[9, 8, 7], [1, 1, 1]]
+    )
+    assert (out[2:21, 2] == [9, 8, 7]).all()
+    assert img.sum() == 0  # input untouched
+    with pytest.raises(InputError, match="one row per trail"):
+        draw_trails(img, [np.zeros((2, 2))], colors=np.zeros((2, 3)))
