@@ -189,10 +189,9 @@ def test_bad_input():
     ("name", "frames"), [("pets2009_vtest/vtest_480x360.avi", 60), ("opencv_tree", 40)]
 )
 def test_models_run_on_real_videos(name, frames):
-    """Every model runs on the real sequences and marks less than half the picture;
-    the background models find some foreground (the walkers; the swaying tree).
-    Differencing may find nothing on the tree: its motion is slow from frame to
-    frame."""
+    """Every model runs on the real sequences and marks less than half the picture,
+    and each finds some foreground (the walkers; the swaying tree: measured on the
+    tree, Gaussian 7.2 %, average 3.1 %, two-frame 2.1 %, three-frame 0.3 %)."""
     from robopercept.imaging import VideoReader
 
     path = data_path("video", name)
@@ -210,4 +209,4 @@ def test_models_run_on_real_videos(name, frames):
                 if t >= 12:
                     shares[k] += mask.mean()
     shares /= frames - 12
-    assert (shares[:2] > 0).all() and (shares < 0.5).all(), shares
+    assert (shares > 0).all() and (shares < 0.5).all(), shares

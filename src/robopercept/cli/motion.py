@@ -98,8 +98,8 @@ class FrameSource:
                     continue
                 yield i, img
         else:
-            for i, frame in enumerate(self._video):
-                if i >= self.total:
+            for i, frame in enumerate(self._video):  # the count is for the progress bar
+                if self.max_frames is not None and i >= self.max_frames:
                     self._video.close()
                     break
                 yield i, frame

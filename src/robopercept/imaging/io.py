@@ -130,6 +130,26 @@ def write_image(
     return p
 
 
+def _passthrough() -> list[str]:
+    """ffmpeg options that hand over the decoded frames as they are.
+
+    Without them ffmpeg resamples to the container's constant frame rate, repeating
+    frames of a variable-rate file (``tree.avi``: 449 frames, of which 68 are distinct).
+    ``-fps_mode`` is ffmpeg >= 5.1's name for the older ``-vsync``.
+    """
+    import imageio_ffmpeg
+
+    try:
+        major, minor = (
+            int(v) for v in imageio_ffmpeg.get_ffmpeg_version().lstrip("n").split(".")[:2]
+        )
+    except ValueError:  # a build without a plain version number: assume a recent one
+        major, minor = 99, 0
+    if (major, minor) >= (5, 1):
+        return ["-fps_mode", "passthrough"]
+    return ["-vsync", "passthrough"]
+
+
 class VideoReader:
     """Iterate over the frames of a video file as RGB uint8 arrays.
 
@@ -147,6 +167,9 @@ class VideoReader:
     frame_count : int
         Number of frames; counted by decoding the file once on first access (exact, not
         the container's estimate).
+
+    Frames come as decoded, one per coded picture, as ``cv2.VideoCapture`` gives
+    them: a variable-frame-rate file is not padded with repeated frames.
 
     Examples
     --------
@@ -189,7 +212,9 @@ class VideoReader:
         import imageio_ffmpeg
 
         w, h = self.size
-        self._gen = imageio_ffmpeg.read_frames(str(self.path), pix_fmt="rgb24")
+        self._gen = imageio_ffmpeg.read_frames(
+            str(self.path), pix_fmt="rgb24", output_params=_passthrough()
+        )
         self._gen.__next__()  # metadata
         try:
             for raw in self._gen:
