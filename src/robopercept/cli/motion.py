@@ -56,7 +56,9 @@ class FrameSource:
     index still advances, so frame numbers stay those of the files' order).
     """
 
-    def __init__(self, path: str, *, fps: float | None = None, max_frames: int | None = None):
+    def __init__(
+        self, path: str, *, fps: float | None = None, max_frames: int | None = None
+    ) -> None:
         from robopercept.errors import FileFormatError
         from robopercept.imaging import VideoReader
 
