@@ -18,7 +18,19 @@ from robopercept.geometry.epipolar import (
     sampson_distance,
     skew,
 )
-from robopercept.geometry.transforms import apply, compose, invert, rotation_from_rotvec, se3
+from robopercept.geometry.rectification import (
+    StereoRectification,
+    rectify_stereo,
+    rectify_uncalibrated,
+)
+from robopercept.geometry.transforms import (
+    apply,
+    compose,
+    invert,
+    rotation_from_rotvec,
+    rotvec_from_rotation,
+    se3,
+)
 from robopercept.geometry.triangulation import triangulate
 
 __all__ = [
@@ -28,6 +40,7 @@ __all__ = [
     "FundamentalFit",
     "FundamentalModel",
     "RelativePose",
+    "StereoRectification",
     "apply",
     "box_iou_matrix",
     "compose",
@@ -42,7 +55,10 @@ __all__ = [
     "fundamental_from_essential",
     "invert",
     "project",
+    "rectify_stereo",
+    "rectify_uncalibrated",
     "rotation_from_rotvec",
+    "rotvec_from_rotation",
     "sampson_distance",
     "se3",
     "skew",

@@ -12,7 +12,15 @@ import numpy as np
 
 from robopercept.errors import InputError
 
-__all__ = ["apply", "check_transform", "compose", "invert", "rotation_from_rotvec", "se3"]
+__all__ = [
+    "apply",
+    "check_transform",
+    "compose",
+    "invert",
+    "rotation_from_rotvec",
+    "rotvec_from_rotation",
+    "se3",
+]
 
 
 def check_transform(T: np.ndarray, name: str = "T") -> np.ndarray:
@@ -60,6 +68,30 @@ def rotation_from_rotvec(rotvec: np.ndarray) -> np.ndarray:
     k = r / theta
     kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     return np.eye(3) + np.sin(theta) * kx + (1 - np.cos(theta)) * kx @ kx
+
+
+def rotvec_from_rotation(R: np.ndarray) -> np.ndarray:
+    r"""The inverse of :func:`rotation_from_rotvec` (``cv2.Rodrigues`` on a matrix):
+    :math:`\theta = \arccos((\operatorname{tr} R - 1) / 2)` and the axis from the
+    antisymmetric part :math:`(R - R^T) / (2 \sin\theta)`; near :math:`\theta = \pi`
+    (where that part vanishes) the axis comes from :math:`(R + I) / 2 = k k^T`."""
+    r = np.asarray(R, dtype=np.float64)
+    if r.shape != (3, 3) or not np.isfinite(r).all():
+        raise InputError(f"R must be a finite 3x3 rotation matrix; got shape {r.shape}")
+    v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / 2.0
+    c = np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)
+    s = float(np.linalg.norm(v))
+    theta = float(np.arctan2(s, c))
+    if s > 1e-6:
+        return v / s * theta
+    if c > 0:  # theta ~ 0: R ~ I + [theta k]x
+        return v
+    B = (r + np.eye(3)) / 2.0  # theta ~ pi: B = k k^T
+    i = int(np.argmax(np.diag(B)))
+    k = B[:, i] / np.sqrt(max(B[i, i], 1e-300))
+    if k @ v < 0:
+        k = -k
+    return k * theta
 
 
 def invert(T: np.ndarray) -> np.ndarray:

@@ -1,0 +1,246 @@
+r"""Stereo rectification: make the two image planes coplanar and their rows aligned, so
+that corresponding points share a row and stereo matching is a 1-D search.
+
+Calibrated (Bouguet's algorithm, ``cv2.stereoRectify``): with
+:math:`X_2 = R X_1 + T`, each camera is first turned by half of the relative rotation,
+:math:`r = \operatorname{rodrigues}(-\tfrac12 \operatorname{rodrigues}^{-1}(R))`
+(camera 1 by :math:`r^T`, camera 2 by :math:`r`), which makes them parallel; then both
+by the rotation :math:`W` that takes the baseline :math:`t = r T` onto the x axis (or
+the y axis for a vertical rig). :math:`R_1 = W r^T`, :math:`R_2 = W r`. The new
+cameras share a focal length (the mean of the two vertical ones, as OpenCV 4) and, with
+``zero_disparity``, a principal point placed so that the undistorted image corners are
+centred; :math:`P_2` carries the baseline, :math:`P_2[0, 3] = f\,t'_x`, and
+
+.. math::
+
+    Q = \begin{pmatrix} 1 & 0 & 0 & -c_x \\ 0 & 1 & 0 & -c_y \\ 0 & 0 & 0 & f \\
+    0 & 0 & -1/T'_x & (c_x - c'_x)/T'_x \end{pmatrix}
+
+maps :math:`(x, y, d, 1)` to homogeneous 3-D points (``cv2.reprojectImageTo3D``).
+
+Uncalibrated (Hartley 1999): from F and correspondences, a homography :math:`H_2`
+sends the second epipole to infinity along x, and :math:`H_1` is the one of the
+compatible family that brings the points of image 1 closest to their partners' rows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import DegenerateError, InputError
+from robopercept.geometry.transforms import rotation_from_rotvec, rotvec_from_rotation
+
+__all__ = ["StereoRectification", "rectify_stereo", "rectify_uncalibrated"]
+
+
+@dataclass(frozen=True)
+class StereoRectification:
+    """Result of :func:`rectify_stereo` (``cv2.stereoRectify``'s outputs).
+
+    Attributes
+    ----------
+    R1, R2 : (3, 3) ndarray
+        Rotations from each original camera frame to its rectified frame.
+    P1, P2 : (3, 4) ndarray
+        Projection matrices in the rectified frame of camera 1.
+    Q : (4, 4) ndarray
+        Disparity-to-depth matrix.
+    vertical : bool
+        True for a vertical rig (rows become columns).
+    """
+
+    R1: np.ndarray
+    R2: np.ndarray
+    P1: np.ndarray
+    P2: np.ndarray
+    Q: np.ndarray
+    vertical: bool
+
+
+def _m3(M: Any, name: str) -> np.ndarray:
+    m = np.asarray(M, dtype=np.float64)
+    if m.shape != (3, 3) or not np.isfinite(m).all():
+        raise InputError(f"{name} must be a finite 3x3 matrix; got shape {m.shape}")
+    return m
+
+
+def _dist(D: Any, name: str) -> np.ndarray:
+    if D is None:
+        return np.zeros(5)
+    d = np.asarray(D, dtype=np.float64).ravel()
+    if d.size not in (4, 5) or not np.isfinite(d).all():
+        raise InputError(
+            f"{name} must hold 4 or 5 coefficients (k1, k2, p1, p2[, k3]); got {d.size}"
+        )
+    return np.r_[d, np.zeros(5 - d.size)]
+
+
+def _undistort_points(xy: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:
+    """Normalized undistorted coordinates of pixels (OpenCV's model, fixed-point
+    iteration as ``cv2.undistortPoints`` with its default 5 iterations)."""
+    k1, k2, p1, p2, k3 = D
+    x0 = (xy[:, 0] - K[0, 2] - K[0, 1] * (xy[:, 1] - K[1, 2]) / K[1, 1]) / K[0, 0]
+    y0 = (xy[:, 1] - K[1, 2]) / K[1, 1]
+    x, y = x0.copy(), y0.copy()
+    for _ in range(5):
+        r2 = x * x + y * y
+        icdist = 1.0 / (1 + ((k3 * r2 + k2) * r2 + k1) * r2)
+        dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        x = (x0 - dx) * icdist
+        y = (y0 - dy) * icdist
+    return np.c_[x, y]
+
+
+def rectify_stereo(
+    K1: Any,
+    D1: Any,
+    K2: Any,
+    D2: Any,
+    R: Any,
+    T: Any,
+    size: tuple[int, int],
+    *,
+    zero_disparity: bool = True,
+) -> StereoRectification:
+    """Bouguet rectification of a calibrated pair (``cv2.stereoRectify`` with its
+    default ``alpha=-1``: no extra zoom).
+
+    Parameters
+    ----------
+    K1, K2 : (3, 3) array_like
+        Camera matrices.
+    D1, D2 : array_like or None
+        Distortion ``(k1, k2, p1, p2[, k3])``.
+    R, T : (3, 3), (3,) array_like
+        Pose of camera 2 relative to camera 1: :math:`X_2 = R X_1 + T`.
+    size : (width, height)
+    zero_disparity : bool
+        Give both cameras the same principal point (``cv2.CALIB_ZERO_DISPARITY``, the
+        default there too), so points at infinity have disparity 0.
+
+    Returns
+    -------
+    StereoRectification
+    """
+    k1, k2 = _m3(K1, "K1"), _m3(K2, "K2")
+    d1, d2 = _dist(D1, "D1"), _dist(D2, "D2")
+    Rm = _m3(R, "R")
+    t_in = np.asarray(T, dtype=np.float64).ravel()
+    if t_in.size != 3 or not np.isfinite(t_in).all() or not np.linalg.norm(t_in) > 0:
+        raise InputError(f"T must be a non-zero 3-vector; got {T!r}")
+    nx, ny = int(size[0]), int(size[1])
+    if nx < 2 or ny < 2:
+        raise InputError(f"size must be (width, height) >= 2; got {size!r}")
+    r_r = rotation_from_rotvec(-0.5 * rotvec_from_rotation(Rm))
+    t = r_r @ t_in
+    idx = 0 if abs(t[0]) > abs(t[1]) else 1
+    uu = np.zeros(3)
+    uu[idx] = 1.0 if t[idx] > 0 else -1.0
+    ww = np.cross(t, uu)
+    nw = np.linalg.norm(ww)
+    if nw > 0:
+        ww *= np.arccos(abs(t[idx]) / np.linalg.norm(t)) / nw
+    wR = rotation_from_rotvec(ww)
+    R1 = wR @ r_r.T
+    R2 = wR @ r_r
+    t = R2 @ t_in
+    fc = (k1[idx ^ 1, idx ^ 1] + k2[idx ^ 1, idx ^ 1]) / 2.0  # as OpenCV 4: the mean
+    corners = np.array([[0, 0], [nx - 1, 0], [0, ny - 1], [nx - 1, ny - 1]], dtype=np.float64)
+    cc = []
+    for K, D, Rk in ((k1, d1, R1), (k2, d2, R2)):
+        n = _undistort_points(corners, K, D)
+        ray = np.c_[n, np.ones(4)] @ Rk.T
+        avg = (fc * ray[:, :2] / ray[:, 2:]).mean(axis=0)
+        cc.append(np.array([(nx - 1) / 2.0 - avg[0], (ny - 1) / 2.0 - avg[1]]))
+    if zero_disparity:
+        cc[0] = cc[1] = (cc[0] + cc[1]) / 2.0
+    else:
+        cc[0][idx ^ 1] = cc[1][idx ^ 1] = (cc[0][idx ^ 1] + cc[1][idx ^ 1]) / 2.0
+    P1 = np.array([[fc, 0, cc[0][0], 0], [0, fc, cc[0][1], 0], [0, 0, 1, 0]])
+    P2 = np.array([[fc, 0, cc[1][0], 0], [0, fc, cc[1][1], 0], [0, 0, 1, 0]])
+    P2[idx, 3] = t[idx] * fc
+    Q = np.zeros((4, 4))
+    Q[0, 0] = Q[1, 1] = 1.0
+    Q[0, 3], Q[1, 3] = -cc[0][0], -cc[0][1]
+    Q[2, 3] = fc
+    Q[3, 2] = -1.0 / t[idx]
+    Q[3, 3] = (cc[0][idx] - cc[1][idx]) / t[idx]
+    return StereoRectification(R1, R2, P1, P2, Q, idx == 1)
+
+
+def rectify_uncalibrated(
+    F: Any, x1: Any, x2: Any, size: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Hartley's rectification from F: homographies ``H1, H2`` (3x3) such that
+    :math:`H_1 x_1` and :math:`H_2 x_2` lie on the same row.
+
+    :math:`H_2 = G R T` moves the image centre to the origin (T), turns the epipole
+    :math:`e_2` onto the x axis (R) and sends it to infinity with
+    :math:`G = \begin{pmatrix} 1&0&0\\0&1&0\\-1/f&0&1 \end{pmatrix}`.
+    :math:`H_1 = H_A H_2 M` with :math:`M = [e_2]_\times F + e_2 (1, 1, 1)` (any
+    :math:`M` with :math:`F = [e_2]_\times M` maps image 1 compatibly) and
+    :math:`H_A = \begin{pmatrix} a&b&c\\0&1&0\\0&0&1 \end{pmatrix}` fitted by linear
+    least squares to minimize :math:`\sum (a \hat x_1 + b \hat y_1 + c - \hat x_2)^2`.
+
+    Parameters
+    ----------
+    F : (3, 3) array_like
+        With :math:`x_2^T F x_1 = 0`.
+    x1, x2 : (N, 2) array_like
+        Correspondences (inliers), N >= 3.
+    size : (width, height) of the images.
+
+    Raises
+    ------
+    DegenerateError
+        The epipole lies inside the image (a forward motion cannot be rectified by
+        homographies without tearing the picture), or too few correspondences.
+    """
+    from robopercept.geometry.epipolar import epipoles, skew
+
+    Fm = _m3(F, "F")
+    p1 = np.asarray(x1, dtype=np.float64)
+    p2 = np.asarray(x2, dtype=np.float64)
+    if p1.ndim != 2 or p1.shape[1] != 2 or p2.shape != p1.shape:
+        raise InputError(f"x1 and x2 must both be (N, 2); got {p1.shape} and {p2.shape}")
+    if len(p1) < 3:
+        raise DegenerateError(f"rectify_uncalibrated needs >= 3 correspondences; got {len(p1)}")
+    w, h = float(size[0]), float(size[1])
+    _, e2 = epipoles(Fm)
+    if abs(e2[2]) > 1e-12:
+        ex, ey = e2[0] / e2[2], e2[1] / e2[2]
+        if 0 <= ex < w and 0 <= ey < h:
+            raise DegenerateError(
+                f"the epipole ({ex:.0f}, {ey:.0f}) lies inside the image: the motion is "
+                "mostly forward and cannot be rectified by homographies"
+            )
+    T = np.array([[1.0, 0, -(w - 1) / 2], [0, 1.0, -(h - 1) / 2], [0, 0, 1.0]])
+    e = T @ e2
+    if abs(e[2]) < 1e-12 * np.hypot(e[0], e[1]):  # already at infinity
+        angle = np.arctan2(e[1], e[0])
+        finf = np.inf
+    else:
+        e = e / e[2]
+        angle = np.arctan2(e[1], e[0])
+        finf = np.hypot(e[0], e[1])
+    c, s = np.cos(-angle), np.sin(-angle)
+    Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    G = np.eye(3)
+    if np.isfinite(finf):
+        G[2, 0] = -1.0 / finf
+    H2 = G @ Rz @ T
+    e2n = e2 / np.linalg.norm(e2)
+    M = skew(e2n) @ Fm + np.outer(e2n, np.ones(3))
+    H0 = H2 @ M
+    a = np.c_[p1, np.ones(len(p1))] @ H0.T
+    b = np.c_[p2, np.ones(len(p2))] @ H2.T
+    a = a[:, :2] / a[:, 2:]
+    b = b[:, :2] / b[:, 2:]
+    abc, *_ = np.linalg.lstsq(np.c_[a, np.ones(len(a))], b[:, 0], rcond=None)
+    HA = np.array([[abc[0], abc[1], abc[2]], [0, 1.0, 0], [0, 0, 1.0]])
+    H1 = HA @ H0
+    return H1 / H1[2, 2], H2 / H2[2, 2]
