@@ -1,4 +1,5 @@
-"""Depth: RGB-D geometry (depth to points, texture coordinates, alignment)."""
+"""Depth: RGB-D geometry (depth to points, texture coordinates, alignment) and stereo
+matching (block matching, semi-global matching, disparity to depth)."""
 
 from robopercept.depth.rgbd import (
     align_color_to_depth,
@@ -8,12 +9,28 @@ from robopercept.depth.rgbd import (
     sample_colors,
     texture_coordinates,
 )
+from robopercept.depth.stereo import (
+    bad_pixel_rate,
+    block_matching,
+    census_transform,
+    depth_resolution,
+    disparity_to_depth,
+    disparity_to_points,
+    semi_global_matching,
+)
 
 __all__ = [
     "align_color_to_depth",
     "align_depth_to_color",
+    "bad_pixel_rate",
+    "block_matching",
+    "census_transform",
+    "depth_resolution",
     "depth_to_points",
+    "disparity_to_depth",
+    "disparity_to_points",
     "pixel_rays",
     "sample_colors",
+    "semi_global_matching",
     "texture_coordinates",
 ]
