@@ -15,6 +15,7 @@ BENCHMARKS = {
     "features": "benchmarks.features",
     "learning": "benchmarks.learning",
     "motion": "benchmarks.motion",
+    "depth": "benchmarks.depth",
 }
 
 

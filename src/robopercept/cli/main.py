@@ -30,7 +30,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from robopercept.cli import cloud, features, imaging, info, learn, motion, tracking
+    from robopercept.cli import cloud, depth, features, imaging, info, learn, motion, tracking
 
     parser = _Parser(
         prog="robopercept",
@@ -46,6 +46,7 @@ def build_parser() -> argparse.ArgumentParser:
     learn.register(sub)
     tracking.register(sub)
     motion.register(sub)
+    depth.register(sub)
     return parser
 
 

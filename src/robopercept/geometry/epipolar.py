@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from robopercept.errors import DegenerateError, InputError
-from robopercept.estimation.models import Model
+from robopercept.estimation.models import Model, _normalizing
 
 __all__ = [
     "EssentialModel",
@@ -90,20 +90,6 @@ def _points(x: Any, name: str) -> np.ndarray:
     if not np.isfinite(p).all():
         raise InputError(f"{name} contains NaN or inf; drop those correspondences first")
     return p
-
-
-def _normalizing(xy: np.ndarray) -> np.ndarray:
-    """Hartley's similarity ``(..., 3, 3)``: centroid to 0, mean distance sqrt(2)."""
-    c = xy.mean(axis=-2)
-    d = np.sqrt(((xy - c[..., None, :]) ** 2).sum(axis=-1)).mean(axis=-1)
-    s = np.sqrt(2.0) / np.maximum(d, 1e-300)
-    t = np.zeros((*xy.shape[:-2], 3, 3))
-    t[..., 0, 0] = s
-    t[..., 1, 1] = s
-    t[..., 0, 2] = -s * c[..., 0]
-    t[..., 1, 2] = -s * c[..., 1]
-    t[..., 2, 2] = 1.0
-    return t
 
 
 def _eight_point_batch(x1: np.ndarray, x2: np.ndarray, essential: bool) -> np.ndarray:
