@@ -1,5 +1,6 @@
 """Depth: RGB-D geometry (depth to points, texture coordinates, alignment) and stereo
-matching (block matching, semi-global matching, disparity to depth)."""
+matching (block matching, semi-global matching, disparity to depth), active sensor
+models (time of flight, active stereo)."""
 
 from robopercept.depth.rgbd import (
     align_color_to_depth,
@@ -8,6 +9,17 @@ from robopercept.depth.rgbd import (
     pixel_rays,
     sample_colors,
     texture_coordinates,
+)
+from robopercept.depth.sensors import (
+    D435,
+    ActiveStereoSensor,
+    focal_from_fov,
+    tof_ambiguity_range,
+    tof_phase,
+    tof_phase_distance,
+    tof_pulse_distance,
+    tof_pulse_time,
+    tof_unwrap,
 )
 from robopercept.depth.stereo import (
     bad_pixel_rate,
@@ -20,6 +32,8 @@ from robopercept.depth.stereo import (
 )
 
 __all__ = [
+    "D435",
+    "ActiveStereoSensor",
     "align_color_to_depth",
     "align_depth_to_color",
     "bad_pixel_rate",
@@ -29,8 +43,15 @@ __all__ = [
     "depth_to_points",
     "disparity_to_depth",
     "disparity_to_points",
+    "focal_from_fov",
     "pixel_rays",
     "sample_colors",
     "semi_global_matching",
     "texture_coordinates",
+    "tof_ambiguity_range",
+    "tof_phase",
+    "tof_phase_distance",
+    "tof_pulse_distance",
+    "tof_pulse_time",
+    "tof_unwrap",
 ]
