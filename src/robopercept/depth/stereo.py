@@ -200,6 +200,17 @@ def _step(cost_row, prev, prev_min, p1, p2, out, nd):  # pragma: no cover - comp
     return best
 
 
+@njit(cache=True, inline="always")
+def _start(cost_row, out, nd):  # pragma: no cover - compiled
+    # a path's first pixel: L = C (padded like _step's output); returns its minimum
+    best = _BIG * 4
+    for k in range(nd):
+        out[k + 1] = cost_row[k]
+        if cost_row[k] < best:
+            best = cost_row[k]
+    return best
+
+
 @njit(cache=True, parallel=True)
 def _sgm_passes(cost, p1, p2, paths, s_out):  # pragma: no cover - compiled
     # two independent passes (top-down and bottom-up), one per thread; each writes its
@@ -234,11 +245,7 @@ def _sgm_passes(cost, p1, p2, paths, s_out):  # pragma: no cover - compiled
                 for k in range(nd):
                     crow[k] = cost[y, x, k]
                 if j == 0:
-                    hmin = _BIG * 4
-                    for k in range(nd):
-                        hz[k + 1] = crow[k]
-                        if crow[k] < hmin:
-                            hmin = crow[k]
+                    hmin = _start(crow, hz, nd)
                 else:
                     hmin = _step(crow, hz, hmin, p1, p2, hz2, nd)
                     hz, hz2 = hz2, hz
@@ -249,12 +256,7 @@ def _sgm_passes(cost, p1, p2, paths, s_out):  # pragma: no cover - compiled
                 for k in range(nd):
                     crow[k] = cost[y, x, k]
                 if first:
-                    mn = _BIG * 4
-                    for k in range(nd):
-                        cv[x, k + 1] = crow[k]
-                        if crow[k] < mn:
-                            mn = crow[k]
-                    nv[x] = mn
+                    nv[x] = _start(crow, cv[x], nd)
                 else:
                     nv[x] = _step(crow, pv[x], mv[x], p1, p2, cv[x], nd)
                 for k in range(nd):
@@ -262,22 +264,12 @@ def _sgm_passes(cost, p1, p2, paths, s_out):  # pragma: no cover - compiled
                 if paths == 8:
                     xa = x - 1  # from the upper left (down) / lower left (up)
                     if first or xa < 0:
-                        mn = _BIG * 4
-                        for k in range(nd):
-                            ca[x, k + 1] = crow[k]
-                            if crow[k] < mn:
-                                mn = crow[k]
-                        na[x] = mn
+                        na[x] = _start(crow, ca[x], nd)
                     else:
                         na[x] = _step(crow, pa[xa], ma[xa], p1, p2, ca[x], nd)
                     xb = x + 1  # from the upper right (down) / lower right (up)
                     if first or xb >= w:
-                        mn = _BIG * 4
-                        for k in range(nd):
-                            cb[x, k + 1] = crow[k]
-                            if crow[k] < mn:
-                                mn = crow[k]
-                        nb[x] = mn
+                        nb[x] = _start(crow, cb[x], nd)
                     else:
                         nb[x] = _step(crow, pb[xb], mb[xb], p1, p2, cb[x], nd)
                     for k in range(nd):
