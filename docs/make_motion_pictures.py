@@ -38,6 +38,13 @@ def _jpeg(path: Path, image: np.ndarray) -> None:
     Image.fromarray(image).save(path, quality=85)
 
 
+def _folder(path: Path, frames: np.ndarray) -> Path:
+    path.mkdir()
+    for i, f in enumerate(frames):
+        write_image(path / f"{i:06d}.png", f)
+    return path
+
+
 def _stack(paths: list[Path]) -> np.ndarray:
     return np.concatenate([read_image(p, mode="rgb") for p in paths], axis=0)
 
@@ -59,10 +66,7 @@ def main_pictures() -> None:
         # (faster than their diameter, so differencing shows a disc and its ghost)
         frames, _ = moving_blobs(40, (120, 160), n_blobs=2, radius=(8.0, 10.0), speed=14.0,
                                  illumination_drift=0.0, rng=4)  # fmt: skip
-        seq = t / "blobs"
-        seq.mkdir()
-        for i, f in enumerate(frames):
-            write_image(seq / f"{i:06d}.png", f)
+        seq = _folder(t / "blobs", frames)
         rows = []
         for method in ("static", "gaussian", "diff", "diff3"):
             out = t / f"blobs_{method}.mp4"
@@ -74,10 +78,7 @@ def main_pictures() -> None:
         # multi-object tracking of the discs (detections from background subtraction)
         frames, _ = moving_blobs(60, (240, 320), n_blobs=4, radius=(12.0, 16.0), speed=3.0,
                                  illumination_drift=0.0, rng=6)  # fmt: skip
-        seq = t / "blobs3"
-        seq.mkdir()
-        for i, f in enumerate(frames):
-            write_image(seq / f"{i:06d}.png", f)
+        seq = _folder(t / "blobs3", frames)
         _run("track", str(seq), "--min-area", "100", "--snapshot", "50", "-o",
              str(t / "track.mp4"), "--results", str(t / "tracks.txt"))  # fmt: skip
         write_image(IMG / "motion_track.png", read_image(t / "track_000050.png"))

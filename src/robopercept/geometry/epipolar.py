@@ -92,6 +92,14 @@ def _points(x: Any, name: str) -> np.ndarray:
     return p
 
 
+def _pairs(x1: Any, x2: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Checked correspondences: both (N, 2), finite, of one length."""
+    p1, p2 = _points(x1, "x1"), _points(x2, "x2")
+    if p1.shape != p2.shape:
+        raise InputError(f"x1 and x2 must have the same shape; got {p1.shape} and {p2.shape}")
+    return p1, p2
+
+
 def _eight_point_batch(x1: np.ndarray, x2: np.ndarray, essential: bool) -> np.ndarray:
     """(B, n, 2) x (B, n, 2) -> (B, 3, 3), unit Frobenius norm, rank 2 (or (1, 1, 0))."""
     t1, t2 = _normalizing(x1), _normalizing(x2)
@@ -155,9 +163,7 @@ def eight_point(x1: Any, x2: Any, *, essential: bool = False) -> np.ndarray:
     DegenerateError
         Fewer than 8 correspondences, or all of them on a line.
     """
-    p1, p2 = _points(x1, "x1"), _points(x2, "x2")
-    if p1.shape != p2.shape:
-        raise InputError(f"x1 and x2 must have the same shape; got {p1.shape} and {p2.shape}")
+    p1, p2 = _pairs(x1, x2)
     if len(p1) < 8:
         raise DegenerateError(f"the eight-point algorithm needs 8 correspondences; got {len(p1)}")
     _check_spread(p1, p2)
@@ -307,9 +313,7 @@ def find_fundamental(
     :class:`FundamentalModel` (Sampson distance below ``threshold`` pixels is an
     inlier), then refits on the inliers.
     """
-    p1, p2 = _points(x1, "x1"), _points(x2, "x2")
-    if p1.shape != p2.shape:
-        raise InputError(f"x1 and x2 must have the same shape; got {p1.shape} and {p2.shape}")
+    p1, p2 = _pairs(x1, x2)
     kw = {"probability": probability, "max_iterations": max_iterations, "rng": rng}
     return _fit(FundamentalModel(), np.c_[p1, p2], method, threshold, kw)
 
@@ -329,9 +333,7 @@ def find_essential(
     (eight-point on :math:`K^{-1} x`; ``threshold`` in pixels, divided by the focal
     length for the normalized residual, as ``cv2.findEssentialMat`` does)."""
     k = _matrix3(K, "K")
-    p1, p2 = _points(x1, "x1"), _points(x2, "x2")
-    if p1.shape != p2.shape:
-        raise InputError(f"x1 and x2 must have the same shape; got {p1.shape} and {p2.shape}")
+    p1, p2 = _pairs(x1, x2)
     kinv = np.linalg.inv(k)
     n1 = p1 @ kinv[:2, :2].T + kinv[:2, 2]
     n2 = p2 @ kinv[:2, :2].T + kinv[:2, 2]

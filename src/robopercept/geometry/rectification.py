@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from robopercept.errors import DegenerateError, InputError
+from robopercept.geometry.epipolar import _matrix3
 from robopercept.geometry.transforms import rotation_from_rotvec, rotvec_from_rotation
 
 __all__ = ["StereoRectification", "rectify_stereo", "rectify_uncalibrated"]
@@ -58,13 +59,6 @@ class StereoRectification:
     P2: np.ndarray
     Q: np.ndarray
     vertical: bool
-
-
-def _m3(M: Any, name: str) -> np.ndarray:
-    m = np.asarray(M, dtype=np.float64)
-    if m.shape != (3, 3) or not np.isfinite(m).all():
-        raise InputError(f"{name} must be a finite 3x3 matrix; got shape {m.shape}")
-    return m
 
 
 def _dist(D: Any, name: str) -> np.ndarray:
@@ -126,9 +120,9 @@ def rectify_stereo(
     -------
     StereoRectification
     """
-    k1, k2 = _m3(K1, "K1"), _m3(K2, "K2")
+    k1, k2 = _matrix3(K1, "K1"), _matrix3(K2, "K2")
     d1, d2 = _dist(D1, "D1"), _dist(D2, "D2")
-    Rm = _m3(R, "R")
+    Rm = _matrix3(R, "R")
     t_in = np.asarray(T, dtype=np.float64).ravel()
     if t_in.size != 3 or not np.isfinite(t_in).all() or not np.linalg.norm(t_in) > 0:
         raise InputError(f"T must be a non-zero 3-vector; got {T!r}")
@@ -202,7 +196,7 @@ def rectify_uncalibrated(
     """
     from robopercept.geometry.epipolar import epipoles, skew
 
-    Fm = _m3(F, "F")
+    Fm = _matrix3(F, "F")
     p1 = np.asarray(x1, dtype=np.float64)
     p2 = np.asarray(x2, dtype=np.float64)
     if p1.ndim != 2 or p1.shape[1] != 2 or p2.shape != p1.shape:
