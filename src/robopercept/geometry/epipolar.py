@@ -189,7 +189,7 @@ def sampson_distance(F: Any, x1: Any, x2: Any) -> np.ndarray:
             + (F^T x_2)_2^2}}.
     """
     Fm = _matrix3(F, "F")
-    p1, p2 = _points(x1, "x1"), _points(x2, "x2")
+    p1, p2 = _pairs(x1, x2)
     return _sampson(Fm[None], p1, p2)[0]
 
 
@@ -419,7 +419,7 @@ def decompose_essential(E: Any, x1: Any, x2: Any, K: Any | None = None) -> Relat
     from robopercept.geometry.triangulation import triangulate
 
     e = _matrix3(E, "E")
-    p1, p2 = _points(x1, "x1"), _points(x2, "x2")
+    p1, p2 = _pairs(x1, x2)
     if K is not None:
         kinv = np.linalg.inv(_matrix3(K, "K"))
         p1 = p1 @ kinv[:2, :2].T + kinv[:2, 2]
