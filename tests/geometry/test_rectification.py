@@ -109,3 +109,24 @@ def test_bad_input():
     pts = np.array([[100.0, 100], [500, 120], [300, 400]])
     with pytest.raises(DegenerateError, match="inside the image"):
         rectify_uncalibrated(F, pts, pts + 1, (640, 480))
+
+
+def test_undistort_rectify_map_equals_opencv():
+    """The maps equal cv2.initUndistortRectifyMap (float32) to 1e-3 px, for plain
+    undistortion and for a rectifying rotation with a new camera."""
+    cv2 = pytest.importorskip("cv2")
+    from robopercept.geometry.rectification import undistort_rectify_map
+
+    K = np.array([[520.0, 0, 315], [0, 515, 242], [0, 0, 1]])
+    d = np.array([-0.25, 0.08, 0.001, -0.002, 0.01])
+    R = rotation_from_rotvec([0.01, -0.02, 0.005])
+    P = np.array([[500.0, 0, 300, 0], [0, 500, 240, 0], [0, 0, 1, 0]])
+    for r, p in ((None, K), (R, P)):
+        mx, my = undistort_rectify_map(K, d, r, p, (640, 480))
+        rx, ry = cv2.initUndistortRectifyMap(
+            K, d, np.eye(3) if r is None else r, p, (640, 480), cv2.CV_32FC1
+        )
+        assert mx.shape == (480, 640) and mx.dtype == np.float32
+        assert np.abs(mx - rx).max() < 1e-3 and np.abs(my - ry).max() < 1e-3
+    with pytest.raises(InputError):
+        undistort_rectify_map(K, d, None, np.eye(2), (640, 480))

@@ -54,3 +54,26 @@ def test_bad_input(camera):
         warp_perspective(camera, np.eye(3), 10)  # type: ignore[arg-type]
     with pytest.raises(InputError):
         warp_perspective(camera, np.eye(2), (10, 10))
+
+
+def test_remap_equals_opencv_and_handles_outside():
+    """remap samples like cv2.remap (bilinear, constant border): integer maps copy
+    pixels exactly; fractional maps agree within OpenCV's 1/32-px quantization."""
+    cv2 = pytest.importorskip("cv2")
+    from robopercept.imaging import remap
+
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, (40, 50, 3), dtype=np.uint8)
+    yy, xx = np.mgrid[0:30, 0:35].astype(np.float32)
+    mx, my = xx * 1.3 + 2, yy * 1.2 + 1
+    ours = remap(img, np.round(mx), np.round(my))
+    ref = cv2.remap(img, np.round(mx), np.round(my), cv2.INTER_LINEAR)
+    np.testing.assert_array_equal(ours, ref)
+    ours = remap(img, mx + 0.25, my + 0.5).astype(int)
+    ref = cv2.remap(img, mx + 0.25, my + 0.5, cv2.INTER_LINEAR).astype(int)
+    # a 1/32-px position error on noise with 255-level steps: at most 255/32 levels
+    assert np.abs(ours - ref).max() <= 8 and np.abs(ours - ref).mean() < 1.5
+    out = remap(img[..., 0], np.full((2, 2), -5.0), np.full((2, 2), np.nan), border_value=7)
+    np.testing.assert_array_equal(out, 7)
+    with pytest.raises(InputError):
+        remap(img, mx, my[:5])

@@ -22,6 +22,7 @@ from robopercept.geometry.rectification import (
     StereoRectification,
     rectify_stereo,
     rectify_uncalibrated,
+    undistort_rectify_map,
 )
 from robopercept.geometry.transforms import (
     apply,
@@ -63,4 +64,5 @@ __all__ = [
     "se3",
     "skew",
     "triangulate",
+    "undistort_rectify_map",
 ]

@@ -31,10 +31,16 @@ from typing import Any
 import numpy as np
 
 from robopercept.errors import DegenerateError, InputError
+from robopercept.geometry.camera import _distort
 from robopercept.geometry.epipolar import _matrix3
 from robopercept.geometry.transforms import rotation_from_rotvec, rotvec_from_rotation
 
-__all__ = ["StereoRectification", "rectify_stereo", "rectify_uncalibrated"]
+__all__ = [
+    "StereoRectification",
+    "rectify_stereo",
+    "rectify_uncalibrated",
+    "undistort_rectify_map",
+]
 
 
 @dataclass(frozen=True)
@@ -238,3 +244,51 @@ def rectify_uncalibrated(
     HA = np.array([[abc[0], abc[1], abc[2]], [0, 1.0, 0], [0, 0, 1.0]])
     H1 = HA @ H0
     return H1 / H1[2, 2], H2 / H2[2, 2]
+
+
+def undistort_rectify_map(
+    K: Any, D: Any, R: Any | None, P: Any, size: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Per-pixel source positions that undistort (and rectify) an image
+    (``cv2.initUndistortRectifyMap``).
+
+    For an output pixel :math:`(u, v)` the ray :math:`(X, Y, W)^T = (P_{3 \times 3} R)^{-1}
+    (u, v, 1)^T` is taken back to the original camera, distorted,
+    :math:`(x_d, y_d) = \operatorname{dist}(X / W, Y / W)`, and projected with K:
+    ``map_x = fx * x_d + cx``, ``map_y = fy * y_d + cy``. Feed the maps to
+    :func:`robopercept.imaging.remap`.
+
+    Parameters
+    ----------
+    K : (3, 3) array_like
+        Original camera matrix.
+    D : array_like or None
+        ``(k1, k2, p1, p2[, k3])``.
+    R : (3, 3) array_like or None
+        Rectifying rotation (``R1`` or ``R2`` of :func:`rectify_stereo`); None for the
+        identity (plain undistortion).
+    P : (3, 3) or (3, 4) array_like
+        New camera (``P1``/``P2``, or a camera matrix).
+    size : (width, height)
+        Output size.
+
+    Returns
+    -------
+    map_x, map_y : (height, width) float32 ndarray
+    """
+    k = _matrix3(K, "K")
+    d = _dist(D, "D")
+    r = np.eye(3) if R is None else _matrix3(R, "R")
+    p = np.asarray(P, dtype=np.float64)
+    if p.shape not in ((3, 3), (3, 4)) or not np.isfinite(p).all():
+        raise InputError(f"P must be a finite 3x3 or 3x4 matrix; got shape {p.shape}")
+    w, h = int(size[0]), int(size[1])
+    if w < 1 or h < 1:
+        raise InputError(f"size must be (width, height) >= 1; got {size!r}")
+    ir = np.linalg.inv(p[:, :3] @ r)
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    ray = np.stack([u, v, np.ones_like(u)], axis=-1) @ ir.T
+    xd, yd = _distort(ray[..., 0] / ray[..., 2], ray[..., 1] / ray[..., 2], tuple(d), False)
+    map_x = k[0, 0] * xd + k[0, 1] * yd + k[0, 2]
+    map_y = k[1, 1] * yd + k[1, 2]
+    return map_x.astype(np.float32), map_y.astype(np.float32)

@@ -21,7 +21,7 @@ from robopercept.imaging.filters import (
 from robopercept.imaging.io import VideoReader, VideoWriter, read_image, write_image
 from robopercept.imaging.morphology import closing, dilate, erode, opening, structuring_element
 from robopercept.imaging.pyramids import gaussian_pyramid, pyr_down
-from robopercept.imaging.warp import transform_points, warp_perspective
+from robopercept.imaging.warp import remap, transform_points, warp_perspective
 
 __all__ = [
     "BlobFeatures",
@@ -52,6 +52,7 @@ __all__ = [
     "otsu_threshold",
     "pyr_down",
     "read_image",
+    "remap",
     "rgb_to_gray",
     "rgb_to_hsv",
     "sobel",

@@ -1,4 +1,4 @@
-r"""Perspective warping of images.
+r"""Perspective warping and remapping of images.
 
 :func:`warp_perspective` maps every output pixel :math:`x'` back through
 :math:`H^{-1}` (the backward map, so the output has no holes),
@@ -8,6 +8,9 @@ pixel); samples outside the input get ``border_value``. Pixel centres are at int
 coordinates, as in OpenCV; ``cv2.warpPerspective(image, H, (w, h))`` is the same
 operation (OpenCV quantizes the sample position to 1/32 pixel, hence differences of a
 grey level or two).
+
+:func:`remap` is the general form: each output pixel names its source position in two
+maps (``cv2.remap``), as undistortion and stereo rectification need.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from numba import njit, prange
 from robopercept._checks import check_choice, check_image, check_int, check_shape
 from robopercept.errors import DegenerateError, InputError
 
-__all__ = ["transform_points", "warp_perspective"]
+__all__ = ["remap", "transform_points", "warp_perspective"]
 
 
 def transform_points(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -44,9 +47,44 @@ def transform_points(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
         return q / w[:, None]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _sample(src, sx, sy, linear, border, out, y, x):  # pragma: no cover - compiled
+    """Write the sample of ``src`` at ``(sx, sy)`` into ``out[y, x]`` (bilinear or
+    nearest; ``border`` outside, bilinear samples near the edge blend towards it)."""
+    h, w, c = src.shape
+    if not linear:
+        ix = int(np.floor(sx + 0.5)) if abs(sx) < 1e9 else -1
+        iy = int(np.floor(sy + 0.5)) if abs(sy) < 1e9 else -1
+        if 0 <= ix < w and 0 <= iy < h:
+            for k in range(c):
+                out[y, x, k] = src[iy, ix, k]
+        else:
+            for k in range(c):
+                out[y, x, k] = border
+        return
+    if not (-1.0 < sx < w and -1.0 < sy < h):
+        for k in range(c):
+            out[y, x, k] = border
+        return
+    x0 = int(np.floor(sx))
+    y0 = int(np.floor(sy))
+    fx = sx - x0
+    fy = sy - y0
+    for k in range(c):
+        acc = 0.0
+        for dy in range(2):
+            yy = y0 + dy
+            wy = fy if dy else 1.0 - fy
+            for dx in range(2):
+                xx = x0 + dx
+                wx = fx if dx else 1.0 - fx
+                v = src[yy, xx, k] if (0 <= yy < h and 0 <= xx < w) else border
+                acc += wy * wx * v
+        out[y, x, k] = acc
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def _warp_kernel(src, minv, linear, border, out):  # pragma: no cover - compiled
-    h, w, c = src.shape
     oh, ow = out.shape[0], out.shape[1]
     for y in prange(oh):
         for x in range(ow):
@@ -54,40 +92,69 @@ def _warp_kernel(src, minv, linear, border, out):  # pragma: no cover - compiled
             zy = minv[1, 0] * x + minv[1, 1] * y + minv[1, 2]
             zw = minv[2, 0] * x + minv[2, 1] * y + minv[2, 2]
             if zw == 0.0:
-                for k in range(c):
-                    out[y, x, k] = border
-                continue
-            sx = zx / zw
-            sy = zy / zw
-            if not linear:
-                ix = int(np.floor(sx + 0.5)) if abs(sx) < 1e9 else -1
-                iy = int(np.floor(sy + 0.5)) if abs(sy) < 1e9 else -1
-                if 0 <= ix < w and 0 <= iy < h:
-                    for k in range(c):
-                        out[y, x, k] = src[iy, ix, k]
-                else:
-                    for k in range(c):
-                        out[y, x, k] = border
-                continue
-            if not (-1.0 < sx < w and -1.0 < sy < h):
-                for k in range(c):
-                    out[y, x, k] = border
-                continue
-            x0 = int(np.floor(sx))
-            y0 = int(np.floor(sy))
-            fx = sx - x0
-            fy = sy - y0
-            for k in range(c):
-                acc = 0.0
-                for dy in range(2):
-                    yy = y0 + dy
-                    wy = fy if dy else 1.0 - fy
-                    for dx in range(2):
-                        xx = x0 + dx
-                        wx = fx if dx else 1.0 - fx
-                        v = src[yy, xx, k] if (0 <= yy < h and 0 <= xx < w) else border
-                        acc += wy * wx * v
-                out[y, x, k] = acc
+                _sample(src, -2.0, -2.0, linear, border, out, y, x)
+            else:
+                _sample(src, zx / zw, zy / zw, linear, border, out, y, x)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _remap_kernel(src, map_x, map_y, linear, border, out):  # pragma: no cover - compiled
+    oh, ow = out.shape[0], out.shape[1]
+    for y in prange(oh):
+        for x in range(ow):
+            sx = map_x[y, x]
+            sy = map_y[y, x]
+            if not (np.isfinite(sx) and np.isfinite(sy)):
+                sx = sy = -2.0
+            _sample(src, sx, sy, linear, border, out, y, x)
+
+
+def _finish(image: np.ndarray, out: np.ndarray) -> np.ndarray:
+    if image.dtype.kind in "ui":
+        info = np.iinfo(image.dtype)
+        out = np.clip(np.rint(out), info.min, info.max)
+    res = out.astype(image.dtype)
+    return res if image.ndim == 3 else res[:, :, 0]
+
+
+def remap(
+    image: np.ndarray,
+    map_x: np.ndarray,
+    map_y: np.ndarray,
+    *,
+    interpolation: Literal["linear", "nearest"] = "linear",
+    border_value: float = 0.0,
+) -> np.ndarray:
+    """Resample an image at arbitrary positions: ``out[y, x] = image(map_y[y, x],
+    map_x[y, x])`` (``cv2.remap`` with a constant border).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+    map_x, map_y : (H', W') array_like
+        Source column and row of every output pixel (NaN counts as outside).
+    interpolation : {"linear", "nearest"}
+    border_value : float
+
+    Returns
+    -------
+    ndarray
+        ``(H', W'[, C])``, the input's dtype (integers rounded).
+    """
+    image = check_image(image)
+    mx = np.asarray(map_x, dtype=np.float64)
+    my = np.asarray(map_y, dtype=np.float64)
+    if mx.ndim != 2 or mx.shape != my.shape:
+        raise InputError(
+            f"map_x and map_y must be 2-D arrays of one shape; got {mx.shape} and {my.shape}"
+        )
+    check_choice(interpolation, "interpolation", ("linear", "nearest"))
+    src = image if image.ndim == 3 else image[:, :, None]
+    out = np.empty((*mx.shape, src.shape[2]), np.float64)
+    _remap_kernel(
+        np.ascontiguousarray(src), mx, my, interpolation == "linear", float(border_value), out
+    )
+    return _finish(image, out)
 
 
 def warp_perspective(
@@ -140,8 +207,4 @@ def warp_perspective(
     _warp_kernel(
         np.ascontiguousarray(src), minv, interpolation == "linear", float(border_value), out
     )
-    if image.dtype.kind in "ui":
-        info = np.iinfo(image.dtype)
-        out = np.clip(np.rint(out), info.min, info.max)
-    res = out.astype(image.dtype)
-    return res if image.ndim == 3 else res[:, :, 0]
+    return _finish(image, out)

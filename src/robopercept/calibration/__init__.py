@@ -1,0 +1,44 @@
+"""Camera calibration: chessboard detection, intrinsics (Zhang's method with
+Levenberg-Marquardt refinement), stereo calibration, hand-eye calibration (AX = XB)."""
+
+from robopercept.calibration.chessboard import (
+    ChessboardDetection,
+    chessboard_points,
+    find_chessboard_corners,
+)
+from robopercept.calibration.handeye import (
+    HandEyeResult,
+    calibrate_hand_eye,
+    hand_eye_residuals,
+    pose_from_xyz_rpy,
+    read_xyz_rpy,
+)
+from robopercept.calibration.intrinsics import (
+    CalibrationResult,
+    StereoCalibration,
+    calibrate_camera,
+    load_calibration,
+    reprojection_errors,
+    save_calibration,
+    stereo_calibrate,
+    undistort,
+)
+
+__all__ = [
+    "CalibrationResult",
+    "ChessboardDetection",
+    "HandEyeResult",
+    "StereoCalibration",
+    "calibrate_camera",
+    "calibrate_hand_eye",
+    "chessboard_points",
+    "find_chessboard_corners",
+    "hand_eye_residuals",
+    "load_calibration",
+    "pose_from_xyz_rpy",
+    "read_xyz_rpy",
+    "reprojection_errors",
+    "save_calibration",
+    "stereo_calibrate",
+    "undistort",
+]

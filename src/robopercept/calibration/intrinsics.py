@@ -1,0 +1,664 @@
+r"""Camera calibration from views of a planar target (Zhang 2000), with OpenCV's lens model.
+
+A board point :math:`X = (X, Y, 0)` seen in view :math:`i` projects to
+
+.. math::
+
+    u = f_x x_d + c_x, \quad v = f_y y_d + c_y, \qquad
+    (x_d, y_d) = \operatorname{dist}\!\left(\frac{(R_i X + t_i)_{xy}}{(R_i X + t_i)_z}\right)
+
+with the Brown-Conrady distortion of :mod:`robopercept.geometry.camera`
+(:math:`k_1, k_2, p_1, p_2, k_3`). Calibration runs in three steps:
+
+1. **A homography per view.** Because the board is the plane :math:`Z = 0`,
+   :math:`s\,(u, v, 1)^T = K [r_1\ r_2\ t] (X, Y, 1)^T = H (X, Y, 1)^T`; H comes from the
+   normalized DLT.
+2. **Closed form for K.** With :math:`B = K^{-T} K^{-1}` (the image of the absolute
+   conic), :math:`r_1 \perp r_2` and :math:`|r_1| = |r_2|` give two linear equations per
+   view, :math:`h_1^T B h_2 = 0` and :math:`h_1^T B h_1 - h_2^T B h_2 = 0`, in the six
+   unknowns of the symmetric B (plus :math:`B_{12} = 0` for zero skew). The null vector
+   of the stacked system gives B, and K follows by Cholesky-like closed forms; then
+   :math:`r_1 = \lambda K^{-1} h_1`, :math:`r_2 = \lambda K^{-1} h_2`,
+   :math:`r_3 = r_1 \times r_2`, :math:`t = \lambda K^{-1} h_3`,
+   :math:`\lambda = 1 / |K^{-1} h_1|`, and R is made orthonormal by SVD. Radial
+   distortion starts from the linear least-squares fit of :math:`k_1, k_2`.
+3. **Levenberg-Marquardt** over all parameters (intrinsics, distortion, a rotation
+   vector and translation per view) minimizing the reprojection error
+   :math:`\sum_{i, j} \|\pi(K, d, R_i, t_i, X_j) - x_{ij}\|^2`
+   (``scipy.optimize.least_squares``).
+
+The reported RMS is OpenCV's: :math:`\sqrt{\sum \|e\|^2 / N}` over all N points, and a
+view's error is the same over its own points.
+
+:func:`stereo_calibrate` then finds the pose :math:`(R, T)` of camera 2 relative to
+camera 1 (:math:`X_2 = R X_1 + T`) from simultaneous views, and :func:`undistort` resamples
+an image through the inverse lens model.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import DegenerateError, FileFormatError, InputError
+from robopercept.estimation.models import _dlt
+from robopercept.geometry.camera import CameraIntrinsics, _distort
+from robopercept.geometry.epipolar import essential_from_pose, fundamental_from_essential
+from robopercept.geometry.rectification import undistort_rectify_map
+from robopercept.geometry.transforms import rotation_from_rotvec, rotvec_from_rotation
+from robopercept.imaging.warp import remap
+
+__all__ = [
+    "CalibrationResult",
+    "StereoCalibration",
+    "calibrate_camera",
+    "load_calibration",
+    "reprojection_errors",
+    "save_calibration",
+    "stereo_calibrate",
+    "undistort",
+]
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """Result of :func:`calibrate_camera` (``cv2.calibrateCamera``'s outputs).
+
+    Attributes
+    ----------
+    K : (3, 3) ndarray
+        Camera matrix ``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``.
+    dist : (5,) ndarray
+        ``(k1, k2, p1, p2, k3)``.
+    rvecs, tvecs : (V, 3) ndarray
+        Pose of the board in each view (board frame to camera frame), as OpenCV's.
+    rms : float
+        Root-mean-square reprojection error over all points, pixels.
+    per_view_errors : (V,) ndarray
+        The same per view.
+    image_size : (int, int)
+        ``(width, height)``.
+    """
+
+    K: np.ndarray
+    dist: np.ndarray
+    rvecs: np.ndarray
+    tvecs: np.ndarray
+    rms: float
+    per_view_errors: np.ndarray
+    image_size: tuple[int, int]
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        """The camera as :class:`~robopercept.geometry.CameraIntrinsics` (Brown-Conrady)."""
+        w, h = self.image_size
+        return CameraIntrinsics.from_matrix(self.K, w, h, "brown_conrady", tuple(self.dist))
+
+    @property
+    def poses(self) -> np.ndarray:
+        """``(V, 4, 4)`` board-to-camera transforms ``T_camera_board``."""
+        out = np.tile(np.eye(4), (len(self.rvecs), 1, 1))
+        for i, (r, t) in enumerate(zip(self.rvecs, self.tvecs, strict=True)):
+            out[i, :3, :3] = rotation_from_rotvec(r)
+            out[i, :3, 3] = t
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (read back by :func:`load_calibration`)."""
+        return {
+            "image_size": list(self.image_size),
+            "K": self.K.tolist(),
+            "dist": self.dist.tolist(),
+            "rms": self.rms,
+            "per_view_errors": self.per_view_errors.tolist(),
+            "rvecs": self.rvecs.tolist(),
+            "tvecs": self.tvecs.tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class StereoCalibration:
+    """Result of :func:`stereo_calibrate` (``cv2.stereoCalibrate``'s outputs).
+
+    Attributes
+    ----------
+    K1, dist1, K2, dist2 : ndarray
+        The two cameras.
+    R, T : ndarray
+        Camera 2 relative to camera 1: :math:`X_2 = R X_1 + T`.
+    E, F : (3, 3) ndarray
+        Essential :math:`[T]_\\times R` and fundamental matrices.
+    rms : float
+        RMS reprojection error over both cameras' points.
+    per_view_errors : (V, 2) ndarray
+        RMS per view and camera.
+    image_size : (int, int)
+    """
+
+    K1: np.ndarray
+    dist1: np.ndarray
+    K2: np.ndarray
+    dist2: np.ndarray
+    R: np.ndarray
+    T: np.ndarray
+    E: np.ndarray
+    F: np.ndarray
+    rms: float
+    per_view_errors: np.ndarray
+    image_size: tuple[int, int]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (read back by :func:`load_calibration`)."""
+        return {
+            "image_size": list(self.image_size),
+            "K1": self.K1.tolist(),
+            "dist1": self.dist1.tolist(),
+            "K2": self.K2.tolist(),
+            "dist2": self.dist2.tolist(),
+            "R": self.R.tolist(),
+            "T": self.T.tolist(),
+            "E": self.E.tolist(),
+            "F": self.F.tolist(),
+            "rms": self.rms,
+            "per_view_errors": self.per_view_errors.tolist(),
+        }
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def _views(points: Any, name: str, dim: int) -> list[np.ndarray]:
+    if isinstance(points, np.ndarray) and points.ndim == 3:
+        points = list(points)
+    if not isinstance(points, Sequence) and not isinstance(points, np.ndarray):
+        raise InputError(f"{name} must be a list with one (N, {dim}) array per view")
+    out = []
+    for i, p in enumerate(points):
+        a = np.asarray(p, dtype=np.float64)
+        if a.ndim == 3 and a.shape[1] == 1:  # OpenCV's (N, 1, 2) corners
+            a = a[:, 0]
+        if a.ndim != 2 or a.shape[1] != dim or not np.isfinite(a).all():
+            raise InputError(f"{name}[{i}] must be a finite (N, {dim}) array; got {a.shape}")
+        out.append(a)
+    return out
+
+
+def _inputs(
+    object_points: Any, image_points: Any, name: str = "image_points"
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    img = _views(image_points, name, 2)
+    if len(img) < 3:
+        raise InputError(
+            f"calibration needs at least 3 views of the board; got {len(img)}: "
+            "capture more images with the board at different tilts"
+        )
+    obj = object_points
+    if isinstance(obj, np.ndarray) and obj.ndim == 2:
+        obj = [obj] * len(img)
+    objs = _views(obj, "object_points", 3)
+    if len(objs) != len(img):
+        raise InputError(
+            f"object_points has {len(objs)} views but {name} has {len(img)}; give one "
+            "board array per view (or a single (N, 3) array for all)"
+        )
+    for i, (o, p) in enumerate(zip(objs, img, strict=True)):
+        if o.shape[0] != p.shape[0]:
+            raise InputError(f"view {i}: {o.shape[0]} object points but {p.shape[0]} image points")
+        if o.shape[0] < 4:
+            raise InputError(f"view {i}: a view needs at least 4 points; got {o.shape[0]}")
+        if np.abs(o[:, 2]).max() > 1e-9 * max(1.0, np.abs(o).max()):
+            raise InputError(
+                f"object_points[{i}] must lie on the plane z = 0 (a planar target such as "
+                "the output of chessboard_points)"
+            )
+    return objs, img
+
+
+def _size(image_size: Any) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in image_size)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"image_size must be (width, height); got {image_size!r}") from exc
+    if w < 1 or h < 1:
+        raise InputError(f"image_size must be positive; got {(w, h)}")
+    return w, h
+
+
+# --------------------------------------------------------------------------- model
+
+
+def _project(
+    obj: np.ndarray,
+    view: np.ndarray,
+    rvecs: np.ndarray,
+    tvecs: np.ndarray,
+    K: np.ndarray,
+    dist: np.ndarray,
+) -> np.ndarray:
+    """Pixels of board points ``obj`` (M, 3) seen in views ``view`` (M,)."""
+    R = _rotations(rvecs)
+    pc = np.einsum("mij,mj->mi", R[view], obj) + tvecs[view]
+    z = pc[:, 2]
+    xd, yd = _distort(pc[:, 0] / z, pc[:, 1] / z, tuple(dist), False)
+    return np.c_[K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]]
+
+
+def _rotations(rvecs: np.ndarray) -> np.ndarray:
+    """Rodrigues for ``(V, 3)`` rotation vectors at once."""
+    theta = np.linalg.norm(rvecs, axis=1)
+    small = theta < 1e-12
+    k = rvecs / np.where(small, 1.0, theta)[:, None]
+    kx = np.zeros((len(rvecs), 3, 3))
+    kx[:, 0, 1], kx[:, 0, 2] = -k[:, 2], k[:, 1]
+    kx[:, 1, 0], kx[:, 1, 2] = k[:, 2], -k[:, 0]
+    kx[:, 2, 0], kx[:, 2, 1] = -k[:, 1], k[:, 0]
+    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
+    return np.eye(3) + s * kx + (1 - c) * (kx @ kx)
+
+
+def reprojection_errors(
+    object_points: Any,
+    image_points: Any,
+    K: Any,
+    dist: Any,
+    rvecs: Any,
+    tvecs: Any,
+) -> tuple[float, np.ndarray]:
+    """RMS reprojection error overall and per view, in pixels (OpenCV's definitions).
+
+    Returns
+    -------
+    rms : float
+        :math:`\\sqrt{\\sum_{i,j} \\|e_{ij}\\|^2 / N}`.
+    per_view : (V,) ndarray
+    """
+    objs, img = _inputs(object_points, image_points)
+    obj = np.concatenate(objs)
+    view = np.repeat(np.arange(len(objs)), [len(o) for o in objs])
+    r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
+    t = np.asarray(tvecs, dtype=np.float64).reshape(-1, 3)
+    d = np.r_[np.asarray(dist, dtype=np.float64).ravel(), np.zeros(5)][:5]
+    e = _project(obj, view, r, t, np.asarray(K, dtype=np.float64), d) - np.concatenate(img)
+    sq = (e**2).sum(axis=1)
+    per = np.sqrt(np.bincount(view, sq) / np.bincount(view))
+    return float(np.sqrt(sq.mean())), per
+
+
+# --------------------------------------------------------------------------- Zhang
+
+
+def _v(h: np.ndarray, i: int, j: int) -> np.ndarray:
+    a, b = h[:, :, i], h[:, :, j]
+    return np.stack(
+        [
+            a[:, 0] * b[:, 0],
+            a[:, 0] * b[:, 1] + a[:, 1] * b[:, 0],
+            a[:, 1] * b[:, 1],
+            a[:, 2] * b[:, 0] + a[:, 0] * b[:, 2],
+            a[:, 2] * b[:, 1] + a[:, 1] * b[:, 2],
+            a[:, 2] * b[:, 2],
+        ],
+        axis=1,
+    )
+
+
+def _zhang_K(H: np.ndarray) -> np.ndarray:
+    """Closed-form K (zero skew) from ``(V, 3, 3)`` homographies board -> pixels."""
+    v = np.concatenate([_v(H, 0, 1), _v(H, 0, 0) - _v(H, 1, 1), [[0, 1e3, 0, 0, 0, 0]]])
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    _, s, vt = np.linalg.svd(v)
+    b11, b12, b22, b13, b23, b33 = vt[-1] * np.sign(vt[-1][0])
+    den = b11 * b22 - b12 * b12
+    if s[-2] < 1e-9 * s[0] or b11 <= 0 or den <= 0:
+        raise DegenerateError(
+            "the views do not determine the camera matrix (the board is at nearly the same "
+            "orientation in every view): tilt the board differently between images"
+        )
+    v0 = (b12 * b13 - b11 * b23) / den
+    lam = b33 - (b13 * b13 + v0 * (b12 * b13 - b11 * b23)) / b11
+    if lam / b11 <= 0:
+        raise DegenerateError(
+            "the closed-form camera matrix is not real (views too similar or points "
+            "mislabelled): tilt the board differently between images"
+        )
+    alpha = np.sqrt(lam / b11)
+    beta = np.sqrt(lam * b11 / den)
+    u0 = -b13 * alpha * alpha / lam
+    return np.array([[alpha, 0.0, u0], [0.0, beta, v0], [0.0, 0.0, 1.0]])
+
+
+def _pose_from_homography(K: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Board pose from ``H = K [r1 r2 t]`` (rotation vector, translation)."""
+    m = np.linalg.solve(K, H)
+    lam = 1.0 / np.linalg.norm(m[:, 0])
+    if m[2, 2] * lam < 0:  # the board must lie in front of the camera
+        lam = -lam
+    r1, r2, t = lam * m[:, 0], lam * m[:, 1], lam * m[:, 2]
+    u, _, vt = np.linalg.svd(np.c_[r1, r2, np.cross(r1, r2)])
+    R = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    return rotvec_from_rotation(R), t
+
+
+def _view_pose(K: np.ndarray, dist: np.ndarray, obj: np.ndarray, img: np.ndarray):
+    """Pose of one view with a known camera: homography of undistorted normalized points
+    (exact for a plane), then LM on the reprojection error."""
+    from scipy.optimize import least_squares
+
+    from robopercept.geometry.rectification import _undistort_points
+
+    xy = _undistort_points(img, K, dist)
+    h = _dlt(obj[None, :, :2], xy[None])[0]
+    r, t = _pose_from_homography(np.eye(3), h)
+    view = np.zeros(len(obj), dtype=np.intp)
+
+    def fun(p: np.ndarray) -> np.ndarray:
+        return (_project(obj, view, p[None, :3], p[None, 3:], K, dist) - img).ravel()
+
+    sol = least_squares(fun, np.r_[r, t], method="lm")
+    return sol.x[:3], sol.x[3:]
+
+
+def _free_mask(n_radial: int, tangential: bool) -> np.ndarray:
+    free = np.zeros(5, dtype=bool)
+    free[[0, 1, 4][:n_radial]] = True
+    free[2:4] = tangential
+    return free
+
+
+def calibrate_camera(
+    object_points: Any,
+    image_points: Any,
+    image_size: tuple[int, int],
+    *,
+    n_radial: int = 3,
+    tangential: bool = True,
+    fix_principal_point: bool = False,
+    max_iterations: int = 100,
+) -> CalibrationResult:
+    """Intrinsics, distortion and board poses from three or more views of a planar target.
+
+    Parameters
+    ----------
+    object_points : (N, 3) array_like or list of (N_i, 3)
+        Board points with z = 0 (one array shared by all views, or one per view), e.g.
+        :func:`~robopercept.calibration.chessboard_points`.
+    image_points : list of (N_i, 2) array_like
+        Detected pixels per view, in the order of the object points (OpenCV's
+        ``(N, 1, 2)`` corner arrays are accepted).
+    image_size : (int, int)
+        ``(width, height)``.
+    n_radial : {0, 1, 2, 3}
+        Radial coefficients estimated (:math:`k_1`, :math:`k_2`, :math:`k_3`); the rest are
+        held at 0. The default 3 with tangential terms is ``cv2.calibrateCamera``'s
+        default model.
+    tangential : bool
+        Estimate :math:`p_1, p_2`.
+    fix_principal_point : bool
+        Hold the principal point at the image centre (``cv2.CALIB_FIX_PRINCIPAL_POINT``).
+    max_iterations : int
+        Bound on Levenberg-Marquardt iterations (function evaluations are bounded by
+        this times the number of parameters).
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    InputError
+        Fewer than 3 views, counts that differ, non-planar object points.
+    DegenerateError
+        Views that do not determine K (the board at one orientation throughout).
+    """
+    from scipy.optimize import least_squares
+
+    objs, img = _inputs(object_points, image_points)
+    w, h = _size(image_size)
+    if n_radial not in (0, 1, 2, 3):
+        raise InputError(f"n_radial must be 0, 1, 2 or 3; got {n_radial!r}")
+    n_views = len(objs)
+    # 1. homographies in a normalized pixel frame (conditioning), 2. closed-form K
+    s = 1.0 / max(w, h)
+    N = np.array([[s, 0, -s * (w - 1) / 2], [0, s, -s * (h - 1) / 2], [0, 0, 1]])
+    Hn = np.stack(
+        [_dlt(o[None, :, :2], (p * s - s * np.array([(w - 1) / 2, (h - 1) / 2]))[None])[0]
+         for o, p in zip(objs, img, strict=True)]
+    )  # fmt: skip
+    K = np.linalg.solve(N, _zhang_K(Hn))
+    if fix_principal_point:
+        K[0, 2], K[1, 2] = (w - 1) / 2, (h - 1) / 2
+    H = np.linalg.solve(N, Hn)
+    poses = [_pose_from_homography(K, Hi) for Hi in H]
+    rvecs = np.array([p[0] for p in poses])
+    tvecs = np.array([p[1] for p in poses])
+    obj = np.concatenate(objs)
+    pix = np.concatenate(img)
+    view = np.repeat(np.arange(n_views), [len(o) for o in objs])
+    # initial radial distortion: linear least squares in k1, k2 (Zhang, section 3.3)
+    free = _free_mask(n_radial, tangential)
+    dist = np.zeros(5)
+    if n_radial:
+        ideal = _project(obj, view, rvecs, tvecs, K, dist)
+        R = _rotations(rvecs)[view]
+        pc = np.einsum("mij,mj->mi", R, obj) + tvecs[view]
+        r2 = (pc[:, 0] ** 2 + pc[:, 1] ** 2) / pc[:, 2] ** 2
+        d = ideal - K[:2, 2]
+        A = np.stack([np.r_[d[:, 0] * r2, d[:, 1] * r2], np.r_[d[:, 0] * r2**2, d[:, 1] * r2**2]])
+        A = A[: min(n_radial, 2)].T
+        k = np.linalg.lstsq(A, np.r_[pix[:, 0] - ideal[:, 0], pix[:, 1] - ideal[:, 1]])[0]
+        if np.isfinite(k).all() and np.abs(k).max() < 10:
+            dist[[0, 1][: len(k)]] = k
+    # 3. Levenberg-Marquardt on everything
+    n_k = 2 if fix_principal_point else 4
+
+    def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        Kp = K.copy()
+        Kp[0, 0], Kp[1, 1] = p[0], p[1]
+        if not fix_principal_point:
+            Kp[0, 2], Kp[1, 2] = p[2], p[3]
+        dp = np.zeros(5)
+        dp[free] = p[n_k : n_k + free.sum()]
+        q = p[n_k + free.sum() :].reshape(n_views, 6)
+        return Kp, dp, q[:, :3], q[:, 3:]
+
+    def fun(p: np.ndarray) -> np.ndarray:
+        Kp, dp, r, t = unpack(p)
+        return (_project(obj, view, r, t, Kp, dp) - pix).ravel()
+
+    p0 = np.r_[K[0, 0], K[1, 1], K[:2, 2], dist[free], np.c_[rvecs, tvecs].ravel()]
+    if fix_principal_point:
+        p0 = np.r_[K[0, 0], K[1, 1], dist[free], np.c_[rvecs, tvecs].ravel()]
+    sol = least_squares(fun, p0, method="lm", x_scale="jac", max_nfev=max_iterations * p0.size)
+    K, dist, rvecs, tvecs = unpack(sol.x)
+    if not (np.isfinite(sol.x).all() and K[0, 0] > 0 and K[1, 1] > 0):
+        raise DegenerateError("the refinement diverged: check that the points match the board")
+    e = (sol.fun.reshape(-1, 2) ** 2).sum(axis=1)
+    per_view = np.sqrt(np.bincount(view, e) / np.bincount(view))
+    return CalibrationResult(K, dist, rvecs, tvecs, float(np.sqrt(e.mean())), per_view, (w, h))
+
+
+def stereo_calibrate(
+    object_points: Any,
+    image_points1: Any,
+    image_points2: Any,
+    image_size: tuple[int, int],
+    *,
+    K1: Any | None = None,
+    dist1: Any | None = None,
+    K2: Any | None = None,
+    dist2: Any | None = None,
+    fix_intrinsics: bool = True,
+) -> StereoCalibration:
+    """Relative pose of two cameras from simultaneous views of a planar target.
+
+    Each camera is calibrated with :func:`calibrate_camera` unless its ``K`` and
+    ``dist`` are given. The initial :math:`(R, T)` is the chordal mean over views of
+    :math:`R_{2,i} R_{1,i}^T` and the median of :math:`t_{2,i} - R t_{1,i}`; then
+    Levenberg-Marquardt minimizes both cameras' reprojection errors over :math:`(R, T)`
+    and the board pose per view (and the intrinsics unless ``fix_intrinsics``, which is
+    ``cv2.CALIB_FIX_INTRINSIC``).
+
+    Parameters
+    ----------
+    object_points : (N, 3) array_like or list of (N_i, 3)
+    image_points1, image_points2 : list of (N_i, 2) array_like
+        The same board points in camera 1 and camera 2, view by view.
+    image_size : (int, int)
+    K1, dist1, K2, dist2 : array_like, optional
+
+    Returns
+    -------
+    StereoCalibration
+    """
+    from scipy.optimize import least_squares
+
+    objs, img1 = _inputs(object_points, image_points1, "image_points1")
+    _, img2 = _inputs(objs, image_points2, "image_points2")
+    size = _size(image_size)
+    for i, (a, b) in enumerate(zip(img1, img2, strict=True)):
+        if a.shape != b.shape:
+            raise InputError(f"view {i}: camera 1 has {len(a)} points but camera 2 {len(b)}")
+    cams = []
+    for K, d, img in ((K1, dist1, img1), (K2, dist2, img2)):
+        if K is None:
+            c = calibrate_camera(objs, img, size)
+            cams.append((c.K, c.dist))
+        else:
+            Km = np.asarray(K, dtype=np.float64).reshape(3, 3)
+            dm = np.r_[np.zeros(5) if d is None else np.asarray(d, dtype=np.float64).ravel(),
+                       np.zeros(5)][:5]  # fmt: skip
+            cams.append((Km, dm))
+    (k1, d1), (k2, d2) = cams
+    poses1 = [_view_pose(k1, d1, o, p) for o, p in zip(objs, img1, strict=True)]
+    poses2 = [_view_pose(k2, d2, o, p) for o, p in zip(objs, img2, strict=True)]
+    rel = [rotation_from_rotvec(b[0]) @ rotation_from_rotvec(a[0]).T
+           for a, b in zip(poses1, poses2, strict=True)]  # fmt: skip
+    u, _, vt = np.linalg.svd(np.sum(rel, axis=0))
+    R = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    T = np.median([b[1] - R @ a[1] for a, b in zip(poses1, poses2, strict=True)], axis=0)
+    obj = np.concatenate(objs)
+    pix = np.r_[np.concatenate(img1), np.concatenate(img2)]
+    view = np.repeat(np.arange(len(objs)), [len(o) for o in objs])
+    n = len(objs)
+
+    def unpack(p: np.ndarray):
+        r, t = p[:3], p[3:6]
+        q = p[6 : 6 + 6 * n].reshape(n, 6)
+        rest = p[6 + 6 * n :]
+        if fix_intrinsics:
+            return r, t, q, (k1, d1, k2, d2)
+        ks = []
+        for c in range(2):
+            f = rest[9 * c : 9 * c + 9]
+            ks += [np.array([[f[0], 0, f[2]], [0, f[1], f[3]], [0, 0, 1]]), f[4:9]]
+        return r, t, q, tuple(ks)
+
+    def fun(p: np.ndarray) -> np.ndarray:
+        r, t, q, (ka, da, kb, db) = unpack(p)
+        Rr = rotation_from_rotvec(r)
+        R1 = _rotations(q[:, :3])
+        r2 = np.array([rotvec_from_rotation(Rr @ Ri) for Ri in R1])
+        t2 = q[:, 3:] @ Rr.T + t
+        e1 = _project(obj, view, q[:, :3], q[:, 3:], ka, da)
+        e2 = _project(obj, view, r2, t2, kb, db)
+        return (np.r_[e1, e2] - pix).ravel()
+
+    p0 = np.r_[rotvec_from_rotation(R), T, np.array([np.r_[a[0], a[1]] for a in poses1]).ravel()]
+    if not fix_intrinsics:
+        for K, d in cams:
+            p0 = np.r_[p0, K[0, 0], K[1, 1], K[0, 2], K[1, 2], d]
+    sol = least_squares(fun, p0, method="lm", x_scale="jac", max_nfev=100 * p0.size)
+    r, t, _, (k1, d1, k2, d2) = unpack(sol.x)
+    R, T = rotation_from_rotvec(r), t.copy()
+    e = (sol.fun.reshape(-1, 2) ** 2).sum(axis=1)
+    m = len(obj)
+    per = np.c_[
+        np.sqrt(np.bincount(view, e[:m]) / np.bincount(view)),
+        np.sqrt(np.bincount(view, e[m:]) / np.bincount(view)),
+    ]
+    E = essential_from_pose(R, T)
+    F = fundamental_from_essential(E, k1, k2)
+    return StereoCalibration(
+        k1, d1, k2, d2, R, T, E, F / F[2, 2], float(np.sqrt(e.mean())), per, size
+    )
+
+
+def undistort(image: np.ndarray, K: Any, dist: Any, new_K: Any | None = None) -> np.ndarray:
+    """The image as a distortion-free camera would see it (``cv2.undistort``).
+
+    Each output pixel :math:`p` is the ray :math:`K_{new}^{-1} p`, distorted and projected
+    with ``K``; the input is sampled there bilinearly (outside: 0).
+
+    Parameters
+    ----------
+    image : (H, W[, C]) ndarray
+    K : (3, 3) array_like
+    dist : array_like
+        ``(k1, k2, p1, p2[, k3])``.
+    new_K : (3, 3) array_like, optional
+        Camera matrix of the output (default ``K``).
+    """
+    img = np.asarray(image)
+    if img.ndim not in (2, 3):
+        raise InputError(f"image must be (H, W) or (H, W, C); got shape {img.shape}")
+    h, w = img.shape[:2]
+    mx, my = undistort_rectify_map(K, dist, None, K if new_K is None else new_K, (w, h))
+    return remap(img, mx, my)
+
+
+# --------------------------------------------------------------------------- files
+
+
+def save_calibration(path: str | Path, result: CalibrationResult | StereoCalibration) -> None:
+    """Write a calibration as JSON (see :func:`load_calibration`)."""
+    Path(path).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+
+
+def load_calibration(path: str | Path) -> dict[str, Any]:
+    """Read a calibration JSON written by :func:`save_calibration` (or by hand).
+
+    A mono file has ``K`` and ``dist``; a stereo file ``K1, dist1, K2, dist2, R, T``.
+    Matrices come back as float64 arrays; ``image_size`` as ``(width, height)``.
+
+    Raises
+    ------
+    FileFormatError
+        Not JSON, or missing/ill-shaped fields (named in the message).
+    """
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise FileFormatError(f"{p}: not a readable calibration JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise FileFormatError(f"{p}: expected a JSON object")
+    shapes = {"K": (3, 3), "K1": (3, 3), "K2": (3, 3), "R": (3, 3), "E": (3, 3), "F": (3, 3),
+              "T": (3,), "dist": None, "dist1": None, "dist2": None}  # fmt: skip
+    if "K" not in data and not {"K1", "K2", "R", "T"} <= data.keys():
+        raise FileFormatError(f"{p}: needs 'K' and 'dist' (mono) or 'K1', 'K2', 'R', 'T' (stereo)")
+    out: dict[str, Any] = dict(data)
+    for key, shape in shapes.items():
+        if key not in data:
+            continue
+        try:
+            a = np.asarray(data[key], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise FileFormatError(f"{p}: field {key!r} is not numeric") from exc
+        if shape is None:
+            a = a.ravel()
+            if a.size not in (4, 5):
+                raise FileFormatError(f"{p}: field {key!r} must hold 4 or 5 coefficients")
+            a = np.r_[a, np.zeros(5)][:5]
+        elif a.shape != shape:
+            raise FileFormatError(f"{p}: field {key!r} must have shape {shape}; got {a.shape}")
+        if not np.isfinite(a).all():
+            raise FileFormatError(f"{p}: field {key!r} is not finite")
+        out[key] = a
+    if "image_size" in data:
+        out["image_size"] = _size(data["image_size"])
+    return out

@@ -1,0 +1,44 @@
+"""Synthetic chessboard photographs with a known camera (for calibration tests)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from robopercept.geometry.camera import _undistort
+from robopercept.geometry.transforms import rotation_from_rotvec
+
+
+def render_board(K, dist, rvec, tvec, pattern=(9, 6), square=0.03, size=(640, 480), ss=3):
+    """Gray uint8 image of a board of (w + 1) x (h + 1) squares with a white margin of
+    one square, seen from pose (rvec, tvec) (board to camera), supersampled ss x ss.
+
+    Board corner (0, 0) is the first inner corner; the square diagonal to it (towards
+    negative x, y) is black, as OpenCV's ordering expects.
+    """
+    w, h = size
+    R = rotation_from_rotvec(np.asarray(rvec, float))
+    t = np.asarray(tvec, float)
+    off = (np.arange(ss) + 0.5) / ss - 0.5
+    u = (np.arange(w)[:, None] + off[None, :]).ravel()
+    v = (np.arange(h)[:, None] + off[None, :]).ravel()
+    uu, vv = np.meshgrid(u, v)
+    xd = (uu - K[0, 2]) / K[0, 0]
+    yd = (vv - K[1, 2]) / K[1, 1]
+    x, y = _undistort(xd, yd, tuple(dist), False)
+    for _ in range(3):  # a few more fixed-point rounds for strong distortion
+        x, y = _undistort(xd, yd, tuple(dist), False)
+    ray = np.stack([x, y, np.ones_like(x)], axis=-1)
+    # plane: n . X = d in camera frame, n = R[:, 2], d = n . t
+    n = R[:, 2]
+    s = (n @ t) / (ray @ n)
+    P = ray * s[..., None] - t
+    B = P @ R  # board coordinates (R^T (X - t))
+    bx, by = B[..., 0] / square, B[..., 1] / square
+    inside = (bx > -1) & (bx < pattern[0]) & (by > -1) & (by < pattern[1])
+    black = (np.floor(bx) + np.floor(by)) % 2 == 0
+    img = np.full(bx.shape, 235.0)
+    img[inside & black] = 20.0
+    margin = (bx > -2) & (bx < pattern[0] + 1) & (by > -2) & (by < pattern[1] + 1)
+    img[~margin] = 90.0
+    img = img.reshape(h, ss, w, ss).mean(axis=(1, 3))
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)

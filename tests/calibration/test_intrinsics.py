@@ -1,0 +1,174 @@
+"""Zhang calibration, stereo calibration and undistortion: against cv2.calibrateCamera /
+stereoCalibrate on the OpenCV sample set, against known cameras on synthetic views and
+renders, and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from robopercept.calibration import (
+    calibrate_camera,
+    chessboard_points,
+    find_chessboard_corners,
+    load_calibration,
+    reprojection_errors,
+    save_calibration,
+    stereo_calibrate,
+    undistort,
+)
+from robopercept.calibration.intrinsics import _project
+from robopercept.errors import DegenerateError, FileFormatError, InputError
+from tests.calibration._render import render_board
+
+K_TRUE = np.array([[612.0, 0, 318.5], [0, 608.0, 243.0], [0, 0, 1]])
+D_TRUE = np.array([-0.21, 0.08, 0.0012, -0.0007, -0.01])
+
+
+def _poses(n, rng):
+    rv = rng.normal(0, 0.35, (n, 3))
+    tv = np.c_[rng.uniform(-0.15, 0.0, n), rng.uniform(-0.1, 0.0, n), rng.uniform(0.5, 0.8, n)]
+    return rv, tv
+
+
+def test_exact_views_recover_the_camera(rng):
+    """Noise-free projections of 10 board poses: K and the distortion to 1e-6."""
+    obj = chessboard_points((9, 6), 0.03)
+    rv, tv = _poses(10, rng)
+    img = [
+        _project(obj, np.zeros(54, int), rv[i : i + 1], tv[i : i + 1], K_TRUE, D_TRUE)
+        for i in range(10)
+    ]
+    res = calibrate_camera(obj, img, (640, 480))
+    np.testing.assert_allclose(res.K, K_TRUE, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(res.dist, D_TRUE, atol=1e-6)
+    np.testing.assert_allclose(res.rvecs, rv, atol=1e-6)
+    assert res.rms < 1e-6 and res.per_view_errors.shape == (10,)
+    rms, per = reprojection_errors(obj, img, res.K, res.dist, res.rvecs, res.tvecs)
+    assert rms == pytest.approx(res.rms, abs=1e-9) and per == pytest.approx(
+        res.per_view_errors, abs=1e-9
+    )
+
+
+def test_synthetic_renders_full_pipeline(rng):
+    """Acceptance: rendered photographs of a board (known K and distortion) through our
+    detector and calibration: fx, fy, cx, cy within 0.5 %."""
+    rv, tv = _poses(8, rng)
+    obj = chessboard_points((9, 6), 0.03)
+    corners = []
+    for i in range(8):
+        det = find_chessboard_corners(render_board(K_TRUE, D_TRUE, rv[i], tv[i]), (9, 6))
+        assert det.found, det.reason
+        corners.append(det.corners)
+    res = calibrate_camera(obj, corners, (640, 480))
+    got = res.K[[0, 1, 0, 1], [0, 1, 2, 2]]
+    want = K_TRUE[[0, 1, 0, 1], [0, 1, 2, 2]]
+    assert np.all(np.abs(got / want - 1) < 0.005), got
+    assert res.rms < 0.1
+
+
+@pytest.mark.realdata
+def test_parity_with_opencv_calibrate_camera(opencv_corners):
+    """Acceptance: left01..14 with our detector: RMS at most 1.02x cv2.calibrateCamera's
+    (0.408 px on cv2's own corners), fx, fy, cx, cy within 0.5 %."""
+    cv2 = pytest.importorskip("cv2")
+    ref, images = opencv_corners
+    obj = chessboard_points((9, 6), 0.025)
+    names = sorted(n for n in images if n.startswith("left"))
+    ours = [find_chessboard_corners(images[n], (9, 6)) for n in names]
+    corners = [d.corners for d in ours if d.found]
+    res = calibrate_camera(obj, corners, (640, 480))
+    rms, K, dist, _, _ = cv2.calibrateCamera(
+        [obj.astype(np.float32)] * 13,
+        [ref[n].astype(np.float32) for n in names],
+        (640, 480),
+        None,
+        None,
+    )
+    assert res.rms <= 1.02 * rms
+    got = res.K[[0, 1, 0, 1], [0, 1, 2, 2]]
+    want = K[[0, 1, 0, 1], [0, 1, 2, 2]]
+    assert np.all(np.abs(got / want - 1) < 0.005), (got, want)
+    # the solver alone, on OpenCV's corners: the same optimum
+    same = calibrate_camera(obj, [ref[n] for n in names], (640, 480))
+    assert same.rms == pytest.approx(rms, rel=1e-4)
+    np.testing.assert_allclose(same.K, K, rtol=1e-5)
+    np.testing.assert_allclose(same.dist, dist.ravel(), atol=1e-4)
+
+
+@pytest.mark.realdata
+def test_stereo_calibrate_matches_opencv(opencv_corners):
+    cv2 = pytest.importorskip("cv2")
+    ref, _ = opencv_corners
+    obj = chessboard_points((9, 6), 0.025)
+    L = [ref[f"left{i:02d}"] for i in (1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14)]
+    R = [ref[f"right{i:02d}"] for i in (1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14)]
+    o32 = [obj.astype(np.float32)] * 13
+    f32 = lambda a: [x.astype(np.float32) for x in a]  # noqa: E731
+    _, K1, d1, _, _ = cv2.calibrateCamera(o32, f32(L), (640, 480), None, None)
+    _, K2, d2, _, _ = cv2.calibrateCamera(o32, f32(R), (640, 480), None, None)
+    rms, *_, Rc, Tc, _, _ = cv2.stereoCalibrate(
+        o32, f32(L), f32(R), K1, d1, K2, d2, (640, 480), flags=cv2.CALIB_FIX_INTRINSIC
+    )
+    st = stereo_calibrate(obj, L, R, (640, 480), K1=K1, dist1=d1, K2=K2, dist2=d2)
+    assert st.rms == pytest.approx(rms, rel=1e-4)
+    np.testing.assert_allclose(st.R, Rc, atol=1e-6)
+    np.testing.assert_allclose(st.T, Tc.ravel(), atol=1e-6)
+    x1, x2 = L[0], R[0]  # the fundamental matrix holds for the (distorted) corners roughly
+    d = np.abs(np.einsum("ni,ij,nj->n", np.c_[x2, np.ones(54)], st.F, np.c_[x1, np.ones(54)]))
+    assert st.F.shape == (3, 3) and np.isfinite(d).all()
+
+
+def test_undistort_matches_opencv():
+    cv2 = pytest.importorskip("cv2")
+    K = np.array([[300.0, 0, 80], [0, 300, 60], [0, 0, 1]])
+    d = np.array([-0.3, 0.1, 0.001, 0.002, 0.0])
+    img = (np.indices((120, 160)).sum(axis=0) * 7 % 256).astype(np.uint8)
+    ours = undistort(img, K, d)
+    ref = cv2.undistort(img, K, d)
+    inner = (slice(5, -5), slice(5, -5))
+    # OpenCV samples at 1/32 px in fixed point: a few grey levels on this sharp pattern
+    assert np.mean(np.abs(ours[inner].astype(int) - ref[inner])) < 2.0
+
+
+def test_save_and_load_round_trip(tmp_path, rng):
+    obj = chessboard_points((5, 4), 0.03)
+    rv, tv = _poses(4, rng)
+    img = [
+        _project(obj, np.zeros(20, int), rv[i : i + 1], tv[i : i + 1], K_TRUE, D_TRUE)
+        for i in range(4)
+    ]
+    res = calibrate_camera(obj, img, (640, 480))
+    save_calibration(tmp_path / "cam.json", res)
+    back = load_calibration(tmp_path / "cam.json")
+    np.testing.assert_allclose(back["K"], res.K)
+    np.testing.assert_allclose(back["dist"], res.dist)
+    assert back["image_size"] == (640, 480)
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(FileFormatError, match=r"bad\.json"):
+        load_calibration(tmp_path / "bad.json")
+    (tmp_path / "short.json").write_text('{"K": [[1, 0], [0, 1]], "dist": [0, 0, 0, 0]}')
+    with pytest.raises(FileFormatError, match="'K'"):
+        load_calibration(tmp_path / "short.json")
+
+
+def test_bad_input(rng):
+    obj = chessboard_points((9, 6), 0.03)
+    rv, tv = _poses(3, rng)
+    img = [
+        _project(obj, np.zeros(54, int), rv[i : i + 1], tv[i : i + 1], K_TRUE, D_TRUE)
+        for i in range(3)
+    ]
+    with pytest.raises(InputError, match="at least 3 views"):
+        calibrate_camera(obj, img[:2], (640, 480))
+    with pytest.raises(InputError, match="object_points has 2 views"):
+        calibrate_camera([obj, obj], img, (640, 480))
+    with pytest.raises(InputError, match="54 object points but 53"):
+        calibrate_camera(obj, [img[0][:53], img[1], img[2]], (640, 480))
+    bent = obj.copy()
+    bent[:, 2] = 0.01
+    with pytest.raises(InputError, match="z = 0"):
+        calibrate_camera(bent, img, (640, 480))
+    # the same view three times: K is not determined
+    with pytest.raises(DegenerateError, match="tilt the board"):
+        calibrate_camera(obj, [img[0]] * 3, (640, 480))
