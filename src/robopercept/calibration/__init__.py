@@ -12,10 +12,12 @@ from robopercept.calibration.handeye import (
     hand_eye_residuals,
     pose_from_xyz_rpy,
     read_xyz_rpy,
+    xyz_rpy_from_pose,
 )
 from robopercept.calibration.intrinsics import (
     CalibrationResult,
     StereoCalibration,
+    board_pose,
     calibrate_camera,
     load_calibration,
     reprojection_errors,
@@ -29,6 +31,7 @@ __all__ = [
     "ChessboardDetection",
     "HandEyeResult",
     "StereoCalibration",
+    "board_pose",
     "calibrate_camera",
     "calibrate_hand_eye",
     "chessboard_points",
@@ -41,4 +44,5 @@ __all__ = [
     "save_calibration",
     "stereo_calibrate",
     "undistort",
+    "xyz_rpy_from_pose",
 ]

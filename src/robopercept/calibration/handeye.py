@@ -64,6 +64,7 @@ __all__ = [
     "hand_eye_residuals",
     "pose_from_xyz_rpy",
     "read_xyz_rpy",
+    "xyz_rpy_from_pose",
 ]
 
 Setup = Literal["eye_in_hand", "eye_to_hand"]
@@ -154,6 +155,22 @@ def pose_from_xyz_rpy(xyz: Any, rpy: Any, *, degrees: bool = True) -> np.ndarray
     T[:3, :3] = rz @ ry @ rx
     T[:3, 3] = t
     return T
+
+
+def xyz_rpy_from_pose(T: Any, *, degrees: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`pose_from_xyz_rpy`: position and (roll, pitch, yaw) of a 4x4
+    pose, pitch in [-90, 90] degrees (roll = atan2(R21, R22), pitch = -asin(R20),
+    yaw = atan2(R10, R00))."""
+    m = check_transform(T)
+    R = m[:3, :3]
+    rpy = np.array(
+        [
+            np.arctan2(R[2, 1], R[2, 2]),
+            -np.arcsin(np.clip(R[2, 0], -1.0, 1.0)),
+            np.arctan2(R[1, 0], R[0, 0]),
+        ]
+    )
+    return m[:3, 3].copy(), np.rad2deg(rpy) if degrees else rpy
 
 
 def read_xyz_rpy(path: str | Path, order: str = "rpy_xyz", *, degrees: bool = True) -> np.ndarray:

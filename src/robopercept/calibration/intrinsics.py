@@ -56,6 +56,7 @@ from robopercept.imaging.warp import remap
 __all__ = [
     "CalibrationResult",
     "StereoCalibration",
+    "board_pose",
     "calibrate_camera",
     "load_calibration",
     "reprojection_errors",
@@ -345,8 +346,6 @@ def _pose_from_homography(K: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def _view_pose(K: np.ndarray, dist: np.ndarray, obj: np.ndarray, img: np.ndarray):
-    """Pose of one view with a known camera: homography of undistorted normalized points
-    (exact for a plane), then LM on the reprojection error."""
     from scipy.optimize import least_squares
 
     from robopercept.geometry.rectification import _undistort_points
@@ -361,6 +360,36 @@ def _view_pose(K: np.ndarray, dist: np.ndarray, obj: np.ndarray, img: np.ndarray
 
     sol = least_squares(fun, np.r_[r, t], method="lm")
     return sol.x[:3], sol.x[3:]
+
+
+def board_pose(object_points: Any, image_points: Any, K: Any, dist: Any = None) -> np.ndarray:
+    r"""Pose of a planar target seen by a calibrated camera (``cv2.solvePnP`` for a
+    board): ``T_camera_board`` as a 4x4 matrix.
+
+    The undistorted normalized points and the board plane are related by the homography
+    :math:`[r_1\ r_2\ t]`, which gives the starting pose; Levenberg-Marquardt then
+    minimizes the reprojection error.
+
+    Parameters
+    ----------
+    object_points : (N, 3) array_like
+        Board points with z = 0 (N >= 4).
+    image_points : (N, 2) array_like
+    K : (3, 3) array_like
+    dist : array_like, optional
+        ``(k1, k2, p1, p2[, k3])``.
+    """
+    objs, img = _inputs([object_points] * 3, [image_points] * 3)
+    Km = np.asarray(K, dtype=np.float64)
+    if Km.shape != (3, 3) or not np.isfinite(Km).all():
+        raise InputError(f"K must be a finite 3x3 matrix; got shape {Km.shape}")
+    d = np.zeros(5) if dist is None else np.asarray(dist, dtype=np.float64).ravel()
+    d = np.r_[d, np.zeros(5)][:5]
+    r, t = _view_pose(Km, d, objs[0], img[0])
+    T = np.eye(4)
+    T[:3, :3] = rotation_from_rotvec(r)
+    T[:3, 3] = t
+    return T
 
 
 def _free_mask(n_radial: int, tangential: bool) -> np.ndarray:

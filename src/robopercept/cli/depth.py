@@ -44,6 +44,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ply", default=None, help="also write the points (needs --focal/--baseline)")
     p.add_argument("--focal", type=float, default=None, help="focal length in pixels")
     p.add_argument("--baseline", type=float, default=None, help="baseline (metres)")
+    p.add_argument(
+        "--calib",
+        default=None,
+        help="stereo calibration JSON (K1 dist1 K2 dist2 R T, as StereoCalibration writes): "
+        "the pair is rectified first and --ply needs no --focal/--baseline",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run_stereo)
 
@@ -54,10 +60,13 @@ def run_stereo(args: argparse.Namespace) -> int:
     from robopercept.imaging import read_image, write_image
     from robopercept.viz import colorize_depth
 
-    if args.ply and (args.focal is None or args.baseline is None):
-        raise InputError("--ply needs --focal (pixels) and --baseline (metres)")
+    if args.ply and not args.calib and (args.focal is None or args.baseline is None):
+        raise InputError("--ply needs --calib, or --focal (pixels) and --baseline (metres)")
     left = read_image(args.left, mode="rgb")
     right = read_image(args.right, mode="rgb")
+    Q = None
+    if args.calib:
+        left, right, Q = _rectify(args.calib, left, right)
     truth = None
     if args.truth:
         truth = read_image(args.truth, mode="gray").astype(np.float64) / args.truth_scale
@@ -94,7 +103,7 @@ def run_stereo(args: argparse.Namespace) -> int:
         summary["bad_1_percent"] = 100 * bad_pixel_rate(disp, truth, 1.0)
         summary["bad_2_percent"] = 100 * bad_pixel_rate(disp, truth, 2.0)
     if args.ply:
-        summary["points"] = _write_ply(Path(args.ply), disp, left, args.focal, args.baseline)
+        summary["points"] = _write_ply(Path(args.ply), disp, left, args.focal, args.baseline, Q)
         written.append(args.ply)
     summary["outputs"] = written
     if args.json:
@@ -113,19 +122,52 @@ def run_stereo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_ply(path: Path, disp: np.ndarray, rgb: np.ndarray, focal: float, baseline: float) -> int:
+def _rectify(path: str, left: np.ndarray, right: np.ndarray) -> tuple:
+    """Rectify a pair with a stereo calibration: Bouguet rotations, then remapping."""
+    from robopercept.calibration import load_calibration
+    from robopercept.errors import InputError
+    from robopercept.geometry import rectify_stereo, undistort_rectify_map
+    from robopercept.imaging import remap
+
+    cal = load_calibration(path)
+    if "K1" not in cal:
+        raise InputError(f"{path} is not a stereo calibration (needs K1 dist1 K2 dist2 R T)")
+    if left.shape != right.shape:
+        raise InputError(f"the images differ in size: {left.shape} and {right.shape}")
+    size = (left.shape[1], left.shape[0])
+    r = rectify_stereo(
+        cal["K1"], cal.get("dist1"), cal["K2"], cal.get("dist2"), cal["R"], cal["T"], size
+    )
+    out = []
+    for img, K, D, R, P in (
+        (left, cal["K1"], cal.get("dist1"), r.R1, r.P1),
+        (right, cal["K2"], cal.get("dist2"), r.R2, r.P2),
+    ):
+        out.append(remap(img, *undistort_rectify_map(K, D, R, P, size)))
+    return out[0], out[1], r.Q
+
+
+def _write_ply(
+    path: Path,
+    disp: np.ndarray,
+    rgb: np.ndarray,
+    focal: float | None,
+    baseline: float | None,
+    Q: np.ndarray | None = None,
+) -> int:
     from robopercept.depth import disparity_to_points
     from robopercept.pointcloud import PointCloud, write_point_cloud
 
     h, w = disp.shape
-    Q = np.array(
-        [
-            [1, 0, 0, -(w - 1) / 2],
-            [0, 1, 0, -(h - 1) / 2],
-            [0, 0, 0, focal],
-            [0, 0, 1 / baseline, 0],
-        ]
-    )
+    if Q is None:
+        Q = np.array(
+            [
+                [1, 0, 0, -(w - 1) / 2],
+                [0, 1, 0, -(h - 1) / 2],
+                [0, 0, 0, focal],
+                [0, 0, 1 / baseline, 0],
+            ]
+        )
     pts = disparity_to_points(disp, Q)
     ok = np.isfinite(pts).all(axis=2)
     cloud = PointCloud(pts[ok], colors=rgb[ok].astype(np.float64) / 255.0)

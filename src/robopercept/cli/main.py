@@ -30,7 +30,17 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from robopercept.cli import cloud, depth, features, imaging, info, learn, motion, tracking
+    from robopercept.cli import (
+        calibration,
+        cloud,
+        depth,
+        features,
+        imaging,
+        info,
+        learn,
+        motion,
+        tracking,
+    )
 
     parser = _Parser(
         prog="robopercept",
@@ -47,6 +57,7 @@ def build_parser() -> argparse.ArgumentParser:
     tracking.register(sub)
     motion.register(sub)
     depth.register(sub)
+    calibration.register(sub)
     return parser
 
 

@@ -2,7 +2,14 @@
 
 from robopercept.viz.cloud import render_points
 from robopercept.viz.colormap import colorize_depth, colorize_signed, label_colors
-from robopercept.viz.draw import draw_boxes, draw_lines, draw_mask, draw_points, draw_text
+from robopercept.viz.draw import (
+    draw_boxes,
+    draw_chessboard,
+    draw_lines,
+    draw_mask,
+    draw_points,
+    draw_text,
+)
 from robopercept.viz.features import draw_matches, hog_picture
 from robopercept.viz.flow import draw_flow, draw_trails, flow_to_color, flow_wheel
 from robopercept.viz.learning import confusion_picture, curves_picture, scatter_picture
@@ -13,6 +20,7 @@ __all__ = [
     "confusion_picture",
     "curves_picture",
     "draw_boxes",
+    "draw_chessboard",
     "draw_flow",
     "draw_lines",
     "draw_mask",

@@ -6,6 +6,7 @@ leaves its input unchanged. Rasterization is Pillow's, which is not a perception
 
 from __future__ import annotations
 
+import colorsys
 from collections.abc import Sequence
 
 import numpy as np
@@ -13,7 +14,15 @@ import numpy as np
 from robopercept._checks import check_image, check_ndim
 from robopercept.errors import InputError
 
-__all__ = ["draw_boxes", "draw_lines", "draw_mask", "draw_points", "draw_text", "to_rgb8"]
+__all__ = [
+    "draw_boxes",
+    "draw_chessboard",
+    "draw_lines",
+    "draw_mask",
+    "draw_points",
+    "draw_text",
+    "to_rgb8",
+]
 
 Color = tuple[int, int, int]
 
@@ -201,3 +210,38 @@ def draw_mask(
     blended = (1.0 - alpha) * img[m].astype(np.float64) + alpha * col
     img[m] = np.round(blended).astype(np.uint8)
     return img
+
+
+def draw_chessboard(
+    image: np.ndarray, corners: np.ndarray, pattern_size: tuple[int, int], found: bool = True
+) -> np.ndarray:
+    """Draw detected chessboard corners as ``cv2.drawChessboardCorners`` does: a found
+    board as rows of coloured circles joined in detection order (row colours run through
+    a rainbow, so the first corner and the order are visible), a partial one in red.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    corners : (N, 2) array_like
+    pattern_size : (int, int)
+        Corners per row and per column.
+    found : bool
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+    """
+    pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    pil, draw = _canvas(image)
+    r = max(3.0, image.shape[0] / 120)
+    w = max(int(pattern_size[0]), 1)
+    for k, (x, y) in enumerate(pts):
+        if found:
+            hue = (k // w) / max(len(pts) // w, 1)
+            col = tuple(int(255 * v) for v in colorsys.hsv_to_rgb(0.75 * hue, 1.0, 1.0))
+            if k:
+                draw.line([tuple(pts[k - 1]), (x, y)], fill=col, width=2)
+        else:
+            col = (255, 0, 0)
+        draw.ellipse((x - r, y - r, x + r, y + r), outline=col, width=2)
+    return np.asarray(pil)

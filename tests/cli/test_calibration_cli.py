@@ -1,0 +1,125 @@
+"""``robopercept calibrate``, ``handeye`` and ``stereo --calib`` against the library
+calls, OpenCV and synthetic truth, with bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from robopercept.cli.main import main
+from tests.conftest import data_path
+
+VIEWS = [1, 2, 3, 4, 5, 6, 7, 8, 9, 11, 12, 13, 14]
+
+
+@pytest.mark.realdata
+def test_calibrate_opencv_set_with_a_negative(tmp_path, capsys):
+    """13 boards and one negative: the negative is reported and skipped, K equals the
+    library call (and cv2 within 0.5 %), overlays and undistorted previews are written."""
+    folder = data_path("calibration", "opencv_chessboard_stereo")
+    neg = data_path("calibration", "opencv_extra_corners_gt", "negative", "negative_1.png")
+    images = [str(folder / f"left{i:02d}.jpg") for i in VIEWS] + [str(neg)]
+    out = tmp_path / "cam.json"
+    code = main(["calibrate", *images, "--board", "9x6", "--square", "0.025", "-o", str(out),
+                 "--overlays", str(tmp_path / "ov"), "--undistorted", str(tmp_path / "un"),
+                 "--quiet"])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr()
+    assert "skipped" in text.err and "negative_1.png" in text.err
+    assert "RMS reprojection error" in text.out and "left13.jpg" in text.out
+    data = json.loads(out.read_text())
+    assert len(data["images"]) == 13 and data["skipped"][0]["image"].endswith("negative_1.png")
+    K = np.array(data["K"])
+    assert abs(K[0, 0] / 536.07 - 1) < 0.005 and abs(K[1, 2] / 235.53 - 1) < 0.005
+    assert data["rms"] < 1.02 * 0.4080
+    assert len(list((tmp_path / "ov").glob("*.png"))) == 14
+    assert len(list((tmp_path / "un").glob("*.png"))) == 13
+
+
+def test_calibrate_too_few_boards_exits_2(tmp_path, capsys):
+    from robopercept.imaging import write_image
+
+    blank = tmp_path / "blank.png"
+    write_image(blank, np.full((60, 80), 128, np.uint8))
+    code = main(["calibrate", str(blank), str(blank), "--board", "9x6", "--quiet"])
+    assert code == 2
+    assert "found in 0 of 2 images" in capsys.readouterr().err
+    assert main(["calibrate", str(blank), "--board", "9"]) == 2
+    assert "expects inner corners as WxH" in capsys.readouterr().err
+
+
+def _write_matrix(path, T):
+    path.write_text("\n".join(" ".join(f"{v:.17g}" for v in row) for row in T) + "\n")
+
+
+def test_handeye_from_pose_files(tmp_path, capsys):
+    """Robot poses as Rx Ry Rz X Y Z files (Open3DV's format) and target poses as
+    matrices: the command returns the X the stations were made with."""
+    from robopercept.calibration import calibrate_hand_eye, pose_from_xyz_rpy
+    from robopercept.geometry import invert, rotation_from_rotvec, se3
+
+    rng = np.random.default_rng(4)
+    X = se3(rotation_from_rotvec([0.1, -0.2, 1.5]), [30.0, -10.0, 80.0])
+    Y = se3(rotation_from_rotvec([3.0, 0.1, 0.0]), [600.0, 50.0, 0.0])
+    robots, targets, G = [], [], []
+    for i in range(6):
+        xyz = rng.normal(0, 100, 3) + np.array([500.0, 0, 400])
+        rpy = rng.normal(0, 20, 3) + np.array([180.0, 0, 0])
+        (tmp_path / f"pos{i}.txt").write_text("\n".join(f"{v:.10f}" for v in [*rpy, *xyz]))
+        g = pose_from_xyz_rpy(xyz, rpy)
+        G.append(g)
+        _write_matrix(tmp_path / f"target{i}.txt", invert(g @ X) @ Y)
+        robots.append(str(tmp_path / f"pos{i}.txt"))
+        targets.append(str(tmp_path / f"target{i}.txt"))
+    out = tmp_path / "he.json"
+    code = main(["handeye", "--robot-poses", *robots, "--target-poses", *targets,
+                 "-o", str(out), "--json"])  # fmt: skip
+    assert code == 0
+    data = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(np.array(data["X"]), X, atol=1e-6)
+    direct = calibrate_hand_eye(G, [invert(g @ X) @ Y for g in G])
+    np.testing.assert_allclose(np.array(data["X"]), direct.X, atol=1e-6)
+    assert json.loads(out.read_text())["rotation_rms_deg"] < 1e-6
+    code = main(["handeye", "--robot-poses", *robots, "--target-poses", *targets[:5]])
+    assert code == 2 and "6 robot poses but 5 target poses" in capsys.readouterr().err
+
+
+@pytest.mark.realdata
+def test_stereo_calib_rectifies_the_chessboard_pair(tmp_path, capsys):
+    """Calibrate the OpenCV pair, then ``stereo --calib``'s rectification puts each
+    corner of left01/right01 on the same row (median |dy| < 0.5 px; 10 px before)."""
+    from robopercept.calibration import (
+        chessboard_points,
+        find_chessboard_corners,
+        save_calibration,
+        stereo_calibrate,
+    )
+    from robopercept.cli.depth import _rectify
+    from robopercept.imaging import read_image
+
+    folder = data_path("calibration", "opencv_chessboard_stereo")
+    L, R = [], []
+    for i in VIEWS:
+        for side, out in (("left", L), ("right", R)):
+            det = find_chessboard_corners(
+                read_image(folder / f"{side}{i:02d}.jpg", mode="gray"), (9, 6)
+            )
+            out.append(det.corners)
+    cal = stereo_calibrate(chessboard_points((9, 6), 0.025), L, R, (640, 480))
+    save_calibration(tmp_path / "stereo.json", cal)
+    left = read_image(folder / "left01.jpg", mode="rgb")
+    right = read_image(folder / "right01.jpg", mode="rgb")
+    rl, rr, Q = _rectify(str(tmp_path / "stereo.json"), left, right)
+    a = find_chessboard_corners(rl, (9, 6))
+    b = find_chessboard_corners(rr, (9, 6))
+    assert a.found and b.found
+    assert np.median(np.abs(a.corners[:, 1] - b.corners[:, 1])) < 0.5
+    assert np.median(np.abs(L[0][:, 1] - R[0][:, 1])) > 5
+    assert Q.shape == (4, 4)
+    code = main(["stereo", str(folder / "left01.jpg"), str(folder / "right01.jpg"),
+                 "--calib", str(tmp_path / "stereo.json"), "--max-disparity", "32",
+                 "--method", "bm", "-o", str(tmp_path / "d.png"), "--ply",
+                 str(tmp_path / "p.ply")])  # fmt: skip
+    assert code == 0 and (tmp_path / "p.ply").exists()
