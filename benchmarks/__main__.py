@@ -16,6 +16,7 @@ BENCHMARKS = {
     "learning": "benchmarks.learning",
     "motion": "benchmarks.motion",
     "depth": "benchmarks.depth",
+    "calibration": "benchmarks.calibration",
 }
 
 

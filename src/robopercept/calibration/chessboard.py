@@ -235,17 +235,23 @@ def _gray(image: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- lattice
 
 
-def _nearest(pts: np.ndarray, free: np.ndarray, q: np.ndarray, tol: float) -> int:
-    d = np.hypot(pts[:, 0] - q[0], pts[:, 1] - q[1])
-    d[~free] = np.inf
-    k = int(np.argmin(d))
-    return k if d[k] < tol else -1
+def _nearest(tree: Any, free: np.ndarray, q: np.ndarray, tol: float) -> int:
+    """The nearest free candidate within ``tol`` of ``q`` (-1 if none)."""
+    for d, k in zip(*tree.query(q, k=3, distance_upper_bound=tol), strict=True):
+        if d < tol and free[k]:
+            return int(k)
+    return -1
 
 
-def _along(dirs: np.ndarray, k: int, step: np.ndarray, degrees: float = 20.0) -> bool:
-    """Whether one of corner k's edge directions is parallel to ``step``."""
-    c = np.abs(dirs[k] @ step) / max(float(np.linalg.norm(step)), 1e-9)
-    return bool(c.max() > np.cos(np.deg2rad(degrees)))
+_COS20 = float(np.cos(np.deg2rad(20.0)))
+
+
+def _along(dirs: np.ndarray, k: int, step: np.ndarray) -> bool:
+    """Whether one of corner k's edge directions is within 20 degrees of ``step``."""
+    sx, sy = float(step[0]), float(step[1])
+    n = max((sx * sx + sy * sy) ** 0.5, 1e-9)
+    (ax, ay), (bx, by) = dirs[k]
+    return max(abs(ax * sx + ay * sy), abs(bx * sx + by * sy)) > _COS20 * n
 
 
 def _seed_neighbours(pts: np.ndarray, dirs: np.ndarray, s: int) -> dict:
@@ -317,7 +323,7 @@ def _trim(grid: dict, pts: np.ndarray, n: int, gray: np.ndarray) -> dict:
     return grid
 
 
-def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int) -> dict:
+def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int, tree: Any) -> dict:
     """Lattice ``{(i, j): candidate}`` grown from seed ``s``."""
     nb = _seed_neighbours(pts, dirs, s)
     if (1, 0) not in nb or (0, 1) not in nb:
@@ -348,6 +354,9 @@ def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int) -> dict:
             if (i + di, j + dj) not in grid
         }
         for i, j in sorted(frontier):
+            n_known = sum((i + a, j + b) in grid for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1)))
+            if tried.get((i, j), -1) >= n_known:
+                continue
             pred, step = None, 0.0
             for di, dj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
                 a, b, c = (i - di, j), (i, j - dj), (i - di, j - dj)
@@ -365,11 +374,8 @@ def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int) -> dict:
                         break
             if pred is None:
                 continue
-            n_known = sum((i + a, j + b) in grid for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1)))
-            if tried.get((i, j), -1) >= n_known:
-                continue
             tried[(i, j)] = n_known
-            k = _nearest(pts, free, pred, 0.3 * step)
+            k = _nearest(tree, free, pred, 0.3 * step)
             if k >= 0 and any(
                 (i + a, j + b) in grid and not _along(dirs, k, pts[k] - pts[grid[(i + a, j + b)]])
                 for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1))
@@ -463,13 +469,16 @@ def find_chessboard_corners(
         )
     # seeds: corners near the median of the candidates first (the board's middle)
     order = np.argsort(np.hypot(*(pts - np.median(pts, axis=0)).T), kind="stable")
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(pts)
     used = np.zeros(len(pts), dtype=bool)
     largest: dict = {}
     tries = 0
     for s in order:
         if used[s]:
             continue
-        grid = _grow(pts, dirs, int(s), max(w, h) + 3)
+        grid = _grow(pts, dirs, int(s), max(w, h) + 3, tree)
         used[list(grid.values())] = True
         grid = _trim(grid, pts, w * h, blurred)
         if len(grid) < 4:  # clutter: a seed that starts no lattice costs little
