@@ -31,14 +31,19 @@ def _poses(n, rng):
     return rv, tv
 
 
+def _views(obj, rv, tv):
+    """Exact projections of the board in each pose (the true camera)."""
+    return [
+        _project(obj, np.zeros(len(obj), int), rv[i : i + 1], tv[i : i + 1], K_TRUE, D_TRUE)
+        for i in range(len(rv))
+    ]
+
+
 def test_exact_views_recover_the_camera(rng):
     """Noise-free projections of 10 board poses: K and the distortion to 1e-6."""
     obj = chessboard_points((9, 6), 0.03)
     rv, tv = _poses(10, rng)
-    img = [
-        _project(obj, np.zeros(54, int), rv[i : i + 1], tv[i : i + 1], K_TRUE, D_TRUE)
-        for i in range(10)
-    ]
+    img = _views(obj, rv, tv)
     res = calibrate_camera(obj, img, (640, 480))
     np.testing.assert_allclose(res.K, K_TRUE, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(res.dist, D_TRUE, atol=1e-6)
@@ -134,10 +139,7 @@ def test_undistort_matches_opencv():
 def test_save_and_load_round_trip(tmp_path, rng):
     obj = chessboard_points((5, 4), 0.03)
     rv, tv = _poses(4, rng)
-    img = [
-        _project(obj, np.zeros(20, int), rv[i : i + 1], tv[i : i + 1], K_TRUE, D_TRUE)
-        for i in range(4)
-    ]
+    img = _views(obj, rv, tv)
     res = calibrate_camera(obj, img, (640, 480))
     save_calibration(tmp_path / "cam.json", res)
     back = load_calibration(tmp_path / "cam.json")
@@ -155,10 +157,7 @@ def test_save_and_load_round_trip(tmp_path, rng):
 def test_bad_input(rng):
     obj = chessboard_points((9, 6), 0.03)
     rv, tv = _poses(3, rng)
-    img = [
-        _project(obj, np.zeros(54, int), rv[i : i + 1], tv[i : i + 1], K_TRUE, D_TRUE)
-        for i in range(3)
-    ]
+    img = _views(obj, rv, tv)
     with pytest.raises(InputError, match="at least 3 views"):
         calibrate_camera(obj, img[:2], (640, 480))
     with pytest.raises(InputError, match="object_points has 2 views"):
