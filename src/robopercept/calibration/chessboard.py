@@ -41,10 +41,9 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_image
 from robopercept.errors import InputError
+from robopercept.features.harris import _gray as _gray_image
 from robopercept.features.harris import refine_corners
-from robopercept.imaging.color import rgb_to_gray
 from robopercept.imaging.filters import gaussian_blur
 
 __all__ = ["ChessboardDetection", "chessboard_points", "find_chessboard_corners"]
@@ -226,10 +225,7 @@ def _ring_test(b, pts, radius, n, min_contrast, max_asym):  # pragma: no cover -
 
 
 def _gray(image: np.ndarray) -> np.ndarray:
-    img = check_image(image)
-    if img.ndim == 3:
-        img = rgb_to_gray(img)
-    return np.ascontiguousarray(img, dtype=np.float64)
+    return np.ascontiguousarray(_gray_image(image), dtype=np.float64)
 
 
 # --------------------------------------------------------------------------- lattice

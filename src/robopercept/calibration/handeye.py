@@ -54,6 +54,7 @@ from robopercept.geometry.epipolar import skew
 from robopercept.geometry.transforms import (
     check_transform,
     invert,
+    nearest_rotation,
     rotation_from_rotvec,
     rotvec_from_rotation,
 )
@@ -267,15 +268,10 @@ def _tsai(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return (1 - n2 / 2) * np.eye(3) + 0.5 * (np.outer(p, p) + np.sqrt(4 - n2) * skew(p))
 
 
-def _procrustes(M: np.ndarray) -> np.ndarray:
-    u, _, vt = np.linalg.svd(M)
-    return u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
-
-
 def _park(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     al = np.array([rotvec_from_rotation(a[:3, :3]) for a in A])
     be = np.array([rotvec_from_rotation(b[:3, :3]) for b in B])
-    return _procrustes(al.T @ be)
+    return nearest_rotation(al.T @ be)
 
 
 def _quaternion(R: np.ndarray) -> np.ndarray:
@@ -332,7 +328,7 @@ def _daniilidis(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     )
     t = 2 * _qmul(qd, qr * np.r_[1, -1, -1, -1])[1:]
     X = np.eye(4)
-    X[:3, :3] = _procrustes(R)
+    X[:3, :3] = nearest_rotation(R)
     X[:3, 3] = t
     return X
 
@@ -353,7 +349,7 @@ def _logs(R: np.ndarray) -> np.ndarray:
 
 def _mean_pose(T: np.ndarray) -> np.ndarray:
     out = np.eye(4)
-    out[:3, :3] = _procrustes(T[:, :3, :3].sum(axis=0))
+    out[:3, :3] = nearest_rotation(T[:, :3, :3].sum(axis=0))
     out[:3, 3] = T[:, :3, 3].mean(axis=0)
     return out
 

@@ -49,8 +49,12 @@ from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.estimation.models import _dlt
 from robopercept.geometry.camera import CameraIntrinsics, _distort
 from robopercept.geometry.epipolar import essential_from_pose, fundamental_from_essential
-from robopercept.geometry.rectification import undistort_rectify_map
-from robopercept.geometry.transforms import rotation_from_rotvec, rotvec_from_rotation
+from robopercept.geometry.rectification import _dist, undistort_rectify_map
+from robopercept.geometry.transforms import (
+    nearest_rotation,
+    rotation_from_rotvec,
+    rotvec_from_rotation,
+)
 from robopercept.imaging.warp import remap
 
 __all__ = [
@@ -208,16 +212,20 @@ def _inputs(
             "board array per view (or a single (N, 3) array for all)"
         )
     for i, (o, p) in enumerate(zip(objs, img, strict=True)):
-        if o.shape[0] != p.shape[0]:
-            raise InputError(f"view {i}: {o.shape[0]} object points but {p.shape[0]} image points")
-        if o.shape[0] < 4:
-            raise InputError(f"view {i}: a view needs at least 4 points; got {o.shape[0]}")
-        if np.abs(o[:, 2]).max() > 1e-9 * max(1.0, np.abs(o).max()):
-            raise InputError(
-                f"object_points[{i}] must lie on the plane z = 0 (a planar target such as "
-                "the output of chessboard_points)"
-            )
+        _check_view(o, p, i)
     return objs, img
+
+
+def _check_view(o: np.ndarray, p: np.ndarray, i: int) -> None:
+    if o.shape[0] != p.shape[0]:
+        raise InputError(f"view {i}: {o.shape[0]} object points but {p.shape[0]} image points")
+    if o.shape[0] < 4:
+        raise InputError(f"view {i}: a view needs at least 4 points; got {o.shape[0]}")
+    if np.abs(o[:, 2]).max() > 1e-9 * max(1.0, np.abs(o).max()):
+        raise InputError(
+            f"object_points[{i}] must lie on the plane z = 0 (a planar target such as "
+            "the output of chessboard_points)"
+        )
 
 
 def _size(image_size: Any) -> tuple[int, int]:
@@ -283,7 +291,7 @@ def reprojection_errors(
     view = np.repeat(np.arange(len(objs)), [len(o) for o in objs])
     r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
     t = np.asarray(tvecs, dtype=np.float64).reshape(-1, 3)
-    d = np.r_[np.asarray(dist, dtype=np.float64).ravel(), np.zeros(5)][:5]
+    d = _dist(dist, "dist")
     e = _project(obj, view, r, t, np.asarray(K, dtype=np.float64), d) - np.concatenate(img)
     sq = (e**2).sum(axis=1)
     per = np.sqrt(np.bincount(view, sq) / np.bincount(view))
@@ -340,9 +348,7 @@ def _pose_from_homography(K: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.
     if m[2, 2] * lam < 0:  # the board must lie in front of the camera
         lam = -lam
     r1, r2, t = lam * m[:, 0], lam * m[:, 1], lam * m[:, 2]
-    u, _, vt = np.linalg.svd(np.c_[r1, r2, np.cross(r1, r2)])
-    R = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
-    return rotvec_from_rotation(R), t
+    return rotvec_from_rotation(nearest_rotation(np.c_[r1, r2, np.cross(r1, r2)])), t
 
 
 def _view_pose(K: np.ndarray, dist: np.ndarray, obj: np.ndarray, img: np.ndarray):
@@ -379,13 +385,13 @@ def board_pose(object_points: Any, image_points: Any, K: Any, dist: Any = None) 
     dist : array_like, optional
         ``(k1, k2, p1, p2[, k3])``.
     """
-    objs, img = _inputs([object_points] * 3, [image_points] * 3)
+    obj = _views([object_points], "object_points", 3)[0]
+    img = _views([image_points], "image_points", 2)[0]
+    _check_view(obj, img, 0)
     Km = np.asarray(K, dtype=np.float64)
     if Km.shape != (3, 3) or not np.isfinite(Km).all():
         raise InputError(f"K must be a finite 3x3 matrix; got shape {Km.shape}")
-    d = np.zeros(5) if dist is None else np.asarray(dist, dtype=np.float64).ravel()
-    d = np.r_[d, np.zeros(5)][:5]
-    r, t = _view_pose(Km, d, objs[0], img[0])
+    r, t = _view_pose(Km, _dist(dist, "dist"), obj, img)
     T = np.eye(4)
     T[:3, :3] = rotation_from_rotvec(r)
     T[:3, 3] = t
@@ -499,9 +505,8 @@ def calibrate_camera(
         Kp, dp, r, t = unpack(p)
         return (_project(obj, view, r, t, Kp, dp) - pix).ravel()
 
-    p0 = np.r_[K[0, 0], K[1, 1], K[:2, 2], dist[free], np.c_[rvecs, tvecs].ravel()]
-    if fix_principal_point:
-        p0 = np.r_[K[0, 0], K[1, 1], dist[free], np.c_[rvecs, tvecs].ravel()]
+    centre = [] if fix_principal_point else K[:2, 2]
+    p0 = np.r_[K[0, 0], K[1, 1], centre, dist[free], np.c_[rvecs, tvecs].ravel()]
     sol = least_squares(fun, p0, method="lm", x_scale="jac", max_nfev=max_iterations * p0.size)
     K, dist, rvecs, tvecs = unpack(sol.x)
     if not (np.isfinite(sol.x).all() and K[0, 0] > 0 and K[1, 1] > 0):
@@ -559,16 +564,13 @@ def stereo_calibrate(
             cams.append((c.K, c.dist))
         else:
             Km = np.asarray(K, dtype=np.float64).reshape(3, 3)
-            dm = np.r_[np.zeros(5) if d is None else np.asarray(d, dtype=np.float64).ravel(),
-                       np.zeros(5)][:5]  # fmt: skip
-            cams.append((Km, dm))
+            cams.append((Km, _dist(d, "dist")))
     (k1, d1), (k2, d2) = cams
     poses1 = [_view_pose(k1, d1, o, p) for o, p in zip(objs, img1, strict=True)]
     poses2 = [_view_pose(k2, d2, o, p) for o, p in zip(objs, img2, strict=True)]
     rel = [rotation_from_rotvec(b[0]) @ rotation_from_rotvec(a[0]).T
            for a, b in zip(poses1, poses2, strict=True)]  # fmt: skip
-    u, _, vt = np.linalg.svd(np.sum(rel, axis=0))
-    R = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    R = nearest_rotation(np.sum(rel, axis=0))
     T = np.median([b[1] - R @ a[1] for a, b in zip(poses1, poses2, strict=True)], axis=0)
     obj = np.concatenate(objs)
     pix = np.r_[np.concatenate(img1), np.concatenate(img2)]

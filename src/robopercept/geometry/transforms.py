@@ -17,6 +17,7 @@ __all__ = [
     "check_transform",
     "compose",
     "invert",
+    "nearest_rotation",
     "rotation_from_rotvec",
     "rotvec_from_rotation",
     "se3",
@@ -92,6 +93,15 @@ def rotvec_from_rotation(R: np.ndarray) -> np.ndarray:
     if k @ v < 0:
         k = -k
     return k * theta
+
+
+def nearest_rotation(M: np.ndarray) -> np.ndarray:
+    r"""The rotation closest to a 3x3 matrix in the Frobenius norm (orthogonal
+    Procrustes): :math:`U \operatorname{diag}(1, 1, \det U V^T) V^T` from
+    :math:`M = U S V^T`. Orthonormalizes a noisy rotation, and averages rotations when M
+    is their sum (the chordal mean)."""
+    u, _, vt = np.linalg.svd(np.asarray(M, dtype=np.float64))
+    return u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
 
 
 def invert(T: np.ndarray) -> np.ndarray:
