@@ -12,7 +12,8 @@ so one disparity step covers more depth the farther the point: the resolution fa
 with the square of the distance.
 
 **Block matching** compares windows: SAD :math:`\sum |L - R|`, SSD
-:math:`\sum (L - R)^2` or zero-mean NCC (1 - correlation) over a
+:math:`\sum (L - R)^2` or zero-mean NCC (1 - correlation, the correlation clipped to
+:math:`[-1, 1]` where a nearly flat window pushes it out) over a
 ``window x window`` square, and keeps the disparity of the lowest cost (winner takes
 all). A large window is smooth but blurs depth edges and thin structure; a small one
 keeps detail but is noisy where texture is weak.
@@ -43,6 +44,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -95,23 +97,31 @@ def _pair(left: np.ndarray, right: np.ndarray, max_disparity: int, min_disparity
 
 
 # ---------------------------------------------------------------- census
+#
+# The kernels below vectorize along one contiguous axis: x for the census, the
+# disparity k for everything on the cost volume, whose layout is (y, x, k). The right
+# image is read through row-reversed copies, so that R[x - dmin - k] is
+# Rr[w - 1 - x + dmin + k], increasing with k. Path costs, window sums and winners
+# are float32 (float64 where a sum can pass 2^24): every value is an integer below
+# 2^24, so float arithmetic is exact in any order, and numba keeps float32 lanes
+# where it would widen small integers to int64.
 
 
 @njit(cache=True, parallel=True)
-def _census_kernel(img, r, out):  # pragma: no cover - compiled
-    h, w = img.shape
+def _census_kernel(pad, r, out):  # pragma: no cover - compiled
+    # pad: the image with r replicated pixels on every side
+    h, w = out.shape
     for y in prange(h):
-        for x in range(w):
-            c = img[y, x]
-            bits = np.uint64(0)
-            for dy in range(-r, r + 1):
-                yy = min(max(y + dy, 0), h - 1)
-                for dx in range(-r, r + 1):
-                    if dy == 0 and dx == 0:
-                        continue
-                    xx = min(max(x + dx, 0), w - 1)
-                    bits = (bits << np.uint64(1)) | np.uint64(img[yy, xx] < c)
-            out[y, x] = bits
+        bits = np.zeros(w, dtype=np.uint64)
+        c = pad[y + r, r : r + w]
+        for dy in range(-r, r + 1):
+            for dx in range(-r, r + 1):
+                if dy == 0 and dx == 0:
+                    continue
+                nb = pad[y + r + dy, r + dx : r + dx + w]
+                for x in range(w):
+                    bits[x] = (bits[x] << np.uint64(1)) | np.uint64(nb[x] < c[x])
+        out[y] = bits
 
 
 def census_transform(image: np.ndarray, window: int = 7) -> np.ndarray:
@@ -121,8 +131,9 @@ def census_transform(image: np.ndarray, window: int = 7) -> np.ndarray:
     if int(window) != window or window < 3 or window % 2 == 0 or window > 7:
         raise InputError(f"census window must be 3, 5 or 7; got {window}")
     g = _gray(image, "image")
+    r = int(window) // 2
     out = np.empty(g.shape, dtype=np.uint64)
-    _census_kernel(g, int(window) // 2, out)
+    _census_kernel(np.pad(g, r, mode="edge"), r, out)
     return out
 
 
@@ -134,220 +145,283 @@ def _popcount(v):  # pragma: no cover - compiled
     return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
 
 
-@njit(cache=True, parallel=True)
-def _census_cost(cl, cr, dmin, nd, invalid, cost):  # pragma: no cover - compiled
-    # cost[y, x, k] = Hamming(cl[y, x], cr[y, x - dmin - k]); ``invalid`` where outside
+@njit(cache=True, fastmath=True, inline="always")
+def _hamming_row(cl, crr, yy, dmin, invalid, out, slot):  # pragma: no cover - compiled
+    # out[slot, x, k] = Hamming(cl[yy, x], cr[yy, x - dmin - k]), ``invalid`` where x - dmin
+    # - k falls outside; crr holds cr's rows reversed (crr[y, w - 1 - x] = cr[y, x])
+    # (1-D row slices: an index of unknown sign, as base + k, makes numba wrap it per
+    # element and keeps the loop from vectorizing)
+    _, w, nd = out.shape
+    for x in range(w):
+        a = cl[yy, x]
+        base = w - 1 - x + dmin
+        kmax = x - dmin
+        rr = crr[yy, base : base + nd]
+        o = out[slot, x]
+        for k in range(nd):
+            v = np.float32(np.int32(_popcount(a ^ rr[k])))
+            o[k] = v if k <= kmax else invalid
+
+
+@njit(cache=True, parallel=True, fastmath=True)
+def _census_block_cost(cl, crr, dmin, r, invalid, rings, cols, out):  # pragma: no cover
+    # out[y, x, k] = sum of the Hamming costs over the (2r+1)^2 block around (y, x),
+    # borders replicated. Per chunk of rows: the block's 2r+1 cost rows in a ring
+    # (rings[c]), their column sums (cols[c]) moved one row at a time, then running
+    # sums along x.
     h, w = cl.shape
-    for y in prange(h):
-        for x in range(w):
-            a = cl[y, x]
+    n_chunks, _, nd = cols.shape
+    n = 2 * r + 1
+    step = (h + n_chunks - 1) // n_chunks
+    for c in prange(n_chunks):
+        y0 = c * step
+        y1 = min(h, y0 + step)
+        ring = rings[c]
+        col = cols[c]
+        acc = np.zeros(nd, dtype=np.float32)
+        for y in range(y0, y1):
+            if y == y0:
+                col[:] = 0
+                for t in range(n):
+                    _hamming_row(cl, crr, min(max(y - r + t, 0), h - 1), dmin, invalid, ring, t)
+                    for x in range(w):
+                        for k in range(nd):
+                            col[x, k] += ring[t, x, k]
+            else:
+                # the slot of row y - r - 1 (entered 2r + 1 rows ago) takes row y + r
+                slot = (y - y0 - 1) % n
+                for x in range(w):
+                    for k in range(nd):
+                        col[x, k] -= ring[slot, x, k]
+                _hamming_row(cl, crr, min(y + r, h - 1), dmin, invalid, ring, slot)
+                for x in range(w):
+                    for k in range(nd):
+                        col[x, k] += ring[slot, x, k]
             for k in range(nd):
-                xr = x - dmin - k
-                if xr >= 0:
-                    cost[y, x, k] = np.uint16(_popcount(a ^ cr[y, xr]))
-                else:
-                    cost[y, x, k] = invalid
-
-
-@njit(cache=True, parallel=True)
-def _box_sum_cost(cost, r, out):  # pragma: no cover - compiled
-    # out[y, x, k] = sum of cost over the (2r+1)^2 block around (y, x), borders clamped
-    h, w, nd = cost.shape
-    for y in prange(h):
-        col = np.zeros((w, nd), dtype=np.int32)
-        for dy in range(-r, r + 1):
-            yy = min(max(y + dy, 0), h - 1)
+                acc[k] = col[0, k] * (r + 1)
+            for t in range(1, r + 1):
+                xx = min(t, w - 1)
+                for k in range(nd):
+                    acc[k] += col[xx, k]
             for x in range(w):
                 for k in range(nd):
-                    col[x, k] += cost[yy, x, k]
-        acc = np.zeros(nd, dtype=np.int32)
-        for dx in range(-r, r + 1):
-            xx = min(max(dx, 0), w - 1)
-            for k in range(nd):
-                acc[k] += col[xx, k]
-        for x in range(w):
-            for k in range(nd):
-                out[y, x, k] = np.uint16(acc[k])
-            xo = min(max(x - r, 0), w - 1)
-            xi = min(max(x + r + 1, 0), w - 1)
-            for k in range(nd):
-                acc[k] += col[xi, k] - col[xo, k]
+                    out[y, x, k] = np.uint16(np.int32(acc[k]))
+                xi = min(x + r + 1, w - 1)
+                xo = max(x - r, 0)
+                for k in range(nd):
+                    acc[k] += col[xi, k] - col[xo, k]
 
 
 # ---------------------------------------------------------------- SGM aggregation
 
 
-@njit(cache=True, inline="always")
-def _step(cost_row, prev, prev_min, p1, p2, out, nd):  # pragma: no cover - compiled
-    # out[k] = C[k] + min(prev[k], prev[k-1] + P1, prev[k+1] + P1, prev_min + P2) - prev_min
-    # prev is padded: prev[0] and prev[nd + 1] hold the sentinel
-    m = prev_min + p2
-    best = _BIG * 4
+@njit(cache=True, fastmath=True, inline="always")
+def _step(cost, y, x, P, pr, pmin, p1, p2, Q, o, Qi, box, boxi, nd):  # pragma: no cover
+    # Q[o, k+1] = C[k] + min(P[pr, k+1], P[pr, k] + P1, P[pr, k+2] + P1, pmin + P2) - pmin
+    # with C = cost[y, x]; rows of P and Q are padded with the sentinel at 0 and nd + 1.
+    # Returns min_k Q[o, k+1], found on the int32 view Qi (floats >= 0 order like their
+    # bits, and int32 minima vectorize where float ones do not); box/boxi (a float32
+    # array of one and its int32 view) turn the bits back. Whole arrays and indices,
+    # not row views, keep numba from reference-counting a view per call.
+    m = pmin + p2
     for k in range(nd):
-        v = prev[k + 1]
-        a = prev[k] + p1
-        b = prev[k + 2] + p1
-        if a < v:
-            v = a
-        if b < v:
-            v = b
-        if m < v:
-            v = m
-        v = v - prev_min + cost_row[k]
-        out[k + 1] = v
-        if v < best:
-            best = v
-    return best
+        v = P[pr, k + 1]
+        a = P[pr, k] + p1
+        b = P[pr, k + 2] + p1
+        v = a if a < v else v
+        v = b if b < v else v
+        v = m if m < v else v
+        Q[o, k + 1] = v - pmin + np.float32(cost[y, x, k])
+    best = Qi[o, 1]
+    for k in range(2, nd + 1):
+        q = Qi[o, k]
+        best = q if q < best else best
+    boxi[0] = best
+    return box[0]
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _start(cost, y, x, Q, o, Qi, box, boxi, nd):  # pragma: no cover - compiled
+    # a path's first pixel: Q[o, k+1] = C[k]; returns its minimum (as _step)
+    for k in range(nd):
+        Q[o, k + 1] = np.float32(cost[y, x, k])
+    best = Qi[o, 1]
+    for k in range(2, nd + 1):
+        q = Qi[o, k]
+        best = q if q < best else best
+    boxi[0] = best
+    return box[0]
 
 
 @njit(cache=True, inline="always")
-def _start(cost_row, out, nd):  # pragma: no cover - compiled
-    # a path's first pixel: L = C (padded like _step's output); returns its minimum
-    best = _BIG * 4
-    for k in range(nd):
-        out[k + 1] = cost_row[k]
-        if cost_row[k] < best:
-            best = cost_row[k]
-    return best
+def _copy_row(src, i, dst, j, n):  # pragma: no cover - compiled
+    for k in range(n):
+        dst[j, k] = src[i, k]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=True)
 def _sgm_passes(cost, p1, p2, paths, s_out):  # pragma: no cover - compiled
-    # two independent passes (top-down and bottom-up), one per thread; each writes its
-    # own sum s_out[pass]
+    # Two independent passes, one per thread, each writing its own sum of path costs
+    # s_out[pass]: top-down with x rising (paths from the left, above, upper left and
+    # upper right) and bottom-up with x falling (the four opposite ones). Per pass,
+    # one row of path costs per direction (float32, padded with a sentinel at both
+    # ends of the disparity axis) is updated in place: the vertical and the "ahead"
+    # diagonal (from x + dx, not visited yet in this row) write column x at once; the
+    # "behind" diagonal (from x - dx) holds the new costs of x - dx until x has read
+    # the old ones.
     h, w, nd = cost.shape
+    big = np.float32(_BIG)
     for job in prange(2):
         s = s_out[job]
         down = job == 0
-        # previous-row path costs for the three vertical/diagonal directions, padded
-        pv = np.full((w, nd + 2), _BIG, dtype=np.int32)
-        pa = np.full((w, nd + 2), _BIG, dtype=np.int32)
-        pb = np.full((w, nd + 2), _BIG, dtype=np.int32)
-        mv = np.zeros(w, dtype=np.int32)
-        ma = np.zeros(w, dtype=np.int32)
-        mb = np.zeros(w, dtype=np.int32)
-        cv = np.full((w, nd + 2), _BIG, dtype=np.int32)
-        ca = np.full((w, nd + 2), _BIG, dtype=np.int32)
-        cb = np.full((w, nd + 2), _BIG, dtype=np.int32)
-        nv = np.zeros(w, dtype=np.int32)
-        na = np.zeros(w, dtype=np.int32)
-        nb = np.zeros(w, dtype=np.int32)
-        hz = np.full(nd + 2, _BIG, dtype=np.int32)
-        hz2 = np.full(nd + 2, _BIG, dtype=np.int32)
-        crow = np.zeros(nd, dtype=np.int32)
+        dx = 1 if down else -1
+        V = np.full((w, nd + 2), big, dtype=np.float32)
+        A = np.full((w, nd + 2), big, dtype=np.float32)  # behind: from x - dx
+        B = np.full((w, nd + 2), big, dtype=np.float32)  # ahead: from x + dx
+        mV = np.zeros(w, dtype=np.float32)
+        mA = np.zeros(w, dtype=np.float32)
+        mB = np.zeros(w, dtype=np.float32)
+        # this pixel's new costs: rows 0/1 horizontal (this and the previous pixel, in
+        # turn), 2 vertical, 3/4 behind (this and the held one, in turn), 5 ahead
+        T = np.full((6, nd + 2), big, dtype=np.float32)
+        Ti = T.view(np.int32)
+        box = np.zeros(1, dtype=np.float32)
+        boxi = box.view(np.int32)
         for i in range(h):
             y = i if down else h - 1 - i
-            first = i == 0
-            # horizontal: left to right on the way down, right to left on the way up
-            hmin = 0
+            hm = big
+            am_held = big
+            hc, hp, ta, th = 0, 1, 3, 4
+            x = 0
             for j in range(w):
                 x = j if down else w - 1 - j
-                for k in range(nd):
-                    crow[k] = cost[y, x, k]
                 if j == 0:
-                    hmin = _start(crow, hz, nd)
+                    hm = _start(cost, y, x, T, hc, Ti, box, boxi, nd)
                 else:
-                    hmin = _step(crow, hz, hmin, p1, p2, hz2, nd)
-                    hz, hz2 = hz2, hz
-                for k in range(nd):
-                    s[y, x, k] = hz[k + 1]
-            # vertical (0, +-1) and, with 8 paths, the diagonals (+-1, +-1)
-            for x in range(w):
-                for k in range(nd):
-                    crow[k] = cost[y, x, k]
-                if first:
-                    nv[x] = _start(crow, cv[x], nd)
+                    hm = _step(cost, y, x, T, hp, hm, p1, p2, T, hc, Ti, box, boxi, nd)
+                if i == 0:
+                    vm = _start(cost, y, x, T, 2, Ti, box, boxi, nd)
                 else:
-                    nv[x] = _step(crow, pv[x], mv[x], p1, p2, cv[x], nd)
-                for k in range(nd):
-                    s[y, x, k] += cv[x, k + 1]
+                    vm = _step(cost, y, x, V, x, mV[x], p1, p2, T, 2, Ti, box, boxi, nd)
                 if paths == 8:
-                    xa = x - 1  # from the upper left (down) / lower left (up)
-                    if first or xa < 0:
-                        na[x] = _start(crow, ca[x], nd)
+                    xa = x - dx
+                    xb = x + dx
+                    if i == 0 or j == 0:
+                        am = _start(cost, y, x, T, ta, Ti, box, boxi, nd)
                     else:
-                        na[x] = _step(crow, pa[xa], ma[xa], p1, p2, ca[x], nd)
-                    xb = x + 1  # from the upper right (down) / lower right (up)
-                    if first or xb >= w:
-                        nb[x] = _start(crow, cb[x], nd)
+                        am = _step(cost, y, x, A, xa, mA[xa], p1, p2, T, ta, Ti, box, boxi, nd)
+                    if i == 0 or j == w - 1:
+                        bm = _start(cost, y, x, T, 5, Ti, box, boxi, nd)
                     else:
-                        nb[x] = _step(crow, pb[xb], mb[xb], p1, p2, cb[x], nd)
+                        bm = _step(cost, y, x, B, xb, mB[xb], p1, p2, T, 5, Ti, box, boxi, nd)
+                    if j > 0:  # x has read the old A[x - dx]: store the held new one
+                        _copy_row(T, th, A, xa, nd + 2)
+                        mA[xa] = am_held
+                    ta, th = th, ta
+                    am_held = am
+                    _copy_row(T, 5, B, x, nd + 2)
+                    mB[x] = bm
                     for k in range(nd):
-                        s[y, x, k] += ca[x, k + 1] + cb[x, k + 1]
-            pv, cv = cv, pv
-            pa, ca = ca, pa
-            pb, cb = cb, pb
-            mv, nv = nv, mv
-            ma, na = na, ma
-            mb, nb = nb, mb
+                        t = T[hc, k + 1] + T[2, k + 1] + T[th, k + 1] + T[5, k + 1]
+                        s[y, x, k] = np.uint16(t)
+                else:
+                    for k in range(nd):
+                        s[y, x, k] = np.uint16(T[hc, k + 1] + T[2, k + 1])
+                _copy_row(T, 2, V, x, nd + 2)
+                mV[x] = vm
+                hc, hp = hp, hc
+            if paths == 8:
+                _copy_row(T, th, A, x, nd + 2)
+                mA[x] = am_held
 
 
 # ---------------------------------------------------------------- winner takes all
 
+_FAR = 3.0e38  # finite "no cost yet" (the kernels are compiled with fast-math)
 
-@njit(cache=True, inline="always")
-def _wta_row(rc, y, dmin, uniqueness, subpixel, disp, right):  # pragma: no cover - compiled
-    # rc[k, x]: cost of disparity dmin + k at left column x. Left winners use only the
-    # disparities that keep x - d inside the right image; right winners (for the
-    # consistency check) those that keep xr + d inside the left image. Loops run over
-    # x innermost, along rc's rows.
-    nd, w = rc.shape
-    best = rc[0].copy()
-    kb = np.zeros(w, dtype=np.int32)
-    for k in range(1, nd):
-        kk = np.int32(k)
-        for x in range(k + dmin, w):  # branch-free, so that it vectorizes
-            v = rc[k, x]
-            b = best[x]
-            m = v < b
-            best[x] = v if m else b
-            kb[x] = kk if m else kb[x]
-    ok = np.ones(w, dtype=np.bool_)
-    if uniqueness > 0.0:
-        for k in range(nd):
-            for x in range(k + dmin, w):
-                if (k < kb[x] - 1 or k > kb[x] + 1) and rc[k, x] * (1.0 - uniqueness) <= best[x]:
-                    ok[x] = False
+
+@njit(cache=True, fastmath=True, inline="always")
+def _wta_row(C, Ci, y, dmin, uniqueness, subpixel, want_right, ks, ksi, rb, rk,
+             disp, right):  # fmt: skip  # pragma: no cover - compiled
+    # C[x, k] >= 0: cost of disparity dmin + k at left column x, Ci its integer view
+    # (same width). Left winners use only the disparities that keep x - d inside the
+    # right image; right winners (for the consistency check, when ``want_right``)
+    # those that keep xr + d inside the left image, gathered in rb/rk reversed (index
+    # w - 1 - xr) so that both run along k. Ties go to the smallest disparity. ks, ksi:
+    # 0..nd-1 as float32 and int32.
+    w, nd = C.shape
+    if want_right:
+        for j in range(rb.shape[0]):
+            rb[j] = _FAR
+            rk[j] = -1.0
     for x in range(w):
         kmax = min(nd - 1, x - dmin)
-        if kmax < 0 or not ok[x]:
+        if kmax < 0:
             disp[y, x] = np.nan
             continue
-        k = kb[x]
-        d = float(k)
-        if subpixel and 0 < k < kmax:
-            a = float(rc[k - 1, x])
-            b = float(rc[k + 1, x])
-            den = a - 2.0 * float(best[x]) + b
+        row = C[x]
+        rowi = Ci[x]
+        # the minimum and its first index, on the bits (costs are >= 0): integer
+        # minima vectorize
+        bi = rowi[0]
+        for k in range(1, kmax + 1):
+            v = rowi[k]
+            bi = v if v < bi else bi
+        kb = np.int32(nd)
+        for k in range(kmax + 1):
+            j = ksi[k] if rowi[k] == bi else np.int32(nd)  # int32 throughout, to vectorize
+            kb = j if j < kb else kb
+        best = row[kb]
+        if want_right:
+            base = w - 1 - x + dmin
+            rbx = rb[base : base + kmax + 1]  # row slices: see _hamming_row
+            rkx = rk[base : base + kmax + 1]
+            for k in range(kmax + 1):
+                v = row[k]
+                o = rbx[k]
+                m = v < o
+                rbx[k] = v if m else o
+                rkx[k] = ks[k] if m else rkx[k]
+        if uniqueness > 0.0:
+            lim = float(best)
+            f = 1.0 - uniqueness
+            bad = 0
+            for k in range(kmax + 1):
+                if (k < kb - 1 or k > kb + 1) and float(row[k]) * f <= lim:
+                    bad += 1
+            if bad > 0:
+                disp[y, x] = np.nan
+                continue
+        d = float(kb)
+        if subpixel and 0 < kb < kmax:
+            a = float(row[kb - 1])
+            b = float(row[kb + 1])
+            den = a - 2.0 * float(best) + b
             if den > 0:
                 d += (a - b) / (2.0 * den)
         disp[y, x] = d + dmin
-    rbest = np.empty(w, dtype=rc.dtype)
-    rk = np.full(w, -1, dtype=np.int32)
-    for xr in range(max(w - dmin, 0)):
-        rbest[xr] = rc[0, xr + dmin]
-        rk[xr] = 0
-    for k in range(1, nd):
-        kk = np.int32(k)
-        for xr in range(max(w - dmin - k, 0)):
-            v = rc[k, xr + dmin + k]
-            b = rbest[xr]
-            m = v < b
-            rbest[xr] = v if m else b
-            rk[xr] = kk if m else rk[xr]
-    for xr in range(w):
-        right[y, xr] = rk[xr] + dmin if rk[xr] >= 0 else -1
+    if want_right:
+        for xr in range(w):
+            k = rk[w - 1 - xr]
+            right[y, xr] = np.int32(k) + dmin if k >= 0 else -1
 
 
-@njit(cache=True, parallel=True)
-def _sgm_wta(s, dmin, uniqueness, subpixel, disp, right):  # pragma: no cover - compiled
+@njit(cache=True, parallel=True, fastmath=True)
+def _sgm_wta(s, dmin, uniqueness, subpixel, want_right, disp, right):  # pragma: no cover - compiled
     _, h, w, nd = s.shape
+    ks = np.arange(nd).astype(np.float32)
+    ksi = np.arange(nd).astype(np.int32)
     for y in prange(h):
-        rc = np.empty((nd, w), dtype=np.int32)
+        C = np.empty((w, nd), dtype=np.float32)
+        Ci = C.view(np.int32)
+        rb = np.empty(w + nd + dmin, dtype=np.float32)
+        rk = np.empty(w + nd + dmin, dtype=np.float32)
+        s0 = s[0, y]
+        s1 = s[1, y]
         for x in range(w):
             for k in range(nd):
-                rc[k, x] = np.int32(s[0, y, x, k]) + np.int32(s[1, y, x, k])
-        _wta_row(rc, y, dmin, uniqueness, subpixel, disp, right)
+                C[x, k] = np.float32(s0[x, k]) + np.float32(s1[x, k])
+        _wta_row(C, Ci, y, dmin, uniqueness, subpixel, want_right, ks, ksi, rb, rk, disp, right)
 
 
 @njit(cache=True, parallel=True)
@@ -363,22 +437,64 @@ def _lr_check(disp, right, max_diff):  # pragma: no cover - compiled
                 disp[y, x] = np.nan
 
 
+@njit(cache=True, inline="always")
+def _sort2(a, b):  # pragma: no cover - compiled
+    return (a, b) if a < b else (b, a)
+
+
+@njit(cache=True, inline="always")
+def _median9(p0, p1, p2, p3, p4, p5, p6, p7, p8):  # pragma: no cover - compiled
+    # the median of nine by 19 exchanges (Paeth's network, as in Devillard's opt_med9)
+    p1, p2 = _sort2(p1, p2)
+    p4, p5 = _sort2(p4, p5)
+    p7, p8 = _sort2(p7, p8)
+    p0, p1 = _sort2(p0, p1)
+    p3, p4 = _sort2(p3, p4)
+    p6, p7 = _sort2(p6, p7)
+    p1, p2 = _sort2(p1, p2)
+    p4, p5 = _sort2(p4, p5)
+    p7, p8 = _sort2(p7, p8)
+    p0, p3 = _sort2(p0, p3)
+    p5, p8 = _sort2(p5, p8)
+    p4, p7 = _sort2(p4, p7)
+    p3, p6 = _sort2(p3, p6)
+    p1, p4 = _sort2(p1, p4)
+    p2, p5 = _sort2(p2, p5)
+    p4, p7 = _sort2(p4, p7)
+    p4, p2 = _sort2(p4, p2)
+    p6, p4 = _sort2(p6, p4)
+    p4, p2 = _sort2(p4, p2)
+    return p4
+
+
 @njit(cache=True, parallel=True)
-def _median3(disp, out):  # pragma: no cover - compiled
-    # 3x3 median of the valid (non-NaN) neighbours, borders replicated; NaN stays NaN
-    h, w = disp.shape
+def _median3(pad, out):  # pragma: no cover - compiled
+    # 3x3 median of the valid (non-NaN) neighbours, borders replicated (pad: the map
+    # with one replicated pixel per side); NaN stays NaN. Windows without NaN (most)
+    # go through a sorting network, branch-free along the row; the rest are sorted.
+    h, w = out.shape
     for y in prange(h):
+        a, b, c = pad[y], pad[y + 1], pad[y + 2]
+        total = np.empty(w, dtype=np.float32)
+        for x in range(w):
+            out[y, x] = _median9(a[x], a[x + 1], a[x + 2], b[x], b[x + 1], b[x + 2],
+                                 c[x], c[x + 1], c[x + 2])  # fmt: skip
+            total[x] = (
+                (a[x] + a[x + 1] + a[x + 2])
+                + (b[x] + b[x + 1] + b[x + 2])
+                + (c[x] + c[x + 1] + c[x + 2])
+            )
         buf = np.empty(9, dtype=np.float32)
         for x in range(w):
-            if np.isnan(disp[y, x]):
+            if not np.isnan(total[x]):
+                continue
+            if np.isnan(b[x + 1]):
                 out[y, x] = np.nan
                 continue
             n = 0
-            for dy in range(-1, 2):
-                yy = min(max(y + dy, 0), h - 1)
-                for dx in range(-1, 2):
-                    xx = min(max(x + dx, 0), w - 1)
-                    v = disp[yy, xx]
+            for row in (a, b, c):
+                for dx in range(3):
+                    v = row[x + dx]
                     if not np.isnan(v):
                         j = n  # insertion sort
                         while j > 0 and buf[j - 1] > v:
@@ -394,7 +510,7 @@ def _post(disp: np.ndarray, right: np.ndarray, lr_check: float | None, median: b
         _lr_check(disp, right, float(lr_check))
     if median:
         out = np.empty_like(disp)
-        _median3(disp, out)
+        _median3(np.pad(disp, 1, mode="edge"), out)
         disp = out
     return disp
 
@@ -472,16 +588,18 @@ def semi_global_matching(
     cl, cr = census_transform(L, census), census_transform(R, census)
     h, w = L.shape
     cost = np.empty((h, w, nd), dtype=np.uint16)
-    _census_cost(cl, cr, int(min_disparity), nd, np.uint16(nbits), cost)
-    if block > 1:
-        summed = np.empty_like(cost)
-        _box_sum_cost(cost, int(block) // 2, summed)
-        cost = summed
+    crr = _reversed_rows(cr, int(max_disparity))
+    r = int(block) // 2
+    n_chunks = max(1, min(h, 2 * numba.get_num_threads()))
+    rings = np.empty((n_chunks, 2 * r + 1, w, nd), dtype=np.float32)
+    cols = np.empty((n_chunks, w, nd), dtype=np.float32)
+    _census_block_cost(cl, crr, int(min_disparity), r, np.float32(nbits), rings, cols, cost)
     s = np.empty((2, h, w, nd), dtype=np.uint16)
-    _sgm_passes(cost, p1, p2, int(paths), s)
+    _sgm_passes(cost, np.float32(p1), np.float32(p2), int(paths), s)
     disp = np.empty((h, w), dtype=np.float32)
     right_winners = np.empty((h, w), dtype=np.int32)
-    _sgm_wta(s, int(min_disparity), float(uniqueness), bool(subpixel), disp, right_winners)
+    _sgm_wta(s, int(min_disparity), float(uniqueness), bool(subpixel), lr_check is not None,
+             disp, right_winners)  # fmt: skip
     return _post(disp, right_winners, lr_check, median)
 
 
@@ -544,68 +662,103 @@ def bad_pixel_rate(disparity: np.ndarray, truth: np.ndarray, threshold: float = 
 # ---------------------------------------------------------------- block matching
 
 
-@njit(cache=True, inline="always")
-def _add_row(col, Lrow, Rpad, off, nd, w, mode, sign):  # pragma: no cover - compiled
-    # col[k, x] += sign * term(L[x], R[x - dmin - k]); Rpad holds R shifted by ``off``
-    for k in range(nd):
-        base = off - k
+@njit(cache=True, fastmath=True, inline="always")
+def _move_rows(col, La, Ra, Ls, Rs, dmin, mode, remove):  # pragma: no cover - compiled
+    # col[x, k] += term(La[x], R_a[x - dmin - k]) - term(Ls[x], R_s[x - dmin - k]) (the
+    # second only when ``remove``); Ra, Rs are reversed right rows, mode 0 |.|, 1 (.)^2,
+    # 2 product
+    w, nd = col.shape
+    for x in range(w):
+        base = w - 1 - x + dmin
+        la = La[x]
+        ls = Ls[x]
+        c = col[x]
+        ra = Ra[base : base + nd]  # row slices: see _hamming_row
+        rs = Rs[base : base + nd]
         if mode == 0:
-            for x in range(w):
-                col[k, x] += sign * abs(Lrow[x] - Rpad[x + base])
+            if remove:
+                for k in range(nd):
+                    c[k] += abs(la - ra[k]) - abs(ls - rs[k])
+            else:
+                for k in range(nd):
+                    c[k] += abs(la - ra[k])
         elif mode == 1:
-            for x in range(w):
-                t = Lrow[x] - Rpad[x + base]
-                col[k, x] += sign * t * t
+            if remove:
+                for k in range(nd):
+                    ta = la - ra[k]
+                    ts = ls - rs[k]
+                    c[k] += ta * ta - ts * ts
+            else:
+                for k in range(nd):
+                    ta = la - ra[k]
+                    c[k] += ta * ta
+        elif remove:
+            for k in range(nd):
+                c[k] += la * ra[k] - ls * rs[k]
         else:
-            for x in range(w):
-                col[k, x] += sign * Lrow[x] * Rpad[x + base]
+            for k in range(nd):
+                c[k] += la * ra[k]
 
 
-@njit(cache=True, parallel=True)
-def _bm_kernel(L, Rpad, pad, dmin, nd, r, mode, n_chunks, sl, sl2, sr, sr2,
-               uniqueness, subpixel, disp, right):  # fmt: skip  # pragma: no cover
-    # per chunk of rows: column sums of the pixel term over the window's rows, moved
-    # one row at a time, then the window sums along x, then winner-takes-all per row.
-    # Rpad[y, pad + x] = R[y, x] with replicated borders, so R at x - dmin - k is
-    # Rpad[y, x + pad - dmin - k] without clamping.
+@njit(cache=True, parallel=True, fastmath=True)
+def _bm_kernel(L, Rr, dmin, r, mode, cols, costs, cints, sl, srr, vl, vrr,
+               uniqueness, subpixel, want_right, disp, right):  # fmt: skip  # pragma: no cover
+    # per chunk of rows: column sums of the pixel term over the window's rows (cols[c],
+    # (w, nd)), moved one row at a time; window sums along x by a running sum
+    # (costs[c]); then winner-takes-all per row. Rr[y, w - 1 - x + j] = R[y, x - j]
+    # with the left border replicated.
     h, w = L.shape
+    n_chunks, _, nd = cols.shape
     step = (h + n_chunks - 1) // n_chunks
     n = float((2 * r + 1) * (2 * r + 1))
-    off = pad - dmin
+    ks = np.arange(nd).astype(np.float32)
+    ksi = np.arange(nd).astype(np.int32)
     for c in prange(n_chunks):
         y0 = c * step
         y1 = min(h, y0 + step)
-        col = np.zeros((nd, w), dtype=np.int32)
-        rc = np.empty((nd, w), dtype=np.float64)
-        pre = np.zeros(w + 2 * r + 2, dtype=np.int32)
+        col = cols[c]
+        C = costs[c]
+        Ci = cints[c]
+        acc = np.zeros_like(col[0])
+        rb = np.empty_like(Rr[0])  # the cost dtype
+        rk = np.empty_like(Rr[0])
+        col[:] = 0
         for y in range(y0, y1):
             if y == y0:
                 for t in range(-r, r + 1):
                     ya = min(max(y + t, 0), h - 1)
-                    _add_row(col, L[ya], Rpad[ya], off, nd, w, mode, 1)
+                    _move_rows(col, L[ya], Rr[ya], L[ya], Rr[ya], dmin, mode, False)
             else:
                 ya = min(y + r, h - 1)
                 ys = max(y - r - 1, 0)
-                _add_row(col, L[ya], Rpad[ya], off, nd, w, mode, 1)
-                _add_row(col, L[ys], Rpad[ys], off, nd, w, mode, -1)
+                _move_rows(col, L[ya], Rr[ya], L[ys], Rr[ys], dmin, mode, True)
+            # running window sums along x, borders replicated
             for k in range(nd):
-                # prefix sums of the column sums over x with replicated borders:
-                # pre[i] = sum of col[k, clamp(j - r - 1)] for j < i
-                pre[0] = 0
-                for i in range(w + 2 * r + 1):
-                    pre[i + 1] = pre[i] + col[k, min(max(i - r, 0), w - 1)]
+                acc[k] = col[0, k] * (r + 1)
+            for t in range(1, r + 1):
+                xx = min(t, w - 1)
+                for k in range(nd):
+                    acc[k] += col[xx, k]
+            for x in range(w):
                 if mode == 2:  # 1 - zero-mean NCC
-                    for x in range(w):
-                        acc = pre[x + 2 * r + 1] - pre[x]
-                        xr = min(max(x - dmin - k, 0), w - 1)
-                        vl = sl2[y, x] - sl[y, x] * sl[y, x] / n
-                        vr = sr2[y, xr] - sr[y, xr] * sr[y, xr] / n
-                        num = acc - sl[y, x] * sr[y, xr] / n
-                        rc[k, x] = 1.0 - num / np.sqrt(max(vl, 1e-9) * max(vr, 1e-9))
+                    base = w - 1 - x + dmin
+                    a = sl[y, x]
+                    b = vl[y, x]
+                    sr = srr[y, base : base + nd]
+                    vr = vrr[y, base : base + nd]
+                    for k in range(nd):
+                        q = (acc[k] - a * sr[k] / n) / np.sqrt(b * vr[k])
+                        q = q if q < 1.0 else 1.0  # the correlation's own range, so that
+                        q = q if q > -1.0 else -1.0  # the cost is >= 0 (see _wta_row)
+                        C[x, k] = 1.0 - q
                 else:
-                    for x in range(w):
-                        rc[k, x] = pre[x + 2 * r + 1] - pre[x]
-            _wta_row(rc, y, dmin, uniqueness, subpixel, disp, right)
+                    for k in range(nd):
+                        C[x, k] = acc[k]
+                xi = min(x + r + 1, w - 1)
+                xo = max(x - r, 0)
+                for k in range(nd):
+                    acc[k] += col[xi, k] - col[xo, k]
+            _wta_row(C, Ci, y, dmin, uniqueness, subpixel, want_right, ks, ksi, rb, rk, disp, right)
 
 
 def _box(img: np.ndarray, r: int) -> np.ndarray:
@@ -614,6 +767,12 @@ def _box(img: np.ndarray, r: int) -> np.ndarray:
 
     n = (2 * r + 1) ** 2
     return uniform_filter(img.astype(np.float64), 2 * r + 1, mode="nearest") * n
+
+
+def _reversed_rows(a: np.ndarray, dmax: int) -> np.ndarray:
+    """``out[y, w - 1 - x + j] = a[y, clip(x - j, 0, w - 1)]`` for ``0 <= j <= dmax``:
+    rows reversed and padded by ``dmax`` copies of the first column."""
+    return np.ascontiguousarray(np.pad(a, ((0, 0), (dmax, 0)), mode="edge")[:, ::-1])
 
 
 def block_matching(
@@ -656,21 +815,33 @@ def block_matching(
     if cost not in ("sad", "ssd", "ncc"):
         raise InputError(f"cost must be 'sad', 'ssd' or 'ncc'; got {cost!r}")
     _check_options(uniqueness, lr_check)
-    Li = np.round(L).astype(np.int32)  # window sums of 255^2 terms fit up to 45x45
-    Ri = np.round(R).astype(np.int32)
     nd = int(max_disparity) - int(min_disparity) + 1
     r = int(window) // 2
     h, w = L.shape
-    pad = int(max_disparity)
-    Rpad = np.pad(Ri, ((0, 0), (pad, 0)), mode="edge")
     mode = {"sad": 0, "ssd": 1, "ncc": 2}[cost]
+    # float32 while every window sum (and a sum plus one column) stays below 2^24,
+    # where float32 holds integers exactly; float64 otherwise
+    side = 2 * r + 1
+    exact32 = mode == 0 or (mode == 1 and (side * side + side) * 255**2 < 2**24)
+    dtype = np.float32 if exact32 else np.float64
+    Li = np.round(L).astype(dtype)
+    Ri = np.round(R).astype(dtype)
+    Rr = _reversed_rows(Ri, int(max_disparity))
     if mode == 2:
-        L64, R64 = Li.astype(np.float64), Ri.astype(np.float64)
-        sl, sl2, sr, sr2 = _box(L64, r), _box(L64 * L64, r), _box(R64, r), _box(R64 * R64, r)
+        n = side * side
+        sl, sl2, sr, sr2 = _box(Li, r), _box(Li * Li, r), _box(Ri, r), _box(Ri * Ri, r)
+        vl = np.maximum(sl2 - sl * sl / n, 1e-9)
+        vr = np.maximum(sr2 - sr * sr / n, 1e-9)
+        srr, vrr = _reversed_rows(sr, int(max_disparity)), _reversed_rows(vr, int(max_disparity))
     else:
-        sl = sl2 = sr = sr2 = np.zeros((1, 1))
+        sl = vl = srr = vrr = np.zeros((1, 1))
+    n_chunks = max(1, min(h, 2 * numba.get_num_threads()))
+    cols = np.zeros((n_chunks, w, nd), dtype=dtype)
+    costs = np.empty((n_chunks, w, nd), dtype=dtype)
     disp = np.empty((h, w), dtype=np.float32)
     right_winners = np.empty((h, w), dtype=np.int32)
-    _bm_kernel(Li, Rpad, pad, int(min_disparity), nd, r, mode, 16, sl, sl2, sr, sr2,
-               float(uniqueness), bool(subpixel), disp, right_winners)  # fmt: skip
+    cints = costs.view(np.int32 if dtype == np.float32 else np.int64)
+    _bm_kernel(Li, Rr, int(min_disparity), r, mode, cols, costs, cints, sl, srr, vl, vrr,
+               float(uniqueness), bool(subpixel), lr_check is not None, disp,
+               right_winners)  # fmt: skip
     return _post(disp, right_winners, lr_check, median)
