@@ -123,3 +123,41 @@ def test_stereo_calib_rectifies_the_chessboard_pair(tmp_path, capsys):
                  "--method", "bm", "-o", str(tmp_path / "d.png"), "--ply",
                  str(tmp_path / "p.ply")])  # fmt: skip
     assert code == 0 and (tmp_path / "p.ply").exists()
+
+
+@pytest.mark.realdata
+def test_handeye_from_circle_grid_images(tmp_path, capsys):
+    """The Open3DV eye-in-hand captures through --images --target acircles: the result
+    equals the library's on the same detections; a station without the grid is
+    reported and skipped."""
+    from robopercept.calibration import (
+        board_pose,
+        calibrate_hand_eye,
+        circles_grid_points,
+        find_circles_grid,
+        read_xyz_rpy,
+    )
+    from robopercept.imaging import read_image
+
+    folder = data_path("calibration", "handeye_open3dv", "eye_in_hand")
+    p = np.loadtxt(folder / "param.txt")
+    cam = tmp_path / "cam.json"
+    cam.write_text(json.dumps({"K": p[:9].reshape(3, 3).tolist(), "dist": p[9:14].tolist()}))
+    neg = data_path("calibration", "opencv_chessboard_stereo", "left01.jpg")
+    images = [str(folder / f"pos{k}.png") for k in range(6)] + [str(neg)]
+    poses = [str(folder / f"pos{k}.txt") for k in range(7)]
+    out = tmp_path / "he.json"
+    code = main(["handeye", "--robot-poses", *poses, "--images", *images, "--camera", str(cam),
+                 "--target", "acircles", "--circles", "light", "--board", "7x11",
+                 "--square", "20", "-o", str(out)])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr()
+    assert "skipped station 6" in text.err and "AX = XB residuals over 15 pairs" in text.out
+    obj = circles_grid_points((7, 11), 20.0)
+    targets = []
+    for k in range(6):
+        det = find_circles_grid(read_image(images[k], mode="gray"), (7, 11), blob_color="light")
+        targets.append(board_pose(obj, det.centers, p[:9].reshape(3, 3), p[9:14]))
+    robot = [read_xyz_rpy(f, "rpy_xyz") for f in poses[:6]]
+    ref = calibrate_hand_eye(robot, targets, "eye_in_hand", "tsai")
+    assert np.allclose(json.loads(out.read_text())["X"], ref.X, atol=1e-9)

@@ -1,10 +1,15 @@
-"""Camera calibration: chessboard detection, intrinsics (Zhang's method with
+"""Camera calibration: chessboard and circle-grid detection, intrinsics (Zhang's method with
 Levenberg-Marquardt refinement), stereo calibration, hand-eye calibration (AX = XB)."""
 
 from robopercept.calibration.chessboard import (
     ChessboardDetection,
     chessboard_points,
     find_chessboard_corners,
+)
+from robopercept.calibration.circles import (
+    CircleGridDetection,
+    circles_grid_points,
+    find_circles_grid,
 )
 from robopercept.calibration.handeye import (
     HandEyeResult,
@@ -29,13 +34,16 @@ from robopercept.calibration.intrinsics import (
 __all__ = [
     "CalibrationResult",
     "ChessboardDetection",
+    "CircleGridDetection",
     "HandEyeResult",
     "StereoCalibration",
     "board_pose",
     "calibrate_camera",
     "calibrate_hand_eye",
     "chessboard_points",
+    "circles_grid_points",
     "find_chessboard_corners",
+    "find_circles_grid",
     "hand_eye_residuals",
     "load_calibration",
     "pose_from_xyz_rpy",

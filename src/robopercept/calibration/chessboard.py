@@ -319,6 +319,23 @@ def _trim(grid: dict, pts: np.ndarray, n: int, gray: np.ndarray) -> dict:
     return grid
 
 
+def _predict(grid: dict, pts: np.ndarray, i: int, j: int) -> tuple[np.ndarray | None, float]:
+    """Where lattice node ``(i, j)`` should be, and the local spacing: the
+    parallelogram rule from three known neighbours, else linear extrapolation along a
+    line of two; ``(None, 0)`` when neither is known."""
+    for di, dj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+        a, b, c = (i - di, j), (i, j - dj), (i - di, j - dj)
+        if a in grid and b in grid and c in grid:
+            pa, pb, pc = pts[grid[a]], pts[grid[b]], pts[grid[c]]
+            return pa + pb - pc, min(np.linalg.norm(pa - pc), np.linalg.norm(pb - pc))
+    for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+        a, b = (i - di, j - dj), (i - 2 * di, j - 2 * dj)
+        if a in grid and b in grid:
+            pa, pb = pts[grid[a]], pts[grid[b]]
+            return 2 * pa - pb, float(np.linalg.norm(pa - pb))
+    return None, 0.0
+
+
 def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int, tree: Any) -> dict:
     """Lattice ``{(i, j): candidate}`` grown from seed ``s``."""
     nb = _seed_neighbours(pts, dirs, s)
@@ -353,21 +370,7 @@ def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int, tree: Any) -> d
             n_known = sum((i + a, j + b) in grid for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1)))
             if tried.get((i, j), -1) >= n_known:
                 continue
-            pred, step = None, 0.0
-            for di, dj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                a, b, c = (i - di, j), (i, j - dj), (i - di, j - dj)
-                if a in grid and b in grid and c in grid:
-                    pa, pb, pc = pts[grid[a]], pts[grid[b]], pts[grid[c]]
-                    pred = pa + pb - pc
-                    step = min(np.linalg.norm(pa - pc), np.linalg.norm(pb - pc))
-                    break
-            if pred is None:
-                for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-                    a, b = (i - di, j - dj), (i - 2 * di, j - 2 * dj)
-                    if a in grid and b in grid:
-                        pa, pb = pts[grid[a]], pts[grid[b]]
-                        pred, step = 2 * pa - pb, np.linalg.norm(pa - pb)
-                        break
+            pred, step = _predict(grid, pts, i, j)
             if pred is None:
                 continue
             tried[(i, j)] = n_known

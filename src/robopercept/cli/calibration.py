@@ -50,8 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="hand-eye calibration AX = XB from robot poses and target poses",
         description="Robot poses (gripper in base) and target poses (target in camera), one "
         "per station, give X = T_gripper_camera (eye in hand) or T_base_camera (eye to "
-        "hand). Target poses come from files (4x4 matrices) or from chessboard images "
-        "with a calibrated camera (--images, --camera, --board, --square).",
+        "hand). Target poses come from files (4x4 matrices) or from images of a "
+        "chessboard or circle grid with a calibrated camera (--images, --camera, --board, "
+        "--square, --target).",
     )
     q.add_argument("--robot-poses", nargs="+", required=True, help="one file per station")
     q.add_argument(
@@ -62,10 +63,32 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     src = q.add_mutually_exclusive_group(required=True)
     src.add_argument("--target-poses", nargs="+", help="4x4 target-in-camera per station")
-    src.add_argument("--images", nargs="+", help="chessboard image per station")
+    src.add_argument("--images", nargs="+", help="target image per station")
     q.add_argument("--camera", default=None, help="camera JSON (from calibrate) for --images")
-    q.add_argument("--board", type=_board, default=None, help="inner corners for --images")
-    q.add_argument("--square", type=float, default=None, help="square side, robot units")
+    q.add_argument(
+        "--target",
+        choices=("chessboard", "circles", "acircles"),
+        default="chessboard",
+        help="what --images show: a chessboard, a symmetric or an asymmetric circle grid",
+    )
+    q.add_argument(
+        "--board",
+        type=_board,
+        default=None,
+        help="inner corners (chessboard) or circles per row x rows (grids) for --images",
+    )
+    q.add_argument(
+        "--square",
+        type=float,
+        default=None,
+        help="square side, or distance between neighbouring centres of a row, robot units",
+    )
+    q.add_argument(
+        "--circles",
+        choices=("dark", "light"),
+        default="dark",
+        help="circle-grid targets: circles darker or lighter than the board",
+    )
     q.add_argument("--setup", choices=("eye-in-hand", "eye-to-hand"), default="eye-in-hand")
     q.add_argument("--method", choices=("tsai", "park", "daniilidis"), default="tsai")
     q.add_argument("-o", "--output", default="handeye.json")
@@ -180,7 +203,9 @@ def _target_poses(args: argparse.Namespace) -> tuple[list[np.ndarray], list[int]
     from robopercept.calibration import (
         board_pose,
         chessboard_points,
+        circles_grid_points,
         find_chessboard_corners,
+        find_circles_grid,
         load_calibration,
     )
     from robopercept.errors import InputError
@@ -193,10 +218,18 @@ def _target_poses(args: argparse.Namespace) -> tuple[list[np.ndarray], list[int]
     cam = load_calibration(args.camera)
     if "K" not in cam:
         raise InputError(f"{args.camera} is not a single-camera calibration (no 'K')")
-    obj = chessboard_points(args.board, args.square)
+    asym = args.target == "acircles"
+    if args.target == "chessboard":
+        obj = chessboard_points(args.board, args.square)
+    else:
+        obj = circles_grid_points(args.board, args.square, asymmetric=asym)
     poses, stations = [], []
     for i, path in enumerate(args.images):
-        det = find_chessboard_corners(read_image(path, mode="gray"), args.board)
+        gray = read_image(path, mode="gray")
+        if args.target == "chessboard":
+            det = find_chessboard_corners(gray, args.board)
+        else:
+            det = find_circles_grid(gray, args.board, asymmetric=asym, blob_color=args.circles)
         if not det.found:
             print(f"skipped station {i} ({path}): {det.reason}", file=sys.stderr)
             continue

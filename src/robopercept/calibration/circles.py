@@ -1,0 +1,357 @@
+r"""Circle-grid detection: the centres of a symmetric or asymmetric grid of circles,
+ordered as ``cv2.findCirclesGrid`` orders them.
+
+:func:`find_circles_grid` works in three steps.
+
+1. **Blobs at many thresholds** (the scheme of OpenCV's ``SimpleBlobDetector``, which
+   ``findCirclesGrid`` uses): the image, with the circles dark (light circles: its
+   negative), is thresholded at 10, 20, ..., 220; in each
+   binary image the connected components of the circles' colour whose area lies in
+   ``[min_area, max_area]`` and that look like filled ellipses are kept. A component's
+   second moments give its covariance :math:`\Sigma`; a filled ellipse has area
+   :math:`A = 4 \pi \sqrt{\det \Sigma}` and an inertia ratio
+   :math:`\lambda_{min}/\lambda_{max}` equal to its squared axis ratio, so components
+   with :math:`A / (4 \pi \sqrt{\det \Sigma})` outside :math:`[0.85, 1.15]` (holes,
+   ragged shapes, merged blobs) or an inertia ratio below 0.1 are dropped. Centroids
+   that agree across at least two thresholds (within half the blob radius) make one
+   circle, at the mean of those centroids.
+2. **Lattice growing.** Both grids are square lattices: the symmetric one along its rows
+   and columns, the asymmetric one along its diagonals (each centre's four nearest
+   neighbours sit at :math:`(\pm 1, \pm 1)` half-spacings). From a seed, the nearest
+   neighbour and the nearest one not along it span the lattice; every further node is
+   predicted by the parallelogram rule :math:`p_{a,b} \approx p_{a-1,b} + p_{a,b-1} -
+   p_{a-1,b-1}` (or by extrapolation along a line) and filled by the nearest circle
+   within 0.3 of the local spacing, so perspective is followed.
+3. **Labelling.** Lattice coordinates :math:`(a, b)` become board coordinates, and the
+   one of the lattice's eight symmetries under which they fill the pattern exactly,
+   with the board's x step turning clockwise into its y step in the image (a board
+   seen from the front), gives the order.
+
+**Order and board coordinates**, as OpenCV's calibration sample: row ``i`` of
+``pattern_size[1]``, ``pattern_size[0]`` centres per row; the symmetric grid's centre
+``(i, j)`` at ``(j s, i s)`` and the asymmetric grid's at ``((2 j + i mod 2) s / 2,
+i s / 2)`` with ``s`` the distance between neighbouring centres in a row
+(:func:`circles_grid_points`). An asymmetric grid with an odd number of rows has no
+symmetry, so its order is fixed by the board; a symmetric grid, or an asymmetric one
+with an even number of rows, looks the same turned by half a turn, and its first
+centre is taken to be the one higher in the image.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from robopercept.calibration.chessboard import _gray, _nearest, _pattern, _predict
+from robopercept.errors import InputError
+from robopercept.imaging.blobs import label_components
+
+__all__ = ["CircleGridDetection", "circles_grid_points", "find_circles_grid"]
+
+_THRESHOLDS = tuple(range(10, 221, 10))  # SimpleBlobDetector's defaults
+_MIN_REPEAT = 2
+
+
+@dataclass(frozen=True)
+class CircleGridDetection:
+    """Result of :func:`find_circles_grid`.
+
+    Attributes
+    ----------
+    found : bool
+        Whether every circle of the pattern was found.
+    centers : (w * h, 2) ndarray
+        Ordered centres ``(x, y)`` when found, else the circles of the largest partial
+        lattice (unordered, for drawing), possibly empty.
+    pattern_size : (int, int)
+    asymmetric : bool
+    reason : str
+        Why the grid was not found ("" when found).
+    """
+
+    found: bool
+    centers: np.ndarray
+    pattern_size: tuple[int, int]
+    asymmetric: bool
+    reason: str = ""
+
+    @property
+    def corners(self) -> np.ndarray:
+        """The centres, under the name the chessboard detection uses (for code and
+        drawing that take either)."""
+        return self.centers
+
+
+def circles_grid_points(
+    pattern_size: tuple[int, int], spacing: float = 1.0, *, asymmetric: bool = True
+) -> np.ndarray:
+    """Board coordinates ``(n, 3)`` of the centres, in the detection order.
+
+    Centre ``k`` (row ``i = k // w``, column ``j = k % w``) sits at ``(j s, i s, 0)`` on
+    a symmetric grid and at ``((2 j + i % 2) s / 2, i s / 2, 0)`` on an asymmetric one,
+    ``s = spacing`` being the distance between neighbouring centres of one row
+    (OpenCV's sample passes ``s / 2`` as its "square size" for the asymmetric grid).
+    """
+    w, h = _pattern(pattern_size)
+    if not spacing > 0:
+        raise InputError(f"spacing must be positive; got {spacing}")
+    i, j = np.divmod(np.arange(w * h), w)
+    if asymmetric:
+        x, y = (2 * j + i % 2) * spacing / 2.0, i * spacing / 2.0
+    else:
+        x, y = j * float(spacing), i * float(spacing)
+    return np.stack([x, y, np.zeros(w * h)], axis=1).astype(np.float64)
+
+
+@njit(cache=True)
+def _moments(labels, n):  # pragma: no cover - compiled
+    # per label: area, sums of x, y, x^2, y^2, xy (about the bbox corner, for precision)
+    # and whether it touches the image border
+    h, w = labels.shape
+    m = np.zeros((n + 1, 6))
+    x0 = np.full(n + 1, w, dtype=np.int64)
+    y0 = np.full(n + 1, h, dtype=np.int64)
+    edge = np.zeros(n + 1, dtype=np.bool_)
+    for y in range(h):
+        for x in range(w):
+            k = labels[y, x]
+            if k > 0 and x0[k] == w:
+                x0[k], y0[k] = x, y
+    for y in range(h):
+        for x in range(w):
+            k = labels[y, x]
+            if k == 0:
+                continue
+            dx = float(x - x0[k])
+            dy = float(y - y0[k])
+            m[k, 0] += 1.0
+            m[k, 1] += dx
+            m[k, 2] += dy
+            m[k, 3] += dx * dx
+            m[k, 4] += dy * dy
+            m[k, 5] += dx * dy
+            if x == 0 or y == 0 or x == w - 1 or y == h - 1:
+                edge[k] = True
+    return m, x0, y0, edge
+
+
+def _ellipse_blobs(mask: np.ndarray, min_area: float, max_area: float) -> np.ndarray:
+    """Centroid and radius ``(n, 3)`` of the components of ``mask`` that are filled
+    ellipses of an accepted size, not touching the border."""
+    labels, n = label_components(mask, connectivity=8)
+    if n == 0:
+        return np.zeros((0, 3))
+    m, x0, y0, edge = _moments(labels, n)
+    m, x0, y0, edge = m[1:], x0[1:], y0[1:], edge[1:]
+    a = m[:, 0]
+    keep = (a >= min_area) & (a <= max_area) & ~edge
+    m, x0, y0, a = m[keep], x0[keep], y0[keep], a[keep]
+    mx, my = m[:, 1] / a, m[:, 2] / a
+    sxx = m[:, 3] / a - mx * mx
+    syy = m[:, 4] / a - my * my
+    sxy = m[:, 5] / a - mx * my
+    det = np.maximum(sxx * syy - sxy * sxy, 1e-12)
+    tr = sxx + syy
+    disc = np.sqrt(np.maximum(0.25 * tr * tr - det, 0.0))
+    lmin, lmax = 0.5 * tr - disc, 0.5 * tr + disc
+    fill = a / (4.0 * np.pi * np.sqrt(det))
+    ok = (fill > 0.85) & (fill < 1.15) & (lmin >= 0.1 * lmax)
+    return np.stack([x0[ok] + mx[ok], y0[ok] + my[ok], np.sqrt(a[ok] / np.pi)], axis=1)
+
+
+def _circles(gray: np.ndarray, dark: bool, min_area: float, max_area: float) -> np.ndarray:
+    """Circle centres and radii: blobs repeated over at least two thresholds."""
+    from scipy.spatial import cKDTree
+
+    groups: list[list[np.ndarray]] = []
+    centres = np.zeros((0, 2))
+    for t in _THRESHOLDS:  # on the image with the circles dark (light ones: 255 - gray)
+        blobs = _ellipse_blobs(gray < t if dark else gray > 255 - t, min_area, max_area)
+        if len(groups) and len(blobs):
+            d, k = cKDTree(centres).query(blobs[:, :2])
+            tol = 0.5 * np.minimum(blobs[:, 2], [groups[j][-1][2] for j in k])
+            new = []
+            for b, dist, j, tj in zip(blobs, d, k, tol, strict=True):
+                if dist <= tj:
+                    groups[j].append(b)
+                else:
+                    new.append(b)
+        else:
+            new = list(blobs)
+        groups.extend([b] for b in new)
+        centres = np.array([np.mean([b[:2] for b in g], axis=0) for g in groups]).reshape(-1, 2)
+    out = [np.mean(g, axis=0) for g in groups if len(g) >= _MIN_REPEAT]
+    return np.array(out).reshape(-1, 3)
+
+
+_STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
+
+
+def _grow(pts: np.ndarray, s: int, tree: Any, limit: int) -> dict:
+    """Lattice ``{(a, b): index}`` grown from seed ``s`` (see the module docstring)."""
+    d, nb = tree.query(pts[s], k=min(7, len(pts)))
+    d, nb = d[1:], nb[1:]
+    if len(nb) < 2:
+        return {(0, 0): s}
+    u = pts[nb[0]] - pts[s]
+    second = -1
+    for dist, k in zip(d[1:], nb[1:], strict=True):
+        v = pts[k] - pts[s]
+        c = abs(u @ v) / (np.linalg.norm(u) * dist)
+        if c < 0.5 and dist < 2.0 * d[0]:  # between 60 and 120 degrees from u
+            second = k
+            break
+    if second < 0:
+        return {(0, 0): s}
+    grid = {(0, 0): s, (1, 0): int(nb[0]), (0, 1): int(second)}
+    free = np.ones(len(pts), dtype=bool)
+    free[list(grid.values())] = False
+    tried: dict = {}
+    changed = True
+    while changed:
+        changed = False
+        frontier = {
+            (a + da, b + db) for (a, b) in grid for da, db in _STEPS if (a + da, b + db) not in grid
+        }
+        for a, b in sorted(frontier):
+            n_known = sum((a + p, b + q) in grid for p, q in _STEPS)
+            if tried.get((a, b), -1) >= n_known:
+                continue
+            pred, step = _predict(grid, pts, a, b)
+            if pred is None:
+                continue
+            tried[(a, b)] = n_known
+            k = _nearest(tree, free, pred, 0.3 * step)
+            if k >= 0:
+                grid[(a, b)] = k
+                free[k] = False
+                changed = True
+        aa = [p for p, _ in grid]
+        bb = [q for _, q in grid]
+        if max(aa) - min(aa) > limit or max(bb) - min(bb) > limit:
+            break
+    return grid
+
+
+_SYMMETRIES = tuple((swap, sx, sy) for swap in (False, True) for sx in (1, -1) for sy in (1, -1))
+
+
+def _label(grid: dict, pts: np.ndarray, w: int, h: int, asymmetric: bool) -> np.ndarray | None:
+    """The centres in detection order, or None when the lattice is not the pattern."""
+    if len(grid) != w * h:
+        return None
+    ab = np.array(list(grid.keys()), dtype=np.int64)
+    idx = np.array(list(grid.values()))
+    # board coordinates (x, y) in half-spacings (asymmetric: the lattice runs along the
+    # diagonals) or spacings (symmetric)
+    base = np.stack([ab[:, 0] - ab[:, 1], ab[:, 0] + ab[:, 1]], 1) if asymmetric else ab
+    i, j = np.divmod(np.arange(w * h), w)
+    want = np.stack([2 * j + i % 2, i], 1) if asymmetric else np.stack([j, i], 1)
+    want_set = {tuple(p) for p in want}
+    found = []
+    for swap, sx, sy in _SYMMETRIES:
+        xy = base[:, ::-1] if swap else base
+        xy = xy * np.array([sx, sy])
+        y = xy[:, 1] - xy[:, 1].min()
+        x = xy[:, 0] - xy[y == 0, 0].min()
+        if {(int(p), int(q)) for p, q in zip(x, y, strict=True)} != want_set:
+            continue
+        # affine fit board -> image: the x step must turn clockwise into the y step
+        A = np.column_stack([x, y, np.ones(len(x))])
+        M, *_ = np.linalg.lstsq(A, pts[idx], rcond=None)
+        if M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0] <= 0:
+            continue
+        order = np.empty(w * h, dtype=np.int64)
+        row = y
+        col = (x - row % 2) // 2 if asymmetric else x
+        order[row * w + col] = idx
+        found.append(pts[order])
+    if not found:
+        return None
+    # half-turn symmetric patterns match twice: the first centre higher in the image
+    return min(found, key=lambda c: (c[0, 1], c[0, 0]))
+
+
+def find_circles_grid(
+    image: np.ndarray,
+    pattern_size: tuple[int, int],
+    *,
+    asymmetric: bool = True,
+    blob_color: str = "dark",
+    min_area: float = 25.0,
+    max_area: float = 5000.0,
+    max_seeds: int = 20,
+) -> CircleGridDetection:
+    """Find the centres of a grid of circles (``cv2.findCirclesGrid``).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        uint8 or float image (RGB for colour).
+    pattern_size : (int, int)
+        Circles per row and rows, e.g. ``(4, 11)`` for OpenCV's asymmetric pattern.
+    asymmetric : bool
+        OpenCV's ``CALIB_CB_ASYMMETRIC_GRID`` (rows offset by half a spacing) or the
+        symmetric grid.
+    blob_color : {"dark", "light"}
+        Circles darker than their surround (OpenCV's default detector) or lighter.
+    min_area, max_area : float
+        Accepted circle area in pixels (OpenCV's defaults).
+    max_seeds : int
+        Lattices of 4 circles or more grown before giving up.
+
+    Returns
+    -------
+    CircleGridDetection
+        ``found`` is False (with the reason) unless every circle was found.
+    """
+    w, h = _pattern(pattern_size)
+    if blob_color not in ("dark", "light"):
+        raise InputError(f"blob_color must be 'dark' or 'light'; got {blob_color!r}")
+    if not 0 < min_area <= max_area:
+        raise InputError(f"need 0 < min_area <= max_area; got {min_area}, {max_area}")
+    gray = _gray(image).astype(np.float64)
+    if image.dtype.kind == "f" and gray.max() <= 1.0 + 1e-9:
+        gray = gray * 255.0
+    circles = _circles(gray, blob_color == "dark", float(min_area), float(max_area))
+    n = w * h
+    if len(circles) < n:
+        return CircleGridDetection(
+            False, circles[:, :2], (w, h), asymmetric,
+            f"only {len(circles)} circle-like blobs; need {n}"
+            + ("" if len(circles) else f" (are the circles {blob_color}?)"),
+        )  # fmt: skip
+    from scipy.spatial import cKDTree
+
+    pts = circles[:, :2]
+    tree = cKDTree(pts)
+    order = np.argsort(np.hypot(*(pts - np.median(pts, axis=0)).T), kind="stable")
+    used = np.zeros(len(pts), dtype=bool)
+    largest: dict = {}
+    tries = 0
+    limit = w + h + 2 if asymmetric else max(w, h) + 2
+    for s in order:
+        if used[s]:
+            continue
+        grid = _grow(pts, int(s), tree, limit)
+        used[list(grid.values())] = True
+        if len(grid) < 4:
+            continue
+        tries += 1
+        if len(grid) > len(largest):
+            largest = grid
+        centers = _label(grid, pts, w, h, asymmetric)
+        if centers is not None:
+            return CircleGridDetection(True, centers, (w, h), asymmetric)
+        if tries >= max_seeds:
+            break
+    partial = pts[list(largest.values())] if largest else np.zeros((0, 2))
+    kind = "asymmetric" if asymmetric else "symmetric"
+    return CircleGridDetection(
+        False, partial, (w, h), asymmetric,
+        f"no complete {w} x {h} {kind} grid of circles (largest lattice: {len(largest)} "
+        "circles); the whole grid must be visible",
+    )  # fmt: skip
