@@ -215,14 +215,25 @@ def _census_block_cost(cl, crr, dmin, r, invalid, rings, cols, out):  # pragma: 
 # ---------------------------------------------------------------- SGM aggregation
 
 
+@njit(cache=True, inline="always")
+def _row_min(Qi, o, box, boxi, nd):  # pragma: no cover - compiled
+    # min of row o's costs 1..nd, found on the int32 view Qi (floats >= 0 order like
+    # their bits, and int32 minima vectorize where float ones do not); box/boxi (a
+    # float32 array of one and its int32 view) turn the bits back
+    best = Qi[o, 1]
+    for k in range(2, nd + 1):
+        q = Qi[o, k]
+        best = q if q < best else best
+    boxi[0] = best
+    return box[0]
+
+
 @njit(cache=True, fastmath=True, inline="always")
 def _step(cost, y, x, P, pr, pmin, p1, p2, Q, o, Qi, box, boxi, nd):  # pragma: no cover
     # Q[o, k+1] = C[k] + min(P[pr, k+1], P[pr, k] + P1, P[pr, k+2] + P1, pmin + P2) - pmin
     # with C = cost[y, x]; rows of P and Q are padded with the sentinel at 0 and nd + 1.
-    # Returns min_k Q[o, k+1], found on the int32 view Qi (floats >= 0 order like their
-    # bits, and int32 minima vectorize where float ones do not); box/boxi (a float32
-    # array of one and its int32 view) turn the bits back. Whole arrays and indices,
-    # not row views, keep numba from reference-counting a view per call.
+    # Returns min_k Q[o, k+1] (_row_min). Whole arrays and indices, not row views, keep
+    # numba from reference-counting a view per call.
     m = pmin + p2
     for k in range(nd):
         v = P[pr, k + 1]
@@ -232,12 +243,7 @@ def _step(cost, y, x, P, pr, pmin, p1, p2, Q, o, Qi, box, boxi, nd):  # pragma: 
         v = b if b < v else v
         v = m if m < v else v
         Q[o, k + 1] = v - pmin + np.float32(cost[y, x, k])
-    best = Qi[o, 1]
-    for k in range(2, nd + 1):
-        q = Qi[o, k]
-        best = q if q < best else best
-    boxi[0] = best
-    return box[0]
+    return _row_min(Qi, o, box, boxi, nd)
 
 
 @njit(cache=True, fastmath=True, inline="always")
@@ -245,12 +251,7 @@ def _start(cost, y, x, Q, o, Qi, box, boxi, nd):  # pragma: no cover - compiled
     # a path's first pixel: Q[o, k+1] = C[k]; returns its minimum (as _step)
     for k in range(nd):
         Q[o, k + 1] = np.float32(cost[y, x, k])
-    best = Qi[o, 1]
-    for k in range(2, nd + 1):
-        q = Qi[o, k]
-        best = q if q < best else best
-    boxi[0] = best
-    return box[0]
+    return _row_min(Qi, o, box, boxi, nd)
 
 
 @njit(cache=True, inline="always")
