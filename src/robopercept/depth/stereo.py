@@ -163,6 +163,29 @@ def _hamming_row(cl, crr, yy, dmin, invalid, out, slot):  # pragma: no cover - c
             o[k] = v if k <= kmax else invalid
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def _window_start(col, r, acc):  # pragma: no cover - compiled
+    # acc[k] = sum of col[clip(x, 0, w - 1), k] for x in -r..r: the window at column 0,
+    # borders replicated
+    w, nd = col.shape
+    for k in range(nd):
+        acc[k] = col[0, k] * (r + 1)
+    for t in range(1, r + 1):
+        xx = min(t, w - 1)
+        for k in range(nd):
+            acc[k] += col[xx, k]
+
+
+@njit(cache=True, fastmath=True, inline="always")
+def _window_move(col, x, r, acc):  # pragma: no cover - compiled
+    # slide the window sums acc from column x to x + 1 (borders replicated)
+    w, nd = col.shape
+    xi = min(x + r + 1, w - 1)
+    xo = max(x - r, 0)
+    for k in range(nd):
+        acc[k] += col[xi, k] - col[xo, k]
+
+
 @njit(cache=True, parallel=True, fastmath=True)
 def _census_block_cost(cl, crr, dmin, r, invalid, rings, cols, out):  # pragma: no cover
     # out[y, x, k] = sum of the Hamming costs over the (2r+1)^2 block around (y, x),
@@ -197,19 +220,11 @@ def _census_block_cost(cl, crr, dmin, r, invalid, rings, cols, out):  # pragma: 
                 for x in range(w):
                     for k in range(nd):
                         col[x, k] += ring[slot, x, k]
-            for k in range(nd):
-                acc[k] = col[0, k] * (r + 1)
-            for t in range(1, r + 1):
-                xx = min(t, w - 1)
-                for k in range(nd):
-                    acc[k] += col[xx, k]
+            _window_start(col, r, acc)
             for x in range(w):
                 for k in range(nd):
                     out[y, x, k] = np.uint16(np.int32(acc[k]))
-                xi = min(x + r + 1, w - 1)
-                xo = max(x - r, 0)
-                for k in range(nd):
-                    acc[k] += col[xi, k] - col[xo, k]
+                _window_move(col, x, r, acc)
 
 
 # ---------------------------------------------------------------- SGM aggregation
@@ -734,12 +749,7 @@ def _bm_kernel(L, Rr, dmin, r, mode, cols, costs, cints, sl, srr, vl, vrr,
                 ys = max(y - r - 1, 0)
                 _move_rows(col, L[ya], Rr[ya], L[ys], Rr[ys], dmin, mode, True)
             # running window sums along x, borders replicated
-            for k in range(nd):
-                acc[k] = col[0, k] * (r + 1)
-            for t in range(1, r + 1):
-                xx = min(t, w - 1)
-                for k in range(nd):
-                    acc[k] += col[xx, k]
+            _window_start(col, r, acc)
             for x in range(w):
                 if mode == 2:  # 1 - zero-mean NCC
                     base = w - 1 - x + dmin
@@ -755,10 +765,7 @@ def _bm_kernel(L, Rr, dmin, r, mode, cols, costs, cints, sl, srr, vl, vrr,
                 else:
                     for k in range(nd):
                         C[x, k] = acc[k]
-                xi = min(x + r + 1, w - 1)
-                xo = max(x - r, 0)
-                for k in range(nd):
-                    acc[k] += col[xi, k] - col[xo, k]
+                _window_move(col, x, r, acc)
             _wta_row(C, Ci, y, dmin, uniqueness, subpixel, want_right, ks, ksi, rb, rk, disp, right)
 
 
