@@ -105,3 +105,22 @@ def test_plane_helpers():
 def test_bad_input(call, exc, match):
     with pytest.raises(exc, match=match):
         call()
+
+
+def test_scatter_matrix_hand_case_and_mask(rng):
+    from robopercept.estimation.least_squares import scatter_matrix
+
+    # hand case: (0,0), (2,0), (0,2), (2,2): centroid (1,1), S = diag(4, 4)
+    c, s = scatter_matrix(np.array([[0.0, 0], [2, 0], [0, 2], [2, 2]]))
+    np.testing.assert_array_equal(c, [1, 1])
+    np.testing.assert_array_equal(s, [[4, 0], [0, 4]])
+    # far from the origin (a centroid of 1e4 m): two passes keep S exact to 1e-9 relative
+    pts = rng.normal(0, 1, (5000, 3)) * [1, 2, 0.01] + 1e4
+    mask = rng.random(5000) < 0.3
+    c, s = scatter_matrix(pts, mask)
+    sel = pts[mask]
+    np.testing.assert_allclose(c, sel.mean(axis=0), rtol=1e-14)
+    np.testing.assert_allclose(s, np.cov(sel.T) * (len(sel) - 1), rtol=1e-9)
+    # integer input and an empty selection
+    c, s = scatter_matrix(np.arange(6).reshape(3, 2), np.zeros(3, dtype=bool))
+    assert np.array_equal(c, [0, 0]) and np.array_equal(s, np.zeros((2, 2)))

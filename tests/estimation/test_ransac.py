@@ -183,3 +183,32 @@ def test_initial_hypothesis_is_scored_first_and_can_end_the_search():
     assert res.n_iterations > 1 and res.inliers[:300].all()
     with pytest.raises(InputError, match="initial"):
         ransac(pts, PlaneModel(), 0.01, initial=np.array([[np.nan, 0, 1, 0]]))
+
+
+@pytest.mark.parametrize("msac", [False, True])
+def test_plane_scoring_kernel_matches_numpy_on_any_thread_count(rng, msac):
+    # the compiled, blocked plane scorer against the generic residual-matrix scorer, on a
+    # ragged number of points (3 full blocks of 2048 and a partial one)
+    import numba
+
+    from robopercept.estimation.models import Model
+
+    pts, _, _ = plane_data(rng, n=3 * 2048 + 77, outlier_ratio=0.5)
+    model = PlaneModel()
+    params, valid = model.fit_minimal(pts[rng.integers(0, len(pts), (16, 3))])
+    params = params[valid]
+    prepared = model.prepare(pts)
+    ref_scores, ref_counts = Model.score(model, params, pts, 0.01, msac)
+    scores, counts = model.score(params, prepared, 0.01, msac)
+    assert np.array_equal(counts, ref_counts) and counts.min() > 0
+    # MSAC losses: sums of the same terms in a different order (1e-12 relative)
+    np.testing.assert_allclose(scores, ref_scores, rtol=1e-12)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = model.score(params, prepared, 0.01, msac)
+    finally:
+        numba.set_num_threads(before)
+    assert np.array_equal(one[0], scores) and np.array_equal(one[1], counts)
+    mask = model.inlier_mask(params[0], prepared, 0.01)
+    assert np.array_equal(mask, np.abs(pts @ params[0, :3] + params[0, 3]) < 0.01)

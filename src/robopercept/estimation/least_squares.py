@@ -19,11 +19,11 @@ Two kinds of fit:
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+from numba import njit
 
 from robopercept._checks import check_choice, check_points
 from robopercept.errors import DegenerateError, InputError
@@ -172,33 +172,47 @@ def _checked(points: np.ndarray, dim: int, need: int, what: str) -> np.ndarray:
     return p
 
 
-_CHUNK = 1 << 18
+@njit(cache=True, nogil=True)
+def _scatter_kernel(points, mask, use_mask):  # pragma: no cover - compiled
+    n, d = points.shape
+    c = np.zeros(d)
+    count = 0
+    for i in range(n):
+        if use_mask and not mask[i]:
+            continue
+        count += 1
+        for j in range(d):
+            c[j] += points[i, j]
+    c /= max(count, 1)
+    s = np.zeros((d, d))
+    dev = np.empty(d)
+    for i in range(n):  # a second pass: deviations from the exact centroid
+        if use_mask and not mask[i]:
+            continue
+        for j in range(d):
+            dev[j] = points[i, j] - c[j]
+        for j in range(d):
+            for k in range(j, d):
+                s[j, k] += dev[j] * dev[k]
+    for j in range(d):
+        for k in range(j):
+            s[j, k] = s[k, j]
+    return c, s
 
 
 def scatter_matrix(
     points: np.ndarray, mask: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     r"""Centroid :math:`\bar x` and scatter :math:`S = \sum_i (x_i - \bar x)(x_i - \bar x)^\top`
-    of the ``(N, D)`` points (those where ``mask`` is True), chunk by chunk so that no
-    ``N x D`` temporary is made."""
+    of the ``(N, D)`` points (those where ``mask`` is True).
 
-    def blocks() -> Iterator[np.ndarray]:
-        for start in range(0, points.shape[0], _CHUNK):
-            block = points[start : start + _CHUNK]
-            yield block if mask is None else block[mask[start : start + _CHUNK]]
-
-    d = points.shape[1]
-    total = np.zeros(d)
-    count = 0
-    for block in blocks():
-        total += block.sum(axis=0)
-        count += block.shape[0]
-    c = total / max(count, 1)
-    s = np.zeros((d, d))
-    for block in blocks():  # a second pass: deviations from the exact centroid
-        dev = block - c
-        s += dev.T @ dev
-    return c, s
+    Two compiled passes over the rows (the centroid, then the deviations from it), with
+    no ``N x D`` temporary and no copy of the selected rows.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if mask is None:
+        return _scatter_kernel(pts, np.zeros(1, dtype=np.bool_), False)
+    return _scatter_kernel(pts, np.asarray(mask, dtype=np.bool_), True)
 
 
 def fit_plane_from_scatter(centroid: np.ndarray, scatter: np.ndarray) -> np.ndarray:

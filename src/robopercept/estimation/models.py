@@ -24,7 +24,7 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from robopercept.errors import DegenerateError
 from robopercept.estimation.least_squares import (
@@ -42,34 +42,62 @@ _EPS = 1e-12
 _CHUNK = 1 << 17  # rows per scoring chunk: B x 131072 float64 residuals at a time
 
 
-@njit(cache=True, nogil=True)
+_BLOCK = 2048  # points per scoring block: 48 KiB of x, y, z, read once for all hypotheses
+
+
+@njit(cache=True, nogil=True, parallel=True)
 def _plane_score_kernel(params, x, y, z, threshold, msac, counts, loss):  # pragma: no cover
-    """Inlier counts and MSAC losses of plane hypotheses over coordinate arrays."""
+    """Inlier counts and MSAC losses of plane hypotheses over coordinate arrays.
+
+    The points go in blocks small enough to stay in cache while every hypothesis is
+    scored on them (memory is read once per batch, not once per hypothesis); blocks run
+    in parallel, and their partial sums are added in block order, so the result does not
+    depend on the number of threads.
+    """
+    n = x.shape[0]
+    nh = params.shape[0]
+    nb = (n + _BLOCK - 1) // _BLOCK
+    part_c = np.zeros((nb, nh), dtype=np.int64)
+    part_l = np.zeros((nb, nh))
     t2 = threshold * threshold
-    for h in range(params.shape[0]):
-        a = params[h, 0]
-        b = params[h, 1]
-        c = params[h, 2]
-        d = params[h, 3]
+    for blk in prange(nb):
+        lo = blk * _BLOCK
+        m = min(n - lo, _BLOCK)
+        xs = x[lo : lo + m]
+        ys = y[lo : lo + m]
+        zs = z[lo : lo + m]
+        for h in range(nh):
+            a = params[h, 0]
+            b = params[h, 1]
+            c = params[h, 2]
+            d = params[h, 3]
+            cnt = 0
+            acc = 0.0
+            if msac:
+                for i in range(m):
+                    r = abs(a * xs[i] + b * ys[i] + c * zs[i] + d)
+                    inside = r < threshold
+                    cnt += inside
+                    acc += r * r if inside else t2
+            else:
+                for i in range(m):
+                    cnt += abs(a * xs[i] + b * ys[i] + c * zs[i] + d) < threshold
+            part_c[blk, h] = cnt
+            part_l[blk, h] = acc
+    for h in range(nh):
         cnt = 0
         acc = 0.0
-        if msac:
-            for i in range(x.shape[0]):
-                r = abs(a * x[i] + b * y[i] + c * z[i] + d)
-                inside = r < threshold
-                cnt += inside
-                acc += r * r if inside else t2
-        else:
-            for i in range(x.shape[0]):
-                cnt += abs(a * x[i] + b * y[i] + c * z[i] + d) < threshold
+        for blk in range(nb):
+            cnt += part_c[blk, h]
+            acc += part_l[blk, h]
         counts[h] = cnt
         loss[h] = acc
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, parallel=True)
 def _plane_mask_kernel(params, x, y, z, threshold, mask):  # pragma: no cover - compiled
     a, b, c, d = params[0], params[1], params[2], params[3]
-    for i in range(x.shape[0]):
+    for i in prange(x.shape[0]):
         mask[i] = abs(a * x[i] + b * y[i] + c * z[i] + d) < threshold
 
 
@@ -221,8 +249,9 @@ class PlaneModel(Model):
     def result(self, params: np.ndarray) -> Plane:
         return Plane(np.asarray(params[:3], dtype=np.float64), float(params[3]))
 
-    # scoring on x, y, z coordinate arrays with a compiled loop: one pass per hypothesis
-    # and no residual matrix (about 10x faster than the chunked NumPy default)
+    # scoring on x, y, z coordinate arrays with a compiled loop and no residual matrix:
+    # cache-sized blocks of points, every hypothesis of the batch scored on a block while
+    # it is in cache, blocks in parallel
     def prepare(self, data: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return tuple(np.ascontiguousarray(data[:, i]) for i in range(3))  # type: ignore[return-value]
 

@@ -26,8 +26,9 @@ The loop:
 6. refit the model by least squares on the inliers of the best hypothesis, and keep the
    refit if it scores at least as well.
 
-Randomness comes only from ``rng``, drawn in a fixed order, and the scoring is plain
-NumPy arithmetic, so a seed gives the same result on any number of threads.
+Randomness comes only from ``rng``, drawn in a fixed order, and the scoring adds its
+partial sums in a fixed order (NumPy arithmetic, or the plane model's compiled blocks
+summed in block order), so a seed gives the same result on any number of threads.
 """
 
 from __future__ import annotations
