@@ -1,7 +1,8 @@
 """Point-cloud processing against Open3D (issue 3), same inputs, one process.
 
-Open3D runs with its default OpenMP threads and ours with cKDTree ``workers=-1`` and
-nanoflann ``n_jobs=4 * os.cpu_count()``: both use the machine's 2 cores. Inputs: a synthetic
+Open3D runs with its default OpenMP threads and ours with cKDTree ``workers=-1``,
+nanoflann ``n_jobs=4 * os.cpu_count()`` and numba's default threads (plane scoring):
+both use the machine's 2 cores. Inputs: a synthetic
 1M-point plane scene with known ground truth, and PCL's table scene (209,280 finite
 points) from ../shared/data.
 """
@@ -175,7 +176,8 @@ def run(repeats: int = 30) -> tuple[list[Record], dict]:
         )
     )
     return recs, {
-        "threads": "2 cores for both (Open3D OpenMP; ours cKDTree workers=-1, nanoflann n_jobs=8)",
+        "threads": "2 cores for both (Open3D OpenMP; ours cKDTree workers=-1, "
+        "nanoflann n_jobs=8, numba default threads)",
         "repeats": few,
         "timing": "ours and Open3D alternate call by call (paired_ms) for the filters and "
         "clusters; statistical outlier removal over 2 * repeats + 1 pairs",
