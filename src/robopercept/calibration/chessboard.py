@@ -12,8 +12,10 @@ accuracy.
    about their mid-level, into exactly four arcs (dark, bright, dark, bright) of
    reasonable length and contrast; the four transitions give the two edge directions
    through the corner. This rejects text, T-junctions and the board's outer corners.
-3. **Grid growing.** From a seed, the neighbours along the two edge directions start a
-   lattice; every further node is predicted by the parallelogram rule
+3. **Grid growing** (compiled, shared with the circle-grid detector). Seeds are tried
+   strongest saddle first (a printed board's corners are usually the sharpest
+   X-junctions in view). From a seed, the neighbours along the two edge directions start
+   a lattice; every further node is predicted by the parallelogram rule
    :math:`p_{i,j} \approx p_{i-1,j} + p_{i,j-1} - p_{i-1,j-1}` (or by linear
    extrapolation along a row), and the nearest candidate within 0.3 of the local
    spacing fills it. Perspective and lens distortion change the spacing slowly, so
@@ -41,6 +43,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from robopercept.calibration._lattice import along, grow_lattice
 from robopercept.errors import InputError
 from robopercept.features.harris import _gray as _gray_image
 from robopercept.features.harris import refine_corners
@@ -122,14 +125,17 @@ def _pattern(pattern_size: Any) -> tuple[int, int]:
 def _saddle_candidates(b, thr, max_out):  # pragma: no cover - compiled
     h, w = b.shape
     s = np.zeros((h, w), np.float32)
+    two = np.float32(2.0)  # float32 throughout (a float64 constant would widen the loop)
+    quarter = np.float32(0.25)
+    zero = np.float32(0.0)
     for y in range(1, h - 1):
+        up, row, down, out_row = b[y - 1], b[y], b[y + 1], s[y]  # row slices vectorize
         for x in range(1, w - 1):
-            ixx = b[y, x + 1] - 2.0 * b[y, x] + b[y, x - 1]
-            iyy = b[y + 1, x] - 2.0 * b[y, x] + b[y - 1, x]
-            ixy = 0.25 * (b[y + 1, x + 1] - b[y + 1, x - 1] - b[y - 1, x + 1] + b[y - 1, x - 1])
+            ixx = row[x + 1] - two * row[x] + row[x - 1]
+            iyy = down[x] - two * row[x] + up[x]
+            ixy = quarter * (down[x + 1] - down[x - 1] - up[x + 1] + up[x - 1])
             v = ixy * ixy - ixx * iyy
-            if v > 0:
-                s[y, x] = v
+            out_row[x] = v if v > zero else zero
     out = np.empty((max_out, 3), np.float64)
     n = 0
     m = 8  # keep away from the border: the ring needs room
@@ -138,13 +144,16 @@ def _saddle_candidates(b, thr, max_out):  # pragma: no cover - compiled
             v = s[y, x]
             if v <= thr:
                 continue
+            # a strict 5 x 5 maximum; ties go to the first in row-major order
             is_max = True
             for dy in range(-2, 3):
                 for dx in range(-2, 3):
-                    if (dy or dx) and s[y + dy, x + dx] > v:
+                    u = s[y + dy, x + dx]
+                    if u > v or (u == v and (dy < 0 or (dy == 0 and dx < 0))):
                         is_max = False
-                    elif (dy or dx) and s[y + dy, x + dx] == v and (dy < 0 or (dy == 0 and dx < 0)):
-                        is_max = False
+                        break
+                if not is_max:
+                    break
             if is_max and n < max_out:
                 out[n, 0] = x
                 out[n, 1] = y
@@ -174,12 +183,16 @@ def _ring_test(b, pts, radius, n, min_contrast, max_asym):  # pragma: no cover -
     ok = np.zeros(m, np.bool_)
     dirs = np.zeros((m, 2, 2), np.float64)
     v = np.empty(n, np.float64)
+    ox = np.empty(n, np.float64)  # the ring's offsets, computed once
+    oy = np.empty(n, np.float64)
+    for k in range(n):
+        ox[k] = radius * np.cos(2.0 * np.pi * k / n)
+        oy[k] = radius * np.sin(2.0 * np.pi * k / n)
     for c in range(m):
         lo = 1e30
         hi = -1e30
         for k in range(n):
-            a = 2.0 * np.pi * k / n
-            v[k] = _bilinear(b, pts[c, 0] + radius * np.cos(a), pts[c, 1] + radius * np.sin(a))
+            v[k] = _bilinear(b, pts[c, 0] + ox[k], pts[c, 1] + oy[k])
             lo = min(lo, v[k])
             hi = max(hi, v[k])
         if hi - lo < min_contrast:
@@ -231,23 +244,9 @@ def _gray(image: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- lattice
 
 
-def _nearest(tree: Any, free: np.ndarray, q: np.ndarray, tol: float) -> int:
-    """The nearest free candidate within ``tol`` of ``q`` (-1 if none)."""
-    for d, k in zip(*tree.query(q, k=3, distance_upper_bound=tol), strict=True):
-        if d < tol and free[k]:
-            return int(k)
-    return -1
-
-
-_COS20 = float(np.cos(np.deg2rad(20.0)))
-
-
 def _along(dirs: np.ndarray, k: int, step: np.ndarray) -> bool:
     """Whether one of corner k's edge directions is within 20 degrees of ``step``."""
-    sx, sy = float(step[0]), float(step[1])
-    n = max((sx * sx + sy * sy) ** 0.5, 1e-9)
-    (ax, ay), (bx, by) = dirs[k]
-    return max(abs(ax * sx + ay * sy), abs(bx * sx + by * sy)) > _COS20 * n
+    return bool(along(dirs, k, float(step[0]), float(step[1])))
 
 
 def _seed_neighbours(pts: np.ndarray, dirs: np.ndarray, s: int) -> dict:
@@ -319,76 +318,22 @@ def _trim(grid: dict, pts: np.ndarray, n: int, gray: np.ndarray) -> dict:
     return grid
 
 
-def _predict(grid: dict, pts: np.ndarray, i: int, j: int) -> tuple[np.ndarray | None, float]:
-    """Where lattice node ``(i, j)`` should be, and the local spacing: the
-    parallelogram rule from three known neighbours, else linear extrapolation along a
-    line of two; ``(None, 0)`` when neither is known."""
-    for di, dj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-        a, b, c = (i - di, j), (i, j - dj), (i - di, j - dj)
-        if a in grid and b in grid and c in grid:
-            pa, pb, pc = pts[grid[a]], pts[grid[b]], pts[grid[c]]
-            return pa + pb - pc, min(np.linalg.norm(pa - pc), np.linalg.norm(pb - pc))
-    for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-        a, b = (i - di, j - dj), (i - 2 * di, j - 2 * dj)
-        if a in grid and b in grid:
-            pa, pb = pts[grid[a]], pts[grid[b]]
-            return 2 * pa - pb, float(np.linalg.norm(pa - pb))
-    return None, 0.0
-
-
-def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int, tree: Any) -> dict:
-    """Lattice ``{(i, j): candidate}`` grown from seed ``s``."""
+def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int) -> dict:
+    """Lattice ``{(i, j): candidate}`` grown from seed ``s``: its nearest neighbours
+    along its two edge directions start it, :func:`grow_lattice` does the rest."""
     nb = _seed_neighbours(pts, dirs, s)
     if (1, 0) not in nb or (0, 1) not in nb:
         return {(0, 0): s}
-    grid = {(0, 0): s}
-    free = np.ones(len(pts), dtype=bool)
-    free[s] = False
     # the first steps must be mutually consistent in length
     l1 = np.linalg.norm(pts[nb[(1, 0)]] - pts[s])
     l2 = np.linalg.norm(pts[nb[(0, 1)]] - pts[s])
     if max(l1, l2) > 2.5 * min(l1, l2):
-        return grid
+        return {(0, 0): s}
     for key in ((1, 0), (0, 1)):
         k = nb[key]
         if not _along(dirs, k, pts[k] - pts[s]):
-            return grid
-    for key in ((1, 0), (0, 1)):
-        grid[key] = nb[key]
-        free[nb[key]] = False
-    tried: dict = {}
-    changed = True
-    while changed:
-        changed = False
-        frontier = {
-            (i + di, j + dj)
-            for (i, j) in grid
-            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
-            if (i + di, j + dj) not in grid
-        }
-        for i, j in sorted(frontier):
-            n_known = sum((i + a, j + b) in grid for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1)))
-            if tried.get((i, j), -1) >= n_known:
-                continue
-            pred, step = _predict(grid, pts, i, j)
-            if pred is None:
-                continue
-            tried[(i, j)] = n_known
-            k = _nearest(tree, free, pred, 0.3 * step)
-            if k >= 0 and any(
-                (i + a, j + b) in grid and not _along(dirs, k, pts[k] - pts[grid[(i + a, j + b)]])
-                for a, b in ((1, 0), (-1, 0), (0, 1), (0, -1))
-            ):
-                k = -1
-            if k >= 0:
-                grid[(i, j)] = k
-                free[k] = False
-                changed = True
-        ii = [a for a, _ in grid]
-        jj = [b for _, b in grid]
-        if max(ii) - min(ii) >= limit or max(jj) - min(jj) >= limit:
-            break
-    return grid
+            return {(0, 0): s}
+    return grow_lattice(pts, s, nb[(1, 0)], nb[(0, 1)], limit, dirs)
 
 
 def _order(grid: dict, pts: np.ndarray, w: int, h: int, gray: np.ndarray) -> np.ndarray | None:
@@ -461,23 +406,22 @@ def find_chessboard_corners(
     if len(cand) < w * h:
         return ChessboardDetection(False, np.zeros((0, 2)), (w, h), "too few corner candidates")
     ok, dirs = _ring_test(blurred, cand[:, :2].copy(), _RADIUS, _RING, _CONTRAST, 0.25)
-    pts, dirs = cand[ok, :2], dirs[ok]
+    pts, dirs, strength = cand[ok, :2], dirs[ok], cand[ok, 2]
     if len(pts) < w * h:
         return ChessboardDetection(
             False, pts, (w, h), f"only {len(pts)} chessboard-like corners; need {w * h}"
         )
-    # seeds: corners near the median of the candidates first (the board's middle)
-    order = np.argsort(np.hypot(*(pts - np.median(pts, axis=0)).T), kind="stable")
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(pts)
+    # seeds: the strongest saddles first. A printed board's black-white corners are the
+    # sharpest, highest-contrast X-junctions in most scenes, so its lattice is usually
+    # the first one grown, and clutter is never visited.
+    order = np.argsort(-strength, kind="stable")
     used = np.zeros(len(pts), dtype=bool)
     largest: dict = {}
     tries = 0
     for s in order:
         if used[s]:
             continue
-        grid = _grow(pts, dirs, int(s), max(w, h) + 3, tree)
+        grid = _grow(pts, dirs, int(s), max(w, h) + 3)
         used[list(grid.values())] = True
         grid = _trim(grid, pts, w * h, blurred)
         if len(grid) < 4:  # clutter: a seed that starts no lattice costs little

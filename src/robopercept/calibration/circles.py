@@ -45,7 +45,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from robopercept.calibration.chessboard import _gray, _nearest, _pattern, _predict
+from robopercept.calibration._lattice import grow_lattice
+from robopercept.calibration.chessboard import _gray, _pattern
 from robopercept.errors import InputError
 from robopercept.imaging.blobs import label_components
 
@@ -187,11 +188,10 @@ def _circles(gray: np.ndarray, dark: bool, min_area: float, max_area: float) -> 
     return np.array(out).reshape(-1, 3)
 
 
-_STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
-
-
 def _grow(pts: np.ndarray, s: int, tree: Any, limit: int) -> dict:
-    """Lattice ``{(a, b): index}`` grown from seed ``s`` (see the module docstring)."""
+    """Lattice ``{(a, b): index}`` grown from seed ``s`` (see the module docstring): its
+    nearest neighbour and the nearest one not along it start it, :func:`grow_lattice`
+    does the rest."""
     d, nb = tree.query(pts[s], k=min(7, len(pts)))
     d, nb = d[1:], nb[1:]
     if len(nb) < 2:
@@ -206,34 +206,8 @@ def _grow(pts: np.ndarray, s: int, tree: Any, limit: int) -> dict:
             break
     if second < 0:
         return {(0, 0): s}
-    grid = {(0, 0): s, (1, 0): int(nb[0]), (0, 1): int(second)}
-    free = np.ones(len(pts), dtype=bool)
-    free[list(grid.values())] = False
-    tried: dict = {}
-    changed = True
-    while changed:
-        changed = False
-        frontier = {
-            (a + da, b + db) for (a, b) in grid for da, db in _STEPS if (a + da, b + db) not in grid
-        }
-        for a, b in sorted(frontier):
-            n_known = sum((a + p, b + q) in grid for p, q in _STEPS)
-            if tried.get((a, b), -1) >= n_known:
-                continue
-            pred, step = _predict(grid, pts, a, b)
-            if pred is None:
-                continue
-            tried[(a, b)] = n_known
-            k = _nearest(tree, free, pred, 0.3 * step)
-            if k >= 0:
-                grid[(a, b)] = k
-                free[k] = False
-                changed = True
-        aa = [p for p, _ in grid]
-        bb = [q for _, q in grid]
-        if max(aa) - min(aa) > limit or max(bb) - min(bb) > limit:
-            break
-    return grid
+    # grow_lattice stops at a span of limit + 1: beyond the pattern in either orientation
+    return grow_lattice(pts, s, int(nb[0]), int(second), limit + 1)
 
 
 _SYMMETRIES = tuple((swap, sx, sy) for swap in (False, True) for sx in (1, -1) for sy in (1, -1))
