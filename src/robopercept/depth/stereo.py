@@ -234,9 +234,11 @@ def _census_block_cost(cl, crr, dmin, r, invalid, rings, cols, out):  # pragma: 
 def _row_min(Qi, o, box, boxi, nd):  # pragma: no cover - compiled
     # min of row o's costs 1..nd, found on the int32 view Qi (floats >= 0 order like
     # their bits, and int32 minima vectorize where float ones do not); box/boxi (a
-    # float32 array of one and its int32 view) turn the bits back
+    # float32 array of one and its int32 view) turn the bits back. The scan covers all
+    # nd entries, the first twice: with nd a multiple of the vector width no element is
+    # left to a scalar tail (the 63 after the first took 4x as long).
     best = Qi[o, 1]
-    for k in range(2, nd + 1):
+    for k in range(1, nd + 1):
         q = Qi[o, k]
         best = q if q < best else best
     boxi[0] = best
@@ -379,8 +381,8 @@ def _wta_row(C, Ci, y, dmin, uniqueness, subpixel, want_right, ks, ksi, rb, rk,
         rowi = Ci[x]
         # the minimum and its first index, on the bits (costs are >= 0): integer
         # minima vectorize
-        bi = rowi[0]
-        for k in range(1, kmax + 1):
+        bi = rowi[0]  # all kmax + 1 entries, no scalar tail (see _row_min)
+        for k in range(kmax + 1):
             v = rowi[k]
             bi = v if v < bi else bi
         kb = np.int32(nd)
