@@ -244,11 +244,6 @@ def _gray(image: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- lattice
 
 
-def _along(dirs: np.ndarray, k: int, step: np.ndarray) -> bool:
-    """Whether one of corner k's edge directions is within 20 degrees of ``step``."""
-    return bool(along(dirs, k, float(step[0]), float(step[1])))
-
-
 def _seed_neighbours(pts: np.ndarray, dirs: np.ndarray, s: int) -> dict:
     """Nearest candidates along the seed's +-u, +-v directions (within 15 degrees)."""
     d = pts - pts[s]
@@ -331,7 +326,8 @@ def _grow(pts: np.ndarray, dirs: np.ndarray, s: int, limit: int) -> dict:
         return {(0, 0): s}
     for key in ((1, 0), (0, 1)):
         k = nb[key]
-        if not _along(dirs, k, pts[k] - pts[s]):
+        dx, dy = pts[k] - pts[s]
+        if not along(dirs, k, float(dx), float(dy)):
             return {(0, 0): s}
     return grow_lattice(pts, s, nb[(1, 0)], nb[(0, 1)], limit, dirs)
 
