@@ -220,3 +220,24 @@ def test_sklearn_tools_accept_classifiers(iris):
     ):
         assert clone(est).get_params() == est.get_params()
         assert cross_val_score(make_pipeline(PCA(3), est), X, y, cv=3).mean() > 0.85
+
+
+def test_grow_tree_is_what_the_estimator_grows():
+    from robopercept.learning.tree import Tree, grow_tree, tree_settings
+
+    X = np.array([[0.0], [1.0], [2.0], [3.0], [4.0], [5.0]])
+    y = np.array([0, 0, 0, 1, 1, 1])
+    settings = tree_settings("gini", ("gini", "entropy"), None, 2, 1, None, 1)
+    assert (settings.criterion, settings.max_features) == (0, 1)
+    tree = grow_tree(np.ascontiguousarray(X.T), y, np.zeros(1), np.arange(6), 2, settings, 0)
+    assert isinstance(tree, Tree)
+    # one split at 2.5 separates the classes: a root and two pure leaves
+    assert tree.node_count == 3 and tree.depth() == 1 and tree.threshold[0] == 2.5
+    np.testing.assert_array_equal(tree.apply(X), [1, 1, 1, 2, 2, 2])
+    np.testing.assert_array_equal(tree.importances(1), [1.0])
+    fitted = DecisionTreeClassifier("gini").fit(X, y).tree_
+    np.testing.assert_array_equal(fitted.threshold, tree.threshold)
+    with pytest.raises(InputError, match="criterion"):
+        tree_settings("squared_error", ("gini", "entropy"), None, 2, 1, None, 1)
+    with pytest.raises(InputError, match="max_depth"):
+        tree_settings("gini", ("gini",), 0, 2, 1, None, 1)

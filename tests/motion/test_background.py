@@ -210,3 +210,27 @@ def test_models_run_on_real_videos(name, frames):
                     shares[k] += mask.mean()
     shares /= frames - 12
     assert (shares > 0).all() and (shares < 0.5).all(), shares
+
+
+def test_check_threshold_names_the_unit():
+    from robopercept.motion.background import check_threshold
+
+    assert check_threshold(12) == 12.0
+    with pytest.raises(InputError, match=r"threshold must be a positive number \(0-255 scale\)"):
+        check_threshold(0)
+    with pytest.raises(InputError, match=r"k must be .*\(standard deviations\); got -1"):
+        check_threshold(-1, "k", "standard deviations")
+    with pytest.raises(InputError, match="standard deviations"):
+        GaussianBackground(k=-1)
+
+
+def test_foreground_model_checks_frame_shapes():
+    from robopercept.motion.background import ForegroundModel
+
+    model = ForegroundModel("median", 3)
+    first = model._frame(np.zeros((4, 5), np.uint8))
+    assert first.shape == (4, 5) and model.frame_count == 1
+    with pytest.raises(InputError, match=r"frame 1 has shape \(5, 4\), the first had \(4, 5\)"):
+        model._frame(np.zeros((5, 4), np.uint8))
+    with pytest.raises(InputError, match="noise must be one of"):
+        ForegroundModel("blur", 3)

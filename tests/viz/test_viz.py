@@ -81,3 +81,16 @@ def test_render_points_projects_with_a_pinhole_and_zbuffer():
     assert (img != 255).any(axis=2).sum() == 1
     with pytest.raises(InputError, match="colors"):
         render_points(pts, cols[:2])
+
+
+def test_check_color_and_pil_canvas():
+    from robopercept.errors import InputError
+    from robopercept.viz.draw import check_color, pil_canvas
+
+    assert check_color(np.array([1, 2, 3])) == (1, 2, 3)
+    with pytest.raises(InputError, match="three integers in 0..255"):
+        check_color((0, 0, 256))
+    pil, draw = pil_canvas(np.zeros((4, 6), np.uint8))
+    draw.point((2, 1), fill=(255, 0, 0))
+    out = np.asarray(pil)
+    assert out.shape == (4, 6, 3) and tuple(out[1, 2]) == (255, 0, 0) and out.sum() == 255

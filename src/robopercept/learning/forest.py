@@ -35,7 +35,7 @@ from robopercept.learning._base import (
     check_target,
     seed_from,
 )
-from robopercept.learning.tree import _CRITERIA, _NO_LIMIT, _grow, _Tree, resolve_max_features
+from robopercept.learning.tree import Tree, grow_tree, tree_settings
 
 __all__ = ["RandomForestClassifier", "RandomForestRegressor"]
 
@@ -62,26 +62,26 @@ class _BaseForest(Estimator):
     ) -> None:
         n, d = X.shape
         n_trees = check_int(self.n_estimators, "n_estimators", 1)
-        if self.criterion not in self._criteria:
-            raise InputError(f"criterion must be one of {self._criteria}; got {self.criterion!r}")
-        crit = _CRITERIA[self.criterion]
-        depth = _NO_LIMIT if self.max_depth is None else check_int(self.max_depth, "max_depth", 1)
-        split = check_int(self.min_samples_split, "min_samples_split", 2)
-        leaf = check_int(self.min_samples_leaf, "min_samples_leaf", 1)
-        feats = resolve_max_features(self.max_features, d)
+        settings = tree_settings(
+            self.criterion,
+            self._criteria,
+            self.max_depth,
+            self.min_samples_split,
+            self.min_samples_leaf,
+            self.max_features,
+            d,
+        )
         if self.oob_score and not self.bootstrap:
             raise InputError("oob_score needs bootstrap=True (without it no sample is left out)")
         seeds = seed_from(self.rng).integers(0, 2**63, size=n_trees)
         XT = np.ascontiguousarray(X.T)
 
-        def one(seed: int) -> tuple[_Tree, np.ndarray]:
+        def one(seed: int) -> tuple[Tree, np.ndarray]:
             if self.bootstrap:
                 samples = np.random.default_rng(seed).integers(0, n, size=n)
             else:
                 samples = np.arange(n, dtype=np.int64)
-            arrays = _grow(XT, y_class, y_value, samples, n_classes, crit, depth, split, leaf,
-                           feats, int(seed))  # fmt: skip
-            return _Tree(arrays), samples
+            return grow_tree(XT, y_class, y_value, samples, n_classes, settings, int(seed)), samples
 
         with ThreadPoolExecutor(_threads(self.n_jobs)) as pool:
             grown = list(

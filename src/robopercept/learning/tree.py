@@ -28,6 +28,7 @@ so the trees are equivalent in accuracy, not identical.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,7 +44,15 @@ from robopercept.learning._base import (
     seed_from,
 )
 
-__all__ = ["DecisionTreeClassifier", "DecisionTreeRegressor"]
+__all__ = [
+    "DecisionTreeClassifier",
+    "DecisionTreeRegressor",
+    "Tree",
+    "TreeSettings",
+    "grow_tree",
+    "resolve_max_features",
+    "tree_settings",
+]
 
 _CRITERIA = {"gini": 0, "entropy": 1, "squared_error": 2}
 _FEATURE_EPS = 1e-7  # values closer than this are not split apart (as scikit-learn)
@@ -347,8 +356,25 @@ def resolve_max_features(value: Any, n_features: int) -> int:
     return k
 
 
-class _Tree:
-    """The arrays of a grown tree."""
+class Tree:
+    """The arrays of a grown tree, in scikit-learn's ``tree_`` layout.
+
+    Node ``i`` splits on ``X[:, feature[i]] <= threshold[i]`` (left) / ``>`` (right);
+    a leaf has ``left[i] == right[i] == -1``. Children come after their parent.
+
+    Attributes
+    ----------
+    feature, threshold : (n_nodes,) int64, float64
+        Split feature and threshold of each inner node.
+    left, right : (n_nodes,) int64
+        Child indices (-1 at leaves).
+    value : (n_nodes, n_outputs) float64
+        Class fractions (classification) or the mean target (regression) of each node.
+    impurity : (n_nodes,) float64
+        Gini, entropy or squared error of each node's samples.
+    n_node_samples : (n_nodes,) int64
+        Number of (bootstrap) samples reaching each node.
+    """
 
     def __init__(self, arrays: tuple) -> None:
         (
@@ -363,12 +389,15 @@ class _Tree:
 
     @property
     def node_count(self) -> int:
+        """Number of nodes (inner nodes and leaves)."""
         return int(self.feature.size)
 
     def apply(self, X: np.ndarray) -> np.ndarray:
+        """Leaf index of every row of ``X`` ((n, d) float64, unchecked)."""
         return _apply(X, self.feature, self.threshold, self.left, self.right)
 
     def depth(self) -> int:
+        """Length of the longest root-to-leaf path (a single leaf has depth 0)."""
         depth = np.zeros(self.node_count, dtype=np.int64)
         for node in range(self.node_count):  # children come after their parent
             if self.left[node] >= 0:
@@ -376,6 +405,12 @@ class _Tree:
         return int(depth.max())
 
     def importances(self, n_features: int) -> np.ndarray:
+        r"""Mean decrease in impurity per feature, normalized to sum 1.
+
+        :math:`I_f = \sum_{t: f_t = f} N_t i_t - N_{l(t)} i_{l(t)} - N_{r(t)} i_{r(t)}`,
+        divided by :math:`\sum_f I_f` (all zeros for a single leaf), as scikit-learn's
+        ``feature_importances_``.
+        """
         out = np.zeros(n_features)
         inner = np.flatnonzero(self.left >= 0)
         w = self.n_node_samples * self.impurity
@@ -383,6 +418,89 @@ class _Tree:
         np.add.at(out, self.feature[inner], gain)
         total = out.sum()
         return out / total if total > 0 else out
+
+
+@dataclass(frozen=True)
+class TreeSettings:
+    """Checked growth settings of a tree, as the compiled grower takes them.
+
+    Attributes
+    ----------
+    criterion : int
+        0 gini, 1 entropy, 2 squared error.
+    max_depth, min_samples_split, min_samples_leaf, max_features : int
+        As the estimators' parameters, resolved to counts (no depth limit is 2**62).
+    """
+
+    criterion: int
+    max_depth: int
+    min_samples_split: int
+    min_samples_leaf: int
+    max_features: int
+
+
+def tree_settings(
+    criterion: str,
+    criteria: tuple[str, ...],
+    max_depth: int | None,
+    min_samples_split: int,
+    min_samples_leaf: int,
+    max_features: int | float | str | None,
+    n_features: int,
+) -> TreeSettings:
+    """Check the tree parameters once and resolve them for :func:`grow_tree`.
+
+    ``criterion`` must be one of ``criteria`` (the estimator's allowed ones);
+    ``max_depth=None`` means no limit; ``max_features`` as :func:`resolve_max_features`.
+    Raises :class:`~robopercept.errors.InputError` naming the parameter otherwise.
+    """
+    check_choice(criterion, "criterion", criteria)
+    depth = _NO_LIMIT if max_depth is None else check_int(max_depth, "max_depth", 1)
+    return TreeSettings(
+        _CRITERIA[criterion],
+        depth,
+        check_int(min_samples_split, "min_samples_split", 2),
+        check_int(min_samples_leaf, "min_samples_leaf", 1),
+        resolve_max_features(max_features, n_features),
+    )
+
+
+def grow_tree(
+    XT: np.ndarray,
+    y_class: np.ndarray,
+    y_value: np.ndarray,
+    samples: np.ndarray,
+    n_classes: int,
+    settings: TreeSettings,
+    seed: int,
+) -> Tree:
+    """Grow one CART tree (unchecked; the estimators validate first).
+
+    Parameters
+    ----------
+    XT : (d, n) float64, C-contiguous
+        The training features transposed (one row per feature, for cache-friendly sorts).
+    y_class : (n,) int64
+        Class codes 0..n_classes-1 (classification; unused in regression).
+    y_value : (n,) float64
+        Targets (regression; unused in classification).
+    samples : (m,) int64
+        Indices of the rows to grow on, repeats allowed (bootstrap samples).
+    n_classes : int
+        Number of classes, 0 for regression.
+    settings : TreeSettings
+        From :func:`tree_settings`.
+    seed : int
+        Seed of the per-tree feature draws (splitmix64).
+
+    Returns
+    -------
+    Tree
+    """
+    s = settings
+    arrays = _grow(XT, y_class, y_value, samples, n_classes, s.criterion, s.max_depth,
+                   s.min_samples_split, s.min_samples_leaf, s.max_features, seed)  # fmt: skip
+    return Tree(arrays)
 
 
 class _BaseTree(Estimator):
@@ -405,14 +523,6 @@ class _BaseTree(Estimator):
         self.max_features = max_features
         self.rng = rng
 
-    def _settings(self, n_features: int) -> tuple[int, int, int, int, int]:
-        check_choice(self.criterion, "criterion", self._criteria)
-        depth = _NO_LIMIT if self.max_depth is None else check_int(self.max_depth, "max_depth", 1)
-        split = check_int(self.min_samples_split, "min_samples_split", 2)
-        leaf = check_int(self.min_samples_leaf, "min_samples_leaf", 1)
-        feats = resolve_max_features(self.max_features, n_features)
-        return _CRITERIA[self.criterion], depth, split, leaf, feats
-
     def _grow(
         self,
         X: np.ndarray,
@@ -421,14 +531,20 @@ class _BaseTree(Estimator):
         samples: np.ndarray,
         n_classes: int,
         seed: int,
-    ) -> _Tree:
-        crit, depth, split, leaf, feats = self._settings(X.shape[1])
-        XT = np.ascontiguousarray(X.T)
-        return _Tree(
-            _grow(XT, y_class, y_value, samples, n_classes, crit, depth, split, leaf, feats, seed)
+    ) -> Tree:
+        settings = tree_settings(
+            self.criterion,
+            self._criteria,
+            self.max_depth,
+            self.min_samples_split,
+            self.min_samples_leaf,
+            self.max_features,
+            X.shape[1],
         )
+        XT = np.ascontiguousarray(X.T)
+        return grow_tree(XT, y_class, y_value, samples, n_classes, settings, seed)
 
-    def _finish(self, tree: _Tree) -> None:
+    def _finish(self, tree: Tree) -> None:
         self.tree_ = tree
         self.feature_importances_ = tree.importances(self.n_features_in_)
 

@@ -44,8 +44,10 @@ from robopercept.errors import InputError
 
 __all__ = [
     "AveragedBackground",
+    "ForegroundModel",
     "GaussianBackground",
     "StaticBackground",
+    "check_threshold",
     "clean_mask",
 ]
 
@@ -122,14 +124,33 @@ def _majority(m, size, out):  # pragma: no cover - compiled
             out[y, x] = 1 if 2 * s > rows * cols else 0
 
 
-def _check_threshold(value: float, name: str = "threshold") -> float:
+def check_threshold(value: float, name: str = "threshold", unit: str = "0-255 scale") -> float:
+    """Return ``value`` as a float after checking that it is finite and > 0.
+
+    The error names the parameter and its ``unit`` (grey levels on the 0-255 scale for
+    intensity thresholds, ``"standard deviations"`` for :class:`GaussianBackground`'s
+    ``k``).
+    """
     if not np.isfinite(value) or value <= 0:
-        raise InputError(f"{name} must be a positive number (0-255 scale); got {value}")
+        raise InputError(f"{name} must be a positive number ({unit}); got {value}")
     return float(value)
 
 
-class _Model:
-    """Shared frame checks: every frame must have the first frame's shape."""
+class ForegroundModel:
+    """Base class of the foreground detectors (background models and differencing).
+
+    It holds the mask clean-up settings and checks the frames: every frame must have
+    the first frame's shape. Subclasses convert each frame with :meth:`_frame` (to
+    float64 on the 0-255 scale, counted) and finish each mask with :meth:`_clean`
+    (channels OR-ed, then :func:`clean_mask`).
+
+    Parameters
+    ----------
+    noise : {"median", "open-close", None}
+        Mask clean-up (see :func:`clean_mask`).
+    noise_size : int
+        Its window size.
+    """
 
     def __init__(self, noise: str | None, noise_size: int) -> None:
         if noise not in NOISE:
@@ -157,7 +178,7 @@ class _Model:
         return clean_mask(np.ascontiguousarray(mask), self.noise, self.noise_size)
 
 
-class StaticBackground(_Model):
+class StaticBackground(ForegroundModel):
     """Foreground = pixels differing from a fixed reference frame by more than
     ``threshold`` (0-255 scale).
 
@@ -179,7 +200,7 @@ class StaticBackground(_Model):
         noise_size: int = 3,
     ) -> None:
         super().__init__(noise, noise_size)
-        self.threshold = _check_threshold(threshold)
+        self.threshold = check_threshold(threshold)
         self.background = _as255(reference, "reference")
         self._shape = self.background.shape
 
@@ -189,7 +210,7 @@ class StaticBackground(_Model):
         return self._clean(np.abs(img - self.background) > self.threshold)
 
 
-class AveragedBackground(_Model):
+class AveragedBackground(ForegroundModel):
     """The background is the mean of the first ``n_frames`` frames; until then the
     mask is empty (``ready`` is False).
 
@@ -213,7 +234,7 @@ class AveragedBackground(_Model):
         if int(n_frames) != n_frames or n_frames < 1:
             raise InputError(f"n_frames must be an integer >= 1; got {n_frames}")
         self.n_frames = int(n_frames)
-        self.threshold = _check_threshold(threshold)
+        self.threshold = check_threshold(threshold)
         self._sum: np.ndarray | None = None
         self.background: np.ndarray | None = None
 
@@ -255,7 +276,7 @@ def _gaussian_step(img, mu, var, k2, alpha, min_var, fg):  # pragma: no cover - 
                     var[y, x, ch] = max(v, min_var)
 
 
-class GaussianBackground(_Model):
+class GaussianBackground(ForegroundModel):
     r"""Per-pixel running Gaussian: foreground where :math:`|I - \mu| > k \sigma`.
 
     Parameters
@@ -297,7 +318,7 @@ class GaussianBackground(_Model):
         noise_size: int = 3,
     ) -> None:
         super().__init__(noise, noise_size)
-        self.k = _check_threshold(k, "k")
+        self.k = check_threshold(k, "k", "standard deviations")
         if not 0.0 < learning_rate <= 1.0:
             raise InputError(f"learning_rate must be in (0, 1]; got {learning_rate}")
         self.learning_rate = float(learning_rate)
@@ -305,8 +326,8 @@ class GaussianBackground(_Model):
             raise InputError(f"init_frames must be an integer >= 1; got {init_frames}")
         self.init_frames = int(init_frames)
         self._init: list[np.ndarray] = []
-        self.initial_std = _check_threshold(initial_std, "initial_std")
-        self.min_std = _check_threshold(min_std, "min_std")
+        self.initial_std = check_threshold(initial_std, "initial_std")
+        self.min_std = check_threshold(min_std, "min_std")
         self.background: np.ndarray | None = None
         self.variance: np.ndarray | None = None
 

@@ -25,12 +25,12 @@ from collections import deque
 import numpy as np
 
 from robopercept.errors import InputError
-from robopercept.motion.background import _check_threshold, _Model
+from robopercept.motion.background import ForegroundModel, check_threshold
 
 __all__ = ["FrameDifference", "ThreeFrameDifference"]
 
 
-class FrameDifference(_Model):
+class FrameDifference(ForegroundModel):
     """Foreground = pixels that changed by more than ``threshold`` (0-255 scale) since
     the frame ``n`` steps back; empty for the first ``n`` frames.
 
@@ -55,7 +55,7 @@ class FrameDifference(_Model):
         if int(n) != n or n < 1:
             raise InputError(f"n must be an integer >= 1; got {n}")
         self.n = int(n)
-        self.threshold = _check_threshold(threshold)
+        self.threshold = check_threshold(threshold)
         self._frames: deque[np.ndarray] = deque(maxlen=self.n)
 
     @property
@@ -73,7 +73,7 @@ class FrameDifference(_Model):
         return self._clean(np.abs(img - old) > self.threshold)
 
 
-class ThreeFrameDifference(_Model):
+class ThreeFrameDifference(ForegroundModel):
     """Foreground of the *previous* frame: the AND of its differences with the frames
     before and after (no ghosts). Empty for the first two frames.
 
@@ -90,7 +90,7 @@ class ThreeFrameDifference(_Model):
         self, threshold: float = 25.0, *, noise: str | None = "median", noise_size: int = 3
     ) -> None:
         super().__init__(noise, noise_size)
-        self.threshold = _check_threshold(threshold)
+        self.threshold = check_threshold(threshold)
         self._frames: deque[np.ndarray] = deque(maxlen=2)
 
     @property

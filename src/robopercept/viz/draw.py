@@ -8,19 +8,25 @@ from __future__ import annotations
 
 import colorsys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from robopercept._checks import check_image, check_ndim
+
+if TYPE_CHECKING:
+    from PIL import Image, ImageDraw
 from robopercept.errors import InputError
 
 __all__ = [
+    "check_color",
     "draw_boxes",
     "draw_chessboard",
     "draw_lines",
     "draw_mask",
     "draw_points",
     "draw_text",
+    "pil_canvas",
     "to_rgb8",
 ]
 
@@ -48,14 +54,20 @@ def to_rgb8(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def _color(color: Sequence[int]) -> Color:
+def check_color(color: Sequence[int]) -> Color:
+    """Return ``color`` as an ``(r, g, b)`` tuple of ints in 0..255, or raise
+    :class:`~robopercept.errors.InputError` naming the expected form."""
     c = tuple(int(v) for v in color)
     if len(c) != 3 or not all(0 <= v <= 255 for v in c):
         raise InputError(f"color must be three integers in 0..255; got {color!r}")
     return c  # type: ignore[return-value]
 
 
-def _canvas(image: np.ndarray):
+def pil_canvas(image: np.ndarray) -> tuple[Image.Image, ImageDraw.ImageDraw]:
+    """A Pillow image of :func:`to_rgb8` ``(image)`` and a drawing context on it.
+
+    The caller draws, then reads the result back with ``np.asarray(pil)``.
+    """
     from PIL import Image, ImageDraw
 
     pil = Image.fromarray(to_rgb8(image))
@@ -86,8 +98,8 @@ def draw_points(
     (H, W, 3) uint8 ndarray
     """
     pts = check_ndim(np.asarray(points, dtype=np.float64).reshape(-1, 2), "points", (2,))
-    col = _color(color)
-    pil, draw = _canvas(image)
+    col = check_color(color)
+    pil, draw = pil_canvas(image)
     for x, y in pts[np.isfinite(pts).all(axis=1)]:
         box = (x - radius, y - radius, x + radius, y + radius)
         draw.ellipse(box, outline=col, fill=col if filled else None)
@@ -112,8 +124,8 @@ def draw_lines(
     (H, W, 3) uint8 ndarray
     """
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
-    col = _color(color)
-    pil, draw = _canvas(image)
+    col = check_color(color)
+    pil, draw = pil_canvas(image)
     for x0, y0, x1, y1 in seg[np.isfinite(seg).all(axis=1)]:
         draw.line([(x0, y0), (x1, y1)], fill=col, width=int(width))
     return np.asarray(pil)
@@ -146,8 +158,8 @@ def draw_boxes(
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     if labels is not None and len(labels) != len(b):
         raise InputError(f"labels must have one entry per box ({len(b)}); got {len(labels)}")
-    col = _color(color)
-    pil, draw = _canvas(image)
+    col = check_color(color)
+    pil, draw = pil_canvas(image)
     for i, (x, y, w, h) in enumerate(b):
         draw.rectangle([x, y, x + w - 1, y + h - 1], outline=col, width=int(width))
         if labels is not None:
@@ -171,15 +183,17 @@ def draw_text(
     """
     from PIL import ImageFont
 
-    col = _color(color)
-    pil, draw = _canvas(image)
+    col = check_color(color)
+    pil, draw = pil_canvas(image)
     try:
         font = ImageFont.load_default(size=size)
     except TypeError:  # Pillow < 10.1
         font = ImageFont.load_default()
     if background is not None:
         box = draw.textbbox(origin, text, font=font)
-        draw.rectangle([box[0] - 2, box[1] - 2, box[2] + 2, box[3] + 2], fill=_color(background))
+        draw.rectangle(
+            [box[0] - 2, box[1] - 2, box[2] + 2, box[3] + 2], fill=check_color(background)
+        )
     draw.text(origin, text, fill=col, font=font)
     return np.asarray(pil)
 
@@ -206,7 +220,7 @@ def draw_mask(
         raise InputError(f"mask must have the image's shape {img.shape[:2]}; got {m.shape}")
     if not 0.0 <= alpha <= 1.0:
         raise InputError(f"alpha must be in [0, 1]; got {alpha}")
-    col = np.asarray(_color(color), dtype=np.float64)
+    col = np.asarray(check_color(color), dtype=np.float64)
     blended = (1.0 - alpha) * img[m].astype(np.float64) + alpha * col
     img[m] = np.round(blended).astype(np.uint8)
     return img
@@ -232,7 +246,7 @@ def draw_chessboard(
     (H, W, 3) uint8 ndarray
     """
     pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
-    pil, draw = _canvas(image)
+    pil, draw = pil_canvas(image)
     r = max(3.0, image.shape[0] / 120)
     w = max(int(pattern_size[0]), 1)
     for k, (x, y) in enumerate(pts):

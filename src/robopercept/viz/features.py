@@ -8,7 +8,7 @@ import numpy as np
 
 from robopercept._checks import check_int, check_ndim
 from robopercept.errors import InputError
-from robopercept.viz.draw import _color, to_rgb8
+from robopercept.viz.draw import check_color, to_rgb8
 
 __all__ = ["draw_matches", "hog_picture"]
 
@@ -111,7 +111,7 @@ def draw_matches(
     order = np.arange(n)
     if max_lines is not None and n > max_lines:
         order = np.linspace(0, n - 1, check_int(max_lines, "max_lines", 1)).astype(int)
-    good, bad = _color(color), _color(outlier_color)
+    good, bad = check_color(color), check_color(outlier_color)
     off = a.shape[1]
     # outliers first so that inliers stay visible on top
     for i in sorted(order, key=lambda k: bool(keep[k])):

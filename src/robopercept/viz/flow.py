@@ -23,7 +23,7 @@ import numpy as np
 
 from robopercept._checks import check_ndim
 from robopercept.errors import InputError
-from robopercept.viz.draw import _canvas, _color, to_rgb8
+from robopercept.viz.draw import check_color, pil_canvas, to_rgb8
 
 __all__ = ["draw_flow", "draw_trails", "flow_to_color", "flow_wheel"]
 
@@ -115,12 +115,12 @@ def draw_flow(
     ok = np.ones(len(p0), dtype=bool) if status is None else np.asarray(status, dtype=bool)
     if ok.shape != (len(p0),):
         raise InputError(f"status must have one entry per point ({len(p0)}); got {ok.shape}")
-    col = _color(color)
-    pil, draw = _canvas(image)
+    col = check_color(color)
+    pil, draw = pil_canvas(image)
     tip = p0 + float(scale) * (p1 - p0)
     finite = np.isfinite(p0).all(axis=1) & np.isfinite(tip).all(axis=1)
     if failed_color is not None:
-        bad = _color(failed_color)
+        bad = check_color(failed_color)
         for x, y in p0[~ok & np.isfinite(p0).all(axis=1)]:
             draw.ellipse((x - 1.5, y - 1.5, x + 1.5, y + 1.5), fill=bad)
     for (x0, y0), (x1, y1) in zip(p0[ok & finite], tip[ok & finite], strict=True):
@@ -165,13 +165,13 @@ def draw_trails(
     """
     if colors is not None and len(colors) != len(trails):
         raise InputError(f"colors must have one row per trail ({len(trails)}); got {len(colors)}")
-    pil, draw = _canvas(to_rgb8(image))
+    pil, draw = pil_canvas(to_rgb8(image))
     for i, trail in enumerate(trails):
         t = np.asarray(trail, dtype=np.float64).reshape(-1, 2)
         t = t[np.isfinite(t).all(axis=1)]
         if len(t) == 0:
             continue
-        col = (0, 255, 0) if colors is None else _color(colors[i])
+        col = (0, 255, 0) if colors is None else check_color(colors[i])
         if len(t) > 1:
             draw.line([tuple(p) for p in t], fill=col, width=int(width))
         x, y = t[-1]
