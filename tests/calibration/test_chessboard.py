@@ -13,6 +13,7 @@ from robopercept.calibration import (
     chessboard_points,
     find_chessboard_corners,
 )
+from robopercept.calibration.chessboard import check_pattern_size
 from robopercept.errors import InputError
 from tests.calibration._render import render_board
 from tests.conftest import data_path
@@ -132,3 +133,18 @@ def test_not_found_cases():
     assert not find_chessboard_corners(img, (9, 7)).found
     with pytest.raises(InputError):
         find_chessboard_corners(img, (9,))
+
+
+def test_check_pattern_size():
+    # the shared check of chessboards and circle grids: (points per row, per column)
+    assert check_pattern_size((9, 6)) == (9, 6)
+    assert check_pattern_size(np.array([4, 11])) == (4, 11)
+    assert all(isinstance(v, int) for v in check_pattern_size(np.array([4, 11])))
+    with pytest.raises(InputError, match=r"\(corners per row, corners per column\)"):
+        check_pattern_size(7)
+    with pytest.raises(InputError, match="at least 2 x 2 inner corners"):
+        check_pattern_size((1, 5))
+    with pytest.raises(InputError, match="at least 2 x 2 circles"):
+        check_pattern_size((4, 1), "circles")
+    with pytest.raises(InputError, match=r"\(circles per row"):
+        check_pattern_size((1, 2, 3), "circles")

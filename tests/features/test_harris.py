@@ -15,6 +15,7 @@ from robopercept.features import (
     refine_corners,
     structure_tensor,
 )
+from robopercept.features.harris import good_features_to_track
 from robopercept.imaging import rgb_to_gray
 
 
@@ -192,3 +193,29 @@ def test_flat_image_and_bad_input():
         refine_corners(np.zeros((8, 8)), [[4.0, 4.0]], 5)
     with pytest.raises(InputError, match=r"\(N, 2\)"):
         refine_corners(img, [1.0, 2.0, 3.0])
+
+
+@pytest.mark.realdata
+def test_good_features_to_track(graf):
+    """Shi-Tomasi corners of the unrounded float32 luma, as cv2.goodFeaturesToTrack on
+    the same gray image; motion re-exports the same function."""
+    import robopercept.motion
+
+    assert robopercept.motion.good_features_to_track is good_features_to_track
+    square = np.zeros((20, 20), np.uint8)
+    square[5:15, 5:15] = 255
+    assert good_features_to_track(square, 4, 0.1, 3).tolist() == [
+        [14.0, 14.0], [5.0, 14.0], [14.0, 5.0], [5.0, 5.0]
+    ]  # fmt: skip
+    xy = good_features_to_track(graf, 300, 0.01, 8)
+    gray = rgb_to_gray(graf, dtype=np.float32)
+    kp = harris_corners(gray, method="shi-tomasi", threshold=0.01, min_distance=8, max_corners=300)
+    np.testing.assert_array_equal(xy, kp.xy)
+    ref = cv2.goodFeaturesToTrack(gray, 300, 0.01, 8, blockSize=3).reshape(-1, 2)
+    np.testing.assert_array_equal(xy, ref)  # integer pixel positions, same order
+    # any dtype, scale-free: float input in [0, 1] gives the same corners as uint8 gray
+    g8 = rgb_to_gray(graf)
+    np.testing.assert_array_equal(
+        good_features_to_track(g8, 300, 0.01, 8),
+        good_features_to_track(g8.astype(np.float32) / 255, 300, 0.01, 8),
+    )

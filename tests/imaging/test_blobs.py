@@ -9,6 +9,7 @@ from skimage import measure
 
 from robopercept.errors import InputError
 from robopercept.imaging import blob_features, label_components, otsu_threshold
+from robopercept.imaging.blobs import uf_find, uf_roots, uf_union, uf_union_pairs
 from tests.conftest import data_path
 
 
@@ -158,3 +159,42 @@ def test_empty_and_full_masks():
 def test_bad_input(call, match):
     with pytest.raises(InputError, match=match):
         call()
+
+
+class TestUnionFind:
+    """The shared union-find forest (``uf_*``), also used by learning.dbscan."""
+
+    def test_hand(self):
+        parent = np.arange(6)
+        assert uf_union(parent, 4, 2) == 2  # the smaller root wins
+        assert uf_union(parent, 5, 4) == 2
+        assert uf_union(parent, 1, 3) == 1
+        assert uf_union(parent, 2, 2) == 2  # a node with itself: nothing changes
+        assert uf_roots(parent).tolist() == [0, 1, 2, 1, 2, 2]
+        # path compression: 5 -> 4 -> 2 becomes 5 -> 2
+        parent = np.array([0, 1, 2, 3, 2, 4])
+        assert uf_find(parent, 5) == 2
+        assert parent.tolist() == [0, 1, 2, 3, 2, 2]
+
+    @pytest.mark.parametrize("dtype", [np.int32, np.int64])
+    def test_matches_scipy_components_and_order_free(self, rng, dtype):
+        # the partition equals scipy's connected components of the pair graph, each set
+        # rooted at its smallest member whatever the order of the unions
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        n = 200
+        a, b = rng.integers(0, n, 150), rng.integers(0, n, 150)
+        _, comp = connected_components(coo_matrix((np.ones(150), (a, b)), shape=(n, n)))
+        smallest = np.full(comp.max() + 1, n)
+        np.minimum.at(smallest, comp, np.arange(n))
+        for perm in (np.arange(150), rng.permutation(150)):
+            parent = np.arange(n, dtype=dtype)
+            uf_union_pairs(parent, a[perm].astype(dtype), b[perm].astype(dtype))
+            np.testing.assert_array_equal(uf_roots(parent), smallest[comp])
+
+    def test_empty(self):
+        parent = np.arange(3)
+        uf_union_pairs(parent, np.zeros(0, np.int64), np.zeros(0, np.int64))
+        assert uf_roots(parent).tolist() == [0, 1, 2]
+        assert uf_roots(np.zeros(0, np.int64)).shape == (0,)

@@ -88,3 +88,23 @@ def test_color_input_and_float_input(astronaut):
 def test_bad_input(kwargs, match):
     with pytest.raises(InputError, match=match):
         canny(np.zeros((10, 10), np.uint8), **kwargs)
+
+
+def test_log_zero_crossings_hand_case_and_contrast():
+    from robopercept.errors import InputError
+    from robopercept.imaging import log_zero_crossings
+
+    log = np.array([[2.0, 2.0, -2.0, -2.0], [0.01, -0.01, 0.01, 0.01], [1.0, 1.0, 1.0, 1.0]])
+    got = log_zero_crossings(log, 0.05)
+    # row 0: the 2 -> -2 step at column 1; row 1: crossings at |L| = 0.01 < 0.05 * 2 are
+    # dropped; row 0 column 2 is negative above a positive pixel but too weak below
+    # (the crossing is marked at the upper pixel, whose |L| = 2 is strong)
+    want = np.zeros_like(got)
+    want[0, 1] = True
+    want[0, 2] = want[0, 3] = True  # -2 above +0.01 / +0.01: sign change downwards
+    np.testing.assert_array_equal(got, want)
+    assert not log_zero_crossings(np.ones((3, 3))).any()
+    with pytest.raises(InputError, match="contrast"):
+        log_zero_crossings(log, 1.5)
+    with pytest.raises(InputError, match="2-D"):
+        log_zero_crossings(np.zeros((3, 3, 3)))

@@ -23,7 +23,7 @@ from robopercept.imaging import (
     median_filter,
     sobel,
 )
-from robopercept.imaging.filters import border_indices
+from robopercept.imaging.filters import border_indices, separable_filter_unchecked
 
 CV_BORDER = {
     "reflect101": cv2.BORDER_REFLECT_101,
@@ -285,3 +285,47 @@ def test_tiny_images_all_borders():
 def test_bad_input_raises_input_error(call, match):
     with pytest.raises(InputError, match=match):
         call()
+
+
+class TestSeparableFilterUnchecked:
+    """The unchecked separable engine that validated callers (SIFT, pyramids) use."""
+
+    def test_impulse_hand(self):
+        img = np.zeros((5, 5), np.float32)
+        img[2, 2] = 1
+        k = np.array([1.0, 2.0, 1.0]) / 4
+        out = separable_filter_unchecked(img, k, k)
+        np.testing.assert_array_equal(out[1:4, 1:4] * 16, [[1, 2, 1], [2, 4, 2], [1, 2, 1]])
+        assert out.dtype == np.float32 and out.sum() == 1
+
+    @pytest.mark.parametrize("shape", [(37, 41), (37, 41, 3), (20, 23, 4)])
+    @pytest.mark.parametrize("dtype", [np.uint8, np.float32, np.float64])
+    def test_equals_the_checked_filters(self, rng, shape, dtype):
+        # bit-identical to the public filters it serves (they call it after checking);
+        # 4 channels run the generic tap loop, 1 and 3 the stride-specialized ones
+        img = (rng.random(shape) * (255 if dtype == np.uint8 else 1)).astype(dtype)
+        g = gaussian_kernel(1.3)
+        for border in ("reflect101", "reflect", "replicate", "constant"):
+            blur = separable_filter_unchecked(img, g, g, border)
+            if len(shape) == 2 or shape[2] == 3:
+                np.testing.assert_array_equal(blur, gaussian_blur(img, 1.3, border=border))
+            kx, ky = np.array([1.0, -2.0, 0.5, 3.0]), np.array([0.25, 1.0, -1.0])
+            out = np.float32 if dtype == np.uint8 else dtype
+            res = separable_filter_unchecked(img, kx, ky, border, 7.0, out, 1, 2)
+            assert res.dtype == out
+            if len(shape) == 2 or shape[2] == 3:
+                ref = correlate(img, np.outer(ky, kx), border=border, cval=7.0, anchor=(1, 2))
+                np.testing.assert_allclose(res, ref, rtol=1e-5, atol=1e-3)
+            else:  # channel by channel equals the gray result
+                for c in range(shape[2]):
+                    one = np.ascontiguousarray(img[..., c])
+                    np.testing.assert_array_equal(
+                        res[..., c], separable_filter_unchecked(one, kx, ky, border, 7.0, out, 1, 2)
+                    )
+
+    def test_does_not_validate(self):
+        # documented: no input checks (NaN goes through), unlike the public filters
+        img = np.full((6, 6), np.nan)
+        assert np.isnan(separable_filter_unchecked(img, np.ones(3), np.ones(3))).all()
+        with pytest.raises(InputError, match="finite"):
+            gaussian_blur(img, 1.0)

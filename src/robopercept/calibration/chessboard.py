@@ -38,18 +38,22 @@ diagonally. For symmetric boards the first corner is the one higher in the image
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numba import njit
 
 from robopercept.calibration._lattice import along, grow_lattice
 from robopercept.errors import InputError
-from robopercept.features.harris import _gray as _gray_image
 from robopercept.features.harris import refine_corners
+from robopercept.imaging.color import rgb_to_gray
 from robopercept.imaging.filters import gaussian_blur
 
-__all__ = ["ChessboardDetection", "chessboard_points", "find_chessboard_corners"]
+__all__ = [
+    "ChessboardDetection",
+    "check_pattern_size",
+    "chessboard_points",
+    "find_chessboard_corners",
+]
 
 _RING = 32
 _RADIUS = 5.0
@@ -97,7 +101,7 @@ def chessboard_points(pattern_size: tuple[int, int], square: float = 1.0) -> np.
     -------
     (w * h, 3) float64 ndarray
     """
-    w, h = _pattern(pattern_size)
+    w, h = check_pattern_size(pattern_size)
     if not (np.isfinite(square) and square > 0):
         raise InputError(f"square must be a positive length; got {square!r}")
     out = np.zeros((w * h, 3))
@@ -106,15 +110,44 @@ def chessboard_points(pattern_size: tuple[int, int], square: float = 1.0) -> np.
     return out
 
 
-def _pattern(pattern_size: Any) -> tuple[int, int]:
+def check_pattern_size(pattern_size: tuple[int, int], noun: str = "corners") -> tuple[int, int]:
+    """Validate the size of a calibration pattern, as OpenCV's ``patternSize``.
+
+    ``(w, h)``: the number of points (a chessboard's inner corners, a grid's circles)
+    per row and per column, each at least 2. Used by every detector and board model of
+    this package.
+
+    Parameters
+    ----------
+    pattern_size : (int, int)
+        ``(points per row, points per column)``.
+    noun : str
+        What the points are, for the error message (``"corners"``, ``"circles"``).
+
+    Returns
+    -------
+    (int, int)
+        ``(w, h)`` as Python ints.
+
+    Raises
+    ------
+    InputError
+        If ``pattern_size`` is not a pair of integers, or either is below 2.
+
+    Examples
+    --------
+    >>> check_pattern_size((9, 6))
+    (9, 6)
+    """
     try:
         w, h = (int(v) for v in pattern_size)
     except (TypeError, ValueError) as exc:
         raise InputError(
-            f"pattern_size must be (corners per row, corners per column); got {pattern_size!r}"
+            f"pattern_size must be ({noun} per row, {noun} per column); got {pattern_size!r}"
         ) from exc
     if w < 2 or h < 2:
-        raise InputError(f"pattern_size needs at least 2 x 2 inner corners; got {(w, h)}")
+        inner = "inner " if noun == "corners" else ""
+        raise InputError(f"pattern_size needs at least 2 x 2 {inner}{noun}; got {(w, h)}")
     return w, h
 
 
@@ -235,10 +268,6 @@ def _ring_test(b, pts, radius, n, min_contrast, max_asym):  # pragma: no cover -
             dirs[c, t, 1] = uy / nu
         ok[c] = good
     return ok, dirs
-
-
-def _gray(image: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(_gray_image(image), dtype=np.float64)
 
 
 # --------------------------------------------------------------------------- lattice
@@ -390,8 +419,8 @@ def find_chessboard_corners(
     ChessboardDetection
         ``found`` is False (with the reason) unless every inner corner was found.
     """
-    w, h = _pattern(pattern_size)
-    gray = _gray(image)
+    w, h = check_pattern_size(pattern_size)
+    gray = np.ascontiguousarray(rgb_to_gray(image), dtype=np.float64)  # validates; same scale
     if gray.dtype.kind == "f" and gray.max() <= 1.0 + 1e-9 and image.dtype.kind == "f":
         gray = gray * 255.0
     blurred = gaussian_blur(gray.astype(np.float32), _SIGMA)

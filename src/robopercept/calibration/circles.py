@@ -40,15 +40,19 @@ centre is taken to be the one higher in the image.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from robopercept.calibration._lattice import grow_lattice
-from robopercept.calibration.chessboard import _gray, _pattern
+from robopercept.calibration.chessboard import check_pattern_size
 from robopercept.errors import InputError
 from robopercept.imaging.blobs import label_components
+from robopercept.imaging.color import rgb_to_gray
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 __all__ = ["CircleGridDetection", "circles_grid_points", "find_circles_grid"]
 
@@ -96,7 +100,7 @@ def circles_grid_points(
     ``s = spacing`` being the distance between neighbouring centres of one row
     (OpenCV's sample passes ``s / 2`` as its "square size" for the asymmetric grid).
     """
-    w, h = _pattern(pattern_size)
+    w, h = check_pattern_size(pattern_size, "circles")
     if not spacing > 0:
         raise InputError(f"spacing must be positive; got {spacing}")
     i, j = np.divmod(np.arange(w * h), w)
@@ -188,7 +192,7 @@ def _circles(gray: np.ndarray, dark: bool, min_area: float, max_area: float) -> 
     return np.array(out).reshape(-1, 3)
 
 
-def _grow(pts: np.ndarray, s: int, tree: Any, limit: int) -> dict:
+def _grow(pts: np.ndarray, s: int, tree: cKDTree, limit: int) -> dict:
     """Lattice ``{(a, b): index}`` grown from seed ``s`` (see the module docstring): its
     nearest neighbour and the nearest one not along it start it, :func:`grow_lattice`
     does the rest."""
@@ -282,12 +286,12 @@ def find_circles_grid(
     CircleGridDetection
         ``found`` is False (with the reason) unless every circle was found.
     """
-    w, h = _pattern(pattern_size)
+    w, h = check_pattern_size(pattern_size, "circles")
     if blob_color not in ("dark", "light"):
         raise InputError(f"blob_color must be 'dark' or 'light'; got {blob_color!r}")
     if not 0 < min_area <= max_area:
         raise InputError(f"need 0 < min_area <= max_area; got {min_area}, {max_area}")
-    gray = _gray(image).astype(np.float64)
+    gray = np.ascontiguousarray(rgb_to_gray(image), dtype=np.float64)  # validates; same scale
     if image.dtype.kind == "f" and gray.max() <= 1.0 + 1e-9:
         gray = gray * 255.0
     circles = _circles(gray, blob_color == "dark", float(min_area), float(max_area))

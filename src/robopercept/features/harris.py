@@ -43,7 +43,7 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_choice, check_image, check_int, check_range
+from robopercept._checks import check_choice, check_int, check_range
 from robopercept.errors import InputError
 from robopercept.features.keypoints import Keypoints
 from robopercept.imaging.color import rgb_to_gray
@@ -57,6 +57,7 @@ from robopercept.imaging.filters import (
 )
 
 __all__ = [
+    "good_features_to_track",
     "harris_corners",
     "harris_response",
     "min_eigenvalue",
@@ -67,16 +68,11 @@ __all__ = [
 Window = Literal["box", "gaussian"]
 
 
-def _gray(image: np.ndarray) -> np.ndarray:
-    image = check_image(image)
-    return rgb_to_gray(image) if image.ndim == 3 else image
-
-
 def _checked(
     image: np.ndarray, block_size: int, ksize: int, window: str, border: str
 ) -> tuple[np.ndarray, int, float]:
     # the gray image, the block size and the derivative scale (_scale)
-    gray = _gray(image)
+    gray = rgb_to_gray(image)  # validates; gray input passes through
     block_size = check_int(block_size, "block_size", 1)
     check_choice(window, "window", ("box", "gaussian"))
     check_choice(border, "border", BORDERS)
@@ -514,6 +510,14 @@ def harris_corners(
         ``scale = block_size``, ``orientation`` NaN, ``response`` the measure,
         ``octave`` 0; strongest first. Empty when the image has no corner (a constant
         image), never an exception.
+
+    Examples
+    --------
+    The four corners of a bright 10x10 square:
+
+    >>> img = np.zeros((20, 20), np.uint8); img[5:15, 5:15] = 255
+    >>> sorted(harris_corners(img, min_distance=3).xy.tolist())
+    [[5.0, 5.0], [5.0, 14.0], [14.0, 5.0], [14.0, 14.0]]
     """
     check_choice(method, "method", ("harris", "shi-tomasi"))
     threshold = check_range(threshold, "threshold", 0.0, 1.0, low_inclusive=False)
@@ -624,6 +628,60 @@ def _subpix_kernel(img, pts, hw, hh, mask, max_iter, eps2, out):  # pragma: no c
         out[n, 1] = cy
 
 
+def good_features_to_track(
+    image: np.ndarray,
+    max_corners: int = 1000,
+    quality: float = 0.01,
+    min_distance: float = 5.0,
+    block_size: int = 3,
+) -> np.ndarray:
+    r"""Shi-Tomasi corners as an ``(N, 2)`` array of ``(x, y)``, strongest first: the
+    points Lucas-Kanade tracks best (a large smallest eigenvalue of the structure tensor).
+
+    :func:`harris_corners` with ``method="shi-tomasi"`` on the gray image
+    ``rgb_to_gray(image, dtype=np.float32)`` (unrounded luma, the input's scale; the
+    quality level is relative, so the scale does not matter): the corners of
+    ``cv2.goodFeaturesToTrack(gray, max_corners, quality, min_distance,
+    blockSize=block_size)``, in the same order. Also exported as
+    ``robopercept.motion.good_features_to_track``.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        Any supported dtype; colour is converted to gray.
+    max_corners : int
+        Keep at most this many.
+    quality : float
+        Relative quality level in (0, 1]: corners weaker than ``quality`` times the
+        strongest are dropped.
+    min_distance : float
+        Minimum distance between corners, pixels.
+    block_size : int
+        Side of the window of the structure tensor.
+
+    Returns
+    -------
+    (N, 2) float64 ndarray
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> img = np.zeros((20, 20), np.uint8); img[5:15, 5:15] = 255
+    >>> good_features_to_track(img, 4, 0.1, 3).tolist()  # the square's 4 corners
+    [[14.0, 14.0], [5.0, 14.0], [14.0, 5.0], [5.0, 5.0]]
+    """
+    gray = rgb_to_gray(image, dtype=np.float32)
+    kp = harris_corners(
+        gray,
+        method="shi-tomasi",
+        block_size=block_size,
+        threshold=quality,
+        min_distance=min_distance,
+        max_corners=max_corners,
+    )
+    return kp.xy
+
+
 def refine_corners(
     image: np.ndarray,
     corners: np.ndarray,
@@ -665,7 +723,7 @@ def refine_corners(
     -------
     (N, 2) float64 ndarray
     """
-    gray = _gray(image).astype(np.float64)
+    gray = rgb_to_gray(image).astype(np.float64)
     pts = np.asarray(corners, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != 2:
         raise InputError(f"corners must be (N, 2) (x, y); got shape {pts.shape}")

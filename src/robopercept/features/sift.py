@@ -49,12 +49,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from robopercept._checks import check_image, check_int, check_positive
+from robopercept._checks import check_int, check_positive
 from robopercept.errors import InputError
 from robopercept.features._atan import atan2_deg
 from robopercept.features.keypoints import Keypoints
 from robopercept.imaging.color import rgb_to_gray
-from robopercept.imaging.filters import gaussian_blur
+from robopercept.imaging.filters import gaussian_kernel, separable_filter_unchecked
 
 __all__ = ["Features", "sift"]
 
@@ -116,8 +116,10 @@ def _upsample2(src, dst):  # pragma: no cover - compiled
 
 
 def _blur(img: np.ndarray, sigma: float) -> np.ndarray:
+    # gaussian_blur(img, sigma, ksize=...) without re-validating img on every layer;
     # OpenCV's kernel size for float images: round(8 sigma + 1), made odd
-    return gaussian_blur(img, sigma, ksize=round(sigma * 8 + 1) | 1)
+    k = gaussian_kernel(sigma, round(sigma * 8 + 1) | 1)
+    return separable_filter_unchecked(img, k, k, "reflect101")
 
 
 def _pyramid(
@@ -553,7 +555,7 @@ def sift(
     Follows ``cv2.SIFT_create()`` step by step (module docstring); on the Oxford
     affine sequences it finds about the same keypoints and matches (``docs/features.md``).
     """
-    image = check_image(image)
+    gray = rgb_to_gray(image)  # validates; gray input passes through
     n_features = check_int(n_features, "n_features", 0)
     layers = check_int(n_octave_layers, "n_octave_layers", 1)
     contrast = float(contrast_threshold)
@@ -565,7 +567,6 @@ def sift(
         raise InputError(
             f"descriptor_dtype must be np.float32 or np.uint8; got {descriptor_dtype!r}"
         )
-    gray = rgb_to_gray(image) if image.ndim == 3 else image
     h, w = gray.shape
     need = MIN_SIZE if upsample else 2 * MIN_SIZE
     if min(h, w) < need:

@@ -1,8 +1,14 @@
 """2-D image processing: filters, edges, colour, morphology, blobs, pyramids, I/O."""
 
 from robopercept.imaging.blobs import BlobFeatures, blob_features, label_components, otsu_threshold
-from robopercept.imaging.color import hsv_range_mask, hsv_to_rgb, rgb_to_gray, rgb_to_hsv
-from robopercept.imaging.edges import canny
+from robopercept.imaging.color import (
+    gray_255,
+    hsv_range_mask,
+    hsv_to_rgb,
+    rgb_to_gray,
+    rgb_to_hsv,
+)
+from robopercept.imaging.edges import canny, log_zero_crossings
 from robopercept.imaging.filters import (
     box_filter,
     convolve,
@@ -18,13 +24,21 @@ from robopercept.imaging.filters import (
     median_filter,
     sobel,
 )
-from robopercept.imaging.io import VideoReader, VideoWriter, read_image, write_image
+from robopercept.imaging.io import (
+    SnapshotVideoWriter,
+    VideoReader,
+    VideoWriter,
+    read_image,
+    sample_image_path,
+    write_image,
+)
 from robopercept.imaging.morphology import closing, dilate, erode, opening, structuring_element
 from robopercept.imaging.pyramids import gaussian_pyramid, pyr_down
 from robopercept.imaging.warp import remap, transform_points, warp_perspective
 
 __all__ = [
     "BlobFeatures",
+    "SnapshotVideoWriter",
     "VideoReader",
     "VideoWriter",
     "blob_features",
@@ -42,11 +56,13 @@ __all__ = [
     "gaussian_kernel",
     "gaussian_pyramid",
     "gradient",
+    "gray_255",
     "hsv_range_mask",
     "hsv_to_rgb",
     "label_components",
     "laplacian",
     "laplacian_of_gaussian",
+    "log_zero_crossings",
     "median_filter",
     "opening",
     "otsu_threshold",
@@ -55,6 +71,7 @@ __all__ = [
     "remap",
     "rgb_to_gray",
     "rgb_to_hsv",
+    "sample_image_path",
     "sobel",
     "structuring_element",
     "transform_points",

@@ -25,11 +25,51 @@ from numba import njit
 from robopercept._checks import check_ndim
 from robopercept.errors import InputError
 
-__all__ = ["BlobFeatures", "blob_features", "label_components", "otsu_threshold"]
+__all__ = [
+    "BlobFeatures",
+    "blob_features",
+    "label_components",
+    "otsu_threshold",
+    "uf_find",
+    "uf_roots",
+    "uf_union",
+    "uf_union_pairs",
+]
+
+
+# --------------------------------------------------------------------------- union-find
+# A disjoint-set forest over the integers 0 .. n-1 stored in one int array ``parent``
+# (``parent[i] == i`` marks a root). Shared with learning.dbscan.
 
 
 @njit(cache=True, nogil=True)
-def _find(parent, i):  # pragma: no cover - compiled
+def uf_find(parent: np.ndarray, i: int) -> int:  # pragma: no cover - compiled
+    """Root of ``i`` in the union-find forest ``parent``, compressing the path on the way.
+
+    Compiled (numba, ``nogil``); call it from compiled code or from Python. After the
+    call every node on the path from ``i`` points at the root directly (path
+    compression), so a sequence of :func:`uf_union` calls costs nearly linear time.
+
+    Parameters
+    ----------
+    parent : (n,) int ndarray
+        The forest: ``parent[i]`` is the parent of ``i``, roots point at themselves.
+        Modified in place (path compression).
+    i : int
+        A node, ``0 <= i < n``; not bounds-checked.
+
+    Returns
+    -------
+    int
+        The root of ``i``'s set.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> parent = np.array([0, 0, 1, 3])  # 2 -> 1 -> 0, and 3 alone
+    >>> int(uf_find(parent, 2)), parent.tolist()
+    (0, [0, 0, 0, 3])
+    """
     root = i
     while parent[root] != root:
         root = parent[root]
@@ -41,9 +81,35 @@ def _find(parent, i):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _union(parent, a, b):  # pragma: no cover - compiled
-    ra = _find(parent, a)
-    rb = _find(parent, b)
+def uf_union(parent: np.ndarray, a: int, b: int) -> int:  # pragma: no cover - compiled
+    """Merge the sets of ``a`` and ``b``; the smaller root becomes the root of both.
+
+    Keeping the smallest index as the root makes the result independent of the order
+    of the unions: each set's root is its smallest member. (This is what numbers blobs
+    in raster order in :func:`label_components` and DBSCAN clusters by their first core
+    point.) Compiled; ``parent`` is modified in place.
+
+    Parameters
+    ----------
+    parent : (n,) int ndarray
+        The forest (see :func:`uf_find`).
+    a, b : int
+        Two nodes (not bounds-checked).
+
+    Returns
+    -------
+    int
+        The root of the merged set, ``min(uf_find(a), uf_find(b))``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> parent = np.arange(4)
+    >>> int(uf_union(parent, 3, 1)), int(uf_union(parent, 1, 2)), parent.tolist()
+    (1, 1, [0, 1, 1, 1])
+    """
+    ra = uf_find(parent, a)
+    rb = uf_find(parent, b)
     if ra < rb:
         parent[rb] = ra
         return ra
@@ -52,6 +118,51 @@ def _union(parent, a, b):  # pragma: no cover - compiled
     return rb
 
 
+@njit(cache=True, nogil=True)
+def uf_union_pairs(parent: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:  # pragma: no cover
+    """:func:`uf_union` of every pair ``(a[t], b[t])``, in place.
+
+    Parameters
+    ----------
+    parent : (n,) int ndarray
+        The forest (see :func:`uf_find`).
+    a, b : (m,) int ndarray
+        Node pairs to merge (not bounds-checked).
+    """
+    for t in range(a.size):
+        uf_union(parent, a[t], b[t])
+
+
+@njit(cache=True, nogil=True)
+def uf_roots(parent: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
+    """The root of every node: ``out[i] = uf_find(parent, i)``, as int64.
+
+    Parameters
+    ----------
+    parent : (n,) int ndarray
+        The forest (see :func:`uf_find`); path-compressed in place.
+
+    Returns
+    -------
+    (n,) int64 ndarray
+        Equal entries mark the same set; each is the set's smallest member when the
+        forest was built with :func:`uf_union`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> parent = np.arange(5)
+    >>> uf_union_pairs(parent, np.array([4, 1]), np.array([2, 3]))
+    >>> uf_roots(parent).tolist()
+    [0, 1, 2, 1, 2]
+    """
+    out = np.empty(parent.size, dtype=np.int64)
+    for i in range(parent.size):
+        out[i] = uf_find(parent, i)
+    return out
+
+
+# --------------------------------------------------------------------------- labelling
 _ONES64 = np.uint64(0x0101010101010101)
 
 
@@ -120,7 +231,7 @@ def _label_kernel(mask, mask64, eight, labels):  # pragma: no cover - compiled
             q = p
             while q < p_end and run_s[q] < e + reach:
                 lab = run_l[q]
-                cur = lab if cur == 0 else _union(parent, cur, lab)
+                cur = lab if cur == 0 else uf_union(parent, cur, lab)
                 q += 1
             if cur == 0:
                 n += 1
@@ -132,7 +243,7 @@ def _label_kernel(mask, mask64, eight, labels):  # pragma: no cover - compiled
     final = np.zeros(n + 1, dtype=np.int32)
     count = 0
     for i in range(1, n + 1):
-        r = _find(parent, i)
+        r = uf_find(parent, i)
         if r == i:
             count += 1
             final[i] = count

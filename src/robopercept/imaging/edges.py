@@ -22,7 +22,7 @@ from robopercept.errors import InputError
 from robopercept.imaging.color import rgb_to_gray
 from robopercept.imaging.filters import gaussian_blur
 
-__all__ = ["canny"]
+__all__ = ["canny", "log_zero_crossings"]
 
 _TAN_22_5 = float(np.tan(np.deg2rad(22.5)))
 _TAN_67_5 = float(np.tan(np.deg2rad(67.5)))
@@ -182,3 +182,49 @@ def canny(
     proto = np.empty(0, dtype=np.float64 if work.dtype == np.float64 else np.float32)
     state = _canny_kernel(np.ascontiguousarray(work), bool(l2_gradient), low, high, proto)
     return state[1:-1, 1:-1] == 2
+
+
+def log_zero_crossings(log: np.ndarray, contrast: float = 0.05) -> np.ndarray:
+    r"""Edges as the zero crossings of a Laplacian-of-Gaussian response (Marr-Hildreth).
+
+    A pixel is an edge when the sign of ``log`` changes between it and its right or
+    lower neighbour and the response there is strong enough:
+
+    .. math::
+
+        E(x, y) = [\operatorname{sgn} L(x, y) \ne \operatorname{sgn} L(x + 1, y)
+        \lor \operatorname{sgn} L(x, y) \ne \operatorname{sgn} L(x, y + 1)]
+        \land |L(x, y)| > c \max |L|
+
+    (positive against non-positive), which removes the crossings of flat, noisy areas.
+
+    Parameters
+    ----------
+    log : (H, W) float ndarray
+        The response, e.g. :func:`~robopercept.imaging.laplacian_of_gaussian` with
+        ``normalized=True``.
+    contrast : float in [0, 1)
+        The fraction ``c`` of the strongest response that a crossing must exceed.
+
+    Returns
+    -------
+    (H, W) bool ndarray
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> log = np.array([[1.0, 1.0, -1.0, -1.0]] * 2)
+    >>> log_zero_crossings(log).astype(int)
+    array([[0, 1, 0, 0],
+           [0, 1, 0, 0]])
+    """
+    log = check_image(log, "log")
+    if log.ndim != 2:
+        raise InputError(f"log must be a 2-D response; got shape {log.shape}")
+    c = check_range(contrast, "contrast", 0.0, 1.0, high_inclusive=False)
+    pos = log > 0
+    cross = np.zeros_like(pos)
+    cross[:, :-1] |= pos[:, :-1] != pos[:, 1:]
+    cross[:-1, :] |= pos[:-1, :] != pos[1:, :]
+    strong = np.abs(log) > c * float(np.abs(log).max() or 1.0)
+    return cross & strong

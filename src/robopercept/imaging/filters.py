@@ -28,6 +28,7 @@ row inside, so the inner loop vectorizes; an ``(H, W, C)`` image is seen as an
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
@@ -57,6 +58,7 @@ __all__ = [
     "laplacian",
     "laplacian_of_gaussian",
     "median_filter",
+    "separable_filter_unchecked",
     "sobel",
 ]
 
@@ -134,106 +136,54 @@ def _pad_row(srow, cidx, channels, cval, buf):  # pragma: no cover - compiled
                 buf[j * channels + c] = srow[s * channels + c]
 
 
-@njit(cache=True, nogil=True)
-def _taps1(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
-    """res[x] = sum_k kx[k] acc[x + (k - ax) 1], the border pixels through ``cidx``.
+def _make_taps(stride: int) -> Callable[..., None]:
+    """Compile the horizontal tap loop for one tap stride (the channel count).
 
-    Tap stride 1 (gray): a literal, so LLVM vectorizes the loop.
+    ``stride`` is frozen into the compiled function as a constant (numba treats closure
+    variables as compile-time constants), so for 1 and 3 LLVM sees a literal stride and
+    vectorizes the inner loops; ``stride=0`` compiles the generic loop, which reads the
+    stride from its ``channels`` argument (slower: not vectorized). One definition, three
+    specializations: :data:`_taps1`, :data:`_taps3`, :data:`_taps_any`.
     """
-    n = kx.shape[0]
-    width = cidx.shape[0] - n + 1
-    lo = ax * 1
-    hi = (width - (n - 1 - ax)) * 1
-    if hi > lo:
-        w0 = kx[0]
-        dst = res[lo:hi]
-        seg = acc[lo - ax * 1 :]
-        for x in range(hi - lo):
-            dst[x] = w0 * seg[x]
-        for k in range(1, n):
-            wk = kx[k]
-            seg = acc[lo + (k - ax) * 1 :]
+
+    @njit(cache=True, nogil=True)
+    def taps(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
+        """res[x] = sum_k kx[k] acc[x + (k - ax) s], s the tap stride, the border pixels
+        through ``cidx``."""
+        s = channels if stride == 0 else stride
+        n = kx.shape[0]
+        width = cidx.shape[0] - n + 1
+        lo = ax * s
+        hi = (width - (n - 1 - ax)) * s
+        if hi > lo:
+            w0 = kx[0]
+            dst = res[lo:hi]
+            seg = acc[lo - ax * s :]
             for x in range(hi - lo):
-                dst[x] += wk * seg[x]
-    else:
-        lo = hi = 0
-    nb = lo // 1  # the border pixels only: left of lo, right of hi
-    for q in range(nb + width - hi // 1):
-        p = q if q < nb else hi // 1 + q - nb
-        for c in range(1):
-            v = 0.0
-            for k in range(n):
-                s = cidx[p + k]
-                v += kx[k] * (const if s < 0 else acc[s * 1 + c])
-            res[p * 1 + c] = v
+                dst[x] = w0 * seg[x]
+            for k in range(1, n):
+                wk = kx[k]
+                seg = acc[lo + (k - ax) * s :]
+                for x in range(hi - lo):
+                    dst[x] += wk * seg[x]
+        else:
+            lo = hi = 0
+        nb = lo // s  # the border pixels only: left of lo, right of hi
+        for q in range(nb + width - hi // s):
+            p = q if q < nb else hi // s + q - nb
+            for c in range(s):
+                v = 0.0
+                for k in range(n):
+                    j = cidx[p + k]
+                    v += kx[k] * (const if j < 0 else acc[j * s + c])
+                res[p * s + c] = v
+
+    return taps
 
 
-@njit(cache=True, nogil=True)
-def _taps3(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
-    """res[x] = sum_k kx[k] acc[x + (k - ax) 3], the border pixels through ``cidx``.
-
-    Tap stride 3 (RGB): a literal, so LLVM vectorizes the loop.
-    """
-    n = kx.shape[0]
-    width = cidx.shape[0] - n + 1
-    lo = ax * 3
-    hi = (width - (n - 1 - ax)) * 3
-    if hi > lo:
-        w0 = kx[0]
-        dst = res[lo:hi]
-        seg = acc[lo - ax * 3 :]
-        for x in range(hi - lo):
-            dst[x] = w0 * seg[x]
-        for k in range(1, n):
-            wk = kx[k]
-            seg = acc[lo + (k - ax) * 3 :]
-            for x in range(hi - lo):
-                dst[x] += wk * seg[x]
-    else:
-        lo = hi = 0
-    nb = lo // 3  # the border pixels only: left of lo, right of hi
-    for q in range(nb + width - hi // 3):
-        p = q if q < nb else hi // 3 + q - nb
-        for c in range(3):
-            v = 0.0
-            for k in range(n):
-                s = cidx[p + k]
-                v += kx[k] * (const if s < 0 else acc[s * 3 + c])
-            res[p * 3 + c] = v
-
-
-@njit(cache=True, nogil=True)
-def _taps_any(acc, kx, ax, cidx, channels, const, res):  # pragma: no cover - compiled
-    """res[x] = sum_k kx[k] acc[x + (k - ax) channels], the border pixels through ``cidx``.
-
-    Any tap stride (slower: not vectorized).
-    """
-    n = kx.shape[0]
-    width = cidx.shape[0] - n + 1
-    lo = ax * channels
-    hi = (width - (n - 1 - ax)) * channels
-    if hi > lo:
-        w0 = kx[0]
-        dst = res[lo:hi]
-        seg = acc[lo - ax * channels :]
-        for x in range(hi - lo):
-            dst[x] = w0 * seg[x]
-        for k in range(1, n):
-            wk = kx[k]
-            seg = acc[lo + (k - ax) * channels :]
-            for x in range(hi - lo):
-                dst[x] += wk * seg[x]
-    else:
-        lo = hi = 0
-    nb = lo // channels  # the border pixels only: left of lo, right of hi
-    for q in range(nb + width - hi // channels):
-        p = q if q < nb else hi // channels + q - nb
-        for c in range(channels):
-            v = 0.0
-            for k in range(n):
-                s = cidx[p + k]
-                v += kx[k] * (const if s < 0 else acc[s * channels + c])
-            res[p * channels + c] = v
+_taps1 = _make_taps(1)  # gray
+_taps3 = _make_taps(3)  # RGB
+_taps_any = _make_taps(0)  # any other channel count
 
 
 @njit(cache=True, nogil=True)
@@ -381,16 +331,66 @@ def _plan(
     return src, channels, ax, cidx, ridx, out, *_int_limits(out_dtype)
 
 
-def _run_separable(
+def separable_filter_unchecked(
     image: np.ndarray,
     kx: np.ndarray,
     ky: np.ndarray,
-    border: str,
-    cval: float,
-    out_dtype: np.dtype,
+    border: str = "reflect101",
+    cval: float = 0.0,
+    out_dtype: np.dtype | type | None = None,
     ax: int | None = None,
     ay: int | None = None,
 ) -> np.ndarray:
+    r"""Separable correlation ``g = k_y \star_y (k_x \star_x f)`` WITHOUT input checks: the
+    compiled engine behind :func:`correlate_separable`, :func:`gaussian_blur`,
+    :func:`box_filter`, :func:`sobel`, :func:`laplacian` and
+    :func:`laplacian_of_gaussian`, for callers that have validated their input already
+    (and that call it in a loop, e.g. pyramids and scale spaces).
+
+    .. math:: g(x, y) = \sum_{i, j} k_y[i]\, k_x[j]\, f(x + j - a_x,\; y + i - a_y)
+
+    It does not validate anything: ``image`` must already be a finite ``(H, W)`` or
+    ``(H, W, C)`` array of a supported dtype (e.g. from ``check_image``), the kernels
+    finite 1-D arrays, ``border`` one of :data:`BORDERS`, the anchors inside the
+    kernels. Bad input gives wrong output or a crash, not an :class:`InputError`; use
+    :func:`correlate_separable` at a public boundary.
+
+    The sums run in float32 (float64 for float64 images); integer outputs are rounded
+    half up and saturated, as OpenCV does. The result equals
+    ``correlate_separable(image, kx, ky, border=border, cval=cval)`` when ``out_dtype`` is
+    float32 for integer input, and ``gaussian_blur(image, sigma, ksize=n)`` for
+    ``kx = ky = gaussian_kernel(sigma, n)`` and ``out_dtype=None``.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        Validated image.
+    kx, ky : (kw,), (kh,) ndarray
+        Horizontal and vertical kernels (any float dtype; cast to the working type).
+    border : {'reflect101', 'reflect', 'replicate', 'constant'}
+    cval : float
+        The value outside the image for ``border="constant"``.
+    out_dtype : dtype, optional
+        Output dtype; default the input dtype (a smoothing filter).
+    ax, ay : int, optional
+        Anchors in ``kx`` and ``ky``; default their centres ``kw // 2``, ``kh // 2``.
+
+    Returns
+    -------
+    ndarray
+        Same shape as ``image``, dtype ``out_dtype``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> img = np.zeros((5, 5), np.float32); img[2, 2] = 1
+    >>> k = np.array([1.0, 2.0, 1.0]) / 4
+    >>> separable_filter_unchecked(img, k, k)[1:4, 1:4] * 16
+    array([[1., 2., 1.],
+           [2., 4., 2.],
+           [1., 2., 1.]], dtype=float32)
+    """
+    out_dtype = image.dtype if out_dtype is None else np.dtype(out_dtype)
     work = _work_dtype(image)
     src, channels, ax, cidx, ridx, out, is_int, lo, hi = _plan(
         image, kx.size, ky.size, ax, ay, border, out_dtype
@@ -523,7 +523,7 @@ def correlate_separable(
     kx = check_kernel(kernel_x, "kernel_x", 1)
     ky = check_kernel(kernel_y, "kernel_y", 1)
     cval = _check_border(border, cval)
-    return _run_separable(image, kx, ky, border, cval, _out_dtype(image, False))
+    return separable_filter_unchecked(image, kx, ky, border, cval, _out_dtype(image, False))
 
 
 def convolve_separable(
@@ -542,7 +542,7 @@ def convolve_separable(
     kx = check_kernel(kernel_x, "kernel_x", 1)
     ky = check_kernel(kernel_y, "kernel_y", 1)
     cval = _check_border(border, cval)
-    return _run_separable(
+    return separable_filter_unchecked(
         image,
         kx[::-1],
         ky[::-1],
@@ -612,12 +612,25 @@ def gaussian_blur(
     -------
     ndarray
         Same shape and dtype as ``image``.
+
+    Examples
+    --------
+    An impulse spreads into the (normalized) Gaussian kernel itself:
+
+    >>> img = np.zeros((5, 5)); img[2, 2] = 1.0
+    >>> out = gaussian_blur(img, 1.0, ksize=3)
+    >>> np.round(out[1:4, 1:4], 4)
+    array([[0.0751, 0.1238, 0.0751],
+           [0.1238, 0.2042, 0.1238],
+           [0.0751, 0.1238, 0.0751]])
+    >>> round(float(out.sum()), 12)
+    1.0
     """
     image = check_image(image)
     check_choice(border, "border", BORDERS)
     kx = gaussian_kernel(sigma, ksize)
     ky = kx if sigma_y is None else gaussian_kernel(sigma_y, ksize)
-    return _run_separable(image, kx, ky, border, 0.0, image.dtype)
+    return separable_filter_unchecked(image, kx, ky, border, 0.0, image.dtype)
 
 
 def box_filter(
@@ -658,7 +671,7 @@ def box_filter(
     kx = np.full(int(kw), scale_x)
     ky = np.full(int(kh), scale_y)
     out_dtype = image.dtype if normalize else _out_dtype(image, False)
-    return _run_separable(image, kx, ky, border, 0.0, out_dtype)
+    return separable_filter_unchecked(image, kx, ky, border, 0.0, out_dtype)
 
 
 @njit(cache=True, nogil=True)
@@ -804,7 +817,7 @@ def sobel(
         raise InputError(f"dx + dy must be >= 1; got dx={dx}, dy={dy}")
     kx = derivative_kernel(int(dx), ksize) * float(scale)
     ky = derivative_kernel(int(dy), ksize)
-    return _run_separable(image, kx, ky, border, 0.0, _out_dtype(image, False))
+    return separable_filter_unchecked(image, kx, ky, border, 0.0, _out_dtype(image, False))
 
 
 def gradient(
@@ -874,9 +887,8 @@ def laplacian(
         return _run_correlate(image, kernel, border, 0.0, out_dtype)
     d2 = derivative_kernel(2, ksize) * float(scale)
     d0 = derivative_kernel(0, ksize)
-    return _run_separable(image, d2, d0, border, 0.0, out_dtype) + _run_separable(
-        image, d0, d2, border, 0.0, out_dtype
-    )
+    fxx = separable_filter_unchecked(image, d2, d0, border, 0.0, out_dtype)
+    return fxx + separable_filter_unchecked(image, d0, d2, border, 0.0, out_dtype)
 
 
 def laplacian_of_gaussian(
@@ -926,6 +938,5 @@ def laplacian_of_gaussian(
         g2 = g2 * sigma * sigma
     out_dtype = _out_dtype(image, False)
     # both kernels are symmetric, so correlation equals convolution here
-    return _run_separable(image, g2, g, border, 0.0, out_dtype) + _run_separable(
-        image, g, g2, border, 0.0, out_dtype
-    )
+    fxx = separable_filter_unchecked(image, g2, g, border, 0.0, out_dtype)
+    return fxx + separable_filter_unchecked(image, g, g2, border, 0.0, out_dtype)

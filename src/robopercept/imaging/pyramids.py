@@ -6,7 +6,7 @@ import numpy as np
 
 from robopercept._checks import check_image
 from robopercept.errors import InputError
-from robopercept.imaging.filters import _run_separable
+from robopercept.imaging.filters import separable_filter_unchecked
 
 __all__ = ["gaussian_pyramid", "pyr_down"]
 
@@ -29,8 +29,12 @@ def pyr_down(image: np.ndarray) -> np.ndarray:
     ndarray
         Half size, same dtype.
     """
-    image = check_image(image)
-    blurred = _run_separable(image, _BINOMIAL_5, _BINOMIAL_5, "reflect101", 0.0, image.dtype)
+    return _pyr_down(check_image(image))
+
+
+def _pyr_down(image: np.ndarray) -> np.ndarray:
+    # pyr_down of a validated image (gaussian_pyramid checks its input once)
+    blurred = separable_filter_unchecked(image, _BINOMIAL_5, _BINOMIAL_5, "reflect101")
     return np.ascontiguousarray(blurred[::2, ::2])
 
 
@@ -60,5 +64,5 @@ def gaussian_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
         )
     out = [image]
     for _ in range(int(levels) - 1):
-        out.append(pyr_down(out[-1]))
+        out.append(_pyr_down(out[-1]))
     return out

@@ -23,14 +23,16 @@ identical to scikit-learn's (not only up to renaming).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from itertools import chain
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from tqdm import tqdm
 
 from robopercept._checks import check_int, check_positive
+from robopercept.imaging.blobs import uf_roots, uf_union_pairs
 from robopercept.learning._base import ClusterMixin, Estimator
 
 __all__ = ["DBSCAN"]
@@ -39,38 +41,6 @@ _CHUNK = 32768
 _BRUTE_DIM = 12
 _BLOCK_BYTES = 64 << 20
 _CACHE_BYTES = 512 << 20
-
-
-@njit(cache=True)
-def _find(parent: np.ndarray, i: int) -> int:
-    root = i
-    while parent[root] != root:
-        root = parent[root]
-    while parent[i] != root:  # path compression
-        nxt = parent[i]
-        parent[i] = root
-        i = nxt
-    return root
-
-
-@njit(cache=True)
-def _union_pairs(parent: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
-    for t in range(a.size):
-        ra = _find(parent, a[t])
-        rb = _find(parent, b[t])
-        if ra != rb:  # the smaller index becomes the root
-            if ra < rb:
-                parent[rb] = ra
-            else:
-                parent[ra] = rb
-
-
-@njit(cache=True)
-def _roots(parent: np.ndarray) -> np.ndarray:
-    out = np.empty(parent.size, dtype=np.int64)
-    for i in range(parent.size):
-        out[i] = _find(parent, i)
-    return out
 
 
 @njit(cache=True)
@@ -96,7 +66,7 @@ def _brute_pairs(
     return rows, cols
 
 
-def _flatten(lists: Any) -> tuple[np.ndarray, np.ndarray]:
+def _flatten(lists: Sequence[Sequence[int]] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Neighbour lists -> (row index, neighbour index) arrays."""
     lengths = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(lists))
     flat = np.fromiter(chain.from_iterable(lists), dtype=np.int64, count=int(lengths.sum()))
@@ -129,7 +99,7 @@ class DBSCAN(ClusterMixin, Estimator):
         self.min_samples = min_samples
         self.progress = progress
 
-    def fit(self, X: Any, y: Any = None) -> DBSCAN:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> DBSCAN:
         """Cluster ``X`` (N, d)."""
         X = self._check_X(X, fitting=True)
         eps = check_positive(self.eps, "eps")
@@ -168,14 +138,14 @@ class DBSCAN(ClusterMixin, Estimator):
             if cache is not None:
                 for rows, nb in cache:
                     keep = is_core[rows] & is_core[nb]
-                    _union_pairs(parent, core_pos[rows[keep]], core_pos[nb[keep]])
+                    uf_union_pairs(parent, core_pos[rows[keep]], core_pos[nb[keep]])
                     bar.update()
             else:
                 for s in range(0, core_idx.size, step):
                     rows, nb = core_search.pairs(X[core_idx[s : s + step]])
-                    _union_pairs(parent, rows + s, nb)
+                    uf_union_pairs(parent, rows + s, nb)
                     bar.update()
-            roots = _roots(parent)
+            roots = uf_roots(parent)
             # roots are the lowest core index of each cluster: number them in that order
             uniq, core_label = np.unique(roots, return_inverse=True)
             labels[core_idx] = core_label

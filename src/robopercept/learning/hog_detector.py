@@ -24,12 +24,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from tqdm import tqdm
 
-from robopercept._checks import check_image, check_positive
+from robopercept._checks import check_positive
 from robopercept.errors import FileFormatError, InputError
 from robopercept.features.hog import hog, hog_windows
 from robopercept.geometry.boxes import box_iou_matrix
+from robopercept.imaging.color import rgb_to_gray
 from robopercept.learning.svm import LinearSVC
 
 __all__ = [
@@ -63,7 +65,9 @@ def box_iou(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     return box_iou_matrix(box, boxes)[0]
 
 
-def non_max_suppression(boxes: Any, scores: Any, iou: float = 0.3) -> np.ndarray:
+def non_max_suppression(
+    boxes: npt.ArrayLike, scores: npt.ArrayLike, iou: float = 0.3
+) -> np.ndarray:
     """Indices of the boxes kept by greedy NMS, best score first."""
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     scores = np.asarray(scores, dtype=np.float64).ravel()
@@ -80,24 +84,25 @@ def non_max_suppression(boxes: Any, scores: Any, iou: float = 0.3) -> np.ndarray
 
 
 def _to_gray(image: np.ndarray) -> np.ndarray:
-    image = check_image(image)
-    img = image.astype(np.float64)
-    if image.dtype == np.uint8:
-        img /= 255.0
-    if img.ndim == 3:
-        img = img @ np.array([0.299, 0.587, 0.114])
-    return img
+    # float64 gray; uint8 scaled to [0, 1] (other dtypes keep their scale)
+    image = np.asarray(image)
+    gray = rgb_to_gray(image, dtype=np.float64)  # validates
+    return gray / 255.0 if image.dtype == np.uint8 else gray
 
 
 def _rescale(image: np.ndarray, scale: float) -> np.ndarray:
     """``image`` resized by ``scale`` < 1 (Gaussian anti-aliasing, then bilinear)."""
-    from robopercept.imaging.filters import gaussian_blur
+    from robopercept.imaging.filters import gaussian_kernel, separable_filter_unchecked
     from robopercept.imaging.warp import warp_perspective
 
     h, w = image.shape
     size = (max(1, round(h * scale)), max(1, round(w * scale)))
     sigma = 0.5 * (1.0 / scale - 1.0)
-    src = gaussian_blur(image, sigma) if sigma > 0.1 else image
+    if sigma > 0.1:  # gaussian_blur(image, sigma) of the image detect() validated
+        k = gaussian_kernel(sigma)
+        src = separable_filter_unchecked(image, k, k, "reflect101")
+    else:
+        src = image
     # pixel centres map as x' = s (x + 1/2) - 1/2
     H = np.array([[scale, 0, 0.5 * scale - 0.5], [0, scale, 0.5 * scale - 0.5], [0, 0, 1]])
     return warp_perspective(src, H, size)
@@ -144,7 +149,9 @@ class HogDetector:
             )
         return np.stack([hog(255.0 * p.astype(np.float32), **self._hog_args()) for p in patches])
 
-    def fit(self, patches: np.ndarray, labels: np.ndarray, *, rng: Any = 0) -> HogDetector:
+    def fit(
+        self, patches: np.ndarray, labels: np.ndarray, *, rng: int | np.random.Generator | None = 0
+    ) -> HogDetector:
         """Train the SVM on window-sized patches with labels 1 (object) / 0."""
         X = self.describe(patches)
         svm = LinearSVC(C=self.C, rng=rng).fit(X, np.asarray(labels).astype(int))
@@ -357,7 +364,7 @@ def train_face_detector(
     hard_per_picture: int = 60,
     max_hard: int = 600,
     augment: bool = True,
-    rng: Any = 0,
+    rng: int | np.random.Generator | None = 0,
     progress: bool = False,
 ) -> tuple[HogDetector, dict[str, float]]:
     """Train the face model: ``lfw_subset`` faces (jittered, mirrored) plus hard negatives.

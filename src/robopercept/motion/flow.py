@@ -34,15 +34,19 @@ window area, threshold ``1e-4``).
 
 from __future__ import annotations
 
+import enum
 import threading
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit, prange
 
 from robopercept._checks import check_image
 from robopercept.errors import DegenerateError, InputError
+from robopercept.features.harris import good_features_to_track  # re-exported
+from robopercept.imaging.color import gray_255
 from robopercept.imaging.pyramids import pyr_down
 
 __all__ = [
@@ -56,8 +60,9 @@ __all__ = [
 ]
 
 
-class FlowStatus:
-    """Codes of :attr:`SparseFlow.reason`."""
+class FlowStatus(enum.IntEnum):
+    """Codes of :attr:`SparseFlow.reason` (integers: ``reason == FlowStatus.TRACKED``
+    compares an int8 array with them, and the compiled tracker writes them)."""
 
     TRACKED = 0
     APERTURE = 1  # smallest eigenvalue of the structure tensor below the threshold
@@ -101,18 +106,6 @@ class SparseFlow:
 
     def __len__(self) -> int:
         return int(self.status.size)
-
-
-def _gray255(image: np.ndarray, name: str) -> np.ndarray:
-    image = check_image(image, name)
-    img = image.astype(np.float32)
-    if image.dtype != np.uint8 and image.dtype.kind == "f":
-        img = img * 255.0  # floats are [0, 1]; work on the 0-255 scale of the thresholds
-    elif image.dtype.kind in "iu" and image.dtype != np.uint8:
-        raise InputError(f"{name} must be uint8 or float in [0, 1]; got {image.dtype}")
-    if img.ndim == 3:
-        img = img @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-    return np.ascontiguousarray(img)
 
 
 _WORK = threading.local()
@@ -229,7 +222,7 @@ def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
     )
     if not inside:
         if finest:
-            reason[p] = 2
+            reason[p] = FlowStatus.LEFT_IMAGE
         return
     a11 = 0.0
     a12 = 0.0
@@ -260,7 +253,7 @@ def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
         eig[p] = me
     if me < min_eig or det < 1.1920929e-07:
         if finest:
-            reason[p] = 1
+            reason[p] = FlowStatus.APERTURE
         return
     nx = nxt[p, 0] - half
     ny = nxt[p, 1] - half
@@ -271,7 +264,7 @@ def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
         inside, r0, c0, v00, v01, v10, v11 = _window_at(nx, ny, win, w, h, pad)
         if not inside:
             if finest:
-                reason[p] = 2
+                reason[p] = FlowStatus.LEFT_IMAGE
             break
         b1 = 0.0
         b2 = 0.0
@@ -306,13 +299,13 @@ def _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
         pdy = dy
     nxt[p, 0] = nx + half
     nxt[p, 1] = ny + half
-    if not finest or reason[p] != 0:
+    if not finest or reason[p] != FlowStatus.TRACKED:
         return
     if not converged:
-        reason[p] = 3
+        reason[p] = FlowStatus.NOT_CONVERGED
     inside, r0, c0, v00, v01, v10, v11 = _window_at(nx, ny, win, w, h, pad)
     if not inside:
-        reason[p] = 2
+        reason[p] = FlowStatus.LEFT_IMAGE
         return
     # the error (mean |J - I|, as OpenCV) and the residual relative to the contrast
     mean = 0.0
@@ -344,7 +337,7 @@ def _lk_level(ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
         gy = np.empty((win, win), dtype=np.float32)
         row = np.empty(win, dtype=np.float32)
         for p in range(k * n // chunks, (k + 1) * n // chunks):
-            if reason[p] == 0:
+            if reason[p] == FlowStatus.TRACKED:
                 _track(p, ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2,
                        min_eig, finest, reason, err, eig, rel, iwin, gx, gy, row)  # fmt: skip
 
@@ -352,7 +345,7 @@ def _lk_level(ii, gxi, gyi, jj, pad, h, w, prev, nxt, scale, win, iters, eps2, m
 def lucas_kanade(
     prev: np.ndarray,
     next: np.ndarray,
-    points: Any,
+    points: npt.ArrayLike,
     *,
     window: int = 21,
     levels: int = 3,
@@ -360,7 +353,7 @@ def lucas_kanade(
     eps: float = 0.01,
     min_eigenvalue: float = 1e-4,
     max_residual: float | None = 0.75,
-    initial: Any = None,
+    initial: npt.ArrayLike | None = None,
 ) -> SparseFlow:
     r"""Track ``points`` from ``prev`` to ``next`` by pyramidal Lucas-Kanade.
 
@@ -396,8 +389,8 @@ def lucas_kanade(
     InputError
         Frames of different sizes, a bad window, or points not ``(N, 2)`` finite.
     """
-    I0 = _gray255(prev, "prev")
-    J0 = _gray255(next, "next")
+    I0 = gray_255(prev, "prev")
+    J0 = gray_255(next, "next")
     if I0.shape != J0.shape:
         raise InputError(f"prev and next must have the same size; got {I0.shape} and {J0.shape}")
     if int(window) != window or window < 3 or window % 2 == 0:
@@ -422,7 +415,7 @@ def lucas_kanade(
     pyr_j = _pyramid(J0, len(pyr_i) - 1, window)
     top = len(pyr_i) - 1
     nxt = guess / 2.0**top
-    reason = np.zeros(n, dtype=np.int8)
+    reason = np.full(n, FlowStatus.TRACKED, dtype=np.int8)
     err = np.zeros(n)
     eig = np.zeros(n)
     rel = np.zeros(n)
@@ -445,29 +438,6 @@ def lucas_kanade(
     if max_residual is not None:
         reason[(reason == FlowStatus.TRACKED) & (rel > max_residual)] = FlowStatus.HIGH_RESIDUAL
     return SparseFlow(pts, nxt, reason == FlowStatus.TRACKED, reason, err, eig, rel)
-
-
-def good_features_to_track(
-    image: np.ndarray,
-    max_corners: int = 1000,
-    quality: float = 0.01,
-    min_distance: float = 5.0,
-    block_size: int = 3,
-) -> np.ndarray:
-    """Shi-Tomasi corners, ``(N, 2)`` ``(x, y)``, strongest first: the points LK tracks
-    best (large smallest eigenvalue). Same corners as ``cv2.goodFeaturesToTrack``."""
-    from robopercept.features.harris import harris_corners
-
-    gray = _gray255(image, "image").astype(np.float32)
-    kp = harris_corners(
-        gray,
-        method="shi-tomasi",
-        block_size=block_size,
-        threshold=quality,
-        min_distance=min_distance,
-        max_corners=max_corners,
-    )
-    return kp.xy
 
 
 def dense_flow(
@@ -549,7 +519,7 @@ def _similarity(p: np.ndarray, q: np.ndarray) -> tuple[float, float, np.ndarray,
 
 
 def classify_motion(
-    points: Any, flow: Any, *, min_motion: float = 0.5, trim: float = 3.0
+    points: npt.ArrayLike, flow: npt.ArrayLike, *, min_motion: float = 0.5, trim: float = 3.0
 ) -> MotionClass:
     r"""Tell translation, rotation and zoom apart by fitting a similarity transform.
 
