@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robopercept.geometry.camera import _undistort
+from robopercept.geometry.camera import undistort
 from robopercept.geometry.transforms import rotation_from_rotvec
 
 
@@ -20,9 +20,9 @@ def _board_coords(K, dist, rvec, tvec, size, ss):
     uu, vv = np.meshgrid(u, v)
     xd = (uu - K[0, 2]) / K[0, 0]
     yd = (vv - K[1, 2]) / K[1, 1]
-    x, y = _undistort(xd, yd, tuple(dist), False)
+    x, y = undistort(xd, yd, tuple(dist))
     for _ in range(3):  # a few more fixed-point rounds for strong distortion
-        x, y = _undistort(xd, yd, tuple(dist), False)
+        x, y = undistort(xd, yd, tuple(dist))
     ray = np.stack([x, y, np.ones_like(x)], axis=-1)
     # plane: n . X = d in camera frame, n = R[:, 2], d = n . t
     n = R[:, 2]

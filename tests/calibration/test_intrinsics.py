@@ -171,3 +171,24 @@ def test_bad_input(rng):
     # the same view three times: K is not determined
     with pytest.raises(DegenerateError, match="tilt the board"):
         calibrate_camera(obj, [img[0]] * 3, (640, 480))
+
+
+def test_rectify_pair_without_distortion_is_the_bouguet_remap():
+    """An identity calibration (same camera, pure x baseline) rectifies to itself up to
+    the remap's interpolation; a mono file or different sizes are refused."""
+    from robopercept.calibration import rectify_pair
+
+    K = np.array([[300.0, 0, 31.5], [0, 300.0, 23.5], [0, 0, 1]])
+    cal = {"K1": K, "K2": K, "R": np.eye(3), "T": np.array([-0.1, 0.0, 0.0])}
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 255, (48, 64), dtype=np.uint8)
+    right = rng.integers(0, 255, (48, 64), dtype=np.uint8)
+    rl, rr, Q = rectify_pair(left, right, cal)
+    assert rl.shape == left.shape and rl.dtype == np.uint8 and Q.shape == (4, 4)
+    np.testing.assert_array_equal(rl[2:-2, 2:-2], left[2:-2, 2:-2])
+    np.testing.assert_array_equal(rr[2:-2, 2:-2], right[2:-2, 2:-2])
+    assert Q[3, 2] == pytest.approx(10.0)  # 1 / baseline
+    with pytest.raises(InputError, match="not a stereo calibration"):
+        rectify_pair(left, right, {"K": K, "dist": np.zeros(5)})
+    with pytest.raises(InputError, match="differ in size"):
+        rectify_pair(left, right[:, :-1], cal)

@@ -13,8 +13,10 @@ from robopercept.depth import (
     sample_colors,
     texture_coordinates,
 )
+from robopercept.depth.rgbd import project_to_color
 from robopercept.errors import InputError
-from robopercept.geometry import CameraIntrinsics, se3
+from robopercept.geometry import CameraIntrinsics, apply, project, se3
+from robopercept.geometry.camera import compiled_params
 from tests.conftest import data_path
 
 rs = pytest.importorskip("pyrealsense2")
@@ -227,3 +229,20 @@ def test_uv_match_librealsense_on_software_device_frames(depth_model, color_mode
     assert kept.sum() > 1500
     np.testing.assert_allclose(pts[kept], vertices[kept], atol=1e-5)
     np.testing.assert_allclose(uv.reshape(-1, 2)[kept], uv_ref[kept], atol=1e-3)
+
+
+@pytest.mark.parametrize("model", ["none", "brown_conrady", "inverse_brown_conrady"])
+def test_project_to_color_matches_apply_then_project(model):
+    # the compiled per-point form equals the NumPy path (apply, then project) to rounding
+    rng = np.random.default_rng(9)
+    kc = CameraIntrinsics(80, 60, 60.0, 60.5, 39.6, 29.8, model, (0.02, 0.01, 1e-3, -2e-3, 0.0))
+    T = se3(np.array([0.01, -0.02, 0.005]), (-0.015, 0.001, 0.0002))
+    pts = np.column_stack([rng.uniform(-1, 1, 50), rng.uniform(-1, 1, 50), rng.uniform(0.3, 3, 50)])
+    ref = project(apply(T, pts), kc)
+    k, code, c = compiled_params(kc)
+    R, t = np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3])
+    ours = np.array([project_to_color(*p, R, t, k, code, c) for p in pts])
+    np.testing.assert_allclose(ours[:, :2], ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ours[:, 2], apply(T, pts)[:, 2], atol=1e-15)
+    u, v, z = project_to_color(0.0, 0.0, -1.0, np.eye(3), np.zeros(3), k, code, c)
+    assert np.isnan(u) and np.isnan(v) and z == -1.0  # behind the colour camera

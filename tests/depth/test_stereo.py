@@ -206,3 +206,21 @@ def test_block_matching_beats_opencv_bm_on_middlebury(name):
     ref = cv2.StereoBM_create(nd, 9).compute(left, right).astype(float) / 16
     ref[ref < 0] = np.nan
     assert ours <= bad_pixel_rate(ref, truth), (name, ours)
+
+
+def test_reprojection_matrix_hand_case_and_cv2():
+    import cv2
+
+    from robopercept.depth.stereo import disparity_to_points, reprojection_matrix
+
+    Q = reprojection_matrix(400.0, 0.2, (9, 5))
+    # centre pixel (4, 2) at disparity 40: Z = f B / d = 2, X = Y = 0; one pixel to the
+    # right: X = (5 - 4) * 2 / 400
+    pts = disparity_to_points(np.full((5, 9), 40.0), Q)
+    np.testing.assert_allclose(pts[2, 4], [0.0, 0.0, 2.0])
+    np.testing.assert_allclose(pts[2, 5], [2.0 / 400, 0.0, 2.0])
+    # the same points as cv2.reprojectImageTo3D with this Q (float32 inside OpenCV)
+    ref = cv2.reprojectImageTo3D(np.full((5, 9), 40.0, np.float32), Q)
+    np.testing.assert_allclose(pts, ref, rtol=1e-6, atol=1e-7)
+    with pytest.raises(InputError, match="positive"):
+        reprojection_matrix(0.0, 0.2, (9, 5))

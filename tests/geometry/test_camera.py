@@ -10,14 +10,24 @@ from scipy.spatial.transform import Rotation
 
 from robopercept.errors import InputError
 from robopercept.geometry import (
+    MODELS,
     CameraIntrinsics,
     apply,
     compose,
     deproject,
+    distort,
     invert,
     project,
     rotation_from_rotvec,
     se3,
+    undistort,
+    undistort_points,
+)
+from robopercept.geometry.camera import (
+    check_distortion,
+    compiled_params,
+    distort_point,
+    lens_model_code,
 )
 
 rs = pytest.importorskip("pyrealsense2")
@@ -139,3 +149,116 @@ def test_se3_helpers():
 def test_bad_input(call, match):
     with pytest.raises(InputError, match=match):
         call()
+
+
+def _distort_reference(x, y, c, modified):
+    # the NumPy reference of the compiled lens model (the formulas of the module docstring)
+    k1, k2, p1, p2, k3 = c
+    r2 = x * x + y * y
+    f = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+    if modified:
+        x, y = x * f, y * f
+        return x + 2 * p1 * x * y + p2 * (r2 + 2 * x * x), y + 2 * p2 * x * y + p1 * (
+            r2 + 2 * y * y
+        )
+    return (
+        x * f + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+        y * f + 2 * p2 * x * y + p1 * (r2 + 2 * y * y),
+    )
+
+
+class TestDistort:
+    def test_hand_case(self):
+        # k1 only: x_d = x (1 + k1 r^2); p1 only: x_d = x + 2 p1 x y, y_d = y + p1 (r^2 + 2 y^2)
+        xd, yd = distort(0.2, 0.1, (0.5, 0.0, 0.0, 0.0, 0.0))
+        np.testing.assert_allclose([xd, yd], [0.2 * 1.025, 0.1 * 1.025], rtol=1e-15)
+        xd, yd = distort(0.2, 0.1, (0.0, 0.0, 0.01, 0.0, 0.0))
+        np.testing.assert_allclose([xd, yd], [0.2 + 0.0004, 0.1 + 0.01 * 0.07], rtol=1e-15)
+        assert distort(0.3, -0.2, COEFFS, "none") == (0.3, -0.2)
+        xd, yd = distort(np.zeros((3, 1)), np.full(4, 0.1), COEFFS)  # broadcast together
+        assert xd.shape == yd.shape == (3, 4)
+
+    @pytest.mark.parametrize("model", MODELS)
+    def test_compiled_matches_numpy_reference(self, model):
+        # exact: the kernel evaluates the same operations in the same order
+        rng = np.random.default_rng(5)
+        x, y = rng.normal(0, 0.4, (2, 7, 9))
+        xd, yd = distort(x, y, COEFFS, model)
+        assert xd.shape == yd.shape == (7, 9)
+        if model == "none":
+            ref = (x, y)
+        else:
+            ref = _distort_reference(x, y, COEFFS, model != "brown_conrady")
+        np.testing.assert_array_equal(xd, ref[0])
+        np.testing.assert_array_equal(yd, ref[1])
+        code = lens_model_code(model)
+        c = np.array(COEFFS)
+        assert distort_point(x[0, 0], y[0, 0], c, code) == (xd[0, 0], yd[0, 0])
+
+    def test_matches_opencv_project_points(self):
+        # cv2.projectPoints with K = I gives the distorted normalized coordinates; both
+        # evaluate the same polynomial in float64
+        rng = np.random.default_rng(6)
+        x, y = rng.uniform(-0.6, 0.6, (2, 200))
+        ref, _ = cv2.projectPoints(
+            np.column_stack([x, y, np.ones_like(x)]), np.zeros(3), np.zeros(3), np.eye(3),
+            np.array(COEFFS),
+        )  # fmt: skip
+        xd, yd = distort(x, y, COEFFS)
+        np.testing.assert_allclose(np.column_stack([xd, yd]), ref[:, 0], atol=1e-13)
+
+    @pytest.mark.parametrize("model", ["brown_conrady", "inverse_brown_conrady"])
+    def test_undistort_round_trip(self, model):
+        rng = np.random.default_rng(7)
+        c = (0.05, -0.02, 0.001, 0.0005, 0.0)
+        x, y = rng.uniform(-0.5, 0.5, (2, 100))
+        xu, yu = undistort(*distort(x, y, c, model), c, model)
+        np.testing.assert_allclose(xu, x, atol=1e-9)
+        np.testing.assert_allclose(yu, y, atol=1e-9)
+        xn, yn = undistort(x, y, c, "none")
+        np.testing.assert_array_equal(xn, x)
+        np.testing.assert_array_equal(yn, y)
+
+    def test_undistort_points_matches_opencv(self):
+        # the same 5 fixed-point rounds as cv2.undistortPoints, the same float64
+        # operations: equal to rounding (OpenCV ignores a skew K[0, 1], so none here)
+        rng = np.random.default_rng(8)
+        K = np.array([[600.0, 0.0, 321.0], [0.0, 605.0, 239.0], [0.0, 0.0, 1.0]])
+        px = rng.uniform(0, 640, (200, 2))
+        ref = cv2.undistortPoints(px[:, None], K, np.array(COEFFS))[:, 0]
+        np.testing.assert_allclose(undistort_points(px, K, COEFFS), ref, atol=1e-12)
+        K0 = [[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]
+        np.testing.assert_allclose(undistort_points([[370.0, 140.0]], K0), [[0.1, -0.2]])
+        # skew: x = (u - cx - s y) / fx, exact without distortion
+        Ks = [[500.0, 2.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]
+        np.testing.assert_allclose(
+            undistort_points([[370.0, 140.0]], Ks), [[(50.0 + 2.0 * 0.2) / 500.0, -0.2]]
+        )
+
+    def test_check_distortion_and_compiled_params(self):
+        np.testing.assert_array_equal(check_distortion(None), np.zeros(5))
+        np.testing.assert_array_equal(check_distortion([[1, 2, 3, 4]]), [1, 2, 3, 4, 0])
+        k, code, c = compiled_params(camera("inverse_brown_conrady"))
+        np.testing.assert_array_equal(k, [640.5, 641.25, 637.2, 361.9])
+        assert code == lens_model_code("modified_brown_conrady") == 2
+        np.testing.assert_array_equal(c, COEFFS)
+        assert [lens_model_code(m) for m in ("none", "brown_conrady")] == [0, 1]
+
+    @pytest.mark.parametrize(
+        ("call", "match"),
+        [
+            (lambda: distort(0.1, 0.1, COEFFS, "fisheye"), "model must be one of 'none'"),
+            (lambda: lens_model_code("kannala_brandt"), "brown_conrady"),
+            (lambda: undistort(0.1, 0.1, COEFFS, "fisheye"), "model must be one of"),
+            (lambda: undistort(0.1, 0.1, COEFFS, "modified_brown_conrady"), "forward-only"),
+            (lambda: distort(0.1, 0.1, (1.0, 2.0)), "5 numbers"),
+            (lambda: undistort(0.1, 0.1, (1.0, 2.0, 3.0, 4.0)), "5 numbers"),
+            (lambda: check_distortion([1.0, 2.0, 3.0]), "4 or 5 coefficients"),
+            (lambda: check_distortion([np.nan] * 5, "D1"), "D1"),
+            (lambda: undistort_points(np.zeros((3, 3)), np.eye(3)), r"\(N, 2\)"),
+            (lambda: undistort_points(np.zeros((3, 2)), np.eye(2)), "3x3"),
+        ],
+    )
+    def test_bad_input(self, call, match):
+        with pytest.raises(InputError, match=match):
+            call()

@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept._checks import check_choice
 from robopercept.errors import DegenerateError, FileFormatError, InputError
@@ -126,7 +127,9 @@ class HandEyeResult:
 # --------------------------------------------------------------------------- poses
 
 
-def pose_from_xyz_rpy(xyz: Any, rpy: Any, *, degrees: bool = True) -> np.ndarray:
+def pose_from_xyz_rpy(
+    xyz: npt.ArrayLike, rpy: npt.ArrayLike, *, degrees: bool = True
+) -> np.ndarray:
     r"""4x4 pose from a position and roll, pitch, yaw.
 
     :math:`R = R_z(\text{yaw})\, R_y(\text{pitch})\, R_x(\text{roll})`: rotations about the
@@ -158,7 +161,7 @@ def pose_from_xyz_rpy(xyz: Any, rpy: Any, *, degrees: bool = True) -> np.ndarray
     return T
 
 
-def xyz_rpy_from_pose(T: Any, *, degrees: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def xyz_rpy_from_pose(T: npt.ArrayLike, *, degrees: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`pose_from_xyz_rpy`: position and (roll, pitch, yaw) of a 4x4
     pose, pitch in [-90, 90] degrees (roll = atan2(R21, R22), pitch = -asin(R20),
     yaw = atan2(R10, R00))."""
@@ -202,7 +205,7 @@ def read_xyz_rpy(path: str | Path, order: str = "rpy_xyz", *, degrees: bool = Tr
     return pose_from_xyz_rpy(xyz, rpy, degrees=degrees)
 
 
-def _stack(poses: Any, name: str) -> np.ndarray:
+def _stack(poses: npt.ArrayLike, name: str) -> np.ndarray:
     if isinstance(poses, np.ndarray) and poses.ndim == 3:
         poses = list(poses)
     if not isinstance(poses, Sequence | np.ndarray):
@@ -392,7 +395,10 @@ def _refine(G: np.ndarray, C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np
 
 
 def hand_eye_residuals(
-    X: Any, T_base_gripper: Any, T_camera_target: Any, setup: Setup = "eye_in_hand"
+    X: npt.ArrayLike,
+    T_base_gripper: npt.ArrayLike,
+    T_camera_target: npt.ArrayLike,
+    setup: Setup = "eye_in_hand",
 ) -> tuple[np.ndarray, np.ndarray]:
     """How well X satisfies :math:`A X = X B` over all pairs of stations.
 
@@ -420,8 +426,8 @@ def hand_eye_residuals(
 
 
 def calibrate_hand_eye(
-    T_base_gripper: Any,
-    T_camera_target: Any,
+    T_base_gripper: npt.ArrayLike,
+    T_camera_target: npt.ArrayLike,
     setup: Setup = "eye_in_hand",
     method: Method = "tsai",
     *,

@@ -44,12 +44,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import DegenerateError, FileFormatError, InputError
-from robopercept.estimation.models import _dlt
-from robopercept.geometry.camera import CameraIntrinsics, _distort
+from robopercept.estimation.models import homography_dlt
+from robopercept.geometry.camera import (
+    CameraIntrinsics,
+    check_distortion,
+    distort,
+    undistort_points,
+)
 from robopercept.geometry.epipolar import essential_from_pose, fundamental_from_essential
-from robopercept.geometry.rectification import _dist, undistort_rectify_map
+from robopercept.geometry.rectification import rectify_stereo, undistort_rectify_map
 from robopercept.geometry.transforms import (
     nearest_rotation,
     rotation_from_rotvec,
@@ -63,6 +69,7 @@ __all__ = [
     "board_pose",
     "calibrate_camera",
     "load_calibration",
+    "rectify_pair",
     "reprojection_errors",
     "save_calibration",
     "stereo_calibrate",
@@ -177,7 +184,7 @@ class StereoCalibration:
 # --------------------------------------------------------------------------- inputs
 
 
-def _views(points: Any, name: str, dim: int) -> list[np.ndarray]:
+def _views(points: Sequence[npt.ArrayLike] | np.ndarray, name: str, dim: int) -> list[np.ndarray]:
     if isinstance(points, np.ndarray) and points.ndim == 3:
         points = list(points)
     if not isinstance(points, Sequence) and not isinstance(points, np.ndarray):
@@ -194,7 +201,9 @@ def _views(points: Any, name: str, dim: int) -> list[np.ndarray]:
 
 
 def _inputs(
-    object_points: Any, image_points: Any, name: str = "image_points"
+    object_points: Sequence[npt.ArrayLike] | np.ndarray,
+    image_points: Sequence[npt.ArrayLike] | np.ndarray,
+    name: str = "image_points",
 ) -> tuple[list[np.ndarray], list[np.ndarray]]:
     img = _views(image_points, name, 2)
     if len(img) < 3:
@@ -228,7 +237,7 @@ def _check_view(o: np.ndarray, p: np.ndarray, i: int) -> None:
         )
 
 
-def _size(image_size: Any) -> tuple[int, int]:
+def _size(image_size: tuple[int, int]) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in image_size)
     except (TypeError, ValueError) as exc:
@@ -250,33 +259,20 @@ def _project(
     dist: np.ndarray,
 ) -> np.ndarray:
     """Pixels of board points ``obj`` (M, 3) seen in views ``view`` (M,)."""
-    R = _rotations(rvecs)
+    R = rotation_from_rotvec(rvecs)
     pc = np.einsum("mij,mj->mi", R[view], obj) + tvecs[view]
     z = pc[:, 2]
-    xd, yd = _distort(pc[:, 0] / z, pc[:, 1] / z, tuple(dist), False)
+    xd, yd = distort(pc[:, 0] / z, pc[:, 1] / z, dist)
     return np.c_[K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]]
 
 
-def _rotations(rvecs: np.ndarray) -> np.ndarray:
-    """Rodrigues for ``(V, 3)`` rotation vectors at once."""
-    theta = np.linalg.norm(rvecs, axis=1)
-    small = theta < 1e-12
-    k = rvecs / np.where(small, 1.0, theta)[:, None]
-    kx = np.zeros((len(rvecs), 3, 3))
-    kx[:, 0, 1], kx[:, 0, 2] = -k[:, 2], k[:, 1]
-    kx[:, 1, 0], kx[:, 1, 2] = k[:, 2], -k[:, 0]
-    kx[:, 2, 0], kx[:, 2, 1] = -k[:, 1], k[:, 0]
-    s, c = np.sin(theta)[:, None, None], np.cos(theta)[:, None, None]
-    return np.eye(3) + s * kx + (1 - c) * (kx @ kx)
-
-
 def reprojection_errors(
-    object_points: Any,
-    image_points: Any,
-    K: Any,
-    dist: Any,
-    rvecs: Any,
-    tvecs: Any,
+    object_points: Sequence[npt.ArrayLike] | np.ndarray,
+    image_points: Sequence[npt.ArrayLike] | np.ndarray,
+    K: npt.ArrayLike,
+    dist: npt.ArrayLike,
+    rvecs: Sequence[npt.ArrayLike] | np.ndarray,
+    tvecs: Sequence[npt.ArrayLike] | np.ndarray,
 ) -> tuple[float, np.ndarray]:
     """RMS reprojection error overall and per view, in pixels (OpenCV's definitions).
 
@@ -291,7 +287,7 @@ def reprojection_errors(
     view = np.repeat(np.arange(len(objs)), [len(o) for o in objs])
     r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
     t = np.asarray(tvecs, dtype=np.float64).reshape(-1, 3)
-    d = _dist(dist, "dist")
+    d = check_distortion(dist, "dist")
     e = _project(obj, view, r, t, np.asarray(K, dtype=np.float64), d) - np.concatenate(img)
     sq = (e**2).sum(axis=1)
     per = np.sqrt(np.bincount(view, sq) / np.bincount(view))
@@ -354,10 +350,8 @@ def _pose_from_homography(K: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.
 def _view_pose(K: np.ndarray, dist: np.ndarray, obj: np.ndarray, img: np.ndarray):
     from scipy.optimize import least_squares
 
-    from robopercept.geometry.rectification import _undistort_points
-
-    xy = _undistort_points(img, K, dist)
-    h = _dlt(obj[None, :, :2], xy[None])[0]
+    xy = undistort_points(img, K, dist)
+    h = homography_dlt(obj[None, :, :2], xy[None])[0]
     r, t = _pose_from_homography(np.eye(3), h)
     view = np.zeros(len(obj), dtype=np.intp)
 
@@ -368,7 +362,12 @@ def _view_pose(K: np.ndarray, dist: np.ndarray, obj: np.ndarray, img: np.ndarray
     return sol.x[:3], sol.x[3:]
 
 
-def board_pose(object_points: Any, image_points: Any, K: Any, dist: Any = None) -> np.ndarray:
+def board_pose(
+    object_points: npt.ArrayLike,
+    image_points: npt.ArrayLike,
+    K: npt.ArrayLike,
+    dist: npt.ArrayLike | None = None,
+) -> np.ndarray:
     r"""Pose of a planar target seen by a calibrated camera (``cv2.solvePnP`` for a
     board): ``T_camera_board`` as a 4x4 matrix.
 
@@ -391,7 +390,7 @@ def board_pose(object_points: Any, image_points: Any, K: Any, dist: Any = None) 
     Km = np.asarray(K, dtype=np.float64)
     if Km.shape != (3, 3) or not np.isfinite(Km).all():
         raise InputError(f"K must be a finite 3x3 matrix; got shape {Km.shape}")
-    r, t = _view_pose(Km, _dist(dist, "dist"), obj, img)
+    r, t = _view_pose(Km, check_distortion(dist, "dist"), obj, img)
     T = np.eye(4)
     T[:3, :3] = rotation_from_rotvec(r)
     T[:3, 3] = t
@@ -406,8 +405,8 @@ def _free_mask(n_radial: int, tangential: bool) -> np.ndarray:
 
 
 def calibrate_camera(
-    object_points: Any,
-    image_points: Any,
+    object_points: Sequence[npt.ArrayLike] | np.ndarray,
+    image_points: Sequence[npt.ArrayLike] | np.ndarray,
     image_size: tuple[int, int],
     *,
     n_radial: int = 3,
@@ -461,7 +460,7 @@ def calibrate_camera(
     s = 1.0 / max(w, h)
     N = np.array([[s, 0, -s * (w - 1) / 2], [0, s, -s * (h - 1) / 2], [0, 0, 1]])
     Hn = np.stack(
-        [_dlt(o[None, :, :2], (p * s - s * np.array([(w - 1) / 2, (h - 1) / 2]))[None])[0]
+        [homography_dlt(o[None, :, :2], (p * s - s * np.array([(w - 1) / 2, (h - 1) / 2]))[None])[0]
          for o, p in zip(objs, img, strict=True)]
     )  # fmt: skip
     K = np.linalg.solve(N, _zhang_K(Hn))
@@ -479,7 +478,7 @@ def calibrate_camera(
     dist = np.zeros(5)
     if n_radial:
         ideal = _project(obj, view, rvecs, tvecs, K, dist)
-        R = _rotations(rvecs)[view]
+        R = rotation_from_rotvec(rvecs)[view]
         pc = np.einsum("mij,mj->mi", R, obj) + tvecs[view]
         r2 = (pc[:, 0] ** 2 + pc[:, 1] ** 2) / pc[:, 2] ** 2
         d = ideal - K[:2, 2]
@@ -517,15 +516,15 @@ def calibrate_camera(
 
 
 def stereo_calibrate(
-    object_points: Any,
-    image_points1: Any,
-    image_points2: Any,
+    object_points: Sequence[npt.ArrayLike] | np.ndarray,
+    image_points1: Sequence[npt.ArrayLike] | np.ndarray,
+    image_points2: Sequence[npt.ArrayLike] | np.ndarray,
     image_size: tuple[int, int],
     *,
-    K1: Any | None = None,
-    dist1: Any | None = None,
-    K2: Any | None = None,
-    dist2: Any | None = None,
+    K1: npt.ArrayLike | None = None,
+    dist1: npt.ArrayLike | None = None,
+    K2: npt.ArrayLike | None = None,
+    dist2: npt.ArrayLike | None = None,
     fix_intrinsics: bool = True,
 ) -> StereoCalibration:
     """Relative pose of two cameras from simultaneous views of a planar target.
@@ -564,7 +563,7 @@ def stereo_calibrate(
             cams.append((c.K, c.dist))
         else:
             Km = np.asarray(K, dtype=np.float64).reshape(3, 3)
-            cams.append((Km, _dist(d, "dist")))
+            cams.append((Km, check_distortion(d, "dist")))
     (k1, d1), (k2, d2) = cams
     poses1 = [_view_pose(k1, d1, o, p) for o, p in zip(objs, img1, strict=True)]
     poses2 = [_view_pose(k2, d2, o, p) for o, p in zip(objs, img2, strict=True)]
@@ -592,7 +591,7 @@ def stereo_calibrate(
     def fun(p: np.ndarray) -> np.ndarray:
         r, t, q, (ka, da, kb, db) = unpack(p)
         Rr = rotation_from_rotvec(r)
-        R1 = _rotations(q[:, :3])
+        R1 = rotation_from_rotvec(q[:, :3])
         r2 = np.array([rotvec_from_rotation(Rr @ Ri) for Ri in R1])
         t2 = q[:, 3:] @ Rr.T + t
         e1 = _project(obj, view, q[:, :3], q[:, 3:], ka, da)
@@ -619,7 +618,9 @@ def stereo_calibrate(
     )
 
 
-def undistort(image: np.ndarray, K: Any, dist: Any, new_K: Any | None = None) -> np.ndarray:
+def undistort(
+    image: np.ndarray, K: npt.ArrayLike, dist: npt.ArrayLike, new_K: npt.ArrayLike | None = None
+) -> np.ndarray:
     """The image as a distortion-free camera would see it (``cv2.undistort``).
 
     Each output pixel :math:`p` is the ray :math:`K_{new}^{-1} p`, distorted and projected
@@ -640,6 +641,50 @@ def undistort(image: np.ndarray, K: Any, dist: Any, new_K: Any | None = None) ->
     h, w = img.shape[:2]
     mx, my = undistort_rectify_map(K, dist, None, K if new_K is None else new_K, (w, h))
     return remap(img, mx, my)
+
+
+def rectify_pair(
+    left: np.ndarray, right: np.ndarray, calibration: dict[str, Any]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rectify a stereo pair with a stereo calibration, so that epipolar lines are rows.
+
+    Bouguet's rotations (:func:`~robopercept.geometry.rectify_stereo`, as
+    ``cv2.stereoRectify``), then each image is undistorted and remapped through
+    :func:`~robopercept.geometry.undistort_rectify_map` (as ``cv2.initUndistortRectifyMap``
+    + ``cv2.remap``, bilinear).
+
+    Parameters
+    ----------
+    left, right : (H, W) or (H, W, 3) ndarray
+        The raw images, of one size.
+    calibration : dict
+        A stereo calibration as :func:`load_calibration` returns it: ``K1, dist1, K2,
+        dist2, R, T`` (the ``dist`` entries may be missing: no distortion).
+
+    Returns
+    -------
+    left_rect, right_rect : ndarray
+        The rectified images, same shape and dtype as the inputs.
+    Q : (4, 4) ndarray
+        The disparity-to-depth matrix for :func:`~robopercept.depth.disparity_to_points`.
+
+    Raises
+    ------
+    InputError
+        Not a stereo calibration, or images of different sizes.
+    """
+    if not {"K1", "K2", "R", "T"} <= calibration.keys():
+        raise InputError("not a stereo calibration: it needs K1 dist1 K2 dist2 R T")
+    if left.shape != right.shape:
+        raise InputError(f"the images differ in size: {left.shape} and {right.shape}")
+    size = (left.shape[1], left.shape[0])
+    cal = calibration
+    r = rectify_stereo(
+        cal["K1"], cal.get("dist1"), cal["K2"], cal.get("dist2"), cal["R"], cal["T"], size
+    )
+    left_r = remap(left, *undistort_rectify_map(cal["K1"], cal.get("dist1"), r.R1, r.P1, size))
+    right_r = remap(right, *undistort_rectify_map(cal["K2"], cal.get("dist2"), r.R2, r.P2, size))
+    return left_r, right_r, r.Q
 
 
 # --------------------------------------------------------------------------- files

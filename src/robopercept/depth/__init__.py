@@ -28,6 +28,7 @@ from robopercept.depth.stereo import (
     depth_resolution,
     disparity_to_depth,
     disparity_to_points,
+    reprojection_matrix,
     semi_global_matching,
 )
 
@@ -45,6 +46,7 @@ __all__ = [
     "disparity_to_points",
     "focal_from_fov",
     "pixel_rays",
+    "reprojection_matrix",
     "sample_colors",
     "semi_global_matching",
     "texture_coordinates",

@@ -21,6 +21,7 @@ from numba import njit
 from robopercept._checks import check_positive
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics, apply, deproject, project
+from robopercept.geometry.camera import compiled_params, distort_point
 from robopercept.geometry.transforms import check_transform
 
 __all__ = [
@@ -28,6 +29,7 @@ __all__ = [
     "align_depth_to_color",
     "depth_to_points",
     "pixel_rays",
+    "project_to_color",
     "sample_colors",
     "texture_coordinates",
 ]
@@ -98,35 +100,41 @@ def depth_to_points(
     return deproject(np.column_stack([u, v]).astype(np.float64), z[v, u], intrinsics)
 
 
-_MODEL_CODE = {"none": 0, "brown_conrady": 1, "modified_brown_conrady": 2}
-
-
 @njit(cache=True, nogil=True, inline="always")
-def _project_color(x0, y0, z0, R, t, k, model, c):  # pragma: no cover - compiled
-    # a depth-frame point into the colour frame, then onto the colour image (librealsense's
-    # forward lens models; the inverse model projects with the modified formula).
-    # k = (fx, fy, cx, cy), c = (k1, k2, p1, p2, k3). Returns (u, v, Z); Z <= 0 or NaN:
-    # behind the camera or not a point.
+def project_to_color(x0, y0, z0, R, t, k, code, c):  # pragma: no cover - compiled
+    r"""One depth-frame point onto the colour image, compiled (callable from numba kernels).
+
+    The point moves into the colour frame, :math:`(X, Y, Z) = R\,(x_0, y_0, z_0) + t`, and
+    projects through the colour camera's lens model,
+    :math:`(u, v) = (f_x x_d + c_x, f_y y_d + c_y)` with
+    :math:`(x_d, y_d) = \operatorname{dist}(X / Z, Y / Z)`
+    (:func:`~robopercept.geometry.camera.distort_point`; librealsense's forward models,
+    the inverse model projecting with the modified formula). The per-point core of
+    :func:`texture_coordinates`; arguments are unchecked.
+
+    Parameters
+    ----------
+    x0, y0, z0 : float
+        The point in the depth camera frame, metres.
+    R : (3, 3) float64 ndarray
+    t : (3,) float64 ndarray
+        ``T_color_depth``'s rotation and translation.
+    k, code, c
+        The colour camera as :func:`~robopercept.geometry.camera.compiled_params` gives
+        it: ``(fx, fy, cx, cy)``, lens-model code, ``(k1, k2, p1, p2, k3)``.
+
+    Returns
+    -------
+    u, v, Z : float
+        Colour pixel and depth in the colour frame; when ``Z`` is not > 0 (behind the
+        camera) or NaN, ``u`` and ``v`` are NaN.
+    """
     X = R[0, 0] * x0 + R[0, 1] * y0 + R[0, 2] * z0 + t[0]
     Y = R[1, 0] * x0 + R[1, 1] * y0 + R[1, 2] * z0 + t[1]
     Z = R[2, 0] * x0 + R[2, 1] * y0 + R[2, 2] * z0 + t[2]
     if not Z > 0:
         return np.nan, np.nan, Z
-    x = X / Z
-    y = Y / Z
-    if model != 0:
-        r2 = x * x + y * y
-        f = 1 + c[0] * r2 + c[1] * r2 * r2 + c[4] * r2 * r2 * r2
-        if model == 2:
-            x = x * f
-            y = y * f
-            xd = x + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
-            yd = y + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
-        else:
-            xd = x * f + 2 * c[2] * x * y + c[3] * (r2 + 2 * x * x)
-            yd = y * f + 2 * c[3] * x * y + c[2] * (r2 + 2 * y * y)
-        x = xd
-        y = yd
+    x, y = distort_point(X / Z, Y / Z, c, code)
     return x * k[0] + k[2], y * k[1] + k[3], Z
 
 
@@ -146,7 +154,7 @@ def _texture_kernel(p, R, t, k, model, c, width, height, tol, uv, valid):  # pra
         uv[i, 1] = np.nan
         if not (np.isfinite(x0) and np.isfinite(y0) and np.isfinite(z0)):
             continue
-        u, v, Z = _project_color(x0, y0, z0, R, t, k, model, c)
+        u, v, Z = project_to_color(x0, y0, z0, R, t, k, model, c)
         if not Z > 0:
             continue
         uv[i, 0] = u / width
@@ -165,16 +173,6 @@ def _texture_kernel(p, R, t, k, model, c, width, height, tol, uv, valid):  # pra
         for i in range(n):
             if valid[i] and zc[i] > zbuf[pix[i]] + tol:
                 valid[i] = False
-
-
-def _color_params(color_intrinsics: CameraIntrinsics) -> tuple[np.ndarray, int, np.ndarray]:
-    """(fx, fy, cx, cy), lens-model code and coefficients for :func:`_project_color`."""
-    k = color_intrinsics
-    return (
-        np.array([k.fx, k.fy, k.cx, k.cy]),
-        _MODEL_CODE.get(k.model, 2),
-        np.array(k.coeffs, dtype=np.float64),
-    )
 
 
 def texture_coordinates(
@@ -215,7 +213,7 @@ def texture_coordinates(
     flat = np.ascontiguousarray(p.reshape(-1, 3))
     uv = np.empty((flat.shape[0], 2))
     valid = np.empty(flat.shape[0], dtype=bool)
-    kk, model, coeffs = _color_params(k)
+    kk, model, coeffs = compiled_params(k)
     _texture_kernel(
         flat,
         np.ascontiguousarray(T[:3, :3]),

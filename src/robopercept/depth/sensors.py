@@ -34,9 +34,9 @@ sensors (all of these) see the first surface; transmissive ones (X-ray CT) see t
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import InputError
 
@@ -63,7 +63,7 @@ def _positive(value: float, name: str) -> float:
     return v
 
 
-def tof_pulse_distance(round_trip_time: Any) -> np.ndarray:
+def tof_pulse_distance(round_trip_time: npt.ArrayLike) -> np.ndarray:
     """Distance :math:`c t / 2` (m) of a pulse back after ``round_trip_time`` seconds."""
     t = np.asarray(round_trip_time, dtype=np.float64)
     if (t < 0).any():
@@ -71,7 +71,7 @@ def tof_pulse_distance(round_trip_time: Any) -> np.ndarray:
     return SPEED_OF_LIGHT * t / 2.0
 
 
-def tof_pulse_time(distance: Any) -> np.ndarray:
+def tof_pulse_time(distance: npt.ArrayLike) -> np.ndarray:
     """Round-trip time :math:`2 d / c` (s) of a pulse to ``distance`` metres."""
     return 2.0 * np.asarray(distance, dtype=np.float64) / SPEED_OF_LIGHT
 
@@ -81,14 +81,14 @@ def tof_ambiguity_range(modulation_frequency: float) -> float:
     return SPEED_OF_LIGHT / (2.0 * _positive(modulation_frequency, "modulation_frequency"))
 
 
-def tof_phase(distance: Any, modulation_frequency: float) -> np.ndarray:
+def tof_phase(distance: npt.ArrayLike, modulation_frequency: float) -> np.ndarray:
     r"""Measured phase :math:`4 \pi f_{mod} d / c \bmod 2\pi` of a target at ``distance``."""
     f = _positive(modulation_frequency, "modulation_frequency")
     d = np.asarray(distance, dtype=np.float64)
     return np.mod(4.0 * np.pi * f * d / SPEED_OF_LIGHT, 2.0 * np.pi)
 
 
-def tof_phase_distance(phase: Any, modulation_frequency: float) -> np.ndarray:
+def tof_phase_distance(phase: npt.ArrayLike, modulation_frequency: float) -> np.ndarray:
     r"""Distance :math:`c \varphi / (4 \pi f_{mod})` (m) in :math:`[0, d_{max})` of a
     phase (wrapped into :math:`[0, 2\pi)` first)."""
     f = _positive(modulation_frequency, "modulation_frequency")
@@ -96,7 +96,9 @@ def tof_phase_distance(phase: Any, modulation_frequency: float) -> np.ndarray:
     return SPEED_OF_LIGHT * phi / (4.0 * np.pi * f)
 
 
-def tof_unwrap(phase1: Any, f1: float, phase2: Any, f2: float, max_distance: float) -> np.ndarray:
+def tof_unwrap(
+    phase1: npt.ArrayLike, f1: float, phase2: npt.ArrayLike, f2: float, max_distance: float
+) -> np.ndarray:
     r"""Distance from two phases at two modulation frequencies, up to ``max_distance``.
 
     Each candidate :math:`d_1 + k\,d_{max,1}` of the first frequency is compared with the
@@ -153,7 +155,7 @@ class ActiveStereoSensor:
         """Focal length in pixels."""
         return focal_from_fov(self.width, self.hfov_deg)
 
-    def depth_rms_error(self, depth: Any) -> np.ndarray:
+    def depth_rms_error(self, depth: npt.ArrayLike) -> np.ndarray:
         r"""Intel's depth RMS error :math:`z^2 s / (f B)` (m) at ``depth`` metres."""
         z = np.asarray(depth, dtype=np.float64)
         return z * z * self.subpixel / (self.focal * self.baseline)
@@ -163,7 +165,7 @@ class ActiveStereoSensor:
         """Nearest depth in range: :math:`f B / d_{max}` (m)."""
         return self.focal * self.baseline / self.max_disparity
 
-    def disparity(self, depth: Any) -> np.ndarray:
+    def disparity(self, depth: npt.ArrayLike) -> np.ndarray:
         """Disparity :math:`f B / z` (px) of a point at ``depth`` metres."""
         return self.focal * self.baseline / np.asarray(depth, dtype=np.float64)
 

@@ -42,14 +42,13 @@ right image (OpenCV marks the first ``numDisparities`` columns invalid instead).
 
 from __future__ import annotations
 
-from typing import Any
-
 import numba
 import numpy as np
+import numpy.typing as npt
 from numba import njit, prange
 
-from robopercept._checks import check_image
 from robopercept.errors import InputError
+from robopercept.imaging.color import gray_255
 
 __all__ = [
     "bad_pixel_rate",
@@ -58,26 +57,15 @@ __all__ = [
     "depth_resolution",
     "disparity_to_depth",
     "disparity_to_points",
+    "reprojection_matrix",
     "semi_global_matching",
 ]
 
 _BIG = 1 << 14  # path-cost sentinel beyond any reachable value (costs stay < 2^13)
 
 
-def _gray(image: np.ndarray, name: str) -> np.ndarray:
-    img = check_image(image, name)
-    g = img.astype(np.float32)
-    if img.dtype.kind == "f":
-        g = g * 255.0
-    elif img.dtype != np.uint8:
-        raise InputError(f"{name} must be uint8 or float in [0, 1]; got {img.dtype}")
-    if g.ndim == 3:
-        g = g @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
-    return np.ascontiguousarray(g)
-
-
 def _pair(left: np.ndarray, right: np.ndarray, max_disparity: int, min_disparity: int):
-    L, R = _gray(left, "left"), _gray(right, "right")
+    L, R = gray_255(left, "left"), gray_255(right, "right")
     if L.shape != R.shape:
         raise InputError(
             f"left and right must have the same size; got {L.shape} and {R.shape}: "
@@ -130,7 +118,7 @@ def census_transform(image: np.ndarray, window: int = 7) -> np.ndarray:
     (borders replicated). Returns (H, W) uint64."""
     if int(window) != window or window < 3 or window % 2 == 0 or window > 7:
         raise InputError(f"census window must be 3, 5 or 7; got {window}")
-    g = _gray(image, "image")
+    g = gray_255(image, "image")
     r = int(window) // 2
     out = np.empty(g.shape, dtype=np.uint64)
     _census_kernel(np.pad(g, r, mode="edge"), r, out)
@@ -623,7 +611,15 @@ def semi_global_matching(
 
 def disparity_to_depth(disparity: np.ndarray, focal: float, baseline: float) -> np.ndarray:
     r"""Depth :math:`z = f B / d` (units of ``baseline``); NaN where :math:`d \le 0` or
-    NaN. ``focal`` in pixels."""
+    NaN. ``focal`` in pixels.
+
+    Examples
+    --------
+    :math:`Z = f B / d`; a zero disparity (no match) gives NaN:
+
+    >>> disparity_to_depth(np.array([[64.0, 32.0, 0.0]]), focal=640.0, baseline=0.05)
+    array([[0.5, 1. , nan]])
+    """
     d = np.asarray(disparity, dtype=np.float64)
     if not focal > 0 or not baseline > 0:
         raise InputError(f"focal and baseline must be positive; got {focal} and {baseline}")
@@ -632,7 +628,7 @@ def disparity_to_depth(disparity: np.ndarray, focal: float, baseline: float) -> 
 
 
 def depth_resolution(
-    depth: Any, focal: float, baseline: float, disparity_step: float = 1.0
+    depth: npt.ArrayLike, focal: float, baseline: float, disparity_step: float = 1.0
 ) -> np.ndarray:
     r"""Depth change of one disparity step at depth :math:`z`:
     :math:`\Delta z = z^2 \Delta d / (f B)` (the first-order error of :math:`z = fB/d`)."""
@@ -642,7 +638,7 @@ def depth_resolution(
     return z * z * disparity_step / (focal * baseline)
 
 
-def disparity_to_points(disparity: np.ndarray, Q: Any) -> np.ndarray:
+def disparity_to_points(disparity: np.ndarray, Q: npt.ArrayLike) -> np.ndarray:
     r"""3-D points ``(H, W, 3)`` from a disparity map and the rectification's
     :math:`Q` (``cv2.reprojectImageTo3D``): :math:`(X, Y, Z, W)^T = Q (x, y, d, 1)^T`,
     point :math:`(X, Y, Z) / W`; NaN where the disparity is NaN or not positive."""
@@ -659,6 +655,50 @@ def disparity_to_points(disparity: np.ndarray, Q: Any) -> np.ndarray:
         pts = hom[..., :3] / hom[..., 3:]
     pts[~(d > 0)] = np.nan
     return pts
+
+
+def reprojection_matrix(focal: float, baseline: float, size: tuple[int, int]) -> np.ndarray:
+    r"""The :math:`Q` of an ideal rectified pair, for :func:`disparity_to_points`.
+
+    With the principal point at the image centre :math:`c = ((w-1)/2, (h-1)/2)`:
+
+    .. math::
+
+        Q = \begin{pmatrix} 1 & 0 & 0 & -c_x \\ 0 & 1 & 0 & -c_y \\
+            0 & 0 & 0 & f \\ 0 & 0 & 1/B & 0 \end{pmatrix},
+
+    so a pixel :math:`(x, y)` of disparity :math:`d` goes to
+    :math:`Z = fB/d`, :math:`X = (x - c_x) Z / f`, :math:`Y = (y - c_y) Z / f`
+    (``cv2.stereoRectify``'s :math:`Q` with equal principal points, up to the sign
+    convention of :math:`T_x = -B`).
+
+    Parameters
+    ----------
+    focal : float
+        Focal length in pixels.
+    baseline : float
+        Distance between the optical centres (its unit is the points' unit).
+    size : (width, height)
+        Image size, as OpenCV.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> Q = reprojection_matrix(500.0, 0.1, (5, 3))
+    >>> disparity_to_points(np.full((3, 5), 25.0), Q)[1, 2].tolist()
+    [0.0, 0.0, 2.0]
+    """
+    if not focal > 0 or not baseline > 0:
+        raise InputError(f"focal and baseline must be positive; got {focal} and {baseline}")
+    w, h = size
+    return np.array(
+        [
+            [1.0, 0.0, 0.0, -(w - 1) / 2],
+            [0.0, 1.0, 0.0, -(h - 1) / 2],
+            [0.0, 0.0, 0.0, focal],
+            [0.0, 0.0, 1.0 / baseline, 0.0],
+        ]
+    )
 
 
 def bad_pixel_rate(disparity: np.ndarray, truth: np.ndarray, threshold: float = 2.0) -> float:

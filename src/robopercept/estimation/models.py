@@ -1,6 +1,7 @@
 r"""Models for the RANSAC engine: 2-D line, plane, 2-D affine map, homography.
 
-Every model works on a data matrix with one row per observation and implements:
+Every model satisfies the :class:`Model` protocol (its docstring is the contract): it
+works on a data matrix with one row per observation and implements
 
 ``fit_minimal(samples)``
     ``(B, n, D)`` minimal samples -> ``(B, P)`` parameters and a ``(B,)`` validity mask;
@@ -21,7 +22,7 @@ is the transfer error :math:`\|H(x, y) - (x', y')\|`.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 from numba import njit, prange
@@ -36,7 +37,15 @@ from robopercept.estimation.least_squares import (
     scatter_matrix,
 )
 
-__all__ = ["AffineModel", "HomographyModel", "LineModel", "Model", "PlaneModel"]
+__all__ = [
+    "AffineModel",
+    "HomographyModel",
+    "LineModel",
+    "Model",
+    "PlaneModel",
+    "hartley_normalization",
+    "homography_dlt",
+]
 
 _EPS = 1e-12
 _CHUNK = 1 << 17  # rows per scoring chunk: B x 131072 float64 residuals at a time
@@ -101,43 +110,141 @@ def _plane_mask_kernel(params, x, y, z, threshold, mask):  # pragma: no cover - 
         mask[i] = abs(a * x[i] + b * y[i] + c * z[i] + d) < threshold
 
 
-class Model:
-    """Base class: the interface the RANSAC engine uses (see the module docstring)."""
+ResultT_co = TypeVar("ResultT_co", covariant=True)
+"""The type of a model's typed result (:class:`Line`, :class:`Plane`, a 3x3 ndarray)."""
+
+
+@runtime_checkable
+class Model(Protocol[ResultT_co]):
+    r"""The interface the RANSAC engine uses: a ``typing.Protocol``, generic over the
+    type of :meth:`result`.
+
+    Any object with these attributes and methods is a model (``isinstance(obj, Model)``
+    checks that they are present, not their signatures); subclassing ``Model``
+    explicitly (``class LineModel(Model[Line])``) also inherits the default
+    :meth:`fit_inliers`, :meth:`prepare`, :meth:`score` and :meth:`inlier_mask`, which go
+    through :meth:`residuals`. Arrays are float64. ``P`` is the number of parameters of
+    one hypothesis (3 for a line, 4 for a plane, 6 affine, 9 homography and F), ``D`` the
+    number of columns of the data (:attr:`dim`).
+
+    Attributes
+    ----------
+    sample_size : int
+        Rows in a minimal sample ``n`` (2 for a line, 3 for a plane or an affine map, 4
+        for a homography, 8 for F); also the ``n`` of the stopping rule
+        :math:`\log(1 - p) / \log(1 - w^n)`.
+    dim : int
+        Columns ``D`` of a data row (2 for 2-D points, 3 for 3-D points, 4 for a
+        correspondence ``(x, y, x', y')``).
+    name : str
+        What the model is called in error messages (``"plane"``).
+    """
 
     sample_size: ClassVar[int]
     dim: ClassVar[int]
     name: ClassVar[str]
 
     def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One hypothesis per minimal sample, all samples at once.
+
+        Parameters
+        ----------
+        samples : (B, sample_size, D) float ndarray
+            ``B`` minimal samples of rows of the data.
+
+        Returns
+        -------
+        params : (B, P) float ndarray
+            The hypothesis of each sample; rows where ``valid`` is False hold any finite
+            placeholder.
+        valid : (B,) bool ndarray
+            False for a degenerate sample (repeated, coincident or collinear points, a
+            singular system); never raises for degeneracy. The engine also drops rows
+            of ``params`` that are not finite.
+        """
         raise NotImplementedError
 
     def fit(self, data: np.ndarray) -> np.ndarray:
+        """Least-squares parameters from all rows (``n >= sample_size``).
+
+        Parameters
+        ----------
+        data : (n, D) float ndarray
+
+        Returns
+        -------
+        (P,) float ndarray
+            The same parameter form as :meth:`fit_minimal`'s rows.
+
+        Raises
+        ------
+        DegenerateError
+            When the rows cannot determine the model (too few, coincident, collinear);
+            the engine then keeps its previous hypothesis.
+        """
         raise NotImplementedError
 
     def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """Errors of every row under every hypothesis.
+
+        Parameters
+        ----------
+        params : (B, P) float ndarray
+        data : (N, D) float ndarray
+
+        Returns
+        -------
+        (B, N) float ndarray
+            Non-negative, in the units of the data (orthogonal distance for a line or a
+            plane, transfer error in pixels for affine maps and homographies, Sampson
+            distance for F), comparable to the engine's ``threshold``; ``inf`` marks a
+            row that can never be an inlier. A row is an inlier when its residual is
+            strictly below ``threshold``.
+        """
         raise NotImplementedError
 
     def check(self, data: np.ndarray) -> None:
-        """Raise :class:`DegenerateError` if ``data`` cannot determine the model."""
+        """Raise :class:`DegenerateError` if ``data`` (N, D) cannot determine the model
+        (every sample would be degenerate, e.g. all points collinear for a plane); the
+        engine calls it once, before sampling. The default accepts any data."""
+        return None
 
-    def result(self, params: np.ndarray) -> Any:
-        return params
+    def result(self, params: np.ndarray) -> ResultT_co:
+        """The typed result of ``params`` (P,): :class:`Line`, :class:`Plane`, a (3, 3)
+        ndarray; it becomes :attr:`RansacResult.model`. The default returns ``params``
+        itself (right for a ``Model[np.ndarray]`` only: override it)."""
+        return params  # type: ignore[return-value]
 
     def fit_inliers(self, data: np.ndarray, mask: np.ndarray) -> np.ndarray:
-        """Least-squares parameters from the rows where ``mask`` is True."""
+        """Least-squares parameters (P,) from the rows of ``data`` (N, D) where ``mask``
+        (N,) is True; raises :class:`DegenerateError` as :meth:`fit` does. The default:
+        ``fit(data[mask])``."""
         return self.fit(data[mask])
 
     # scoring hooks: the engine calls prepare() once, then score()/inlier_mask(); the
     # defaults go through residuals() in chunks of rows, a model may override them
     def prepare(self, data: np.ndarray) -> Any:
-        """Data in the layout :meth:`score` reads (the default: ``data`` itself)."""
+        """Data (N, D) in the layout :meth:`score` and :meth:`inlier_mask` read, computed
+        once per :func:`ransac` call; opaque to the engine (the default: ``data``
+        itself; :class:`PlaneModel`: contiguous x, y, z columns)."""
         return data
 
     def score(
         self, params: np.ndarray, prepared: Any, threshold: float, msac: bool
     ) -> tuple[np.ndarray, np.ndarray]:
-        """(B,) scores, higher is better (inlier count, or minus the MSAC loss), and (B,)
-        inlier counts."""
+        r"""Score ``B`` hypotheses ``params`` (B, P) on the ``prepared`` data.
+
+        Returns
+        -------
+        scores : (B,) float ndarray
+            HIGHER IS BETTER; the engine keeps the maximum. Without ``msac``, the inlier
+            count :math:`|\{i : r_i < t\}|` as a float; with ``msac``, MINUS the
+            truncated squared loss, :math:`-\sum_i \min(r_i^2, t^2)` (<= 0, 0 is a
+            perfect fit), ``t`` being ``threshold``.
+        counts : (B,) int64 ndarray
+            Inlier counts :math:`|\{i : r_i < t\}|` (the engine breaks ties of
+            ``scores`` with them and feeds the best one to the stopping rule).
+        """
         data = prepared
         b = params.shape[0]
         counts = np.zeros(b, dtype=np.int64)
@@ -153,7 +260,8 @@ class Model:
         return (-loss if msac else counts.astype(np.float64)), counts
 
     def inlier_mask(self, params: np.ndarray, prepared: Any, threshold: float) -> np.ndarray:
-        """(N,) bool: residual of the single hypothesis ``params`` (P,) below threshold."""
+        """(N,) bool: residual of the single hypothesis ``params`` (P,) strictly below
+        ``threshold``, on the ``prepared`` data."""
         data = prepared
         mask = np.empty(data.shape[0], dtype=bool)
         for start in range(0, data.shape[0], _CHUNK):
@@ -166,7 +274,7 @@ def _scale(points: np.ndarray) -> float:
     return max(float(np.abs(points).max()) if points.size else 0.0, 1.0)
 
 
-class LineModel(Model):
+class LineModel(Model[Line]):
     r"""2-D line :math:`a x + b y + c = 0`, :math:`a^2 + b^2 = 1`; data ``(N, 2)``.
 
     Minimal sample: 2 distinct points, normal :math:`\perp (p_1 - p_0)`. Residual: the
@@ -199,7 +307,7 @@ class LineModel(Model):
         return Line(np.asarray(params, dtype=np.float64))
 
 
-class PlaneModel(Model):
+class PlaneModel(Model[Plane]):
     r"""Plane :math:`n^\top x + d = 0`, :math:`\|n\| = 1`; data ``(N, 3)``.
 
     Minimal sample: 3 non-collinear points, :math:`n \propto (p_1 - p_0) \times
@@ -284,7 +392,7 @@ def _apply(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return np.stack([x[:, 0] / w, x[:, 1] / w], axis=2)
 
 
-class AffineModel(Model):
+class AffineModel(Model[np.ndarray]):
     r"""2-D affine map :math:`x' = A x + t` from correspondences ``(x, y, x', y')``.
 
     Parameters are the 6 entries of the top two rows of the 3x3 matrix. Minimal sample: 3
@@ -338,8 +446,32 @@ class AffineModel(Model):
         return self._matrices(params[None])[0]
 
 
-def _normalizing(xy: np.ndarray) -> np.ndarray:
-    """Hartley normalization ``(B, 3, 3)``: centroid to 0, mean distance sqrt(2)."""
+def hartley_normalization(xy: np.ndarray) -> np.ndarray:
+    r"""Hartley's normalizing similarities of ``B`` point sets at once.
+
+    For each set, :math:`T = \begin{bmatrix} s & 0 & -s c_x \\ 0 & s & -s c_y \\ 0 & 0 & 1
+    \end{bmatrix}` moves the centroid :math:`c` to the origin and scales the mean
+    distance to it to :math:`\sqrt 2`: :math:`s = \sqrt 2 / \bar d` (Hartley & Zisserman,
+    section 4.4.4). It conditions the DLT and the eight-point algorithm. Unchecked
+    (an internal building block: the caller validates its points).
+
+    Parameters
+    ----------
+    xy : (B, n, 2) float64 ndarray
+        ``B`` sets of ``n`` points.
+
+    Returns
+    -------
+    (B, 3, 3) float64 ndarray
+        One :math:`T` per set (points that coincide: :math:`\bar d` is clamped to
+        :math:`10^{-12}`).
+
+    Examples
+    --------
+    >>> T = hartley_normalization(np.array([[[0.0, 2.0], [2.0, 2.0]]]))  # c = (1, 2), d = 1
+    >>> np.round(T[0], 4).tolist()
+    [[1.4142, 0.0, -1.4142], [0.0, 1.4142, -2.8284], [0.0, 0.0, 1.0]]
+    """
     c = xy.mean(axis=1)
     d = np.sqrt(((xy - c[:, None]) ** 2).sum(axis=2)).mean(axis=1)
     s = np.sqrt(2.0) / np.maximum(d, _EPS)
@@ -352,9 +484,11 @@ def _normalizing(xy: np.ndarray) -> np.ndarray:
     return t
 
 
-def _dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+def homography_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     r"""Normalized DLT for ``(B, n, 2)`` correspondences -> ``(B, 3, 3)`` with
-    :math:`h_{33} = 1` where possible.
+    :math:`h_{33} = 1` where possible (Hartley & Zisserman, Alg. 4.2; what
+    ``cv2.findHomography(src, dst, 0)`` starts from). Unchecked: ``n >= 4`` float64
+    points, validated by the caller; degenerate sets give a meaningless or non-finite H.
 
     Each correspondence gives two rows of :math:`A h = 0`,
     :math:`[-x, -y, -1, 0, 0, 0, x' x, x' y, x'] h = 0` and
@@ -362,7 +496,7 @@ def _dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     vector of the smallest singular value, computed on Hartley-normalized points and
     mapped back: :math:`H = T'^{-1} \hat H T`.
     """
-    ts, td = _normalizing(src), _normalizing(dst)
+    ts, td = hartley_normalization(src), hartley_normalization(dst)
     s = src @ ts[:, :2, :2].transpose(0, 2, 1) + ts[:, None, :2, 2]
     d = dst @ td[:, :2, :2].transpose(0, 2, 1) + td[:, None, :2, 2]
     b, n = s.shape[:2]
@@ -391,7 +525,7 @@ def _dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return h
 
 
-class HomographyModel(Model):
+class HomographyModel(Model[np.ndarray]):
     r"""Homography :math:`x' \sim H x` from correspondences ``(x, y, x', y')``.
 
     Minimal sample: 4 correspondences with no 3 source (or destination) points collinear.
@@ -413,7 +547,7 @@ class HomographyModel(Model):
                 valid &= np.abs(_triangle_area2(pts[:, i], pts[:, j], pts[:, k])) > tol
         h = np.tile(np.eye(3), (samples.shape[0], 1, 1))
         if valid.any():
-            h[valid] = _dlt(src[valid], dst[valid])
+            h[valid] = homography_dlt(src[valid], dst[valid])
         valid &= np.isfinite(h).all(axis=(1, 2))
         return h.reshape(-1, 9), valid
 
@@ -421,7 +555,7 @@ class HomographyModel(Model):
         if data.shape[0] < 4:
             raise DegenerateError(f"a homography needs 4 correspondences; got {data.shape[0]}")
         self.check(data)
-        return _dlt(data[None, :, :2], data[None, :, 2:])[0].reshape(9)
+        return homography_dlt(data[None, :, :2], data[None, :, 2:])[0].reshape(9)
 
     def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
         p = _apply(params.reshape(-1, 3, 3), data[:, :2])

@@ -1,7 +1,15 @@
 """Camera models, rigid transforms, boxes, two-view geometry and triangulation."""
 
 from robopercept.geometry.boxes import box_iou_matrix
-from robopercept.geometry.camera import MODELS, CameraIntrinsics, deproject, project
+from robopercept.geometry.camera import (
+    MODELS,
+    CameraIntrinsics,
+    deproject,
+    distort,
+    project,
+    undistort,
+    undistort_points,
+)
 from robopercept.geometry.epipolar import (
     EssentialModel,
     FundamentalFit,
@@ -48,6 +56,7 @@ __all__ = [
     "compose",
     "decompose_essential",
     "deproject",
+    "distort",
     "eight_point",
     "epipolar_lines",
     "epipoles",
@@ -66,5 +75,7 @@ __all__ = [
     "se3",
     "skew",
     "triangulate",
+    "undistort",
+    "undistort_points",
     "undistort_rectify_map",
 ]

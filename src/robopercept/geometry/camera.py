@@ -18,6 +18,11 @@ and :math:`r^2 = x^2 + y^2`:
 
 As in librealsense's ``rs2_project_point_to_pixel`` / ``rs2_deproject_pixel_to_point``,
 the iterative inversions run a fixed 10 iterations.
+
+This module owns the one lens model of the library: :func:`distort_point` (compiled, per
+point, for numba kernels such as the RGB-D ones) is the only implementation of the
+forward formulas, and :func:`distort` applies it to arrays; :func:`undistort` and
+:func:`undistort_points` invert it. An unknown model name is an :class:`InputError`.
 """
 
 from __future__ import annotations
@@ -27,11 +32,25 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
+from numba import njit
 
 from robopercept._checks import check_choice
 from robopercept.errors import InputError
 
-__all__ = ["MODELS", "CameraIntrinsics", "deproject", "project"]
+__all__ = [
+    "MODELS",
+    "CameraIntrinsics",
+    "check_distortion",
+    "compiled_params",
+    "deproject",
+    "distort",
+    "distort_point",
+    "lens_model_code",
+    "project",
+    "undistort",
+    "undistort_points",
+]
 
 Model = Literal["none", "brown_conrady", "modified_brown_conrady", "inverse_brown_conrady"]
 MODELS = ("none", "brown_conrady", "modified_brown_conrady", "inverse_brown_conrady")
@@ -112,12 +131,115 @@ class CameraIntrinsics:
         )
 
 
-def _distort(x: np.ndarray, y: np.ndarray, c: tuple, modified: bool) -> tuple:
-    k1, k2, p1, p2, k3 = c
+def compiled_params(intrinsics: CameraIntrinsics) -> tuple[np.ndarray, int, np.ndarray]:
+    """A camera as the plain arrays that compiled kernels take.
+
+    Parameters
+    ----------
+    intrinsics : CameraIntrinsics
+
+    Returns
+    -------
+    k : (4,) float64 ndarray
+        ``(fx, fy, cx, cy)``.
+    code : int
+        :func:`lens_model_code` of its model.
+    coeffs : (5,) float64 ndarray
+        ``(k1, k2, p1, p2, k3)``, the ``c`` of :func:`distort_point`.
+
+    Examples
+    --------
+    >>> k, code, c = compiled_params(CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0))
+    >>> k.tolist(), code
+    ([500.0, 500.0, 320.0, 240.0], 0)
+    """
+    k = intrinsics
+    return (
+        np.array([k.fx, k.fy, k.cx, k.cy]),
+        lens_model_code(k.model),
+        np.array(k.coeffs, dtype=np.float64),
+    )
+
+
+_MODEL_CODE = {
+    "none": 0,
+    "brown_conrady": 1,
+    "modified_brown_conrady": 2,
+    "inverse_brown_conrady": 2,
+}
+
+
+def lens_model_code(model: str) -> int:
+    """Integer code of a lens model for the compiled per-point functions.
+
+    ``"none"`` is 0, ``"brown_conrady"`` 1, and ``"modified_brown_conrady"`` and
+    ``"inverse_brown_conrady"`` 2: librealsense projects the inverse model with the
+    modified (forward) formula, so both distort the same way.
+
+    Parameters
+    ----------
+    model : str
+        One of :data:`MODELS`.
+
+    Returns
+    -------
+    int
+        The ``code`` argument of :func:`distort_point`.
+
+    Raises
+    ------
+    InputError
+        If ``model`` is not one of :data:`MODELS` (never a silent fallback).
+
+    Examples
+    --------
+    >>> lens_model_code("brown_conrady"), lens_model_code("inverse_brown_conrady")
+    (1, 2)
+    """
+    code = _MODEL_CODE.get(model) if isinstance(model, str) else None
+    if code is None:
+        raise InputError(f"model must be one of {', '.join(map(repr, MODELS))}; got {model!r}")
+    return code
+
+
+@njit(cache=True, nogil=True, inline="always")
+def distort_point(x, y, c, code):  # pragma: no cover - compiled
+    r"""The lens model on one normalized point, compiled (callable from numba kernels).
+
+    With :math:`r^2 = x^2 + y^2` and :math:`f = 1 + k_1 r^2 + k_2 r^4 + k_3 r^6`,
+    ``code`` 1 (Brown-Conrady, OpenCV's) gives
+    :math:`x_d = x f + 2 p_1 x y + p_2 (r^2 + 2 x^2)`,
+    :math:`y_d = y f + 2 p_2 x y + p_1 (r^2 + 2 y^2)`; ``code`` 2 (modified, and
+    librealsense's projection of the inverse model) applies the same tangential terms to
+    the radially distorted point :math:`(x f, y f)` (with the undistorted :math:`r^2`);
+    ``code`` 0 returns the point unchanged. This is the one implementation of the
+    formula: :func:`distort`, :func:`project` and the RGB-D kernels all call it.
+
+    Parameters
+    ----------
+    x, y : float
+        Normalized coordinates :math:`X / Z`, :math:`Y / Z`.
+    c : (5,) float64 ndarray
+        ``(k1, k2, p1, p2, k3)``.
+    code : int
+        From :func:`lens_model_code` (not checked here: the caller validates once).
+
+    Returns
+    -------
+    xd, yd : float
+    """
+    if code == 0:
+        return x, y
+    k1 = c[0]
+    k2 = c[1]
+    p1 = c[2]
+    p2 = c[3]
+    k3 = c[4]
     r2 = x * x + y * y
     f = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
-    if modified:  # tangential terms on the radially distorted point
-        x, y = x * f, y * f
+    if code == 2:  # tangential terms on the radially distorted point
+        x = x * f
+        y = y * f
         return (
             x + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
             y + 2 * p2 * x * y + p1 * (r2 + 2 * y * y),
@@ -128,11 +250,127 @@ def _distort(x: np.ndarray, y: np.ndarray, c: tuple, modified: bool) -> tuple:
     )
 
 
-def _undistort(xo: np.ndarray, yo: np.ndarray, c: tuple, modified: bool) -> tuple:
-    """Fixed-point inversion of :func:`_distort` (10 iterations, as librealsense)."""
+@njit(cache=True, nogil=True)
+def _distort_kernel(x, y, c, code, xd, yd):  # pragma: no cover - compiled
+    for i in range(x.shape[0]):
+        xd[i], yd[i] = distort_point(x[i], y[i], c, code)
+
+
+def distort(
+    x: np.ndarray, y: np.ndarray, coeffs: npt.ArrayLike, model: Model = "brown_conrady"
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Apply the lens model to normalized coordinates: :math:`(x, y) \mapsto (x_d, y_d)`.
+
+    The formulas are those of :func:`distort_point` (and of the module docstring):
+    ``"brown_conrady"`` is OpenCV's model (``cv2.projectPoints`` with
+    ``distCoeffs = (k1, k2, p1, p2, k3)``), ``"modified_brown_conrady"`` and
+    ``"inverse_brown_conrady"`` the formula librealsense's
+    ``rs2_project_point_to_pixel`` uses for them, ``"none"`` the identity.
+
+    Parameters
+    ----------
+    x, y : array_like
+        Normalized coordinates :math:`X / Z`, :math:`Y / Z`, broadcast together.
+    coeffs : (5,) sequence of float
+        ``(k1, k2, p1, p2, k3)``.
+    model : {'none', 'brown_conrady', 'modified_brown_conrady', 'inverse_brown_conrady'}
+
+    Returns
+    -------
+    xd, yd : float64 ndarray
+        Of the broadcast shape of ``x`` and ``y``.
+
+    Raises
+    ------
+    InputError
+        An unknown ``model`` (the message names the valid ones), or ``coeffs`` that are not
+        5 numbers.
+
+    Examples
+    --------
+    >>> xd, yd = distort(0.1, 0.0, (0.5, 0.0, 0.0, 0.0, 0.0))  # x (1 + k1 r^2)
+    >>> round(float(xd), 6), float(yd)
+    (0.1005, 0.0)
+    """
+    code = lens_model_code(model)
+    c = _coeffs(coeffs)
+    bx, by = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if bx.shape != by.shape:
+        bx, by = np.broadcast_arrays(bx, by)
+    fx, fy = np.ascontiguousarray(bx).reshape(-1), np.ascontiguousarray(by).reshape(-1)
+    xd, yd = np.empty_like(fx), np.empty_like(fy)
+    _distort_kernel(fx, fy, c, code, xd, yd)
+    return xd.reshape(bx.shape), yd.reshape(bx.shape)
+
+
+def undistort(
+    xd: np.ndarray,
+    yd: np.ndarray,
+    coeffs: Sequence[float],
+    model: Model = "brown_conrady",
+    iterations: int = _ITERATIONS,
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Invert the lens model on normalized coordinates by fixed-point iteration.
+
+    Starting from :math:`(x, y) = (x_d, y_d)`, each iteration sets
+    :math:`x \leftarrow (x_d - \delta_x) / f`, :math:`y \leftarrow (y_d - \delta_y) / f`
+    with :math:`f = 1 + k_1 r^2 + k_2 r^4 + k_3 r^6` and the tangential terms
+    :math:`\delta` of the current estimate (of :math:`(x f, y f)` for
+    ``"inverse_brown_conrady"``, whose coefficients describe the undistortion in
+    librealsense). With ``iterations=10`` this is ``rs2_deproject_pixel_to_point``'s
+    loop; with 5 and ``"brown_conrady"`` that of ``cv2.undistortPoints``.
+
+    Parameters
+    ----------
+    xd, yd : array_like
+        Distorted normalized coordinates, broadcast together.
+    coeffs : (5,) sequence of float
+        ``(k1, k2, p1, p2, k3)``.
+    model : {'none', 'brown_conrady', 'inverse_brown_conrady'}
+        ``"modified_brown_conrady"`` is forward-only (as in librealsense).
+    iterations : int
+
+    Returns
+    -------
+    x, y : float64 ndarray
+
+    Raises
+    ------
+    InputError
+        An unknown model, or ``"modified_brown_conrady"``.
+
+    Examples
+    --------
+    >>> c = (0.1, -0.05, 0.001, 0.002, 0.0)
+    >>> x, y = undistort(*distort(0.2, -0.1, c), c)
+    >>> round(float(x), 6), round(float(y), 6)
+    (0.2, -0.1)
+    """
+    lens_model_code(model)
+    if model == "modified_brown_conrady":
+        raise InputError(
+            "cannot undistort with model 'modified_brown_conrady' (a forward-only model, as "
+            "in librealsense); use 'inverse_brown_conrady' or 'brown_conrady'"
+        )
+    xo, yo = np.asarray(xd, dtype=np.float64), np.asarray(yd, dtype=np.float64)
+    if model == "none":
+        bx, by = np.broadcast_arrays(xo, yo)
+        return bx.copy(), by.copy()
+    return _undistort(xo, yo, tuple(_coeffs(coeffs)), model == "inverse_brown_conrady",
+                      iterations)  # fmt: skip
+
+
+def _coeffs(coeffs: npt.ArrayLike) -> np.ndarray:
+    c = np.asarray(coeffs, dtype=np.float64).reshape(-1)
+    if c.shape != (5,):
+        raise InputError(f"coeffs must be 5 numbers (k1, k2, p1, p2, k3); got {c.size}")
+    return c
+
+
+def _undistort(xo: np.ndarray, yo: np.ndarray, c: tuple, modified: bool, iterations: int) -> tuple:
     k1, k2, p1, p2, k3 = c
     x, y = xo, yo
-    for _ in range(_ITERATIONS):
+    for _ in range(iterations):
         r2 = x * x + y * y
         icdist = 1.0 / (1 + ((k3 * r2 + k2) * r2 + k1) * r2)
         if modified:
@@ -144,6 +382,86 @@ def _undistort(xo: np.ndarray, yo: np.ndarray, c: tuple, modified: bool) -> tupl
         x = (xo - dx) * icdist
         y = (yo - dy) * icdist
     return x, y
+
+
+def check_distortion(D: npt.ArrayLike | None, name: str = "D") -> np.ndarray:
+    """OpenCV-style distortion coefficients as a float64 ``(k1, k2, p1, p2, k3)`` array.
+
+    Parameters
+    ----------
+    D : array_like or None
+        4 or 5 finite numbers ``(k1, k2, p1, p2[, k3])`` in any shape (OpenCV's ``(1, 5)``
+        included); a missing ``k3`` is 0, and None means no distortion.
+    name : str
+        The argument's name in the error message.
+
+    Returns
+    -------
+    (5,) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        Another number of coefficients, or NaN/inf.
+
+    Examples
+    --------
+    >>> check_distortion([0.1, -0.2, 0.0, 0.0]).tolist()
+    [0.1, -0.2, 0.0, 0.0, 0.0]
+    """
+    if D is None:
+        return np.zeros(5)
+    d = np.asarray(D, dtype=np.float64).ravel()
+    if d.size not in (4, 5) or not np.isfinite(d).all():
+        raise InputError(
+            f"{name} must hold 4 or 5 coefficients (k1, k2, p1, p2[, k3]); got {d.size}"
+        )
+    return np.r_[d, np.zeros(5 - d.size)]
+
+
+def undistort_points(
+    pixels: npt.ArrayLike, K: npt.ArrayLike, dist: npt.ArrayLike | None = None, iterations: int = 5
+) -> np.ndarray:
+    r"""Normalized undistorted coordinates of distorted pixels (``cv2.undistortPoints``
+    without R and P).
+
+    The pixel is taken to normalized distorted coordinates through :math:`K^{-1}` (skew
+    included), :math:`y_d = (v - c_y) / f_y`, :math:`x_d = (u - c_x - s\, y_d) / f_x`, and
+    Brown-Conrady is inverted by :func:`undistort`'s fixed-point iteration, 5 rounds by
+    default as in OpenCV.
+
+    Parameters
+    ----------
+    pixels : (N, 2) array_like
+    K : (3, 3) array_like
+        Camera matrix.
+    dist : array_like or None
+        ``(k1, k2, p1, p2[, k3])``.
+    iterations : int
+
+    Returns
+    -------
+    (N, 2) float64 ndarray
+        ``cv2.undistortPoints(pixels, K, dist)[:, 0]`` to rounding (the same 5-round
+        iteration) when K has no skew; OpenCV ignores a skew ``K[0, 1]``, this applies it.
+
+    Examples
+    --------
+    >>> K = [[500.0, 0, 320], [0, 500, 240], [0, 0, 1]]
+    >>> undistort_points([[370.0, 140.0]], K).tolist()
+    [[0.1, -0.2]]
+    """
+    xy = np.asarray(pixels, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise InputError(f"pixels must be (N, 2); got shape {xy.shape}")
+    k = np.asarray(K, dtype=np.float64)
+    if k.shape != (3, 3) or not np.isfinite(k).all():
+        raise InputError(f"K must be a finite 3x3 matrix; got shape {k.shape}")
+    d = check_distortion(dist, "dist")
+    x0 = (xy[:, 0] - k[0, 2] - k[0, 1] * (xy[:, 1] - k[1, 2]) / k[1, 1]) / k[0, 0]
+    y0 = (xy[:, 1] - k[1, 2]) / k[1, 1]
+    x, y = _undistort(x0, y0, tuple(d), False, iterations)
+    return np.c_[x, y]
 
 
 def project(points: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
@@ -169,7 +487,7 @@ def project(points: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
         x, y = p[..., 0] / z, p[..., 1] / z
     if k.model != "none":
         # librealsense projects the inverse model with the modified (forward) formula
-        x, y = _distort(x, y, k.coeffs, modified=k.model != "brown_conrady")
+        x, y = distort(x, y, k.coeffs, k.model)
     return np.stack([x * k.fx + k.cx, y * k.fy + k.cy], axis=-1)
 
 
@@ -204,6 +522,6 @@ def deproject(
     x = (px[..., 0] - k.cx) / k.fx
     y = (px[..., 1] - k.cy) / k.fy
     if k.model != "none":
-        x, y = _undistort(x, y, k.coeffs, modified=k.model == "inverse_brown_conrady")
+        x, y = _undistort(x, y, k.coeffs, k.model == "inverse_brown_conrady", _ITERATIONS)
     d = np.asarray(depth, dtype=np.float64)
     return np.stack(np.broadcast_arrays(d * x, d * y, d * np.ones_like(x)), axis=-1)

@@ -23,12 +23,13 @@ coordinates into camera 2: :math:`X_2 = R X_1 + t`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import DegenerateError, InputError
-from robopercept.estimation.models import Model, _normalizing
+from robopercept.estimation.models import Model, hartley_normalization
+from robopercept.geometry.transforms import check_matrix3
 
 __all__ = [
     "EssentialModel",
@@ -48,13 +49,13 @@ __all__ = [
 ]
 
 
-def skew(v: Any) -> np.ndarray:
+def skew(v: npt.ArrayLike) -> np.ndarray:
     r"""The cross-product matrix :math:`[v]_\times` with :math:`[v]_\times u = v \times u`."""
     x, y, z = np.asarray(v, dtype=np.float64).reshape(3)
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
-def _rotation(R: Any, name: str = "R") -> np.ndarray:
+def _rotation(R: npt.ArrayLike, name: str = "R") -> np.ndarray:
     r = np.asarray(R, dtype=np.float64)
     if r.shape != (3, 3) or not np.isfinite(r).all():
         raise InputError(f"{name} must be a finite 3x3 rotation matrix; got shape {r.shape}")
@@ -63,27 +64,22 @@ def _rotation(R: Any, name: str = "R") -> np.ndarray:
     return r
 
 
-def _matrix3(M: Any, name: str) -> np.ndarray:
-    m = np.asarray(M, dtype=np.float64)
-    if m.shape != (3, 3) or not np.isfinite(m).all():
-        raise InputError(f"{name} must be a finite 3x3 matrix; got shape {m.shape}")
-    return m
-
-
-def essential_from_pose(R: Any, t: Any) -> np.ndarray:
+def essential_from_pose(R: npt.ArrayLike, t: npt.ArrayLike) -> np.ndarray:
     r"""Essential matrix :math:`E = [t]_\times R` of the motion :math:`X_2 = R X_1 + t`."""
     return skew(np.asarray(t, dtype=np.float64).reshape(3)) @ _rotation(R)
 
 
-def fundamental_from_essential(E: Any, K1: Any, K2: Any) -> np.ndarray:
+def fundamental_from_essential(
+    E: npt.ArrayLike, K1: npt.ArrayLike, K2: npt.ArrayLike
+) -> np.ndarray:
     r""":math:`F = K_2^{-T} E K_1^{-1}`, scaled to unit Frobenius norm."""
-    e = _matrix3(E, "E")
-    k1, k2 = _matrix3(K1, "K1"), _matrix3(K2, "K2")
+    e = check_matrix3(E, "E")
+    k1, k2 = check_matrix3(K1, "K1"), check_matrix3(K2, "K2")
     F = np.linalg.inv(k2).T @ e @ np.linalg.inv(k1)
     return F / np.linalg.norm(F)
 
 
-def _points(x: Any, name: str) -> np.ndarray:
+def _points(x: npt.ArrayLike, name: str) -> np.ndarray:
     p = np.asarray(x, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 2:
         raise InputError(f"{name} must be (N, 2) pixel coordinates; got shape {p.shape}")
@@ -92,7 +88,7 @@ def _points(x: Any, name: str) -> np.ndarray:
     return p
 
 
-def _pairs(x1: Any, x2: Any) -> tuple[np.ndarray, np.ndarray]:
+def _pairs(x1: npt.ArrayLike, x2: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Checked correspondences: both (N, 2), finite, of one length."""
     p1, p2 = _points(x1, "x1"), _points(x2, "x2")
     if p1.shape != p2.shape:
@@ -102,7 +98,7 @@ def _pairs(x1: Any, x2: Any) -> tuple[np.ndarray, np.ndarray]:
 
 def _eight_point_batch(x1: np.ndarray, x2: np.ndarray, essential: bool) -> np.ndarray:
     """(B, n, 2) x (B, n, 2) -> (B, 3, 3), unit Frobenius norm, rank 2 (or (1, 1, 0))."""
-    t1, t2 = _normalizing(x1), _normalizing(x2)
+    t1, t2 = hartley_normalization(x1), hartley_normalization(x2)
     a1 = x1 @ t1[:, :2, :2].transpose(0, 2, 1) + t1[:, None, :2, 2]
     a2 = x2 @ t2[:, :2, :2].transpose(0, 2, 1) + t2[:, None, :2, 2]
     u1, v1 = a1[..., 0], a1[..., 1]
@@ -126,7 +122,7 @@ def _eight_point_batch(x1: np.ndarray, x2: np.ndarray, essential: bool) -> np.nd
     return F / np.linalg.norm(F, axis=(1, 2), keepdims=True)
 
 
-def eight_point(x1: Any, x2: Any, *, essential: bool = False) -> np.ndarray:
+def eight_point(x1: npt.ArrayLike, x2: npt.ArrayLike, *, essential: bool = False) -> np.ndarray:
     r"""The normalized eight-point algorithm (Hartley 1997).
 
     Both point sets are moved to their centroid and scaled to a mean distance of
@@ -180,7 +176,7 @@ def _check_spread(p1: np.ndarray, p2: np.ndarray) -> None:
             )
 
 
-def sampson_distance(F: Any, x1: Any, x2: Any) -> np.ndarray:
+def sampson_distance(F: npt.ArrayLike, x1: npt.ArrayLike, x2: npt.ArrayLike) -> np.ndarray:
     r"""First-order geometric error of each correspondence, in pixels:
 
     .. math::
@@ -188,7 +184,7 @@ def sampson_distance(F: Any, x1: Any, x2: Any) -> np.ndarray:
         d = \frac{|x_2^T F x_1|}{\sqrt{(F x_1)_1^2 + (F x_1)_2^2 + (F^T x_2)_1^2
             + (F^T x_2)_2^2}}.
     """
-    Fm = _matrix3(F, "F")
+    Fm = check_matrix3(F, "F")
     p1, p2 = _pairs(x1, x2)
     return _sampson(Fm[None], p1, p2)[0]
 
@@ -204,7 +200,7 @@ def _sampson(F: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     return num / np.maximum(den, 1e-300)
 
 
-class FundamentalModel(Model):
+class FundamentalModel(Model[np.ndarray]):
     r"""F from correspondences ``(x1, y1, x2, y2)`` for :func:`robopercept.estimation.ransac`.
 
     Minimal sample: 8 correspondences, fitted by the normalized eight-point algorithm
@@ -297,8 +293,8 @@ def _fit(
 
 
 def find_fundamental(
-    x1: Any,
-    x2: Any,
+    x1: npt.ArrayLike,
+    x2: npt.ArrayLike,
     *,
     method: str = "ransac",
     threshold: float = 1.0,
@@ -319,9 +315,9 @@ def find_fundamental(
 
 
 def find_essential(
-    x1: Any,
-    x2: Any,
-    K: Any,
+    x1: npt.ArrayLike,
+    x2: npt.ArrayLike,
+    K: npt.ArrayLike,
     *,
     method: str = "ransac",
     threshold: float = 1.0,
@@ -332,7 +328,7 @@ def find_essential(
     """Essential matrix from pixel correspondences of one calibrated camera ``K``
     (eight-point on :math:`K^{-1} x`; ``threshold`` in pixels, divided by the focal
     length for the normalized residual, as ``cv2.findEssentialMat`` does)."""
-    k = _matrix3(K, "K")
+    k = check_matrix3(K, "K")
     p1, p2 = _pairs(x1, x2)
     kinv = np.linalg.inv(k)
     n1 = p1 @ kinv[:2, :2].T + kinv[:2, 2]
@@ -342,7 +338,7 @@ def find_essential(
     return _fit(EssentialModel(), np.c_[n1, n2], method, threshold / f, kw)
 
 
-def epipolar_lines(F: Any, points: Any, which: int = 1) -> np.ndarray:
+def epipolar_lines(F: npt.ArrayLike, points: npt.ArrayLike, which: int = 1) -> np.ndarray:
     r"""Epipolar lines ``(N, 3)`` :math:`(a, b, c)` with :math:`a^2 + b^2 = 1`
     (``cv2.computeCorrespondEpilines``).
 
@@ -351,7 +347,7 @@ def epipolar_lines(F: Any, points: Any, which: int = 1) -> np.ndarray:
     A point :math:`(x, y)` lies on the line when :math:`a x + b y + c = 0`, and
     :math:`|a x + b y + c|` is its distance to the line in pixels.
     """
-    Fm = _matrix3(F, "F")
+    Fm = check_matrix3(F, "F")
     p = _points(points, "points")
     if which not in (1, 2):
         raise InputError(f"which must be 1 (points in image 1) or 2; got {which!r}")
@@ -361,11 +357,11 @@ def epipolar_lines(F: Any, points: Any, which: int = 1) -> np.ndarray:
     return lines / np.where(n > 0, n, 1.0)[:, None]
 
 
-def epipoles(F: Any) -> tuple[np.ndarray, np.ndarray]:
+def epipoles(F: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     r"""The epipoles :math:`e_1` (:math:`F e_1 = 0`, in image 1) and :math:`e_2`
     (:math:`F^T e_2 = 0`, in image 2) as homogeneous unit 3-vectors; divide by the last
     entry for pixels (it is 0 for an epipole at infinity, e.g. a sideways motion)."""
-    Fm = _matrix3(F, "F")
+    Fm = check_matrix3(F, "F")
     u, _, vt = np.linalg.svd(Fm)
     e1, e2 = vt[-1], u[:, -1]
     for e in (e1, e2):
@@ -395,7 +391,9 @@ class RelativePose:
     candidates: int
 
 
-def decompose_essential(E: Any, x1: Any, x2: Any, K: Any | None = None) -> RelativePose:
+def decompose_essential(
+    E: npt.ArrayLike, x1: npt.ArrayLike, x2: npt.ArrayLike, K: npt.ArrayLike | None = None
+) -> RelativePose:
     r"""Relative pose from an essential matrix by the cheirality test.
 
     With :math:`E = U \operatorname{diag}(1, 1, 0) V^T` (signs fixed so that U and V are
@@ -418,10 +416,10 @@ def decompose_essential(E: Any, x1: Any, x2: Any, K: Any | None = None) -> Relat
     """
     from robopercept.geometry.triangulation import triangulate
 
-    e = _matrix3(E, "E")
+    e = check_matrix3(E, "E")
     p1, p2 = _pairs(x1, x2)
     if K is not None:
-        kinv = np.linalg.inv(_matrix3(K, "K"))
+        kinv = np.linalg.inv(check_matrix3(K, "K"))
         p1 = p1 @ kinv[:2, :2].T + kinv[:2, 2]
         p2 = p2 @ kinv[:2, :2].T + kinv[:2, 2]
     U, sv, Vt = np.linalg.svd(e)

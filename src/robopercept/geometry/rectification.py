@@ -26,14 +26,17 @@ compatible family that brings the points of image 1 closest to their partners' r
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import DegenerateError, InputError
-from robopercept.geometry.camera import _distort
-from robopercept.geometry.epipolar import _matrix3
-from robopercept.geometry.transforms import rotation_from_rotvec, rotvec_from_rotation
+from robopercept.geometry.camera import check_distortion, distort, undistort_points
+from robopercept.geometry.transforms import (
+    check_matrix3,
+    rotation_from_rotvec,
+    rotvec_from_rotation,
+)
 
 __all__ = [
     "StereoRectification",
@@ -67,41 +70,13 @@ class StereoRectification:
     vertical: bool
 
 
-def _dist(D: Any, name: str) -> np.ndarray:
-    if D is None:
-        return np.zeros(5)
-    d = np.asarray(D, dtype=np.float64).ravel()
-    if d.size not in (4, 5) or not np.isfinite(d).all():
-        raise InputError(
-            f"{name} must hold 4 or 5 coefficients (k1, k2, p1, p2[, k3]); got {d.size}"
-        )
-    return np.r_[d, np.zeros(5 - d.size)]
-
-
-def _undistort_points(xy: np.ndarray, K: np.ndarray, D: np.ndarray) -> np.ndarray:
-    """Normalized undistorted coordinates of pixels (OpenCV's model, fixed-point
-    iteration as ``cv2.undistortPoints`` with its default 5 iterations)."""
-    k1, k2, p1, p2, k3 = D
-    x0 = (xy[:, 0] - K[0, 2] - K[0, 1] * (xy[:, 1] - K[1, 2]) / K[1, 1]) / K[0, 0]
-    y0 = (xy[:, 1] - K[1, 2]) / K[1, 1]
-    x, y = x0.copy(), y0.copy()
-    for _ in range(5):
-        r2 = x * x + y * y
-        icdist = 1.0 / (1 + ((k3 * r2 + k2) * r2 + k1) * r2)
-        dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-        dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        x = (x0 - dx) * icdist
-        y = (y0 - dy) * icdist
-    return np.c_[x, y]
-
-
 def rectify_stereo(
-    K1: Any,
-    D1: Any,
-    K2: Any,
-    D2: Any,
-    R: Any,
-    T: Any,
+    K1: npt.ArrayLike,
+    D1: npt.ArrayLike | None,
+    K2: npt.ArrayLike,
+    D2: npt.ArrayLike | None,
+    R: npt.ArrayLike,
+    T: npt.ArrayLike,
     size: tuple[int, int],
     *,
     zero_disparity: bool = True,
@@ -126,9 +101,9 @@ def rectify_stereo(
     -------
     StereoRectification
     """
-    k1, k2 = _matrix3(K1, "K1"), _matrix3(K2, "K2")
-    d1, d2 = _dist(D1, "D1"), _dist(D2, "D2")
-    Rm = _matrix3(R, "R")
+    k1, k2 = check_matrix3(K1, "K1"), check_matrix3(K2, "K2")
+    d1, d2 = check_distortion(D1, "D1"), check_distortion(D2, "D2")
+    Rm = check_matrix3(R, "R")
     t_in = np.asarray(T, dtype=np.float64).ravel()
     if t_in.size != 3 or not np.isfinite(t_in).all() or not np.linalg.norm(t_in) > 0:
         raise InputError(f"T must be a non-zero 3-vector; got {T!r}")
@@ -152,7 +127,7 @@ def rectify_stereo(
     corners = np.array([[0, 0], [nx - 1, 0], [0, ny - 1], [nx - 1, ny - 1]], dtype=np.float64)
     cc = []
     for K, D, Rk in ((k1, d1, R1), (k2, d2, R2)):
-        n = _undistort_points(corners, K, D)
+        n = undistort_points(corners, K, D)
         ray = np.c_[n, np.ones(4)] @ Rk.T
         avg = (fc * ray[:, :2] / ray[:, 2:]).mean(axis=0)
         cc.append(np.array([(nx - 1) / 2.0 - avg[0], (ny - 1) / 2.0 - avg[1]]))
@@ -173,7 +148,7 @@ def rectify_stereo(
 
 
 def rectify_uncalibrated(
-    F: Any, x1: Any, x2: Any, size: tuple[int, int]
+    F: npt.ArrayLike, x1: npt.ArrayLike, x2: npt.ArrayLike, size: tuple[int, int]
 ) -> tuple[np.ndarray, np.ndarray]:
     r"""Hartley's rectification from F: homographies ``H1, H2`` (3x3) such that
     :math:`H_1 x_1` and :math:`H_2 x_2` lie on the same row.
@@ -202,7 +177,7 @@ def rectify_uncalibrated(
     """
     from robopercept.geometry.epipolar import epipoles, skew
 
-    Fm = _matrix3(F, "F")
+    Fm = check_matrix3(F, "F")
     p1 = np.asarray(x1, dtype=np.float64)
     p2 = np.asarray(x2, dtype=np.float64)
     if p1.ndim != 2 or p1.shape[1] != 2 or p2.shape != p1.shape:
@@ -247,7 +222,11 @@ def rectify_uncalibrated(
 
 
 def undistort_rectify_map(
-    K: Any, D: Any, R: Any | None, P: Any, size: tuple[int, int]
+    K: npt.ArrayLike,
+    D: npt.ArrayLike | None,
+    R: npt.ArrayLike | None,
+    P: npt.ArrayLike,
+    size: tuple[int, int],
 ) -> tuple[np.ndarray, np.ndarray]:
     r"""Per-pixel source positions that undistort (and rectify) an image
     (``cv2.initUndistortRectifyMap``).
@@ -276,9 +255,9 @@ def undistort_rectify_map(
     -------
     map_x, map_y : (height, width) float32 ndarray
     """
-    k = _matrix3(K, "K")
-    d = _dist(D, "D")
-    r = np.eye(3) if R is None else _matrix3(R, "R")
+    k = check_matrix3(K, "K")
+    d = check_distortion(D, "D")
+    r = np.eye(3) if R is None else check_matrix3(R, "R")
     p = np.asarray(P, dtype=np.float64)
     if p.shape not in ((3, 3), (3, 4)) or not np.isfinite(p).all():
         raise InputError(f"P must be a finite 3x3 or 3x4 matrix; got shape {p.shape}")
@@ -288,7 +267,7 @@ def undistort_rectify_map(
     ir = np.linalg.inv(p[:, :3] @ r)
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     ray = np.stack([u, v, np.ones_like(u)], axis=-1) @ ir.T
-    xd, yd = _distort(ray[..., 0] / ray[..., 2], ray[..., 1] / ray[..., 2], tuple(d), False)
+    xd, yd = distort(ray[..., 0] / ray[..., 2], ray[..., 1] / ray[..., 2], d)
     map_x = k[0, 0] * xd + k[0, 1] * yd + k[0, 2]
     map_y = k[1, 1] * yd + k[1, 2]
     return map_x.astype(np.float32), map_y.astype(np.float32)

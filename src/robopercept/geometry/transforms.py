@@ -9,11 +9,13 @@ r"""Rigid transforms in SE(3) as 4x4 homogeneous matrices.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import InputError
 
 __all__ = [
     "apply",
+    "check_matrix3",
     "check_transform",
     "compose",
     "invert",
@@ -24,13 +26,43 @@ __all__ = [
 ]
 
 
-def check_transform(T: np.ndarray, name: str = "T") -> np.ndarray:
+def check_transform(T: npt.ArrayLike, name: str = "T") -> np.ndarray:
     """``T`` as a float64 4x4 array after checking its shape and last row."""
     m = np.asarray(T, dtype=np.float64)
     if m.shape != (4, 4) or not np.isfinite(m).all():
         raise InputError(f"{name} must be a finite 4x4 matrix; got shape {m.shape}")
     if not np.allclose(m[3], [0, 0, 0, 1]):
         raise InputError(f"{name}'s last row must be [0, 0, 0, 1]; got {m[3].tolist()}")
+    return m
+
+
+def check_matrix3(M: npt.ArrayLike, name: str = "M") -> np.ndarray:
+    """``M`` as a float64 3x3 array after checking its shape and that it is finite.
+
+    Parameters
+    ----------
+    M : (3, 3) array_like
+        A camera matrix, rotation, essential or fundamental matrix, homography.
+    name : str
+        The argument's name in the error message.
+
+    Returns
+    -------
+    (3, 3) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        Another shape, or NaN/inf.
+
+    Examples
+    --------
+    >>> check_matrix3(np.eye(3), "K").dtype
+    dtype('float64')
+    """
+    m = np.asarray(M, dtype=np.float64)
+    if m.shape != (3, 3) or not np.isfinite(m).all():
+        raise InputError(f"{name} must be a finite 3x3 matrix; got shape {m.shape}")
     return m
 
 
@@ -60,15 +92,52 @@ def se3(rotation: np.ndarray | None = None, translation: np.ndarray | None = Non
 
 
 def rotation_from_rotvec(rotvec: np.ndarray) -> np.ndarray:
-    r"""Rodrigues: :math:`R = I + \sin\theta [k]_\times + (1 - \cos\theta) [k]_\times^2`
-    for the rotation by :math:`\theta = \|r\|` about :math:`k = r / \theta`."""
-    r = np.asarray(rotvec, dtype=np.float64).reshape(3)
-    theta = float(np.linalg.norm(r))
-    if theta < 1e-15:
-        return np.eye(3)
-    k = r / theta
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(theta) * kx + (1 - np.cos(theta)) * kx @ kx
+    r"""Rodrigues' formula (``cv2.Rodrigues`` on a vector), for one rotation vector or many.
+
+    .. math:: R = I + \sin\theta\, [k]_\times + (1 - \cos\theta)\, [k]_\times^2
+
+    for the rotation by :math:`\theta = \|r\|` about :math:`k = r / \theta`; below
+    :math:`\theta = 10^{-12}` the first-order :math:`R = I + [r]_\times`.
+
+    Parameters
+    ----------
+    rotvec : (3,) or (..., 3) array_like
+        Rotation vectors in radians (OpenCV's ``(3, 1)`` column too).
+
+    Returns
+    -------
+    (3, 3) or (..., 3, 3) float64 ndarray
+        A ``(3,)`` or ``(3, 1)`` input gives one matrix, a ``(..., 3)`` stack a stack
+        (``(1, 3)`` gives ``(1, 3, 3)``). Matches ``cv2.Rodrigues`` and
+        ``scipy.spatial.transform.Rotation.from_rotvec(r).as_matrix()`` to rounding.
+
+    Raises
+    ------
+    InputError
+        A shape other than those.
+
+    Examples
+    --------
+    >>> np.round(rotation_from_rotvec([0.0, 0.0, np.pi / 2]), 12).tolist()
+    [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    """
+    r = np.asarray(rotvec, dtype=np.float64)
+    single = r.shape in ((3,), (3, 1))
+    if single:
+        r = r.reshape(1, 3)
+    elif r.ndim < 2 or r.shape[-1] != 3:
+        raise InputError(f"rotvec must have shape (3,), (3, 1) or (..., 3); got {r.shape}")
+    theta = np.linalg.norm(r, axis=-1)
+    small = theta < 1e-12
+    k = r / np.where(small, 1.0, theta)[..., None]
+    kx = np.zeros((*r.shape[:-1], 3, 3))
+    kx[..., 0, 1], kx[..., 0, 2] = -k[..., 2], k[..., 1]
+    kx[..., 1, 0], kx[..., 1, 2] = k[..., 2], -k[..., 0]
+    kx[..., 2, 0], kx[..., 2, 1] = -k[..., 1], k[..., 0]
+    s = np.where(small, 1.0, np.sin(theta))[..., None, None]  # small: k = r, R = I + [r]x
+    c = np.where(small, 1.0, np.cos(theta))[..., None, None]
+    R = np.eye(3) + s * kx + (1 - c) * (kx @ kx)
+    return R[0] if single else R
 
 
 def rotvec_from_rotation(R: np.ndarray) -> np.ndarray:

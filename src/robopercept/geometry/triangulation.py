@@ -16,16 +16,15 @@ halfway along the shortest segment between the two back-projected rays.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import DegenerateError, InputError
 
 __all__ = ["triangulate"]
 
 
-def _projection(P: Any, name: str) -> np.ndarray:
+def _projection(P: npt.ArrayLike, name: str) -> np.ndarray:
     p = np.asarray(P, dtype=np.float64)
     if p.shape != (3, 4) or not np.isfinite(p).all():
         raise InputError(f"{name} must be a finite 3x4 projection matrix; got shape {p.shape}")
@@ -34,7 +33,14 @@ def _projection(P: Any, name: str) -> np.ndarray:
     return p
 
 
-def triangulate(P1: Any, P2: Any, x1: Any, x2: Any, *, method: str = "dlt") -> np.ndarray:
+def triangulate(
+    P1: npt.ArrayLike,
+    P2: npt.ArrayLike,
+    x1: npt.ArrayLike,
+    x2: npt.ArrayLike,
+    *,
+    method: str = "dlt",
+) -> np.ndarray:
     r"""3-D points ``(N, 3)`` seen at ``x1`` by ``P1`` and at ``x2`` by ``P2``.
 
     Parameters

@@ -55,13 +55,14 @@ from numba import njit, prange
 from scipy.stats import chi2
 
 from robopercept.depth import pixel_rays
-from robopercept.depth.rgbd import _color_params, _project_color
+from robopercept.depth.rgbd import project_to_color
 from robopercept.errors import DegenerateError, InputError
-from robopercept.estimation import PlaneModel, ransac
+from robopercept.estimation import Plane, PlaneModel, ransac
 from robopercept.estimation.least_squares import scatter_matrix
 from robopercept.estimation.models import Model
 from robopercept.geometry import CameraIntrinsics
-from robopercept.imaging.color import _hsv_u8
+from robopercept.geometry.camera import compiled_params
+from robopercept.imaging.color import rgb_to_hsv_pixel
 from robopercept.sources.frames import RGBDFrame
 from robopercept.tracking import KalmanFilter, constant_velocity
 
@@ -92,7 +93,7 @@ def _project_kernel(
     for b in prange(_CHUNKS):
         for i in range(b * n // _CHUNKS, (b + 1) * n // _CHUNKS):
             z = depth[i] * scale
-            u, v, zcol = _project_color(
+            u, v, zcol = project_to_color(
                 rays[i, 0] * z, rays[i, 1] * z, rays[i, 2] * z, R, t, k, model, c
             )
             col = np.rint(u)
@@ -134,7 +135,7 @@ def _select_kernel(
                 continue
             if tol >= 0 and zc[i] > zbuf[j] + tol:
                 continue
-            h, s, v = _hsv_u8(
+            h, s, v = rgb_to_hsv_pixel(
                 np.int32(rgb[3 * j]), np.int32(rgb[3 * j + 1]), np.int32(rgb[3 * j + 2])
             )
             if s < low[1] or s > high[1] or v < low[2] or v > high[2]:
@@ -305,7 +306,7 @@ class PlaneTrackResult:
     inlier_points: np.ndarray = field(repr=False)
 
 
-class PlaneHueModel(Model):
+class PlaneHueModel(Model[Plane]):
     """A plane whose inliers must also match the hypothesis' hue.
 
     Data rows are ``(x, y, z, h)`` with h the OpenCV hue (0..180). The minimal sample is
@@ -345,7 +346,7 @@ class PlaneHueModel(Model):
     def check(self, data: np.ndarray) -> None:
         self._plane.check(np.ascontiguousarray(data[:, :3]))
 
-    def result(self, params: np.ndarray) -> Any:
+    def result(self, params: np.ndarray) -> Plane:
         return self._plane.result(params[:4])
 
 
@@ -439,7 +440,7 @@ class PlaneTracker:
         if self._zbuf.shape[0] != kc.width * kc.height:
             self._zbuf = np.full(kc.width * kc.height, np.inf)
         T = frame.T_color_depth
-        k, model, coeffs = _color_params(kc)
+        k, model, coeffs = compiled_params(kc)
         pix = np.empty(flat.shape[0], dtype=np.int64)
         zc = np.empty(flat.shape[0])
         _project_kernel(
