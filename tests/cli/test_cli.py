@@ -1,4 +1,5 @@
-"""The robopercept command: outputs, JSON, and one-line errors with exit code 2."""
+"""The robopercept command: outputs, JSON, and one-line errors with their exit codes
+(1 a bad file or data, 2 a usage error, 70 an internal error)."""
 
 from __future__ import annotations
 
@@ -60,18 +61,18 @@ def test_blobs_table_json_and_overlay(tmp_path, capsys):
 
 
 @pytest.mark.parametrize(
-    ("args", "needle"),
+    ("args", "needle", "code"),
     [
-        (["edges", "nonexistent.png"], "no such file"),
-        (["edges", "--method", "magic"], "invalid choice"),
-        (["blobs", "--min-area", "-3"], "min-area"),
-        (["edges", "--low", "200", "--high", "100"], "swap"),
-        (["frobnicate"], "invalid choice"),
+        (["edges", "nonexistent.png"], "no such file", 1),
+        (["edges", "--method", "magic"], "invalid choice", 2),
+        (["blobs", "--min-area", "-3"], "min-area", 2),
+        (["edges", "--low", "200", "--high", "100"], "swap", 1),
+        (["frobnicate"], "invalid choice", 2),
     ],
 )
-def test_errors_are_one_line_exit_2(args, needle):
+def test_errors_are_one_line_with_their_exit_code(args, needle, code):
     r = run_cli(*args)
-    assert r.returncode == 2
+    assert r.returncode == code
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and needle in lines[0], r.stderr
     assert "Traceback" not in r.stderr
@@ -81,7 +82,7 @@ def test_corrupt_file_is_one_line(tmp_path):
     bad = tmp_path / "bad.png"
     bad.write_bytes(b"\x89PNG\r\n\x1a\n garbage")
     r = run_cli("blobs", str(bad))
-    assert r.returncode == 2 and "bad.png" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 1 and "bad.png" in r.stderr and "Traceback" not in r.stderr
 
 
 # ----------------------------------------------------------------------------- cloud
@@ -121,15 +122,63 @@ def test_cloud_command_pipeline_and_json(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("args", "match"),
+    ("args", "match", "code"),
     [
-        (["cloud", "missing.pcd"], "cannot read"),
-        (["cloud", "x.ply", "--planes", "1"], "N:THRESHOLD"),
-        (["cloud", "x.ply", "--pass-through", "q:0:1"], "AXIS"),
-        (["cloud", "x.ply", "-o", "out.txt"], "output must end"),
+        (["cloud", "missing.pcd"], "cannot read", 1),
+        (["cloud", "x.ply", "--planes", "1"], "N:THRESHOLD", 2),
+        (["cloud", "x.ply", "--pass-through", "q:0:1"], "AXIS", 2),
+        (["cloud", "x.ply", "-o", "out.txt"], "output must end", 2),
     ],
 )
-def test_cloud_command_errors(tmp_path, args, match):
+def test_cloud_command_errors(tmp_path, args, match, code):
     r = run_cli(*args)
-    assert r.returncode == 2 and match in r.stderr
+    assert r.returncode == code and match in r.stderr
     assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_exit_code_2_for_a_usage_error(capsys):
+    assert main(["edges", "--method", "magic"]) == 2  # argparse
+    assert main(["features", "--max", "0"]) == 2  # a bad flag value found by the command
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and err[1] == "robopercept: error: --max must be >= 1; got 0"
+
+
+def test_exit_code_1_for_a_missing_file(tmp_path, capsys):
+    assert main(["edges", str(tmp_path / "absent.png")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("robopercept: error: ") and "absent.png" in err[0]
+
+
+def _boom(args):
+    raise ZeroDivisionError("division by zero")
+
+
+def test_exit_code_70_for_an_internal_error(monkeypatch, capsys):
+    from robopercept.cli import edges
+
+    monkeypatch.delenv("ROBOPERCEPT_DEBUG", raising=False)
+    monkeypatch.setattr(edges, "run_edges", _boom)
+    assert main(["edges"]) == 70
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "robopercept: internal error (this is a bug, please report it): ZeroDivisionError: "
+        "division by zero; rerun with --debug for the traceback"
+    ]
+
+
+@pytest.mark.parametrize("argv", [["--debug", "edges"], ["edges", "--debug"]])
+def test_debug_flag_reraises(monkeypatch, argv):
+    from robopercept.cli import edges
+
+    monkeypatch.delenv("ROBOPERCEPT_DEBUG", raising=False)
+    monkeypatch.setattr(edges, "run_edges", _boom)
+    with pytest.raises(ZeroDivisionError):
+        main(argv)
+
+
+def test_debug_environment_variable_reraises(monkeypatch, tmp_path):
+    from robopercept.errors import FileFormatError
+
+    monkeypatch.setenv("ROBOPERCEPT_DEBUG", "1")
+    with pytest.raises(FileFormatError):
+        main(["edges", str(tmp_path / "absent.png")])

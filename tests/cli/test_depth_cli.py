@@ -52,5 +52,5 @@ def test_stereo_block_matching_and_errors(tmp_path, capsys):
     assert code == 0 and "valid" in capsys.readouterr().out
     assert main(["stereo", str(left), str(right), "--max-disparity", "15", "--ply", "x.ply"]) == 2
     assert "--focal" in capsys.readouterr().err
-    assert main(["stereo", str(left), str(right), "--max-disparity", "500"]) == 2
+    assert main(["stereo", str(left), str(right), "--max-disparity", "500"]) == 1
     assert "image width" in capsys.readouterr().err

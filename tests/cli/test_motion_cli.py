@@ -2,7 +2,8 @@
 
 The commands are checked against the library calls they wrap, on image folders
 (lossless, so the frames the command sees are the test's), and against ground truth
-on synthetic sequences; bad input ends in one line on stderr and exit code 2.
+on synthetic sequences; bad input ends in one line on stderr and exit code 1 (a bad
+file or frame) or 2 (a bad flag).
 """
 
 from __future__ import annotations
@@ -87,10 +88,10 @@ def test_undecodable_video_is_one_clear_error(tmp_path, capsys):
     bad.write_bytes(b"\x00\x01 this is not a video" * 100)
     for command in (["bgsub", str(bad)], ["track", str(bad)], ["flow", str(bad)],
                     ["meanshift", str(bad), "--box", "1,1,5,5"]):  # fmt: skip
-        assert main([*command, "-o", str(tmp_path / "o.mp4"), "--quiet"]) == 2
+        assert main([*command, "-o", str(tmp_path / "o.mp4"), "--quiet"]) == 1
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "broken.mp4" in err[0] and "Traceback" not in err[0]
-    assert main(["bgsub", str(tmp_path / "absent.avi")]) == 2
+    assert main(["bgsub", str(tmp_path / "absent.avi")]) == 1
     assert "no such file" in capsys.readouterr().err
 
 
@@ -111,7 +112,7 @@ def test_frame_of_another_size_names_the_frame_and_keeps_the_video(tmp_path, cap
     frames[4] = frames[4][:80]
     seq = _folder(tmp_path / "seq", frames)
     out = tmp_path / "o.mp4"
-    assert main(["bgsub", str(seq), "--method", "diff", "-o", str(out), "--quiet"]) == 2
+    assert main(["bgsub", str(seq), "--method", "diff", "-o", str(out), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "frame 4" in err
     with VideoReader(out) as video:  # the frames before it were written
@@ -182,7 +183,7 @@ def test_flow_pair_dense_and_bad_pairs(tmp_path, capsys):
     centre = picture[40:100, 40:120].reshape(-1, 3)
     assert np.median(centre[:, 0]) == 255 and np.median(centre[:, 1]) < 40
     write_image(tmp_path / "small.png", tex[:50, :50])
-    assert main(["flow", str(tmp_path / "a.png"), str(tmp_path / "small.png")]) == 2
+    assert main(["flow", str(tmp_path / "a.png"), str(tmp_path / "small.png")]) == 1
     assert "same size" in capsys.readouterr().err
     assert main(["flow", "a", "b", "c"]) == 2
 
@@ -234,7 +235,7 @@ def test_meanshift_box_outside_the_image_is_refused(tmp_path, capsys):
     frames, _ = _disc_frames(2)
     seq = _folder(tmp_path / "seq", frames)
     code = main(["meanshift", str(seq), "--box", "150,10,30,30", "-o", str(tmp_path / "m.mp4")])
-    assert code == 2
+    assert code == 1
     assert "not inside" in capsys.readouterr().err
     assert main(["meanshift", str(seq), "--box", "1,2,3"]) == 2
 

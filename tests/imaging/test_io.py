@@ -123,3 +123,46 @@ def test_png_compression_level_is_lossless_and_checked(tmp_path, rng):
     assert b < a / 2
     with pytest.raises(InputError, match="png_compression"):
         write_image(tmp_path / "bad.png", img, png_compression=12)
+
+
+def test_sample_image_path_is_the_bundled_box():
+    from robopercept.imaging import sample_image_path
+
+    p = sample_image_path()
+    assert p.name == "box.png" and p.is_file()
+    img = read_image(p)
+    assert img.dtype == np.uint8 and img.shape == (223, 324)
+
+
+def test_snapshot_video_writer_writes_the_video_and_the_chosen_frames(tmp_path, rng):
+    from robopercept.imaging import SnapshotVideoWriter
+
+    frames = [(rng.random((32, 48, 3)) * 255).astype(np.uint8) for _ in range(5)]
+    path = tmp_path / "out.mp4"
+    with SnapshotVideoWriter(path, 10.0, [1, 3, 99]) as out:
+        for i, f in enumerate(frames):
+            out.add(i, f)
+    assert out.written == [str(path), str(tmp_path / "out_000001.png"),
+                           str(tmp_path / "out_000003.png")]  # fmt: skip
+    np.testing.assert_array_equal(read_image(tmp_path / "out_000003.png"), frames[3])
+    with VideoReader(path) as video:
+        assert video.frame_count == 5 and video.size == (48, 32)
+    out.close()  # closing twice lists the video once
+    assert out.written.count(str(path)) == 1
+
+
+def test_snapshot_video_writer_keeps_frames_written_before_an_error(tmp_path):
+    from robopercept.imaging import SnapshotVideoWriter
+
+    path = tmp_path / "out.mp4"
+    with pytest.raises(InputError, match="differs from the first"):
+        with SnapshotVideoWriter(path, 10.0) as out:
+            out.add(0, np.zeros((16, 16, 3), np.uint8))
+            out.add(1, np.zeros((16, 16, 3), np.uint8))
+            out.add(2, np.zeros((8, 16, 3), np.uint8))
+    assert out.written == [str(path)]
+    with VideoReader(path) as video:
+        assert video.frame_count == 2
+    empty = SnapshotVideoWriter(tmp_path / "none.mp4", 10.0)
+    empty.close()
+    assert empty.written == [] and not (tmp_path / "none.mp4").exists()

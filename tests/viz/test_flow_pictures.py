@@ -70,3 +70,21 @@ def test_trails():
     assert img.sum() == 0  # input untouched
     with pytest.raises(InputError, match="one row per trail"):
         draw_trails(img, [np.zeros((2, 2))], colors=np.zeros((2, 3)))
+
+
+def test_dense_flow_picture_fills_cells_and_places_the_legend():
+    from robopercept.viz import dense_flow_picture, flow_to_color, flow_wheel
+
+    field = np.zeros((3, 4, 2))
+    field[..., 0] = 1.0  # rightward everywhere
+    field[0, 0] = np.nan  # untracked: black cell
+    pic = dense_flow_picture(field, 5, (40, 30, 3))
+    assert pic.shape == (40, 30, 3) and pic.dtype == np.uint8
+    cell = flow_to_color(field)[1, 1]
+    assert (pic[5:10, 5:10] == cell).all()  # cell (1, 1) fills its 5x5 block
+    assert (pic[0:5, 0:5] == 0).all()
+    wheel = flow_wheel(15)  # min(101, 40 // 4 * 2 + 1, 30 // 4 * 2 + 1)
+    np.testing.assert_array_equal(pic[-15:, -15:], wheel)
+    assert (pic[15:25, :15] == 0).all()  # beyond the 3x4 grid: black padding
+    with pytest.raises(InputError, match="step"):
+        dense_flow_picture(field, 0, (40, 30))

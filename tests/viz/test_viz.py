@@ -88,7 +88,7 @@ def test_check_color_and_pil_canvas():
     from robopercept.viz.draw import check_color, pil_canvas
 
     assert check_color(np.array([1, 2, 3])) == (1, 2, 3)
-    with pytest.raises(InputError, match="three integers in 0..255"):
+    with pytest.raises(InputError, match=r"three integers in 0\.\.255"):
         check_color((0, 0, 256))
     pil, draw = pil_canvas(np.zeros((4, 6), np.uint8))
     draw.point((2, 1), fill=(255, 0, 0))

@@ -1,10 +1,34 @@
-"""Argument types shared by the command modules."""
+"""Argument types and the usage error shared by the command modules.
+
+Each type is an ``argparse`` ``type=`` callable: it returns the parsed value or raises
+``argparse.ArgumentTypeError``, which argparse reports as a usage error (exit code 2).
+A command that finds a bad flag value or combination after parsing raises
+:class:`UsageError` (exit code 2 as well).
+"""
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+from pathlib import Path
 
-__all__ = ["positive_int"]
+import numpy as np
+
+__all__ = [
+    "UsageError",
+    "board_size",
+    "box_xywh",
+    "hsv",
+    "load_gray",
+    "noise_filter",
+    "numbers",
+    "pass_through",
+    "positive_int",
+]
+
+
+class UsageError(Exception):
+    """A command-line argument, or a combination of them, is wrong (exit code 2)."""
 
 
 def positive_int(text: str) -> int:
@@ -16,3 +40,83 @@ def positive_int(text: str) -> int:
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1; got {v}")
     return v
+
+
+def box_xywh(text: str) -> tuple[float, float, float, float]:
+    """``x,y,w,h`` -> four floats (argparse type)."""
+    parts = text.replace(" ", "").split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects x,y,w,h numbers; got {text!r}") from None
+    if len(values) != 4:
+        raise argparse.ArgumentTypeError(f"expects x,y,w,h (four numbers); got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def noise_filter(text: str) -> str | None:
+    """``median``, ``open-close`` or ``none`` (-> None) (argparse type)."""
+    if text not in ("median", "open-close", "none"):
+        raise argparse.ArgumentTypeError(f"expects median, open-close or none; got {text!r}")
+    return None if text == "none" else text
+
+
+def hsv(text: str) -> tuple[float, float, float]:
+    """``H,S,V`` -> three floats (argparse type)."""
+    parts = text.split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects H,S,V numbers; got {text!r}") from None
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expects H,S,V (three numbers); got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def board_size(text: str) -> tuple[int, int]:
+    """``9x6`` -> (9, 6) inner corners, at least 2x2 (argparse type)."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expects inner corners as WxH, e.g. 9x6; got {text!r}"
+        ) from None
+    if w < 2 or h < 2:
+        raise argparse.ArgumentTypeError(f"needs at least 2x2 inner corners; got {text!r}")
+    return w, h
+
+
+def pass_through(text: str) -> tuple[str, float, float]:
+    """``AXIS:MIN:MAX`` with AXIS in x, y, z (argparse type)."""
+    parts = text.split(":")
+    if len(parts) != 3 or parts[0] not in ("x", "y", "z"):
+        raise argparse.ArgumentTypeError("expects AXIS:MIN:MAX with AXIS in x, y, z")
+    try:
+        return parts[0], float(parts[1]), float(parts[2])
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def numbers(kinds: tuple[type, ...], usage: str) -> Callable[[str], tuple]:
+    """An argparse type for ``A:B:...`` with one converter per field (``kinds``);
+    ``usage`` names the fields in the error (``"K:STD_RATIO"``)."""
+
+    def parse(text: str) -> tuple:
+        parts = text.split(":")
+        if len(parts) != len(kinds):
+            raise argparse.ArgumentTypeError(f"expects {usage}")
+        try:
+            return tuple(k(p) for k, p in zip(kinds, parts, strict=True))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expects {usage}; got {text!r}") from None
+
+    return parse
+
+
+def load_gray(path: str | None) -> tuple[Path, np.ndarray]:
+    """The image at ``path`` as gray (the bundled sample image when None), with its
+    path (:func:`~robopercept.imaging.read_image` with ``mode="gray"``)."""
+    from robopercept.imaging import read_image, sample_image_path
+
+    p = Path(path) if path else sample_image_path()
+    return p, read_image(p, mode="gray")

@@ -6,39 +6,18 @@ import argparse
 import json
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from robopercept.cli._args import UsageError, numbers, pass_through
+
 __all__ = ["register"]
 
 
-def _pass_through(text: str) -> tuple[str, float, float]:
-    parts = text.split(":")
-    if len(parts) != 3 or parts[0] not in ("x", "y", "z"):
-        raise argparse.ArgumentTypeError("expects AXIS:MIN:MAX with AXIS in x, y, z")
-    try:
-        return parts[0], float(parts[1]), float(parts[2])
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _numbers(kinds: tuple[type, ...], usage: str) -> Callable[[str], tuple]:
-    def parse(text: str) -> tuple:
-        parts = text.split(":")
-        if len(parts) != len(kinds):
-            raise argparse.ArgumentTypeError(f"expects {usage}")
-        try:
-            return tuple(k(p) for k, p in zip(kinds, parts, strict=True))
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expects {usage}; got {text!r}") from None
-
-    return parse
-
-
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``cloud`` command to the ``robopercept`` subcommand parsers ``sub``."""
     p = sub.add_parser(
         "cloud",
         help="filter, segment planes and cluster a point cloud (PLY/PCD)",
@@ -51,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", default="segments.ply", help="output .ply or .pcd")
     p.add_argument(
         "--pass-through",
-        type=_pass_through,
+        type=pass_through,
         action="append",
         default=[],
         metavar="AXIS:MIN:MAX",
@@ -60,14 +39,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--voxel", type=float, default=None, metavar="SIZE", help="voxel size (m)")
     p.add_argument(
         "--sor",
-        type=_numbers((int, float), "K:STD_RATIO"),
+        type=numbers((int, float), "K:STD_RATIO"),
         default=None,
         metavar="K:STD_RATIO",
         help="statistical outlier removal (e.g. 50:1.0)",
     )
     p.add_argument(
         "--planes",
-        type=_numbers((int, float), "N:THRESHOLD"),
+        type=numbers((int, float), "N:THRESHOLD"),
         default=None,
         metavar="N:THRESHOLD",
         help="extract up to N planes with a RANSAC threshold in metres (e.g. 1:0.01)",
@@ -77,7 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--clusters",
-        type=_numbers((float, int, int), "TOL:MIN:MAX"),
+        type=numbers((float, int, int), "TOL:MIN:MAX"),
         default=None,
         metavar="TOL:MIN:MAX",
         help="Euclidean clusters of the points off the planes (e.g. 0.02:100:25000)",
@@ -91,6 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_cloud(args: argparse.Namespace) -> int:
+    """Run ``robopercept cloud`` with the parsed ``args``; returns the exit status."""
     from robopercept.pointcloud import (
         euclidean_clusters,
         pass_through,
@@ -104,7 +84,7 @@ def run_cloud(args: argparse.Namespace) -> int:
 
     out = Path(args.output)
     if out.suffix.lower() not in (".ply", ".pcd"):
-        raise ValueError(f"output must end in .ply or .pcd; got {out.name}")
+        raise UsageError(f"output must end in .ply or .pcd; got {out.name}")
     steps: list[dict[str, Any]] = []
 
     def step(name: str, n_in: int, n_out: int, t0: float, **extra: Any) -> None:

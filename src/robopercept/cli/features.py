@@ -10,12 +10,16 @@ import time
 
 import numpy as np
 
+from robopercept.cli._args import UsageError, load_gray
+
 __all__ = ["register"]
 
 DETECTORS = ("harris", "shi-tomasi", "sift")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``features``, ``hog``, ``match`` and ``stitch`` commands to the subcommand
+    parsers ``sub``."""
     p = sub.add_parser(
         "features",
         help="detect keypoints (Harris, Shi-Tomasi corners, SIFT) and draw them",
@@ -93,14 +97,14 @@ def _pair_arguments(p: argparse.ArgumentParser, output: str) -> None:
 
 
 def run_features(args: argparse.Namespace) -> int:
-    from robopercept.cli.imaging import _load_gray
+    """Run ``robopercept features`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import harris_corners
     from robopercept.imaging import write_image
     from robopercept.viz import draw_lines, draw_points
 
     if args.max < 1:
-        raise ValueError(f"--max must be >= 1; got {args.max}")
-    src, gray = _load_gray(args.image)
+        raise UsageError(f"--max must be >= 1; got {args.max}")
+    src, gray = load_gray(args.image)
     t0 = time.perf_counter()
     if args.detector == "sift":
         from robopercept.features import sift
@@ -162,12 +166,12 @@ def run_features(args: argparse.Namespace) -> int:
 
 
 def run_hog(args: argparse.Namespace) -> int:
-    from robopercept.cli.imaging import _load_gray
+    """Run ``robopercept hog`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import cell_histograms, hog
     from robopercept.imaging import write_image
     from robopercept.viz import hog_picture
 
-    src, gray = _load_gray(args.image)
+    src, gray = load_gray(args.image)
     t0 = time.perf_counter()
     desc = hog(gray, orientations=args.bins, cell_size=args.cell, block_size=args.block)
     ms = (time.perf_counter() - t0) * 1e3
@@ -197,6 +201,7 @@ def _load_pair(args: argparse.Namespace):
 
 
 def run_match(args: argparse.Namespace) -> int:
+    """Run ``robopercept match`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import match_images
     from robopercept.imaging import write_image
     from robopercept.viz import draw_matches
@@ -231,6 +236,7 @@ def run_match(args: argparse.Namespace) -> int:
 
 
 def run_stitch(args: argparse.Namespace) -> int:
+    """Run ``robopercept stitch`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import stitch
     from robopercept.imaging import write_image
 

@@ -45,11 +45,13 @@ def report() -> list[tuple[str, str, str]]:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``info`` command to the ``robopercept`` subcommand parsers ``sub``."""
     p = sub.add_parser("info", help="versions and which optional extras work")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run ``robopercept info`` with the parsed ``args``; returns the exit status."""
     for name, version, note in report():
         print(f"{name:<24} {version:<14} {note}")
     return 0

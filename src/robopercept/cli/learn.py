@@ -6,23 +6,26 @@ from __future__ import annotations
 
 import argparse
 import csv
-import dataclasses
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from robopercept.errors import FileFormatError, InputError
+from robopercept.cli._args import UsageError
+from robopercept.errors import InputError
 
-__all__ = ["read_table", "register"]
+__all__ = ["register"]
 
 CLUSTER_METHODS = ("kmeans", "meanshift", "dbscan")
 MODELS = ("tree", "forest", "svm", "lda")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``detect-hog``, ``train-hog``, ``learn``, ``cluster``, ``classify`` and ``reduce``
+    commands to the subcommand parsers ``sub``."""
     d = sub.add_parser(
         "detect-hog",
         help="find faces with the HOG + linear SVM sliding-window detector",
@@ -123,70 +126,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=run_reduce)
 
 
-# -- tables ---------------------------------------------------------------------------
-def read_table(
-    path: str | Path, label: str | None = None
-) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
-    """A CSV file with a header row: ``(X, y, feature names)``.
-
-    Every column but ``label`` must be numeric (empty cells and NaN are refused, by the
-    estimators, with the row named); ``y`` keeps the label column's text.
-    """
-    path = Path(path)
-    try:
-        with path.open(newline="") as fh:
-            rows = [row for row in csv.reader(fh) if row]
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{path}: not a text CSV file") from None
-    if len(rows) < 2:
-        raise FileFormatError(f"{path}: needs a header row and at least one data row")
-    header = [h.strip() for h in rows[0]]
-    body = rows[1:]
-    for i, row in enumerate(body, start=2):
-        if len(row) != len(header):
-            raise FileFormatError(
-                f"{path}: line {i} has {len(row)} fields, the header {len(header)}"
-            )
-    if label is not None and label not in header:
-        raise InputError(f"{path}: no column {label!r}; columns are {', '.join(header)}")
-    y = None
-    if label is not None:
-        j = header.index(label)
-        y = np.array([row[j].strip() for row in body])
-    names = [h for h in header if h != label]
-    cols = [header.index(n) for n in names]
-    if not cols:
-        raise InputError(f"{path}: no feature columns besides the label")
-    X = np.empty((len(body), len(cols)))
-    for c, (j, name) in enumerate(zip(cols, names, strict=True)):
-        try:
-            X[:, c] = [float(row[j]) if row[j].strip() else np.nan for row in body]
-        except ValueError:
-            raise InputError(
-                f"{path}: column {name!r} is not numeric; name it with --label if it "
-                "holds the classes, or drop it"
-            ) from None
-    return X, y, names
-
-
-def _standardize(train: np.ndarray, *others: np.ndarray) -> list[np.ndarray]:
-    mean, std = train.mean(axis=0), train.std(axis=0)
-    std = np.where(std > 0, std, 1.0)
-    return [(a - mean) / std for a in (train, *others)]
-
-
-def _codes(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Integer codes of labels, with the names sorted numerically when they all are
-    numbers (so classes 2 and 10 come in that order)."""
-    names = np.unique(y)
-    try:
-        names = names[np.argsort([float(v) for v in names], kind="stable")]
-    except ValueError:
-        pass
-    lookup = {v: i for i, v in enumerate(names)}
-    return np.array([lookup[v] for v in y], dtype=np.int64), names
-
-
+# -- pictures -------------------------------------------------------------------------
 def _write(path: str | Path, image: np.ndarray) -> Path:
     from robopercept.imaging import write_image
 
@@ -195,6 +135,7 @@ def _write(path: str | Path, image: np.ndarray) -> Path:
 
 # -- detect-hog / train-hog -----------------------------------------------------------
 def run_detect_hog(args: argparse.Namespace) -> int:
+    """Run ``robopercept detect-hog`` with the parsed ``args``; returns the exit status."""
     from robopercept.imaging import read_image
     from robopercept.learning.hog_detector import HogDetector, default_face_detector
     from robopercept.viz import draw_boxes
@@ -232,10 +173,11 @@ def run_detect_hog(args: argparse.Namespace) -> int:
 
 
 def run_train_hog(args: argparse.Namespace) -> int:
+    """Run ``robopercept train-hog`` with the parsed ``args``; returns the exit status."""
     from robopercept.learning.hog_detector import train_face_detector
 
     if args.rounds < 0:
-        raise InputError(f"--rounds must be >= 0; got {args.rounds}")
+        raise UsageError(f"--rounds must be >= 0; got {args.rounds}")
     t0 = time.perf_counter()
     det, cv = train_face_detector(mining_rounds=args.rounds, rng=args.seed, progress=True)
     det.save(args.output)
@@ -259,11 +201,19 @@ def _to_2d(X: np.ndarray) -> tuple[np.ndarray, str]:
 
 
 def run_cluster(args: argparse.Namespace) -> int:
-    from robopercept.learning import DBSCAN, KMeans, MeanShift, adjusted_rand_score
+    """Run ``robopercept cluster`` with the parsed ``args``; returns the exit status."""
+    from robopercept.learning import (
+        DBSCAN,
+        KMeans,
+        MeanShift,
+        adjusted_rand_score,
+        read_table,
+        standardize,
+    )
 
     X, y, names = read_table(args.data, args.label)
     if args.standardize:
-        (X,) = _standardize(X)
+        (X,) = standardize(X)
     if args.method == "kmeans":
         model: Any = KMeans(args.clusters, rng=args.seed)
     elif args.method == "meanshift":
@@ -318,7 +268,9 @@ def run_cluster(args: argparse.Namespace) -> int:
     return 0
 
 
-def _scatter(pts: np.ndarray, labels: np.ndarray, title: str, names: Any = None) -> np.ndarray:
+def _scatter(
+    pts: np.ndarray, labels: np.ndarray, title: str, names: Sequence[str] | np.ndarray | None = None
+) -> np.ndarray:
     from robopercept.viz import scatter_picture
 
     return scatter_picture(pts, labels, title=title, names=names)
@@ -339,22 +291,15 @@ def _model(args: argparse.Namespace) -> Any:
     return LDA()
 
 
-def _scores(model: Any, X: np.ndarray, n_classes: int) -> np.ndarray:
-    """Per-class scores ``(N, c)`` for ROC/PR: probabilities, else decision values."""
-    if hasattr(model, "predict_proba"):
-        return model.predict_proba(X)
-    f = model.decision_function(X)
-    return np.c_[-f, f] if n_classes == 2 else f
-
-
 def run_classify(args: argparse.Namespace) -> int:
+    """Run ``robopercept classify`` with the parsed ``args``; returns the exit status."""
     from robopercept.learning import (
-        average_precision_score,
-        classification_report,
+        confusion_table,
         cross_val_score,
-        precision_recall_curve,
-        roc_auc_score,
-        roc_curve,
+        evaluate_classifier,
+        label_codes,
+        read_table,
+        standardize,
         train_test_split,
     )
     from robopercept.viz import confusion_picture, curves_picture
@@ -369,46 +314,34 @@ def run_classify(args: argparse.Namespace) -> int:
         Xtr, ytr = X, y
     else:
         if not 0.0 < args.test_size < 1.0:
-            raise InputError(f"--test-size must be in (0, 1); got {args.test_size}")
+            raise UsageError(f"--test-size must be in (0, 1); got {args.test_size}")
         Xtr, Xt, ytr, yt = train_test_split(
             X, y, test_size=args.test_size, stratify=y, rng=args.seed
         )
-    codes, classes = _codes(np.r_[ytr, yt])
+    if args.cv and args.cv < 2:
+        raise UsageError(f"--cv must be >= 2; got {args.cv}")
+    codes, classes = label_codes(np.r_[ytr, yt])
     ctr, cte = codes[: len(ytr)], codes[len(ytr) :]
     if args.standardize:
-        Xtr, Xt = _standardize(Xtr, Xt)
+        Xtr, Xt = standardize(Xtr, Xt)
     model = _model(args)
     t0 = time.perf_counter()
     model.fit(Xtr, ctr)
     fit_ms = (time.perf_counter() - t0) * 1e3
-    pred = model.predict(Xt)
-    rep = classification_report(cte, pred)  # codes: classes in numeric order
-    rep = dataclasses.replace(rep, labels=classes[rep.labels])
-    # the report's classes are the ones seen in test; the scores cover the model's
-    scores = _scores(model, Xt, model.classes_.size)
+    ev = evaluate_classifier(model, Xt, cte, classes)
+    rep = ev.report
     out = Path(args.output)
     out.mkdir(parents=True, exist_ok=True)
-    roc, pr, per_class = [], [], {}
-    columns = list(enumerate(model.classes_))
-    if len(columns) == 2:
-        columns = columns[1:]  # one curve says it all: the second class is the positive
-    for col, code in columns:
-        truth = (cte == code).astype(int)
-        if truth.min() == truth.max():
-            continue  # the class is absent from (or alone in) the test rows
-        name = str(classes[code])
-        fpr, tpr, _ = roc_curve(truth, scores[:, col])
-        prec, rec, _ = precision_recall_curve(truth, scores[:, col])
-        auc_v = roc_auc_score(truth, scores[:, col])
-        ap_v = average_precision_score(truth, scores[:, col])
-        per_class[name] = {"roc_auc": auc_v, "average_precision": ap_v}
-        roc.append((fpr, tpr, f"{name} AUC {auc_v:.3f}"))
-        pr.append((rec, prec, f"{name} AP {ap_v:.3f}"))
     label_names = [str(v) for v in rep.labels]
     confusion = confusion_picture(rep.confusion, label_names)
     written = {"confusion": str(_write(out / "confusion.png", confusion))}
-    if roc:
-        ovr = " (one vs rest)" if len(roc) > 1 else ""
+    if ev.curves:
+        ovr = " (one vs rest)" if len(ev.curves) > 1 else ""
+        roc = [(c.fpr, c.tpr, f"{n} AUC {c.roc_auc:.3f}") for n, c in ev.curves.items()]
+        pr = [
+            (c.recall, c.precision, f"{n} AP {c.average_precision:.3f}")
+            for n, c in ev.curves.items()
+        ]
         pics = (
             ("roc", roc, "ROC", "false positive rate", "TPR"),
             ("pr", pr, "precision-recall", "recall", "precision"),
@@ -425,19 +358,10 @@ def run_classify(args: argparse.Namespace) -> int:
         "train_rows": len(Xtr),
         "test_rows": len(Xt),
         "fit_ms": round(fit_ms, 1),
-        "accuracy": rep.accuracy,
-        "classes": label_names,
-        "precision": rep.precision.tolist(),
-        "recall": rep.recall.tolist(),
-        "f1": rep.f1.tolist(),
-        "support": rep.support.tolist(),
-        "confusion": rep.confusion.tolist(),
-        "curves": per_class,
+        **ev.to_dict(),
         "pictures": written,
     }
     if args.cv:
-        if args.cv < 2:
-            raise InputError(f"--cv must be >= 2; got {args.cv}")
         cv = cross_val_score(_model(args), Xtr, ctr, cv=args.cv)
         report["cv_accuracy"] = {"mean": float(cv.mean()), "std": float(cv.std())}
     (out / "report.json").write_text(json.dumps(report, indent=2))
@@ -447,11 +371,8 @@ def run_classify(args: argparse.Namespace) -> int:
     print(f"{args.model}: trained on {len(Xtr)} rows in {fit_ms:.0f} ms, tested on {len(Xt)}")
     print(rep.table())
     print("confusion matrix (rows: true, columns: predicted)")
-    w = max(6, *(len(n) for n in label_names))
-    print(" " * w + " " + " ".join(f"{n:>{w}}" for n in label_names))
-    for n, row in zip(label_names, rep.confusion, strict=True):
-        print(f"{n:>{w}} " + " ".join(f"{v:>{w}d}" for v in row))
-    for n, v in per_class.items():
+    print(confusion_table(rep.confusion, label_names))
+    for n, v in report["curves"].items():
         print(f"  {n}: ROC AUC {v['roc_auc']:.4f}, average precision {v['average_precision']:.4f}")
     if "cv_accuracy" in report:
         cvr = report["cv_accuracy"]
@@ -462,15 +383,18 @@ def run_classify(args: argparse.Namespace) -> int:
 
 # -- learn reduce ---------------------------------------------------------------------
 def run_reduce(args: argparse.Namespace) -> int:
-    from robopercept.learning import LDA, PCA
+    """Run ``robopercept reduce`` with the parsed ``args``; returns the exit status."""
+    from robopercept.learning import LDA, PCA, label_codes, read_table
 
+    if args.method == "lda" and args.label is None:
+        raise UsageError("LDA needs the classes: name their column with --label")
     X, y, names = read_table(args.data, args.label)
     codes = classes = None
     if y is not None:
-        codes, classes = _codes(y)
+        codes, classes = label_codes(y)
     if args.method == "lda":
         if codes is None:
-            raise InputError("LDA needs the classes: name their column with --label")
+            raise UsageError("LDA needs the classes: name their column with --label")
         if classes is not None and classes.size < 3:
             raise InputError(
                 f"LDA gives at most c - 1 = {classes.size - 1} axis for {classes.size} "

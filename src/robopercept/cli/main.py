@@ -1,8 +1,26 @@
 """The ``robopercept`` command.
 
-Each command group lives in its own module and registers itself with :func:`register`.
-Errors in arguments, missing or corrupt files, and bad values print one line on stderr
-and exit with code 2; no traceback reaches the user (``ROBOPERCEPT_DEBUG=1`` shows it).
+Each command lives in a module named after it (``edges``, ``bgsub``, ``plane_track``
+for ``plane-track``, ...; ``features``, ``learn`` and ``calibrate`` hold their
+related commands too) and registers itself with ``register(sub)``. The modules parse
+arguments and print; the work is done by the library.
+
+Errors print one line on stderr, never a traceback, and set the exit code:
+
+* **0**: success (also when the output is piped into a command that closes it early);
+* **2**: usage error: an unknown command or flag, a bad flag value or combination
+  (argparse's message, or ``robopercept: error: ...`` for a
+  :class:`~robopercept.cli._args.UsageError` raised by a command);
+* **1**: a failure the user can fix: a missing, unreadable or corrupt file, or data the
+  method refuses (:class:`~robopercept.errors.RoboperceptError`, ``OSError``,
+  ``ValueError``): ``robopercept: error: <message>``;
+* **70** (``EX_SOFTWARE``): any other exception is a bug in robopercept:
+  ``robopercept: internal error (this is a bug, please report it): <Type>: <message>;
+  rerun with --debug for the traceback``;
+* **130**: interrupted by Ctrl-C.
+
+``robopercept --debug COMMAND ...`` (or the environment variable
+``ROBOPERCEPT_DEBUG=1``) re-raises errors of kinds 1 and 70, so the traceback shows.
 """
 
 from __future__ import annotations
@@ -11,61 +29,119 @@ import argparse
 import os
 import sys
 from collections.abc import Sequence
+from typing import Any, NoReturn
 
 from robopercept import __version__
+from robopercept.cli._args import UsageError
 from robopercept.errors import RoboperceptError
 
-__all__ = ["main"]
+__all__ = ["EXIT_ERROR", "EXIT_INTERNAL", "EXIT_USAGE", "build_parser", "main"]
 
+EXIT_ERROR = 1
 EXIT_USAGE = 2
+EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
+EXIT_INTERRUPTED = 130
 
 
-class UsageError(Exception):
-    """A command-line argument is wrong."""
+class _ParserError(UsageError):
+    """argparse's own message, already prefixed with the command's name."""
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, exit 2
-        raise UsageError(f"{self.prog}: {message} (see {self.prog} --help)")
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        if self.prog != "robopercept":  # also after the command: robopercept edges --debug
+            self.add_argument(
+                "--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS
+            )
+
+    def error(self, message: str) -> NoReturn:  # one line, exit 2
+        raise _ParserError(f"{self.prog}: {message} (see {self.prog} --help)")
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of every command (each command module's ``register``)."""
     from robopercept.cli import (
-        calibration,
+        bgsub,
+        blobs,
+        calibrate,
         cloud,
-        depth,
+        edges,
         features,
-        imaging,
+        flow,
         info,
         learn,
-        motion,
-        tracking,
+        meanshift,
+        plane_track,
+        stereo,
+        track,
     )
 
     parser = _Parser(
         prog="robopercept",
         description="Robotic perception from the command line. Run a command with --help "
-        "for its options.",
+        "for its options. Exit codes: 0 success, 1 error (missing or bad file or data), "
+        "2 usage error, 70 internal error (a bug), 130 interrupted.",
     )
     parser.add_argument("--version", action="version", version=f"robopercept {__version__}")
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the traceback of an error (as ROBOPERCEPT_DEBUG=1)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    info.register(sub)
-    imaging.register(sub)
-    features.register(sub)
-    cloud.register(sub)
-    learn.register(sub)
-    tracking.register(sub)
-    motion.register(sub)
-    depth.register(sub)
-    calibration.register(sub)
+    for module in (
+        info,
+        edges,
+        blobs,
+        features,
+        cloud,
+        learn,
+        plane_track,
+        bgsub,
+        flow,
+        meanshift,
+        track,
+        stereo,
+        calibrate,
+    ):
+        module.register(sub)
     return parser
 
 
+def _first_line(exc: BaseException) -> str:
+    text = str(exc)
+    return text.splitlines()[0] if text.strip() else type(exc).__name__
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit code (0 success, 2 usage or input error, 130 Ctrl-C)."""
+    """Run the ``robopercept`` command and return its exit code.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        0 success; 1 a user-fixable failure (missing or corrupt file, bad data:
+        ``RoboperceptError``, ``OSError``, ``ValueError``), one line
+        ``robopercept: error: ...`` on stderr; 2 a usage error (argparse, a bad flag
+        value or combination); 70 an internal error (any other exception: a bug),
+        reported in one line that says so; 130 Ctrl-C.
+
+    Raises
+    ------
+    Exception
+        With ``--debug`` or ``ROBOPERCEPT_DEBUG=1``, the error of a command (exit codes
+        1 and 70) is re-raised instead, so its traceback shows.
+    """
     parser = build_parser()
+    debug = bool(os.environ.get("ROBOPERCEPT_DEBUG"))
     try:
         args = parser.parse_args(argv)
+        debug = debug or bool(getattr(args, "debug", False))
         if not getattr(args, "func", None):
             parser.print_help()
             return 0
@@ -73,18 +149,31 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into `head` and closed: not an error
         sys.stderr.close()
         return 0
-    except UsageError as exc:
+    except _ParserError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
-    except (RoboperceptError, OSError, ValueError) as exc:
-        if os.environ.get("ROBOPERCEPT_DEBUG"):
-            raise
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f"robopercept: error: {msg}", file=sys.stderr)
+    except UsageError as exc:
+        print(f"robopercept: error: {_first_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("robopercept: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except (RoboperceptError, OSError, ValueError) as exc:
+        if debug:
+            raise
+        print(f"robopercept: error: {_first_line(exc)}", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:
+        if debug:
+            raise
+        lines = str(exc).strip().splitlines()
+        print(
+            "robopercept: internal error (this is a bug, please report it): "
+            f"{type(exc).__name__}: {lines[0] if lines else '(no message)'}; rerun with "
+            "--debug for the traceback",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -8,7 +8,7 @@ Arrays are RGB(A) or gray as stored; nothing is rescaled.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +17,14 @@ import numpy as np
 from robopercept._checks import check_image, check_positive
 from robopercept.errors import FileFormatError, InputError
 
-__all__ = ["VideoReader", "VideoWriter", "read_image", "write_image"]
+__all__ = [
+    "SnapshotVideoWriter",
+    "VideoReader",
+    "VideoWriter",
+    "read_image",
+    "sample_image_path",
+    "write_image",
+]
 
 _IMAGE_EXTS = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".pnm"}
 
@@ -73,6 +80,26 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     elif mode == "gray" and img.ndim == 3:
         img = rgb_to_gray(np.ascontiguousarray(img[..., :3]))
     return img
+
+
+def sample_image_path() -> Path:
+    """Path of the sample image shipped with the package.
+
+    It is OpenCV's ``box.png`` (324x223, 8-bit gray; see ``robopercept/data/SOURCES.md``),
+    the picture the command-line tools use when no image is given.
+
+    Returns
+    -------
+    Path
+
+    Examples
+    --------
+    >>> read_image(sample_image_path()).shape
+    (223, 324)
+    """
+    from importlib import resources
+
+    return Path(str(resources.files("robopercept") / "data" / "box.png"))
 
 
 def write_image(
@@ -199,6 +226,7 @@ class VideoReader:
 
     @property
     def frame_count(self) -> int:
+        """Number of frames in the file, counted by decoding it once (then cached)."""
         if self._frame_count is None:
             import imageio_ffmpeg
 
@@ -223,6 +251,7 @@ class VideoReader:
             self.close()
 
     def close(self) -> None:
+        """Stop decoding and release the ffmpeg process (iterating again reopens it)."""
         if self._gen is not None:
             self._gen.close()
             self._gen = None
@@ -289,11 +318,75 @@ class VideoWriter:
         self.frames_written += 1
 
     def close(self) -> None:
+        """Flush the encoder and finish the file (a later ``write`` starts it anew)."""
         if self._gen is not None:
             self._gen.close()
             self._gen = None
 
     def __enter__(self) -> VideoWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class SnapshotVideoWriter:
+    """A :class:`VideoWriter` that also saves chosen frames as PNG images.
+
+    Frame ``index`` of :meth:`add` goes into the video; when ``index`` is one of
+    ``snapshots`` it is also written to ``<stem>_<index:06d>.png`` beside the video
+    (``out.mp4`` -> ``out_000025.png``). Closing (also on leaving a ``with`` block after
+    an error) completes the video, so what was written before an interruption is kept.
+
+    Parameters
+    ----------
+    path : path-like
+        The MP4 to write.
+    fps : float
+    snapshots : iterable of int, optional
+        Indices of the frames to save as PNG as well.
+
+    Attributes
+    ----------
+    written : list of str
+        Files written so far: the snapshots as they are written, and the video (first)
+        once closed with at least one frame in it. Callers may append their own files.
+
+    Examples
+    --------
+    >>> with SnapshotVideoWriter("out.mp4", 25.0, [0]) as out:  # doctest: +SKIP
+    ...     out.add(0, np.zeros((48, 64, 3), np.uint8))
+    >>> out.written  # doctest: +SKIP
+    ['out.mp4', 'out_000000.png']
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        fps: float,
+        snapshots: Iterable[int] | None = None,
+    ) -> None:
+        self.path = Path(path)
+        self.writer = VideoWriter(self.path, fps=fps)
+        self.snapshots = {int(i) for i in (snapshots or [])}
+        self.written: list[str] = []
+
+    def add(self, index: int, picture: np.ndarray) -> None:
+        """Append ``picture`` (RGB uint8) to the video; save it too if ``index`` is a
+        snapshot."""
+        self.writer.write(picture)
+        if index in self.snapshots:
+            png = self.path.with_name(f"{self.path.stem}_{index:06d}.png")
+            write_image(png, picture)
+            self.written.append(str(png))
+
+    def close(self) -> None:
+        """Complete the video (and list it first in :attr:`written` if it has frames)."""
+        self.writer.close()
+        if self.writer.frames_written and str(self.path) not in self.written:
+            self.written.insert(0, str(self.path))
+
+    def __enter__(self) -> SnapshotVideoWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -35,6 +35,16 @@ from robopercept.learning.model_selection import (
     train_test_split,
 )
 from robopercept.learning.pca import PCA
+from robopercept.learning.report import (
+    ClassCurves,
+    ClassifierEvaluation,
+    class_scores,
+    confusion_table,
+    evaluate_classifier,
+    label_codes,
+    read_table,
+    standardize,
+)
 from robopercept.learning.svm import SVC, LinearSVC
 from robopercept.learning.tree import DecisionTreeClassifier, DecisionTreeRegressor
 
@@ -43,6 +53,8 @@ __all__ = [
     "LDA",
     "PCA",
     "SVC",
+    "ClassCurves",
+    "ClassifierEvaluation",
     "DecisionTreeClassifier",
     "DecisionTreeRegressor",
     "GridSearch",
@@ -57,17 +69,23 @@ __all__ = [
     "adjusted_rand_score",
     "auc",
     "average_precision_score",
+    "class_scores",
     "classification_report",
     "clone",
     "confusion_matrix",
+    "confusion_table",
     "cross_val_score",
     "estimate_bandwidth",
+    "evaluate_classifier",
     "f1_score",
     "kmeans_plusplus",
+    "label_codes",
     "precision_recall_curve",
     "precision_score",
+    "read_table",
     "recall_score",
     "roc_auc_score",
     "roc_curve",
+    "standardize",
     "train_test_split",
 ]

@@ -1,4 +1,5 @@
-"""Motion analysis: background subtraction, image differencing, optical flow."""
+"""Motion analysis: background subtraction, image differencing, optical flow, KLT point
+tracking."""
 
 from robopercept.motion.background import (
     AveragedBackground,
@@ -17,14 +18,17 @@ from robopercept.motion.flow import (
     good_features_to_track,
     lucas_kanade,
 )
+from robopercept.motion.klt import KLTTracker, PointTracks
 
 __all__ = [
     "AveragedBackground",
     "FlowStatus",
     "FrameDifference",
     "GaussianBackground",
+    "KLTTracker",
     "MaskDetections",
     "MotionClass",
+    "PointTracks",
     "SparseFlow",
     "StaticBackground",
     "ThreeFrameDifference",

@@ -1,5 +1,6 @@
 """End-to-end applications built from the library's methods."""
 
+from robopercept.pipelines.mot import MotFrame, run_mot, track_objects
 from robopercept.pipelines.plane_tracking import (
     PlaneHueModel,
     PlaneTracker,
@@ -10,10 +11,13 @@ from robopercept.pipelines.plane_tracking import (
 )
 
 __all__ = [
+    "MotFrame",
     "PlaneHueModel",
     "PlaneTrackResult",
     "PlaneTracker",
     "PlaneTrackerConfig",
     "plane_errors",
+    "run_mot",
     "summarize",
+    "track_objects",
 ]

@@ -32,6 +32,7 @@ import numpy as np
 
 from robopercept.errors import InputError, RoboperceptError
 from robopercept.geometry import apply, project
+from robopercept.imaging.io import VideoWriter
 from robopercept.pipelines.plane_tracking import (
     PlaneTracker,
     PlaneTrackerConfig,
@@ -140,7 +141,7 @@ class PlaneTrackOutputs:
         self._csv_fh.flush()
         self._video_on = video
         self._fps = fps
-        self._video: Any = None
+        self._video: VideoWriter | None = None
         self._rows: list[tuple[PlaneTrackResult, dict[str, Any]]] = []
         self._extent: np.ndarray | None = None
         self.closed = False
@@ -192,20 +193,12 @@ class PlaneTrackOutputs:
             elif not np.isfinite(r.track_d):
                 self._extent = None
             if self._video is None:
-                import imageio.v2 as imageio
-
-                self._video = imageio.get_writer(
-                    self.out / "tracking.mp4",
-                    fps=self._fps,
-                    codec="libx264",
-                    quality=6,
-                    macro_block_size=2,
-                    ffmpeg_log_level="error",
-                )
-            self._video.append_data(annotate_frame(frame, r, self._extent))
+                self._video = VideoWriter(self.out / "tracking.mp4", fps=self._fps, quality=6)
+            self._video.write(annotate_frame(frame, r, self._extent))
 
     @property
     def results(self) -> list[PlaneTrackResult]:
+        """The per-frame tracking results added so far, in order."""
         return [r for r, _ in self._rows]
 
     def summary(self, **extra: Any) -> dict[str, Any]:

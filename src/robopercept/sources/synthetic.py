@@ -366,14 +366,18 @@ class SyntheticRGBDScene:
     # -------------------------------------------------------------- calibration
     @property
     def depth_intrinsics(self) -> CameraIntrinsics:
+        """Pinhole intrinsics of the depth camera (``depth_size``, no distortion)."""
         return self._kd  # type: ignore[attr-defined]
 
     @property
     def color_intrinsics(self) -> CameraIntrinsics:
+        """Pinhole intrinsics of the colour camera (``color_size``, no distortion)."""
         return self._kc  # type: ignore[attr-defined]
 
     @property
     def T_color_depth(self) -> np.ndarray:
+        """4x4 pose of the depth camera in the colour camera frame (a copy): maps
+        depth-frame points into the colour frame."""
         return self._T.copy()  # type: ignore[attr-defined]
 
     def __len__(self) -> int:

@@ -11,7 +11,13 @@ from robopercept.viz.draw import (
     draw_text,
 )
 from robopercept.viz.features import draw_matches, hog_picture
-from robopercept.viz.flow import draw_flow, draw_trails, flow_to_color, flow_wheel
+from robopercept.viz.flow import (
+    dense_flow_picture,
+    draw_flow,
+    draw_trails,
+    flow_to_color,
+    flow_wheel,
+)
 from robopercept.viz.learning import confusion_picture, curves_picture, scatter_picture
 
 __all__ = [
@@ -19,6 +25,7 @@ __all__ = [
     "colorize_signed",
     "confusion_picture",
     "curves_picture",
+    "dense_flow_picture",
     "draw_boxes",
     "draw_chessboard",
     "draw_flow",

@@ -25,7 +25,7 @@ from robopercept._checks import check_ndim
 from robopercept.errors import InputError
 from robopercept.viz.draw import check_color, pil_canvas, to_rgb8
 
-__all__ = ["draw_flow", "draw_trails", "flow_to_color", "flow_wheel"]
+__all__ = ["dense_flow_picture", "draw_flow", "draw_trails", "flow_to_color", "flow_wheel"]
 
 
 def flow_to_color(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndarray:
@@ -74,6 +74,41 @@ def flow_wheel(size: int = 101) -> np.ndarray:
     f = np.stack([xx - r, yy - r], axis=-1)
     f[np.hypot(f[..., 0], f[..., 1]) > r] = np.nan
     return flow_to_color(f, max_magnitude=r)
+
+
+def dense_flow_picture(field: np.ndarray, step: int, shape: tuple[int, ...]) -> np.ndarray:
+    """A sparse-grid flow field as a full-size colour picture with its legend.
+
+    Each grid vector's :func:`flow_to_color` colour fills its ``step`` x ``step`` cell;
+    the picture is cropped or padded (black) to ``shape``, and the
+    :func:`flow_wheel` legend (up to 101 px, a quarter of the smaller side) sits in the
+    bottom-right corner.
+
+    Parameters
+    ----------
+    field : (h, w, 2) ndarray
+        Flow ``(u, v)`` at the grid points, as :func:`~robopercept.motion.dense_flow`
+        returns it (NaN where untracked: black).
+    step : int
+        The grid spacing in pixels.
+    shape : (H, W) or (H, W, 3)
+        The image's shape.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+    """
+    if int(step) != step or step < 1:
+        raise InputError(f"step must be an integer >= 1; got {step}")
+    color = flow_to_color(field)
+    picture = np.kron(color, np.ones((step, step, 1), dtype=np.uint8))
+    H, W = shape[:2]
+    full = np.zeros((H, W, 3), dtype=np.uint8)
+    h, w = min(picture.shape[0], H), min(picture.shape[1], W)
+    full[:h, :w] = picture[:h, :w]
+    wheel = flow_wheel(min(101, H // 4 * 2 + 1, W // 4 * 2 + 1))
+    full[-wheel.shape[0] :, -wheel.shape[1] :] = wheel
+    return full
 
 
 def draw_flow(

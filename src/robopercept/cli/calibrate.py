@@ -11,23 +11,13 @@ from typing import Any
 
 import numpy as np
 
+from robopercept.cli._args import UsageError, board_size
+
 __all__ = ["register"]
 
 
-def _board(text: str) -> tuple[int, int]:
-    """``9x6`` -> (9, 6) (argparse type)."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expects inner corners as WxH, e.g. 9x6; got {text!r}"
-        ) from None
-    if w < 2 or h < 2:
-        raise argparse.ArgumentTypeError(f"needs at least 2x2 inner corners; got {text!r}")
-    return w, h
-
-
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``calibrate`` and ``handeye`` commands to the subcommand parsers ``sub``."""
     p = sub.add_parser(
         "calibrate",
         help="camera intrinsics and distortion from chessboard photos (Zhang)",
@@ -36,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "print the per-view reprojection errors and write the camera as JSON.",
     )
     p.add_argument("images", nargs="+")
-    p.add_argument("--board", type=_board, required=True, help="inner corners, e.g. 9x6")
+    p.add_argument("--board", type=board_size, required=True, help="inner corners, e.g. 9x6")
     p.add_argument("--square", type=float, default=1.0, help="square side (sets the unit)")
     p.add_argument("-o", "--output", default="camera.json")
     p.add_argument("--overlays", default=None, help="folder for detection overlays")
@@ -73,7 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     q.add_argument(
         "--board",
-        type=_board,
+        type=board_size,
         default=None,
         help="inner corners (chessboard) or circles per row x rows (grids) for --images",
     )
@@ -100,6 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
+    """Run ``robopercept calibrate`` with the parsed ``args``; returns the exit status."""
     from tqdm import tqdm
 
     from robopercept.calibration import (
@@ -114,7 +105,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from robopercept.viz import draw_chessboard
 
     if not (np.isfinite(args.square) and args.square > 0):
-        raise InputError(f"--square must be a positive length; got {args.square}")
+        raise UsageError(f"--square must be a positive length; got {args.square}")
     size, names, corners, skipped = None, [], [], []
     for path in tqdm(
         args.images, unit="image", desc="chessboard", disable=args.quiet, file=sys.stderr
@@ -151,6 +142,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
             f"the board was found in {len(corners)} of {len(args.images)} images; "
             "calibration needs at least 3 (check --board: inner corners, not squares)"
         )
+    assert size is not None  # set by the first readable image
     res = calibrate_camera(chessboard_points(args.board, args.square), corners, size)
     save_calibration(args.output, res)
     data = json.loads(Path(args.output).read_text())
@@ -214,7 +206,7 @@ def _target_poses(args: argparse.Namespace) -> tuple[list[np.ndarray], list[int]
     if args.target_poses:
         return [_matrix_file(p) for p in args.target_poses], list(range(len(args.target_poses)))
     if not (args.camera and args.board and args.square):
-        raise InputError("--images needs --camera (a calibrate JSON), --board and --square")
+        raise UsageError("--images needs --camera (a calibrate JSON), --board and --square")
     cam = load_calibration(args.camera)
     if "K" not in cam:
         raise InputError(f"{args.camera} is not a single-camera calibration (no 'K')")
@@ -226,6 +218,7 @@ def _target_poses(args: argparse.Namespace) -> tuple[list[np.ndarray], list[int]
     poses, stations = [], []
     for i, path in enumerate(args.images):
         gray = read_image(path, mode="gray")
+        det: Any
         if args.target == "chessboard":
             det = find_chessboard_corners(gray, args.board)
         else:
@@ -239,13 +232,13 @@ def _target_poses(args: argparse.Namespace) -> tuple[list[np.ndarray], list[int]
 
 
 def run_handeye(args: argparse.Namespace) -> int:
+    """Run ``robopercept handeye`` with the parsed ``args``; returns the exit status."""
     from robopercept.calibration import calibrate_hand_eye, read_xyz_rpy
     from robopercept.calibration.handeye import xyz_rpy_from_pose
-    from robopercept.errors import InputError
 
     sources = args.target_poses or args.images
     if len(sources) != len(args.robot_poses):
-        raise InputError(
+        raise UsageError(
             f"{len(args.robot_poses)} robot poses but {len(sources)} "
             f"{'target poses' if args.target_poses else 'images'}: give one per station"
         )

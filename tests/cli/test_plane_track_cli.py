@@ -81,16 +81,16 @@ def test_hsv_box_matching_nothing_detects_nothing(tmp_path, capsys):
 
 
 @pytest.mark.parametrize(
-    ("args", "match"),
+    ("args", "match", "code"),
     [
-        (["plane-track", "--source", "nowhere"], "not 'synthetic'"),
-        (["plane-track", "--source", "synthetic", "--hsv-low", "1,2"], "H,S,V"),
-        (["plane-track", "--source", "synthetic", "--hsv-low", "45,35,999"], "OpenCV scale"),
-        (["plane-track", "--source", "missing.bag"], "not found"),
-        (["demo", "--frames", "0"], ">= 1"),
+        (["plane-track", "--source", "nowhere"], "not 'synthetic'", 2),
+        (["plane-track", "--source", "synthetic", "--hsv-low", "1,2"], "H,S,V", 2),
+        (["plane-track", "--source", "synthetic", "--hsv-low", "45,35,999"], "OpenCV scale", 2),
+        (["plane-track", "--source", "missing.bag"], "not found", 1),
+        (["demo", "--frames", "0"], ">= 1", 2),
     ],
 )
-def test_errors_are_one_line_exit_2(tmp_path, capsys, args, match):
-    assert main([*args, "--out", str(tmp_path)] if args[0] != "demo" else args) == 2
+def test_errors_are_one_line_with_their_exit_code(tmp_path, capsys, args, match, code):
+    assert main([*args, "--out", str(tmp_path)] if args[0] != "demo" else args) == code
     err = capsys.readouterr().err
     assert match in err and err.count("\n") == 1

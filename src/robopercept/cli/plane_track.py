@@ -7,25 +7,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from robopercept.cli._args import positive_int
+from robopercept.cli._args import UsageError, hsv, positive_int
 
 __all__ = ["register", "summary_table"]
 
 DEMO_FRAMES = 300
 
 
-def _hsv(text: str) -> tuple[float, float, float]:
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects H,S,V numbers; got {text!r}") from None
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"expects H,S,V (three numbers); got {text!r}")
-    return values  # type: ignore[return-value]
-
-
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``demo``, ``plane-track`` and ``synth-rgbd`` commands to the subcommand
+    parsers ``sub``."""
     p = sub.add_parser(
         "demo",
         help="the main job: track a green board's plane in the built-in synthetic RGB-D scene",
@@ -54,8 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", type=positive_int, default=None, help="stop after N frames")
     p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES, help="synthetic: frames")
     p.add_argument("--seed", type=int, default=0, help="synthetic: scene seed")
-    p.add_argument("--hsv-low", type=_hsv, default=(45, 35, 35), metavar="H,S,V")
-    p.add_argument("--hsv-high", type=_hsv, default=(65, 255, 255), metavar="H,S,V")
+    p.add_argument("--hsv-low", type=hsv, default=(45, 35, 35), metavar="H,S,V")
+    p.add_argument("--hsv-high", type=hsv, default=(65, 255, 255), metavar="H,S,V")
     p.add_argument("--hue-tolerance", type=float, default=None, help="hue as RANSAC feature")
     p.add_argument("--no-video", action="store_true", help="skip tracking.mp4")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -89,12 +80,12 @@ def _source(args: argparse.Namespace) -> Any:
         return RealSenseSource(path)
     if path.is_dir():
         return TUMFolderSource(path)
-    raise FileNotFoundError(
+    raise UsageError(
         f"--source {src}: not 'synthetic', 'realsense', a folder or a .bag/.db3 recording"
     )
 
 
-def _fmt(v: Any, unit: str = "", digits: int = 2) -> str:
+def _fmt(v: float | None, unit: str = "", digits: int = 2) -> str:
     return "-" if v is None else f"{v:.{digits}f}{unit}"
 
 
@@ -162,11 +153,15 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _plane_track(args: argparse.Namespace) -> int:
+    from robopercept.errors import InputError
     from robopercept.pipelines import PlaneTrackerConfig
 
-    config = PlaneTrackerConfig(
-        hsv_low=args.hsv_low, hsv_high=args.hsv_high, hue_tolerance=args.hue_tolerance
-    )
+    try:  # made from the flags alone: what it refuses is a bad flag value
+        config = PlaneTrackerConfig(
+            hsv_low=args.hsv_low, hsv_high=args.hsv_high, hue_tolerance=args.hue_tolerance
+        )
+    except InputError as exc:
+        raise UsageError(str(exc)) from exc
     return _run(args, _source(args), config)
 
 

@@ -10,12 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from robopercept.cli._args import positive_int
+from robopercept.cli._args import UsageError, positive_int
 
 __all__ = ["register"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``stereo`` command to the ``robopercept`` subcommand parsers ``sub``."""
     p = sub.add_parser(
         "stereo",
         help="disparity map of a rectified stereo pair (block matching or SGM)",
@@ -55,13 +56,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_stereo(args: argparse.Namespace) -> int:
+    """Run ``robopercept stereo`` with the parsed ``args``; returns the exit status."""
     from robopercept.depth import bad_pixel_rate, block_matching, semi_global_matching
     from robopercept.errors import InputError
     from robopercept.imaging import read_image, write_image
     from robopercept.viz import colorize_depth
 
     if args.ply and not args.calib and (args.focal is None or args.baseline is None):
-        raise InputError("--ply needs --calib, or --focal (pixels) and --baseline (metres)")
+        raise UsageError("--ply needs --calib, or --focal (pixels) and --baseline (metres)")
     left = read_image(args.left, mode="rgb")
     right = read_image(args.right, mode="rgb")
     Q = None
@@ -123,28 +125,10 @@ def run_stereo(args: argparse.Namespace) -> int:
 
 
 def _rectify(path: str, left: np.ndarray, right: np.ndarray) -> tuple:
-    """Rectify a pair with a stereo calibration: Bouguet rotations, then remapping."""
-    from robopercept.calibration import load_calibration
-    from robopercept.errors import InputError
-    from robopercept.geometry import rectify_stereo, undistort_rectify_map
-    from robopercept.imaging import remap
+    """``--calib``: read the stereo calibration and rectify the pair with it."""
+    from robopercept.calibration import load_calibration, rectify_pair
 
-    cal = load_calibration(path)
-    if "K1" not in cal:
-        raise InputError(f"{path} is not a stereo calibration (needs K1 dist1 K2 dist2 R T)")
-    if left.shape != right.shape:
-        raise InputError(f"the images differ in size: {left.shape} and {right.shape}")
-    size = (left.shape[1], left.shape[0])
-    r = rectify_stereo(
-        cal["K1"], cal.get("dist1"), cal["K2"], cal.get("dist2"), cal["R"], cal["T"], size
-    )
-    out = []
-    for img, K, D, R, P in (
-        (left, cal["K1"], cal.get("dist1"), r.R1, r.P1),
-        (right, cal["K2"], cal.get("dist2"), r.R2, r.P2),
-    ):
-        out.append(remap(img, *undistort_rectify_map(K, D, R, P, size)))
-    return out[0], out[1], r.Q
+    return rectify_pair(left, right, load_calibration(path))
 
 
 def _write_ply(
@@ -155,19 +139,12 @@ def _write_ply(
     baseline: float | None,
     Q: np.ndarray | None = None,
 ) -> int:
-    from robopercept.depth import disparity_to_points
+    from robopercept.depth import disparity_to_points, reprojection_matrix
     from robopercept.pointcloud import PointCloud, write_point_cloud
 
-    h, w = disp.shape
     if Q is None:
-        Q = np.array(
-            [
-                [1, 0, 0, -(w - 1) / 2],
-                [0, 1, 0, -(h - 1) / 2],
-                [0, 0, 0, focal],
-                [0, 0, 1 / baseline, 0],
-            ]
-        )
+        assert focal is not None and baseline is not None  # checked with the flags
+        Q = reprojection_matrix(focal, baseline, (disp.shape[1], disp.shape[0]))
     pts = disparity_to_points(disp, Q)
     ok = np.isfinite(pts).all(axis=2)
     cloud = PointCloud(pts[ok], colors=rgb[ok].astype(np.float64) / 255.0)
