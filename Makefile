@@ -25,6 +25,7 @@ demo: $(VENV)/.core
 test: $(VENV)/.dev
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m ruff format --check src tests benchmarks
+	$(PY) tools/typecheck.py
 	$(PY) -m pytest -p no:cacheprovider
 
 bench: $(VENV)/.dev

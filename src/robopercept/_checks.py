@@ -11,6 +11,7 @@ from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import InputError
 
@@ -32,7 +33,7 @@ __all__ = [
 IMAGE_DTYPES = (np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64, np.bool_)
 
 
-def _as_array(value: Any, name: str) -> np.ndarray:
+def _as_array(value: npt.ArrayLike, name: str) -> np.ndarray:
     if isinstance(value, np.ndarray):
         return value
     try:
@@ -47,7 +48,7 @@ def _as_array(value: Any, name: str) -> np.ndarray:
     return arr
 
 
-def check_ndim(value: Any, name: str, ndims: Iterable[int]) -> np.ndarray:
+def check_ndim(value: npt.ArrayLike, name: str, ndims: Iterable[int]) -> np.ndarray:
     """Return ``value`` as an array whose number of dimensions is one of ``ndims``."""
     arr = _as_array(value, name)
     ndims = tuple(ndims)
@@ -60,7 +61,7 @@ def check_ndim(value: Any, name: str, ndims: Iterable[int]) -> np.ndarray:
     return arr
 
 
-def check_shape(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+def check_shape(value: npt.ArrayLike, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
     """Return ``value`` as an array of ``shape`` (``None`` matches any length)."""
     arr = _as_array(value, name)
     ok = arr.ndim == len(shape) and all(
@@ -72,7 +73,9 @@ def check_shape(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndar
     return arr
 
 
-def check_dtype(value: Any, name: str, dtypes: Iterable[Any] = IMAGE_DTYPES) -> np.ndarray:
+def check_dtype(
+    value: npt.ArrayLike, name: str, dtypes: Iterable[Any] = IMAGE_DTYPES
+) -> np.ndarray:
     """Return ``value`` as an array whose dtype is one of ``dtypes``."""
     arr = _as_array(value, name)
     dtypes = tuple(np.dtype(d) for d in dtypes)
@@ -85,7 +88,7 @@ def check_dtype(value: Any, name: str, dtypes: Iterable[Any] = IMAGE_DTYPES) -> 
     return arr
 
 
-def check_finite(value: Any, name: str) -> np.ndarray:
+def check_finite(value: npt.ArrayLike, name: str) -> np.ndarray:
     """Return ``value`` as an array with no NaN or infinity."""
     arr = _as_array(value, name)
     if arr.dtype.kind == "f" and not np.isfinite(arr).all():
@@ -97,7 +100,7 @@ def check_finite(value: Any, name: str) -> np.ndarray:
     return arr
 
 
-def check_nonempty(value: Any, name: str) -> np.ndarray:
+def check_nonempty(value: npt.ArrayLike, name: str) -> np.ndarray:
     """Return ``value`` as an array with at least one element along every axis."""
     arr = _as_array(value, name)
     if arr.size == 0:
@@ -137,7 +140,7 @@ def check_positive(value: float, name: str) -> float:
     return check_range(value, name, 0.0, None, low_inclusive=False)
 
 
-def check_odd_size(value: Any, name: str, minimum: int = 1) -> int:
+def check_odd_size(value: npt.ArrayLike, name: str, minimum: int = 1) -> int:
     """Return ``value`` as an int after checking that it is odd and >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise InputError(f"{name} must be an odd integer; got {value!r}")
@@ -149,7 +152,7 @@ def check_odd_size(value: Any, name: str, minimum: int = 1) -> int:
     return v
 
 
-def check_choice(value: Any, name: str, choices: Iterable[Any]) -> Any:
+def check_choice(value: npt.ArrayLike, name: str, choices: Iterable[Any]) -> Any:
     """Return ``value`` after checking that it is one of ``choices``."""
     choices = tuple(choices)
     if value not in choices:
@@ -158,7 +161,7 @@ def check_choice(value: Any, name: str, choices: Iterable[Any]) -> Any:
 
 
 def check_image(
-    image: Any, name: str = "image", *, allow_color: bool = True, allow_bool: bool = False
+    image: npt.ArrayLike, name: str = "image", *, allow_color: bool = True, allow_bool: bool = False
 ) -> np.ndarray:
     """Return ``image`` as an ``(H, W)`` or ``(H, W, 3)`` array of a supported dtype.
 
@@ -194,7 +197,7 @@ def check_image(
     return check_finite(arr, name)
 
 
-def check_kernel(kernel: Any, name: str = "kernel", ndim: int = 2) -> np.ndarray:
+def check_kernel(kernel: npt.ArrayLike, name: str = "kernel", ndim: int = 2) -> np.ndarray:
     """Return ``kernel`` as a finite, non-empty float64 array of ``ndim`` dimensions."""
     arr = check_ndim(kernel, name, (ndim,))
     if arr.dtype.kind not in "biuf":
@@ -213,7 +216,7 @@ def as_float(image: np.ndarray) -> np.ndarray:
     return image.astype(np.float32)
 
 
-def check_int(value: Any, name: str, minimum: int | None = None) -> int:
+def check_int(value: npt.ArrayLike, name: str, minimum: int | None = None) -> int:
     """Return ``value`` as an int after checking that it is an integer >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise InputError(f"{name} must be an integer; got {value!r}")
@@ -223,7 +226,7 @@ def check_int(value: Any, name: str, minimum: int | None = None) -> int:
     return v
 
 
-def check_points(value: Any, name: str = "points", dim: int | None = 3) -> np.ndarray:
+def check_points(value: npt.ArrayLike, name: str = "points", dim: int | None = 3) -> np.ndarray:
     """Return ``value`` as a float64 ``(N, dim)`` array (NaN/inf allowed: callers decide).
 
     ``dim=None`` accepts any number of columns.
@@ -242,7 +245,7 @@ def check_points(value: Any, name: str = "points", dim: int | None = 3) -> np.nd
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
-def as_rng(rng: Any) -> np.random.Generator:
+def as_rng(rng: int | np.integer | np.random.Generator | None) -> np.random.Generator:
     """``rng`` as a NumPy Generator: an int seed, a Generator, or None (fresh entropy)."""
     if isinstance(rng, np.random.Generator):
         return rng

@@ -212,3 +212,65 @@ def test_plane_scoring_kernel_matches_numpy_on_any_thread_count(rng, msac):
     assert np.array_equal(one[0], scores) and np.array_equal(one[1], counts)
     mask = model.inlier_mask(params[0], prepared, 0.01)
     assert np.array_equal(mask, np.abs(pts @ params[0, :3] + params[0, 3]) < 0.01)
+
+
+class TestModelProtocol:
+    """Every model of the house satisfies the ``Model`` protocol the engine relies on."""
+
+    def models(self):
+        from robopercept.geometry.epipolar import EssentialModel, FundamentalModel
+        from robopercept.pipelines.plane_tracking import PlaneHueModel
+
+        return [
+            LineModel(),
+            PlaneModel(),
+            AffineModel(),
+            HomographyModel(),
+            FundamentalModel(),
+            EssentialModel(),
+            PlaneHueModel(10.0),
+        ]
+
+    def test_models_are_instances_of_the_runtime_checkable_protocol(self):
+        from robopercept.estimation.models import Model
+
+        for m in self.models():
+            assert isinstance(m, Model), type(m).__name__
+            assert m.sample_size >= 2 and m.dim >= 2 and m.name
+        assert not isinstance(object(), Model)
+        assert not isinstance(np.zeros(3), Model)
+
+    def test_a_duck_typed_model_is_accepted_and_a_non_model_refused(self, rng):
+        from robopercept.estimation.models import Model
+
+        class Wrapped:  # every protocol member, borrowed; no inheritance
+            sample_size, dim, name = 2, 2, "wrapped line"
+
+        for name in ("fit_minimal", "fit", "residuals", "check", "result", "fit_inliers"):
+            setattr(Wrapped, name, getattr(LineModel, name))
+        for name in ("prepare", "score", "inlier_mask"):
+            setattr(Wrapped, name, getattr(Model, name))
+        pts = np.c_[np.linspace(0, 1, 50), 0.5 * np.linspace(0, 1, 50) + 0.1]
+        assert isinstance(Wrapped(), Model)
+        res = ransac(pts, Wrapped(), 1e-6, rng=0)
+        assert res.n_inliers == 50
+        np.testing.assert_allclose(res.params, ransac(pts, LineModel(), 1e-6, rng=0).params)
+        with pytest.raises(InputError, match="Model"):
+            ransac(pts, object(), 0.1)  # type: ignore[arg-type]
+
+    def test_score_sign_convention(self, rng):
+        # higher is better for both rules: the inlier count, or MINUS the truncated loss
+        pts, _, _ = plane_data(rng, n=500)
+        t = 0.01
+        for scoring in ("ransac", "msac"):
+            res = ransac(pts, PlaneModel(), t, scoring=scoring, rng=1)
+            r = np.abs(pts @ res.params[:3] + res.params[3])
+            if scoring == "ransac":
+                assert res.score == res.n_inliers == np.count_nonzero(r < t)
+            else:
+                np.testing.assert_allclose(res.score, -np.minimum(r**2, t * t).sum(), rtol=1e-9)
+                assert res.score <= 0.0
+            model = PlaneModel()
+            shifted = res.params[None] + [0, 0, 0, 0.05]
+            worse, _ = model.score(shifted, model.prepare(pts), t, scoring == "msac")
+            assert worse[0] < res.score

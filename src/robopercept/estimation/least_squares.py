@@ -254,6 +254,15 @@ def fit_line(points: np.ndarray, method: Method = "total") -> LineFit:
     Returns
     -------
     LineFit
+
+    Examples
+    --------
+    Points on :math:`y = 2x + 1`:
+
+    >>> fit = fit_line(np.array([[0.0, 1.0], [1.0, 3.0], [2.0, 5.0], [3.0, 7.0]]))
+    >>> a, b, c = fit.line.coefficients  # a x + b y + c = 0
+    >>> round(float(-a / b), 9), round(float(-c / b), 9), bool(fit.rms < 1e-12)
+    (2.0, 1.0, True)
     """
     check_choice(method, "method", ("total", "ordinary"))
     p = _checked(points, 2, 2, "line")

@@ -11,7 +11,8 @@ The loop:
 
    - ``"ransac"``: the number of inliers :math:`|\{i : r_i < t\}|` (higher is better),
    - ``"msac"`` (Torr & Zisserman 2000): the truncated loss
-     :math:`\sum_i \min(r_i^2, t^2)` (lower is better);
+     :math:`\sum_i \min(r_i^2, t^2)` (lower is better; scores are its negative, so that
+     for both rules the engine keeps the highest score);
 
 4. keep the best; with ``local_optimization`` (LO-RANSAC, Chum et al. 2003) every new
    best is refined by iterated least-squares fits on its inliers while that improves the
@@ -35,9 +36,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept._checks import as_rng, check_choice, check_int, check_points, check_range
 from robopercept.errors import DegenerateError, InputError
@@ -46,19 +48,22 @@ from robopercept.estimation.models import Model
 __all__ = ["RansacResult", "ransac", "required_iterations"]
 
 Scoring = Literal["ransac", "msac"]
+ResultT = TypeVar("ResultT")  # the model's typed result: Line, Plane, a 3x3 ndarray
 
 _MAX_REDRAWS = 100  # consecutive all-degenerate batches before giving up
 
 
 @dataclass(frozen=True)
-class RansacResult:
-    """Result of :func:`ransac`.
+class RansacResult(Generic[ResultT]):
+    r"""Result of :func:`ransac`, generic over the type of the model's result
+    (``RansacResult[Plane]`` for a :class:`~robopercept.estimation.PlaneModel`).
 
     Attributes
     ----------
-    model : object
-        The model's typed result (:class:`~robopercept.estimation.Plane`,
-        :class:`~robopercept.estimation.Line`, a 3x3 matrix).
+    model : ResultT
+        The model's typed result, ``model.result(params)``
+        (:class:`~robopercept.estimation.Plane`, :class:`~robopercept.estimation.Line`, a
+        3x3 ndarray).
     params : (P,) float ndarray
         The raw parameters.
     inliers : (N,) bool ndarray
@@ -66,10 +71,11 @@ class RansacResult:
     n_iterations : int
         Minimal samples drawn and scored (redrawn degenerate samples not counted).
     score : float
-        Inlier count (``"ransac"``) or truncated squared loss (``"msac"``).
+        Higher is better: the inlier count (``"ransac"``), or MINUS the truncated squared
+        loss, :math:`-\sum_i \min(r_i^2, t^2) \le 0` (``"msac"``), of ``params``.
     """
 
-    model: Any
+    model: ResultT
     params: np.ndarray
     inliers: np.ndarray
     n_iterations: int
@@ -111,7 +117,7 @@ def _draw(rng: np.random.Generator, n: int, size: int, batch: int) -> np.ndarray
 
 
 def _refine(
-    model: Model,
+    model: Model[Any],
     params: np.ndarray,
     x: np.ndarray,
     prepared: Any,
@@ -140,8 +146,8 @@ def _refine(
 
 
 def ransac(
-    data: np.ndarray,
-    model: Model,
+    data: npt.ArrayLike,
+    model: Model[ResultT],
     threshold: float,
     *,
     sample_size: int | None = None,
@@ -151,9 +157,9 @@ def ransac(
     scoring: Scoring = "ransac",
     local_optimization: bool = False,
     batch_size: int = 8,
-    initial: np.ndarray | None = None,
+    initial: npt.ArrayLike | None = None,
     rng: int | np.random.Generator | None = None,
-) -> RansacResult:
+) -> RansacResult[ResultT]:
     r"""Robustly fit ``model`` to ``data`` (see the module docstring for the algorithm).
 
     Parameters
@@ -162,7 +168,7 @@ def ransac(
         One row per observation (points, or correspondences ``(x, y, x', y')``); finite.
     model : Model
         :class:`LineModel`, :class:`PlaneModel`, :class:`AffineModel`,
-        :class:`HomographyModel` or any object with the same methods.
+        :class:`HomographyModel` or any object satisfying the :class:`Model` protocol.
     threshold : float
         Inlier threshold on the model's residual (> 0), in data units.
     sample_size : int, optional
@@ -189,13 +195,26 @@ def ransac(
 
     Returns
     -------
-    RansacResult
+    RansacResult[ResultT]
+        ``model`` is ``model.result(params)``; ``score`` is higher-is-better (the inlier
+        count, or minus the MSAC loss).
 
     Raises
     ------
     DegenerateError
         Fewer rows than ``sample_size``, data that cannot determine the model (e.g. all
         points collinear for a plane), or only degenerate samples drawn.
+
+    Examples
+    --------
+    A line through 50 points, every tenth one moved off it:
+
+    >>> from robopercept.estimation import LineModel
+    >>> x = np.linspace(0.0, 1.0, 50)
+    >>> data = np.column_stack([x, 2 * x + 1]); data[::10, 1] += 3.0
+    >>> result = ransac(data, LineModel(), threshold=0.01, rng=0)
+    >>> int(result.inliers.sum()), np.flatnonzero(~result.inliers).tolist()
+    (45, [0, 10, 20, 30, 40])
     """
     if not isinstance(model, Model):
         raise InputError(
@@ -285,9 +304,9 @@ def ransac(
     return RansacResult(model.result(refit), refit, inliers, drawn, score)
 
 
-def _fit_each(model: Model, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _fit_each(model: Model[Any], samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares fits of non-minimal samples, one at a time."""
-    out = []
+    out: list[np.ndarray | None] = []
     valid = np.ones(samples.shape[0], dtype=bool)
     for i, s in enumerate(samples):
         try:

@@ -205,6 +205,14 @@ def match_descriptors(
     -------
     Matches
         In query order. Empty (never an exception) when either set is empty.
+
+    Examples
+    --------
+    >>> query = np.array([[0.0, 0.0], [1.0, 1.0]])
+    >>> train = np.array([[1.0, 1.1], [5.0, 5.0], [0.1, 0.0]])
+    >>> m = match_descriptors(query, train)
+    >>> m.query_idx.tolist(), m.train_idx.tolist(), np.round(m.distance, 3).tolist()
+    ([0, 1], [2, 0], [0.1, 0.1])
     """
     if ratio is not None:
         ratio = check_range(ratio, "ratio", 0.0, 1.0, low_inclusive=False)

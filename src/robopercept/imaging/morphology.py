@@ -122,6 +122,18 @@ def dilate(image: np.ndarray, se: np.ndarray | None = None, iterations: int = 1)
     """Dilation: the maximum of ``image`` over the reflected structuring element.
 
     See :func:`erode` for the parameters.
+
+    Examples
+    --------
+    The default 3x3 square grows one pixel into a 3x3 block:
+
+    >>> m = np.zeros((5, 5), np.uint8); m[2, 2] = 1
+    >>> dilate(m)
+    array([[0, 0, 0, 0, 0],
+           [0, 1, 1, 1, 0],
+           [0, 1, 1, 1, 0],
+           [0, 1, 1, 1, 0],
+           [0, 0, 0, 0, 0]], dtype=uint8)
     """
     return _rank(image, se, "max", iterations)
 

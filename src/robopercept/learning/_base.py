@@ -16,6 +16,7 @@ import inspect
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept._checks import as_rng
 from robopercept.errors import InputError, NotFittedError
@@ -106,7 +107,7 @@ class Estimator:
                 "predicting or transforming"
             )
 
-    def _check_X(self, X: Any, *, fitting: bool = False) -> np.ndarray:
+    def _check_X(self, X: npt.ArrayLike, *, fitting: bool = False) -> npt.NDArray[np.float64]:
         X = check_matrix(X, "X")
         if fitting:
             self.n_features_in_ = X.shape[1]
@@ -118,7 +119,7 @@ class Estimator:
         return X
 
 
-def _same(a: Any, b: Any) -> bool:
+def _same(a: object, b: object) -> bool:
     try:
         return bool(a is b or (type(a) is type(b) and a == b))
     except (ValueError, TypeError):  # arrays
@@ -128,13 +129,13 @@ def _same(a: Any, b: Any) -> bool:
 class ClassifierMixin:
     """``score`` is the accuracy."""
 
-    _estimator_type = "classifier"
+    _estimator_type: str | None = "classifier"
 
-    def score(self, X: Any, y: Any) -> float:
+    def score(self, X: npt.ArrayLike, y: npt.ArrayLike) -> float:
         """Mean accuracy of ``predict(X)`` against ``y``."""
         return float(np.mean(self.predict(X) == np.asarray(y)))  # type: ignore[attr-defined]
 
-    def _encode_labels(self, y: Any, n_samples: int) -> np.ndarray:
+    def _encode_labels(self, y: npt.ArrayLike, n_samples: int) -> np.ndarray:
         y = np.asarray(y)
         if y.ndim != 1 or y.shape[0] != n_samples:
             raise InputError(f"y must be a 1-D array of {n_samples} labels; got shape {y.shape}")
@@ -152,9 +153,9 @@ class ClassifierMixin:
 class RegressorMixin:
     """``score`` is the coefficient of determination R^2."""
 
-    _estimator_type = "regressor"
+    _estimator_type: str | None = "regressor"
 
-    def score(self, X: Any, y: Any) -> float:
+    def score(self, X: npt.ArrayLike, y: npt.ArrayLike) -> float:
         r"""R^2 = 1 - \sum (y - \hat y)^2 / \sum (y - \bar y)^2."""
         y = np.asarray(y, dtype=np.float64)
         pred = self.predict(X)  # type: ignore[attr-defined]
@@ -166,16 +167,16 @@ class RegressorMixin:
 class TransformerMixin:
     """``fit_transform`` = ``fit`` then ``transform``."""
 
-    def fit_transform(self, X: Any, y: Any = None) -> np.ndarray:
+    def fit_transform(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> np.ndarray:
         return self.fit(X, y).transform(X)  # type: ignore[attr-defined]
 
 
 class ClusterMixin:
     """``fit_predict`` returns ``labels_``."""
 
-    _estimator_type = "clusterer"
+    _estimator_type: str | None = "clusterer"
 
-    def fit_predict(self, X: Any, y: Any = None) -> np.ndarray:
+    def fit_predict(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> np.ndarray:
         return self.fit(X).labels_  # type: ignore[attr-defined]
 
 
@@ -189,7 +190,7 @@ def clone(estimator: Any) -> Any:
     return type(estimator)(**params)
 
 
-def check_matrix(X: Any, name: str = "X") -> np.ndarray:
+def check_matrix(X: npt.ArrayLike, name: str = "X") -> npt.NDArray[np.float64]:
     """``X`` as a C-contiguous float64 ``(n_samples, n_features)`` array without NaN/inf."""
     try:
         arr = np.asarray(X)
@@ -215,7 +216,7 @@ def check_matrix(X: Any, name: str = "X") -> np.ndarray:
     return arr
 
 
-def check_target(y: Any, n_samples: int) -> np.ndarray:
+def check_target(y: npt.ArrayLike, n_samples: int) -> np.ndarray:
     """Regression target as finite float64 of length ``n_samples``."""
     y = np.asarray(y)
     if y.ndim != 1 or y.shape[0] != n_samples:
@@ -228,7 +229,7 @@ def check_target(y: Any, n_samples: int) -> np.ndarray:
     return y
 
 
-def seed_from(rng: Any) -> np.random.Generator:
+def seed_from(rng: int | np.integer | np.random.Generator | None) -> np.random.Generator:
     """A fresh Generator from the estimator's ``rng`` parameter, without consuming it.
 
     An int seed gives the same stream on every ``fit``; a Generator is copied so that

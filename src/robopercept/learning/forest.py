@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from tqdm import tqdm
 
 from robopercept._checks import check_int
@@ -50,7 +50,22 @@ def _threads(n_jobs: int | None) -> int:
 
 class _BaseForest(Estimator):
     _criteria: tuple[str, ...] = ()
-    _default_features: Any = "sqrt"
+    _default_features: int | float | str | None = "sqrt"
+    # parameters that both forests' __init__ set, read by the shared fitting code
+    n_estimators: int
+    criterion: str
+    max_depth: int | None
+    min_samples_split: int
+    min_samples_leaf: int
+    max_features: int | float | str | None
+    bootstrap: bool
+    oob_score: bool
+    n_jobs: int | None
+    rng: int | np.random.Generator | None
+    progress: bool
+
+    def _oob(self, X: np.ndarray, samples: list[np.ndarray], target: np.ndarray) -> None:
+        raise NotImplementedError
 
     def _grow_all(
         self,
@@ -171,7 +186,7 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         oob_score: bool = False,
         voting: str = "hard",
         n_jobs: int | None = None,
-        rng: Any = None,
+        rng: int | np.random.Generator | None = None,
         progress: bool = False,
     ) -> None:
         self.n_estimators = n_estimators
@@ -187,7 +202,7 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         self.rng = rng
         self.progress = progress
 
-    def fit(self, X: Any, y: Any) -> RandomForestClassifier:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> RandomForestClassifier:
         """Grow the forest on ``X`` (N, d) and labels ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         if self.voting not in ("hard", "soft"):
@@ -206,12 +221,12 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         pred = np.argmax(source[ok], axis=1)
         self.oob_score_ = float(np.mean(pred == codes[ok]))
 
-    def predict_proba(self, X: Any) -> np.ndarray:
+    def predict_proba(self, X: npt.ArrayLike) -> np.ndarray:
         """Mean of the trees' leaf class shares, ``(N, c)``."""
         self._check_fitted("estimators_")
         return self._tree_outputs(self._check_X(X)).mean(axis=0)
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Majority vote of the trees (``voting="soft"``: the largest mean share)."""
         self._check_fitted("estimators_")
         out = self._tree_outputs(self._check_X(X))
@@ -247,7 +262,7 @@ class RandomForestRegressor(RegressorMixin, _BaseForest):
         bootstrap: bool = True,
         oob_score: bool = False,
         n_jobs: int | None = None,
-        rng: Any = None,
+        rng: int | np.random.Generator | None = None,
         progress: bool = False,
     ) -> None:
         self.n_estimators = n_estimators
@@ -262,7 +277,7 @@ class RandomForestRegressor(RegressorMixin, _BaseForest):
         self.rng = rng
         self.progress = progress
 
-    def fit(self, X: Any, y: Any) -> RandomForestRegressor:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> RandomForestRegressor:
         """Grow the forest on ``X`` (N, d) and targets ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         y = check_target(y, X.shape[0])
@@ -279,7 +294,7 @@ class RandomForestRegressor(RegressorMixin, _BaseForest):
         ss_tot = float(np.sum((y - y.mean()) ** 2))
         self.oob_score_ = 1.0 - float(np.sum((y - pred[ok]) ** 2)) / ss_tot if ss_tot else 0.0
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Mean of the trees' predictions."""
         self._check_fitted("estimators_")
         return self._tree_outputs(self._check_X(X))[..., 0].mean(axis=0)

@@ -27,9 +27,8 @@ the same labels and inertia.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from robopercept._checks import check_choice, check_int
@@ -102,7 +101,11 @@ def _assign_sums(
 
 
 def kmeans_plusplus(
-    X: Any, n_clusters: int, *, rng: Any = None, n_local_trials: int | None = None
+    X: npt.ArrayLike,
+    n_clusters: int,
+    *,
+    rng: int | np.random.Generator | None = None,
+    n_local_trials: int | None = None,
 ) -> np.ndarray:
     """Greedy k-means++ seeding: ``(n_clusters, d)`` initial centres drawn from ``X``."""
     X = np.ascontiguousarray(X, dtype=np.float64)
@@ -151,6 +154,17 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
     inertia_ : float
         Sum of squared distances of the samples to their centres.
     n_iter_ : int
+
+    Examples
+    --------
+    Two well separated blobs:
+
+    >>> X = np.array([[0.0, 0.0], [0.1, 0.0], [0.0, 0.1], [5.0, 5.0], [5.1, 5.0], [5.0, 5.1]])
+    >>> km = KMeans(2, rng=0).fit(X)
+    >>> (km.labels_ == km.labels_[0]).tolist()
+    [True, True, True, False, False, False]
+    >>> np.round(np.sort(km.cluster_centers_[:, 0]), 3).tolist()
+    [0.033, 5.033]
     """
 
     def __init__(
@@ -161,7 +175,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
         n_init: int | str = "auto",
         max_iter: int = 300,
         tol: float = 1e-4,
-        rng: Any = None,
+        rng: int | np.random.Generator | None = None,
     ) -> None:
         self.n_clusters = n_clusters
         self.init = init
@@ -188,7 +202,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
             raise InputError(f"init centres must have shape ({k}, {X.shape[1]}); got {C.shape}")
         return [C.copy()], 1
 
-    def fit(self, X: Any, y: Any = None) -> KMeans:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> KMeans:
         """Cluster ``X`` (N, d); keeps the best of ``n_init`` runs."""
         X = self._check_X(X, fitting=True)
         check_int(self.max_iter, "max_iter", 1)
@@ -197,7 +211,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
         given, runs = self._seeds(X)
         gen = seed_from(self.rng)
         # centred data give more accurate |x|^2 - 2 x.c + |c|^2 distances (as sklearn)
-        offset = X.mean(axis=0)
+        offset: npt.NDArray[np.float64] = X.mean(axis=0)
         X = X - offset
         x_sq = np.einsum("ij,ij->i", X, X)
         tol = float(np.mean(np.var(X, axis=0))) * float(self.tol)
@@ -253,19 +267,19 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
                 counts[j] = 1
         return sums / counts[:, None]
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Index of the nearest centre for every sample."""
         self._check_fitted("cluster_centers_")
         X = self._check_X(X)
         return _assign(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X))[0]
 
-    def transform(self, X: Any) -> np.ndarray:
+    def transform(self, X: npt.ArrayLike) -> np.ndarray:
         """Euclidean distance of every sample to every centre, ``(N, k)``."""
         self._check_fitted("cluster_centers_")
         X = self._check_X(X)
         return np.sqrt(_sq_dist(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X)))
 
-    def score(self, X: Any, y: Any = None) -> float:
+    def score(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> float:
         """Minus the inertia of ``X`` with the fitted centres (higher is better)."""
         self._check_fitted("cluster_centers_")
         X = self._check_X(X)

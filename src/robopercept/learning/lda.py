@@ -29,9 +29,8 @@ the same directions up to sign and scale per axis, and the same predictions.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+import numpy.typing as npt
 from scipy.linalg import eigh
 
 from robopercept.errors import InputError
@@ -68,7 +67,7 @@ class LDA(ClassifierMixin, TransformerMixin, Estimator):
         self.n_components = n_components
         self.shrinkage = shrinkage
 
-    def fit(self, X: Any, y: Any) -> LDA:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> LDA:
         """Estimate the scatter matrices and solve the generalized eigenproblem."""
         X = self._check_X(X, fitting=True)
         codes = self._encode_labels(y, X.shape[0])
@@ -121,20 +120,20 @@ class LDA(ClassifierMixin, TransformerMixin, Estimator):
         ev = np.linalg.eigvalsh(Sw)
         return 0.0 if ev[0] > 1e-12 * max(ev[-1], 1e-300) else 1e-6
 
-    def transform(self, X: Any) -> np.ndarray:
+    def transform(self, X: npt.ArrayLike) -> np.ndarray:
         """Project ``(X - mean)`` onto the first ``n_components`` directions."""
         self._check_fitted("scalings_")
         X = self._check_X(X)
         return (X - self.xbar_) @ self.scalings_[:, : self._k]
 
-    def decision_function(self, X: Any) -> np.ndarray:
+    def decision_function(self, X: npt.ArrayLike) -> np.ndarray:
         """:math:`\\delta_i(x)` for every class, ``(N, c)`` (``(N,)`` for two classes)."""
         self._check_fitted("coef_")
         X = self._check_X(X)
         scores = X @ self.coef_.T + self.intercept_
         return scores[:, 1] - scores[:, 0] if self.classes_.size == 2 else scores
 
-    def predict_proba(self, X: Any) -> np.ndarray:
+    def predict_proba(self, X: npt.ArrayLike) -> np.ndarray:
         """Posterior class probabilities under the Gaussian model, ``(N, c)``."""
         self._check_fitted("coef_")
         X = self._check_X(X)
@@ -143,7 +142,7 @@ class LDA(ClassifierMixin, TransformerMixin, Estimator):
         p = np.exp(s)
         return p / p.sum(axis=1, keepdims=True)
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """The class with the largest :math:`\\delta_i(x)`."""
         self._check_fitted("coef_")
         X = self._check_X(X)

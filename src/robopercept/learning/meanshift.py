@@ -31,9 +31,8 @@ The rules (stopping, ranking, merging, labelling) are those of
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+import numpy.typing as npt
 from tqdm import tqdm
 
 from robopercept._checks import check_choice, check_int, check_positive
@@ -46,7 +45,11 @@ _BLOCK_BYTES = 64 << 20
 
 
 def estimate_bandwidth(
-    X: Any, *, quantile: float = 0.3, n_samples: int | None = None, rng: Any = None
+    X: npt.ArrayLike,
+    *,
+    quantile: float = 0.3,
+    n_samples: int | None = None,
+    rng: int | np.random.Generator | None = None,
 ) -> float:
     """A bandwidth from the data: the mean distance from each sample to its
     ``quantile * N``-th nearest neighbour (scikit-learn's heuristic), over at most
@@ -116,7 +119,7 @@ class MeanShift(ClusterMixin, Estimator):
         self.max_iter = max_iter
         self.progress = progress
 
-    def fit(self, X: Any, y: Any = None) -> MeanShift:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> MeanShift:
         """Find the modes of ``X`` (N, d) and label every sample."""
         X = self._check_X(X, fitting=True)
         check_choice(self.kernel, "kernel", ("flat", "gaussian"))
@@ -215,7 +218,7 @@ class MeanShift(ClusterMixin, Estimator):
                 unique[i] = True
         return modes[unique]
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Index of the nearest mode for every sample."""
         self._check_fitted("cluster_centers_")
         X = self._check_X(X)

@@ -24,9 +24,10 @@ equal to ``sklearn.metrics`` to the last bits.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import InputError
 
@@ -49,7 +50,9 @@ __all__ = [
 Average = Literal["binary", "macro", "micro", "weighted"] | None
 
 
-def _pair(y_true: Any, y_pred: Any, second: str = "y_pred") -> tuple[np.ndarray, np.ndarray]:
+def _pair(
+    y_true: npt.ArrayLike, y_pred: npt.ArrayLike, second: str = "y_pred"
+) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.asarray(y_true), np.asarray(y_pred)
     if a.ndim != 1 or b.ndim != 1:
         raise InputError(f"y_true and {second} must be 1-D; got shapes {a.shape} and {b.shape}")
@@ -62,7 +65,9 @@ def _pair(y_true: Any, y_pred: Any, second: str = "y_pred") -> tuple[np.ndarray,
     return a, b
 
 
-def confusion_matrix(y_true: Any, y_pred: Any, labels: Any = None) -> np.ndarray:
+def confusion_matrix(
+    y_true: npt.ArrayLike, y_pred: npt.ArrayLike, labels: npt.ArrayLike | None = None
+) -> np.ndarray:
     """Counts ``C[i, j]`` of samples of true class ``labels[i]`` predicted as ``labels[j]``.
 
     Parameters
@@ -74,6 +79,13 @@ def confusion_matrix(y_true: Any, y_pred: Any, labels: Any = None) -> np.ndarray
     Returns
     -------
     (K, K) int64 array, rows true, columns predicted (``sklearn.metrics.confusion_matrix``).
+
+    Examples
+    --------
+    >>> confusion_matrix([0, 0, 1, 1, 2], [0, 1, 1, 1, 2])
+    array([[1, 1, 0],
+           [0, 2, 0],
+           [0, 0, 1]])
     """
     y_true, y_pred = _pair(y_true, y_pred)
     labels = np.union1d(y_true, y_pred) if labels is None else np.asarray(labels)
@@ -91,14 +103,17 @@ def confusion_matrix(y_true: Any, y_pred: Any, labels: Any = None) -> np.ndarray
     return np.bincount(t[keep] * k + p[keep], minlength=k * k).reshape(k, k).astype(np.int64)
 
 
-def accuracy_score(y_true: Any, y_pred: Any) -> float:
+def accuracy_score(y_true: npt.ArrayLike, y_pred: npt.ArrayLike) -> float:
     """Fraction of samples whose prediction equals the truth."""
     y_true, y_pred = _pair(y_true, y_pred)
     return float(np.mean(y_true == y_pred))
 
 
 def _prf(
-    y_true: Any, y_pred: Any, average: Average, pos_label: Any
+    y_true: npt.ArrayLike,
+    y_pred: npt.ArrayLike,
+    average: Average,
+    pos_label: int | float | str | np.generic,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-class true positives, predicted counts and true counts (support)."""
     y_true, y_pred = _pair(y_true, y_pred)
@@ -148,7 +163,11 @@ def _check_average(average: Average) -> None:
 
 
 def precision_score(
-    y_true: Any, y_pred: Any, *, average: Average = "binary", pos_label: Any = 1
+    y_true: npt.ArrayLike,
+    y_pred: npt.ArrayLike,
+    *,
+    average: Average = "binary",
+    pos_label: int | float | str | np.generic = 1,
 ) -> float | np.ndarray:
     """TP / (TP + FP) per class, averaged as ``average`` says (0 where undefined)."""
     _check_average(average)
@@ -157,7 +176,11 @@ def precision_score(
 
 
 def recall_score(
-    y_true: Any, y_pred: Any, *, average: Average = "binary", pos_label: Any = 1
+    y_true: npt.ArrayLike,
+    y_pred: npt.ArrayLike,
+    *,
+    average: Average = "binary",
+    pos_label: int | float | str | np.generic = 1,
 ) -> float | np.ndarray:
     """TP / (TP + FN) per class, averaged as ``average`` says (0 where undefined)."""
     _check_average(average)
@@ -166,7 +189,11 @@ def recall_score(
 
 
 def f1_score(
-    y_true: Any, y_pred: Any, *, average: Average = "binary", pos_label: Any = 1
+    y_true: npt.ArrayLike,
+    y_pred: npt.ArrayLike,
+    *,
+    average: Average = "binary",
+    pos_label: int | float | str | np.generic = 1,
 ) -> float | np.ndarray:
     """2 TP / (2 TP + FP + FN) per class (the harmonic mean of precision and recall)."""
     _check_average(average)
@@ -207,7 +234,7 @@ class ClassificationReport:
         return "\n".join(lines)
 
 
-def classification_report(y_true: Any, y_pred: Any) -> ClassificationReport:
+def classification_report(y_true: npt.ArrayLike, y_pred: npt.ArrayLike) -> ClassificationReport:
     """Precision, recall, F1 and support of every class (``average=None``)."""
     y_true, y_pred = _pair(y_true, y_pred)
     labels = np.union1d(y_true, y_pred)
@@ -228,7 +255,9 @@ def classification_report(y_true: Any, y_pred: Any) -> ClassificationReport:
 # --------------------------------------------------------------------------- ranking
 
 
-def _binary_truth(y_true: Any, y_score: Any, pos_label: Any) -> tuple[np.ndarray, np.ndarray]:
+def _binary_truth(
+    y_true: npt.ArrayLike, y_score: npt.ArrayLike, pos_label: int | float | str | np.generic | None
+) -> tuple[np.ndarray, np.ndarray]:
     y_true, y_score = _pair(y_true, y_score, "y_score")
     score = np.asarray(y_score, dtype=np.float64)
     if not np.all(np.isfinite(score)):
@@ -267,7 +296,11 @@ def _counts_at_thresholds(
 
 
 def roc_curve(
-    y_true: Any, y_score: Any, *, pos_label: Any = None, drop_intermediate: bool = True
+    y_true: npt.ArrayLike,
+    y_score: npt.ArrayLike,
+    *,
+    pos_label: int | float | str | np.generic | None = None,
+    drop_intermediate: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Receiver operating characteristic: ``(fpr, tpr, thresholds)``.
 
@@ -288,7 +321,7 @@ def roc_curve(
     return fpr, tpr, thr
 
 
-def auc(x: Any, y: Any) -> float:
+def auc(x: npt.ArrayLike, y: npt.ArrayLike) -> float:
     """Area under a curve by the trapezoid rule (``x`` monotonic)."""
     x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     if x.shape != y.shape or x.ndim != 1 or x.size < 2:
@@ -307,7 +340,12 @@ def auc(x: Any, y: Any) -> float:
     return float(direction * trapezoid(y, x))
 
 
-def roc_auc_score(y_true: Any, y_score: Any, *, pos_label: Any = None) -> float:
+def roc_auc_score(
+    y_true: npt.ArrayLike,
+    y_score: npt.ArrayLike,
+    *,
+    pos_label: int | float | str | np.generic | None = None,
+) -> float:
     """Area under the ROC curve: the probability that a random positive outranks a
     random negative (ties count one half). Needs both classes in ``y_true``."""
     truth, _ = _binary_truth(y_true, y_score, pos_label)
@@ -318,7 +356,11 @@ def roc_auc_score(y_true: Any, y_score: Any, *, pos_label: Any = None) -> float:
 
 
 def precision_recall_curve(
-    y_true: Any, y_score: Any, *, pos_label: Any = None, drop_intermediate: bool = False
+    y_true: npt.ArrayLike,
+    y_score: npt.ArrayLike,
+    *,
+    pos_label: int | float | str | np.generic | None = None,
+    drop_intermediate: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Precision and recall at every distinct threshold: ``(precision, recall, thresholds)``.
 
@@ -336,13 +378,18 @@ def precision_recall_curve(
     return np.r_[precision[::-1], 1.0], np.r_[recall[::-1], 0.0], thr[::-1]
 
 
-def average_precision_score(y_true: Any, y_score: Any, *, pos_label: Any = None) -> float:
+def average_precision_score(
+    y_true: npt.ArrayLike,
+    y_score: npt.ArrayLike,
+    *,
+    pos_label: int | float | str | np.generic | None = None,
+) -> float:
     r"""Average precision :math:`\sum_k (R_k - R_{k-1}) P_k` (no interpolation)."""
     precision, recall, _ = precision_recall_curve(y_true, y_score, pos_label=pos_label)
     return float(max(0.0, -np.sum(np.diff(recall) * precision[:-1])))
 
 
-def adjusted_rand_score(labels_true: Any, labels_pred: Any) -> float:
+def adjusted_rand_score(labels_true: npt.ArrayLike, labels_pred: npt.ArrayLike) -> float:
     r"""Agreement of two clusterings, corrected for chance (Hubert and Arabie's ARI).
 
     With the contingency table :math:`n_{ij}` (samples in class :math:`i` and cluster

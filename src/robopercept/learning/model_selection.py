@@ -15,11 +15,12 @@ splits for the same seed.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence, Sized
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from tqdm import tqdm
 
 from robopercept._checks import as_rng, check_int
@@ -87,9 +88,9 @@ def train_test_split(
     *arrays: Any,
     test_size: float | int = 0.25,
     val_size: float | int | None = None,
-    stratify: Any = None,
+    stratify: npt.ArrayLike | None = None,
     shuffle: bool = True,
-    rng: Any = None,
+    rng: int | np.random.Generator | None = None,
 ) -> list[Any]:
     """Split arrays into train and test parts (and a validation part with ``val_size``).
 
@@ -161,7 +162,7 @@ class KFold:
 
     n_splits: int = 5
     shuffle: bool = False
-    rng: Any = None
+    rng: int | np.random.Generator | None = None
 
     def _check(self, n: int) -> int:
         k = check_int(self.n_splits, "n_splits", 2)
@@ -169,7 +170,9 @@ class KFold:
             raise InputError(f"n_splits={k} is more than the {n} samples; lower n_splits")
         return k
 
-    def split(self, X: Any, y: Any = None, groups: Any = None) -> Iterator[tuple]:
+    def split(
+        self, X: Sized, y: npt.ArrayLike | None = None, groups: npt.ArrayLike | None = None
+    ) -> Iterator[tuple]:
         """Yield ``(train_indices, test_indices)`` for each fold."""
         n = len(X)
         k = self._check(n)
@@ -183,7 +186,14 @@ class KFold:
             start += size
             yield train, test
 
-    def get_n_splits(self, X: Any = None, y: Any = None, groups: Any = None) -> int:
+    def get_n_splits(
+        self,
+        X: npt.ArrayLike | None = None,
+        y: npt.ArrayLike | None = None,
+        groups: npt.ArrayLike | None = None,
+    ) -> int:
+        """Number of train/test splits, ``n_splits`` (the arguments are ignored, as in
+        scikit-learn)."""
         return int(self.n_splits)
 
 
@@ -191,7 +201,9 @@ class KFold:
 class StratifiedKFold(KFold):
     """K folds that keep every class's share (each class dealt to the folds in turn)."""
 
-    def split(self, X: Any, y: Any = None, groups: Any = None) -> Iterator[tuple]:
+    def split(
+        self, X: Sized, y: npt.ArrayLike | None = None, groups: npt.ArrayLike | None = None
+    ) -> Iterator[tuple]:
         if y is None:
             raise InputError("StratifiedKFold needs the labels y")
         y = np.asarray(y)
@@ -273,8 +285,8 @@ def _cv(cv: Any, estimator: Any) -> Any:
 
 def cross_val_score(
     estimator: Any,
-    X: Any,
-    y: Any = None,
+    X: npt.ArrayLike,
+    y: npt.ArrayLike | None = None,
     *,
     cv: int | Any = 5,
     scoring: str | Callable | None = None,
@@ -348,7 +360,7 @@ class GridSearch:
             raise InputError("param_grid is empty; give at least one value per parameter")
         return out
 
-    def fit(self, X: Any, y: Any = None) -> GridSearch:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> GridSearch:
         """Cross-validate every candidate; the best (first on ties) wins."""
         results = []
         for params in tqdm(self._candidates(), desc="grid search", disable=not self.progress):
@@ -371,7 +383,7 @@ class GridSearch:
             self.best_estimator_ = est.fit(X) if y is None else est.fit(X, y)
         return self
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Predict with ``best_estimator_``."""
         if not hasattr(self, "best_estimator_"):
             from robopercept.errors import NotFittedError

@@ -22,9 +22,8 @@ flipped so that its largest-magnitude entry is positive.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+import numpy.typing as npt
 
 from robopercept.errors import InputError
 from robopercept.learning._base import Estimator, TransformerMixin
@@ -60,7 +59,7 @@ class PCA(TransformerMixin, Estimator):
         self.n_components = n_components
         self.standardize = standardize
 
-    def fit(self, X: Any, y: Any = None) -> PCA:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> PCA:
         """Learn the mean, the scale and the components of ``X`` (N, d)."""
         X = self._check_X(X, fitting=True)
         n, d = X.shape
@@ -108,13 +107,13 @@ class PCA(TransformerMixin, Estimator):
             )
         return k
 
-    def transform(self, X: Any) -> np.ndarray:
+    def transform(self, X: npt.ArrayLike) -> np.ndarray:
         """Coordinates of ``X`` along the components, ``(N, k)``."""
         self._check_fitted("components_")
         X = self._check_X(X)
         return ((X - self.mean_) / self.scale_) @ self.components_.T
 
-    def inverse_transform(self, Z: Any) -> np.ndarray:
+    def inverse_transform(self, Z: npt.ArrayLike) -> np.ndarray:
         """Points in the input space from component coordinates ``Z`` (N, k)."""
         self._check_fitted("components_")
         Z = np.asarray(Z, dtype=np.float64)

@@ -36,9 +36,9 @@ Matches ``sklearn.svm.SVC`` (same dual, same stopping rule) and ``LinearSVC``.
 from __future__ import annotations
 
 import itertools
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from robopercept._checks import check_choice, check_int, check_positive
@@ -206,7 +206,7 @@ def _smo(K: np.ndarray, y: np.ndarray, C: float, tol: float, max_iter: int):
     return alpha, -rho, it
 
 
-def _gamma(gamma: Any, X: np.ndarray) -> float:
+def _gamma(gamma: float | str, X: np.ndarray) -> float:
     if gamma == "scale":
         var = float(X.var())
         return 1.0 / (X.shape[1] * var) if var > 0 else 1.0
@@ -271,7 +271,7 @@ class SVC(ClassifierMixin, Estimator):
     def _kernel(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
         return kernel_matrix(A, B, self.kernel, self._gamma, int(self.degree), float(self.coef0))
 
-    def fit(self, X: Any, y: Any) -> SVC:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> SVC:
         """Train one machine per pair of classes on ``X`` (N, d), ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         codes = self._encode_labels(y, X.shape[0])
@@ -318,13 +318,13 @@ class SVC(ClassifierMixin, Estimator):
             )
         return self
 
-    def _ovo(self, X: Any) -> np.ndarray:
+    def _ovo(self, X: npt.ArrayLike) -> np.ndarray:
         self._check_fitted("support_vectors_")
         X = self._check_X(X)
         Ks = self._kernel(X, self.support_vectors_)
         return np.stack([Ks[:, i] @ coef + b for i, coef, b in self._machines], axis=1)
 
-    def decision_function(self, X: Any) -> np.ndarray:
+    def decision_function(self, X: npt.ArrayLike) -> np.ndarray:
         """:math:`f(x)`: ``(N,)`` for two classes (positive: ``classes_[1]``); for more,
         ``(N, c)`` one-vs-rest scores (votes plus a confidence in (-1/3, 1/3), as
         scikit-learn) or ``(N, c (c-1) / 2)`` with ``decision_function_shape="ovo"``
@@ -344,7 +344,7 @@ class SVC(ClassifierMixin, Estimator):
             votes[f[:, k] <= 0, b] += 1
         return votes + conf / (3 * (np.abs(conf) + 1))
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """The class with most one-vs-one votes (ties: the lower class)."""
         f = self._ovo(X)
         c = self.classes_.size
@@ -438,7 +438,7 @@ class LinearSVC(ClassifierMixin, Estimator):
         intercept_scaling: float = 1.0,
         tol: float = 1e-4,
         max_iter: int = 1000,
-        rng: Any = None,
+        rng: int | np.random.Generator | None = None,
     ) -> None:
         self.C = C
         self.loss = loss
@@ -448,7 +448,7 @@ class LinearSVC(ClassifierMixin, Estimator):
         self.max_iter = max_iter
         self.rng = rng
 
-    def fit(self, X: Any, y: Any) -> LinearSVC:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> LinearSVC:
         """Train on ``X`` (N, d) and labels ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         codes = self._encode_labels(y, X.shape[0])
@@ -477,14 +477,16 @@ class LinearSVC(ClassifierMixin, Estimator):
         self.n_iter_ = epochs
         return self
 
-    def decision_function(self, X: Any) -> np.ndarray:
+    def decision_function(self, X: npt.ArrayLike) -> np.ndarray:
         """:math:`w \\cdot x + b`: ``(N,)`` for two classes, else ``(N, c)``."""
         self._check_fitted("coef_")
         X = self._check_X(X)
         f = X @ self.coef_.T + self.intercept_
         return f[:, 0] if self.classes_.size == 2 else f
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
+        """Class labels ``(N,)``: the sign of the decision for two classes, else the
+        class whose one-vs-rest decision is largest."""
         f = self.decision_function(X)
         if f.ndim == 1:
             return self.classes_[(f > 0).astype(np.int64)]

@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit, prange
 
 from robopercept._checks import check_choice, check_int
@@ -338,7 +338,7 @@ def _apply(
     return out
 
 
-def resolve_max_features(value: Any, n_features: int) -> int:
+def resolve_max_features(value: int | float | str | None, n_features: int) -> int:
     """``max_features`` as a count: None -> all, int, fraction, "sqrt", "log2"."""
     if value is None:
         return n_features
@@ -514,7 +514,7 @@ class _BaseTree(Estimator):
         min_samples_split: int = 2,
         min_samples_leaf: int = 1,
         max_features: int | float | str | None = None,
-        rng: Any = None,
+        rng: int | np.random.Generator | None = None,
     ) -> None:
         self.criterion = criterion
         self.max_depth = max_depth
@@ -548,7 +548,7 @@ class _BaseTree(Estimator):
         self.tree_ = tree
         self.feature_importances_ = tree.importances(self.n_features_in_)
 
-    def apply(self, X: Any) -> np.ndarray:
+    def apply(self, X: npt.ArrayLike) -> np.ndarray:
         """Index of the leaf each sample falls in."""
         self._check_fitted("tree_")
         return self.tree_.apply(self._check_X(X))
@@ -599,7 +599,7 @@ class DecisionTreeClassifier(ClassifierMixin, _BaseTree):
         min_samples_split: int = 2,
         min_samples_leaf: int = 1,
         max_features: int | float | str | None = None,
-        rng: Any = None,
+        rng: int | np.random.Generator | None = None,
     ) -> None:
         super().__init__(
             criterion=criterion,
@@ -610,7 +610,7 @@ class DecisionTreeClassifier(ClassifierMixin, _BaseTree):
             rng=rng,
         )
 
-    def fit(self, X: Any, y: Any) -> DecisionTreeClassifier:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> DecisionTreeClassifier:
         """Grow the tree on ``X`` (N, d) and labels ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         codes = self._encode_labels(y, X.shape[0])
@@ -620,12 +620,12 @@ class DecisionTreeClassifier(ClassifierMixin, _BaseTree):
         self._finish(tree)
         return self
 
-    def predict_proba(self, X: Any) -> np.ndarray:
+    def predict_proba(self, X: npt.ArrayLike) -> np.ndarray:
         """Class shares of the leaf each sample falls in, ``(N, c)``."""
         leaves = self.apply(X)
         return self.tree_.value[leaves]
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """The most frequent class of each sample's leaf."""
         proba = self.predict_proba(X)
         return self.classes_[np.argmax(proba, axis=1)]
@@ -643,7 +643,7 @@ class DecisionTreeRegressor(RegressorMixin, _BaseTree):
         min_samples_split: int = 2,
         min_samples_leaf: int = 1,
         max_features: int | float | str | None = None,
-        rng: Any = None,
+        rng: int | np.random.Generator | None = None,
     ) -> None:
         super().__init__(
             criterion=criterion,
@@ -654,7 +654,7 @@ class DecisionTreeRegressor(RegressorMixin, _BaseTree):
             rng=rng,
         )
 
-    def fit(self, X: Any, y: Any) -> DecisionTreeRegressor:
+    def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> DecisionTreeRegressor:
         """Grow the tree on ``X`` (N, d) and targets ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         y = check_target(y, X.shape[0])
@@ -664,7 +664,7 @@ class DecisionTreeRegressor(RegressorMixin, _BaseTree):
         self._finish(tree)
         return self
 
-    def predict(self, X: Any) -> np.ndarray:
+    def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Mean target of each sample's leaf."""
         leaves = self.apply(X)
         return self.tree_.value[leaves, 0]

@@ -34,9 +34,8 @@ closing fills small holes, with a ``size`` square), or None.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from robopercept._checks import check_image
@@ -54,7 +53,7 @@ __all__ = [
 NOISE = ("median", "open-close", None)
 
 
-def _as255(frame: Any, name: str = "frame") -> np.ndarray:
+def _as255(frame: npt.ArrayLike, name: str = "frame") -> np.ndarray:
     img = check_image(frame, name)
     if img.dtype == np.uint8:
         return img.astype(np.float32)
@@ -160,7 +159,7 @@ class ForegroundModel:
         self.frame_count = 0
         self._shape: tuple[int, ...] | None = None
 
-    def _frame(self, frame: Any) -> np.ndarray:
+    def _frame(self, frame: npt.ArrayLike) -> np.ndarray:
         img = _as255(frame, f"frame {self.frame_count}")
         if self._shape is None:
             self._shape = img.shape

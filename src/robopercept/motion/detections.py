@@ -4,7 +4,6 @@ ground-truth masks (for tests, benchmarks and demonstrations)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -70,7 +69,7 @@ def moving_blobs(
     speed: float = 5.0,
     noise_std: float = 4.0,
     illumination_drift: float = 0.25,
-    rng: Any = 0,
+    rng: int | np.random.Generator | None = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A textured background with discs moving across it, sensor noise and a slow
     illumination change, and the true foreground masks.

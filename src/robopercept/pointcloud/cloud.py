@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept._checks import check_points
 from robopercept.errors import InputError
@@ -14,7 +15,7 @@ from robopercept.errors import InputError
 __all__ = ["PointCloud", "check_cloud"]
 
 
-def _optional(value: Any, name: str, n: int) -> np.ndarray | None:
+def _optional(value: npt.ArrayLike | None, name: str, n: int) -> np.ndarray | None:
     if value is None:
         return None
     arr = check_points(value, name, 3)

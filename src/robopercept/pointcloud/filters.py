@@ -159,6 +159,16 @@ def voxel_downsample(cloud: PointCloud, voxel_size: float) -> tuple[PointCloud, 
             One point per occupied voxel.
         voxel_of_point : (N,) int64 ndarray
             For each input point, the output point it went into (-1 for non-finite points).
+
+    Examples
+    --------
+    The first two points share a 0.1 m voxel and are averaged:
+
+    >>> from robopercept.pointcloud import PointCloud
+    >>> cloud = PointCloud(np.array([[0.01, 0.01, 0.0], [0.03, 0.01, 0.0], [0.51, 0.0, 0.0]]))
+    >>> down, index = voxel_downsample(cloud, 0.1)
+    >>> np.round(down.points, 3).tolist(), index.tolist()
+    ([[0.02, 0.01, 0.0], [0.51, 0.0, 0.0]], [0, 0, 1])
     """
     cloud = check_cloud(cloud)
     s = check_positive(voxel_size, "voxel_size")

@@ -28,9 +28,9 @@ Hue ignores pixels of low saturation or value (gray, dark), where it is meaningl
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept._checks import check_image
 from robopercept.errors import InputError
@@ -62,7 +62,7 @@ class MeanShiftResult:
     angle: float = 0.0
 
 
-def _check_box(box: Any, shape: tuple[int, ...], name: str = "box") -> np.ndarray:
+def _check_box(box: npt.ArrayLike, shape: tuple[int, ...], name: str = "box") -> np.ndarray:
     b = np.asarray(box, dtype=np.float64).ravel()
     if b.size != 4 or not np.isfinite(b).all():
         raise InputError(f"{name} must be 4 finite numbers x, y, w, h; got {box!r}")
@@ -111,7 +111,7 @@ class MeanShiftTracker:
     def __init__(
         self,
         frame: np.ndarray,
-        box: Any,
+        box: npt.ArrayLike,
         *,
         feature: str = "hue",
         bins: int | None = None,

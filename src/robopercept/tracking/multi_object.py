@@ -36,9 +36,9 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
 from robopercept.errors import InputError
@@ -64,7 +64,7 @@ class Track:
         Centre velocity in pixels per frame.
     detection : int
         Index of the detection it took this frame, -1 when coasting.
-    label : Any
+    label : numpy scalar or None
         Class of its detections (None when no classes are given).
     score : float
         Score of the detection it took (NaN when coasting or without scores).
@@ -78,7 +78,7 @@ class Track:
     box: np.ndarray
     velocity: np.ndarray
     detection: int
-    label: Any
+    label: np.generic | None
     score: float
     state: str
     hits: int
@@ -91,7 +91,7 @@ class _Live:
 
     __slots__ = ("age", "confirmed", "hits", "id", "kf", "label", "misses", "score")
 
-    def __init__(self, tid: int, kf: KalmanFilter, label: Any, score: float) -> None:
+    def __init__(self, tid: int, kf: KalmanFilter, label: np.generic | None, score: float) -> None:
         self.id, self.kf, self.label, self.score = tid, kf, label, score
         self.hits, self.age, self.misses, self.confirmed = 1, 1, 0, False
 
@@ -165,7 +165,7 @@ class MultiObjectTracker:
         """Every live track (tentative, confirmed and coasting) after the last update."""
         return [self._report(t, -1) for t in self._tracks]
 
-    def _new(self, z: np.ndarray, label: Any, score: float) -> _Live:
+    def _new(self, z: np.ndarray, label: np.generic | None, score: float) -> _Live:
         P = np.diag([1.0, 1.0, 1.0, 1.0, 100.0, 100.0, 100.0, 100.0]) * self.measurement_noise
         kf = KalmanFilter(8, 4, x=np.r_[z, 0, 0, 0, 0], P=P, A=self._A, Q=self._Q,
                           H=self._H, R=self._R)  # fmt: skip
@@ -179,7 +179,12 @@ class MultiObjectTracker:
         velocity = x[4:6].copy()
         return Track(t.id, box, velocity, det, t.label, score, state, t.hits, t.age, t.misses)
 
-    def update(self, detections: Any, scores: Any = None, classes: Any = None) -> list[Track]:
+    def update(
+        self,
+        detections: npt.ArrayLike,
+        scores: npt.ArrayLike | None = None,
+        classes: npt.ArrayLike | None = None,
+    ) -> list[Track]:
         """Advance one frame with this frame's detections ``(N, 4)`` ``x, y, w, h``.
 
         Returns the confirmed tracks matched this frame (and, with

@@ -25,7 +25,7 @@ def scatter_picture(
     *,
     title: str = "",
     xlabel: str = "",
-    names: Sequence[str] | None = None,
+    names: Sequence[str] | np.ndarray | None = None,
     width: int = 800,
     height: int = 600,
 ) -> np.ndarray:
