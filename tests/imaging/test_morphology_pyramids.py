@@ -80,3 +80,15 @@ def test_pyramid_matches_pyrdown(camera, astronaut):
 def test_bad_input(call, match):
     with pytest.raises(InputError, match=match):
         call()
+
+
+def test_pyr_down_unchecked_is_pyr_down_without_the_checks():
+    from robopercept.imaging.pyramids import pyr_down, pyr_down_unchecked
+
+    img = np.random.default_rng(0).random((9, 12)).astype(np.float32)
+    np.testing.assert_array_equal(pyr_down_unchecked(img), pyr_down(img))
+    bad = img.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(InputError):
+        pyr_down(bad)
+    assert np.isnan(pyr_down_unchecked(bad)[0, 0])  # no isfinite scan: NaN goes through

@@ -8,7 +8,7 @@ from robopercept._checks import check_image
 from robopercept.errors import InputError
 from robopercept.imaging.filters import separable_filter_unchecked
 
-__all__ = ["gaussian_pyramid", "pyr_down"]
+__all__ = ["gaussian_pyramid", "pyr_down", "pyr_down_unchecked"]
 
 _BINOMIAL_5 = np.array([1.0, 4.0, 6.0, 4.0, 1.0]) / 16.0
 
@@ -29,11 +29,13 @@ def pyr_down(image: np.ndarray) -> np.ndarray:
     ndarray
         Half size, same dtype.
     """
-    return _pyr_down(check_image(image))
+    return pyr_down_unchecked(check_image(image))
 
 
-def _pyr_down(image: np.ndarray) -> np.ndarray:
-    # pyr_down of a validated image (gaussian_pyramid checks its input once)
+def pyr_down_unchecked(image: np.ndarray) -> np.ndarray:
+    """:func:`pyr_down` of an image its caller has validated: no checks (callers that
+    reduce level after level validate the input once, as :func:`gaussian_pyramid` and
+    Lucas-Kanade do)."""
     blurred = separable_filter_unchecked(image, _BINOMIAL_5, _BINOMIAL_5, "reflect101")
     return np.ascontiguousarray(blurred[::2, ::2])
 
@@ -64,5 +66,5 @@ def gaussian_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
         )
     out = [image]
     for _ in range(int(levels) - 1):
-        out.append(_pyr_down(out[-1]))
+        out.append(pyr_down_unchecked(out[-1]))
     return out

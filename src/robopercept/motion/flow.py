@@ -47,7 +47,7 @@ from robopercept._checks import check_image
 from robopercept.errors import DegenerateError, InputError
 from robopercept.features.harris import good_features_to_track  # re-exported
 from robopercept.imaging.color import gray_255
-from robopercept.imaging.pyramids import pyr_down
+from robopercept.imaging.pyramids import pyr_down_unchecked
 
 __all__ = [
     "FlowStatus",
@@ -174,7 +174,7 @@ def _pyramid(img: np.ndarray, levels: int, window: int) -> list[np.ndarray]:
     # as OpenCV's buildOpticalFlowPyramid: stop before a level smaller than the window
     pyr = [img]
     for _ in range(levels):
-        nxt = pyr_down(pyr[-1])
+        nxt = pyr_down_unchecked(pyr[-1])
         if nxt.shape[0] <= window or nxt.shape[1] <= window:
             break
         pyr.append(nxt)
