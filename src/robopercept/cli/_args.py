@@ -42,35 +42,11 @@ def positive_int(text: str) -> int:
     return v
 
 
-def box_xywh(text: str) -> tuple[float, float, float, float]:
-    """``x,y,w,h`` -> four floats (argparse type)."""
-    parts = text.replace(" ", "").split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects x,y,w,h numbers; got {text!r}") from None
-    if len(values) != 4:
-        raise argparse.ArgumentTypeError(f"expects x,y,w,h (four numbers); got {text!r}")
-    return values  # type: ignore[return-value]
-
-
 def noise_filter(text: str) -> str | None:
     """``median``, ``open-close`` or ``none`` (-> None) (argparse type)."""
     if text not in ("median", "open-close", "none"):
         raise argparse.ArgumentTypeError(f"expects median, open-close or none; got {text!r}")
     return None if text == "none" else text
-
-
-def hsv(text: str) -> tuple[float, float, float]:
-    """``H,S,V`` -> three floats (argparse type)."""
-    parts = text.split(",")
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects H,S,V numbers; got {text!r}") from None
-    if len(values) != 3:
-        raise argparse.ArgumentTypeError(f"expects H,S,V (three numbers); got {text!r}")
-    return values  # type: ignore[return-value]
 
 
 def board_size(text: str) -> tuple[int, int]:
@@ -97,20 +73,26 @@ def pass_through(text: str) -> tuple[str, float, float]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def numbers(kinds: tuple[type, ...], usage: str) -> Callable[[str], tuple]:
-    """An argparse type for ``A:B:...`` with one converter per field (``kinds``);
-    ``usage`` names the fields in the error (``"K:STD_RATIO"``)."""
+def numbers(kinds: tuple[type, ...], usage: str, sep: str = ":") -> Callable[[str], tuple]:
+    """An argparse type for ``A:B:...`` (fields split at ``sep``) with one converter per
+    field (``kinds``); ``usage`` names the fields in the error (``"K:STD_RATIO"``)."""
 
     def parse(text: str) -> tuple:
-        parts = text.split(":")
+        parts = text.replace(" ", "").split(sep)
         if len(parts) != len(kinds):
-            raise argparse.ArgumentTypeError(f"expects {usage}")
+            raise argparse.ArgumentTypeError(f"expects {usage}; got {text!r}")
         try:
             return tuple(k(p) for k, p in zip(kinds, parts, strict=True))
         except ValueError:
             raise argparse.ArgumentTypeError(f"expects {usage}; got {text!r}") from None
 
     return parse
+
+
+box_xywh = numbers((float,) * 4, "x,y,w,h (four numbers)", ",")
+box_xywh.__doc__ = "``x,y,w,h`` -> four floats (argparse type)."
+hsv = numbers((float,) * 3, "H,S,V (three numbers)", ",")
+hsv.__doc__ = "``H,S,V`` -> three floats (argparse type)."
 
 
 def load_gray(path: str | None) -> tuple[Path, np.ndarray]:

@@ -115,28 +115,9 @@ def _first_line(exc: BaseException) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``robopercept`` command and return its exit code.
-
-    Parameters
-    ----------
-    argv : sequence of str, optional
-        The arguments (default: ``sys.argv[1:]``).
-
-    Returns
-    -------
-    int
-        0 success; 1 a user-fixable failure (missing or corrupt file, bad data:
-        ``RoboperceptError``, ``OSError``, ``ValueError``), one line
-        ``robopercept: error: ...`` on stderr; 2 a usage error (argparse, a bad flag
-        value or combination); 70 an internal error (any other exception: a bug),
-        reported in one line that says so; 130 Ctrl-C.
-
-    Raises
-    ------
-    Exception
-        With ``--debug`` or ``ROBOPERCEPT_DEBUG=1``, the error of a command (exit codes
-        1 and 70) is re-raised instead, so its traceback shows.
-    """
+    """Run the ``robopercept`` command on ``argv`` (default ``sys.argv[1:]``) and return
+    its exit code: 0, 1, 2, 70 or 130 as the module docstring lists them. With
+    ``--debug`` (or ``ROBOPERCEPT_DEBUG=1``) the errors of codes 1 and 70 are re-raised."""
     parser = build_parser()
     debug = bool(os.environ.get("ROBOPERCEPT_DEBUG"))
     try:
