@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip -q --disable-pip-version-check
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean syslibs
 
 $(VENV)/.core:
 	$(PYTHON) -m venv $(VENV)
@@ -13,7 +13,19 @@ $(VENV)/.core:
 	$(PIP) install -e .
 	touch $@
 
-$(VENV)/.dev: $(VENV)/.core pyproject.toml
+# Open3D and pyrealsense2 (test references) load the system library libusb-1.0; install it
+# with apt-get (through sudo when not root) when the dynamic linker cannot find it.
+syslibs:
+	@if ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then :; \
+	elif command -v apt-get >/dev/null 2>&1; then \
+	  SUDO=; [ "$$(id -u)" -ne 0 ] && SUDO=sudo; \
+	  echo "make: installing the system library libusb-1.0-0 (needed by Open3D and pyrealsense2) with $${SUDO:+sudo }apt-get"; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq libusb-1.0-0; \
+	else \
+	  echo "make: libusb-1.0 is missing and apt-get is not available: install libusb-1.0 with your package manager" >&2; exit 1; \
+	fi
+
+$(VENV)/.dev: $(VENV)/.core pyproject.toml | syslibs
 	$(PIP) install -e ".[dev]"
 	touch $@
 
@@ -22,7 +34,7 @@ demo: $(VENV)/.core
 	$(VENV)/bin/robopercept demo --out robopercept-out
 
 # Every test, with the reference libraries installed.
-test: $(VENV)/.dev
+test: $(VENV)/.dev syslibs
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m ruff format --check src tests benchmarks
 	$(PY) tools/typecheck.py
