@@ -182,3 +182,27 @@ def test_debug_environment_variable_reraises(monkeypatch, tmp_path):
     monkeypatch.setenv("ROBOPERCEPT_DEBUG", "1")
     with pytest.raises(FileFormatError):
         main(["edges", str(tmp_path / "absent.png")])
+
+
+def test_mistyped_command_gets_a_suggestion(capsys):
+    assert main(["edgs", "x.png"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "invalid choice: 'edgs'" in err[0]
+    assert "did you mean 'edges'?" in err[0]
+    assert main(["zzzzzz"]) == 2  # nothing close: no suggestion
+    assert "did you mean" not in capsys.readouterr().err
+
+
+def test_warnings_are_one_clean_line(monkeypatch, capsys):
+    import warnings
+
+    from robopercept.cli import edges
+
+    def warn(args):
+        warnings.warn("16-bit input: thresholds scaled", UserWarning, stacklevel=1)
+        return 0
+
+    monkeypatch.setattr(edges, "run_edges", warn)
+    assert main(["edges", "x.png"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["robopercept: warning: 16-bit input: thresholds scaled"]

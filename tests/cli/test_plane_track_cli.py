@@ -13,7 +13,8 @@ from robopercept.pipelines.plane_outputs import CSV_COLUMNS
 
 def test_demo_writes_its_outputs_and_prints_the_figures(tmp_path, capsys):
     out = tmp_path / "demo"
-    code = main(["demo", "--out", str(out), "--frames", "6", "--quiet"])
+    # --max-frames, as every other frame command (--frames stays as an alias)
+    code = main(["demo", "--out", str(out), "--max-frames", "6", "--quiet"])
     assert code == 0
     text = capsys.readouterr().out
     for needle in ("detection rate", "tracked", "ms/frame", "plane.csv"):
@@ -53,6 +54,21 @@ def test_synth_rgbd_then_plane_track_from_the_folder(tmp_path, capsys):
     assert len(rows) == 3 and tuple(rows[0]) == CSV_COLUMNS
     summary = json.loads((out / "summary.json").read_text())
     assert summary["tracked"]["angle_deg"]["median"] < 1.0  # ground truth read back
+
+
+def test_a_run_that_tracked_no_frame_exits_1(tmp_path, capsys):
+    seq = tmp_path / "seq"
+    assert main(["synth-rgbd", str(seq), "--frames", "2", "--quiet"]) == 0
+    for depth in (seq / "depth").iterdir():
+        depth.write_bytes(b"not a png")  # every frame unreadable: skipped and counted
+    out = tmp_path / "out"
+    code = main(["plane-track", "--source", str(seq), "--out", str(out), "--no-video", "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert err[-1] == (
+        "robopercept: error: no frame was tracked (2 skipped as unreadable): check --source"
+    )
+    assert (out / "summary.json").exists()  # what was written is kept
 
 
 def test_hsv_box_matching_nothing_detects_nothing(tmp_path, capsys):

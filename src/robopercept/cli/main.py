@@ -26,10 +26,13 @@ Errors print one line on stderr, never a traceback, and set the exit code:
 from __future__ import annotations
 
 import argparse
+import difflib
 import os
+import re
 import sys
+import warnings
 from collections.abc import Sequence
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TextIO
 
 from robopercept import __version__
 from robopercept.cli._args import UsageError
@@ -56,7 +59,34 @@ class _Parser(argparse.ArgumentParser):
             )
 
     def error(self, message: str) -> NoReturn:  # one line, exit 2
-        raise _ParserError(f"{self.prog}: {message} (see {self.prog} --help)")
+        raise _ParserError(
+            f"{self.prog}: {message}{_did_you_mean(message)} (see {self.prog} --help)"
+        )
+
+
+def _did_you_mean(message: str) -> str:
+    """``; did you mean 'edges'?`` for argparse's "invalid choice: 'edgs' (choose from
+    ...)" when one choice is close (difflib), else ``""``."""
+    m = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+    if not m:
+        return ""
+    choices = re.findall(r"'([^']*)'", m.group(2)) or [c.strip() for c in m.group(2).split(",")]
+    close = difflib.get_close_matches(m.group(1), choices, n=1, cutoff=0.6)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+def _one_line_warning(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: TextIO | None = None,
+    line: str | None = None,
+) -> None:
+    """Show a warning as one line, ``robopercept: warning: <message>`` (no source path
+    or code line, which mean nothing to a command-line user)."""
+    text = str(message).strip().splitlines()
+    print(f"robopercept: warning: {text[0] if text else category.__name__}", file=sys.stderr)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -120,6 +150,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ``--debug`` (or ``ROBOPERCEPT_DEBUG=1``) the errors of codes 1 and 70 are re-raised."""
     parser = build_parser()
     debug = bool(os.environ.get("ROBOPERCEPT_DEBUG"))
+    with warnings.catch_warnings():
+        warnings.showwarning = _one_line_warning
+        return _main(parser, argv, debug)
+
+
+def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None, debug: bool) -> int:
     try:
         args = parser.parse_args(argv)
         debug = debug or bool(getattr(args, "debug", False))

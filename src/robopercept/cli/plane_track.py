@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from robopercept.cli._args import UsageError, hsv, positive_int
+from robopercept.errors import InputError
 
 __all__ = ["register", "summary_table"]
 
@@ -25,7 +26,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "summary.json, plane.png) and print the figures against the ground truth.",
     )
     p.add_argument("--out", default="robopercept-out", help="output folder")
-    p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES, help="frames")
+    p.add_argument(
+        "--max-frames",
+        "--frames",
+        dest="frames",
+        type=positive_int,
+        default=DEMO_FRAMES,
+        help=f"frames of the scene to render and track (default {DEMO_FRAMES})",
+    )
     p.add_argument("--seed", type=int, default=0, help="scene seed")
     p.add_argument("--no-video", action="store_true", help="skip tracking.mp4")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -140,6 +148,11 @@ def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
     )
     print(summary_table(summary))
     print(f"outputs in {args.out}/: {', '.join(summary['outputs'])}")
+    if summary["frames"] == 0:  # nothing tracked: not a success
+        raise InputError(
+            f"no frame was tracked ({summary['skipped_frames']} skipped as unreadable): "
+            "check --source"
+        )
     return 130 if summary.get("stopped") == "interrupted" else 0
 
 
@@ -153,7 +166,6 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _plane_track(args: argparse.Namespace) -> int:
-    from robopercept.errors import InputError
     from robopercept.pipelines import PlaneTrackerConfig
 
     try:  # made from the flags alone: what it refuses is a bad flag value
