@@ -7,7 +7,6 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -71,96 +70,29 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_cloud(args: argparse.Namespace) -> int:
     """Run ``robopercept cloud`` with the parsed ``args``; returns the exit status."""
-    from robopercept.pointcloud import (
-        euclidean_clusters,
-        pass_through,
-        read_point_cloud,
-        segment_planes,
-        statistical_outlier_removal,
-        voxel_downsample,
-        write_point_cloud,
-    )
+    from robopercept.pipelines.cloud import process_cloud
+    from robopercept.pointcloud import read_point_cloud, write_point_cloud
     from robopercept.viz.colormap import label_colors
 
     out = Path(args.output)
     if out.suffix.lower() not in (".ply", ".pcd"):
         raise UsageError(f"output must end in .ply or .pcd; got {out.name}")
-    steps: list[dict[str, Any]] = []
-
-    def step(name: str, n_in: int, n_out: int, t0: float, **extra: Any) -> None:
-        steps.append(
-            {
-                "step": name,
-                "points_in": n_in,
-                "points_out": n_out,
-                "ms": round((time.perf_counter() - t0) * 1e3, 2),
-                **extra,
-            }
-        )
-
     t0 = time.perf_counter()
     cloud = read_point_cloud(args.input)
-    n_read = len(cloud)
-    cloud = cloud.finite()
-    step("read", n_read, len(cloud), t0, nonfinite_dropped=n_read - len(cloud))
-    for axis, lo, hi in args.pass_through:
-        t0 = time.perf_counter()
-        n = len(cloud)
-        cloud, _ = pass_through(cloud, axis, lo, hi)
-        step(f"pass-through {axis} [{lo:g}, {hi:g}]", n, len(cloud), t0)
-    if args.voxel is not None:
-        t0 = time.perf_counter()
-        n = len(cloud)
-        cloud, _ = voxel_downsample(cloud, args.voxel)
-        step(f"voxel {args.voxel:g}", n, len(cloud), t0)
-    if args.sor is not None:
-        t0 = time.perf_counter()
-        n = len(cloud)
-        cloud, _ = statistical_outlier_removal(cloud, *args.sor)
-        step(f"sor k={args.sor[0]} std={args.sor[1]:g}", n, len(cloud), t0)
-
-    segment = np.zeros(len(cloud), dtype=np.int64)  # 0 unassigned, 1.. planes then clusters
-    planes_out: list[dict[str, Any]] = []
-    if args.planes is not None:
-        t0 = time.perf_counter()
-        n_planes, thr = args.planes
-        found = segment_planes(
-            cloud, thr, max_planes=n_planes, min_inliers=args.min_plane, rng=args.seed
-        )
-        for i, seg in enumerate(found):
-            segment[seg.inliers] = i + 1
-            planes_out.append(
-                {
-                    "equation": [round(float(v), 6) for v in seg.plane.equation],
-                    "inliers": int(seg.inliers.size),
-                    "iterations": seg.n_iterations,
-                }
-            )
-        step(
-            f"planes (threshold {thr:g})",
-            len(cloud),
-            int(np.count_nonzero(segment == 0)),
-            t0,
-            planes=planes_out,
-        )
-    clusters_out: list[int] = []
-    if args.clusters is not None:
-        t0 = time.perf_counter()
-        tol, cmin, cmax = args.clusters
-        free = np.flatnonzero(segment == 0)
-        labels = euclidean_clusters(cloud.select(free), tol, cmin, cmax)
-        base = len(planes_out) + 1
-        segment[free[labels >= 0]] = labels[labels >= 0] + base
-        clusters_out = np.bincount(labels[labels >= 0]).tolist() if (labels >= 0).any() else []
-        step(
-            f"clusters (tol {tol:g}, {cmin}..{cmax})",
-            int(free.size),
-            int(sum(clusters_out)),
-            t0,
-            cluster_sizes=clusters_out,
-        )
-
-    colors = label_colors(segment, background=(128, 128, 128)).astype(np.float64) / 255.0
+    read_ms = (time.perf_counter() - t0) * 1e3
+    res = process_cloud(
+        cloud,
+        boxes=args.pass_through,
+        voxel=args.voxel,
+        sor=args.sor,
+        planes=args.planes,
+        min_plane=args.min_plane,
+        clusters=args.clusters,
+        rng=args.seed,
+    )
+    res.steps[0]["ms"] = round(res.steps[0]["ms"] + read_ms, 2)  # the read step reads too
+    cloud = res.cloud
+    colors = label_colors(res.segment, background=(128, 128, 128)).astype(np.float64) / 255.0
     if args.planes is None and args.clusters is None and cloud.colors is not None:
         colors = cloud.colors
     write_point_cloud(out, cloud.with_colors(colors))
@@ -169,20 +101,20 @@ def run_cloud(args: argparse.Namespace) -> int:
         from robopercept.viz import render_points
 
         write_image(args.image, render_points(cloud.points, colors))
-    summary = {"input": str(args.input), "output": str(out), "steps": steps}
+    summary = {"input": str(args.input), "output": str(out), "steps": res.steps}
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
         print()
         return 0
     print(f"{'step':<34} {'in':>9} {'out':>9} {'ms':>9}")
-    for s in steps:
+    for s in res.steps:
         print(f"{s['step']:<34} {s['points_in']:>9} {s['points_out']:>9} {s['ms']:>9.1f}")
-    for i, pl in enumerate(planes_out):
+    for i, pl in enumerate(res.planes):
         a, b, c, d = pl["equation"]
         print(
             f"plane {i + 1}: {a:+.4f} x {b:+.4f} y {c:+.4f} z {d:+.4f} = 0, {pl['inliers']} points"
         )
-    if clusters_out:
-        print(f"clusters: {len(clusters_out)}, sizes {clusters_out}")
+    if res.cluster_sizes:
+        print(f"clusters: {len(res.cluster_sizes)}, sizes {res.cluster_sizes}")
     print(f"wrote {out}" + (f" and {args.image}" if args.image else ""))
     return 0

@@ -1,0 +1,141 @@
+"""A point-cloud processing pipeline: filters, then plane extraction, then clusters.
+
+The steps run in a fixed order, each one optional: drop non-finite points, pass-through
+boxes, voxel grid, statistical outlier removal, RANSAC planes (largest first), Euclidean
+clusters of the points left off the planes. Every point ends with a segment label:
+0 unassigned, ``1..P`` the planes, ``P+1..`` the clusters (the PCL tutorial's
+"planar segmentation, then cluster extraction" recipe).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from robopercept.pointcloud import (
+    PointCloud,
+    euclidean_clusters,
+    pass_through,
+    segment_planes,
+    statistical_outlier_removal,
+    voxel_downsample,
+)
+
+__all__ = ["CloudProcessing", "process_cloud"]
+
+
+@dataclass(frozen=True)
+class CloudProcessing:
+    """Result of :func:`process_cloud`.
+
+    Attributes
+    ----------
+    cloud : PointCloud
+        The filtered cloud (the points the labels refer to).
+    segment : (N,) int64
+        0 unassigned, ``1..len(planes)`` the planes, then the clusters.
+    steps : list of dict
+        One record per step: ``step`` (its name), ``points_in``, ``points_out``, ``ms``
+        and step-specific fields (``nonfinite_dropped``, ``planes``, ``cluster_sizes``).
+    planes : list of dict
+        ``equation`` (a, b, c, d of ax + by + cz + d = 0), ``inliers``, ``iterations``.
+    cluster_sizes : list of int
+        Points per cluster, in label order.
+    """
+
+    cloud: PointCloud
+    segment: np.ndarray
+    steps: list[dict[str, Any]]
+    planes: list[dict[str, Any]]
+    cluster_sizes: list[int]
+
+
+def process_cloud(
+    cloud: PointCloud,
+    *,
+    boxes: Sequence[tuple[Literal["x", "y", "z"], float, float]] = (),
+    voxel: float | None = None,
+    sor: tuple[int, float] | None = None,
+    planes: tuple[int, float] | None = None,
+    min_plane: int = 100,
+    clusters: tuple[float, int, int] | None = None,
+    rng: int | np.random.Generator | None = 0,
+) -> CloudProcessing:
+    """Run the pipeline on ``cloud`` (each step optional, in the module's order).
+
+    Parameters
+    ----------
+    cloud : PointCloud
+    boxes : sequence of (axis, low, high)
+        Pass-through filters (:func:`~robopercept.pointcloud.pass_through`), applied in turn.
+    voxel : float, optional
+        Voxel size for :func:`~robopercept.pointcloud.voxel_downsample`.
+    sor : (k, std_ratio), optional
+        :func:`~robopercept.pointcloud.statistical_outlier_removal`.
+    planes : (max_planes, threshold), optional
+        :func:`~robopercept.pointcloud.segment_planes`, planes of at least ``min_plane``
+        inliers.
+    clusters : (tolerance, min_size, max_size), optional
+        :func:`~robopercept.pointcloud.euclidean_clusters` of the points off the planes.
+    rng : int, Generator or None
+        Seed of the plane RANSAC.
+
+    Returns
+    -------
+    CloudProcessing
+    """
+    steps: list[dict[str, Any]] = []
+
+    def step(name: str, n_in: int, n_out: int, t0: float, **extra: Any) -> None:
+        ms = round((time.perf_counter() - t0) * 1e3, 2)
+        steps.append({"step": name, "points_in": n_in, "points_out": n_out, "ms": ms, **extra})
+
+    t0 = time.perf_counter()
+    n_read = len(cloud)
+    cloud = cloud.finite()
+    step("read", n_read, len(cloud), t0, nonfinite_dropped=n_read - len(cloud))
+    filters: list[tuple[str, Any, tuple]] = [
+        (f"pass-through {a} [{lo:g}, {hi:g}]", pass_through, (a, lo, hi)) for a, lo, hi in boxes
+    ]
+    if voxel is not None:
+        filters.append((f"voxel {voxel:g}", voxel_downsample, (voxel,)))
+    if sor is not None:
+        filters.append((f"sor k={sor[0]} std={sor[1]:g}", statistical_outlier_removal, sor))
+    for name, fn, params in filters:
+        t0, n = time.perf_counter(), len(cloud)
+        cloud, _ = fn(cloud, *params)
+        step(name, n, len(cloud), t0)
+
+    segment = np.zeros(len(cloud), dtype=np.int64)
+    planes_out: list[dict[str, Any]] = []
+    if planes is not None:
+        t0 = time.perf_counter()
+        n_planes, thr = planes
+        found = segment_planes(cloud, thr, max_planes=n_planes, min_inliers=min_plane, rng=rng)
+        for i, seg in enumerate(found):
+            segment[seg.inliers] = i + 1
+            planes_out.append(
+                {
+                    "equation": [round(float(v), 6) for v in seg.plane.equation],
+                    "inliers": int(seg.inliers.size),
+                    "iterations": seg.n_iterations,
+                }
+            )
+        left = int(np.count_nonzero(segment == 0))
+        step(f"planes (threshold {thr:g})", len(cloud), left, t0, planes=planes_out)
+    sizes: list[int] = []
+    if clusters is not None:
+        t0 = time.perf_counter()
+        tol, cmin, cmax = clusters
+        free = np.flatnonzero(segment == 0)
+        labels = euclidean_clusters(cloud.select(free), tol, cmin, cmax)
+        kept = labels >= 0
+        segment[free[kept]] = labels[kept] + len(planes_out) + 1
+        sizes = np.bincount(labels[kept]).tolist() if kept.any() else []
+        name = f"clusters (tol {tol:g}, {cmin}..{cmax})"
+        step(name, int(free.size), int(sum(sizes)), t0, cluster_sizes=sizes)
+    return CloudProcessing(cloud, segment, steps, planes_out, sizes)
