@@ -37,7 +37,8 @@ def run(repeats: int) -> tuple[list[Record], dict]:
     X, y = load_digits(return_X_y=True)
     Xc = X[:, X.std(axis=0) > 0]  # sklearn's eigen LDA needs a regular S_W
     cases = [
-        ("kmeans", "k=10, k-means++, n_init=1", lambda: L.KMeans(10, rng=0).fit(X).predict(X),
+        ("kmeans", "k=10, k-means++, n_init=1",
+         lambda: L.KMeans(10, random_state=0).fit(X).predict(X),
          lambda: cluster.KMeans(10, n_init=1, random_state=0).fit(X).predict(X), 1.5, repeats),
         ("dbscan", "eps=20.5, min_samples=5", lambda: L.DBSCAN(20.5).fit(X),
          lambda: cluster.DBSCAN(eps=20.5).fit(X), 1.5, repeats),
@@ -48,15 +49,16 @@ def run(repeats: int) -> tuple[list[Record], dict]:
          .fit(Xc, y).predict(Xc), 1.5, repeats),
         ("meanshift", "bandwidth 25, every sample a seed", lambda: L.MeanShift(25).fit(X),
          lambda: cluster.MeanShift(bandwidth=25).fit(X), 1.0, 1),
-        ("decision_tree", "gini, unpruned", lambda: L.DecisionTreeClassifier(rng=0).fit(X, y)
-         .predict(X), lambda: tree.DecisionTreeClassifier(random_state=0).fit(X, y).predict(X),
+        ("decision_tree", "gini, unpruned",
+         lambda: L.DecisionTreeClassifier(random_state=0).fit(X, y).predict(X),
+         lambda: tree.DecisionTreeClassifier(random_state=0).fit(X, y).predict(X),
          2.0, repeats),
         ("random_forest", "100 trees, sqrt features, 1 thread",
-         lambda: L.RandomForestClassifier(100, rng=0).fit(X, y).predict(X),
+         lambda: L.RandomForestClassifier(100, random_state=0).fit(X, y).predict(X),
          lambda: ensemble.RandomForestClassifier(100, random_state=0).fit(X, y).predict(X),
          2.0, min(repeats, 5)),
         ("random_forest", "100 trees, ours on 2 threads",
-         lambda: L.RandomForestClassifier(100, rng=0, n_jobs=2).fit(X, y).predict(X),
+         lambda: L.RandomForestClassifier(100, random_state=0, n_jobs=2).fit(X, y).predict(X),
          lambda: ensemble.RandomForestClassifier(100, random_state=0).fit(X, y).predict(X),
          None, min(repeats, 5)),
         ("svc_rbf", "C=1, gamma=scale, one-vs-one", lambda: L.SVC().fit(X, y).predict(X),

@@ -58,7 +58,7 @@ def run(repeats: int) -> tuple[list[Record], dict]:
                             "tracked": int(o.status.sum()), "reference_tracked": int(st.sum())})
     )  # fmt: skip
 
-    frames, masks = moving_blobs(60, (480, 640), n_blobs=6, rng=0)
+    frames, masks = moving_blobs(60, (640, 480), n_blobs=6, rng=0)
     rgb = np.repeat(frames[..., None], 3, axis=3)
 
     def run_ours(model, seq):

@@ -64,7 +64,7 @@ def main_pictures() -> None:
 
         # ghosts: moving discs over a texture, the first frame holding the discs
         # (faster than their diameter, so differencing shows a disc and its ghost)
-        frames, _ = moving_blobs(40, (120, 160), n_blobs=2, radius=(8.0, 10.0), speed=14.0,
+        frames, _ = moving_blobs(40, (160, 120), n_blobs=2, radius=(8.0, 10.0), speed=14.0,
                                  illumination_drift=0.0, rng=4)  # fmt: skip
         seq = _folder(t / "blobs", frames)
         rows = []
@@ -76,7 +76,7 @@ def main_pictures() -> None:
         write_image(IMG / "motion_bgsub_ghosts.png", _stack(rows))
 
         # multi-object tracking of the discs (detections from background subtraction)
-        frames, _ = moving_blobs(60, (240, 320), n_blobs=4, radius=(12.0, 16.0), speed=3.0,
+        frames, _ = moving_blobs(60, (320, 240), n_blobs=4, radius=(12.0, 16.0), speed=3.0,
                                  illumination_drift=0.0, rng=6)  # fmt: skip
         seq = _folder(t / "blobs3", frames)
         _run("track", str(seq), "--min-area", "100", "--snapshot", "50", "-o",

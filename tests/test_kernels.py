@@ -285,10 +285,10 @@ def _imaging_cases() -> list[Case]:
         Case("label_8", lambda: label_components(mask, 8)),
         Case("label_4", lambda: label_components(mask, 4)),
         Case("blob_features", lambda: blob_features(label_components(mask)[0])),
-        Case("warp_linear", lambda: warp_perspective(GRAY_F32, hom, (30, 22))),
+        Case("warp_linear", lambda: warp_perspective(GRAY_F32, hom, (22, 30))),
         Case(
             "warp_nearest_rgb",
-            lambda: warp_perspective(RGB_U8, hom, (30, 22), interpolation="nearest"),
+            lambda: warp_perspective(RGB_U8, hom, (22, 30), interpolation="nearest"),
         ),
         Case(
             "separable_2_channels",
@@ -505,27 +505,33 @@ def _learning_cases() -> list[Case]:
         return {k: v for k, v in vars(model).items() if k.endswith("_") and not k.startswith("_")}
 
     return [
-        Case("kmeans", lambda: fitted(KMeans(3, rng=0, n_init=2), X)),
+        Case("kmeans", lambda: fitted(KMeans(3, random_state=0, n_init=2), X)),
         Case("dbscan", lambda: fitted(DBSCAN(0.6, 4), X)),
         Case("dbscan_brute", lambda: fitted(DBSCAN(1.2, 4), Xw)),
         Case(
             "tree_gini",
-            lambda: DecisionTreeClassifier(max_depth=4, rng=0).fit(X, y3).predict_proba(X),
+            lambda: DecisionTreeClassifier(max_depth=4, random_state=0).fit(X, y3).predict_proba(X),
         ),
         Case(
             "tree_entropy",
-            lambda: DecisionTreeClassifier("entropy", max_features=1, rng=2).fit(X, y3).apply(X),
+            lambda: (
+                DecisionTreeClassifier("entropy", max_features=1, random_state=2)
+                .fit(X, y3)
+                .apply(X)
+            ),
         ),
         Case(
             "tree_regressor",
-            lambda: DecisionTreeRegressor(max_depth=3, rng=0).fit(X, X[:, 0] ** 2).predict(X),
+            lambda: (
+                DecisionTreeRegressor(max_depth=3, random_state=0).fit(X, X[:, 0] ** 2).predict(X)
+            ),
         ),
         Case("svc_rbf", lambda: SVC(C=2.0).fit(X, y).decision_function(X)),
         Case("svc_ovr", lambda: SVC(kernel="poly", degree=2).fit(X, y3).decision_function(X)),
-        Case("linear_svc", lambda: LinearSVC(rng=0).fit(X, y3).decision_function(X)),
+        Case("linear_svc", lambda: LinearSVC(random_state=0).fit(X, y3).decision_function(X)),
         Case(
             "linear_svc_hinge",
-            lambda: LinearSVC(loss="hinge", rng=0).fit(X, y).decision_function(X),
+            lambda: LinearSVC(loss="hinge", random_state=0).fit(X, y).decision_function(X),
         ),
     ]
 

@@ -55,7 +55,7 @@ def test_cluster_kmeans_matches_the_library_and_writes_labels(tmp_path, iris_csv
     args = ["learn", "cluster", str(iris_csv), "--label", "species", "-k", "3"]
     assert main([*args, "-o", str(out), "--labels-out", str(labels_csv), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    ref = KMeans(3, rng=0).fit(iris[0])
+    ref = KMeans(3, random_state=0).fit(iris[0])
     assert report["inertia"] == pytest.approx(ref.inertia_, rel=1e-12)
     assert sorted(report["sizes"].values()) == sorted(np.bincount(ref.labels_).tolist())
     assert report["adjusted_rand_index"] == pytest.approx(adjusted_rand_score(iris[1], ref.labels_))
@@ -89,7 +89,7 @@ def test_classify_report_equals_the_library_and_writes_pictures(tmp_path, iris_c
     assert main([*args, "-o", str(out), "--json", "--cv", "3"]) == 0
     report = json.loads(capsys.readouterr().out)
     X, y, _ = read_table(iris_csv, "species")
-    Xtr, Xt, ytr, yt = train_test_split(X, y, test_size=0.25, stratify=y, rng=0)
+    Xtr, Xt, ytr, yt = train_test_split(X, y, test_size=0.25, stratify=y, random_state=0)
     codes = {n: i for i, n in enumerate(NAMES)}
     ctr, cte = np.array([codes[v] for v in ytr]), np.array([codes[v] for v in yt])
     model = SVC().fit(Xtr, ctr)

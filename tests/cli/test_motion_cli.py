@@ -32,7 +32,7 @@ def _masks(folder, n):
 
 @pytest.fixture(scope="module")
 def blobs():
-    return moving_blobs(30, (96, 128), n_blobs=2, radius=(9.0, 12.0), speed=3.0, rng=1)
+    return moving_blobs(30, (128, 96), n_blobs=2, radius=(9.0, 12.0), speed=3.0, rng=1)
 
 
 def test_bgsub_gaussian_equals_the_library_and_finds_the_blobs(tmp_path, capsys, blobs):
@@ -58,7 +58,7 @@ def test_bgsub_gaussian_equals_the_library_and_finds_the_blobs(tmp_path, capsys,
 
 def test_bgsub_three_frame_difference_is_one_frame_late(tmp_path):
     # discs faster than their diameter, so the three-frame AND holds the whole disc
-    frames, _ = moving_blobs(10, (96, 128), n_blobs=2, radius=(8.0, 9.0), speed=20.0, rng=2)
+    frames, _ = moving_blobs(10, (128, 96), n_blobs=2, radius=(8.0, 9.0), speed=20.0, rng=2)
     seq = _folder(tmp_path / "seq", frames[:10])
     code = main(["bgsub", str(seq), "--method", "diff3", "--gray", "-o",
                  str(tmp_path / "d.mp4"), "--masks", str(tmp_path / "m"), "--quiet",
@@ -244,7 +244,7 @@ def test_track_from_background_subtraction(tmp_path, capsys):
     """Two discs on the synthetic background: two long tracks, one per disc."""
     from robopercept.tracking import read_mot
 
-    frames, _ = moving_blobs(40, (96, 128), n_blobs=2, radius=(9.0, 11.0), speed=2.0,
+    frames, _ = moving_blobs(40, (128, 96), n_blobs=2, radius=(9.0, 11.0), speed=2.0,
                                  illumination_drift=0.0, rng=3)  # fmt: skip
     seq = _folder(tmp_path / "seq", frames)
     results = tmp_path / "tracks.txt"

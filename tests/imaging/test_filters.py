@@ -17,6 +17,7 @@ from robopercept.imaging import (
     derivative_kernel,
     gaussian_blur,
     gaussian_kernel,
+    gaussian_ksize,
     gradient,
     laplacian,
     laplacian_of_gaussian,
@@ -63,8 +64,35 @@ def test_gaussian_kernel_hand():
     k = gaussian_kernel(1.0, 3)
     e = np.exp(-0.5)
     np.testing.assert_allclose(k, [e / (1 + 2 * e), 1 / (1 + 2 * e), e / (1 + 2 * e)])
-    assert gaussian_kernel(2.0).size == 13  # 2 ceil(3 sigma) + 1
+    # the default size is OpenCV's float rule round(8 sigma + 1) | 1 (+-4 sigma); it was
+    # 2 ceil(3 sigma) + 1 = 13 before issue 22 aligned it with cv2.GaussianBlur on floats
+    assert gaussian_kernel(2.0).size == 17
     np.testing.assert_allclose(gaussian_kernel(1.5, 9), cv2.getGaussianKernel(9, 1.5).ravel())
+
+
+def test_gaussian_ksize_is_opencvs_rule_by_hand():
+    # round(2 t sigma + 1) | 1, t = 3 for uint8 and 4 otherwise, worked by hand:
+    # sigma 2: 8-bit round(13) | 1 = 13, float round(17) | 1 = 17
+    assert gaussian_ksize(2.0, np.uint8) == 13 and gaussian_ksize(2.0, np.float32) == 17
+    # sigma 1.5: round(10) | 1 = 11 (uint8), round(13) | 1 = 13 (float64, uint16)
+    assert gaussian_ksize(1.5, np.uint8) == 11 and gaussian_ksize(1.5, np.float64) == 13
+    assert gaussian_ksize(1.5, np.uint16) == 13
+    # sigma 0.3: round(2.8) | 1 = 3 and round(3.4) | 1 = 3; sigma 0.5625 (float): 5.5 -> 7
+    assert gaussian_ksize(0.3, np.uint8) == 3 and gaussian_ksize(0.3, np.float32) == 3
+    assert gaussian_ksize(0.5625, np.float32) == 7
+
+
+def test_gaussian_kernel_sigma_zero_hand_and_opencv():
+    # sigma = 0: OpenCV's fixed binomial-like kernels up to 9 taps, then the sampled
+    # Gaussian of sigma = 0.3 ((n - 1) / 2 - 1) + 0.8 (n = 11: sigma = 2.0)
+    np.testing.assert_array_equal(gaussian_kernel(0, 3), [0.25, 0.5, 0.25])
+    np.testing.assert_array_equal(gaussian_kernel(0, 5) * 16, [1, 4, 6, 4, 1])
+    np.testing.assert_allclose(gaussian_kernel(0, 11), gaussian_kernel(2.0, 11), rtol=1e-15)
+    for n in (1, 3, 5, 7, 9, 11, 15, 21):
+        # equal to float64 rounding (OpenCV computes the same exp in double)
+        np.testing.assert_allclose(
+            gaussian_kernel(0, n), cv2.getGaussianKernel(n, 0).ravel(), rtol=0, atol=1e-15
+        )
 
 
 def test_gaussian_impulse_is_outer_product():
@@ -178,6 +206,55 @@ def test_gaussian_blur_matches_opencv(camera, astronaut, graf):
         assert diff.max() <= 1 and diff.mean() < 0.1
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("sigma", [2.0, 0.8, 1.3])
+def test_gaussian_blur_default_size_matches_opencv_float(camera, astronaut, dtype, sigma):
+    """gaussian_blur(f, sigma) == cv2.GaussianBlur(f, (0, 0), sigma): the same 4-sigma
+    kernel size for float images. Tolerance: float32 accumulation order, 1e-6 on [0, 1]
+    data (OpenCV sums in float32, we in float64 then round); float64: 1e-12. The former
+    3-sigma kernel differed by ~1e-3 at sigma 2, which these tolerances reject."""
+    for img in (camera, astronaut):
+        f = img.astype(dtype) / 255.0
+        ours = gaussian_blur(f, sigma)
+        ref = cv2.GaussianBlur(f, (0, 0), sigma)
+        assert ours.dtype == dtype
+        assert np.abs(ours - ref).max() <= (1e-6 if dtype == np.float32 else 1e-12)
+    # anisotropic sigmas size each axis by its own sigma, as OpenCV
+    f = camera.astype(dtype) / 255.0
+    ref = cv2.GaussianBlur(f, (0, 0), sigma, sigmaY=2.5 * sigma)
+    assert np.abs(gaussian_blur(f, sigma, sigma_y=2.5 * sigma) - ref).max() <= 1e-6
+
+
+def test_gaussian_blur_default_size_matches_opencv_uint8(camera, astronaut):
+    """uint8 keeps OpenCV's 3-sigma size (13 taps at sigma 2). Tolerance: one grey level,
+    off-by-one on < 10% of pixels: OpenCV blurs 8-bit images with a fixed-point kernel,
+    we in float32 and round once. The wrong (4-sigma) size would change the kernel's
+    normalization and break the equality with cv2.GaussianBlur(img, (13, 13), 2.0) below."""
+    for img in (camera, astronaut):
+        ours = gaussian_blur(img, 2.0)
+        assert ours.dtype == np.uint8
+        diff = np.abs(ours.astype(int) - cv2.GaussianBlur(img, (0, 0), 2.0))
+        assert diff.max() <= 1 and diff.mean() < 0.1
+        np.testing.assert_array_equal(ours, gaussian_blur(img, 2.0, ksize=13))
+        assert not np.array_equal(ours, gaussian_blur(img, 2.0, ksize=17))
+
+
+@pytest.mark.parametrize("ksize", [3, 5, 7, 9, 11, (5, 9), (11, 3)])
+def test_gaussian_blur_sigma_zero_takes_sigma_from_ksize(camera, ksize):
+    """sigma=0 with a ksize: sigma = 0.3 ((ksize - 1) / 2 - 1) + 0.8 per axis (OpenCV's
+    fixed kernels up to 9 taps), as cv2.GaussianBlur(f, ksize, 0). Same tolerances as
+    above (float32 accumulation; one grey level for 8-bit)."""
+    k = (ksize, ksize) if isinstance(ksize, int) else ksize
+    f = camera.astype(np.float32) / 255.0
+    assert np.abs(gaussian_blur(f, 0, ksize=ksize) - cv2.GaussianBlur(f, k, 0)).max() <= 1e-6
+    f64 = f.astype(np.float64)
+    ref = cv2.GaussianBlur(f64, k, 0)
+    assert np.abs(gaussian_blur(f64, 0, ksize=ksize) - ref).max() <= 1e-12
+    ours8 = gaussian_blur(camera, 0, ksize=ksize).astype(int)
+    diff = np.abs(ours8 - cv2.GaussianBlur(camera, k, 0))
+    assert diff.max() <= 1 and diff.mean() < 0.1
+
+
 @pytest.mark.parametrize("ksize", [1, 3, 5, 7])
 @pytest.mark.parametrize(("dx", "dy"), [(1, 0), (0, 1), (1, 1), (2, 0)])
 def test_sobel_matches_opencv(camera, graf, ksize, dx, dy):
@@ -272,8 +349,17 @@ def test_tiny_images_all_borders():
         (lambda: correlate(np.zeros((4, 4)), np.ones(3)), "2-D"),
         (lambda: correlate(np.zeros((4, 4)), np.ones((3, 3)), border="wrap"), "border must be"),
         (lambda: correlate(np.zeros((4, 4), np.complex64), np.ones((3, 3))), "dtype"),
-        (lambda: gaussian_kernel(-1.0), r"sigma must be in \(0"),
+        (lambda: gaussian_kernel(-1.0), r"sigma must be in \[0"),
+        (lambda: gaussian_kernel(0.0), r"sigma=0 derives sigma from the kernel size"),
         (lambda: gaussian_kernel(1.0, 4), "odd"),
+        (lambda: gaussian_blur(np.zeros((4, 4)), 0.0), r"sigma=0 needs the kernel width"),
+        (
+            lambda: gaussian_blur(np.zeros((4, 4)), 0.0, ksize=(3, 0)),
+            "sigma=0 needs the kernel height",
+        ),
+        (lambda: gaussian_blur(np.zeros((4, 4)), 1.0, ksize=4), r"ksize must be an odd .* try 5"),
+        (lambda: gaussian_blur(np.zeros((4, 4)), 1.0, ksize="5"), r"\(width, height\)"),
+        (lambda: gaussian_blur(np.zeros((4, 4)), 1.0, sigma_y=-1.0), r"sigma_y must be in \[0"),
         (lambda: sobel(np.zeros((4, 4)), 0, 0), "dx \\+ dy"),
         (lambda: sobel(np.zeros((4, 4)), 1, 0, ksize=4), "ksize must be 1, 3, 5 or 7"),
         (lambda: median_filter(np.zeros((4, 4)), 2), "odd"),
@@ -304,7 +390,7 @@ class TestSeparableFilterUnchecked:
         # bit-identical to the public filters it serves (they call it after checking);
         # 4 channels run the generic tap loop, 1 and 3 the stride-specialized ones
         img = (rng.random(shape) * (255 if dtype == np.uint8 else 1)).astype(dtype)
-        g = gaussian_kernel(1.3)
+        g = gaussian_kernel(1.3, gaussian_ksize(1.3, dtype))  # gaussian_blur's size rule
         for border in ("reflect101", "reflect", "replicate", "constant"):
             blur = separable_filter_unchecked(img, g, g, border)
             if len(shape) == 2 or shape[2] == 3:

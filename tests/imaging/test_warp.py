@@ -15,25 +15,54 @@ H = np.array([[0.9, 0.1, 20.0], [-0.05, 1.1, 10.0], [1e-4, 2e-4, 1.0]])
 
 def test_integer_shift_is_exact(camera):
     t = np.array([[1.0, 0, 7], [0, 1.0, -3], [0, 0, 1]])
-    out = warp_perspective(camera, t, camera.shape)
+    size = camera.shape[::-1]  # dsize is (width, height); square here
+    out = warp_perspective(camera, t, size)
     np.testing.assert_array_equal(out[:-3, 7:], camera[3:, :-7])  # (x, y) -> (x + 7, y - 3)
     assert (out[:, :7] == 0).all() and (out[-3:, :] == 0).all()
-    np.testing.assert_array_equal(warp_perspective(camera, np.eye(3), camera.shape), camera)
+    np.testing.assert_array_equal(warp_perspective(camera, np.eye(3), size), camera)
+
+
+def test_dsize_is_width_height_hand_case():
+    """dsize = (width, height), as OpenCV: a 3-wide, 2-high input shifted one column
+    right into a 5-wide, 2-high output; the hand-written result."""
+    img = np.array([[1, 2, 3], [4, 5, 6]], np.uint8)
+    t = np.array([[1.0, 0, 1], [0, 1.0, 0], [0, 0, 1]])
+    out = warp_perspective(img, t, (5, 2))
+    assert out.shape == (2, 5)
+    np.testing.assert_array_equal(out, [[0, 1, 2, 3, 0], [0, 4, 5, 6, 0]])
+    # keeping the input's size: image.shape[1::-1] is (width, height) for gray and RGB
+    rgb = np.dstack([img] * 3)
+    assert warp_perspective(rgb, np.eye(3), rgb.shape[1::-1]).shape == (2, 3, 3)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.float32])
+def test_non_square_dsize_equals_opencv(astronaut, dtype):
+    """A wide (w=333 > h=211) and a tall (w=150 < h=420) output: the same shape as
+    cv2.warpPerspective with the same dsize, and the same pixels up to OpenCV's 1/32-px
+    sample quantization (mean difference < 0.1 grey level; float32 on the 0-255 scale).
+    A transposed size would differ in shape and in content."""
+    img = astronaut.astype(dtype)
+    for dsize in ((333, 211), (150, 420)):
+        ours = warp_perspective(img, H, dsize)
+        ref = cv2.warpPerspective(img, H, dsize)
+        assert ours.shape == ref.shape == (dsize[1], dsize[0], 3)
+        d = np.abs(ours.astype(np.float64) - ref.astype(np.float64))
+        assert d.mean() < 0.1 and d.max() <= 5
 
 
 def test_parity_with_opencv(astronaut):
     # OpenCV quantizes the sample position to 1/32 px (fixed-point tables), which moves
     # a bilinear value by up to a few grey levels at strong edges: mean difference
     # < 0.1 grey level, at most 5, and > 2 on under 0.1% of the values
-    ours = warp_perspective(astronaut, H, (400, 500))
+    ours = warp_perspective(astronaut, H, (500, 400))
     ref = cv2.warpPerspective(astronaut, H, (500, 400))
     d = np.abs(ours.astype(int) - ref.astype(int))
     assert ours.shape == ref.shape and ours.dtype == np.uint8
     assert d.mean() < 0.1 and d.max() <= 5 and np.mean(d > 2) < 1e-3
-    near = warp_perspective(astronaut, H, (400, 500), interpolation="nearest")
+    near = warp_perspective(astronaut, H, (500, 400), interpolation="nearest")
     ref = cv2.warpPerspective(astronaut, H, (500, 400), flags=cv2.INTER_NEAREST)
     assert np.mean(near != ref) < 1e-4  # only exact half-pixel ties differ
-    f = warp_perspective(astronaut.astype(np.float32) / 255, H, (400, 500))
+    f = warp_perspective(astronaut.astype(np.float32) / 255, H, (500, 400))
     assert f.dtype == np.float32
     assert np.abs(f * 255 - ours).max() <= 0.5 + 1e-3
 
@@ -50,8 +79,10 @@ def test_transform_points_round_trip(rng):
 def test_bad_input(camera):
     with pytest.raises(DegenerateError, match="singular"):
         warp_perspective(camera, np.zeros((3, 3)), (10, 10))
-    with pytest.raises(InputError, match="size"):
+    with pytest.raises(InputError, match=r"dsize must be the output \(width, height\)"):
         warp_perspective(camera, np.eye(3), 10)  # type: ignore[arg-type]
+    with pytest.raises(InputError, match=r"dsize\[1\] \(height\) must be >= 1"):
+        warp_perspective(camera, np.eye(3), (10, 0))
     with pytest.raises(InputError):
         warp_perspective(camera, np.eye(2), (10, 10))
 

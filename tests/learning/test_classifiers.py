@@ -32,7 +32,7 @@ def test_tree_hand_case_information_gain():
     X = np.array([[1.0, 5], [2, 1], [3, 5], [4, 1], [5, 3]])
     y = np.array([0, 0, 1, 1, 1])
     for criterion in ("entropy", "gini"):
-        tree = DecisionTreeClassifier(criterion, rng=0).fit(X, y)
+        tree = DecisionTreeClassifier(criterion, random_state=0).fit(X, y)
         assert tree.tree_.feature[0] == 0 and tree.tree_.threshold[0] == 2.5
         assert tree.get_depth() == 1 and tree.get_n_leaves() == 2
         np.testing.assert_array_equal(tree.predict([[0.0, 0], [9, 9]]), [0, 1])
@@ -44,14 +44,14 @@ def test_tree_hand_case_information_gain():
 
 def test_tree_limits_and_proba(iris):
     X, y = iris
-    stump = DecisionTreeClassifier(max_depth=1, rng=0).fit(X, y)
+    stump = DecisionTreeClassifier(max_depth=1, random_state=0).fit(X, y)
     assert stump.get_depth() == 1
     proba = stump.predict_proba(X)
     np.testing.assert_allclose(proba.sum(axis=1), 1.0)
-    leafy = DecisionTreeClassifier(min_samples_leaf=10, rng=0).fit(X, y)
+    leafy = DecisionTreeClassifier(min_samples_leaf=10, random_state=0).fit(X, y)
     assert np.bincount(leafy.apply(X)).max() >= 10
     assert np.bincount(leafy.apply(X))[np.bincount(leafy.apply(X)) > 0].min() >= 10
-    full = DecisionTreeClassifier(rng=0).fit(X, y)
+    full = DecisionTreeClassifier(random_state=0).fit(X, y)
     assert (
         full.score(X, y) >= 1 - 1 / 150
     )  # iris has one duplicated, differently labelled pair at most
@@ -59,8 +59,8 @@ def test_tree_limits_and_proba(iris):
 
 def test_tree_same_seed_same_tree(digits):
     X, y = digits
-    a = DecisionTreeClassifier(max_features="sqrt", rng=4).fit(X, y)
-    b = DecisionTreeClassifier(max_features="sqrt", rng=4).fit(X, y)
+    a = DecisionTreeClassifier(max_features="sqrt", random_state=4).fit(X, y)
+    b = DecisionTreeClassifier(max_features="sqrt", random_state=4).fit(X, y)
     np.testing.assert_array_equal(a.tree_.threshold, b.tree_.threshold)
 
 
@@ -73,7 +73,7 @@ def test_tree_accuracy_matches_sklearn(digits, criterion):
     ours, ref = _mean_accuracy_gap(
         X,
         y,
-        lambda s: DecisionTreeClassifier(criterion, rng=s),
+        lambda s: DecisionTreeClassifier(criterion, random_state=s),
         lambda s: SkTree(criterion=criterion, random_state=s),
     )
     assert abs(ours - ref) <= 0.015, (ours, ref)
@@ -90,8 +90,8 @@ def test_regression_tree_and_forest():
         np.arange(10.0)[:, None], np.r_[np.zeros(5), np.ones(5)]
     )
     assert step.tree_.threshold[0] == 4.5
-    assert DecisionTreeRegressor(rng=0).fit(Xa, ya).score(Xb, yb) > 0.95
-    ours = RandomForestRegressor(60, max_features=1.0, oob_score=True, rng=0).fit(Xa, ya)
+    assert DecisionTreeRegressor(random_state=0).fit(Xa, ya).score(Xb, yb) > 0.95
+    ours = RandomForestRegressor(60, max_features=1.0, oob_score=True, random_state=0).fit(Xa, ya)
     ref = SkForest(60, random_state=0).fit(Xa, ya)
     assert abs(ours.score(Xb, yb) - ref.score(Xb, yb)) < 0.01
     assert abs(ours.oob_score_ - ours.score(Xb, yb)) < 0.03
@@ -105,7 +105,7 @@ def test_forest_accuracy_matches_sklearn(digits):
     ours, ref = _mean_accuracy_gap(
         X,
         y,
-        lambda s: RandomForestClassifier(100, rng=s, n_jobs=-1),
+        lambda s: RandomForestClassifier(100, random_state=s, n_jobs=-1),
         lambda s: SkForest(100, random_state=s),
     )
     assert abs(ours - ref) <= 0.015, (ours, ref)
@@ -113,12 +113,12 @@ def test_forest_accuracy_matches_sklearn(digits):
 
 def test_forest_oob_and_threads_do_not_change_the_forest(digits):
     X, y = digits
-    a = RandomForestClassifier(30, oob_score=True, n_jobs=1, rng=9).fit(X, y)
-    b = RandomForestClassifier(30, oob_score=True, n_jobs=2, rng=9).fit(X, y)
+    a = RandomForestClassifier(30, oob_score=True, n_jobs=1, random_state=9).fit(X, y)
+    b = RandomForestClassifier(30, oob_score=True, n_jobs=2, random_state=9).fit(X, y)
     np.testing.assert_array_equal(a.predict_proba(X), b.predict_proba(X))
     assert a.oob_score_ == b.oob_score_
     assert 0.9 < a.oob_score_ < 1.0  # honest: below the training accuracy of 1
-    soft = RandomForestClassifier(30, voting="soft", rng=9).fit(X, y)
+    soft = RandomForestClassifier(30, voting="soft", random_state=9).fit(X, y)
     assert (soft.predict(X) == a.predict(X)).mean() > 0.99
     with pytest.raises(InputError, match="bootstrap"):
         RandomForestClassifier(5, bootstrap=False, oob_score=True).fit(X, y)
@@ -176,10 +176,10 @@ def test_linear_svc(digits):
     X, y = digits
     X = X / 16.0
     ours, ref = _mean_accuracy_gap(
-        X, y, lambda s: LinearSVC(C=0.1, rng=s), lambda s: SkLinear(C=0.1, random_state=s)
+        X, y, lambda s: LinearSVC(C=0.1, random_state=s), lambda s: SkLinear(C=0.1, random_state=s)
     )
     assert abs(ours - ref) <= 0.015, (ours, ref)
-    binary = LinearSVC(C=1.0, loss="hinge", rng=0).fit(X, y == 3)
+    binary = LinearSVC(C=1.0, loss="hinge", random_state=0).fit(X, y == 3)
     assert binary.decision_function(X).shape == (X.shape[0],)
     assert binary.score(X, y == 3) > 0.97
 
@@ -213,8 +213,8 @@ def test_sklearn_tools_accept_classifiers(iris):
 
     X, y = iris
     for est in (
-        DecisionTreeClassifier(rng=0),
-        RandomForestClassifier(20, rng=0),
+        DecisionTreeClassifier(random_state=0),
+        RandomForestClassifier(20, random_state=0),
         SVC(),
         LinearSVC(),
     ):

@@ -40,7 +40,7 @@ def test_kmeans_matches_sklearn_from_same_centres(request, name, k, seed):
     from sklearn.cluster import KMeans as SkKMeans
 
     X, _ = request.getfixturevalue(name)
-    init = kmeans_plusplus(X, k, rng=seed)
+    init = kmeans_plusplus(X, k, random_state=seed)
     ours = KMeans(k, init=init).fit(X)
     ref = SkKMeans(k, init=init, n_init=1).fit(X)
     np.testing.assert_array_equal(ours.labels_, ref.labels_)
@@ -50,12 +50,12 @@ def test_kmeans_matches_sklearn_from_same_centres(request, name, k, seed):
 
 def test_kmeans_plusplus_spreads_and_is_seeded(rng):
     X, _ = _blobs(rng)
-    a = KMeans(3, rng=7).fit(X)
-    b = KMeans(3, rng=7).fit(X)
+    a = KMeans(3, random_state=7).fit(X)
+    b = KMeans(3, random_state=7).fit(X)
     np.testing.assert_array_equal(a.labels_, b.labels_)
     # k-means++ on well-separated blobs finds them
     assert a.inertia_ < 150 * 2 * 0.5**2 * 1.5
-    init = kmeans_plusplus(X, 3, rng=0)
+    init = kmeans_plusplus(X, 3, random_state=0)
     assert len({tuple(np.round(c / 10)) for c in init}) == 3
 
 
@@ -64,7 +64,7 @@ def test_kmeans_random_init_and_empty_cluster():
     # the second centre is beyond every sample: it starts empty and is moved
     km = KMeans(2, init=np.array([[0.1], [100.0]])).fit(X)
     assert sorted(np.bincount(km.labels_).tolist()) == [1, 3]
-    assert KMeans(3, init="random", rng=0).fit(X).inertia_ >= 0
+    assert KMeans(3, init="random", random_state=0).fit(X).inertia_ >= 0
 
 
 def test_kmeans_bad_input(iris):
@@ -76,7 +76,7 @@ def test_kmeans_bad_input(iris):
     with pytest.raises(NotFittedError):
         KMeans(3).predict(X)
     with pytest.raises(InputError, match="features"):
-        KMeans(3, rng=0).fit(X).predict(X[:, :2])
+        KMeans(3, random_state=0).fit(X).predict(X[:, :2])
 
 
 def test_dbscan_hand_case():

@@ -34,7 +34,7 @@ def test_hog_svm_cross_validated_accuracy_on_lfw_subset():
     patches, labels = face_training_data()
     for det in (HogDetector(orientations=18, signed=True, C=1.0), HogDetector(C=0.1)):
         X = det.describe(patches)
-        svm = LinearSVC(C=det.C, rng=0)
+        svm = LinearSVC(C=det.C, random_state=0)
         assert cross_val_score(svm, X, labels, cv=5).mean() >= 0.9
         precision = cross_val_score(svm, X, labels, cv=5, scoring="precision")
         recall = cross_val_score(svm, X, labels, cv=5, scoring="recall")
@@ -53,9 +53,9 @@ def test_shipped_face_model_best_box_is_the_astronauts_face(astronaut):
 
 def test_training_reproduces_the_shipped_model():
     """train_face_detector() with its defaults gives the bundled weights (seeded, so
-    exactly: the hard negatives and the SVM's coordinate order are drawn from rng=0),
+    exactly: the hard negatives and the SVM's coordinate order are drawn from random_state=0),
     and its cross-validated accuracy is >= 0.9."""
-    det, cv = train_face_detector(rng=0)
+    det, cv = train_face_detector(random_state=0)
     shipped = default_face_detector()
     np.testing.assert_allclose(det.coef_, shipped.coef_, atol=1e-9)
     assert det.intercept_ == pytest.approx(shipped.intercept_, abs=1e-9)

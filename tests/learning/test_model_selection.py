@@ -21,12 +21,12 @@ from robopercept.learning.kmeans import KMeans
 
 def test_train_test_split_sizes_stratified_and_seeded(iris):
     X, y = iris
-    X_tr, X_te, _, y_te = train_test_split(X, y, test_size=0.2, stratify=y, rng=0)
+    X_tr, X_te, _, y_te = train_test_split(X, y, test_size=0.2, stratify=y, random_state=0)
     assert len(X_te) == 30 and len(X_tr) == 120
     np.testing.assert_array_equal(np.bincount(y_te), [10, 10, 10])
-    again = train_test_split(X, y, test_size=0.2, stratify=y, rng=0)
+    again = train_test_split(X, y, test_size=0.2, stratify=y, random_state=0)
     np.testing.assert_array_equal(again[3], y_te)
-    parts = train_test_split(X, y, test_size=0.2, val_size=0.2, stratify=y, rng=1)
+    parts = train_test_split(X, y, test_size=0.2, val_size=0.2, stratify=y, random_state=1)
     X_tr, X_va, X_te, _, y_va, _ = parts
     assert (len(X_tr), len(X_va), len(X_te)) == (90, 30, 30)
     np.testing.assert_array_equal(np.bincount(y_va), [10, 10, 10])
@@ -57,7 +57,7 @@ def test_kfold_partitions():
 
 def test_stratified_kfold_keeps_class_shares(digits):
     _, y = digits
-    for _, test in StratifiedKFold(5, shuffle=True, rng=0).split(y, y):
+    for _, test in StratifiedKFold(5, shuffle=True, random_state=0).split(y, y):
         counts = np.bincount(y[test], minlength=10)
         full = np.bincount(y) / 5
         assert np.all(np.abs(counts - full) <= 1)
@@ -82,7 +82,7 @@ def _explained(est, X, y):
 
 
 def test_params_and_own_clone():
-    km = KMeans(4, tol=1e-3, rng=5)
+    km = KMeans(4, tol=1e-3, random_state=5)
     assert km.get_params()["n_clusters"] == 4
     km.set_params(n_clusters=6)
     c = clone(km)
@@ -102,7 +102,7 @@ def test_sklearn_clone_pipeline_cross_val_score(iris):
     from sklearn.pipeline import make_pipeline
 
     X, y = iris
-    for est in (PCA(2), LDA(), KMeans(3, rng=0)):
+    for est in (PCA(2), LDA(), KMeans(3, random_state=0)):
         twin = sk_clone(est)
         assert twin.get_params() == est.get_params()
     assert is_classifier(LDA())

@@ -74,7 +74,7 @@ def test_label_codes_numeric_then_text_order():
 
 def test_class_scores_probabilities_or_decision_values(iris):
     X, y = iris
-    forest = RandomForestClassifier(n_estimators=10, rng=0).fit(X, y)
+    forest = RandomForestClassifier(n_estimators=10, random_state=0).fit(X, y)
     np.testing.assert_array_equal(class_scores(forest, X, 3), forest.predict_proba(X))
     binary = y < 2
     svm = SVC(kernel="linear").fit(X[binary], y[binary])
@@ -87,7 +87,7 @@ def test_evaluate_classifier_equals_sklearn_metrics(iris):
 
     X, y = iris
     names = np.array(["setosa", "versicolor", "virginica"])
-    Xtr, Xt, ytr, yt = train_test_split(X, y, test_size=0.3, stratify=y, rng=0)
+    Xtr, Xt, ytr, yt = train_test_split(X, y, test_size=0.3, stratify=y, random_state=0)
     model = SVC().fit(Xtr, ytr)
     ev = evaluate_classifier(model, Xt, yt, names)
     pred = model.predict(Xt)

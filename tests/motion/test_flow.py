@@ -30,7 +30,7 @@ def test_subpixel_translation_is_recovered():
     is the shift within 0.03 px, with and without the pyramid."""
     a = _texture()
     H = np.array([[1, 0, 1.3], [0, 1, -0.7], [0, 0, 1.0]])
-    b = warp_perspective(a, H, a.shape)
+    b = warp_perspective(a, H, a.shape[::-1])
     pts = _inner(good_features_to_track(a, 100, 0.01, 8), a.shape, 30)
     assert len(pts) > 30
     for levels in (0, 3):
@@ -74,7 +74,7 @@ def test_aperture_and_leaving_the_image_are_flagged():
 
 def test_uint8_float_and_colour_inputs_agree():
     a = _texture()
-    b = warp_perspective(a, np.array([[1, 0, 0.6], [0, 1, 0.4], [0, 0, 1.0]]), a.shape)
+    b = warp_perspective(a, np.array([[1, 0, 0.6], [0, 1, 0.4], [0, 0, 1.0]]), a.shape[::-1])
     pts = _inner(good_features_to_track(a, 50, 0.01, 8), a.shape, 30)
     f = lucas_kanade(a, b, pts)
     u8 = lucas_kanade((a * 255).round().astype(np.uint8), (b * 255).round().astype(np.uint8), pts)
@@ -85,7 +85,7 @@ def test_uint8_float_and_colour_inputs_agree():
 
 def test_dense_flow_grid():
     a = _texture()
-    b = warp_perspective(a, np.array([[1, 0, 2.0], [0, 1, 1.0], [0, 0, 1.0]]), a.shape)
+    b = warp_perspective(a, np.array([[1, 0, 2.0], [0, 1, 1.0], [0, 0, 1.0]]), a.shape[::-1])
     grid, flow, res = dense_flow(a, b, step=20)
     assert grid.shape == flow.shape == (13, 15, 2)
     assert grid[0, 0].tolist() == [10, 10] and grid[0, 1].tolist() == [30, 10]

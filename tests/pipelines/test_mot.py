@@ -65,7 +65,7 @@ def test_a_given_tracker_is_driven():
 
 
 def test_background_subtraction_when_no_detections_are_given():
-    frames, _ = moving_blobs(30, (96, 128), n_blobs=2, radius=(9.0, 11.0), speed=2.0,
+    frames, _ = moving_blobs(30, (128, 96), n_blobs=2, radius=(9.0, 11.0), speed=2.0,
                              illumination_drift=0.0, rng=3)  # fmt: skip
     rgb = [np.repeat(f[..., None], 3, axis=2) for f in frames]
     steps = list(track_objects(enumerate(rgb), min_area=50))

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import UsageError
+from robopercept.cli._args import UsageError, file_output, flag_errors, image_output
 from robopercept.errors import InputError
 
 __all__ = ["register"]
@@ -34,7 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "finds faces; --model loads one written by `robopercept train-hog`.",
     )
     d.add_argument("image")
-    d.add_argument("-o", "--output", default="detections.png", help="output PNG")
+    d.add_argument(
+        "-o", "--output", type=image_output, default="detections.png", help="output image"
+    )
     d.add_argument("--model", help="model .npz (default: the bundled face model)")
     d.add_argument("--threshold", type=float, default=0.0, help="lowest SVM score (default 0)")
     d.add_argument("--min-size", type=int, help="smallest object in pixels (default: window)")
@@ -80,8 +82,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--min-samples", type=int, default=5, help="DBSCAN: core size (default 5)")
     c.add_argument("--standardize", action="store_true", help="scale features to unit variance")
     c.add_argument("--seed", type=int, default=0)
-    c.add_argument("-o", "--output", default="clusters.png", help="output PNG")
-    c.add_argument("--labels-out", help="write one cluster label per row to this CSV")
+    c.add_argument("-o", "--output", type=image_output, default="clusters.png", help="output image")
+    c.add_argument(
+        "--labels-out", type=file_output, help="write one cluster label per row to this CSV"
+    )
     c.add_argument("--json", action="store_true", help="print the summary as JSON")
     c.set_defaults(func=run_cluster)
 
@@ -120,8 +124,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--method", choices=("pca", "lda"), default="pca")
     r.add_argument("--label", help="the column of classes (required by LDA)")
     r.add_argument("--standardize", action="store_true", help="PCA on unit-variance features")
-    r.add_argument("-o", "--output", default="reduced.png", help="output PNG")
-    r.add_argument("--transformed", help="write the 2-D coordinates to this CSV")
+    r.add_argument("-o", "--output", type=image_output, default="reduced.png", help="output image")
+    r.add_argument("--transformed", type=file_output, help="write the 2-D coordinates to this CSV")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.set_defaults(func=run_reduce)
 
@@ -134,6 +138,7 @@ def _write(path: str | Path, image: np.ndarray) -> Path:
 
 
 # -- detect-hog / train-hog -----------------------------------------------------------
+@flag_errors(threshold="--threshold", min_size="--min-size", max_size="--max-size")
 def run_detect_hog(args: argparse.Namespace) -> int:
     """Run ``robopercept detect-hog`` with the parsed ``args``; returns the exit status."""
     from robopercept.imaging import read_image
@@ -179,7 +184,7 @@ def run_train_hog(args: argparse.Namespace) -> int:
     if args.rounds < 0:
         raise UsageError(f"--rounds must be >= 0; got {args.rounds}")
     t0 = time.perf_counter()
-    det, cv = train_face_detector(mining_rounds=args.rounds, rng=args.seed, progress=True)
+    det, cv = train_face_detector(mining_rounds=args.rounds, random_state=args.seed, progress=True)
     det.save(args.output)
     print(
         f"train-hog: lfw_subset 5-fold CV accuracy {cv['accuracy']:.3f}, precision "
@@ -200,6 +205,12 @@ def _to_2d(X: np.ndarray) -> tuple[np.ndarray, str]:
     return PCA(2).fit_transform(X), "first two principal components"
 
 
+@flag_errors(
+    n_clusters="--clusters",
+    bandwidth="--bandwidth",
+    eps="--eps",
+    min_samples="--min-samples",
+)
 def run_cluster(args: argparse.Namespace) -> int:
     """Run ``robopercept cluster`` with the parsed ``args``; returns the exit status."""
     from robopercept.learning import (
@@ -215,7 +226,7 @@ def run_cluster(args: argparse.Namespace) -> int:
     if args.standardize:
         (X,) = standardize(X)
     if args.method == "kmeans":
-        model: Any = KMeans(args.clusters, rng=args.seed)
+        model: Any = KMeans(args.clusters, random_state=args.seed)
     elif args.method == "meanshift":
         model = MeanShift(bandwidth=args.bandwidth)
     else:
@@ -281,16 +292,23 @@ def _model(args: argparse.Namespace) -> Any:
     from robopercept.learning import LDA, SVC, DecisionTreeClassifier, RandomForestClassifier
 
     if args.model == "tree":
-        return DecisionTreeClassifier(max_depth=args.max_depth, rng=args.seed)
+        return DecisionTreeClassifier(max_depth=args.max_depth, random_state=args.seed)
     if args.model == "forest":
         return RandomForestClassifier(
-            n_estimators=args.trees, max_depth=args.max_depth, n_jobs=-1, rng=args.seed
+            n_estimators=args.trees, max_depth=args.max_depth, n_jobs=-1, random_state=args.seed
         )
     if args.model == "svm":
         return SVC(C=args.C, kernel=args.kernel)
     return LDA()
 
 
+@flag_errors(
+    n_estimators="--trees",
+    max_depth="--max-depth",
+    C="-C",
+    kernel="--kernel",
+    test_size="--test-size",
+)
 def run_classify(args: argparse.Namespace) -> int:
     """Run ``robopercept classify`` with the parsed ``args``; returns the exit status."""
     from robopercept.learning import (
@@ -316,7 +334,7 @@ def run_classify(args: argparse.Namespace) -> int:
         if not 0.0 < args.test_size < 1.0:
             raise UsageError(f"--test-size must be in (0, 1); got {args.test_size}")
         Xtr, Xt, ytr, yt = train_test_split(
-            X, y, test_size=args.test_size, stratify=y, rng=args.seed
+            X, y, test_size=args.test_size, stratify=y, random_state=args.seed
         )
     if args.cv and args.cv < 2:
         raise UsageError(f"--cv must be >= 2; got {args.cv}")
@@ -377,7 +395,8 @@ def run_classify(args: argparse.Namespace) -> int:
     if "cv_accuracy" in report:
         cvr = report["cv_accuracy"]
         print(f"  {args.cv}-fold CV accuracy on train: {cvr['mean']:.4f} +- {cvr['std']:.4f}")
-    print(f"-> {out}/ (confusion.png, roc.png, pr.png, report.json)")
+    files = [Path(v).name for v in written.values()] + ["report.json"]
+    print(f"-> {out}/ ({', '.join(files)})")
     return 0
 
 

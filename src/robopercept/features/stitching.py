@@ -193,7 +193,7 @@ def stitch(
         )
     t = np.array([[1.0, 0.0, -lo[0]], [0.0, 1.0, -lo[1]], [0.0, 0.0, 1.0]])
     t_b = t @ h_ba
-    size = (height, width)
+    size = (width, height)  # dsize, as OpenCV
     fa = warp_perspective(a.astype(np.float64), t, size)
     fb = warp_perspective(b.astype(np.float64), t_b, size)
     if blend == "feather":

@@ -32,6 +32,7 @@ from collections.abc import Callable
 from typing import Literal
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from robopercept._checks import (
@@ -54,6 +55,7 @@ __all__ = [
     "derivative_kernel",
     "gaussian_blur",
     "gaussian_kernel",
+    "gaussian_ksize",
     "gradient",
     "laplacian",
     "laplacian_of_gaussian",
@@ -554,39 +556,118 @@ def convolve_separable(
     )
 
 
-def gaussian_kernel(sigma: float, size: int | None = None) -> np.ndarray:
-    r"""Normalized 1-D Gaussian kernel.
+# cv2.getGaussianKernel(n, 0) for odd n <= 9: OpenCV 4.x's fixed small kernels (used
+# instead of the sampled Gaussian of sigma = 0.3 ((n - 1) / 2 - 1) + 0.8 when sigma <= 0)
+_SMALL_GAUSSIAN = {
+    1: (1.0,),
+    3: (0.25, 0.5, 0.25),
+    5: (0.0625, 0.25, 0.375, 0.25, 0.0625),
+    7: (0.03125, 0.109375, 0.21875, 0.28125, 0.21875, 0.109375, 0.03125),
+    9: (1 / 64, 13 / 256, 15 / 128, 51 / 256, 15 / 64, 51 / 256, 15 / 128, 13 / 256, 1 / 64),
+}
 
-    .. math:: w_i = \frac{\exp(-x_i^2 / 2\sigma^2)}{\sum_j \exp(-x_j^2 / 2\sigma^2)},
-              \quad x_i = i - \frac{n - 1}{2}
 
-    which is ``cv2.getGaussianKernel(size, sigma)`` for ``sigma > 0``.
+def gaussian_ksize(sigma: float, dtype: npt.DTypeLike = np.float64) -> int:
+    r"""OpenCV's automatic Gaussian kernel size for ``sigma`` and an image dtype.
+
+    .. math:: n = \operatorname{round}(2 t \sigma + 1) \;|\; 1, \qquad
+              t = 3 \text{ for uint8}, \quad t = 4 \text{ otherwise}
+
+    (``| 1`` makes it odd), the rule of OpenCV's ``createGaussianKernels`` behind
+    ``cv2.GaussianBlur(image, (0, 0), sigma)``: the kernel covers +-3 sigma for 8-bit
+    images, whose result is rounded to a grey level anyway, and +-4 sigma for every
+    other depth (scikit-image's ``gaussian`` also truncates at 4 sigma).
 
     Parameters
     ----------
     sigma : float
         Standard deviation in pixels, > 0.
+    dtype : dtype-like
+        The image's dtype (``np.uint8`` selects the 3-sigma rule).
+
+    Returns
+    -------
+    int
+        Odd kernel length.
+
+    Examples
+    --------
+    >>> gaussian_ksize(2.0, np.float32), gaussian_ksize(2.0, np.uint8)
+    (17, 13)
+    """
+    sigma = check_positive(sigma, "sigma")
+    t = 3.0 if np.dtype(dtype) == np.uint8 else 4.0
+    # Python's round is round-half-even, as OpenCV's cvRound; "| 1" hides the tie rule
+    return round(sigma * t * 2.0 + 1.0) | 1
+
+
+def gaussian_kernel(sigma: float, size: int | None = None) -> np.ndarray:
+    r"""Normalized 1-D Gaussian kernel, ``cv2.getGaussianKernel(size, sigma)``.
+
+    .. math:: w_i = \frac{\exp(-x_i^2 / 2\sigma^2)}{\sum_j \exp(-x_j^2 / 2\sigma^2)},
+              \quad x_i = i - \frac{n - 1}{2}
+
+    With ``sigma = 0`` the standard deviation comes from the size, as in OpenCV:
+    :math:`\sigma = 0.3 ((n - 1) / 2 - 1) + 0.8`; for ``n <= 9`` OpenCV (4.x) then uses
+    fixed small kernels instead (``[1/4, 1/2, 1/4]`` for ``n = 3``, ``[1, 4, 6, 4, 1] / 16``
+    for ``n = 5``, ...), and so does this function, so the result equals
+    ``cv2.getGaussianKernel(size, 0)`` for every odd size.
+
+    Parameters
+    ----------
+    sigma : float
+        Standard deviation in pixels, > 0; or 0 to derive it from ``size``.
     size : int, optional
-        Odd kernel length; by default ``2 ceil(3 sigma) + 1`` (covers +-3 sigma).
+        Odd kernel length; by default :func:`gaussian_ksize` for float images,
+        ``round(8 sigma + 1) | 1`` (covers +-4 sigma). Required when ``sigma = 0``.
 
     Returns
     -------
     (size,) float64 ndarray
+
+    Examples
+    --------
+    >>> gaussian_kernel(0, 5) * 16
+    array([1., 4., 6., 4., 1.])
+    >>> gaussian_kernel(1.0).size
+    9
     """
-    sigma = check_positive(sigma, "sigma")
-    if size is None:
-        size = 2 * math.ceil(3.0 * sigma) + 1
+    sigma = check_range(sigma, "sigma", 0.0)
+    if sigma == 0.0:
+        if size is None:
+            raise InputError(
+                "sigma=0 derives sigma from the kernel size, as OpenCV: give the size "
+                "(e.g. gaussian_kernel(0, 5)) or a sigma > 0"
+            )
+        size = check_odd_size(size, "size")
+        if size in _SMALL_GAUSSIAN:
+            return np.array(_SMALL_GAUSSIAN[size], dtype=np.float64)
+        sigma = 0.3 * ((size - 1) * 0.5 - 1.0) + 0.8
+    elif size is None:
+        size = gaussian_ksize(sigma, np.float64)
     size = check_odd_size(size, "size")
     x = np.arange(size, dtype=np.float64) - (size - 1) / 2.0
     w = np.exp(-(x * x) / (2.0 * sigma * sigma))
     return w / w.sum()
 
 
+def _gaussian_axis(sigma: float, size: int, dtype: np.dtype, flag: str) -> np.ndarray:
+    # the kernel of one axis of gaussian_blur: size 0 is automatic (OpenCV's rule)
+    if size == 0:
+        if sigma == 0.0:
+            raise InputError(
+                f"sigma=0 needs the {flag} to derive sigma from, as OpenCV: pass an odd "
+                "ksize (e.g. ksize=5) or sigma > 0 (the size then follows OpenCV's rule)"
+            )
+        size = gaussian_ksize(sigma, dtype)
+    return gaussian_kernel(sigma, size)
+
+
 def gaussian_blur(
     image: np.ndarray,
     sigma: float,
     *,
-    ksize: int | None = None,
+    ksize: int | tuple[int, int] | None = None,
     sigma_y: float | None = None,
     border: Border = "reflect101",
 ) -> np.ndarray:
@@ -594,24 +675,38 @@ def gaussian_blur(
 
     .. math:: g = G_{\sigma_y} \star_y (G_{\sigma_x} \star_x f)
 
-    Matches ``cv2.GaussianBlur(image, (ksize, ksize), sigma, sigmaY=sigma_y)``: exactly
-    (to float rounding) for float input, within 1 grey level for uint8 (OpenCV uses an
-    8-bit fixed-point kernel there).
+    The same call as ``cv2.GaussianBlur(image, ksize, sigma, sigmaY=sigma_y)``, with the
+    same defaults: without ``ksize`` each axis' kernel size is :func:`gaussian_ksize`,
+    ``round(2 t sigma + 1) | 1`` with ``t = 3`` for uint8 and ``t = 4`` for every other
+    dtype (so ``gaussian_blur(f, 2.0)`` uses 13 taps on uint8 and 17 on float images);
+    ``sigma = 0`` with a ``ksize`` derives sigma from the size as
+    :func:`gaussian_kernel` (``0.3 ((ksize - 1) / 2 - 1) + 0.8``, OpenCV's fixed kernels
+    up to 9 taps). The result equals OpenCV's to float rounding for float input, and
+    within 1 grey level for uint8 (OpenCV uses an 8-bit fixed-point kernel there).
 
     Parameters
     ----------
     image : (H, W) or (H, W, 3) ndarray
     sigma : float
-        Standard deviation along x (and y unless ``sigma_y``), > 0.
-    ksize : int, optional
-        Odd kernel size for both axes; default ``2 ceil(3 sigma) + 1`` per axis.
+        Standard deviation along x (and y unless ``sigma_y``), >= 0; 0 takes it from
+        ``ksize``.
+    ksize : int or (width, height), optional
+        Odd kernel size for both axes, or per axis as OpenCV's ``(kw, kh)``; 0 (or None)
+        for the automatic size above.
     sigma_y : float, optional
+        Standard deviation along y; None or 0 means ``sigma``, as OpenCV's ``sigmaY=0``.
     border : {'reflect101', 'reflect', 'replicate', 'constant'}
 
     Returns
     -------
     ndarray
         Same shape and dtype as ``image``.
+
+    Raises
+    ------
+    InputError
+        If ``sigma`` (or ``sigma_y``) is negative, a ``ksize`` is even, or an axis has
+        neither a sigma nor a kernel size.
 
     Examples
     --------
@@ -628,8 +723,26 @@ def gaussian_blur(
     """
     image = check_image(image)
     check_choice(border, "border", BORDERS)
-    kx = gaussian_kernel(sigma, ksize)
-    ky = kx if sigma_y is None else gaussian_kernel(sigma_y, ksize)
+    sx = check_range(sigma, "sigma", 0.0)
+    sy = sx if sigma_y is None else check_range(sigma_y, "sigma_y", 0.0)
+    if sy == 0.0:  # OpenCV: sigmaY <= 0 takes sigmaX
+        sy = sx
+    if ksize is None:
+        kw = kh = 0
+    elif isinstance(ksize, (int, np.integer)) and not isinstance(ksize, bool):
+        kw = kh = int(ksize)
+    else:
+        try:
+            kw, kh = (int(v) for v in ksize)  # type: ignore[union-attr]
+        except (TypeError, ValueError):
+            raise InputError(
+                f"ksize must be an odd int or (width, height) of odd ints; got {ksize!r}"
+            ) from None
+    for k in (kw, kh):
+        if k != 0:
+            check_odd_size(k, "ksize")  # 0 is automatic, as OpenCV's (0, 0)
+    kx = _gaussian_axis(sx, kw, image.dtype, "kernel width")
+    ky = kx if (sy, kh) == (sx, kw) else _gaussian_axis(sy, kh, image.dtype, "kernel height")
     return separable_filter_unchecked(image, kx, ky, border, 0.0, image.dtype)
 
 

@@ -5,9 +5,10 @@ r"""Perspective warping and remapping of images.
 :math:`\tilde x = H^{-1} (x', y', 1)^\top`, :math:`x = \tilde x_1 / \tilde x_3,
 y = \tilde x_2 / \tilde x_3`, and samples the input there bilinearly (or at the nearest
 pixel); samples outside the input get ``border_value``. Pixel centres are at integer
-coordinates, as in OpenCV; ``cv2.warpPerspective(image, H, (w, h))`` is the same
-operation (OpenCV quantizes the sample position to 1/32 pixel, hence differences of a
-grey level or two).
+coordinates, and the output size is ``dsize = (width, height)``, as in OpenCV;
+``warp_perspective(image, H, (w, h))`` is ``cv2.warpPerspective(image, H, (w, h))``
+(OpenCV quantizes the sample position to 1/32 pixel, hence differences of a grey level
+or two).
 
 :func:`remap` is the general form: each output pixel names its source position in two
 maps (``cv2.remap``), as undistortion and stereo rectification need.
@@ -160,7 +161,7 @@ def remap(
 def warp_perspective(
     image: np.ndarray,
     h: np.ndarray,
-    size: tuple[int, int],
+    dsize: tuple[int, int],
     *,
     interpolation: Literal["linear", "nearest"] = "linear",
     border_value: float = 0.0,
@@ -172,8 +173,10 @@ def warp_perspective(
     image : (H, W) or (H, W, 3) ndarray
     h : (3, 3) array_like
         Maps input pixel coordinates to output pixel coordinates.
-    size : (int, int)
-        Output ``(height, width)``.
+    dsize : (int, int)
+        Output size ``(width, height)``, as ``cv2.warpPerspective``'s ``dsize`` (the
+        result's shape is ``(height, width)``). To keep the input's size, pass
+        ``image.shape[1::-1]``.
     interpolation : {"linear", "nearest"}
     border_value : float
         Value of output pixels whose source lies outside the input (bilinear samples
@@ -182,12 +185,25 @@ def warp_perspective(
     Returns
     -------
     ndarray
-        ``size`` (plus the channel axis), the input's dtype (integers rounded).
+        ``(height, width)`` (plus the channel axis), the input's dtype (integers
+        rounded).
 
     Raises
     ------
     DegenerateError
         If ``h`` is singular.
+    InputError
+        If ``dsize`` is not a pair of positive integers.
+
+    Examples
+    --------
+    A shift by 2 columns into a 4 wide, 2 high output (``dsize`` is width first):
+
+    >>> import numpy as np
+    >>> img = np.arange(6, dtype=np.uint8).reshape(2, 3)
+    >>> shift = np.array([[1.0, 0, 2], [0, 1, 0], [0, 0, 1]])
+    >>> warp_perspective(img, shift, (4, 2)).tolist()
+    [[0, 0, 0, 1], [0, 0, 3, 4]]
     """
     image = check_image(image)
     m = check_shape(np.asarray(h, dtype=np.float64), "H", (3, 3))
@@ -195,10 +211,12 @@ def warp_perspective(
         raise InputError("H must be finite")
     check_choice(interpolation, "interpolation", ("linear", "nearest"))
     try:
-        oh, ow = size
+        ow, oh = dsize
     except (TypeError, ValueError):
-        raise InputError(f"size must be (height, width); got {size!r}") from None
-    oh, ow = check_int(oh, "size[0]", 1), check_int(ow, "size[1]", 1)
+        raise InputError(
+            f"dsize must be the output (width, height), as OpenCV's; got {dsize!r}"
+        ) from None
+    ow, oh = check_int(ow, "dsize[0] (width)", 1), check_int(oh, "dsize[1] (height)", 1)
     if abs(np.linalg.det(m)) <= 1e-12 * max(np.abs(m).max(), 1e-300) ** 3:
         raise DegenerateError("H is singular: it does not map the image onto a plane")
     minv = np.linalg.inv(m)

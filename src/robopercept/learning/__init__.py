@@ -7,7 +7,7 @@ and ``cross_val_score`` accept them; scikit-learn is not needed to use them.
 
 from __future__ import annotations
 
-from robopercept.learning._base import clone
+from robopercept.learning._base import DataConversionWarning, clone
 from robopercept.learning.dbscan import DBSCAN
 from robopercept.learning.forest import RandomForestClassifier, RandomForestRegressor
 from robopercept.learning.kmeans import KMeans, kmeans_plusplus
@@ -55,6 +55,7 @@ __all__ = [
     "SVC",
     "ClassCurves",
     "ClassifierEvaluation",
+    "DataConversionWarning",
     "DecisionTreeClassifier",
     "DecisionTreeRegressor",
     "GridSearch",

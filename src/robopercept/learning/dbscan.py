@@ -29,11 +29,11 @@ from itertools import chain
 import numpy as np
 import numpy.typing as npt
 from numba import njit
-from tqdm import tqdm
 
 from robopercept._checks import check_int, check_positive
 from robopercept.imaging.blobs import uf_roots, uf_union_pairs
 from robopercept.learning._base import ClusterMixin, Estimator
+from robopercept.progress import progress_bar
 
 __all__ = ["DBSCAN"]
 
@@ -108,7 +108,7 @@ class DBSCAN(ClusterMixin, Estimator):
         search = _Neighbours(X, eps)
         step = search.chunk
         chunks = range(0, n, step)
-        bar = tqdm(total=3 * len(chunks), desc="dbscan", disable=not self.progress)
+        bar = progress_bar(total=3 * len(chunks), desc="dbscan", disable=not self.progress)
         # pass 1: neighbour counts; the pairs are kept while they fit in the budget so
         # that passes 2 and 3 need no second query
         counts = np.empty(n, dtype=np.int64)

@@ -12,7 +12,7 @@ The samples a tree's bootstrap left out (about :math:`e^{-1} \approx 37\%`) are 
 out-of-bag samples; predicting every training sample with only the trees that did not
 see it gives an honest accuracy (``oob_score_``) without a held-out set.
 
-Each tree gets its own seed drawn from ``rng`` before any tree is grown, so the forest
+Each tree gets its own seed drawn from ``random_state`` before any tree is grown, so the forest
 is the same for any ``n_jobs``; trees grow on ``n_jobs`` threads (the tree kernel
 releases the GIL).
 """
@@ -24,18 +24,19 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import numpy.typing as npt
-from tqdm import tqdm
 
 from robopercept._checks import check_int
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClassifierMixin,
     Estimator,
+    RandomStateLike,
     RegressorMixin,
     check_target,
     seed_from,
 )
 from robopercept.learning.tree import Tree, grow_tree, tree_settings
+from robopercept.progress import progress_bar
 
 __all__ = ["RandomForestClassifier", "RandomForestRegressor"]
 
@@ -61,6 +62,7 @@ class _BaseForest(Estimator):
     bootstrap: bool
     oob_score: bool
     n_jobs: int | None
+    random_state: RandomStateLike
     rng: int | np.random.Generator | None
     progress: bool
 
@@ -88,7 +90,7 @@ class _BaseForest(Estimator):
         )
         if self.oob_score and not self.bootstrap:
             raise InputError("oob_score needs bootstrap=True (without it no sample is left out)")
-        seeds = seed_from(self.rng).integers(0, 2**63, size=n_trees)
+        seeds = seed_from(self._random_state(stacklevel=5)).integers(0, 2**63, size=n_trees)
         XT = np.ascontiguousarray(X.T)
 
         def one(seed: int) -> tuple[Tree, np.ndarray]:
@@ -100,7 +102,7 @@ class _BaseForest(Estimator):
 
         with ThreadPoolExecutor(_threads(self.n_jobs)) as pool:
             grown = list(
-                tqdm(
+                progress_bar(
                     pool.map(one, seeds.tolist()),
                     total=n_trees,
                     desc="random forest",
@@ -159,7 +161,11 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         Majority vote of the trees, or the largest mean class share.
     n_jobs : int or None
         Threads growing trees (None: 1, -1: all cores); the result does not depend on it.
+    random_state : int, Generator, RandomState or None
+        Seed of the bootstrap samples and feature draws (scikit-learn's name); the same
+        seed gives the same forest.
     rng : int, Generator or None
+        Deprecated alias of ``random_state`` (one release): ``fit`` warns and uses it.
     progress : bool
 
     Attributes
@@ -186,8 +192,9 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         oob_score: bool = False,
         voting: str = "hard",
         n_jobs: int | None = None,
-        rng: int | np.random.Generator | None = None,
+        random_state: RandomStateLike = None,
         progress: bool = False,
+        rng: int | np.random.Generator | None = None,
     ) -> None:
         self.n_estimators = n_estimators
         self.criterion = criterion
@@ -199,6 +206,7 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
         self.oob_score = oob_score
         self.voting = voting
         self.n_jobs = n_jobs
+        self.random_state = random_state
         self.rng = rng
         self.progress = progress
 
@@ -262,8 +270,9 @@ class RandomForestRegressor(RegressorMixin, _BaseForest):
         bootstrap: bool = True,
         oob_score: bool = False,
         n_jobs: int | None = None,
-        rng: int | np.random.Generator | None = None,
+        random_state: RandomStateLike = None,
         progress: bool = False,
+        rng: int | np.random.Generator | None = None,
     ) -> None:
         self.n_estimators = n_estimators
         self.criterion = criterion
@@ -274,13 +283,14 @@ class RandomForestRegressor(RegressorMixin, _BaseForest):
         self.bootstrap = bootstrap
         self.oob_score = oob_score
         self.n_jobs = n_jobs
+        self.random_state = random_state
         self.rng = rng
         self.progress = progress
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> RandomForestRegressor:
         """Grow the forest on ``X`` (N, d) and targets ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
-        y = check_target(y, X.shape[0])
+        y = check_target(y, X.shape[0], type(self).__name__)
         self._grow_all(X, np.zeros(1, dtype=np.int64), y, 0, y)
         return self
 

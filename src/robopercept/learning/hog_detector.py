@@ -25,14 +25,15 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from tqdm import tqdm
 
-from robopercept._checks import check_positive
+from robopercept._checks import check_file, check_positive, check_range
 from robopercept.errors import FileFormatError, InputError
 from robopercept.features.hog import hog, hog_windows
 from robopercept.geometry.boxes import box_iou_matrix
 from robopercept.imaging.color import rgb_to_gray
+from robopercept.learning._base import RandomStateLike, random_generator, renamed_rng
 from robopercept.learning.svm import LinearSVC
+from robopercept.progress import progress_bar
 
 __all__ = [
     "Detections",
@@ -96,10 +97,12 @@ def _rescale(image: np.ndarray, scale: float) -> np.ndarray:
     from robopercept.imaging.warp import warp_perspective
 
     h, w = image.shape
-    size = (max(1, round(h * scale)), max(1, round(w * scale)))
+    size = (max(1, round(w * scale)), max(1, round(h * scale)))  # (width, height)
     sigma = 0.5 * (1.0 / scale - 1.0)
-    if sigma > 0.1:  # gaussian_blur(image, sigma) of the image detect() validated
-        k = gaussian_kernel(sigma)
+    if sigma > 0.1:  # gaussian_blur(image, sigma, ksize=n) of the image detect() validated
+        # n = 2 ceil(3 sigma) + 1 (+-3 sigma), the size the bundled model was trained with;
+        # gaussian_kernel's default is now OpenCV's 4-sigma float size (issue 22)
+        k = gaussian_kernel(sigma, 2 * int(np.ceil(3.0 * sigma)) + 1)
         src = separable_filter_unchecked(image, k, k, "reflect101")
     else:
         src = image
@@ -150,11 +153,35 @@ class HogDetector:
         return np.stack([hog(255.0 * p.astype(np.float32), **self._hog_args()) for p in patches])
 
     def fit(
-        self, patches: np.ndarray, labels: np.ndarray, *, rng: int | np.random.Generator | None = 0
+        self,
+        patches: np.ndarray,
+        labels: np.ndarray,
+        *,
+        random_state: RandomStateLike = 0,
+        rng: int | np.random.Generator | None = None,
     ) -> HogDetector:
-        """Train the SVM on window-sized patches with labels 1 (object) / 0."""
+        """Train the SVM on window-sized patches with labels 1 (object) / 0.
+
+        Parameters
+        ----------
+        patches : (N, h, w) ndarray
+            Window-sized gray patches.
+        labels : (N,) array_like
+            1 for the object, 0 for background.
+        random_state : int, Generator, RandomState or None
+            Seed of the SVM's coordinate order (scikit-learn's name).
+        rng
+            Deprecated alias of ``random_state`` (one release).
+
+        Returns
+        -------
+        HogDetector
+            ``self``, with ``coef_`` and ``intercept_``.
+        """
+        random_state = renamed_rng("HogDetector.fit", random_state, rng, default=0)
         X = self.describe(patches)
-        svm = LinearSVC(C=self.C, rng=rng).fit(X, np.asarray(labels).astype(int))
+        svm = LinearSVC(C=self.C, random_state=random_state)
+        svm.fit(X, np.asarray(labels).astype(int))
         self.coef_ = svm.coef_[0]
         self.intercept_ = float(svm.intercept_[0])
         return self
@@ -196,7 +223,9 @@ class HogDetector:
         scale_step : float
             Ratio between pyramid levels (> 1).
         min_size, max_size : int
-            Smallest and largest object size (window width) searched, in pixels.
+            Smallest and largest object size (window width) searched, in pixels;
+            ``1 <= min_size <= max_size`` (a size below 1 never grows past ``max_size``
+            by ``scale_step``).
         nms_iou : float
             Overlap above which the weaker of two boxes is dropped.
         """
@@ -218,15 +247,15 @@ class HogDetector:
                 f"stride must divide or be a multiple of the cell size {self.cell_size}; "
                 f"got {stride}"
             )
-        lo = ww if min_size is None else min_size
-        hi = min(gray.shape) if max_size is None else max_size
+        lo = ww if min_size is None else check_range(min_size, "min_size", 1.0)
+        hi = min(gray.shape) if max_size is None else check_range(max_size, "max_size", 1.0)
         sizes = []
         size = float(lo)
         while size <= hi + 1e-9:
             sizes.append(size)
             size *= scale_step
         boxes, scores = [], []
-        for size in tqdm(sizes, desc="hog pyramid", disable=not progress):
+        for size in progress_bar(sizes, desc="hog pyramid", disable=not progress):
             scale = ww / size
             level = gray if abs(scale - 1.0) < 1e-9 else _rescale(gray, scale)
             if level.shape[0] < wh or level.shape[1] < ww:
@@ -267,15 +296,48 @@ class HogDetector:
 
     @classmethod
     def load(cls, path: str | Path) -> HogDetector:
-        """Read a model written by :meth:`save` (``allow_pickle=False``)."""
+        """Read a model written by :meth:`save`.
+
+        The file is read with ``allow_pickle=False``: nothing in it is executed. Any
+        other file (a CSV, a ``.npy`` array, an archive without the model's arrays) is
+        refused as not a model, without NumPy's advice to load pickles unsafely.
+
+        Parameters
+        ----------
+        path : str or Path
+            The ``.npz`` written by :meth:`save` (``robopercept train-hog``).
+
+        Returns
+        -------
+        HogDetector
+            Fitted (``coef_``, ``intercept_`` set).
+
+        Raises
+        ------
+        FileFormatError
+            Missing file, a folder, or not a robopercept HOG model file.
+        """
+        p = check_file(path, "a model file (.npz written by `robopercept train-hog`)")
+        not_model = (
+            f"{p} is not a robopercept HOG model file (.npz written by `robopercept train-hog`)"
+        )
+        try:  # NumPy takes what is neither .npy nor .npz for a pickle and refuses it
+            data = np.load(p, allow_pickle=False)
+        except (OSError, ValueError, EOFError):
+            raise FileFormatError(not_model) from None
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise FileFormatError(f"{not_model}: it holds one array, not an archive")
         try:
-            with np.load(path, allow_pickle=False) as f:
+            with data as f:
                 coef = f["coef"].astype(np.float64)
                 meta = json.loads(str(f["meta"]))
-        except (OSError, KeyError, ValueError) as exc:
-            raise FileFormatError(f"{path}: not a robopercept HOG model ({exc})") from None
-        if meta.get("kind") != "robopercept.HogDetector":
-            raise FileFormatError(f"{path}: not a robopercept HOG model (kind {meta.get('kind')})")
+        except KeyError as exc:
+            raise FileFormatError(f"{not_model}: it has no {exc} array") from None
+        except (OSError, ValueError, EOFError):
+            raise FileFormatError(f"{not_model}: its arrays cannot be read") from None
+        if not isinstance(meta, dict) or meta.get("kind") != "robopercept.HogDetector":
+            kind = meta.get("kind") if isinstance(meta, dict) else None
+            raise FileFormatError(f"{not_model}: its kind is {kind!r}")
         det = cls(
             window=tuple(meta["window"]),
             cell_size=int(meta["cell_size"]),
@@ -288,7 +350,7 @@ class HogDetector:
         det.intercept_ = float(meta["intercept"])
         expect = det.describe(np.zeros((1, *det.window))).shape[1]
         if coef.shape != (expect,):
-            raise FileFormatError(f"{path}: weights have shape {coef.shape}, expected ({expect},)")
+            raise FileFormatError(f"{p}: weights have shape {coef.shape}, expected ({expect},)")
         return det
 
 
@@ -364,8 +426,9 @@ def train_face_detector(
     hard_per_picture: int = 60,
     max_hard: int = 600,
     augment: bool = True,
-    rng: int | np.random.Generator | None = 0,
+    random_state: RandomStateLike = 0,
     progress: bool = False,
+    rng: int | np.random.Generator | None = None,
 ) -> tuple[HogDetector, dict[str, float]]:
     """Train the face model: ``lfw_subset`` faces (jittered, mirrored) plus hard negatives.
 
@@ -381,12 +444,16 @@ def train_face_detector(
     skin, from round textured things better than unsigned ones; with unsigned 9-bin
     HOG a mission patch on ``astronaut`` outscored the face.
 
+    ``random_state`` (scikit-learn's name; ``rng=`` is its deprecated alias for one
+    release) seeds the folds, the random negative windows and the SVM.
+
     Returns
     -------
     HogDetector, dict
         The detector and the 5-fold cross-validated accuracy, precision and recall of
         the SVM on ``lfw_subset`` alone (before mining).
     """
+    seed = renamed_rng("train_face_detector", random_state, rng, default=0)
     from robopercept.learning.metrics import precision_score, recall_score
     from robopercept.learning.model_selection import StratifiedKFold
 
@@ -396,8 +463,8 @@ def train_face_detector(
     det = HogDetector(C=C, cell_size=cell_size, orientations=orientations, signed=signed)
     X = det.describe(patches)
     preds = np.empty_like(labels)
-    for train, test in StratifiedKFold(5, shuffle=True, rng=rng).split(X, labels):
-        svm = LinearSVC(C=det.C, rng=rng).fit(X[train], labels[train])
+    for train, test in StratifiedKFold(5, shuffle=True, random_state=seed).split(X, labels):
+        svm = LinearSVC(C=det.C, random_state=seed).fit(X[train], labels[train])
         preds[test] = svm.predict(X[test])
     cv = {
         "accuracy": float(np.mean(preds == labels)),
@@ -412,7 +479,7 @@ def train_face_detector(
         faces = np.r_[faces, _jitter_faces(full[:100])]
     pos = np.r_[faces, faces[:, :, ::-1]]
     neg = np.r_[patches[labels == 0], patches[labels == 0][:, :, ::-1]]
-    gen = np.random.default_rng(rng)
+    gen = random_generator(seed)
     pictures = _negative_pictures()
     randoms = []
     for pic in pictures:  # random windows of random sizes
@@ -424,8 +491,8 @@ def train_face_detector(
             if crop.shape == (24, 24):
                 randoms.append(crop)
     neg = np.r_[neg, np.stack(randoms)]
-    det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], rng=rng)
-    for _ in tqdm(range(mining_rounds), desc="hard negatives", disable=not progress):
+    det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], random_state=seed)
+    for _ in progress_bar(range(mining_rounds), desc="hard negatives", disable=not progress):
         hard = []
         for pic in pictures:
             found = det.detect(pic, threshold=-0.5, stride=det.cell_size, nms_iou=0.5, max_size=200)
@@ -439,5 +506,5 @@ def train_face_detector(
         if not hard:
             break
         neg = np.r_[neg, np.stack(hard)]
-        det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], rng=rng)
+        det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], random_state=seed)
     return det, cv

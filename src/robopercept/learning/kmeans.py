@@ -33,7 +33,14 @@ from numba import njit
 
 from robopercept._checks import check_choice, check_int
 from robopercept.errors import InputError
-from robopercept.learning._base import ClusterMixin, Estimator, TransformerMixin, seed_from
+from robopercept.learning._base import (
+    ClusterMixin,
+    Estimator,
+    RandomStateLike,
+    TransformerMixin,
+    renamed_rng,
+    seed_from,
+)
 
 __all__ = ["KMeans", "kmeans_plusplus"]
 
@@ -104,12 +111,37 @@ def kmeans_plusplus(
     X: npt.ArrayLike,
     n_clusters: int,
     *,
-    rng: int | np.random.Generator | None = None,
+    random_state: RandomStateLike = None,
     n_local_trials: int | None = None,
+    rng: int | np.random.Generator | None = None,
 ) -> np.ndarray:
-    """Greedy k-means++ seeding: ``(n_clusters, d)`` initial centres drawn from ``X``."""
+    """Greedy k-means++ seeding: ``(n_clusters, d)`` initial centres drawn from ``X``.
+
+    Parameters
+    ----------
+    X : (N, d) array_like
+    n_clusters : int
+    random_state : int, Generator, RandomState or None
+        Seed (scikit-learn's name); a Generator is not consumed.
+    n_local_trials : int, optional
+        Candidates tried per centre (default ``2 + ln k``, scikit-learn's).
+    rng
+        Deprecated alias of ``random_state`` (one release).
+
+    Returns
+    -------
+    (n_clusters, d) ndarray
+    """
+    random_state = renamed_rng("kmeans_plusplus", random_state, rng)
     X = np.ascontiguousarray(X, dtype=np.float64)
-    gen = seed_from(rng)
+    return _plusplus(X, int(n_clusters), seed_from(random_state), n_local_trials)
+
+
+def _plusplus(
+    X: np.ndarray, n_clusters: int, gen: np.random.Generator, n_local_trials: int | None
+) -> np.ndarray:
+    # kmeans_plusplus drawing from (and advancing) gen, so that KMeans' n_init runs
+    # each get their own seeding
     n = X.shape[0]
     trials = n_local_trials if n_local_trials is not None else 2 + int(np.log(n_clusters))
     x_sq = np.einsum("ij,ij->i", X, X)
@@ -145,7 +177,11 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
     tol : float
         Convergence when the centres' total squared shift is at most
         ``tol * mean(var(X, axis=0))``.
+    random_state : int, Generator, RandomState or None
+        Seed of the seedings (scikit-learn's name); the same seed gives the same
+        clustering.
     rng : int, Generator or None
+        Deprecated alias of ``random_state`` (one release): ``fit`` warns and uses it.
 
     Attributes
     ----------
@@ -160,7 +196,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
     Two well separated blobs:
 
     >>> X = np.array([[0.0, 0.0], [0.1, 0.0], [0.0, 0.1], [5.0, 5.0], [5.1, 5.0], [5.0, 5.1]])
-    >>> km = KMeans(2, rng=0).fit(X)
+    >>> km = KMeans(2, random_state=0).fit(X)
     >>> (km.labels_ == km.labels_[0]).tolist()
     [True, True, True, False, False, False]
     >>> np.round(np.sort(km.cluster_centers_[:, 0]), 3).tolist()
@@ -175,6 +211,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
         n_init: int | str = "auto",
         max_iter: int = 300,
         tol: float = 1e-4,
+        random_state: RandomStateLike = None,
         rng: int | np.random.Generator | None = None,
     ) -> None:
         self.n_clusters = n_clusters
@@ -182,6 +219,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
         self.n_init = n_init
         self.max_iter = max_iter
         self.tol = tol
+        self.random_state = random_state
         self.rng = rng
 
     def _seeds(self, X: np.ndarray) -> tuple[list[np.ndarray] | None, int]:
@@ -209,7 +247,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
         if not np.isfinite(self.tol) or self.tol < 0:
             raise InputError(f"tol must be a finite number >= 0; got {self.tol}")
         given, runs = self._seeds(X)
-        gen = seed_from(self.rng)
+        gen = seed_from(self._random_state())
         # centred data give more accurate |x|^2 - 2 x.c + |c|^2 distances (as sklearn)
         offset: npt.NDArray[np.float64] = X.mean(axis=0)
         X = X - offset
@@ -221,7 +259,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
             if given is not None:
                 C = given[0] - offset
             elif self.init == "k-means++":
-                C = kmeans_plusplus(X, k, rng=gen)
+                C = _plusplus(X, k, gen, None)
             else:
                 C = X[gen.choice(X.shape[0], size=k, replace=False)].copy()
             labels, centers, inertia, n_iter = self._lloyd(X, C, x_sq, tol)

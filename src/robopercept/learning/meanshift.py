@@ -33,11 +33,18 @@ from __future__ import annotations
 
 import numpy as np
 import numpy.typing as npt
-from tqdm import tqdm
 
 from robopercept._checks import check_choice, check_int, check_positive
 from robopercept.errors import InputError
-from robopercept.learning._base import ClusterMixin, Estimator, seed_from
+from robopercept.learning._base import (
+    ClusterMixin,
+    Estimator,
+    RandomStateLike,
+    check_matrix,
+    renamed_rng,
+    seed_from,
+)
+from robopercept.progress import progress_bar
 
 __all__ = ["MeanShift", "estimate_bandwidth"]
 
@@ -49,18 +56,41 @@ def estimate_bandwidth(
     *,
     quantile: float = 0.3,
     n_samples: int | None = None,
+    random_state: RandomStateLike = None,
     rng: int | np.random.Generator | None = None,
 ) -> float:
     """A bandwidth from the data: the mean distance from each sample to its
     ``quantile * N``-th nearest neighbour (scikit-learn's heuristic), over at most
-    ``n_samples`` random samples."""
-    from scipy.spatial import cKDTree
+    ``n_samples`` random samples.
 
-    X = np.ascontiguousarray(X, dtype=np.float64)
+    Parameters
+    ----------
+    X : (N, d) array_like
+    quantile : float in (0, 1]
+    n_samples : int, optional
+        Subsample size (all samples by default).
+    random_state : int, Generator, RandomState or None
+        Seed of the subsample (scikit-learn's name).
+    rng
+        Deprecated alias of ``random_state`` (one release).
+
+    Returns
+    -------
+    float
+    """
+    random_state = renamed_rng("estimate_bandwidth", random_state, rng)
+    X = check_matrix(X, "X")
     if not 0.0 < quantile <= 1.0:
         raise InputError(f"quantile must be in (0, 1]; got {quantile}")
     if n_samples is not None and n_samples < X.shape[0]:
-        X = X[seed_from(rng).choice(X.shape[0], size=n_samples, replace=False)]
+        X = X[seed_from(random_state).choice(X.shape[0], size=n_samples, replace=False)]
+    return _bandwidth(X, quantile)
+
+
+def _bandwidth(X: np.ndarray, quantile: float) -> float:
+    # estimate_bandwidth of checked data
+    from scipy.spatial import cKDTree
+
     k = max(1, int(X.shape[0] * quantile))
     dist, _ = cKDTree(X).query(X, k=k)
     return float(np.mean(dist if k == 1 else dist[:, -1]))
@@ -124,8 +154,15 @@ class MeanShift(ClusterMixin, Estimator):
         X = self._check_X(X, fitting=True)
         check_choice(self.kernel, "kernel", ("flat", "gaussian"))
         max_iter = check_int(self.max_iter, "max_iter", 1)
-        h = estimate_bandwidth(X) if self.bandwidth is None else self.bandwidth
-        h = check_positive(h, "bandwidth")
+        if self.bandwidth is None:
+            h = _bandwidth(X, 0.3)
+            if not h > 0:
+                raise InputError(
+                    f"the estimated bandwidth is 0 ({X.shape[0]} sample(s), all at one "
+                    "point?): pass bandwidth= explicitly"
+                )
+        else:
+            h = check_positive(self.bandwidth, "bandwidth")
         if isinstance(self.seeds, str):
             check_choice(self.seeds, "seeds", ("all", "grid"))
             if self.seeds == "all":
@@ -174,7 +211,7 @@ class MeanShift(ClusterMixin, Estimator):
         active = np.arange(pos.shape[0])
         block = int(max(1, _BLOCK_BYTES // (8 * X.shape[0])))
         n_iter = 0
-        bar = tqdm(total=max_iter + 1, desc="mean shift", disable=not self.progress)
+        bar = progress_bar(total=max_iter + 1, desc="mean shift", disable=not self.progress)
         for it in range(max_iter + 1):
             if active.size == 0:
                 break

@@ -8,25 +8,26 @@ each class are dealt to the folds in turn, so a class of :math:`n_c` samples put
 :math:`\lfloor n_c / k \rfloor` or :math:`\lceil n_c / k \rceil` into each fold.
 
 Estimators are copied with :func:`~robopercept.learning.clone` before each fit, so the
-one passed in is never changed. Everything random takes ``rng`` and gives the same
-splits for the same seed.
+one passed in is never changed. Everything random takes ``random_state``
+(scikit-learn's name: an int seed, None, a Generator or a RandomState; ``rng=`` is a
+deprecated alias for one release) and gives the same splits for the same seed.
 """
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Iterator, Mapping, Sequence, Sized
-from dataclasses import dataclass
+from dataclasses import InitVar, dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from tqdm import tqdm
 
-from robopercept._checks import as_rng, check_int
+from robopercept._checks import check_int
 from robopercept.errors import InputError
 from robopercept.learning import metrics
-from robopercept.learning._base import clone
+from robopercept.learning._base import RandomStateLike, clone, random_generator, renamed_rng
+from robopercept.progress import progress_bar
 
 __all__ = [
     "GridSearch",
@@ -90,6 +91,7 @@ def train_test_split(
     val_size: float | int | None = None,
     stratify: npt.ArrayLike | None = None,
     shuffle: bool = True,
+    random_state: RandomStateLike = None,
     rng: int | np.random.Generator | None = None,
 ) -> list[Any]:
     """Split arrays into train and test parts (and a validation part with ``val_size``).
@@ -103,7 +105,10 @@ def train_test_split(
         Class labels whose shares every part keeps.
     shuffle : bool
         ``False`` keeps the order (train first, then validation, then test).
-    rng : int, Generator or None
+    random_state : int, Generator, RandomState or None
+        Seed of the shuffle (scikit-learn's name); a Generator is advanced.
+    rng
+        Deprecated alias of ``random_state`` (one release).
 
     Returns
     -------
@@ -111,6 +116,7 @@ def train_test_split(
         ``[a_train, a_test, b_train, b_test, ...]`` like scikit-learn, or
         ``[a_train, a_val, a_test, ...]`` when ``val_size`` is given.
     """
+    random_state = renamed_rng("train_test_split", random_state, rng)
     n = _n_samples(arrays)
     n_test = _count(test_size, n, "test_size")
     n_val = _count(val_size, n, "val_size")
@@ -120,7 +126,7 @@ def train_test_split(
             f"cannot split {n} samples into train, validation ({n_val}) and test ({n_test}) "
             "parts with at least one sample each; lower test_size/val_size"
         )
-    gen = as_rng(rng)
+    gen = random_generator(random_state)
     if stratify is not None:
         y = np.asarray(stratify)
         if y.shape[0] != n:
@@ -158,11 +164,28 @@ def _take(a: Any, idx: np.ndarray) -> Any:
 
 @dataclass(frozen=True)
 class KFold:
-    """K consecutive folds (shuffled first with ``shuffle=True``)."""
+    """K consecutive folds (shuffled first with ``shuffle=True``).
+
+    Parameters
+    ----------
+    n_splits : int
+        Number of folds, >= 2.
+    shuffle : bool
+        Shuffle the samples before cutting the folds.
+    random_state : int, Generator, RandomState or None
+        Seed of the shuffle (scikit-learn's name); a Generator or RandomState is
+        advanced by every ``split``. ``rng=`` is its deprecated alias (one release).
+    """
 
     n_splits: int = 5
     shuffle: bool = False
-    rng: int | np.random.Generator | None = None
+    random_state: RandomStateLike = None
+    rng: InitVar[int | np.random.Generator | None] = None
+
+    def __post_init__(self, rng: int | np.random.Generator | None) -> None:
+        if rng is not None:  # deprecated alias of random_state
+            seed = renamed_rng(type(self).__name__, self.random_state, rng, stacklevel=4)
+            object.__setattr__(self, "random_state", seed)
 
     def _check(self, n: int) -> int:
         k = check_int(self.n_splits, "n_splits", 2)
@@ -176,7 +199,7 @@ class KFold:
         """Yield ``(train_indices, test_indices)`` for each fold."""
         n = len(X)
         k = self._check(n)
-        order = as_rng(self.rng).permutation(n) if self.shuffle else np.arange(n)
+        order = random_generator(self.random_state).permutation(n) if self.shuffle else np.arange(n)
         sizes = np.full(k, n // k)
         sizes[: n % k] += 1
         start = 0
@@ -215,7 +238,7 @@ class StratifiedKFold(KFold):
                 f"n_splits={k} is more than the members of every class "
                 f"(largest {counts.max()}); lower n_splits"
             )
-        gen = as_rng(self.rng) if self.shuffle else None
+        gen = random_generator(self.random_state) if self.shuffle else None
         fold = np.empty(n, dtype=np.int64)
         offset = 0
         for c in range(counts.size):
@@ -303,7 +326,7 @@ def cross_val_score(
     splitter = _cv(cv, estimator)
     scores = []
     splits = list(splitter.split(X, y_arr))
-    for train, test in tqdm(splits, desc="cross-validation", disable=not progress):
+    for train, test in progress_bar(splits, desc="cross-validation", disable=not progress):
         est = clone(estimator)
         if y_arr is None:
             est.fit(X[train])
@@ -363,7 +386,9 @@ class GridSearch:
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> GridSearch:
         """Cross-validate every candidate; the best (first on ties) wins."""
         results = []
-        for params in tqdm(self._candidates(), desc="grid search", disable=not self.progress):
+        for params in progress_bar(
+            self._candidates(), desc="grid search", disable=not self.progress
+        ):
             est = clone(self.estimator).set_params(**params)
             scores = cross_val_score(est, X, y, cv=self.cv, scoring=self.scoring)
             results.append(

@@ -64,7 +64,9 @@ class PCA(TransformerMixin, Estimator):
         X = self._check_X(X, fitting=True)
         n, d = X.shape
         if n < 2:
-            raise InputError("PCA needs at least 2 samples to estimate a covariance")
+            raise InputError(
+                f"PCA needs at least 2 samples to estimate a covariance; got {n} sample(s)"
+            )
         self.mean_ = X.mean(axis=0)
         Xc = X - self.mean_
         if self.standardize:

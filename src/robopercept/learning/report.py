@@ -21,11 +21,11 @@ import csv
 import dataclasses
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from robopercept._checks import check_file
 from robopercept.errors import FileFormatError, InputError
 from robopercept.learning.metrics import (
     ClassificationReport,
@@ -73,8 +73,8 @@ def read_table(
     Raises
     ------
     FileFormatError
-        Not a text file, no data row, or a row with another number of fields than
-        the header.
+        Missing file or a folder, not a text file, no data row, or a row with another
+        number of fields than the header.
     InputError
         No column ``label``, no feature column, or a non-numeric feature column.
 
@@ -87,7 +87,7 @@ def read_table(
     >>> X.tolist(), y.tolist(), names
     ([[1.0, 2.0], [3.0, 4.0]], ['x', 'y'], ['a', 'b'])
     """
-    path = Path(path)
+    path = check_file(path, "a CSV file")
     try:
         with path.open(newline="") as fh:
             rows = [row for row in csv.reader(fh) if row]

@@ -43,7 +43,12 @@ from numba import njit
 
 from robopercept._checks import check_choice, check_int, check_positive
 from robopercept.errors import InputError
-from robopercept.learning._base import ClassifierMixin, Estimator, seed_from
+from robopercept.learning._base import (
+    ClassifierMixin,
+    Estimator,
+    RandomStateLike,
+    seed_from,
+)
 
 __all__ = ["SVC", "LinearSVC", "kernel_matrix"]
 
@@ -422,6 +427,22 @@ class LinearSVC(ClassifierMixin, Estimator):
     (``"squared_hinge"``, the default). The intercept is learned as the weight of a
     constant feature ``intercept_scaling`` (so it is regularized too, like liblinear).
 
+    Parameters
+    ----------
+    C : float
+        Price of a margin violation.
+    loss : {"squared_hinge", "hinge"}
+    fit_intercept : bool
+    intercept_scaling : float
+    tol : float
+        Stop when the projected gradient's spread is below it.
+    max_iter : int
+        Epochs per one-vs-rest problem.
+    random_state : int, Generator, RandomState or None
+        Seed of the coordinate order (scikit-learn's name).
+    rng : int, Generator or None
+        Deprecated alias of ``random_state`` (one release): ``fit`` warns and uses it.
+
     Attributes
     ----------
     coef_ : (1, d) or (c, d) ndarray
@@ -438,6 +459,7 @@ class LinearSVC(ClassifierMixin, Estimator):
         intercept_scaling: float = 1.0,
         tol: float = 1e-4,
         max_iter: int = 1000,
+        random_state: RandomStateLike = None,
         rng: int | np.random.Generator | None = None,
     ) -> None:
         self.C = C
@@ -446,6 +468,7 @@ class LinearSVC(ClassifierMixin, Estimator):
         self.intercept_scaling = intercept_scaling
         self.tol = tol
         self.max_iter = max_iter
+        self.random_state = random_state
         self.rng = rng
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> LinearSVC:
@@ -461,7 +484,7 @@ class LinearSVC(ClassifierMixin, Estimator):
         Xa = np.ascontiguousarray(Xa)
         c = self.classes_.size
         targets = [1] if c == 2 else list(range(c))
-        seed = int(seed_from(self.rng).integers(0, 2**63))
+        seed = int(seed_from(self._random_state()).integers(0, 2**63))
         W = []
         epochs = 0
         for k in targets:

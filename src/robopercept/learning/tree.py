@@ -39,6 +39,7 @@ from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClassifierMixin,
     Estimator,
+    RandomStateLike,
     RegressorMixin,
     check_target,
     seed_from,
@@ -514,6 +515,7 @@ class _BaseTree(Estimator):
         min_samples_split: int = 2,
         min_samples_leaf: int = 1,
         max_features: int | float | str | None = None,
+        random_state: RandomStateLike = None,
         rng: int | np.random.Generator | None = None,
     ) -> None:
         self.criterion = criterion
@@ -521,6 +523,7 @@ class _BaseTree(Estimator):
         self.min_samples_split = min_samples_split
         self.min_samples_leaf = min_samples_leaf
         self.max_features = max_features
+        self.random_state = random_state
         self.rng = rng
 
     def _grow(
@@ -578,8 +581,11 @@ class DecisionTreeClassifier(ClassifierMixin, _BaseTree):
         Fewest samples each child must keep.
     max_features : int, float, "sqrt", "log2" or None
         Features examined per node (drawn at random); None: all.
+    random_state : int, Generator, RandomState or None
+        The order features are examined in (ties between equally good splits), and the
+        features drawn with ``max_features`` (scikit-learn's name).
     rng : int, Generator or None
-        The order features are examined in (ties between equally good splits).
+        Deprecated alias of ``random_state`` (one release): ``fit`` warns and uses it.
 
     Attributes
     ----------
@@ -599,6 +605,7 @@ class DecisionTreeClassifier(ClassifierMixin, _BaseTree):
         min_samples_split: int = 2,
         min_samples_leaf: int = 1,
         max_features: int | float | str | None = None,
+        random_state: RandomStateLike = None,
         rng: int | np.random.Generator | None = None,
     ) -> None:
         super().__init__(
@@ -607,6 +614,7 @@ class DecisionTreeClassifier(ClassifierMixin, _BaseTree):
             min_samples_split=min_samples_split,
             min_samples_leaf=min_samples_leaf,
             max_features=max_features,
+            random_state=random_state,
             rng=rng,
         )
 
@@ -614,7 +622,7 @@ class DecisionTreeClassifier(ClassifierMixin, _BaseTree):
         """Grow the tree on ``X`` (N, d) and labels ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
         codes = self._encode_labels(y, X.shape[0])
-        seed = int(seed_from(self.rng).integers(0, 2**63))
+        seed = int(seed_from(self._random_state()).integers(0, 2**63))
         samples = np.arange(X.shape[0], dtype=np.int64)
         tree = self._grow(X, codes, np.zeros(1), samples, self.classes_.size, seed)
         self._finish(tree)
@@ -643,6 +651,7 @@ class DecisionTreeRegressor(RegressorMixin, _BaseTree):
         min_samples_split: int = 2,
         min_samples_leaf: int = 1,
         max_features: int | float | str | None = None,
+        random_state: RandomStateLike = None,
         rng: int | np.random.Generator | None = None,
     ) -> None:
         super().__init__(
@@ -651,14 +660,15 @@ class DecisionTreeRegressor(RegressorMixin, _BaseTree):
             min_samples_split=min_samples_split,
             min_samples_leaf=min_samples_leaf,
             max_features=max_features,
+            random_state=random_state,
             rng=rng,
         )
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> DecisionTreeRegressor:
         """Grow the tree on ``X`` (N, d) and targets ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
-        y = check_target(y, X.shape[0])
-        seed = int(seed_from(self.rng).integers(0, 2**63))
+        y = check_target(y, X.shape[0], type(self).__name__)
+        seed = int(seed_from(self._random_state()).integers(0, 2**63))
         samples = np.arange(X.shape[0], dtype=np.int64)
         tree = self._grow(X, np.zeros(1, dtype=np.int64), y, samples, 0, seed)
         self._finish(tree)

@@ -62,7 +62,7 @@ def detections_from_mask(
 
 def moving_blobs(
     n_frames: int = 60,
-    size: tuple[int, int] = (240, 320),
+    size: tuple[int, int] = (320, 240),
     *,
     n_blobs: int = 3,
     radius: tuple[float, float] = (12.0, 22.0),
@@ -80,13 +80,19 @@ def moving_blobs(
     ``illumination_drift`` (a fraction, 0.25: 25 % brighter at the end); Gaussian
     noise of ``noise_std`` (0-255 scale) is added to every frame.
 
+    Parameters
+    ----------
+    n_frames : int
+    size : (width, height)
+        Frame size, as OpenCV's sizes (the frames' shape is ``(height, width)``).
+
     Returns
     -------
     frames : (n_frames, H, W) uint8 ndarray
     masks : (n_frames, H, W) bool ndarray
     """
     gen = np.random.default_rng(rng)
-    h, w = size
+    w, h = size
     from robopercept.imaging.filters import gaussian_blur
 
     texture = gaussian_blur(gen.uniform(0, 1, (h, w)), 3.0)
