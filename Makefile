@@ -7,10 +7,18 @@ PIP    := $(PY) -m pip -q --disable-pip-version-check
 
 .PHONY: demo test lint bench clean syslibs
 
+# Installing ends with `robopercept warmup`: numba compiles every command's kernels once,
+# in parallel, into its on-disk cache (a few minutes on 2 cores), so no command's first
+# run waits for the compiler. It runs again only when the sources change.
 $(VENV)/.core:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --upgrade pip
 	$(PIP) install -e .
+	touch $@
+
+$(VENV)/.warm: $(VENV)/.core $(shell find src -name '*.py' 2>/dev/null)
+	@echo "make: compiling every command's kernels ahead of time (robopercept warmup; once per install, a few minutes on 2 cores)"
+	$(VENV)/bin/robopercept warmup
 	touch $@
 
 # Open3D and pyrealsense2 (test references) load the system library libusb-1.0; install it
@@ -30,7 +38,7 @@ $(VENV)/.dev: $(VENV)/.core pyproject.toml | syslibs
 	touch $@
 
 # Main job: the RGB-D plane tracker on the built-in synthetic scene -> robopercept-out/
-demo: $(VENV)/.core
+demo: $(VENV)/.warm
 	$(VENV)/bin/robopercept demo --out robopercept-out
 
 # Every test, with the reference libraries installed.

@@ -43,6 +43,8 @@ FLOORS: dict[str, int] = {
     "__init__": 1,
     "errors": 1,
     "_checks": 1,
+    "progress": 1,
+    "jit": 1,
     "imaging": 2,
     "geometry": 2,
     "estimation": 2,

@@ -103,8 +103,10 @@ def build_parser() -> argparse.ArgumentParser:
         learn,
         meanshift,
         plane_track,
+        rgbd_import,
         stereo,
         track,
+        warmup,
     )
 
     parser = _Parser(
@@ -128,12 +130,14 @@ def build_parser() -> argparse.ArgumentParser:
         cloud,
         learn,
         plane_track,
+        rgbd_import,
         bgsub,
         flow,
         meanshift,
         track,
         stereo,
         calibrate,
+        warmup,
     ):
         module.register(sub)
     return parser
@@ -155,6 +159,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _main(parser, argv, debug)
 
 
+def _run_command(args: argparse.Namespace) -> int:
+    """``args.func(args)``, saying so while numba compiles kernels on first use
+    (:class:`~robopercept.jit.CompileNotice`; silent with ``--quiet``)."""
+    from robopercept.cli.warmup import first_use_seconds
+    from robopercept.jit import CompileNotice
+
+    command = str(args.command)
+    quiet = bool(getattr(args, "quiet", False))
+    with CompileNotice(command, first_use_seconds(command), enabled=not quiet):
+        return int(args.func(args) or 0)
+
+
 def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None, debug: bool) -> int:
     try:
         args = parser.parse_args(argv)
@@ -162,7 +178,7 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None, debug: bo
         if not getattr(args, "func", None):
             parser.print_help()
             return 0
-        return int(args.func(args) or 0)
+        return _run_command(args)
     except BrokenPipeError:  # output piped into `head` and closed: not an error
         sys.stderr.close()
         return 0

@@ -39,6 +39,7 @@ from robopercept.pipelines.plane_tracking import (
     PlaneTrackResult,
     summarize,
 )
+from robopercept.progress import progress_bar
 from robopercept.sources.frames import RGBDFrame
 from robopercept.viz import draw_lines, draw_text
 from robopercept.viz.plot import Panel, Series, plot_series
@@ -266,7 +267,8 @@ def run_plane_tracking(
     fps : float
         Frame rate of the video.
     progress : bool
-        Show a progress bar (tqdm) on stderr.
+        Show progress on stderr (:func:`~robopercept.progress.progress_bar`: a bar on a
+        terminal, a few lines otherwise).
 
     Returns
     -------
@@ -274,8 +276,6 @@ def run_plane_tracking(
         The summary also written to ``summary.json``; ``"stopped"`` says why a run ended
         early (``"interrupted"`` for Ctrl-C, or the source's error).
     """
-    from tqdm import tqdm
-
     if max_frames is not None and max_frames < 1:
         raise InputError(f"max_frames must be >= 1; got {max_frames}")
     tracker = PlaneTracker(config)
@@ -285,7 +285,7 @@ def run_plane_tracking(
     stopped: str | None = None
     start = time.perf_counter()
     outputs = PlaneTrackOutputs(out_dir, video=video, fps=fps)
-    bar = tqdm(total=total, unit="frame", disable=not progress, desc="plane tracking")
+    bar = progress_bar(total=total, unit="frame", disable=not progress, desc="plane tracking")
     try:
         it = iter(frames)
         count = 0
@@ -310,7 +310,9 @@ def run_plane_tracking(
         bar.close()
         skipped = getattr(frames, "skipped", [])
         n_skipped = len(skipped) if not isinstance(skipped, int) else skipped
-        summary = outputs.summary(skipped=n_skipped, wall_seconds=time.perf_counter() - start)
+        wall = time.perf_counter() - start
+        summary = outputs.summary(skipped=n_skipped, wall_seconds=wall)
+        summary["wall_seconds"] = round(wall, 3)
         summary["wall_fps_including_source"] = summary.pop("fps", math.nan)
         ms = summary.get("ms_per_stage_median", {}).get("total")
         summary["fps"] = 1000.0 / ms if ms else None

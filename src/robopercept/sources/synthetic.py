@@ -424,7 +424,11 @@ class SyntheticRGBDScene:
         kd, kc = self.depth_intrinsics, self.color_intrinsics
         if self._rays_d is None:  # type: ignore[attr-defined]
             object.__setattr__(self, "_rays_d", pixel_rays(kd))
-            object.__setattr__(self, "_rays_c", pixel_rays(kc))
+            # colour rays turned into the depth frame once (the rig is rigid)
+            r_depth_color = invert(self._T)[:3, :3]  # type: ignore[attr-defined]
+            object.__setattr__(
+                self, "_rays_c", np.ascontiguousarray(pixel_rays(kc) @ r_depth_color.T)
+            )
         depth, board_mask = self._render_depth(rects, groups, board_id, rng)
         color = self._render_color(rects, groups, colors, rng)
         return RGBDFrame(
@@ -492,7 +496,7 @@ class SyntheticRGBDScene:
     ) -> np.ndarray:
         kc = self.color_intrinsics
         T_depth_color = invert(self._T)  # type: ignore[attr-defined]
-        rays = np.ascontiguousarray(self._rays_c @ T_depth_color[:3, :3].T)  # type: ignore[attr-defined]
+        rays = self._rays_c  # type: ignore[attr-defined]
         out = np.empty((rays.shape[0], 3), dtype=np.uint8)
         key = np.uint64(rng.integers(0, 2**63))
         origin = np.ascontiguousarray(T_depth_color[:3, 3])
