@@ -129,6 +129,13 @@ def summary_table(summary: dict[str, Any]) -> str:
             f"speed             {_fmt(summary.get('fps'), ' fps', 1)} "
             f"({ms['total']:.1f} ms/frame: {stages})"
         )
+    wall = summary.get("wall_seconds")
+    if wall:
+        rate = summary.get("wall_fps_including_source")
+        lines.append(
+            f"wall time         {wall:.1f} s ({_fmt(rate, ' frames/s', 1)} with the source "
+            "and the outputs; the speed above is the tracker alone)"
+        )
     if summary.get("stopped"):
         lines.append(f"stopped early     {summary['stopped']}")
     return "\n".join(lines)
@@ -136,6 +143,7 @@ def summary_table(summary: dict[str, Any]) -> str:
 
 def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
     from robopercept.pipelines.plane_outputs import run_plane_tracking
+    from robopercept.sources.realsense import SourceError
 
     summary = run_plane_tracking(
         source,
@@ -147,13 +155,14 @@ def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
         progress=not args.quiet,
     )
     print(summary_table(summary))
+    stopped = summary.get("stopped") or ""
+    if summary["frames"] == 0:  # nothing tracked: not a success, and no video or plot
+        why = stopped or f"{summary['skipped_frames']} skipped as unreadable"
+        raise InputError(f"no frame was tracked ({why}): check --source")
     print(f"outputs in {args.out}/: {', '.join(summary['outputs'])}")
-    if summary["frames"] == 0:  # nothing tracked: not a success
-        raise InputError(
-            f"no frame was tracked ({summary['skipped_frames']} skipped as unreadable): "
-            "check --source"
-        )
-    return 130 if summary.get("stopped") == "interrupted" else 0
+    if stopped.startswith("source failed"):  # outputs cover the frames before the failure
+        raise SourceError(f"{stopped} after {summary['frames']} frames")
+    return 130 if stopped == "interrupted" else 0
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -178,12 +187,11 @@ def _plane_track(args: argparse.Namespace) -> int:
 
 
 def _synth(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
+    from robopercept.progress import progress_bar
     from robopercept.sources import SyntheticRGBDScene, write_tum_folder
 
     scene = SyntheticRGBDScene(n_frames=args.frames, seed=args.seed)
-    frames = tqdm(scene, total=len(scene), unit="frame", desc="rendering", disable=args.quiet)
+    frames = progress_bar(scene, unit="frame", desc="rendering", disable=args.quiet)
     out = write_tum_folder(args.out_dir, frames)
     print(f"wrote {len(scene)} frames to {out}/ (camera.json, planes.csv)", file=sys.stdout)
     return 0

@@ -109,6 +109,8 @@ class RealSenseSource:
         pyrealsense2 missing, or a recording without a depth or colour stream.
     FileFormatError
         A recording that cannot be opened.
+    SourceError
+        Live camera: none connected, or none with the serial number given.
 
     Notes
     -----
@@ -140,6 +142,29 @@ class RealSenseSource:
         self.timeout = float(timeout)
         self.max_frames = max_frames
         self.skipped: list[tuple[int, str]] = []
+        if self.path is None:
+            self._check_connected()
+
+    def _check_connected(self) -> None:
+        """Raise :class:`SourceError` now, not at the first frame, when no camera (or
+        not the one with the serial number asked for) is connected."""
+        rs = self.rs
+        try:
+            serials = [
+                d.get_info(rs.camera_info.serial_number) for d in rs.context().query_devices()
+            ]
+        except RuntimeError as exc:
+            raise SourceError(f"cannot list the RealSense cameras: {exc}") from None
+        if not serials:
+            raise SourceError(
+                "no RealSense camera found: connect one (USB 3), or replay a recording with "
+                "--source FILE.bag (or FILE.db3)"
+            )
+        if self.device is not None and str(self.device) not in serials:
+            raise SourceError(
+                f"no RealSense camera with serial number {self.device}; connected: "
+                f"{', '.join(serials)}"
+            )
 
     def _start(self) -> tuple[Any, Any]:
         rs = self.rs

@@ -3,11 +3,14 @@
 Layout (the TUM benchmark's, plus two files of ours)::
 
     rgb.txt        "timestamp rgb/<name>.png" per line ('#' comments)
-    depth.txt      "timestamp depth/<name>.png" per line (16-bit PNG)
+    depth.txt      "timestamp depth/<name>.png" per line (16-bit PNG, PGM or TIFF)
     rgb/, depth/   the images
     camera.json    {"depth": {"width", "height", "fx", "fy", "cx", "cy", "model", "coeffs"},
                     "color": {same}, "T_color_depth": 4x4 list, "depth_scale": m per unit}
     planes.csv     optional ground truth: "frame,nx,ny,nz,d" (n . x = d on the plane)
+
+``robopercept rgbd-import`` (:mod:`robopercept.sources.rgbd_import`) writes this layout
+from other RGB-D folders; docs/tracking.md describes ``camera.json`` field by field.
 
 Colour and depth images are associated by nearest timestamp (each depth image to the
 closest colour image within ``max_difference`` seconds), like the benchmark's
@@ -31,7 +34,26 @@ from robopercept.geometry import CameraIntrinsics
 from robopercept.imaging.io import read_image, write_image
 from robopercept.sources.frames import RGBDFrame
 
-__all__ = ["TUMFolderSource", "read_camera_json", "write_tum_folder"]
+__all__ = [
+    "CAMERA_JSON_HELP",
+    "TUMFolderSource",
+    "associate_timestamps",
+    "camera_dict",
+    "read_camera_json",
+    "read_timestamp_list",
+    "write_tum_folder",
+]
+
+CAMERA_JSON_HELP = (
+    "camera.json needs depth, color, T_color_depth and depth_scale: 'depth' and 'color' "
+    "cameras (each width, height, fx, fy, cx, cy in pixels; optional model and coeffs), "
+    "'T_color_depth' (4x4, depth frame to colour frame, metres) and 'depth_scale' "
+    "(metres per depth unit: 0.0002 for TUM's 5000 units per metre, 0.001 for "
+    "millimetres); write it with `robopercept rgbd-import SRC_DIR OUT_DIR --preset "
+    "fr1|fr2|fr3|ros-default` (or --intrinsics fx,fy,cx,cy), see docs/tracking.md"
+)
+"""The schema of ``camera.json`` in one line, with the command that writes it: the
+remedy every camera.json error ends with."""
 
 
 def _intrinsics(d: dict[str, Any], what: str, path: Path) -> CameraIntrinsics:
@@ -46,20 +68,48 @@ def _intrinsics(d: dict[str, Any], what: str, path: Path) -> CameraIntrinsics:
             d.get("model", "none"),
             tuple(d.get("coeffs", (0.0,) * 5)),
         )
-    except (KeyError, TypeError, ValueError) as exc:
-        raise FileFormatError(f"{path}: bad '{what}' camera ({exc})") from None
+    except (KeyError, TypeError, ValueError, InputError) as exc:
+        raise FileFormatError(f"{path}: bad '{what}' camera ({exc}); {CAMERA_JSON_HELP}") from None
 
 
 def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """``camera.json`` as ``{"depth": CameraIntrinsics, "color": ..., "T_color_depth":
-    (4, 4) ndarray, "depth_scale": float}``."""
+    """Read a ``camera.json`` calibration.
+
+    The file holds ``{"depth": CAM, "color": CAM, "T_color_depth": 4x4 list,
+    "depth_scale": float}`` with ``CAM = {"width", "height", "fx", "fy", "cx", "cy"}`` in
+    pixels plus optional ``"model"`` (a :class:`CameraIntrinsics` lens model, default
+    ``"none"``) and ``"coeffs"`` (``k1, k2, p1, p2, k3``). ``T_color_depth`` maps
+    depth-frame points into the colour frame (metres); ``depth_scale`` is metres per
+    raw depth unit, so ``z = depth_scale * D`` (RealSense's convention; the inverse of
+    TUM's and Open3D's "units per metre").
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    dict
+        ``{"depth": CameraIntrinsics, "color": CameraIntrinsics, "T_color_depth": (4, 4)
+        ndarray, "depth_scale": float}``.
+
+    Raises
+    ------
+    FileFormatError
+        Missing, unreadable or incomplete file; the message ends with
+        :data:`CAMERA_JSON_HELP` (the fields and ``robopercept rgbd-import``).
+    """
     p = Path(path)
+    if not p.is_file():
+        raise FileFormatError(f"{p}: missing; {CAMERA_JSON_HELP}")
     try:
         raw = json.loads(p.read_text())
     except OSError as exc:
-        raise FileFormatError(f"{p}: cannot read ({exc.strerror or exc})") from None
+        raise FileFormatError(
+            f"{p}: cannot read ({exc.strerror or exc}); {CAMERA_JSON_HELP}"
+        ) from None
     except json.JSONDecodeError as exc:
-        raise FileFormatError(f"{p}: not valid JSON ({exc})") from None
+        raise FileFormatError(f"{p}: not valid JSON ({exc}); {CAMERA_JSON_HELP}") from None
     try:
         T = np.asarray(raw["T_color_depth"], dtype=np.float64)
         scale = float(raw["depth_scale"])
@@ -70,17 +120,40 @@ def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
             "depth_scale": scale,
         }
     except (KeyError, TypeError, ValueError) as exc:
-        raise FileFormatError(
-            f"{p}: needs depth, color, T_color_depth and depth_scale ({exc})"
-        ) from None
+        raise FileFormatError(f"{p}: field {exc} missing or wrong; {CAMERA_JSON_HELP}") from None
     if T.shape != (4, 4) or not scale > 0:
-        raise FileFormatError(f"{p}: T_color_depth must be 4x4 and depth_scale > 0")
+        raise FileFormatError(
+            f"{p}: T_color_depth must be a 4x4 list and depth_scale > 0; {CAMERA_JSON_HELP}"
+        )
     return out
 
 
-def _read_list(path: Path) -> list[tuple[float, str]]:
+def read_timestamp_list(path: str | os.PathLike[str]) -> list[tuple[float, str]]:
+    """Read a TUM list such as ``rgb.txt``: ``timestamp file`` per line.
+
+    Blank lines and ``#`` comments are skipped; columns after the second are ignored.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    list of (float, str)
+        Timestamp (seconds) and the file path relative to the list's folder.
+
+    Raises
+    ------
+    FileFormatError
+        A missing file (naming ``robopercept rgbd-import`` for other layouts) or a line
+        that is not ``timestamp file``.
+    """
+    path = Path(path)
     if not path.exists():
-        raise FileFormatError(f"{path}: missing (a TUM folder needs rgb.txt and depth.txt)")
+        raise FileFormatError(
+            f"{path}: missing (a tracker folder needs rgb.txt, depth.txt and camera.json; "
+            "convert other layouts with `robopercept rgbd-import SRC_DIR OUT_DIR`)"
+        )
     rows = []
     for n, line in enumerate(path.read_text().splitlines(), 1):
         line = line.strip()
@@ -94,10 +167,33 @@ def _read_list(path: Path) -> list[tuple[float, str]]:
     return rows
 
 
-def _associate(
+def associate_timestamps(
     depth: list[tuple[float, str]], rgb: list[tuple[float, str]], max_difference: float
 ) -> list[tuple[float, str, str]]:
-    """Each depth image with the nearest colour image (within ``max_difference`` s)."""
+    """Pair each depth image with the colour image nearest in time.
+
+    For each depth entry ``(t, d)`` the colour entry ``(t_c, c)`` minimising
+    ``|t - t_c|`` is taken if ``|t - t_c| <= max_difference``; otherwise the depth image
+    is left out. Unlike the TUM benchmark's ``associate.py`` a colour image may serve
+    two depth images (it does not remove matched entries).
+
+    Parameters
+    ----------
+    depth, rgb : list of (float, str)
+        ``(timestamp, file)`` as :func:`read_timestamp_list` returns them.
+    max_difference : float
+        Largest gap, seconds.
+
+    Returns
+    -------
+    list of (float, str, str)
+        ``(depth timestamp, depth file, colour file)`` in the order of ``depth``.
+
+    Examples
+    --------
+    >>> associate_timestamps([(1.0, "d1"), (2.0, "d2")], [(1.01, "c1"), (5.0, "c5")], 0.02)
+    [(1.0, 'd1', 'c1')]
+    """
     if not rgb:
         return []
     t_rgb = np.array([t for t, _ in rgb])
@@ -143,8 +239,10 @@ class TUMFolderSource:
         if not self.path.is_dir():
             raise FileFormatError(f"{self.path}: not a folder")
         self.camera = read_camera_json(self.path / "camera.json")
-        self.pairs = _associate(
-            _read_list(self.path / "depth.txt"), _read_list(self.path / "rgb.txt"), max_difference
+        self.pairs = associate_timestamps(
+            read_timestamp_list(self.path / "depth.txt"),
+            read_timestamp_list(self.path / "rgb.txt"),
+            max_difference,
         )
         self.planes = self._read_planes(self.path / "planes.csv")
         self.skipped: list[tuple[int, str]] = []
@@ -186,7 +284,11 @@ class TUMFolderSource:
                 self.skipped.append((index, str(exc)))
                 continue
             if depth.dtype != np.uint16 or depth.ndim != 2:
-                reason = f"{dpath}: depth must be a 16-bit single-channel PNG; got {depth.dtype}"
+                reason = (
+                    f"{dpath}: depth must be 16-bit single-channel (PNG, PGM or TIFF); got "
+                    f"{depth.dtype} {depth.shape}: convert the folder with `robopercept "
+                    "rgbd-import` (it reads float and 16-bit depth)"
+                )
                 warnings.warn(f"skipping frame {index}: {reason}", stacklevel=2)
                 self.skipped.append((index, reason))
                 continue
@@ -204,7 +306,9 @@ class TUMFolderSource:
             )
 
 
-def _camera_dict(k: CameraIntrinsics) -> dict[str, Any]:
+def camera_dict(k: CameraIntrinsics) -> dict[str, Any]:
+    """The camera as camera.json stores it: ``width``, ``height``, ``fx``, ``fy``,
+    ``cx``, ``cy`` (pixels), ``model`` and ``coeffs`` (see ``docs/tracking.md``)."""
     return {
         "width": k.width,
         "height": k.height,
@@ -244,8 +348,8 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
                 raise InputError(f"frames must be RGBDFrame objects; got {type(f).__name__}")
             if not wrote_camera:
                 cam = {
-                    "depth": _camera_dict(f.depth_intrinsics),
-                    "color": _camera_dict(f.color_intrinsics),
+                    "depth": camera_dict(f.depth_intrinsics),
+                    "color": camera_dict(f.color_intrinsics),
                     "T_color_depth": f.T_color_depth.tolist(),
                     "depth_scale": f.depth_scale,
                 }
