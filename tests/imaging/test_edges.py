@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -108,3 +110,61 @@ def test_log_zero_crossings_hand_case_and_contrast():
         log_zero_crossings(log, 1.5)
     with pytest.raises(InputError, match="2-D"):
         log_zero_crossings(np.zeros((3, 3, 3)))
+
+
+# -- grey-level scale: thresholds follow the image's dtype ------------------------------
+
+
+@pytest.mark.parametrize("sigma", [0.0, 1.0, 2.0])
+def test_uint16_image_with_thresholds_times_257_gives_the_8bit_edges(camera, sigma):
+    """img16 = 257 * img8 maps 0..255 onto 0..65535; its gradients are 257 times as
+    large, so thresholds 257 times as large give the same edges (measured: identical, the
+    float32 arithmetic scales exactly here), and no warning."""
+    from robopercept.imaging.edges import grey_level_scale
+
+    s = grey_level_scale(np.uint16)
+    img16 = camera.astype(np.uint16) * 257
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        a = canny(camera, 50, 150, sigma=sigma)
+        b = canny(img16, 50 * s, 150 * s, sigma=sigma)
+    np.testing.assert_array_equal(a, b)
+    assert 0.01 < a.mean() < 0.2
+
+
+def test_8bit_thresholds_on_a_16bit_image_warn_and_say_the_fix(camera):
+    img16 = camera.astype(np.uint16) * 257
+    with pytest.warns(UserWarning, match=r"look like 8-bit .* 257 times them \(12850 and 38550\)"):
+        noisy = canny(img16, 50, 150)
+    # what the user saw in issue 22: many times the edges of the 8-bit image
+    assert noisy.mean() > 3 * canny(camera, 50, 150).mean()
+    # 8-bit data in a uint16 array (max <= 255) is on the 8-bit scale: no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(
+            canny(camera.astype(np.uint16), 50, 150), canny(camera, 50, 150)
+        )
+
+
+def test_thresholds_above_the_largest_possible_gradient_warn(camera):
+    # no 8-bit image has a Sobel gradient above 8 * 255 = 2040 (|gx| + |gy|, each at
+    # most 4 * 255); the steepest step, 0 | 255, reaches 4 * 255 = 1020 along x
+    step = np.zeros((5, 6), np.uint8)
+    step[:, 3:] = 255
+    assert canny(step, 1019, 1019, sigma=0, l2_gradient=False).any()
+    assert not canny(step, 1020, 1020, sigma=0, l2_gradient=False).any()
+    with pytest.warns(UserWarning, match=r"above 2040.*divide by 257"):
+        assert not canny(camera, 12850, 38550).any()
+    with pytest.warns(UserWarning, match=r"above 8.*divide by 255"):
+        assert not canny(camera.astype(np.float32) / 255, 50, 150).any()
+
+
+def test_grey_level_scale():
+    from robopercept.imaging.edges import grey_level_scale
+
+    assert grey_level_scale(np.uint8) == 1.0
+    assert grey_level_scale(np.uint16) == 257.0
+    assert 255 * grey_level_scale(np.uint16) == 65535  # the full ranges correspond
+    assert grey_level_scale(np.float32) == grey_level_scale(np.float64) == 1 / 255
+    with pytest.raises(InputError, match=r"int32.*uint8, uint16 or float"):
+        grey_level_scale(np.int32)

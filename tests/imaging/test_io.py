@@ -166,3 +166,180 @@ def test_snapshot_video_writer_keeps_frames_written_before_an_error(tmp_path):
     empty = SnapshotVideoWriter(tmp_path / "none.mp4", 10.0)
     empty.close()
     assert empty.written == [] and not (tmp_path / "none.mp4").exists()
+
+
+# -- 16-bit images: gray and colour, PNG, TIFF and PGM/PPM ------------------------------
+
+
+def _png_row_filters(path) -> set[int]:
+    """The filter types of the rows of a (non-interlaced) PNG, read from its IDAT stream
+    (so a test can show which reconstruction it exercised)."""
+    import struct
+    import zlib
+
+    data = path.read_bytes()
+    pos, idat = 8, b""
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos : pos + 4])
+        if data[pos + 4 : pos + 8] == b"IDAT":
+            idat += data[pos + 8 : pos + 8 + length]
+        pos += 12 + length
+    w, h, depth, ctype = struct.unpack(">IIBB", data[16:26])
+    row = 1 + w * {0: 1, 2: 3, 4: 2, 6: 4}[ctype] * depth // 8
+    return set(zlib.decompress(idat)[::row][:h])
+
+
+def _cv2_rgb(path):
+    """``cv2.imread(path, cv2.IMREAD_UNCHANGED)`` with colour turned to RGB(A) order."""
+    cv2 = pytest.importorskip("cv2")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img.ndim == 3:
+        img = img[..., [2, 1, 0, 3][: img.shape[2]]]
+    return img
+
+
+@pytest.mark.parametrize("ext", [".png", ".tiff", ".tif", ".ppm", ".pgm", ".pnm"])
+@pytest.mark.parametrize("channels", [1, 3, 4])
+def test_16bit_gray_and_colour_round_trip_exactly_and_read_as_opencv(tmp_path, rng, ext, channels):
+    """Random uint16 (all 16 bits used) through write_image and read_image: the same
+    array, uint16; OpenCV (IMREAD_UNCHANGED, BGR turned to RGB) reads the same file the
+    same, so the files are standard ones. PGM/PPM have no alpha: RGBA is refused there."""
+    shape = (23, 31) if channels == 1 else (23, 31, channels)
+    img = rng.integers(0, 65536, shape, dtype=np.uint16)
+    path = tmp_path / f"img{ext}"
+    if channels == 4 and ext in (".ppm", ".pgm", ".pnm"):
+        with pytest.raises(InputError, match=r"not RGBA: write \.png or \.tiff"):
+            write_image(path, img)
+        return
+    back = read_image(write_image(path, img))
+    assert back.dtype == np.uint16 and back.shape == img.shape
+    np.testing.assert_array_equal(back, img)
+    np.testing.assert_array_equal(_cv2_rgb(path), img)
+    if channels > 1:  # colour to gray keeps 16 bits (BT.601, rgb_to_gray's rounding)
+        from robopercept.imaging import rgb_to_gray
+
+        gray = read_image(path, mode="gray")
+        assert gray.dtype == np.uint16
+        np.testing.assert_array_equal(gray, rgb_to_gray(img[..., :3]))
+
+
+@pytest.mark.parametrize(
+    "png_filter", ["NONE", "SUB", "UP", "AVG", "PAETH", "ALL_FILTERS"], ids=str.lower
+)
+@pytest.mark.parametrize("channels", [3, 4])
+def test_reads_16bit_colour_png_written_by_opencv_with_every_row_filter(
+    tmp_path, astronaut, rng, png_filter, channels
+):
+    """A photo with all 16 bits used (astronaut * 257 plus noise in the low byte), written
+    by OpenCV (libpng) with each PNG row filter forced: read exactly. The filters found
+    in the file show that each reconstruction (none, sub, up, average, Paeth) ran."""
+    cv2 = pytest.importorskip("cv2")
+    img = astronaut[:96, :128].astype(np.uint16) * 257 + rng.integers(0, 257, (96, 128, 3))
+    img = img.astype(np.uint16)
+    if channels == 4:
+        img = np.dstack([img, rng.integers(0, 65536, (96, 128), dtype=np.uint16)])
+    path = tmp_path / "cv.png"
+    flag = getattr(cv2, f"IMWRITE_PNG_{png_filter}" if png_filter == "ALL_FILTERS" else
+                   f"IMWRITE_PNG_FILTER_{png_filter}")  # fmt: skip
+    bgr = img[..., [2, 1, 0, 3][:channels]]
+    assert cv2.imwrite(str(path), bgr, [cv2.IMWRITE_PNG_FILTER, flag])
+    used = _png_row_filters(path)
+    if png_filter == "ALL_FILTERS":  # libpng's adaptive choice mixes them
+        assert len(used) >= 3, used
+    else:
+        assert used == {["NONE", "SUB", "UP", "AVG", "PAETH"].index(png_filter)}, used
+    back = read_image(path)
+    assert back.dtype == np.uint16
+    np.testing.assert_array_equal(back, img)
+
+
+def test_16bit_gray_alpha_png_hand_built(tmp_path):
+    """A 2x2 gray + alpha 16-bit PNG made by hand (filter 'none', big-endian samples):
+    read as stored; 'gray' keeps the gray channel, 'rgb' replicates it."""
+    import struct
+    import zlib
+
+    want = np.array([[[0, 65535], [1, 256]], [[258, 4660], [65534, 0]]], np.uint16)
+    rows = b"".join(b"\x00" + want[y].astype(">u2").tobytes() for y in range(2))
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(body))
+            + kind
+            + body
+            + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+        )
+
+    png = (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", 2, 2, 16, 4, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(rows))
+        + chunk(b"IEND", b"")
+    )
+    path = tmp_path / "ga.png"
+    path.write_bytes(png)
+    got = read_image(path)
+    assert got.dtype == np.uint16
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(read_image(path, mode="gray"), want[..., 0])
+    np.testing.assert_array_equal(read_image(path, mode="rgb"), np.repeat(want[..., :1], 3, 2))
+    # the same file with its interlace flag set is refused, saying how to re-save it
+    ihdr = struct.pack(">IIBBBBB", 2, 2, 16, 4, 0, 0, 1)
+    (tmp_path / "adam7.png").write_bytes(png.replace(png[8:33], chunk(b"IHDR", ihdr)))
+    with pytest.raises(FileFormatError, match=r"adam7\.png: interlaced .* without interlacing"):
+        read_image(tmp_path / "adam7.png")
+
+
+def test_16bit_colour_png_errors_name_the_file(tmp_path, rng):
+    good = write_image(tmp_path / "c.png", rng.integers(0, 65536, (20, 20, 3), dtype=np.uint16))
+    data = good.read_bytes()
+    (tmp_path / "cut.png").write_bytes(data[: len(data) // 2])
+    with pytest.raises(FileFormatError, match=r"cut\.png: truncated PNG"):
+        read_image(tmp_path / "cut.png")
+    flipped = bytearray(data)
+    flipped[60] ^= 0xFF  # inside the IDAT data
+    (tmp_path / "crc.png").write_bytes(bytes(flipped))
+    with pytest.raises(FileFormatError, match=r"crc\.png: corrupt PNG \(CRC mismatch"):
+        read_image(tmp_path / "crc.png")
+
+
+def test_8bit_formats_refuse_uint16_naming_the_alternative(tmp_path):
+    img = np.full((4, 4, 3), 40000, np.uint16)
+    for ext, fmt in ((".jpg", "JPEG"), (".jpeg", "JPEG"), (".bmp", "BMP")):
+        with pytest.raises(InputError, match=rf"{fmt} holds 8 bits per channel.*\.png or \.tiff"):
+            write_image(tmp_path / f"x{ext}", img)
+        assert not (tmp_path / f"x{ext}").exists()
+    # the conversion the message names gives the 8-bit image
+    np.testing.assert_array_equal((img / 257).round().astype(np.uint8), 156)
+
+
+def test_16bit_netpbm_plain_and_binary_keep_the_stored_values(tmp_path):
+    """Hand-written 16-bit PPM/PGM: a plain (ASCII) P3 with a comment, and a binary P5
+    with maxval 4095 (12-bit data): values as stored, nothing rescaled (as OpenCV)."""
+    (tmp_path / "p3.ppm").write_bytes(
+        b"P3\n# two pixels\n2 1\n65535\n0 1 2  # first\n 65535 300 4096\n"
+    )
+    got = read_image(tmp_path / "p3.ppm")
+    assert got.dtype == np.uint16
+    np.testing.assert_array_equal(got, [[[0, 1, 2], [65535, 300, 4096]]])
+    values = np.array([[0, 4095, 256], [17, 1000, 2]], np.uint16)
+    (tmp_path / "p5.pgm").write_bytes(b"P5 3 2 4095\n" + values.astype(">u2").tobytes())
+    got = read_image(tmp_path / "p5.pgm")
+    assert got.dtype == np.uint16
+    np.testing.assert_array_equal(got, values)
+    np.testing.assert_array_equal(_cv2_rgb(tmp_path / "p5.pgm"), values)
+    (tmp_path / "cut.pgm").write_bytes(b"P5 3 2 4095\n" + values.astype(">u2").tobytes()[:-3])
+    with pytest.raises(FileFormatError, match=r"cut\.pgm: truncated P5"):
+        read_image(tmp_path / "cut.pgm")
+
+
+@pytest.mark.realdata
+def test_reads_real_16bit_pgm_depth_as_opencv():
+    """NYU's 16-bit Kinect PGM and a slambook2 depth PGM: uint16, equal to OpenCV's."""
+    for path in (
+        data_path("rgbd", "single_frames_open3d", "NYU_depth.pgm"),
+        data_path("rgbd", "rgbd5_poses_slambook2", "depth", "1.pgm"),
+    ):
+        depth = read_image(path)
+        assert depth.dtype == np.uint16 and depth.max() > 255
+        np.testing.assert_array_equal(depth, _cv2_rgb(path))

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, load_gray
+from robopercept.cli._args import UsageError, image_output, load_gray
 
 __all__ = ["register"]
 
@@ -26,13 +26,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--threshold",
         type=float,
         default=None,
-        help="grey level; pixels above it are foreground (default: Otsu)",
+        help="grey level on the image's scale (0..255 for 8-bit, 0..65535 for 16-bit "
+        "images); pixels above it are foreground (default: Otsu)",
     )
     b.add_argument("--invert", action="store_true", help="dark objects on a bright background")
     b.add_argument("--min-area", type=int, default=20, help="drop blobs smaller than this (pixels)")
     b.add_argument("--connectivity", type=int, choices=(4, 8), default=8)
     b.add_argument("--json", action="store_true", help="machine-readable output on stdout")
-    b.add_argument("-o", "--output", default=None, help="write an overlay PNG of the blobs")
+    b.add_argument(
+        "-o",
+        "--output",
+        type=image_output,
+        default=None,
+        help="write an overlay image of the blobs",
+    )
     b.set_defaults(func=run_blobs)
 
 
@@ -71,6 +78,7 @@ def run_blobs(args: argparse.Namespace) -> int:
                 "threshold": thr,
                 "connectivity": args.connectivity,
                 "blobs": records,
+                **({"overlay": str(args.output)} if args.output else {}),
             },
             sys.stdout,
             indent=2,

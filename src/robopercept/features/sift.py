@@ -519,8 +519,9 @@ def sift(
     Parameters
     ----------
     image : (H, W) or (H, W, 3) ndarray
-        uint8 image, or float in [0, 1] (scaled by 255, the scale the thresholds are
-        written for); colour is converted to gray first.
+        uint8 image, uint16 (scaled by 255 / 65535) or float in [0, 1] (scaled by 255):
+        the thresholds are written for the 0..255 scale; colour is converted to gray
+        first.
     n_features : int
         Keep the strongest ``n_features`` (by response; ties with the last are kept, as
         OpenCV's ``retainBest``); 0 keeps all.

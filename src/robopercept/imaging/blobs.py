@@ -493,8 +493,9 @@ def otsu_threshold(image: np.ndarray) -> float:
     :math:`\omega_0(t) \omega_1(t) (\mu_0(t) - \mu_1(t))^2` of the grey-level histogram.
 
     Integer images use one bin per level (uint8: 256 bins), like
-    ``cv2.threshold(..., cv2.THRESH_OTSU)``, which returns the same level; float images use
-    256 bins over their range. Pixels ``> t`` are foreground.
+    ``cv2.threshold(..., cv2.THRESH_OTSU)``, which returns the same level; other images
+    (uint16, float) use 256 bins over their range. The level is on the image's own scale
+    (0..65535 for uint16, nothing rescaled). Pixels ``> t`` are foreground.
 
     Parameters
     ----------

@@ -10,22 +10,124 @@ The five steps (Canny 1986):
 4. double threshold: magnitude > ``high`` is strong, > ``low`` is weak;
 5. hysteresis: weak pixels are kept only when 8-connected, through other weak pixels, to a
    strong one.
+
+Thresholds are gradient magnitudes in the grey levels of the image as given: 0..255 for
+uint8, 0..65535 for uint16, [0, 1] for floats; nothing is rescaled. ``cv2.Canny`` takes
+uint8 only (it refuses uint16); ``skimage.feature.canny`` works on floats in [0, 1].
+:func:`grey_level_scale` converts thresholds written in 8-bit grey levels to another
+dtype's scale (times 257 for uint16), and :func:`canny` warns when the thresholds cannot
+be on the image's scale (8-bit-sized thresholds on a 16-bit image, and the reverse).
 """
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from numba import njit
+from numpy.typing import DTypeLike
 
 from robopercept._checks import check_image, check_range
 from robopercept.errors import InputError
 from robopercept.imaging.color import rgb_to_gray
 from robopercept.imaging.filters import gaussian_blur
 
-__all__ = ["canny", "log_zero_crossings"]
+__all__ = ["canny", "grey_level_scale", "log_zero_crossings"]
 
 _TAN_22_5 = float(np.tan(np.deg2rad(22.5)))
 _TAN_67_5 = float(np.tan(np.deg2rad(67.5)))
+#: the largest Sobel gradient magnitude of an 8-bit image, |g_x| + |g_y| <= 2 * 4 * 255
+#: (L2 is smaller); a float image in [0, 1] has at most 8
+_MAX_8BIT_GRADIENT = 8.0 * 255.0
+
+
+def grey_level_scale(dtype: DTypeLike) -> float:
+    r"""The factor that takes a grey level (or a threshold) written on the 8-bit scale
+    0..255 to the scale of images of ``dtype``.
+
+    A grey level :math:`v_8` of an 8-bit image is :math:`v = s\,v_8` on the full range of
+    ``dtype``, with :math:`s = 1` for uint8, :math:`s = 65535 / 255 = 257` for uint16
+    (``v8 * 257`` maps 0..255 onto 0..65535 exactly, as ``cv2.convertScaleAbs`` inverts)
+    and :math:`s = 1 / 255` for floating point images in [0, 1] (skimage's scale). Every
+    threshold of :func:`canny` is linear in the grey levels, so it scales by the same
+    :math:`s`.
+
+    Parameters
+    ----------
+    dtype : numpy dtype
+        uint8, uint16 or a floating point type.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        Another dtype (int32, int16, ...), which has no agreed full range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> grey_level_scale(np.uint16) * 150
+    38550.0
+    >>> grey_level_scale(np.float32) * 255
+    1.0
+    """
+    dt = np.dtype(dtype)
+    if dt == np.uint8:
+        return 1.0
+    if dt == np.uint16:
+        return 257.0
+    if dt.kind == "f":
+        return 1.0 / 255.0
+    raise InputError(
+        f"no grey-level scale for {dt} images: convert to uint8, uint16 or float in [0, 1] "
+        "(e.g. image.astype(np.uint16) when the values fit in 0..65535)"
+    )
+
+
+def _threshold_scale_warning(gray: np.ndarray, low: float, high: float) -> str | None:
+    """A warning when the thresholds cannot be on the scale of ``gray``, else None.
+
+    Two cheap tests, on the largest value of the image ``peak``: a uint16 image that uses
+    more than 8 bits (``peak > 255``) with ``high <= _MAX_8BIT_GRADIENT`` (thresholds sized
+    for 8-bit data: on 16 bits they sit at about two 8-bit grey levels, i.e. noise); a
+    uint8 image, or a float image in [0, 1], with ``low`` above the largest gradient such
+    an image can have (no pixel can ever pass: 16-bit or 8-bit thresholds).
+
+    Parameters
+    ----------
+    gray : (H, W) ndarray
+    low, high : float
+
+    Returns
+    -------
+    str or None
+    """
+    if gray.dtype == np.uint16 and high <= _MAX_8BIT_GRADIENT:
+        peak = int(gray.max())
+        if peak > 255:
+            return (
+                f"canny thresholds {low:g} and {high:g} look like 8-bit grey levels (at most "
+                f"{_MAX_8BIT_GRADIENT:g}, the largest gradient of an 8-bit image) but the image "
+                f"is 16-bit (values up to {peak}): for the edges of its 8-bit version use 257 "
+                f"times them ({low * 257:g} and {high * 257:g}); if they are in the image's "
+                "own units (a depth map in mm), ignore this warning"
+            )
+    elif gray.dtype == np.uint8 and low > _MAX_8BIT_GRADIENT:
+        return (
+            f"canny threshold {low:g} is above {_MAX_8BIT_GRADIENT:g}, the largest gradient "
+            "of an 8-bit image, so there can be no edge: for thresholds written for 16-bit "
+            f"images divide by 257 ({low / 257:.4g} and {high / 257:.4g})"
+        )
+    elif gray.dtype.kind == "f" and low > 8.0 and float(gray.max()) <= 1.0:
+        return (
+            f"canny threshold {low:g} is above 8, the largest gradient of an image in "
+            "[0, 1], so there can be no edge: for thresholds in 8-bit grey levels divide "
+            f"by 255 ({low / 255:.4g} and {high / 255:.4g})"
+        )
+    return None
 
 
 @njit(cache=True, nogil=True)
@@ -148,17 +250,25 @@ def canny(
 ) -> np.ndarray:
     """Canny edges.
 
-    Thresholds are in the units of the gradient magnitude of ``image`` as given (a uint8
-    image's gradients are in grey levels per pixel, times the Sobel gain of 4 per axis);
-    nothing is rescaled. With ``sigma=0`` this is ``cv2.Canny(image, low, high,
-    L2gradient=l2_gradient)``; colour images are converted to gray first (OpenCV instead
+    Thresholds are in the units of the gradient magnitude of ``image`` as given, that is
+    in its grey levels per pixel times the Sobel gain of 4 per axis: 0..255 grey levels
+    for uint8, 0..65535 for uint16, [0, 1] for floats; nothing is rescaled. With
+    ``sigma=0`` this is ``cv2.Canny(image, low, high, L2gradient=l2_gradient)`` for
+    uint8; ``cv2.Canny`` refuses uint16, and the uint16 image ``257 * img8`` with
+    thresholds ``257 * low``, ``257 * high`` gives the edges of ``img8`` (see
+    :func:`grey_level_scale`). Colour images are converted to gray first (OpenCV instead
     takes the channel of largest gradient).
 
     Parameters
     ----------
     image : (H, W) or (H, W, 3) ndarray
+        uint8, uint16 or float.
     low, high : float
-        Hysteresis thresholds, ``0 <= low <= high``.
+        Hysteresis thresholds, ``0 <= low <= high``, on the image's scale (above). A
+        :class:`UserWarning` says when they cannot be: a uint16 image using more than 8
+        bits with ``high <= 2040`` (the largest gradient of an 8-bit image, so 8-bit
+        thresholds: multiply by 257), or a uint8 / [0, 1] float image with ``low`` above
+        its largest possible gradient (no edge can pass).
     sigma : float
         Gaussian smoothing before differentiation; 0 skips it.
     l2_gradient : bool
@@ -176,6 +286,9 @@ def canny(
     if low > high:
         raise InputError(f"low must be <= high; got low={low:g}, high={high:g}: swap them")
     gray = rgb_to_gray(image) if image.ndim == 3 else image
+    message = _threshold_scale_warning(gray, low, high)
+    if message:
+        warnings.warn(message, stacklevel=2)
     work = gray
     if sigma > 0:
         work = gaussian_blur(gray if gray.dtype.kind == "f" else gray.astype(np.float32), sigma)
