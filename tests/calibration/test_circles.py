@@ -79,10 +79,42 @@ def test_symmetric_light_circles():
     assert not miss.found and "circle" in miss.reason
 
 
+def _stamp_discs(img, centres, radius=10.0, value=25):
+    """Dark discs (stray blobs: screws, holes) painted at image points."""
+    out = img.copy()
+    yy, xx = np.mgrid[: img.shape[0], : img.shape[1]]
+    for x, y in centres:
+        out[np.hypot(xx - x, yy - y) < radius] = value
+    return out
+
+
+def test_stray_blobs_on_the_lattice_extension():
+    """Two blobs above the first row and one left of row 5, each where the grid's
+    lattice would continue (the Open3DV eye-to-hand case: the grown lattice holds 47
+    circles, and the detector gave up before it searched for the 4 x 11 window): the
+    grid is found, its centres within 0.1 px of the projected ones and in order."""
+    rvec, tvec = [0.15, -0.2, 0.1], [-0.05, -0.07, 0.45]
+    strays = _project(np.array([[0.015, -0.015, 0], [0.075, -0.015, 0], [-0.015, 0.075, 0]]),
+                      rvec, tvec)  # fmt: skip
+    img = _stamp_discs(render_circles(K, NO_DIST, rvec, tvec), strays)
+    det = find_circles_grid(img, (4, 11))
+    assert det.found, det.reason
+    truth = _project(circles_grid_points((4, 11), 0.03), rvec, tvec)
+    assert np.linalg.norm(det.centers - truth, axis=1).max() < 0.1
+    # the three strays are circle-like blobs to the detector (44 + 3), so the grid was
+    # found among more candidates than it has circles
+    assert "only 47 circle-like blobs" in find_circles_grid(img, (4, 12)).reason
+
+
 def test_wrong_size_and_blank_are_reported():
+    """A 4 x 10 (or 3 x 11) pattern fits inside the rendered 4 x 11 grid, but which
+    window would be a guess: not found, and the reason says the grid is larger."""
     img = render_circles(K, NO_DIST, [0.1, -0.1, 0.0], [-0.05, -0.07, 0.45])
     det = find_circles_grid(img, (4, 10))
     assert not det.found and "4 x 10" in det.reason and len(det.centers) > 0
+    assert "holds a 4 x 11 grid" in det.reason and "more circles than" in det.reason
+    det = find_circles_grid(img, (3, 11))
+    assert not det.found and "holds a 4 x 11 grid" in det.reason
     blank = find_circles_grid(np.full((120, 160), 200, np.uint8), (4, 11))
     assert not blank.found and "are the circles dark?" in blank.reason
 
@@ -177,3 +209,27 @@ def test_open3dv_hand_eye(open3dv):
     cos = np.clip((np.trace(R.T @ res.X[:3, :3]) - 1) / 2, -1, 1)
     assert np.degrees(np.arccos(cos)) < 0.1
     assert np.linalg.norm(t.ravel() - res.X[:3, 3]) < 3.0
+
+
+EYE_TO_HAND = ("calibration", "handeye_open3dv", "eye_to_hand")
+
+
+@pytest.mark.realdata
+def test_open3dv_eye_to_hand_captures_match_opencv():
+    """The five eye-to-hand captures (1022 x 768, 7 x 11 light circles, stray bright
+    screws on the robot flange and a label on the lattice's extension in pos0-2): all
+    five found, as cv2.findCirclesGrid finds them, in its order; centres 0.06-0.07 px
+    apart on average (we measure) and at most 0.23 px, so the bounds are 0.1 px mean and
+    0.3 px max (the same blob-centroid averaging; contour against pixel moments)."""
+    cv2 = pytest.importorskip("cv2")
+    from robopercept.imaging import read_image
+
+    folder = data_path(*EYE_TO_HAND)
+    for k in range(5):
+        g = read_image(folder / f"pos{k}.png", mode="gray")
+        det = find_circles_grid(g, (7, 11), blob_color="light")
+        assert det.found, (k, det.reason)
+        ok, c = cv2.findCirclesGrid(255 - g, (7, 11), flags=cv2.CALIB_CB_ASYMMETRIC_GRID)
+        assert ok
+        err = np.linalg.norm(det.centers - c.reshape(-1, 2), axis=1)
+        assert err.mean() < 0.1 and err.max() < 0.3, (k, err.mean(), err.max())

@@ -75,14 +75,15 @@ def test_handeye_from_pose_files(tmp_path, capsys):
         targets.append(str(tmp_path / f"target{i}.txt"))
     out = tmp_path / "he.json"
     code = main(["handeye", "--robot-poses", *robots, "--target-poses", *targets,
-                 "-o", str(out), "--json"])  # fmt: skip
+                 "--setup", "eye-in-hand", "-o", str(out), "--json"])  # fmt: skip
     assert code == 0
     data = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(np.array(data["X"]), X, atol=1e-6)
     direct = calibrate_hand_eye(G, [invert(g @ X) @ Y for g in G])
     np.testing.assert_allclose(np.array(data["X"]), direct.X, atol=1e-6)
     assert json.loads(out.read_text())["rotation_rms_deg"] < 1e-6
-    code = main(["handeye", "--robot-poses", *robots, "--target-poses", *targets[:5]])
+    code = main(["handeye", "--robot-poses", *robots, "--target-poses", *targets[:5],
+                 "--setup", "eye-in-hand"])  # fmt: skip
     assert code == 2 and "6 robot poses but 5 target poses" in capsys.readouterr().err
 
 
@@ -150,7 +151,7 @@ def test_handeye_from_circle_grid_images(tmp_path, capsys):
     out = tmp_path / "he.json"
     code = main(["handeye", "--robot-poses", *poses, "--images", *images, "--camera", str(cam),
                  "--target", "acircles", "--circles", "light", "--board", "7x11",
-                 "--square", "20", "-o", str(out)])  # fmt: skip
+                 "--square", "20", "--setup", "eye-in-hand", "-o", str(out)])  # fmt: skip
     assert code == 0
     text = capsys.readouterr()
     assert "skipped station 6" in text.err and "AX = XB residuals over 15 pairs" in text.out
@@ -162,3 +163,73 @@ def test_handeye_from_circle_grid_images(tmp_path, capsys):
     robot = [read_xyz_rpy(f, "rpy_xyz") for f in poses[:6]]
     ref = calibrate_hand_eye(robot, targets, "eye_in_hand", "tsai")
     assert np.allclose(json.loads(out.read_text())["X"], ref.X, atol=1e-9)
+
+
+def test_handeye_setup_is_required(tmp_path, capsys):
+    """Without --setup the command stops with a usage error (exit 2) that names both
+    setups: eye in hand and eye to hand give different X from the same files, and a
+    silent default gives a wrong X without a sign."""
+    from robopercept.geometry import se3
+
+    files = []
+    for i in range(3):
+        _write_matrix(tmp_path / f"m{i}.txt", se3(np.eye(3), [i, 0.0, 0.0]))
+        files.append(str(tmp_path / f"m{i}.txt"))
+    code = main(["handeye", "--robot-poses", *files, "--pose-format", "matrix",
+                 "--target-poses", *files])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "--setup is required" in err and "eye-in-hand" in err and "eye-to-hand" in err
+    assert not (tmp_path / "handeye.json").exists()
+    assert main(["handeye", "--robot-poses", *files, "--target-poses", *files,
+                 "--setup", "eye-on-base"]) == 2  # fmt: skip
+    assert "invalid choice" in capsys.readouterr().err
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("fmt", ["yml", "xml"])
+def test_handeye_eye_to_hand_images_with_an_opencv_camera_file(tmp_path, capsys, fmt):
+    """The Open3DV eye-to-hand captures (fixed camera, 7 x 11 light circles, 40 mm, on
+    the gripper) through --images with the camera in an OpenCV YAML / XML file written by
+    cv2.FileStorage: all 5 stations are used and X = T_base_camera equals the library's
+    on the same detections (1e-9: the same code)."""
+    cv2 = pytest.importorskip("cv2")
+    from robopercept.calibration import (
+        board_pose,
+        calibrate_hand_eye,
+        circles_grid_points,
+        find_circles_grid,
+        read_xyz_rpy,
+    )
+    from robopercept.imaging import read_image
+
+    folder = data_path("calibration", "handeye_open3dv", "eye_to_hand")
+    p = np.loadtxt(folder / "param.txt")
+    K, dist = p[:9].reshape(3, 3), p[9:14]
+    cam = tmp_path / f"camera.{fmt}"
+    fs = cv2.FileStorage(str(cam), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 1022)
+    fs.write("image_height", 768)
+    fs.write("camera_matrix", K)
+    fs.write("distortion_coefficients", dist.reshape(1, 5))
+    fs.release()
+    images = [str(folder / f"pos{k}.png") for k in range(5)]
+    poses = [str(folder / f"pos{k}.txt") for k in range(5)]
+    out = tmp_path / "he.json"
+    code = main(["handeye", "--robot-poses", *poses, "--images", *images, "--camera", str(cam),
+                 "--target", "acircles", "--circles", "light", "--board", "7x11",
+                 "--square", "40", "--setup", "eye-to-hand", "-o", str(out)])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr()
+    assert "skipped" not in text.err
+    assert "X = T_base_camera" in text.out and "AX = XB residuals over 10 pairs" in text.out
+    obj = circles_grid_points((7, 11), 40.0)
+    targets = []
+    for path in images:
+        det = find_circles_grid(read_image(path, mode="gray"), (7, 11), blob_color="light")
+        targets.append(board_pose(obj, det.centers, K, dist))
+    robot = [read_xyz_rpy(f, "rpy_xyz") for f in poses]
+    ref = calibrate_hand_eye(robot, targets, "eye_to_hand", "tsai")
+    data = json.loads(out.read_text())
+    assert data["setup"] == "eye_to_hand" and data["stations"] == 5
+    np.testing.assert_allclose(data["X"], ref.X, atol=1e-9)

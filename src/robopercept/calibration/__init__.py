@@ -1,5 +1,6 @@
 """Camera calibration: chessboard and circle-grid detection, intrinsics (Zhang's method with
-Levenberg-Marquardt refinement), stereo calibration, hand-eye calibration (AX = XB)."""
+Levenberg-Marquardt refinement), stereo calibration, hand-eye calibration (AX = XB), and
+calibration files (JSON, OpenCV FileStorage YAML/XML)."""
 
 from robopercept.calibration.chessboard import (
     ChessboardDetection,
@@ -11,6 +12,7 @@ from robopercept.calibration.circles import (
     circles_grid_points,
     find_circles_grid,
 )
+from robopercept.calibration.filestorage import read_opencv_storage
 from robopercept.calibration.handeye import (
     HandEyeResult,
     calibrate_hand_eye,
@@ -48,6 +50,7 @@ __all__ = [
     "hand_eye_residuals",
     "load_calibration",
     "pose_from_xyz_rpy",
+    "read_opencv_storage",
     "read_xyz_rpy",
     "rectify_pair",
     "reprojection_errors",

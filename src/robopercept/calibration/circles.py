@@ -22,10 +22,16 @@ ordered as ``cv2.findCirclesGrid`` orders them.
    predicted by the parallelogram rule :math:`p_{a,b} \approx p_{a-1,b} + p_{a,b-1} -
    p_{a-1,b-1}` (or by extrapolation along a line) and filled by the nearest circle
    within 0.3 of the local spacing, so perspective is followed.
-3. **Labelling.** Lattice coordinates :math:`(a, b)` become board coordinates, and the
-   one of the lattice's eight symmetries under which they fill the pattern exactly,
-   with the board's x step turning clockwise into its y step in the image (a board
-   seen from the front), gives the order.
+3. **Labelling.** Lattice coordinates :math:`(a, b)` become board coordinates. Under
+   each of the lattice's eight symmetries, every placement (translation) of the
+   ``w x h`` pattern whose nodes all hold a circle, with the board's x step turning
+   clockwise into its y step in the image (a board seen from the front), is a
+   candidate; the one candidate set of circles gives the order. A lattice may be larger
+   than the pattern: stray blobs (screws, holes, a label) that happen to sit on the
+   lattice's extension join it, and ``cv2.findCirclesGrid`` still finds the pattern
+   there, so the pattern-sized window is taken, provided it is the only complete one
+   and the lattice holds no complete ``(w + 1) x h`` or ``w x (h + 1)`` grid (then the
+   board is larger than ``pattern_size`` says, and any window of it would be a guess).
 
 **Order and board coordinates**, as OpenCV's calibration sample: row ``i`` of
 ``pattern_size[1]``, ``pattern_size[0]`` centres per row; the symmetric grid's centre
@@ -217,40 +223,76 @@ def _grow(pts: np.ndarray, s: int, tree: cKDTree, limit: int) -> dict:
 _SYMMETRIES = tuple((swap, sx, sy) for swap in (False, True) for sx in (1, -1) for sy in (1, -1))
 
 
-def _label(grid: dict, pts: np.ndarray, w: int, h: int, asymmetric: bool) -> np.ndarray | None:
-    """The centres in detection order, or None when the lattice is not the pattern."""
-    if len(grid) != w * h:
-        return None
-    ab = np.array(list(grid.keys()), dtype=np.int64)
-    idx = np.array(list(grid.values()))
-    # board coordinates (x, y) in half-spacings (asymmetric: the lattice runs along the
-    # diagonals) or spacings (symmetric)
-    base = np.stack([ab[:, 0] - ab[:, 1], ab[:, 0] + ab[:, 1]], 1) if asymmetric else ab
+def _pattern(w: int, h: int, asymmetric: bool) -> np.ndarray:
+    """Board coordinates ``(w h, 2)`` of the centres in detection order, integer:
+    half-spacings ``(2 j + i mod 2, i)`` (asymmetric) or spacings ``(j, i)``."""
     i, j = np.divmod(np.arange(w * h), w)
-    want = np.stack([2 * j + i % 2, i], 1) if asymmetric else np.stack([j, i], 1)
-    want_set = {tuple(p) for p in want}
-    found = []
+    return np.stack([2 * j + i % 2, i], 1) if asymmetric else np.stack([j, i], 1)
+
+
+def _windows(
+    base: np.ndarray, idx: np.ndarray, pts: np.ndarray, want: np.ndarray, *, handed: bool
+) -> dict[frozenset, list[np.ndarray]]:
+    """Every placement of the pattern ``want`` (board coordinates) on the lattice (board
+    coordinates ``base`` of circles ``idx``) under the lattice's eight symmetries in
+    which each pattern node holds a circle: ``{circles: [ordered centres, ...]}``, one
+    entry per distinct set of circles. ``handed`` keeps only placements whose x step
+    turns clockwise into the y step in the image (the board seen from the front)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    mask = np.zeros((int(want[:, 1].max()) + 1, int(want[:, 0].max()) + 1), dtype=bool)
+    mask[want[:, 1], want[:, 0]] = True
+    board = np.column_stack([want, np.ones(len(want))])
+    out: dict[frozenset, list[np.ndarray]] = {}
     for swap, sx, sy in _SYMMETRIES:
         xy = base[:, ::-1] if swap else base
         xy = xy * np.array([sx, sy])
-        y = xy[:, 1] - xy[:, 1].min()
-        x = xy[:, 0] - xy[y == 0, 0].min()
-        if {(int(p), int(q)) for p, q in zip(x, y, strict=True)} != want_set:
+        xy = xy - xy.min(axis=0)
+        occ = np.full((xy[:, 1].max() + 1, xy[:, 0].max() + 1), -1, dtype=np.int64)
+        occ[xy[:, 1], xy[:, 0]] = idx
+        if occ.shape[0] < mask.shape[0] or occ.shape[1] < mask.shape[1]:
             continue
-        # affine fit board -> image: the x step must turn clockwise into the y step
-        A = np.column_stack([x, y, np.ones(len(x))])
-        M, *_ = np.linalg.lstsq(A, pts[idx], rcond=None)
-        if M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0] <= 0:
-            continue
-        order = np.empty(w * h, dtype=np.int64)
-        row = y
-        col = (x - row % 2) // 2 if asymmetric else x
-        order[row * w + col] = idx
-        found.append(pts[order])
+        full = (sliding_window_view(occ >= 0, mask.shape) | ~mask).all(axis=(2, 3))
+        for oy, ox in np.argwhere(full):
+            sel = occ[oy + want[:, 1], ox + want[:, 0]]  # centre k -> circle index
+            if handed:  # affine fit board -> image: x step turns clockwise into y step
+                M, *_ = np.linalg.lstsq(board, pts[sel], rcond=None)
+                if M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0] <= 0:
+                    continue
+            out.setdefault(frozenset(sel.tolist()), []).append(pts[sel])
+    return out
+
+
+def _label(
+    grid: dict, pts: np.ndarray, w: int, h: int, asymmetric: bool
+) -> tuple[np.ndarray | None, str]:
+    """The centres in detection order, or None and why the lattice is not the pattern
+    ("" when it is too small or holds no complete pattern).
+
+    A lattice larger than the pattern (stray blobs on the lattice's extension: screws,
+    holes, a label) still gives the pattern when exactly one ``w x h`` window of it is
+    complete and no ``(w + 1) x h`` or ``w x (h + 1)`` grid is (which would make the
+    board larger than ``pattern_size`` says, and the window a guess).
+    """
+    n = w * h
+    if len(grid) < n:
+        return None, ""
+    ab = np.array(list(grid.keys()), dtype=np.int64)
+    idx = np.array(list(grid.values()), dtype=np.int64)
+    # board coordinates (x, y) in half-spacings (asymmetric: the lattice runs along the
+    # diagonals) or spacings (symmetric)
+    base = np.stack([ab[:, 0] - ab[:, 1], ab[:, 0] + ab[:, 1]], 1) if asymmetric else ab
+    found = _windows(base, idx, pts, _pattern(w, h, asymmetric), handed=True)
     if not found:
-        return None
+        return None, ""
+    if len(grid) > n:
+        for ww, hh in ((w + 1, h), (w, h + 1)):
+            if _windows(base, idx, pts, _pattern(ww, hh, asymmetric), handed=False):
+                return None, f"a {ww} x {hh} grid"
+    if len(found) > 1:
+        return None, f"{len(found)} different {w} x {h} grids"
     # half-turn symmetric patterns match twice: the first centre higher in the image
-    return min(found, key=lambda c: (c[0, 1], c[0, 0]))
+    return min(next(iter(found.values())), key=lambda c: (c[0, 1], c[0, 0])), ""
 
 
 def find_circles_grid(
@@ -284,7 +326,9 @@ def find_circles_grid(
     Returns
     -------
     CircleGridDetection
-        ``found`` is False (with the reason) unless every circle was found.
+        ``found`` is False (with the reason) unless every circle was found. Extra
+        circles on the grid's extension (stray blobs) are left out; a grid larger than
+        ``pattern_size`` is not found.
     """
     w, h = check_pattern_size(pattern_size, "circles")
     if blob_color not in ("dark", "light"):
@@ -309,6 +353,7 @@ def find_circles_grid(
     order = np.argsort(np.hypot(*(pts - np.median(pts, axis=0)).T), kind="stable")
     used = np.zeros(len(pts), dtype=bool)
     largest: dict = {}
+    ambiguous = ""  # why a lattice holding the pattern was not taken
     tries = 0
     limit = w + h + 2 if asymmetric else max(w, h) + 2
     for s in order:
@@ -321,15 +366,24 @@ def find_circles_grid(
         tries += 1
         if len(grid) > len(largest):
             largest = grid
-        centers = _label(grid, pts, w, h, asymmetric)
+        centers, larger = _label(grid, pts, w, h, asymmetric)
         if centers is not None:
             return CircleGridDetection(True, centers, (w, h), asymmetric)
+        if larger and not ambiguous:
+            ambiguous = f"the lattice of {len(grid)} circles holds {larger}"
         if tries >= max_seeds:
             break
     partial = pts[list(largest.values())] if largest else np.zeros((0, 2))
     kind = "asymmetric" if asymmetric else "symmetric"
-    return CircleGridDetection(
-        False, partial, (w, h), asymmetric,
-        f"no complete {w} x {h} {kind} grid of circles (largest lattice: {len(largest)} "
-        "circles); the whole grid must be visible",
-    )  # fmt: skip
+    if ambiguous:
+        reason = (
+            f"{ambiguous}, so a {w} x {h} {kind} grid of it would be a guess: the grid "
+            "has more circles than the pattern size says (give circles per row x rows of "
+            "the whole grid)"
+        )
+    else:
+        reason = (
+            f"no complete {w} x {h} {kind} grid of circles (largest lattice: {len(largest)} "
+            "circles); the whole grid must be visible"
+        )
+    return CircleGridDetection(False, partial, (w, h), asymmetric, reason)

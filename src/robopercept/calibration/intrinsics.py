@@ -46,6 +46,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_file
+from robopercept.calibration.filestorage import read_opencv_storage
 from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.estimation.models import homography_dlt
 from robopercept.geometry.camera import (
@@ -64,6 +66,7 @@ from robopercept.geometry.transforms import (
 from robopercept.imaging.warp import remap
 
 __all__ = [
+    "CALIBRATION_ALIASES",
     "CalibrationResult",
     "StereoCalibration",
     "board_pose",
@@ -695,28 +698,97 @@ def save_calibration(path: str | Path, result: CalibrationResult | StereoCalibra
     Path(path).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
 
 
+#: other names of the fields, as OpenCV's samples, cv2.FileStorage users and ROS write them
+CALIBRATION_ALIASES: dict[str, tuple[str, ...]] = {
+    "K": ("camera_matrix", "cameraMatrix"),
+    "dist": ("distortion_coefficients", "distCoeffs", "dist_coeffs", "D"),
+    "K1": ("M1", "cameraMatrix1"),
+    "dist1": ("D1", "distCoeffs1"),
+    "K2": ("M2", "cameraMatrix2"),
+    "dist2": ("D2", "distCoeffs2"),
+    "image_size": ("imageSize",),
+}
+
+
 def load_calibration(path: str | Path) -> dict[str, Any]:
-    """Read a calibration JSON written by :func:`save_calibration` (or by hand).
+    """Read a camera calibration: the JSON of :func:`save_calibration` (or by hand), or
+    an OpenCV ``FileStorage`` YAML / XML file (``cv2.FileStorage``, OpenCV's
+    ``calibration`` and ``stereo_calib`` samples, ROS ``camera_info`` YAML).
 
     A mono file has ``K`` and ``dist``; a stereo file ``K1, dist1, K2, dist2, R, T``.
-    Matrices come back as float64 arrays; ``image_size`` as ``(width, height)``.
+    The names OpenCV users write are read as these (:data:`CALIBRATION_ALIASES`):
+    ``camera_matrix`` / ``cameraMatrix`` for ``K``, ``distortion_coefficients`` /
+    ``distCoeffs`` / ``D`` for ``dist``, ``M1``, ``D1``, ``M2``, ``D2`` for the stereo
+    pair, and ``image_width`` with ``image_height`` for ``image_size``. Matrices may be
+    ``!!opencv-matrix`` nodes or ``{rows, cols, data}`` mappings (ROS). Matrices come
+    back as float64 arrays, ``dist`` as the five ``(k1, k2, p1, p2, k3)`` (4 are padded
+    with ``k3 = 0``; OpenCV's 8, 12 or 14 are accepted only when the coefficients past
+    ``k3`` are zero), ``image_size`` as ``(width, height)``; other entries are kept
+    as read.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.json`` file, or a YAML / XML file (told by the content: ``{`` starts
+        JSON, ``<`` XML, ``%YAML`` or anything else YAML).
+
+    Returns
+    -------
+    dict
 
     Raises
     ------
     FileFormatError
-        Not JSON, or missing/ill-shaped fields (named in the message).
+        Unreadable, or missing/ill-shaped fields (named in the message).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> yml = '''%YAML:1.0
+    ... camera_matrix: !!opencv-matrix
+    ...    rows: 3
+    ...    cols: 3
+    ...    dt: d
+    ...    data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]
+    ... distortion_coefficients: !!opencv-matrix
+    ...    rows: 1
+    ...    cols: 5
+    ...    dt: d
+    ...    data: [ -0.2, 0.05, 0., 0., 0. ]
+    ... image_width: 640
+    ... image_height: 480
+    ... '''
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     p = pathlib.Path(d) / "camera.yml"
+    ...     _ = p.write_text(yml)
+    ...     cam = load_calibration(p)
+    >>> cam["K"][0], cam["dist"], cam["image_size"]
+    (array([500.,   0., 320.]), array([-0.2 ,  0.05,  0.  ,  0.  ,  0.  ]), (640, 480))
     """
-    p = Path(path)
+    p = check_file(path, "a camera file (.json from `robopercept calibrate`, or OpenCV .yml/.xml)")
     try:
-        data = json.loads(p.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FileFormatError(f"{p}: not a readable calibration JSON ({exc})") from exc
-    if not isinstance(data, dict):
-        raise FileFormatError(f"{p}: expected a JSON object")
+        text = p.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"{p}: not a readable calibration file ({exc})") from exc
+    if text.lstrip().startswith("{"):
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise FileFormatError(f"{p}: not a readable calibration JSON ({exc})") from exc
+        if not isinstance(data, dict):
+            raise FileFormatError(f"{p}: expected a JSON object")
+    else:
+        data = read_opencv_storage(p)
+    found = ", ".join(sorted(data)) or "nothing"
+    data = _canonical_fields(data, p)
     shapes = {"K": (3, 3), "K1": (3, 3), "K2": (3, 3), "R": (3, 3), "E": (3, 3), "F": (3, 3),
               "T": (3,), "dist": None, "dist1": None, "dist2": None}  # fmt: skip
     if "K" not in data and not {"K1", "K2", "R", "T"} <= data.keys():
-        raise FileFormatError(f"{p}: needs 'K' and 'dist' (mono) or 'K1', 'K2', 'R', 'T' (stereo)")
+        raise FileFormatError(
+            f"{p}: needs a camera matrix 'K' (or 'camera_matrix', 'cameraMatrix') and "
+            "'dist' (or 'distortion_coefficients', 'distCoeffs', 'D') for one camera, or "
+            f"'K1', 'K2', 'R', 'T' (or 'M1', 'M2', 'R', 'T') for a stereo pair; found {found}"
+        )
     out: dict[str, Any] = dict(data)
     for key, shape in shapes.items():
         if key not in data:
@@ -726,15 +798,63 @@ def load_calibration(path: str | Path) -> dict[str, Any]:
         except (TypeError, ValueError) as exc:
             raise FileFormatError(f"{p}: field {key!r} is not numeric") from exc
         if shape is None:
-            a = a.ravel()
-            if a.size not in (4, 5):
-                raise FileFormatError(f"{p}: field {key!r} must hold 4 or 5 coefficients")
-            a = np.r_[a, np.zeros(5)][:5]
-        elif a.shape != shape:
+            a = _five_coefficients(a.ravel(), key, p)
+        elif a.size == np.prod(shape) and a.shape != shape:
+            a = a.reshape(shape)  # T as a 3 x 1 column, as OpenCV writes it
+        if shape is not None and a.shape != shape:
             raise FileFormatError(f"{p}: field {key!r} must have shape {shape}; got {a.shape}")
         if not np.isfinite(a).all():
             raise FileFormatError(f"{p}: field {key!r} is not finite")
         out[key] = a
     if "image_size" in data:
-        out["image_size"] = _size(data["image_size"])
+        try:
+            out["image_size"] = _size(data["image_size"])
+        except InputError as exc:
+            raise FileFormatError(f"{p}: field 'image_size': {exc}") from exc
     return out
+
+
+def _canonical_fields(data: dict[str, Any], p: Path) -> dict[str, Any]:
+    """Rename the aliases of :data:`CALIBRATION_ALIASES` (the first name present wins),
+    join ``image_width`` and ``image_height`` into ``image_size``, and turn
+    ``{rows, cols, data}`` mappings (ROS) into arrays."""
+    out = dict(data)
+    for key, names in CALIBRATION_ALIASES.items():
+        if key not in out:
+            alias = next((n for n in names if n in out), None)
+            if alias is not None:
+                out[key] = out[alias]
+    if "image_size" not in out and {"image_width", "image_height"} <= out.keys():
+        out["image_size"] = (out["image_width"], out["image_height"])
+    for key in ("K", "K1", "K2", "R", "T", "E", "F", "dist", "dist1", "dist2"):
+        v = out.get(key)
+        if isinstance(v, dict) and "data" in v:
+            try:
+                a = np.asarray(v["data"], dtype=np.float64)
+                out[key] = a.reshape(int(v["rows"]), int(v["cols"])) if "rows" in v else a
+            except (KeyError, TypeError, ValueError) as exc:
+                raise FileFormatError(f"{p}: field {key!r}: rows x cols != data ({exc})") from exc
+    model = out.get("distortion_model")
+    if isinstance(model, str) and model not in ("plumb_bob", "rational_polynomial"):
+        raise FileFormatError(
+            f"{p}: distortion_model {model!r} is not OpenCV's radial-tangential model "
+            "(plumb_bob), the one robopercept uses; recalibrate with that model"
+        )
+    return out
+
+
+def _five_coefficients(a: np.ndarray, key: str, p: Path) -> np.ndarray:
+    """``(k1, k2, p1, p2, k3)`` from OpenCV's 4, 5, 8, 12 or 14 coefficients."""
+    if a.size not in (4, 5, 8, 12, 14):
+        raise FileFormatError(
+            f"{p}: field {key!r} must hold 4 or 5 distortion coefficients "
+            f"(k1 k2 p1 p2 [k3]); got {a.size}"
+        )
+    if a.size > 5 and np.any(a[5:] != 0):
+        raise FileFormatError(
+            f"{p}: field {key!r} holds {a.size} coefficients with nonzero k4 and beyond "
+            "(OpenCV's rational, thin-prism or tilted model); robopercept's lens model has "
+            "k1 k2 p1 p2 k3: recalibrate without CALIB_RATIONAL_MODEL, "
+            "CALIB_THIN_PRISM_MODEL and CALIB_TILTED_MODEL"
+        )
+    return np.r_[a, np.zeros(5)][:5]

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, board_size
+from robopercept.cli._args import UsageError, board_size, file_output
 
 __all__ = ["register"]
 
@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("images", nargs="+")
     p.add_argument("--board", type=board_size, required=True, help="inner corners, e.g. 9x6")
     p.add_argument("--square", type=float, default=1.0, help="square side (sets the unit)")
-    p.add_argument("-o", "--output", default="camera.json")
+    p.add_argument("-o", "--output", type=file_output, default="camera.json")
     p.add_argument("--overlays", default=None, help="folder for detection overlays")
     p.add_argument("--undistorted", default=None, help="folder for undistorted previews")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -54,7 +54,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     src = q.add_mutually_exclusive_group(required=True)
     src.add_argument("--target-poses", nargs="+", help="4x4 target-in-camera per station")
     src.add_argument("--images", nargs="+", help="target image per station")
-    q.add_argument("--camera", default=None, help="camera JSON (from calibrate) for --images")
+    q.add_argument(
+        "--camera",
+        default=None,
+        help="camera file for --images: the JSON of calibrate, or OpenCV YAML/XML "
+        "(camera_matrix / K, distortion_coefficients / D, as cv2.FileStorage writes them)",
+    )
     q.add_argument(
         "--target",
         choices=("chessboard", "circles", "acircles"),
@@ -79,9 +84,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="dark",
         help="circle-grid targets: circles darker or lighter than the board",
     )
-    q.add_argument("--setup", choices=("eye-in-hand", "eye-to-hand"), default="eye-in-hand")
+    q.add_argument(
+        "--setup",
+        choices=("eye-in-hand", "eye-to-hand"),
+        default=None,
+        help="required: eye-in-hand (camera on the gripper, target fixed; X = "
+        "T_gripper_camera) or eye-to-hand (camera fixed, target on the gripper; X = "
+        "T_base_camera)",
+    )
     q.add_argument("--method", choices=("tsai", "park", "daniilidis"), default="tsai")
-    q.add_argument("-o", "--output", default="handeye.json")
+    q.add_argument("-o", "--output", type=file_output, default="handeye.json")
     q.add_argument("--json", action="store_true", help="print the result as JSON")
     q.set_defaults(func=run_handeye)
 
@@ -91,8 +103,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Run ``robopercept calibrate`` with the parsed ``args``; returns the exit status."""
-    from tqdm import tqdm
-
     from robopercept.calibration import (
         calibrate_camera,
         chessboard_points,
@@ -102,14 +112,18 @@ def run_calibrate(args: argparse.Namespace) -> int:
     )
     from robopercept.errors import FileFormatError, InputError
     from robopercept.imaging import read_image, write_image
+    from robopercept.progress import progress_bar
     from robopercept.viz import draw_chessboard
 
     if not (np.isfinite(args.square) and args.square > 0):
         raise UsageError(f"--square must be a positive length; got {args.square}")
+    folders = [p for p in args.images if Path(p).is_dir()]
+    if folders:  # not an unreadable photo to skip: the images were meant
+        raise FileFormatError(
+            f"{folders[0]} is a folder; give the image files in it (e.g. {Path(folders[0])}/*.png)"
+        )
     size, names, corners, skipped = None, [], [], []
-    for path in tqdm(
-        args.images, unit="image", desc="chessboard", disable=args.quiet, file=sys.stderr
-    ):
+    for path in progress_bar(args.images, unit="image", desc="chessboard", disable=args.quiet):
         try:
             gray = read_image(path, mode="gray")
         except FileFormatError as exc:
@@ -206,10 +220,16 @@ def _target_poses(args: argparse.Namespace) -> tuple[list[np.ndarray], list[int]
     if args.target_poses:
         return [_matrix_file(p) for p in args.target_poses], list(range(len(args.target_poses)))
     if not (args.camera and args.board and args.square):
-        raise UsageError("--images needs --camera (a calibrate JSON), --board and --square")
+        raise UsageError(
+            "--images needs --camera (the JSON of calibrate, or an OpenCV YAML/XML "
+            "camera file), --board and --square"
+        )
     cam = load_calibration(args.camera)
     if "K" not in cam:
-        raise InputError(f"{args.camera} is not a single-camera calibration (no 'K')")
+        raise InputError(
+            f"{args.camera} is a stereo calibration; --camera needs one camera's "
+            "(K or camera_matrix, and its distortion)"
+        )
     asym = args.target == "acircles"
     if args.target == "chessboard":
         obj = chessboard_points(args.board, args.square)
@@ -236,6 +256,11 @@ def run_handeye(args: argparse.Namespace) -> int:
     from robopercept.calibration import calibrate_hand_eye, read_xyz_rpy
     from robopercept.calibration.handeye import xyz_rpy_from_pose
 
+    if args.setup is None:  # no default: the wrong setup gives a wrong X without a sign
+        raise UsageError(
+            "--setup is required: eye-in-hand (camera on the gripper, target fixed) or "
+            "eye-to-hand (camera fixed, target on the gripper)"
+        )
     sources = args.target_poses or args.images
     if len(sources) != len(args.robot_poses):
         raise UsageError(

@@ -1,0 +1,493 @@
+r"""Reading OpenCV ``FileStorage`` files (YAML and XML) without OpenCV.
+
+``cv2.FileStorage`` writes calibration results (``camera_matrix``,
+``distortion_coefficients``, ...) in a YAML dialect that plain YAML readers refuse: a
+``%YAML:1.0`` directive (with a colon) and ``!!opencv-matrix`` tags on matrices, each
+a mapping of ``rows``, ``cols``, ``dt`` and the row-major ``data``. Its XML form has a
+root ``<opencv_storage>``, matrices as elements with ``type_id="opencv-matrix"``,
+sequences as ``<_>`` children (or space-separated scalars) and strings optionally in
+double quotes. :func:`read_opencv_storage` reads both, and plain YAML of the same shape
+(ROS ``camera_info`` files, hand-written ones), into Python values:
+
+- a matrix becomes an ndarray of the stored type (``dt``: ``u`` uint8, ``c`` int8, ``w``
+  uint16, ``s`` int16, ``i`` int32, ``f`` float32, ``d`` float64, ``h`` float16), shape
+  ``(rows, cols)``, or ``(rows, cols, n)`` for an ``n``-channel ``dt`` such as ``"2f"``
+  (what ``cv2.FileStorage.getNode(name).mat()`` returns); an ``!!opencv-nd-matrix``
+  takes its ``sizes``;
+- mappings become dicts, sequences lists, numbers int or float (``.Inf``, ``.Nan``
+  included), anything else a string.
+
+The YAML reader covers what ``cv2.FileStorage`` writes and common hand-written YAML:
+block mappings and sequences by indentation (``- key: value`` items included), flow
+``[...]`` and ``{...}`` collections over several lines, quoted and plain scalars, ``#``
+comments and the ``---`` / ``...`` document markers. Anchors, aliases and block
+scalars (``|``, ``>``) are refused with :class:`~robopercept.errors.FileFormatError`.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robopercept.errors import FileFormatError
+
+__all__ = ["read_opencv_storage"]
+
+_DTYPES = {"u": np.uint8, "c": np.int8, "w": np.uint16, "s": np.int16, "i": np.int32,
+           "f": np.float32, "d": np.float64, "h": np.float16}  # fmt: skip
+_INT = re.compile(r"[-+]?\d+\Z")
+_FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\Z")
+_SPECIAL = {".inf": np.inf, "+.inf": np.inf, "-.inf": -np.inf, ".nan": np.nan}
+_XML_TOKEN = re.compile(r'"([^"]*)"|(\S+)')  # XML strings have no backslash escapes
+
+
+def read_opencv_storage(path: str | Path) -> dict[str, Any]:
+    """Read an OpenCV ``FileStorage`` file (YAML, XML or JSON) into a dict.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.yml`` / ``.yaml`` / ``.xml`` / ``.json`` file, as ``cv2.FileStorage``
+        writes it (or plain YAML of the same shape). The format is told by the content:
+        ``<`` starts XML, ``{`` JSON, anything else is YAML.
+
+    Returns
+    -------
+    dict
+        Top-level names to values: matrices as ndarrays (see the module docstring),
+        nested mappings as dicts, sequences as lists, scalars as int, float or str.
+        ``cv2.FileStorage(path, cv2.FILE_STORAGE_READ).getNode(name)`` gives the same
+        values (``.mat()``, ``.real()``, ``.string()``).
+
+    Raises
+    ------
+    FileFormatError
+        Unreadable, not well-formed (the message gives the line), or a matrix whose
+        ``data`` does not hold ``rows x cols x channels`` numbers.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> text = '''%YAML:1.0
+    ... ---
+    ... camera_matrix: !!opencv-matrix
+    ...    rows: 3
+    ...    cols: 3
+    ...    dt: d
+    ...    data: [ 500., 0., 320., 0., 500.,
+    ...        240., 0., 0., 1. ]
+    ... image_width: 640
+    ... '''
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     p = pathlib.Path(d) / "camera.yml"
+    ...     _ = p.write_text(text)
+    ...     fs = read_opencv_storage(p)
+    >>> fs["camera_matrix"][1]
+    array([  0., 500., 240.])
+    >>> fs["image_width"]
+    640
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FileFormatError(f"{p}: not a readable OpenCV FileStorage file ({exc})") from exc
+    head = text.lstrip()
+    if head.startswith("<"):
+        return _read_xml(text, str(p))
+    if head.startswith("{"):
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise FileFormatError(f"{p}: not valid JSON ({exc})") from exc
+        if not isinstance(data, dict):
+            raise FileFormatError(f"{p}: expected a JSON object at the top")
+        return {k: _typed(v, str(p)) for k, v in data.items()}
+    node = _read_yaml(text, str(p))
+    if node is None:
+        return {}
+    if not isinstance(node, dict):
+        raise FileFormatError(f"{p}: expected a mapping (name: value) at the top of the file")
+    return node
+
+
+# --------------------------------------------------------------------------- matrices
+
+
+def _matrix(node: Any, nd: bool, where: str) -> np.ndarray:
+    """ndarray of an ``opencv-matrix`` (``rows``, ``cols``) or ``opencv-nd-matrix``
+    (``sizes``) node with its ``dt`` and row-major ``data``."""
+    if not isinstance(node, dict) or "data" not in node or "dt" not in node:
+        raise FileFormatError(f"{where}: a matrix needs 'dt' and 'data' entries")
+    m = re.fullmatch(r"\s*(\d*)\s*([ucwsifdh])\s*", str(node["dt"]))
+    if m is None:
+        raise FileFormatError(f"{where}: unknown matrix element type dt={node['dt']!r}")
+    channels = int(m.group(1) or 1)
+    try:
+        if nd:
+            shape = [int(v) for v in np.atleast_1d(node["sizes"])]
+        else:
+            shape = [int(node["rows"]), int(node["cols"])]
+        data = np.asarray(node["data"] if node["data"] is not None else [], dtype=np.float64)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise FileFormatError(f"{where}: matrix size or data not numeric ({exc})") from exc
+    if channels > 1:
+        shape.append(channels)
+    if data.size != int(np.prod(shape)):
+        raise FileFormatError(
+            f"{where}: matrix of shape {tuple(shape)} needs {int(np.prod(shape))} numbers "
+            f"in 'data'; found {data.size}"
+        )
+    return data.reshape(shape).astype(_DTYPES[m.group(2)])
+
+
+def _typed(node: Any, where: str) -> Any:
+    """JSON FileStorage: nodes with ``type_id`` opencv-matrix become ndarrays."""
+    if isinstance(node, dict):
+        kind = node.get("type_id")
+        if kind in ("opencv-matrix", "opencv-nd-matrix"):
+            return _matrix(node, kind == "opencv-nd-matrix", where)
+        return {k: _typed(v, where) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_typed(v, where) for v in node]
+    return node
+
+
+def _tagged(tag: str | None, node: Any, where: str) -> Any:
+    if tag == "!!opencv-matrix":
+        return _matrix(node, False, where)
+    if tag == "!!opencv-nd-matrix":
+        return _matrix(node, True, where)
+    return node  # other tags (sparse matrices, !!str, ...) keep their plain value
+
+
+# --------------------------------------------------------------------------- scalars
+
+
+def _scalar(token: str) -> Any:
+    """int, float (``.Inf``, ``.Nan``, ``1.``), None for ``~``, ``null`` or nothing,
+    else str."""
+    if not token:
+        return None
+    if _INT.match(token):
+        return int(token)
+    if _FLOAT.match(token):
+        return float(token)
+    low = token.lower()
+    if low in _SPECIAL:
+        return _SPECIAL[low]
+    if low in ("~", "null"):
+        return None
+    return token
+
+
+def _unescape(body: str) -> str:
+    """Body of a double-quoted string: backslash escapes resolved."""
+    out, i = [], 0
+    table = {"n": "\n", "t": "\t", "r": "\r", "0": "\0", '"': '"', "\\": "\\", "/": "/"}
+    while i < len(body):
+        c = body[i]
+        if c == "\\" and i + 1 < len(body):
+            nxt = body[i + 1]
+            if nxt == "x" and i + 3 < len(body):
+                out.append(chr(int(body[i + 2 : i + 4], 16)))
+                i += 4
+                continue
+            out.append(table.get(nxt, nxt))
+            i += 2
+            continue
+        out.append(c)
+        i += 1
+    return "".join(out)
+
+
+# --------------------------------------------------------------------------- YAML
+
+
+def _strip_comment(line: str) -> str:
+    """The line without a ``#`` comment (one at the start or after a blank, outside
+    quotes)."""
+    quote, k = "", 0
+    while k < len(line):
+        c = line[k]
+        if quote:
+            if c == "\\" and quote == '"':
+                k += 1
+            elif c == quote:
+                quote = ""
+        elif c in "\"'" and (k == 0 or line[k - 1] in " \t[{,:-"):
+            quote = c
+        elif c == "#" and (k == 0 or line[k - 1] in " \t"):
+            return line[:k]
+        k += 1
+    return line
+
+
+def _open_brackets(text: str) -> int:
+    """Flow brackets ``[`` / ``{`` left open at the end of ``text`` (outside quotes)."""
+    depth, quote, k = 0, "", 0
+    while k < len(text):
+        c = text[k]
+        if quote:
+            if c == "\\" and quote == '"':
+                k += 1
+            elif c == quote:
+                quote = ""
+        elif c in "\"'" and (k == 0 or text[k - 1] in " \t[{,:"):
+            quote = c
+        elif c in "[{":
+            depth += 1
+        elif c in "]}":
+            depth -= 1
+        k += 1
+    return depth
+
+
+def _read_yaml(text: str, name: str) -> Any:
+    """Parse the YAML subset of the module docstring; None for an empty document."""
+    lines: list[tuple[int, int, str]] = []  # (line number, indent, content)
+    for no, raw in enumerate(text.splitlines(), 1):
+        s = _strip_comment(raw).rstrip()
+        body = s.lstrip(" ")
+        if not body or (not lines and body.startswith("%")) or body in ("---", "..."):
+            continue
+        if body.startswith("\t"):
+            raise FileFormatError(
+                f"{name}: line {no}: indented with a tab; YAML indents with spaces"
+            )
+        lines.append((no, len(s) - len(body), body))
+    logical: list[tuple[int, int, str]] = []
+    k = 0
+    while k < len(lines):  # a flow collection continues until its brackets close
+        no, ind, body = lines[k]
+        while _open_brackets(body) > 0 and k + 1 < len(lines):
+            k += 1
+            body += " " + lines[k][2]
+        if _open_brackets(body) != 0:
+            raise FileFormatError(f"{name}: line {no}: unbalanced brackets")
+        logical.append((no, ind, body))
+        k += 1
+    if not logical:
+        return None
+    node, k = _block(logical, 0, name)
+    if k != len(logical):
+        raise FileFormatError(f"{name}: line {logical[k][0]}: unexpected indentation")
+    return node
+
+
+def _is_item(body: str) -> bool:
+    return body == "-" or body.startswith("- ")
+
+
+def _key_split(body: str) -> tuple[str, str] | None:
+    """``key: rest`` -> (key, rest), None when the line is no mapping entry."""
+    if body[:1] in "\"'":
+        close = body.find(body[0], 1)
+        if close > 0 and body[close + 1 : close + 2] == ":":
+            rest = body[close + 2 :]
+            if not rest or rest[0] == " ":
+                key = body[1:close]
+                return (_unescape(key) if body[0] == '"' else key), rest.strip()
+        return None
+    m = re.match(r"([^:\[\]{},#]+?)\s*:(\s|$)", body)
+    if m is None:
+        return None
+    return m.group(1), body[m.end() :].strip()
+
+
+def _block(lines: list[tuple[int, int, str]], k: int, name: str) -> tuple[Any, int]:
+    """The block node starting at ``lines[k]`` (a sequence or a mapping, by its first
+    line) and the index after it."""
+    no, ind, body = lines[k]
+    if _is_item(body):
+        items: list[Any] = []
+        while k < len(lines) and lines[k][1] == ind and _is_item(lines[k][2]):
+            no, _, body = lines[k]
+            rest = body[1:].strip()
+            if rest and rest[0] not in "[{" and (_is_item(rest) or _key_split(rest) is not None):
+                # "- key: value" or "- - item": a block whose lines line up after the dash
+                lines[k] = (no, ind + len(body) - len(rest), rest)
+                value, k = _block(lines, k, name)
+            else:
+                value, k = _value(lines, k + 1, ind, rest, no, name)
+            items.append(value)
+        return items, k
+    out: dict[str, Any] = {}
+    while k < len(lines) and lines[k][1] == ind:
+        no, _, body = lines[k]
+        if _is_item(body):
+            raise FileFormatError(f"{name}: line {no}: a sequence item inside a mapping")
+        split = _key_split(body)
+        if split is None:
+            raise FileFormatError(f"{name}: line {no}: expected 'name: value'; got {body!r}")
+        key, rest = split
+        value, k = _value(lines, k + 1, ind, rest, no, name, same_level_seq=True)
+        out[key] = value
+    return out, k
+
+
+def _value(
+    lines: list[tuple[int, int, str]],
+    k: int,
+    ind: int,
+    rest: str,
+    no: int,
+    name: str,
+    *,
+    same_level_seq: bool = False,
+) -> tuple[Any, int]:
+    """The value of an entry whose text after the key (or dash) is ``rest``: inline, or
+    the indented block from ``lines[k]`` on; returns it and the index after it."""
+    where = f"{name}: line {no}"
+    tag = None
+    if rest.startswith("!"):
+        tag, _, rest = rest.partition(" ")
+        rest = rest.strip()
+    if rest[:1] in ("&", "*", "|", ">"):
+        raise FileFormatError(f"{where}: anchors, aliases and block scalars are not supported")
+    if rest:
+        if rest[0] in "[{":
+            value, end = _flow(rest, 0, where)
+            if rest[end:].strip():
+                raise FileFormatError(f"{where}: text after a closed bracket: {rest[end:]!r}")
+        elif rest[0] in "\"'":
+            value, end = _quoted(rest, 0, where)
+            if rest[end:].strip():
+                raise FileFormatError(f"{where}: text after a quoted string: {rest[end:]!r}")
+        else:
+            value = _scalar(rest)
+        return _tagged(tag, value, where), k
+    if k < len(lines) and (
+        lines[k][1] > ind or (same_level_seq and lines[k][1] == ind and _is_item(lines[k][2]))
+    ):
+        value, k = _block(lines, k, name)
+        return _tagged(tag, value, where), k
+    return _tagged(tag, None, where), k
+
+
+def _quoted(text: str, k: int, where: str) -> tuple[str, int]:
+    q = text[k]
+    j = k + 1
+    while j < len(text):
+        if q == '"' and text[j] == "\\":
+            j += 2
+            continue
+        if text[j] == q:
+            if q == "'" and text[j + 1 : j + 2] == "'":
+                j += 2
+                continue
+            body = text[k + 1 : j]
+            return (_unescape(body) if q == '"' else body.replace("''", "'")), j + 1
+        j += 1
+    raise FileFormatError(f"{where}: unterminated quoted string")
+
+
+def _skip(text: str, k: int) -> int:
+    while k < len(text) and text[k] in " \t":
+        k += 1
+    return k
+
+
+def _flow(text: str, k: int, where: str) -> tuple[Any, int]:
+    """A flow node at ``text[k]``: ``[...]``, ``{...}``, a quoted or a plain scalar
+    (which ends at ``,``, ``]`` or ``}``)."""
+    k = _skip(text, k)
+    if k >= len(text):
+        raise FileFormatError(f"{where}: a value is missing")
+    c = text[k]
+    if c == "!":  # a tag inside a flow collection
+        m = re.match(r"!\S*", text[k:])
+        assert m is not None
+        value, end = _flow(text, k + m.end(), where)
+        return _tagged(m.group(0), value, where), end
+    if c in "\"'":
+        return _quoted(text, k, where)
+    if c in "[{":
+        close = "]" if c == "[" else "}"
+        seq: list[Any] = []
+        mapping: dict[str, Any] = {}
+        k = _skip(text, k + 1)
+        while k < len(text) and text[k] != close:
+            if c == "{":
+                if text[k] in "\"'":
+                    key, k = _quoted(text, k, where)
+                else:
+                    m = re.match(r"[^:,}\]]*", text[k:])
+                    assert m is not None
+                    key, k = m.group(0).strip(), k + m.end()
+                k = _skip(text, k)
+                if k >= len(text) or text[k] != ":":
+                    raise FileFormatError(f"{where}: expected ':' after {key!r} in {{...}}")
+                mapping[key], k = _flow(text, k + 1, where)
+            else:
+                item, k = _flow(text, k, where)
+                seq.append(item)
+            k = _skip(text, k)
+            if k < len(text) and text[k] == ",":
+                k = _skip(text, k + 1)
+            elif k < len(text) and text[k] != close:
+                raise FileFormatError(f"{where}: expected ',' or {close!r}; got {text[k]!r}")
+        if k >= len(text):
+            raise FileFormatError(f"{where}: {close!r} missing")
+        return (mapping if c == "{" else seq), k + 1
+    m = re.match(r"[^,\]}]*", text[k:])
+    assert m is not None
+    return _scalar(m.group(0).strip()), k + m.end()
+
+
+# --------------------------------------------------------------------------- XML
+
+
+def _read_xml(text: str, name: str) -> dict[str, Any]:
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise FileFormatError(f"{name}: not well-formed XML ({exc})") from exc
+    if root.tag != "opencv_storage":
+        raise FileFormatError(
+            f"{name}: the XML root is <{root.tag}>; an OpenCV FileStorage file has <opencv_storage>"
+        )
+    return {child.tag: _xml_node(child, name) for child in root}
+
+
+def _xml_node(e: Any, name: str) -> Any:
+    """Value of one element: a matrix (``type_id``), a sequence (``<_>`` children or
+    several scalars in the text), a mapping (named children) or one scalar."""
+    kind = e.get("type_id")
+    kids = list(e)
+    where = f"{name}: <{e.tag}>"
+    if kind in ("opencv-matrix", "opencv-nd-matrix"):
+        node = {k.tag: _xml_node(k, name) for k in kids}
+        data = next((k for k in kids if k.tag == "data"), None)
+        if data is not None:  # always a list, even of one number
+            node["data"] = [_scalar(t) for t in (data.text or "").split()]
+        return _matrix(node, kind == "opencv-nd-matrix", where)
+    if kids:
+        if all(k.tag == "_" for k in kids):
+            return [_xml_node(k, name) for k in kids]
+        return {k.tag: _xml_node(k, name) for k in kids}
+    text = e.text or ""
+    tokens: list[Any] = []
+    for m in _XML_TOKEN.finditer(text):
+        if m.group(1) is None:
+            if '"' in m.group(2):
+                break
+            tokens.append(_scalar(m.group(2)))
+        elif text[m.end() : m.end() + 1].strip():
+            break  # a quote inside a quoted string (&quot; in the file)
+        else:
+            tokens.append(m.group(1))
+    else:
+        if not tokens:
+            return None
+        return tokens[0] if len(tokens) == 1 else tokens
+    whole = text.strip()  # one string with quotes inside: "say &quot;hi&quot;"
+    if len(whole) >= 2 and whole[0] == whole[-1] == '"':
+        return whole[1:-1]
+    raise FileFormatError(f"{where}: unbalanced quotes in {whole!r}")
