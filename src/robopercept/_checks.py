@@ -7,18 +7,22 @@ call sites read ``image = check_image(image)``.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from robopercept.errors import InputError
+from robopercept.errors import FileFormatError, InputError
 
 __all__ = [
     "as_float",
     "check_choice",
     "check_dtype",
+    "check_extension",
+    "check_file",
     "check_finite",
     "check_image",
     "check_kernel",
@@ -28,6 +32,7 @@ __all__ = [
     "check_positive",
     "check_range",
     "check_shape",
+    "plain_repr",
 ]
 
 IMAGE_DTYPES = (np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64, np.bool_)
@@ -123,7 +128,7 @@ def check_range(
     except (TypeError, ValueError) as exc:
         raise InputError(f"{name} must be a number; got {value!r}") from exc
     if not np.isfinite(v):
-        raise InputError(f"{name} must be finite; got {value!r}")
+        raise InputError(f"{name} must be finite; got {plain_repr(value)}")
     too_low = low is not None and (v < low if low_inclusive else v <= low)
     too_high = high is not None and (v > high if high_inclusive else v >= high)
     if too_low or too_high:
@@ -131,7 +136,7 @@ def check_range(
         hi = "inf" if high is None else f"{high:g}"
         lb = "[" if low_inclusive else "("
         hb = "]" if high_inclusive else ")"
-        raise InputError(f"{name} must be in {lb}{lo}, {hi}{hb}; got {value!r}")
+        raise InputError(f"{name} must be in {lb}{lo}, {hi}{hb}; got {plain_repr(value)}")
     return v
 
 
@@ -156,7 +161,9 @@ def check_choice(value: npt.ArrayLike, name: str, choices: Iterable[Any]) -> Any
     """Return ``value`` after checking that it is one of ``choices``."""
     choices = tuple(choices)
     if value not in choices:
-        raise InputError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
+        raise InputError(
+            f"{name} must be one of {', '.join(map(plain_repr, choices))}; got {plain_repr(value)}"
+        )
     return value
 
 
@@ -252,3 +259,109 @@ def as_rng(rng: int | np.integer | np.random.Generator | None) -> np.random.Gene
     if rng is None or (isinstance(rng, (int, np.integer)) and not isinstance(rng, bool)):
         return np.random.default_rng(rng)
     raise InputError(f"rng must be an int seed, a numpy.random.Generator or None; got {rng!r}")
+
+
+def plain_repr(value: Any) -> str:
+    """``repr(value)`` with NumPy scalars and arrays written as the Python numbers and
+    lists they hold, for error messages.
+
+    ``repr((np.float64(1.5), 2))`` is ``(np.float64(1.5), 2)`` under NumPy 2; a message
+    shows ``(1.5, 2)``. Tuples and lists are converted element by element; anything
+    else is left to ``repr``.
+
+    Parameters
+    ----------
+    value : object
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> plain_repr((np.float64(1000.0), np.int64(3)))
+    '(1000.0, 3)'
+    >>> plain_repr(np.array([1.0, 2.5]))
+    '[1.0, 2.5]'
+    """
+
+    def plain(v: Any) -> Any:
+        if isinstance(v, (np.generic, np.ndarray)):
+            return v.tolist()
+        if isinstance(v, (tuple, list)):
+            return type(v)(plain(x) for x in v)
+        return v
+
+    return repr(plain(value))
+
+
+def check_file(path: str | os.PathLike[str], what: str) -> Path:
+    """Return ``path`` after checking that it names an existing file.
+
+    Parameters
+    ----------
+    path : path-like
+    what : str
+        What the caller reads, with its article, for the message of a folder
+        (``"an image file"``, ``"a point cloud (.ply or .pcd)"``).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileFormatError
+        ``"<path> is a folder; give <what>"`` for a folder, ``"<path>: no such file"``
+        for a path that does not exist.
+
+    Examples
+    --------
+    >>> check_file(".", "an image file")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.FileFormatError: . is a folder; give an image file
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise FileFormatError(f"{p} is a folder; give {what}")
+    if not p.exists():
+        raise FileFormatError(f"{p}: no such file")
+    return p
+
+
+def check_extension(path: str | os.PathLike[str], extensions: Iterable[str], what: str) -> Path:
+    """Return ``path`` after checking that its extension (any case) is one of
+    ``extensions`` (lower case, with the dot).
+
+    Parameters
+    ----------
+    path : path-like
+    extensions : iterable of str
+        ``{".png", ".jpg"}``.
+    what : str
+        What the file holds, for the message (``"a video"``).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    InputError
+        ``"<path>: <what> needs one of the extensions <extensions>; got '<ext>'"``.
+
+    Examples
+    --------
+    >>> check_extension("clip.gif", {".mp4"}, "a video")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: clip.gif: a video needs the extension .mp4; got '.gif'
+    """
+    p = Path(path)
+    allowed = sorted(extensions)
+    if p.suffix.lower() not in allowed:
+        got = repr(p.suffix) if p.suffix else "no extension"
+        want = "the extension" if len(allowed) == 1 else "one of the extensions"
+        raise InputError(f"{p}: {what} needs {want} {', '.join(allowed)}; got {got}")
+    return p

@@ -124,7 +124,7 @@ def test_cloud_command_pipeline_and_json(tmp_path):
 @pytest.mark.parametrize(
     ("args", "match", "code"),
     [
-        (["cloud", "missing.pcd"], "cannot read", 1),
+        (["cloud", "missing.pcd"], "missing.pcd: no such file", 1),
         (["cloud", "x.ply", "--planes", "1"], "N:THRESHOLD", 2),
         (["cloud", "x.ply", "--pass-through", "q:0:1"], "AXIS", 2),
         (["cloud", "x.ply", "-o", "out.txt"], "output must end", 2),
@@ -206,3 +206,33 @@ def test_warnings_are_one_clean_line(monkeypatch, capsys):
     assert main(["edges", "x.png"]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["robopercept: warning: 16-bit input: thresholds scaled"]
+
+
+def test_edges_of_a_16bit_image_are_those_of_its_8bit_version(tmp_path, capsys):
+    """Issue 22: the 16-bit image (the 8-bit sample * 257, as a 16-bit PNG) got 8-bit
+    thresholds. The defaults are 8-bit grey levels, scaled by 257 for uint16 input with a
+    one-line note: the edge map is the 8-bit one, pixel for pixel. Thresholds given on
+    the command line are taken as given, with a warning when they look 8-bit."""
+    import re
+
+    from robopercept.imaging import sample_image_path
+
+    img8 = read_image(sample_image_path())
+    src8 = write_image(tmp_path / "box8.png", img8)
+    src16 = write_image(tmp_path / "box16.png", img8.astype(np.uint16) * 257)
+    assert read_image(src16).dtype == np.uint16
+    assert main(["edges", str(src8), "-o", str(tmp_path / "e8.png")]) == 0
+    out8 = capsys.readouterr().out
+    assert main(["edges", str(src16), "-o", str(tmp_path / "e16.png")]) == 0
+    out16 = capsys.readouterr().out.splitlines()
+    assert len(out16) == 2 and "--low 12850 --high 38550" in out16[0]
+    edges8 = read_image(tmp_path / "e8.png")
+    np.testing.assert_array_equal(read_image(tmp_path / "e16.png"), edges8)
+    share = re.search(r"edge pixels \(\d+\.\d%\)", out8)  # "12300 edge pixels (17.0%)"
+    assert share and share.group() in out16[1]
+    # explicit 8-bit thresholds on the 16-bit image: as given, with the fix in a warning
+    noisy = ["edges", str(src16), "--low", "50", "--high", "150", "-o", str(tmp_path / "n.png")]
+    assert main(noisy) == 0
+    cap = capsys.readouterr()
+    assert "12850 and 38550" in cap.err and cap.err.startswith("robopercept: warning:")
+    assert (read_image(tmp_path / "n.png") > 0).mean() > 1.3 * (edges8 > 0).mean()

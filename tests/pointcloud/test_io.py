@@ -174,8 +174,11 @@ def test_corrupt_ply_is_refused(tmp_path, content, match):
 
 
 def test_missing_and_unknown_files(tmp_path):
-    with pytest.raises(FileFormatError, match="cannot read"):
+    with pytest.raises(FileFormatError, match=r"none\.pcd: no such file"):
         read_point_cloud(tmp_path / "none.pcd")
+    with pytest.raises(FileFormatError, match="is a folder; give a point cloud file"):
+        read_point_cloud(tmp_path)
+    (tmp_path / "cloud.xyz").write_text("0 0 0\n")
     with pytest.raises(FileFormatError, match="extension"):
         read_point_cloud(tmp_path / "cloud.xyz")
     with pytest.raises(InputError, match="extension"):

@@ -4,26 +4,42 @@ Each type is an ``argparse`` ``type=`` callable: it returns the parsed value or 
 ``argparse.ArgumentTypeError``, which argparse reports as a usage error (exit code 2).
 A command that finds a bad flag value or combination after parsing raises
 :class:`UsageError` (exit code 2 as well).
+
+Output files are checked when the flags are parsed (:func:`output_path`, with the
+library writer's own extension check), so a name that does not fit the content is
+refused before any work. Library errors that name a Python parameter are rewritten with
+the flag the user typed (:func:`flag_errors`), in this one place.
 """
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+from robopercept.errors import InputError
 
 __all__ = [
     "UsageError",
     "board_size",
     "box_xywh",
+    "check_output",
+    "cloud_output",
+    "file_output",
+    "flag_errors",
     "hsv",
+    "image_output",
+    "in_flags",
     "load_gray",
     "noise_filter",
     "numbers",
     "pass_through",
     "positive_int",
+    "video_output",
 ]
 
 
@@ -102,3 +118,130 @@ def load_gray(path: str | None) -> tuple[Path, np.ndarray]:
 
     p = Path(path) if path else sample_image_path()
     return p, read_image(p, mode="gray")
+
+
+# -- outputs ---------------------------------------------------------------------------
+def _output_check(kind: str) -> Callable[[str], Path]:
+    """The library's check of a file name for output ``kind`` (its writer's own); every
+    kind refuses an existing folder (``"file"``: only that)."""
+    if kind == "file":
+        return Path
+    if kind == "image":
+        from robopercept.imaging import check_image_path
+
+        return check_image_path
+    if kind == "video":
+        from robopercept.imaging import check_video_path
+
+        return check_video_path
+    if kind == "cloud":
+        from robopercept.pointcloud import check_cloud_path
+
+        return check_cloud_path
+    if kind == "npy":
+        from robopercept._checks import check_extension
+
+        return lambda path: check_extension(path, (".npy",), "a NumPy array (np.save)")
+    raise ValueError(f"unknown output kind {kind!r}")  # a programming error
+
+
+def output_path(kind: str) -> Callable[[str], str]:
+    """An argparse type for an output file of ``kind``: ``"image"``
+    (:func:`~robopercept.imaging.check_image_path`), ``"video"``
+    (:func:`~robopercept.imaging.check_video_path`), ``"cloud"``
+    (:func:`~robopercept.pointcloud.check_cloud_path`), ``"npy"`` or ``"file"`` (any
+    name); an existing folder is refused for every kind.
+
+    The name is checked while the flags are parsed, so ``bgsub -o x.png`` is a usage
+    error (exit code 2) naming the flag and the allowed extensions, before any frame is
+    read, instead of an H.264 stream written under an image's name.
+    """
+
+    def parse(text: str) -> str:  # the library is imported when a flag is parsed
+        if Path(text).is_dir():
+            raise argparse.ArgumentTypeError(f"{text} is a folder; give a file name")
+        try:
+            _output_check(kind)(text)
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return text
+
+    parse.__name__ = f"{kind}_output"
+    return parse
+
+
+image_output = output_path("image")
+image_output.__doc__ = "An output image file: PNG, JPEG, TIFF, BMP, PNM (argparse type)."
+video_output = output_path("video")
+video_output.__doc__ = "An output video file: .mp4, .m4v, .mov, .mkv, .avi (argparse type)."
+cloud_output = output_path("cloud")
+cloud_output.__doc__ = "An output point cloud: .ply or .pcd (argparse type)."
+file_output = output_path("file")
+file_output.__doc__ = "An output file of any name, not an existing folder (argparse type)."
+
+
+def check_output(path: str, kind: str, flag: str = "-o/--output") -> str:
+    """``path`` after the check of :func:`output_path` for an output whose kind is known
+    only after parsing (``flow -o``: an image for two images, a video for one video);
+    a misfit is a :class:`UsageError` naming ``flag``."""
+    if Path(path).is_dir():
+        raise UsageError(f"{flag}: {path} is a folder; give a file name")
+    try:
+        _output_check(kind)(path)
+    except InputError as exc:
+        raise UsageError(f"{flag}: {exc}") from None
+    return path
+
+
+# -- library errors in the user's terms --------------------------------------------------
+def in_flags(message: str, flags: Mapping[str, str]) -> str:
+    """``message`` with each Python parameter of ``flags`` written as its flag.
+
+    ``feature='rgb'`` becomes ``--feature rgb`` and a bare ``sigma`` becomes
+    ``--sigma``; a name is replaced only as a whole word (``block_sigma`` keeps its
+    ``sigma``, ``--sigma`` is not replaced again).
+
+    Parameters
+    ----------
+    message : str
+    flags : mapping of str to str
+        Parameter name -> flag (``{"cell_size": "--cell"}``).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> in_flags("box holds no colour: use feature='rgb'", {"feature": "--feature"})
+    'box holds no colour: use --feature rgb'
+    >>> in_flags("cell_size must be >= 1; got 0", {"cell_size": "--cell"})
+    '--cell must be >= 1; got 0'
+    """
+    for param, flag in flags.items():
+        name = rf"(?<![\w-]){re.escape(param)}"
+        literal = flag.replace("\\", "\\\\")  # re.sub's template: the flag as written
+        message = re.sub(name + r"""=(['"]?)([^'"\s,;:)]*)\1""", literal + r" \2", message)
+        message = re.sub(name + r"(?![\w-])", literal, message)
+    return message
+
+
+@contextmanager
+def flag_errors(**flags: str) -> Iterator[None]:
+    """Inside, an :class:`~robopercept.errors.InputError` from the library has the Python
+    parameters of ``flags`` (``cell_size="--cell"``) written as the flags the user typed
+    (:func:`in_flags`); it stays an ``InputError`` (exit code 1). Usable as a ``with``
+    block around a library call or as a decorator of a command's ``run`` function.
+
+    Examples
+    --------
+    >>> with flag_errors(sigma="--sigma"):  # doctest: +SKIP
+    ...     canny(gray, 50, 150, sigma=args.sigma)
+    """
+    try:
+        yield
+    except InputError as exc:
+        text = in_flags(str(exc), flags)
+        if text == str(exc):
+            raise
+        raise InputError(text) from exc

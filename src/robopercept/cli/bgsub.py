@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import noise_filter, positive_int
+from robopercept.cli._args import flag_errors, noise_filter, positive_int
 from robopercept.cli._video import (
     add_video_arguments,
+    finish,
     open_source,
-    print_summary,
     progress,
     text_size,
 )
@@ -67,6 +67,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_bgsub)
 
 
+@flag_errors(
+    k="--k",
+    learning_rate="--learning-rate",
+    init_frames="--init-frames",
+    n_frames="--init-frames",
+    threshold="--threshold",
+    n="--n",
+    noise="--noise",
+    noise_size="--noise-size",
+    **{"noise size": "--noise-size"},
+)
 def _bg_model(args: argparse.Namespace, first: np.ndarray) -> Any:
     from robopercept.imaging import read_image
     from robopercept.motion import (
@@ -128,8 +139,7 @@ def run_bgsub(args: argparse.Namespace) -> int:
 
     source = open_source(args.video, args)
     masks_dir = Path(args.masks) if args.masks else None
-    if masks_dir is not None:
-        masks_dir.mkdir(parents=True, exist_ok=True)
+    n_masks = 0
     model: Any = None
     delay = 1 if args.method == "diff3" else 0
     label = {"diff": f"frame t-{args.n}", "diff3": "(no background model)"}.get(
@@ -147,13 +157,14 @@ def run_bgsub(args: argparse.Namespace) -> int:
         def emit(
             index: int, frame: np.ndarray, mask: np.ndarray, background: np.ndarray | None
         ) -> None:
-            nonlocal blobs
+            nonlocal blobs, n_masks
             det = detections_from_mask(mask, args.min_area)
             blobs += len(det)
             fractions.append(float(mask.mean()))
             out.add(index, _bg_picture(frame, mask, det.boxes, background, args.layout, label))
             if masks_dir is not None:
                 write_image(masks_dir / f"{index:06d}.png", mask.astype(np.uint8) * 255)
+                n_masks += 1
 
         for i, frame in source:
             work = _prepare(frame, args.gray)
@@ -174,5 +185,6 @@ def run_bgsub(args: argparse.Namespace) -> int:
     if fractions:
         print(f"foreground        {100 * float(np.mean(fractions)):.2f}% of pixels on average")
         print(f"blobs             {blobs / len(fractions):.2f} per frame (>= {args.min_area} px)")
-    print_summary(source, out.written, frames, seconds)
-    return 0
+    if n_masks:
+        out.written.append(f"{masks_dir}/ ({n_masks} masks)")
+    return finish(source, out.written, frames, seconds)

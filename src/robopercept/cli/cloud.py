@@ -7,10 +7,11 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, numbers, pass_through
+from robopercept.cli._args import UsageError, flag_errors, image_output, numbers, pass_through
 
 __all__ = ["register"]
 
@@ -61,13 +62,30 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="Euclidean clusters of the points off the planes (e.g. 0.02:100:25000)",
     )
     p.add_argument(
-        "--image", default=None, metavar="PNG", help="also render the coloured cloud to a PNG"
+        "--image",
+        type=image_output,
+        default=None,
+        metavar="PNG",
+        help="also render the coloured cloud to an image (.png, .jpg, ...)",
     )
     p.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
     p.add_argument("--json", action="store_true", help="machine-readable summary on stdout")
     p.set_defaults(func=run_cloud)
 
 
+@flag_errors(
+    voxel_size="--voxel",
+    k="--sor K",
+    std_ratio="--sor STD_RATIO",
+    max_planes="--planes N",
+    threshold="--planes THRESHOLD",
+    min_inliers="--min-plane",
+    tolerance="--clusters TOL",
+    min_size="--clusters MIN",
+    max_size="--clusters MAX",
+    min_value="--pass-through MIN",
+    max_value="--pass-through MAX",
+)
 def run_cloud(args: argparse.Namespace) -> int:
     """Run ``robopercept cloud`` with the parsed ``args``; returns the exit status."""
     from robopercept.pipelines.cloud import process_cloud
@@ -101,7 +119,9 @@ def run_cloud(args: argparse.Namespace) -> int:
         from robopercept.viz import render_points
 
         write_image(args.image, render_points(cloud.points, colors))
-    summary = {"input": str(args.input), "output": str(out), "steps": res.steps}
+    summary: dict[str, Any] = {"input": str(args.input), "output": str(out), "steps": res.steps}
+    if args.image:
+        summary["image"] = str(args.image)
     if args.json:
         json.dump(summary, sys.stdout, indent=2)
         print()

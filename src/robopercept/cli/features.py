@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, load_gray
+from robopercept.cli._args import UsageError, flag_errors, image_output, load_gray
 
 __all__ = ["register"]
 
@@ -28,7 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("image", nargs="?", help="input image (default: the bundled sample)")
     p.add_argument(
-        "-o", "--output", default="features.png", help="output PNG (default: %(default)s)"
+        "-o",
+        "--output",
+        type=image_output,
+        default="features.png",
+        help="output image (default: %(default)s)",
     )
     p.add_argument("--detector", choices=DETECTORS, default="harris")
     p.add_argument(
@@ -58,7 +62,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "bin along its edge direction, brightness = strength) and print the descriptor size.",
     )
     h.add_argument("image", nargs="?", help="input image (default: the bundled sample)")
-    h.add_argument("-o", "--output", default="hog.png", help="output PNG (default: %(default)s)")
+    h.add_argument(
+        "-o",
+        "--output",
+        type=image_output,
+        default="hog.png",
+        help="output image (default: %(default)s)",
+    )
     h.add_argument("--cell", type=int, default=8, help="cell size in pixels (default: 8)")
     h.add_argument("--bins", type=int, default=9, help="orientation bins (default: 9)")
     h.add_argument("--block", type=int, default=2, help="block size in cells (default: 2)")
@@ -91,11 +101,24 @@ def _pair_arguments(p: argparse.ArgumentParser, output: str) -> None:
     # the two images, the output picture and the matching options of match / stitch
     p.add_argument("image_a")
     p.add_argument("image_b")
-    p.add_argument("-o", "--output", default=output, help="output PNG (default: %(default)s)")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=image_output,
+        default=output,
+        help="output image (default: %(default)s)",
+    )
     p.add_argument("--ratio", type=float, default=0.8, help="ratio test (default: 0.8)")
     p.add_argument("--threshold", type=float, default=3.0, help="RANSAC pixels (default: 3)")
 
 
+@flag_errors(
+    threshold="--quality",
+    block_size="--block-size",
+    min_distance="--min-distance",
+    max_corners="--max",
+    n_features="--max",
+)
 def run_features(args: argparse.Namespace) -> int:
     """Run ``robopercept features`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import harris_corners
@@ -165,6 +188,7 @@ def run_features(args: argparse.Namespace) -> int:
     return 0
 
 
+@flag_errors(cell_size="--cell", orientations="--bins", block_size="--block", scale="--scale")
 def run_hog(args: argparse.Namespace) -> int:
     """Run ``robopercept hog`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import cell_histograms, hog
@@ -200,6 +224,7 @@ def _load_pair(args: argparse.Namespace):
     return read_image(args.image_a, mode="rgb"), read_image(args.image_b, mode="rgb")
 
 
+@flag_errors(ratio="--ratio", threshold="--threshold")
 def run_match(args: argparse.Namespace) -> int:
     """Run ``robopercept match`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import match_images
@@ -235,6 +260,7 @@ def run_match(args: argparse.Namespace) -> int:
     return 0
 
 
+@flag_errors(ratio="--ratio", threshold="--threshold", blend="--blend")
 def run_stitch(args: argparse.Namespace) -> int:
     """Run ``robopercept stitch`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import stitch

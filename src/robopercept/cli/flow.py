@@ -11,14 +11,26 @@ from pathlib import Path
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, positive_int
+from robopercept.cli._args import UsageError, check_output, flag_errors, positive_int
 from robopercept.cli._video import (
     add_video_arguments,
+    finish,
     open_source,
-    print_summary,
     progress,
     text_size,
 )
+
+#: the library's parameters and the flags that set them
+FLAGS = {
+    "window": "--window",
+    "levels": "--levels",
+    "max_corners": "--max-corners",
+    "quality": "--quality",
+    "min_distance": "--min-distance",
+    "step": "--step",
+    "trail": "--trail",
+    "scale": "--scale",
+}
 
 __all__ = ["register"]
 
@@ -44,7 +56,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--step", type=positive_int, default=4, help="--dense: grid step (px)")
     p.add_argument("--trail", type=positive_int, default=15, help="video: trail length")
     p.add_argument("--json", action="store_true", help="two images: print the result as JSON")
-    add_video_arguments(p, None, "output (default: flow.png for two images, flow.mp4 for a video)")
+    add_video_arguments(
+        p,
+        None,
+        "output: an image for two images (default flow.png), a video (.mp4, .avi, ...) for "
+        "one video (default flow.mp4)",
+        video=False,
+    )
     p.set_defaults(func=run_flow)
 
 
@@ -168,14 +186,18 @@ def _flow_video(args: argparse.Namespace) -> int:
     )
     if kinds:
         print("motion            " + ", ".join(f"{k} {v}" for k, v in sorted(kinds.items())))
-    print_summary(source, out.written, frames, seconds)
-    return 0
+    return finish(source, out.written, frames, seconds)
 
 
+@flag_errors(**FLAGS)
 def run_flow(args: argparse.Namespace) -> int:
     """Run ``robopercept flow`` with the parsed ``args``; returns the exit status."""
     if len(args.inputs) == 2:
+        if args.output:
+            check_output(args.output, "image")
         return _flow_pair(args)
     if len(args.inputs) == 1:
+        if args.output:
+            check_output(args.output, "video")
         return _flow_video(args)
     raise UsageError(f"flow takes two images (A B) or one video; got {len(args.inputs)} inputs")

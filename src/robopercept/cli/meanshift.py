@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from robopercept.cli._args import box_xywh, positive_int
+from robopercept.cli._args import box_xywh, file_output, flag_errors, positive_int
 from robopercept.cli._video import (
     add_video_arguments,
+    finish,
     open_source,
-    print_summary,
     progress,
     text_size,
 )
@@ -33,17 +33,38 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--box", type=box_xywh, required=True, metavar="X,Y,W,H", help="target, frame 0")
     p.add_argument("--feature", choices=("hue", "rgb"), default="hue")
     p.add_argument("--bins", type=positive_int, default=None, help="16 (hue) or 8 (rgb)")
+    p.add_argument(
+        "--min-saturation",
+        type=int,
+        default=60,
+        help="hue: pixels below this saturation (0-255) are left out (default 60)",
+    )
+    p.add_argument(
+        "--min-value",
+        type=int,
+        default=32,
+        help="hue: pixels below this brightness (0-255) are left out (default 32)",
+    )
     p.add_argument("--camshift", action="store_true", help="adapt the window size (CamShift)")
     p.add_argument(
         "--plain-histogram",
         action="store_true",
         help="no background weighting (OpenCV's histogram)",
     )
-    p.add_argument("--results", default=None, help="CSV of frame,x,y,w,h,similarity")
+    p.add_argument(
+        "--results", type=file_output, default=None, help="CSV of frame,x,y,w,h,similarity"
+    )
     add_video_arguments(p, "meanshift.mp4")
     p.set_defaults(func=run_meanshift)
 
 
+@flag_errors(
+    box="--box",
+    feature="--feature",
+    bins="--bins",
+    min_saturation="--min-saturation",
+    min_value="--min-value",
+)
 def run_meanshift(args: argparse.Namespace) -> int:
     """Run ``robopercept meanshift`` with the parsed ``args``; returns the exit status."""
     from robopercept.imaging import SnapshotVideoWriter
@@ -68,6 +89,8 @@ def run_meanshift(args: argparse.Namespace) -> int:
                         feature=args.feature,
                         bins=args.bins,
                         adaptive=args.camshift,
+                        min_saturation=args.min_saturation,
+                        min_value=args.min_value,
                         background_weighting=not args.plain_histogram,
                     )
                     box, similarity = tracker.box.astype(np.float64), 1.0
@@ -90,8 +113,7 @@ def run_meanshift(args: argparse.Namespace) -> int:
     if len(rows) > 1:
         sims = np.array([s for _, _, s in rows[1:]])
         print(f"similarity        mean {sims.mean():.3f}, min {sims.min():.3f}")
-    print_summary(source, out.written, frames, seconds)
-    return 0
+    return finish(source, out.written, frames, seconds)
 
 
 def _write_boxes_csv(path: Path, rows: list[tuple[int, np.ndarray, float]]) -> None:

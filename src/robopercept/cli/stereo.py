@@ -10,7 +10,14 @@ from pathlib import Path
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, positive_int
+from robopercept.cli._args import (
+    UsageError,
+    cloud_output,
+    flag_errors,
+    image_output,
+    output_path,
+    positive_int,
+)
 
 __all__ = ["register"]
 
@@ -38,11 +45,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--P2", type=float, default=None, help="sgm: large-jump penalty")
     p.add_argument("--uniqueness", type=float, default=0.0, help="reject ambiguous (0-1)")
     p.add_argument("--lr-check", type=float, default=None, help="left-right check (px)")
-    p.add_argument("-o", "--output", default="disparity.png", help="coloured disparity PNG")
-    p.add_argument("--npy", default=None, help="also save the float32 disparity (.npy)")
+    p.add_argument(
+        "-o", "--output", type=image_output, default="disparity.png", help="coloured disparity"
+    )
+    p.add_argument(
+        "--npy",
+        type=output_path("npy"),
+        default=None,
+        help="also save the float32 disparity (.npy)",
+    )
     p.add_argument("--truth", default=None, help="ground-truth disparity image (0 unknown)")
     p.add_argument("--truth-scale", type=float, default=1.0, help="truth = pixel / scale")
-    p.add_argument("--ply", default=None, help="also write the points (needs --focal/--baseline)")
+    p.add_argument(
+        "--ply",
+        type=cloud_output,
+        default=None,
+        help="also write the points, .ply or .pcd (needs --calib or --focal/--baseline)",
+    )
     p.add_argument("--focal", type=float, default=None, help="focal length in pixels")
     p.add_argument("--baseline", type=float, default=None, help="baseline (metres)")
     p.add_argument(
@@ -55,6 +74,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_stereo)
 
 
+@flag_errors(
+    max_disparity="--max-disparity",
+    min_disparity="--min-disparity",
+    window="--window",
+    block="--block",
+    paths="--paths",
+    P1="--P1",
+    P2="--P2",
+    uniqueness="--uniqueness",
+    lr_check="--lr-check",
+    focal="--focal",
+    baseline="--baseline",
+)
 def run_stereo(args: argparse.Namespace) -> int:
     """Run ``robopercept stereo`` with the parsed ``args``; returns the exit status."""
     from robopercept.depth import bad_pixel_rate, block_matching, semi_global_matching
@@ -73,7 +105,10 @@ def run_stereo(args: argparse.Namespace) -> int:
     if args.truth:
         truth = read_image(args.truth, mode="gray").astype(np.float64) / args.truth_scale
         if truth.shape != left.shape[:2]:
-            raise InputError(f"--truth is {truth.shape[::-1]}, the images {left.shape[1::-1]}")
+            raise InputError(
+                f"--truth is {truth.shape[1]}x{truth.shape[0]}, the images "
+                f"{left.shape[1]}x{left.shape[0]}: give the ground truth of this pair"
+            )
     t0 = time.perf_counter()
     if args.method == "sgm":
         disp = semi_global_matching(

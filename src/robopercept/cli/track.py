@@ -9,11 +9,11 @@ import time
 
 import numpy as np
 
-from robopercept.cli._args import positive_int
+from robopercept.cli._args import file_output, flag_errors, positive_int
 from robopercept.cli._video import (
     add_video_arguments,
+    finish,
     open_source,
-    print_summary,
     progress,
     text_size,
 )
@@ -34,7 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", help="video file or folder of images (e.g. MOT17 img1/)")
     p.add_argument("--detections", default=None, help="MOTChallenge det.txt (frames from 1)")
     p.add_argument("--min-score", type=float, default=None, help="drop weaker detections")
-    p.add_argument("--results", default="tracks.txt", help="MOTChallenge results file")
+    p.add_argument(
+        "--results", type=file_output, default="tracks.txt", help="MOTChallenge results file"
+    )
     p.add_argument("--cost", choices=("iou", "mahalanobis", "euclidean"), default="iou")
     p.add_argument("--gate", type=float, default=None, help="see MultiObjectTracker")
     p.add_argument("--min-hits", type=int, default=3)
@@ -45,6 +47,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_track)
 
 
+@flag_errors(
+    cost="--cost",
+    gate="--gate",
+    min_hits="--min-hits",
+    max_age="--max-age",
+    min_score="--min-score",
+    min_area="--min-area",
+)
 def run_track(args: argparse.Namespace) -> int:
     """Run ``robopercept track`` with the parsed ``args``; returns the exit status."""
     from robopercept.imaging import SnapshotVideoWriter
@@ -91,10 +101,10 @@ def run_track(args: argparse.Namespace) -> int:
                 frames += 1
                 bar.update(1)
         finally:  # results so far are kept, also on an error or Ctrl-C
-            write_mot(args.results, results)
-            out.written.append(args.results)
+            if frames:  # no results file for a run that read no frame
+                write_mot(args.results, results)
+                out.written.append(args.results)
     seconds = time.perf_counter() - t0
     print(f"detections        {n_det} ({n_det / max(frames, 1):.1f} per frame)")
     print(f"tracks            {len(ids)} identities, {len(results)} result rows")
-    print_summary(source, out.written, frames, seconds)
-    return 0
+    return finish(source, out.written, frames, seconds)

@@ -8,7 +8,13 @@ from robopercept.pointcloud.filters import (
     statistical_outlier_removal,
     voxel_downsample,
 )
-from robopercept.pointcloud.io import PcdData, read_pcd, read_point_cloud, write_point_cloud
+from robopercept.pointcloud.io import (
+    PcdData,
+    check_cloud_path,
+    read_pcd,
+    read_point_cloud,
+    write_point_cloud,
+)
 from robopercept.pointcloud.normals import estimate_normals
 from robopercept.pointcloud.segmentation import PlaneSegment, segment_plane, segment_planes
 
@@ -16,6 +22,7 @@ __all__ = [
     "PcdData",
     "PlaneSegment",
     "PointCloud",
+    "check_cloud_path",
     "estimate_normals",
     "euclidean_clusters",
     "pass_through",

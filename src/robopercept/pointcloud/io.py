@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from robopercept.errors import FileFormatError, InputError
+from robopercept._checks import check_extension, check_file
+from robopercept.errors import FileFormatError
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
-__all__ = ["PcdData", "read_pcd", "read_point_cloud", "write_point_cloud"]
+__all__ = ["PcdData", "check_cloud_path", "read_pcd", "read_point_cloud", "write_point_cloud"]
 
 _MAX_HEADER = 1 << 16
 _PCD_TYPES = {
@@ -484,15 +485,41 @@ def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:
     Raises
     ------
     FileFormatError
-        Missing, truncated or corrupt file, unknown extension.
+        Missing file or a folder, truncated or corrupt file, unknown extension.
     """
-    p = Path(path)
+    p = check_file(path, "a point cloud file (.ply or .pcd)")
     suffix = p.suffix.lower()
     if suffix == ".pcd":
         return _cloud_from_pcd(read_pcd(p), p)
     if suffix == ".ply":
         return _read_ply(p)
     raise FileFormatError(f"{p}: unknown point-cloud extension {suffix!r}: use .ply or .pcd")
+
+
+def check_cloud_path(path: str | os.PathLike[str]) -> Path:
+    """Return ``path`` after checking that :func:`write_point_cloud` can write there
+    (extension ``.ply`` or ``.pcd``, any case), so a caller can refuse a wrong name
+    before the work that makes the cloud.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    InputError
+        Another extension, naming the two allowed.
+
+    Examples
+    --------
+    >>> check_cloud_path("scan.PLY").name
+    'scan.PLY'
+    """
+    return check_extension(path, (".ply", ".pcd"), "a point cloud")
 
 
 def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: bool = True) -> Path:
@@ -512,10 +539,8 @@ def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: b
         The path written.
     """
     check_cloud(cloud)
-    p = Path(path)
+    p = check_cloud_path(path)
     suffix = p.suffix.lower()
-    if suffix not in (".ply", ".pcd"):
-        raise InputError(f"unknown point-cloud extension {suffix!r} in {p}: use .ply or .pcd")
     if p.parent and not p.parent.exists():
         p.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".ply":

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_image
+from robopercept._checks import check_image, plain_repr
 from robopercept.errors import InputError
 
 __all__ = ["MeanShiftResult", "MeanShiftTracker"]
@@ -65,15 +65,15 @@ class MeanShiftResult:
 def _check_box(box: npt.ArrayLike, shape: tuple[int, ...], name: str = "box") -> np.ndarray:
     b = np.asarray(box, dtype=np.float64).ravel()
     if b.size != 4 or not np.isfinite(b).all():
-        raise InputError(f"{name} must be 4 finite numbers x, y, w, h; got {box!r}")
+        raise InputError(f"{name} must be 4 finite numbers x, y, w, h; got {plain_repr(box)}")
     x, y, w, h = b
     H, W = shape[:2]
     if w < 1 or h < 1:
-        raise InputError(f"{name} must have width and height >= 1; got {w} x {h}")
+        raise InputError(f"{name} must have width and height >= 1; got {w:g} x {h:g}")
     if x < 0 or y < 0 or x + w > W or y + h > H:
         raise InputError(
-            f"{name} {tuple(b.round(1))} is not inside the {W}x{H} image: clip it to "
-            f"0 <= x, x + w <= {W}, 0 <= y, y + h <= {H}"
+            f"{name} x, y, w, h = {x:g}, {y:g}, {w:g}, {h:g} is not inside the {W}x{H} "
+            f"image: clip it to 0 <= x, x + w <= {W}, 0 <= y, y + h <= {H}"
         )
     return b
 

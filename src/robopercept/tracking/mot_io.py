@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from robopercept._checks import check_file
 from robopercept.errors import FileFormatError
 
 __all__ = ["MotRows", "read_mot", "write_mot"]
@@ -39,8 +40,9 @@ class MotRows:
 
 
 def read_mot(path: str | Path) -> MotRows:
-    """Read a MOTChallenge ``det.txt``, ``gt.txt`` or results file."""
-    path = Path(path)
+    """Read a MOTChallenge ``det.txt``, ``gt.txt`` or results file (a missing file or a
+    folder is a :class:`~robopercept.errors.FileFormatError` that says which)."""
+    path = check_file(path, "a MOTChallenge text file (det.txt)")
     try:
         text = path.read_text()
     except UnicodeDecodeError:
