@@ -297,7 +297,7 @@ def test_bad_camera_files(tmp_path):
     size = write("s.json", {"K": K.tolist(), "image_size": [640]})
     with pytest.raises(FileFormatError, match="image_size"):
         load_calibration(size)
-    with pytest.raises(FileFormatError, match="missing.yml: no such file"):
+    with pytest.raises(FileFormatError, match=r"missing\.yml: no such file"):
         load_calibration(tmp_path / "missing.yml")
     with pytest.raises(FileFormatError, match=r"is a folder; give a camera file \(\.json"):
         load_calibration(tmp_path)
