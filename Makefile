@@ -33,8 +33,11 @@ syslibs:
 	  echo "make: libusb-1.0 is missing and apt-get is not available: install libusb-1.0 with your package manager" >&2; exit 1; \
 	fi
 
-$(VENV)/.dev: $(VENV)/.core pyproject.toml | syslibs
-	$(PIP) install -e ".[dev]"
+# torch is installed first, pinned by constraints.txt (the CPU build, no CUDA packages),
+# then the dev and deep extras under the same constraints.
+$(VENV)/.dev: $(VENV)/.core pyproject.toml constraints.txt | syslibs
+	$(PIP) install -c constraints.txt "torch==2.13.0"
+	$(PIP) install -c constraints.txt -e ".[dev,deep]"
 	touch $@
 
 # Main job: the RGB-D plane tracker on the built-in synthetic scene -> robopercept-out/

@@ -1,0 +1,644 @@
+"""Training a classifier: the course's steps spelled out, on any ``torch.nn.Module``.
+
+:func:`fit` runs the loop the notes teach: mini-batches of the training set (shuffled
+by a seeded generator), cross-entropy loss, back-propagation, an optimizer step (SGD
+with momentum, optionally Nesterov, and weight decay; or AdamW), a learning-rate
+schedule (constant, step, cosine or one-cycle), gradient clipping, evaluation on the
+validation set after every epoch, early stopping when the monitored figure has not
+improved for ``patience`` epochs, and the best epoch's weights restored at the end.
+Mixed precision is used only on CUDA (``amp="auto"``).
+
+Optimizers and schedules are PyTorch's own (:mod:`torch.optim`,
+:mod:`torch.optim.lr_scheduler`): they are not perception methods. A run is
+deterministic on the CPU: the same seed and thread count give bit-identical weights
+(``torch.use_deterministic_algorithms`` during the run), and a run resumed from its
+checkpoint ends where an uninterrupted one does (the checkpoint holds the model, the
+optimizer, the schedule, the shuffling generator and torch's random state).
+
+Checkpoints are ``torch.save`` dictionaries of tensors and plain Python values, read back
+with ``weights_only=True`` (no pickled code), written atomically after every epoch, so
+Ctrl-C leaves the last complete one readable.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import csv
+import math
+import os
+import time
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+from torch import nn
+from torch.utils.data import DataLoader, Dataset
+
+from robopercept.errors import FileFormatError, InputError
+
+__all__ = [
+    "Evaluation",
+    "History",
+    "Normalize",
+    "TrainConfig",
+    "evaluate",
+    "fit",
+    "load_checkpoint",
+    "save_checkpoint",
+]
+
+Optimizer = Literal["sgd", "adamw"]
+Schedule = Literal["constant", "step", "cosine", "onecycle"]
+
+
+@dataclass
+class TrainConfig:
+    """How :func:`fit` trains.
+
+    Attributes
+    ----------
+    epochs : int
+        Most epochs (early stopping may end sooner).
+    batch_size : int
+    optimizer : {"sgd", "adamw"}
+        SGD with ``momentum`` (``nesterov``) and L2 ``weight_decay``, or AdamW
+        (decoupled weight decay).
+    lr : float
+        Learning rate (the peak for ``"onecycle"``).
+    momentum, nesterov, weight_decay
+        As in :class:`torch.optim.SGD` / :class:`torch.optim.AdamW`.
+    schedule : {"constant", "step", "cosine", "onecycle"}
+        ``"step"``: lr x ``gamma`` every ``step_size`` epochs
+        (:class:`~torch.optim.lr_scheduler.StepLR`); ``"cosine"``: cosine annealing to 0
+        over ``epochs`` (:class:`~torch.optim.lr_scheduler.CosineAnnealingLR`);
+        ``"onecycle"``: warm-up then annealing, stepped per batch
+        (:class:`~torch.optim.lr_scheduler.OneCycleLR`).
+    step_size, gamma
+        The step schedule.
+    patience : int or None
+        Stop after this many epochs without improvement of ``monitor`` (None: never).
+    monitor : {"val_loss", "val_accuracy"}
+        The figure that picks the best epoch (lower loss, higher accuracy).
+    clip_grad_norm : float or None
+        Clip the gradients' global L2 norm to this.
+    amp : {"auto", True, False}
+        Mixed precision (bfloat16 autocast); "auto" uses it on CUDA only.
+    seed : int
+        Seeds the initial weights' random state, the shuffling and dropout.
+    device : str or None
+        ``"cpu"``, ``"cuda"``, ...; None: CUDA when available, else the CPU.
+    lr_multipliers : dict of str to float
+        Discriminative learning rates: parameters whose qualified name starts with a
+        key train at ``lr`` times its value (the longest matching key wins), e.g.
+        ``{"features": 0.1}`` for a pretrained trunk under a new head.
+    unfreeze_at : dict of int to list of str
+        At the start of epoch ``k`` (1-based), make the parameters under these name
+        prefixes trainable (``[""]``: all): gradual unfreezing.
+    """
+
+    epochs: int = 30
+    batch_size: int = 64
+    optimizer: Optimizer = "adamw"
+    lr: float = 1e-3
+    momentum: float = 0.9
+    nesterov: bool = False
+    weight_decay: float = 1e-4
+    schedule: Schedule = "cosine"
+    step_size: int = 10
+    gamma: float = 0.1
+    patience: int | None = 10
+    monitor: Literal["val_loss", "val_accuracy"] = "val_accuracy"
+    clip_grad_norm: float | None = None
+    amp: bool | Literal["auto"] = "auto"
+    seed: int = 0
+    device: str | None = None
+    lr_multipliers: dict[str, float] = field(default_factory=dict)
+    unfreeze_at: dict[int, list[str]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "step_size"):
+            if int(getattr(self, name)) < 1:
+                raise InputError(f"{name} must be >= 1; got {getattr(self, name)}")
+        if not (math.isfinite(self.lr) and self.lr > 0):
+            raise InputError(f"lr (the learning rate) must be > 0; got {self.lr}")
+        if self.optimizer not in ("sgd", "adamw"):
+            raise InputError(f"optimizer must be 'sgd' or 'adamw'; got {self.optimizer!r}")
+        if self.schedule not in ("constant", "step", "cosine", "onecycle"):
+            raise InputError(
+                "schedule must be 'constant', 'step', 'cosine' or 'onecycle'; "
+                f"got {self.schedule!r}"
+            )
+        if self.monitor not in ("val_loss", "val_accuracy"):
+            raise InputError(f"monitor must be 'val_loss' or 'val_accuracy'; got {self.monitor!r}")
+        if self.patience is not None and self.patience < 1:
+            raise InputError(f"patience must be >= 1 or None; got {self.patience}")
+
+
+@dataclass
+class History:
+    """Per-epoch figures of a run (``val_*`` are NaN without a validation set)."""
+
+    epoch: list[int] = field(default_factory=list)
+    train_loss: list[float] = field(default_factory=list)
+    train_accuracy: list[float] = field(default_factory=list)
+    val_loss: list[float] = field(default_factory=list)
+    val_accuracy: list[float] = field(default_factory=list)
+    lr: list[float] = field(default_factory=list)
+    seconds: list[float] = field(default_factory=list)
+    best_epoch: int = -1
+    stopped: str = ""
+
+    _COLUMNS = (
+        "epoch",
+        "train_loss",
+        "train_accuracy",
+        "val_loss",
+        "val_accuracy",
+        "lr",
+        "seconds",
+    )
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain lists and values (JSON- and checkpoint-ready)."""
+        return {k: v for k, v in asdict(self).items() if not k.startswith("_")}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> History:
+        """The inverse of :meth:`to_dict`."""
+        return cls(
+            **{k: d[k] for k in cls.__dataclass_fields__ if not k.startswith("_") and k in d}
+        )
+
+    def write_csv(self, path: str | os.PathLike[str]) -> Path:
+        """One row per epoch: the columns of the class."""
+        p = Path(path)
+        with p.open("w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(self._COLUMNS)
+            for row in zip(*(getattr(self, c) for c in self._COLUMNS), strict=True):
+                w.writerow([f"{v:.6g}" if isinstance(v, float) else v for v in row])
+        return p
+
+    def picture(self) -> np.ndarray:
+        """Loss, accuracy and learning rate against the epoch, as an (H, W, 3) uint8
+        image (:func:`robopercept.viz.plot.plot_series`), readable at 1080p."""
+        from robopercept.viz.plot import Panel, Series, plot_series
+
+        x = np.asarray(self.epoch, float)
+        blue, orange, green = (31, 119, 180), (255, 127, 14), (44, 160, 44)
+
+        def curves(name: str) -> list[Series]:
+            out = [Series(x, np.asarray(getattr(self, f"train_{name}"), float), "train", blue)]
+            val = np.asarray(getattr(self, f"val_{name}"), float)
+            if np.isfinite(val).any():
+                out.append(Series(x, val, "validation", orange))
+            return out
+
+        panels = [
+            Panel("loss (cross-entropy)", curves("loss")),
+            Panel("accuracy", curves("accuracy")),
+            Panel("learning rate", [Series(x, np.asarray(self.lr, float), "lr", green)]),
+        ]
+        return plot_series(panels, width=1200, panel_height=260, xlabel="epoch")
+
+
+class Normalize(nn.Module):
+    """``(x - mean_c) / std_c`` per channel, with the statistics as buffers (saved in the
+    checkpoint, moved with the model, exported to ONNX): put it first in a model, with
+    statistics of the training split only
+    (:func:`~robopercept.nn.data.normalization_stats`). Also usable as a dataset
+    transform: takes ``(C, H, W)`` images as well as ``(N, C, H, W)`` batches.
+
+    Parameters
+    ----------
+    mean, std : (C,) array
+        Per-channel statistics; ``std`` > 0.
+    """
+
+    mean: torch.Tensor
+    std: torch.Tensor
+
+    def __init__(self, mean: Any, std: Any) -> None:
+        super().__init__()
+        m = np.atleast_1d(np.asarray(mean, dtype=np.float32))
+        s = np.atleast_1d(np.asarray(std, dtype=np.float32))
+        if m.shape != s.shape or m.ndim != 1:
+            raise InputError(
+                f"mean and std must be (C,) of one length; got {m.shape} and {s.shape}"
+            )
+        if np.any(s <= 0):
+            raise InputError(
+                "std must be > 0 in every channel: a constant channel cannot be normalized"
+            )
+        self.register_buffer("mean", torch.from_numpy(m).view(1, -1, 1, 1))
+        self.register_buffer("std", torch.from_numpy(s).view(1, -1, 1, 1))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Normalize ``(C, H, W)`` or ``(N, C, H, W)``."""
+        single = x.ndim == 3
+        batch = x[None] if single else x
+        if batch.ndim != 4 or batch.shape[1] != self.mean.shape[1]:
+            raise InputError(
+                f"Normalize has {self.mean.shape[1]} channels; got an input of shape "
+                f"{tuple(x.shape)} (images are (C, H, W), batches (N, C, H, W))"
+            )
+        out = (batch - self.mean.to(batch)) / self.std.to(batch)
+        return out[0] if single else out
+
+
+@dataclass
+class Evaluation:
+    """A model's figures on a dataset.
+
+    Attributes
+    ----------
+    loss, accuracy : float
+    y_true, y_pred : (N,) int ndarray
+    probabilities : (N, K) float ndarray
+    """
+
+    loss: float
+    accuracy: float
+    y_true: np.ndarray
+    y_pred: np.ndarray
+    probabilities: np.ndarray
+
+    def confusion_matrix(self, n_classes: int | None = None) -> np.ndarray:
+        """Counts ``[true, predicted]`` (:func:`robopercept.learning.metrics.confusion_matrix`)."""
+        from robopercept.learning.metrics import confusion_matrix
+
+        k = n_classes or self.probabilities.shape[1]
+        return confusion_matrix(self.y_true, self.y_pred, labels=np.arange(k))
+
+
+def _device(name: str | None) -> torch.device:
+    if name is None:
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        dev = torch.device(name)
+    except RuntimeError as exc:
+        raise InputError(f"device {name!r} is not a torch device ('cpu', 'cuda', ...)") from exc
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise InputError("device 'cuda' asked for, but torch sees no CUDA device: use 'cpu'")
+    return dev
+
+
+def _check_batch(x: torch.Tensor, y: torch.Tensor, n_classes: int) -> None:
+    if x.ndim != 4:
+        raise InputError(f"images must be (N, C, H, W) batches; got shape {tuple(x.shape)}")
+    if y.numel() and (int(y.min()) < 0 or int(y.max()) >= n_classes):
+        raise InputError(
+            f"labels must be in 0..{n_classes - 1} (the model has {n_classes} outputs); "
+            f"got {int(y.min())}..{int(y.max())}"
+        )
+
+
+@contextlib.contextmanager
+def _deterministic() -> Iterator[None]:
+    before = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(before)
+
+
+def _autocast(device: torch.device, amp: bool | str) -> contextlib.AbstractContextManager[Any]:
+    use = device.type == "cuda" if amp == "auto" else bool(amp)
+    if use and device.type == "cuda":
+        return torch.autocast("cuda", dtype=torch.bfloat16)
+    return contextlib.nullcontext()
+
+
+def _n_outputs(model: nn.Module, sample: torch.Tensor, device: torch.device) -> int:
+    was = model.training
+    model.eval()
+    with torch.no_grad():
+        out = model(sample[:1].to(device))
+    model.train(was)
+    if out.ndim != 2:
+        raise InputError(f"the model must output (N, classes) logits; got {tuple(out.shape)}")
+    return int(out.shape[1])
+
+
+@torch.no_grad()
+def evaluate(
+    model: nn.Module,
+    data: Dataset[Any],
+    *,
+    batch_size: int = 256,
+    device: str | None = None,
+) -> Evaluation:
+    """Loss, accuracy and predictions of ``model`` on ``data`` (eval mode, no gradients).
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        Maps an (N, C, H, W) batch to (N, K) logits.
+    data : Dataset
+        Items ``(image (C, H, W), label)``.
+    batch_size : int
+    device : str, optional
+
+    Returns
+    -------
+    Evaluation
+    """
+    if len(data) == 0:  # type: ignore[arg-type]
+        raise InputError("the dataset is empty: nothing to evaluate")
+    dev = _device(device)
+    model = model.to(dev)
+    was = model.training
+    model.eval()
+    losses, trues, probs = [], [], []
+    for x, y in DataLoader(data, batch_size=batch_size, shuffle=False):
+        x, y = x.to(dev, torch.float32), y.to(dev, torch.long)
+        logits = model(x).float()
+        _check_batch(x, y, logits.shape[1])
+        losses.append(nn.functional.cross_entropy(logits, y, reduction="sum").item())
+        trues.append(y.cpu().numpy())
+        probs.append(torch.softmax(logits, 1).cpu().numpy())
+    model.train(was)
+    p = np.concatenate(probs)
+    t = np.concatenate(trues)
+    pred = p.argmax(1)
+    return Evaluation(float(sum(losses) / len(t)), float((pred == t).mean()), t, pred, p)
+
+
+def _optimizer(model: nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
+    """One parameter group per learning-rate multiplier. Every parameter is given to the
+    optimizer, frozen ones too: torch's optimizers skip a parameter without a gradient
+    (no step, no weight decay), so unfreezing later needs no new group."""
+    named = list(model.named_parameters())
+    if not any(p.requires_grad for _, p in named) and not cfg.unfreeze_at:
+        raise InputError("the model has no trainable parameters (everything is frozen)")
+    groups: dict[float, list[nn.Parameter]] = {}
+    for name, param in named:
+        keys = [k for k in cfg.lr_multipliers if name.startswith(k)]
+        mult = cfg.lr_multipliers[max(keys, key=len)] if keys else 1.0
+        groups.setdefault(float(mult), []).append(param)
+    arg = [{"params": ps, "lr": cfg.lr * m} for m, ps in groups.items()]
+    if cfg.optimizer == "sgd":
+        return torch.optim.SGD(
+            arg,
+            lr=cfg.lr,
+            momentum=cfg.momentum,
+            nesterov=cfg.nesterov,
+            weight_decay=cfg.weight_decay,
+        )
+    return torch.optim.AdamW(arg, lr=cfg.lr, weight_decay=cfg.weight_decay)
+
+
+def _scheduler(opt: torch.optim.Optimizer, cfg: TrainConfig, steps_per_epoch: int) -> Any:
+    if cfg.schedule == "step":
+        return torch.optim.lr_scheduler.StepLR(opt, step_size=cfg.step_size, gamma=cfg.gamma)
+    if cfg.schedule == "cosine":
+        return torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=cfg.epochs)
+    if cfg.schedule == "onecycle":
+        return torch.optim.lr_scheduler.OneCycleLR(
+            opt,
+            max_lr=[g["lr"] for g in opt.param_groups],
+            epochs=cfg.epochs,
+            steps_per_epoch=steps_per_epoch,
+        )
+    return torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
+
+
+def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path:
+    """Write ``state`` (tensors and plain values) to ``path`` atomically (a temporary
+    file renamed over it), so an interruption never leaves half a checkpoint."""
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.name + ".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, p)
+    return p
+
+
+def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None) -> dict[str, Any]:
+    """Read a checkpoint written by :func:`fit` (``weights_only=True``: tensors and plain
+    values only, no code) and, with ``model``, load its weights into it.
+
+    Raises
+    ------
+    FileFormatError
+        Missing or unreadable file, not a robopercept checkpoint, or weights of another
+        architecture (the message names the architecture recorded in the checkpoint).
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise FileFormatError(f"{p} is a folder; give a checkpoint file (.pt)")
+    if not p.exists():
+        raise FileFormatError(f"{p}: no such file")
+    try:
+        state = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many kinds for a foreign file
+        raise FileFormatError(
+            f"{p}: not a readable torch checkpoint ({type(exc).__name__})"
+        ) from None
+    if not isinstance(state, dict) or "model" not in state:
+        raise FileFormatError(f"{p}: not a robopercept checkpoint (no 'model' weights)")
+    if model is not None:
+        own = model.state_dict()
+        theirs = state["model"]
+        bad = sorted(set(own) ^ set(theirs)) + sorted(
+            k for k in set(own) & set(theirs) if tuple(own[k].shape) != tuple(theirs[k].shape)
+        )
+        if bad:
+            arch = state.get("architecture", "an unrecorded architecture")
+            raise FileFormatError(
+                f"{p}: weights of {arch}, not of this model ({len(bad)} mismatched tensors, "
+                f"first {bad[0]!r}): build the model the checkpoint was trained with"
+            )
+        model.load_state_dict(theirs)
+    return state
+
+
+def fit(
+    model: nn.Module,
+    train: Dataset[Any],
+    val: Dataset[Any] | None = None,
+    config: TrainConfig | None = None,
+    *,
+    checkpoint: str | os.PathLike[str] | None = None,
+    resume: bool = False,
+    architecture: str = "",
+    progress: bool = True,
+) -> History:
+    """Train ``model`` on ``train`` (items ``(image (C, H, W), label)``), validating on
+    ``val`` after each epoch; return the :class:`History`.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        Logits ``(N, K)`` for an ``(N, C, H, W)`` batch. Trained in place; at the end it
+        holds the best epoch's weights (by ``config.monitor``; the last epoch's without
+        ``val``).
+    train, val : Dataset
+    config : TrainConfig, optional
+    checkpoint : path, optional
+        Written after every epoch (model, optimizer, schedule, random states, history,
+        config, ``architecture``); the best weights go to ``<name>.best.pt`` beside it.
+    resume : bool
+        Continue from ``checkpoint`` (ends as the uninterrupted run would).
+    architecture : str
+        Recorded in the checkpoint (named when loading into the wrong model).
+    progress : bool
+        A bar per epoch on stderr (:func:`robopercept.progress.progress_bar`).
+
+    Returns
+    -------
+    History
+
+    Raises
+    ------
+    InputError
+        Empty dataset, images not (C, H, W), labels out of range, or a loss that became
+        NaN or infinite (lower the learning rate).
+    """
+    from robopercept.progress import progress_bar
+
+    cfg = config or TrainConfig()
+    if len(train) == 0:  # type: ignore[arg-type]
+        raise InputError("the training set is empty")
+    if val is not None and len(val) == 0:  # type: ignore[arg-type]
+        raise InputError("the validation set is empty (give none, or a non-empty one)")
+    if resume and checkpoint is None:
+        raise InputError("resume needs the checkpoint to resume from")
+    dev = _device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    model.to(dev)
+    x0, _ = train[0]
+    if torch.as_tensor(x0).ndim != 3:
+        raise InputError(
+            f"training images must be (C, H, W) tensors (channels first); got shape "
+            f"{tuple(torch.as_tensor(x0).shape)}"
+        )
+    n_classes = _n_outputs(model, torch.as_tensor(x0)[None].float(), dev)
+    shuffle = torch.Generator().manual_seed(cfg.seed)
+    loader = DataLoader(train, batch_size=cfg.batch_size, shuffle=True, generator=shuffle)
+    opt = _optimizer(model, cfg)
+    sched = _scheduler(opt, cfg, len(loader))
+    hist = History()
+    start_epoch = 0
+    best_state: dict[str, torch.Tensor] | None = None
+    best_value = math.inf
+    ckpt = Path(checkpoint) if checkpoint is not None else None
+    best_path = ckpt.with_name(ckpt.stem + ".best.pt") if ckpt is not None else None
+    if resume and ckpt is not None:
+        state = load_checkpoint(ckpt, model)
+        opt.load_state_dict(state["optimizer"])
+        sched.load_state_dict(state["scheduler"])
+        shuffle.set_state(state["shuffle_state"])
+        torch.set_rng_state(state["torch_rng_state"])
+        hist = History.from_dict(state["history"])
+        start_epoch = int(state["epoch"]) + 1
+        for k, prefixes in cfg.unfreeze_at.items():  # what the run had unfrozen by then
+            if k <= start_epoch:
+                for name, param in model.named_parameters():
+                    if any(name.startswith(pf) for pf in prefixes):
+                        param.requires_grad_(True)
+        best_value = float(state["best_value"])
+        if best_path is not None and best_path.exists():
+            best_state = load_checkpoint(best_path)["model"]
+    sign = -1.0 if cfg.monitor == "val_accuracy" else 1.0
+    bar = progress_bar(
+        total=cfg.epochs - start_epoch, desc="training", unit="epoch", disable=not progress
+    )
+    try:
+        with _deterministic():
+            for epoch in range(start_epoch, cfg.epochs):
+                t0 = time.perf_counter()
+                for prefix in cfg.unfreeze_at.get(epoch + 1, []):
+                    for name, param in model.named_parameters():
+                        if name.startswith(prefix):
+                            param.requires_grad_(True)
+                model.train()
+                lr = float(opt.param_groups[0]["lr"])
+                total, correct, count = 0.0, 0, 0
+                for b, (x, y) in enumerate(loader):
+                    x, y = x.to(dev, torch.float32), y.to(dev, torch.long)
+                    _check_batch(x, y, n_classes)
+                    with _autocast(dev, cfg.amp):
+                        logits = model(x)
+                        loss = nn.functional.cross_entropy(logits.float(), y)
+                    if not torch.isfinite(loss):
+                        raise InputError(
+                            f"the loss became {loss.item()} at epoch {epoch + 1}, batch {b + 1}: "
+                            f"lower the learning rate (lr {cfg.lr:g})"
+                        )
+                    opt.zero_grad(set_to_none=True)
+                    loss.backward()
+                    if cfg.clip_grad_norm is not None:
+                        nn.utils.clip_grad_norm_(model.parameters(), cfg.clip_grad_norm)
+                    opt.step()
+                    if cfg.schedule == "onecycle":
+                        sched.step()
+                    total += loss.item() * len(y)
+                    correct += int((logits.argmax(1) == y).sum())
+                    count += len(y)
+                if cfg.schedule != "onecycle":
+                    sched.step()
+                hist.epoch.append(epoch + 1)
+                hist.train_loss.append(total / count)
+                hist.train_accuracy.append(correct / count)
+                if val is not None:
+                    ev = evaluate(model, val, batch_size=max(cfg.batch_size, 256), device=str(dev))
+                    hist.val_loss.append(ev.loss)
+                    hist.val_accuracy.append(ev.accuracy)
+                    value = sign * (ev.accuracy if sign < 0 else ev.loss)
+                else:
+                    hist.val_loss.append(math.nan)
+                    hist.val_accuracy.append(math.nan)
+                    value = -float(epoch)  # the last epoch is the best
+                hist.lr.append(lr)
+                hist.seconds.append(time.perf_counter() - t0)
+                if value < best_value:
+                    best_value = value
+                    hist.best_epoch = epoch + 1
+                    best_state = copy.deepcopy(model.state_dict())
+                    if best_path is not None:
+                        save_checkpoint(
+                            best_path, {"model": best_state, "architecture": architecture}
+                        )
+                if ckpt is not None:
+                    save_checkpoint(
+                        ckpt,
+                        {
+                            "model": model.state_dict(),
+                            "optimizer": opt.state_dict(),
+                            "scheduler": sched.state_dict(),
+                            "shuffle_state": shuffle.get_state(),
+                            "torch_rng_state": torch.get_rng_state(),
+                            "history": hist.to_dict(),
+                            "epoch": epoch,
+                            "best_value": best_value,
+                            "config": asdict(cfg),
+                            "architecture": architecture,
+                        },
+                    )
+                bar.update(1)
+                bar.set_postfix(
+                    loss=f"{hist.train_loss[-1]:.3f}",
+                    acc=f"{hist.train_accuracy[-1]:.3f}",
+                    val_acc=f"{hist.val_accuracy[-1]:.3f}",
+                )
+                if (
+                    cfg.patience is not None
+                    and val is not None
+                    and epoch + 1 - hist.best_epoch >= cfg.patience
+                ):
+                    hist.stopped = f"early stopping: no improvement for {cfg.patience} epochs"
+                    break
+    except KeyboardInterrupt:
+        hist.stopped = "interrupted"
+        raise
+    finally:
+        bar.close()
+        if best_state is not None:
+            model.load_state_dict(best_state)
+    return hist

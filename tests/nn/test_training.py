@@ -1,0 +1,203 @@
+"""The training loop: determinism, resume, early stopping, bad input (issue 23)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from torch import nn  # noqa: E402
+from torch.utils.data import TensorDataset  # noqa: E402
+
+from robopercept.errors import FileFormatError, InputError  # noqa: E402
+from robopercept.nn.training import (  # noqa: E402
+    History,
+    Normalize,
+    TrainConfig,
+    evaluate,
+    fit,
+    load_checkpoint,
+)
+
+
+def _blobs(n: int = 240, seed: int = 0) -> TensorDataset:
+    """Three classes of 1x6x6 images: a bright square in one of three places."""
+    rng = np.random.default_rng(seed)
+    y = np.arange(n) % 3
+    x = rng.normal(0, 0.3, (n, 1, 6, 6)).astype(np.float32)
+    for i, c in enumerate(y):
+        x[i, 0, 2 * c : 2 * c + 2, 1:5] += 1.5
+    return TensorDataset(torch.from_numpy(x), torch.from_numpy(y))
+
+
+def _model(seed: int = 0) -> nn.Module:
+    torch.manual_seed(seed)
+    return nn.Sequential(
+        nn.Conv2d(1, 4, 3, padding=1), nn.ReLU(), nn.Dropout(0.2), nn.Flatten(), nn.Linear(144, 3)
+    )
+
+
+def _weights(m: nn.Module) -> list[np.ndarray]:
+    return [v.detach().numpy().copy() for v in m.state_dict().values()]
+
+
+CFG = dict(epochs=6, batch_size=32, lr=0.05, optimizer="sgd", schedule="step", step_size=3)
+
+
+def test_learns_the_toy_problem() -> None:
+    model = _model()
+    hist = fit(model, _blobs(), _blobs(90, seed=1), TrainConfig(**CFG), progress=False)
+    assert hist.epoch == [1, 2, 3, 4, 5, 6]
+    assert hist.val_accuracy[-1] >= 0.95 and hist.train_loss[-1] < hist.train_loss[0]
+    np.testing.assert_allclose(hist.lr, [0.05] * 3 + [0.005] * 3, rtol=1e-12)  # StepLR(3, 0.1)
+    assert evaluate(model, _blobs(90, seed=1)).accuracy >= 0.95
+
+
+def test_same_seed_same_weights() -> None:
+    a, b = _model(), _model()
+    fit(a, _blobs(), _blobs(60, 1), TrainConfig(**CFG, seed=3), progress=False)
+    fit(b, _blobs(), _blobs(60, 1), TrainConfig(**CFG, seed=3), progress=False)
+    for u, v in zip(_weights(a), _weights(b), strict=True):
+        np.testing.assert_array_equal(u, v)
+    c = _model()
+    fit(c, _blobs(), _blobs(60, 1), TrainConfig(**CFG, seed=4), progress=False)
+    assert any(not np.array_equal(u, v) for u, v in zip(_weights(a), _weights(c), strict=True))
+
+
+class _InterruptAfter(torch.utils.data.Dataset):
+    """``data``, with Ctrl-C on item access number ``after + 1`` (an interrupted run)."""
+
+    def __init__(self, data, after: int) -> None:
+        self.data, self.after, self.seen = data, after, 0
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    def __getitem__(self, i):
+        self.seen += 1
+        if self.seen > self.after:
+            raise KeyboardInterrupt
+        return self.data[i]
+
+
+def test_resumed_run_ends_as_the_uninterrupted_one(tmp_path) -> None:
+    cfg = TrainConfig(**dict(CFG, patience=None, schedule="cosine"))
+    whole = _model()
+    fit(whole, _blobs(), _blobs(60, 1), cfg, progress=False)
+    part = _model()
+    ck = tmp_path / "run.pt"
+    with pytest.raises(KeyboardInterrupt):  # Ctrl-C in epoch 4
+        fit(
+            part,
+            _InterruptAfter(_blobs(), 3 * 240 + 50),
+            _blobs(60, 1),
+            cfg,
+            checkpoint=ck,
+            progress=False,
+        )
+    state = load_checkpoint(ck)  # the last complete epoch's checkpoint is readable
+    assert state["epoch"] == 2 and state["history"]["epoch"] == [1, 2, 3]
+    resumed = _model(seed=9)  # other initial weights: the checkpoint's replace them
+    hist = fit(resumed, _blobs(), _blobs(60, 1), cfg, checkpoint=ck, resume=True, progress=False)
+    assert hist.epoch == [1, 2, 3, 4, 5, 6]
+    for u, v in zip(_weights(whole), _weights(resumed), strict=True):
+        np.testing.assert_array_equal(u, v)
+
+
+def test_early_stopping_restores_the_best_epoch(tmp_path) -> None:
+    model = _model()
+    cfg = TrainConfig(
+        epochs=40, batch_size=32, lr=0.05, optimizer="sgd", patience=3, monitor="val_loss"
+    )
+    hist = fit(model, _blobs(), _blobs(60, 1), cfg, checkpoint=tmp_path / "r.pt", progress=False)
+    assert hist.stopped.startswith("early stopping") and len(hist.epoch) < 40
+    best = hist.best_epoch
+    assert hist.val_loss[best - 1] == min(hist.val_loss)
+    assert len(hist.epoch) - best == 3
+    assert math.isclose(evaluate(model, _blobs(60, 1)).loss, hist.val_loss[best - 1], rel_tol=1e-5)
+    best_file = load_checkpoint(tmp_path / "r.best.pt", _model())
+    assert "model" in best_file
+
+
+def test_nan_loss_names_the_learning_rate() -> None:
+    with pytest.raises(InputError, match="lower the learning rate"):
+        fit(
+            _model(),
+            _blobs(),
+            None,
+            TrainConfig(epochs=3, lr=1e12, optimizer="sgd"),
+            progress=False,
+        )
+
+
+def test_bad_inputs() -> None:
+    empty = TensorDataset(torch.zeros(0, 1, 6, 6), torch.zeros(0, dtype=torch.long))
+    with pytest.raises(InputError, match="training set is empty"):
+        fit(_model(), empty, progress=False)
+    x = torch.zeros(10, 1, 6, 6)
+    with pytest.raises(InputError, match=r"labels must be in 0\.\.2"):
+        fit(_model(), TensorDataset(x, torch.full((10,), 7)), progress=False)
+    last = TensorDataset(torch.zeros(10, 6, 6, 1), torch.zeros(10, dtype=torch.long))
+    with pytest.raises((InputError, RuntimeError)):
+        fit(_model(), last, progress=False)
+    with pytest.raises(InputError, match="channels first"):
+        fit(
+            _model(),
+            TensorDataset(torch.zeros(10, 6, 6), torch.zeros(10, dtype=torch.long)),
+            progress=False,
+        )
+    with pytest.raises(InputError, match="learning rate"):
+        TrainConfig(lr=0)
+
+
+def test_checkpoint_of_another_architecture(tmp_path) -> None:
+    ck = tmp_path / "a.pt"
+    fit(
+        _model(),
+        _blobs(),
+        None,
+        TrainConfig(epochs=1),
+        checkpoint=ck,
+        architecture="toy-cnn",
+        progress=False,
+    )
+    other = nn.Sequential(nn.Flatten(), nn.Linear(36, 3))
+    with pytest.raises(FileFormatError, match="weights of toy-cnn"):
+        load_checkpoint(ck, other)
+    junk = tmp_path / "junk.pt"
+    junk.write_text("not a checkpoint")
+    with pytest.raises(FileFormatError, match="not a readable torch checkpoint"):
+        load_checkpoint(junk)
+    with pytest.raises(FileFormatError, match="no such file"):
+        load_checkpoint(tmp_path / "none.pt")
+
+
+def test_history_csv_and_picture(tmp_path) -> None:
+    h = History(
+        epoch=[1, 2],
+        train_loss=[1.0, 0.5],
+        train_accuracy=[0.5, 0.8],
+        val_loss=[1.1, 0.6],
+        val_accuracy=[0.4, 0.7],
+        lr=[0.1, 0.1],
+        seconds=[0.2, 0.2],
+        best_epoch=2,
+    )
+    text = h.write_csv(tmp_path / "h.csv").read_text().splitlines()
+    assert text[0] == "epoch,train_loss,train_accuracy,val_loss,val_accuracy,lr,seconds"
+    assert text[2] == "2,0.5,0.8,0.6,0.7,0.1,0.2"
+    assert History.from_dict(h.to_dict()) == h
+    img = h.picture()
+    assert img.dtype == np.uint8 and img.shape[1] == 1200 and img.shape[0] >= 3 * 260
+
+
+def test_normalize_layer() -> None:
+    n = Normalize([1.0, 2.0], [2.0, 4.0])
+    x = torch.ones(1, 2, 2, 2)
+    np.testing.assert_allclose(n(x)[0, :, 0, 0].numpy(), [0.0, -0.25])
+    assert set(n.state_dict()) == {"mean", "std"}
+    with pytest.raises(InputError):
+        Normalize([0.0], [0.0])  # std 0
