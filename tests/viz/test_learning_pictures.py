@@ -36,3 +36,31 @@ def test_scatter_and_curves():
     assert curves_picture([(x, x, "diag")], title="ROC", xlabel="x", ylabel="y").ndim == 3
     with pytest.raises(InputError):
         curves_picture([], title="", xlabel="", ylabel="")
+
+
+def test_tiles_picture_layout_and_colours() -> None:
+    from robopercept.viz import tiles_picture
+
+    w = np.zeros((5, 3, 3))
+    w[0, 1, 1] = 1.0  # one positive weight
+    w[1, 0, 0] = -1.0  # one negative weight
+    img = tiles_picture(w, signed=True, columns=3, tile_px=30, gap=6)
+    assert img.shape == (2 * 36 + 6, 3 * 36 + 6, 3) and img.dtype == np.uint8
+    centre0 = img[6 + 15, 6 + 15]  # tile 0's middle cell: red
+    corner1 = img[6 + 5, 6 + 36 + 5]  # tile 1's top-left cell: blue
+    assert int(centre0[0]) > int(centre0[2]) + 80  # red
+    assert int(corner1[2]) > int(corner1[0]) + 80  # blue
+    assert (img[6 + 36 + 15, 6 + 2 * 36 + 15] == 255).all()  # the empty 6th slot stays white
+
+
+def test_tiles_picture_activations_and_bad_input() -> None:
+    from robopercept.viz import tiles_picture
+
+    maps = np.stack([np.arange(16.0).reshape(4, 4), np.full((4, 4), 3.0)])
+    img = tiles_picture(maps, tile_px=40, gap=0, columns=2)
+    assert img[0, 0].tolist() == [0, 0, 0] and img[39, 39].tolist() == [255, 255, 255]
+    assert (img[:, 40:] == 0).all()  # a constant map is drawn black, not divided by zero
+    with pytest.raises(InputError):
+        tiles_picture(np.zeros((2, 2)))
+    with pytest.raises(InputError):
+        tiles_picture(np.zeros((0, 3, 3)))

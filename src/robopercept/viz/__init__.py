@@ -18,7 +18,12 @@ from robopercept.viz.flow import (
     flow_to_color,
     flow_wheel,
 )
-from robopercept.viz.learning import confusion_picture, curves_picture, scatter_picture
+from robopercept.viz.learning import (
+    confusion_picture,
+    curves_picture,
+    scatter_picture,
+    tiles_picture,
+)
 
 __all__ = [
     "colorize_depth",
@@ -41,4 +46,5 @@ __all__ = [
     "label_colors",
     "render_points",
     "scatter_picture",
+    "tiles_picture",
 ]

@@ -11,7 +11,7 @@ from robopercept.errors import InputError
 from robopercept.viz.colormap import label_colors
 from robopercept.viz.plot import Panel, Series, plot_series
 
-__all__ = ["confusion_picture", "curves_picture", "scatter_picture"]
+__all__ = ["confusion_picture", "curves_picture", "scatter_picture", "tiles_picture"]
 
 
 def _colors(n: int) -> list[tuple[int, int, int]]:
@@ -125,3 +125,76 @@ def confusion_picture(
                 font=font,
             )
     return np.asarray(img)
+
+
+def tiles_picture(
+    tiles: np.ndarray,
+    *,
+    signed: bool = False,
+    columns: int | None = None,
+    tile_px: int = 96,
+    gap: int = 6,
+    names: Sequence[str] | None = None,
+) -> np.ndarray:
+    """A grid of small images, each enlarged (nearest neighbour) to ``tile_px`` pixels:
+    a network's first-layer filters or its feature maps, readable at 1080p.
+
+    Parameters
+    ----------
+    tiles : (K, H, W) or (K, 3, H, W) ndarray
+        K single-channel tiles, or K colour filters (RGB).
+    signed : bool
+        Diverging colours (negative blue, zero white, positive red; one scale for all
+        tiles, :func:`~robopercept.viz.colormap.colorize_signed`), for weights;
+        otherwise each tile is stretched to its own min..max in gray, for activations.
+    columns : int, optional
+        Tiles per row (default about sqrt(K)).
+    tile_px : int
+        Side of an enlarged tile.
+    gap : int
+        White pixels between tiles.
+    names : sequence of str, optional
+        A caption under each tile.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+    """
+    from robopercept.viz.colormap import colorize_signed
+    from robopercept.viz.draw import draw_text
+
+    t = np.asarray(tiles, dtype=np.float64)
+    if t.ndim == 4 and t.shape[1] == 3:
+        t = np.moveaxis(t, 1, -1)
+    elif t.ndim != 3:
+        raise InputError(f"tiles must be (K, H, W) or (K, 3, H, W); got {t.shape}")
+    k = t.shape[0]
+    if k == 0:
+        raise InputError("no tiles to draw")
+    cols = columns or int(np.ceil(np.sqrt(k)))
+    rows = int(np.ceil(k / cols))
+    cap = 18 if names is not None else 0
+    h, w = t.shape[1], t.shape[2]
+    scale = max(1, tile_px // max(h, w))
+    th, tw = h * scale, w * scale
+    out = np.full((rows * (th + gap + cap) + gap, cols * (tw + gap) + gap, 3), 255, np.uint8)
+    limit = float(np.percentile(np.abs(t), 99)) or 1.0
+    for i in range(k):
+        tile = t[i]
+        if tile.ndim == 3:  # colour filter: one scale, centred at grey
+            rgb = np.clip(127.5 + 127.5 * tile / limit, 0, 255).astype(np.uint8)
+        elif signed:
+            rgb = colorize_signed(tile, limit)
+        else:
+            lo, hi = float(tile.min()), float(tile.max())
+            g = np.zeros_like(tile) if hi <= lo else (tile - lo) / (hi - lo)
+            rgb = np.repeat((255 * g).astype(np.uint8)[..., None], 3, axis=2)
+        big = np.repeat(np.repeat(rgb, scale, axis=0), scale, axis=1)
+        r, c = divmod(i, cols)
+        y, x = gap + r * (th + gap + cap), gap + c * (tw + gap)
+        out[y : y + th, x : x + tw] = big
+    for i, name in enumerate(names or []):  # captions last: draw_text returns a new image
+        r, c = divmod(i, cols)
+        y, x = gap + r * (th + gap + cap), gap + c * (tw + gap)
+        out = draw_text(out, str(name), (x, y + th + 2), color=(0, 0, 0), size=13, background=None)
+    return np.ascontiguousarray(out)
