@@ -17,6 +17,7 @@ from robopercept.cli.warmup import FIRST_USE_SECONDS, first_use_seconds, make_in
 _INPUT_NAMES = ("image", "image2", "left", "right", "video", "cloud", "table")
 _INPUT_NAMES += ("board0", "board1", "board2")
 NO_WORKLOAD = {"info", "warmup", "plane-track", "synth-rgbd", "rgbd-import", "train-hog", "handeye"}
+NO_WORKLOAD |= {"nn"}  # torch networks: no numba kernel to compile (issue 23)
 
 
 def _commands() -> set[str]:

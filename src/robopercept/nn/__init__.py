@@ -22,6 +22,7 @@ _SUBMODULES = (
     "training",
     "transfer",
     "export",
+    "run",
 )
 
 __all__ = list(_SUBMODULES)

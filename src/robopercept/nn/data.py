@@ -60,6 +60,7 @@ __all__ = [
     "normalization_stats",
     "shapes_dataset",
     "stratified_split",
+    "to_unit_float",
 ]
 
 #: file extensions :class:`ImageFolder` reads (lower case)
@@ -281,8 +282,9 @@ def load_lfw_subset(transform: Transform | None = None) -> ArrayDataset:
     return ArrayDataset(images, labels, ("non-face", "face"), transform)
 
 
-def _to_unit_float(image: np.ndarray) -> np.ndarray:
-    """uint8 / 255, uint16 / 65535, float kept: the file's full scale mapped to 1."""
+def to_unit_float(image: np.ndarray) -> np.ndarray:
+    """An image read from a file as float32 with the file's full scale mapped to 1:
+    uint8 / 255, uint16 / 65535, floats kept."""
     if image.dtype == np.uint8:
         return image.astype(np.float32) / 255.0
     if image.dtype == np.uint16:
@@ -381,7 +383,7 @@ class ImageFolder(ArrayDataset):
                         f"cannot read image {str(f)!r} ({exc}): remove or repair it, or pass "
                         "skip_invalid=True"
                     ) from exc
-                arr = _to_unit_float(img)
+                arr = to_unit_float(img)
                 arr = arr[None] if arr.ndim == 2 else arr.transpose(2, 0, 1)
                 if size is not None:
                     arr = _resize(arr, size)

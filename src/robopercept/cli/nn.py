@@ -1,0 +1,297 @@
+"""``robopercept nn train|eval|predict|summary``: convolutional networks (extra ``deep``).
+
+The work is done by :mod:`robopercept.nn.run` and :mod:`robopercept.nn.summary`; this
+module parses and prints. torch is imported only when a command runs, so the parser (and
+every other command) stays torch-free; without torch a command fails with the install
+line of the ``deep`` extra.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+from typing import Any
+
+from robopercept.cli._args import UsageError, image_output, positive_int
+from robopercept.errors import InputError
+
+__all__ = ["MODEL_NAMES", "register"]
+
+#: the names of :data:`robopercept.nn.models.MODELS` (kept here so the parser needs no torch)
+MODEL_NAMES = ("vgg_small", "inception_small", "resnet_small")
+
+_NO_TORCH = "robopercept nn needs the deep extra: pip install 'robopercept[deep]'"
+
+
+def _need_torch() -> None:
+    """Raise a one-line error (exit 1) when torch is not installed."""
+    if importlib.util.find_spec("torch") is None:
+        raise InputError(_NO_TORCH)
+
+
+def _size(text: str) -> tuple[int, int]:
+    """``WxH`` -> (width, height), both >= 1 (argparse type)."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects WxH, e.g. 32x32; got {text!r}") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"expects positive sizes; got {text!r}")
+    return w, h
+
+
+def _chw(text: str) -> tuple[int, int, int]:
+    """``C,H,W`` -> three integers >= 1 (argparse type)."""
+    try:
+        c, h, w = (int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects C,H,W, e.g. 1,8,8; got {text!r}") from None
+    if min(c, h, w) < 1:
+        raise argparse.ArgumentTypeError(f"expects positive sizes; got {text!r}")
+    return c, h, w
+
+
+def _positive_float(text: str) -> float:
+    """A float > 0 (argparse type)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a number; got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0; got {text!r}")
+    return v
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``nn`` and its subcommands ``train``, ``eval``, ``predict`` and ``summary`` to
+    the subcommand parsers ``sub``."""
+    p = sub.add_parser(
+        "nn",
+        help="convolutional networks: train, evaluate, predict, summarize (needs torch)",
+        description="Small VGG, Inception and ResNet classifiers in PyTorch (extra deep: "
+        "pip install 'robopercept[deep]').",
+    )
+    ns = p.add_subparsers(dest="nn_command", metavar="TASK", parser_class=type(p))
+    ns.required = True
+
+    t = ns.add_parser(
+        "train",
+        help="train a classifier and write a run folder",
+        description="Split the data (stratified train/validation/test, seeded), normalize "
+        "with train statistics, train, and write OUT/checkpoint.pt (last epoch), "
+        "checkpoint.best.pt, history.csv, curves.png, metrics.json and confusion.png.",
+    )
+    t.add_argument(
+        "--data", required=True, help="digits, lfw, or a folder laid out as root/class/img.png"
+    )
+    t.add_argument("--model", choices=MODEL_NAMES, default="resnet_small")
+    t.add_argument("--epochs", type=positive_int, default=30, help="most epochs (default 30)")
+    t.add_argument("--lr", type=_positive_float, default=1e-3, help="learning rate (default 1e-3)")
+    t.add_argument("--batch-size", type=positive_int, default=64, help="default 64")
+    t.add_argument("--optimizer", choices=("adamw", "sgd"), default="adamw")
+    t.add_argument(
+        "--schedule", choices=("cosine", "step", "onecycle", "constant"), default="cosine"
+    )
+    t.add_argument(
+        "--patience", type=positive_int, default=10, help="early stopping (default 10 epochs)"
+    )
+    t.add_argument("--seed", type=int, default=0, help="split, weights and shuffling (default 0)")
+    t.add_argument("--augment", action="store_true", help="random shifts, rotations, scales")
+    t.add_argument("--gray", action="store_true", help="image folders: read grey images")
+    t.add_argument("--size", type=_size, help="image folders: resize to WxH")
+    t.add_argument(
+        "--split",
+        type=_split,
+        default=(0.7, 0.15, 0.15),
+        help="train,validation,test shares (default 0.7,0.15,0.15)",
+    )
+    t.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")
+    t.add_argument("--resume", action="store_true", help="continue the run in --out")
+    t.add_argument("--overwrite", action="store_true", help="replace a run already in --out")
+    t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
+    t.add_argument("--json", action="store_true", help="print metrics.json")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(func=run_train)
+
+    e = ns.add_parser(
+        "eval",
+        help="accuracy, per-class figures and confusion matrix of a trained model",
+        description="Evaluate CHECKPOINT (a run's .pt file or its folder) on a whole data "
+        "set; writes the confusion matrix picture. The built-in sets include the run's "
+        "training images: metrics.json holds the held-out test figures.",
+    )
+    e.add_argument("checkpoint")
+    e.add_argument("--data", required=True, help="digits, lfw, or an image folder")
+    e.add_argument("-o", "--output", type=image_output, default="confusion.png")
+    e.add_argument("--device", help="cpu, cuda, ...")
+    e.add_argument("--json", action="store_true", help="print the figures as JSON")
+    e.set_defaults(func=run_eval)
+
+    r = ns.add_parser(
+        "predict",
+        help="the most probable classes of images",
+        description="Classify each IMAGE with CHECKPOINT (read grey or colour and resized "
+        "as the model was trained). A digits model expects 8x8 light-on-dark digits.",
+    )
+    r.add_argument("checkpoint")
+    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument("--top-k", type=positive_int, default=3, help="classes per image (default 3)")
+    r.add_argument("--device", help="cpu, cuda, ...")
+    r.add_argument("--json", action="store_true", help="print the predictions as JSON")
+    r.set_defaults(func=run_predict)
+
+    s = ns.add_parser(
+        "summary",
+        help="per-layer output shapes, parameters and receptive fields of a model",
+        description="Build MODEL (untrained) and print its layers for an input of C,H,W.",
+    )
+    s.add_argument("model", choices=MODEL_NAMES)
+    s.add_argument("--input", type=_chw, default=(1, 8, 8), help="C,H,W (default 1,8,8)")
+    s.add_argument("--classes", type=positive_int, default=10, help="outputs (default 10)")
+    s.add_argument("--json", action="store_true", help="print the table as JSON")
+    s.set_defaults(func=run_summary)
+
+
+def _split(text: str) -> tuple[float, float, float]:
+    """``0.7,0.15,0.15`` -> three positive shares summing to 1 (argparse type)."""
+    try:
+        parts = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects TRAIN,VAL,TEST shares; got {text!r}") from None
+    if len(parts) != 3 or min(parts) <= 0 or abs(sum(parts) - 1) > 1e-6:
+        raise argparse.ArgumentTypeError(
+            f"expects three positive shares summing to 1, e.g. 0.7,0.15,0.15; got {text!r}"
+        )
+    return parts[0], parts[1], parts[2]
+
+
+def run_train(args: argparse.Namespace) -> int:
+    """Run ``robopercept nn train`` with the parsed ``args``; returns the exit status."""
+    _need_torch()
+    from robopercept.nn.run import train_run
+    from robopercept.nn.training import TrainConfig
+
+    if args.resume and args.overwrite:
+        raise UsageError("--resume and --overwrite exclude each other")
+    cfg = TrainConfig(
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        optimizer=args.optimizer,
+        lr=args.lr,
+        schedule=args.schedule,
+        patience=args.patience,
+        seed=args.seed,
+        device=args.device,
+    )
+    res = train_run(
+        args.data,
+        args.model,
+        args.out,
+        config=cfg,
+        mode="gray" if args.gray else "rgb",
+        size=args.size,
+        fractions=args.split,
+        augment=args.augment,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        progress=not (args.quiet or args.json),
+    )
+    if args.json:
+        print(json.dumps(json.loads(res.files["metrics"].read_text())))
+        return 0
+    h = res.history
+    print(
+        f"nn train: {args.model} ({res.parameters:,} parameters) on {args.data}, "
+        f"{len(h.epoch)} epochs in {res.seconds:.1f} s; best epoch {h.best_epoch} "
+        f"(validation accuracy {h.val_accuracy[h.best_epoch - 1]:.4f})"
+        + (f"; {h.stopped}" if h.stopped else "")
+    )
+    print(f"test accuracy {res.test.accuracy:.4f} on {res.test.n} images")
+    for name, path in res.files.items():
+        print(f"  {name:<10} {path}")
+    return 0
+
+
+def run_eval(args: argparse.Namespace) -> int:
+    """Run ``robopercept nn eval`` with the parsed ``args``; returns the exit status."""
+    _need_torch()
+    from robopercept.imaging import write_image
+    from robopercept.nn.run import evaluate_run
+
+    ev = evaluate_run(args.checkpoint, args.data, device=args.device)
+    written = write_image(args.output, ev.picture(f"confusion matrix ({args.data})"))
+    if args.json:
+        print(json.dumps({**ev.to_dict(), "output": str(written)}))
+        return 0
+    print(f"nn eval: accuracy {ev.accuracy:.4f}, loss {ev.loss:.4f} on {ev.n} images")
+    width = max(5, *(len(c) for c in ev.classes))
+    print(f"  {'class':<{width}}  precision  recall      f1  support")
+    for k, name in enumerate(ev.classes):
+        print(
+            f"  {name:<{width}}  {ev.precision[k]:9.3f}  {ev.recall[k]:6.3f}  "
+            f"{ev.f1[k]:6.3f}  {int(ev.support[k]):7d}"
+        )
+    print(f"-> {written}")
+    return 0
+
+
+def run_predict(args: argparse.Namespace) -> int:
+    """Run ``robopercept nn predict`` with the parsed ``args``; returns the exit status."""
+    _need_torch()
+    from robopercept.nn.run import predict
+
+    preds = predict(args.checkpoint, args.images, top_k=args.top_k, device=args.device)
+    if args.json:
+        rows: list[dict[str, Any]] = [
+            {
+                "image": str(p.path),
+                "top": [{"class": c, "probability": prob} for c, prob in p.top],
+            }
+            for p in preds
+        ]
+        print(json.dumps(rows))
+        return 0
+    width = max(5, *(len(str(p.path)) for p in preds))
+    print(f"{'image':<{width}}  rank  class                 probability")
+    for p in preds:
+        for rank, (c, prob) in enumerate(p.top, 1):
+            print(f"{str(p.path) if rank == 1 else '':<{width}}  {rank:4d}  {c:<20}  {prob:11.4f}")
+    return 0
+
+
+def run_summary(args: argparse.Namespace) -> int:
+    """Run ``robopercept nn summary`` with the parsed ``args``; returns the exit status."""
+    _need_torch()
+    from robopercept.nn.models import build_model
+    from robopercept.nn.summary import summary
+
+    c = args.input[0]
+    s = summary(build_model(args.model, in_channels=c, num_classes=args.classes), args.input)
+    if not args.json:
+        print(s)
+        return 0
+    print(
+        json.dumps(
+            {
+                "model": args.model,
+                "input_shape": list(s.input_shape),
+                "output_shape": list(s.output_shape),
+                "total_params": s.total_params,
+                "trainable_params": s.trainable_params,
+                "layers": [
+                    {
+                        "name": row.name,
+                        "type": row.type,
+                        "output_shape": list(row.output_shape),
+                        "params": row.params,
+                        "receptive_field": (
+                            None if row.receptive_field is None else list(row.receptive_field)
+                        ),
+                    }
+                    for row in s.rows
+                ],
+            }
+        )
+    )
+    return 0

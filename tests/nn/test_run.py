@@ -1,0 +1,100 @@
+"""robopercept.nn.run: the run's architecture record and the checks at its boundary
+(the end-to-end runs are in tests/cli/test_nn_cli.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from robopercept.errors import FileFormatError, InputError  # noqa: E402
+from robopercept.nn.run import Architecture, load_data, predict, train_run  # noqa: E402
+
+ARCH = Architecture(
+    model="resnet_small",
+    kwargs={"widths": [8, 16]},
+    in_channels=3,
+    num_classes=2,
+    input_size=(12, 10),
+    classes=("cat", "dog"),
+    mode="rgb",
+)
+
+
+def test_architecture_round_trip_and_build() -> None:
+    assert Architecture.from_json(ARCH.to_json()) == ARCH
+    model = ARCH.build()
+    torch.manual_seed(0)
+    out = model(torch.rand(4, 3, 12, 10))
+    assert out.shape == (4, 2)
+    # the first layer is the identity Normalize until the run's statistics are loaded
+    x = torch.rand(1, 3, 12, 10)
+    assert torch.equal(model[0](x), x)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        None,
+        "vgg",
+        json.dumps({"model": "vgg_small"}),  # no run marker
+        ARCH.to_json().replace("resnet_small", "alexnet"),  # unknown builder
+        ARCH.to_json().replace('"dog"', '"dog", "cow"'),  # 3 names for 2 classes
+    ],
+)
+def test_architecture_refuses_foreign_records(text) -> None:
+    with pytest.raises(FileFormatError, match="architecture"):
+        Architecture.from_json(text, "x.pt")
+
+
+def test_load_data_names_and_folders(tmp_path) -> None:
+    ds = load_data("digits")
+    assert ds.image_shape == (1, 8, 8) and len(ds) == 1797
+    with pytest.raises(InputError, match=r"no such folder.*'digits', 'lfw'"):
+        load_data(tmp_path / "missing")
+
+
+def test_train_run_refuses_before_any_work(tmp_path) -> None:
+    with pytest.raises(InputError, match=r"unknown model 'alexnet'.*vgg_small"):
+        train_run("digits", "alexnet", tmp_path / "r")
+    with pytest.raises(InputError, match="fractions"):
+        train_run("digits", "vgg_small", tmp_path / "r", fractions=(0.5, 0.5))
+    (tmp_path / "file").write_text("")
+    with pytest.raises(InputError, match="is a file"):
+        train_run("digits", "vgg_small", tmp_path / "file")
+    assert not (tmp_path / "r").exists()
+
+
+def test_predict_refuses_bad_arguments(tmp_path) -> None:
+    with pytest.raises(InputError, match="no images"):
+        predict(tmp_path / "c.pt", [])
+    with pytest.raises(InputError, match="--top-k"):
+        predict(tmp_path / "c.pt", ["a.png"], top_k=0)
+    with pytest.raises(FileFormatError, match="no such checkpoint"):
+        predict(tmp_path / "c.pt", ["a.png"])
+
+
+def test_predict_resizes_to_the_input_size(tmp_path) -> None:
+    """A checkpoint made by hand: the model sees the image resized to 12x10, so a
+    constant image gives the same probabilities at any file size."""
+    from robopercept.imaging import write_image
+    from robopercept.nn.training import save_checkpoint
+
+    torch.manual_seed(0)
+    model = ARCH.build().eval()
+    save_checkpoint(
+        tmp_path / "c.pt", {"model": model.state_dict(), "architecture": ARCH.to_json()}
+    )
+    small, big = tmp_path / "small.png", tmp_path / "big.png"
+    write_image(small, np.full((12, 10, 3), 128, np.uint8))
+    write_image(big, np.full((48, 40, 3), 128, np.uint8))
+    a, b = predict(tmp_path / "c.pt", [small, big], top_k=5)
+    assert len(a.top) == 2  # at most the number of classes
+    assert [c for c, _ in a.top] == [c for c, _ in b.top]
+    np.testing.assert_allclose([p for _, p in a.top], [p for _, p in b.top], atol=1e-6)
+    with torch.no_grad():
+        ref = torch.softmax(model(torch.full((1, 3, 12, 10), 128 / 255)), 1)[0]
+    np.testing.assert_allclose(sorted(ref.tolist(), reverse=True), [p for _, p in a.top], atol=1e-6)
