@@ -98,3 +98,30 @@ def test_predict_resizes_to_the_input_size(tmp_path) -> None:
     with torch.no_grad():
         ref = torch.softmax(model(torch.full((1, 3, 12, 10), 128 / 255)), 1)[0]
     np.testing.assert_allclose(sorted(ref.tolist(), reverse=True), [p for _, p in a.top], atol=1e-6)
+
+
+def test_ctrl_c_keeps_the_checkpoint_and_writes_the_history(tmp_path, monkeypatch) -> None:
+    """An interrupted run leaves its last complete checkpoint and history.csv readable."""
+    import robopercept.nn.run as run_module
+    from robopercept.nn.training import History, save_checkpoint
+
+    def interrupted_fit(model, train, val, config, *, checkpoint, **kwargs):
+        hist = History(
+            epoch=[1, 2],
+            train_loss=[1.0, 0.5],
+            train_accuracy=[0.5, 0.8],
+            val_loss=[1.1, 0.6],
+            val_accuracy=[0.4, 0.7],
+            lr=[0.1, 0.1],
+            seconds=[1.0, 1.0],
+        )
+        save_checkpoint(checkpoint, {"model": model.state_dict(), "history": hist.to_dict()})
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_module, "fit", interrupted_fit)
+    out = tmp_path / "run"
+    with pytest.raises(KeyboardInterrupt):
+        run_module.train_run("digits", "vgg_small", out, progress=False)
+    lines = (out / "history.csv").read_text().splitlines()
+    assert len(lines) == 3 and lines[2].startswith("2,0.5,")
+    assert (out / "checkpoint.pt").exists()

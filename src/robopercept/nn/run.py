@@ -444,16 +444,21 @@ def train_run(
     net[0] = Normalize(mean, std)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    hist = fit(
-        net,
-        cast(Dataset[Any], train),
-        cast(Dataset[Any], val),
-        cfg,
-        checkpoint=ckpt,
-        resume=resume,
-        architecture=arch.to_json(),
-        progress=progress,
-    )
+    try:
+        hist = fit(
+            net,
+            cast(Dataset[Any], train),
+            cast(Dataset[Any], val),
+            cfg,
+            checkpoint=ckpt,
+            resume=resume,
+            architecture=arch.to_json(),
+            progress=progress,
+        )
+    except KeyboardInterrupt:  # keep what the last complete epoch left: history.csv too
+        if ckpt.exists():
+            History.from_dict(load_checkpoint(ckpt)["history"]).write_csv(out / "history.csv")
+        raise
     seconds = time.perf_counter() - t0
     test_ev = _run_evaluation(net, test, cfg.device)
     files = _write_run(out, hist, test_ev)
