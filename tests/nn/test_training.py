@@ -201,3 +201,22 @@ def test_normalize_layer() -> None:
     assert set(n.state_dict()) == {"mean", "std"}
     with pytest.raises(InputError):
         Normalize([0.0], [0.0])  # std 0
+
+
+def test_cosine_and_onecycle_schedules() -> None:
+    cfg = TrainConfig(epochs=4, lr=0.1, optimizer="sgd", schedule="cosine", patience=None)
+    hist = fit(_model(), _blobs(64), None, cfg, progress=False)
+    want = [0.05 * (1 + math.cos(math.pi * e / 4)) for e in range(4)]  # lr (1 + cos) / 2
+    np.testing.assert_allclose(hist.lr, want, rtol=1e-12)
+    cfg = TrainConfig(epochs=3, lr=0.1, batch_size=32, schedule="onecycle", patience=None)
+    hist = fit(_model(), _blobs(64), None, cfg, progress=False)
+    ref_opt = torch.optim.AdamW([torch.zeros(1, requires_grad=True)], lr=0.1)
+    ref = torch.optim.lr_scheduler.OneCycleLR(ref_opt, max_lr=0.1, epochs=3, steps_per_epoch=2)
+    starts = []
+    for _ in range(3):  # the rate at the start of each epoch, 2 batches per epoch
+        starts.append(ref.get_last_lr()[0])
+        for _ in range(2):
+            ref_opt.step()
+            ref.step()
+    np.testing.assert_allclose(hist.lr, starts, rtol=1e-12)
+    assert hist.lr[0] < hist.lr[1]  # warm-up
