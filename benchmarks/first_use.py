@@ -29,7 +29,8 @@ import time
 from pathlib import Path
 
 from benchmarks._harness import RESULTS, machine
-from robopercept.cli.warmup import make_inputs, workloads
+from robopercept.cli.warmup import workloads
+from robopercept.pipelines.samples import make_inputs
 
 
 def _timed_run(argv: list[str], env: dict[str, str]) -> dict[str, float]:

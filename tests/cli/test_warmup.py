@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from robopercept.cli.main import build_parser, main
-from robopercept.cli.warmup import FIRST_USE_SECONDS, first_use_seconds, make_inputs, workloads
+from robopercept.cli.warmup import FIRST_USE_SECONDS, first_use_seconds, workloads
+from robopercept.pipelines.samples import make_inputs
 
 #: commands with no workload, and why: they compile nothing of their own (info, the
 #: warmup itself), run a workload's code on other inputs (plane-track, synth-rgbd and

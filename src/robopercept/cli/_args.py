@@ -89,9 +89,12 @@ def pass_through(text: str) -> tuple[str, float, float]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def numbers(kinds: tuple[type, ...], usage: str, sep: str = ":") -> Callable[[str], tuple]:
+def numbers(
+    kinds: tuple[Callable[[str], object], ...], usage: str, sep: str = ":"
+) -> Callable[[str], tuple]:
     """An argparse type for ``A:B:...`` (fields split at ``sep``) with one converter per
-    field (``kinds``); ``usage`` names the fields in the error (``"K:STD_RATIO"``)."""
+    field (``kinds``: types, or argparse types such as :func:`positive_int`); ``usage``
+    names the fields in the error (``"K:STD_RATIO"``)."""
 
     def parse(text: str) -> tuple:
         parts = text.replace(" ", "").split(sep)

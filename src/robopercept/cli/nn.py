@@ -13,7 +13,7 @@ import importlib.util
 import json
 from typing import Any
 
-from robopercept.cli._args import UsageError, image_output, positive_int
+from robopercept.cli._args import UsageError, image_output, numbers, positive_int
 from robopercept.errors import InputError
 
 __all__ = ["MODEL_NAMES", "register"]
@@ -31,25 +31,13 @@ def _need_torch() -> None:
 
 
 def _size(text: str) -> tuple[int, int]:
-    """``WxH`` -> (width, height), both >= 1 (argparse type)."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects WxH, e.g. 32x32; got {text!r}") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"expects positive sizes; got {text!r}")
+    """``WxH`` (or ``WXH``) -> (width, height), both >= 1 (argparse type)."""
+    w, h = numbers((positive_int,) * 2, "WxH, two positive integers, e.g. 32x32", "x")(text.lower())
     return w, h
 
 
-def _chw(text: str) -> tuple[int, int, int]:
-    """``C,H,W`` -> three integers >= 1 (argparse type)."""
-    try:
-        c, h, w = (int(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects C,H,W, e.g. 1,8,8; got {text!r}") from None
-    if min(c, h, w) < 1:
-        raise argparse.ArgumentTypeError(f"expects positive sizes; got {text!r}")
-    return c, h, w
+_chw = numbers((positive_int,) * 3, "C,H,W, three positive integers, e.g. 1,8,8", ",")
+_chw.__doc__ = "``C,H,W`` -> three integers >= 1 (argparse type)."
 
 
 def _positive_float(text: str) -> float:
