@@ -127,14 +127,14 @@ def run(repeats: int = 30) -> tuple[list[Record], dict]:
     desc = cv2.HOGDescriptor((64, 128), (16, 16), (8, 8), (8, 8), 9)
     ref = desc.compute(img)
     numba.set_num_threads(1)  # serial like OpenCV here
-    ours = ft.hog_windows(img, window=(128, 64), stride=8)
+    ours = ft.hog_windows(img, window=(64, 128), stride=8)
     recs.append(
         Record(
             "hog_windows",
             f"640x480 uint8, 64x128 windows every 8 px -> {ours.shape[0] * ours.shape[1]} "
             "windows x 3780",
             *paired_ms(
-                lambda: ft.hog_windows(img, window=(128, 64), stride=8),
+                lambda: ft.hog_windows(img, window=(64, 128), stride=8),
                 lambda: desc.compute(img),
                 repeats,
             ),

@@ -106,7 +106,7 @@ def test_parity_opencv_dense_on_a_real_photo():
 
     img = read_image(data_path("features", "opencv_box", "box_in_scene.png"), mode="gray")
     ref = _cv_hog((64, 128)).compute(img, winStride=(16, 8))
-    ours = hog_windows(img, window=(128, 64), stride=(8, 16))
+    ours = hog_windows(img, window=(64, 128), stride=(16, 8))
     ny, nx = (img.shape[0] - 128) // 8 + 1, (img.shape[1] - 64) // 16 + 1
     assert ours.shape == (ny, nx, 3780)
     np.testing.assert_allclose(ours.reshape(-1), ref.ravel(), atol=CV_TOL)
@@ -152,7 +152,7 @@ def test_dense_windows_equal_single_windows(camera):
     # a window sees the whole image's gradient: the top-left window equals hog() of a
     # crop one pixel larger (so the window's right/bottom gradients see the same
     # neighbours; the extra row/column fills no block)
-    dense = hog_windows(camera, window=(64, 48), stride=16)
+    dense = hog_windows(camera, window=(48, 64), stride=16)
     single = hog(np.ascontiguousarray(camera[:65, :49]))  # one extra row/col: same blocks
     np.testing.assert_allclose(dense[0, 0], single, atol=1e-6)
 
@@ -188,7 +188,7 @@ def test_bad_input():
     with pytest.raises(InputError, match="multiple of the block stride"):
         hog_windows(np.zeros((200, 200), np.uint8), stride=12)
     with pytest.raises(InputError, match="block size 16 plus a multiple"):
-        hog_windows(np.zeros((200, 200), np.uint8), window=(100, 64))
+        hog_windows(np.zeros((200, 200), np.uint8), window=(64, 100))
     with pytest.raises(InputError, match="block_norm"):
         hog(np.zeros((32, 32), np.uint8), block_norm="L3")  # type: ignore[arg-type]
     with pytest.raises(InputError, match="convention='opencv' only"):

@@ -505,7 +505,7 @@ def hog(
 
 def hog_windows(
     image: np.ndarray,
-    window: int | tuple[int, int] = (128, 64),
+    window: int | tuple[int, int] = (64, 128),
     stride: int | tuple[int, int] = 8,
     *,
     orientations: int = 9,
@@ -529,9 +529,11 @@ def hog_windows(
     image : (H, W) or (H, W, 3) ndarray
         The image.
     window : int or (int, int)
-        Detection window in pixels, (height, width); default OpenCV's 128 x 64.
+        Detection window in pixels, (width, height) as ``cv2.HOGDescriptor``'s
+        ``winSize``; default OpenCV's 64 x 128.
     stride : int or (int, int)
-        Step between windows in pixels; a multiple of the block stride in pixels.
+        Step between windows in pixels, (x, y) as ``winStride``; a multiple of the block
+        stride in pixels.
     orientations, cell_size, block_size, block_stride, block_norm, clip, convention,
     block_sigma, signed, gamma
         As in :func:`hog`.
@@ -562,8 +564,8 @@ def hog_windows(
         signed,
         gamma,
     )
-    win = _pair(window, "window")
-    step = _pair(stride, "stride")
+    win = _pair(window, "window")[::-1]  # (width, height) -> (height, width) inside
+    step = _pair(stride, "stride")[::-1]
     (bh, bw), (sy, sx) = p.block_px, p.stride_px
     for k, name in ((0, "height"), (1, "width")):
         if (win[k] - p.block_px[k]) % p.stride_px[k] or win[k] < p.block_px[k]:

@@ -117,8 +117,9 @@ class HogDetector:
 
     Parameters
     ----------
-    window : (height, width)
-        Detection window in pixels.
+    window : (width, height)
+        Detection window in pixels (as ``cv2.HOGDescriptor``'s ``winSize``); patches
+        are ``(N, height, width)``.
     cell_size, block_size, orientations
         HOG settings (OpenCV convention, block stride one cell).
     C : float
@@ -146,9 +147,9 @@ class HogDetector:
     def describe(self, patches: np.ndarray) -> np.ndarray:
         """HOG descriptors of ``(N, h, w)`` window-sized gray patches, ``(N, D)``."""
         patches = np.asarray(patches)
-        if patches.ndim != 3 or patches.shape[1:] != tuple(self.window):
+        if patches.ndim != 3 or patches.shape[1:] != tuple(self.window)[::-1]:
             raise InputError(
-                f"patches must be (N, {self.window[0]}, {self.window[1]}); got {patches.shape}"
+                f"patches must be (N, {self.window[1]}, {self.window[0]}); got {patches.shape}"
             )
         return np.stack([hog(255.0 * p.astype(np.float32), **self._hog_args()) for p in patches])
 
@@ -234,7 +235,7 @@ class HogDetector:
         if scale_step <= 1.0:
             raise InputError(f"scale_step must be > 1; got {scale_step}")
         check_positive(nms_iou, "nms_iou")
-        wh, ww = self.window
+        ww, wh = self.window
         stride = max(1, self.cell_size // 2) if stride is None else int(stride)
         if stride % self.cell_size == 0:  # whole cells: one dense pass per level
             step, offsets = stride, [(0, 0)]
@@ -265,7 +266,7 @@ class HogDetector:
                 part = level[oy:, ox:]
                 if part.shape[0] < wh or part.shape[1] < ww:
                     continue
-                s = hog_windows(part, (wh, ww), step, **self._hog_args()) @ self.coef_
+                s = hog_windows(part, (ww, wh), step, **self._hog_args()) @ self.coef_
                 s += self.intercept_
                 iy, ix = np.nonzero(s > threshold)
                 for i, j in zip(iy, ix, strict=True):
@@ -348,7 +349,7 @@ class HogDetector:
         )
         det.coef_ = coef
         det.intercept_ = float(meta["intercept"])
-        expect = det.describe(np.zeros((1, *det.window))).shape[1]
+        expect = det.describe(np.zeros((1, *det.window[::-1]))).shape[1]
         if coef.shape != (expect,):
             raise FileFormatError(f"{p}: weights have shape {coef.shape}, expected ({expect},)")
         return det
