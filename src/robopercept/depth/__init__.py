@@ -1,7 +1,12 @@
-"""Depth: RGB-D geometry (depth to points, texture coordinates, alignment) and stereo
-matching (block matching, semi-global matching, disparity to depth), active sensor
-models (time of flight, active stereo)."""
+"""Depth: RGB-D geometry (depth to points, texture coordinates, alignment, colour
+selection of points) and stereo matching (block matching, semi-global matching,
+disparity to depth), active sensor models (time of flight, active stereo)."""
 
+from robopercept.depth.color_select import (
+    ColoredPoints,
+    ColorRangeSelector,
+    points_in_color_range,
+)
 from robopercept.depth.rgbd import (
     align_color_to_depth,
     align_depth_to_color,
@@ -35,6 +40,8 @@ from robopercept.depth.stereo import (
 __all__ = [
     "D435",
     "ActiveStereoSensor",
+    "ColorRangeSelector",
+    "ColoredPoints",
     "align_color_to_depth",
     "align_depth_to_color",
     "bad_pixel_rate",
@@ -46,6 +53,7 @@ __all__ = [
     "disparity_to_points",
     "focal_from_fov",
     "pixel_rays",
+    "points_in_color_range",
     "reprojection_matrix",
     "sample_colors",
     "semi_global_matching",

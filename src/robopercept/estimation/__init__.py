@@ -3,12 +3,14 @@ from matches."""
 
 from robopercept.estimation.homography import HomographyFit, find_homography
 from robopercept.estimation.least_squares import (
+    DepthPlaneFit,
     Line,
     LineFit,
     Plane,
     PlaneFit,
     fit_line,
     fit_plane,
+    fit_plane_inverse_depth,
 )
 from robopercept.estimation.models import (
     AffineModel,
@@ -21,6 +23,7 @@ from robopercept.estimation.ransac import RansacResult, ransac, required_iterati
 
 __all__ = [
     "AffineModel",
+    "DepthPlaneFit",
     "HomographyFit",
     "HomographyModel",
     "Line",
@@ -34,6 +37,7 @@ __all__ = [
     "find_homography",
     "fit_line",
     "fit_plane",
+    "fit_plane_inverse_depth",
     "ransac",
     "required_iterations",
 ]

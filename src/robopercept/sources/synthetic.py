@@ -2,9 +2,56 @@ r"""A synthetic D435-like RGB-D scene with ground truth, rendered analytically.
 
 The scene is a room (floor, three walls, ceiling), boxes of several colours on the
 floor (one of them a small green distractor), a green board that moves and rotates
-along a smooth trajectory between about 0.6 and 2.4 m, leaving the view in part, and a
-grey panel that passes in front of the camera for a moment. Every surface is a
-rectangle; each pixel's ray is intersected with all of them and the nearest hit wins.
+between about 0.6 and 2.4 m along one of several motion profiles, leaving the view in
+part, and a grey panel that passes in front of the camera for a moment. Every surface is
+a rectangle; each pixel's ray is intersected with all of them and the nearest hit wins.
+
+Motion profiles (``motion``, :data:`MOTIONS`; :func:`board_pose`). Time is
+:math:`\tau = i / \text{fps}` seconds, taken modulo the loop of :math:`T` = ``period``
+seconds, and :math:`t = \tau / T \in [0, 1)` in loops. The orientation is
+:math:`R = R_y(\psi) R_x(\theta) R_z(\phi)` (yaw, pitch, roll); the board's normal is
+:math:`R e_z` and stays within 50 deg of the optical axis, so the front is always seen.
+
+* ``"smooth"`` (the default), at phase :math:`s = t`, :math:`w = 2 \pi s`:
+  :math:`z = 1.5 - 0.9 \cos w`, :math:`x = 0.45 z \sin 1.5 w + 0.35 z
+  e^{-((s - 0.3) / 0.05)^2}` (a sideways dash half out of view at t = 0.3),
+  :math:`y = 0.08 \sin 2 w - 0.05`, :math:`\psi = 40^\circ \sin 1.3 w`,
+  :math:`\theta = 25^\circ \sin(0.9 w + 1)`, :math:`\phi = 15^\circ \sin 0.7 w`. Speeds about
+  0.55 m/s (median), 2 m/s in the dash.
+* ``"fast"``: the same formulas at :math:`s = 3 t` (:data:`FAST_RATE`; the dash at
+  :math:`s \bmod 1`): three passes per loop, 1.6 m/s median, about 6 m/s in the dashes,
+  rotation rates up to about 110 deg/s; the position is continuous over the loop.
+* ``"jerky"``: piecewise-linear between waypoints :math:`q_k = (x, y, z, \psi, \theta,
+  \phi)` at knots :math:`\tau_k`, :math:`q(\tau) = q_k + (\tau - \tau_k)
+  (q_{k+1} - q_k) / (\tau_{k+1} - \tau_k)`: constant velocity and rotation rate on
+  each segment, jumps at the knots. Segment lengths are uniform in 0.2..0.6 s (scaled
+  by at most a few percent to fill the loop); each step is, with probability 0.35, the
+  previous one reversed and scaled by U(0.5, 1), otherwise a random direction at
+  U(0.3, 1.5) m/s and angle rates U(-100, 100) deg/s; waypoints are clipped to
+  :math:`z \in [0.8, 2.2]`, :math:`|x| \le 0.35 z`, :math:`y \in [-0.15, 0.05]`,
+  :math:`|\psi| \le 35^\circ`, :math:`|\theta| \le 20^\circ`, :math:`|\phi| \le 15^\circ`.
+  Drawn from ``numpy.random.default_rng([seed, 1])``.
+* ``"stop-go"``: the smooth path at the phase :func:`stop_go_phase`: in each 2.5 s cycle
+  the board dwells 0.5, 1.0, 1.5 or 0.8 s (in turn) with the pose exactly unchanged,
+  then moves linearly in phase to catch up with the smooth schedule (1.25 to 2.5 times
+  the smooth speed); the position is continuous.
+* ``"handheld"``: the smooth pose plus hand motion, :math:`c = c_s + o_{1:3}(\tau)`,
+  :math:`R = R_s \exp([o_{4:6}(\tau)]_\times)` with
+  :math:`o_j(\tau) = \sum_m a_{jm} \sin(2 \pi f_{jm} \tau + \varphi_{jm})`: tremor,
+  six sinusoids per axis at :math:`f` ~ U(3, 10) Hz giving 2 mm and 0.3 deg RMS per
+  axis, and drift, two at U(0.05, 0.3) Hz of 3 mm and 0.3 deg amplitude. Drawn from
+  ``numpy.random.default_rng([seed, 2])``.
+
+The random profiles depend on ``seed`` and time only (never on the frame index), so
+any frame can be rendered alone and in any order. Like the smooth path, every profile
+may jump at the loop's end (the rotation of ``"fast"``, everything of the others).
+
+Options: ``occluder`` (default True) is the grey 0.30 x 2.0 m panel crossing 0.5 m in
+front of the camera between t = 0.62 and 0.70 (present for t in 0.60..0.72);
+``distractor`` (:data:`DISTRACTORS`) is ``"box"`` (default: a 0.2 m green box on the red
+box), ``"wall"`` (a 0.5 x 0.4 m patch of :data:`WALL_PATCH_COLOR` on the back wall at
+x = -0.6, y = -0.4 m, in view most of the time; OpenCV hue 56, inside the default green
+HSV box like the board), ``"both"`` or ``"none"``.
 
 Depth is rendered from the left infrared imager (the depth origin, as on a D435) and
 degraded the way active stereo degrades it:
@@ -35,6 +82,7 @@ depth.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -49,7 +97,16 @@ from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.transforms import invert, rotation_from_rotvec, se3
 from robopercept.sources.frames import RGBDFrame
 
-__all__ = ["BOARD_COLOR", "SyntheticRGBDScene"]
+__all__ = [
+    "BOARD_COLOR",
+    "DISTRACTORS",
+    "FAST_RATE",
+    "MOTIONS",
+    "WALL_PATCH_COLOR",
+    "SyntheticRGBDScene",
+    "board_pose",
+    "stop_go_phase",
+]
 
 BOARD_COLOR = (60, 170, 60)  # OpenCV hue 60, saturation 165: inside the default HSV box
 _BOARD_SIZE = (0.60, 0.45)  # metres
@@ -219,7 +276,10 @@ def _box_part(center, size, color) -> _Part:
     return np.array(faces), np.array(colors, dtype=np.float64), np.asarray(center, float), radius
 
 
-def _static_scene() -> list[_Part]:
+def _static_scene(distractor: str = "box") -> list[_Part]:
+    """The room and the boxes; ``distractor`` (one of :data:`DISTRACTORS`) adds the small
+    green box on the red box (``"box"``), the green patch on the back wall (``"wall"``),
+    or both."""
     x0, x1, yc, yf, zb = _ROOM
     ex, ey, ez = np.eye(3)
     cx, cy = (x0 + x1) / 2, (yc + yf) / 2
@@ -237,36 +297,229 @@ def _static_scene() -> list[_Part]:
     parts: list[_Part] = [
         (np.array(room), np.array(colors, dtype=np.float64), np.zeros(3), math.inf)
     ]
-    for center, size, color in [
+    boxes = [
         ((-1.1, yf - 0.30, 3.0), (0.6, 0.6, 0.6), (200, 45, 40)),  # red
         ((1.3, yf - 0.35, 3.6), (0.7, 0.7, 0.5), (45, 70, 200)),  # blue
         ((0.4, yf - 0.20, 4.2), (0.8, 0.4, 0.4), (225, 200, 40)),  # yellow
         ((-1.1, yf - 0.70, 3.0), (0.2, 0.2, 0.2), (70, 160, 72)),  # green, on the red box
         ((2.2, yf - 0.75, 4.6), (0.5, 1.5, 0.5), (150, 150, 150)),  # grey cabinet
-    ]:
+    ]
+    if distractor in ("none", "wall"):
+        del boxes[3]
+    for center, size, color in boxes:
         parts.append(_box_part(center, size, color))
+    if distractor in ("wall", "both"):
+        # 0.5 m wide, 0.4 m tall, 3 mm in front of the back wall, facing the camera; the
+        # ray from the camera to it passes clear of every box
+        patch_center = np.array([-0.6, -0.4, zb - 0.003])
+        patch = _rect(patch_center, ey, ex, 0.20, 0.25)
+        patch_color = np.array([WALL_PATCH_COLOR], float)
+        parts.append((patch[None], patch_color, patch_center, math.hypot(0.20, 0.25)))
     return parts
 
 
-def board_pose(t: float) -> tuple[np.ndarray, np.ndarray]:
-    """Centre (3,) and rotation (3, 3) of the board at time ``t`` in [0, 1) of a loop.
+MOTIONS = ("smooth", "fast", "jerky", "stop-go", "handheld")
+DISTRACTORS = ("none", "box", "wall", "both")
+FAST_RATE = 3.0  # the fast profile runs the smooth path this many times per loop
+WALL_PATCH_COLOR = (70, 160, 55)  # OpenCV hue 56, saturation 167: inside the default box
+# the jerky profile's workspace: depth, lateral extent (times the depth), height, and
+# the yaw, pitch, roll limits (degrees)
+_JERKY_Z = (0.8, 2.2)
+_JERKY_X_PER_Z = 0.35
+_JERKY_Y = (-0.15, 0.05)
+_JERKY_ANGLES = (35.0, 20.0, 15.0)
+_STOP_GO_CYCLE = 2.5  # seconds: one dwell plus one catch-up move
+_STOP_GO_DWELLS = (0.5, 1.0, 1.5, 0.8)  # seconds, used in turn
 
-    The trajectory: depth 1.5 +- 0.9 m, sideways sweeps that take the board half out of
-    view around t = 0.3, yaw +-40 deg, pitch +-25 deg, roll +-15 deg.
-    """
-    w = 2.0 * math.pi * t
-    z = 1.5 - 0.9 * math.cos(w)
-    x = 0.45 * z * math.sin(1.5 * w) + 0.35 * z * math.exp(-(((t - 0.3) / 0.05) ** 2))
-    y = 0.08 * math.sin(2.0 * w) - 0.05
-    yaw = math.radians(40.0) * math.sin(1.3 * w)
-    pitch = math.radians(25.0) * math.sin(0.9 * w + 1.0)
-    roll = math.radians(15.0) * math.sin(0.7 * w)
-    r = (
+
+def _rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """:math:`R = R_y(\\text{yaw}) R_x(\\text{pitch}) R_z(\\text{roll})` (3, 3)."""
+    return (
         rotation_from_rotvec(np.array([0.0, yaw, 0.0]))
         @ rotation_from_rotvec(np.array([pitch, 0.0, 0.0]))
         @ rotation_from_rotvec(np.array([0.0, 0.0, roll]))
     )
-    return np.array([x, y, z]), r
+
+
+def _smooth_pose(s: float, s_bump: float) -> tuple[np.ndarray, np.ndarray]:
+    """The smooth path at phase ``s`` (loops, unwrapped) with the sideways dash at the
+    loop phase ``s_bump`` in [0, 1)."""
+    w = 2.0 * math.pi * s
+    z = 1.5 - 0.9 * math.cos(w)
+    x = 0.45 * z * math.sin(1.5 * w) + 0.35 * z * math.exp(-(((s_bump - 0.3) / 0.05) ** 2))
+    y = 0.08 * math.sin(2.0 * w) - 0.05
+    yaw = math.radians(40.0) * math.sin(1.3 * w)
+    pitch = math.radians(25.0) * math.sin(0.9 * w + 1.0)
+    roll = math.radians(15.0) * math.sin(0.7 * w)
+    return np.array([x, y, z]), _rotation(yaw, pitch, roll)
+
+
+@functools.lru_cache(maxsize=32)
+def _jerky_waypoints(seed: int, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """Knot times (K + 1,) in seconds, from 0 to ``period``, and waypoints (K + 1, 6):
+    ``x, y, z, yaw, pitch, roll`` (radians), drawn from ``default_rng([seed, 1])``."""
+    rng = np.random.default_rng([seed, 1])
+    durations: list[float] = []
+    while sum(durations) < period:
+        durations.append(float(rng.uniform(0.2, 0.6)))
+    times = np.concatenate([[0.0], np.cumsum(durations) * (period / sum(durations))])
+    zlo, zhi = _JERKY_Z
+    lim = np.radians(_JERKY_ANGLES)
+    p = np.array([0.0, -0.05, 1.5, 0.0, 0.0, 0.0])
+    points = [p]
+    prev_step = np.zeros(6)
+    for d in np.diff(times):
+        if rng.random() < 0.35 and np.any(prev_step):
+            # a reversal: go back along the last segment, part or all of the way
+            step = -prev_step * rng.uniform(0.5, 1.0)
+        else:
+            direction = rng.normal(size=3)
+            direction /= np.linalg.norm(direction)
+            step = np.concatenate(
+                [
+                    direction * rng.uniform(0.3, 1.5) * d,  # 0.3 .. 1.5 m/s
+                    rng.uniform(-1.0, 1.0, 3) * np.radians(100.0) * d,  # <= 100 deg/s
+                ]
+            )
+        q = points[-1] + step
+        q[2] = min(max(q[2], zlo), zhi)
+        q[0] = min(max(q[0], -_JERKY_X_PER_Z * q[2]), _JERKY_X_PER_Z * q[2])
+        q[1] = min(max(q[1], _JERKY_Y[0]), _JERKY_Y[1])
+        q[3:] = np.clip(q[3:], -lim, lim)
+        prev_step = q - points[-1]
+        points.append(q)
+    return times, np.array(points)
+
+
+@functools.lru_cache(maxsize=32)
+def _handheld_terms(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Frequencies (Hz), phases and amplitudes (6, M) of the hand's sinusoids: rows are
+    x, y, z (metres) and the rotation vector (radians); columns 0..5 are the tremor
+    (3..10 Hz, 2 mm and 0.3 deg RMS per axis), 6..7 the drift (0.05..0.3 Hz, 3 mm and
+    0.3 deg amplitude). Drawn from ``default_rng([seed, 2])``."""
+    rng = np.random.default_rng([seed, 2])
+    n_tremor, n_drift = 6, 2
+    freq = np.concatenate(
+        [rng.uniform(3.0, 10.0, (6, n_tremor)), rng.uniform(0.05, 0.3, (6, n_drift))], axis=1
+    )
+    phase = rng.uniform(0.0, 2.0 * math.pi, freq.shape)
+    # a sum of M sinusoids of amplitude a has RMS a sqrt(M / 2)
+    tremor_rms = np.array([0.002] * 3 + [math.radians(0.3)] * 3)
+    drift_amp = np.array([0.003] * 3 + [math.radians(0.3)] * 3)
+    amp = np.concatenate(
+        [
+            np.repeat((tremor_rms / math.sqrt(n_tremor / 2))[:, None], n_tremor, axis=1),
+            np.repeat(drift_amp[:, None], n_drift, axis=1),
+        ],
+        axis=1,
+    )
+    return freq, phase, amp
+
+
+def stop_go_phase(t: float, period: float = 10.0) -> float:
+    r"""Phase of the smooth path reached at loop time ``t`` by the stop-go profile.
+
+    With :math:`\tau = t T` seconds (:math:`T` = ``period``), cycle :math:`k =
+    \lfloor \tau / C \rfloor` of :math:`C` = 2.5 s dwells :math:`D_k` seconds
+    (0.5, 1.0, 1.5, 0.8 s in turn) and then moves linearly to the smooth schedule's
+    phase at the cycle's end:
+
+    .. math:: s(\tau) = \frac{k C + C \max(0, \tau - k C - D_k) / (C - D_k)}{T}
+
+    so :math:`s` is continuous, exactly constant during a dwell and
+    :math:`C / (C - D_k)` (1.25 to 2.5) times the smooth rate during a move.
+
+    Parameters
+    ----------
+    t : float
+        Time in loops (``seconds / period``), in [0, 1).
+    period : float
+        Seconds of one loop.
+
+    Returns
+    -------
+    float
+        The phase in [0, 1] at which to evaluate the smooth path.
+
+    Examples
+    --------
+    >>> stop_go_phase(0.01), stop_go_phase(0.25)  # still at 0.1 s; on schedule at 2.5 s
+    (0.0, 0.25)
+    """
+    tau = t * period
+    c = _STOP_GO_CYCLE
+    k = math.floor(tau / c)
+    dwell = _STOP_GO_DWELLS[k % len(_STOP_GO_DWELLS)]
+    moved = max(0.0, tau - k * c - dwell) / (c - dwell)
+    return (k * c + c * min(moved, 1.0)) / period
+
+
+def board_pose(
+    t: float, motion: str = "smooth", seed: int = 0, period: float = 10.0
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Centre (3,) and rotation (3, 3) of the board at time ``t`` in loops.
+
+    ``t`` is in loops, :math:`t = \tau / T` for :math:`\tau` seconds into a loop of
+    :math:`T` = ``period`` seconds, in [0, 1) (``SyntheticRGBDScene`` passes
+    ``(i / fps / period) % 1``). The rotation's columns are the board's width axis,
+    height axis and normal, in the depth camera frame; :math:`R = R_y(\text{yaw})
+    R_x(\text{pitch}) R_z(\text{roll})`. The profiles (see the module docstring for
+    the formulas):
+
+    * ``"smooth"``: depth :math:`1.5 - 0.9 \cos 2\pi t` m, sideways sweeps that take the
+      board half out of view around t = 0.3, yaw +-40 deg, pitch +-25 deg, roll +-15 deg;
+    * ``"fast"``: the smooth formulas at phase :math:`3 t` (three sweeps per loop);
+    * ``"jerky"``: constant-velocity segments of 0.2..0.6 s between seeded waypoints;
+    * ``"stop-go"``: the smooth path at phase :func:`stop_go_phase`;
+    * ``"handheld"``: the smooth path plus seeded tremor and drift.
+
+    Parameters
+    ----------
+    t : float
+        Time in loops, in [0, 1).
+    motion : str
+        One of :data:`MOTIONS`.
+    seed : int
+        Seeds the ``"jerky"`` waypoints and the ``"handheld"`` tremor (others ignore it).
+    period : float
+        Seconds of one loop; the profiles defined in seconds (jerky segments, stop-go
+        dwells, tremor frequencies) use it.
+
+    Returns
+    -------
+    center : (3,) ndarray
+        Board centre in metres.
+    rotation : (3, 3) ndarray
+        Board orientation.
+
+    Examples
+    --------
+    >>> c, r = board_pose(0.0)
+    >>> c.round(3).tolist()
+    [0.0, -0.05, 0.6]
+    """
+    if motion not in MOTIONS:
+        raise InputError(f"motion must be one of {', '.join(MOTIONS)}; got {motion!r}")
+    if motion == "smooth":
+        return _smooth_pose(t, t)
+    if motion == "fast":
+        s = FAST_RATE * t
+        return _smooth_pose(s, s % 1.0)
+    if motion == "stop-go":
+        s = stop_go_phase(t, period)
+        return _smooth_pose(s, s)
+    tau = t * period
+    if motion == "jerky":
+        times, points = _jerky_waypoints(int(seed), float(period))
+        k = min(max(int(np.searchsorted(times, tau, side="right")) - 1, 0), len(times) - 2)
+        a = (tau - times[k]) / (times[k + 1] - times[k])
+        q = (1.0 - a) * points[k] + a * points[k + 1]
+        return q[:3].copy(), _rotation(q[3], q[4], q[5])
+    # handheld
+    center, rot = _smooth_pose(t, t)
+    freq, phase, amp = _handheld_terms(int(seed))
+    offset = (amp * np.sin(2.0 * math.pi * freq * tau + phase)).sum(axis=1)
+    return center + offset[:3], rot @ rotation_from_rotvec(offset[3:])
 
 
 def _occluder_x(t: float) -> float:
@@ -306,6 +559,20 @@ class SyntheticRGBDScene:
     period : float
         Seconds of one loop of the board's trajectory (the default sequence, 300 frames
         at 30 fps, is one loop); the trajectory depends on time, not on ``n_frames``.
+    motion : str
+        The board's motion profile, one of :data:`MOTIONS`: ``"smooth"`` (default),
+        ``"fast"`` (the smooth path 3x faster), ``"jerky"`` (constant-velocity
+        segments of 0.2..0.6 s with abrupt turns and reversals), ``"stop-go"`` (dwells of
+        0.5..1.5 s with the pose exactly still, then fast catch-up moves),
+        ``"handheld"`` (the smooth path plus 3..10 Hz tremor of a few mm and a slow
+        drift); formulas in the module docstring. ``seed`` also seeds the ``"jerky"``
+        waypoints and the ``"handheld"`` tremor.
+    occluder : bool
+        Whether the grey panel passes in front of the camera (t 0.60..0.72 of the loop).
+    distractor : str
+        Green things that are not the board, one of :data:`DISTRACTORS`: ``"box"``
+        (default, the small green box on the red box), ``"wall"`` (a 0.5 x 0.4 m green
+        patch on the back wall), ``"both"`` or ``"none"``.
 
     Examples
     --------
@@ -330,9 +597,20 @@ class SyntheticRGBDScene:
     max_depth: float = 10.0
     color_noise: float = 2.0
     period: float = 10.0
+    motion: str = "smooth"
+    occluder: bool = True
+    distractor: str = "box"
 
     def __post_init__(self) -> None:
         check_int(self.n_frames, "n_frames", 1)
+        if self.motion not in MOTIONS:
+            raise InputError(f"motion must be one of {', '.join(MOTIONS)}; got {self.motion!r}")
+        if self.distractor not in DISTRACTORS:
+            raise InputError(
+                f"distractor must be one of {', '.join(DISTRACTORS)}; got {self.distractor!r}"
+            )
+        if not isinstance(self.occluder, (bool, np.bool_)):
+            raise InputError(f"occluder must be True or False; got {self.occluder!r}")
         check_int(self.seed, "seed", 0)
         for name in ("depth_size", "color_size"):
             size = tuple(getattr(self, name))
@@ -359,7 +637,7 @@ class SyntheticRGBDScene:
         object.__setattr__(self, "_kd", kd)
         object.__setattr__(self, "_kc", kc)
         object.__setattr__(self, "_T", T_color_depth)
-        object.__setattr__(self, "_static", _static_scene())
+        object.__setattr__(self, "_static", _static_scene(self.distractor))
         object.__setattr__(self, "_rays_d", None)
         object.__setattr__(self, "_rays_c", None)
 
@@ -392,13 +670,13 @@ class SyntheticRGBDScene:
         self, t: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, tuple[np.ndarray, float]]:
         """Rectangles, colours, groups, the board's rectangle index and its plane."""
-        center, rot = board_pose(t)
+        center, rot = board_pose(t, self.motion, self.seed, self.period)
         hw, hh = _BOARD_SIZE[0] / 2, _BOARD_SIZE[1] / 2
         board = _rect(center, rot[:, 0], rot[:, 1], hw, hh, two_sided=True)
         parts = list(self._static)  # type: ignore[attr-defined]
         board_id = sum(p[0].shape[0] for p in parts)
         parts.append((board[None], np.array([BOARD_COLOR], float), center, math.hypot(hw, hh)))
-        if 0.60 <= t <= 0.72:
+        if self.occluder and 0.60 <= t <= 0.72:
             parts.append(_box_part((_occluder_x(t), 0.0, 0.5), (0.30, 2.0, 0.04), (128,) * 3))
         rects = np.concatenate([p[0] for p in parts])
         colors = np.concatenate([p[1] for p in parts])

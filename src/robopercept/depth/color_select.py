@@ -1,0 +1,482 @@
+r"""Colour selection of RGB-D points: the points of a depth image whose colour, seen
+through the colour camera, lies in an HSV box, computed only for the points selected.
+
+For every depth pixel :math:`i = v W + u` with raw depth :math:`D_i > 0`:
+
+1. **Point.** :math:`p_i = s D_i\, r_i` with the unit-depth ray
+   :math:`r_i = \operatorname{deproject}((u, v), 1)` (:func:`~robopercept.depth.pixel_rays`,
+   computed once per depth camera) and the depth scale :math:`s`.
+2. **Colour pixel.** :math:`(u_c, v_c, z_c)` = :func:`~robopercept.depth.project_to_color`
+   of :math:`p_i` through ``T_color_depth`` and the colour camera (its lens model
+   included); the colour pixel is :math:`j = \operatorname{rint}(v_c) W_c +
+   \operatorname{rint}(u_c)` when :math:`z_c > 0` and it lies inside the colour image.
+3. **Occlusion (z-buffer).** :math:`Z_j = \min_{k \to j} z_{c,k}` over the points landing on
+   colour pixel :math:`j`; point :math:`i` is hidden there when
+   :math:`z_{c,i} > Z_j + \text{tol}` (``occlusion_tolerance``; None: no test).
+4. **Colour box.** :math:`(H, S, V)` of colour pixel :math:`j` on OpenCV's uint8 scale
+   (:func:`~robopercept.imaging.rgb_to_hsv_pixel`, bit for bit
+   ``cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)``); selected when
+   :math:`S_{lo} \le S \le S_{hi}`, :math:`V_{lo} \le V \le V_{hi}` and
+   :math:`H_{lo} \le H \le H_{hi}` (or :math:`H \ge H_{lo} \lor H \le H_{hi}` when
+   :math:`H_{lo} > H_{hi}`: the hue range wraps around, e.g. red).
+
+This is the library path ``depth_to_points`` -> ``texture_coordinates`` (z-buffer) ->
+``sample_colors`` -> ``rgb_to_hsv`` -> ``hsv_range_mask``, point for point (same points,
+same order, same hues; tests/depth/test_color_select.py), fused into compiled passes:
+the projection (parallel), the z-buffer (serial: pixels collide) and the selection
+(parallel), so that only the selected points are stored. The parallel passes work in
+64 row blocks and pack the blocks in order, so the output is in row-major depth-pixel
+order on any thread count.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit, prange
+
+from robopercept._checks import check_positive
+from robopercept.depth.rgbd import pixel_rays, project_to_color
+from robopercept.errors import InputError
+from robopercept.geometry import CameraIntrinsics
+from robopercept.geometry.camera import compiled_params
+from robopercept.geometry.transforms import check_transform
+from robopercept.imaging.color import rgb_to_hsv_pixel
+
+__all__ = ["ColorRangeSelector", "ColoredPoints", "points_in_color_range"]
+
+_CHUNKS = 64  # row blocks of the parallel per-pixel passes
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _project_kernel(
+    depth, rays, scale, R, t, k, model, c, width, height, pix, zc
+):  # pragma: no cover - compiled
+    # For every depth pixel i with depth: the point p = s D r(u, v), its colour pixel
+    # pix[i] = row * width + col (-1: no depth, behind the colour camera or outside its
+    # image) and its depth zc[i] in the colour frame. Pixels are independent: parallel.
+    n = depth.shape[0]
+    for b in prange(_CHUNKS):
+        for i in range(b * n // _CHUNKS, (b + 1) * n // _CHUNKS):
+            z = depth[i] * scale
+            u, v, zcol = project_to_color(
+                rays[i, 0] * z, rays[i, 1] * z, rays[i, 2] * z, R, t, k, model, c
+            )
+            col = np.rint(u)
+            row = np.rint(v)
+            j = -1
+            if (
+                z > 0
+                and z < np.inf
+                and zcol > 0
+                and col >= 0
+                and col < width
+                and row >= 0
+                and row < height
+            ):
+                j = int(row) * width + int(col)
+            pix[i] = j
+            zc[i] = zcol
+
+
+@njit(cache=True, nogil=True)
+def _zbuffer_kernel(pix, zc, zbuf):  # pragma: no cover - compiled
+    # nearest colour-frame depth per colour pixel (serial: pixels collide)
+    for i in range(pix.shape[0]):
+        j = pix[i]
+        if j >= 0 and zc[i] < zbuf[j]:
+            zbuf[j] = zc[i]
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _select_kernel(
+    depth, rays, scale, rgb, pix, zc, zbuf, tol, low, high, out, hue, idx
+):  # pragma: no cover - compiled
+    # The points whose colour pixel is theirs (no other point nearer there by more than
+    # tol; tol < 0: no test) and whose HSV (OpenCV's uint8 conversion, bit for bit) lies
+    # in the box low..high (hue wraps around when low[0] > high[0]). Each row block
+    # writes from its own first pixel on, then the blocks are packed in order, so the
+    # result is in row-major order whatever the threads. Returns the number selected.
+    n = pix.shape[0]
+    counts = np.zeros(_CHUNKS, dtype=np.int64)
+    wrap = low[0] > high[0]
+    for b in prange(_CHUNKS):
+        a = b * n // _CHUNKS
+        g = a
+        for i in range(a, (b + 1) * n // _CHUNKS):
+            j = pix[i]
+            if j < 0:
+                continue
+            if tol >= 0 and zc[i] > zbuf[j] + tol:
+                continue
+            h, s, v = rgb_to_hsv_pixel(
+                np.int32(rgb[3 * j]), np.int32(rgb[3 * j + 1]), np.int32(rgb[3 * j + 2])
+            )
+            if s < low[1] or s > high[1] or v < low[2] or v > high[2]:
+                continue
+            if wrap:
+                if h < low[0] and h > high[0]:
+                    continue
+            elif h < low[0] or h > high[0]:
+                continue
+            z = depth[i] * scale
+            out[g, 0] = rays[i, 0] * z
+            out[g, 1] = rays[i, 1] * z
+            out[g, 2] = rays[i, 2] * z
+            hue[g] = h
+            idx[g] = i
+            g += 1
+        counts[b] = g - a
+    m = 0
+    for b in range(_CHUNKS):
+        a = b * n // _CHUNKS
+        for g in range(a, a + counts[b]):
+            out[m, 0] = out[g, 0]
+            out[m, 1] = out[g, 1]
+            out[m, 2] = out[g, 2]
+            hue[m] = hue[g]
+            idx[m] = idx[g]
+            m += 1
+    return m
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _reset_kernel(pix, zbuf):  # pragma: no cover - compiled
+    # back to +inf for the next call (only the touched pixels; racing writes store the
+    # same value)
+    n = pix.shape[0]
+    for b in prange(_CHUNKS):
+        for i in range(b * n // _CHUNKS, (b + 1) * n // _CHUNKS):
+            if pix[i] >= 0:
+                zbuf[pix[i]] = np.inf
+
+
+@dataclass(frozen=True)
+class ColoredPoints:
+    """The points a :class:`ColorRangeSelector` selected from one RGB-D frame.
+
+    Attributes
+    ----------
+    points : (M, 3) float64 ndarray
+        Depth-camera-frame points, metres, in row-major depth-pixel order: exactly
+        ``depth_to_points(depth, K_depth, depth_scale)`` at those pixels.
+    hue : (M,) float64 ndarray
+        OpenCV hue (0..180, integer-valued) of each point's colour pixel, as
+        ``rgb_to_hsv`` of the uint8 colour gives it.
+    pixels : (M,) int64 ndarray
+        The depth pixel of each point, ``row * width + col`` (increasing).
+    n_valid : int
+        Depth pixels with a depth (finite and > 0).
+    ms : dict of str to float
+        Milliseconds of the two passes: ``"points"`` (projection and z-buffer) and
+        ``"color"`` (selection).
+    """
+
+    points: np.ndarray = field(repr=False)
+    hue: np.ndarray = field(repr=False)
+    pixels: np.ndarray = field(repr=False)
+    n_valid: int
+    ms: dict[str, float]
+
+
+def _check_hsv_bounds(
+    hsv_low: npt.ArrayLike, hsv_high: npt.ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """The HSV box as two float64 (3,) arrays after checking the OpenCV scale."""
+    try:
+        lo = np.asarray(hsv_low, dtype=np.float64).reshape(-1)
+        hi = np.asarray(hsv_high, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as e:
+        raise InputError(
+            f"hsv_low and hsv_high (--hsv-low, --hsv-high) must be three numbers H, S, V; "
+            f"got {hsv_low!r}, {hsv_high!r}"
+        ) from e
+    if lo.shape != (3,) or hi.shape != (3,):
+        raise InputError(
+            f"hsv_low and hsv_high (--hsv-low, --hsv-high) need 3 values each (H, S, V); "
+            f"got {lo.tolist()} and {hi.tolist()}"
+        )
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        raise InputError(f"HSV bounds must be finite; got low={lo.tolist()}, high={hi.tolist()}")
+    if not (0 <= lo[0] <= 180 and 0 <= hi[0] <= 180) or not all(
+        0 <= v <= 255 for v in (lo[1], lo[2], hi[1], hi[2])
+    ):
+        raise InputError(
+            "HSV bounds are on the OpenCV scale: H in 0..180 (degrees / 2), S and V in "
+            f"0..255; got low={lo.tolist()}, high={hi.tolist()}"
+            + (": hue in degrees? halve it" if 180 < max(lo[0], hi[0]) <= 360 else "")
+        )
+    if lo[1] > hi[1] or lo[2] > hi[2]:
+        raise InputError(
+            f"the low S and V bounds must be <= the high ones; got low={lo.tolist()}, "
+            f"high={hi.tolist()}: swap them (only hue may wrap around, low H > high H)"
+        )
+    return lo, hi
+
+
+class ColorRangeSelector:
+    r"""Points of a depth image whose colour (through the colour camera) lies in an HSV box.
+
+    See the module docstring for the four steps (point, colour pixel, z-buffer occlusion
+    test, HSV box). The result equals, point for point and in the same order,
+    ``depth_to_points`` -> ``texture_coordinates(..., occlusion_tolerance)`` ->
+    ``sample_colors`` -> ``rgb_to_hsv`` -> ``hsv_range_mask`` on the pixels with depth;
+    only the selected points are computed and stored.
+
+    A selector keeps, between calls, the unit rays of the last depth camera and a
+    colour-image z-buffer (all +inf between calls, also after an error), so reuse one
+    for a stream of frames; one selector is not for concurrent calls from several
+    threads.
+
+    Parameters
+    ----------
+    hsv_low, hsv_high : (3,) array_like
+        The box's bounds ``(H, S, V)`` on the OpenCV scale (H 0..180, S and V 0..255),
+        inclusive. Hue wraps around when ``hsv_low[0] > hsv_high[0]`` (red:
+        ``(170, 50, 50)`` .. ``(10, 255, 255)``).
+    occlusion_tolerance : float or None
+        Metres: a point is hidden when another one lands on its colour pixel more than
+        this much nearer to the colour camera; None: no occlusion test.
+
+    Raises
+    ------
+    InputError
+        Bounds not 3 finite numbers on the OpenCV scale, low S or V above high, or a
+        negative tolerance.
+
+    Examples
+    --------
+    A 2x2 depth image 1 m away seen by a colour camera in the same place, green above,
+    grey below:
+
+    >>> from robopercept.geometry import CameraIntrinsics
+    >>> k = CameraIntrinsics(2, 2, 2.0, 2.0, 0.5, 0.5)
+    >>> depth = np.full((2, 2), 1000, dtype=np.uint16)
+    >>> color = np.array([[[0, 200, 0], [20, 180, 30]], [[90, 90, 90], [90, 90, 90]]], np.uint8)
+    >>> select = ColorRangeSelector((45, 35, 35), (65, 255, 255))
+    >>> sel = select(depth, color, k, k, np.eye(4), 0.001)
+    >>> sel.pixels.tolist(), sel.hue.tolist(), sel.n_valid
+    ([0, 1], [60.0, 62.0], 4)
+    >>> sel.points.tolist()
+    [[-0.25, -0.25, 1.0], [0.25, -0.25, 1.0]]
+    """
+
+    def __init__(
+        self,
+        hsv_low: npt.ArrayLike,
+        hsv_high: npt.ArrayLike,
+        occlusion_tolerance: float | None = 0.02,
+    ) -> None:
+        self.hsv_low, self.hsv_high = _check_hsv_bounds(hsv_low, hsv_high)
+        if occlusion_tolerance is not None:
+            tol = float(occlusion_tolerance)
+            if not tol >= 0:
+                raise InputError(
+                    f"occlusion_tolerance must be >= 0 metres, or None for no occlusion "
+                    f"test; got {occlusion_tolerance}"
+                )
+            occlusion_tolerance = tol
+        self.occlusion_tolerance = occlusion_tolerance
+        self._rays_key: CameraIntrinsics | None = None
+        self._rays = np.zeros((0, 3))
+        self._zbuf = np.zeros(0)  # colour-image z-buffer, +inf between calls
+
+    def _unit_rays(self, k: CameraIntrinsics) -> np.ndarray:
+        """``pixel_rays(k)``, cached for the last depth camera."""
+        if self._rays_key != k:
+            self._rays = pixel_rays(k)
+            self._rays_key = k
+        return self._rays
+
+    def __call__(
+        self,
+        depth: np.ndarray,
+        color: np.ndarray,
+        depth_intrinsics: CameraIntrinsics,
+        color_intrinsics: CameraIntrinsics,
+        T_color_depth: npt.ArrayLike,
+        depth_scale: float,
+    ) -> ColoredPoints:
+        """Select the points of one RGB-D frame.
+
+        Parameters
+        ----------
+        depth : (H, W) ndarray
+            Raw depth (uint16 units, or float with ``depth_scale=1``); 0 (and NaN) is no
+            measurement.
+        color : (Hc, Wc, 3) uint8 ndarray
+            RGB colour image.
+        depth_intrinsics : CameraIntrinsics
+            Of the depth camera, ``W x H``.
+        color_intrinsics : CameraIntrinsics
+            Of the colour camera, ``Wc x Hc``.
+        T_color_depth : (4, 4) array_like
+            Depth frame to colour frame (librealsense's depth-to-colour extrinsics).
+        depth_scale : float
+            Metres per depth unit (0.001 on a D435).
+
+        Returns
+        -------
+        ColoredPoints
+        """
+        d, rgb, T, scale = _check_frame(
+            depth, color, depth_intrinsics, color_intrinsics, T_color_depth, depth_scale
+        )
+        kc = color_intrinsics
+        flat = np.ascontiguousarray(d).reshape(-1)
+        rays = self._unit_rays(depth_intrinsics)
+        if self._zbuf.shape[0] != kc.width * kc.height:
+            self._zbuf = np.full(kc.width * kc.height, np.inf)
+        tol = self.occlusion_tolerance
+        k, model, coeffs = compiled_params(kc)
+        n = flat.shape[0]
+        pix = np.empty(n, dtype=np.int64)
+        zc = np.empty(n)
+        out = np.empty((n, 3))
+        hue = np.empty(n)
+        idx = np.empty(n, dtype=np.int64)
+        t0 = time.perf_counter()
+        _project_kernel(
+            flat,
+            rays,
+            scale,
+            np.ascontiguousarray(T[:3, :3]),
+            np.ascontiguousarray(T[:3, 3]),
+            k,
+            model,
+            coeffs,
+            kc.width,
+            kc.height,
+            pix,
+            zc,
+        )
+        try:
+            if tol is not None:
+                _zbuffer_kernel(pix, zc, self._zbuf)
+            t1 = time.perf_counter()
+            m = _select_kernel(
+                flat,
+                rays,
+                scale,
+                np.ascontiguousarray(rgb).reshape(-1),
+                pix,
+                zc,
+                self._zbuf,
+                -1.0 if tol is None else tol,
+                self.hsv_low,
+                self.hsv_high,
+                out,
+                hue,
+                idx,
+            )
+        finally:
+            if tol is not None:
+                _reset_kernel(pix, self._zbuf)
+        t2 = time.perf_counter()
+        with np.errstate(invalid="ignore"):
+            n_valid = int(np.count_nonzero((flat > 0) & (flat < np.inf)))
+        return ColoredPoints(
+            points=out[:m],
+            hue=hue[:m],
+            pixels=idx[:m],
+            n_valid=n_valid,
+            ms={"points": (t1 - t0) * 1e3, "color": (t2 - t1) * 1e3},
+        )
+
+
+def _check_frame(
+    depth: np.ndarray,
+    color: np.ndarray,
+    depth_intrinsics: CameraIntrinsics,
+    color_intrinsics: CameraIntrinsics,
+    T_color_depth: npt.ArrayLike,
+    depth_scale: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The checked inputs of :meth:`ColorRangeSelector.__call__`."""
+    for name, k in (("depth_intrinsics", depth_intrinsics), ("color_intrinsics", color_intrinsics)):
+        if not isinstance(k, CameraIntrinsics):
+            raise InputError(f"{name} must be a CameraIntrinsics; got {type(k).__name__}")
+    d = np.asarray(depth)
+    kd = depth_intrinsics
+    if d.ndim != 2:
+        hint = (
+            ": drop the channel axis with depth[..., 0]" if d.ndim == 3 and d.shape[2] == 1 else ""
+        )
+        raise InputError(f"depth must be a 2-D (H, W) image; got shape {d.shape}{hint}")
+    if d.dtype.kind not in "uif":
+        raise InputError(f"depth must be numeric (uint16 raw units or float); got {d.dtype}")
+    if d.shape != (kd.height, kd.width):
+        raise InputError(
+            f"depth is {d.shape[1]}x{d.shape[0]} but depth_intrinsics describe "
+            f"{kd.width}x{kd.height}: use the depth stream's intrinsics "
+            "(CameraIntrinsics.scaled for another resolution)"
+        )
+    c = np.asarray(color)
+    kc = color_intrinsics
+    if c.ndim != 3 or c.shape[2] != 3:
+        hint = ""
+        if c.ndim == 3 and c.shape[2] == 4:
+            hint = ": RGBA? drop alpha with color[..., :3]"
+        elif c.ndim == 3 and c.shape[0] == 3:
+            hint = ": channels-first? use color.transpose(1, 2, 0)"
+        elif c.ndim == 2:
+            hint = ": a gray image has no hue; pass the RGB colour stream"
+        raise InputError(f"color must be an (H, W, 3) RGB image; got shape {c.shape}{hint}")
+    if c.dtype != np.uint8:
+        hint = (
+            ": scale [0, 1] floats with (color * 255).round().astype(np.uint8)"
+            if c.dtype.kind == "f"
+            else ": convert it to 8 bits (16-bit: (color >> 8).astype(np.uint8))"
+        )
+        raise InputError(
+            f"color must be uint8 (HSV bounds are on its 0..255 scale); got {c.dtype}{hint}"
+        )
+    if c.shape[:2] != (kc.height, kc.width):
+        raise InputError(
+            f"color is {c.shape[1]}x{c.shape[0]} but color_intrinsics describe "
+            f"{kc.width}x{kc.height}: use the colour stream's intrinsics "
+            "(CameraIntrinsics.scaled for another resolution)"
+        )
+    T = check_transform(T_color_depth, "T_color_depth")
+    scale = check_positive(depth_scale, "depth_scale")
+    return d, c, T, float(scale)
+
+
+def points_in_color_range(
+    depth: np.ndarray,
+    color: np.ndarray,
+    depth_intrinsics: CameraIntrinsics,
+    color_intrinsics: CameraIntrinsics,
+    T_color_depth: npt.ArrayLike,
+    depth_scale: float,
+    hsv_low: npt.ArrayLike,
+    hsv_high: npt.ArrayLike,
+    occlusion_tolerance: float | None = 0.02,
+) -> ColoredPoints:
+    """Points of a depth image whose colour lies in an HSV box, one-shot.
+
+    ``ColorRangeSelector(hsv_low, hsv_high, occlusion_tolerance)(depth, color,
+    depth_intrinsics, color_intrinsics, T_color_depth, depth_scale)``; see
+    :class:`ColorRangeSelector` for the parameters and the method. For a stream of
+    frames, keep one selector (it caches the depth camera's rays and its z-buffer).
+
+    Returns
+    -------
+    ColoredPoints
+
+    Examples
+    --------
+    >>> from robopercept.geometry import CameraIntrinsics
+    >>> k = CameraIntrinsics(2, 1, 2.0, 2.0, 0.5, 0.0)
+    >>> color = np.array([[[0, 255, 0], [255, 0, 0]]], np.uint8)
+    >>> depth = np.array([[500, 500]], np.uint16)
+    >>> box = (45, 35, 35), (65, 255, 255)
+    >>> sel = points_in_color_range(depth, color, k, k, np.eye(4), 0.001, *box)
+    >>> sel.pixels.tolist(), sel.points.tolist()
+    ([0], [[-0.125, 0.0, 0.5]])
+    """
+    selector = ColorRangeSelector(hsv_low, hsv_high, occlusion_tolerance)
+    return selector(depth, color, depth_intrinsics, color_intrinsics, T_color_depth, depth_scale)

@@ -1,0 +1,400 @@
+r"""Interacting multiple model (IMM) estimator over a bank of linear Kalman filters.
+
+Blom & Bar-Shalom (1988), "The interacting multiple model algorithm for systems with
+Markovian switching coefficients", IEEE TAC 33(8); Bar-Shalom, Li & Kirubarajan,
+*Estimation with Applications to Tracking and Navigation* (2001), sec. 11.6.
+
+The target follows one of :math:`r` linear-Gaussian models (one
+:class:`~robopercept.tracking.kalman.KalmanFilter` each, all with the same state and
+measurement) and switches between them as a Markov chain,
+:math:`M_{ij} = P(\text{model } j \text{ at } k \mid \text{model } i \text{ at } k-1)`
+(rows sum to 1). One cycle, from the mode probabilities :math:`\mu_i` and each
+filter's estimate :math:`(\hat x_i, P_i)` at :math:`k-1`:
+
+1. Mixing. Predicted mode probabilities and mixing probabilities
+
+   .. math:: \bar c_j = \sum_i M_{ij} \mu_i, \qquad
+             \omega_{ij} = \frac{M_{ij} \mu_i}{\bar c_j}
+
+   and the mixed initial condition of filter :math:`j`
+
+   .. math:: \hat x^0_j = \sum_i \omega_{ij} \hat x_i, \qquad
+             P^0_j = \sum_i \omega_{ij} \left(P_i + (\hat x_i - \hat x^0_j)
+             (\hat x_i - \hat x^0_j)^\top\right)
+
+   (the second term is the spread of the means).
+2. Mode-matched prediction: filter :math:`j` predicts from :math:`(\hat x^0_j, P^0_j)`
+   with its own :math:`A_j, Q_j` (or this step's override, e.g. for a varying
+   :math:`\Delta t`). The combined prior is the moment match of the predictions under
+   the predicted mode probabilities :math:`\bar c_j` (step 4 with :math:`\bar c`).
+3. Mode-matched update and mode probabilities: each filter updates with :math:`z`;
+   with its innovation :math:`y_j` and innovation covariance :math:`S_j`, the mode
+   likelihood and the new mode probabilities are
+
+   .. math:: \Lambda_j = N(y_j; 0, S_j) = \frac{\exp(-\tfrac12 y_j^\top S_j^{-1} y_j)}
+             {\sqrt{\det(2\pi S_j)}}, \qquad
+             \mu_j = \frac{\bar c_j \Lambda_j}{\sum_l \bar c_l \Lambda_l}
+
+   (computed from :math:`\log \Lambda_j` with a log-sum-exp, so that a measurement far
+   from every model still ranks the models instead of underflowing to 0/0).
+4. Combination (moment matching of the Gaussian mixture):
+
+   .. math:: \hat x = \sum_j \mu_j \hat x_j, \qquad
+             P = \sum_j \mu_j \left(P_j + (\hat x_j - \hat x)(\hat x_j - \hat x)^\top\right)
+
+A step without a measurement (:meth:`IMMEstimator.skip`) is the IMM with a missed
+detection: nothing discriminates the modes, so :math:`\mu_j = \bar c_j`, each filter
+keeps its prediction and the combined estimate is the combined prior.
+
+Parity with filterpy's ``IMMEstimator`` (same ``M`` convention, ``cbar = mu @ M``,
+``omega[i, j] = M[i, j] mu[i] / cbar[j]``): ``x``, ``P``, ``mu``, ``cbar``, ``omega`` and
+the likelihoods after each update agree to rounding. One deliberate difference: filterpy
+weights its combined *prior* ``x_prior`` by the previous posterior ``mu``; here it is
+weighted by :math:`\bar c`, the mode probabilities of the prediction, as the textbook
+and :meth:`IMMEstimator.skip` require.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+from scipy.linalg import cho_factor, cho_solve
+
+from robopercept.errors import DegenerateError, InputError
+from robopercept.tracking.kalman import KalmanFilter
+
+__all__ = ["IMMEstimator"]
+
+_SUM_TOL = 1e-8  # how far from 1 a probability vector (or a row of M) may sum
+
+
+def _quad(S: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """``(y^T S^-1 y, log det S)`` through a Cholesky factorization of ``S``."""
+    try:
+        c = cho_factor(S)
+    except np.linalg.LinAlgError:
+        raise DegenerateError(
+            "an innovation covariance H P H^T + R is not positive definite: "
+            "check that every filter's R is positive definite"
+        ) from None
+    return float(y @ cho_solve(c, y)), 2.0 * float(np.log(np.diag(c[0])).sum())
+
+
+def _as_r(R: npt.ArrayLike | float | None) -> np.ndarray | None:
+    """``R`` as a float array (0-d for a scalar, which the filters read as ``R I``)."""
+    return None if R is None else np.asarray(R, dtype=np.float64)
+
+
+def _moments(weights: np.ndarray, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance of a Gaussian mixture: ``x = sum w_j x_j``,
+    ``P = sum w_j (P_j + (x_j - x)(x_j - x)^T)``; ``xs`` (r, n), ``Ps`` (r, n, n)."""
+    x = weights @ xs
+    d = xs - x
+    return x, np.einsum("j,jab->ab", weights, Ps) + np.einsum("j,ja,jb->ab", weights, d, d)
+
+
+class IMMEstimator:
+    r"""Interacting multiple model estimator (Blom & Bar-Shalom 1988; Bar-Shalom, Li &
+    Kirubarajan, *Estimation with Applications to Tracking and Navigation*, sec. 11.6).
+
+    The equations are in the module docstring. The filters are used in place (as
+    filterpy does): after each step ``filters[j].x, filters[j].P`` are the mode-matched
+    estimates.
+
+    Parameters
+    ----------
+    filters : sequence of KalmanFilter, length r >= 2
+        One filter per motion model, all with the same ``dim_x`` and ``dim_z`` (pad a
+        smaller model's state, e.g. constant position as ``[p, v]`` with ``v`` reset to
+        0 by ``A``, so that the states can be mixed).
+    mu : (r,) array_like
+        Initial mode probabilities: non-negative, summing to 1.
+    M : (r, r) array_like
+        Markov transition matrix, ``M[i, j] = P(model j at k | model i at k-1)``;
+        non-negative rows summing to 1 (filterpy's convention).
+
+    Attributes
+    ----------
+    filters : list of KalmanFilter
+    mu : (r,) ndarray
+        Mode probabilities (posterior after :meth:`update`; :math:`\bar c` after
+        :meth:`skip`).
+    M : (r, r) ndarray
+    cbar : (r,) ndarray
+        Predicted mode probabilities :math:`\bar c = M^\top \mu` for the next step.
+    omega : (r, r) ndarray
+        Mixing probabilities ``omega[i, j] = M[i, j] mu[i] / cbar[j]``.
+    x, P : ndarray, (n,) and (n, n)
+        Combined (moment-matched) estimate: the prior after :meth:`predict`, the
+        posterior after :meth:`update` or :meth:`skip`.
+    x_prior, P_prior : ndarray
+        Combined prior of the last :meth:`predict`, weighted by :math:`\bar c`.
+    likelihood, log_likelihood : (r,) ndarray
+        :math:`\Lambda_j` and :math:`\log \Lambda_j` of the last update (1 and 0 before
+        any).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from robopercept.tracking import IMMEstimator, constant_velocity
+    >>> slow = constant_velocity(dim=1, dt=1.0, q=1e-4, r=1.0)
+    >>> fast = constant_velocity(dim=1, dt=1.0, q=1.0, r=1.0)
+    >>> imm = IMMEstimator([slow, fast], mu=[0.9, 0.1], M=[[0.95, 0.05], [0.05, 0.95]])
+    >>> for z in [0.0, 1.0, 2.0, 3.0, 10.0]:  # a jump in speed after z = 3
+    ...     imm.predict()
+    ...     imm.update([z])
+    >>> imm.mu.round(2)  # the manoeuvring model explains the jump
+    array([0.02, 0.98])
+    """
+
+    def __init__(
+        self,
+        filters: Sequence[KalmanFilter],
+        mu: npt.ArrayLike,
+        M: npt.ArrayLike,
+    ) -> None:
+        filters = list(filters)
+        if len(filters) < 2:
+            raise InputError(
+                f"an IMM needs at least 2 filters (one per motion model); got {len(filters)}"
+            )
+        for j, f in enumerate(filters):
+            if not isinstance(f, KalmanFilter):
+                raise InputError(
+                    f"filters[{j}] must be a robopercept KalmanFilter; got {type(f).__name__}"
+                )
+        nx, nz = filters[0].dim_x, filters[0].dim_z
+        for j, f in enumerate(filters[1:], start=1):
+            if (f.dim_x, f.dim_z) != (nx, nz):
+                raise InputError(
+                    f"all filters must share dim_x and dim_z so that their states can be "
+                    f"mixed; filters[0] has (dim_x, dim_z) = ({nx}, {nz}), filters[{j}] has "
+                    f"({f.dim_x}, {f.dim_z}): pad the smaller state (e.g. constant position "
+                    "as [p, v] with A zeroing v)"
+                )
+        r = len(filters)
+        mu_a = np.asarray(mu, dtype=np.float64).reshape(-1)
+        if mu_a.shape != (r,):
+            raise InputError(f"mu must have one probability per filter ({r}); got {mu_a.size}")
+        if not np.isfinite(mu_a).all() or (mu_a < 0).any() or abs(mu_a.sum() - 1) > _SUM_TOL:
+            raise InputError(
+                f"mu must be a probability vector (non-negative, summing to 1); got {mu_a} "
+                f"(sum {mu_a.sum():.6g}): use mu / mu.sum()"
+            )
+        M_a = np.asarray(M, dtype=np.float64)
+        if M_a.shape != (r, r):
+            raise InputError(f"M must be ({r}, {r}), one row per filter; got {M_a.shape}")
+        rows = M_a.sum(axis=1)
+        if not np.isfinite(M_a).all() or (M_a < 0).any() or (abs(rows - 1) > _SUM_TOL).any():
+            raise InputError(
+                "M must be a Markov transition matrix, M[i, j] = P(model j | model i), "
+                f"non-negative with rows summing to 1; row sums are {rows}: "
+                "use M / M.sum(axis=1, keepdims=True) (or M.T if its columns sum to 1)"
+            )
+        self.filters = filters
+        self.mu = mu_a / mu_a.sum()
+        self.M = M_a
+        self.cbar = np.zeros(r)
+        self.omega = np.zeros((r, r))
+        self._mixing()
+        self.likelihood = np.ones(r)
+        self.log_likelihood = np.zeros(r)
+        self.x, self.P = self._combine(self.mu)
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+
+    # ------------------------------------------------------------------ internals
+    def _mixing(self) -> None:
+        """``cbar = mu @ M``, ``omega[i, j] = M[i, j] mu[i] / cbar[j]`` (a mode that
+        cannot be reached, ``cbar[j] = 0``, mixes with ``mu``: its weight is 0 anyway)."""
+        self.cbar = self.mu @ self.M
+        num = self.M * self.mu[:, None]
+        safe = self.cbar > 0
+        self.omega = np.where(safe, num / np.where(safe, self.cbar, 1.0), self.mu[:, None])
+
+    def _stack(self) -> tuple[np.ndarray, np.ndarray]:
+        return (
+            np.stack([f.x for f in self.filters]),
+            np.stack([f.P for f in self.filters]),
+        )
+
+    def _combine(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        xs, Ps = self._stack()
+        return _moments(weights, xs, Ps)
+
+    # ------------------------------------------------------------------ the cycle
+    def predict(
+        self,
+        models: Sequence[tuple[npt.ArrayLike, npt.ArrayLike] | None] | None = None,
+        u: npt.ArrayLike | None = None,
+    ) -> None:
+        r"""Mix, then predict each filter from its mixed initial condition.
+
+        Parameters
+        ----------
+        models : sequence of ``(A, Q)`` or None, one per filter, optional
+            This step's transition and process noise for filter ``j`` (e.g. rebuilt for
+            this step's :math:`\Delta t`); ``None`` (the whole argument or one entry)
+            keeps that filter's own ``A, Q``. The filters' ``A, Q`` are not changed.
+        u : (dim_u,) array_like, optional
+            Control input passed to every filter's ``predict``.
+
+        Notes
+        -----
+        Sets the filters to :math:`(\hat x_j^-, P_j^-)`, and ``x, P, x_prior, P_prior`` to
+        their moment match under :math:`\bar c` (module docstring, steps 1-2).
+        """
+        r, nx = len(self.filters), self.filters[0].dim_x
+        overrides: list[tuple[np.ndarray, np.ndarray] | None] = [None] * r
+        if models is not None:
+            models = list(models)
+            if len(models) != r:
+                raise InputError(
+                    f"models must have one (A, Q) or None per filter ({r}); got {len(models)}"
+                )
+            for j, m in enumerate(models):
+                if m is None:
+                    continue
+                if len(m) != 2:
+                    raise InputError(f"models[{j}] must be a pair (A, Q) or None")
+                A = np.asarray(m[0], dtype=np.float64)
+                Q = np.asarray(m[1], dtype=np.float64)
+                for name, a in (("A", A), ("Q", Q)):
+                    if a.shape != (nx, nx) or not np.isfinite(a).all():
+                        raise InputError(
+                            f"models[{j}] {name} must be a finite ({nx}, {nx}) matrix; "
+                            f"got shape {a.shape}"
+                        )
+                overrides[j] = (A, Q)
+        uu = None if u is None else np.asarray(u, dtype=np.float64)
+        xs, Ps = self._stack()
+        x0 = self.omega.T @ xs  # x0[j] = sum_i omega[i, j] x_i
+        d = xs[:, None, :] - x0[None, :, :]  # d[i, j] = x_i - x0_j
+        P0 = np.einsum("ij,iab->jab", self.omega, Ps) + np.einsum(
+            "ij,ija,ijb->jab", self.omega, d, d
+        )
+        for j, f in enumerate(self.filters):
+            f.x, f.P = x0[j].copy(), P0[j].copy()
+            ov = overrides[j]
+            if ov is None:
+                f.predict(uu)
+            else:
+                f.predict(uu, A=ov[0], Q=ov[1])
+        self.x, self.P = self._combine(self.cbar)
+        self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
+
+    def update(self, z: npt.ArrayLike, R: npt.ArrayLike | float | None = None) -> None:
+        r"""Update every filter with ``z``, then the mode probabilities and the
+        combined estimate.
+
+        Parameters
+        ----------
+        z : (dim_z,) array_like
+        R : (dim_z, dim_z) array_like or float, optional
+            Measurement noise for this step, for every filter (a scalar is a multiple of
+            the identity); default each filter's own ``R``.
+
+        Notes
+        -----
+        :math:`\log\Lambda_j = -\tfrac12 (y_j^\top S_j^{-1} y_j + \log\det S_j +
+        d_z \log 2\pi)`; :math:`\mu_j \propto \bar c_j \Lambda_j`, normalized in the log
+        domain; if no mode has a finite weight (cannot happen with finite inputs),
+        :math:`\mu = \bar c`. Then :math:`\bar c` and :math:`\omega` for the next step and
+        the moment-matched ``x, P`` (module docstring, steps 3-4).
+        """
+        r = len(self.filters)
+        logl = np.empty(r)
+        nz = self.filters[0].dim_z
+        zz, rr = np.asarray(z, dtype=np.float64), _as_r(R)
+        for j, f in enumerate(self.filters):
+            res = f.update(zz, R=rr)
+            _, logdet = _quad(res.S, res.y)
+            logl[j] = -0.5 * (res.mahalanobis2 + logdet + nz * np.log(2.0 * np.pi))
+        self.log_likelihood = logl
+        self.likelihood = np.exp(logl)
+        with np.errstate(divide="ignore"):
+            w = np.log(self.cbar) + logl
+        top = w.max()
+        if np.isfinite(top):
+            p = np.exp(w - top)
+            self.mu = p / p.sum()
+        else:
+            self.mu = self.cbar.copy()
+        self._mixing()
+        self.x, self.P = self._combine(self.mu)
+
+    def skip(self) -> None:
+        r"""A step without a measurement (missed detection), after :meth:`predict`.
+
+        Nothing discriminates the modes, so :math:`\mu = \bar c`; :math:`\bar c` and
+        :math:`\omega` are recomputed from it for the next step; each filter keeps its
+        prediction as its estimate and ``x, P`` are the combined prior.
+        """
+        self.mu = self.cbar.copy()
+        self._mixing()
+        self.x, self.P = self._combine(self.mu)
+
+    # ------------------------------------------------------------------ gating
+    def mahalanobis2(self, z: npt.ArrayLike, R: npt.ArrayLike | float | None = None) -> float:
+        r"""Smallest squared Mahalanobis distance of ``z`` over the models' predictions,
+        :math:`\min_j y_j^\top S_j^{-1} y_j` (call after :meth:`predict`).
+
+        A measurement is plausible when any model finds it so. If model :math:`j` is
+        the true one, :math:`y_j^\top S_j^{-1} y_j \sim \chi^2_{d_z}`, so the gate
+        :math:`\min_j d_j^2 \le \chi^2_{d_z}(p)` keeps a true measurement with
+        probability at least :math:`p` whatever the mode. Gating on the low-noise model,
+        or on the dominant one, would reject exactly the measurements that reveal a
+        manoeuvre, and the IMM could never switch modes; the moment-matched
+        :meth:`innovation` approximates a multimodal mixture by one Gaussian and
+        can be too tight or too loose in both directions.
+
+        Parameters
+        ----------
+        z : (dim_z,) array_like
+        R : (dim_z, dim_z) array_like or float, optional
+            Measurement noise for this step (default each filter's own).
+
+        Returns
+        -------
+        float
+        """
+        best = np.inf
+        for f in self.filters:
+            y, S = f.innovation(np.asarray(z, dtype=np.float64), R=_as_r(R))
+            best = min(best, _quad(S, y)[0])
+        return float(best)
+
+    def innovation(
+        self, z: npt.ArrayLike, R: npt.ArrayLike | float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        r"""Innovation of ``z`` against the combined (moment-matched) predicted
+        measurement (call after :meth:`predict`).
+
+        With :math:`\hat z_j = H_j \hat x_j^-`, :math:`S_j = H_j P_j^- H_j^\top + R_j`
+        and weights :math:`\bar c_j`:
+
+        .. math:: \hat z = \sum_j \bar c_j \hat z_j, \quad y = z - \hat z, \quad
+                  S = \sum_j \bar c_j \left(S_j + (\hat z_j - \hat z)
+                  (\hat z_j - \hat z)^\top\right)
+
+        (equal to ``z - H x_prior`` and ``H P_prior H^T + R`` when the filters share
+        ``H`` and ``R``).
+
+        Parameters
+        ----------
+        z : (dim_z,) array_like
+        R : (dim_z, dim_z) array_like or float, optional
+
+        Returns
+        -------
+        y : (dim_z,) ndarray
+        S : (dim_z, dim_z) ndarray
+        """
+        zz = np.asarray(z, dtype=np.float64).reshape(-1)
+        rr = _as_r(R)
+        parts = [f.innovation(zz, R=rr) for f in self.filters]
+        zhat = np.stack([zz - y for y, _ in parts])
+        Ss = np.stack([S for _, S in parts])
+        zc, S = _moments(self.cbar, zhat, Ss)
+        return zz - zc, S
