@@ -378,14 +378,16 @@ def _motion_cases() -> list[Case]:
 
 
 def _estimation_cases() -> list[Case]:
-    from robopercept.estimation import PlaneModel, ransac
+    from robopercept.estimation import PlaneModel, fit_plane_inverse_depth, ransac
     from robopercept.estimation.least_squares import scatter_matrix
 
     rng = np.random.default_rng(4)
     pts = rng.normal(size=(200, 3)) * [1.0, 1.0, 0.01]
     pts[:30] = rng.normal(size=(30, 3))
     keep = rng.random(200) < 0.6
+    front = pts + np.array([0.0, 0.0, 2.0])  # in front of the camera for the inverse-depth fit
     return [
+        Case("inverse_depth_plane", lambda: fit_plane_inverse_depth(front, keep)),
         Case("scatter_matrix", lambda: scatter_matrix(pts)),
         Case("scatter_matrix_mask", lambda: scatter_matrix(pts, keep)),
         Case(
@@ -398,6 +400,7 @@ def _estimation_cases() -> list[Case]:
 
 def _depth_cases() -> list[Case]:
     from robopercept.depth import (
+        ColorRangeSelector,
         align_color_to_depth,
         block_matching,
         census_transform,
@@ -427,6 +430,20 @@ def _depth_cases() -> list[Case]:
     pts = np.stack([(x - 7.5) / 14.0, (y - 5.5) / 14.0, np.ones_like(x, float)], -1)
     pts = (pts * depth[..., None] * 0.001).reshape(-1, 3)
     sgm = dict(census=3, block=3)
+
+    def color_select() -> list[Any]:
+        # the whole HSV box with the z-buffer, then a wrapping box without it (the
+        # occluder hides wall points); wall-clock timings are not results
+        out = []
+        for low, high, tol in [
+            ((0, 0, 0), (180, 255, 255), 0.02),
+            ((150, 20, 20), (60, 255, 255), None),
+        ]:
+            sel = ColorRangeSelector(low, high, tol)(depth, color, k_depth, k_color, T, 0.001)
+            out.append(dataclasses.replace(sel, ms={}))
+        assert out[0].pixels.size > 50 and out[1].pixels.size > 20
+        return out
+
     return [
         Case("census", lambda: census_transform(GRAY_U8, 5)),
         Case("sgm_8", lambda: semi_global_matching(left, right, 8, **sgm)),
@@ -455,6 +472,7 @@ def _depth_cases() -> list[Case]:
             lambda: texture_coordinates(pts, T, k_inverse, occlusion_tolerance=None),
         ),
         Case("align_color", lambda: align_color_to_depth(color, depth, k_depth, k_color, T)),
+        Case("color_select", color_select),
     ]
 
 
@@ -582,7 +600,7 @@ def _pipeline_cases() -> list[Case]:
         scene = SyntheticRGBDScene(n_frames=2, depth_size=(64, 36), color_size=(80, 45))
         frames = list(scene)
         tracker = PlaneTracker()
-        results = [tracker.process(f) for f in frames]
+        results = [r for _, r in tracker.stream(frames)]
         for r in results:  # wall-clock timings are not results
             object.__setattr__(r, "ms", {})
         return [frames, results]

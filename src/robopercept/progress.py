@@ -31,7 +31,8 @@ class SummaryProgress:
     Prints ``desc: n/total unit (p %), t s`` when the count passes 25 %, 50 % and 75 %
     of ``total`` (or every ``every`` seconds when ``total`` is unknown) and one closing
     line ``desc: n unit in t s (r unit/s)``. The subset of the tqdm interface the
-    package uses: ``update``, ``set_postfix``, ``close``, iteration and ``with``.
+    package uses: ``update``, ``set_postfix``, ``set_postfix_str``, ``close``,
+    iteration and ``with``.
 
     Parameters
     ----------
@@ -103,6 +104,10 @@ class SummaryProgress:
     def set_postfix(self, **values: Any) -> None:
         """Values shown after the count on the next line (as tqdm's ``set_postfix``)."""
         self.postfix = "".join(f", {k}={v}" for k, v in values.items())
+
+    def set_postfix_str(self, text: str = "", refresh: bool = True) -> None:
+        """Text shown after the count on the next line (as tqdm's ``set_postfix_str``)."""
+        self.postfix = f", {text}" if text else ""
 
     def close(self) -> None:
         """Print the closing line (once)."""

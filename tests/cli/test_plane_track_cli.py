@@ -19,7 +19,7 @@ def test_demo_writes_its_outputs_and_prints_the_figures(tmp_path, capsys):
     code = main(["demo", "--out", str(out), "--max-frames", "6", "--quiet"])
     assert code == 0
     text = capsys.readouterr().out
-    for needle in ("detection rate", "tracked", "ms/frame", "plane.csv"):
+    for needle in ("detection rate", "tracked", "ms/frame", "plane.csv", "wall time"):
         assert needle in text
     for name in ("plane.csv", "tracking.mp4", "summary.json", "plane.png"):
         assert (out / name).stat().st_size > 0
@@ -95,7 +95,8 @@ def test_hsv_box_matching_nothing_detects_nothing(tmp_path, capsys):
     assert code == 0
     with open(out / "plane.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
-    assert [r["detected"] for r in rows] == ["0", "0", "0"]
+    assert [r["accepted"] for r in rows] == ["0", "0", "0"]
+    assert [r["status"] for r in rows] == ["lost", "lost", "lost"]
 
 
 @pytest.mark.parametrize(
@@ -163,7 +164,8 @@ def test_real_rgbd_folders_import_and_track(tmp_path, capsys, folder, flags, n_f
     with open(out / "plane.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == n_frames
-    assert summary["detected_frames"] == sum(r["detected"] == "1" for r in rows)
+    assert summary["accepted_frames"] == sum(r["accepted"] == "1" for r in rows)
+    assert sum(summary["status_counts"].values()) == n_frames
     listed = text.split("outputs in ", 1)[1].split(": ", 1)[1].split(", ")
     assert sorted(n.strip() for n in listed) == sorted(
         ["plane.csv", "summary.json", "plane.png", "tracking.mp4"]
@@ -192,7 +194,7 @@ def test_pcl_floor_plane_matches_open3d_on_pcl_clouds(tmp_path, capsys):
         rows = list(csv.DictReader(fh))
     o3d.utility.random.seed(0)
     for row, pcd in zip(rows, sorted(src.glob("*.pcd")), strict=True):
-        assert row["detected"] == "1"
+        assert row["accepted"] == "1"
         n = np.array([float(row["nx"]), float(row["ny"]), float(row["nz"])])
         pts = read_point_cloud(pcd).points
         cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts[np.isfinite(pts).all(1)]))
@@ -276,8 +278,8 @@ def test_a_source_failing_mid_run_exits_1_with_the_frames_written(tmp_path, caps
     class Unplugged:
         """Two frames of the synthetic scene, then the camera is gone."""
 
-        def __init__(self, n_frames, seed):
-            self.scene = real(n_frames=3, seed=seed)
+        def __init__(self, n_frames, seed, **scene):
+            self.scene = real(n_frames=3, seed=seed, **scene)
 
         def __iter__(self):
             it = iter(self.scene)

@@ -42,11 +42,13 @@ def test_run_writes_every_output(tmp_path):
     scene = SyntheticRGBDScene(n_frames=8, **SMALL)
     summary = run_plane_tracking(scene, tmp_path / "out", progress=False)
     rows, saved = _check_outputs(tmp_path / "out", 8)
-    assert saved == json.loads(json.dumps(summary, default=float))
-    assert summary["detection_rate"] == 1.0
+    assert saved == json.loads(json.dumps(summary.to_dict(), default=float))
+    assert summary.detection_rate == 1.0
+    assert summary.status_counts["new"] == 1 and summary.status_counts["tracking"] == 7
     for row in rows:
         n = np.array([float(row["nx"]), float(row["ny"]), float(row["nz"])])
-        assert row["detected"] == "1"
+        assert (row["measured"], row["accepted"]) == ("1", "1")
+        assert row["status"] in ("new", "tracking")
         assert np.linalg.norm(n) == pytest.approx(1.0, abs=1e-5)
         # n.x = d with d the distance: d > 0
         assert float(row["d"]) > 0 and float(row["track_d"]) > 0
@@ -64,7 +66,7 @@ def test_max_frames_and_no_video(tmp_path):
     summary = run_plane_tracking(scene, tmp_path, max_frames=3, video=False, progress=False)
     _check_outputs(tmp_path, 3, video=False)
     assert not (tmp_path / "tracking.mp4").exists()
-    assert "tracking.mp4" not in summary["outputs"]
+    assert "tracking.mp4" not in summary.outputs
 
 
 def _interrupted(scene, after, exc):
@@ -79,7 +81,7 @@ def test_ctrl_c_stops_cleanly_with_complete_outputs(tmp_path):
     summary = run_plane_tracking(
         _interrupted(scene, 3, KeyboardInterrupt()), tmp_path, progress=False
     )
-    assert summary["stopped"] == "interrupted"
+    assert summary.stopped == "interrupted"
     _check_outputs(tmp_path, 3)
 
 
@@ -91,7 +93,7 @@ def test_a_failing_source_stops_cleanly(tmp_path):
             tmp_path,
             progress=False,
         )
-    assert "unplugged" in summary["stopped"]
+    assert "unplugged" in summary.stopped
     _check_outputs(tmp_path, 4)
 
 
@@ -104,7 +106,7 @@ def test_corrupt_frame_is_skipped_and_counted(tmp_path):
         summary = run_plane_tracking(
             TUMFolderSource(folder), tmp_path / "out", progress=False, video=False
         )
-    assert summary["skipped_frames"] == 1
+    assert summary.skipped_frames == 1
     rows, _ = _check_outputs(tmp_path / "out", 3, video=False)
     assert [r["frame"] for r in rows] == ["0", "2", "3"]
 

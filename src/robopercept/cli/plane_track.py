@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import sys
+import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from robopercept.cli._args import UsageError, hsv, positive_int
 from robopercept.errors import InputError
+
+if TYPE_CHECKING:
+    from robopercept.pipelines import PlaneTrackSummary
 
 __all__ = ["register", "summary_table"]
 
@@ -35,8 +38,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help=f"frames of the scene to render and track (default {DEMO_FRAMES})",
     )
     p.add_argument("--seed", type=int, default=0, help="scene seed")
+    _scene_flags(p)
+    _smooth_flag(p)
     p.add_argument("--no-video", action="store_true", help="skip tracking.mp4")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser(
@@ -53,11 +59,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", type=positive_int, default=None, help="stop after N frames")
     p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES, help="synthetic: frames")
     p.add_argument("--seed", type=int, default=0, help="synthetic: scene seed")
+    _scene_flags(p, prefix="synthetic: ")
     p.add_argument("--hsv-low", type=hsv, default=(45, 35, 35), metavar="H,S,V")
     p.add_argument("--hsv-high", type=hsv, default=(65, 255, 255), metavar="H,S,V")
     p.add_argument("--hue-tolerance", type=float, default=None, help="hue as RANSAC feature")
+    _smooth_flag(p)
     p.add_argument("--no-video", action="store_true", help="skip tracking.mp4")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_plane_track)
 
     p = sub.add_parser(
@@ -70,17 +79,65 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("out_dir", help="output folder")
     p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES)
     p.add_argument("--seed", type=int, default=0)
+    _scene_flags(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=_synth)
 
 
+def _scene_flags(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    from robopercept.sources import DISTRACTORS, MOTIONS
+
+    p.add_argument(
+        "--motion",
+        choices=MOTIONS,
+        default="smooth",
+        help=f"{prefix}the board's motion profile (default smooth)",
+    )
+    p.add_argument(
+        "--no-occluder",
+        dest="occluder",
+        action="store_false",
+        help=f"{prefix}no grey panel passing in front of the board",
+    )
+    p.add_argument(
+        "--distractor",
+        choices=DISTRACTORS,
+        default="box",
+        help=f"{prefix}other green things: a small box, a patch on the wall, both or none",
+    )
+
+
+def _smooth_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--smooth",
+        type=int,
+        default=2,
+        metavar="N",
+        help="fixed-lag smoothing: each frame's plane also uses the next N frames "
+        "(N frames of latency; default 2); 0: the causal filter",
+    )
+
+
+def _scene(args: argparse.Namespace) -> Any:
+    from robopercept.sources import SyntheticRGBDScene
+
+    return SyntheticRGBDScene(
+        n_frames=args.frames,
+        seed=args.seed,
+        motion=args.motion,
+        occluder=args.occluder,
+        distractor=args.distractor,
+    )
+
+
 def _source(args: argparse.Namespace) -> Any:
-    from robopercept.sources import SyntheticRGBDScene, TUMFolderSource
+    from robopercept.sources import TUMFolderSource
     from robopercept.sources.realsense import RealSenseSource
 
     src = args.source
     if src == "synthetic":
-        return SyntheticRGBDScene(n_frames=args.frames, seed=args.seed)
+        return _scene(args)
     if src == "realsense":
         return RealSenseSource(None, max_frames=args.max_frames)
     path = Path(src)
@@ -97,47 +154,46 @@ def _fmt(v: float | None, unit: str = "", digits: int = 2) -> str:
     return "-" if v is None else f"{v:.{digits}f}{unit}"
 
 
-def summary_table(summary: dict[str, Any]) -> str:
+def summary_table(summary: PlaneTrackSummary) -> str:
     """The figures of :func:`~robopercept.pipelines.run_plane_tracking` as text."""
+    s = summary
+    counts = ", ".join(f"{k} {v}" for k, v in s.status_counts.items() if v)
     lines = [
-        f"frames            {summary['frames']} (skipped {summary['skipped_frames']})",
-        f"detected          {summary['detected_frames']}",
+        f"frames            {s.frames} (skipped {s.skipped_frames})",
+        f"plane measured    {s.measured_frames}, accepted {s.accepted_frames} ({counts})",
     ]
-    if summary.get("detection_rate") is not None:
+    if s.detection_rate is not None:
         lines.append(
-            f"detection rate    {100 * summary['detection_rate']:.1f}% of "
-            f"{summary['evaluated_frames']} frames with >= 500 valid board pixels"
+            f"detection rate    {100 * s.detection_rate:.1f}% of "
+            f"{s.evaluated_frames} frames with >= 500 valid board pixels"
         )
-    if "raw" in summary:
+    if s.raw is not None and s.tracked is not None:
         lines.append("                  angle median   angle p95   offset median   offset p95")
-        for key in ("raw", "tracked"):
-            a, o = summary[key]["angle_deg"], summary[key]["offset_mm"]
+        for key, e in (("raw fit", s.raw), ("tracked", s.tracked)):
+            a, o = e.angle_deg, e.offset_mm
             lines.append(
-                f"{key:<17} {_fmt(a['median'], ' deg'):>12} {_fmt(a['p95'], ' deg'):>11} "
-                f"{_fmt(o['median'], ' mm'):>15} {_fmt(o['p95'], ' mm'):>12}"
+                f"{key:<17} {_fmt(a.median, ' deg', 3):>12} {_fmt(a.p95, ' deg', 3):>11} "
+                f"{_fmt(o.median, ' mm'):>15} {_fmt(o.p95, ' mm'):>12}"
             )
-    jit = summary.get("jitter_deg") or {}
-    if jit:
+    if s.jitter_raw_deg is not None or s.jitter_tracked_deg is not None:
         lines.append(
-            f"normal jitter     raw {_fmt(jit.get('raw'), ' deg', 3)}, "
-            f"tracked {_fmt(jit.get('tracked'), ' deg', 3)}"
+            f"normal jitter     raw {_fmt(s.jitter_raw_deg, ' deg', 3)}, "
+            f"tracked {_fmt(s.jitter_tracked_deg, ' deg', 3)}"
         )
-    ms = summary.get("ms_per_stage_median") or {}
+    ms = s.ms_per_stage_median
     if ms.get("total") is not None:
         stages = ", ".join(f"{k} {v:.1f}" for k, v in ms.items() if k != "total")
         lines.append(
-            f"speed             {_fmt(summary.get('fps'), ' fps', 1)} "
-            f"({ms['total']:.1f} ms/frame: {stages})"
+            f"tracker speed     {_fmt(s.fps, ' fps', 1)} ({ms['total']:.1f} ms/frame "
+            f"median, the tracker's own work: {stages})"
         )
-    wall = summary.get("wall_seconds")
-    if wall:
-        rate = summary.get("wall_fps_including_source")
+    if s.wall_seconds:
         lines.append(
-            f"wall time         {wall:.1f} s ({_fmt(rate, ' frames/s', 1)} with the source "
-            "and the outputs; the speed above is the tracker alone)"
+            f"wall time         {s.wall_seconds:.1f} s ({_fmt(s.wall_fps, ' frames/s', 1)} "
+            "with the source and the outputs)"
         )
-    if summary.get("stopped"):
-        lines.append(f"stopped early     {summary['stopped']}")
+    if s.stopped:
+        lines.append(f"stopped early     {s.stopped}")
     return "\n".join(lines)
 
 
@@ -154,24 +210,32 @@ def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
         fps=30.0,
         progress=not args.quiet,
     )
-    print(summary_table(summary))
-    stopped = summary.get("stopped") or ""
-    if summary["frames"] == 0:  # nothing tracked: not a success, and no video or plot
-        why = stopped or f"{summary['skipped_frames']} skipped as unreadable"
+    if args.json:
+        print(json.dumps(summary.to_dict(), indent=2, default=float))
+    else:
+        print(summary_table(summary))
+    stopped = summary.stopped or ""
+    if summary.frames == 0:  # nothing tracked: not a success, and no video or plot
+        why = stopped or f"{summary.skipped_frames} skipped as unreadable"
         raise InputError(f"no frame was tracked ({why}): check --source")
-    print(f"outputs in {args.out}/: {', '.join(summary['outputs'])}")
+    if not args.json:
+        print(f"outputs in {args.out}/: {', '.join(summary.outputs)}")
     if stopped.startswith("source failed"):  # outputs cover the frames before the failure
-        raise SourceError(f"{stopped} after {summary['frames']} frames")
+        raise SourceError(f"{stopped} after {summary.frames} frames")
     return 130 if stopped == "interrupted" else 0
 
 
 def _demo(args: argparse.Namespace) -> int:
     from robopercept.pipelines import PlaneTrackerConfig
-    from robopercept.sources import SyntheticRGBDScene
+    from robopercept.sources import ReadAhead
 
-    return _run(
-        args, SyntheticRGBDScene(n_frames=args.frames, seed=args.seed), PlaneTrackerConfig()
-    )
+    # frames are rendered in batches ahead of the tracker, so that the renderer does not
+    # run between the tracker's stages (the stage timings are the tracker's alone)
+    try:
+        config = PlaneTrackerConfig(smoothing_lag=args.smooth)
+    except InputError as exc:
+        raise UsageError(str(exc).replace("smoothing_lag", "--smooth")) from exc
+    return _run(args, ReadAhead(_scene(args), batch=30), config)
 
 
 def _plane_track(args: argparse.Namespace) -> int:
@@ -179,19 +243,25 @@ def _plane_track(args: argparse.Namespace) -> int:
 
     try:  # made from the flags alone: what it refuses is a bad flag value
         config = PlaneTrackerConfig(
-            hsv_low=args.hsv_low, hsv_high=args.hsv_high, hue_tolerance=args.hue_tolerance
+            hsv_low=args.hsv_low,
+            hsv_high=args.hsv_high,
+            hue_tolerance=args.hue_tolerance,
+            smoothing_lag=args.smooth,
         )
     except InputError as exc:
-        raise UsageError(str(exc)) from exc
+        raise UsageError(str(exc).replace("smoothing_lag", "--smooth")) from exc
     return _run(args, _source(args), config)
 
 
 def _synth(args: argparse.Namespace) -> int:
     from robopercept.progress import progress_bar
-    from robopercept.sources import SyntheticRGBDScene, write_tum_folder
+    from robopercept.sources import write_tum_folder
 
-    scene = SyntheticRGBDScene(n_frames=args.frames, seed=args.seed)
+    scene = _scene(args)
     frames = progress_bar(scene, unit="frame", desc="rendering", disable=args.quiet)
     out = write_tum_folder(args.out_dir, frames)
-    print(f"wrote {len(scene)} frames to {out}/ (camera.json, planes.csv)", file=sys.stdout)
+    if args.json:
+        print(json.dumps({"out_dir": str(out), "frames": len(scene), "motion": args.motion}))
+    else:
+        print(f"wrote {len(scene)} frames to {out}/ (camera.json, planes.csv)")
     return 0

@@ -4,11 +4,17 @@
 frame source and writes, into one folder:
 
 * ``plane.csv``: one row per input frame, flushed as it is written;
-  columns :data:`CSV_COLUMNS`; ``n`` is the unit normal and ``d`` the distance in metres
-  with ``n . x = d`` for points ``x`` of the plane in the depth camera frame;
+  columns :data:`CSV_COLUMNS`; ``status`` is the track's
+  (:class:`~robopercept.tracking.TrackStatus`: ``new``, ``tracking``, ``gated``,
+  ``coasting``, ``lost``), ``measured`` says a plane was fitted in the frame and
+  ``accepted`` that the track used it (a ``gated`` row is measured and not accepted);
+  ``nx, ny, nz, d`` are the measured plane and ``track_*`` the tracked one, with the
+  unit normal ``n`` and the distance ``d`` in metres, ``n . x = d`` for points ``x`` of
+  the plane in the depth camera frame; ``ms`` is the tracker's time on the frame;
 * ``tracking.mp4``: the colour image with the board's inliers, the tracked plane's
   outline and normal, and a status line (optional);
-* ``summary.json``: :func:`~robopercept.pipelines.summarize`'s figures;
+* ``summary.json``: :func:`~robopercept.pipelines.summarize`'s figures
+  (:class:`~robopercept.pipelines.PlaneTrackSummary`), with the count of each status;
 * ``plane.png``: raw, tracked and (when known) true plane parameters over time.
 
 The run stops cleanly on Ctrl-C or when the source fails (a camera unplugged): the
@@ -20,7 +26,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import os
 import time
 import warnings
@@ -33,11 +38,11 @@ import numpy as np
 from robopercept.errors import InputError, RoboperceptError
 from robopercept.geometry import apply, project
 from robopercept.imaging.io import VideoWriter
+from robopercept.pipelines.plane_eval import PlaneTrackSummary, summarize
 from robopercept.pipelines.plane_tracking import (
     PlaneTracker,
     PlaneTrackerConfig,
     PlaneTrackResult,
-    summarize,
 )
 from robopercept.progress import progress_bar
 from robopercept.sources.frames import RGBDFrame
@@ -49,7 +54,9 @@ __all__ = ["CSV_COLUMNS", "PlaneTrackOutputs", "annotate_frame", "run_plane_trac
 CSV_COLUMNS = (
     "frame",
     "timestamp",
-    "detected",
+    "status",
+    "measured",
+    "accepted",
     "nx",
     "ny",
     "nz",
@@ -120,8 +127,7 @@ def annotate_frame(
         img = draw_lines(img, seg, color=(255, 220, 0), width=3)
         arrow = project(apply(T, np.array([center, center - 0.2 * n])), kc)
         img = draw_lines(img, arrow.reshape(1, 4), color=(0, 220, 255), width=3)
-    status = result.status + ("" if result.detected else (" (gated)" if result.gated else ""))
-    text = f"frame {result.index}  {status}  inliers {result.inliers}"
+    text = f"frame {result.index}  {result.status}  inliers {result.inliers}"
     if np.isfinite(d):
         text += f"  n=({n[0]:+.3f}, {n[1]:+.3f}, {n[2]:+.3f})  d={d:.3f} m"
     text += f"  {result.ms['total']:.1f} ms"
@@ -152,7 +158,7 @@ class PlaneTrackOutputs:
 
     def __exit__(self, *exc: object) -> None:
         if not self.closed:
-            self.close({})
+            self.close(None)
 
     def _update_extent(self, result: PlaneTrackResult) -> None:
         pts = result.inlier_points
@@ -174,7 +180,9 @@ class PlaneTrackOutputs:
             [
                 r.index,
                 f"{r.timestamp:.6f}",
-                int(r.detected),
+                str(r.status),
+                int(r.measured),
+                int(r.accepted),
                 *(_fmt(v) for v in r.normal),
                 _fmt(r.d),
                 r.inliers,
@@ -189,7 +197,7 @@ class PlaneTrackOutputs:
         }
         self._rows.append((r, truth))
         if self._video_on:
-            if r.detected:
+            if r.accepted:
                 self._update_extent(r)
             elif not np.isfinite(r.track_d):
                 self._extent = None
@@ -202,22 +210,25 @@ class PlaneTrackOutputs:
         """The per-frame tracking results added so far, in order."""
         return [r for r, _ in self._rows]
 
-    def summary(self, **extra: Any) -> dict[str, Any]:
+    def summary(self, **extra: Any) -> PlaneTrackSummary:
         """The run's figures (with ground truth when every frame has a plane)."""
         results = self.results
         truths = [t for _, t in self._rows]
         has_truth = bool(truths) and all("plane" in t for t in truths)
         return summarize(results, truths if has_truth else None, **extra)
 
-    def close(self, summary: dict[str, Any]) -> None:
-        """Finish the video, write ``summary.json`` and ``plane.png``."""
+    def close(self, summary: PlaneTrackSummary | None) -> None:
+        """Finish the video, write ``summary.json`` (when given) and ``plane.png``."""
         if self.closed:
             return
         self.closed = True
         self._csv_fh.close()
         if self._video is not None:
             self._video.close()
-        (self.out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
+        if summary is not None:
+            (self.out / "summary.json").write_text(
+                json.dumps(summary.to_dict(), indent=2, default=float)
+            )
         if self._rows:
             from robopercept.imaging import write_image
 
@@ -226,7 +237,7 @@ class PlaneTrackOutputs:
     def _plot(self) -> np.ndarray:
         res = self.results
         t = np.array([r.index for r in res], dtype=np.float64)
-        raw = np.array([np.append(r.normal, r.d) if r.detected else [np.nan] * 4 for r in res])
+        raw = np.array([np.append(r.normal, r.d) if r.measured else [np.nan] * 4 for r in res])
         trk = np.array([np.append(r.track_normal, r.track_d) for r in res])
         truth = np.array(
             [np.append(*tr["plane"]) if "plane" in tr else [np.nan] * 4 for _, tr in self._rows]
@@ -251,7 +262,7 @@ def run_plane_tracking(
     video: bool = True,
     fps: float = 30.0,
     progress: bool = True,
-) -> dict[str, Any]:
+) -> PlaneTrackSummary:
     """Track the board through ``frames`` and write the outputs into ``out_dir``.
 
     Parameters
@@ -268,13 +279,15 @@ def run_plane_tracking(
         Frame rate of the video.
     progress : bool
         Show progress on stderr (:func:`~robopercept.progress.progress_bar`: a bar on a
-        terminal, a few lines otherwise).
+        terminal, a few lines otherwise), with the running count of accepted frames.
 
     Returns
     -------
-    dict
-        The summary also written to ``summary.json``; ``"stopped"`` says why a run ended
-        early (``"interrupted"`` for Ctrl-C, or the source's error).
+    PlaneTrackSummary
+        The summary also written to ``summary.json``; ``stopped`` says why a run ended
+        early (``"interrupted"`` for Ctrl-C, or the source's error). Its stage timings
+        are the tracker's own work per frame (:attr:`PlaneTrackResult.ms`); the wall
+        time covers the source and the outputs too.
     """
     if max_frames is not None and max_frames < 1:
         raise InputError(f"max_frames must be >= 1; got {max_frames}")
@@ -286,6 +299,7 @@ def run_plane_tracking(
     start = time.perf_counter()
     outputs = PlaneTrackOutputs(out_dir, video=video, fps=fps)
     bar = progress_bar(total=total, unit="frame", disable=not progress, desc="plane tracking")
+    accepted = 0
     try:
         it = iter(frames)
         count = 0
@@ -298,27 +312,24 @@ def run_plane_tracking(
                 stopped = f"source failed: {exc}"
                 warnings.warn(f"stopping: {stopped}", stacklevel=2)
                 break
-            result = tracker.process(frame)
-            outputs.add(frame, result)
+            for done, result in tracker.push(frame):
+                outputs.add(done, result)
             count += 1
+            accepted += tracker.last_accepted
+            bar.set_postfix_str(f"detected {accepted}/{count}", refresh=False)
             bar.update(1)
-            if count % 10 == 0:
-                bar.set_postfix(detected=sum(r.detected for r in outputs.results[-10:]))
     except KeyboardInterrupt:
         stopped = "interrupted"
     finally:
+        for done, result in tracker.flush():  # the frames the smoother still held
+            outputs.add(done, result)
         bar.close()
         skipped = getattr(frames, "skipped", [])
         n_skipped = len(skipped) if not isinstance(skipped, int) else skipped
         wall = time.perf_counter() - start
-        summary = outputs.summary(skipped=n_skipped, wall_seconds=wall)
-        summary["wall_seconds"] = round(wall, 3)
-        summary["wall_fps_including_source"] = summary.pop("fps", math.nan)
-        ms = summary.get("ms_per_stage_median", {}).get("total")
-        summary["fps"] = 1000.0 / ms if ms else None
-        if stopped:
-            summary["stopped"] = stopped
         names = ["plane.csv", "tracking.mp4", "summary.json", "plane.png"]
-        summary["outputs"] = [n for n in names if video or n != "tracking.mp4"]
+        summary = outputs.summary(skipped=n_skipped, wall_seconds=round(wall, 3)).replace(
+            stopped=stopped, outputs=tuple(n for n in names if video or n != "tracking.mp4")
+        )
         outputs.close(summary)
     return summary

@@ -9,22 +9,25 @@ frame it cannot decode and records it in ``skipped`` as ``(index, reason)``.
 (TUM lists, colour/depth subfolders, image pairs) into the folder layout that
 :class:`TUMFolderSource` reads, with its ``camera.json``."""
 
-from robopercept.sources.frames import RGBDFrame
+from robopercept.sources.frames import ReadAhead, RGBDFrame
 from robopercept.sources.rgbd_import import (
     CAMERA_PRESETS,
     RGBDImportResult,
     camera_preset,
     import_rgbd_folder,
 )
-from robopercept.sources.synthetic import SyntheticRGBDScene
+from robopercept.sources.synthetic import DISTRACTORS, MOTIONS, SyntheticRGBDScene
 from robopercept.sources.tum import TUMFolderSource, read_camera_json, write_tum_folder
 from robopercept.sources.video import IMAGE_EXTENSIONS, VideoSource
 
 __all__ = [
     "CAMERA_PRESETS",
+    "DISTRACTORS",
     "IMAGE_EXTENSIONS",
+    "MOTIONS",
     "RGBDFrame",
     "RGBDImportResult",
+    "ReadAhead",
     "SyntheticRGBDScene",
     "TUMFolderSource",
     "VideoSource",

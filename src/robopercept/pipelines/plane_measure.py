@@ -1,0 +1,355 @@
+r"""Plane measurement: one RGB-D frame to the plane of a coloured board and its covariance.
+
+Per frame (:meth:`PlaneMeasurer.measure`):
+
+1. **Coloured points.** Depth to points, each point's colour through the colour camera
+   (with the z-buffer occlusion test) and the HSV box:
+   :class:`~robopercept.depth.ColorRangeSelector`, the library path
+   ``depth_to_points`` -> ``texture_coordinates`` -> ``sample_colors`` ->
+   ``rgb_to_hsv`` -> ``hsv_range_mask`` fused into three compiled passes.
+2. **RANSAC** on the coloured points (:func:`~robopercept.estimation.ransac` with
+   :class:`~robopercept.estimation.PlaneModel`: 3 points, normal by cross product).
+   Hypotheses are scored by MSAC, :math:`\sum_i \min(r_i^2, \tau^2)`, so that among
+   planes with as many inliers the one nearer them wins (plain counting lets a plane
+   tilt toward the background points that the colour image's parallax paints green at
+   the board's edges). A predicted plane (from the tracker) is scored first, and the
+   search stops early once a hypothesis has as large a share of inliers as the previous
+   frame had. The inlier threshold grows with the squared distance like stereo depth
+   noise, :math:`\tau(z) = \max(\tau_{min}, \tau_1 z^2)` at the points' median depth.
+   Optionally (``hue_tolerance``) hue is an extra feature: a point is an inlier only if
+   its hue is also near the hypothesis' sample hue (:class:`PlaneHueModel`).
+3. **Refit in inverse depth.** The plane is refitted to its inliers by least squares in
+   inverse depth (:func:`~robopercept.estimation.fit_plane_inverse_depth`): stereo
+   depth noise is additive in disparity and lies along the viewing rays, so
+   :math:`1/z = c^\top (x/z, y/z, 1)` with :math:`c = n / d` is the exact
+   maximum-likelihood model, where total least squares tilts an oblique board by a
+   fraction of a degree at 2 m. The inliers are re-selected against the refitted plane
+   and the fit repeated (``refit_iterations`` times).
+4. **Covariance with a floor.** The fit's covariance of the closest point
+   :math:`\pi = d\, n` treats the :math:`N` inliers as independent; errors that are
+   shared by neighbouring pixels (depth quantization, calibration, flying pixels along
+   edges, colour parallax) do not average out that way. The reported covariance is the
+   fit's scaled as if at most :math:`N_{eff}` points were independent,
+   :math:`R = \Sigma_\pi \max(1, N / N_{eff})` (``effective_points``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robopercept.depth import ColorRangeSelector
+from robopercept.errors import DegenerateError, InputError
+from robopercept.estimation import Plane, PlaneModel, fit_plane_inverse_depth, ransac
+from robopercept.estimation.models import Model
+from robopercept.sources.frames import RGBDFrame
+
+__all__ = ["PlaneHueModel", "PlaneMeasurement", "PlaneMeasurer", "PlaneMeasurerConfig"]
+
+
+@dataclass(frozen=True)
+class PlaneMeasurerConfig:
+    """Settings of :class:`PlaneMeasurer` (defaults suit a D435 and a green board).
+
+    Attributes
+    ----------
+    hsv_low, hsv_high : (3,) tuple
+        HSV box on the OpenCV scale (H 0..180, S and V 0..255), bounds inclusive; the hue
+        range wraps around when ``hsv_low[0] > hsv_high[0]``.
+    occlusion_tolerance : float or None
+        Z-buffer tolerance of the colour lookup, metres (None: no occlusion test).
+    threshold_1m : float
+        RANSAC inlier threshold at 1 m, metres; it grows with :math:`z^2`.
+    threshold_min : float
+        Lower bound of the threshold, metres.
+    min_points : int
+        Fewer coloured points (or inliers) than this: no plane.
+    max_iterations : int
+        RANSAC bound on hypotheses per frame.
+    probability : float
+        RANSAC confidence for the adaptive number of iterations.
+    hue_tolerance : float or None
+        Use hue as an extra RANSAC feature (OpenCV hue units); None: geometry only.
+    refit_iterations : int
+        Inverse-depth refits, each on the inliers of the previous plane.
+    effective_points : int
+        :math:`N_{eff}`: the covariance is never smaller than that of this many
+        independent points.
+    rng : int
+        Seed of RANSAC's sampling (frame ``i`` uses ``(rng, i)``).
+    """
+
+    hsv_low: tuple[float, float, float] = (45.0, 35.0, 35.0)
+    hsv_high: tuple[float, float, float] = (65.0, 255.0, 255.0)
+    occlusion_tolerance: float | None = 0.02
+    threshold_1m: float = 0.01
+    threshold_min: float = 0.004
+    min_points: int = 200
+    max_iterations: int = 200
+    probability: float = 0.999
+    hue_tolerance: float | None = None
+    refit_iterations: int = 3
+    effective_points: int = 2000
+    rng: int = 0
+
+    def __post_init__(self) -> None:
+        # the HSV box is checked (and normalized to floats) by the selector's rules
+        sel = ColorRangeSelector(self.hsv_low, self.hsv_high, self.occlusion_tolerance)
+        object.__setattr__(self, "hsv_low", tuple(float(v) for v in sel.hsv_low))
+        object.__setattr__(self, "hsv_high", tuple(float(v) for v in sel.hsv_high))
+        for name in ("threshold_1m", "threshold_min"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"{name} must be > 0; got {getattr(self, name)}")
+        if not 0 < self.probability < 1:
+            raise InputError(f"probability must be in (0, 1); got {self.probability}")
+        if self.min_points < 3 or self.max_iterations < 1:
+            raise InputError("min_points >= 3 and max_iterations >= 1 required")
+        if self.refit_iterations < 0 or self.effective_points < 1:
+            raise InputError("refit_iterations >= 0 and effective_points >= 1 required")
+
+
+@dataclass(frozen=True)
+class PlaneMeasurement:
+    """One frame's plane (see the module docstring).
+
+    Attributes
+    ----------
+    found : bool
+        A plane was fitted on at least ``min_points`` inliers.
+    normal : (3,) ndarray
+        Unit normal with ``normal @ x = d`` and ``d >= 0`` (NaN when not found).
+    d : float
+        Distance from the depth camera, metres (NaN when not found).
+    covariance : (3, 3) ndarray
+        Covariance of the closest point ``d * normal``, with the floor (NaN when not
+        found).
+    inliers : int
+        Inliers of the plane (0 when not found).
+    n_points, n_colored : int
+        Depth pixels with a depth, and those with the board's colour.
+    inlier_points : (K, 3) ndarray
+        The inliers (depth frame), for drawing.
+    ms : dict
+        Milliseconds per stage: ``points``, ``color``, ``ransac`` (with the refit).
+    """
+
+    found: bool
+    normal: np.ndarray
+    d: float
+    covariance: np.ndarray
+    inliers: int
+    n_points: int
+    n_colored: int
+    inlier_points: np.ndarray = field(repr=False)
+    ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def closest_point(self) -> np.ndarray:
+        """:math:`\\pi = d\\, n`, the point of the plane nearest the camera."""
+        return self.d * self.normal
+
+    @property
+    def dominant(self) -> bool:
+        """At least half of the coloured points are the plane's inliers."""
+        return self.found and self.inliers >= 0.5 * self.n_colored
+
+
+class PlaneHueModel(Model[Plane]):
+    """A plane whose inliers must also match the hypothesis' hue.
+
+    Data rows are ``(x, y, z, h)`` with h the OpenCV hue (0..180). The minimal sample is
+    3 points; the hypothesis is the plane through them plus the circular mean hue of the
+    sample, :math:`(n, d, \\bar h)`. A row's residual is its distance to the plane when
+    its hue is within ``hue_tolerance`` of :math:`\\bar h` (on the 180-periodic circle),
+    and infinity otherwise.
+    """
+
+    sample_size = 3
+    dim = 4
+    name = "plane with hue"
+
+    def __init__(self, hue_tolerance: float) -> None:
+        self.tol = float(hue_tolerance)
+        self._plane = PlaneModel()
+
+    def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        params, valid = self._plane.fit_minimal(np.ascontiguousarray(samples[..., :3]))
+        ang = samples[..., 3] * (2 * np.pi / 180.0)
+        hue = np.arctan2(np.sin(ang).mean(1), np.cos(ang).mean(1)) * (180.0 / (2 * np.pi))
+        return np.column_stack([params, np.mod(hue, 180.0)]), valid
+
+    def fit(self, data: np.ndarray) -> np.ndarray:
+        p = self._plane.fit(np.ascontiguousarray(data[:, :3]))
+        ang = data[:, 3] * (2 * np.pi / 180.0)
+        hue = math.atan2(np.sin(ang).mean(), np.cos(ang).mean()) * (180.0 / (2 * np.pi))
+        return np.append(p, hue % 180.0)
+
+    def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
+        r = self._plane.residuals(params[:, :4], np.ascontiguousarray(data[:, :3]))
+        dh = np.abs(data[None, :, 3] - params[:, 4:5]) % 180.0
+        dh = np.minimum(dh, 180.0 - dh)
+        r[dh > self.tol] = np.inf
+        return r
+
+    def check(self, data: np.ndarray) -> None:
+        self._plane.check(np.ascontiguousarray(data[:, :3]))
+
+    def result(self, params: np.ndarray) -> Plane:
+        return self._plane.result(params[:4])
+
+
+def closest_point_form(normal: np.ndarray, offset: float) -> tuple[np.ndarray, float]:
+    """From ``n.x + offset = 0`` to ``(n', d)`` with ``n'.x = d`` and ``d >= 0``."""
+    n = np.asarray(normal, dtype=np.float64)
+    d = -float(offset)
+    if d < 0:
+        n, d = -n, -d
+    return n, d
+
+
+class PlaneMeasurer:
+    """Measure a coloured board's plane in RGB-D frames (see the module docstring).
+
+    Parameters
+    ----------
+    config : PlaneMeasurerConfig, optional
+
+    Examples
+    --------
+    >>> from robopercept.sources import SyntheticRGBDScene
+    >>> scene = SyntheticRGBDScene(n_frames=1, depth_size=(212, 120), color_size=(320, 180))
+    >>> m = PlaneMeasurer().measure(scene.frame(0))
+    >>> m.found, bool(m.inliers > 1000)
+    (True, True)
+    """
+
+    def __init__(self, config: PlaneMeasurerConfig | None = None) -> None:
+        self.config = config or PlaneMeasurerConfig()
+        c = self.config
+        self.selector = ColorRangeSelector(c.hsv_low, c.hsv_high, c.occlusion_tolerance)
+        self._prev_ratio: float | None = None
+
+    def reset(self) -> None:
+        """Forget the previous frame's inlier share (the early-stop target)."""
+        self._prev_ratio = None
+
+    def threshold(self, points: np.ndarray) -> float:
+        """RANSAC inlier threshold :math:`\\max(\\tau_{min}, \\tau_1 z^2)` at the median
+        depth of (a subsample of) ``points``, metres."""
+        c = self.config
+        z = float(np.median(points[:: max(1, points.shape[0] // 4096), 2]))
+        return max(c.threshold_min, c.threshold_1m * z * z)
+
+    def measure(self, frame: RGBDFrame, predicted: np.ndarray | None = None) -> PlaneMeasurement:
+        """The board's plane in ``frame``.
+
+        Parameters
+        ----------
+        frame : RGBDFrame
+        predicted : (3,) ndarray, optional
+            A predicted closest point :math:`\\pi = d\\, n` (from a tracker), scored
+            first by RANSAC.
+
+        Returns
+        -------
+        PlaneMeasurement
+        """
+        if not isinstance(frame, RGBDFrame):
+            raise InputError(f"frame must be an RGBDFrame; got {type(frame).__name__}")
+        c = self.config
+        cp = self.selector(
+            frame.depth,
+            frame.color,
+            frame.depth_intrinsics,
+            frame.color_intrinsics,
+            frame.T_color_depth,
+            frame.depth_scale,
+        )
+        ms = dict(cp.ms)
+        t0 = time.perf_counter()
+        pts, hue = cp.points, cp.hue
+        nan3 = np.full(3, np.nan)
+        none = PlaneMeasurement(
+            False,
+            nan3,
+            math.nan,
+            np.full((3, 3), np.nan),
+            0,
+            cp.n_valid,
+            pts.shape[0],
+            np.zeros((0, 3)),
+            ms,
+        )
+        if pts.shape[0] < c.min_points:
+            self._prev_ratio = None
+            ms["ransac"] = (time.perf_counter() - t0) * 1e3
+            return none
+        thr = self.threshold(pts)
+        initial = None
+        if predicted is not None and np.all(np.isfinite(predicted)):
+            dp = float(np.linalg.norm(predicted))
+            if dp > 0:
+                initial = np.append(predicted / dp, -dp)[None]
+        min_inl = None
+        if self._prev_ratio is not None:
+            min_inl = max(c.min_points, int(self._prev_ratio * pts.shape[0]))
+        rng = np.random.default_rng([c.rng, frame.index])
+        try:
+            model: Model[Plane]
+            if c.hue_tolerance is None:
+                data, model = pts, PlaneModel()
+            else:
+                data, model = np.column_stack([pts, hue]), PlaneHueModel(c.hue_tolerance)
+                if initial is not None:
+                    initial = np.append(initial[0], float(np.median(hue)))[None]
+            res = ransac(
+                data,
+                model,
+                thr,
+                max_iterations=c.max_iterations,
+                probability=c.probability,
+                scoring="msac",
+                min_inliers=min_inl,
+                initial=initial,
+                rng=rng,
+            )
+            inl = res.inliers
+            normal, d = closest_point_form(res.model.normal, res.model.offset)
+            fit = None
+            for _ in range(c.refit_iterations):
+                if int(inl.sum()) < c.min_points:
+                    break
+                fit = fit_plane_inverse_depth(pts, inl)
+                normal, d = fit.normal, fit.d
+                inl = np.abs(pts @ normal - d) < thr
+                if c.hue_tolerance is not None:
+                    inl &= res.inliers  # the hue test of the hypothesis still applies
+        except DegenerateError:
+            self._prev_ratio = None
+            ms["ransac"] = (time.perf_counter() - t0) * 1e3
+            return none
+        n_in = int(inl.sum())
+        if n_in < c.min_points:
+            self._prev_ratio = None
+            ms["ransac"] = (time.perf_counter() - t0) * 1e3
+            return none
+        if fit is None or fit.count != n_in:  # the covariance of the final inliers
+            try:
+                fit = fit_plane_inverse_depth(pts, inl)
+            except DegenerateError:
+                fit = None
+        if fit is None:
+            self._prev_ratio = None
+            ms["ransac"] = (time.perf_counter() - t0) * 1e3
+            return none
+        if c.refit_iterations == 0:  # report RANSAC's plane, with the fit's covariance
+            cov = fit.covariance
+        else:
+            normal, d, cov = fit.normal, fit.d, fit.covariance
+        cov = cov * max(1.0, n_in / c.effective_points)
+        self._prev_ratio = n_in / pts.shape[0]
+        ms["ransac"] = (time.perf_counter() - t0) * 1e3
+        return PlaneMeasurement(True, normal, d, cov, n_in, cp.n_valid, pts.shape[0], pts[inl], ms)
