@@ -151,3 +151,29 @@ def test_missing_recording_and_missing_pyrealsense2(tmp_path, monkeypatch):
         import_pyrealsense2()
     with pytest.raises(InputError, match=r"robopercept\[realsense\]"):
         RealSenseSource(tmp_path / "x.bag")
+
+
+def test_write_realsense_recording_round_trips_calibration(tmp_path):
+    # the synthetic scene's frames through the software device and recorder: the same
+    # depth, colour, intrinsics (float32 in librealsense), extrinsics and depth scale
+    from robopercept.sources import SyntheticRGBDScene
+    from robopercept.sources.realsense import write_realsense_recording
+
+    scene = SyntheticRGBDScene(n_frames=6, depth_size=(64, 48), color_size=(80, 60))
+    frames = list(scene)
+    assert write_realsense_recording(tmp_path / "s.db3", frames) == 6
+    back = list(RealSenseSource(tmp_path / "s.db3", timeout=1.0))
+    assert len(back) >= 4
+    k0 = next(k for k, f in enumerate(frames) if np.array_equal(f.depth, back[0].depth))
+    for j, f in enumerate(back):
+        assert np.array_equal(f.depth, frames[k0 + j].depth)
+        assert np.array_equal(f.color, frames[k0 + j].color)
+    kd, kd2 = frames[0].depth_intrinsics, back[0].depth_intrinsics
+    assert (kd2.width, kd2.height) == (kd.width, kd.height)
+    np.testing.assert_allclose([kd2.fx, kd2.cx, kd2.cy], [kd.fx, kd.cx, kd.cy], rtol=1e-6)
+    # librealsense keeps extrinsics in float32 and its recorder rounds them again:
+    # within 1e-6 (a micrometre, a microradian)
+    np.testing.assert_allclose(back[0].T_color_depth, frames[0].T_color_depth, atol=1e-6)
+    assert back[0].depth_scale == pytest.approx(frames[0].depth_scale)
+    with pytest.raises(InputError, match="no frames"):
+        write_realsense_recording(tmp_path / "e.db3", [])

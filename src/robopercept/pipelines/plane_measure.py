@@ -92,7 +92,7 @@ class PlaneMeasurerConfig:
     probability: float = 0.999
     hue_tolerance: float | None = None
     refit_iterations: int = 3
-    effective_points: int = 2000
+    effective_points: int = 20000
     rng: int = 0
 
     def __post_init__(self) -> None:

@@ -22,7 +22,13 @@ from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.transforms import se3
 from robopercept.sources.frames import RGBDFrame
 
-__all__ = ["RealSenseSource", "SourceError", "import_pyrealsense2"]
+__all__ = [
+    "RealSenseSource",
+    "SoftwareCamera",
+    "SourceError",
+    "import_pyrealsense2",
+    "write_realsense_recording",
+]
 
 _MODELS = {
     "none": "none",
@@ -257,3 +263,132 @@ class RealSenseSource:
                 pipe.stop()
             except RuntimeError:  # pragma: no cover - already stopped
                 pass
+
+
+def _rs_intrinsics(rs: Any, k: CameraIntrinsics) -> Any:
+    intr = rs.intrinsics()
+    intr.width, intr.height, intr.fx, intr.fy = k.width, k.height, k.fx, k.fy
+    intr.ppx, intr.ppy = k.cx, k.cy
+    intr.model = getattr(rs.distortion, k.model)
+    intr.coeffs = [float(c) for c in k.coeffs] if k.coeffs else [0.0] * 5
+    return intr
+
+
+class SoftwareCamera:
+    """A pyrealsense2 *software device* with the depth and colour streams of an
+    :class:`~robopercept.sources.frames.RGBDFrame`'s calibration: frames pushed into it
+    come out of librealsense as a D4xx's would (into :attr:`queue`), and with
+    ``record_to`` its recorder writes them to a RealSense recording (``.db3`` with
+    librealsense 2.59), readable by :class:`RealSenseSource`.
+
+    Parameters
+    ----------
+    frame : RGBDFrame
+        Gives the resolutions, intrinsics, extrinsics (``T_color_depth``) and depth units.
+    record_to : path, optional
+        Record every pushed frame there.
+    queue_size : int
+        Frames librealsense keeps in :attr:`queue` (``rs.frame_queue``).
+    fps : int
+        The streams' nominal rate.
+
+    Notes
+    -----
+    librealsense writes a recording from its own threads: :meth:`close` waits
+    ``settle`` seconds for the last frames before it stops the sensors (the recorder or
+    its syncer may still lose the first or last frameset of a recording).
+    """
+
+    def __init__(
+        self,
+        frame: RGBDFrame,
+        record_to: str | os.PathLike[str] | None = None,
+        queue_size: int = 4,
+        fps: int = 30,
+    ) -> None:
+        rs = import_pyrealsense2()
+        self.rs = rs
+        self.device = rs.software_device()
+        self.sensors: list[tuple[Any, Any, int]] = []
+        for name, typ, uid, k, bpp, fmt in (
+            ("Depth", rs.stream.depth, 0, frame.depth_intrinsics, 2, rs.format.z16),
+            ("Color", rs.stream.color, 1, frame.color_intrinsics, 3, rs.format.rgb8),
+        ):
+            sensor = self.device.add_sensor(name)
+            vs = rs.video_stream()
+            vs.type, vs.index, vs.uid, vs.width, vs.height = typ, 0, uid, k.width, k.height
+            vs.fps, vs.bpp, vs.fmt, vs.intrinsics = fps, bpp, fmt, _rs_intrinsics(rs, k)
+            self.sensors.append((sensor, sensor.add_video_stream(vs), bpp))
+        ex = rs.extrinsics()
+        T = frame.T_color_depth
+        ex.rotation = T[:3, :3].T.reshape(-1).tolist()  # column-major
+        ex.translation = T[:3, 3].tolist()
+        self.sensors[0][1].register_extrinsics_to(self.sensors[1][1], ex)
+        self.sensors[0][0].add_read_only_option(rs.option.depth_units, float(frame.depth_scale))
+        self.recorder = None if record_to is None else rs.recorder(str(record_to), self.device)
+        self.queue = rs.frame_queue(int(queue_size), keep_frames=True)
+        for sensor, profile, _ in self.sensors:
+            sensor.open(profile)
+            sensor.start(self.queue)
+        self.count = 0
+
+    def push(self, frame: RGBDFrame) -> None:
+        """Hand one frame's depth and colour to librealsense (timestamps in ms from
+        ``frame.timestamp``)."""
+        rs = self.rs
+        for (sensor, profile, bpp), pixels in zip(
+            self.sensors, (frame.depth, frame.color), strict=True
+        ):
+            f = rs.software_video_frame()
+            f.pixels, f.bpp, f.stride = pixels, bpp, bpp * pixels.shape[1]
+            f.timestamp, f.domain = 1000.0 * frame.timestamp, rs.timestamp_domain.hardware_clock
+            f.frame_number = self.count
+            f.profile = profile.as_video_stream_profile()
+            sensor.on_video_frame(f)
+        self.count += 1
+
+    def close(self, settle: float = 0.0) -> None:
+        """Stop the sensors (after ``settle`` seconds) and finish the recording."""
+        import time
+
+        time.sleep(settle)
+        for sensor, _, _ in self.sensors:
+            sensor.stop()
+            sensor.close()
+        self.recorder = None
+
+
+def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: float = 0.03) -> int:
+    """Write ``frames`` (RGBDFrames of one calibration) to a RealSense recording through
+    a :class:`SoftwareCamera` and librealsense's recorder.
+
+    Parameters
+    ----------
+    path : path
+        The recording (``.db3`` with librealsense 2.59).
+    frames : iterable of RGBDFrame
+    pace : float
+        Seconds between frames, so that librealsense's recorder keeps up.
+
+    Returns
+    -------
+    int
+        Frames pushed.
+    """
+    import time
+
+    it = iter(frames)
+    try:
+        first = next(it)
+    except StopIteration:
+        raise InputError("no frames to record") from None
+    cam = SoftwareCamera(first, record_to=path, queue_size=64)
+    try:
+        for frame in (first, *it):
+            cam.push(frame)
+            while cam.queue.poll_for_frame():  # nobody reads them here
+                pass
+            time.sleep(pace)
+    finally:
+        cam.close(settle=1.0)
+    return cam.count

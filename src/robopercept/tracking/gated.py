@@ -107,7 +107,7 @@ class GatedTrackConfig:
         smoothing, :func:`lagged_model`); 0: filtering only.
     """
 
-    process_noise: tuple[float, ...] = (5.0, 200.0, 5000.0)
+    process_noise: tuple[float, ...] = (5.0, 500.0, 20000.0)
     switch_probability: float = 0.05
     gate_probability: float = 0.9999
     max_coast: int = 15
