@@ -227,15 +227,12 @@ def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
 
 def _demo(args: argparse.Namespace) -> int:
     from robopercept.pipelines import PlaneTrackerConfig
-    from robopercept.sources import ReadAhead
 
-    # frames are rendered in batches ahead of the tracker, so that the renderer does not
-    # run between the tracker's stages (the stage timings are the tracker's alone)
     try:
         config = PlaneTrackerConfig(smoothing_lag=args.smooth)
     except InputError as exc:
         raise UsageError(str(exc).replace("smoothing_lag", "--smooth")) from exc
-    return _run(args, ReadAhead(_scene(args), batch=30), config)
+    return _run(args, _scene(args), config)
 
 
 def _plane_track(args: argparse.Namespace) -> int:

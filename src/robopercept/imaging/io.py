@@ -740,10 +740,26 @@ class VideoReader:
         self.close()
 
 
+def _lowest_priority(gen: Any) -> None:
+    """Run the ffmpeg process behind an ``imageio_ffmpeg.write_frames`` generator at the
+    lowest CPU priority (nice 19, where the OS has it), so that it encodes on the cores
+    the pipeline leaves idle instead of taking them from it."""
+    proc = getattr(getattr(gen, "gi_frame", None), "f_locals", {}).get("p")
+    pid = getattr(proc, "pid", None)
+    if pid is None or not hasattr(os, "setpriority"):
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, 19)
+    except OSError:  # not permitted here: the encoder keeps its priority
+        pass
+
+
 class VideoWriter:
     """Write RGB uint8 frames to an H.264 MP4 (yuv420p, playable everywhere).
 
-    Every frame must have the size of the first. The file is complete once
+    The encoder (an ffmpeg process) runs at the lowest CPU priority where the OS allows
+    it, so it takes only the cores the pipeline leaves idle. Every frame must have the
+    size of the first. The file is complete once
     :meth:`close` runs (also on leaving a ``with`` block after an error), so frames
     written before an interruption are kept.
 
@@ -793,6 +809,7 @@ class VideoWriter:
                 output_params=["-preset", "veryfast"],
             )
             self._gen.send(None)
+            _lowest_priority(self._gen)
         elif (w, h) != self._size:
             raise InputError(
                 f"frame size {w}x{h} differs from the first frame's {self._size[0]}x{self._size[1]}"

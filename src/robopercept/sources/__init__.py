@@ -9,7 +9,7 @@ frame it cannot decode and records it in ``skipped`` as ``(index, reason)``.
 (TUM lists, colour/depth subfolders, image pairs) into the folder layout that
 :class:`TUMFolderSource` reads, with its ``camera.json``."""
 
-from robopercept.sources.frames import ReadAhead, RGBDFrame
+from robopercept.sources.frames import RGBDFrame
 from robopercept.sources.rgbd_import import (
     CAMERA_PRESETS,
     RGBDImportResult,
@@ -27,7 +27,6 @@ __all__ = [
     "MOTIONS",
     "RGBDFrame",
     "RGBDImportResult",
-    "ReadAhead",
     "SyntheticRGBDScene",
     "TUMFolderSource",
     "VideoSource",
