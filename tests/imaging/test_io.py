@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -343,3 +345,25 @@ def test_reads_real_16bit_pgm_depth_as_opencv():
         depth = read_image(path)
         assert depth.dtype == np.uint16 and depth.max() > 255
         np.testing.assert_array_equal(depth, _cv2_rgb(path))
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
+def test_video_encoder_runs_at_the_lowest_priority(tmp_path):
+    # the ffmpeg process takes only the cores the pipeline leaves idle (issue 24: it
+    # took the tracker's second core and skewed its stage timings)
+    import os
+
+    def ffmpeg_children():
+        pids = []
+        for task in Path(f"/proc/{os.getpid()}/task").iterdir():
+            pids += [int(p) for p in (task / "children").read_text().split()]
+        return [p for p in pids if "ffmpeg" in Path(f"/proc/{p}/comm").read_text()]
+
+    writer = VideoWriter(tmp_path / "v.mp4")
+    writer.write(np.zeros((16, 16, 3), np.uint8))
+    try:
+        children = ffmpeg_children()
+        assert children
+        assert all(os.getpriority(os.PRIO_PROCESS, p) == 19 for p in children)
+    finally:
+        writer.close()

@@ -317,6 +317,10 @@ class PlaneMeasurer:
                 rng=rng,
             )
             inl = res.inliers
+            # the early-stop target of the next frame is RANSAC's own share of inliers:
+            # the refitted plane's (larger) share is out of reach of the hypotheses, and
+            # asking for it would run every frame to max_iterations
+            ransac_ratio = int(inl.sum()) / pts.shape[0]
             normal, d = closest_point_form(res.model.normal, res.model.offset)
             fit = None
             for _ in range(c.refit_iterations):
@@ -350,6 +354,6 @@ class PlaneMeasurer:
         else:
             normal, d, cov = fit.normal, fit.d, fit.covariance
         cov = cov * max(1.0, n_in / c.effective_points)
-        self._prev_ratio = n_in / pts.shape[0]
+        self._prev_ratio = ransac_ratio
         ms["ransac"] = (time.perf_counter() - t0) * 1e3
         return PlaneMeasurement(True, normal, d, cov, n_in, cp.n_valid, pts.shape[0], pts[inl], ms)

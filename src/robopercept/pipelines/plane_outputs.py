@@ -25,6 +25,7 @@ written) and the summary says why it stopped.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import time
@@ -68,6 +69,9 @@ CSV_COLUMNS = (
     "track_d",
     "ms",
 )
+
+
+_NO_POINTS = np.zeros((0, 3))
 
 
 def _fmt(v: float) -> str:
@@ -195,7 +199,6 @@ class PlaneTrackOutputs:
         truth = {
             k: v for k, v in frame.ground_truth.items() if k in ("plane", "valid_board_pixels")
         }
-        self._rows.append((r, truth))
         if self._video_on:
             if r.accepted:
                 self._update_extent(r)
@@ -204,10 +207,14 @@ class PlaneTrackOutputs:
             if self._video is None:
                 self._video = VideoWriter(self.out / "tracking.mp4", fps=self._fps, quality=6)
             self._video.write(annotate_frame(frame, r, self._extent))
+        # kept for the summary and the plot without the inlier points (up to 7 MB a
+        # frame at 1280x720: a long run would hold gigabytes)
+        self._rows.append((dataclasses.replace(r, inlier_points=_NO_POINTS), truth))
 
     @property
     def results(self) -> list[PlaneTrackResult]:
-        """The per-frame tracking results added so far, in order."""
+        """The per-frame tracking results added so far, in order (without their inlier
+        points, which only the video needs)."""
         return [r for r, _ in self._rows]
 
     def summary(self, **extra: Any) -> PlaneTrackSummary:
