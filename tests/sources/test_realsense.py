@@ -159,11 +159,13 @@ def test_write_realsense_recording_round_trips_calibration(tmp_path):
     from robopercept.sources import SyntheticRGBDScene
     from robopercept.sources.realsense import write_realsense_recording
 
-    scene = SyntheticRGBDScene(n_frames=6, depth_size=(64, 48), color_size=(80, 60))
+    scene = SyntheticRGBDScene(n_frames=12, depth_size=(64, 48), color_size=(80, 60))
     frames = list(scene)
-    assert write_realsense_recording(tmp_path / "s.db3", frames) == 6
+    assert write_realsense_recording(tmp_path / "s.db3", frames) == 12
     back = list(RealSenseSource(tmp_path / "s.db3", timeout=1.0))
-    assert len(back) >= 4
+    # librealsense's recorder may lose frames at the ends of a short recording under
+    # load (seen in CI: 3 of 6); what comes back is consecutive and exact
+    assert len(back) >= 6
     k0 = next(k for k, f in enumerate(frames) if np.array_equal(f.depth, back[0].depth))
     for j, f in enumerate(back):
         assert np.array_equal(f.depth, frames[k0 + j].depth)

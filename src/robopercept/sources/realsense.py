@@ -383,6 +383,7 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
     except StopIteration:
         raise InputError("no frames to record") from None
     cam = SoftwareCamera(first, record_to=path, queue_size=64)
+    time.sleep(0.5)  # the recorder starts on its own thread: early frames can be lost
     try:
         for frame in (first, *it):
             cam.push(frame)
