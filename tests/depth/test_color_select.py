@@ -241,34 +241,21 @@ def test_red_wraps_around():
 
 @pytest.fixture(scope="module")
 def bag_frame():
-    """librealsense's unit-test recording: one depth + colour frame, with its cameras."""
-    rs = pytest.importorskip("pyrealsense2")
+    """librealsense's unit-test recording: one depth + colour frame, with its cameras, as
+    RealSenseSource reads it (pyrealsense2's own intrinsics and extrinsics)."""
+    pytest.importorskip("pyrealsense2")
+    from robopercept.sources.realsense import RealSenseSource
+
     path = data_path("rgbd", "realsense_bag", "single_depth_color_640x480.bag")
-
-    def intrinsics(i) -> CameraIntrinsics:
-        model = {"brown_conrady": "brown_conrady"}.get(i.model.name, "none")
-        return CameraIntrinsics(i.width, i.height, i.fx, i.fy, i.ppx, i.ppy, model, tuple(i.coeffs))
-
-    pipe = rs.pipeline()
-    cfg = rs.config()
-    cfg.enable_device_from_file(str(path), repeat_playback=False)
-    profile = pipe.start(cfg)
-    profile.get_device().as_playback().set_real_time(False)
-    try:
-        frames = pipe.wait_for_frames(5000)
-        depth, color = frames.get_depth_frame(), frames.get_color_frame()
-        e = depth.profile.get_extrinsics_to(color.profile)
-        out = (
-            np.asanyarray(depth.get_data()).copy(),
-            np.asanyarray(color.get_data()).copy(),
-            intrinsics(depth.profile.as_video_stream_profile().intrinsics),
-            intrinsics(color.profile.as_video_stream_profile().intrinsics),
-            se3(np.array(e.rotation).reshape(3, 3).T, e.translation),  # column-major
-            profile.get_device().first_depth_sensor().get_depth_scale(),
-        )
-    finally:
-        pipe.stop()
-    return out
+    f = next(iter(RealSenseSource(path, timeout=1.0)))
+    return (
+        f.depth,
+        f.color,
+        f.depth_intrinsics,
+        f.color_intrinsics,
+        f.T_color_depth,
+        f.depth_scale,
+    )
 
 
 @pytest.mark.realdata

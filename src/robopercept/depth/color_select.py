@@ -39,7 +39,7 @@ import numpy.typing as npt
 from numba import njit, prange
 
 from robopercept._checks import check_positive
-from robopercept.depth.rgbd import pixel_rays, project_to_color
+from robopercept.depth.rgbd import check_depth, pixel_rays, project_to_color
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.camera import compiled_params
@@ -399,21 +399,7 @@ def _check_frame(
     for name, k in (("depth_intrinsics", depth_intrinsics), ("color_intrinsics", color_intrinsics)):
         if not isinstance(k, CameraIntrinsics):
             raise InputError(f"{name} must be a CameraIntrinsics; got {type(k).__name__}")
-    d = np.asarray(depth)
-    kd = depth_intrinsics
-    if d.ndim != 2:
-        hint = (
-            ": drop the channel axis with depth[..., 0]" if d.ndim == 3 and d.shape[2] == 1 else ""
-        )
-        raise InputError(f"depth must be a 2-D (H, W) image; got shape {d.shape}{hint}")
-    if d.dtype.kind not in "uif":
-        raise InputError(f"depth must be numeric (uint16 raw units or float); got {d.dtype}")
-    if d.shape != (kd.height, kd.width):
-        raise InputError(
-            f"depth is {d.shape[1]}x{d.shape[0]} but depth_intrinsics describe "
-            f"{kd.width}x{kd.height}: use the depth stream's intrinsics "
-            "(CameraIntrinsics.scaled for another resolution)"
-        )
+    d = check_depth(depth, depth_intrinsics, "depth_intrinsics")
     c = np.asarray(color)
     kc = color_intrinsics
     if c.ndim != 3 or c.shape[2] != 3:

@@ -27,6 +27,7 @@ from robopercept.geometry.transforms import check_transform
 __all__ = [
     "align_color_to_depth",
     "align_depth_to_color",
+    "check_depth",
     "depth_to_points",
     "pixel_rays",
     "project_to_color",
@@ -35,18 +36,25 @@ __all__ = [
 ]
 
 
-def _check_depth(depth: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
+def check_depth(
+    depth: np.ndarray, intrinsics: CameraIntrinsics, name: str = "intrinsics"
+) -> np.ndarray:
+    """``depth`` as an array after checking that it is a numeric (H, W) image of the size
+    ``intrinsics`` (called ``name`` in the message) describe; InputError otherwise."""
     d = np.asarray(depth)
     if d.ndim != 2:
-        raise InputError(f"depth must be a 2-D image; got shape {d.shape}")
-    if d.shape != (intrinsics.height, intrinsics.width):
-        raise InputError(
-            f"depth is {d.shape[1]}x{d.shape[0]} but the intrinsics describe "
-            f"{intrinsics.width}x{intrinsics.height}: use matching intrinsics "
-            "(CameraIntrinsics.scaled for another resolution)"
+        hint = (
+            ": drop the channel axis with depth[..., 0]" if d.ndim == 3 and d.shape[2] == 1 else ""
         )
+        raise InputError(f"depth must be a 2-D (H, W) image; got shape {d.shape}{hint}")
     if d.dtype.kind not in "uif":
         raise InputError(f"depth must be numeric (uint16 raw units or float); got {d.dtype}")
+    if d.shape != (intrinsics.height, intrinsics.width):
+        raise InputError(
+            f"depth is {d.shape[1]}x{d.shape[0]} but {name} describe "
+            f"{intrinsics.width}x{intrinsics.height}: use the depth stream's intrinsics "
+            "(CameraIntrinsics.scaled for another resolution)"
+        )
     return d
 
 
@@ -87,7 +95,7 @@ def depth_to_points(
         float64 points in the depth camera frame, metres. Equal to the vertices of
         ``rs2::pointcloud`` where the depth is valid.
     """
-    d = _check_depth(depth, intrinsics)
+    d = check_depth(depth, intrinsics)
     s = check_positive(depth_scale, "depth_scale")
     z = d.astype(np.float64) * s
     valid = np.isfinite(z) & (z > 0)
@@ -302,7 +310,7 @@ def align_depth_to_color(
     (Hc, Wc) ndarray
         Depth in the input's units and dtype, measured along the colour camera's z.
     """
-    d = _check_depth(depth, depth_intrinsics)
+    d = check_depth(depth, depth_intrinsics, "depth_intrinsics")
     pts = depth_to_points(d, depth_intrinsics, depth_scale, organized=False)
     pc = apply(check_transform(T_color_depth, "T_color_depth"), pts)
     pix = np.rint(project(pc, color_intrinsics))

@@ -259,7 +259,6 @@ class PlaneMeasurer:
         """
         if not isinstance(frame, RGBDFrame):
             raise InputError(f"frame must be an RGBDFrame; got {type(frame).__name__}")
-        c = self.config
         cp = self.selector(
             frame.depth,
             frame.color,
@@ -270,23 +269,31 @@ class PlaneMeasurer:
         )
         ms = dict(cp.ms)
         t0 = time.perf_counter()
-        pts, hue = cp.points, cp.hue
-        nan3 = np.full(3, np.nan)
-        none = PlaneMeasurement(
-            False,
-            nan3,
-            math.nan,
-            np.full((3, 3), np.nan),
-            0,
-            cp.n_valid,
-            pts.shape[0],
-            np.zeros((0, 3)),
-            ms,
-        )
+        pts = cp.points
+        try:
+            plane = self._fit(pts, cp.hue, frame.index, predicted)
+        except DegenerateError:
+            plane = None
+        self._prev_ratio = None if plane is None else plane[4]
+        ms["ransac"] = (time.perf_counter() - t0) * 1e3
+        if plane is None:
+            nan3 = np.full(3, np.nan)
+            return PlaneMeasurement(
+                False, nan3, math.nan, np.full((3, 3), np.nan), 0, cp.n_valid,
+                pts.shape[0], np.zeros((0, 3)), ms,
+            )  # fmt: skip
+        normal, d, cov, inl, _ = plane
+        n_in = int(inl.sum())
+        return PlaneMeasurement(True, normal, d, cov, n_in, cp.n_valid, pts.shape[0], pts[inl], ms)
+
+    def _fit(
+        self, pts: np.ndarray, hue: np.ndarray, index: int, predicted: np.ndarray | None
+    ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, float] | None:
+        # RANSAC, then the inverse-depth refits: (normal, d, floored covariance, inlier
+        # mask, RANSAC's inlier share), or None with fewer than min_points
+        c = self.config
         if pts.shape[0] < c.min_points:
-            self._prev_ratio = None
-            ms["ransac"] = (time.perf_counter() - t0) * 1e3
-            return none
+            return None
         thr = self.threshold(pts)
         initial = None
         if predicted is not None and np.all(np.isfinite(predicted)):
@@ -296,64 +303,44 @@ class PlaneMeasurer:
         min_inl = None
         if self._prev_ratio is not None:
             min_inl = max(c.min_points, int(self._prev_ratio * pts.shape[0]))
-        rng = np.random.default_rng([c.rng, frame.index])
-        try:
-            model: Model[Plane]
-            if c.hue_tolerance is None:
-                data, model = pts, PlaneModel()
-            else:
-                data, model = np.column_stack([pts, hue]), PlaneHueModel(c.hue_tolerance)
-                if initial is not None:
-                    initial = np.append(initial[0], float(np.median(hue)))[None]
-            res = ransac(
-                data,
-                model,
-                thr,
-                max_iterations=c.max_iterations,
-                probability=c.probability,
-                scoring="msac",
-                min_inliers=min_inl,
-                initial=initial,
-                rng=rng,
-            )
-            inl = res.inliers
-            # the early-stop target of the next frame is RANSAC's own share of inliers:
-            # the refitted plane's (larger) share is out of reach of the hypotheses, and
-            # asking for it would run every frame to max_iterations
-            ransac_ratio = int(inl.sum()) / pts.shape[0]
-            normal, d = closest_point_form(res.model.normal, res.model.offset)
-            fit = None
-            for _ in range(c.refit_iterations):
-                if int(inl.sum()) < c.min_points:
-                    break
-                fit = fit_plane_inverse_depth(pts, inl)
-                normal, d = fit.normal, fit.d
-                inl = np.abs(pts @ normal - d) < thr
-                if c.hue_tolerance is not None:
-                    inl &= res.inliers  # the hue test of the hypothesis still applies
-        except DegenerateError:
-            self._prev_ratio = None
-            ms["ransac"] = (time.perf_counter() - t0) * 1e3
-            return none
+        model: Model[Plane]
+        if c.hue_tolerance is None:
+            data, model = pts, PlaneModel()
+        else:
+            data, model = np.column_stack([pts, hue]), PlaneHueModel(c.hue_tolerance)
+            if initial is not None:
+                initial = np.append(initial[0], float(np.median(hue)))[None]
+        res = ransac(
+            data,
+            model,
+            thr,
+            max_iterations=c.max_iterations,
+            probability=c.probability,
+            scoring="msac",
+            min_inliers=min_inl,
+            initial=initial,
+            rng=np.random.default_rng([c.rng, index]),
+        )
+        inl = res.inliers
+        # the early-stop target of the next frame is RANSAC's own share of inliers: the
+        # refitted plane's (larger) share is out of reach of the hypotheses, and asking
+        # for it would run every frame to max_iterations
+        share = int(inl.sum()) / pts.shape[0]
+        normal, d = closest_point_form(res.model.normal, res.model.offset)
+        fit = None
+        for _ in range(c.refit_iterations):
+            if int(inl.sum()) < c.min_points:
+                return None
+            fit = fit_plane_inverse_depth(pts, inl)
+            normal, d = fit.normal, fit.d
+            inl = np.abs(pts @ normal - d) < thr
+            if c.hue_tolerance is not None:
+                inl &= res.inliers  # the hue test of the hypothesis still applies
         n_in = int(inl.sum())
         if n_in < c.min_points:
-            self._prev_ratio = None
-            ms["ransac"] = (time.perf_counter() - t0) * 1e3
-            return none
+            return None
         if fit is None or fit.count != n_in:  # the covariance of the final inliers
-            try:
-                fit = fit_plane_inverse_depth(pts, inl)
-            except DegenerateError:
-                fit = None
-        if fit is None:
-            self._prev_ratio = None
-            ms["ransac"] = (time.perf_counter() - t0) * 1e3
-            return none
-        if c.refit_iterations == 0:  # report RANSAC's plane, with the fit's covariance
-            cov = fit.covariance
-        else:
-            normal, d, cov = fit.normal, fit.d, fit.covariance
-        cov = cov * max(1.0, n_in / c.effective_points)
-        self._prev_ratio = ransac_ratio
-        ms["ransac"] = (time.perf_counter() - t0) * 1e3
-        return PlaneMeasurement(True, normal, d, cov, n_in, cp.n_valid, pts.shape[0], pts[inl], ms)
+            fit = fit_plane_inverse_depth(pts, inl)
+        if c.refit_iterations > 0:  # else RANSAC's plane, with the fit's covariance
+            normal, d = fit.normal, fit.d
+        return normal, d, fit.covariance * max(1.0, n_in / c.effective_points), inl, share

@@ -363,9 +363,6 @@ class GatedTrack:
             return None
         return self._filter.x[: self.dim].copy()
 
-    def _new(self, z: np.ndarray, R: np.ndarray) -> _Filter:
-        return _Filter(self.config, z, R)
-
     def _reacquired(self, z: np.ndarray, R: np.ndarray) -> bool:
         n = self.config.reacquire_frames
         if n is None:
@@ -375,7 +372,7 @@ class GatedTrack:
             cand.update(z, R)
             self._candidate_hits += 1
         else:
-            self._candidate = self._new(z, R)
+            self._candidate = _Filter(self.config, z, R)
             self._candidate_hits = 1
         return self._candidate_hits >= n
 
@@ -423,14 +420,15 @@ class GatedTrack:
                 raise InputError(f"z must have {self.dim} values and R must be given")
             R = np.asarray(R, dtype=np.float64)
             if self._filter is None:
-                self._filter, status, accepted = self._new(z, R), TrackStatus.NEW, True
+                self._filter, status, accepted = _Filter(self.config, z, R), TrackStatus.NEW, True
             else:
                 d2 = self._filter.mahalanobis2(z, R)
                 if d2 <= self._gate:
                     self._filter.update(z, R)
                     status, accepted = TrackStatus.TRACKING, True
                 elif self._overwhelming(support, dominant) or self._reacquired(z, R):
-                    self._filter, status, accepted = self._new(z, R), TrackStatus.NEW, True
+                    self._filter = _Filter(self.config, z, R)
+                    status, accepted = TrackStatus.NEW, True
                 else:
                     status = TrackStatus.GATED
             if status is not TrackStatus.GATED:
