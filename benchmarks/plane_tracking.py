@@ -141,9 +141,17 @@ def _demo_vs_folder(n_frames: int) -> Record:
     with tempfile.TemporaryDirectory() as tmp:
         folder = write_tum_folder(Path(tmp) / "seq", scene)
         _stage_medians(TUMFolderSource(folder), Path(tmp) / "warm")  # JIT, caches
-        demo = _stage_medians(scene, Path(tmp) / "demo")
-        read = _stage_medians(TUMFolderSource(folder), Path(tmp) / "folder")
-    diff = {k: demo[k] / read[k] - 1.0 for k in ("points", "color", "ransac", "total")}
+        # ABBA order, median over the runs: one run's median of a 2 ms stage moves by
+        # up to 20% with what else the two cores do at the time (the encoder's bursts)
+        runs: dict[str, list[dict[str, float]]] = {"demo": [], "folder": []}
+        for i, which in enumerate(("demo", "folder", "folder", "demo", "demo", "folder")):
+            source = scene if which == "demo" else TUMFolderSource(folder)
+            runs[which].append(_stage_medians(source, Path(tmp) / f"{which}{i}"))
+    demo, read = (
+        {k: float(np.median([r[k] for r in runs[w]])) for k in runs[w][0]}
+        for w in ("demo", "folder")
+    )
+    diff = {k: demo[k] / read[k] - 1.0 for k in ("points", "color", "ransac", "kalman", "total")}
     return Record(
         "plane_tracking_sources",
         f"demo vs plane-track from a folder, {n_frames} frames 848x480",
@@ -157,6 +165,7 @@ def _demo_vs_folder(n_frames: int) -> Record:
             "demo_ms": demo,
             "folder_ms": read,
             "stage_difference": diff,
+            "runs": runs,
         },
     )
 

@@ -364,6 +364,9 @@ def test_video_encoder_runs_at_the_lowest_priority(tmp_path):
     try:
         children = ffmpeg_children()
         assert children
-        assert all(os.getpriority(os.PRIO_PROCESS, p) == 19 for p in children)
+        tids = [int(t) for p in children for t in os.listdir(f"/proc/{p}/task")]
+        assert all(os.getpriority(os.PRIO_PROCESS, t) == 19 for t in tids)
+        if hasattr(os, "SCHED_IDLE"):  # every encoder thread, not only the first
+            assert all(os.sched_getscheduler(t) == os.SCHED_IDLE for t in tids)
     finally:
         writer.close()

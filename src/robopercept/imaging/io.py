@@ -742,16 +742,26 @@ class VideoReader:
 
 def _lowest_priority(gen: Any) -> None:
     """Run the ffmpeg process behind an ``imageio_ffmpeg.write_frames`` generator at the
-    lowest CPU priority (nice 19, where the OS has it), so that it encodes on the cores
-    the pipeline leaves idle instead of taking them from it."""
+    lowest CPU priority, so that it encodes on the cores the pipeline leaves idle instead
+    of taking them from it: Linux's ``SCHED_IDLE`` policy where the OS has it (the
+    encoder runs only when a core has nothing else to run; nice 19 alone still takes a
+    share of a busy core, in proportion to the frame rate), else nice 19. Applied to
+    every thread the process has (threads it starts later inherit it)."""
     proc = getattr(getattr(gen, "gi_frame", None), "f_locals", {}).get("p")
     pid = getattr(proc, "pid", None)
     if pid is None or not hasattr(os, "setpriority"):
         return
     try:
-        os.setpriority(os.PRIO_PROCESS, pid, 19)
-    except OSError:  # not permitted here: the encoder keeps its priority
-        pass
+        tids = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
+    except (OSError, ValueError):
+        tids = [pid]
+    for tid in tids:
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, 19)
+            if hasattr(os, "SCHED_IDLE"):
+                os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+        except OSError:  # not permitted here, or the thread ended: it keeps its priority
+            pass
 
 
 class VideoWriter:
