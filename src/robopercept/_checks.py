@@ -365,3 +365,126 @@ def check_extension(path: str | os.PathLike[str], extensions: Iterable[str], wha
         want = "the extension" if len(allowed) == 1 else "one of the extensions"
         raise InputError(f"{p}: {what} needs {want} {', '.join(allowed)}; got {got}")
     return p
+
+
+def check_real(
+    value: Any,
+    name: str,
+    low: float | None = None,
+    high: float | None = None,
+    *,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+) -> float:
+    """:func:`check_range` for a parameter that must be one real number: also refuses
+    ``bool``, ``None``, strings, lists and arrays of more than one value.
+
+    Parameters
+    ----------
+    value : int or float
+    name : str
+        The parameter (or CLI flag) named in the message.
+    low, high, low_inclusive, high_inclusive
+        As in :func:`check_range`.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> check_real(2, "sigma", 0.0)
+    2.0
+    >>> check_real(True, "sigma")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: sigma must be a real number; got bool True: pass a float
+    """
+    scalar = isinstance(value, (int, float, np.integer, np.floating)) or (
+        isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf"
+    )
+    if isinstance(value, (bool, np.bool_)) or not scalar:
+        raise InputError(
+            f"{name} must be a real number; got {type(value).__name__} {plain_repr(value)}: "
+            "pass a float"
+        )
+    return check_range(
+        value, name, low, high, low_inclusive=low_inclusive, high_inclusive=high_inclusive
+    )
+
+
+def check_bool(value: Any, name: str) -> bool:
+    """Return ``value`` as a bool after checking that it is ``True`` or ``False``
+    (a NumPy bool included); ``"yes"``, 1 or None are refused.
+
+    Examples
+    --------
+    >>> check_bool(np.True_, "refine")
+    True
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputError(f"{name} must be True or False; got {plain_repr(value)}")
+    return bool(value)
+
+
+def check_magnitude(
+    value: npt.ArrayLike, name: str, limit: float = 1e150, smallest: float | None = None
+) -> np.ndarray:
+    """Return ``value`` as an array after checking that its finite values stay within
+    ``limit`` in magnitude (and, with ``smallest``, that a non-zero array reaches it).
+
+    Squares and products of values beyond about 1e154 overflow float64 (and of values
+    below 1e-154 underflow to 0; for float32, beyond about 1e19), so variances,
+    distances and covariances computed from such input are inf, NaN or 0. Functions
+    whose arithmetic squares their input refuse it here rather than return NaN or raise
+    a NumPy/SciPy error; each picks ``limit`` from the highest power of its input it
+    computes and its working precision.
+
+    Parameters
+    ----------
+    value : array_like
+    name : str
+        The argument named in the message.
+    limit : float
+        Largest allowed absolute value.
+    smallest : float, optional
+        When given, an array whose largest absolute value is non-zero but below it is
+        refused too (all its squares underflow).
+
+    Returns
+    -------
+    ndarray
+
+    Raises
+    ------
+    InputError
+        ``"<name> has values up to <m>; values beyond <limit> overflow ...: rescale your
+        data"`` (integers are checked too).
+
+    Examples
+    --------
+    >>> check_magnitude([1.0, -1e300], "X")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: X has values up to 1e+300; values beyond 1e+150 ...
+    """
+    arr = _as_array(value, name)
+    if arr.size == 0 or arr.dtype.kind not in "iuf":
+        return arr
+    if arr.dtype.kind in "iu" and smallest is None and np.iinfo(arr.dtype).max <= limit:
+        return arr  # (uint8, uint16 images: nothing to look at)
+    a = np.abs(arr[np.isfinite(arr)] if arr.dtype.kind == "f" else arr.astype(np.float64))
+    m = float(a.max()) if a.size else 0.0
+    if m > limit:
+        raise InputError(
+            f"{name} has values up to {m:.3g}; values beyond {limit:.3g} overflow the "
+            "floating-point arithmetic: rescale your data (e.g. divide by its largest "
+            "absolute value)"
+        )
+    if smallest is not None and 0.0 < m < smallest:
+        raise InputError(
+            f"{name} has values only up to {m:.3g}; values below {smallest:.3g} underflow "
+            "the floating-point arithmetic: rescale your data (e.g. divide by its largest "
+            "absolute value)"
+        )
+    return arr

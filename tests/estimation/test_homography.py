@@ -58,3 +58,29 @@ def test_degenerate_and_bad_input(rng):
         find_homography(line, line)
     with pytest.raises(InputError, match="same shape"):
         find_homography(np.zeros((5, 2)), np.zeros((6, 2)))
+
+
+# issue 25: a threshold no match meets (every hypothesis has 0 inliers) used to overflow
+# the adaptive iteration count (math.ceil(inf)); it now runs max_iterations and reports
+# no inliers
+def test_no_inliers_runs_max_iterations(rng):
+    src, dst, _ = _matches(rng, n=50, noise=0.5)
+    fit = find_homography(src, dst, 1e-300, max_iterations=30)
+    assert fit.n_iterations == 30 and fit.n_inliers == 0 and np.isnan(fit.rms)
+    assert fit.H.shape == (3, 3) and np.isfinite(fit.H).all()
+
+
+# issue 25: scalar parameters are checked at the boundary
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"threshold": float("inf")}, "threshold must be finite"),
+        ({"threshold": None}, "threshold must be a real number"),
+        ({"max_iterations": 2.5}, "max_iterations must be an integer"),
+        ({"refine": "no"}, "refine must be True or False"),
+    ],
+)
+def test_scalar_parameters_are_checked(rng, kwargs, match):
+    src, dst, _ = _matches(rng, n=20)
+    with pytest.raises(InputError, match=match):
+        find_homography(src, dst, **kwargs)

@@ -274,3 +274,42 @@ class TestModelProtocol:
             shifted = res.params[None] + [0, 0, 0, 0.05]
             worse, _ = model.score(shifted, model.prepare(pts), t, scoring == "msac")
             assert worse[0] < res.score
+
+
+# issue 25: while no hypothesis has an inlier (w = 0) the adaptive bound
+# log(1 - p) / log(1 - w^n) is infinite; it used to reach math.ceil(inf) (OverflowError)
+def test_zero_inlier_hypotheses_keep_max_iterations():
+    rng = np.random.default_rng(4)
+    noise = rng.uniform(-1, 1, (100, 2))
+    # least-squares fits of 5 noisy points pass through none of them within 1e-12
+    res = ransac(noise, LineModel(), 1e-12, sample_size=5, max_iterations=40, rng=0)
+    assert res.n_iterations == 40 and res.n_inliers == 0
+    # a line among outliers: the first samples of 5 mix in outliers (0 inliers at 1e-9);
+    # the first all-inlier sample fits the line exactly and the adaptive bound stops
+    x = rng.uniform(-1, 1, 60)
+    data = np.vstack([np.c_[x, 0.5 * x - 0.2], rng.uniform(-1, 1, (40, 2))])
+    res = ransac(data, LineModel(), 1e-9, sample_size=5, batch_size=1, rng=0)
+    assert res.inliers[:60].all() and not res.inliers[60:].any()
+    assert 1 < res.n_iterations < 1000
+    assert required_iterations(0.0, 4, 0.99) == float("inf")
+
+
+# issue 25: scalar parameters are checked for type and size at the boundary
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"max_iterations": 10.5}, "max_iterations must be an integer"),
+        ({"max_iterations": True}, "max_iterations must be an integer"),
+        ({"batch_size": 2**40}, "batch_size must be in"),
+        ({"probability": None}, "probability must be a real number"),
+        ({"probability": [0.9]}, "probability must be a real number"),
+        ({"threshold": float("nan")}, "threshold must be finite"),
+        ({"threshold": True}, "threshold must be a real number"),
+        ({"min_inliers": None, "sample_size": 3.0}, "sample_size must be an integer"),
+        ({"local_optimization": "yes"}, "local_optimization must be True or False"),
+    ],
+)
+def test_scalar_parameters_are_checked(kwargs, match):
+    kw = {"threshold": 0.1, **kwargs}
+    with pytest.raises(InputError, match=match):
+        ransac(np.eye(3), PlaneModel(), **kw)

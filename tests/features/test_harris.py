@@ -219,3 +219,17 @@ def test_good_features_to_track(graf):
         good_features_to_track(g8, 300, 0.01, 8),
         good_features_to_track(g8.astype(np.float32) / 255, 300, 0.01, 8),
     )
+
+
+# issue 25: images near 1e300 overflowed the 4th-order response and surfaced as a
+# misleading "image must be finite" (float64) or NaN (float32 above ~1e10); refused
+# with a typed error. Within the limits the response scales as the 4th power
+@pytest.mark.parametrize(("dtype", "scale"), [(np.float64, 1e300), (np.float32, 1e10)])
+def test_harris_refuses_values_whose_4th_power_overflows(dtype, scale):
+    img = np.random.default_rng(0).random((32, 32))
+    with pytest.raises(InputError, match="rescale your data"):
+        harris_response((img * scale).astype(dtype))
+    small = harris_response(img.astype(dtype))
+    big = harris_response((img * 2.0**20).astype(dtype))  # exact scaling, 2^80 response
+    np.testing.assert_allclose(big, small * 2.0**80, rtol=1e-4, atol=1e-30)
+    assert (harris_response(img * 1e-300) == 0).all()  # (1e-300)^4 underflows to 0

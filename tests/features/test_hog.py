@@ -195,3 +195,16 @@ def test_bad_input():
         hog(np.zeros((32, 32), np.uint8), convention="skimage", signed=True)
     with pytest.raises(InputError, match="channels-first"):
         hog(np.zeros((3, 64, 64), np.uint8))
+
+
+# issue 25: images near 1e300 (and from 1e17 on, in the float32 block norms) gave NaN
+# descriptors silently; refused with a typed error. Within the limit HOG is scale
+# invariant (up to the epsilon of the block norm)
+def test_hog_refuses_values_that_overflow_the_block_norms():
+    img = np.random.default_rng(0).random((128, 64))
+    for call in (hog, hog_windows, cell_histograms):
+        with pytest.raises(InputError, match="rescale your data"):
+            call(img * 1e300)
+    # (at 1e6 and 1e12 the block norm's epsilon is negligible; float32 rounding: 1e-5)
+    np.testing.assert_allclose(hog(img * 1e12), hog(img * 1e6), atol=1e-5)
+    assert np.isfinite(hog(img * 1e-300)).all()

@@ -113,3 +113,43 @@ def test_empty_and_bad_input():
             metric="hamming",
             method="kdtree",
         )
+
+
+# issue 25: an empty query (a blank image's SIFT gives 0 descriptors) with the
+# cross-check raised IndexError; every filter combination on an empty set gives an empty
+# Matches of int64 indices and float64 distances, as cv2.BFMatcher(crossCheck=True).match
+# gives an empty tuple for an empty query (and raises for an empty train set)
+@pytest.mark.parametrize("metric", ["l2", "hamming"])
+@pytest.mark.parametrize(("nq", "nt"), [(0, 5), (5, 0), (0, 0), (0, 1)])
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"cross_check": True}, {"ratio": 0.8}, {"ratio": 0.8, "cross_check": True}, {}],
+)
+def test_empty_sets_give_empty_matches(metric, nq, nt, kwargs):
+    dtype = np.uint8 if metric == "hamming" else np.float32
+    query, train = np.ones((nq, 32), dtype), np.ones((nt, 32), dtype)
+    m = match_descriptors(query, train, metric=metric, **kwargs)
+    assert len(m) == 0
+    assert m.query_idx.dtype == m.train_idx.dtype == np.int64
+    assert m.distance.dtype == np.float64
+    assert m.query_idx.shape == m.train_idx.shape == m.distance.shape == (0,)
+    norm = cv2.NORM_HAMMING if metric == "hamming" else cv2.NORM_L2
+    if nq == 0:  # (OpenCV asserts on an empty train set with a non-empty query)
+        assert len(cv2.BFMatcher(norm, crossCheck=True).match(query, train)) == 0
+
+
+# issue 25: scalar parameters are checked at the boundary
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"ratio": float("nan")}, "ratio must be finite"),
+        ({"ratio": True}, "ratio must be a real number"),
+        ({"max_distance": [1.0]}, "max_distance must be a real number"),
+        ({"cross_check": 1}, "cross_check must be True or False"),
+        ({"metric": None}, "metric must be one of"),
+    ],
+)
+def test_scalar_parameters_are_checked(kwargs, match):
+    some = np.ones((5, 8), dtype=np.float32)
+    with pytest.raises(InputError, match=match):
+        match_descriptors(some, some, **kwargs)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from robopercept.errors import InputError
+from robopercept.errors import DegenerateError, InputError
 from robopercept.geometry import (
     MODELS,
     CameraIntrinsics,
@@ -27,6 +27,8 @@ from robopercept.geometry.camera import (
     check_distortion,
     compiled_params,
     distort_point,
+    fold_radius,
+    invert_lens,
     lens_model_code,
 )
 
@@ -85,7 +87,22 @@ def test_matches_librealsense(model):
             for p, d in zip(pix, depth, strict=True)
         ]
     )
-    np.testing.assert_allclose(ours, ref, atol=1e-6)
+    if model == "none":
+        np.testing.assert_allclose(ours, ref, atol=1e-6)
+        return
+    # issue 25: librealsense stops after 10 fixed-point iterations, which have not
+    # converged near the corners with these strong coefficients (its points are off by
+    # up to ~0.6 px there); ours goes on to convergence. Where that loop (run here in
+    # float64) has converged to 1e-9 the two agree to 1e-6 m (float32 in librealsense);
+    # elsewhere ours round-trips to 1e-6 px and librealsense's does not
+    xd, yd = (pix[:, 0] - k.cx) / k.fx, (pix[:, 1] - k.cy) / k.fy
+    x10, y10 = undistort(xd, yd, k.coeffs, model, iterations=10)
+    rx, ry = distort(x10, y10, k.coeffs, model)
+    conv = np.maximum(np.abs(rx - xd), np.abs(ry - yd)) < 1e-9
+    assert 0.8 < conv.mean() < 1.0
+    np.testing.assert_allclose(ours[conv], ref[conv], atol=1e-6)
+    np.testing.assert_allclose(project(ours, k), pix, atol=1e-6)
+    assert np.abs(project(ref[~conv], k) - pix[~conv]).max() > 1e-2
 
 
 @pytest.mark.parametrize("model", ["none", "brown_conrady", "inverse_brown_conrady"])
@@ -262,3 +279,109 @@ class TestDistort:
     def test_bad_input(self, call, match):
         with pytest.raises(InputError, match=match):
             call()
+
+
+# issue 25: librealsense's fixed 10 fixed-point iterations diverge near the corners for
+# strong coefficients (to NaN at 2 of these 627 pixels for this fisheye-like lens, and to
+# points up to ~100 px off for the others), silently. Deprojection now iterates to
+# convergence (Newton after the 10 rounds) and round-trips to 1e-6 px over the image
+@pytest.mark.parametrize(
+    "coeffs",
+    [
+        (-0.62, 0.07, 0.0, 0.05, 0.91),
+        (-0.3, 0.1, 0.0, 0.0, 0.0),
+        (0.5, 0.3, 0.0, 0.0, 0.1),
+        (-0.4, 0.2, 0.001, 0.001, 0.0),
+    ],
+)
+@pytest.mark.parametrize("model", ["brown_conrady", "inverse_brown_conrady"])
+def test_deproject_converges_with_strong_coefficients(model, coeffs):
+    k = CameraIntrinsics(1280, 720, 640.5, 641.25, 637.2, 361.9, model, coeffs)
+    u, v = np.meshgrid(np.linspace(0, 1279, 33), np.linspace(0, 719, 19))
+    pix = np.c_[u.ravel(), v.ravel()]
+    depth = np.linspace(0.3, 4.0, len(pix))
+    pts = deproject(pix, depth, k)
+    assert np.isfinite(pts).all()
+    np.testing.assert_allclose(pts[:, 2], depth)
+    np.testing.assert_allclose(project(pts, k), pix, atol=1e-6)
+    # the same rays as the plain invert_lens on normalized coordinates
+    x, y, ok = invert_lens((pix[:, 0] - k.cx) / k.fx, (pix[:, 1] - k.cy) / k.fy, coeffs, model)
+    assert ok.all()
+    np.testing.assert_allclose(pts[:, :2] / depth[:, None], np.c_[x, y], rtol=1e-12)
+
+
+def test_fold_radius_hand_cases():
+    # h(s) = 1 + 3 k1 s + 5 k2 s^2 + 7 k3 s^3: k1 = -0.3 gives s* = 1 / 0.9
+    assert fold_radius((-0.3, 0.0, 0.0, 0.0, 0.0)) == pytest.approx(np.sqrt(1 / 0.9), rel=1e-12)
+    # k2 = -0.2 alone: 1 - s^2 = 0 at s = 1
+    assert fold_radius((0.0, -0.2, 0.0, 0.0, 0.0)) == pytest.approx(1.0, rel=1e-12)
+    assert fold_radius((0.1, 0.01, 0.5, 0.5, 0.001)) == np.inf  # h > 0 for all s > 0
+    assert fold_radius((0.0,) * 5) == np.inf
+    # r f(r^2) is increasing below the fold radius and decreasing just past it
+    c = (-0.4, 0.05, 0.0, 0.0, 0.0)
+    r = fold_radius(c)
+    g = [distort(s, 0.0, c)[0] for s in (0.99 * r, r, 1.01 * r)]
+    assert g[1] > g[0] and g[1] > g[2]
+
+
+# issue 25: pixels beyond the radius where the lens model folds over have no
+# undistorted ray; they raised nothing and came back NaN or as points on the wrong
+# branch (mirrored through the centre, or beyond the fold)
+@pytest.mark.parametrize("model", ["brown_conrady", "inverse_brown_conrady"])
+def test_deproject_refuses_pixels_beyond_the_fold(model):
+    c = (-0.6, 0.0, 0.0, 0.0, 0.0)  # r (1 - 0.6 r^2) peaks at r = 0.745, r_d = 0.497
+    k = CameraIntrinsics(1280, 720, 640.0, 640.0, 640.0, 360.0, model, c)
+    inside = np.array([[640.0 + 0.45 * 640.0, 360.0], [640.0, 360.0 - 0.3 * 640.0]])
+    np.testing.assert_allclose(project(deproject(inside, 1.0, k), k), inside, atol=1e-6)
+    corner = np.array([[640.0, 360.0], [0.0, 0.0]])
+    with pytest.raises(DegenerateError, match=r"1 of 2 pixel\(s\)") as err:
+        deproject(corner, 1.0, k)
+    msg = str(err.value)
+    assert "(-0.6, 0.0, 0.0, 0.0, 0.0)" in msg and "(0.0, 0.0)" in msg
+    assert "folds over" in msg and "0.7454" in msg and "Check that the coefficients" in msg
+    _, _, ok = invert_lens([1.1, 0.3, -0.55], [0.0, 0.2, 0.0], c, model)
+    np.testing.assert_array_equal(ok, [False, True, False])
+
+
+# issue 25: pixels and depths of different lengths raised NumPy's broadcast ValueError;
+# other bad inputs came through as NaN or a TypeError
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: deproject(np.zeros((5, 2)), np.ones(3), camera("none")), "depth of shape"),
+        (lambda: deproject(np.zeros((4, 5, 2)), np.ones(4), camera("none")), "one depth per"),
+        (lambda: deproject(np.zeros((5, 2)), None, camera("none")), "depth must be a number"),
+        (lambda: deproject(np.zeros((5, 2)), "1.0", camera("none")), "depth must be a number"),
+        (lambda: deproject([[np.nan, 1.0]], 1.0, camera("none")), "pixels must be finite"),
+        (lambda: deproject([["a", "b"]], 1.0, camera("none")), "pixels must be numeric"),
+        (lambda: deproject([[1.0, 2.0]], 1.0, "camera"), "CameraIntrinsics"),
+        (lambda: CameraIntrinsics(640, 480, None, 1, 0, 0), "fx must be a real number"),
+        (lambda: CameraIntrinsics(640, 480, True, 1, 0, 0), "fx must be a real number"),
+        (lambda: CameraIntrinsics(640, 480, 1, 1, np.nan, 0), "cx must be finite"),
+        (lambda: CameraIntrinsics(640, 480, 1, [1.0], 0, 0), "fy must be a real number"),
+        (lambda: CameraIntrinsics(640, 2**40, 1, 1, 0, 0), "height must be at most 65536"),
+        (lambda: CameraIntrinsics(640, 480, 1, 1, 0, 0, None), "model must be one of"),
+        (lambda: CameraIntrinsics(640, 480, 1, 1, 0, 0, ["none"]), "model must be one of"),
+        (lambda: CameraIntrinsics(640, 480, 1, 1, 0, 0, "none", None), "coeffs must be 5"),
+        (lambda: CameraIntrinsics(640, 480, 1, 1, 0, 0, "none", "abcde"), "coeffs must be a"),
+        (lambda: undistort(0.1, 0.1, COEFFS, iterations=2.5), "iterations must be an integer"),
+        (lambda: undistort(0.1, 0.1, COEFFS, iterations=10**9), "iterations must be in"),
+        (
+            lambda: undistort_points([[1.0, 2.0]], np.eye(3), iterations=None),
+            "iterations must be an integer",
+        ),
+    ],
+)
+def test_bad_input_issue_25(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_depth_broadcasting_that_is_allowed():
+    k = camera("none")
+    # one depth per pixel, one depth for all, and a column of depths for a row of pixels
+    assert deproject(np.zeros((4, 5, 2)), np.ones((4, 5)), k).shape == (4, 5, 3)
+    assert deproject(np.zeros((4, 5, 2)), 2, k).shape == (4, 5, 3)
+    assert deproject(np.zeros((5, 2)), np.ones((3, 1)), k).shape == (3, 5, 3)
+    # NaN depth (no measurement) gives a NaN point, as depth_to_points relies on
+    assert np.isnan(deproject(np.zeros((2, 2)), [np.nan, 1.0], k)[0]).all()

@@ -241,3 +241,19 @@ def test_grow_tree_is_what_the_estimator_grows():
         tree_settings("squared_error", ("gini", "entropy"), None, 2, 1, None, 1)
     with pytest.raises(InputError, match="max_depth"):
         tree_settings("gini", ("gini",), 0, 2, 1, None, 1)
+
+
+# issue 25: features near 1e300 (or 1e-300) overflowed (underflowed) gamma='scale' and
+# the kernels: one class predicted for everything, silently. Refused with a typed error
+@pytest.mark.parametrize("scale", [1e300, 1e-300])
+@pytest.mark.parametrize("make", [lambda: SVC(), lambda: SVC(kernel="linear"), LinearSVC])
+def test_svm_refuses_features_whose_squares_overflow(make, scale):
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(40, 3))
+    y = (X[:, 0] > 0).astype(int)
+    with pytest.raises(InputError, match="rescale your data"):
+        make().fit(X * scale, y)
+    model = make().fit(X, y)
+    assert (model.predict(X) == y).mean() > 0.9
+    with pytest.raises(InputError, match="X has values up to"):
+        model.predict(X * 1e300)

@@ -164,3 +164,23 @@ def test_meanshift_bad_input(rng):
         MeanShift(1.0, seeds="grid", min_bin_freq=1000).fit(X)
     with pytest.raises(NotFittedError):
         MeanShift(1.0).predict(X)
+
+
+# issue 25: data near 1e300 (or 1e-300) overflowed (underflowed) the squared distances:
+# NaN inertia, or every point in one cluster. It is refused with a typed error naming
+# the fix; data within 1e150 of scale gives the answer of the rescaled data
+@pytest.mark.parametrize("scale", [1e300, 1e160, 1e-300, 1e-160])
+def test_kmeans_refuses_data_whose_squares_overflow(scale):
+    X = np.random.default_rng(0).normal(size=(40, 3))
+    with pytest.raises(InputError, match="rescale your data"):
+        KMeans(2, random_state=0).fit(X * scale)
+    km = KMeans(2, random_state=0).fit(X)
+    with pytest.raises(InputError, match="X has values up to"):
+        km.predict(X * 1e300)
+
+
+def test_kmeans_at_1e140_is_the_rescaled_answer():
+    X = np.random.default_rng(0).normal(size=(40, 3))
+    a, b = KMeans(2, random_state=0).fit(X), KMeans(2, random_state=0).fit(X * 1e140)
+    np.testing.assert_array_equal(a.labels_, b.labels_)
+    np.testing.assert_allclose(b.cluster_centers_, a.cluster_centers_ * 1e140, rtol=1e-9)

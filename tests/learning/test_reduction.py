@@ -115,3 +115,18 @@ def test_lda_bad_input(iris):
         LDA(n_components=3).fit(X, y)
     with pytest.raises(NotFittedError):
         LDA().predict(X)
+
+
+# issue 25: data near 1e300 raised NumPy's LinAlgError ("Eigenvalues did not
+# converge"), near 1e-300 gave explained_variance_ratio_ [0, 0]; refused with a typed
+# error. At 1e140 the components are those of the rescaled data
+@pytest.mark.parametrize("scale", [1e300, 1e160, 1e-300])
+def test_pca_refuses_data_whose_squares_overflow(scale):
+    X = np.random.default_rng(0).normal(size=(40, 3))
+    with pytest.raises(InputError, match="rescale your data"):
+        PCA(2).fit(X * scale)
+    with pytest.raises(InputError, match="X has values up to"):
+        PCA(2).fit(X).transform(X * 1e300)
+    a, b = PCA(2).fit(X), PCA(2).fit(X * 1e140)
+    np.testing.assert_allclose(b.components_, a.components_, atol=1e-9)
+    np.testing.assert_allclose(b.explained_variance_ratio_, a.explained_variance_ratio_)

@@ -165,3 +165,29 @@ def test_ekf_matches_filterpy_range_bearing():
 def test_bad_input(call, exc, match):
     with pytest.raises(exc, match=match):
         call()
+
+
+# issue 25: matrices and measurements near 1e300 overflowed S and the Mahalanobis
+# distance (inf, a silent gate decision); they are refused by name with the fix
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: KalmanFilter(2, 2, P=1e300, H=np.eye(2)), "P has values up to 1e\\+300"),
+        (lambda: KalmanFilter(2, 2, H=np.eye(2), R=np.eye(2) * 1e200), "R has values up to"),
+        (lambda: KalmanFilter(2, 2, H=np.eye(2)).mahalanobis([1e300, 0.0]), "z has values"),
+        (lambda: KalmanFilter(2, 2, H=np.eye(2)).update([1e300, 0.0]), "z has values"),
+        (lambda: KalmanFilter(2, 2, H=np.eye(2)).predict(Q=1e300), "Q has values"),
+    ],
+)
+def test_values_whose_squares_overflow_are_refused(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_tiny_covariances_stay_exact():
+    # 1e-300 covariances: the gain is a ratio of them, so the update is exact
+    kf = KalmanFilter(2, 2, P=1e-300, H=np.eye(2), R=1e-300, Q=1e-300)
+    kf.predict()
+    kf.update([1.0, 1.0])
+    np.testing.assert_allclose(kf.x, [2 / 3, 2 / 3], rtol=1e-12)
+    assert np.isfinite(kf.P).all()

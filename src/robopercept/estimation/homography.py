@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robopercept._checks import check_points
+from robopercept._checks import check_bool, check_points
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation.models import HomographyModel
 from robopercept.estimation.ransac import ransac
@@ -33,7 +33,8 @@ class HomographyFit:
     inliers : (N,) bool ndarray
         Matches whose transfer error is below the threshold.
     rms : float
-        Root-mean-square transfer error of the inliers, in pixels.
+        Root-mean-square transfer error of the inliers, in pixels; NaN when no match is
+        within the threshold (``n_inliers == 0``).
     n_iterations : int
         RANSAC samples drawn.
     """
@@ -91,7 +92,7 @@ def find_homography(
     DegenerateError
         Fewer than 4 matches, all points collinear, or no valid sample.
     InputError
-        Mismatched or non-finite inputs.
+        Mismatched or non-finite inputs, or a parameter of the wrong type or range.
     """
     a = check_points(src, "src", 2)
     b = check_points(dst, "dst", 2)
@@ -102,6 +103,7 @@ def find_homography(
             f"a homography needs at least 4 matches; got {a.shape[0]}: "
             "relax the ratio test or use images that overlap more"
         )
+    refine = check_bool(refine, "refine")
     data = np.concatenate([a, b], axis=1)
     if not np.isfinite(data).all():
         raise InputError("src and dst must be finite")

@@ -22,8 +22,9 @@ The loop:
 
    .. math:: k = \frac{\log(1 - p)}{\log(1 - w^n)}
 
-   and stop once ``k`` samples have been drawn, ``max_iterations`` is reached, or the
-   best hypothesis has ``min_inliers`` inliers;
+   (:math:`k = \infty` while no hypothesis has an inlier, :math:`w = 0`: the bound stays
+   ``max_iterations``) and stop once ``k`` samples have been drawn, ``max_iterations``
+   is reached, or the best hypothesis has ``min_inliers`` inliers;
 6. refit the model by least squares on the inliers of the best hypothesis, and keep the
    refit if it scores at least as well.
 
@@ -41,7 +42,14 @@ from typing import Any, Generic, Literal, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import as_rng, check_choice, check_int, check_points, check_range
+from robopercept._checks import (
+    as_rng,
+    check_bool,
+    check_choice,
+    check_int,
+    check_points,
+    check_real,
+)
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation.models import Model
 
@@ -51,6 +59,7 @@ Scoring = Literal["ransac", "msac"]
 ResultT = TypeVar("ResultT")  # the model's typed result: Line, Plane, a 3x3 ndarray
 
 _MAX_REDRAWS = 100  # consecutive all-degenerate batches before giving up
+_MAX_BATCH = 65536  # hypotheses per batch: bounds the (batch, rows) sample arrays
 
 
 @dataclass(frozen=True)
@@ -185,7 +194,8 @@ def ransac(
     local_optimization : bool
         LO-RANSAC: refine each new best by iterated least squares on its inliers.
     batch_size : int
-        Hypotheses drawn and scored together.
+        Hypotheses drawn and scored together, 1 to 65536 (a bound on the memory of
+        the batch's samples and residual blocks).
     initial : (K, P) array_like, optional
         Hypotheses in the model's parameter form (e.g. a plane predicted by a tracker)
         scored before any random sample; each counts as one iteration, and a good one
@@ -225,11 +235,13 @@ def ransac(
         raise InputError(
             "data must be finite; drop NaN/inf rows first: data[np.isfinite(data).all(1)]"
         )
-    threshold = check_range(threshold, "threshold", 0.0, None, low_inclusive=False)
-    probability = check_range(probability, "probability", 0.0, 1.0, high_inclusive=False)
+    threshold = check_real(threshold, "threshold", 0.0, None, low_inclusive=False)
+    probability = check_real(probability, "probability", 0.0, 1.0, high_inclusive=False)
     check_choice(scoring, "scoring", ("ransac", "msac"))
+    local_optimization = check_bool(local_optimization, "local_optimization")
     max_iterations = check_int(max_iterations, "max_iterations", 1)
     batch_size = check_int(batch_size, "batch_size", 1)
+    check_real(batch_size, "batch_size", 1, _MAX_BATCH)
     n_sample = model.sample_size if sample_size is None else check_int(sample_size, "sample_size")
     if n_sample < model.sample_size:
         raise InputError(
@@ -261,8 +273,10 @@ def ransac(
         k = int(np.argmax(scores))
         best_params, best_score, best_count = init[k], float(scores[k]), int(counts[k])
         drawn = init.shape[0]
-        if best_count > 0:
-            needed = required_iterations(best_count / n, model.sample_size, probability)
+        needed = min(
+            required_iterations(best_count / n, model.sample_size, probability),
+            float(max_iterations),
+        )
         if min_inliers is not None and best_count >= min_inliers:
             needed = 0.0
     while drawn < min(needed, max_iterations):
@@ -293,7 +307,11 @@ def ransac(
             if local_optimization:
                 cand, score, count = _refine(model, cand, x, prepared, threshold, msac, rounds=5)
             best_params, best_score, best_count = cand, score, count
-            needed = required_iterations(best_count / n, model.sample_size, probability)
+            # w = 0 (no inliers yet) gives k = inf: keep max_iterations
+            needed = min(
+                required_iterations(best_count / n, model.sample_size, probability),
+                float(max_iterations),
+            )
         if min_inliers is not None and best_count >= min_inliers:
             break
 

@@ -43,7 +43,7 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_choice, check_int, check_range
+from robopercept._checks import check_choice, check_int, check_magnitude, check_range
 from robopercept.errors import InputError
 from robopercept.features.keypoints import Keypoints
 from robopercept.imaging.color import rgb_to_gray
@@ -73,6 +73,9 @@ def _checked(
 ) -> tuple[np.ndarray, int, float]:
     # the gray image, the block size and the derivative scale (_scale)
     gray = rgb_to_gray(image)  # validates; gray input passes through
+    # the response is of 4th order in the image (det M): refuse values whose 4th power
+    # overflows (float32 on the fast path), as a typed error rather than NaN/inf inside
+    gray = check_magnitude(gray, "image", 1e8 if gray.dtype == np.float32 else 1e60)
     block_size = check_int(block_size, "block_size", 1)
     check_choice(window, "window", ("box", "gaussian"))
     check_choice(border, "border", BORDERS)

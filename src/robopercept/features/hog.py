@@ -52,7 +52,13 @@ from typing import Literal
 import numpy as np
 from numba import njit, prange
 
-from robopercept._checks import check_choice, check_image, check_int, check_positive
+from robopercept._checks import (
+    check_choice,
+    check_image,
+    check_int,
+    check_magnitude,
+    check_positive,
+)
 from robopercept.errors import InputError
 from robopercept.features._atan import atan2_deg
 
@@ -62,6 +68,9 @@ Convention = Literal["opencv", "skimage"]
 Norm = Literal["L2-Hys", "L2", "L1", "L1-sqrt"]
 NORMS = ("L2-Hys", "L2", "L1", "L1-sqrt")
 _NORM_CODE = {n: i for i, n in enumerate(NORMS)}
+
+
+_MAX_VALUE = 1e15  # |image| beyond it overflows the float32 block norms' sums of squares
 
 
 def _pair(value: int | tuple[int, int], name: str) -> tuple[int, int]:
@@ -483,7 +492,8 @@ def hog(
     RGB images) and ``skimage.feature.hog(image, ...)`` (``convention="skimage"``,
     ``block_stride=1``) to float32 rounding.
     """
-    image = check_image(image)
+    # gradient magnitudes and block norms square sums of votes: refuse what overflows
+    image = check_magnitude(check_image(image), "image", _MAX_VALUE)
     p = _Params(
         orientations,
         cell_size,
@@ -551,7 +561,8 @@ def hog_windows(
         If the image is smaller than the window, the window does not hold a whole
         number of block steps, or the stride is not a multiple of the block stride.
     """
-    image = check_image(image)
+    # gradient magnitudes and block norms square sums of votes: refuse what overflows
+    image = check_magnitude(check_image(image), "image", _MAX_VALUE)
     p = _Params(
         orientations,
         cell_size,
@@ -625,7 +636,8 @@ def cell_histograms(
     InputError
         If the image is smaller than one cell.
     """
-    image = check_image(image)
+    # gradient magnitudes and block norms square sums of votes: refuse what overflows
+    image = check_magnitude(check_image(image), "image", _MAX_VALUE)
     cell = _pair(cell_size, "cell_size")
     nbins = check_int(orientations, "orientations", 1)
     h, w = image.shape[:2]

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from robopercept._checks import check_choice, check_int, check_range
+from robopercept._checks import check_bool, check_choice, check_int, check_real
 from robopercept.errors import InputError
 
 __all__ = ["Matches", "knn_match", "match_descriptors"]
@@ -204,7 +204,16 @@ def match_descriptors(
     Returns
     -------
     Matches
-        In query order. Empty (never an exception) when either set is empty.
+        In query order. Empty (never an exception) when either set is empty, with the
+        cross-check or the ratio test too (int64 indices, float64 distances).
+
+    Raises
+    ------
+    InputError
+        Descriptors that are not ``(N, D)`` numeric (uint8 for Hamming) or of different
+        lengths, NaN/inf, ``ratio`` outside (0, 1], a negative ``max_distance``, a
+        ``cross_check`` that is not a bool, or the ratio test with a single train
+        descriptor and a non-empty query.
 
     Examples
     --------
@@ -215,13 +224,16 @@ def match_descriptors(
     ([0, 1], [2, 0], [0.1, 0.1])
     """
     if ratio is not None:
-        ratio = check_range(ratio, "ratio", 0.0, 1.0, low_inclusive=False)
+        ratio = check_real(ratio, "ratio", 0.0, 1.0, low_inclusive=False)
     if max_distance is not None:
-        max_distance = check_range(max_distance, "max_distance", 0.0)
+        max_distance = check_real(max_distance, "max_distance", 0.0)
+    cross_check = check_bool(cross_check, "cross_check")
     k = 2 if ratio is not None else 1
     idx, dist = knn_match(query, train, k, metric=metric, method=method)
     nq = idx.shape[0]
-    if idx.shape[1] == 0:
+    if nq == 0 or idx.shape[1] == 0:
+        # an empty query or train set (a blank image's SIFT): no match, whatever the
+        # filters, as cv2.BFMatcher(crossCheck=True).match gives ()
         z = np.zeros(0, dtype=np.int64)
         return Matches(z, z.copy(), np.zeros(0))
     keep = np.ones(nq, dtype=bool)

@@ -16,8 +16,21 @@ and :math:`r^2 = x^2 + y^2`:
 - ``"inverse_brown_conrady"``: the coefficients describe the *undistortion*: deprojection
   inverts the modified model by iteration, projection applies it.
 
-As in librealsense's ``rs2_project_point_to_pixel`` / ``rs2_deproject_pixel_to_point``,
-the iterative inversions run a fixed 10 iterations.
+Projection is closed-form for every model. Deprojection inverts the lens model (for
+``"brown_conrady"`` and ``"inverse_brown_conrady"``) by iteration: first librealsense's
+fixed 10 fixed-point iterations (``rs2_deproject_pixel_to_point``; the result is
+librealsense's wherever those converged), then, for the pixels whose forward residual
+:math:`\|d(x, y) - (x_d, y_d)\|_\infty` still exceeds :math:`10^{-12} (1 + |x_d| +
+|y_d|)` (strong coefficients at the image corners, where the fixed-point map stops
+contracting and used to diverge to wrong points or NaN), damped Newton steps on the
+forward model with its analytic Jacobian, up to 100. A pixel is accepted only where the
+residual meets the tolerance, the undistorted radius is below :func:`fold_radius`
+(where the radial distortion :math:`r f(r^2)` stops growing: beyond it the model folds
+over, and solutions there are not the lens's) and the Jacobian's determinant is
+positive; any other pixel makes :func:`deproject` raise
+:class:`~robopercept.errors.DegenerateError` naming the coefficients, the pixels and the
+fix, never return NaN or a wrong point silently. :func:`undistort` and
+:func:`undistort_points` keep the fixed iteration counts of librealsense and OpenCV.
 
 This module owns the one lens model of the library: :func:`distort_point` (compiled, per
 point, for numba kernels such as the RGB-D ones) is the only implementation of the
@@ -35,8 +48,8 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_choice
-from robopercept.errors import InputError
+from robopercept._checks import check_choice, check_int, check_real, plain_repr
+from robopercept.errors import DegenerateError, InputError
 
 __all__ = [
     "MODELS",
@@ -46,6 +59,8 @@ __all__ = [
     "deproject",
     "distort",
     "distort_point",
+    "fold_radius",
+    "invert_lens",
     "lens_model_code",
     "project",
     "undistort",
@@ -55,6 +70,10 @@ __all__ = [
 Model = Literal["none", "brown_conrady", "modified_brown_conrady", "inverse_brown_conrady"]
 MODELS = ("none", "brown_conrady", "modified_brown_conrady", "inverse_brown_conrady")
 _ITERATIONS = 10
+_NEWTON_ITERATIONS = 100
+_TOLERANCE = 1e-12  # forward residual, normalized units, relative to 1 + |x_d| + |y_d|
+_MAX_SIDE = 65536  # pixels per image side
+_MAX_UNDISTORT_ITERATIONS = 10_000
 
 
 @dataclass(frozen=True)
@@ -84,15 +103,26 @@ class CameraIntrinsics:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise InputError(f"{name} must be a positive integer; got {v!r}")
+            if v > _MAX_SIDE:
+                raise InputError(
+                    f"{name} must be at most {_MAX_SIDE} pixels; got {v}: give the image "
+                    "size in pixels (not in bytes or in pixels squared)"
+                )
+            object.__setattr__(self, name, int(v))
         for name in ("fx", "fy", "cx", "cy"):
-            v = float(getattr(self, name))
-            if not np.isfinite(v) or (name in ("fx", "fy") and v <= 0):
-                raise InputError(f"{name} must be finite (and > 0 for focal lengths); got {v}")
+            v = check_real(getattr(self, name), name)
+            if name in ("fx", "fy") and v <= 0:
+                raise InputError(f"{name} must be > 0 (a focal length in pixels); got {v}")
             object.__setattr__(self, name, v)
         check_choice(self.model, "model", MODELS)
-        c = tuple(float(v) for v in self.coeffs)
-        if len(c) != 5 or not np.isfinite(c).all():
-            raise InputError(f"coeffs must be 5 finite numbers (k1, k2, p1, p2, k3); got {c}")
+        try:
+            c = tuple(check_real(v, "coeffs") for v in self.coeffs)
+        except TypeError:  # not iterable
+            c = ()
+        if len(c) != 5:
+            raise InputError(
+                f"coeffs must be 5 finite numbers (k1, k2, p1, p2, k3); got {self.coeffs!r}"
+            )
         object.__setattr__(self, "coeffs", c)
 
     @property
@@ -329,6 +359,8 @@ def undistort(
     model : {'none', 'brown_conrady', 'inverse_brown_conrady'}
         ``"modified_brown_conrady"`` is forward-only (as in librealsense).
     iterations : int
+        Fixed-point rounds, 0 to 10000 (no convergence test: :func:`invert_lens`
+        iterates to convergence and flags the points that do not converge).
 
     Returns
     -------
@@ -337,7 +369,8 @@ def undistort(
     Raises
     ------
     InputError
-        An unknown model, or ``"modified_brown_conrady"``.
+        An unknown model, ``"modified_brown_conrady"``, or ``iterations`` not an integer
+        in [0, 10000].
 
     Examples
     --------
@@ -352,12 +385,19 @@ def undistort(
             "cannot undistort with model 'modified_brown_conrady' (a forward-only model, as "
             "in librealsense); use 'inverse_brown_conrady' or 'brown_conrady'"
         )
+    iterations = _check_iterations(iterations)
     xo, yo = np.asarray(xd, dtype=np.float64), np.asarray(yd, dtype=np.float64)
     if model == "none":
         bx, by = np.broadcast_arrays(xo, yo)
         return bx.copy(), by.copy()
     return _undistort(xo, yo, tuple(_coeffs(coeffs)), model == "inverse_brown_conrady",
                       iterations)  # fmt: skip
+
+
+def _check_iterations(iterations: int) -> int:
+    n = check_int(iterations, "iterations", 0)
+    check_real(n, "iterations", 0, _MAX_UNDISTORT_ITERATIONS)
+    return n
 
 
 def _coeffs(coeffs: npt.ArrayLike) -> np.ndarray:
@@ -458,6 +498,7 @@ def undistort_points(
     if k.shape != (3, 3) or not np.isfinite(k).all():
         raise InputError(f"K must be a finite 3x3 matrix; got shape {k.shape}")
     d = check_distortion(dist, "dist")
+    iterations = _check_iterations(iterations)
     x0 = (xy[:, 0] - k[0, 2] - k[0, 1] * (xy[:, 1] - k[1, 2]) / k[1, 1]) / k[0, 0]
     y0 = (xy[:, 1] - k[1, 2]) / k[1, 1]
     x, y = _undistort(x0, y0, tuple(d), False, iterations)
@@ -494,13 +535,19 @@ def project(points: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
 def deproject(
     pixels: np.ndarray, depth: np.ndarray | float, intrinsics: CameraIntrinsics
 ) -> np.ndarray:
-    """Camera-frame points at ``depth`` (the Z coordinate) behind pixels ``(u, v)``.
+    r"""Camera-frame points at ``depth`` (the Z coordinate) behind pixels ``(u, v)``.
+
+    The pixel's normalized distorted coordinates :math:`x_d = (u - c_x) / f_x`,
+    :math:`y_d = (v - c_y) / f_y` are undistorted by :func:`invert_lens` (librealsense's
+    10 fixed-point iterations, then damped Newton steps until the forward model
+    reproduces them to :math:`10^{-12}`), and the point is :math:`Z (x, y, 1)`.
 
     Parameters
     ----------
     pixels : (..., 2) array_like
+        Finite pixel coordinates.
     depth : (...) array_like or float
-        Z in metres, broadcast against the pixels.
+        Z in metres, broadcast against the pixels' leading shape (NaN gives NaN points).
     intrinsics : CameraIntrinsics
         Any model but ``"modified_brown_conrady"`` (a forward-only model, as in
         librealsense).
@@ -508,12 +555,56 @@ def deproject(
     Returns
     -------
     (..., 3) float64 ndarray
-        Matches ``pyrealsense2.rs2_deproject_pixel_to_point``.
+        Matches ``pyrealsense2.rs2_deproject_pixel_to_point`` wherever librealsense's 10
+        iterations converge; elsewhere (strong coefficients, image corners) the converged
+        inverse, so that ``project(deproject(p, z, k), k) == p`` to rounding.
+
+    Raises
+    ------
+    InputError
+        Pixels that are not ``(..., 2)`` or not finite, a depth that is not numeric or
+        does not broadcast against the pixels, or the forward-only model.
+    DegenerateError
+        Pixels that no undistorted point maps to under the lens model (it folds over
+        before reaching them): the message names the coefficients, the pixels and the
+        fix.
+
+    Examples
+    --------
+    >>> k = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+    >>> deproject([[345.0, 190.0]], 2.0, k).tolist()
+    [[0.1, -0.2, 2.0]]
     """
-    px = np.asarray(pixels, dtype=np.float64)
+    px = np.asarray(pixels)
     if px.shape[-1:] != (2,):
         raise InputError(f"pixels must have shape (..., 2); got {px.shape}")
+    if px.dtype.kind not in "iuf":
+        raise InputError(f"pixels must be numeric; got dtype {px.dtype}")
+    px = px.astype(np.float64, copy=False)
+    if not np.isfinite(px).all():
+        n_bad = int(np.count_nonzero(~np.isfinite(px).all(axis=-1)))
+        raise InputError(
+            f"pixels must be finite; got {n_bad} with NaN/inf: drop them first, "
+            "pixels[np.isfinite(pixels).all(-1)]"
+        )
+    d = np.asarray(depth)
+    if d.dtype.kind not in "iuf":
+        raise InputError(
+            f"depth must be a number or a numeric array of metres; got {plain_repr(depth)}"
+            if d.ndim == 0
+            else f"depth must be a numeric array of metres; got dtype {d.dtype}"
+        )
+    try:
+        np.broadcast_shapes(d.shape, px.shape[:-1])
+    except ValueError:
+        raise InputError(
+            f"depth of shape {d.shape} does not match pixels of shape {px.shape}: give one "
+            "depth per pixel (shape pixels.shape[:-1]) or a single depth"
+        ) from None
+    d = d.astype(np.float64, copy=False)
     k = intrinsics
+    if not isinstance(k, CameraIntrinsics):
+        raise InputError(f"intrinsics must be a CameraIntrinsics; got {type(k).__name__}")
     if k.model == "modified_brown_conrady":
         raise InputError(
             "cannot deproject with model 'modified_brown_conrady' (a forward-only model, as "
@@ -522,6 +613,195 @@ def deproject(
     x = (px[..., 0] - k.cx) / k.fx
     y = (px[..., 1] - k.cy) / k.fy
     if k.model != "none":
-        x, y = _undistort(x, y, k.coeffs, k.model == "inverse_brown_conrady", _ITERATIONS)
-    d = np.asarray(depth, dtype=np.float64)
+        x, y, ok = invert_lens(x, y, k.coeffs, k.model)
+        if not ok.all():
+            bad = np.flatnonzero(~ok.reshape(-1))
+            first = px.reshape(-1, 2)[bad[:3]]
+            raise DegenerateError(
+                f"{bad.size} of {ok.size} pixel(s) have no undistorted ray under the "
+                f"{k.model!r} lens model with coeffs (k1, k2, p1, p2, k3) = {k.coeffs}, e.g. "
+                f"(u, v) = {plain_repr([tuple(p) for p in first.tolist()])}: the model folds "
+                f"over (stops growing) at normalized radius {fold_radius(k.coeffs):.4g}, "
+                f"about {fold_radius(k.coeffs) * k.fx:.4g} px from the principal point, "
+                "before reaching them. Check that "
+                "the coefficients and the model are this camera's (order k1, k2, p1, p2, "
+                "k3), or deproject only pixels inside the lens model's valid radius"
+            )
     return np.stack(np.broadcast_arrays(d * x, d * y, d * np.ones_like(x)), axis=-1)
+
+
+def invert_lens(
+    xd: npt.ArrayLike, yd: npt.ArrayLike, coeffs: npt.ArrayLike, model: Model = "brown_conrady"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""Invert the lens model to convergence, with a per-point flag.
+
+    Solves :math:`d(x, y) = (x_d, y_d)` for the undistorted normalized point, where
+    :math:`d` is :func:`distort` with ``model`` (for ``"inverse_brown_conrady"`` the
+    forward formula librealsense projects it with). First librealsense's 10 fixed-point
+    iterations (:func:`undistort`), then, where the forward residual
+    :math:`\|d(x, y) - (x_d, y_d)\|_\infty` exceeds :math:`10^{-12}(1 + |x_d| + |y_d|)`,
+    damped Newton steps :math:`(x, y) \leftarrow (x, y) - t J^{-1} (d(x, y) - (x_d, y_d))`
+    with the analytic Jacobian :math:`J` of :math:`d` and :math:`t` halved until the
+    residual drops, up to 100 steps. OpenCV's ``cv2.undistortPointsIter`` likewise
+    iterates to a criterion.
+
+    Parameters
+    ----------
+    xd, yd : array_like
+        Distorted normalized coordinates, broadcast together.
+    coeffs : (5,) sequence of float
+        ``(k1, k2, p1, p2, k3)``.
+    model : {'brown_conrady', 'inverse_brown_conrady', 'none'}
+
+    Returns
+    -------
+    x, y : float64 ndarray
+        The undistorted coordinates (the last iterate where not converged).
+    converged : bool ndarray
+        Where the residual meets the tolerance, the undistorted radius is below
+        :func:`fold_radius` (the solution lies on the branch through the origin, not
+        beyond the radius where the model folds over) and :math:`\det J > 0`.
+
+    Raises
+    ------
+    InputError
+        An unknown model, ``"modified_brown_conrady"``, or ``coeffs`` that are not 5
+        numbers.
+
+    Examples
+    --------
+    >>> c = (-0.3, 0.1, 0.0, 0.0, 0.0)
+    >>> x, y, ok = invert_lens(*distort(0.9, 0.5, c), c)  # 10 fixed-point steps diverge
+    >>> round(float(x), 9), round(float(y), 9), bool(ok)
+    (0.9, 0.5, True)
+    """
+    code = lens_model_code(model)
+    if model == "modified_brown_conrady":
+        raise InputError(
+            "cannot undistort with model 'modified_brown_conrady' (a forward-only model, as "
+            "in librealsense); use 'inverse_brown_conrady' or 'brown_conrady'"
+        )
+    c = _coeffs(coeffs)
+    bx, by = np.broadcast_arrays(np.asarray(xd, dtype=np.float64), np.asarray(yd, dtype=np.float64))
+    shape = bx.shape
+    xo, yo = bx.reshape(-1), by.reshape(-1)
+    if code == 0:
+        return bx.copy(), by.copy(), np.ones(shape, dtype=bool)
+    with np.errstate(all="ignore"):  # diverging fixed-point iterates are handled below
+        x, y = _undistort(xo, yo, tuple(c), code == 2, _ITERATIONS)
+        tol = _TOLERANCE * (1.0 + np.abs(xo) + np.abs(yo))
+        rx, ry = _residual(x, y, xo, yo, c, code)
+        todo = np.flatnonzero(~(np.maximum(np.abs(rx), np.abs(ry)) <= tol))
+        if todo.size:
+            x, y = x.copy(), y.copy()
+            # from the fixed-point iterate where it is finite and closer, else from x_d
+            sx, sy = x[todo], y[todo]
+            start = ~np.isfinite(sx + sy)
+            start |= ~(np.hypot(rx[todo], ry[todo]) < np.hypot(*_residual(
+                xo[todo], yo[todo], xo[todo], yo[todo], c, code)))  # fmt: skip
+            sx[start], sy[start] = xo[todo][start], yo[todo][start]
+            x[todo], y[todo] = _newton(sx, sy, xo[todo], yo[todo], tol[todo], c, code)
+        rx, ry = _residual(x, y, xo, yo, c, code)
+        ok = (np.maximum(np.abs(rx), np.abs(ry)) <= tol) & (x * x + y * y < fold_radius(c) ** 2)
+        if c[2] or c[3]:  # (radial only: det J = f h > 0 below the fold radius)
+            jxx, jxy, jyx, jyy = _jacobian(x, y, c, code)
+            ok &= jxx * jyy - jxy * jyx > 0
+    return x.reshape(shape), y.reshape(shape), ok.reshape(shape)
+
+
+def fold_radius(coeffs: npt.ArrayLike) -> float:
+    r"""Undistorted normalized radius where the radial distortion folds over.
+
+    The distorted radius :math:`r f(r^2)`, :math:`f(s) = 1 + k_1 s + k_2 s^2 + k_3 s^3`,
+    grows with :math:`r` while :math:`h(s) = \frac{d}{dr}\big(r f(r^2)\big) =
+    1 + 3 k_1 s + 5 k_2 s^2 + 7 k_3 s^3 > 0`; the fold radius is :math:`\sqrt{s^*}` for
+    the smallest positive root :math:`s^*` of :math:`h`, and ``inf`` when :math:`h` has
+    none (the model is invertible at every radius). Points beyond it are not imaged by
+    a lens with these coefficients.
+
+    Parameters
+    ----------
+    coeffs : (5,) sequence of float
+        ``(k1, k2, p1, p2, k3)``.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> round(fold_radius((-0.3, 0.0, 0.0, 0.0, 0.0)), 6)  # 1 - 0.9 r^2 = 0
+    1.054093
+    >>> fold_radius((0.1, 0.0, 0.0, 0.0, 0.0))
+    inf
+    """
+    k1, k2, _, _, k3 = _coeffs(coeffs)
+    roots: np.ndarray = (
+        np.roots([7 * k3, 5 * k2, 3 * k1, 1.0]) if (k1, k2, k3) != (0, 0, 0) else np.zeros(0)
+    )
+    s = [r.real for r in roots if abs(r.imag) <= 1e-12 * max(1.0, abs(r)) and r.real > 0]
+    return float(np.sqrt(min(s))) if s else float("inf")
+
+
+def _residual(x, y, xo, yo, c, code):  # type: ignore[no-untyped-def]
+    xd, yd = np.empty_like(x), np.empty_like(y)
+    _distort_kernel(x, y, c, code, xd, yd)
+    return xd - xo, yd - yo
+
+
+def _jacobian(x, y, c, code):  # type: ignore[no-untyped-def]
+    """Analytic partial derivatives of :func:`distort_point` (code 1 or 2)."""
+    k1, k2, p1, p2, k3 = c
+    r2 = x * x + y * y
+    f = 1 + k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+    df = k1 + 2 * k2 * r2 + 3 * k3 * r2 * r2  # df / d(r^2)
+    # derivatives of the radially distorted point (x f, y f)
+    qxx, qxy, qyy = f + 2 * x * x * df, 2 * x * y * df, f + 2 * y * y * df
+    if code == 1:
+        return (
+            qxx + 2 * p1 * y + 6 * p2 * x,
+            qxy + 2 * p1 * x + 2 * p2 * y,
+            qxy + 2 * p2 * y + 2 * p1 * x,
+            qyy + 2 * p2 * x + 6 * p1 * y,
+        )
+    xq, yq = x * f, y * f
+    ax, bx = 1 + 2 * p1 * yq + 4 * p2 * xq, 2 * p1 * xq
+    ay, by = 1 + 2 * p2 * xq + 4 * p1 * yq, 2 * p2 * yq
+    return (
+        qxx * ax + qxy * bx + 2 * p2 * x,
+        qxy * ax + qyy * bx + 2 * p2 * y,
+        qxy * ay + qxx * by + 2 * p1 * x,
+        qyy * ay + qxy * by + 2 * p1 * y,
+    )
+
+
+def _newton(x, y, xo, yo, tol, c, code):  # type: ignore[no-untyped-def]
+    """Damped Newton on d(x, y) = (xo, yo); arrays are 1-D, modified in place."""
+    rx, ry = _residual(x, y, xo, yo, c, code)
+    for _ in range(_NEWTON_ITERATIONS):
+        act = np.flatnonzero(~(np.maximum(np.abs(rx), np.abs(ry)) <= tol) & np.isfinite(rx + ry))
+        if not act.size:
+            break
+        ax, ay, arx, ary = x[act], y[act], rx[act], ry[act]
+        jxx, jxy, jyx, jyy = _jacobian(ax, ay, c, code)
+        det = jxx * jyy - jxy * jyx
+        dx = (jyy * arx - jxy * ary) / det
+        dy = (jxx * ary - jyx * arx) / det
+        norm = np.hypot(arx, ary)
+        t = np.ones_like(ax)
+        pending = np.isfinite(dx + dy)
+        for _ in range(40):  # halve the step until the residual drops
+            if not pending.any():
+                break
+            nx, ny = ax - t * dx, ay - t * dy
+            nrx, nry = _residual(nx, ny, xo[act], yo[act], c, code)
+            better = pending & (np.hypot(nrx, nry) < norm)
+            idx = act[better]
+            x[idx], y[idx], rx[idx], ry[idx] = nx[better], ny[better], nrx[better], nry[better]
+            pending &= ~better
+            t[pending] *= 0.5
+        stuck = act[pending]
+        if stuck.size == act.size:
+            break
+        rx[stuck] = np.nan  # no step lowers the residual: give up on these
+    return x, y

@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_choice, check_int
+from robopercept._checks import check_choice, check_int, check_magnitude
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClusterMixin,
@@ -242,7 +242,7 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> KMeans:
         """Cluster ``X`` (N, d); keeps the best of ``n_init`` runs."""
-        X = self._check_X(X, fitting=True)
+        X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
         check_int(self.max_iter, "max_iter", 1)
         if not np.isfinite(self.tol) or self.tol < 0:
             raise InputError(f"tol must be a finite number >= 0; got {self.tol}")
@@ -308,17 +308,17 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
     def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """Index of the nearest centre for every sample."""
         self._check_fitted("cluster_centers_")
-        X = self._check_X(X)
+        X = check_magnitude(self._check_X(X), "X", 1e150)
         return _assign(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X))[0]
 
     def transform(self, X: npt.ArrayLike) -> np.ndarray:
         """Euclidean distance of every sample to every centre, ``(N, k)``."""
         self._check_fitted("cluster_centers_")
-        X = self._check_X(X)
+        X = check_magnitude(self._check_X(X), "X", 1e150)
         return np.sqrt(_sq_dist(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X)))
 
     def score(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> float:
         """Minus the inertia of ``X`` with the fitted centres (higher is better)."""
         self._check_fitted("cluster_centers_")
-        X = self._check_X(X)
+        X = check_magnitude(self._check_X(X), "X", 1e150)
         return -float(_assign(X, self.cluster_centers_, np.einsum("ij,ij->i", X, X))[1].sum())

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_magnitude
 from robopercept.errors import InputError
 from robopercept.learning._base import Estimator, TransformerMixin
 
@@ -61,7 +62,7 @@ class PCA(TransformerMixin, Estimator):
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> PCA:
         """Learn the mean, the scale and the components of ``X`` (N, d)."""
-        X = self._check_X(X, fitting=True)
+        X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
         n, d = X.shape
         if n < 2:
             raise InputError(
@@ -112,7 +113,7 @@ class PCA(TransformerMixin, Estimator):
     def transform(self, X: npt.ArrayLike) -> np.ndarray:
         """Coordinates of ``X`` along the components, ``(N, k)``."""
         self._check_fitted("components_")
-        X = self._check_X(X)
+        X = check_magnitude(self._check_X(X), "X", 1e150)
         return ((X - self.mean_) / self.scale_) @ self.components_.T
 
     def inverse_transform(self, Z: npt.ArrayLike) -> np.ndarray:

@@ -41,7 +41,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_choice, check_int, check_positive
+from robopercept._checks import check_choice, check_int, check_magnitude, check_positive
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClassifierMixin,
@@ -278,7 +278,7 @@ class SVC(ClassifierMixin, Estimator):
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> SVC:
         """Train one machine per pair of classes on ``X`` (N, d), ``y`` (N,)."""
-        X = self._check_X(X, fitting=True)
+        X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
         codes = self._encode_labels(y, X.shape[0])
         C = check_positive(self.C, "C")
         tol = check_positive(self.tol, "tol")
@@ -325,7 +325,7 @@ class SVC(ClassifierMixin, Estimator):
 
     def _ovo(self, X: npt.ArrayLike) -> np.ndarray:
         self._check_fitted("support_vectors_")
-        X = self._check_X(X)
+        X = check_magnitude(self._check_X(X), "X", 1e150)
         Ks = self._kernel(X, self.support_vectors_)
         return np.stack([Ks[:, i] @ coef + b for i, coef, b in self._machines], axis=1)
 
@@ -473,7 +473,7 @@ class LinearSVC(ClassifierMixin, Estimator):
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> LinearSVC:
         """Train on ``X`` (N, d) and labels ``y`` (N,)."""
-        X = self._check_X(X, fitting=True)
+        X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
         codes = self._encode_labels(y, X.shape[0])
         C = check_positive(self.C, "C")
         check_choice(self.loss, "loss", ("hinge", "squared_hinge"))
@@ -503,7 +503,7 @@ class LinearSVC(ClassifierMixin, Estimator):
     def decision_function(self, X: npt.ArrayLike) -> np.ndarray:
         """:math:`w \\cdot x + b`: ``(N,)`` for two classes, else ``(N, c)``."""
         self._check_fitted("coef_")
-        X = self._check_X(X)
+        X = check_magnitude(self._check_X(X), "X", 1e150)
         f = X @ self.coef_.T + self.intercept_
         return f[:, 0] if self.classes_.size == 2 else f
 

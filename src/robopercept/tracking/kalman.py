@@ -32,7 +32,7 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.stats import chi2
 
-from robopercept._checks import check_int, check_positive, check_range
+from robopercept._checks import check_int, check_magnitude, check_positive, check_range
 from robopercept.errors import DegenerateError, InputError
 
 __all__ = [
@@ -55,7 +55,7 @@ def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
         raise InputError(f"{name} must have shape {shape}; got {a.shape}")
     if not np.isfinite(a).all():
         raise InputError(f"{name} must be finite")
-    return a
+    return check_magnitude(a, name, 1e150)  # squares beyond it overflow (S, y^T S^-1 y)
 
 
 def _vec(value: object, name: str, n: int) -> np.ndarray:
@@ -64,7 +64,7 @@ def _vec(value: object, name: str, n: int) -> np.ndarray:
         raise InputError(f"{name} must have {n} elements; got shape {np.shape(value)}")
     if not np.isfinite(a).all():
         raise InputError(f"{name} must be finite; got {value!r}")
-    return a
+    return check_magnitude(a, name, 1e150)
 
 
 @dataclass(frozen=True)
