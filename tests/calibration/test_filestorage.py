@@ -208,17 +208,19 @@ def test_load_calibration_stereo_and_short_distortion(cv2, tmp_path):
     """OpenCV's stereo names (M1, D1, M2, D2, R, T with T a 3 x 1 column) and 4 or
     zero-padded 8 coefficients."""
     R = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    K2 = K.copy()
+    K2[:2] *= 1.01  # a camera matrix keeps its bottom row (0, 0, 1)
     path = tmp_path / "stereo.yml"
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
     fs.write("M1", K)
     fs.write("D1", DIST[:4].reshape(1, 4))
-    fs.write("M2", K * 1.01)
+    fs.write("M2", K2)
     fs.write("D2", np.r_[DIST, 0, 0, 0].reshape(1, 8))
     fs.write("R", R)
     fs.write("T", np.array([[-0.1], [0.0], [0.002]]))
     fs.release()
     cam = load_calibration(path)
-    assert np.array_equal(cam["K1"], K) and np.array_equal(cam["K2"], K * 1.01)
+    assert np.array_equal(cam["K1"], K) and np.array_equal(cam["K2"], K2)
     assert np.array_equal(cam["dist1"], [*DIST[:4], 0.0])
     assert np.array_equal(cam["dist2"], DIST)
     assert cam["T"].shape == (3,) and np.array_equal(cam["R"], R)
@@ -301,3 +303,112 @@ def test_bad_camera_files(tmp_path):
         load_calibration(tmp_path / "missing.yml")
     with pytest.raises(FileFormatError, match=r"is a folder; give a camera file \(\.json"):
         load_calibration(tmp_path)
+
+
+# issue 25: load_calibration with "image_size": [Infinity, 480] raised OverflowError;
+# every numeric field is now checked for type, finiteness and range
+
+
+@pytest.mark.parametrize(
+    "size",
+    [
+        "[Infinity, 480]",
+        "[640, -Infinity]",
+        "[NaN, 480]",
+        "[1e30, 480]",
+        "[640.5, 480]",
+        "[0, 480]",
+        "[-640, 480]",
+        "[true, 480]",
+        '["640", 480]',
+        "[640, 480, 3]",
+        "640",
+        "[[640, 480]]",
+        "[640, 2147483648]",
+    ],
+)
+def test_json_image_size_must_be_two_whole_positive_numbers(tmp_path, size):
+    path = tmp_path / "cam.json"
+    path.write_text(f'{{"K": {json.dumps(K.tolist())}, "image_size": {size}}}')
+    with pytest.raises(FileFormatError, match=r"cam\.json: field 'image_size'.*width, height"):
+        load_calibration(path)
+
+
+def test_json_image_size_as_whole_floats_reads_as_ints(tmp_path):
+    path = tmp_path / "cam.json"
+    path.write_text(f'{{"K": {json.dumps(K.tolist())}, "image_size": [640.0, 480.0]}}')
+    size = load_calibration(path)["image_size"]
+    assert size == (640, 480) and all(type(v) is int for v in size)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "match"),
+    [
+        ("K", '[["500", 0, 320], [0, 500, 240], [0, 0, 1]]', "'K' must hold numbers"),
+        ("K", "[[1" + "0" * 400 + ", 0, 320], [0, 500, 240], [0, 0, 1]]", "'K' must hold numb"),
+        ("K", "[[true, 0, 320], [0, 500, 240], [0, 0, 1]]", "'K' must hold numbers"),
+        ("K", "[[null, 0, 320], [0, 500, 240], [0, 0, 1]]", "'K' must hold numbers"),
+        ("K", "[[NaN, 0, 320], [0, 500, 240], [0, 0, 1]]", "'K' is not finite"),
+        ("K", "[[1e999, 0, 320], [0, 500, 240], [0, 0, 1]]", "'K' is not finite"),
+        ("K", "[[-500, 0, 320], [0, 500, 240], [0, 0, 1]]", "'K' must be a camera matrix"),
+        ("K", "[[500, 0, 320], [0, 0, 240], [0, 0, 1]]", r"'K' .* with fx, fy > 0"),
+        ("K", "[[500, 0, 320], [0, 500, 240], [0, 0, 2]]", r"'K' .*\[0, 0, 1\]\] with"),
+        ("dist", "[0.1, Infinity, 0, 0, 0]", "'dist' is not finite"),
+        ("dist", '[0.1, 0, 0, 0, "x"]', "'dist' must hold numbers"),
+    ],
+)
+def test_json_matrices_must_be_finite_numbers_of_the_right_form(tmp_path, field, value, match):
+    data = {"K": json.dumps(K.tolist()), "dist": json.dumps(DIST.tolist())}
+    data[field] = value
+    path = tmp_path / "cam.json"
+    path.write_text("{" + ", ".join(f'"{k}": {v}' for k, v in data.items()) + "}")
+    with pytest.raises(FileFormatError, match=rf"cam\.json: field {match}"):
+        load_calibration(path)
+
+
+def test_stereo_rotation_must_be_a_rotation(tmp_path):
+    cam = {"K1": K.tolist(), "K2": K.tolist(), "T": [-0.1, 0, 0]}
+    for name, R in (("scaled", 2 * np.eye(3)), ("mirror", np.diag([1.0, 1, -1]))):
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({**cam, "R": R.tolist()}))
+        with pytest.raises(FileFormatError, match=r"field 'R' must be a rotation"):
+            load_calibration(path)
+    path = tmp_path / "ok.json"
+    path.write_text(json.dumps({**cam, "R": np.eye(3).tolist()}))
+    assert np.array_equal(load_calibration(path)["R"], np.eye(3))
+
+
+@pytest.mark.parametrize(
+    ("matrix", "match"),
+    [
+        ("rows: .inf\n   cols: 1\n   dt: d\n   data: [1]", r"rows must be an integer .* \.?inf"),
+        ("rows: 1\n   cols: .nan\n   dt: d\n   data: [1]", "cols must be an integer"),
+        ("rows: 2.5\n   cols: 2\n   dt: d\n   data: [1, 2, 3, 4, 5]", "rows must be an integer"),
+        ("rows: -1\n   cols: -3\n   dt: d\n   data: [1, 2, 3]", "rows must be an integer"),
+        ('rows: 1\n   cols: "3"\n   dt: d\n   data: [1, 2, 3]', "cols must be an integer"),
+        ("rows: 65536\n   cols: 65536\n   dt: d\n   data: [1]", "needs 4294967296 numbers"),
+        ("rows: 1\n   cols: 1\n   dt: 999999d\n   data: [1]", "1 to 512 channels"),
+        ("rows: 1\n   cols: 2\n   dt: u\n   data: [1, 300]", r"300\.0 does not fit .*\(uint8\)"),
+        ("rows: 1\n   cols: 2\n   dt: i\n   data: [1, 2.5]", r"2\.5 does not fit .*\(int32\)"),
+        ("rows: 1\n   cols: 1\n   dt: f\n   data: [1e300]", r"1e\+300 does not fit .*\(float32\)"),
+    ],
+)
+def test_yaml_matrix_sizes_and_values_are_checked(tmp_path, matrix, match):
+    path = tmp_path / "m.yml"
+    path.write_text(f"%YAML:1.0\nm: !!opencv-matrix\n   {matrix}\n")
+    with pytest.raises(FileFormatError, match=match):
+        read_opencv_storage(path)
+
+
+def test_yaml_image_size_fields_are_checked(tmp_path):
+    head = "%YAML:1.0\ncamera_matrix:\n  rows: 3\n  cols: 3\n  data: ["
+    head += ", ".join(str(v) for v in K.ravel()) + "]\n"
+    for w, h in ((".inf", "480"), ("640", ".nan"), ("640.5", "480"), ("-1", "480")):
+        path = tmp_path / "cam.yml"
+        path.write_text(head + f"image_width: {w}\nimage_height: {h}\n")
+        with pytest.raises(FileFormatError, match=r"cam\.yml: field 'image_size'"):
+            load_calibration(path)
+    ros = tmp_path / "ros.yml"  # ROS {rows, cols, data} with a non-integer size
+    ros.write_text("camera_matrix:\n  rows: .inf\n  cols: 3\n  data: [1, 2, 3]\n")
+    with pytest.raises(FileFormatError, match="'K': rows x cols"):
+        load_calibration(ros)

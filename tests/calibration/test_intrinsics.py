@@ -171,6 +171,10 @@ def test_bad_input(rng):
     # the same view three times: K is not determined
     with pytest.raises(DegenerateError, match="tilt the board"):
         calibrate_camera(obj, [img[0]] * 3, (640, 480))
+    # issue 25: an infinite or fractional image size raised OverflowError or was cut
+    for size in ((float("inf"), 480), (640, float("nan")), (640.5, 480), (True, 480), "ab"):
+        with pytest.raises(InputError, match="image_size must be"):
+            calibrate_camera(obj, img, size)
 
 
 def test_rectify_pair_without_distortion_is_the_bouguet_remap():

@@ -92,3 +92,114 @@ def test_detector_bad_input(tmp_path):
     bad.write_bytes(b"not a zip")
     with pytest.raises(FileFormatError, match="HOG model"):
         HogDetector.load(bad)
+
+
+# issue 25: HogDetector.load let BadZipFile, EOFError, KeyError, ValueError, zlib.error,
+# tokenize errors... through on corrupt .npz files; every damaged file is now refused
+# with a FileFormatError naming it
+
+
+def _shipped_model_bytes():
+    from importlib import resources
+
+    return (resources.files("robopercept") / "data" / "face_hog_svm.npz").read_bytes()
+
+
+def test_mutated_model_files_load_or_are_refused_by_name(tmp_path):
+    """300 seeded mutants of the shipped model (bit flips, truncations, zeroed runs,
+    0xFF runs): each loads a detector with the shipped shape or raises FileFormatError
+    naming the file, nothing else (most of them raised BadZipFile before)."""
+    data = _shipped_model_bytes()
+    shipped = default_face_detector()
+    gen = np.random.default_rng(25)
+    path = tmp_path / "mutant.npz"
+    outcomes = {"loaded": 0, "refused": 0}
+    for k in range(300):
+        m = bytearray(data)
+        kind = k % 4
+        at = int(gen.integers(len(m)))
+        if kind == 0:
+            for _ in range(int(gen.integers(1, 5))):
+                i = int(gen.integers(len(m)))
+                m[i] ^= 1 << int(gen.integers(8))
+        elif kind == 1:
+            m = m[:at]
+        else:
+            n = int(gen.integers(1, 33))
+            m[at : at + n] = (b"\x00" if kind == 2 else b"\xff") * len(m[at : at + n])
+        path.write_bytes(bytes(m))
+        try:
+            det = HogDetector.load(path)
+        except FileFormatError as exc:
+            assert "mutant.npz" in str(exc)
+            outcomes["refused"] += 1
+        else:
+            assert det.coef_.shape == shipped.coef_.shape
+            assert np.isfinite(det.coef_).all() and np.isfinite(det.intercept_)
+            outcomes["loaded"] += 1
+    assert outcomes["refused"] > 200  # the mutants do break the file
+
+
+def _save_model(path, coef, meta, compressed=False):
+    import json
+
+    save = np.savez_compressed if compressed else np.savez
+    save(path, coef=coef, meta=np.array(json.dumps(meta)))
+
+
+def test_crafted_model_files_are_refused(tmp_path):
+    det = default_face_detector()
+    meta = {"kind": "robopercept.HogDetector", "window": list(det.window),
+            "cell_size": det.cell_size, "block_size": det.block_size,
+            "orientations": det.orientations, "signed": det.signed, "C": det.C,
+            "intercept": det.intercept_}  # fmt: skip
+    # the same model compressed loads, with the same weights
+    _save_model(tmp_path / "z.npz", det.coef_, meta, compressed=True)
+    again = HogDetector.load(tmp_path / "z.npz")
+    assert np.array_equal(again.coef_, det.coef_) and again.intercept_ == det.intercept_
+    cases = {
+        "pickle": (np.array([object()] * 3, dtype=object), meta, "pickles"),
+        "complex": (det.coef_ + 1j, meta, "finite real numbers"),
+        "nan": (np.r_[np.nan, det.coef_[1:]], meta, "finite real numbers"),
+        "short": (det.coef_[:-1], meta, "weights have shape"),
+        "huge_window": (det.coef_, {**meta, "window": [10**9, 24]}, "window width"),
+        "bool_cell": (det.coef_, {**meta, "cell_size": True}, "cell_size is True"),
+        "float_orient": (det.coef_, {**meta, "orientations": 9.5}, "orientations is 9.5"),
+        "nan_C": (det.coef_, {**meta, "C": float("nan")}, "C is nan"),
+        "inf_b": (det.coef_, {**meta, "intercept": float("inf")}, "intercept is inf"),
+        "kind": (det.coef_, {**meta, "kind": "other"}, "kind is 'other'"),
+        "window": (det.coef_, {**meta, "window": 24}, "window is 24"),
+    }
+    for name, (coef, m, match) in cases.items():
+        if name == "pickle":
+            np.savez(tmp_path / f"{name}.npz", coef=coef, meta=np.array("{}"))
+        else:
+            _save_model(tmp_path / f"{name}.npz", coef, m)
+        with pytest.raises(FileFormatError, match=match) as info:
+            HogDetector.load(tmp_path / f"{name}.npz")
+        assert f"{name}.npz" in str(info.value)
+    np.save(tmp_path / "one.npy", det.coef_)
+    with pytest.raises(FileFormatError, match="one array, not an archive"):
+        HogDetector.load(tmp_path / "one.npy")
+    np.savez(tmp_path / "nometa.npz", coef=det.coef_)
+    with pytest.raises(FileFormatError, match="no 'meta' array"):
+        HogDetector.load(tmp_path / "nometa.npz")
+    # an NPY header that claims 10^12 weights, in a sound zip (right CRC), is refused
+    # before anything is allocated
+    import io
+    import json
+    import zipfile
+
+    from numpy.lib import format as npy
+
+    lie = io.BytesIO()
+    npy.write_array_header_1_0(lie, {"descr": "<f8", "fortran_order": False,
+                                     "shape": (10**12,)})  # fmt: skip
+    lie.write(det.coef_.tobytes())
+    meta_npy = io.BytesIO()
+    np.save(meta_npy, np.array(json.dumps(meta)))
+    with zipfile.ZipFile(tmp_path / "lie.npz", "w") as z:
+        z.writestr("coef.npy", lie.getvalue())
+        z.writestr("meta.npy", meta_npy.getvalue())
+    with pytest.raises(FileFormatError, match=r"header says 1000000000000 x 8 bytes"):
+        HogDetector.load(tmp_path / "lie.npz")

@@ -179,3 +179,129 @@ def test_write_realsense_recording_round_trips_calibration(tmp_path):
     assert back[0].depth_scale == pytest.approx(frames[0].depth_scale)
     with pytest.raises(InputError, match="no frames"):
         write_realsense_recording(tmp_path / "e.db3", [])
+
+
+# issue 25: a .bag whose record length word is 0xFFFFFFFF made librealsense spin forever
+# (holding the GIL, deaf to Ctrl-C); the record structure is now checked first
+
+
+def _bag_length_words(data):
+    """Offsets of every top-level record's header_len and data_len words, walked here
+    independently of the code under test (ROS bag 2.0: magic, then records
+    <header_len:u32><header><data_len:u32><data>)."""
+    import struct
+
+    assert data[:13] == b"#ROSBAG V2.0\n"
+    off, words = 13, []
+    while off < len(data):
+        (hlen,) = struct.unpack_from("<I", data, off)
+        (dlen,) = struct.unpack_from("<I", data, off + 4 + hlen)
+        words += [off, off + 4 + hlen]
+        off += 8 + hlen + dlen
+    assert off == len(data)
+    return words
+
+
+def _play_in_child(path, timeout=60):
+    """Play a recording through RealSenseSource in a child process, so that a hang in
+    librealsense fails the test instead of blocking pytest; returns its last line."""
+    import subprocess
+
+    code = (
+        "import sys\n"
+        "from robopercept.sources.realsense import RealSenseSource\n"
+        "try:\n"
+        "    print(len(list(RealSenseSource(sys.argv[1], timeout=1.0))))\n"
+        "except Exception as e:\n"
+        "    print(type(e).__name__, e)\n"
+    )
+    try:
+        r = subprocess.run(
+            [sys.executable, "-c", code, str(path)],
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"playing {path} hung for {timeout} s")
+    assert r.returncode == 0, r.stderr
+    return r.stdout.strip().splitlines()[-1]
+
+
+@pytest.mark.realdata
+def test_bag_with_broken_length_words_is_refused_naming_the_offset(tmp_path):
+    from robopercept.sources.realsense import check_ros1_bag
+
+    if not BAG.exists():
+        pytest.skip(f"{BAG} absent")
+    data = BAG.read_bytes()
+    assert check_ros1_bag(BAG) == 147  # the real recording passes, record for record
+    words = _bag_length_words(data)
+    # header_len and data_len of the bag header, the chunk and the first index record,
+    # then a sample of the rest
+    picks = words[:6] + words[6::37] + words[-2:]
+    for off in picks:
+        bad = bytearray(data)
+        bad[off : off + 4] = b"\xff\xff\xff\xff"
+        path = tmp_path / f"ff_{off}.bag"
+        path.write_bytes(bytes(bad))
+        with pytest.raises(FileFormatError, match=rf"ff_{off}\.bag: byte offset {off}: "):
+            RealSenseSource(path)  # refused before librealsense sees it
+    for n in (0, 12, 13, 100, 4117, 500_000, len(data) - 1):
+        path = tmp_path / f"cut_{n}.bag"
+        path.write_bytes(data[:n])
+        with pytest.raises(FileFormatError, match=rf"cut_{n}\.bag"):
+            RealSenseSource(path)
+    # a header field whose length runs past its header, and a pointer to no record
+    bad = bytearray(data)
+    bad[13 + 4 : 13 + 8] = (1000).to_bytes(4, "little")
+    (tmp_path / "field.bag").write_bytes(bytes(bad))
+    with pytest.raises(FileFormatError, match="byte offset 17: header field length 1000"):
+        check_ros1_bag(tmp_path / "field.bag")
+    bad = bytearray(data)
+    i = data.index(b"index_pos=", 13) + len(b"index_pos=")
+    bad[i : i + 8] = (4118).to_bytes(8, "little")
+    (tmp_path / "pos.bag").write_bytes(bytes(bad))
+    with pytest.raises(FileFormatError, match="index_pos 4118 does not point at a record"):
+        check_ros1_bag(tmp_path / "pos.bag")
+
+
+@pytest.mark.realdata
+def test_bag_that_hung_librealsense_now_fails_fast_and_a_good_one_plays(tmp_path):
+    # the chunk record's header_len set to 0xFFFFFFFF: librealsense 2.59 spun forever
+    if not BAG.exists():
+        pytest.skip(f"{BAG} absent")
+    data = bytearray(BAG.read_bytes())
+    chunk = _bag_length_words(bytes(data))[2]
+    data[chunk : chunk + 4] = b"\xff\xff\xff\xff"
+    (tmp_path / "hang.bag").write_bytes(bytes(data))
+    line = _play_in_child(tmp_path / "hang.bag")
+    assert line.startswith("FileFormatError") and f"byte offset {chunk}" in line
+    assert _play_in_child(BAG) == "1"
+
+
+def test_corrupt_db3_recording_gives_file_format_error(tmp_path):
+    import sqlite3
+
+    from robopercept.sources.realsense import check_db3_recording
+
+    path = tmp_path / "rec.db3"
+    record(path, n=2)
+    check_db3_recording(path)  # a sound recording passes
+    data = path.read_bytes()
+    for name, bad in (
+        ("cut.db3", data[: len(data) // 2]),
+        ("page.db3", data[:4096] + bytes(4096) + data[8192:]),
+        ("text.db3", b"not a database\n" * 10),
+        ("empty.db3", b""),
+    ):
+        (tmp_path / name).write_bytes(bad)
+        with pytest.raises(FileFormatError, match=name) as info:
+            RealSenseSource(tmp_path / name)
+        assert not isinstance(info.value, sqlite3.Error)
+    con = sqlite3.connect(tmp_path / "other.db3")  # sound SQLite, not a ROS2 bag
+    con.execute("CREATE TABLE t (x)")
+    con.commit()
+    con.close()
+    with pytest.raises(FileFormatError, match="no messages, topics table"):
+        RealSenseSource(tmp_path / "other.db3")

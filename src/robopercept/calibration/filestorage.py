@@ -27,6 +27,7 @@ scalars (``|``, ``>``) are refused with :class:`~robopercept.errors.FileFormatEr
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -127,22 +128,59 @@ def _matrix(node: Any, nd: bool, where: str) -> np.ndarray:
     if m is None:
         raise FileFormatError(f"{where}: unknown matrix element type dt={node['dt']!r}")
     channels = int(m.group(1) or 1)
+    if not 1 <= channels <= _MAX_CHANNELS:
+        raise FileFormatError(
+            f"{where}: a matrix has 1 to {_MAX_CHANNELS} channels (OpenCV's CV_CN_MAX); "
+            f"dt={node['dt']!r} asks for {channels}"
+        )
     try:
         if nd:
-            shape = [int(v) for v in np.atleast_1d(node["sizes"])]
+            sizes = node["sizes"]
+            sizes = sizes.tolist() if isinstance(sizes, np.ndarray) else sizes
+            shape = [_extent(v, "sizes", where) for v in np.atleast_1d(sizes).tolist()]
         else:
-            shape = [int(node["rows"]), int(node["cols"])]
+            shape = [_extent(node["rows"], "rows", where), _extent(node["cols"], "cols", where)]
         data = np.asarray(node["data"] if node["data"] is not None else [], dtype=np.float64)
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise FileFormatError(f"{where}: matrix size or data not numeric ({exc})") from exc
     if channels > 1:
         shape.append(channels)
-    if data.size != int(np.prod(shape)):
+    if data.size != math.prod(shape):
         raise FileFormatError(
-            f"{where}: matrix of shape {tuple(shape)} needs {int(np.prod(shape))} numbers "
+            f"{where}: matrix of shape {tuple(shape)} needs {math.prod(shape)} numbers "
             f"in 'data'; found {data.size}"
         )
-    return data.reshape(shape).astype(_DTYPES[m.group(2)])
+    dtype = np.dtype(_DTYPES[m.group(2)])
+    if dtype.kind in "iu":
+        info = np.iinfo(dtype.name)
+        bad = ~np.isfinite(data) | (data != np.round(data)) | (data < info.min) | (data > info.max)
+    else:
+        bad = np.isfinite(data) & (np.abs(data) > np.finfo(dtype.name).max)
+    if bad.any():
+        raise FileFormatError(
+            f"{where}: matrix data {float(data[bad][0])!r} does not fit its element type "
+            f"dt={node['dt']!r} ({dtype}); write the matrix with a wider dt (such as d)"
+        )
+    return data.reshape(shape).astype(dtype)
+
+
+_MAX_CHANNELS = 512  # OpenCV's CV_CN_MAX
+_MAX_EXTENT = 2**31 - 1  # OpenCV's Mat sizes are int
+
+
+def _extent(value: Any, name: str, where: str) -> int:
+    """A matrix's ``rows``, ``cols`` or ``sizes`` entry: an integer in ``[0, 2^31 - 1]``
+    (OpenCV's ``int`` sizes), as an int; ``640.0`` is read as 640, ``2.5``, ``.inf``,
+    booleans and strings are refused."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        raise FileFormatError(f"{where}: matrix {name} must be an integer; got {value!r}")
+    if not (math.isfinite(value) and value == int(value) and 0 <= value <= _MAX_EXTENT):
+        raise FileFormatError(
+            f"{where}: matrix {name} must be an integer from 0 to {_MAX_EXTENT}; got {value!r}"
+        )
+    return int(value)
 
 
 def _typed(node: Any, where: str) -> Any:

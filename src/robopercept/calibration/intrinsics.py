@@ -38,6 +38,7 @@ an image through the inverse lens model.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,7 +47,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_file
+from robopercept._checks import check_file, plain_repr
 from robopercept.calibration.filestorage import read_opencv_storage
 from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.estimation.models import homography_dlt
@@ -241,13 +242,26 @@ def _check_view(o: np.ndarray, p: np.ndarray, i: int) -> None:
 
 
 def _size(image_size: tuple[int, int]) -> tuple[int, int]:
+    """``(width, height)``, each an integer in ``[1, 2^31 - 1]`` (OpenCV's ``cv::Size``
+    holds ints); integral floats such as ``640.0`` are taken, ``640.5``, infinities,
+    NaN, booleans and strings are refused."""
     try:
-        w, h = (int(v) for v in image_size)
+        w, h = image_size
     except (TypeError, ValueError) as exc:
-        raise InputError(f"image_size must be (width, height); got {image_size!r}") from exc
-    if w < 1 or h < 1:
-        raise InputError(f"image_size must be positive; got {(w, h)}")
-    return w, h
+        raise InputError(
+            f"image_size must be (width, height); got {plain_repr(image_size)}"
+        ) from exc
+    for v in (w, h):
+        if (
+            isinstance(v, (bool, np.bool_))
+            or not isinstance(v, (int, float, np.integer, np.floating))
+            or not (math.isfinite(v) and v == int(v) and 1 <= v <= 2**31 - 1)
+        ):
+            raise InputError(
+                "image_size must be (width, height), two whole numbers of pixels from 1 to "
+                f"2^31 - 1; got {plain_repr(image_size)}"
+            )
+    return int(w), int(h)
 
 
 # --------------------------------------------------------------------------- model
@@ -739,7 +753,12 @@ def load_calibration(path: str | Path) -> dict[str, Any]:
     Raises
     ------
     FileFormatError
-        Unreadable, or missing/ill-shaped fields (named in the message).
+        Unreadable, or missing/ill-shaped fields (named in the message). Every
+        numeric field is checked: matrices hold finite numbers only (no strings,
+        booleans or null), ``K`` is ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` with
+        ``fx, fy > 0``, ``R`` a rotation to 1e-6, ``image_size`` two whole numbers of
+        pixels in ``[1, 2^31 - 1]`` (``640.0`` reads as 640; ``640.5``, ``Infinity``
+        and ``NaN`` are refused).
 
     Examples
     --------
@@ -794,9 +813,16 @@ def load_calibration(path: str | Path) -> dict[str, Any]:
         if key not in data:
             continue
         try:
-            a = np.asarray(data[key], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise FileFormatError(f"{p}: field {key!r} is not numeric") from exc
+            if not _numbers_only(data[key]):  # strings, booleans, None, mappings
+                raise TypeError("not all numbers")
+            a = np.asarray(data[key])
+            if a.dtype.kind not in "iuf":  # ints past 64 bits, ragged nesting
+                raise TypeError(f"elements of type {a.dtype}")
+            a = a.astype(np.float64)
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise FileFormatError(
+                f"{p}: field {key!r} must hold numbers; got {plain_repr(data[key])[:80]}"
+            ) from exc
         if shape is None:
             a = _five_coefficients(a.ravel(), key, p)
         elif a.size == np.prod(shape) and a.shape != shape:
@@ -805,6 +831,14 @@ def load_calibration(path: str | Path) -> dict[str, Any]:
             raise FileFormatError(f"{p}: field {key!r} must have shape {shape}; got {a.shape}")
         if not np.isfinite(a).all():
             raise FileFormatError(f"{p}: field {key!r} is not finite")
+        if key in ("K", "K1", "K2"):
+            _check_camera_matrix(a, key, p)
+        if key == "R" and not (np.allclose(a.T @ a, np.eye(3), atol=1e-6) and np.linalg.det(a) > 0):
+            raise FileFormatError(
+                f"{p}: field 'R' must be a rotation (R^T R = I, det R = +1, to 1e-6); "
+                f"got det {np.linalg.det(a):.6g}: write the stereo rotation as "
+                "stereo_calibrate / cv2.stereoCalibrate return it"
+            )
         out[key] = a
     if "image_size" in data:
         try:
@@ -812,6 +846,35 @@ def load_calibration(path: str | Path) -> dict[str, Any]:
         except InputError as exc:
             raise FileFormatError(f"{p}: field 'image_size': {exc}") from exc
     return out
+
+
+def _numbers_only(value: Any) -> bool:
+    """True when ``value`` is a number, or (nested) lists or arrays of numbers only:
+    no strings, booleans, None or mappings (JSON ``true`` would become 1)."""
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, np.ndarray):
+            if v.dtype.kind not in "iuf":
+                return False
+        elif isinstance(v, (list, tuple)):
+            stack.extend(v)
+        elif isinstance(v, (bool, np.bool_)) or not isinstance(
+            v, (int, float, np.integer, np.floating)
+        ):
+            return False
+    return True
+
+
+def _check_camera_matrix(K: np.ndarray, key: str, p: Path) -> None:
+    """Refuse a camera matrix that is not ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``
+    with ``fx, fy > 0`` (the form every calibration writes)."""
+    if not (K[0, 0] > 0 and K[1, 1] > 0 and K[1, 0] == 0 and np.array_equal(K[2], [0, 0, 1])):
+        raise FileFormatError(
+            f"{p}: field {key!r} must be a camera matrix [[fx, s, cx], [0, fy, cy], "
+            f"[0, 0, 1]] with fx, fy > 0; got {K.tolist()}: take it from a calibration "
+            "(robopercept calibrate, cv2.calibrateCamera)"
+        )
 
 
 def _canonical_fields(data: dict[str, Any], p: Path) -> dict[str, Any]:
@@ -830,9 +893,19 @@ def _canonical_fields(data: dict[str, Any], p: Path) -> dict[str, Any]:
         v = out.get(key)
         if isinstance(v, dict) and "data" in v:
             try:
+                if not _numbers_only(v["data"]):
+                    raise ValueError("data must hold numbers only")
                 a = np.asarray(v["data"], dtype=np.float64)
-                out[key] = a.reshape(int(v["rows"]), int(v["cols"])) if "rows" in v else a
-            except (KeyError, TypeError, ValueError) as exc:
+                if "rows" in v:
+                    rows, cols = v["rows"], v["cols"]
+                    if not all(
+                        isinstance(n, int) and not isinstance(n, bool) and n >= 0
+                        for n in (rows, cols)
+                    ):
+                        raise ValueError(f"rows {rows!r}, cols {cols!r} are not whole numbers")
+                    a = a.reshape(rows, cols)
+                out[key] = a
+            except (KeyError, TypeError, ValueError, OverflowError) as exc:
                 raise FileFormatError(f"{p}: field {key!r}: rows x cols != data ({exc})") from exc
     model = out.get("distortion_model")
     if isinstance(model, str) and model not in ("plumb_bob", "rational_polynomial"):

@@ -18,7 +18,10 @@ random and hard negatives from face-free scikit-image pictures.
 
 from __future__ import annotations
 
+import io
 import json
+import math
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from robopercept._checks import check_file, check_positive, check_range
-from robopercept.errors import FileFormatError, InputError
+from robopercept.errors import FileFormatError, InputError, RoboperceptError
 from robopercept.features.hog import hog, hog_windows
 from robopercept.geometry.boxes import box_iou_matrix
 from robopercept.imaging.color import rgb_to_gray
@@ -316,43 +319,155 @@ class HogDetector:
         Raises
         ------
         FileFormatError
-            Missing file, a folder, or not a robopercept HOG model file.
+            Missing file, a folder, or not a robopercept HOG model file: a damaged
+            archive (whatever zipfile, zlib or NumPy's header parser raise), an NPY
+            header whose shape does not match its bytes, object arrays (pickles),
+            settings out of range (window sides and cells 1 to 2048 px, 1 to 360
+            orientations, ``C > 0``), or weights that are not finite or do not fit
+            the settings. The message names the file.
         """
         p = check_file(path, "a model file (.npz written by `robopercept train-hog`)")
         not_model = (
             f"{p} is not a robopercept HOG model file (.npz written by `robopercept train-hog`)"
         )
-        try:  # NumPy takes what is neither .npy nor .npz for a pickle and refuses it
-            data = np.load(p, allow_pickle=False)
-        except (OSError, ValueError, EOFError):
-            raise FileFormatError(not_model) from None
-        if not isinstance(data, np.lib.npyio.NpzFile):
-            raise FileFormatError(f"{not_model}: it holds one array, not an archive")
+        arrays = _read_npz(p, ("coef", "meta"), not_model)
+        coef, meta_array = arrays["coef"], arrays["meta"]
+        if meta_array.ndim != 0 or meta_array.dtype.kind != "U":
+            raise FileFormatError(f"{not_model}: its meta array is not a JSON string")
         try:
-            with data as f:
-                coef = f["coef"].astype(np.float64)
-                meta = json.loads(str(f["meta"]))
-        except KeyError as exc:
-            raise FileFormatError(f"{not_model}: it has no {exc} array") from None
-        except (OSError, ValueError, EOFError):
-            raise FileFormatError(f"{not_model}: its arrays cannot be read") from None
+            meta = json.loads(str(meta_array))
+        except (ValueError, RecursionError):
+            raise FileFormatError(f"{not_model}: its meta array is not valid JSON") from None
         if not isinstance(meta, dict) or meta.get("kind") != "robopercept.HogDetector":
             kind = meta.get("kind") if isinstance(meta, dict) else None
             raise FileFormatError(f"{not_model}: its kind is {kind!r}")
+        window = meta.get("window")
+        if not (isinstance(window, list) and len(window) == 2):
+            raise FileFormatError(f"{p}: window is {window!r}; expected [width, height]")
         det = cls(
-            window=tuple(meta["window"]),
-            cell_size=int(meta["cell_size"]),
-            block_size=int(meta["block_size"]),
-            orientations=int(meta["orientations"]),
-            signed=bool(meta.get("signed", False)),
-            C=float(meta["C"]),
+            window=(
+                _whole(window[0], "window width", 1, _MAX_WINDOW, p),
+                _whole(window[1], "window height", 1, _MAX_WINDOW, p),
+            ),
+            cell_size=_whole(meta.get("cell_size"), "cell_size", 1, _MAX_WINDOW, p),
+            block_size=_whole(meta.get("block_size"), "block_size", 1, _MAX_WINDOW, p),
+            orientations=_whole(meta.get("orientations"), "orientations", 1, 360, p),
+            signed=meta.get("signed", False),
+            C=_real(meta.get("C"), "C", p, positive=True),
         )
-        det.coef_ = coef
-        det.intercept_ = float(meta["intercept"])
-        expect = det.describe(np.zeros((1, *det.window[::-1]))).shape[1]
+        if not isinstance(det.signed, bool):
+            raise FileFormatError(f"{p}: signed is {det.signed!r}; expected true or false")
+        det.intercept_ = _real(meta.get("intercept"), "intercept", p, positive=False)
+        if coef.dtype.kind not in "iuf" or not np.isfinite(coef).all():
+            raise FileFormatError(f"{p}: the weights (coef) must be finite real numbers")
+        det.coef_ = coef.astype(np.float64)
+        try:
+            expect = det.describe(np.zeros((1, *det.window[::-1]))).shape[1]
+        except RoboperceptError as exc:
+            raise FileFormatError(f"{p}: its HOG settings do not fit its window: {exc}") from None
         if coef.shape != (expect,):
             raise FileFormatError(f"{p}: weights have shape {coef.shape}, expected ({expect},)")
         return det
+
+
+_MAX_WINDOW = 2048  # window sides and HOG cells in a model file, in pixels
+_MAX_MEMBER = 256 * 2**20  # bytes an array of a model file may unpack to
+
+
+def _whole(value: Any, name: str, lo: int, hi: int, p: Path) -> int:
+    """A whole-number setting of a model file, in ``[lo, hi]``."""
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise FileFormatError(
+            f"{p}: {name} is {value!r}; expected a whole number from {lo} to {hi} "
+            "(retrain the model with `robopercept train-hog`)"
+        )
+    return value
+
+
+def _real(value: Any, name: str, p: Path, positive: bool) -> float:
+    """A real-number setting of a model file: finite (and > 0 if ``positive``)."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not math.isfinite(value)
+        or (positive and value <= 0)
+    ):
+        want = "a finite number > 0" if positive else "a finite number"
+        raise FileFormatError(
+            f"{p}: {name} is {value!r}; expected {want} "
+            "(retrain the model with `robopercept train-hog`)"
+        )
+    return float(value)
+
+
+def _read_npz(p: Path, names: tuple[str, ...], not_model: str) -> dict[str, np.ndarray]:
+    """The arrays ``names`` of the ``.npz`` archive ``p``, read without pickles and
+    without trusting a length or shape the file states.
+
+    Each member ``name.npy`` is unpacked (at most :data:`_MAX_MEMBER` bytes; the zip
+    CRC is checked), its NPY header parsed, and the array built with
+    ``np.frombuffer`` only when ``prod(shape) * itemsize`` equals the bytes that follow
+    the header; object dtypes (pickles) are refused. This is ``np.load(p,
+    allow_pickle=False)[name]`` for a sound file, and a :class:`FileFormatError` for
+    any damaged one.
+    """
+    try:
+        with p.open("rb") as f:
+            head = f.read(6)
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot read the model file ({exc})") from None
+    if head == b"\x93NUMPY":
+        raise FileFormatError(f"{not_model}: it holds one array, not an archive")
+    arrays: dict[str, np.ndarray] = {}
+    try:
+        with zipfile.ZipFile(p) as z:
+            members = {i.filename: i for i in z.infolist()}
+            for name in names:
+                info = members.get(f"{name}.npy")
+                if info is None:
+                    raise FileFormatError(f"{not_model}: it has no {name!r} array")
+                if info.file_size > _MAX_MEMBER:
+                    raise FileFormatError(
+                        f"{not_model}: its {name!r} array claims {info.file_size} bytes"
+                    )
+                arrays[name] = _npy_from_bytes(z.read(info), name, not_model)
+    except FileFormatError:
+        raise
+    except Exception as exc:
+        # untrusted bytes through zipfile, zlib/bz2/lzma and NumPy's header parser,
+        # which raise BadZipFile, zlib.error, EOFError, NotImplementedError (an unknown
+        # compression), RuntimeError (encryption), tokenize.TokenError, ValueError,
+        # MemoryError...: every one of them means a damaged or foreign file
+        raise FileFormatError(f"{not_model} ({type(exc).__name__}: {exc})") from None
+    return arrays
+
+
+def _npy_from_bytes(raw: bytes, name: str, not_model: str) -> np.ndarray:
+    """An array from the bytes of an ``.npy`` file (format 1.0 or 2.0), checked
+    against its header; object dtypes (pickles) are refused, never loaded."""
+    from numpy.lib import format as npy
+
+    f = io.BytesIO(raw)
+    version = npy.read_magic(f)
+    if version == (1, 0):
+        shape, fortran, dtype = npy.read_array_header_1_0(f)
+    elif version == (2, 0):
+        shape, fortran, dtype = npy.read_array_header_2_0(f)
+    else:
+        raise FileFormatError(f"{not_model}: its {name!r} array has NPY version {version}")
+    if dtype.hasobject:
+        raise FileFormatError(
+            f"{not_model}: its {name!r} array holds Python objects (pickles), which are "
+            "never loaded"
+        )
+    count = math.prod(shape)
+    if count * dtype.itemsize != len(raw) - f.tell():
+        raise FileFormatError(
+            f"{not_model}: its {name!r} array header says {count} x {dtype.itemsize} "
+            f"bytes; {len(raw) - f.tell()} follow"
+        )
+    data = np.frombuffer(raw, dtype=dtype, count=count, offset=f.tell())
+    return data.reshape(shape, order="F" if fortran else "C").copy()
 
 
 FACE_MODEL = "face_hog_svm.npz"

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robopercept._checks import check_file
+from robopercept._checks import check_file, plain_repr
 from robopercept.errors import FileFormatError
 
 __all__ = ["MotRows", "read_mot", "write_mot"]
@@ -39,15 +39,55 @@ class MotRows:
                        self.extra[sel])  # fmt: skip
 
 
+#: frame and id numbers are read as float64: beyond 2^53 they are no longer exact
+MOT_MAX_NUMBER = 2**53
+
+
 def read_mot(path: str | Path) -> MotRows:
-    """Read a MOTChallenge ``det.txt``, ``gt.txt`` or results file (a missing file or a
-    folder is a :class:`~robopercept.errors.FileFormatError` that says which)."""
+    """Read a MOTChallenge ``det.txt``, ``gt.txt`` or results file.
+
+    Each non-blank line is ``frame,id,x,y,w,h[,conf[,...]]`` (at least 6 numbers, the
+    same count on every line). As the MOTChallenge devkit requires, ``frame`` is a
+    whole number >= 1 and ``id`` a whole number >= -1 (-1: a detection without an
+    identity, as in ``det.txt``), both below :data:`MOT_MAX_NUMBER` (2^53, exact in
+    float64); every number on the line (box, confidence, the extra columns) is
+    finite. ``conf`` is 1 when the file has 6 columns.
+
+    Parameters
+    ----------
+    path : str or Path
+        The text file.
+
+    Returns
+    -------
+    MotRows
+        ``frame`` and ``id`` as int64, ``boxes`` ``(N, 4)`` float64 ``x, y, w, h``,
+        ``conf`` ``(N,)``, ``extra`` ``(N, k)`` the columns after ``conf``.
+
+    Raises
+    ------
+    FileFormatError
+        A missing file or a folder (says which), not UTF-8 text, a line that is not
+        comma-separated numbers, a short or ragged line, or a frame, id or value out of
+        the rules above; the message names the file and the line.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     p = pathlib.Path(d) / "det.txt"
+    ...     _ = p.write_text("1,-1,10,20,30,40,0.9\\n2,-1,12,20,30,40,0.8\\n")
+    ...     rows = read_mot(p)
+    >>> rows.frame.tolist(), rows.id.tolist(), rows.conf.tolist()
+    ([1, 2], [-1, -1], [0.9, 0.8])
+    """
     path = check_file(path, "a MOTChallenge text file (det.txt)")
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise FileFormatError(f"{path}: not a text file") from None
     rows = []
+    lines: list[int] = []
     width = None
     for i, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
@@ -66,15 +106,44 @@ def read_mot(path: str | Path) -> MotRows:
         if len(values) != width:
             raise FileFormatError(f"{path}: line {i} has {len(values)} fields, line 1 {width}")
         rows.append(values)
+        lines.append(i)
     if not rows:
         z = np.zeros(0)
         return MotRows(
             z.astype(np.int64), z.astype(np.int64), np.zeros((0, 4)), z, np.zeros((0, 0))
         )
     a = np.asarray(rows)
+    _check_rows(a, lines, path)
     conf = a[:, 6] if a.shape[1] > 6 else np.ones(len(a))
     return MotRows(a[:, 0].astype(np.int64), a[:, 1].astype(np.int64), a[:, 2:6].copy(),
                    conf, a[:, 7:].copy())  # fmt: skip
+
+
+def _check_rows(a: np.ndarray, lines: list[int], path: Path) -> None:
+    """Refuse the first row (by its line number) whose numbers break the rules of
+    :func:`read_mot`: non-finite values, or a frame / id that is not a whole number in
+    ``[1, 2^53)`` / ``[-1, 2^53)``."""
+    limit = f"below 2^53 ({MOT_MAX_NUMBER})"
+    with np.errstate(invalid="ignore"):
+        frame, tid = a[:, 0], a[:, 1]
+        rules = (
+            (
+                (frame != np.round(frame)) | (frame < 1) | (frame >= MOT_MAX_NUMBER),
+                f"frames are whole numbers from 1 (the first frame) {limit}",
+            ),
+            (
+                (tid != np.round(tid)) | (tid < -1) | (tid >= MOT_MAX_NUMBER),
+                f"ids are whole numbers from -1 (a detection without identity) {limit}",
+            ),
+            (~np.isfinite(a).all(axis=1), "every value must be finite (no nan or inf)"),
+        )
+    for bad, rule in rules:
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise FileFormatError(
+                f"{path}: line {lines[k]} ({plain_repr(a[k])[1:-1][:120]}): {rule}; "
+                "fix or drop that line"
+            )
 
 
 def write_mot(path: str | Path, rows: Iterable[tuple[int, int, Iterable[float], float]]) -> int:
