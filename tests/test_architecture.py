@@ -45,6 +45,7 @@ FLOORS: dict[str, int] = {
     "_checks": 1,
     "progress": 1,
     "jit": 1,
+    "fileio": 1,
     "imaging": 2,
     "geometry": 2,
     "estimation": 2,

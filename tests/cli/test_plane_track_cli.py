@@ -67,9 +67,11 @@ def test_a_run_that_tracked_no_frame_exits_1(tmp_path, capsys):
     code = main(["plane-track", "--source", str(seq), "--out", str(out), "--no-video", "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 1
-    assert err[-1] == (
-        "robopercept: error: no frame was tracked (2 skipped as unreadable): check --source"
+    first = sorted((seq / "depth").iterdir())[0]
+    assert err[-1].startswith(
+        f"robopercept: error: no frame was tracked (2 skipped as unreadable; first: {first}: "
     )
+    assert err[-1].endswith("): check --source")
     assert (out / "summary.json").exists()  # what was written is kept
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -370,3 +371,253 @@ def test_video_encoder_runs_at_the_lowest_priority(tmp_path):
             assert all(os.sched_getscheduler(t) == os.SCHED_IDLE for t in tids)
     finally:
         writer.close()
+
+
+# -- issue 25: hostile and corrupt files -------------------------------------------------
+
+
+def _chunk(kind: bytes, body: bytes) -> bytes:
+    """One PNG chunk with its correct CRC-32 (so only what the test means is wrong)."""
+    import struct
+    import zlib
+
+    crc = zlib.crc32(kind + body) & 0xFFFFFFFF
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
+
+
+def _lying_png(width: int, height: int, rows: int, depth: int = 8, ctype: int = 0) -> bytes:
+    """A PNG whose IHDR declares ``width`` x ``height`` but whose (complete, valid) zlib
+    stream holds only ``rows`` rows of zeros."""
+    import struct
+    import zlib
+
+    bpp = {0: 1, 2: 3, 4: 2, 6: 4}[ctype] * depth // 8
+    stream = (b"\x00" + bytes(width * bpp)) * rows
+    ihdr = struct.pack(">IIBBBBB", width, height, depth, ctype, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + _chunk(b"IHDR", ihdr)
+        + _chunk(b"IDAT", zlib.compress(stream, 9))
+        + _chunk(b"IEND", b"")
+    )
+
+
+def _peak_mib(fn) -> float:
+    """The peak of memory that NumPy and Python allocate (tracemalloc) while ``fn`` runs."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        fn()
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    return peak / 2**20
+
+
+_CHILD = """
+import json, resource, sys
+import imageio.v3, PIL.Image, tifffile  # imported before the baseline: not counted
+from robopercept.imaging import read_image
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+out = []
+for path in sys.argv[1:]:
+    try:
+        read_image(path)
+        out.append(None)
+    except Exception as exc:
+        out.append([type(exc).__name__, str(exc)])
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
+print(json.dumps({"errors": out, "peak_mib": peak / 1024}))
+"""
+
+
+def _read_in_child(*paths) -> dict:
+    """read_image each path in a fresh Python: the exception of each (None if it read)
+    and the growth of the process's peak resident memory (ru_maxrss, which counts
+    Pillow's C allocations too; tracemalloc sees only Python's and NumPy's)."""
+    import json
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-c", _CHILD, *map(str, paths)],
+        capture_output=True, text=True, timeout=120, check=True,
+    )  # fmt: skip
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize(
+    "width, height, depth, ctype",
+    [
+        (1, 100_000, 8, 0),  # under every bound but the data: decompressed, then refused
+        (2, 40_000_000, 8, 0),  # 120 MB of rows from 20 bytes: past deflate's 1032:1
+        (2, 50_000_000, 8, 0),  # 100M pixels: past Pillow's decompression-bomb limit
+        (1, 100_000, 16, 2),
+        (2, 40_000_000, 16, 6),
+    ],
+)
+def test_png_header_larger_than_its_data_is_refused_before_allocating(
+    tmp_path, width, height, depth, ctype
+):
+    """issue 25: a 69-byte PNG declaring 1x100,000 pixels with 32 rows of data came back
+    as 100,000 rows (zeros invented); one declaring 2x50,000,000 allocated 382 MB before
+    it was refused. Now: a FileFormatError naming the file, with < 50 MiB allocated."""
+    path = tmp_path / "liar.png"
+    path.write_bytes(_lying_png(width, height, 32, depth, ctype))
+    assert path.stat().st_size < 100
+    got = _read_in_child(path)
+    assert got["errors"][0][0] == "FileFormatError", got
+    assert re.search(r"liar\.png: .*(truncated|decompression-bomb)", got["errors"][0][1]), got
+    assert got["peak_mib"] < 50, got
+
+
+def test_png_with_a_short_but_plausible_stream_is_truncated_not_padded(tmp_path, rng):
+    """issue 25: a stream of incompressible rows, half the rows the header declares (the
+    size bound alone cannot see it): refused, never zero rows at the bottom."""
+    import struct
+    import zlib
+
+    img = rng.integers(0, 256, (64, 48, 3), dtype=np.uint8)
+    stream = b"".join(b"\x00" + img[y].tobytes() for y in range(32))
+    png = (
+        b"\x89PNG\r\n\x1a\n"
+        + _chunk(b"IHDR", struct.pack(">IIBBBBB", 48, 64, 8, 2, 0, 0, 0))
+        + _chunk(b"IDAT", zlib.compress(stream))
+        + _chunk(b"IEND", b"")
+    )
+    (tmp_path / "half.png").write_bytes(png)
+    with pytest.raises(FileFormatError, match=r"half\.png: truncated PNG"):
+        read_image(tmp_path / "half.png")
+    # the same stream with all 64 rows reads exactly
+    full = png.replace(_chunk(b"IDAT", zlib.compress(stream)), _chunk(b"IDAT", zlib.compress(
+        b"".join(b"\x00" + img[y].tobytes() for y in range(64)))))  # fmt: skip
+    (tmp_path / "full.png").write_bytes(full)
+    np.testing.assert_array_equal(read_image(tmp_path / "full.png"), img)
+
+
+def test_header_over_the_pixel_limit_is_a_typed_error(tmp_path, monkeypatch):
+    """issue 25: Pillow's decompression-bomb limit (PIL.Image.MAX_IMAGE_PIXELS) is a
+    FileFormatError naming the file and the setting, for our decoders too."""
+    from PIL import Image
+
+    path = write_image(tmp_path / "big.png", np.zeros((100, 100, 3), np.uint16))
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 9_999)
+    with pytest.raises(FileFormatError, match=r"big\.png: .*10000 pixels.*MAX_IMAGE_PIXELS"):
+        read_image(path)
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 10_000)
+    assert read_image(path).shape == (100, 100, 3)
+
+
+def test_other_formats_whose_header_outgrows_the_file_are_refused(tmp_path, rng):
+    """issue 25: BMP, binary PGM/PPM, uncompressed TIFF and baseline JPEG headers that
+    declare more pixels than the file can hold: FileFormatError, little allocated. A
+    JPEG's baseline Huffman data needs >= 2 bits per 8x8 block (a DC code and an EOB)."""
+    import struct
+
+    img = rng.integers(0, 256, (16, 16, 3), dtype=np.uint8)
+    cases = {}
+    bmp = bytearray(write_image(tmp_path / "a.bmp", img).read_bytes())
+    bmp[22:26] = struct.pack("<i", 9000)  # height
+    cases["bmp"] = bytes(bmp)
+    cases["ppm"] = b"P6 9000 9000 255\n" + img.tobytes()
+    cases["pgm"] = b"P5\n60000 1000\n65535\n" + img.tobytes()
+    jpg = bytearray(write_image(tmp_path / "a.jpg", img).read_bytes())
+    sof = jpg.find(b"\xff\xc0")
+    jpg[sof + 5 : sof + 9] = struct.pack(">HH", 9000, 9000)
+    cases["jpg"] = bytes(jpg)
+    tif = tmp_path / "a.tif"
+    import tifffile
+
+    tifffile.imwrite(tif, img)
+    data = tif.read_bytes()
+    with tifffile.TiffFile(tif) as t:  # the ImageLength tag's value, patched in place
+        tag = t.pages[0].tags["ImageLength"]
+        offset = tag.valueoffset
+        fmt = "<H" if tag.dtype == 3 else "<I"
+    cases["tif"] = data[:offset] + struct.pack(fmt, 9000) + data[offset + struct.calcsize(fmt) :]
+    cases["jpeg"] = b"\xff\xd8\xff\xe0\x00\x00" + bytes(64)  # a segment length of 0
+    paths = []
+    for ext, content in cases.items():
+        paths.append(tmp_path / f"liar.{ext}")
+        paths[-1].write_bytes(content)
+    got = _read_in_child(*paths)
+    for path, error in zip(paths, got["errors"], strict=True):
+        assert error is not None and error[0] == "FileFormatError", (path.name, error)
+        assert error[1].startswith(str(path)), error
+    assert got["peak_mib"] < 50, got
+
+
+def test_16bit_rgb_png_is_read_with_all_16_bits_as_opencv(tmp_path, rng):
+    """issue 25: 16-bit RGB PNGs came back as 8 bits (value >> 8): values > 255 with odd
+    low bytes, written by OpenCV (libpng), read exactly as cv2.imread(IMREAD_UNCHANGED)."""
+    cv2 = pytest.importorskip("cv2")
+    img = rng.integers(1, 256, (17, 23, 3)) * 256 + rng.integers(0, 128, (17, 23, 3)) * 2 + 1
+    img = img.astype(np.uint16)
+    assert (img > 255).all() and (img % 2 == 1).all()
+    path = tmp_path / "rgb16.png"
+    assert cv2.imwrite(str(path), img[..., ::-1])
+    got = read_image(path)
+    assert got.dtype == np.uint16
+    np.testing.assert_array_equal(got, cv2.imread(str(path), cv2.IMREAD_UNCHANGED)[..., ::-1])
+    np.testing.assert_array_equal(got, img)
+
+
+def test_tall_thin_16bit_png_decodes_in_memory_linear_in_its_size(tmp_path, rng):
+    """A legitimate 3 x 4,000 16-bit RGB PNG with Paeth rows (written by OpenCV): the
+    reconstruction's memory stays a small multiple of the image's 72 kB (the former
+    anti-diagonal layout of (W + H) x H entries asked for 384 MB here)."""
+    cv2 = pytest.importorskip("cv2")
+    img = rng.integers(0, 65536, (4_000, 3, 3), dtype=np.uint16)
+    path = tmp_path / "thin.png"
+    paeth = [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_PAETH]
+    assert cv2.imwrite(str(path), img[..., ::-1], paeth)
+    assert _png_row_filters(path) == {4}
+    out = {}
+    assert _peak_mib(lambda: out.setdefault("img", read_image(path))) < 20
+    np.testing.assert_array_equal(out["img"], img)
+
+
+def _mutants(data: bytes, rng, count: int):
+    """Seeded mutants of a file: byte flips, truncations, inserted random chunks (with a
+    correct CRC, so the chunk parser accepts them) and duplicated spans."""
+    for i in range(count):
+        d = bytearray(data)
+        kind = i % 4
+        if kind == 0:
+            for pos in rng.integers(0, len(d), rng.integers(1, 8)):
+                d[pos] ^= int(rng.integers(1, 256))
+        elif kind == 1:
+            d = d[: int(rng.integers(1, len(d)))]
+        elif kind == 2:
+            pos = int(rng.integers(8, len(d)))
+            name = bytes(rng.choice(list(b"IDATIHDRIENDtEXtPLTEabcz"), 4))
+            d[pos:pos] = _chunk(name, rng.bytes(int(rng.integers(0, 40))))
+        else:
+            a = int(rng.integers(0, len(d)))
+            b = min(len(d), a + int(rng.integers(1, 64)))
+            d[a:a] = d[a:b]
+        yield bytes(d)
+
+
+@pytest.mark.parametrize("ext", [".png", ".jpg", ".bmp", ".ppm", ".tif", "16.png"])
+def test_mutated_files_give_an_image_or_a_file_format_error(tmp_path, rng, ext):
+    """issue 25: ~200 seeded mutants of a small file of each format read_image accepts:
+    each gives a valid array or a FileFormatError, never another exception type."""
+    dtype = np.uint16 if ext.startswith("16") else np.uint8
+    img = rng.integers(0, np.iinfo(dtype).max, (12, 10, 3), dtype=dtype)
+    source = write_image(tmp_path / f"src{ext}", img).read_bytes()
+    outcomes = {"image": 0, "error": 0}
+    for i, mutant in enumerate(_mutants(source, np.random.default_rng(25), 200)):
+        path = tmp_path / f"m{i}{ext}"
+        path.write_bytes(mutant)
+        try:
+            got = read_image(path)
+        except FileFormatError as exc:
+            assert str(path) in str(exc)
+            outcomes["error"] += 1
+        else:
+            assert got.ndim in (2, 3) and got.size > 0
+            assert got.dtype in (np.uint8, np.uint16)
+            outcomes["image"] += 1
+    assert outcomes["error"] > 20, outcomes  # the mutations did reach the decoders

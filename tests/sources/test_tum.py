@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 
 import numpy as np
 import pytest
 
-from robopercept.errors import FileFormatError, InputError
+from robopercept.errors import FileFormatError
 from robopercept.geometry import CameraIntrinsics, se3
+from robopercept.imaging.io import write_image
 from robopercept.sources import RGBDFrame, TUMFolderSource, read_camera_json, write_tum_folder
 
 KD = CameraIntrinsics(32, 24, 30.0, 30.0, 15.5, 11.5, "brown_conrady", (0.01, 0, 0, 0, 0))
@@ -78,21 +80,89 @@ def test_corrupt_frame_is_skipped_and_counted(tmp_path):
     assert got == [0, 2] and [i for i, _ in src.skipped] == [1]
 
 
-def test_missing_frame_file_is_named(tmp_path):
-    folder = write_tum_folder(tmp_path / "seq", frames(2))
+# issue 25: a missing file or a frame of the wrong size ended the run at that frame
+# (plane-track then exited 0 with 50 of 60 frames unprocessed): now skipped and counted
+# like a corrupt frame, with a warning naming the file
+def test_missing_frame_file_is_skipped_counted_and_named(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(3))
     victim = sorted((folder / "depth").iterdir())[1]
     victim.unlink()
-    with pytest.raises(FileFormatError, match=re.escape(victim.name)):
-        list(TUMFolderSource(folder))
+    src = TUMFolderSource(folder)
+    with pytest.warns(UserWarning, match=rf"skipping frame 1: .*{re.escape(victim.name)}.*missing"):
+        got = [f.index for f in src]
+    assert got == [0, 2] and [i for i, _ in src.skipped] == [1]
+    assert victim.name in src.skipped[0][1]
+
+
+def test_frame_of_the_wrong_size_is_skipped_and_counted(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(3))
+    victim = sorted((folder / "rgb").iterdir())[2]
+    write_image(victim, np.zeros((20, 40, 3), np.uint8))  # 40x20, camera.json: 40x30
+    src = TUMFolderSource(folder)
+    with pytest.warns(UserWarning, match=r"skipping frame 2: .*camera\.json"):
+        got = [f.index for f in src]
+    assert got == [0, 1] and [i for i, _ in src.skipped] == [2]
 
 
 def test_sizes_must_match_camera_json(tmp_path):
-    folder = write_tum_folder(tmp_path / "seq", frames(1))
+    folder = write_tum_folder(tmp_path / "seq", frames(2))
     cam = json.loads((folder / "camera.json").read_text())
     cam["depth"]["width"] = 64
     (folder / "camera.json").write_text(json.dumps(cam))
-    with pytest.raises(InputError, match=r"camera\.json"):
-        list(TUMFolderSource(folder))
+    src = TUMFolderSource(folder)
+    with pytest.warns(UserWarning, match=r"depth is \(32, 24\) .* 64x24: check camera\.json"):
+        assert list(src) == []
+    assert [i for i, _ in src.skipped] == [0, 1]
+
+
+# issue 25: a source error that cannot be skipped (the folder vanished) stops the run,
+# naming the folder
+def test_a_vanished_folder_is_named(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(3))
+    src = TUMFolderSource(folder)
+    it = iter(src)
+    assert next(it).index == 0
+    shutil.rmtree(folder)
+    with pytest.raises(FileFormatError, match=rf"{re.escape(str(folder))}: the folder is gone"):
+        next(it)
+
+
+# issue 25: non-UTF-8 lists and camera.json, Infinity sizes and over-long names raised
+# UnicodeDecodeError, OverflowError and OSError (ENAMETOOLONG) instead of FileFormatError
+@pytest.mark.parametrize("name", ["rgb.txt", "depth.txt", "camera.json", "planes.csv"])
+def test_non_utf8_files_are_named(tmp_path, name):
+    folder = write_tum_folder(tmp_path / "seq", frames(1))
+    (folder / name).write_bytes(b"\xff\xfe\x00garbage \xc3\x28\n")
+    with pytest.raises(FileFormatError, match=rf"{re.escape(name)}: not UTF-8"):
+        TUMFolderSource(folder)
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        (lambda c: c["depth"].update(width=float("inf")), "bad 'depth' camera"),
+        (lambda c: c["color"].update(height=float("-inf")), "bad 'color' camera"),
+        (lambda c: c.update(depth_scale=float("inf")), "depth_scale a finite number"),
+        (lambda c: c["T_color_depth"][0].__setitem__(3, float("nan")), "finite numbers"),
+    ],
+)
+def test_infinite_sizes_in_camera_json_are_named(tmp_path, edit, match):
+    folder = write_tum_folder(tmp_path / "seq", frames(1))
+    cam = json.loads((folder / "camera.json").read_text())
+    edit(cam)
+    (folder / "camera.json").write_text(json.dumps(cam))  # writes Infinity / NaN
+    with pytest.raises(FileFormatError, match=rf"camera\.json: .*{match}"):
+        TUMFolderSource(folder)
+
+
+def test_over_long_names_are_named(tmp_path):
+    folder = write_tum_folder(tmp_path / "seq", frames(1))
+    long_name = "rgb/" + "x" * 300 + ".png"
+    (folder / "rgb.txt").write_text(f"1000.0 {long_name}\n")
+    with pytest.raises(FileFormatError, match=r"rgb\.txt:1: file name too long"):
+        TUMFolderSource(folder)
+    with pytest.raises(FileFormatError, match="cannot open"):
+        TUMFolderSource(tmp_path / ("y" * 300))
 
 
 @pytest.mark.parametrize(

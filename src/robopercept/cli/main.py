@@ -17,7 +17,10 @@ Errors print one line on stderr, never a traceback, and set the exit code:
 * **70** (``EX_SOFTWARE``): any other exception is a bug in robopercept:
   ``robopercept: internal error (this is a bug, please report it): <Type>: <message>;
   rerun with --debug for the traceback``;
-* **130**: interrupted by Ctrl-C.
+* **130**: interrupted by Ctrl-C (SIGINT);
+* **143**: stopped by SIGTERM (``docker stop``, systemd, ``kill``): handled like Ctrl-C,
+  ``robopercept: stopped by SIGTERM``. ``plane-track`` and ``demo`` finish the frame
+  at hand and write their outputs first (for both signals).
 
 ``robopercept --debug COMMAND ...`` (or the environment variable
 ``ROBOPERCEPT_DEBUG=1``) re-raises errors of kinds 1 and 70, so the traceback shows.
@@ -29,7 +32,9 @@ import argparse
 import difflib
 import os
 import re
+import signal
 import sys
+import threading
 import warnings
 from collections.abc import Sequence
 from typing import Any, NoReturn, TextIO
@@ -44,6 +49,32 @@ EXIT_ERROR = 1
 EXIT_USAGE = 2
 EXIT_INTERNAL = 70  # EX_SOFTWARE of sysexits.h
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143  # 128 + SIGTERM
+
+
+class _Terminated(BaseException):
+    """SIGTERM, raised in the main thread as Ctrl-C raises KeyboardInterrupt (a
+    BaseException, so ``except Exception`` clauses let it through and ``finally`` and
+    ``with`` blocks close their files on the way out)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise _Terminated
+
+
+def _with_sigterm(run: Any) -> int:
+    """``run()`` with SIGTERM raising :class:`_Terminated` (main thread only, and not
+    when SIGTERM is ignored); the previous handler is restored afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        return int(run())
+    previous = signal.getsignal(signal.SIGTERM)
+    if previous is not signal.SIG_DFL:  # ignored, or someone else's handler: keep it
+        return int(run())
+    signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        return int(run())
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 class _ParserError(UsageError):
@@ -114,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="robopercept",
         description="Robotic perception from the command line. Run a command with --help "
         "for its options. Exit codes: 0 success, 1 error (missing or bad file or data), "
-        "2 usage error, 70 internal error (a bug), 130 interrupted.",
+        "2 usage error, 70 internal error (a bug), 130 interrupted, 143 stopped by SIGTERM.",
     )
     parser.add_argument("--version", action="version", version=f"robopercept {__version__}")
     parser.add_argument(
@@ -152,13 +183,13 @@ def _first_line(exc: BaseException) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``robopercept`` command on ``argv`` (default ``sys.argv[1:]``) and return
-    its exit code: 0, 1, 2, 70 or 130 as the module docstring lists them. With
+    its exit code: 0, 1, 2, 70, 130 or 143 as the module docstring lists them. With
     ``--debug`` (or ``ROBOPERCEPT_DEBUG=1``) the errors of codes 1 and 70 are re-raised."""
     parser = build_parser()
     debug = bool(os.environ.get("ROBOPERCEPT_DEBUG"))
     with warnings.catch_warnings():
         warnings.showwarning = _one_line_warning
-        return _main(parser, argv, debug)
+        return _with_sigterm(lambda: _main(parser, argv, debug))
 
 
 def _run_command(args: argparse.Namespace) -> int:
@@ -193,6 +224,9 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None, debug: bo
     except KeyboardInterrupt:
         print("robopercept: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except _Terminated:
+        print("robopercept: stopped by SIGTERM", file=sys.stderr)
+        return EXIT_TERMINATED
     except (RoboperceptError, OSError, ValueError) as exc:
         if debug:
             raise

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -16,6 +17,8 @@ if TYPE_CHECKING:
 __all__ = ["register", "summary_table"]
 
 DEMO_FRAMES = 300
+EXIT_INTERRUPTED = 130  # 128 + SIGINT
+EXIT_TERMINATED = 143  # 128 + SIGTERM
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -198,6 +201,7 @@ def summary_table(summary: PlaneTrackSummary) -> str:
 
 
 def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
+    from robopercept.fileio import WriteError
     from robopercept.pipelines.plane_outputs import run_plane_tracking
     from robopercept.sources.realsense import SourceError
 
@@ -215,14 +219,46 @@ def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
     else:
         print(summary_table(summary))
     stopped = summary.stopped or ""
+    if stopped.startswith("output failed"):  # a full disk: what was written is kept
+        if not args.json and summary.outputs:
+            print(f"outputs in {args.out}/: {', '.join(summary.outputs)}")
+        lost = [n for n in ("plane.png", "summary.json") if n not in summary.outputs]
+        raise WriteError(
+            f"{stopped} (after {summary.frames} frames"
+            + (f"; {' and '.join(lost)} not written" if lost else "")
+            + "): free some space or choose another --out"
+        )
     if summary.frames == 0:  # nothing tracked: not a success, and no video or plot
-        why = stopped or f"{summary.skipped_frames} skipped as unreadable"
+        skipped = getattr(source, "skipped", None) or []
+        reason = str(skipped[0][1]).splitlines()[0] if isinstance(skipped, list) and skipped else ""
+        first = f"; first: {reason}" if reason else ""
+        why = stopped or f"{summary.skipped_frames} skipped as unreadable{first}"
         raise InputError(f"no frame was tracked ({why}): check --source")
     if not args.json:
         print(f"outputs in {args.out}/: {', '.join(summary.outputs)}")
+    if summary.skipped_frames:
+        print(
+            f"robopercept: warning: {summary.skipped_frames} frames skipped (missing, "
+            "unreadable or of the wrong size; listed in the warnings above)",
+            file=sys.stderr,
+        )
     if stopped.startswith("source failed"):  # outputs cover the frames before the failure
         raise SourceError(f"{stopped} after {summary.frames} frames")
-    return 130 if stopped == "interrupted" else 0
+    if stopped == "interrupted":
+        print(
+            f"robopercept: interrupted (Ctrl-C) after {summary.frames} frames; the outputs "
+            "cover them",
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
+    if stopped.startswith("stopped by SIGTERM"):
+        print(
+            f"robopercept: stopped by SIGTERM after {summary.frames} frames; the outputs "
+            "cover them",
+            file=sys.stderr,
+        )
+        return EXIT_TERMINATED
+    return 0
 
 
 def _demo(args: argparse.Namespace) -> int:

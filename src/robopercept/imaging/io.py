@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from robopercept._checks import check_extension, check_file, check_image, check_positive
-from robopercept.errors import FileFormatError, InputError
+from robopercept.errors import FileFormatError, InputError, RoboperceptError
 
 __all__ = [
     "SnapshotVideoWriter",
@@ -121,10 +121,15 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     Raises
     ------
     FileFormatError
-        Missing, empty, truncated or undecodable file, naming the file.
+        Missing, empty, truncated or undecodable file, naming the file; every exception
+        a decoder raises on a corrupt file comes as this one. A header that declares
+        more pixels than the file can hold (PNG: more data than deflate's 1032:1 can
+        expand to; BMP, PGM/PPM, uncompressed TIFF: more samples than bytes; baseline
+        JPEG: fewer than 2 bits per 8x8 block) or more than Pillow's decompression-bomb
+        limit ``PIL.Image.MAX_IMAGE_PIXELS`` is refused before the image is allocated; a
+        PNG whose image data ends before the rows its header declares is refused rather
+        than padded with zero rows.
     """
-    import imageio.v3 as iio
-
     from robopercept.imaging.color import rgb_to_gray
 
     p = Path(path)
@@ -133,14 +138,14 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     check_file(p, "an image file")
     if p.stat().st_size == 0:
         raise FileFormatError(f"{p}: the file is empty")
-    img = _read_16bit_special(p)
-    if img is None:
-        try:
-            img = np.asarray(iio.imread(p))
-        except Exception as exc:  # decoders raise many kinds
-            raise FileFormatError(
-                f"{p}: cannot decode as an image ({type(exc).__name__}: {exc})"
-            ) from exc
+    try:
+        img = _decode_image(p)
+    except (RoboperceptError, MemoryError):
+        raise
+    except Exception as exc:  # decoders raise many kinds (OSError, SyntaxError, ...)
+        raise FileFormatError(
+            f"{p}: cannot decode as an image ({type(exc).__name__}: {exc})"
+        ) from exc
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
     if img.ndim not in (2, 3) or img.size == 0:
@@ -163,9 +168,12 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     return img
 
 
-def _read_16bit_special(p: Path) -> np.ndarray | None:
-    """The image of a 16-bit colour PNG or a 16-bit PGM/PPM, read without loss; None
-    for every other file (which imageio reads without loss).
+def _decode_image(p: Path) -> np.ndarray:
+    """The array of an image file as its decoder gives it, after the header checks.
+
+    PNG goes through :func:`_read_png` (every PNG, so its data is checked against its
+    header); a 16-bit PGM/PPM through :func:`_decode_netpbm16`; the rest through imageio
+    once :func:`_check_declared_size` has passed.
 
     Parameters
     ----------
@@ -174,17 +182,27 @@ def _read_16bit_special(p: Path) -> np.ndarray | None:
 
     Returns
     -------
-    ndarray or None
-        uint16 (see :func:`_decode_png16` and :func:`_decode_netpbm16`).
+    ndarray
+        As decoded (gray, gray + alpha, RGB or RGBA; uint8, uint16, int32 or bool).
+
+    Raises
+    ------
+    FileFormatError
+        From the checks; decoders' own exceptions pass through (read_image types them).
     """
+    import imageio.v3 as iio
+
     with open(p, "rb") as fh:
         head = fh.read(4096)  # a PNG's IHDR; a netpbm header, comments included
-    if _png16_colour_type(head) is not None:
-        return _decode_png16(p.read_bytes(), p)
+    if head.startswith(_PNG_SIGNATURE):
+        return _read_png(p.read_bytes(), p)
+    _check_declared_size(p)
     header = _netpbm_header(head)
     if header is not None and header[3] > 255:
-        return _decode_netpbm16(p.read_bytes(), p)
-    return None
+        img = _decode_netpbm16(p.read_bytes(), p)
+        if img is not None:
+            return img
+    return np.asarray(iio.imread(p))
 
 
 def sample_image_path() -> Path:
@@ -299,31 +317,18 @@ def write_image(
 # specifications, zlib for the compression); everything else goes through imageio.
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: PNG colour type -> channels, and the bit depths the specification allows for it
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}
+_PNG_DEPTHS = {0: (1, 2, 4, 8, 16), 2: (8, 16), 3: (1, 2, 4, 8), 4: (8, 16), 6: (8, 16)}
+#: the Adam7 passes: first column, first row, column step, row step
+_ADAM7 = ((0, 0, 8, 8), (4, 0, 8, 8), (0, 4, 4, 8), (2, 0, 4, 4), (0, 2, 2, 4), (1, 0, 2, 2),
+          (0, 1, 1, 2))  # fmt: skip
+#: deflate's largest expansion: a 258-byte match coded in 1 + 1 bits (zlib's header and
+#: the block headers only lower it)
+_DEFLATE_MAX_RATIO = 1032
 #: PNG colour type -> channels, for the 16-bit colour types that Pillow reduces to 8 bits
 _PNG16_CHANNELS = {2: 3, 4: 2, 6: 4}
 _PNM_EXTS = {".ppm", ".pgm", ".pnm"}
-
-
-def _png16_colour_type(head: bytes) -> int | None:
-    """The colour type of a 16-bit colour PNG from its first 29 bytes, else None.
-
-    Parameters
-    ----------
-    head : bytes
-        The start of the file: the 8-byte signature, then the IHDR chunk (length, type,
-        width, height, bit depth at byte 24, colour type at byte 25).
-
-    Returns
-    -------
-    int or None
-        2 (RGB), 4 (gray + alpha) or 6 (RGBA) for a 16-bit file of those types; None
-        for any other file (Pillow reads those without loss).
-    """
-    if len(head) < 29 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
-        return None
-    if head[24] != 16 or head[25] not in _PNG16_CHANNELS:
-        return None
-    return int(head[25])
 
 
 def _paeth(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -358,7 +363,8 @@ def _png_unfilter(filtered: np.ndarray, types: np.ndarray, bpp: int) -> np.ndarr
     filter type: 0 none, 1 ``a``, 2 ``b``, 3 :math:`\\lfloor (a + b) / 2 \\rfloor`, 4 Paeth.
     Pixel ``(y, x)`` needs only pixels of smaller ``x + y``, so the pixels of one
     anti-diagonal ``t = x + y`` are reconstructed together, in NumPy, in ``W + H - 1``
-    steps (a row-by-row loop would need one Python step per pixel for types 3 and 4).
+    steps (a row-by-row loop would need one Python step per pixel for types 3 and 4),
+    in memory linear in the image (two int16 copies of it).
     Files whose rows use only types 0, 1 and 2 (those this module writes, and OpenCV's)
     are reconstructed row by row instead: a running sum for 1, a sum of rows for 2.
 
@@ -387,27 +393,23 @@ def _png_unfilter(filtered: np.ndarray, types: np.ndarray, bpp: int) -> np.ndarr
             elif types[y] == 2 and y > 0:
                 out[y] += out[y - 1]
         return out
-    ys = np.arange(h)[:, None]
-    diag = ys + np.arange(w)[None, :]  # (H, W): the step t = x + y of each pixel
-    steps = w + h - 1
-    f = np.zeros((steps, h, bpp), np.int16)
-    f[diag, ys] = filtered.reshape(h, w, bpp)
-    # r[t + 2, y + 1] is pixel (y, x = t - y); r[:, 0] (above the image) and every
-    # entry of a pixel outside the image stay 0
-    r = np.zeros((steps + 2, h + 1, bpp), np.int16)
-    kind = types.astype(np.int16)[:, None]
-    for t in range(steps):
-        y0, y1 = max(0, t - w + 1), min(h, t + 1)
-        a = r[t + 1, y0 + 1 : y1 + 1]
-        b = r[t + 1, y0:y1]
-        c = r[t, y0:y1]
-        k = kind[y0:y1]
+    # r[(y + 1) * (w + 1) + x + 1] is pixel (y, x); row 0 and column 0 of the (h + 1) x
+    # (w + 1) grid stand for the zeros outside the image, so the left, upper and
+    # upper-left neighbours of flat index i are i - 1, i - (w + 1) and i - (w + 2)
+    f = filtered.reshape(h * w, bpp).astype(np.int16)
+    r = np.zeros(((h + 1) * (w + 1), bpp), np.int16)
+    kind = types.astype(np.int16)
+    for t in range(w + h - 1):
+        ys = np.arange(max(0, t - w + 1), min(h, t + 1))
+        i = (ys + 1) * (w + 1) + (t - ys) + 1
+        a, b, c = r[i - 1], r[i - (w + 1)], r[i - (w + 2)]
+        k = kind[ys][:, None]
         pred = np.where(k == 1, a, np.where(k == 2, b, 0))
         pred = np.where(k == 3, (a + b) >> 1, pred)
         if (k == 4).any():
             pred = np.where(k == 4, _paeth(a, b, c), pred)
-        r[t + 2, y0 + 1 : y1 + 1] = (f[t, y0:y1] + pred) & 255
-    return r[diag + 2, ys + 1].astype(np.uint8).reshape(h, n)
+        r[i] = (f[ys * w + (t - ys)] + pred) & 255
+    return r.reshape(h + 1, w + 1, bpp)[1:, 1:].astype(np.uint8).reshape(h, n)
 
 
 def _png_filter(raw: np.ndarray, bpp: int) -> np.ndarray:
@@ -477,17 +479,206 @@ def _encode_png16(image: np.ndarray, level: int) -> bytes:
     )
 
 
-def _decode_png16(data: bytes, p: Path) -> np.ndarray:
-    """Decode a 16-bit colour PNG (colour types 2, 4, 6) without loss.
+def _png_chunks(data: bytes, p: Path) -> list[tuple[bytes, int, int]]:
+    """The chunks of a PNG file up to its IEND, each as ``(type, start, end)`` (``end``
+    past its CRC), checked as libpng checks them.
 
-    Chunks are checked against their CRC-32; ancillary chunks (gamma, ``sBIT``, text,
-    and ``tRNS``: a transparent colour key is not turned into an alpha channel) are
-    skipped, so the samples come as stored.
+    A chunk that runs past the end of the file, or a file without IEND, is truncated; a
+    critical chunk (type starting upper case: IHDR, PLTE, IDAT, IEND) whose CRC-32 does
+    not match is corrupt; an ancillary chunk with a bad CRC is left out (libpng's
+    default: warn and discard).
+
+    Parameters
+    ----------
+    data : bytes
+        The whole file, signature included.
+    p : Path
+        The file's name, for error messages.
+
+    Returns
+    -------
+    list of (bytes, int, int)
+
+    Raises
+    ------
+    FileFormatError
+    """
+    chunks, pos = [], len(_PNG_SIGNATURE)
+    while True:
+        if pos + 12 > len(data):
+            raise FileFormatError(
+                f"{p}: truncated PNG (the file ends at byte {len(data)}, before its IEND chunk)"
+            )
+        (length,) = struct.unpack_from(">I", data, pos)
+        kind, end = data[pos + 4 : pos + 8], pos + 12 + length
+        if end > len(data):
+            raise FileFormatError(f"{p}: truncated PNG (the {kind!r} chunk is cut short)")
+        (crc,) = struct.unpack_from(">I", data, end - 4)
+        if zlib.crc32(data[pos + 4 : end - 4]) & 0xFFFFFFFF == crc:
+            chunks.append((kind, pos, end))
+        elif kind[:1].isupper():
+            raise FileFormatError(f"{p}: corrupt PNG (CRC mismatch in the {kind!r} chunk)")
+        if kind == b"IEND":
+            return chunks
+        pos = end
+
+
+def _png_stream_size(w: int, h: int, bits: int, interlace: int) -> int:
+    """Bytes of the decompressed IDAT stream of a ``w`` x ``h`` PNG (PNG specification,
+    sections 7.2 and 8.2): each row is a filter-type byte and
+    :math:`\\lceil w \\cdot bits / 8 \\rceil` bytes; an Adam7 file holds the rows of its 7
+    passes (pass ``(x0, y0, dx, dy)`` has :math:`\\lceil (w - x0) / dx \\rceil` columns
+    and :math:`\\lceil (h - y0) / dy \\rceil` rows; an empty pass has no bytes).
+
+    Parameters
+    ----------
+    w, h : int
+        Width and height, > 0.
+    bits : int
+        Bits per pixel (bit depth times channels).
+    interlace : int
+        0 none, 1 Adam7.
+
+    Returns
+    -------
+    int
+    """
+    passes = _ADAM7 if interlace else ((0, 0, 1, 1),)
+    total = 0
+    for x0, y0, dx, dy in passes:
+        cols, rows = -(-(w - x0) // dx), -(-(h - y0) // dy)
+        if cols > 0 and rows > 0:
+            total += rows * (1 + (cols * bits + 7) // 8)
+    return total
+
+
+def _check_pixels(p: Path, fmt: str, w: int, h: int, decoded_bytes: int) -> None:
+    """Refuse a header's image size before anything is allocated for it: no pixels, or
+    more than Pillow's decompression-bomb limit ``PIL.Image.MAX_IMAGE_PIXELS`` (read at
+    each call, so raising it, or setting None, lets trusted large files through).
+
+    Parameters
+    ----------
+    p : Path
+        The file, for the message.
+    fmt : str
+        Its format's name, for the message.
+    w, h : int
+        The size its header declares.
+    decoded_bytes : int
+        What the decoded image would take, for the message.
+
+    Raises
+    ------
+    FileFormatError
+    """
+    from PIL import Image
+
+    if w <= 0 or h <= 0:
+        raise FileFormatError(f"{p}: corrupt {fmt} (its header declares a {w}x{h} image)")
+    cap = Image.MAX_IMAGE_PIXELS
+    if cap is not None and w * h > cap:
+        raise FileFormatError(
+            f"{p}: the {fmt} header declares {w}x{h} = {w * h} pixels "
+            f"({decoded_bytes / 2**20:.0f} MiB decoded), over the decompression-bomb limit "
+            f"of {int(cap)} pixels; if the file is trusted, raise PIL.Image.MAX_IMAGE_PIXELS"
+        )
+
+
+def _read_png(data: bytes, p: Path) -> np.ndarray:
+    """Decode a PNG, its data checked against its header before and while decoding.
+
+    1. The chunks are walked and checked (:func:`_png_chunks`); IHDR must come first
+       with a bit depth and colour type the specification allows.
+    2. Before anything is decompressed: the size must pass :func:`_check_pixels`, and
+       the IDAT stream the header implies (:func:`_png_stream_size`) must fit in what
+       deflate can make of the compressed bytes, at most 1032 bytes per byte (a
+       258-byte match coded in 2 bits).
+    3. The stream is decompressed to at most its declared size; a stream that ends
+       before it is a truncated file (Pillow pads the missing rows with zeros).
+    4. 16-bit colour (RGB, gray + alpha, RGBA) is reconstructed here
+       (:func:`_decode_png16`: Pillow has no 16-bit colour mode); everything else goes
+       to Pillow as the same file with the checked stream in one stored (uncompressed)
+       IDAT, so it is decompressed once.
 
     Parameters
     ----------
     data : bytes
         The whole file.
+    p : Path
+        The file's name, for error messages.
+
+    Returns
+    -------
+    ndarray
+        As ``cv2.imread(path, cv2.IMREAD_UNCHANGED)`` gives it, in RGB(A) order.
+
+    Raises
+    ------
+    FileFormatError
+    """
+    import imageio.v3 as iio
+
+    chunks = _png_chunks(data, p)
+    first, start, end = chunks[0]
+    if first != b"IHDR" or end - start != 25:
+        raise FileFormatError(f"{p}: corrupt PNG (no IHDR chunk first)")
+    w, h, depth, ctype, method, filt, interlace = struct.unpack_from(">IIBBBBB", data, start + 8)
+    if depth not in _PNG_DEPTHS.get(ctype, ()) or method or filt or interlace > 1:
+        raise FileFormatError(
+            f"{p}: corrupt PNG header (bit depth {depth}, colour type {ctype}, "
+            f"methods {method}/{filt}/{interlace})"
+        )
+    if interlace and depth == 16 and ctype in _PNG16_CHANNELS:
+        raise FileFormatError(
+            f"{p}: interlaced (Adam7) 16-bit colour PNGs are not read; re-save it without "
+            "interlacing, e.g. cv2.imwrite(out, cv2.imread(path, cv2.IMREAD_UNCHANGED))"
+        )
+    channels = 4 if ctype == 3 else _PNG_CHANNELS[ctype]  # palette: expanded to RGB(A)
+    _check_pixels(p, "PNG", w, h, w * h * channels * max(depth // 8, 1))
+    idat = b"".join(data[a + 8 : b - 4] for kind, a, b in chunks if kind == b"IDAT")
+    size = _png_stream_size(w, h, depth * _PNG_CHANNELS[ctype], interlace)
+    if size > _DEFLATE_MAX_RATIO * len(idat):
+        raise FileFormatError(
+            f"{p}: truncated or corrupt PNG (its header declares {w}x{h} pixels, "
+            f"{size} bytes of image data, but it holds {len(idat)} compressed bytes, "
+            f"which deflate cannot expand beyond {_DEFLATE_MAX_RATIO * len(idat)})"
+        )
+    try:
+        stream = zlib.decompressobj().decompress(idat, size)
+    except zlib.error as exc:
+        raise FileFormatError(f"{p}: corrupt PNG image data ({exc})") from exc
+    if len(stream) < size:
+        raise FileFormatError(
+            f"{p}: truncated PNG ({len(stream)} bytes of image data, {size} expected "
+            f"for the {w}x{h} pixels its header declares)"
+        )
+    if depth == 16 and ctype in _PNG16_CHANNELS:
+        return _decode_png16(stream, w, h, _PNG16_CHANNELS[ctype], p)
+    parts, stored = [data[:8]], _png_chunk(b"IDAT", zlib.compress(stream, 0))
+    for kind, a, b in chunks:
+        if kind != b"IDAT":
+            parts.append(data[a:b])
+        elif stored:
+            parts.append(stored)
+            stored = b""
+    return np.asarray(iio.imread(b"".join(parts), plugin="pillow", extension=".png"))
+
+
+def _decode_png16(stream: bytes, w: int, h: int, ch: int, p: Path) -> np.ndarray:
+    """Reconstruct a non-interlaced 16-bit colour PNG (colour types 2, 4, 6) from its
+    decompressed IDAT stream, without loss.
+
+    Ancillary chunks (gamma, ``sBIT``, text, and ``tRNS``: a transparent colour key is
+    not turned into an alpha channel) are not applied, so the samples come as stored.
+
+    Parameters
+    ----------
+    stream : bytes
+        The decompressed IDAT stream, at least ``h * (1 + w * ch * 2)`` bytes (checked
+        by :func:`_read_png`).
+    w, h, ch : int
+        Width, height, channels.
     p : Path
         The file's name, for error messages.
 
@@ -499,44 +690,9 @@ def _decode_png16(data: bytes, p: Path) -> np.ndarray:
     Raises
     ------
     FileFormatError
-        A bad CRC, a truncated or corrupt stream, or an interlaced file.
+        A row filter type above 4.
     """
-    pos, header = 8, b""
-    idat: list[bytes] = []
-    while pos + 8 <= len(data):
-        (length,) = struct.unpack(">I", data[pos : pos + 4])
-        kind = data[pos + 4 : pos + 8]
-        body = data[pos + 8 : pos + 8 + length]
-        crc = data[pos + 8 + length : pos + 12 + length]
-        if len(body) < length or len(crc) < 4:
-            raise FileFormatError(f"{p}: truncated PNG (the {kind!r} chunk is cut short)")
-        if zlib.crc32(kind + body) & 0xFFFFFFFF != struct.unpack(">I", crc)[0]:
-            raise FileFormatError(f"{p}: corrupt PNG (CRC mismatch in the {kind!r} chunk)")
-        if kind == b"IHDR":
-            header = body
-        elif kind == b"IDAT":
-            idat.append(body)
-        elif kind == b"IEND":
-            break
-        pos += 12 + length
-    if len(header) != 13 or not idat:
-        raise FileFormatError(f"{p}: truncated PNG (no {'IDAT' if header else 'IHDR'} chunk)")
-    w, h, _, ctype, _, _, interlace = struct.unpack(">IIBBBBB", header)
-    if interlace:
-        raise FileFormatError(
-            f"{p}: interlaced (Adam7) 16-bit colour PNGs are not read; re-save it without "
-            "interlacing, e.g. cv2.imwrite(out, cv2.imread(path, cv2.IMREAD_UNCHANGED))"
-        )
-    ch = _PNG16_CHANNELS[ctype]
     n = w * ch * 2
-    try:
-        stream = zlib.decompress(b"".join(idat))
-    except zlib.error as exc:
-        raise FileFormatError(f"{p}: corrupt PNG image data ({exc})") from exc
-    if w == 0 or h == 0 or len(stream) < h * (n + 1):
-        raise FileFormatError(
-            f"{p}: truncated PNG ({len(stream)} bytes of image data, {h * (n + 1)} expected)"
-        )
     rows = np.frombuffer(stream, np.uint8, h * (n + 1)).reshape(h, n + 1)
     if rows[:, 0].max() > 4:
         raise FileFormatError(f"{p}: corrupt PNG (row filter type {rows[:, 0].max()} > 4)")
@@ -544,8 +700,151 @@ def _decode_png16(data: bytes, p: Path) -> np.ndarray:
     return raw.view(">u2").reshape(h, w, ch).astype(np.uint16)
 
 
+def _check_declared_size(p: Path) -> None:
+    """Refuse, before decoding, a non-PNG image whose header declares more pixels than
+    the file can hold or than :func:`_check_pixels` allows.
+
+    Where the format bounds its compression, the header's size is compared with the
+    file's: BMP without compression (``offset + stride * |height|`` bytes, rows padded
+    to 4 bytes), binary PGM/PPM/PBM (their samples' bytes), plain PGM/PPM (at least 2
+    bytes a sample: a digit and a separator; 1 a pixel for plain PBM), TIFF (every
+    strip or tile inside the file; uncompressed: all its samples' bytes), baseline and
+    extended Huffman JPEG (at least 2 bits per 8x8 block of its largest component: a DC
+    code and an end-of-block code). Progressive and arithmetic-coded JPEG, RLE BMP and
+    compressed TIFF have no such bound: only the pixel limit applies to them.
+
+    Parameters
+    ----------
+    p : Path
+        An existing, non-empty file.
+
+    Raises
+    ------
+    FileFormatError
+    """
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        head = fh.read(4096)
+        if head[:2] == b"\xff\xd8":
+            dims = _jpeg_frame(fh)
+            if dims is not None:
+                w, h, ch, huffman = dims
+                _check_pixels(p, "JPEG", w, h, w * h * ch)
+                need = -(-w // 8) * -(-h // 8) // 4
+                if huffman and need > size:
+                    raise FileFormatError(
+                        f"{p}: truncated or corrupt JPEG (its header declares {w}x{h} pixels, "
+                        f"which take at least {need} bytes of Huffman-coded data; the file "
+                        f"has {size})"
+                    )
+            return
+    fmt, need = "", 0
+    if head[:2] == b"BM" and len(head) >= 30:
+        (offset,) = struct.unpack_from("<I", head, 10)
+        if struct.unpack_from("<I", head, 14)[0] == 12:  # OS/2 BITMAPCOREHEADER
+            w, h, _, bits = struct.unpack_from("<HHHH", head, 18)
+            compression = 0
+        elif len(head) >= 34:
+            w, h, _, bits, compression = struct.unpack_from("<iiHHI", head, 18)
+        else:
+            return
+        h = abs(h)  # negative: rows stored top-down
+        _check_pixels(p, "BMP", w, h, w * h * 4)
+        fmt = "BMP"
+        if compression in (0, 3, 6):  # BI_RGB, BI_BITFIELDS, BI_ALPHABITFIELDS
+            need = offset + (w * bits + 31) // 32 * 4 * h
+    elif (header := _netpbm_header(head)) is not None:
+        magic, w, h, maxval, offset = header
+        ch = 3 if magic in ("P3", "P6") else 1
+        fmt = magic
+        _check_pixels(p, magic, w, h, w * h * ch * (2 if maxval > 255 else 1))
+        samples = w * h * ch
+        need = offset + {
+            "P1": samples,
+            "P4": -(-w // 8) * h,
+            "P5": samples * (2 if maxval > 255 else 1),
+            "P6": samples * (2 if maxval > 255 else 1),
+        }.get(magic, 2 * samples - 1)
+    elif head[:4] in (b"II*\x00", b"MM\x00*"):
+        fmt = "TIFF"
+        need = _tiff_need(p, size)
+    if need > size:
+        raise FileFormatError(
+            f"{p}: truncated {fmt} (its header declares {need} bytes of image data and "
+            f"header; the file has {size})"
+        )
+
+
+def _jpeg_frame(fh: Any) -> tuple[int, int, int, bool] | None:
+    """The frame header (SOF) of a JPEG: width, height, components, and whether it is
+    sequential Huffman-coded (SOF0, SOF1, SOF3); None if the markers before it cannot be
+    walked (the decoder then says what is wrong).
+
+    Parameters
+    ----------
+    fh : binary file
+        Positioned anywhere; read from byte 2 (after SOI).
+
+    Returns
+    -------
+    (int, int, int, bool) or None
+    """
+    fh.seek(2)
+    while True:
+        marker = fh.read(4)
+        if len(marker) < 4 or marker[0] != 0xFF or marker[1] in (0xD9, 0xDA):
+            return None
+        if 0xC0 <= marker[1] <= 0xCF and marker[1] not in (0xC4, 0xC8, 0xCC):
+            frame = fh.read(6)
+            if len(frame) < 6:
+                return None
+            _, h, w, ch = struct.unpack(">BHHB", frame)
+            return w, h, ch, marker[1] in (0xC0, 0xC1, 0xC3)
+        (length,) = struct.unpack(">H", marker[2:])
+        if length < 2:  # a corrupt length (it counts its own 2 bytes)
+            return None
+        fh.seek(length - 2, os.SEEK_CUR)
+
+
+def _tiff_need(p: Path, size: int) -> int:
+    """The bytes the first page of a TIFF needs, from its tags (tifffile parses them):
+    every strip or tile must lie inside the file (a missing one, of 0 bytes, would be
+    filled with zeros by the decoder) and, uncompressed, hold all the page's samples.
+
+    Parameters
+    ----------
+    p : Path
+        The file.
+    size : int
+        Its size in bytes.
+
+    Returns
+    -------
+    int
+        The size the file must have at least (``size + 1`` for a strip outside it).
+
+    Raises
+    ------
+    FileFormatError
+        Over the pixel limit (:func:`_check_pixels`).
+    """
+    import tifffile
+
+    with tifffile.TiffFile(p) as tif:
+        page = tif.pages.first
+        h, w = int(page.imagelength), int(page.imagewidth)
+        _check_pixels(p, "TIFF", w, h, int(page.size) * page.dtype.itemsize)
+        counts = [int(c) for c in page.databytecounts]
+        if not counts or min(counts) == 0:
+            return size + 1
+        end = max(int(o) + c for o, c in zip(page.dataoffsets, counts, strict=True))
+        if int(page.compression) == 1:  # uncompressed
+            return max(end, int(page.size) * page.dtype.itemsize)
+        return end
+
+
 def _netpbm_header(data: bytes) -> tuple[str, int, int, int, int] | None:
-    """Parse a PGM/PPM header (binary P5/P6 or plain P2/P3).
+    """Parse a PBM/PGM/PPM header (binary P4/P5/P6 or plain P1/P2/P3).
 
     Parameters
     ----------
@@ -555,14 +854,15 @@ def _netpbm_header(data: bytes) -> tuple[str, int, int, int, int] | None:
     Returns
     -------
     (magic, width, height, maxval, offset) or None
-        ``offset`` is where the samples start (after the one whitespace byte that ends a
-        binary header); None when ``data`` is no such header.
+        ``maxval`` is 1 for PBM (P1/P4, which have none); ``offset`` is where the
+        samples start (after the one whitespace byte that ends a binary header); None
+        when ``data`` is no such header.
     """
-    if len(data) < 2 or data[:2] not in (b"P2", b"P3", b"P5", b"P6"):
+    if len(data) < 2 or data[:2] not in (b"P1", b"P2", b"P3", b"P4", b"P5", b"P6"):
         return None
     fields: list[int] = []
     pos = 2
-    while len(fields) < 3:
+    while len(fields) < (2 if data[:2] in (b"P1", b"P4") else 3):
         while pos < len(data) and (data[pos : pos + 1].isspace() or data[pos] == ord("#")):
             if data[pos] == ord("#"):
                 end = data.find(b"\n", pos)
@@ -574,7 +874,8 @@ def _netpbm_header(data: bytes) -> tuple[str, int, int, int, int] | None:
         if pos == start:
             return None
         fields.append(int(data[start:pos]))
-    return data[:2].decode(), fields[0], fields[1], fields[2], pos + 1
+    maxval = fields[2] if len(fields) == 3 else 1
+    return data[:2].decode(), fields[0], fields[1], maxval, pos + 1
 
 
 def _decode_netpbm16(data: bytes, p: Path) -> np.ndarray | None:
@@ -764,6 +1065,14 @@ def _lowest_priority(gen: Any) -> None:
             pass
 
 
+_FRAGMENTED = [
+    "-movflags",
+    "+frag_keyframe+empty_moov+default_base_moof",
+    "-frag_duration",
+    "1000000",
+]
+
+
 class VideoWriter:
     """Write RGB uint8 frames to an H.264 MP4 (yuv420p, playable everywhere).
 
@@ -781,14 +1090,24 @@ class VideoWriter:
     fps : float
     quality : float
         0..10 (imageio-ffmpeg's scale; higher is better).
+    fragmented : bool
+        MP4/MOV only: write a fragmented file (``-movflags frag_keyframe+empty_moov``,
+        a fragment at least every second), playable up to the last fragment written
+        even when the encoder never finishes (a full disk, a killed process); a plain
+        MP4 is unreadable without its closing index.
     """
 
     def __init__(
-        self, path: str | os.PathLike[str], fps: float = 30.0, quality: float = 7.0
+        self,
+        path: str | os.PathLike[str],
+        fps: float = 30.0,
+        quality: float = 7.0,
+        fragmented: bool = False,
     ) -> None:
         self.path = check_video_path(path)
         self.fps = check_positive(fps, "fps")
         self.quality = float(quality)
+        self.fragmented = bool(fragmented) and self.path.suffix.lower() in (".mp4", ".m4v", ".mov")
         self._gen: Any = None
         self._size: tuple[int, int] | None = None
         self.frames_written = 0
@@ -816,7 +1135,7 @@ class VideoWriter:
                 # x264's "veryfast" preset: about a third of "medium"'s CPU time for a
                 # somewhat larger file at the same quality (the encoder runs beside
                 # the pipeline, on the same cores)
-                output_params=["-preset", "veryfast"],
+                output_params=["-preset", "veryfast"] + (_FRAGMENTED if self.fragmented else []),
             )
             self._gen.send(None)
             _lowest_priority(self._gen)

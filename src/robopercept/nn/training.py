@@ -39,6 +39,7 @@ from torch import nn
 from torch.utils.data import DataLoader, Dataset
 
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import atomic_path
 
 __all__ = [
     "Evaluation",
@@ -413,9 +414,8 @@ def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path
     file renamed over it), so an interruption never leaves half a checkpoint."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, p)
+    with atomic_path(p) as tmp:  # the one atomic writer (robopercept.fileio)
+        torch.save(state, tmp)
     return p
 
 

@@ -17,26 +17,39 @@ frame source and writes, into one folder:
   (:class:`~robopercept.pipelines.PlaneTrackSummary`), with the count of each status;
 * ``plane.png``: raw, tracked and (when known) true plane parameters over time.
 
-The run stops cleanly on Ctrl-C or when the source fails (a camera unplugged): the
-outputs written so far are finalized (the video closed, the summary and the plot
-written) and the summary says why it stopped.
+The run stops cleanly on Ctrl-C, on SIGTERM (``docker stop``, systemd), when the
+source fails (a camera unplugged) or when an output cannot be written (a full disk):
+the outputs written so far are finalized (the video closed, the summary and the plot
+written) and the summary says why it stopped (``stopped``). Signals that arrive while
+the outputs are being written or finalized are held back (:class:`StopSignals`), so a
+second Ctrl-C never leaves a file half-written. ``summary.json`` and ``plane.png`` are
+written atomically (:func:`robopercept.fileio.atomic_write`: complete or absent, never
+truncated); ``plane.csv`` holds whole rows only (a row cut short by a full disk is
+removed); the video is a fragmented MP4, playable up to the last fragment written even
+when the encoder could not finish.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
 import os
+import shutil
+import signal
+import threading
 import time
 import warnings
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from robopercept.errors import InputError, RoboperceptError
+from robopercept.fileio import WriteError, atomic_path, atomic_write, write_error
 from robopercept.geometry import apply, project
 from robopercept.imaging.io import VideoWriter
 from robopercept.pipelines.plane_eval import PlaneTrackSummary, summarize
@@ -50,7 +63,13 @@ from robopercept.sources.frames import RGBDFrame
 from robopercept.viz import draw_lines, draw_text
 from robopercept.viz.plot import Panel, Series, plot_series
 
-__all__ = ["CSV_COLUMNS", "PlaneTrackOutputs", "annotate_frame", "run_plane_tracking"]
+__all__ = [
+    "CSV_COLUMNS",
+    "PlaneTrackOutputs",
+    "StopSignals",
+    "annotate_frame",
+    "run_plane_tracking",
+]
 
 CSV_COLUMNS = (
     "frame",
@@ -138,18 +157,131 @@ def annotate_frame(
     return draw_text(img, text, (8, 8), size=max(12, kc.height // 40))
 
 
+class StopSignals:
+    """Turn SIGINT (Ctrl-C) and SIGTERM into a request to stop, for a loop that must
+    finish its outputs before it ends.
+
+    Inside ``with StopSignals() as stop:`` the first signal only records itself in
+    :attr:`received` (``"SIGINT"`` or ``"SIGTERM"``); the loop checks it between
+    frames and stops. A further signal raises :class:`KeyboardInterrupt` (to break out
+    of a source that blocks), except inside ``with stop.shield():`` (writing or
+    finalizing the outputs), where it is only counted in :attr:`count`, so a file is
+    never left half-written. On leaving, the previous handlers are restored.
+
+    Handlers are installed only from the main thread (the only one Python delivers
+    signals to); elsewhere the object is inert and Ctrl-C keeps raising
+    :class:`KeyboardInterrupt`. A signal the process ignores (``SIG_IGN``, as under
+    ``nohup``) stays ignored.
+
+    Parameters
+    ----------
+    signals : tuple of signal.Signals
+        Default ``(SIGINT, SIGTERM)``.
+
+    Attributes
+    ----------
+    received : str or None
+        Name of the first signal received.
+    count : int
+        Signals received so far.
+
+    Examples
+    --------
+    >>> with StopSignals() as stop:  # doctest: +SKIP
+    ...     for frame in frames:
+    ...         with stop.shield():
+    ...             write(frame)
+    ...         if stop.received:
+    ...             break
+    """
+
+    def __init__(
+        self, signals: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM)
+    ) -> None:
+        self.signals = tuple(signals)
+        self.received: str | None = None
+        self.count = 0
+        self._shielded = 0
+        self._previous: dict[signal.Signals, Any] = {}
+
+    def _handle(self, signum: int, frame: object) -> None:
+        self.count += 1
+        if self.received is None:
+            self.received = signal.Signals(signum).name
+        elif not self._shielded:
+            raise KeyboardInterrupt
+
+    @contextmanager
+    def shield(self) -> Iterator[None]:
+        """Hold back further signals (only count them) while the block runs."""
+        self._shielded += 1
+        try:
+            yield
+        finally:
+            self._shielded -= 1
+
+    def __enter__(self) -> StopSignals:
+        if threading.current_thread() is threading.main_thread():
+            for sig in self.signals:
+                old = signal.getsignal(sig)
+                if old is signal.SIG_IGN or old is None:
+                    continue
+                signal.signal(sig, self._handle)
+                self._previous[sig] = old
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, old in self._previous.items():
+            signal.signal(sig, old)
+        self._previous.clear()
+
+
+def _video_error(path: Path, exc: OSError) -> WriteError:
+    """The :class:`WriteError` of a failed video write. The encoder's own error has no
+    ``errno`` (imageio-ffmpeg reports a broken pipe), so a folder with under 1 MiB free
+    is taken for a full disk."""
+    if exc.errno is None:
+        try:
+            full = shutil.disk_usage(path.parent).free < 1 << 20
+        except OSError:
+            full = False
+        if full:
+            return write_error(path, OSError(28, "No space left on device"))
+        lines = str(exc).strip().splitlines()
+        return WriteError(
+            f"{path}: the video encoder stopped ({lines[0] if lines else type(exc).__name__})",
+            None,
+            str(path),
+        )
+    return write_error(path, exc)
+
+
 class PlaneTrackOutputs:
     """Writes ``plane.csv``, ``tracking.mp4``, ``summary.json`` and ``plane.png`` into
     ``out_dir`` (see the module docstring). Use as a context manager or call
-    :meth:`close`; every row is flushed as written."""
+    :meth:`close`; every row is written in one call and flushed.
+
+    An output that cannot be written raises :class:`~robopercept.fileio.WriteError`
+    naming the file (``no space left on the device`` for a full disk); ``plane.csv``
+    then keeps its complete rows only.
+
+    Attributes
+    ----------
+    written : list of str
+        The outputs completed by :meth:`close`.
+    errors : list of str
+        What :meth:`close` could not write, one line per file.
+    """
 
     def __init__(self, out_dir: str | os.PathLike[str], *, video: bool = True, fps: float = 30.0):
         self.out = Path(out_dir)
         self.out.mkdir(parents=True, exist_ok=True)
-        self._csv_fh = (self.out / "plane.csv").open("w", newline="")
-        self._csv = csv.writer(self._csv_fh)
-        self._csv.writerow(CSV_COLUMNS)
-        self._csv_fh.flush()
+        self._csv_path = self.out / "plane.csv"
+        self._csv_fh = self._csv_path.open("w", newline="", encoding="utf-8")
+        self._csv_bytes = 0  # size of the complete rows written
+        self._csv_row(CSV_COLUMNS)
+        self.written: list[str] = []
+        self.errors: list[str] = []
         self._video_on = video
         self._fps = fps
         self._video: VideoWriter | None = None
@@ -177,10 +309,27 @@ class PlaneTrackOutputs:
             [(lo1 + hi1) / 2, (lo2 + hi2) / 2, (hi1 - lo1) / 2, (hi2 - lo2) / 2]
         )
 
+    def _csv_row(self, row: Iterable[object]) -> None:
+        buf = io.StringIO()
+        csv.writer(buf).writerow(row)
+        line = buf.getvalue()
+        try:  # one write, flushed: a full disk cuts at most this row, removed on close
+            self._csv_fh.write(line)
+            self._csv_fh.flush()
+        except OSError as exc:
+            raise write_error(self._csv_path, exc) from exc
+        self._csv_bytes += len(line.encode("utf-8"))
+
     def add(self, frame: RGBDFrame, result: PlaneTrackResult) -> None:
-        """Write the row (and the video frame) of one processed frame."""
+        """Write the row (and the video frame) of one processed frame.
+
+        Raises
+        ------
+        WriteError
+            ``plane.csv`` or ``tracking.mp4`` could not be written (a full disk).
+        """
         r = result
-        self._csv.writerow(
+        self._csv_row(
             [
                 r.index,
                 f"{r.timestamp:.6f}",
@@ -195,21 +344,27 @@ class PlaneTrackOutputs:
                 f"{r.ms['total']:.3f}",
             ]
         )
-        self._csv_fh.flush()
         truth = {
             k: v for k, v in frame.ground_truth.items() if k in ("plane", "valid_board_pixels")
         }
+        # kept for the summary and the plot without the inlier points (up to 7 MB a
+        # frame at 1280x720: a long run would hold gigabytes); the summary counts the
+        # rows plane.csv holds
+        self._rows.append((dataclasses.replace(r, inlier_points=_NO_POINTS), truth))
         if self._video_on:
             if r.accepted:
                 self._update_extent(r)
             elif not np.isfinite(r.track_d):
                 self._extent = None
             if self._video is None:
-                self._video = VideoWriter(self.out / "tracking.mp4", fps=self._fps, quality=6)
-            self._video.write(annotate_frame(frame, r, self._extent))
-        # kept for the summary and the plot without the inlier points (up to 7 MB a
-        # frame at 1280x720: a long run would hold gigabytes)
-        self._rows.append((dataclasses.replace(r, inlier_points=_NO_POINTS), truth))
+                self._video = VideoWriter(
+                    self.out / "tracking.mp4", fps=self._fps, quality=6, fragmented=True
+                )
+            picture = annotate_frame(frame, r, self._extent)
+            try:
+                self._video.write(picture)
+            except OSError as exc:
+                raise _video_error(self._video.path, exc) from exc
 
     @property
     def results(self) -> list[PlaneTrackResult]:
@@ -224,22 +379,67 @@ class PlaneTrackOutputs:
         has_truth = bool(truths) and all("plane" in t for t in truths)
         return summarize(results, truths if has_truth else None, **extra)
 
-    def close(self, summary: PlaneTrackSummary | None) -> None:
-        """Finish the video, write ``summary.json`` (when given) and ``plane.png``."""
+    def close(self, summary: PlaneTrackSummary | None) -> PlaneTrackSummary | None:
+        """Finish ``plane.csv`` and the video, write ``plane.png`` and then (when given)
+        ``summary.json``, both atomically, with ``outputs`` listing the files completed.
+
+        Each output is finished on its own: one that fails (a full disk) is recorded in
+        :attr:`errors` and the others are still written. ``plane.csv`` is cut back to
+        its last complete row.
+
+        Returns
+        -------
+        PlaneTrackSummary or None
+            ``summary`` with ``outputs`` set to the files written (:attr:`written`).
+        """
         if self.closed:
-            return
+            return summary
         self.closed = True
-        self._csv_fh.close()
+        try:
+            self._csv_fh.close()
+        except OSError as exc:  # the buffered rest of a row cut short
+            self.errors.append(str(write_error(self._csv_path, exc)))
+        try:
+            if self._csv_path.stat().st_size != self._csv_bytes:
+                os.truncate(self._csv_path, self._csv_bytes)
+            self.written.append("plane.csv")
+        except OSError as exc:
+            self.errors.append(str(write_error(self._csv_path, exc)))
         if self._video is not None:
-            self._video.close()
-        if summary is not None:
-            (self.out / "summary.json").write_text(
-                json.dumps(summary.to_dict(), indent=2, default=float)
-            )
+            try:
+                self._video.close()
+                if self._video.frames_written:
+                    self.written.append("tracking.mp4")
+            except OSError as exc:
+                self.errors.append(str(_video_error(self._video.path, exc)))
         if self._rows:
             from robopercept.imaging import write_image
 
-            write_image(self.out / "plane.png", self._plot())
+            try:
+                with atomic_path(self.out / "plane.png") as tmp:
+                    write_image(tmp, self._plot())
+                self.written.append("plane.png")
+            except WriteError as exc:
+                self.errors.append(str(exc))
+        if summary is None:
+            return None
+        summary = self._with_errors(summary.replace(outputs=(*self.written, "summary.json")))
+        try:
+            atomic_write(
+                self.out / "summary.json",
+                json.dumps(summary.to_dict(), indent=2, default=float),
+            )
+            self.written.append("summary.json")
+        except WriteError as exc:
+            self.errors.append(str(exc))
+            summary = self._with_errors(summary.replace(outputs=tuple(self.written)))
+        return summary
+
+    def _with_errors(self, summary: PlaneTrackSummary) -> PlaneTrackSummary:
+        """``summary`` whose ``stopped`` names the first output that failed, if any."""
+        if self.errors and not (summary.stopped or "").startswith("output failed"):
+            return summary.replace(stopped=f"output failed: {self.errors[0]}")
+        return summary
 
     def _plot(self) -> np.ndarray:
         res = self.results
@@ -292,9 +492,19 @@ def run_plane_tracking(
     -------
     PlaneTrackSummary
         The summary also written to ``summary.json``; ``stopped`` says why a run ended
-        early (``"interrupted"`` for Ctrl-C, or the source's error). Its stage timings
-        are the tracker's own work per frame (:attr:`PlaneTrackResult.ms`); the wall
-        time covers the source and the outputs too.
+        early: ``"interrupted"`` (Ctrl-C), ``"stopped by SIGTERM"``, ``"source failed:
+        <error>"`` or ``"output failed: <file>: <error>"`` (``no space left on the
+        device`` for a full disk). ``outputs`` lists the files completed. Its stage
+        timings are the tracker's own work per frame (:attr:`PlaneTrackResult.ms`); the
+        wall time covers the source and the outputs too.
+
+    Notes
+    -----
+    While it runs (from the main thread), SIGINT and SIGTERM are handled by
+    :class:`StopSignals`: the first stops the run after the current frame, a second one
+    while a frame is processed raises :class:`KeyboardInterrupt` (stop now), and any
+    signal while the outputs are written or finalized waits until they are complete.
+    The previous handlers are restored on return.
     """
     if max_frames is not None and max_frames < 1:
         raise InputError(f"max_frames must be >= 1; got {max_frames}")
@@ -307,36 +517,71 @@ def run_plane_tracking(
     outputs = PlaneTrackOutputs(out_dir, video=video, fps=fps)
     bar = progress_bar(total=total, unit="frame", disable=not progress, desc="plane tracking")
     accepted = 0
-    try:
-        it = iter(frames)
-        count = 0
-        while max_frames is None or count < max_frames:
-            try:
-                frame = next(it)
-            except StopIteration:
-                break
-            except (RoboperceptError, RuntimeError, OSError) as exc:
-                stopped = f"source failed: {exc}"
-                warnings.warn(f"stopping: {stopped}", stacklevel=2)
-                break
-            for done, result in tracker.push(frame):
-                outputs.add(done, result)
-            count += 1
-            accepted += tracker.last_accepted
-            bar.set_postfix_str(f"detected {accepted}/{count}", refresh=False)
-            bar.update(1)
-    except KeyboardInterrupt:
-        stopped = "interrupted"
-    finally:
-        for done, result in tracker.flush():  # the frames the smoother still held
-            outputs.add(done, result)
-        bar.close()
-        skipped = getattr(frames, "skipped", [])
-        n_skipped = len(skipped) if not isinstance(skipped, int) else skipped
-        wall = time.perf_counter() - start
-        names = ["plane.csv", "tracking.mp4", "summary.json", "plane.png"]
-        summary = outputs.summary(skipped=n_skipped, wall_seconds=round(wall, 3)).replace(
-            stopped=stopped, outputs=tuple(n for n in names if video or n != "tracking.mp4")
-        )
-        outputs.close(summary)
+    output_failed = False
+    with StopSignals() as stop:
+        try:
+            it = iter(frames)
+            count = 0
+            while max_frames is None or count < max_frames:
+                try:
+                    frame = next(it)
+                except StopIteration:
+                    break
+                except (RoboperceptError, RuntimeError, OSError) as exc:
+                    stopped = f"source failed: {exc}"
+                    warnings.warn(f"stopping: {stopped}", stacklevel=2)
+                    break
+                done_frames = tracker.push(frame)
+                with stop.shield():
+                    for done, result in done_frames:
+                        outputs.add(done, result)
+                count += 1
+                accepted += tracker.last_accepted
+                bar.set_postfix_str(f"detected {accepted}/{count}", refresh=False)
+                bar.update(1)
+                if stop.received:
+                    break
+        except KeyboardInterrupt:
+            stopped = "interrupted"
+        except WriteError as exc:  # a full disk: stop, keep what was written
+            stopped = f"output failed: {exc}"
+            output_failed = True
+            warnings.warn(f"stopping: {stopped}", stacklevel=2)
+        finally:
+            with stop.shield():  # a second Ctrl-C waits until the outputs are complete
+                if stop.received and stopped in (None, "interrupted"):
+                    by_ctrl_c = stop.received == "SIGINT"
+                    stopped = "interrupted" if by_ctrl_c else f"stopped by {stop.received}"
+                summary = _finish(outputs, tracker, frames, start, stopped, output_failed)
+                bar.close()
     return summary
+
+
+def _finish(
+    outputs: PlaneTrackOutputs,
+    tracker: PlaneTracker,
+    frames: Iterable[RGBDFrame],
+    start: float,
+    stopped: str | None,
+    output_failed: bool,
+) -> PlaneTrackSummary:
+    """Add the frames the smoother still held (unless an output already failed), close
+    the outputs and return the summary written (``stopped`` names a later failure)."""
+    try:
+        if not output_failed:
+            for done, result in tracker.flush():
+                outputs.add(done, result)
+    except WriteError as exc:
+        stopped = stopped or f"output failed: {exc}"
+    except Exception as exc:
+        if stopped != "interrupted":
+            raise
+        # a tracker cut short by a second Ctrl-C: its held frames are dropped
+        warnings.warn(f"the last frames held by the smoother were dropped: {exc}", stacklevel=3)
+    skipped = getattr(frames, "skipped", [])
+    n_skipped = len(skipped) if not isinstance(skipped, int) else skipped
+    wall = time.perf_counter() - start
+    summary = outputs.summary(skipped=n_skipped, wall_seconds=round(wall, 3))
+    final = outputs.close(summary.replace(stopped=stopped))
+    assert final is not None
+    return final

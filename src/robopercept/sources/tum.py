@@ -20,6 +20,7 @@ closest colour image within ``max_difference`` seconds), like the benchmark's
 from __future__ import annotations
 
 import csv
+import io
 import json
 import os
 import warnings
@@ -56,6 +57,10 @@ CAMERA_JSON_HELP = (
 remedy every camera.json error ends with."""
 
 
+_NAME_MAX = 255  # bytes per path component (Linux, macOS, Windows)
+_PATH_MAX = 4095  # bytes per path (Linux)
+
+
 def _intrinsics(d: dict[str, Any], what: str, path: Path) -> CameraIntrinsics:
     try:
         return CameraIntrinsics(
@@ -68,7 +73,8 @@ def _intrinsics(d: dict[str, Any], what: str, path: Path) -> CameraIntrinsics:
             d.get("model", "none"),
             tuple(d.get("coeffs", (0.0,) * 5)),
         )
-    except (KeyError, TypeError, ValueError, InputError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError, InputError) as exc:
+        # OverflowError: int(Infinity), which json.loads accepts
         raise FileFormatError(f"{path}: bad '{what}' camera ({exc}); {CAMERA_JSON_HELP}") from None
 
 
@@ -100,16 +106,22 @@ def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
         :data:`CAMERA_JSON_HELP` (the fields and ``robopercept rgbd-import``).
     """
     p = Path(path)
-    if not p.is_file():
-        raise FileFormatError(f"{p}: missing; {CAMERA_JSON_HELP}")
     try:
-        raw = json.loads(p.read_text())
+        if not p.is_file():
+            raise FileFormatError(f"{p}: missing; {CAMERA_JSON_HELP}")
+        raw = json.loads(p.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(
+            f"{p}: not UTF-8 text (byte {exc.start}); {CAMERA_JSON_HELP}"
+        ) from None
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(f"{p}: not valid JSON ({exc}); {CAMERA_JSON_HELP}") from None
+    except FileFormatError:
+        raise
     except OSError as exc:
         raise FileFormatError(
             f"{p}: cannot read ({exc.strerror or exc}); {CAMERA_JSON_HELP}"
         ) from None
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(f"{p}: not valid JSON ({exc}); {CAMERA_JSON_HELP}") from None
     try:
         T = np.asarray(raw["T_color_depth"], dtype=np.float64)
         scale = float(raw["depth_scale"])
@@ -121,9 +133,10 @@ def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
         }
     except (KeyError, TypeError, ValueError) as exc:
         raise FileFormatError(f"{p}: field {exc} missing or wrong; {CAMERA_JSON_HELP}") from None
-    if T.shape != (4, 4) or not scale > 0:
+    if T.shape != (4, 4) or not np.isfinite(T).all() or not (0 < scale < np.inf):
         raise FileFormatError(
-            f"{p}: T_color_depth must be a 4x4 list and depth_scale > 0; {CAMERA_JSON_HELP}"
+            f"{p}: T_color_depth must be a 4x4 list of finite numbers and depth_scale a "
+            f"finite number > 0; {CAMERA_JSON_HELP}"
         )
     return out
 
@@ -149,21 +162,39 @@ def read_timestamp_list(path: str | os.PathLike[str]) -> list[tuple[float, str]]
         that is not ``timestamp file``.
     """
     path = Path(path)
-    if not path.exists():
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
         raise FileFormatError(
             f"{path}: missing (a tracker folder needs rgb.txt, depth.txt and camera.json; "
             "convert other layouts with `robopercept rgbd-import SRC_DIR OUT_DIR`)"
-        )
+        ) from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(
+            f"{path}: not UTF-8 text (byte {exc.start}): expected 'timestamp file' lines"
+        ) from None
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
     rows = []
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    for n, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
         parts = line.split()
         try:
-            rows.append((float(parts[0]), parts[1]))
+            t = float(parts[0])
+            name = parts[1]
         except (IndexError, ValueError):
             raise FileFormatError(f"{path}:{n}: expected 'timestamp file', got {line!r}") from None
+        if not np.isfinite(t):
+            raise FileFormatError(f"{path}:{n}: timestamp {parts[0]!r} is not a finite number")
+        longest = max(len(c.encode("utf-8")) for c in Path(name).parts) if name else 0
+        if longest > _NAME_MAX or len(name.encode("utf-8")) > _PATH_MAX:
+            raise FileFormatError(
+                f"{path}:{n}: file name too long ({len(name.encode('utf-8'))} bytes, a "
+                f"name may have {_NAME_MAX} per folder level): expected 'timestamp file'"
+            )
+        rows.append((t, name))
     return rows
 
 
@@ -213,10 +244,11 @@ def associate_timestamps(
 class TUMFolderSource:
     """Frames of a TUM-layout folder (see the module docstring).
 
-    Iterating yields :class:`RGBDFrame` objects. A frame whose image cannot be decoded is
-    skipped with a warning and recorded in :attr:`skipped`; a frame file that is missing
-    raises :class:`FileFormatError` naming it; images whose size disagrees with
-    ``camera.json`` raise :class:`InputError`.
+    Iterating yields :class:`RGBDFrame` objects. A frame whose image is missing, cannot
+    be decoded, or whose size disagrees with ``camera.json`` is skipped with a warning
+    naming the file and recorded in :attr:`skipped` (so one bad frame does not end a
+    run). A folder that vanishes while it is read raises :class:`FileFormatError`
+    naming it: that cannot be skipped.
 
     Parameters
     ----------
@@ -236,7 +268,11 @@ class TUMFolderSource:
 
     def __init__(self, path: str | os.PathLike[str], max_difference: float = 0.02) -> None:
         self.path = Path(path)
-        if not self.path.is_dir():
+        try:
+            is_dir = self.path.is_dir()
+        except OSError as exc:  # ENAMETOOLONG, ELOOP, EACCES
+            raise FileFormatError(f"{self.path}: cannot open ({exc.strerror or exc})") from None
+        if not is_dir:
             raise FileFormatError(f"{self.path}: not a folder")
         self.camera = read_camera_json(self.path / "camera.json")
         self.pairs = associate_timestamps(
@@ -252,7 +288,13 @@ class TUMFolderSource:
         if not path.exists():
             return {}
         planes = {}
-        with path.open(newline="") as fh:
+        try:
+            text = path.read_text(encoding="utf-8")
+        except UnicodeDecodeError as exc:
+            raise FileFormatError(
+                f"{path}: not UTF-8 text (byte {exc.start}): expected frame,nx,ny,nz,d"
+            ) from None
+        with io.StringIO(text, newline="") as fh:
             for n, row in enumerate(csv.DictReader(fh), 2):
                 try:
                     normal = np.array([float(row["nx"]), float(row["ny"]), float(row["nz"])])
@@ -273,37 +315,58 @@ class TUMFolderSource:
         cam = self.camera
         for index, (t, dname, cname) in enumerate(self.pairs):
             dpath, cpath = self.path / dname, self.path / cname
-            for p in (dpath, cpath):
-                if not p.exists():
-                    raise FileFormatError(f"{p}: frame {index} file is missing")
+            missing = [p for p in (dpath, cpath) if not _exists(p)]
+            if missing:
+                if not _exists(self.path):  # not a frame's fault: cannot be skipped
+                    raise FileFormatError(
+                        f"{self.path}: the folder is gone (frame {index} of {len(self)})"
+                    )
+                self._skip(index, f"{missing[0]}: file is missing")
+                continue
             try:
                 depth = read_image(dpath)
                 color = read_image(cpath, mode="rgb")
             except FileFormatError as exc:
-                warnings.warn(f"skipping frame {index}: {exc}", stacklevel=2)
-                self.skipped.append((index, str(exc)))
+                self._skip(index, str(exc))
                 continue
             if depth.dtype != np.uint16 or depth.ndim != 2:
-                reason = (
+                self._skip(
+                    index,
                     f"{dpath}: depth must be 16-bit single-channel (PNG, PGM or TIFF); got "
                     f"{depth.dtype} {depth.shape}: convert the folder with `robopercept "
-                    "rgbd-import` (it reads float and 16-bit depth)"
+                    "rgbd-import` (it reads float and 16-bit depth)",
                 )
-                warnings.warn(f"skipping frame {index}: {reason}", stacklevel=2)
-                self.skipped.append((index, reason))
                 continue
             truth = dict(self.planes.get(index, {}))
-            yield RGBDFrame(
-                index,
-                t,
-                depth,
-                np.ascontiguousarray(color[..., :3]),
-                cam["depth"],
-                cam["color"],
-                cam["T_color_depth"],
-                cam["depth_scale"],
-                truth,
-            )
+            try:
+                frame = RGBDFrame(
+                    index,
+                    t,
+                    depth,
+                    np.ascontiguousarray(color[..., :3]),
+                    cam["depth"],
+                    cam["color"],
+                    cam["T_color_depth"],
+                    cam["depth_scale"],
+                    truth,
+                )
+            except InputError as exc:  # an image of the wrong size
+                self._skip(index, f"{dpath.name} / {cpath.name}: {exc}")
+                continue
+            yield frame
+
+    def _skip(self, index: int, reason: str) -> None:
+        """Warn ``skipping frame <index>: <reason>`` and record it in :attr:`skipped`."""
+        warnings.warn(f"skipping frame {index}: {reason}", stacklevel=3)
+        self.skipped.append((index, reason))
+
+
+def _exists(p: Path) -> bool:
+    """``p.exists()``, False for a path the OS refuses (too long, a loop)."""
+    try:
+        return p.exists()
+    except OSError:
+        return False
 
 
 def camera_dict(k: CameraIntrinsics) -> dict[str, Any]:

@@ -1,0 +1,195 @@
+"""Writing output files safely: atomically, and with errors that name the file.
+
+:func:`atomic_write` and :func:`atomic_path` write a file as a temporary file in the
+same folder, flushed to the disk (``fsync``), then renamed over the target with
+:func:`os.replace`, which POSIX and Windows make atomic within one file system: a
+reader (or a run interrupted by a signal, a full disk or a crash) sees the old file or
+the complete new one, never a truncated one. On an error the temporary file is removed
+and :class:`WriteError` names the target file and what happened (``no space left on the
+device`` for ``ENOSPC``/``EDQUOT``).
+
+This is the one atomic writer of the package (checkpoints of ``nn.training``, the
+outputs of ``pipelines.plane_outputs``).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from robopercept.errors import RoboperceptError
+
+__all__ = [
+    "DISK_FULL_ERRNOS",
+    "WriteError",
+    "atomic_path",
+    "atomic_write",
+    "describe_write_error",
+    "write_error",
+]
+
+DISK_FULL_ERRNOS = frozenset(
+    e for e in (errno.ENOSPC, getattr(errno, "EDQUOT", None), errno.EFBIG) if e is not None
+)
+"""``errno`` values that mean the disk (or the user's quota) is full."""
+
+
+class WriteError(RoboperceptError, OSError):
+    """An output file could not be written (a full disk, an I/O error, a read-only or
+    vanished folder). The message starts with the file's path; ``errno`` and
+    ``filename`` are those of the underlying :class:`OSError`.
+
+    Parameters
+    ----------
+    message : str
+        One line starting with the file's path (:func:`describe_write_error`).
+    code : int, optional
+        The ``errno`` of the underlying error.
+    filename : str, optional
+        The file being written.
+    """
+
+    def __init__(self, message: str, code: int | None = None, filename: str | None = None):
+        super().__init__(message)
+        self.errno = code
+        self.filename = filename
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+def _errno(exc: BaseException | None) -> int | None:
+    """The first ``errno`` in ``exc`` and its causes (a writer may wrap the OSError)."""
+    seen = 0
+    while exc is not None and seen < 16:
+        code = getattr(exc, "errno", None)
+        if code is not None:
+            return int(code)
+        exc = exc.__cause__ or exc.__context__
+        seen += 1
+    return None
+
+
+def describe_write_error(path: str | os.PathLike[str], exc: BaseException) -> str:
+    """One line naming ``path`` and what went wrong writing it.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file being written.
+    exc : BaseException
+        The error (an :class:`OSError` gives its ``errno``/``strerror``).
+
+    Returns
+    -------
+    str
+        ``"<path>: no space left on the device"`` for ``ENOSPC``, ``EDQUOT`` and
+        ``EFBIG``; ``"<path>: <strerror>"`` for another :class:`OSError`;
+        ``"<path>: <first line of exc>"`` otherwise.
+
+    Examples
+    --------
+    >>> describe_write_error("out/summary.json", OSError(28, "No space left on device"))
+    'out/summary.json: no space left on the device'
+    """
+    code = _errno(exc)
+    if code in DISK_FULL_ERRNOS:
+        what = "no space left on the device"
+    elif isinstance(exc, OSError) and exc.strerror:
+        what = exc.strerror
+    else:
+        lines = str(exc).strip().splitlines()
+        what = lines[0] if lines else type(exc).__name__
+    return f"{os.fspath(path)}: {what}"
+
+
+def write_error(path: str | os.PathLike[str], exc: OSError) -> WriteError:
+    """A :class:`WriteError` for ``exc`` raised while writing ``path`` (message from
+    :func:`describe_write_error`, same ``errno``)."""
+    return WriteError(describe_write_error(path, exc), _errno(exc), os.fspath(path))
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Give a temporary path beside ``path`` to write; on success rename it over
+    ``path`` atomically.
+
+    The temporary file is ``.<name>.<pid>.tmp<suffix>`` in the same folder (same file
+    system, so the rename is atomic; the target's suffix is kept for writers that choose
+    the format from it). When the block raises, the temporary file is removed and
+    ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to write; its folder is created if needed.
+
+    Yields
+    ------
+    Path
+        Where to write the content.
+
+    Raises
+    ------
+    WriteError
+        An :class:`OSError` while writing, flushing or renaming (the message names
+        ``path``: ``no space left on the device`` for a full disk).
+
+    Examples
+    --------
+    >>> with atomic_path("out/model.pt") as tmp:  # doctest: +SKIP
+    ...     torch.save(state, tmp)
+    """
+    p = Path(path)
+    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp{p.suffix}")
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        yield tmp
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, p)
+    except BaseException as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        if isinstance(exc, OSError) and not isinstance(exc, WriteError):
+            raise write_error(p, exc) from exc
+        raise
+
+
+def atomic_write(path: str | os.PathLike[str], data: bytes | str) -> Path:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or path-like
+    data : bytes or str
+        ``str`` is written as UTF-8.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    WriteError
+        The file could not be written; ``path`` is left as it was.
+
+    Examples
+    --------
+    >>> atomic_write("summary.json", '{"frames": 3}')  # doctest: +SKIP
+    PosixPath('summary.json')
+    """
+    raw = data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    p = Path(path)
+    with atomic_path(p) as tmp, open(tmp, "wb") as fh:
+        fh.write(raw)
+    return p
