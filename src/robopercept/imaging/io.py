@@ -16,20 +16,26 @@ from __future__ import annotations
 import os
 import re
 import struct
+import types
 import zlib
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from robopercept._checks import check_extension, check_file, check_image, check_positive
 from robopercept.errors import FileFormatError, InputError, RoboperceptError
 
+_inflate_lib: types.ModuleType
+_inflate_errors: tuple[type[BaseException], ...]
 try:  # Intel ISA-L's inflate, about 3x the standard library's; the same zlib streams
-    from isal import isal_zlib as _inflate_lib
+    from isal import isal_zlib
+
+    # (isal's stub declares its error class as an instance)
+    _inflate_lib, _inflate_errors = isal_zlib, (zlib.error, cast(type, isal_zlib.error))
 except ImportError:  # pragma: no cover - a platform without isal wheels
-    _inflate_lib = zlib  # type: ignore[no-redef]
+    _inflate_lib, _inflate_errors = zlib, (zlib.error,)
 
 __all__ = [
     "SnapshotVideoWriter",
@@ -651,7 +657,7 @@ def _read_png(data: bytes, p: Path) -> np.ndarray:
         )
     try:
         stream = _inflate_lib.decompressobj().decompress(idat, size)
-    except (zlib.error, _inflate_lib.error) as exc:
+    except _inflate_errors as exc:
         raise FileFormatError(f"{p}: corrupt PNG image data ({exc})") from exc
     if len(stream) < size:
         raise FileFormatError(
