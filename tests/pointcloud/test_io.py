@@ -207,3 +207,77 @@ def test_stanford_ascii_ply_with_faces():
     )
     assert len(cloud) == 35947
     np.testing.assert_allclose(cloud.points, ref, rtol=1e-6)
+
+
+# issue 25: PCD header fields beyond what the file can hold (COUNT >= 2**31 escaped
+# np.dtype as a ValueError), coordinates with COUNT > 1, and a malformed VIEWPOINT
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        (_pcd_header(2).replace(b"COUNT 1 1 1", b"COUNT 2147483648 1 1"), "COUNT 2147483648"),
+        (_pcd_header(2).replace(b"COUNT 1 1 1", b"COUNT 1099511627776 1 1"), "more than"),
+        (
+            _pcd_header(0).replace(b"COUNT 1 1 1", b"COUNT 1 1 100000000"),
+            "bytes per point, more than the whole file",
+        ),
+        (_pcd_header(2).replace(b"COUNT 1 1 1", b"COUNT one 1 1"), "COUNT 'one'"),
+        (_pcd_header(2).replace(b"COUNT 1 1 1", b"COUNT 0 1 1"), "COUNT 0"),
+        (_pcd_header(2).replace(b"SIZE 4 4 4", b"SIZE 0 4 4"), "SIZE 0"),
+        (_pcd_header(2).replace(b"TYPE F F F", b"TYPE Q F F"), "TYPE Q"),
+        (_pcd_header(2).replace(b"WIDTH 2", b"WIDTH -2"), "WIDTH must be >= 0"),
+        (_pcd_header(2).replace(b"HEIGHT 1", b"HEIGHT 1.5"), "HEIGHT must be an integer"),
+        (_pcd_header(2).replace(b"POINTS 2", b"POINTS 2e3"), "POINTS must be an integer"),
+        (_pcd_header(2).replace(b"DATA binary", b"DATA"), "DATA must be"),
+        (
+            _pcd_header(2).replace(b"COUNT 1 1 1", b"COUNT 2 1 1") + b"\0" * 32,
+            "field 'x' has COUNT 2; it must be 1",
+        ),
+        (_pcd_header(2).replace(b"VIEWPOINT 0 0 0 1 0 0 0", b"VIEWPOINT 0 0 0") + b"\0" * 24, "7"),
+        (
+            _pcd_header(2).replace(b"VIEWPOINT 0 0 0 1", b"VIEWPOINT nan 0 0 1") + b"\0" * 24,
+            "VIEWPOINT",
+        ),
+    ],
+)
+def test_pcd_header_fields_are_bounded(tmp_path, content, match):
+    path = tmp_path / "hostile.pcd"
+    path.write_bytes(content)
+    with pytest.raises(FileFormatError, match=match) as info:
+        read_point_cloud(path)
+    assert "hostile.pcd" in str(info.value)
+
+
+def test_pcd_extra_count_on_other_fields_is_kept(tmp_path):
+    # a COUNT > 1 field that is not a coordinate (a descriptor) stays readable
+    head = _pcd_header(2).replace(b"FIELDS x y z", b"FIELDS x y z h")
+    head = head.replace(b"SIZE 4 4 4", b"SIZE 4 4 4 4").replace(b"TYPE F F F", b"TYPE F F F F")
+    head = head.replace(b"COUNT 1 1 1", b"COUNT 1 1 1 3")
+    rec = np.arange(12, dtype="<f4").reshape(2, 6)
+    path = tmp_path / "desc.pcd"
+    path.write_bytes(head + rec.tobytes())
+    pcd = read_pcd(path)
+    assert pcd.fields["h"].shape == (2, 3)
+    np.testing.assert_array_equal(read_point_cloud(path).points, rec[:, :3])
+
+
+# issue 25: a vertex coordinate (or colour) declared as a list property escaped
+# np.column_stack as a ValueError
+@pytest.mark.parametrize(
+    ("props", "rows", "bad"),
+    [
+        ("property list uchar float x\nproperty float y\nproperty float z\n", "1 1 2 3\n", "x"),
+        ("property float x\nproperty float y\nproperty list uchar float z\n", "1 2 2 3 4\n", "z"),
+        (
+            "property float x\nproperty float y\nproperty float z\n"
+            "property list uchar uchar red\nproperty uchar green\nproperty uchar blue\n",
+            "1 2 3 1 9 9 9\n",
+            "red",
+        ),
+    ],
+)
+def test_ply_list_coordinates_are_refused(tmp_path, props, rows, bad):
+    path = tmp_path / "list.ply"
+    path.write_text(f"ply\nformat ascii 1.0\nelement vertex 1\n{props}end_header\n{rows}")
+    with pytest.raises(FileFormatError, match=f"property {bad} declared as a list") as info:
+        read_point_cloud(path)
+    assert "list.ply" in str(info.value) and "must be scalar properties" in str(info.value)

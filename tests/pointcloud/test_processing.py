@@ -112,6 +112,126 @@ def test_filters_on_empty_and_all_nan_clouds():
         assert segment_planes(cloud, 0.1) == []
 
 
+# issue 25: nanoflann's tree build read uninitialized memory and segfaulted on a cloud of
+# identical points (zero extent) and on one whose extent overflows (coordinates near
+# 1e308); run in a child process so a crash fails this test instead of killing pytest
+_DEGENERATE_SOR = """
+import numpy as np
+from robopercept.pointcloud import PointCloud, statistical_outlier_removal
+rng = np.random.default_rng(0)
+for n in (21, 50, 5000):
+    for v in (-3.5, 0.0, 1.0, 1e300):
+        out, idx = statistical_outlier_removal(PointCloud(np.full((n, 3), v)), 50, 1.0)
+        assert len(out) == 0 and idx.size == 0, (n, v)
+for _ in range(3):
+    statistical_outlier_removal(PointCloud(rng.uniform(-1, 1, (5000, 3)) * 1e308), 50, 1.0)
+print("survived")
+"""
+
+
+def test_statistical_outlier_removal_survives_degenerate_clouds():
+    import subprocess
+    import sys
+
+    # before the fix: SIGSEGV (return code -11) on every run on this machine
+    for _ in range(2):  # the crash depended on stack contents: run it twice
+        done = subprocess.run(
+            [sys.executable, "-c", _DEGENERATE_SOR], capture_output=True, text=True, timeout=300
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+        assert done.stdout.strip() == "survived"
+
+
+@pytest.mark.parametrize("n", [1, 2, 30, 400])
+def test_statistical_outlier_removal_of_identical_points_is_empty_like_open3d(n):
+    pts = np.full((n, 3), 0.25)
+    _, ours = statistical_outlier_removal(PointCloud(pts), 50, 1.0)
+    _, ref = PointCloud(pts).to_open3d().remove_statistical_outlier(50, 1.0)
+    assert ours.size == 0 and len(ref) == 0  # every mean distance is 0: 0 < d fails
+
+
+def test_statistical_outlier_removal_on_a_line_matches_open3d():
+    # a zero extent along y and z: nanoflann builds this tree fine
+    pts = np.column_stack([np.linspace(0, 1, 200) ** 2, np.zeros(200), np.zeros(200)])
+    _, ours = statistical_outlier_removal(PointCloud(pts), 8, 1.0)
+    _, ref = PointCloud(pts).to_open3d().remove_statistical_outlier(8, 1.0)
+    np.testing.assert_array_equal(ours, np.asarray(ref))
+
+
+@pytest.mark.parametrize("exponent", [700, -700])
+def test_statistical_outlier_removal_is_scale_free_near_float_limits(rng, exponent):
+    # scaling by a power of two is exact, and the rule compares distances with their own
+    # mean and deviation: the kept indices are identical, with no overflow to inf/NaN
+    pts = np.vstack([rng.normal(0, 0.01, (800, 3)), rng.uniform(-1, 1, (20, 3))])
+    _, base = statistical_outlier_removal(PointCloud(pts), 10, 1.0)
+    _, scaled = statistical_outlier_removal(PointCloud(pts * 2.0**exponent), 10, 1.0)
+    np.testing.assert_array_equal(scaled, base)
+    assert 0 < base.size < 820
+
+
+# issue 25: the neighbour queries go in blocks, so memory holds one block of (block, k)
+# results rather than N x k (20M points were killed at 16 GB)
+def test_statistical_outlier_removal_queries_in_blocks(rng, monkeypatch):
+    from scipy.spatial import cKDTree
+
+    import robopercept.pointcloud.filters as filters
+
+    pts = np.vstack([rng.normal(0, 0.05, (3000, 3)), rng.uniform(-1, 1, (50, 3))])
+    whole, e = filters._knn_mean_distance(pts, 12)
+    d, _ = cKDTree(pts).query(pts, 12)
+    # the reference: mean of the 12 nearest distances (the point itself at 0 first)
+    np.testing.assert_allclose(whole, d.mean(axis=1), rtol=1e-12)
+    assert e == 0
+    rows = []
+    real = filters._mean_root
+
+    def spy(d2):
+        rows.append(d2.shape[0])
+        return real(d2)
+
+    monkeypatch.setattr(filters, "_mean_root", spy)
+    monkeypatch.setattr(filters, "_KNN_BLOCK_BYTES", 16 * 12 * 1200)  # 1200 points a block
+    _, blocked_idx = statistical_outlier_removal(PointCloud(pts), 12, 1.0)
+    assert rows == [1200, 1200, 650]
+    rows.clear()  # up to twice the budget: one block (a small second one costs time)
+    monkeypatch.setattr(filters, "_KNN_BLOCK_BYTES", 16 * 12 * 1600)
+    statistical_outlier_removal(PointCloud(pts), 12, 1.0)
+    assert rows == [3050]
+    monkeypatch.setattr(filters, "_KNN_BLOCK_BYTES", 1 << 40)
+    _, one_idx = statistical_outlier_removal(PointCloud(pts), 12, 1.0)
+    np.testing.assert_array_equal(blocked_idx, one_idx)
+    blocked, _ = filters._knn_mean_distance(pts, 12, block=333)
+    np.testing.assert_array_equal(blocked, whole)  # bit for bit: per-point sums
+    # large clouds query their blocks in Morton order: the same numbers, point for point
+    monkeypatch.setattr(filters, "_ORDER_MIN", 100)
+    ordered, _ = filters._knn_mean_distance(pts, 12, block=333)
+    np.testing.assert_array_equal(ordered, whole)
+
+
+def test_morton_order_hand_case(rng):
+    from robopercept.pointcloud.filters import _morton_order
+
+    # the 8 corners of a cube: key = x + 2 y + 4 z in each bit, so corner (x, y, z)
+    # comes at position x + 2 y + 4 z
+    corners = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
+    perm = rng.permutation(8)
+    order = _morton_order(corners[perm], corners.min(0), corners.max(0))
+    np.testing.assert_array_equal(corners[perm][order], corners)
+    # finer: inside the cell x < 1/2, y < 1/2, z < 1/2 the curve finishes before x >= 1/2
+    pts = np.array([[0.49, 0.49, 0.49], [0.51, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    assert _morton_order(pts, np.zeros(3), np.ones(3)).tolist() == [2, 0, 1, 3]
+
+
+# issue 25: a cloud whose voxel numbers overflow int64 was silently merged into garbage
+def test_voxel_downsample_refuses_a_grid_beyond_int64(rng):
+    pts = rng.uniform(-1, 1, (100, 3))
+    with pytest.raises(InputError, match=r"use voxel_size >= "):
+        voxel_downsample(PointCloud(pts * 1e30), 0.1)
+    with pytest.raises(InputError, match="overflows float64"):
+        voxel_downsample(PointCloud(pts * 1e308), 0.1)
+    assert len(voxel_downsample(PointCloud(pts * 1e15), 0.1)[0]) == 100  # still fits
+
+
 # ----------------------------------------------------------------------------- normals
 def test_normals_of_a_plane_face_the_viewpoint(rng):
     xy = rng.uniform(-1, 1, (2000, 2))

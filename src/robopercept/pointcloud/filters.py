@@ -160,6 +160,12 @@ def voxel_downsample(cloud: PointCloud, voxel_size: float) -> tuple[PointCloud, 
         voxel_of_point : (N,) int64 ndarray
             For each input point, the output point it went into (-1 for non-finite points).
 
+        Raises
+        ------
+        InputError
+            ``voxel_size`` not > 0, or so small against the cloud's extent that voxel
+            numbers would not fit in int64 (more than 2**62 voxels along one axis).
+
     Examples
     --------
     The first two points share a 0.1 m voxel and are averaged:
@@ -178,6 +184,18 @@ def voxel_downsample(cloud: PointCloud, voxel_size: float) -> tuple[PointCloud, 
         return PointCloud(np.empty((0, 3))), inverse
     pts = cloud.points if fin.size == len(cloud) else cloud.points[fin]
     lo, hi = _bounds(pts)
+    with np.errstate(over="ignore"):
+        extent = float((hi - lo).max())
+    if not extent / s < 2.0**62:  # int64 voxel numbers would wrap (issue 25: 1e308 clouds)
+        if not math.isfinite(extent):
+            raise InputError(
+                "the cloud's extent overflows float64 (coordinates near 1e308): "
+                "rescale the cloud before voxel_downsample"
+            )
+        raise InputError(
+            f"voxel_size {s:g} is too small for the cloud's extent {extent:g}: more than "
+            f"2**62 voxels along one axis; use voxel_size >= {extent / 2.0**62:g}"
+        )
     base = lo - 0.5 * s
     dims = np.floor((hi - base) / s).astype(np.int64) + 1
     if float(np.prod(dims.astype(np.float64))) < 2.0**62:
@@ -220,21 +238,123 @@ def _mean_root(d2: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
     return out
 
 
-def _knn_mean_distance(points: np.ndarray, k: int) -> np.ndarray:
-    """(N,) mean Euclidean distance from each point to its k nearest points (itself included).
+# bytes of nanoflann results (squared distances and indices, 16 bytes per neighbour) per
+# block of queries: 128 MiB is about 168k points at k = 50
+_KNN_BLOCK_BYTES = 128 << 20  # (clouds up to twice that go in one block)
+# |coordinates| beyond 2**500 (or below 2**-500) would overflow (underflow) the squared
+# distances, and a span of inf crashes nanoflann's tree build
+_SAFE_EXPONENT = 500
+# from this many points on, the queries go in Morton (Z-curve) order of a 1024^3 grid
+_ORDER_MIN = 1 << 20
+
+
+def _spread_bits(v: np.ndarray) -> np.ndarray:
+    """Insert two zero bits after each of the 10 low bits of ``v`` (uint32): ``b9..b0``
+    becomes ``b9 0 0 b8 0 0 ... b0``, the 30-bit Morton layout of one axis."""
+    v = v & 0x3FF
+    v = (v | (v << 16)) & 0x030000FF
+    v = (v | (v << 8)) & 0x0300F00F
+    v = (v | (v << 4)) & 0x030C30C3
+    return (v | (v << 2)) & 0x09249249
+
+
+def _morton_order(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    r"""(N,) int64 permutation that visits ``points`` along a Z-order (Morton) curve.
+
+    Each point's cell in a :math:`1024^3` grid over the bounding box ``[lo, hi]``,
+    :math:`c = \lfloor 1023.99 (p - lo) / \max(hi - lo) \rfloor`, is interleaved into the
+    30-bit key :math:`\sum_b 2^{3b} (c_{x,b} + 2 c_{y,b} + 4 c_{z,b})`; points sorted by
+    key come in spatially compact runs. Computed 1M points at a time (NumPy).
+    """
+    n = points.shape[0]
+    inv = 1023.99 / float((hi - lo).max())
+    key = np.empty(n, dtype=np.uint32)
+    for start in range(0, n, 1 << 20):
+        cell = ((points[start : start + (1 << 20)] - lo) * inv).astype(np.uint32)
+        key[start : start + (1 << 20)] = (
+            _spread_bits(cell[:, 0])
+            | (_spread_bits(cell[:, 1]) << 1)
+            | (_spread_bits(cell[:, 2]) << 2)
+        )
+    return np.argsort(key)
+
+
+def _knn_mean_distance(
+    points: np.ndarray, k: int, block: int | None = None
+) -> tuple[np.ndarray, int]:
+    r"""(N,) mean Euclidean distance from each point to its k nearest points (itself included).
+
+    :math:`\bar d_i = \frac1k \sum_{j=1}^{k} \lVert p_i - p_{(j)} \rVert` over the ``k``
+    nearest points :math:`p_{(j)}` of :math:`p_i`, the point itself first (Open3D's
+    statistic in ``remove_statistical_outlier``).
 
     nanoflann with leaves of 20 points; about 1.4x faster than ``cKDTree.query`` on the
     PCL table scene (209k points, k = 50; ``python -m benchmarks pointcloud``). The
-    queries go to 4 threads per core: pynanoflann gives each thread one contiguous
-    block, and smaller blocks balance dense and sparse parts of the cloud better. The
-    squared distances nanoflann returns are reduced in place by :func:`_mean_root`
-    (pynanoflann's own ``kneighbors`` would allocate a square-rooted copy of the whole
-    (N, k) array first).
+    queries go in blocks of ``block`` points (by default as many as fit
+    ``_KNN_BLOCK_BYTES`` of nanoflann's (block, k) distance and index arrays), each
+    block to 4 threads per core: pynanoflann gives each thread one contiguous run, and
+    smaller runs balance dense and sparse parts of the cloud better. Each block's
+    squared distances are reduced in place by :func:`_mean_root`, so the memory beyond
+    the tree is the (N,) result plus one block, not N x k (issue 25: 20M points). From
+    ``_ORDER_MIN`` points on, the blocks follow a Morton order (:func:`_morton_order`,
+    one more (N,) int64 array): a cloud larger than the cache queried in scattered
+    order spends most of its time on cache misses (3.7x the CPU time for 200k of 1M
+    uniformly shuffled points). Each point's result is the same in either order.
+
+    Degenerate clouds are handled before nanoflann sees them, because its tree build
+    reads uninitialized memory (and segfaults) when the bounding box has zero extent
+    (every point the same) or an infinite one (coordinates near +-1e308): a zero-extent
+    cloud gets all-zero distances without a tree; coordinates beyond ``2**500`` (or all
+    below ``2**-500``) are scaled by ``2**-exponent`` (exact in floating point), and the
+    distances come back in units of ``2**exponent`` (the true ones may not be
+    representable). Lines, planes and repeated points are fine for nanoflann and take
+    the ordinary path.
+
+    Parameters
+    ----------
+    points : (N, 3) float64 ndarray
+        Finite, C-contiguous.
+    k : int
+        ``1 <= k <= N``.
+    block : int, optional
+        Points per block of queries (tests use small blocks).
+
+    Returns
+    -------
+    mean_distance : (N,) float64 ndarray
+        In units of ``2**exponent``.
+    exponent : int
+        0 unless the cloud was rescaled.
     """
+    n = points.shape[0]
+    lo, hi = _bounds(points)
+    if (lo == hi).all():  # zero extent: every distance is 0 (nanoflann would crash)
+        return np.zeros(n), 0
+    exponent = math.frexp(float(max(np.abs(lo).max(), np.abs(hi).max())))[1]
+    if abs(exponent) > _SAFE_EXPONENT:  # power-of-two rescale: exact; no copy otherwise
+        points = np.ldexp(points, -exponent)
+        lo, hi = np.ldexp(lo, -exponent), np.ldexp(hi, -exponent)
+    else:
+        exponent = 0
+    # the order first: its sort keys are freed before the tree takes its memory
+    order = _morton_order(points, lo, hi) if n >= _ORDER_MIN else None
     tree = pynanoflann.KDTree(n_neighbors=k, metric="l2", leaf_size=20)
     tree.fit(points)
-    d2, _ = tree.index.kneighbors_multithreaded(points, k, 4 * (os.cpu_count() or 1))
-    return _mean_root(d2)
+    rows = block if block is not None else max(1024, _KNN_BLOCK_BYTES // (16 * k))
+    if block is None and n <= 2 * rows:  # one block up to twice the budget: a second,
+        rows = n  # smaller block costs about 6% on the table scene (209k points)
+    threads = 4 * (os.cpu_count() or 1)
+    out = np.empty(n)
+    for start in range(0, n, rows):
+        if order is None:
+            d2, _ = tree.index.kneighbors_multithreaded(points[start : start + rows], k, threads)
+            out[start : start + rows] = _mean_root(d2)
+        else:
+            sel = order[start : start + rows]
+            d2, _ = tree.index.kneighbors_multithreaded(points[sel], k, threads)
+            out[sel] = _mean_root(d2)
+        del d2, _
+    return out, exponent
 
 
 def statistical_outlier_removal(
@@ -252,7 +372,17 @@ def statistical_outlier_removal(
     .. math:: 0 < \bar d_i < \mu + \text{std\_ratio}\; \sigma
 
     (Open3D's rule; the lower bound drops points that coincide with all their
-    neighbours).
+    neighbours). A cloud whose points are all the same therefore gives an empty result,
+    as Open3D's does (issue 25: it used to crash nanoflann); a cloud with coordinates
+    near the float64 limit is rescaled exactly by a power of two, which leaves the rule
+    unchanged, instead of overflowing the squared distances.
+
+    The neighbour queries go in blocks (about 168k points at k = 50), in Morton order
+    from 1M points on, so the memory beyond the input is the k-d tree, one (N,) float64
+    array of mean distances (and one (N,) int64 order), one block of nanoflann's
+    (block, k) results (128 MiB) and the output; an all-finite cloud is not copied.
+    20M points (458 MiB) took 730 MiB beyond the input at its peak, output included
+    (``BENCH_SOR_20M=1 python -m benchmarks pointcloud``, ``docs/benchmarks.md``).
 
     Parameters
     ----------
@@ -271,16 +401,20 @@ def statistical_outlier_removal(
     cloud = check_cloud(cloud)
     k = check_int(k, "k", 2)
     ratio = check_range(std_ratio, "std_ratio", 0.0)
-    fin = _finite_index(cloud)
-    if fin.size == 0:
-        return PointCloud(np.empty((0, 3))), fin
-    pts = cloud.points[fin]
-    kk = min(k, pts.shape[0])
-    mean_d = _knn_mean_distance(pts, kk)
+    finite = cloud.finite_mask()
+    fin = None if finite.all() else np.flatnonzero(finite)  # None: no copy of the points
+    del finite
+    pts = np.ascontiguousarray(cloud.points if fin is None else cloud.points[fin])
+    if pts.shape[0] == 0:
+        return PointCloud(np.empty((0, 3))), np.empty(0, dtype=np.int64)
+    # the rule is scale-free, so the distances' units (2**exponent) do not matter
+    mean_d, _ = _knn_mean_distance(pts, min(k, pts.shape[0]))
     mu = mean_d.mean()
     sigma = mean_d.std(ddof=1) if mean_d.size > 1 else 0.0
     keep = (mean_d > 0) & (mean_d < mu + ratio * sigma)
-    idx = fin[keep]
+    del mean_d
+    idx = np.flatnonzero(keep) if fin is None else fin[keep]
+    del keep
     return cloud.select(idx), idx
 
 

@@ -185,14 +185,27 @@ def read_pcd(path: str | os.PathLike[str]) -> PcdData:
             f"({len(counts)}) must have one entry per field",
         )
     formats = []
+    record = 0
     for name, size, typ, count in zip(names, sizes, types, counts, strict=True):
         try:
             code = _PCD_TYPES[(typ.upper(), int(size))]
-            cnt = int(count)
         except (KeyError, ValueError):
             raise _fail(p, f"field {name!r} has unsupported TYPE {typ} SIZE {size}") from None
+        try:
+            cnt = int(count)
+        except ValueError:
+            raise _fail(p, f"field {name!r} has COUNT {count!r}; expected an integer") from None
         if cnt < 1:
-            raise _fail(p, f"field {name!r} has COUNT {cnt}")
+            raise _fail(p, f"field {name!r} has COUNT {cnt}; expected >= 1")
+        # issue 25: a record is bounded by the file (and numpy's C-int shapes) before
+        # np.dtype sees it; COUNT 2**31 used to escape as a ValueError
+        record += cnt * int(size)
+        if record > len(raw) or cnt >= 2**31:
+            raise _fail(
+                p,
+                f"field {name!r} has COUNT {cnt}: {record} bytes per point, more than the "
+                f"whole file ({len(raw)} bytes): corrupt header",
+            )
         formats.append((name, "<" + code, (cnt,)) if cnt > 1 else (name, "<" + code))
     # unique names: PCL pads with "_" fields; numpy needs distinct names
     seen: dict[str, int] = {}
@@ -212,7 +225,11 @@ def read_pcd(path: str | os.PathLike[str]) -> PcdData:
         try:
             vp = np.array([float(v) for v in header["VIEWPOINT"]], dtype=np.float64)
         except ValueError:
-            raise _fail(p, "VIEWPOINT must be 7 numbers") from None
+            vp = np.empty(0)
+        if vp.shape != (7,) or not np.isfinite(vp).all():
+            raise _fail(
+                p, f"VIEWPOINT must be 7 finite numbers; got {' '.join(header['VIEWPOINT'])!r}"
+            )
     kind = (header["DATA"] or ["?"])[0].lower()
     body = memoryview(raw)[offset:]
     if kind == "ascii":
@@ -312,6 +329,9 @@ def _cloud_from_pcd(pcd: PcdData, path: Path) -> PointCloud:
     f = pcd.fields
     if not {"x", "y", "z"} <= f.keys():
         raise _fail(path, f"no x, y, z fields (fields: {', '.join(f)})")
+    for key in ("x", "y", "z", "normal_x", "normal_y", "normal_z"):
+        if key in f and f[key].ndim != 1:
+            raise _fail(path, f"field {key!r} has COUNT {f[key].shape[1]}; it must be 1")
     pts = np.column_stack([f["x"], f["y"], f["z"]]).astype(np.float64)
     colors = None
     for key in ("rgb", "rgba"):
@@ -389,6 +409,15 @@ def _read_ply(path: Path) -> PointCloud:
     names = v.dtype.names or ()
     if not {"x", "y", "z"} <= set(names):
         raise _fail(path, f"vertex element has no x, y, z (properties: {', '.join(names)})")
+    # issue 25: a list property (dtype object) used to escape np.column_stack as ValueError
+    used = {"x", "y", "z", "red", "green", "blue", "r", "g", "b", "nx", "ny", "nz"}
+    lists = [k for k in names if k in used and v.dtype[k].kind not in "biuf"]
+    if lists:
+        raise _fail(
+            path,
+            f"vertex propert{'ies' if len(lists) > 1 else 'y'} {', '.join(lists)} "
+            "declared as a list; x, y, z (and colours, normals) must be scalar properties",
+        )
     pts = np.column_stack([v["x"], v["y"], v["z"]]).astype(np.float64)
     colors = None
     for r, g, b in (("red", "green", "blue"), ("r", "g", "b")):
