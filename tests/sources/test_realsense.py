@@ -305,3 +305,174 @@ def test_corrupt_db3_recording_gives_file_format_error(tmp_path):
     con.close()
     with pytest.raises(FileFormatError, match="no messages, topics table"):
         RealSenseSource(tmp_path / "other.db3")
+
+
+# issue 25: librealsense crashed (SIGSEGV) or hung on some corrupt recordings, taking
+# the process with it; recordings now play in a watched child process, and the bag
+# check also reads the chunk, index and connection fields librealsense trusts
+
+
+def _play_here_or_in_child(path, in_child=True, watchdog=10.0, timeout=90):
+    """Play ``path`` in a subprocess (so a crash or hang fails the test, not pytest):
+    with ``in_child`` through RealSenseSource (its own watched player process), else
+    through librealsense in that subprocess itself with the file checks off (what the
+    code did before the fix); returns (return code, last line), return code None on a
+    hang."""
+    import subprocess
+
+    code = (
+        "import sys\n"
+        "import robopercept.sources.realsense as m\n"
+        "from robopercept.sources.realsense import RealSenseSource\n"
+        "if sys.argv[3] == '0':\n"
+        "    m.check_db3_recording = m.check_ros1_bag = lambda path: 0\n"
+        "src = RealSenseSource(sys.argv[1], timeout=0.5, watchdog=float(sys.argv[2]))\n"
+        "frames = src if sys.argv[3] == '1' else src._frames_here()\n"
+        "try:\n"
+        "    print(len(list(frames)))\n"
+        "except Exception as e:\n"
+        "    print(type(e).__name__, e)\n"
+    )
+    cmd = [sys.executable, "-c", code, str(path), str(watchdog), "1" if in_child else "0"]
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, "hang"
+    lines = r.stdout.strip().splitlines()
+    return r.returncode, lines[-1] if lines else r.stderr[-300:]
+
+
+def _edit_db3(path, sql, *params):
+    import sqlite3
+
+    con = sqlite3.connect(path)
+    con.execute(sql, params)
+    con.commit()
+    con.close()
+
+
+def test_db3_whose_tf_message_crashed_librealsense_gives_file_format_error(tmp_path):
+    # fuzz finding: a few flipped bits in a message blob gave SIGSEGV in pipeline.start;
+    # minimal form: one byte of the depth-to-colour transform string set to 0xAC
+    import sqlite3
+
+    path = tmp_path / "tf.db3"
+    record(path, n=3)
+    con = sqlite3.connect(path)
+    rows = con.execute(
+        "SELECT m.id, m.data FROM messages m JOIN topics t ON m.topic_id = t.id "
+        "WHERE t.name LIKE '%/tf/ref_%'"
+    ).fetchall()
+    con.close()
+    assert rows and all(b"rotation=1.000000," in bytes(d) for _, d in rows)
+    for mid, data in rows:
+        bad = bytearray(data)
+        bad[bad.index(b"rotation=1.000000,") + 17] = 0xAC  # the first ','
+        _edit_db3(path, "UPDATE messages SET data = ? WHERE id = ?", bytes(bad), mid)
+    rc, line = _play_here_or_in_child(path, in_child=False)
+    assert rc == -11, (rc, line)  # librealsense itself segfaults on it
+    rc, line = _play_here_or_in_child(path)
+    assert rc == 0, line
+    assert line.startswith(f"FileFormatError librealsense crashed reading {path} at frame 0")
+    assert "SIGSEGV" in line
+
+
+def test_db3_that_hung_librealsense_is_refused_or_stopped_by_the_watchdog(tmp_path):
+    # fuzz finding: a 32-bit word of the topics table set to 0x80000000 (a topic name
+    # with bytes 00 00 00 80 in it) made librealsense spin forever
+    path = tmp_path / "name.db3"
+    record(path, n=3)
+    _edit_db3(
+        path,
+        "UPDATE topics SET name = CAST(? AS TEXT) WHERE name LIKE '%Frames_Queue_Size/value'"
+        " AND id = (SELECT MIN(id) FROM topics WHERE name LIKE '%Frames_Queue_Size/value')",
+        b"/device_0/sensor_0/opt\x00\x00\x00\x80Frames_Queue_Size/value",
+    )
+    rc, line = _play_here_or_in_child(path, in_child=False, timeout=20)
+    assert rc is None, line  # librealsense itself hangs on it
+    # the check refuses it at once, naming the topic
+    with pytest.raises(FileFormatError, match=r"name\.db3: .*topic \d+ has a name that is not"):
+        RealSenseSource(path)
+    # and were it to pass the checks, the watchdog stops the player and says so
+    good = tmp_path / "good.db3"
+    record(good, n=2)
+    src = RealSenseSource(good, timeout=0.5, watchdog=3.0)
+    src.path = path
+    t = time.monotonic()
+    with pytest.raises(
+        FileFormatError,
+        match=r"name\.db3: librealsense stopped responding for 3\.5 s reading frame 0",
+    ):
+        list(src)
+    assert time.monotonic() - t < 15
+
+
+@pytest.mark.realdata
+def test_bag_chunk_and_index_fields_are_checked(tmp_path):
+    import struct
+
+    from robopercept.sources.realsense import check_ros1_bag
+
+    if not BAG.exists():
+        pytest.skip(f"{BAG} absent")
+    data = BAG.read_bytes()
+    # the real bag: one lz4 chunk of 747,730 bytes holding 1,578,062 (2.1:1)
+    chunk = _bag_length_words(data)[2]
+    at = data.index(b"size=", chunk) + 5
+    assert struct.unpack_from("<I", data, at)[0] == 1_578_062
+
+    def patched(name, offset, new):
+        bad = bytearray(data)
+        bad[offset : offset + len(new)] = new
+        (tmp_path / name).write_bytes(bytes(bad))
+        return tmp_path / name
+
+    # uncompressed size beyond lz4's 255:1 (and the 1 GiB cap), or below half the data
+    for v in (0xFFFFFFFF, 0x7FFFFFFF, 255 * 747_730 + 65, 0, 373_800):
+        p = patched(f"size_{v}.bag", at, struct.pack("<I", v))
+        with pytest.raises(
+            FileFormatError,
+            match=rf"byte offset {chunk}: lz4 chunk of 747730 bytes claims an "
+            rf"uncompressed size of {v} ",
+        ):
+            RealSenseSource(p)
+    for v in (373_801, 1_578_062 + 1):  # within lz4's bounds: the check lets it through
+        check_ros1_bag(patched(f"ok_{v}.bag", at, struct.pack("<I", v)))
+    # compression librealsense does not decode
+    c = data.index(b"compression=lz4", chunk) + len(b"compression=")
+    with pytest.raises(FileFormatError, match=r"chunk compression b'lz5' is not one of"):
+        check_ros1_bag(patched("lz5.bag", c, b"lz5"))
+    # an index record whose count disagrees with its data, or names no connection
+    idx = _bag_length_words(data)[4]  # the first index data record (conn 0, count 1)
+    cnt = data.index(b"count=", idx) + 6
+    with pytest.raises(
+        FileFormatError, match=rf"byte offset {idx}: 2 index entries need 24 bytes, not 12"
+    ):
+        check_ros1_bag(patched("count.bag", cnt, struct.pack("<I", 2)))
+    conn = data.index(b"conn=", idx) + 5
+    with pytest.raises(
+        FileFormatError, match=rf"byte offset {idx}: connection 4660 is never declared"
+    ):
+        check_ros1_bag(patched("conn.bag", conn, struct.pack("<I", 0x1234)))
+    op = data.index(b"op=\x04", idx) + 3
+    with pytest.raises(
+        FileFormatError, match=rf"byte offset {idx}: record op 2 cannot sit outside"
+    ):
+        check_ros1_bag(patched("op.bag", op, b"\x02"))
+
+
+@pytest.mark.realdata
+def test_real_bag_plays_in_the_child_as_it_did_in_process():
+    # the frames through the player process are the frames librealsense gives here
+    if not BAG.exists():
+        pytest.skip(f"{BAG} absent")
+    src = RealSenseSource(BAG, timeout=1.0)
+    (a,) = list(src)
+    (b,) = list(src._frames_here())
+    assert np.array_equal(a.depth, b.depth) and np.array_equal(a.color, b.color)
+    assert a.depth.flags.writeable and a.color.flags.c_contiguous
+    assert (a.depth_intrinsics, a.color_intrinsics) == (b.depth_intrinsics, b.color_intrinsics)
+    np.testing.assert_array_equal(a.T_color_depth, b.T_color_depth)
+    assert (a.index, a.timestamp, a.depth_scale) == (b.index, b.timestamp, b.depth_scale)
+    with pytest.raises(InputError, match="watchdog must be a positive"):
+        RealSenseSource(BAG, watchdog=0)
