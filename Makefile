@@ -5,7 +5,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip -q --disable-pip-version-check
 
-.PHONY: demo test lint bench clean syslibs
+.PHONY: demo test lint bench fuzz clean syslibs
 
 # Installing ends with `robopercept warmup`: numba compiles every command's kernels once,
 # in parallel, into its on-disk cache (a few minutes on 2 cores), so no command's first
@@ -53,6 +53,14 @@ test: $(VENV)/.dev syslibs
 
 bench: $(VENV)/.dev
 	$(PY) -m benchmarks
+
+# The long fuzz campaign (tests/fuzz, docs/reliability.md): hostile arguments for every
+# public callable and mutated files for every reader, each call in a sandboxed worker;
+# prints the summary table, writes benchmarks/results/fuzz.json, fails on any untyped
+# error, crash, hang or over-bound allocation. `make fuzz FUZZ_BUDGET=300` for a short one.
+FUZZ_BUDGET ?= 1800
+fuzz: $(VENV)/.dev
+	$(PY) -m tests.fuzz --budget $(FUZZ_BUDGET)
 
 clean:
 	rm -rf $(VENV) robopercept-out

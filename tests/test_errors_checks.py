@@ -74,3 +74,36 @@ def test_import_is_light():
     )
     out2 = subprocess.run([sys.executable, "-c", code2], capture_output=True, text=True, check=True)
     assert out2.stdout.strip() == "[]"  # the bare package imports no JIT at all
+
+
+# issue 25: paths of every reader and writer go through as_path (bytes, None, an int,
+# a NUL byte or a 300-character name gave TypeError, ValueError or OSError)
+@pytest.mark.parametrize(
+    ("value", "words"),
+    [
+        (None, "must be a file or folder path"),
+        (3, "must be a file or folder path"),
+        (["a.png"], "must be a file or folder path"),
+        ("", "must not be empty"),
+        ("a\x00b.png", "NUL byte"),
+        ("n" * 300 + ".png", "file name too long"),
+        ("d/" * 2100 + "x.png", "file name too long"),
+    ],
+)
+def test_as_path_refuses_what_cannot_name_a_file(value, words):
+    from robopercept._checks import as_path
+
+    with pytest.raises(InputError, match=words):
+        as_path(value, "path")
+
+
+def test_as_path_takes_str_bytes_and_pathlike(tmp_path):
+    from pathlib import Path
+
+    from robopercept._checks import as_path, check_file
+
+    assert as_path(b"out/plane.csv") == Path("out/plane.csv")
+    assert as_path(tmp_path) == tmp_path
+    assert as_path("n" * 255) == Path("n" * 255)  # the longest name Linux allows
+    with pytest.raises(InputError, match="the path of an image file"):
+        check_file(None, "an image file")

@@ -295,6 +295,60 @@ def plain_repr(value: Any) -> str:
     return repr(plain(value))
 
 
+def as_path(value: Any, name: str = "path") -> Path:
+    """Return ``value`` as a :class:`~pathlib.Path` after checking that it can name a
+    file: a ``str``, ``bytes`` (decoded with :func:`os.fsdecode`) or ``os.PathLike``,
+    without a NUL byte, no name in it longer than 255 bytes and at most 4095 bytes in
+    all (Linux's ``NAME_MAX`` and ``PATH_MAX``, which the OS would refuse with
+    ``OSError`` only once the file is opened).
+
+    Parameters
+    ----------
+    value : str, bytes or path-like
+    name : str
+        The parameter's name (or the CLI flag) for the message.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    InputError
+        Another type, an empty path, a NUL byte, or a name or path too long.
+
+    Examples
+    --------
+    >>> as_path(b"out/plane.csv")
+    PosixPath('out/plane.csv')
+    >>> as_path(None, "out")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: out must be a file or folder path (str or pathlib.Path); got None
+    """
+    if isinstance(value, bytes):
+        value = os.fsdecode(value)
+    if not isinstance(value, (str, os.PathLike)):
+        raise InputError(
+            f"{name} must be a file or folder path (str or pathlib.Path); got {plain_repr(value)}"
+        )
+    text = os.fspath(value)
+    if not isinstance(text, str):  # a PathLike that gives bytes
+        text = os.fsdecode(text)
+    if text == "":
+        raise InputError(f"{name} must not be empty; give a file or folder path")
+    if "\x00" in text:
+        raise InputError(f"{name} contains a NUL byte; got {text!r}")
+    encoded = os.fsencode(text)
+    longest = max(len(part) for part in encoded.split(b"/"))
+    if longest > 255 or len(encoded) > 4095:
+        raise InputError(
+            f"{name}: file name too long ({longest} bytes in one name, {len(encoded)} in all; "
+            f"the limits are 255 and 4095): {text[:60]}..."
+        )
+    return Path(text)
+
+
 def check_file(path: str | os.PathLike[str], what: str) -> Path:
     """Return ``path`` after checking that it names an existing file.
 
@@ -311,6 +365,8 @@ def check_file(path: str | os.PathLike[str], what: str) -> Path:
 
     Raises
     ------
+    InputError
+        Not a usable path (:func:`as_path`).
     FileFormatError
         ``"<path> is a folder; give <what>"`` for a folder, ``"<path>: no such file"``
         for a path that does not exist.
@@ -322,7 +378,7 @@ def check_file(path: str | os.PathLike[str], what: str) -> Path:
     ...
     robopercept.errors.FileFormatError: . is a folder; give an image file
     """
-    p = Path(path)
+    p = as_path(path, f"the path of {what}")
     if p.is_dir():
         raise FileFormatError(f"{p} is a folder; give {what}")
     if not p.exists():
@@ -349,7 +405,8 @@ def check_extension(path: str | os.PathLike[str], extensions: Iterable[str], wha
     Raises
     ------
     InputError
-        ``"<path>: <what> needs one of the extensions <extensions>; got '<ext>'"``.
+        ``"<path>: <what> needs one of the extensions <extensions>; got '<ext>'"``, or
+        not a usable path (:func:`as_path`).
 
     Examples
     --------
@@ -358,7 +415,7 @@ def check_extension(path: str | os.PathLike[str], extensions: Iterable[str], wha
     ...
     robopercept.errors.InputError: clip.gif: a video needs the extension .mp4; got '.gif'
     """
-    p = Path(path)
+    p = as_path(path, f"the path of {what}")
     allowed = sorted(extensions)
     if p.suffix.lower() not in allowed:
         got = repr(p.suffix) if p.suffix else "no extension"

@@ -1,0 +1,1829 @@
+"""The API fuzzer: hostile arguments for every public callable of every package.
+
+For each package of robopercept (``imaging``, ``geometry``, ... ``nn``) the names of its
+``__all__`` are walked (for ``nn``, the ``__all__`` of each of its modules): functions,
+class constructors, and the working methods of stateful classes (``fit``, ``predict``,
+``transform`` of the estimators with hostile ``X`` and ``y``, ``update`` of the
+filters and trackers, ``apply`` of the background models, ...). Each becomes a
+:class:`Plan`: the callable and one *valid* value for every parameter -- the function's
+default, else a value chosen by the parameter's name (``image`` gets a small textured
+image, ``points`` a cloud of 60 points, ``path`` a file written on first use), else the
+table :data:`VALID` of arguments per callable where the name says too little.
+
+A fuzz input replaces ONE parameter by a hostile value (so an error is attributable to
+it) drawn from the strategy of the parameter's *role*, which is read off the valid
+value: an image-sized array gets :func:`~tests.fuzz.strategies.hostile_images`, an
+``(N, 2|3)`` array :func:`~tests.fuzz.strategies.hostile_points`, a number
+:func:`~tests.fuzz.strategies.hostile_scalars`, a string choice, a flag, a path, a
+point cloud, a small matrix, a sequence, an object each their own (:func:`role_of`).
+
+Each input runs in the :class:`~tests.fuzz.sandbox.Sandbox` worker, through
+:func:`invoke`, and is classified there: ``ok``, ``typed`` (a ``RoboperceptError``),
+``untyped`` (any other exception: a broken contract), ``crash`` (the worker died),
+``hang`` (over the time limit) or ``memory`` (over the allocation limit).
+
+What needs a live device, a GUI, a network, or minutes of training is skipped, with
+its reason, in :data:`SKIP`; result records (frozen dataclasses without a validating
+constructor, built by the library and not by users), enumerations and protocols are
+skipped by rule (:func:`skip_reason`). :func:`build_plans` returns both lists.
+"""
+
+from __future__ import annotations
+
+import atexit
+import dataclasses
+import enum
+import functools
+import importlib
+import inspect
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from hypothesis import HealthCheck, Phase, given, seed, settings
+from hypothesis import strategies as st
+
+from tests.fuzz import strategies as hs
+from tests.fuzz.report import Tally
+from tests.fuzz.strategies import Build, Layout, Recipe, describe, materialize, resolve
+
+__all__ = [
+    "PACKAGES",
+    "SKIP",
+    "VALID",
+    "Fixture",
+    "Plan",
+    "build_plans",
+    "draw_examples",
+    "invoke",
+    "plan_seed",
+    "preload",
+    "role_of",
+    "run_api_campaign",
+    "run_plan",
+    "skip_reason",
+]
+
+#: the packages whose ``__all__`` is fuzzed, in floor order
+PACKAGES: tuple[str, ...] = (
+    "imaging",
+    "geometry",
+    "estimation",
+    "features",
+    "learning",
+    "motion",
+    "depth",
+    "calibration",
+    "pointcloud",
+    "tracking",
+    "viz",
+    "sources",
+    "pipelines",
+    "nn",
+)
+
+#: the scratch folder of the campaign: inputs (``in/``: empty and garbage files of
+#: every extension, lazily written fixtures) and outputs (``out/``)
+WORKDIR = Path(
+    os.environ.get("ROBOPERCEPT_FUZZ_DIR") or tempfile.mkdtemp(prefix="robopercept-fuzz-")
+)
+if not os.environ.get("ROBOPERCEPT_FUZZ_DIR"):
+    _owner = os.getpid()  # the sandbox's forked workers must not remove it on exit
+    atexit.register(lambda: os.getpid() == _owner and shutil.rmtree(WORKDIR, ignore_errors=True))
+IN_DIR = WORKDIR / "in"
+OUT_DIR = WORKDIR / "out"
+
+
+# =========================================================================== valid data
+# Small, deterministic, and built in the parent: they pickle into every call.
+
+
+def _texture(h: int = 48, w: int = 64) -> np.ndarray:
+    """A (h, w) uint8 image with corners, edges and blobs: 8-px checkerboard squares, a
+    diagonal ramp and mild noise (every detector finds something in it)."""
+    rng = np.random.default_rng(1)
+    yy, xx = np.mgrid[0:h, 0:w]
+    board = ((yy // 8 + xx // 8) % 2) * 150.0
+    ramp = (xx + yy) * (80.0 / (h + w))
+    img = board + ramp + rng.normal(0, 4, (h, w)) + 10
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+IMG = _texture()
+IMG2 = np.roll(IMG, 2, axis=1)  # the same scene shifted 2 px right (stereo, flow)
+IMG_RGB = np.stack([IMG, IMG2, 255 - IMG], axis=-1)
+IMG_F = IMG.astype(np.float64) / 255.0
+MASK = np.zeros((48, 64), bool)
+MASK[10:30, 12:40] = True
+LABELS = MASK.astype(np.int32)
+LABELS[35:45, 45:60] = 2
+
+_rng = np.random.default_rng(3)
+PTS3 = _rng.normal(size=(60, 3))
+PTS3[:, 2] += 5.0
+PTS2 = _rng.uniform(2, 60, (40, 2))
+
+K = np.array([[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]])
+_ang = 0.05
+R_SMALL = np.array([[np.cos(_ang), 0, np.sin(_ang)], [0, 1, 0], [-np.sin(_ang), 0, np.cos(_ang)]])
+T_VEC = np.array([-0.5, 0.0, 0.0])
+T4 = np.eye(4)
+T4[:3, :3] = R_SMALL
+T4[:3, 3] = [0.1, -0.2, 0.3]
+P1 = K @ np.hstack([np.eye(3), np.zeros((3, 1))])
+P2 = K @ np.hstack([R_SMALL, T_VEC[:, None]])
+_X3 = np.column_stack([_rng.uniform(-1, 1, 30), _rng.uniform(-1, 1, 30), _rng.uniform(4, 6, 30)])
+
+
+def _proj(P: np.ndarray, X: np.ndarray) -> np.ndarray:
+    h = np.column_stack([X, np.ones(len(X))]) @ P.T
+    return h[:, :2] / h[:, 2:]
+
+
+X1 = _proj(P1, _X3)  # (30, 2) pixels in view 1
+X2 = _proj(P2, _X3)  # (30, 2) pixels in view 2
+H3 = np.array([[1.05, 0.02, 3.0], [-0.01, 0.98, -2.0], [1e-4, 2e-4, 1.0]])
+SRC = np.array([[x, y] for x in range(5, 60, 12) for y in range(5, 45, 10)], float)
+_dst_h = np.column_stack([SRC, np.ones(len(SRC))]) @ H3.T
+DST = _dst_h[:, :2] / _dst_h[:, 2:]
+_skew_t = np.array([[0, -T_VEC[2], T_VEC[1]], [T_VEC[2], 0, -T_VEC[0]], [-T_VEC[1], T_VEC[0], 0]])
+E_MAT = _skew_t @ R_SMALL
+F_MAT = np.linalg.inv(K).T @ E_MAT @ np.linalg.inv(K)
+
+# three Gaussian blobs in 4-D, 20 samples each: classifiers, clusterers, PCA, LDA
+XB = np.concatenate([_rng.normal(c, 0.5, (20, 4)) for c in (0.0, 3.0, 6.0)])
+YB = np.repeat(np.arange(3), 20)
+YR = XB[:, 0] * 2.0 + _rng.normal(0, 0.1, 60)
+Y2 = (np.arange(40) % 2).astype(np.int64)
+S2 = np.linspace(0.05, 0.95, 40) + 0.3 * (Y2 - 0.5)
+
+BOXES = np.array([[5.0, 5.0, 20.0, 20.0], [30.0, 10.0, 50.0, 40.0]])
+DEPTH_U16 = (1000 + 10 * (np.arange(48)[:, None] + np.arange(64)[None, :])).astype(np.uint16)
+DEPTH_M = DEPTH_U16.astype(np.float64) / 1000.0
+DISP = np.full((48, 64), 8.0) + np.linspace(0, 4, 64)[None, :]
+FLOW = np.dstack([np.full((48, 64), 1.5), np.full((48, 64), -0.5)])
+
+# calibration: a 4x3 board of 1-unit squares seen in 3 poses through K
+BOARD = np.array([[x, y, 0.0] for y in range(3) for x in range(4)])
+
+
+def _view(rx: float, ry: float, tz: float) -> np.ndarray:
+    c, s = np.cos(rx), np.sin(rx)
+    rot_x = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    c, s = np.cos(ry), np.sin(ry)
+    rot_y = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    cam = BOARD @ (rot_y @ rot_x).T + [-1.5, -1.0, tz]
+    return _proj(K @ np.hstack([np.eye(3), np.zeros((3, 1))]), cam)
+
+
+VIEWS = [
+    _view(0.2, 0.1, 8.0),
+    _view(-0.25, 0.3, 9.0),
+    _view(0.1, -0.35, 7.5),
+    _view(0.3, 0.25, 8.5),
+]
+RVECS = np.zeros((1, 3))
+TVECS = np.array([[-1.5, -1.0, 8.0]])
+HAND_A = np.stack([np.eye(4)] * 4)
+for _i, (_a, _t) in enumerate([(0.3, 0.1), (-0.4, 0.2), (0.5, -0.3), (0.2, 0.4)]):
+    _c, _s = np.cos(_a), np.sin(_a)
+    HAND_A[_i, :3, :3] = np.array([[_c, -_s, 0], [_s, _c, 0], [0, 0, 1]]) @ np.array(
+        [[1, 0, 0], [0, np.cos(_t), -np.sin(_t)], [0, np.sin(_t), np.cos(_t)]]
+    )
+    HAND_A[_i, :3, 3] = [0.1 * _i, 0.05, 0.2 - 0.03 * _i]
+_Xhe = T4
+HAND_B = np.stack([np.linalg.inv(_Xhe) @ np.linalg.inv(a) @ np.eye(4) for a in HAND_A])
+
+
+def _b(target: str, *args: Any, **kwargs: Any) -> Build:
+    """Shorthand for a :class:`Build` recipe."""
+    return Build(target, tuple(args), tuple(kwargs.items()))
+
+
+CAM = _b("robopercept.geometry:CameraIntrinsics", 64, 48, 50.0, 50.0, 32.0, 24.0)
+CLOUD = _b("robopercept.pointcloud:PointCloud", PTS3)
+KF = _b("robopercept.tracking:constant_velocity", 2, 1.0, 1.0, 1.0)
+SCENE = _b(
+    "robopercept.sources:SyntheticRGBDScene",
+    n_frames=3,
+    depth_size=(64, 48),
+    color_size=(64, 48),
+)
+FRAME = _b("tests.fuzz.api:scene_frame", 0)
+PLANE = _b("robopercept.estimation:Plane", np.array([0.0, 0.0, 1.0]), -5.0)
+TORCH_IMG = _b("tests.fuzz.api:torch_image", 1, 16, 16)
+TINY_NET = _b("robopercept.nn.models:vgg_small", 1, 3, widths=(4,), convs_per_stage=1)
+ARRAY_DATA = _b(
+    "robopercept.nn.data:ArrayDataset",
+    np.random.default_rng(5).uniform(0, 1, (12, 8, 8)).astype(np.float32),
+    np.arange(12) % 3,
+    ("a", "b", "c"),
+)
+TRAIN_CFG = _b("robopercept.nn.training:TrainConfig", epochs=1, batch_size=4, device="cpu")
+
+
+@dataclass(frozen=True)
+class Fixture(Recipe):
+    """A file or folder made on first use in the worker (``IN_DIR/name``), by the
+    function :data:`FIXTURES` names; its path (a ``str``) is the valid value.
+
+    Parameters
+    ----------
+    name : str
+        File name, with the extension that readers dispatch on (``cloud.pcd``).
+    root : str
+        The folder it lives in (the parent's :data:`IN_DIR`, passed along so that a
+        worker started in any way finds it).
+    """
+
+    name: str
+    root: str = str(IN_DIR)
+
+    def make(self) -> str:
+        """Create the fixture if it is missing and return its path."""
+        path = Path(self.root) / self.name
+        if not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            FIXTURES[self.name](path)
+        return str(path)
+
+    def __repr__(self) -> str:
+        return f"<{self.name}>"
+
+
+def scene_frame(index: int) -> Any:
+    """Frame ``index`` of a 3-frame, 64x48 synthetic RGB-D scene (valid frames)."""
+    return materialize(SCENE).frame(index)
+
+
+def torch_image(*shape: int) -> Any:
+    """A float32 tensor of ``shape`` of uniform noise, seeded (valid transform input)."""
+    import torch
+
+    g = torch.Generator().manual_seed(0)
+    return torch.rand(shape, generator=g)
+
+
+def _write_image(path: Path) -> None:
+    from robopercept.imaging import write_image
+
+    write_image(path, IMG_RGB)
+
+
+def _write_cloud(path: Path) -> None:
+    from robopercept.pointcloud import PointCloud, write_point_cloud
+
+    write_point_cloud(path, PointCloud(PTS3))
+
+
+def _write_video(path: Path) -> None:
+    from robopercept.imaging import VideoWriter
+
+    w = VideoWriter(path, fps=10.0)
+    for i in range(4):
+        w.write(np.roll(IMG_RGB, 3 * i, axis=1))
+    w.close()
+
+
+def _write_mot(path: Path) -> None:
+    from robopercept.tracking import write_mot
+
+    write_mot(path, [(1, 1, (5.0, 5.0, 10.0, 10.0), 1.0), (2, 1, (6.0, 5.0, 10.0, 10.0), 0.9)])
+
+
+def _write_calibration(path: Path) -> None:
+    from robopercept.calibration import CalibrationResult, save_calibration
+
+    save_calibration(
+        path,
+        CalibrationResult(K, np.zeros(5), RVECS, TVECS, 0.1, np.array([0.1]), (64, 48)),
+    )
+
+
+def _write_tum(path: Path) -> None:
+    from robopercept.sources import write_tum_folder
+
+    write_tum_folder(path, list(materialize(SCENE)))
+
+
+def _write_checkpoint(path: Path) -> None:
+    from robopercept.nn.training import save_checkpoint
+
+    save_checkpoint(path, {"epoch": 1, "model": materialize(TINY_NET).state_dict()})
+
+
+def _write_run(path: Path) -> None:
+    from robopercept.nn.run import train_run
+    from robopercept.nn.training import TrainConfig
+
+    train_run(
+        "digits",
+        "vgg_small",
+        path,
+        config=TrainConfig(epochs=1, batch_size=64, device="cpu"),
+        model_kwargs={"widths": [4], "convs_per_stage": 1},
+    )
+
+
+def _write_image_folder(path: Path) -> None:
+    from robopercept.imaging import write_image
+
+    for k, cls in enumerate(("a", "b")):
+        (path / cls).mkdir(parents=True, exist_ok=True)
+        for i in range(4):
+            write_image(path / cls / f"{i}.png", np.roll(IMG_RGB, 5 * i + 20 * k, axis=1))
+
+
+def _write_rgbd_pairs(path: Path) -> None:
+    from robopercept.imaging import write_image
+
+    path.mkdir(parents=True, exist_ok=True)
+    for i in range(2):
+        write_image(path / f"{i:04d}_rgb.png", IMG_RGB)
+        write_image(path / f"{i:04d}_depth.png", DEPTH_U16)
+
+
+FIXTURES: dict[str, Callable[[Path], None]] = {
+    "image.png": _write_image,
+    "cloud.pcd": _write_cloud,
+    "cloud.ply": _write_cloud,
+    "video.mp4": _write_video,
+    "mot.txt": _write_mot,
+    "calibration.yaml": _write_calibration,
+    "calibration.json": _write_calibration,
+    "tum": _write_tum,
+    "tum/camera.json": lambda p: _write_tum(p.parent),
+    "pose.txt": lambda p: p.write_text("10 20 30 0.1 0.2 0.3\n"),
+    "table.csv": lambda p: p.write_text(
+        "a,b,label\n"
+        + "".join(f"{x:.3f},{y:.3f},{'xy'[i % 2]}\n" for i, (x, y) in enumerate(PTS2[:20]))
+    ),
+    "checkpoint.pt": _write_checkpoint,
+    "run": _write_run,
+    "run/checkpoint.pt": lambda p: _write_run(p.parent),
+    "images": _write_image_folder,
+    "rgbd_pairs": _write_rgbd_pairs,
+}
+
+
+def _out(name: str) -> str:
+    return str(OUT_DIR / name)
+
+
+# =========================================================================== the table
+# Valid arguments where the parameter's name and default say too little. Keys are plan
+# names: "package.name" for functions and constructors, "package.Class.method" for
+# methods; "*" holds the positional arguments (varargs, positional-only).
+
+_IMG_ONLY = {"image": IMG}
+
+VALID: dict[str, dict[str, Any]] = {
+    # ------------------------------------------------------------------ imaging
+    "imaging.SnapshotVideoWriter": {"path": _out("snap.mp4"), "fps": 10.0},
+    "imaging.SnapshotVideoWriter.add": {"index": 0, "picture": IMG_RGB},
+    "imaging.VideoReader": {"path": Fixture("video.mp4")},
+    "imaging.VideoReader.__iter__": {},
+    "imaging.VideoWriter": {"path": _out("video.mp4")},
+    "imaging.VideoWriter.write": {"frame": IMG_RGB},
+    "imaging.blob_features": {"labels": LABELS},
+    "imaging.box_filter": {"image": IMG, "ksize": 3},
+    "imaging.canny": {"image": IMG, "low": 20.0, "high": 60.0},
+    "imaging.check_image_path": {"path": Fixture("image.png")},
+    "imaging.check_video_path": {"path": Fixture("video.mp4")},
+    "imaging.convolve": {"image": IMG, "kernel": np.ones((3, 3)) / 9},
+    "imaging.convolve_separable": {
+        "image": IMG,
+        "kernel_x": np.ones(3) / 3,
+        "kernel_y": np.ones(3) / 3,
+    },
+    "imaging.correlate": {"image": IMG, "kernel": np.ones((3, 3)) / 9},
+    "imaging.correlate_separable": {
+        "image": IMG,
+        "kernel_x": np.ones(3) / 3,
+        "kernel_y": np.ones(3) / 3,
+    },
+    "imaging.derivative_kernel": {"order": 1, "ksize": 3},
+    "imaging.gaussian_blur": {"image": IMG, "sigma": 1.5},
+    "imaging.gaussian_kernel": {"sigma": 1.5},
+    "imaging.gaussian_ksize": {"sigma": 1.5},
+    "imaging.gaussian_pyramid": {"image": IMG, "levels": 2},
+    "imaging.hsv_range_mask": {
+        "hsv": IMG_RGB,
+        "low": (10.0, 20.0, 20.0),
+        "high": (90.0, 255.0, 255.0),
+    },
+    "imaging.hsv_to_rgb": {"hsv": (IMG_RGB // 2).astype(np.uint8)},
+    "imaging.label_components": {"mask": MASK},
+    "imaging.laplacian_of_gaussian": {"image": IMG, "sigma": 1.5},
+    "imaging.log_zero_crossings": {"log": IMG_F - 0.5},
+    "imaging.read_image": {"path": Fixture("image.png")},
+    "imaging.remap": {
+        "image": IMG,
+        "map_x": np.tile(np.arange(64, dtype=np.float32), (48, 1)) + 0.5,
+        "map_y": np.tile(np.arange(48, dtype=np.float32)[:, None], (1, 64)),
+    },
+    "imaging.rgb_to_gray": {"image": IMG_RGB},
+    "imaging.rgb_to_hsv": {"image": IMG_RGB},
+    "imaging.sobel": {"image": IMG, "dx": 1, "dy": 0},
+    "imaging.structuring_element": {"shape": "ellipse", "size": 5},
+    "imaging.transform_points": {"h": H3, "xy": PTS2},
+    "imaging.warp_perspective": {"image": IMG, "h": H3, "dsize": (64, 48)},
+    "imaging.write_image": {"path": _out("image.png"), "image": IMG_RGB},
+    # ------------------------------------------------------------------ geometry
+    "geometry.CameraIntrinsics": {
+        "width": 64,
+        "height": 48,
+        "fx": 50.0,
+        "fy": 50.0,
+        "cx": 32.0,
+        "cy": 24.0,
+    },
+    "geometry.CameraIntrinsics.scaled": {"width": 32, "height": 24},
+    "geometry.apply": {"T": T4, "points": PTS3},
+    "geometry.box_iou_matrix": {"a": BOXES, "b": BOXES[::-1].copy()},
+    "geometry.compose": {"*": [T4, np.linalg.inv(T4)]},
+    "geometry.decompose_essential": {"E": E_MAT, "x1": X1, "x2": X2, "K": K},
+    "geometry.deproject": {"pixels": PTS2, "depth": np.full(40, 2.0), "intrinsics": CAM},
+    "geometry.distort": {
+        "x": PTS2[:, 0] / 100,
+        "y": PTS2[:, 1] / 100,
+        "coeffs": (0.1, -0.05, 0.001, 0.001, 0.0),
+    },
+    "geometry.eight_point": {"x1": X1, "x2": X2},
+    "geometry.epipolar_lines": {"F": F_MAT, "points": X1},
+    "geometry.epipoles": {"F": F_MAT},
+    "geometry.essential_from_pose": {"R": R_SMALL, "t": T_VEC},
+    "geometry.find_essential": {"x1": X1, "x2": X2, "K": K, "rng": 0},
+    "geometry.find_fundamental": {"x1": X1, "x2": X2, "rng": 0},
+    "geometry.fundamental_from_essential": {"E": E_MAT, "K1": K, "K2": K},
+    "geometry.invert": {"T": T4},
+    "geometry.nearest_rotation": {"M": R_SMALL + 0.01},
+    "geometry.project": {"points": PTS3, "intrinsics": CAM},
+    "geometry.rectify_stereo": {
+        "K1": K,
+        "D1": np.zeros(5),
+        "K2": K,
+        "D2": np.zeros(5),
+        "R": R_SMALL,
+        "T": T_VEC,
+        "size": (64, 48),
+    },
+    "geometry.rectify_uncalibrated": {"F": F_MAT, "x1": X1, "x2": X2, "size": (64, 48)},
+    "geometry.rotation_from_rotvec": {"rotvec": np.array([0.1, 0.2, 0.3])},
+    "geometry.rotvec_from_rotation": {"R": R_SMALL},
+    "geometry.sampson_distance": {"F": F_MAT, "x1": X1, "x2": X2},
+    "geometry.se3": {"rotation": R_SMALL, "translation": T_VEC},
+    "geometry.skew": {"v": np.array([1.0, 2.0, 3.0])},
+    "geometry.triangulate": {"P1": P1, "P2": P2, "x1": X1, "x2": X2},
+    "geometry.undistort": {
+        "xd": PTS2[:, 0] / 100,
+        "yd": PTS2[:, 1] / 100,
+        "coeffs": (0.1, -0.05, 0.001, 0.001, 0.0),
+    },
+    "geometry.undistort_points": {
+        "pixels": PTS2,
+        "K": K,
+        "dist": np.array([0.1, -0.05, 0.0, 0.0, 0.0]),
+    },
+    "geometry.undistort_rectify_map": {
+        "K": K,
+        "D": np.zeros(5),
+        "R": np.eye(3),
+        "P": K,
+        "size": (64, 48),
+    },
+    # ------------------------------------------------------------------ estimation
+    "estimation.find_homography": {"src": SRC, "dst": DST, "rng": 0},
+    "estimation.fit_line": {"points": PTS2},
+    "estimation.fit_plane": {"points": PTS3},
+    "estimation.fit_plane_inverse_depth": {"points": PTS3},
+    "estimation.ransac": {
+        "data": PTS3,
+        "model": _b("robopercept.estimation:PlaneModel"),
+        "threshold": 0.5,
+        "rng": 0,
+    },
+    "estimation.required_iterations": {"inlier_ratio": 0.5, "sample_size": 4, "probability": 0.99},
+    "estimation.Plane": {"normal": np.array([0.0, 0.0, 1.0]), "offset": -5.0},
+    "estimation.Plane.distance": {"points": PTS3},
+    "estimation.Plane.project": {"points": PTS3},
+    "estimation.Line": {"coefficients": np.array([1.0, -1.0, 0.5])},
+    "estimation.Line.distance": {"points": PTS2},
+    "estimation.LineModel.fit": {"data": PTS2},
+    "estimation.PlaneModel.fit": {"data": PTS3},
+    "estimation.HomographyModel.fit": {"data": np.hstack([SRC, DST])},
+    "estimation.AffineModel.fit": {"data": np.hstack([SRC, DST])},
+    # ------------------------------------------------------------------ features
+    "features.Keypoints": {
+        "xy": PTS2[:5],
+        "scale": np.ones(5),
+        "orientation": np.zeros(5),
+        "response": np.ones(5),
+        "octave": np.zeros(5, np.int64),
+    },
+    "features.cell_histograms": _IMG_ONLY,
+    "features.harris_corners": _IMG_ONLY,
+    "features.harris_response": _IMG_ONLY,
+    "features.hog": {"image": IMG},
+    "features.hog_windows": {"image": IMG, "window": (32, 32), "stride": 16},
+    "features.knn_match": {"query": PTS3[:20] * 10, "train": PTS3[10:50] * 10},
+    "features.match_descriptors": {"query": PTS3[:20] * 10, "train": PTS3[10:50] * 10},
+    "features.match_images": {"image_a": IMG, "image_b": IMG2},
+    "features.min_eigenvalue": _IMG_ONLY,
+    "features.refine_corners": {"image": IMG, "corners": np.array([[16.0, 16.0], [24.0, 32.0]])},
+    "features.sift": _IMG_ONLY,
+    "features.stitch": {"image_a": IMG, "image_b": IMG2},
+    "features.structure_tensor": _IMG_ONLY,
+    # ------------------------------------------------------------------ learning
+    "learning.GridSearch": {
+        "estimator": _b("robopercept.learning:KMeans", 2, n_init=1),
+        "param_grid": {"n_clusters": [2, 3]},
+        "cv": 2,
+    },
+    "learning.GridSearch.fit": {"X": XB, "y": YB},
+    "learning.RandomForestClassifier": {"n_estimators": 3},
+    "learning.RandomForestRegressor": {"n_estimators": 3},
+    "learning.KMeans": {"n_clusters": 3, "n_init": 1},
+    "learning.accuracy_score": {"y_true": YB, "y_pred": np.roll(YB, 1)},
+    "learning.adjusted_rand_score": {"labels_true": YB, "labels_pred": np.roll(YB, 1)},
+    "learning.auc": {"x": np.linspace(0, 1, 10), "y": np.linspace(0, 1, 10) ** 2},
+    "learning.average_precision_score": {"y_true": Y2, "y_score": S2},
+    "learning.class_scores": {"model": "fitted:SVC", "X": XB, "n_classes": 3},
+    "learning.classification_report": {"y_true": YB, "y_pred": np.roll(YB, 1)},
+    "learning.clone": {"estimator": _b("robopercept.learning:KMeans", 3)},
+    "learning.confusion_matrix": {"y_true": YB, "y_pred": np.roll(YB, 1)},
+    "learning.confusion_table": {"confusion": np.array([[5, 1], [2, 7]]), "names": ["a", "b"]},
+    "learning.cross_val_score": {
+        "estimator": _b("robopercept.learning:DecisionTreeClassifier", max_depth=3),
+        "X": XB,
+        "y": YB,
+        "cv": 3,
+    },
+    "learning.estimate_bandwidth": {"X": XB, "rng": 0},
+    "learning.evaluate_classifier": {
+        "model": "fitted:SVC",
+        "X": XB,
+        "codes": YB,
+        "classes": np.array(["a", "b", "c"]),
+    },
+    "learning.f1_score": {"y_true": Y2, "y_pred": np.roll(Y2, 1)},
+    "learning.kmeans_plusplus": {"X": XB, "n_clusters": 3, "rng": 0},
+    "learning.label_codes": {"y": np.array(["b", "a", "b", "c"])},
+    "learning.precision_recall_curve": {"y_true": Y2, "y_score": S2},
+    "learning.precision_score": {"y_true": Y2, "y_pred": np.roll(Y2, 1)},
+    "learning.read_table": {"path": Fixture("table.csv"), "label": "label"},
+    "learning.recall_score": {"y_true": Y2, "y_pred": np.roll(Y2, 1)},
+    "learning.roc_auc_score": {"y_true": Y2, "y_score": S2},
+    "learning.roc_curve": {"y_true": Y2, "y_score": S2},
+    "learning.standardize": {"*": [XB, XB[:10] + 1.0]},
+    "learning.train_test_split": {"*": [XB, YB], "random_state": 0},
+    "learning.KFold.split": {"X": XB},
+    "learning.PCA.inverse_transform": {"Z": XB},
+    "learning.StratifiedKFold.split": {"X": XB, "y": YB},
+    # ------------------------------------------------------------------ motion
+    "motion.StaticBackground": {"reference": IMG},
+    "motion.classify_motion": {"points": PTS2, "flow": np.tile([1.5, -0.5], (40, 1))},
+    "motion.clean_mask": {"mask": MASK},
+    "motion.dense_flow": {"prev": IMG, "next": IMG2},
+    "motion.detections_from_mask": {"mask": MASK, "min_area": 10},
+    "motion.good_features_to_track": {"image": IMG},
+    "motion.lucas_kanade": {
+        "prev": IMG,
+        "next": IMG2,
+        "points": np.array([[16.0, 16.0], [32.0, 24.0]]),
+    },
+    "motion.moving_blobs": {"n_frames": 3, "size": (64, 48), "radius": (4.0, 8.0)},
+    "motion.KLTTracker": {"max_corners": 50},
+    # ------------------------------------------------------------------ depth
+    "depth.ActiveStereoSensor": {"baseline": 0.05, "width": 64, "hfov_deg": 87.0},
+    "depth.ActiveStereoSensor.disparity": {"depth": DEPTH_M},
+    "depth.ActiveStereoSensor.depth_rms_error": {"depth": DEPTH_M},
+    "depth.ColorRangeSelector": {"hsv_low": (0.0, 0.0, 0.0), "hsv_high": (180.0, 255.0, 255.0)},
+    "depth.ColorRangeSelector.__call__": {
+        "depth": DEPTH_U16,
+        "color": IMG_RGB,
+        "depth_intrinsics": CAM,
+        "color_intrinsics": CAM,
+        "T_color_depth": np.eye(4),
+        "depth_scale": 0.001,
+    },
+    "depth.align_color_to_depth": {
+        "color_image": IMG_RGB,
+        "depth": DEPTH_U16,
+        "depth_intrinsics": CAM,
+        "color_intrinsics": CAM,
+        "T_color_depth": np.eye(4),
+    },
+    "depth.align_depth_to_color": {
+        "depth": DEPTH_U16,
+        "depth_intrinsics": CAM,
+        "color_intrinsics": CAM,
+        "T_color_depth": np.eye(4),
+    },
+    "depth.bad_pixel_rate": {"disparity": DISP, "truth": DISP + 0.5},
+    "depth.block_matching": {"left": IMG, "right": IMG2, "max_disparity": 8, "window": 5},
+    "depth.census_transform": {"image": IMG, "window": 5},
+    "depth.depth_resolution": {"depth": np.array([0.5, 1.0, 2.0]), "focal": 50.0, "baseline": 0.05},
+    "depth.depth_to_points": {"depth": DEPTH_U16, "intrinsics": CAM},
+    "depth.disparity_to_depth": {"disparity": DISP, "focal": 50.0, "baseline": 0.05},
+    "depth.disparity_to_points": {
+        "disparity": DISP,
+        "Q": np.array([[1, 0, 0, -32.0], [0, 1, 0, -24.0], [0, 0, 0, 50.0], [0, 0, 20.0, 0]]),
+    },
+    "depth.focal_from_fov": {"width": 64, "hfov_deg": 87.0},
+    "depth.pixel_rays": {"intrinsics": CAM},
+    "depth.points_in_color_range": {
+        "depth": DEPTH_U16,
+        "color": IMG_RGB,
+        "depth_intrinsics": CAM,
+        "color_intrinsics": CAM,
+        "T_color_depth": np.eye(4),
+        "depth_scale": 0.001,
+        "hsv_low": (0.0, 0.0, 0.0),
+        "hsv_high": (180.0, 255.0, 255.0),
+    },
+    "depth.reprojection_matrix": {"focal": 50.0, "baseline": 0.05, "size": (64, 48)},
+    "depth.sample_colors": {"color_image": IMG_RGB, "uv": PTS2 / np.array([64.0, 64.0])},
+    "depth.semi_global_matching": {"left": IMG, "right": IMG2, "max_disparity": 8, "paths": 4},
+    "depth.texture_coordinates": {
+        "points": PTS3,
+        "T_color_depth": np.eye(4),
+        "color_intrinsics": CAM,
+    },
+    "depth.tof_ambiguity_range": {"modulation_frequency": 20e6},
+    "depth.tof_phase": {"distance": np.array([0.5, 1.0, 2.0]), "modulation_frequency": 20e6},
+    "depth.tof_phase_distance": {"phase": np.array([0.1, 1.0, 3.0]), "modulation_frequency": 20e6},
+    "depth.tof_pulse_distance": {"round_trip_time": np.array([1e-9, 1e-8])},
+    "depth.tof_pulse_time": {"distance": np.array([0.5, 1.0, 2.0])},
+    "depth.tof_unwrap": {
+        "phase1": np.array([1.0, 2.0]),
+        "f1": 20e6,
+        "phase2": np.array([0.5, 1.5]),
+        "f2": 15e6,
+        "max_distance": 20.0,
+    },
+    # ------------------------------------------------------------------ calibration
+    "calibration.board_pose": {"object_points": BOARD, "image_points": VIEWS[0], "K": K},
+    "calibration.calibrate_camera": {
+        "object_points": [BOARD] * 4,
+        "image_points": VIEWS,
+        "image_size": (64, 48),
+    },
+    "calibration.calibrate_hand_eye": {"T_base_gripper": HAND_A, "T_camera_target": HAND_B},
+    "calibration.chessboard_points": {"pattern_size": (4, 3)},
+    "calibration.circles_grid_points": {"pattern_size": (4, 3)},
+    "calibration.find_chessboard_corners": {"image": IMG, "pattern_size": (5, 3)},
+    "calibration.find_circles_grid": {"image": IMG, "pattern_size": (4, 3)},
+    "calibration.hand_eye_residuals": {
+        "X": T4,
+        "T_base_gripper": HAND_A,
+        "T_camera_target": HAND_B,
+    },
+    "calibration.load_calibration": {"path": Fixture("calibration.json")},
+    "calibration.pose_from_xyz_rpy": {
+        "xyz": np.array([1.0, 2.0, 3.0]),
+        "rpy": np.array([10.0, 20.0, 30.0]),
+    },
+    "calibration.read_opencv_storage": {"path": Fixture("calibration.yaml")},
+    "calibration.read_xyz_rpy": {"path": Fixture("pose.txt")},
+    "calibration.rectify_pair": {"left": IMG, "right": IMG2, "calibration": "stereo_calibration"},
+    "calibration.reprojection_errors": {
+        "object_points": [BOARD] * 3,
+        "image_points": VIEWS[:3],
+        "K": K,
+        "dist": np.zeros(5),
+        "rvecs": np.zeros((3, 3)),
+        "tvecs": np.tile(TVECS, (3, 1)),
+    },
+    "calibration.save_calibration": {
+        "path": _out("calibration.json"),
+        "result": _b(
+            "robopercept.calibration:CalibrationResult",
+            K,
+            np.zeros(5),
+            RVECS,
+            TVECS,
+            0.1,
+            np.array([0.1]),
+            (64, 48),
+        ),
+    },
+    "calibration.stereo_calibrate": {
+        "object_points": [BOARD] * 4,
+        "image_points1": VIEWS,
+        "image_points2": [v + np.array([3.0, 0.0]) for v in VIEWS],
+        "image_size": (64, 48),
+        "K1": K,
+        "dist1": np.zeros(5),
+        "K2": K,
+        "dist2": np.zeros(5),
+    },
+    "calibration.undistort": {"image": IMG, "K": K, "dist": np.array([0.1, -0.05, 0.0, 0.0, 0.0])},
+    "calibration.xyz_rpy_from_pose": {"T": T4},
+    # ------------------------------------------------------------------ pointcloud
+    "pointcloud.PointCloud": {"points": PTS3},
+    "pointcloud.PointCloud.select": {"selection": np.arange(10)},
+    "pointcloud.PointCloud.with_colors": {"colors": np.full((60, 3), 0.5)},
+    "pointcloud.check_cloud_path": {"path": Fixture("cloud.ply")},
+    "pointcloud.estimate_normals": {"cloud": CLOUD, "k": 10},
+    "pointcloud.euclidean_clusters": {"cloud": CLOUD, "tolerance": 0.5},
+    "pointcloud.pass_through": {"cloud": CLOUD, "axis": "z", "min_value": 4.0, "max_value": 6.0},
+    "pointcloud.radius_outlier_removal": {"cloud": CLOUD, "radius": 1.0, "min_neighbors": 2},
+    "pointcloud.read_pcd": {"path": Fixture("cloud.pcd")},
+    "pointcloud.read_point_cloud": {"path": Fixture("cloud.ply")},
+    "pointcloud.segment_plane": {"cloud": CLOUD, "threshold": 0.5, "rng": 0},
+    "pointcloud.segment_planes": {"cloud": CLOUD, "threshold": 0.5, "min_inliers": 10, "rng": 0},
+    "pointcloud.statistical_outlier_removal": {"cloud": CLOUD, "k": 8},
+    "pointcloud.voxel_downsample": {"cloud": CLOUD, "voxel_size": 0.5},
+    "pointcloud.write_point_cloud": {"path": _out("cloud.ply"), "cloud": CLOUD},
+    # ------------------------------------------------------------------ tracking
+    "tracking.ExtendedKalmanFilter": {
+        "dim_x": 2,
+        "dim_z": 1,
+        "h": "ekf_h",
+        "H_jacobian": "ekf_H",
+    },
+    "tracking.ExtendedKalmanFilter.update": {"z": np.array([1.0])},
+    "tracking.IMMEstimator": {
+        "filters": [KF, KF],
+        "mu": np.array([0.5, 0.5]),
+        "M": np.array([[0.9, 0.1], [0.1, 0.9]]),
+    },
+    "tracking.IMMEstimator.update": {"z": np.array([1.0, 2.0])},
+    "tracking.KalmanFilter": {"dim_x": 4, "dim_z": 2},
+    "tracking.KalmanFilter.update": {"z": np.array([1.0, 2.0])},
+    "tracking.KalmanFilter.predict": {},
+    "tracking.GatedTrack.step": {"z": np.array([0.0, 0.0, 1.0, 2.0]), "R": np.eye(4) * 0.01},
+    "tracking.MeanShiftTracker": {"frame": IMG_RGB, "box": (12.0, 10.0, 20.0, 16.0)},
+    "tracking.MeanShiftTracker.update": {"frame": np.roll(IMG_RGB, 2, axis=1)},
+    "tracking.MultiObjectTracker.update": {"detections": BOXES, "scores": np.array([0.9, 0.8])},
+    "tracking.constant_acceleration": {"dim": 2, "dt": 1.0, "q": 1.0, "r": 1.0},
+    "tracking.constant_position": {"dim": 2, "dt": 1.0, "q": 1.0, "r": 1.0},
+    "tracking.constant_velocity": {"dim": 2, "dt": 1.0, "q": 1.0, "r": 1.0},
+    "tracking.kf_predict": {
+        "x": np.array([0.0, 1.0]),
+        "P": np.eye(2),
+        "A": np.array([[1.0, 1.0], [0.0, 1.0]]),
+        "Q": np.eye(2) * 0.1,
+    },
+    "tracking.kf_update": {
+        "x": np.array([0.0, 1.0]),
+        "P": np.eye(2),
+        "z": np.array([0.5]),
+        "H": np.array([[1.0, 0.0]]),
+        "R": np.eye(1),
+    },
+    "tracking.lagged_model": {
+        "A": np.array([[1.0, 1.0], [0.0, 1.0]]),
+        "Q": np.eye(2) * 0.1,
+        "k": 1,
+        "lag": 2,
+    },
+    "tracking.read_mot": {"path": Fixture("mot.txt")},
+    "tracking.write_mot": {
+        "path": _out("mot.txt"),
+        "rows": [(1, 1, (5.0, 5.0, 10.0, 10.0), 1.0), (2, 1, (6.0, 5.0, 10.0, 10.0), 0.9)],
+    },
+    # ------------------------------------------------------------------ viz
+    "viz.colorize_depth": {"depth": DEPTH_M},
+    "viz.colorize_signed": {"field": IMG_F - 0.5},
+    "viz.confusion_picture": {"matrix": np.array([[5, 1], [2, 7]]), "names": ["a", "b"]},
+    "viz.curves_picture": {
+        "curves": [(np.linspace(0, 1, 5), np.linspace(0, 1, 5) ** 2, "a")],
+        "title": "t",
+        "xlabel": "x",
+        "ylabel": "y",
+        "width": 200,
+        "height": 160,
+    },
+    "viz.dense_flow_picture": {"field": FLOW[::8, ::8].copy(), "step": 8, "shape": (48, 64)},
+    "viz.draw_boxes": {"image": IMG_RGB, "boxes": BOXES},
+    "viz.draw_chessboard": {"image": IMG_RGB, "corners": VIEWS[0], "pattern_size": (4, 3)},
+    "viz.draw_flow": {"image": IMG_RGB, "start": PTS2, "end": PTS2 + 2.0},
+    "viz.draw_lines": {"image": IMG_RGB, "segments": np.hstack([PTS2[:5], PTS2[5:10]])},
+    "viz.draw_mask": {"image": IMG_RGB, "mask": MASK},
+    "viz.draw_matches": {
+        "image_a": IMG_RGB,
+        "xy_a": PTS2[:5],
+        "image_b": IMG_RGB,
+        "xy_b": PTS2[5:10],
+    },
+    "viz.draw_points": {"image": IMG_RGB, "points": PTS2},
+    "viz.draw_text": {"image": IMG_RGB, "text": "fuzz"},
+    "viz.draw_trails": {"image": IMG_RGB, "trails": [PTS2[:5], PTS2[5:9]]},
+    "viz.flow_to_color": {"flow": FLOW},
+    "viz.flow_wheel": {"size": 21},
+    "viz.hog_picture": {"histograms": np.random.default_rng(0).uniform(0, 1, (4, 6, 9))},
+    "viz.label_colors": {"labels": LABELS},
+    "viz.render_points": {"points": PTS3, "size": (64, 48)},
+    "viz.scatter_picture": {"points": PTS2, "labels": Y2, "width": 200, "height": 160},
+    "viz.tiles_picture": {
+        "tiles": np.random.default_rng(0).uniform(0, 1, (4, 8, 8)),
+        "tile_px": 16,
+    },
+    # ------------------------------------------------------------------ sources
+    "sources.RGBDFrame": {
+        "index": 0,
+        "timestamp": 0.0,
+        "depth": DEPTH_U16,
+        "color": IMG_RGB,
+        "depth_intrinsics": CAM,
+        "color_intrinsics": CAM,
+        "T_color_depth": np.eye(4),
+        "depth_scale": 0.001,
+    },
+    "sources.SyntheticRGBDScene": {"n_frames": 2, "depth_size": (64, 48), "color_size": (64, 48)},
+    "sources.SyntheticRGBDScene.frame": {"index": 1},
+    "sources.SyntheticRGBDScene.__iter__": {},
+    "sources.TUMFolderSource": {"path": Fixture("tum")},
+    "sources.TUMFolderSource.__iter__": {},
+    "sources.VideoSource": {"path": Fixture("video.mp4"), "max_frames": 3},
+    "sources.VideoSource.__iter__": {},
+    "sources.camera_preset": {"name": "fr1"},
+    "sources.import_rgbd_folder": {
+        "src": Fixture("rgbd_pairs"),
+        "out": _out("imported"),
+        "intrinsics": (50.0, 50.0, 32.0, 24.0),
+    },
+    "sources.read_camera_json": {"path": Fixture("tum/camera.json")},
+    "sources.write_tum_folder": {"path": _out("tum"), "frames": [FRAME]},
+    # ------------------------------------------------------------------ pipelines
+    "pipelines.PlaneHueModel": {"hue_tolerance": 10.0},
+    "pipelines.PlaneMeasurer.measure": {"frame": FRAME},
+    "pipelines.PlaneTracker.process": {"frame": FRAME},
+    "pipelines.plane_errors": {
+        "normal": np.array([0.0, 0.0, 1.0]),
+        "d": 1.0,
+        "true_normal": np.array([0.0, 0.1, 0.995]),
+        "true_d": 1.1,
+    },
+    "pipelines.process_cloud": {"cloud": CLOUD, "voxel": 0.2, "sor": (5, 2.0)},
+    "pipelines.run_mot": {
+        "frames": [(1, IMG_RGB), (2, np.roll(IMG_RGB, 2, axis=1))],
+        "min_area": 10,
+    },
+    "pipelines.summarize": {"results": "plane_results"},
+    "pipelines.track_objects": {
+        "frames": [(1, IMG_RGB), (2, np.roll(IMG_RGB, 2, axis=1))],
+        "min_area": 10,
+    },
+    # ------------------------------------------------------------------ nn
+    "nn.functional.avg_pool2d": {"x": IMG_F[None, None], "kernel_size": 2},
+    "nn.functional.conv2d": {"x": IMG_F[None, None], "w": np.ones((2, 1, 3, 3)) / 9},
+    "nn.functional.conv_output_size": {"size": 32, "kernel": 3},
+    "nn.functional.conv_transpose2d": {
+        "x": IMG_F[None, None, :8, :8],
+        "w": np.ones((1, 2, 3, 3)) / 9,
+    },
+    "nn.functional.im2col": {"x": IMG_F[None, None, :16, :16], "kernel_size": 3},
+    "nn.functional.max_pool2d": {"x": IMG_F[None, None], "kernel_size": 2},
+    "nn.functional.sum_pool2d": {"x": IMG_F[None, None], "kernel_size": 2},
+    "nn.functional.ConvSpec": {"in_channels": 3, "out_channels": 8, "kernel_size": 3},
+    "nn.functional.parameter_count": {"spec": _b("robopercept.nn.functional:ConvSpec", 3, 8, 3)},
+    "nn.functional.receptive_field": {"layers": [(3, 1, 1), (2, 2, 0), (3, 1, 1)]},
+    "nn.blocks.Bottleneck": {"in_channels": 8, "width": 4},
+    "nn.blocks.ConvBNAct": {"in_channels": 3, "out_channels": 4},
+    "nn.blocks.InceptionBlock": {
+        "in_channels": 4,
+        "ch1x1": 2,
+        "ch3x3red": 2,
+        "ch3x3": 2,
+        "ch5x5red": 2,
+        "ch5x5": 2,
+        "pool_proj": 2,
+    },
+    "nn.blocks.ResidualBlock": {"in_channels": 4, "out_channels": 4},
+    "nn.blocks.VGGStage": {"in_channels": 3, "out_channels": 4},
+    "nn.blocks.check_input": {"x": _b("tests.fuzz.api:torch_image", 1, 1, 8, 8), "in_channels": 1},
+    "nn.blocks.make_activation": {"act": "relu"},
+    "nn.models.Classifier": {
+        "features": _b("robopercept.nn.blocks:ConvBNAct", 1, 4),
+        "num_features": 4,
+        "num_classes": 3,
+        "in_channels": 1,
+    },
+    "nn.models.build_model": {"name": "vgg_small", "widths": (4,), "convs_per_stage": 1},
+    "nn.models.inception_small": {"stem_width": 8, "blocks": ((4, 4, 4, 2, 2, 2),)},
+    "nn.models.resnet_small": {"widths": (4, 8)},
+    "nn.models.vgg_small": {"widths": (4, 8)},
+    "nn.summary.summary": {"model": TINY_NET, "input_shape": (1, 1, 16, 16)},
+    "nn.data.ArrayDataset": {
+        "images": np.random.default_rng(5).uniform(0, 1, (6, 8, 8)).astype(np.float32),
+        "labels": np.arange(6) % 2,
+        "classes": ("a", "b"),
+    },
+    "nn.data.Compose": {"transforms": [_b("robopercept.nn.data:RandomFlip", generator=0)]},
+    "nn.data.ImageFolder": {"root": Fixture("images"), "size": (16, 16)},
+    "nn.data.Normalize": {"mean": [0.5], "std": [0.25]},
+    "nn.data.RandomCrop": {"size": 12, "padding": 2, "generator": 0},
+    "nn.data.RandomFlip": {"generator": 0},
+    "nn.data.RandomAffine": {"degrees": 10.0, "generator": 0},
+    "nn.data.ColorJitter": {"brightness": 0.2, "generator": 0},
+    "nn.data.GaussianNoise": {"generator": 0},
+    "nn.data.normalization_stats": {"data": np.random.default_rng(5).uniform(0, 1, (6, 1, 8, 8))},
+    "nn.data.shapes_dataset": {"n": 6, "size": 16, "rng": 0},
+    "nn.data.stratified_split": {"labels": np.arange(30) % 3},
+    "nn.data.to_unit_float": {"image": IMG},
+    "nn.training.TrainConfig": {"epochs": 1, "batch_size": 4},
+    "nn.training.evaluate": {"model": TINY_NET, "data": ARRAY_DATA, "device": "cpu"},
+    "nn.training.fit": {"model": TINY_NET, "train": ARRAY_DATA, "config": TRAIN_CFG},
+    "nn.training.load_checkpoint": {"path": Fixture("checkpoint.pt"), "model": TINY_NET},
+    "nn.training.save_checkpoint": {
+        "path": _out("checkpoint.pt"),
+        "state": {"epoch": 1, "w": [1.0, 2.0]},
+    },
+    "nn.transfer.freeze": {"model": TINY_NET},
+    "nn.transfer.keep_frozen_batchnorm_in_eval": {"model": TINY_NET},
+    "nn.transfer.replace_head": {"model": TINY_NET, "num_classes": 5},
+    "nn.transfer.trainable_parameter_names": {"model": TINY_NET},
+    "nn.transfer.unfreeze": {"model": TINY_NET},
+    "nn.export.export_onnx": {
+        "model": TINY_NET,
+        "path": _out("net.onnx"),
+        "input_shape": (1, 16, 16),
+    },
+    "nn.run.evaluate_run": {
+        "checkpoint": Fixture("run/checkpoint.pt"),
+        "data": "digits",
+        "device": "cpu",
+    },
+    "nn.run.load_data": {"data": Fixture("images"), "size": (16, 16)},
+    "nn.run.load_run": {"checkpoint": Fixture("run/checkpoint.pt"), "device": "cpu"},
+    "nn.run.predict": {
+        "checkpoint": Fixture("run/checkpoint.pt"),
+        "image_paths": [Fixture("image.png")],
+        "device": "cpu",
+    },
+}
+
+# Valid values that need the worker (callables, fitted estimators, results of a run):
+# the table names them by a string that _SPECIAL turns into a Build.
+_SPECIAL: dict[str, Any] = {
+    "fitted:SVC": _b("tests.fuzz.api:fitted", "robopercept.learning:SVC"),
+    "ekf_h": _b("tests.fuzz.api:picklable", "ekf_h"),
+    "ekf_H": _b("tests.fuzz.api:picklable", "ekf_H"),
+    "stereo_calibration": _b("tests.fuzz.api:stereo_calibration"),
+    "plane_results": _b("tests.fuzz.api:plane_results"),
+}
+
+
+def fitted(target: str) -> Any:
+    """An estimator of class ``target`` fitted on the three-blob data (valid model)."""
+    return resolve(target)().fit(XB, YB)
+
+
+def _ekf_h(x: np.ndarray) -> np.ndarray:
+    return np.array([x[0] ** 2 / 10.0])
+
+
+def _ekf_jac(x: np.ndarray) -> np.ndarray:
+    return np.array([[x[0] / 5.0, 0.0]])
+
+
+def picklable(name: str) -> Callable[..., Any]:
+    """A module-level function by name (the EKF's measurement model and Jacobian)."""
+    return {"ekf_h": _ekf_h, "ekf_H": _ekf_jac}[name]
+
+
+def stereo_calibration() -> dict[str, Any]:
+    """The dict :func:`robopercept.calibration.load_calibration` returns for a stereo
+    rig of two K cameras 0.5 apart (the valid ``calibration`` of ``rectify_pair``)."""
+    from robopercept.calibration import StereoCalibration, load_calibration, save_calibration
+
+    path = IN_DIR / "stereo.json"
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        result = StereoCalibration(
+            K,
+            np.zeros(5),
+            K,
+            np.zeros(5),
+            np.eye(3),
+            np.array([-0.5, 0.0, 0.0]),
+            E_MAT,
+            F_MAT,
+            0.1,
+            np.array([0.1]),
+            (64, 48),
+        )
+        save_calibration(path, result)
+    return load_calibration(path)
+
+
+def plane_results() -> list[Any]:
+    """Plane-tracking results of the 3 frames of the synthetic scene (``summarize``)."""
+    from robopercept.pipelines import PlaneTracker
+
+    tracker = PlaneTracker()
+    return [tracker.process(frame) for frame in materialize(SCENE)]
+
+
+#: methods fuzzed beyond constructors: class plan name -> methods; estimators (classes
+#: with ``fit``) get theirs from :func:`_estimator_methods`
+METHODS: dict[str, tuple[str, ...]] = {
+    "imaging.VideoWriter": ("write",),
+    "imaging.SnapshotVideoWriter": ("add",),
+    "imaging.VideoReader": ("__iter__",),
+    "geometry.CameraIntrinsics": ("scaled",),
+    "estimation.Plane": ("distance", "project"),
+    "estimation.Line": ("distance",),
+    "estimation.LineModel": ("fit",),
+    "estimation.PlaneModel": ("fit",),
+    "estimation.HomographyModel": ("fit",),
+    "estimation.AffineModel": ("fit",),
+    "learning.KFold": ("split",),
+    "learning.StratifiedKFold": ("split",),
+    "motion.AveragedBackground": ("apply",),
+    "motion.FrameDifference": ("apply",),
+    "motion.GaussianBackground": ("apply",),
+    "motion.StaticBackground": ("apply",),
+    "motion.ThreeFrameDifference": ("apply",),
+    "motion.KLTTracker": ("update",),
+    "depth.ActiveStereoSensor": ("disparity", "depth_rms_error"),
+    "depth.ColorRangeSelector": ("__call__",),
+    "pointcloud.PointCloud": ("select", "with_colors"),
+    "tracking.KalmanFilter": ("update", "predict"),
+    "tracking.ExtendedKalmanFilter": ("update",),
+    "tracking.IMMEstimator": ("update",),
+    "tracking.GatedTrack": ("step",),
+    "tracking.MeanShiftTracker": ("update",),
+    "tracking.MultiObjectTracker": ("update",),
+    "sources.SyntheticRGBDScene": ("frame", "__iter__"),
+    "sources.TUMFolderSource": ("__iter__",),
+    "sources.VideoSource": ("__iter__",),
+    "pipelines.PlaneMeasurer": ("measure",),
+    "pipelines.PlaneTracker": ("process",),
+    "nn.data.RandomFlip": ("__call__",),
+    "nn.data.RandomCrop": ("__call__",),
+    "nn.data.RandomAffine": ("__call__",),
+    "nn.data.ColorJitter": ("__call__",),
+    "nn.data.GaussianNoise": ("__call__",),
+    "nn.data.Normalize": ("__call__",),
+}
+
+#: the constructor arguments of a method's instance, where the constructor's own
+#: valid values are not what the method needs
+INIT: dict[str, dict[str, Any]] = {
+    "tracking.KalmanFilter": {"dim_x": 2, "dim_z": 2, "x": np.zeros(2), "P": np.eye(2)},
+    "tracking.GatedTrack": {"dim": 4},
+}
+
+#: calls made on the instance before the fuzzed method (valid warm-up)
+PRE: dict[str, tuple[tuple[str, tuple[Any, ...]], ...]] = {
+    "motion.FrameDifference.apply": (("apply", (IMG,)),),
+    "motion.ThreeFrameDifference.apply": (("apply", (IMG,)), ("apply", (IMG2,))),
+    "motion.KLTTracker.update": (("update", (IMG,)),),
+    "tracking.MultiObjectTracker.update": (("update", (BOXES,)),),
+    "tracking.IMMEstimator.update": (("predict", ()),),
+    "tracking.ExtendedKalmanFilter.update": (("predict", ()),),
+}
+
+#: roles that the valid value does not reveal (a tensor where an image goes)
+ROLES: dict[str, dict[str, str]] = {
+    "nn.data.RandomFlip.__call__": {"x": "image"},
+    "nn.data.RandomCrop.__call__": {"x": "image"},
+    "nn.data.RandomAffine.__call__": {"x": "image"},
+    "nn.data.ColorJitter.__call__": {"x": "image"},
+    "nn.data.GaussianNoise.__call__": {"x": "image"},
+    "nn.data.Normalize.__call__": {"x": "image"},
+    "nn.blocks.check_input": {"x": "image"},
+    "pipelines.PlaneMeasurer.measure": {"frame": "frame"},
+    "pipelines.PlaneTracker.process": {"frame": "frame"},
+    "sources.write_tum_folder": {"frames": "frames"},
+}
+
+for _cls in (
+    "RandomFlip",
+    "RandomCrop",
+    "RandomAffine",
+    "ColorJitter",
+    "GaussianNoise",
+    "Normalize",
+):
+    VALID.setdefault(f"nn.data.{_cls}.__call__", {"x": TORCH_IMG})
+VALID["nn.data.Normalize"] = {"mean": [0.5], "std": [0.25]}
+
+#: callables not fuzzed, with the reason
+SKIP: dict[str, str] = {
+    "imaging.sample_image_path": "takes no argument (returns the path of a bundled image)",
+    "learning.DataConversionWarning": "a warning category, not a callable of the API",
+    "estimation.Model": "a typing Protocol (its implementations are fuzzed)",
+    "geometry.EssentialModel": "takes no argument; fitted through find_essential",
+    "geometry.FundamentalModel": "takes no argument; fitted through find_fundamental",
+    "nn.run.train_run": "trains a network (tens of seconds per call); its parts are fuzzed: "
+    "load_data, TrainConfig, fit, evaluate",
+    "nn.data.load_digits": "takes only a transform; loads a bundled data set "
+    "(the datasets are fuzzed through shapes_dataset and ArrayDataset)",
+    "nn.data.load_lfw_subset": "downloads (network) on first use",
+    "pipelines.PlaneTracker.run": "iterates process() over a source: fuzzed as process",
+}
+
+#: name -> valid value for required parameters missing from :data:`VALID`
+BY_NAME: dict[str, Any] = {
+    "image": IMG,
+    "img": IMG,
+    "gray": IMG,
+    "frame": IMG,
+    "mask": MASK,
+    "points": PTS3,
+    "cloud": CLOUD,
+    "X": XB,
+    "y": YB,
+    "intrinsics": CAM,
+}
+
+
+def skip_reason(obj: Any) -> str | None:
+    """Why a public name is not fuzzed by rule, or None.
+
+    Parameters
+    ----------
+    obj : object
+        A name of a package's ``__all__``.
+
+    Returns
+    -------
+    str or None
+        Not callable (a constant, a module); an enumeration; an exception class; a
+        result record (a frozen dataclass without ``__post_init__``: the library builds
+        it, its constructor checks nothing by design).
+    """
+    if not callable(obj):
+        return "not callable (a constant)"
+    if inspect.isclass(obj):
+        if issubclass(obj, enum.Enum):
+            return "an enumeration"
+        if issubclass(obj, BaseException):
+            return "an exception class"
+        if dataclasses.is_dataclass(obj) and not hasattr(obj, "__post_init__"):
+            return (
+                "result record (a dataclass without a validating constructor, built by the library)"
+            )
+    return None
+
+
+# =========================================================================== plans
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How to call one public callable validly, and which parameters to attack.
+
+    Parameters
+    ----------
+    name : str
+        ``"imaging.gaussian_blur"``, ``"learning.KMeans"`` (the constructor) or
+        ``"learning.KMeans.fit"`` (a method).
+    package : str
+        The package (``"nn"`` for every ``nn`` module).
+    target : str
+        ``"module:qualname"`` of the function or class.
+    method : str
+        The method's name, ``""`` for a function or a constructor.
+    init : tuple of (str, value)
+        Constructor arguments of the instance (methods only).
+    pre : tuple of (method, args)
+        Valid calls on the instance before the fuzzed one.
+    args : tuple
+        Positional arguments (varargs, positional-only).
+    kwargs : tuple of (str, value)
+        Keyword arguments.
+    roles : tuple of (str, str)
+        The fuzzed parameters (``"*0"`` for the first positional one) and their roles.
+    """
+
+    name: str
+    package: str
+    target: str
+    method: str = ""
+    init: tuple[tuple[str, Any], ...] = ()
+    pre: tuple[tuple[str, tuple[Any, ...]], ...] = ()
+    args: tuple[Any, ...] = ()
+    kwargs: tuple[tuple[str, Any], ...] = ()
+    roles: tuple[tuple[str, str], ...] = ()
+
+    def value(self, param: str) -> Any:
+        """The valid value of ``param`` (``"*0"`` for positional argument 0)."""
+        if param.startswith("*"):
+            return self.args[int(param[1:])]
+        return dict(self.kwargs)[param]
+
+
+def _ann_text(annotation: Any) -> str:
+    return (
+        annotation
+        if isinstance(annotation, str)
+        else getattr(annotation, "__name__", str(annotation))
+    )
+
+
+def role_of(name: str, value: Any, annotation: Any = None) -> str:
+    """The role of a parameter: which hostile strategy attacks it.
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name.
+    value : object
+        Its valid value.
+    annotation : object, optional
+        Its annotation (consulted when the valid value is None).
+
+    Returns
+    -------
+    str
+        ``"image"`` (2-D or 3-D arrays at least 8x8), ``"points"`` (``(N, 2..4)``
+        arrays, N >= 5), ``"array"`` (other arrays: matrices, vectors), ``"scalar"``,
+        ``"flag"``, ``"choice"`` (a string), ``"tuple"`` (up to 4 numbers), ``"sequence"``,
+        ``"path"``, ``"cloud"``, ``"object"``, or ``"fixed"`` (callables: not attacked).
+    """
+    if isinstance(value, Fixture):
+        return "path"
+    if isinstance(value, Build):
+        return "cloud" if value.target.endswith(":PointCloud") else "object"
+    if isinstance(value, str) and (
+        value.startswith(str(WORKDIR)) or name in ("path", "out", "out_dir")
+    ):
+        return "path"
+    if isinstance(value, Layout):
+        value = value.array
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "biufc":
+            return "array"
+        if value.ndim == 2 and 2 <= value.shape[1] <= 4 and value.shape[0] >= 5:
+            return "points"
+        if value.ndim in (2, 3) and value.shape[0] >= 8 and value.shape[1] >= 8:
+            return "image"
+        return "array"
+    if isinstance(value, (bool, np.bool_)):
+        return "flag"
+    if isinstance(value, (int, float, np.integer, np.floating)):
+        return "scalar"
+    if isinstance(value, str):
+        return "choice"
+    if isinstance(value, (tuple, list)):
+        if 0 < len(value) <= 4 and all(
+            isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            for v in value
+        ):
+            return "tuple"
+        return "sequence"
+    if value is None:
+        text = _ann_text(annotation)
+        if "Callable" in text:
+            return "fixed"
+        if "ndarray" in text or "ArrayLike" in text:
+            return "array"
+        if "tuple" in text:
+            return "tuple"
+        if "float" in text or "int" in text or "Generator" in text:
+            return "scalar"
+        if "str" in text:
+            return "choice"
+        return "object"
+    if callable(value):
+        return "fixed"
+    return "object"
+
+
+def strategy_for(role: str, like: Any) -> st.SearchStrategy[Any]:
+    """The hostile strategy of a role, seeded with the parameter's valid value.
+
+    Parameters
+    ----------
+    role : str
+        From :func:`role_of`.
+    like : object
+        The valid value.
+
+    Returns
+    -------
+    SearchStrategy
+    """
+    if isinstance(like, Layout):
+        like = like.array
+    if role == "image":
+        return hs.hostile_images(like=like if isinstance(like, np.ndarray) else None)
+    if role == "points":
+        return hs.hostile_points(like=like)
+    if role == "array":
+        return hs.hostile_arrays(like=like)
+    if role == "scalar":
+        return hs.hostile_scalars(like=like)
+    if role == "flag":
+        return hs.hostile_flags(like)
+    if role == "choice":
+        return hs.hostile_choices(like)
+    if role == "tuple":
+        return hs.hostile_tuples(like=like)
+    if role == "sequence":
+        return hs.hostile_sequences(like=like)
+    if role == "path":
+        if isinstance(like, Fixture):
+            return hs.hostile_paths(str(IN_DIR), like=like.name)
+        # an output: hostile names in the output folder, so that no write can replace
+        # the empty and garbage inputs that the readers are given
+        return hs.hostile_paths(str(OUT_DIR), like=like)
+    if role == "cloud":
+        return hs.hostile_clouds(like=like)
+    if role == "frame":
+        return st.one_of(hs.hostile_objects(), st.builds(_hostile_frame, hs.hostile_images()))
+    if role == "frames":
+        return st.one_of(
+            hs.hostile_sequences(like=None),
+            st.builds(lambda f: [f], st.builds(_hostile_frame, hs.hostile_images())),
+        )
+    return hs.hostile_objects(like)
+
+
+def _hostile_frame(image: Any) -> Build:
+    """A frame of the synthetic scene whose depth map is replaced by a hostile image
+    (made with :func:`dataclasses.replace`, so the frame's own checks run)."""
+    return _b("tests.fuzz.api:replace_frame", image)
+
+
+def replace_frame(depth: Any) -> Any:
+    """Frame 0 of the synthetic scene with ``depth`` as its depth map."""
+    return dataclasses.replace(scene_frame(0), depth=depth)
+
+
+def _qual(obj: Any) -> str:
+    return f"{obj.__module__}:{obj.__qualname__}"
+
+
+def _walk() -> Iterator[tuple[str, str, Any]]:
+    """(package, plan-name prefix, object) for every name of every ``__all__``."""
+    for pkg in PACKAGES:
+        mod = importlib.import_module(f"robopercept.{pkg}")
+        if pkg == "nn":
+            for sub in mod.__all__:
+                submod = importlib.import_module(f"robopercept.nn.{sub}")
+                for name in submod.__all__:
+                    yield pkg, f"nn.{sub}.{name}", getattr(submod, name)
+        else:
+            for name in mod.__all__:
+                yield pkg, f"{pkg}.{name}", getattr(mod, name)
+
+
+def _resolve_special(value: Any) -> Any:
+    if isinstance(value, str) and value in _SPECIAL:
+        return _SPECIAL[value]
+    if isinstance(value, list):
+        return [_resolve_special(v) for v in value]
+    return value
+
+
+def _signature_plan(
+    name: str,
+    package: str,
+    fn: Any,
+    target: str,
+    method: str = "",
+    init: dict[str, Any] | None = None,
+) -> Plan:
+    """A plan from ``fn``'s signature, :data:`VALID`, :data:`BY_NAME` and the defaults."""
+    table = {k: _resolve_special(v) for k, v in VALID.get(name, {}).items()}
+    sig = inspect.signature(fn)
+    hints: dict[str, Any] = {}
+    args: list[Any] = list(table.pop("*", []))
+    kwargs: dict[str, Any] = {}
+    roles: list[tuple[str, str]] = []
+    for i in range(len(args)):
+        roles.append((f"*{i}", role_of(f"*{i}", args[i])))
+    covered = len(args)  # leading positional parameters given by the table's "*"
+    for pname, p in sig.parameters.items():
+        if pname == "self" or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+            continue
+        if covered and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD):
+            covered -= 1
+            continue
+        if pname in table:
+            value = table.pop(pname)
+        elif p.default is not inspect.Parameter.empty:
+            value = p.default
+        elif pname in BY_NAME:
+            value = BY_NAME[pname]
+        else:
+            raise LookupError(
+                f"{name}: no valid value for required parameter {pname!r}: add it to VALID"
+            )
+        if p.kind == p.POSITIONAL_ONLY:
+            args.append(value)
+            roles.append((f"*{len(args) - 1}", role_of(pname, value, p.annotation)))
+            continue
+        kwargs[pname] = value
+        role = ROLES.get(name, {}).get(pname) or role_of(
+            pname, value, hints.get(pname, p.annotation)
+        )
+        if pname in ("progress",):
+            role = "fixed"  # a progress bar switch: not part of the computation
+        roles.append((pname, role))
+    if table:  # **kwargs of the callable (build_model's builder arguments)
+        for pname, value in table.items():
+            kwargs[pname] = value
+            roles.append((pname, role_of(pname, value)))
+    roles = [(p, r) for p, r in roles if r != "fixed"]
+    pre = tuple((m, tuple(_resolve_special(a) for a in margs)) for m, margs in PRE.get(name, ()))
+    return Plan(
+        name=name,
+        package=package,
+        target=target,
+        method=method,
+        init=tuple((init or {}).items()),
+        pre=pre,
+        args=tuple(args),
+        kwargs=tuple(kwargs.items()),
+        roles=tuple(roles),
+    )
+
+
+_ESTIMATOR_METHODS = (
+    "fit",
+    "predict",
+    "transform",
+    "decision_function",
+    "predict_proba",
+    "inverse_transform",
+    "score",
+)
+
+
+def _estimator_methods(cls: type) -> tuple[str, ...]:
+    return tuple(m for m in _ESTIMATOR_METHODS if callable(getattr(cls, m, None)))
+
+
+def _estimator_valid(
+    name: str, cls: type, method: str
+) -> tuple[dict[str, Any], tuple[tuple[str, tuple[Any, ...]], ...]]:
+    """Valid X, y for an estimator's ``method`` and the ``fit`` call before it."""
+    y = YR if "Regressor" in cls.__name__ else YB
+    if method == "fit":
+        return {"X": XB, "y": y}, ()
+    if method == "inverse_transform":
+        return {"X": XB[:, :2]}, (("fit", (XB, y)),)
+    return {"X": XB}, (("fit", (XB, y)),)
+
+
+def build_plans(
+    packages: tuple[str, ...] | list[str] = PACKAGES,
+) -> tuple[list[Plan], dict[str, str]]:
+    """Every plan of the given packages, and the skipped callables with their reasons.
+
+    Parameters
+    ----------
+    packages : sequence of str
+        Package names of :data:`PACKAGES`.
+
+    Returns
+    -------
+    plans : list of Plan
+        Constructors, functions and methods, in ``__all__`` order.
+    skipped : dict
+        Plan name -> reason.
+
+    Raises
+    ------
+    LookupError
+        A required parameter has no valid value (a new public function: add it to
+        :data:`VALID` or :data:`SKIP`).
+    """
+    _prepare_inputs()
+    preload(packages)
+    plans: list[Plan] = []
+    skipped: dict[str, str] = {}
+    seen: set[int] = set()
+    for package, name, obj in _walk():
+        if package not in packages:
+            continue
+        if name in SKIP:
+            skipped[name] = SKIP[name]
+            continue
+        reason = skip_reason(obj)
+        if reason is not None:
+            skipped[name] = reason
+            if name not in METHODS:  # a record's methods that take user data still run
+                continue
+        if id(obj) in seen and inspect.isclass(obj):
+            skipped[name] = "the same class as another public name"
+            continue
+        seen.add(id(obj))
+        target = _qual(obj)
+        if reason is None:
+            plans.append(_signature_plan(name, package, obj, target))
+        if not inspect.isclass(obj):
+            continue
+        init = {k: _resolve_special(v) for k, v in VALID.get(name, {}).items()}
+        init.update(INIT.get(name, {}))
+        if package == "learning" and hasattr(obj, "fit"):
+            for m in _estimator_methods(obj):
+                mname = f"{name}.{m}"
+                valid, pre = _estimator_valid(name, obj, m)
+                VALID.setdefault(mname, valid)
+                PRE.setdefault(mname, pre)
+                plans.append(_signature_plan(mname, package, getattr(obj, m), target, m, init))
+        for m in METHODS.get(name, ()):
+            mname = f"{name}.{m}"
+            if mname in SKIP:
+                skipped[mname] = SKIP[mname]
+                continue
+            plans.append(_signature_plan(mname, package, getattr(obj, m), target, m, init))
+    return plans, skipped
+
+
+def preload(packages: tuple[str, ...] | list[str] = PACKAGES) -> None:
+    """Import in this (the parent) process what the callables import lazily on first use.
+
+    The sandbox's worker is a fork of this process, re-forked after every crash or
+    hang, and it traces allocations: a first-time import there is paid again after
+    each respawn, and traced (torch's optimizers pull in ``torch._dynamo`` and sympy,
+    about 800 modules: 10 s traced against 0.4 s warm). Imports only: nothing runs a
+    thread pool before the fork.
+
+    Parameters
+    ----------
+    packages : sequence of str
+    """
+    if "nn" in packages:
+        import torch._dynamo
+        import torch.optim  # noqa: F401
+    if "viz" in packages or "nn" in packages:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot
+
+
+def _prepare_inputs() -> None:
+    """Empty and garbage files of every extension the readers use, in :data:`IN_DIR`."""
+    IN_DIR.mkdir(parents=True, exist_ok=True)
+    OUT_DIR.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(0)
+    for suffix in (
+        "",
+        ".png",
+        ".pcd",
+        ".ply",
+        ".mp4",
+        ".txt",
+        ".yaml",
+        ".json",
+        ".csv",
+        ".pt",
+        ".onnx",
+    ):
+        (IN_DIR / f"empty{suffix}").touch()
+        garbage = IN_DIR / f"garbage{suffix}"
+        if not garbage.exists():
+            garbage.write_bytes(rng.integers(0, 256, 512, dtype=np.uint8).tobytes())
+
+
+# =========================================================================== calling
+
+
+def invoke(plan: Plan, param: str = "", value: Any = None) -> None:
+    """Call ``plan``'s callable with ``param`` replaced by ``value`` (in the worker).
+
+    The instance of a method is built first (with the plan's valid constructor
+    arguments) and warmed up by the plan's ``pre`` calls; a returned iterator is run
+    to at most 5 items, so lazy sources do their work. The result is dropped. The
+    worker's current folder is the campaign's scratch folder (``WORKDIR/cwd``), so that
+    a hostile empty or relative output path writes nothing into the project.
+
+    Parameters
+    ----------
+    plan : Plan
+    param : str
+        The parameter made hostile (``""``: none, the valid call).
+    value : object
+        Its hostile value (:class:`~tests.fuzz.strategies.Layout` and
+        :class:`~tests.fuzz.strategies.Build` values are made here).
+    """
+    # a relative or empty path ("" is the current folder) lands in the scratch folder,
+    # never in the folder the campaign was started from
+    cwd = WORKDIR / "cwd"
+    cwd.mkdir(parents=True, exist_ok=True)
+    os.chdir(cwd)
+    args = list(plan.args)
+    kwargs = dict(plan.kwargs)
+    if param.startswith("*"):
+        args[int(param[1:])] = value
+    elif param:
+        kwargs[param] = value
+    fn = resolve(plan.target)
+    if plan.method:
+        obj = fn(**materialize(dict(plan.init)))
+        for m, margs in plan.pre:
+            _drain(getattr(obj, m)(*materialize(margs)))
+        fn = getattr(obj, plan.method)
+    _drain(fn(*materialize(args), **materialize(kwargs)))
+
+
+def _drain(result: Any) -> None:
+    if isinstance(result, Iterator):
+        for i, _ in enumerate(result):
+            if i >= 4:
+                break
+
+
+def draw_examples(plan: Plan, n: int, seed_: int) -> list[tuple[str, Any]]:
+    """``n`` fuzz inputs for ``plan``: (parameter, hostile value), deterministic in ``seed_``.
+
+    Hypothesis draws the parameter (uniformly among the plan's roles) and then its
+    value from the role's strategy; generation only (no shrinking: nothing fails
+    inside Hypothesis, outcomes are classified afterwards).
+
+    Parameters
+    ----------
+    plan : Plan
+    n : int
+        Number of inputs.
+    seed_ : int
+        Hypothesis seed.
+
+    Returns
+    -------
+    list of (str, object)
+        Empty when the plan has no parameter to attack.
+    """
+    if not plan.roles or n <= 0:
+        return []
+    strat = st.sampled_from(plan.roles).flatmap(
+        lambda pr: strategy_for(pr[1], plan.value(pr[0])).map(lambda v, p=pr[0]: (p, v))
+    )
+    out: list[tuple[str, Any]] = []
+
+    @seed(seed_)
+    @settings(
+        max_examples=n,
+        database=None,
+        deadline=None,
+        phases=[Phase.generate],
+        suppress_health_check=list(HealthCheck),
+        derandomize=False,
+    )
+    @given(strat)
+    def collect(example: tuple[str, Any]) -> None:
+        out.append(example)
+
+    collect()
+    return out[:n]
+
+
+@dataclass
+class PlanRun:
+    """The outcomes of one plan: the valid call's and the tally of the fuzz inputs."""
+
+    plan: Plan
+    baseline: Any
+    tally: Tally
+    examples: list[tuple[str, str, Any]] = field(default_factory=list)  # (param, value, outcome)
+
+
+def run_plan(
+    plan: Plan,
+    sandbox: Any,
+    n: int,
+    seed_: int,
+    *,
+    baseline: bool = True,
+    confirm_timeout: float | None = None,
+) -> PlanRun:
+    """Run the valid call of ``plan`` and ``n`` hostile inputs in ``sandbox``.
+
+    A call over the sandbox's time limit is run once more with ``confirm_timeout``
+    seconds (when given) and counted as a hang only if it runs over again: the first
+    call of a numba kernel with a new dtype compiles it (seconds to tens of seconds on
+    a loaded machine, then cached on disk), which is slow, not a hang.
+
+    Parameters
+    ----------
+    plan : Plan
+    sandbox : Sandbox
+    n : int
+        Hostile inputs.
+    seed_ : int
+        Hypothesis seed of :func:`draw_examples`.
+    baseline : bool
+        Also run the valid call (its outcome is :attr:`PlanRun.baseline`, not counted
+        in the tally).
+    confirm_timeout : float, optional
+        The limit of the second try of a call that hung; None: no second try.
+
+    Returns
+    -------
+    PlanRun
+    """
+    base = _run(sandbox, functools.partial(invoke, plan), confirm_timeout) if baseline else None
+    tally = Tally(plan.name, plan.package)
+    run = PlanRun(plan, base, tally)
+    for param, value in draw_examples(plan, n, seed_):
+        text = describe(value)
+        outcome = _run(sandbox, functools.partial(invoke, plan, param, value), confirm_timeout)
+        tally.add(outcome, param, text)
+        run.examples.append((param, text, outcome))
+    return run
+
+
+def _run(sandbox: Any, call: Any, confirm_timeout: float | None) -> Any:
+    outcome = sandbox.run(call)
+    if outcome.kind == "hang" and confirm_timeout:
+        outcome = sandbox.run(call, timeout=confirm_timeout)
+    return outcome
+
+
+def plan_seed(seed_: int, name: str, round_: int) -> int:
+    """A seed per (campaign seed, plan, round), stable across runs and Python versions."""
+    h = 2166136261
+    for ch in f"{seed_}:{name}:{round_}".encode():
+        h = ((h ^ ch) * 16777619) & 0xFFFFFFFF
+    return h
+
+
+def run_api_campaign(
+    budget_s: float,
+    seed_: int,
+    sandbox: Any,
+    *,
+    packages: tuple[str, ...] | list[str] = PACKAGES,
+    batch: int = 5,
+    confirm_timeout: float | None = 60.0,
+    log: Callable[[str], None] | None = None,
+) -> tuple[list[Tally], dict[str, str], list[str]]:
+    """Fuzz every plan round-robin until ``budget_s`` seconds have passed.
+
+    The valid call of every plan runs first. Then each round gives every plan ``batch``
+    new inputs (seeded by round; 2 in the first round), so that a short budget still
+    touches every callable and a long one goes deeper everywhere.
+
+    Parameters
+    ----------
+    budget_s : float
+        Seconds (wall clock) for the whole campaign; a round in progress stops when it
+        is spent.
+    seed_ : int
+        Campaign seed.
+    sandbox : Sandbox
+    packages : sequence of str
+    batch : int
+        Inputs per plan per round.
+    confirm_timeout : float, optional
+        The second try of a plan's first hang (see :func:`run_plan`); later hangs of the
+        same plan, and hangs when less than this is left of the budget, count at once.
+    log : callable, optional
+        Called with a progress line after each round.
+
+    Returns
+    -------
+    tallies : list of Tally
+        One per plan (valid calls not counted).
+    skipped : dict
+        Skipped callables and why.
+    broken : list of str
+        Plans whose *valid* call did not succeed (the table needs fixing, or the
+        callable is broken for valid input), with the outcome.
+    """
+    start = time.monotonic()
+    plans, skipped = build_plans(packages)
+    tallies = {p.name: Tally(p.name, p.package) for p in plans}
+    broken: list[str] = []
+    active = []
+    for p in plans:
+        base = _run(sandbox, functools.partial(invoke, p), confirm_timeout)
+        if base.kind == "ok":
+            active.append(p)
+        else:
+            broken.append(
+                f"{p.name}: valid call gave {base.kind} {base.error}: {base.message[:160]}"
+            )
+        if time.monotonic() - start > budget_s:
+            break
+    round_ = 0
+    while time.monotonic() - start < budget_s and active:
+        for p in active:
+            if time.monotonic() - start >= budget_s:
+                break
+            left = budget_s - (time.monotonic() - start)
+            first = tallies[p.name].hangs == 0
+            confirm = (
+                confirm_timeout if first and confirm_timeout and left > confirm_timeout else None
+            )
+            r = run_plan(
+                p,
+                sandbox,
+                min(batch, 2) if round_ == 0 else batch,
+                plan_seed(seed_, p.name, round_),
+                baseline=False,
+                confirm_timeout=confirm,
+            )
+            tallies[p.name].merge(r.tally)
+        round_ += 1
+        if log is not None:
+            n = sum(t.inputs for t in tallies.values())
+            log(f"api round {round_}: {n} inputs, {time.monotonic() - start:.0f} s")
+    return list(tallies.values()), skipped, broken

@@ -1,0 +1,708 @@
+"""Hypothesis strategies for hostile inputs: images, clouds, point sets, scalars.
+
+Every strategy draws *descriptions* that pickle cheaply: arrays are drawn contiguous
+and, where their memory layout is part of the attack (Fortran order, a non-contiguous
+view, a read-only buffer, zero strides from :func:`numpy.broadcast_to`), wrapped in a
+:class:`Layout` that :func:`materialize` applies in the worker process -- a pickled
+view arrives as a fresh contiguous array, so the layout must be made on the far side.
+Objects that only exist in the worker (a ``PointCloud`` of hostile points, a camera)
+are :class:`Build` recipes, made there by calling ``target(*args, **kwargs)``.
+
+Sizes stay small (images at most 64x64, at most 500 points) so that one call takes
+milliseconds and a campaign tries thousands of inputs.
+
+The hostile menu follows issue 25 (and the campaigns of NumPy, SciPy and scikit-image,
+whose own fuzzers use the same families):
+
+* images: shapes ``(0, 0)``, ``(1, 1)``, ``(H, W)``, ``(H, W, 1|3|4|5)``, 1-D, 4-D,
+  channels-first; dtypes ``bool``, ``uint8``, ``int8``, ``uint16``, ``int32``,
+  ``float16``, ``float32``, ``float64``, ``complex64``, ``object``; values NaN, +-inf,
+  1e300, -0.0, denormals; Fortran order, non-contiguous views, read-only, zero strides;
+* point sets and clouds: ``(0, 3)``, ``(1, 3)``, ``(N, 2)``, ``(N, 4)``, points as
+  columns, identical points, collinear points, NaN rows, 1e300, integer dtype, lists
+  of lists;
+* scalars: nan, inf, -inf, -1, 0, 1e-162, 2**40, 2**63, True, None, ``"3"``,
+  ``[1, 2]``, ``np.float32(2)``, ``np.int64(3)``, a complex number -- mixed with the
+  valid value and its neighbours, so valid-but-extreme combinations are tried too.
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from hypothesis import strategies as st
+
+__all__ = [
+    "HOSTILE_SCALARS",
+    "IMAGE_DTYPES",
+    "LAYOUTS",
+    "Build",
+    "Layout",
+    "Recipe",
+    "hostile_arrays",
+    "hostile_choices",
+    "hostile_clouds",
+    "hostile_flags",
+    "hostile_images",
+    "hostile_objects",
+    "hostile_paths",
+    "hostile_points",
+    "hostile_scalars",
+    "hostile_sequences",
+    "hostile_tuples",
+    "materialize",
+]
+
+#: the dtypes an image may come in (issue 25's list)
+IMAGE_DTYPES: tuple[str, ...] = (
+    "bool",
+    "uint8",
+    "int8",
+    "uint16",
+    "int32",
+    "float16",
+    "float32",
+    "float64",
+    "complex64",
+    "object",
+)
+
+#: memory layouts applied in the worker: C order, Fortran order, a strided view,
+#: a read-only buffer, zero strides (np.broadcast_to)
+LAYOUTS: tuple[str, ...] = ("c", "fortran", "strided", "readonly", "broadcast")
+
+#: the special floating values injected into arrays
+SPECIAL_VALUES: tuple[float, ...] = (
+    math.nan,
+    math.inf,
+    -math.inf,
+    1e300,
+    -1e300,
+    -0.0,
+    5e-324,
+    2.2250738585072014e-308 / 3,
+)
+
+#: issue 25's hostile scalars (each a parameter value that a guard must refuse or that
+#: the function must handle)
+HOSTILE_SCALARS: tuple[Any, ...] = (
+    math.nan,
+    math.inf,
+    -math.inf,
+    -1,
+    0,
+    1e-162,
+    2**40,
+    2**63,
+    True,
+    None,
+    "3",
+    [1, 2],
+    np.float32(2),
+    np.int64(3),
+    complex(1, 1),
+)
+
+
+class Recipe:
+    """Base of the values that :func:`materialize` makes in the worker."""
+
+    def make(self) -> Any:
+        """Return the object this recipe describes."""
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Layout(Recipe):
+    """An array and the memory layout the worker gives it before the call.
+
+    Parameters
+    ----------
+    array : numpy.ndarray
+        The values, C-contiguous (as they pickle).
+    layout : str
+        One of :data:`LAYOUTS`: ``"c"`` (as is), ``"fortran"``
+        (``np.asfortranarray``), ``"strided"`` (a view of every other element of a
+        twice-as-large array along the first axis), ``"readonly"``
+        (``writeable=False``), ``"broadcast"`` (``np.broadcast_to`` of the first
+        element/row: zero strides, read-only).
+    """
+
+    array: np.ndarray
+    layout: str = "c"
+
+    def make(self) -> np.ndarray:
+        """Return the array in its layout (called in the worker).
+
+        Returns
+        -------
+        numpy.ndarray
+            Same shape, dtype and values as :attr:`array` (``"broadcast"`` repeats the
+            first row), with the requested strides and flags.
+        """
+        a = self.array
+        if self.layout == "fortran":
+            return np.asfortranarray(a)
+        if self.layout == "strided" and a.ndim >= 1:
+            big = np.repeat(a, 2, axis=0)
+            return big[::2]
+        if self.layout == "readonly":
+            b = a.copy()
+            b.flags.writeable = False
+            return b
+        if self.layout == "broadcast" and a.ndim >= 1 and a.shape[0] > 0:
+            return np.broadcast_to(a[:1], a.shape)
+        return a
+
+    def __repr__(self) -> str:
+        return f"{_describe(self.array)}[{self.layout}]"
+
+
+@dataclass(frozen=True)
+class Build(Recipe):
+    """A recipe for an object made in the worker: ``import target; target(*args, **kwargs)``.
+
+    Parameters
+    ----------
+    target : str
+        ``"module:qualname"`` of a callable.
+    args, kwargs
+        Its arguments, themselves materialized first (they may hold :class:`Layout`
+        or :class:`Build` values).
+    """
+
+    target: str
+    args: tuple[Any, ...] = ()
+    kwargs: tuple[tuple[str, Any], ...] = ()
+
+    def make(self) -> Any:
+        """Materialize the arguments and call the target (in the worker).
+
+        Returns
+        -------
+        object
+            What the target returns.
+        """
+        fn = resolve(self.target)
+        args = [materialize(a) for a in self.args]
+        kwargs = {k: materialize(v) for k, v in self.kwargs}
+        return fn(*args, **kwargs)
+
+    def __repr__(self) -> str:
+        parts = [repr(a) for a in self.args] + [f"{k}={v!r}" for k, v in self.kwargs]
+        return f"{self.target.rsplit(':', 1)[-1]}({', '.join(parts)})"
+
+
+def resolve(target: str) -> Any:
+    """Return the object that ``"module:qual.name"`` names.
+
+    Parameters
+    ----------
+    target : str
+        A module path and a dotted attribute path inside it, separated by ``:``.
+
+    Returns
+    -------
+    object
+    """
+    module, _, qual = target.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in qual.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def materialize(value: Any) -> Any:
+    """Replace every :class:`Recipe` inside ``value`` by what it makes.
+
+    Lists, tuples and dicts are walked (and rebuilt with their own type); anything else
+    is returned as is.
+
+    Parameters
+    ----------
+    value : object
+
+    Returns
+    -------
+    object
+    """
+    if isinstance(value, Recipe):
+        return value.make()
+    if isinstance(value, list):
+        return [materialize(v) for v in value]
+    if isinstance(value, tuple) and type(value) is tuple:
+        return tuple(materialize(v) for v in value)
+    if isinstance(value, dict):
+        return {k: materialize(v) for k, v in value.items()}
+    return value
+
+
+def _describe(a: np.ndarray) -> str:
+    """A short description of an array for reports: dtype, shape and its specials."""
+    tags = []
+    if a.dtype.kind in "fc" and a.size:
+        with np.errstate(all="ignore"):
+            v = a.astype(np.complex128).real if a.dtype.kind == "c" else a.astype(np.float64)
+        if np.isnan(v).any():
+            tags.append("nan")
+        if np.isinf(v).any():
+            tags.append("inf")
+        finite = v[np.isfinite(v)]
+        if finite.size and np.abs(finite).max() > 1e100:
+            tags.append("huge")
+    extra = f" {'+'.join(tags)}" if tags else ""
+    return f"array({a.dtype}, {a.shape}{extra})"
+
+
+def describe(value: Any) -> str:
+    """A one-line description of a fuzz value for tables and failure lists.
+
+    Parameters
+    ----------
+    value : object
+        A value drawn by a strategy of this module.
+
+    Returns
+    -------
+    str
+        Arrays as ``array(dtype, shape tags)[layout]``, long containers shortened.
+    """
+    if isinstance(value, np.ndarray):
+        return _describe(value)
+    if isinstance(value, (list, tuple)) and len(value) > 6:
+        head = ", ".join(describe(v) for v in value[:3])
+        return f"{type(value).__name__}[{head}, ... {len(value)} items]"
+    if isinstance(value, (list, tuple)):
+        inner = ", ".join(describe(v) for v in value)
+        return (
+            f"[{inner}]"
+            if isinstance(value, list)
+            else f"({inner}{',' if len(value) == 1 else ''})"
+        )
+    r = repr(value)
+    return r if len(r) <= 80 else r[:77] + "..."
+
+
+# --------------------------------------------------------------------------- arrays
+
+
+def _cast(values: np.ndarray, dtype: str) -> np.ndarray:
+    """``values`` (float64) cast to ``dtype`` the way a user's array would hold them."""
+    with np.errstate(all="ignore"):
+        if dtype == "bool":
+            return values > 0.5
+        if dtype == "object":
+            return values.astype(object)
+        dt = np.dtype(dtype)
+        if dt.kind in "iu":
+            info = np.iinfo(dt)
+            clean = np.nan_to_num(values, nan=0.0, posinf=info.max, neginf=info.min)
+            return np.clip(clean, info.min, info.max).astype(dt)
+        return values.astype(dt)
+
+
+@st.composite
+def _values(draw: st.DrawFn, shape: tuple[int, ...], scale: float = 255.0) -> np.ndarray:
+    """Float64 values of ``shape``: noise, constant, a ramp, or extremes, with specials."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    kind = draw(st.sampled_from(["noise", "constant", "ramp", "binary", "extreme"]))
+    n = int(np.prod(shape)) if shape else 1
+    if kind == "noise":
+        v = rng.uniform(0, scale, n)
+    elif kind == "constant":
+        v = np.full(n, draw(st.sampled_from([0.0, 1.0, scale, -0.0, 0.5])))
+    elif kind == "ramp":
+        v = np.linspace(0, scale, n)
+    elif kind == "binary":
+        v = rng.integers(0, 2, n) * scale
+    else:
+        v = rng.choice(
+            [0.0, scale, -scale, 1e300, -1e300, 5e-324, math.nan, math.inf, -math.inf], n
+        )
+    v = v.reshape(shape)
+    if n and draw(st.booleans()):
+        special = draw(st.sampled_from(SPECIAL_VALUES))
+        count = draw(st.sampled_from([1, max(1, n // 10), n]))
+        flat = v.reshape(-1)
+        flat[rng.choice(n, size=min(count, n), replace=False)] = special
+    return v
+
+
+_IMAGE_SHAPES = st.one_of(
+    st.sampled_from([(0, 0), (1, 1), (0, 5), (5, 0), (1, 64), (64, 1)]),
+    st.tuples(st.integers(2, 64), st.integers(2, 64)),
+    st.tuples(st.integers(2, 48), st.integers(2, 48), st.sampled_from([1, 3, 4, 5])),
+    st.tuples(st.sampled_from([1, 3, 4]), st.integers(8, 32), st.integers(8, 32)),
+    st.tuples(st.integers(0, 64)),
+    st.tuples(st.integers(1, 3), st.integers(2, 16), st.integers(2, 16), st.sampled_from([1, 3])),
+    st.just(()),
+)
+
+
+@st.composite
+def hostile_images(draw: st.DrawFn, like: np.ndarray | None = None) -> Any:
+    """Draw a hostile image: odd shape, dtype, values or memory layout.
+
+    Half of the draws keep the shape of ``like`` (the valid image of the call) and
+    change its dtype, values or layout, so that the attack reaches past the shape
+    check; the other half draw any shape of the menu.
+
+    Parameters
+    ----------
+    like : numpy.ndarray, optional
+        The valid image of the call.
+
+    Returns
+    -------
+    Layout
+        A :class:`Layout` wrapping an array with at most 64x64 pixels (4-D: 3x16x16x3).
+    """
+    if like is not None and draw(st.booleans()):
+        shape = tuple(like.shape)
+        scale = 1.0 if like.dtype.kind == "f" else 255.0
+    else:
+        shape = draw(_IMAGE_SHAPES)
+        scale = draw(st.sampled_from([1.0, 255.0, 65535.0]))
+    dtype = draw(st.sampled_from(IMAGE_DTYPES))
+    values = draw(_values(shape, scale))
+    layout = draw(st.sampled_from(LAYOUTS))
+    return Layout(_cast(values, dtype), layout)
+
+
+# --------------------------------------------------------------------------- points
+
+
+@st.composite
+def hostile_points(draw: st.DrawFn, like: Any = None, dim: int | None = None) -> Any:
+    """Draw a hostile point set.
+
+    Parameters
+    ----------
+    like : numpy.ndarray, optional
+        The valid ``(N, D)`` points of the call; sets the usual dimension.
+    dim : int, optional
+        The dimension when ``like`` is not given (default 3).
+
+    Returns
+    -------
+    Layout or list
+        ``(0, D)``, ``(1, D)``, ``(N, D +- 1)``, points as columns, identical points,
+        collinear points, NaN rows, 1e300 coordinates, an integer dtype, or the same as
+        a list of lists. At most 500 points.
+    """
+    if dim is None:
+        dim = like.shape[1] if isinstance(like, np.ndarray) and like.ndim == 2 else 3
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    n_like = like.shape[0] if isinstance(like, np.ndarray) and like.ndim == 2 else 50
+    n = draw(st.sampled_from([0, 1, 2, 3, 4, 7, n_like, 100, 500]))
+    d = draw(st.sampled_from([dim, dim, dim, 2, 3, 4, 1]))
+    kind = draw(
+        st.sampled_from(
+            ["random", "identical", "collinear", "coplanar", "nan_rows", "huge", "tiny", "grid"]
+        )
+    )
+    if kind == "identical":
+        p = np.tile(rng.normal(size=d), (n, 1))
+    elif kind == "collinear":
+        p = np.outer(np.linspace(-1, 1, n), rng.normal(size=d)) + rng.normal(size=d)
+    elif kind == "coplanar" and d >= 3:
+        p = rng.normal(size=(n, d))
+        p[:, 2:] = 0.0
+    elif kind == "nan_rows":
+        p = rng.normal(size=(n, d))
+        if n:
+            p[rng.choice(n, size=max(1, n // 5), replace=False)] = draw(
+                st.sampled_from([math.nan, math.inf, -math.inf])
+            )
+    elif kind == "huge":
+        p = rng.normal(size=(n, d)) * 1e300
+    elif kind == "tiny":
+        p = rng.normal(size=(n, d)) * 1e-300
+    elif kind == "grid":
+        p = np.round(rng.uniform(0, 4, size=(n, d)))
+    else:
+        p = rng.normal(size=(n, d)) * draw(st.sampled_from([1.0, 10.0, 1000.0]))
+    form = draw(st.sampled_from(["array", "array", "int", "float32", "transposed", "list"]))
+    if form == "int":
+        with np.errstate(all="ignore"):
+            p = np.nan_to_num(p, nan=0, posinf=2**62, neginf=-(2**62)).astype(np.int64)
+    elif form == "float32":
+        with np.errstate(all="ignore"):
+            p = p.astype(np.float32)
+    elif form == "transposed":
+        p = p.T.copy()
+    elif form == "list":
+        return p.tolist()
+    return Layout(p, draw(st.sampled_from(LAYOUTS)))
+
+
+@st.composite
+def hostile_clouds(draw: st.DrawFn, like: Any = None) -> Any:
+    """Draw a hostile point cloud argument.
+
+    Returns
+    -------
+    Build or object
+        Mostly a ``PointCloud`` built in the worker from hostile points (identical,
+        collinear, empty, one point, 1e300); sometimes a raw array, a list, or None
+        where a ``PointCloud`` is expected.
+    """
+    pts = draw(hostile_points(dim=3))
+    if draw(st.integers(0, 3)) == 0:
+        return draw(st.sampled_from([None, 3, "cloud.ply"])) if draw(st.booleans()) else pts
+    return Build("robopercept.pointcloud:PointCloud", (pts,))
+
+
+# --------------------------------------------------------------------------- scalars
+
+
+def _neighbours(like: Any) -> list[Any]:
+    """Valid-looking values near ``like``: the value, doubled, off by one, tiny, huge."""
+    if isinstance(like, bool) or not isinstance(like, (int, float, np.integer, np.floating)):
+        return []
+    v = like
+    if isinstance(v, (int, np.integer)):
+        v = int(v)
+        return [v, v + 1, max(v - 1, 0), 2 * v + 1, 1, 2, 3, 5]
+    v = float(v)
+    return [v, 2 * v, v / 2, -v, v * 1e6, v * 1e-6, 0.5, 1.0]
+
+
+@st.composite
+def hostile_scalars(draw: st.DrawFn, like: Any = None) -> Any:
+    """Draw a hostile scalar parameter value.
+
+    Parameters
+    ----------
+    like : int or float, optional
+        The valid value of the parameter; its neighbours are drawn one time in four.
+
+    Returns
+    -------
+    object
+        One of :data:`HOSTILE_SCALARS`, a random float or int of any magnitude, or a
+        valid-looking neighbour of ``like``.
+    """
+    pick = draw(st.integers(0, 7))
+    near = _neighbours(like)
+    if pick <= 1 and near:
+        return draw(st.sampled_from(near))
+    if pick == 2:
+        return draw(st.floats(allow_nan=True, allow_infinity=True))
+    if pick == 3:
+        return draw(st.integers(-(2**64), 2**64))
+    return draw(st.sampled_from(HOSTILE_SCALARS))
+
+
+def hostile_flags(like: Any = None) -> st.SearchStrategy[Any]:
+    """Values where a ``bool`` is expected: the other bool, and non-bools.
+
+    Returns
+    -------
+    SearchStrategy
+        ``not like``, ``None``, ``"yes"``, ``2``, ``nan``, ``np.bool_(True)``,
+        ``[True]``.
+    """
+    other = not like if isinstance(like, bool) else True
+    return st.sampled_from([other, None, "yes", "", 2, math.nan, np.bool_(True), [True]])
+
+
+def hostile_choices(like: Any = None) -> st.SearchStrategy[Any]:
+    """Values where a string choice (``method="ransac"``) is expected.
+
+    Returns
+    -------
+    SearchStrategy
+        The empty string, an unknown word, the valid word in upper case or padded,
+        ``None``, a number, a list, bytes.
+    """
+    base = like if isinstance(like, str) else "x"
+    return st.sampled_from(
+        ["", "bogus", base.upper(), f" {base} ", None, 3, math.nan, [base], base.encode()]
+    )
+
+
+@st.composite
+def hostile_tuples(draw: st.DrawFn, like: Any = None) -> Any:
+    """Values where a small tuple of numbers (a size, a pattern, a window) is expected.
+
+    Returns
+    -------
+    object
+        Zeros, negatives, NaN, 2**40 entries, floats where ints go, strings, wrong
+        lengths, None, a bare int, or ``like`` with one entry made hostile.
+    """
+    n = len(like) if isinstance(like, (tuple, list)) and like else 2
+    fixed = [
+        (0,) * n,
+        (-1,) * n,
+        (math.nan,) * n,
+        (2**40,) * n,
+        (1.5,) * n,
+        ("3",) * n,
+        (1,) * (n + 1),
+        (1,),
+        (),
+        None,
+        7,
+        (math.inf,) * n,
+    ]
+    if isinstance(like, (tuple, list)) and like and draw(st.booleans()):
+        i = draw(st.integers(0, len(like) - 1))
+        out = list(like)
+        out[i] = draw(hostile_scalars(like=like[i]))
+        return tuple(out)
+    return draw(st.sampled_from(fixed))
+
+
+# --------------------------------------------------------------------------- other
+
+
+@st.composite
+def hostile_arrays(draw: st.DrawFn, like: Any = None) -> Any:
+    """A hostile small array (a matrix such as K, H, T, F, or a vector).
+
+    Half of the draws keep ``like``'s shape and poison its values (NaN, inf, 1e300,
+    all zeros: singular, a dtype change, a layout); the rest change the shape
+    (transposed, one row more or fewer, empty, a scalar, 3-D).
+
+    Returns
+    -------
+    Layout or object
+    """
+    base = np.asarray(like, dtype=np.float64) if _numeric_array(like) else np.eye(3)
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    if draw(st.booleans()):
+        a = base.copy()
+        how = draw(st.sampled_from(["nan", "inf", "huge", "zeros", "tiny", "noise", "negate"]))
+        if a.size:
+            flat = a.reshape(-1)
+            if how == "nan":
+                flat[rng.integers(0, flat.size)] = math.nan
+            elif how == "inf":
+                flat[rng.integers(0, flat.size)] = math.inf
+            elif how == "huge":
+                flat *= 1e300
+            elif how == "zeros":
+                flat[:] = 0.0
+            elif how == "tiny":
+                flat *= 1e-300
+            elif how == "noise":
+                flat += rng.normal(size=flat.size) * 1e3
+            else:
+                flat *= -1
+        dtype = draw(
+            st.sampled_from(["float64", "float64", "float32", "int64", "complex64", "object"])
+        )
+        return Layout(_cast(a, dtype), draw(st.sampled_from(LAYOUTS)))
+    shape_kind = draw(st.sampled_from(["T", "row+", "row-", "empty", "scalar", "3d", "list"]))
+    if shape_kind == "T" and base.ndim == 2:
+        return Layout(base.T.copy())
+    if shape_kind == "row+":
+        return Layout(
+            np.concatenate([base, base[:1]]) if base.ndim and base.shape[0] else base[None]
+        )
+    if shape_kind == "row-" and base.ndim and base.shape[0]:
+        return Layout(base[:-1].copy())
+    if shape_kind == "empty":
+        return Layout(np.zeros((0, *base.shape[1:])))
+    if shape_kind == "scalar":
+        return draw(st.sampled_from([np.float64(1.0), 0, math.nan]))
+    if shape_kind == "3d":
+        return Layout(np.stack([base, base]))
+    return base.tolist()
+
+
+def _numeric_array(like: Any) -> bool:
+    if isinstance(like, np.ndarray):
+        return like.dtype.kind in "biuf"
+    return False
+
+
+@st.composite
+def hostile_sequences(draw: st.DrawFn, like: Any = None) -> Any:
+    """A hostile sequence where a list of arrays or records is expected.
+
+    Returns
+    -------
+    object
+        ``[]``, ``None``, a bare number, ``like`` with its first item made hostile,
+        ``like`` truncated to one item, or ``like`` doubled.
+    """
+    items = list(like) if isinstance(like, (list, tuple)) else []
+    pick = draw(st.integers(0, 5))
+    if pick == 0:
+        return []
+    if pick == 1:
+        return draw(st.sampled_from([None, 3, "abc", math.nan]))
+    if items and pick == 2:
+        return items[:1]
+    if items and pick == 3:
+        return items + items
+    if items:
+        first = items[0]
+        if isinstance(first, np.ndarray) and first.ndim == 2 and first.shape[1] in (2, 3):
+            bad = draw(hostile_points(like=first))
+        elif isinstance(first, np.ndarray):
+            bad = draw(hostile_arrays(like=first))
+        elif isinstance(first, (int, float)) and not isinstance(first, bool):
+            bad = draw(hostile_scalars(like=first))
+        else:
+            bad = draw(hostile_objects())
+        return [bad, *items[1:]]
+    return draw(st.sampled_from([[None], [math.nan], [[]]]))
+
+
+def hostile_objects(like: Any = None) -> st.SearchStrategy[Any]:
+    """Values where an object of a robopercept type (a camera, a filter, a config) goes.
+
+    Returns
+    -------
+    SearchStrategy
+        None, a number, a string, a dict, an empty list, a 3x3 matrix.
+    """
+    return st.sampled_from([None, 3, "object", {}, [], np.eye(3), math.nan])
+
+
+def hostile_paths(workdir: str, like: Any = None) -> st.SearchStrategy[Any]:
+    """Values where a file or folder path is expected.
+
+    Parameters
+    ----------
+    workdir : str
+        The campaign's scratch folder (``fuzz_inputs`` files prepared there).
+
+    Returns
+    -------
+    SearchStrategy
+        A missing file, a missing folder, the scratch folder itself, an empty file, a
+        file of random bytes with the right extension, a name with a NUL byte, a
+        300-character name, ``""``, ``None``, a number, bytes.
+    """
+    suffix = ""
+    if like is not None:
+        name = str(like)
+        dot = name.rfind(".")
+        suffix = name[dot:] if dot > name.rfind("/") else ""
+    return st.sampled_from(
+        [
+            f"{workdir}/missing{suffix}",
+            f"{workdir}/no/such/folder/file{suffix}",
+            workdir,
+            f"{workdir}/empty{suffix}",
+            f"{workdir}/garbage{suffix}",
+            f"{workdir}/nul\x00name{suffix}",
+            f"{workdir}/{'n' * 300}{suffix}",
+            "",
+            None,
+            3,
+            f"{workdir}/garbage{suffix}".encode(),
+        ]
+    )
