@@ -545,3 +545,145 @@ def check_magnitude(
             "absolute value)"
         )
     return arr
+
+
+def check_text(value: Any, name: str) -> str:
+    """Return ``value`` after checking that it is a ``str`` (a title, a label, a caption);
+    None, numbers, bytes and lists are refused rather than printed as their ``repr``.
+
+    Examples
+    --------
+    >>> check_text(["x"], "xlabel")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: xlabel must be a string; got list ['x']: pass str(...) of it
+    """
+    if not isinstance(value, str):
+        raise InputError(
+            f"{name} must be a string; got {type(value).__name__} {plain_repr(value)}: "
+            "pass str(...) of it"
+        )
+    return value
+
+
+def check_reals(
+    value: Any,
+    name: str,
+    length: int | None = None,
+    low: float | None = None,
+    high: float | None = None,
+) -> np.ndarray:
+    """Return ``value`` as a float64 1-D array of finite real numbers (a colour, a bound,
+    a position): ``length`` of them when given, each in ``[low, high]`` when given.
+
+    Bools, None, strings, complex numbers and ragged or nested sequences are refused
+    (``(10, [1, 2], 20)`` would make NumPy raise ``ValueError``; ``("3", "3")`` would be
+    parsed).
+
+    Examples
+    --------
+    >>> check_reals((0, 255.0, 7), "color", 3, 0, 255)
+    array([  0., 255.,   7.])
+    >>> check_reals((0, float("inf"), 0), "color", 3)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: color must be 3 finite real numbers; got (0, inf, 0)
+    """
+    want = f"{length} finite real numbers" if length is not None else "finite real numbers"
+    items = value.tolist() if isinstance(value, np.ndarray) and value.ndim == 1 else value
+    real = (int, float, np.integer, np.floating)
+    ok = isinstance(items, (tuple, list)) and all(
+        isinstance(v, real) and not isinstance(v, (bool, np.bool_)) for v in items
+    )
+    if not ok or (length is not None and len(items) != length):
+        raise InputError(f"{name} must be {want}; got {plain_repr(value)}")
+    arr = np.array(items, dtype=np.float64).reshape(-1)
+    if not np.isfinite(arr).all():
+        raise InputError(f"{name} must be {want}; got {plain_repr(value)}")
+    if (low is not None and (arr < low).any()) or (high is not None and (arr > high).any()):
+        lo = "-inf" if low is None else f"{low:g}"
+        hi = "inf" if high is None else f"{high:g}"
+        raise InputError(f"{name} must be in [{lo}, {hi}]; got {plain_repr(value)}")
+    return arr
+
+
+def check_numeric(value: Any, name: str) -> np.ndarray:
+    """Return ``value`` as a float64 array after checking that NumPy reads it as real
+    numbers (bool, integer or floating point dtype).
+
+    Strings, complex numbers (whose imaginary part ``astype(float)`` would drop
+    silently), None, objects and ragged lists are refused with :class:`InputError`
+    rather than surfacing as NumPy's ``ValueError``/``TypeError``. Shape and
+    finiteness are the caller's to check.
+
+    Examples
+    --------
+    >>> check_numeric([[1, 2], [3, 4]], "K").dtype
+    dtype('float64')
+    >>> check_numeric([1 + 2j], "t")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: t must hold real numbers; got dtype complex128: ...
+    """
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # ragged or nested sequences
+        raise InputError(
+            f"{name} must be a numeric array; got {type(value).__name__} that NumPy cannot "
+            f"read as one ({exc}): pass a rectangular list or a numpy array"
+        ) from None
+    if arr.dtype.kind not in "biuf":
+        raise InputError(
+            f"{name} must hold real numbers; got dtype {arr.dtype}: pass a float array"
+        )
+    return arr.astype(np.float64, copy=False)
+
+
+def check_size(
+    value: Any,
+    name: str = "size",
+    minimum: int = 1,
+    maximum: int = 65536,
+    max_pixels: int | None = None,
+) -> tuple[int, int]:
+    """Return an image size ``(width, height)`` as two ints after checking that each is
+    a whole number in ``[minimum, maximum]`` and, with ``max_pixels``, that
+    ``width * height`` does not exceed it (a bound on what the caller allocates).
+
+    Integral floats (``640.0``) are accepted; None, strings, NaN/inf, fractions, bools
+    and sequences of another length are refused.
+
+    Examples
+    --------
+    >>> check_size((640.0, 480))
+    (640, 480)
+    >>> check_size(7)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: size must be (width, height), two whole numbers of pixels; got 7
+    """
+    want = f"{name} must be (width, height), two whole numbers of pixels; got {plain_repr(value)}"
+    items = value.tolist() if isinstance(value, np.ndarray) and value.ndim == 1 else value
+    if not isinstance(items, (tuple, list)) or len(items) != 2:
+        raise InputError(want)
+    out = []
+    for v in items:
+        if isinstance(v, (bool, np.bool_)) or not isinstance(
+            v, (int, float, np.integer, np.floating)
+        ):
+            raise InputError(want)
+        if isinstance(v, (float, np.floating)) and not (np.isfinite(v) and float(v).is_integer()):
+            raise InputError(want)
+        out.append(int(v))
+    w, h = out
+    if min(w, h) < minimum or max(w, h) > maximum:
+        raise InputError(
+            f"{name} must be (width, height) with each side in [{minimum}, {maximum}] "
+            f"pixels; got {plain_repr(value)}"
+        )
+    if max_pixels is not None and w * h > max_pixels:
+        raise InputError(
+            f"{name} {plain_repr(value)} has {w * h} pixels, more than the {max_pixels} "
+            "allowed here (the arrays would take several GiB): use a smaller size"
+        )
+    return w, h

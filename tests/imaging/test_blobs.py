@@ -198,3 +198,22 @@ class TestUnionFind:
         uf_union_pairs(parent, np.zeros(0, np.int64), np.zeros(0, np.int64))
         assert uf_roots(parent).tolist() == [0, 1, 2]
         assert uf_roots(np.zeros(0, np.int64)).shape == (0,)
+
+
+# issue 25: sparse label values
+def test_issue25_sparse_label_values_do_not_allocate_by_the_largest():
+    """int32 labels up to 2**31 - 1 in a small image made blob_features allocate
+    per-label arrays of 2**31 entries (MemoryError); the features are those of the
+    labels numbered 1..k, reported under their own values."""
+    dense = np.zeros((12, 16), np.int32)
+    dense[1:4, 1:5] = 1
+    dense[6:11, 8:15] = 2
+    dense[8, 10] = 0  # a hole
+    sparse = np.where(dense == 1, 7, np.where(dense == 2, 2**31 - 1, 0)).astype(np.int32)
+    a, b = blob_features(dense), blob_features(sparse)
+    np.testing.assert_array_equal(b.labels, [7, 2**31 - 1])
+    for field in ("area", "bbox", "centroid", "perimeter", "circularity", "holes"):
+        np.testing.assert_array_equal(getattr(b, field), getattr(a, field))
+    full = np.full((3, 3), 2**40, np.int64)  # no background at all
+    assert blob_features(full).labels.tolist() == [2**40]
+    assert blob_features(full).area.tolist() == [9]

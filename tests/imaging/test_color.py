@@ -93,7 +93,7 @@ def test_hsv_range_matches_inrange(astronaut):
         (lambda: rgb_to_hsv(np.zeros((4, 4, 3)), scale="deg"), "scale must be"),
         (lambda: rgb_to_hsv(np.zeros((4, 4, 4))), "RGBA"),
         (lambda: hsv_range_mask(np.zeros((4, 4, 3)), (0, 9, 0), (10, 5, 5)), "swap"),
-        (lambda: hsv_range_mask(np.zeros((4, 4, 3)), (0, 0), (10, 5, 5)), "shape"),
+        (lambda: hsv_range_mask(np.zeros((4, 4, 3)), (0, 0), (10, 5, 5)), "3 finite real"),
         (lambda: hsv_range_mask(np.zeros((4, 4)), (0, 0, 0), (1, 1, 1)), "rgb_to_hsv"),
     ],
 )
@@ -231,3 +231,32 @@ def test_gray_255_scales_floats_only_and_refuses_other_dtypes():
     np.testing.assert_array_equal(gray_255(np.array([[0.0, 1.0]])), [[0.0, 255.0]])
     with pytest.raises(InputError, match="left must be uint8 or float"):
         gray_255(np.zeros((2, 2), np.uint16), "left")
+
+
+# issue 25: bounds are three finite real numbers ------------------------------------------
+@pytest.mark.parametrize(
+    ("low", "match"),
+    [
+        ((10.0, [1, 2], 20.0), "low must be 3 finite real numbers"),  # was ValueError
+        ((0, np.nan, 0), "low must be 3 finite real numbers"),
+        (("0", "0", "0"), "low must be 3 finite real numbers"),
+        (None, "low must be 3 finite real numbers"),
+        ((True, 0, 0), "low must be 3 finite real numbers"),
+    ],
+)
+def test_issue25_hsv_bounds_are_checked(low, match):
+    with pytest.raises(InputError, match=match):
+        hsv_range_mask(np.zeros((4, 4, 3)), low, (90, 255, 255))
+
+
+def test_issue25_hsv_bounds_accept_arrays_and_numpy_numbers():
+    hsv = np.zeros((2, 2, 3), np.uint8)
+    hsv[0, 0] = (10, 100, 100)
+    m = hsv_range_mask(hsv, np.array([5, 50, 50]), (np.int64(15), 255.0, np.float32(255)))
+    np.testing.assert_array_equal(m, [[True, False], [False, False]])
+
+
+@pytest.mark.parametrize("dtype", ["3", [1, 2], np.int16])
+def test_issue25_rgb_to_gray_dtype_is_checked(dtype):
+    with pytest.raises(InputError, match=r"dtype must be None, np\.float32 or np\.float64"):
+        rgb_to_gray(np.zeros((2, 2, 3), np.uint8), dtype=dtype)

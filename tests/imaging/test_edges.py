@@ -168,3 +168,29 @@ def test_grey_level_scale():
     assert grey_level_scale(np.float32) == grey_level_scale(np.float64) == 1 / 255
     with pytest.raises(InputError, match=r"int32.*uint8, uint16 or float"):
         grey_level_scale(np.int32)
+
+
+# issue 25: canny's scalars ----------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"low": np.nan, "high": 20.0}, "low must be finite"),
+        ({"low": "3", "high": 20.0}, "low must be a real number"),
+        ({"low": 1.0, "high": 20.0, "sigma": 2**40}, "at most 65535"),
+        ({"low": 1.0, "high": 20.0, "l2_gradient": "yes"}, "l2_gradient must be True or False"),
+    ],
+)
+def test_issue25_canny_scalars(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        canny(np.zeros((16, 16), np.uint8), **kwargs)
+
+
+def test_issue25_canny_tiny_sigma_is_no_smoothing():
+    """sigma=1e-162 blurred with an all-NaN kernel; now it is the identity, so the edges
+    equal those of sigma=0."""
+    img = np.zeros((32, 32), np.uint8)
+    img[8:24, 8:24] = 200
+    np.testing.assert_array_equal(
+        canny(img, 50.0, 150.0, sigma=1e-162), canny(img, 50.0, 150.0, sigma=0.0)
+    )
+    assert canny(img, 50.0, 150.0, sigma=1e-162).any()

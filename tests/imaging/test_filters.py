@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+import robopercept.imaging as _im
 from robopercept.errors import InputError
 from robopercept.imaging import (
     box_filter,
@@ -24,7 +25,11 @@ from robopercept.imaging import (
     median_filter,
     sobel,
 )
-from robopercept.imaging.filters import border_indices, separable_filter_unchecked
+from robopercept.imaging.filters import (
+    MAX_KERNEL_SIZE,
+    border_indices,
+    separable_filter_unchecked,
+)
 
 CV_BORDER = {
     "reflect101": cv2.BORDER_REFLECT_101,
@@ -415,3 +420,75 @@ class TestSeparableFilterUnchecked:
         assert np.isnan(separable_filter_unchecked(img, np.ones(3), np.ones(3))).all()
         with pytest.raises(InputError, match="finite"):
             gaussian_blur(img, 1.0)
+
+
+# issue 25: scalar parameters are checked for type, finiteness and size -----------------
+_IMG = np.random.default_rng(25).uniform(0, 1, (24, 32)).astype(np.float32)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        # sigma = 2**40 asked for a 48 TiB kernel; near 1e308 the size overflowed to inf
+        (lambda: _im.gaussian_blur(_IMG, 2**40), r"at most 65535.*downsampled"),
+        (lambda: _im.gaussian_ksize(1e308), r"sigma=1e\+308.*at most 65535"),
+        (lambda: _im.gaussian_kernel(1.5, 2**63 + 1), r"size asks for a kernel of"),
+        (lambda: _im.gaussian_blur(_IMG, np.nan), r"sigma must be finite"),
+        (lambda: _im.gaussian_blur(_IMG, [1, 2]), r"sigma must be a real number"),
+        (lambda: _im.gaussian_blur(_IMG, 1.0, sigma_y="3"), r"sigma_y must be a real number"),
+        (lambda: _im.gaussian_blur(_IMG, 1.0, ksize=(3, 1.5)), r"\(width, height\) of ints"),
+        (lambda: _im.gaussian_blur(_IMG, 1.0, ksize=(np.inf, 3)), r"\(width, height\) of ints"),
+        (lambda: _im.gaussian_blur(_IMG, 1.0, ksize=2**40 + 1), r"at most 65535"),
+        (lambda: _im.box_filter(_IMG, 2**40), r"ksize \(width\) asks for a kernel"),
+        (lambda: _im.box_filter(_IMG, 3, normalize="yes"), r"normalize must be True or False"),
+        (lambda: _im.median_filter(_IMG, 2**40 + 1), r"\[3, 31\].*downsampled"),
+        # order=[1, 2] raised TypeError; ksize=2**63 hung in repeated np.convolve
+        (lambda: _im.derivative_kernel([1, 2], 3), r"order must be an integer"),
+        (lambda: _im.derivative_kernel(1, 2**63), r"ksize must be 1, 3, 5 or 7"),
+        (lambda: _im.derivative_kernel(1, 3.0), r"ksize must be 1, 3, 5 or 7"),
+        (lambda: _im.sobel(_IMG, 1, 0, scale="3"), r"scale must be a real number"),
+        (lambda: _im.laplacian(_IMG, scale=np.nan), r"scale must be finite"),
+        (lambda: _im.correlate(_IMG, np.ones((3, 3)), cval=None), r"cval must be a real"),
+        (lambda: _im.correlate(_IMG, np.ones((3, 3)), anchor=(np.nan, 1)), r"anchor a_x"),
+        (lambda: _im.correlate(_IMG, np.ones((3, 3)), anchor=7), r"anchor must be \(a_x, a_y\)"),
+        (lambda: _im.correlate(_IMG, np.ones((3, 3)), anchor=(0, 3)), r"anchor a_y must be in"),
+        # 1e-162: sigma^4 underflowed to 0 and the LoG was all NaN
+        (lambda: _im.laplacian_of_gaussian(_IMG, 1e-162), r"normalized=True"),
+        (lambda: _im.laplacian_of_gaussian(_IMG, 1e150, truncate=1e300), r"at most 65535"),
+        (lambda: _im.laplacian_of_gaussian(_IMG, 1.0, normalized=2), r"normalized must be"),
+    ],
+)
+def test_issue25_filter_scalars_are_refused_with_input_error(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_tiny_sigma_is_the_identity_not_nan():
+    """sigma <= 1e-162 returned an all-NaN image (sigma**2 underflowed to 0, 0/0 at the
+    centre); the limit of a shrinking Gaussian is the impulse, i.e. the identity."""
+    for sigma in (1e-162, 1e-300, 5e-324):
+        k = _im.gaussian_kernel(sigma, 5)
+        np.testing.assert_array_equal(k, [0.0, 0.0, 1.0, 0.0, 0.0])
+        out = _im.gaussian_blur(_IMG, sigma)
+        np.testing.assert_array_equal(out, _IMG)
+        np.testing.assert_array_equal(_im.gaussian_blur(_IMG, sigma, ksize=7), _IMG)
+    # the normalized LoG of a tiny sigma is -2 f (kernel radius 0: sigma^2 G'' = -G)
+    log = _im.laplacian_of_gaussian(_IMG, 1e-162, normalized=True)
+    np.testing.assert_allclose(log, -2.0 * _IMG, rtol=1e-6)
+    # just above the unnormalized floor: -2 f / sigma^2, finite
+    small = _im.laplacian_of_gaussian(_IMG.astype(np.float64), 1e-15)
+    assert np.isfinite(small).all()
+    np.testing.assert_allclose(small, -2e30 * _IMG, rtol=1e-6)
+
+
+def test_issue25_limits_still_work_at_their_edge():
+    """The largest sigma that gaussian_ksize takes gives the longest kernel, and the
+    size limits themselves are accepted."""
+    assert _im.gaussian_ksize(8191.75) == MAX_KERNEL_SIZE
+    assert _im.gaussian_kernel(0.5, MAX_KERNEL_SIZE).size == MAX_KERNEL_SIZE
+    out = _im.median_filter(_IMG[:8, :8], 31)
+    assert out.shape == (8, 8)
+    np.testing.assert_allclose(_im.derivative_kernel(np.int64(2), 5), [1, 0, -2, 0, 1])
+    # an anchor given as NumPy ints still works, and the default anchor equals the centre
+    a = _im.correlate(_IMG, np.ones((3, 3)), anchor=(np.int64(1), np.int64(1)))
+    np.testing.assert_array_equal(a, _im.correlate(_IMG, np.ones((3, 3))))

@@ -9,7 +9,15 @@ import numpy as np
 import pytest
 
 from robopercept.errors import FileFormatError, InputError
-from robopercept.imaging import VideoReader, VideoWriter, read_image, write_image
+from robopercept.imaging import (
+    SnapshotVideoWriter,
+    VideoReader,
+    VideoWriter,
+    check_image_path,
+    check_video_path,
+    read_image,
+    write_image,
+)
 from tests.conftest import data_path
 
 
@@ -621,3 +629,59 @@ def test_mutated_files_give_an_image_or_a_file_format_error(tmp_path, rng, ext):
             assert got.dtype in (np.uint8, np.uint16)
             outcomes["image"] += 1
     assert outcomes["error"] > 20, outcomes  # the mutations did reach the decoders
+
+
+# issue 25: every path and scalar of the readers and writers is checked -------------------
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda t: read_image(None), "must be a file or folder path"),
+        (lambda t: read_image(str(t / ("n" * 300 + ".png"))), "file name too long"),
+        (lambda t: write_image(None, np.zeros((2, 2), np.uint8)), "file or folder path"),
+        (
+            lambda t: write_image(t / "a.png", np.zeros((2, 2), np.uint8), png_compression=np.nan),
+            "png_compression must be an integer",
+        ),
+        (
+            lambda t: write_image(t / "a.png", np.zeros((2, 2), np.uint8), png_compression=-np.inf),
+            "png_compression must be an integer",
+        ),
+        (
+            lambda t: write_image(t / "a.png", np.zeros((2, 2), np.uint8), png_compression=10),
+            r"png_compression must be in 0\.\.9",
+        ),
+        (lambda t: VideoReader(None), "file or folder path"),
+        (lambda t: VideoReader(str(t / ("n" * 300 + ".mp4"))), "file name too long"),
+        (lambda t: VideoWriter(None), "file or folder path"),
+        (lambda t: VideoWriter(t / "v.mp4", quality=[1, 2]), "quality must be a real number"),
+        (lambda t: VideoWriter(t / "v.mp4", quality=0), r"quality must be in \[1, 10\]"),
+        (lambda t: VideoWriter(t / "v.mp4", fps=1e300), r"fps must be in \[0.001, 10000\]"),
+        (lambda t: VideoWriter(t / "v.mp4", fragmented="yes"), "fragmented must be True or"),
+        (lambda t: SnapshotVideoWriter(t / "v.mp4", 10.0, np.int64(3)), "snapshots must be an"),
+        (lambda t: SnapshotVideoWriter(t / "v.mp4", 10.0, [1.5]), "snapshots .each index."),
+        (lambda t: SnapshotVideoWriter(None, 10.0), "file or folder path"),
+        (lambda t: check_image_path(None), "file or folder path"),
+        (lambda t: check_video_path(3), "file or folder path"),
+    ],
+)
+def test_issue25_bad_paths_and_scalars_raise_input_error(tmp_path, call, match):
+    with pytest.raises(InputError, match=match):
+        call(tmp_path)
+    assert not (tmp_path / "v.mp4").exists()
+
+
+def test_issue25_bytes_paths_and_numpy_scalars_work(tmp_path):
+    """bytes paths (os.fsdecode) and NumPy integers are valid where a path or an int
+    goes; a bytes path to a file that is not a video is a FileFormatError, not a
+    TypeError."""
+    img = np.arange(12, dtype=np.uint8).reshape(3, 4)
+    p = write_image(str(tmp_path / "a.png").encode(), img, png_compression=np.int64(1))
+    np.testing.assert_array_equal(read_image(bytes(p)), img)
+    (tmp_path / "garbage.mp4").write_bytes(b"\x00" * 64)
+    with pytest.raises(FileFormatError):
+        VideoReader(str(tmp_path / "garbage.mp4").encode())
+    with SnapshotVideoWriter(str(tmp_path / "s.mp4").encode(), 10.0, [np.int64(0)]) as out:
+        out.add(np.int64(0), np.zeros((8, 8, 3), np.uint8))
+        with pytest.raises(InputError, match="index must be an integer"):
+            out.add(0.0, np.zeros((8, 8, 3), np.uint8))
+    assert [Path(f).name for f in out.written] == ["s.mp4", "s_000000.png"]

@@ -92,3 +92,65 @@ def test_pyr_down_unchecked_is_pyr_down_without_the_checks():
     with pytest.raises(InputError):
         pyr_down(bad)
     assert np.isnan(pyr_down_unchecked(bad)[0, 0])  # no isfinite scan: NaN goes through
+
+
+# issue 25: iterations and element sizes are checked; huge iteration counts end ----------
+_MASK = (np.random.default_rng(25).uniform(0, 1, (12, 17)) > 0.6).astype(np.uint8) * 200
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: dilate(_MASK, iterations=[1, 2]), "iterations must be an integer"),
+        (lambda: dilate(_MASK, iterations=-np.inf), "iterations must be an integer"),
+        (lambda: erode(_MASK, iterations=np.nan), "iterations must be an integer"),
+        (lambda: erode(_MASK, iterations=2.0), "iterations must be an integer"),
+        (lambda: erode(_MASK, iterations=0), "iterations must be >= 1"),
+        # 2**40 raised NumPy's "array is too big"; 109280 asked for 11 GiB
+        (lambda: structuring_element("rect", 2**40), r"\[1, 4095\].*downsampled"),
+        (lambda: structuring_element("ellipse", 109280), r"\[1, 4095\]"),
+        (lambda: structuring_element("cross", (3, 0)), r"\[1, 4095\]"),
+        (lambda: structuring_element("cross", (3,)), r"int or \(width, height\)"),
+        (lambda: structuring_element("cross", (1.5, 3)), "size .width. must be an integer"),
+        (lambda: structuring_element("cross", None), "size .width. must be an integer"),
+        (lambda: gaussian_pyramid(_MASK, [1, 2]), "levels must be an integer"),
+    ],
+)
+def test_issue25_bad_scalars_raise_input_error(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def _passes(img, se, op, n):
+    out = img
+    for _ in range(n):
+        out = op(out, se)
+    return out
+
+
+@pytest.mark.parametrize(
+    "se",
+    [
+        None,  # holds its anchor: the result settles (a fixed point)
+        np.array([[1, 0, 1]], bool),  # offsets -1, +1: the result alternates, period 2
+        np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0]], bool),  # period 3 on the lattice
+    ],
+)
+@pytest.mark.parametrize("op", [erode, dilate])
+def test_issue25_any_iteration_count_ends_and_equals_repeated_passes(se, op):
+    """iterations=2**63 hung (one pass after another); each pass depends only on the
+    previous result, so once a result repeats the rest is skipped exactly. Checked
+    against the passes done one by one, around and beyond the period."""
+    for n in (1, 2, 3, 17, 40, 41, 42, 43):
+        np.testing.assert_array_equal(op(_MASK, se, iterations=n), _passes(_MASK, se, op, n))
+    big = 2**63 + 5
+    period_end = _passes(_MASK, se, op, 60 + (big - 60) % 6)  # 6: a multiple of 1, 2, 3
+    np.testing.assert_array_equal(op(_MASK, se, iterations=big), period_end)
+
+
+def test_issue25_element_limit_is_accepted():
+    se = structuring_element("rect", (4095, 1))
+    assert se.shape == (1, 4095) and se.all()
+    np.testing.assert_array_equal(
+        structuring_element("ellipse", (np.int64(5), 5)), structuring_element("ellipse", 5)
+    )

@@ -108,3 +108,47 @@ def test_remap_equals_opencv_and_handles_outside():
     np.testing.assert_array_equal(out, 7)
     with pytest.raises(InputError):
         remap(img, mx, my[:5])
+
+
+# issue 25: homographies at any scale, output sizes bounded, points checked ---------------
+@pytest.mark.parametrize(
+    ("call", "error", "match"),
+    [
+        # a (3, 3) array of points raised NumPy's "cannot reshape array of size 9"
+        (lambda: transform_points(H, np.ones((3, 3))), InputError, r"xy must have shape \(N, 2\)"),
+        (lambda: transform_points(H, [[1, 2], [3]]), InputError, "xy must be"),
+        (lambda: transform_points(np.full((3, 3), np.nan), [[1, 2]]), InputError, "finite"),
+        (lambda: transform_points(np.zeros((3, 3)), [[1, 2]]), DegenerateError, "all zeros"),
+        (lambda: transform_points(np.eye(3).astype(object), [[1, 2]]), InputError, "H must"),
+        (
+            lambda: warp_perspective(np.zeros((4, 4)), np.eye(3), (2**40, 2**40)),
+            InputError,
+            r"at most 134217728",
+        ),
+        (lambda: warp_perspective(np.zeros((4, 4)), np.eye(3), 7), InputError, "dsize must"),
+        (
+            lambda: warp_perspective(np.zeros((4, 4)), np.eye(3), (4, 4), border_value=None),
+            InputError,
+            "border_value must be a real",
+        ),
+    ],
+)
+def test_issue25_bad_arguments(call, error, match):
+    with pytest.raises(error, match=match):
+        call()
+
+
+def test_issue25_homography_scale_does_not_matter():
+    """H and 1e300 H (or 1e-300 H) are the same homography: the result is the same,
+    where the products of 1e300 entries overflowed to inf/NaN and the singularity test
+    (det <= 1e-12 max|H|^3, inf <= inf) called a valid 1e300 H singular."""
+    pts = np.array([[0.0, 0.0], [10.0, 5.0], [63.0, 47.0]])
+    ref = transform_points(H, pts)
+    for s in (1e300, 1e-300):
+        np.testing.assert_allclose(transform_points(H * s, pts), ref, rtol=1e-12)
+    img = np.random.default_rng(0).integers(0, 256, (48, 64), dtype=np.uint8)
+    np.testing.assert_array_equal(
+        warp_perspective(img, H * 1e300, (64, 48)), warp_perspective(img, H, (64, 48))
+    )
+    # one point as (2,) still works
+    np.testing.assert_allclose(transform_points(H, pts[1]), ref[1:2])

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from robopercept.errors import InputError
-from robopercept.viz import draw_flow, draw_trails, flow_to_color, flow_wheel
+from robopercept.viz import (
+    dense_flow_picture,
+    draw_flow,
+    draw_trails,
+    flow_to_color,
+    flow_wheel,
+)
 
 
 def test_wheel_colours_by_direction_and_speed():
@@ -88,3 +94,63 @@ def test_dense_flow_picture_fills_cells_and_places_the_legend():
     assert (pic[15:25, :15] == 0).all()  # beyond the 3x4 grid: black padding
     with pytest.raises(InputError, match="step"):
         dense_flow_picture(field, 0, (40, 30))
+
+
+# issue 25: sizes, steps, shapes, widths and trails are checked ----------------------------
+_RGB = np.zeros((32, 48, 3), np.uint8)
+_P = np.array([[5.0, 5.0], [20.0, 10.0]])
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: flow_wheel(np.nan), "size must be an integer"),
+        (lambda: flow_wheel(-np.inf), "size must be an integer"),
+        (lambda: flow_wheel(None), "size must be an integer"),
+        (lambda: flow_wheel(2**40), "size must be at most 2049"),
+        (lambda: dense_flow_picture(np.zeros((4, 6, 2)), True, (32, 48)), "step must be an"),
+        (lambda: dense_flow_picture(np.zeros((4, 6, 2)), 1.0, (32, 48)), "step must be an"),
+        (lambda: dense_flow_picture(np.zeros((4, 6, 2)), 8, (48, np.float32(2))), "width"),
+        (lambda: dense_flow_picture(np.zeros((4, 6, 2)), 8, (1,)), r"\(H, W\) or \(H, W, 3\)"),
+        (lambda: dense_flow_picture(np.zeros((4, 6, 2)), 8, (2**40, 2**40)), "at most 67108864"),
+        (lambda: flow_to_color(np.zeros((4, 4, 2)), max_magnitude=0), "max_magnitude must"),
+        (lambda: flow_to_color(np.zeros((4, 4, 2), complex)), r"real \(H, W, 2\) array"),
+        (lambda: draw_flow(_RGB, _P, _P + 1, color=(0, 255, np.inf)), "color must be three"),
+        (lambda: draw_flow(_RGB, _P, _P + 1, head="3"), "head must be a real number"),
+        (lambda: draw_flow(_RGB, _P, _P + 1, width=1e300), "width must be an integer"),
+        (lambda: draw_trails(_RGB, [_P], radius=-1), r"radius must be in \[0, inf\]"),
+        (lambda: draw_trails(_RGB, [_P], width=[1, 2]), "width must be an integer"),
+        (lambda: draw_trails(_RGB, [_P], width=2**40), "width must be at most"),
+        (lambda: draw_trails(_RGB, "abc"), "trails must be a list"),
+        (lambda: draw_trails(_RGB, [_P], colors=[(0, 0, np.nan)]), r"colors\[0\] must be"),
+    ],
+)
+def test_issue25_bad_arguments_raise_input_error(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_dense_flow_picture_fills_cells_and_any_step_works():
+    """Each grid vector fills its step x step cell (the former np.kron construction),
+    and a step as large as 2**63 (NumPy's int64 overflowed) draws the first vector
+    over the whole picture instead of asking for a picture of 2**63 pixels."""
+    rng = np.random.default_rng(0)
+    field = rng.normal(size=(4, 6, 2))
+    colors = flow_to_color(field)
+    pic = dense_flow_picture(field, 8, (48, 64))
+    ref = np.kron(colors, np.ones((8, 8, 1), np.uint8))
+    np.testing.assert_array_equal(pic[:32, :36], ref[:32, :36])  # (the legend is lower right)
+    assert (pic[32:, :20] == 0).all()  # beyond the grid: black
+    huge = dense_flow_picture(field, 2**63, (48, 64))
+    assert (huge[:10, :10] == colors[0, 0]).all()
+    tiny = dense_flow_picture(field, 1, (3, 5))  # too small for a legend: no error
+    np.testing.assert_array_equal(tiny, colors[:3, :5])
+
+
+def test_issue25_far_flow_and_trails_draw_the_visible_part():
+    start = np.array([[10.0, 10.0], [1e300, 5.0]])
+    end = np.array([[1e300, 10.0], [1e300 + 1.0, 5.0]])
+    out = draw_flow(_RGB, start, end, failed_color=None)
+    assert (out[10, 10:, 1] == 255).all() and out[:, :, 1].sum() == 255 * 38
+    trails = draw_trails(_RGB, [np.array([[0.0, 16.0], [-1e300, 16.0], [1e300, 16.0]])])
+    assert (trails[16, :, 1] == 255).all()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from robopercept.errors import InputError
-from robopercept.viz import confusion_picture, curves_picture, scatter_picture
+from robopercept.viz import confusion_picture, curves_picture, scatter_picture, tiles_picture
 
 
 def test_confusion_picture_shades_by_row_share():
@@ -64,3 +64,53 @@ def test_tiles_picture_activations_and_bad_input() -> None:
         tiles_picture(np.zeros((2, 2)))
     with pytest.raises(InputError):
         tiles_picture(np.zeros((0, 3, 3)))
+
+
+# issue 25: texts, sizes, counts and columns are checked ---------------------------------
+_XY = np.random.default_rng(0).normal(size=(20, 2))
+_CURVE = [(np.linspace(0, 1, 5), np.linspace(0, 1, 5), "a")]
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: confusion_picture(np.eye(2), ["a", "b"], title=["x"]), "title must be a string"),
+        (lambda: confusion_picture(np.eye(2), ["a", "b"], cell=-90070), "cell must be >= 0"),
+        (lambda: confusion_picture(np.eye(2), ["a", "b"], cell=2**40), "at most 67108864"),
+        (lambda: confusion_picture(np.full((2, 2), np.nan), ["a", "b"]), "finite, non-negative"),
+        (lambda: confusion_picture(np.eye(2), "ab"), "names must be a sequence"),
+        (lambda: curves_picture(_CURVE, title=3, xlabel="x", ylabel="y"), "title must be"),
+        (lambda: curves_picture(_CURVE, title="t", xlabel=["x"], ylabel="y"), "xlabel must"),
+        (lambda: curves_picture(_CURVE, title="t", xlabel="x", ylabel=3), "ylabel must be"),
+        (lambda: curves_picture(_CURVE, title="", xlabel="", ylabel="", width=0), "width must"),
+        (lambda: curves_picture(_CURVE, title="", xlabel="", ylabel="", width=3.4e16), "width"),
+        (lambda: curves_picture([(1, 2)], title="", xlabel="", ylabel=""), r"\(x, y, label\)"),
+        (lambda: curves_picture([([1, 2], [1], "a")], title="", xlabel="", ylabel=""), "length"),
+        (lambda: scatter_picture(_XY, width=-np.inf), "width must be an integer"),
+        (lambda: scatter_picture(_XY, height=1e-162), "height must be an integer"),
+        (lambda: scatter_picture(_XY, width=2**40), "at most 67108864"),
+        (lambda: scatter_picture(_XY, xlabel=[""]), "xlabel must be a string"),
+        (lambda: scatter_picture(_XY * 1e305), "overflow"),
+        (lambda: tiles_picture(np.ones((3, 4, 4)), tile_px="3"), "tile_px must be an integer"),
+        (lambda: tiles_picture(np.ones((3, 4, 4)), columns=5865057000623), "at most 67108864"),
+        (lambda: tiles_picture(np.ones((3, 4, 4)), columns=0), "columns must be >= 1"),
+        (lambda: tiles_picture(np.full((3, 4, 4), np.nan)), "tiles must be finite"),
+        (lambda: tiles_picture(np.ones((3, 4, 4)), names=["a"]), "3 tiles but 1 names"),
+    ],
+)
+def test_issue25_bad_arguments_raise_input_error(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_extreme_but_valid_values_still_draw():
+    """A single value near 1e300 (its range widened relatively, a fixed +-0.5 vanished
+    there and divided by zero) and values up to 1e300 plot; the smallest sizes work."""
+    pic = scatter_picture(np.full((3, 2), 1e300), width=100, height=90)
+    assert pic.shape == (90, 100, 3) and (pic != 255).any()
+    pic = curves_picture(
+        [(np.array([-1e300, 1e300]), np.array([0.0, 1e-300]), "c")], title="", xlabel="", ylabel=""
+    )
+    assert pic.shape == (560, 700, 3)
+    tiles = tiles_picture(np.array([[[1e308, -1e308]]]), tile_px=4, gap=0)
+    assert tiles.shape == (2, 4, 3) and tiles[0, 0, 0] == 255 and tiles[0, 3, 0] == 0

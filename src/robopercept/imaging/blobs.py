@@ -446,7 +446,8 @@ def blob_features(labels: np.ndarray) -> BlobFeatures:
     ----------
     labels : (H, W) int ndarray
         From :func:`label_components`: 0 background, blobs ``1..n``. Labels that do not
-        occur are skipped.
+        occur are skipped (sparse values, up to int64's largest, cost what their count
+        costs).
 
     Returns
     -------
@@ -462,6 +463,15 @@ def blob_features(labels: np.ndarray) -> BlobFeatures:
         raise InputError("labels must be >= 0 (0 is background)")
     lab = labels.astype(np.int64, copy=False)
     n = int(lab.max()) if lab.size else 0
+    ids = None
+    if n > lab.size:
+        # sparse label values (2**31 - 1 in a 64x48 image): the per-label arrays below
+        # would be sized by the largest value (GiB); number the labels 1..k instead
+        ids, compact = np.unique(lab, return_inverse=True)
+        lab = compact.reshape(labels.shape).astype(np.int64)
+        if ids[0] != 0:  # (compact 0 stays the background)
+            ids, lab = np.r_[0, ids], lab + 1
+        n = len(ids) - 1
     area, cx, cy, xmin, ymin, xmax, ymax = _stats_kernel(np.ascontiguousarray(lab), n)
     present = np.nonzero(area[1:])[0] + 1
     padded = np.pad(lab, 1)
@@ -475,7 +485,7 @@ def blob_features(labels: np.ndarray) -> BlobFeatures:
     with np.errstate(divide="ignore", invalid="ignore"):
         circ = np.where(per > 0, 4.0 * np.pi * a / np.maximum(per, 1e-300) ** 2, 0.0)
     return BlobFeatures(
-        labels=sel.astype(np.int64),
+        labels=(sel if ids is None else ids[sel]).astype(np.int64),
         area=a.astype(np.int64),
         bbox=np.stack([xmin[sel], ymin[sel], bw, bh], axis=1).astype(np.int64).reshape(-1, 4),
         centroid=np.stack([cx[sel] / np.maximum(a, 1), cy[sel] / np.maximum(a, 1)], axis=1).reshape(

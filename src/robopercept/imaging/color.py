@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import DTypeLike
 
-from robopercept._checks import check_choice, check_image, check_shape
+from robopercept._checks import check_choice, check_image, check_reals
 from robopercept.errors import InputError
 
 __all__ = [
@@ -286,7 +286,7 @@ def rgb_to_gray(image: np.ndarray, dtype: DTypeLike | None = None) -> np.ndarray
     if dtype is not None:
         try:
             out = np.dtype(dtype)
-        except TypeError as exc:
+        except (TypeError, ValueError) as exc:
             raise InputError(
                 f"dtype must be None, np.float32 or np.float64; got {dtype!r}"
             ) from exc
@@ -334,10 +334,8 @@ def hsv_range_mask(
     hsv = check_image(hsv, "hsv")
     if hsv.ndim != 3:
         raise InputError(f"hsv must be (H, W, 3); got {hsv.shape}: convert with rgb_to_hsv")
-    low = check_shape(np.asarray(low, dtype=np.float64), "low", (3,))
-    high = check_shape(np.asarray(high, dtype=np.float64), "high", (3,))
-    if not (np.isfinite(low).all() and np.isfinite(high).all()):
-        raise InputError(f"low and high must be finite; got low={low}, high={high}")
+    low = check_reals(low, "low", 3)
+    high = check_reals(high, "high", 3)
     if low[1] > high[1] or low[2] > high[2]:
         raise InputError(
             f"low must be <= high for S and V; got low={low.tolist()}, high={high.tolist()}: "

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import DTypeLike
 
-from robopercept._checks import check_image, check_range
+from robopercept._checks import check_bool, check_image, check_real
 from robopercept.errors import InputError
 from robopercept.imaging.color import rgb_to_gray
 from robopercept.imaging.filters import gaussian_blur
@@ -280,9 +280,10 @@ def canny(
         True on edge pixels.
     """
     image = check_image(image)
-    low = check_range(low, "low", 0.0)
-    high = check_range(high, "high", 0.0)
-    sigma = check_range(sigma, "sigma", 0.0)
+    low = check_real(low, "low", 0.0)
+    high = check_real(high, "high", 0.0)
+    sigma = check_real(sigma, "sigma", 0.0)
+    l2_gradient = check_bool(l2_gradient, "l2_gradient")
     if low > high:
         raise InputError(f"low must be <= high; got low={low:g}, high={high:g}: swap them")
     gray = rgb_to_gray(image) if image.ndim == 3 else image
@@ -334,7 +335,7 @@ def log_zero_crossings(log: np.ndarray, contrast: float = 0.05) -> np.ndarray:
     log = check_image(log, "log")
     if log.ndim != 2:
         raise InputError(f"log must be a 2-D response; got shape {log.shape}")
-    c = check_range(contrast, "contrast", 0.0, 1.0, high_inclusive=False)
+    c = check_real(contrast, "contrast", 0.0, 1.0, high_inclusive=False)
     pos = log > 0
     cross = np.zeros_like(pos)
     cross[:, :-1] |= pos[:, :-1] != pos[:, 1:]

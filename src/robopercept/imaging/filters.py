@@ -36,17 +36,20 @@ import numpy.typing as npt
 from numba import njit
 
 from robopercept._checks import (
+    check_bool,
     check_choice,
     check_image,
+    check_int,
     check_kernel,
     check_odd_size,
-    check_positive,
-    check_range,
+    check_real,
+    plain_repr,
 )
 from robopercept.errors import InputError
 
 __all__ = [
     "BORDERS",
+    "MAX_KERNEL_SIZE",
     "box_filter",
     "convolve",
     "convolve_separable",
@@ -66,6 +69,14 @@ __all__ = [
 
 Border = Literal["reflect101", "reflect", "replicate", "constant"]
 BORDERS: tuple[str, ...] = ("reflect101", "reflect", "replicate", "constant")
+#: the longest 1-D kernel a filter builds from a scalar parameter (a Gaussian's sigma, a
+#: box or kernel size, a LoG's truncation): 2**16 - 1 taps, a Gaussian of sigma up to
+#: 8191 on float images. Larger requests (``sigma=2**40`` would ask for terabytes) are
+#: refused with this limit named; blur a downsampled image instead.
+MAX_KERNEL_SIZE = 2**16 - 1
+#: the widest median window: the sorting network costs about ``ksize**4 / 4``
+#: comparisons per pixel and channel (ksize 31: 2.3e5)
+MAX_MEDIAN_KSIZE = 31
 
 
 # --------------------------------------------------------------------------- borders
@@ -302,7 +313,35 @@ def _as_rows(image: np.ndarray) -> tuple[np.ndarray, int]:
 
 def _check_border(border: str, cval: float) -> float:
     check_choice(border, "border", BORDERS)
-    return check_range(cval, "cval")
+    return check_real(cval, "cval")
+
+
+def _check_taps(size: int, name: str, hint: str) -> int:
+    """``size`` after checking that it is at most :data:`MAX_KERNEL_SIZE` taps."""
+    if size > MAX_KERNEL_SIZE:
+        raise InputError(
+            f"{name} asks for a kernel of {size} taps; at most {MAX_KERNEL_SIZE} are built: {hint}"
+        )
+    return size
+
+
+def _check_anchor(anchor: object, kernel_shape: tuple[int, int]) -> tuple[int, int] | None:
+    """The public ``anchor=(a_x, a_y)`` of :func:`correlate`: None or two integers inside
+    the kernel."""
+    if anchor is None:
+        return None
+    if not isinstance(anchor, (tuple, list)) or len(anchor) != 2:
+        raise InputError(f"anchor must be (a_x, a_y), two integers; got {plain_repr(anchor)}")
+    kh, kw = kernel_shape
+    out = []
+    for v, size, axis in ((anchor[0], kw, "a_x"), (anchor[1], kh, "a_y")):
+        a = check_int(v, f"anchor {axis}")
+        if not 0 <= a < size:
+            raise InputError(
+                f"anchor {axis} must be in [0, {size - 1}] for a kernel of {size}; got {a}"
+            )
+        out.append(a)
+    return out[0], out[1]
 
 
 def _anchor(size: int, anchor: int | None, name: str) -> int:
@@ -459,6 +498,7 @@ def correlate(
     image = check_image(image)
     kernel = check_kernel(kernel)
     cval = _check_border(border, cval)
+    anchor = _check_anchor(anchor, kernel.shape)
     return _run_correlate(image, kernel, border, cval, _out_dtype(image, False), anchor)
 
 
@@ -590,13 +630,29 @@ def gaussian_ksize(sigma: float, dtype: npt.DTypeLike = np.float64) -> int:
     int
         Odd kernel length.
 
+    Raises
+    ------
+    InputError
+        ``sigma`` not a positive real number, or so large that the kernel would have
+        more than :data:`MAX_KERNEL_SIZE` taps (sigma above 8191 for float images).
+
     Examples
     --------
     >>> gaussian_ksize(2.0, np.float32), gaussian_ksize(2.0, np.uint8)
     (17, 13)
     """
-    sigma = check_positive(sigma, "sigma")
-    t = 3.0 if np.dtype(dtype) == np.uint8 else 4.0
+    sigma = check_real(sigma, "sigma", 0.0, low_inclusive=False)
+    try:
+        t = 3.0 if np.dtype(dtype) == np.uint8 else 4.0
+    except TypeError:
+        raise InputError(f"dtype must be a NumPy dtype; got {plain_repr(dtype)}") from None
+    # the limit before the product: sigma near 1e308 would overflow it to inf
+    if sigma > (MAX_KERNEL_SIZE - 1) / (2.0 * t):
+        raise InputError(
+            f"sigma={sigma:g} asks for a Gaussian kernel of about {2 * t * sigma:.3g} taps; at "
+            f"most {MAX_KERNEL_SIZE} are built (sigma <= {(MAX_KERNEL_SIZE - 1) / (2 * t):g} "
+            "here): blur a downsampled image (robopercept.imaging.pyr_down) with a smaller sigma"
+        )
     # Python's round is round-half-even, as OpenCV's cvRound; "| 1" hides the tie rule
     return round(sigma * t * 2.0 + 1.0) | 1
 
@@ -632,22 +688,27 @@ def gaussian_kernel(sigma: float, size: int | None = None) -> np.ndarray:
     >>> gaussian_kernel(1.0).size
     9
     """
-    sigma = check_range(sigma, "sigma", 0.0)
+    sigma = check_real(sigma, "sigma", 0.0)
+    if size is not None:
+        size = check_odd_size(size, "size")
+        _check_taps(size, "size", "pass a smaller odd size")
     if sigma == 0.0:
         if size is None:
             raise InputError(
                 "sigma=0 derives sigma from the kernel size, as OpenCV: give the size "
                 "(e.g. gaussian_kernel(0, 5)) or a sigma > 0"
             )
-        size = check_odd_size(size, "size")
         if size in _SMALL_GAUSSIAN:
             return np.array(_SMALL_GAUSSIAN[size], dtype=np.float64)
         sigma = 0.3 * ((size - 1) * 0.5 - 1.0) + 0.8
     elif size is None:
         size = gaussian_ksize(sigma, np.float64)
-    size = check_odd_size(size, "size")
     x = np.arange(size, dtype=np.float64) - (size - 1) / 2.0
-    w = np.exp(-(x * x) / (2.0 * sigma * sigma))
+    # (x / sigma)^2 rather than x^2 / sigma^2: sigma^2 underflows to 0 below 1e-162 and
+    # would give 0/0 = NaN at the centre; this way a tiny sigma gives the impulse [.., 0,
+    # 1, 0, ..] (the identity filter), its limit
+    with np.errstate(over="ignore"):
+        w = np.exp(-0.5 * np.square(x / sigma))
     return w / w.sum()
 
 
@@ -661,6 +722,20 @@ def _gaussian_axis(sigma: float, size: int, dtype: np.dtype, flag: str) -> np.nd
             )
         size = gaussian_ksize(sigma, dtype)
     return gaussian_kernel(sigma, size)
+
+
+def _pair(value: object, name: str) -> tuple[int, int]:
+    """An ``int`` or a ``(width, height)`` pair of ints as ``(width, height)``, refusing
+    other types (floats, strings, NaN, other lengths) with an InputError naming ``name``."""
+    pair = (value, value) if not isinstance(value, (tuple, list)) else tuple(value)
+    ok = len(pair) == 2 and all(
+        isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)) for v in pair
+    )
+    if not ok:
+        raise InputError(
+            f"{name} must be an int or (width, height) of ints; got {plain_repr(value)}"
+        )
+    return int(pair[0]), int(pair[1])
 
 
 def gaussian_blur(
@@ -723,24 +798,14 @@ def gaussian_blur(
     """
     image = check_image(image)
     check_choice(border, "border", BORDERS)
-    sx = check_range(sigma, "sigma", 0.0)
-    sy = sx if sigma_y is None else check_range(sigma_y, "sigma_y", 0.0)
+    sx = check_real(sigma, "sigma", 0.0)
+    sy = sx if sigma_y is None else check_real(sigma_y, "sigma_y", 0.0)
     if sy == 0.0:  # OpenCV: sigmaY <= 0 takes sigmaX
         sy = sx
-    if ksize is None:
-        kw = kh = 0
-    elif isinstance(ksize, (int, np.integer)) and not isinstance(ksize, bool):
-        kw = kh = int(ksize)
-    else:
-        try:
-            kw, kh = (int(v) for v in ksize)  # type: ignore[union-attr]
-        except (TypeError, ValueError):
-            raise InputError(
-                f"ksize must be an odd int or (width, height) of odd ints; got {ksize!r}"
-            ) from None
+    kw, kh = _pair(0 if ksize is None else ksize, "ksize")
     for k in (kw, kh):
-        if k != 0:
-            check_odd_size(k, "ksize")  # 0 is automatic, as OpenCV's (0, 0)
+        if k != 0:  # 0 is automatic, as OpenCV's (0, 0)
+            _check_taps(check_odd_size(k, "ksize"), "ksize", "pass a smaller odd ksize")
     kx = _gaussian_axis(sx, kw, image.dtype, "kernel width")
     ky = kx if (sy, kh) == (sx, kw) else _gaussian_axis(sy, kh, image.dtype, "kernel height")
     return separable_filter_unchecked(image, kx, ky, border, 0.0, image.dtype)
@@ -775,10 +840,12 @@ def box_filter(
     """
     image = check_image(image)
     check_choice(border, "border", BORDERS)
-    kw, kh = (ksize, ksize) if np.isscalar(ksize) else tuple(ksize)
+    normalize = check_bool(normalize, "normalize")
+    kw, kh = _pair(ksize, "ksize")
     for name, k in (("ksize (width)", kw), ("ksize (height)", kh)):
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        if k < 1:
             raise InputError(f"{name} must be a positive integer; got {k!r}")
+        _check_taps(k, name, "pass a smaller window")
     scale_x = 1.0 / kw if normalize else 1.0
     scale_y = 1.0 / kh if normalize else 1.0
     kx = np.full(int(kw), scale_x)
@@ -825,7 +892,8 @@ def median_filter(
     ----------
     image : (H, W) or (H, W, 3) ndarray
     ksize : int
-        Odd window size >= 3 (a small window: the cost grows with ``ksize**2``).
+        Odd window size, 3 to :data:`MAX_MEDIAN_KSIZE` (31): the window is sorted by
+        insertion, about ``ksize**4 / 4`` comparisons per pixel and channel.
     border : {'replicate', 'reflect101', 'reflect'}
 
     Returns
@@ -835,6 +903,12 @@ def median_filter(
     """
     image = check_image(image)
     ksize = check_odd_size(ksize, "ksize", 3)
+    if ksize > MAX_MEDIAN_KSIZE:
+        raise InputError(
+            f"ksize must be an odd integer in [3, {MAX_MEDIAN_KSIZE}]; got {ksize}: the "
+            f"insertion sort costs about ksize**4 / 4 comparisons per pixel; for a wider "
+            "window take the median of a downsampled image (robopercept.imaging.pyr_down)"
+        )
     check_choice(border, "border", ("replicate", "reflect101", "reflect"))
     src, channels = _as_rows(image)
     h, w = image.shape[:2]
@@ -865,7 +939,19 @@ def derivative_kernel(order: int, ksize: int) -> np.ndarray:
     Returns
     -------
     (n,) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        ``order`` not an integer in range, or ``ksize`` not 1, 3, 5 or 7.
+
+    Examples
+    --------
+    >>> derivative_kernel(1, 5)
+    array([-1., -2.,  0.,  2.,  1.])
     """
+    order = check_int(order, "order", 0)
+    ksize = _check_ksize(ksize)
     if ksize == 1:
         if order == 0:
             return np.ones(1)
@@ -883,7 +969,8 @@ def derivative_kernel(order: int, ksize: int) -> np.ndarray:
 
 
 def _check_ksize(ksize: int) -> int:
-    if isinstance(ksize, bool) or ksize not in (1, 3, 5, 7):
+    integer = isinstance(ksize, (int, np.integer)) and not isinstance(ksize, (bool, np.bool_))
+    if not integer or ksize not in (1, 3, 5, 7):
         raise InputError(f"ksize must be 1, 3, 5 or 7; got {ksize!r}")
     return int(ksize)
 
@@ -928,7 +1015,8 @@ def sobel(
             raise InputError(f"{name} must be a non-negative integer; got {v!r}")
     if dx + dy < 1:
         raise InputError(f"dx + dy must be >= 1; got dx={dx}, dy={dy}")
-    kx = derivative_kernel(int(dx), ksize) * float(scale)
+    scale = check_real(scale, "scale")
+    kx = derivative_kernel(int(dx), ksize) * scale
     ky = derivative_kernel(int(dy), ksize)
     return separable_filter_unchecked(image, kx, ky, border, 0.0, _out_dtype(image, False))
 
@@ -994,14 +1082,20 @@ def laplacian(
     image = check_image(image)
     check_choice(border, "border", BORDERS)
     ksize = _check_ksize(ksize)
+    scale = check_real(scale, "scale")
     out_dtype = _out_dtype(image, False)
     if ksize in (1, 3):
-        kernel = (_LAPLACE_1 if ksize == 1 else _LAPLACE_3) * float(scale)
+        kernel = (_LAPLACE_1 if ksize == 1 else _LAPLACE_3) * scale
         return _run_correlate(image, kernel, border, 0.0, out_dtype)
-    d2 = derivative_kernel(2, ksize) * float(scale)
+    d2 = derivative_kernel(2, ksize) * scale
     d0 = derivative_kernel(0, ksize)
     fxx = separable_filter_unchecked(image, d2, d0, border, 0.0, out_dtype)
     return fxx + separable_filter_unchecked(image, d0, d2, border, 0.0, out_dtype)
+
+
+#: the smallest sigma of the unnormalized LoG: its centre weight -1/sigma^2 is 1e30 there,
+#: which keeps the output of any image within float32
+_LOG_MIN_SIGMA = 1e-15
 
 
 def laplacian_of_gaussian(
@@ -1039,16 +1133,31 @@ def laplacian_of_gaussian(
         float32 for integer input, else the input dtype.
     """
     image = check_image(image)
-    sigma = check_positive(sigma, "sigma")
-    truncate = check_positive(truncate, "truncate")
+    sigma = check_real(sigma, "sigma", 0.0, low_inclusive=False)
+    truncate = check_real(truncate, "truncate", 0.0, low_inclusive=False)
+    normalized = check_bool(normalized, "normalized")
     check_choice(border, "border", BORDERS)
-    radius = int(truncate * sigma + 0.5)
+    if not normalized and sigma < _LOG_MIN_SIGMA:
+        raise InputError(
+            f"sigma={sigma:g} is too small for the unnormalized LoG: its centre weight "
+            f"-1/sigma^2 overflows (sigma >= {_LOG_MIN_SIGMA:g}); pass normalized=True "
+            "(the sigma^2-scaled LoG, finite for any sigma) or a larger sigma"
+        )
+    half = truncate * sigma + 0.5  # (the product before int(): 1e300 * 1e300 is inf)
+    if half >= (MAX_KERNEL_SIZE + 1) / 2:
+        raise InputError(
+            f"truncate * sigma = {truncate * sigma:.3g} asks for a kernel of about "
+            f"{2 * half:.3g} taps; at most {MAX_KERNEL_SIZE} are built: use a smaller "
+            "sigma or truncate, or filter a downsampled image"
+        )
+    radius = int(half)
     x = np.arange(-radius, radius + 1, dtype=np.float64)
-    g = np.exp(-0.5 * x * x / (sigma * sigma))
+    u2 = np.square(x / sigma)  # as in gaussian_kernel: no sigma^2 that underflows
+    g = np.exp(-0.5 * u2)
     g /= g.sum()
-    g2 = g * (x * x / sigma**4 - 1.0 / sigma**2)
-    if normalized:
-        g2 = g2 * sigma * sigma
+    # G'' sigma^2 = G (x^2 / sigma^2 - 1); taps whose weight underflowed to 0 stay 0
+    g2n = np.where(g > 0, g * (u2 - 1.0), 0.0)
+    g2 = g2n if normalized else g2n / (sigma * sigma)
     out_dtype = _out_dtype(image, False)
     # both kernels are symmetric, so correlation equals convolution here
     fxx = separable_filter_unchecked(image, g2, g, border, 0.0, out_dtype)

@@ -24,7 +24,16 @@ from typing import Any, cast
 
 import numpy as np
 
-from robopercept._checks import check_extension, check_file, check_image, check_positive
+from robopercept._checks import (
+    as_path,
+    check_bool,
+    check_extension,
+    check_file,
+    check_image,
+    check_int,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import FileFormatError, InputError, RoboperceptError
 
 _inflate_lib: types.ModuleType
@@ -143,7 +152,7 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     """
     from robopercept.imaging.color import rgb_to_gray
 
-    p = Path(path)
+    p = as_path(path, "path")
     if mode not in (None, "rgb", "gray"):
         raise InputError(f"mode must be None, 'rgb' or 'gray'; got {mode!r}")
     check_file(p, "an image file")
@@ -278,7 +287,7 @@ def write_image(
     """
     import imageio.v3 as iio
 
-    p = Path(path)
+    p = as_path(path, "path")
     arr = np.asarray(image)
     if arr.ndim == 3 and arr.shape[2] == 4:
         check_image(arr[..., :3], "image")
@@ -304,10 +313,12 @@ def write_image(
             "channel, or drop it with image[..., :3]"
         )
     extra = {}
-    if png_compression is not None and ext == ".png":
-        if not 0 <= int(png_compression) <= 9:
-            raise InputError(f"png_compression must be in 0..9; got {png_compression}")
-        extra["compress_level"] = int(png_compression)
+    if png_compression is not None:
+        level = check_int(png_compression, "png_compression", 0)
+        if level > 9:
+            raise InputError(f"png_compression must be in 0..9; got {level}")
+        if ext == ".png":
+            extra["compress_level"] = level
     p.parent.mkdir(parents=True, exist_ok=True)
     try:
         if arr.dtype == np.uint16 and ext == ".png" and arr.ndim == 3:
@@ -998,8 +1009,7 @@ class VideoReader:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         import imageio_ffmpeg
 
-        self.path = Path(path)
-        check_file(self.path, "a video file")
+        self.path = check_file(path, "a video file")
         try:
             gen = imageio_ffmpeg.read_frames(str(self.path))
             meta: dict[str, Any] = gen.__next__()
@@ -1084,6 +1094,11 @@ _FRAGMENTED = [
 ]
 
 
+#: the frame rates :class:`VideoWriter` takes: ffmpeg refuses rates near 1e-6 and 1e300,
+#: and the container of a rate above 1e4 reads back as 0 fps
+MIN_FPS, MAX_FPS = 1e-3, 1e4
+
+
 class VideoWriter:
     """Write RGB uint8 frames to an H.264 MP4 (yuv420p, playable everywhere).
 
@@ -1099,8 +1114,10 @@ class VideoWriter:
         ``.mp4``, ``.m4v``, ``.mov``, ``.mkv`` or ``.avi`` (:func:`check_video_path`);
         another extension is refused here, before any frame is made.
     fps : float
+        Frames per second, in ``[MIN_FPS, MAX_FPS]`` (0.001 to 10000: rates outside
+        are refused by ffmpeg or not read back).
     quality : float
-        0..10 (imageio-ffmpeg's scale; higher is better).
+        1..10 (imageio-ffmpeg's scale; higher is better).
     fragmented : bool
         MP4/MOV only: write a fragmented file (``-movflags frag_keyframe+empty_moov``,
         a fragment at least every second), playable up to the last fragment written
@@ -1116,9 +1133,10 @@ class VideoWriter:
         fragmented: bool = False,
     ) -> None:
         self.path = check_video_path(path)
-        self.fps = check_positive(fps, "fps")
-        self.quality = float(quality)
-        self.fragmented = bool(fragmented) and self.path.suffix.lower() in (".mp4", ".m4v", ".mov")
+        self.fps = check_real(fps, "fps", MIN_FPS, MAX_FPS)
+        self.quality = check_real(quality, "quality", 1.0, 10.0)
+        fragmented = check_bool(fragmented, "fragmented")
+        self.fragmented = fragmented and self.path.suffix.lower() in (".mp4", ".m4v", ".mov")
         self._gen: Any = None
         self._size: tuple[int, int] | None = None
         self.frames_written = 0
@@ -1206,14 +1224,22 @@ class SnapshotVideoWriter:
         fps: float,
         snapshots: Iterable[int] | None = None,
     ) -> None:
-        self.path = Path(path)
+        self.path = check_video_path(path)
+        if snapshots is None:
+            snapshots = ()
+        if isinstance(snapshots, (str, bytes)) or not isinstance(snapshots, Iterable):
+            raise InputError(
+                f"snapshots must be an iterable of frame indices (e.g. [0, 25]); got "
+                f"{plain_repr(snapshots)}"
+            )
+        self.snapshots = {check_int(i, "snapshots (each index)", 0) for i in snapshots}
         self.writer = VideoWriter(self.path, fps=fps)
-        self.snapshots = {int(i) for i in (snapshots or [])}
         self.written: list[str] = []
 
     def add(self, index: int, picture: np.ndarray) -> None:
         """Append ``picture`` (RGB uint8) to the video; save it too if ``index`` is a
         snapshot."""
+        index = check_int(index, "index")
         self.writer.write(picture)
         if index in self.snapshots:
             png = self.path.with_name(f"{self.path.stem}_{index:06d}.png")

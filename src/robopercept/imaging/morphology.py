@@ -13,12 +13,18 @@ the reverse. All four match ``cv2.erode``/``cv2.dilate``/``cv2.morphologyEx`` ex
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
-from robopercept._checks import check_choice, check_image, check_ndim
+from robopercept._checks import check_choice, check_image, check_int, check_ndim, plain_repr
 from robopercept.errors import InputError
 
-__all__ = ["closing", "dilate", "erode", "opening", "structuring_element"]
+__all__ = ["MAX_ELEMENT_SIZE", "closing", "dilate", "erode", "opening", "structuring_element"]
+
+#: the largest side of a :func:`structuring_element` (OpenCV builds any size; an element
+#: of 2**40 pixels would ask for terabytes): 4095 pixels, 16 MiB for a square
+MAX_ELEMENT_SIZE = 4095
 
 
 def structuring_element(shape: str, size: int | tuple[int, int]) -> np.ndarray:
@@ -28,16 +34,34 @@ def structuring_element(shape: str, size: int | tuple[int, int]) -> np.ndarray:
     ----------
     shape : {'rect', 'cross', 'ellipse'}
     size : int or (width, height)
+        Integers in ``[1, MAX_ELEMENT_SIZE]`` (4095).
 
     Returns
     -------
     (height, width) bool ndarray
+
+    Raises
+    ------
+    InputError
+        An unknown shape, or a size that is not one or two integers in range.
+
+    Examples
+    --------
+    >>> structuring_element("cross", 3).astype(int)
+    array([[0, 1, 0],
+           [1, 1, 1],
+           [0, 1, 0]])
     """
     check_choice(shape, "shape", ("rect", "cross", "ellipse"))
-    w, h = (size, size) if np.isscalar(size) else tuple(size)
-    if int(w) < 1 or int(h) < 1:
-        raise InputError(f"size must be >= 1; got {size!r}")
-    w, h = int(w), int(h)
+    pair = tuple(size) if isinstance(size, (tuple, list)) else (size, size)
+    if len(pair) != 2:
+        raise InputError(f"size must be an int or (width, height); got {plain_repr(size)}")
+    w, h = check_int(pair[0], "size (width)"), check_int(pair[1], "size (height)")
+    if not (1 <= w <= MAX_ELEMENT_SIZE and 1 <= h <= MAX_ELEMENT_SIZE):
+        raise InputError(
+            f"size must be in [1, {MAX_ELEMENT_SIZE}] pixels per side; got {plain_repr(size)}: "
+            "for a wider element, work on a downsampled image (robopercept.imaging.pyr_down)"
+        )
     if shape == "rect":
         return np.ones((h, w), dtype=bool)
     if shape == "cross":
@@ -69,8 +93,7 @@ def _check_se(se: np.ndarray | None) -> np.ndarray:
 def _rank(image: np.ndarray, se: np.ndarray, op: str, iterations: int) -> np.ndarray:
     image = check_image(image, allow_bool=True)
     se = _check_se(se)
-    if isinstance(iterations, bool) or int(iterations) < 1:
-        raise InputError(f"iterations must be >= 1; got {iterations!r}")
+    iterations = check_int(iterations, "iterations", 1)
     is_bool = image.dtype == np.bool_
     work = image.view(np.uint8) if is_bool else image
     kh, kw = se.shape
@@ -90,13 +113,31 @@ def _rank(image: np.ndarray, se: np.ndarray, op: str, iterations: int) -> np.nda
     h, w = work.shape[:2]
     pad = ((top, bottom), (left, right)) + (((0, 0),) if work.ndim == 3 else ())
     out = work
-    for _ in range(int(iterations)):
+    # Each pass is a function of the previous result only, so once a result repeats
+    # the sequence is periodic from there and the remaining passes can be skipped
+    # exactly: a large ``iterations`` (2**63) costs the passes until the result stops
+    # changing (about the image's size for an element that holds its anchor), not a hang.
+    seen: dict[bytes, int] | None = {}
+    k = 0
+    while k < iterations:
         padded = np.pad(out, pad, constant_values=fill)
         acc = None
         for dy, dx in offsets:
             view = padded[top + dy : top + dy + h, left + dx : left + dx + w]
             acc = view.copy() if acc is None else reduce(acc, view, out=acc)
         out = acc
+        k += 1
+        if seen is not None and iterations - k > 1:
+            key = hashlib.blake2b(out.tobytes(), digest_size=16).digest()
+            if key in seen:  # pass k repeats pass seen[key]: periodic from here
+                iterations = k + (iterations - k) % (k - seen[key])
+                seen = None  # (the few passes left need no more bookkeeping)
+            else:
+                seen[key] = k
+    return _as_result(out, is_bool)
+
+
+def _as_result(out: np.ndarray, is_bool: bool) -> np.ndarray:
     return out.view(np.bool_) if is_bool else out
 
 
@@ -109,6 +150,8 @@ def erode(image: np.ndarray, se: np.ndarray | None = None, iterations: int = 1) 
     se : (kh, kw) array_like of bool, optional
         Structuring element, anchored at ``(kh // 2, kw // 2)``.
     iterations : int
+        Passes, >= 1 (any size: once the result repeats, the remaining passes are
+        skipped exactly).
 
     Returns
     -------

@@ -16,15 +16,41 @@ maps (``cv2.remap``), as undistortion and stereo rectification need.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numba import njit, prange
 
-from robopercept._checks import check_choice, check_image, check_int, check_shape
+from robopercept._checks import (
+    check_choice,
+    check_finite,
+    check_image,
+    check_int,
+    check_points,
+    check_real,
+    check_shape,
+)
 from robopercept.errors import DegenerateError, InputError
 
-__all__ = ["remap", "transform_points", "warp_perspective"]
+__all__ = ["MAX_OUTPUT_PIXELS", "remap", "transform_points", "warp_perspective"]
+
+#: the largest output of :func:`warp_perspective`, width x height: 2**27 pixels (an
+#: 8K frame is 2**25; the float64 work buffer of a colour output is then 3 GiB)
+MAX_OUTPUT_PIXELS = 2**27
+
+
+def _check_homography(h: Any) -> np.ndarray:
+    """``h`` as a finite float64 (3, 3) matrix scaled to largest entry 1 (a homography
+    is defined up to scale; the scaling keeps entries near 1e300 from overflowing in
+    the products), or InputError / DegenerateError (all zeros)."""
+    m = check_shape(h, "H", (3, 3))
+    if m.dtype.kind not in "biuf":
+        raise InputError(f"H must be a real (3, 3) matrix; got dtype {m.dtype}")
+    m = check_finite(m.astype(np.float64), "H")
+    top = float(np.abs(m).max())
+    if top == 0.0:
+        raise DegenerateError("H is singular (all zeros): it maps no point; pass a homography")
+    return m / top
 
 
 def transform_points(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
@@ -33,15 +59,33 @@ def transform_points(h: np.ndarray, xy: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     h : (3, 3) array_like
+        Finite; any scale (it is divided by its largest entry first).
     xy : (N, 2) array_like
+        Points, or one point as ``(2,)``.
 
     Returns
     -------
     (N, 2) float64 ndarray
         Points mapped to infinity (third coordinate 0) come back as inf/NaN.
+
+    Raises
+    ------
+    InputError
+        ``h`` not a finite (3, 3) matrix, ``xy`` not (N, 2).
+    DegenerateError
+        ``h`` all zeros.
+
+    Examples
+    --------
+    >>> transform_points(np.array([[2.0, 0, 1], [0, 2, 0], [0, 0, 1]]), [[1.0, 1.0]])
+    array([[3., 2.]])
     """
-    m = check_shape(np.asarray(h, dtype=np.float64), "H", (3, 3))
-    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    m = _check_homography(h)
+    one = isinstance(xy, (list, tuple)) and len(xy) == 2
+    one = one and all(isinstance(v, (int, float, np.integer, np.floating)) for v in xy)
+    if one or (isinstance(xy, np.ndarray) and xy.shape == (2,)):
+        xy = np.asarray(xy)[None, :]  # one point
+    p = check_points(xy, "xy", 2)
     q = p @ m[:2, :2].T + m[:2, 2]
     w = p @ m[2, :2] + m[2, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -143,18 +187,22 @@ def remap(
         ``(H', W'[, C])``, the input's dtype (integers rounded).
     """
     image = check_image(image)
-    mx = np.asarray(map_x, dtype=np.float64)
-    my = np.asarray(map_y, dtype=np.float64)
-    if mx.ndim != 2 or mx.shape != my.shape:
+    maps = []
+    for name, value in (("map_x", map_x), ("map_y", map_y)):
+        arr = check_shape(value, name, (None, None))
+        if arr.dtype.kind not in "biuf":
+            raise InputError(f"{name} must be a real 2-D array; got dtype {arr.dtype}")
+        maps.append(np.ascontiguousarray(arr, dtype=np.float64))
+    mx, my = maps
+    if mx.shape != my.shape:
         raise InputError(
             f"map_x and map_y must be 2-D arrays of one shape; got {mx.shape} and {my.shape}"
         )
     check_choice(interpolation, "interpolation", ("linear", "nearest"))
+    border_value = check_real(border_value, "border_value")
     src = image if image.ndim == 3 else image[:, :, None]
     out = np.empty((*mx.shape, src.shape[2]), np.float64)
-    _remap_kernel(
-        np.ascontiguousarray(src), mx, my, interpolation == "linear", float(border_value), out
-    )
+    _remap_kernel(np.ascontiguousarray(src), mx, my, interpolation == "linear", border_value, out)
     return _finish(image, out)
 
 
@@ -191,9 +239,10 @@ def warp_perspective(
     Raises
     ------
     DegenerateError
-        If ``h`` is singular.
+        If ``h`` is singular (or all zeros).
     InputError
-        If ``dsize`` is not a pair of positive integers.
+        If ``h`` is not a finite (3, 3) matrix, ``dsize`` is not a pair of positive
+        integers or asks for more than :data:`MAX_OUTPUT_PIXELS` pixels.
 
     Examples
     --------
@@ -206,23 +255,21 @@ def warp_perspective(
     [[0, 0, 0, 1], [0, 0, 3, 4]]
     """
     image = check_image(image)
-    m = check_shape(np.asarray(h, dtype=np.float64), "H", (3, 3))
-    if not np.isfinite(m).all():
-        raise InputError("H must be finite")
+    m = _check_homography(h)  # (largest entry 1)
     check_choice(interpolation, "interpolation", ("linear", "nearest"))
-    try:
-        ow, oh = dsize
-    except (TypeError, ValueError):
+    if not isinstance(dsize, (tuple, list)) or len(dsize) != 2:
+        raise InputError(f"dsize must be the output (width, height), as OpenCV's; got {dsize!r}")
+    ow, oh = check_int(dsize[0], "dsize[0] (width)", 1), check_int(dsize[1], "dsize[1] (height)", 1)
+    if ow * oh > MAX_OUTPUT_PIXELS:
         raise InputError(
-            f"dsize must be the output (width, height), as OpenCV's; got {dsize!r}"
-        ) from None
-    ow, oh = check_int(ow, "dsize[0] (width)", 1), check_int(oh, "dsize[1] (height)", 1)
-    if abs(np.linalg.det(m)) <= 1e-12 * max(np.abs(m).max(), 1e-300) ** 3:
+            f"dsize {ow}x{oh} is {ow * oh} pixels; at most {MAX_OUTPUT_PIXELS} are made: "
+            "pass the output (width, height) you need (image.shape[1::-1] keeps the size)"
+        )
+    border_value = check_real(border_value, "border_value")
+    if abs(np.linalg.det(m)) <= 1e-12:
         raise DegenerateError("H is singular: it does not map the image onto a plane")
     minv = np.linalg.inv(m)
     src = image if image.ndim == 3 else image[:, :, None]
     out = np.empty((oh, ow, src.shape[2]), np.float64)
-    _warp_kernel(
-        np.ascontiguousarray(src), minv, interpolation == "linear", float(border_value), out
-    )
+    _warp_kernel(np.ascontiguousarray(src), minv, interpolation == "linear", border_value, out)
     return _finish(image, out)

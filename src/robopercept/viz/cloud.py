@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from robopercept._checks import check_points
+from robopercept._checks import check_int, check_points, check_real, plain_repr
 from robopercept.errors import InputError
+from robopercept.viz.draw import check_color, check_picture_size
 
-__all__ = ["render_points"]
+__all__ = ["MAX_POINT_SIZE", "render_points"]
+
+#: the largest ``point_size`` of :func:`render_points` (each point is drawn as a
+#: ``point_size`` x ``point_size`` square, one pass per pixel of it)
+MAX_POINT_SIZE = 64
 
 
 def render_points(
@@ -33,38 +38,58 @@ def render_points(
     colors : (N, 3) array_like, optional
         RGB in [0, 1] (float) or uint8; default a depth shading.
     size : (W, H)
+        Positive integers, at most 2**26 pixels in all.
     fov_deg : float
+        In (0, 180).
     point_size : int
+        1 to :data:`MAX_POINT_SIZE`.
     background : RGB
+        Three integers in 0..255.
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
     """
     p = check_points(points, "points", 3)
-    w, h = (int(v) for v in size)
-    if w < 1 or h < 1 or not 0 < fov_deg < 180 or point_size < 1:
-        raise InputError(
-            f"need size >= (1, 1), 0 < fov_deg < 180, point_size >= 1; got {size}, "
-            f"{fov_deg}, {point_size}"
-        )
-    img = np.empty((h, w, 3), dtype=np.uint8)
-    img[:] = background
-    ok = np.isfinite(p).all(axis=1) & (p[:, 2] > 1e-6)
-    if colors is None:
-        z = p[ok, 2]
-        shade = 1.0 - 0.7 * (z - z.min()) / max(float(np.ptp(z)) if z.size else 0.0, 1e-9)
-        col8 = (np.outer(shade, [60, 110, 200])).astype(np.uint8)
-    else:
-        c = np.asarray(colors)
+    if not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise InputError(f"size must be the image's (width, height); got {plain_repr(size)}")
+    w, h = check_picture_size(size[0], size[1], "render (size)")
+    fov_deg = check_real(fov_deg, "fov_deg", 0.0, 180.0, low_inclusive=False, high_inclusive=False)
+    point_size = check_int(point_size, "point_size", 1)
+    if point_size > MAX_POINT_SIZE:
+        raise InputError(f"point_size must be at most {MAX_POINT_SIZE}; got {point_size}")
+    bg = check_color(background, "background")
+    c = None
+    if colors is not None:
+        c = np.asarray(colors) if isinstance(colors, np.ndarray) else check_points(colors, "colors")
         if c.shape != p.shape:
             raise InputError(f"colors must have shape {p.shape}; got {c.shape}")
-        c = c[ok]
-        col8 = c if c.dtype == np.uint8 else np.clip(np.rint(c * 255), 0, 255).astype(np.uint8)
-    q = p[ok]
+        if c.dtype.kind not in "biuf" or not np.isfinite(c).all():
+            raise InputError("colors must be finite real numbers, RGB in [0, 1] (float) or uint8")
+    img = np.empty((h, w, 3), dtype=np.uint8)
+    img[:] = bg
+    front = np.isfinite(p).all(axis=1) & (p[:, 2] > 1e-6)
+    if not front.any():
+        return img
+    if c is None:
+        z = p[front, 2]
+        # z is in (1e-6, 1.8e308]: halves keep the range finite
+        span = max(float(z.max() * 0.5 - z.min() * 0.5), 1e-9)
+        shade = 1.0 - 0.7 * (z * 0.5 - z.min() * 0.5) / span
+        col8 = (np.outer(shade, [60, 110, 200])).astype(np.uint8)
+    else:
+        cf = c[front]
+        col8 = cf if cf.dtype == np.uint8 else np.clip(np.rint(cf * 255), 0, 255).astype(np.uint8)
     f = (w / 2) / np.tan(np.radians(fov_deg) / 2)
-    u = np.floor(f * q[:, 0] / q[:, 2] + w / 2).astype(np.int64)
-    v = np.floor(f * q[:, 1] / q[:, 2] + h / 2).astype(np.int64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        uf = np.floor(f * p[front, 0] / p[front, 2] + w / 2)
+        vf = np.floor(f * p[front, 1] / p[front, 2] + h / 2)
+    # (points that project far outside are dropped before the integer cast)
+    ok = (uf > -point_size) & (uf < w) & (vf > -point_size) & (vf < h)
+    col8 = col8[ok]
+    q = p[front][ok]
+    u = uf[ok].astype(np.int64)
+    v = vf[ok].astype(np.int64)
     order = np.argsort(-q[:, 2], kind="stable")  # far first: near points overwrite
     u, v, col8 = u[order], v[order], col8[order]
     for du in range(point_size):

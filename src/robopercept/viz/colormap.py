@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from robopercept._checks import check_ndim
+from robopercept._checks import check_finite, check_ndim, check_real
 from robopercept.errors import InputError
+from robopercept.viz.draw import check_color
 
 __all__ = ["colorize_depth", "colorize_signed", "label_colors", "turbo"]
 
@@ -21,8 +22,26 @@ _TURBO = np.array(
 
 
 def turbo(t: np.ndarray) -> np.ndarray:
-    """Map ``t`` in [0, 1] to Turbo RGB uint8 (values outside are clipped)."""
-    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
+    """Map ``t`` in [0, 1] to Turbo RGB uint8 (values outside are clipped).
+
+    Parameters
+    ----------
+    t : array_like
+        Real, finite values.
+
+    Returns
+    -------
+    (..., 3) uint8 ndarray
+
+    Examples
+    --------
+    >>> turbo([0.0, 1.0]).tolist()
+    [[35, 23, 27], [144, 13, 0]]
+    """
+    arr = check_ndim(t, "t", range(33))
+    if arr.dtype.kind not in "biuf":
+        raise InputError(f"t must be real numbers; got dtype {arr.dtype}")
+    t = np.clip(check_finite(arr.astype(np.float64), "t"), 0.0, 1.0)
     powers = np.stack([t**k for k in range(6)], axis=-1)
     rgb = np.clip(powers @ _TURBO.T, 0.0, 1.0)
     return np.round(rgb * 255.0).astype(np.uint8)
@@ -42,22 +61,37 @@ def colorize_depth(
     depth : (H, W) ndarray
         Any numeric dtype; pixels equal to ``invalid`` or non-finite are invalid.
     min_depth, max_depth : float, optional
-        Range mapped to the colours; by default the 1st and 99th percentiles of valid depth.
+        Range mapped to the colours; by default the 1st and 99th percentiles of valid
+        depth. With ``max_depth <= min_depth`` the map is a step: depths above
+        ``min_depth`` get the far colour.
+    invalid : float
+        The value that marks a pixel without depth (NaN: none besides NaN/inf).
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
     """
-    d = check_ndim(depth, "depth", (2,)).astype(np.float64)
+    d = check_ndim(depth, "depth", (2,))
+    if d.dtype.kind not in "biuf":
+        raise InputError(f"depth must be a numeric (H, W) array; got dtype {d.dtype}")
+    d = d.astype(np.float64)
+    if not (isinstance(invalid, (float, np.floating)) and np.isnan(invalid)):
+        invalid = check_real(invalid, "invalid")  # (NaN: no sentinel, NaN is invalid anyway)
+    lo = None if min_depth is None else check_real(min_depth, "min_depth")
+    hi = None if max_depth is None else check_real(max_depth, "max_depth")
     valid = np.isfinite(d) & (d != invalid)
     out = np.zeros((*d.shape, 3), dtype=np.uint8)
     if not valid.any():
         return out
-    lo = float(np.percentile(d[valid], 1)) if min_depth is None else float(min_depth)
-    hi = float(np.percentile(d[valid], 99)) if max_depth is None else float(max_depth)
-    if hi <= lo:
-        hi = lo + 1e-9
-    out[valid] = turbo((d[valid] - lo) / (hi - lo))
+    # in halves, so that depths and ranges near 1e308 do not overflow the differences
+    half = 0.5 * d[valid]
+    lo_h = float(np.percentile(half, 1)) if lo is None else 0.5 * lo
+    hi_h = float(np.percentile(half, 99)) if hi is None else 0.5 * hi
+    if hi_h > lo_h:
+        t = (half - lo_h) / (hi_h - lo_h)
+    else:
+        t = (half > lo_h).astype(np.float64)
+    out[valid] = turbo(t)
     return out
 
 
@@ -74,13 +108,19 @@ def colorize_signed(field: np.ndarray, limit: float | None = None) -> np.ndarray
     -------
     (H, W, 3) uint8 ndarray
     """
-    f = check_ndim(field, "field", (2,)).astype(np.float64)
+    f = check_ndim(field, "field", (2,))
+    if f.dtype.kind not in "biuf":
+        raise InputError(f"field must be a numeric (H, W) array; got dtype {f.dtype}")
+    f = f.astype(np.float64)
     f = np.where(np.isfinite(f), f, 0.0)
     if limit is None:
         limit = float(np.percentile(np.abs(f), 99)) if f.size else 1.0
+    else:
+        limit = check_real(limit, "limit")
     if limit <= 0:
         limit = 1.0
-    t = np.clip(f / limit, -1.0, 1.0)[..., None]
+    with np.errstate(over="ignore"):  # (|f| / a tiny limit is inf: clipped to 1)
+        t = np.clip(f / limit, -1.0, 1.0)[..., None]
     white = np.array([255.0, 255.0, 255.0])
     red = np.array([178.0, 24.0, 43.0])
     blue = np.array([33.0, 102.0, 172.0])
@@ -94,14 +134,17 @@ def label_colors(labels: np.ndarray, *, background: tuple[int, int, int] = (0, 0
     Parameters
     ----------
     labels : (H, W) or (N,) int ndarray
+    background : (3,) ints
+        The colour of labels <= 0.
 
     Returns
     -------
     (..., 3) uint8 ndarray
     """
-    lab = np.asarray(labels)
+    lab = check_ndim(labels, "labels", range(33))
     if lab.dtype.kind not in "iu":
         raise InputError(f"labels must be integers; got {lab.dtype}")
+    background = check_color(background, "background")
     hue = np.mod(lab.astype(np.float64) * 0.618033988749895, 1.0)
     h6 = hue * 6.0
     x = 1.0 - np.abs(np.mod(h6, 2.0) - 1.0)

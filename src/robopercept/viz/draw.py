@@ -8,18 +8,34 @@ from __future__ import annotations
 
 import colorsys
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from robopercept._checks import check_image, check_ndim
+from robopercept._checks import (
+    check_bool,
+    check_image,
+    check_int,
+    check_ndim,
+    check_points,
+    check_real,
+    check_reals,
+    check_text,
+    plain_repr,
+)
 
 if TYPE_CHECKING:
     from PIL import Image, ImageDraw
 from robopercept.errors import InputError
 
 __all__ = [
+    "MAX_PICTURE_PIXELS",
+    "MAX_STROKE",
     "check_color",
+    "check_picture_size",
+    "check_stroke",
+    "check_xy",
+    "clip_segments",
     "draw_boxes",
     "draw_chessboard",
     "draw_lines",
@@ -31,6 +47,13 @@ __all__ = [
 ]
 
 Color = tuple[int, int, int]
+
+#: the largest picture a viz function makes, width x height: 2**26 pixels (64 Mpx,
+#: 192 MiB as RGB; an 8K frame is 33 Mpx)
+MAX_PICTURE_PIXELS = 2**26
+#: the largest line width, circle radius or font size in pixels (Pillow takes about a
+#: minute to rasterize a circle of radius 1e6)
+MAX_STROKE = 10_000
 
 
 def to_rgb8(image: np.ndarray) -> np.ndarray:
@@ -54,13 +77,216 @@ def to_rgb8(image: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def check_color(color: Sequence[int]) -> Color:
+def check_color(color: Sequence[int], name: str = "color") -> Color:
     """Return ``color`` as an ``(r, g, b)`` tuple of ints in 0..255, or raise
-    :class:`~robopercept.errors.InputError` naming the expected form."""
-    c = tuple(int(v) for v in color)
-    if len(c) != 3 or not all(0 <= v <= 255 for v in c):
-        raise InputError(f"color must be three integers in 0..255; got {color!r}")
-    return c  # type: ignore[return-value]
+    :class:`~robopercept.errors.InputError` naming the expected form.
+
+    Integer-valued floats (``255.0``) and NumPy integers (a row of
+    :func:`~robopercept.viz.label_colors`) are accepted; fractions, NaN, inf, None,
+    strings and other lengths are refused.
+
+    Examples
+    --------
+    >>> check_color(np.array([255, 0, 7], np.uint8))
+    (255, 0, 7)
+    """
+    message = f"{name} must be three integers in 0..255 (r, g, b); got {plain_repr(color)}"
+    try:
+        c = check_reals(color, name, 3, 0.0, 255.0)
+    except InputError:
+        raise InputError(message) from None
+    if (c != np.round(c)).any():
+        raise InputError(message)
+    return int(c[0]), int(c[1]), int(c[2])
+
+
+def check_picture_size(width: Any, height: Any, what: str = "picture") -> tuple[int, int]:
+    """Return ``(width, height)`` as ints after checking that they are positive integers
+    whose product is at most :data:`MAX_PICTURE_PIXELS`.
+
+    Parameters
+    ----------
+    width, height : int
+    what : str
+        The picture's name in messages (the parameter names are ``width``, ``height``).
+
+    Returns
+    -------
+    (int, int)
+
+    Raises
+    ------
+    InputError
+        Not integers, below 1, or a picture of more than 2**26 pixels.
+
+    Examples
+    --------
+    >>> check_picture_size(640, 480)
+    (640, 480)
+    """
+    w, h = check_int(width, "width", 1), check_int(height, "height", 1)
+    if w * h > MAX_PICTURE_PIXELS:
+        raise InputError(
+            f"the {what} would be {w}x{h} = {w * h} pixels; at most {MAX_PICTURE_PIXELS} "
+            "(64 Mpx) are made: pass a smaller size"
+        )
+    return w, h
+
+
+def check_stroke(value: Any, name: str, *, integer: bool = True, minimum: float = 1) -> float:
+    """Return a line width (``integer=True``) or a radius as a number in
+    ``[minimum, MAX_STROKE]`` pixels.
+
+    Examples
+    --------
+    >>> check_stroke(2, "width"), check_stroke(0.5, "radius", integer=False, minimum=0)
+    (2, 0.5)
+    """
+    v: float = check_int(value, name, int(minimum)) if integer else check_real(value, name, minimum)
+    if v > MAX_STROKE:
+        raise InputError(f"{name} must be at most {MAX_STROKE} pixels; got {plain_repr(value)}")
+    return v
+
+
+def check_xy(value: Any, name: str, columns: int = 2) -> np.ndarray:
+    """Return ``value`` as a float64 ``(N, columns)`` array: rows of coordinates, one row
+    given as ``(columns,)``, or an empty list; NaN/inf rows are kept (the drawing
+    functions skip them).
+
+    Examples
+    --------
+    >>> check_xy([3, 4], "points")
+    array([[3., 4.]])
+    """
+    if isinstance(value, (list, tuple)) and len(value) == 0:
+        return np.zeros((0, columns))
+    arr = check_ndim(value, name, (1, 2))
+    if arr.ndim == 1 and arr.shape[0] == columns:
+        arr = arr[None, :]
+    if arr.ndim == 2 and arr.shape[0] == 0:
+        return np.zeros((0, columns))
+    return check_points(arr, name, columns)
+
+
+def clip_segments(segments: np.ndarray, width: int, height: int, margin: float) -> np.ndarray:
+    r"""Clip line segments to the canvas grown by ``margin`` (Liang-Barsky).
+
+    Pillow rasterizes a segment pixel by pixel over its whole length (5 s for 1e9
+    pixels) and overflows on coordinates beyond the C ``int`` range, so segments are
+    cut to the box :math:`[-m, W - 1 + m] 	imes [-m, H - 1 + m]` first: the part
+    inside is unchanged, segments wholly outside or with a NaN/inf end are dropped.
+    Ends that are not cut are returned as given; segments with a coordinate beyond
+    1e12 are clipped in exact rational arithmetic (``x0 + u (x1 - x0)`` in float64
+    would lose the canvas beside ends near 1e300, or overflow).
+
+    Parameters
+    ----------
+    segments : (N, 4) float ndarray
+        ``x0, y0, x1, y1``.
+    width, height : int
+        The canvas.
+    margin : float
+        Pixels kept beyond each edge (half a line width or more).
+
+    Returns
+    -------
+    (M, 4) float64 ndarray
+        The visible parts, M <= N.
+
+    Examples
+    --------
+    >>> clip_segments(np.array([[-10.0, 5.0, 1e300, 5.0]]), 10, 10, 1.0)
+    array([[-1.,  5., 10.,  5.]])
+    """
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    seg = seg[np.isfinite(seg).all(axis=1)]
+    box = (-margin, width - 1 + margin, -margin, height - 1 + margin)
+    lo_x, hi_x, lo_y, hi_y = box
+    xs, ys = seg[:, 0::2], seg[:, 1::2]
+    seg = seg[
+        (xs.max(axis=1) >= lo_x)
+        & (xs.min(axis=1) <= hi_x)
+        & (ys.max(axis=1) >= lo_y)
+        & (ys.min(axis=1) <= hi_y)
+    ]  # (the bounding box misses the canvas: so does the segment)
+    far = (np.abs(seg) > _FAR).any(axis=1)
+    out = np.empty_like(seg)
+    keep = np.zeros(len(seg), dtype=bool)
+    near = np.flatnonzero(~far)
+    if near.size:
+        out[near], keep[near] = _clip_near(seg[near], box)
+    for i in np.flatnonzero(far):  # rare: exact rational arithmetic, one by one
+        clipped = _clip_exact(seg[i], box)
+        if clipped is not None:
+            out[i], keep[i] = clipped, True
+    return out[keep]
+
+
+#: coordinates beyond which a segment is clipped exactly (float64 spacing there is 1e-4
+#: px; near 1e300 the canvas is far below the precision of ``x0 + u (x1 - x0)``)
+_FAR = 1e12
+
+
+def _clip_near(seg: np.ndarray, box: tuple[float, float, float, float]) -> tuple:
+    """Liang-Barsky on (N, 4) segments of moderate coordinates: the clipped segments
+    (unchanged ends where not cut) and which ones are visible."""
+    x0, y0, x1, y1 = seg.T
+    dx, dy = x1 - x0, y1 - y0
+    lo_x, hi_x, lo_y, hi_y = box
+    u0, u1 = np.zeros(len(seg)), np.ones(len(seg))
+    keep = np.ones(len(seg), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for p, q in ((-dx, x0 - lo_x), (dx, hi_x - x0), (-dy, y0 - lo_y), (dy, hi_y - y0)):
+            r = q / p
+            keep &= ~((p == 0) & (q < 0))
+            u0 = np.where(p < 0, np.maximum(u0, r), u0)
+            u1 = np.where(p > 0, np.minimum(u1, r), u1)
+    keep &= u0 <= u1
+    out = np.stack(
+        [
+            np.where(u0 > 0, x0 + u0 * dx, x0),
+            np.where(u0 > 0, y0 + u0 * dy, y0),
+            np.where(u1 < 1, x0 + u1 * dx, x1),
+            np.where(u1 < 1, y0 + u1 * dy, y1),
+        ],
+        axis=1,
+    )
+    out[:, 0::2] = np.clip(out[:, 0::2], lo_x, hi_x)  # (rounding: a hair outside)
+    out[:, 1::2] = np.clip(out[:, 1::2], lo_y, hi_y)
+    return out, keep
+
+
+def _clip_exact(row: np.ndarray, box: tuple[float, float, float, float]) -> np.ndarray | None:
+    """Liang-Barsky on one segment in exact rationals (every float is one), or None
+    when it misses the box."""
+    from fractions import Fraction
+
+    x0, y0, x1, y1 = (Fraction(float(v)) for v in row)
+    lo_x, hi_x, lo_y, hi_y = (Fraction(float(v)) for v in box)
+    dx, dy = x1 - x0, y1 - y0
+    u0, u1 = Fraction(0), Fraction(1)
+    for p, q in ((-dx, x0 - lo_x), (dx, hi_x - x0), (-dy, y0 - lo_y), (dy, hi_y - y0)):
+        if p == 0:
+            if q < 0:
+                return None
+        elif p < 0:
+            u0 = max(u0, q / p)
+        else:
+            u1 = min(u1, q / p)
+    if u0 > u1:
+        return None
+    return np.array(
+        [float(x0 + u0 * dx), float(y0 + u0 * dy), float(x0 + u1 * dx), float(y0 + u1 * dy)]
+    )
+
+
+def _visible_circles(pts: np.ndarray, radius: float, width: int, height: int) -> np.ndarray:
+    """The finite centres whose circle of ``radius`` can touch the canvas."""
+    ok = np.isfinite(pts).all(axis=1)
+    with np.errstate(invalid="ignore"):
+        ok &= (pts[:, 0] >= -radius - 1) & (pts[:, 0] <= width + radius)
+        ok &= (pts[:, 1] >= -radius - 1) & (pts[:, 1] <= height + radius)
+    return pts[ok]
 
 
 def pil_canvas(image: np.ndarray) -> tuple[Image.Image, ImageDraw.ImageDraw]:
@@ -91,16 +317,19 @@ def draw_points(
         ``(x, y)`` pixel coordinates.
     color : (3,) ints
     radius : float
+        In ``[0, MAX_STROKE]`` pixels.
     filled : bool
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
     """
-    pts = check_ndim(np.asarray(points, dtype=np.float64).reshape(-1, 2), "points", (2,))
+    pts = check_xy(points, "points")
     col = check_color(color)
+    radius = check_stroke(radius, "radius", integer=False, minimum=0)
+    filled = check_bool(filled, "filled")
     pil, draw = pil_canvas(image)
-    for x, y in pts[np.isfinite(pts).all(axis=1)]:
+    for x, y in _visible_circles(pts, radius, pil.width, pil.height):
         box = (x - radius, y - radius, x + radius, y + radius)
         draw.ellipse(box, outline=col, fill=col if filled else None)
     return np.asarray(pil)
@@ -118,16 +347,18 @@ def draw_lines(
         ``x0, y0, x1, y1`` per segment.
     color : (3,) ints
     width : int
+        Line width in ``[1, MAX_STROKE]`` pixels.
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
     """
-    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    seg = check_xy(segments, "segments", 4)
     col = check_color(color)
+    width = int(check_stroke(width, "width"))
     pil, draw = pil_canvas(image)
-    for x0, y0, x1, y1 in seg[np.isfinite(seg).all(axis=1)]:
-        draw.line([(x0, y0), (x1, y1)], fill=col, width=int(width))
+    for x0, y0, x1, y1 in clip_segments(seg, pil.width, pil.height, width + 2):
+        draw.line([(x0, y0), (x1, y1)], fill=col, width=width)
     return np.asarray(pil)
 
 
@@ -148,6 +379,7 @@ def draw_boxes(
         ``x, y, width, height`` (OpenCV's ``Rect`` order).
     color : (3,) ints
     width : int
+        Outline width in ``[1, MAX_STROKE]`` pixels.
     labels : sequence of str, optional
         One caption per box, drawn above its top-left corner.
 
@@ -155,15 +387,30 @@ def draw_boxes(
     -------
     (H, W, 3) uint8 ndarray
     """
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
-    if labels is not None and len(labels) != len(b):
-        raise InputError(f"labels must have one entry per box ({len(b)}); got {len(labels)}")
+    b = check_xy(boxes, "boxes", 4)
+    if labels is not None:
+        if isinstance(labels, (str, bytes)) or not isinstance(labels, (Sequence, np.ndarray)):
+            raise InputError(
+                f"labels must be a sequence of captions, one per box; got {plain_repr(labels)}"
+            )
+        if len(labels) != len(b):
+            raise InputError(f"labels must have one entry per box ({len(b)}); got {len(labels)}")
     col = check_color(color)
+    width = int(check_stroke(width, "width"))
     pil, draw = pil_canvas(image)
+    m = width + 2.0  # corners beyond the canvas by more than this are moved onto its margin
     for i, (x, y, w, h) in enumerate(b):
-        draw.rectangle([x, y, x + w - 1, y + h - 1], outline=col, width=int(width))
+        x0, y0 = x, y
+        x1, y1 = x + (w - 1), y + (h - 1)
+        if not np.isfinite([x0, y0, x1, y1]).all():
+            continue
+        if x1 < x0 or y1 < y0 or x1 < -m or y1 < -m or x0 > pil.width + m or y0 > pil.height + m:
+            continue  # empty, or wholly outside
+        xs = np.clip([x0, x1], -m, pil.width + m)
+        ys = np.clip([y0, y1], -m, pil.height + m)
+        draw.rectangle([xs[0], ys[0], xs[1], ys[1]], outline=col, width=width)
         if labels is not None:
-            draw.text((x + 2, max(0.0, y - 12)), str(labels[i]), fill=col)
+            draw.text((xs[0] + 2, max(0.0, ys[0] - 12)), str(labels[i]), fill=col)
     return np.asarray(pil)
 
 
@@ -180,21 +427,43 @@ def draw_text(
 
     Uses Pillow's built-in font at ``size`` pixels, on a filled background box unless
     ``background`` is None, so it stays readable on any image.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    text : str
+    origin : (float, float)
+        ``(x, y)`` of the top-left corner; text wholly outside the image is not drawn.
+    color : (3,) ints
+    size : int
+        Font size in ``[1, MAX_STROKE]`` pixels.
+    background : (3,) ints or None
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
     """
     from PIL import ImageFont
 
+    text = check_text(text, "text")
+    ox, oy = check_reals(origin, "origin", 2)
     col = check_color(color)
+    bg = None if background is None else check_color(background, "background")
+    size = int(check_stroke(size, "size"))
     pil, draw = pil_canvas(image)
     try:
         font = ImageFont.load_default(size=size)
     except TypeError:  # Pillow < 10.1
         font = ImageFont.load_default()
-    if background is not None:
-        box = draw.textbbox(origin, text, font=font)
-        draw.rectangle(
-            [box[0] - 2, box[1] - 2, box[2] + 2, box[3] + 2], fill=check_color(background)
-        )
-    draw.text(origin, text, fill=col, font=font)
+    left, top, right, bottom = draw.textbbox((0, 0), text, font=font)
+    if ox + right + 2 < 0 or oy + bottom + 2 < 0 or ox + left - 2 > pil.width:
+        return np.asarray(pil)  # wholly outside (and far coordinates overflow Pillow)
+    if oy + top - 2 > pil.height:
+        return np.asarray(pil)
+    if bg is not None:
+        box = (ox + left, oy + top, ox + right, oy + bottom)
+        draw.rectangle([box[0] - 2, box[1] - 2, box[2] + 2, box[3] + 2], fill=bg)
+    draw.text((ox, oy), text, fill=col, font=font)
     return np.asarray(pil)
 
 
@@ -215,11 +484,13 @@ def draw_mask(
     (H, W, 3) uint8 ndarray
     """
     img = to_rgb8(image)
-    m = check_ndim(mask, "mask", (2,)).astype(bool)
+    m = check_ndim(mask, "mask", (2,))
+    if m.dtype.kind not in "biuf":
+        raise InputError(f"mask must be bool or numeric; got dtype {m.dtype}")
+    m = m.astype(bool)
     if m.shape != img.shape[:2]:
         raise InputError(f"mask must have the image's shape {img.shape[:2]}; got {m.shape}")
-    if not 0.0 <= alpha <= 1.0:
-        raise InputError(f"alpha must be in [0, 1]; got {alpha}")
+    alpha = check_real(alpha, "alpha", 0.0, 1.0)
     col = np.asarray(check_color(color), dtype=np.float64)
     blended = (1.0 - alpha) * img[m].astype(np.float64) + alpha * col
     img[m] = np.round(blended).astype(np.uint8)
@@ -245,17 +516,27 @@ def draw_chessboard(
     -------
     (H, W, 3) uint8 ndarray
     """
-    pts = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    pts = check_xy(corners, "corners")
+    if not isinstance(pattern_size, (tuple, list)) or len(pattern_size) != 2:
+        raise InputError(
+            f"pattern_size must be (corners per row, corners per column); got "
+            f"{plain_repr(pattern_size)}"
+        )
+    w = check_int(pattern_size[0], "pattern_size[0]", 1)
+    check_int(pattern_size[1], "pattern_size[1]", 1)
+    found = check_bool(found, "found")
     pil, draw = pil_canvas(image)
-    r = max(3.0, image.shape[0] / 120)
-    w = max(int(pattern_size[0]), 1)
+    r = max(3.0, pil.height / 120)
     for k, (x, y) in enumerate(pts):
         if found:
             hue = (k // w) / max(len(pts) // w, 1)
             col = tuple(int(255 * v) for v in colorsys.hsv_to_rgb(0.75 * hue, 1.0, 1.0))
             if k:
-                draw.line([tuple(pts[k - 1]), (x, y)], fill=col, width=2)
+                seg = clip_segments(np.r_[pts[k - 1], x, y], pil.width, pil.height, 4.0)
+                for x0, y0, x1, y1 in seg:
+                    draw.line([(x0, y0), (x1, y1)], fill=col, width=2)
         else:
             col = (255, 0, 0)
-        draw.ellipse((x - r, y - r, x + r, y + r), outline=col, width=2)
+        for cx, cy in _visible_circles(pts[k : k + 1], r, pil.width, pil.height):
+            draw.ellipse((cx - r, cy - r, cx + r, cy + r), outline=col, width=2)
     return np.asarray(pil)

@@ -8,7 +8,7 @@ import numpy as np
 
 from robopercept._checks import check_int, check_ndim
 from robopercept.errors import InputError
-from robopercept.viz.draw import check_color, to_rgb8
+from robopercept.viz.draw import check_color, check_picture_size, check_xy, clip_segments, to_rgb8
 
 __all__ = ["draw_matches", "hog_picture"]
 
@@ -38,11 +38,19 @@ def hog_picture(histograms: np.ndarray, cell_size: int = 8, *, scale: int = 2) -
     """
     from PIL import Image, ImageDraw
 
-    hist = check_ndim(np.asarray(histograms, dtype=np.float64), "histograms", (3,))
+    hist = check_ndim(histograms, "histograms", (3,))
+    if hist.dtype.kind not in "biuf":
+        raise InputError(f"histograms must be real numbers; got dtype {hist.dtype}")
+    hist = hist.astype(np.float64)
     if not np.isfinite(hist).all() or (hist < 0).any():
         raise InputError("histograms must be finite and non-negative")
     c = check_int(cell_size, "cell_size", 1) * check_int(scale, "scale", 1)
     ny, nx, nb = hist.shape
+    if hist.size == 0:
+        raise InputError(f"histograms must not be empty; got shape {hist.shape}")
+    check_picture_size(nx * c, ny * c, "HOG picture (cells x cell_size x scale)")
+    # values near 1e308 would overflow the 99th-percentile interpolation: scale first
+    hist = hist / max(float(hist.max()), 1e-300)
     positive = hist[hist > 0]
     top = np.percentile(positive, 99.0) if positive.size else 0.0
     level = np.zeros_like(hist) if top <= 0 else np.minimum(hist / top, 1.0)
@@ -94,15 +102,25 @@ def draw_matches(
     from PIL import Image, ImageDraw
 
     a, b = to_rgb8(image_a), to_rgb8(image_b)
-    pa = np.asarray(xy_a, dtype=np.float64).reshape(-1, 2)
-    pb = np.asarray(xy_b, dtype=np.float64).reshape(-1, 2)
+    pa = check_xy(xy_a, "xy_a")
+    pb = check_xy(xy_b, "xy_b")
     if pa.shape != pb.shape:
         raise InputError(f"xy_a and xy_b must have the same shape; got {pa.shape} and {pb.shape}")
     n = pa.shape[0]
-    keep = np.ones(n, bool) if inliers is None else np.asarray(inliers, dtype=bool).reshape(-1)
+    if inliers is None:
+        keep = np.ones(n, bool)
+    else:
+        keep = check_ndim(inliers, "inliers", (1,))
+        if keep.dtype.kind not in "biuf":
+            raise InputError(f"inliers must be bool (one per match); got dtype {keep.dtype}")
+        keep = keep.astype(bool)
     if keep.shape[0] != n:
         raise InputError(f"inliers has {keep.shape[0]} entries for {n} matches")
+    if max_lines is not None:
+        max_lines = check_int(max_lines, "max_lines", 1)
+    good, bad = check_color(color), check_color(outlier_color, "outlier_color")
     h = max(a.shape[0], b.shape[0])
+    check_picture_size(a.shape[1] + b.shape[1], h, "side-by-side picture")
     canvas = np.zeros((h, a.shape[1] + b.shape[1], 3), np.uint8)
     canvas[: a.shape[0], : a.shape[1]] = a
     canvas[: b.shape[0], a.shape[1] :] = b
@@ -110,16 +128,19 @@ def draw_matches(
     draw = ImageDraw.Draw(pil)
     order = np.arange(n)
     if max_lines is not None and n > max_lines:
-        order = np.linspace(0, n - 1, check_int(max_lines, "max_lines", 1)).astype(int)
-    good, bad = check_color(color), check_color(outlier_color)
+        order = np.linspace(0, n - 1, max_lines).astype(int)
     off = a.shape[1]
+    W, H = pil.width, pil.height
     # outliers first so that inliers stay visible on top
     for i in sorted(order, key=lambda k: bool(keep[k])):
         col = good if keep[i] else bad
         (x0, y0), (x1, y1) = pa[i], pb[i]
         if not np.isfinite([x0, y0, x1, y1]).all():
             continue
-        draw.line([(x0, y0), (x1 + off, y1)], fill=col, width=1)
-        for x, y in ((x0, y0), (x1 + off, y1)):
-            draw.ellipse((x - 2, y - 2, x + 2, y + 2), outline=col)
+        x1 = x1 + off
+        for sx0, sy0, sx1, sy1 in clip_segments(np.array([x0, y0, x1, y1]), W, H, 3.0):
+            draw.line([(sx0, sy0), (sx1, sy1)], fill=col, width=1)
+        for x, y in ((x0, y0), (x1, y1)):
+            if -3 <= x <= W + 3 and -3 <= y <= H + 3:
+                draw.ellipse((x - 2, y - 2, x + 2, y + 2), outline=col)
     return np.asarray(pil)

@@ -21,11 +21,29 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from robopercept._checks import check_ndim
+from robopercept._checks import check_int, check_ndim, check_real, plain_repr
 from robopercept.errors import InputError
-from robopercept.viz.draw import check_color, pil_canvas, to_rgb8
+from robopercept.viz.draw import (
+    check_color,
+    check_picture_size,
+    check_stroke,
+    check_xy,
+    clip_segments,
+    pil_canvas,
+    to_rgb8,
+)
 
-__all__ = ["dense_flow_picture", "draw_flow", "draw_trails", "flow_to_color", "flow_wheel"]
+__all__ = [
+    "MAX_WHEEL_SIZE",
+    "dense_flow_picture",
+    "draw_flow",
+    "draw_trails",
+    "flow_to_color",
+    "flow_wheel",
+]
+
+#: the largest :func:`flow_wheel` (a legend; 2049 px is 4 Mpx)
+MAX_WHEEL_SIZE = 2049
 
 
 def flow_to_color(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndarray:
@@ -45,17 +63,16 @@ def flow_to_color(flow: np.ndarray, max_magnitude: float | None = None) -> np.nd
     """
     from robopercept.imaging.color import hsv_to_rgb
 
-    f = check_ndim(np.asarray(flow, dtype=np.float64), "flow", (3,))
-    if f.shape[2] != 2:
-        raise InputError(f"flow must be (H, W, 2); got shape {f.shape}")
+    f = check_ndim(flow, "flow", (3,))
+    if f.shape[2] != 2 or f.dtype.kind not in "biuf":
+        raise InputError(f"flow must be a real (H, W, 2) array; got {f.shape} {f.dtype}")
+    f = f.astype(np.float64)
     valid = np.isfinite(f).all(axis=2)
     mag = np.hypot(f[..., 0], f[..., 1])
     if max_magnitude is None:
         top = float(np.percentile(mag[valid], 99.0)) if valid.any() else 0.0
     else:
-        top = float(max_magnitude)
-        if not np.isfinite(top) or top <= 0:
-            raise InputError(f"max_magnitude must be a positive number; got {max_magnitude}")
+        top = check_real(max_magnitude, "max_magnitude", 0.0, low_inclusive=False)
     hue = np.mod(np.arctan2(f[..., 1], f[..., 0]), 2 * np.pi) / (2 * np.pi)
     sat = np.zeros_like(mag) if top <= 0 else np.minimum(mag / top, 1.0)
     hsv = np.stack([hue, sat, np.ones_like(mag)], axis=-1)
@@ -66,9 +83,20 @@ def flow_to_color(flow: np.ndarray, max_magnitude: float | None = None) -> np.nd
 
 def flow_wheel(size: int = 101) -> np.ndarray:
     """The legend of :func:`flow_to_color`: a disc whose pixel at offset ``(u, v)`` from
-    the centre has the colour of the flow ``(u, v)``; outside the disc is black."""
-    if int(size) != size or size < 3:
-        raise InputError(f"size must be an integer >= 3; got {size}")
+    the centre has the colour of the flow ``(u, v)``; outside the disc is black.
+
+    Parameters
+    ----------
+    size : int
+        Side in pixels, 3 to :data:`MAX_WHEEL_SIZE`.
+
+    Returns
+    -------
+    (size, size, 3) uint8 ndarray
+    """
+    size = check_int(size, "size", 3)
+    if size > MAX_WHEEL_SIZE:
+        raise InputError(f"size must be at most {MAX_WHEEL_SIZE} pixels; got {size}")
     r = (size - 1) / 2.0
     yy, xx = np.mgrid[:size, :size].astype(np.float64)
     f = np.stack([xx - r, yy - r], axis=-1)
@@ -98,16 +126,21 @@ def dense_flow_picture(field: np.ndarray, step: int, shape: tuple[int, ...]) -> 
     -------
     (H, W, 3) uint8 ndarray
     """
-    if int(step) != step or step < 1:
-        raise InputError(f"step must be an integer >= 1; got {step}")
+    step = check_int(step, "step", 1)
+    if not isinstance(shape, (tuple, list)) or len(shape) not in (2, 3):
+        raise InputError(f"shape must be the image's (H, W) or (H, W, 3); got {plain_repr(shape)}")
+    W, H = check_picture_size(shape[1], shape[0], "flow picture (shape)")
     color = flow_to_color(field)
-    picture = np.kron(color, np.ones((step, step, 1), dtype=np.uint8))
-    H, W = shape[:2]
+    step = min(step, max(H, W))  # (a step past the picture's size draws the same)
+    # each grid vector fills its step x step cell: pixel (y, x) shows vector
+    # (y // step, x // step), for the pixels the grid covers inside (H, W)
+    h, w = min(color.shape[0] * step, H), min(color.shape[1] * step, W)
     full = np.zeros((H, W, 3), dtype=np.uint8)
-    h, w = min(picture.shape[0], H), min(picture.shape[1], W)
-    full[:h, :w] = picture[:h, :w]
-    wheel = flow_wheel(min(101, H // 4 * 2 + 1, W // 4 * 2 + 1))
-    full[-wheel.shape[0] :, -wheel.shape[1] :] = wheel
+    full[:h, :w] = color[np.arange(h)[:, None] // step, np.arange(w)[None, :] // step]
+    side = min(101, H // 4 * 2 + 1, W // 4 * 2 + 1)
+    if side >= 3:  # (no room for a legend in a picture under 12 pixels)
+        wheel = flow_wheel(side)
+        full[-wheel.shape[0] :, -wheel.shape[1] :] = wheel
     return full
 
 
@@ -143,33 +176,49 @@ def draw_flow(
     -------
     (H, W, 3) uint8 ndarray
     """
-    p0 = check_ndim(np.asarray(start, dtype=np.float64).reshape(-1, 2), "start", (2,))
-    p1 = np.asarray(end, dtype=np.float64).reshape(-1, 2)
+    p0 = check_xy(start, "start")
+    p1 = check_xy(end, "end")
     if p1.shape != p0.shape:
         raise InputError(f"start and end must have the same shape; got {p0.shape} and {p1.shape}")
-    ok = np.ones(len(p0), dtype=bool) if status is None else np.asarray(status, dtype=bool)
+    if status is None:
+        ok = np.ones(len(p0), dtype=bool)
+    else:
+        ok = check_ndim(status, "status", (1,))
+        if ok.dtype.kind not in "biuf":
+            raise InputError(f"status must be bool (one per point); got dtype {ok.dtype}")
+        ok = ok.astype(bool)
     if ok.shape != (len(p0),):
         raise InputError(f"status must have one entry per point ({len(p0)}); got {ok.shape}")
     col = check_color(color)
+    bad = None if failed_color is None else check_color(failed_color, "failed_color")
+    scale = check_real(scale, "scale")
+    width = int(check_stroke(width, "width"))
+    head = check_real(head, "head", 0.0)
     pil, draw = pil_canvas(image)
-    tip = p0 + float(scale) * (p1 - p0)
+    W, H = pil.width, pil.height
+    with np.errstate(over="ignore", invalid="ignore"):
+        tip = p0 + scale * (p1 - p0)
     finite = np.isfinite(p0).all(axis=1) & np.isfinite(tip).all(axis=1)
-    if failed_color is not None:
-        bad = check_color(failed_color)
+    if bad is not None:
         for x, y in p0[~ok & np.isfinite(p0).all(axis=1)]:
-            draw.ellipse((x - 1.5, y - 1.5, x + 1.5, y + 1.5), fill=bad)
+            if -2 <= x <= W + 2 and -2 <= y <= H + 2:
+                draw.ellipse((x - 1.5, y - 1.5, x + 1.5, y + 1.5), fill=bad)
+    margin = width + 12.0  # (an arrowhead reaches 10 px beyond its tip)
     for (x0, y0), (x1, y1) in zip(p0[ok & finite], tip[ok & finite], strict=True):
-        draw.line([(x0, y0), (x1, y1)], fill=col, width=int(width))
-        length = np.hypot(x1 - x0, y1 - y0)
+        for sx0, sy0, sx1, sy1 in clip_segments(np.array([x0, y0, x1, y1]), W, H, margin):
+            draw.line([(sx0, sy0), (sx1, sy1)], fill=col, width=width)
+        if not (-margin <= x1 <= W + margin and -margin <= y1 <= H + margin):
+            continue  # the head is off the picture
+        length = np.hypot(0.5 * x1 - 0.5 * x0, 0.5 * y1 - 0.5 * y0) * 2.0
         if length < 1e-9:
             draw.point((x0, y0), fill=col)
             continue
         h = min(max(head * length, 2.0), 10.0)
-        ux, uy = (x1 - x0) / length, (y1 - y0) / length
+        ux, uy = (x1 / length - x0 / length), (y1 / length - y0 / length)
         for side in (1.0, -1.0):  # two barbs at +-30 degrees from the shaft
             c, s = np.cos(np.pi / 6), side * np.sin(np.pi / 6)
             bx, by = -(c * ux - s * uy), -(s * ux + c * uy)
-            draw.line([(x1, y1), (x1 + h * bx, y1 + h * by)], fill=col, width=int(width))
+            draw.line([(x1, y1), (x1 + h * bx, y1 + h * by)], fill=col, width=width)
     return np.asarray(pil)
 
 
@@ -191,24 +240,43 @@ def draw_trails(
     colors : (N, 3) uint8 array_like, optional
         One colour per trail (default green).
     width : int
+        Line width in ``[1, MAX_STROKE]`` pixels.
     radius : float
-        Radius of the dot at the newest position.
+        Radius of the dot at the newest position, ``[0, MAX_STROKE]`` pixels.
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
     """
-    if colors is not None and len(colors) != len(trails):
-        raise InputError(f"colors must have one row per trail ({len(trails)}); got {len(colors)}")
+    if isinstance(trails, np.ndarray) and trails.ndim == 3:
+        trails = list(trails)
+    if not isinstance(trails, (list, tuple)):
+        raise InputError(
+            f"trails must be a list of (K, 2) arrays, one per tracked point; got "
+            f"{plain_repr(trails)}"
+        )
+    paths = [check_xy(t, f"trails[{i}]") for i, t in enumerate(trails)]
+    cols = [(0, 255, 0)] * len(paths)
+    if colors is not None:
+        if isinstance(colors, (str, bytes)) or not hasattr(colors, "__len__"):
+            raise InputError(f"colors must be (N, 3), one row per trail; got {plain_repr(colors)}")
+        if len(colors) != len(paths):
+            raise InputError(
+                f"colors must have one row per trail ({len(paths)}); got {len(colors)}"
+            )
+        cols = [check_color(c, f"colors[{i}]") for i, c in enumerate(colors)]
+    width = int(check_stroke(width, "width"))
+    radius = check_stroke(radius, "radius", integer=False, minimum=0)
     pil, draw = pil_canvas(to_rgb8(image))
-    for i, trail in enumerate(trails):
-        t = np.asarray(trail, dtype=np.float64).reshape(-1, 2)
+    W, H = pil.width, pil.height
+    for t, col in zip(paths, cols, strict=True):
         t = t[np.isfinite(t).all(axis=1)]
         if len(t) == 0:
             continue
-        col = (0, 255, 0) if colors is None else check_color(colors[i])
         if len(t) > 1:
-            draw.line([tuple(p) for p in t], fill=col, width=int(width))
+            for x0, y0, x1, y1 in clip_segments(np.hstack([t[:-1], t[1:]]), W, H, width + 2):
+                draw.line([(x0, y0), (x1, y1)], fill=col, width=width)
         x, y = t[-1]
-        draw.ellipse((x - radius, y - radius, x + radius, y + radius), fill=col)
+        if -radius - 1 <= x <= W + radius and -radius - 1 <= y <= H + radius:
+            draw.ellipse((x - radius, y - radius, x + radius, y + radius), fill=col)
     return np.asarray(pil)

@@ -13,9 +13,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robopercept._checks import check_int, check_magnitude, check_text
 from robopercept.errors import InputError
+from robopercept.viz.draw import check_color, check_picture_size
 
-__all__ = ["Panel", "Series", "plot_series"]
+__all__ = ["MIN_PANEL_HEIGHT", "MIN_WIDTH", "Panel", "Series", "plot_series"]
+
+#: the smallest plot width and panel height in pixels (the axes' margins and labels)
+MIN_WIDTH, MIN_PANEL_HEIGHT = 100, 60
+#: the largest magnitude of a plotted value: differences of values beyond it overflow
+_MAX_VALUE = 1e300
 
 
 @dataclass
@@ -42,19 +49,68 @@ def _ticks(lo: float, hi: float, n: int = 5) -> list[float]:
     span = hi - lo
     raw = span / max(n, 1)
     mag = 10 ** math.floor(math.log10(raw)) if raw > 0 else 1.0
-    step = next(m * mag for m in (1, 2, 2.5, 5, 10) if m * mag >= raw)
+    step = next((m * mag for m in (1, 2, 2.5, 5, 10) if m * mag >= raw), 10 * mag)
+    if not step > 0:  # (a span of subnormal numbers)
+        return [lo]
     start = math.ceil(lo / step) * step
-    return [start + i * step for i in range(int((hi - start) / step + 1e-9) + 1)]
+    count = min(int((hi - start) / step + 1e-9) + 1, 4 * n + 1)
+    return [start + i * step for i in range(max(count, 0))]
+
+
+def _widen(lo: float, hi: float, pad: float) -> tuple[float, float]:
+    """``(lo, hi)`` made a range of positive width: a single value ``v`` becomes
+    ``v -+ max(pad, |v| 1e-9)`` (a fixed pad vanishes beside values near 1e300)."""
+    if hi <= lo:
+        d = max(pad, abs(lo) * 1e-9)
+        return lo - d, hi + d
+    return lo, hi
 
 
 def plot_series(
     panels: Sequence[Panel], *, width: int = 1000, panel_height: int = 220, xlabel: str = ""
 ) -> np.ndarray:
-    """Render ``panels`` one above the other and return the ``(H, W, 3)`` uint8 image."""
+    """Render ``panels`` one above the other and return the ``(H, W, 3)`` uint8 image.
+
+    Parameters
+    ----------
+    panels : sequence of Panel
+        At least one; titles, y labels and series labels are strings; values beyond
+        1e300 in magnitude are refused (their differences overflow).
+    width : int
+        At least :data:`MIN_WIDTH` (100) pixels.
+    panel_height : int
+        At least :data:`MIN_PANEL_HEIGHT` (60) pixels.
+    xlabel : str
+
+    Returns
+    -------
+    (panel_height * len(panels) + 30, width, 3) uint8 ndarray
+    """
     from PIL import Image, ImageDraw, ImageFont
 
-    if not panels:
-        raise InputError("plot_series needs at least one panel")
+    if not isinstance(panels, (list, tuple)) or not panels:
+        raise InputError("plot_series needs at least one panel (a list of Panel)")
+    xlabel = check_text(xlabel, "xlabel")
+    width = check_int(width, "width", MIN_WIDTH)
+    panel_height = check_int(panel_height, "height of a panel", MIN_PANEL_HEIGHT)
+    check_picture_size(width, panel_height * len(panels) + 30, "plot")
+    for panel in panels:
+        if not isinstance(panel, Panel):
+            raise InputError(f"panels must be Panel objects; got {type(panel).__name__}")
+        check_text(panel.title, "title")
+        check_text(panel.ylabel, "ylabel")
+        for s in panel.series:
+            if not isinstance(s, Series):
+                raise InputError(f"a panel's series must be Series; got {type(s).__name__}")
+            check_text(s.label, "a curve's label")
+            check_color(s.color, "a curve's color")
+            for axis, values in (("x", s.x), ("y", s.y)):
+                v = np.asarray(values)
+                if v.dtype.kind not in "biuf":
+                    raise InputError(
+                        f"series {s.label!r}: {axis} must be real numbers; got dtype {v.dtype}"
+                    )
+                check_magnitude(v, f"series {s.label!r}: {axis}", _MAX_VALUE)
     try:
         font = ImageFont.load_default(size=13)
     except TypeError:  # Pillow < 10.1
@@ -74,9 +130,8 @@ def plot_series(
         xmin, xmax = (float(xv.min()), float(xv.max())) if xv.size else (0.0, 1.0)
         ymin, ymax = (float(yv.min()), float(yv.max())) if yv.size else (0.0, 1.0)
         if xmax <= xmin:
-            xmax = xmin + 1.0
-        if ymax <= ymin:
-            ymin, ymax = ymin - 0.5, ymax + 0.5
+            xmax = xmin + max(1.0, abs(xmin) * 1e-9)
+        ymin, ymax = _widen(ymin, ymax, 0.5)
         pad = 0.05 * (ymax - ymin)
         ymin, ymax = ymin - pad, ymax + pad
 
