@@ -289,7 +289,7 @@ def test_bad_hsv_bounds(low, high, match):
 
 @pytest.mark.parametrize("tol", [-0.01, np.nan])
 def test_bad_tolerance(tol):
-    with pytest.raises(InputError, match="occlusion_tolerance must be >= 0 metres, or None"):
+    with pytest.raises(InputError, match=r"occlusion_tolerance \(metres >= 0, or None"):
         ColorRangeSelector(*GREEN, tol)
 
 
@@ -322,3 +322,21 @@ def test_bad_frames():
     # one-shot: the same checks
     with pytest.raises(InputError, match="swap them"):
         points_in_color_range(d, c, k, k, T, 0.001, (0, 200, 0), (10, 100, 255))
+
+
+# issue 25: scalars and cameras of the wrong type or size are refused, typed
+def test_bad_scalars_and_cameras():
+    d, c, k, T = DEPTH_HAND, COLOR_HAND, K_HAND, T_HAND
+    with pytest.raises(InputError, match=r"occlusion_tolerance .* must be a real number"):
+        points_in_color_range(d, c, k, k, T, 0.001, *GREEN, occlusion_tolerance=[1, 2])
+    with pytest.raises(InputError, match=r"depth\.astype\(np\.float32\)"):
+        points_in_color_range(d.astype(np.float16), c, k, k, T, 0.001, *GREEN)
+    huge = CameraIntrinsics(65536, 65536, 500.0, 500.0, 0.0, 0.0)
+    with pytest.raises(InputError, match="color_intrinsics describe a 65536x65536 image"):
+        points_in_color_range(d, c, k, huge, T, 0.001, *GREEN)
+    with pytest.raises(InputError, match="depth_scale"):
+        points_in_color_range(d, c, k, k, T, "3", *GREEN)
+    # a numpy tolerance is a tolerance
+    ref = points_in_color_range(d, c, k, k, T, 0.001, *GREEN, occlusion_tolerance=0.02)
+    got = points_in_color_range(d, c, k, k, T, 0.001, *GREEN, occlusion_tolerance=np.float32(0.02))
+    np.testing.assert_array_equal(got.pixels, ref.pixels)

@@ -10,6 +10,7 @@ from robopercept.depth import (
     align_color_to_depth,
     align_depth_to_color,
     depth_to_points,
+    pixel_rays,
     sample_colors,
     texture_coordinates,
 )
@@ -246,3 +247,61 @@ def test_project_to_color_matches_apply_then_project(model):
     np.testing.assert_allclose(ours[:, 2], apply(T, pts)[:, 2], atol=1e-15)
     u, v, z = project_to_color(0.0, 0.0, -1.0, np.eye(3), np.zeros(3), k, code, c)
     assert np.isnan(u) and np.isnan(v) and z == -1.0  # behind the colour camera
+
+
+# issue 25: intrinsics of the wrong type, masks of the wrong shape, cameras too large
+_K = CameraIntrinsics(4, 3, 2.0, 2.0, 1.5, 1.0)
+_DEPTH = np.full((3, 4), 1000, np.uint16)
+_COLOR = np.zeros((3, 4, 3), np.uint8)
+_HUGE = CameraIntrinsics(65536, 65536, 500.0, 500.0, 32767.5, 32767.5)
+
+
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda: pixel_rays(None), "intrinsics must be a CameraIntrinsics; got NoneType"),
+        (lambda: pixel_rays(np.eye(3)), r"CameraIntrinsics\.from_matrix"),
+        (lambda: pixel_rays(_HUGE), "65536x65536 image, more than 67108864 pixels"),
+        (lambda: depth_to_points(_DEPTH, []), "intrinsics must be a CameraIntrinsics; got list"),
+        (lambda: depth_to_points(_DEPTH, _K, organized="yes"), "organized must be True or"),
+        (lambda: depth_to_points(_DEPTH.astype(np.float16), _K), r"depth\.astype\(np\.float32"),
+        (lambda: texture_coordinates(np.zeros((1, 3)), np.eye(4), {}), "color_intrinsics must"),
+        (lambda: texture_coordinates(np.zeros((1, 3)), np.eye(4), _HUGE), "more than 67108864"),
+        (
+            lambda: texture_coordinates(np.zeros((1, 3)), np.eye(4), _K, occlusion_tolerance=[1]),
+            r"occlusion_tolerance \(metres, or None\) must be a real number",
+        ),
+        (lambda: texture_coordinates([["a", "b", "c"]], np.eye(4), _K), "points must hold real"),
+        (lambda: sample_colors(_COLOR, np.zeros((5, 2)), np.ones((4, 3))), r"valid must be a bo"),
+        (lambda: sample_colors(_COLOR, np.zeros((5, 2)), np.ones(5)), "valid must be a boolean"),
+        (lambda: sample_colors(_COLOR, np.full((1, 1), np.inf)), r"uv must have shape \(\.\.\., 2"),
+        (
+            lambda: align_color_to_depth(_COLOR, _DEPTH, _K, np.eye(3), np.eye(4)),
+            "color_intrinsics must be a CameraIntrinsics; got ndarray",
+        ),
+        (
+            lambda: align_depth_to_color(_DEPTH, 3, _K, np.eye(4)),
+            "depth_intrinsics must be a CameraIntrinsics; got int",
+        ),
+        (
+            lambda: align_depth_to_color(_DEPTH, _K, "object", np.eye(4)),
+            "color_intrinsics must be a CameraIntrinsics; got str",
+        ),
+        (lambda: align_depth_to_color(_DEPTH, _K, _K, np.eye(4), "3"), "depth_scale"),
+    ],
+)
+def test_bad_arguments_give_input_errors(call, words):
+    with pytest.raises(InputError, match=words):
+        call()
+
+
+def test_valid_edge_arguments_still_work():
+    uv, valid = texture_coordinates(depth_to_points(_DEPTH, _K), np.eye(4), _K)
+    # a mask given as a nested list of bools is a mask too
+    got = sample_colors(_COLOR + 7, uv, valid.tolist())
+    np.testing.assert_array_equal(got, sample_colors(_COLOR + 7, uv, valid))
+    assert (got == 7).all()
+    # a depth scale of numpy type, and a tiny positive one: z = s * D, not 0 or NaN
+    pts = depth_to_points(_DEPTH, _K, np.float32(0.001), organized=np.True_)
+    assert pts[1, 1, 2] == pytest.approx(1.0)
+    assert depth_to_points(_DEPTH, _K, 1e-300)[1, 1, 2] == pytest.approx(1e-297)

@@ -65,5 +65,40 @@ def test_active_stereo_error_grows_with_distance_squared():
     assert D435.disparity(D435.min_depth) == pytest.approx(126)
     wide = ActiveStereoSensor(baseline=0.1, width=848, hfov_deg=87.0)
     assert wide.depth_rms_error(2.0) == pytest.approx(D435.depth_rms_error(2.0) / 2)
-    with pytest.raises(InputError, match="below 180"):
+    with pytest.raises(InputError, match=r"hfov_deg must be in \(0, 180\)"):
         focal_from_fov(640, 180)
+
+
+# issue 25: scalars checked for type and finiteness, the unwrapping bounded
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda: tof_ambiguity_range(None), "modulation_frequency must be a real number"),
+        (lambda: tof_phase(1.0, 1 + 1j), "modulation_frequency must be a real number"),
+        (lambda: tof_phase_distance(0.5, np.inf), "modulation_frequency must be finite"),
+        (lambda: tof_pulse_distance(["a"]), "round_trip_time must hold real numbers"),
+        (lambda: tof_pulse_distance(-1.0), "round_trip_time must be >= 0"),
+        (lambda: tof_unwrap(0.1, 1 + 1j, 0.2, 25e6, 30.0), "f1 must be a real number"),
+        (lambda: tof_unwrap(np.zeros(0), 20e6, np.zeros((2, 1)), 25e6, 30.0), "same shape"),
+        (
+            lambda: tof_unwrap([0.1, 0.2], 20e6, [0.2, 0.1], 25e6, 3.7e8),
+            "lower max_distance or raise f1",
+        ),
+        (lambda: tof_unwrap(0.1, 2.0**63, 0.2, 25e6, 30.0), "more than 16777216 candidates"),
+        (lambda: focal_from_fov([1, 2], 87.0), "width must be a real number"),
+        (lambda: focal_from_fov(640, None), "hfov_deg must be a real number"),
+        (lambda: ActiveStereoSensor(baseline=None, width=848, hfov_deg=87.0), "baseline"),
+        (lambda: ActiveStereoSensor(0.05, 848.5, 87.0), "width must be an integer"),
+        (lambda: ActiveStereoSensor(0.05, 848, 87.0, max_disparity=0), "max_disparity"),
+        (lambda: D435.disparity([["a"]]), "depth must hold real numbers"),
+    ],
+)
+def test_bad_arguments_give_input_errors(call, words):
+    with pytest.raises(InputError, match=words):
+        call()
+
+
+def test_unwrap_of_single_phases_and_a_numpy_frequency():
+    f1, f2 = 20e6, 25e6
+    got = tof_unwrap(tof_phase(17.3, f1), np.float32(f1), tof_phase(17.3, f2), f2, 29.9)
+    assert got.shape == () and float(got) == pytest.approx(17.3, abs=1e-6)

@@ -14,6 +14,7 @@ from robopercept.depth.stereo import (
     depth_resolution,
     disparity_to_depth,
     disparity_to_points,
+    reprojection_matrix,
     semi_global_matching,
 )
 from robopercept.errors import InputError
@@ -158,7 +159,7 @@ def test_bad_input():
         block_matching(left, right, 16, uniqueness=1.5)
     with pytest.raises(InputError, match="census window"):
         census_transform(left, 9)
-    with pytest.raises(InputError, match="positive"):
+    with pytest.raises(InputError, match=r"focal \(pixels\) must be in \(0, inf\]"):
         disparity_to_depth(np.ones((2, 2)), 0.0, 0.1)
 
 
@@ -222,5 +223,74 @@ def test_reprojection_matrix_hand_case_and_cv2():
     # the same points as cv2.reprojectImageTo3D with this Q (float32 inside OpenCV)
     ref = cv2.reprojectImageTo3D(np.full((5, 9), 40.0, np.float32), Q)
     np.testing.assert_allclose(pts, ref, rtol=1e-6, atol=1e-7)
-    with pytest.raises(InputError, match="positive"):
+    with pytest.raises(InputError, match=r"focal \(pixels\) must be in \(0, inf\]"):
         reprojection_matrix(0.0, 0.2, (9, 5))
+
+
+# issue 25: scalar parameters are checked for type, finiteness and size at the boundary
+def _bad_stereo_calls():
+    left, right = _shifted_pair((30, 50), 3)
+    d = np.full((2, 3), 4.0)
+    return [
+        (lambda: block_matching(left, right, 8, float("inf")), "window must be an"),
+        (lambda: block_matching(left, right, -np.inf), "max_disparity must be an integer"),
+        (lambda: block_matching(left, right, 8.0), "max_disparity must be an integer; got 8.0"),
+        (lambda: block_matching(left, right, 8, uniqueness=None), "uniqueness must be a real"),
+        (lambda: block_matching(left, right, 8, uniqueness=1 + 1j), "uniqueness .* real number"),
+        (
+            lambda: block_matching(left, right, 8, lr_check="3"),
+            r"lr_check \(pixels; None: no",
+        ),
+        (lambda: block_matching(left, right, 8, cost=["sad"]), "cost must be"),
+        (lambda: block_matching(left, right, 8, subpixel="yes"), "subpixel must be True or"),
+        (lambda: semi_global_matching(left, right, 8, min_disparity=np.inf), "min_disparity"),
+        (lambda: semi_global_matching(left, right, 8, paths=4.0), "paths must be an integer"),
+        (lambda: semi_global_matching(left, right, 8, P2=2.0**40), r"P2 must be in \[0, 8192\]"),
+        (lambda: semi_global_matching(left, right, 8, census=1 + 1j), "census must be an int"),
+        (lambda: semi_global_matching(left, right, 8, block=2**40 + 1), "overflow the 16-bit"),
+        (lambda: semi_global_matching(left, right, 8, median=None), "median must be True"),
+        (lambda: census_transform(left, 1 + 1j), "window must be an integer"),
+        (lambda: census_transform(left, [1, 2]), "window must be an integer"),
+        (lambda: depth_resolution(1.0, None, 0.1), r"focal \(pixels\) must be a real"),
+        (lambda: depth_resolution(1.0, 500.0, 0.1, 1 + 1j), "disparity_step must be a real"),
+        (lambda: disparity_to_depth(d, 500.0, [1, 2]), "baseline must be a real"),
+        (lambda: disparity_to_depth(d, 1e200, 1e200), "focal \\* baseline overflows"),
+        (lambda: disparity_to_depth([["a"]], 500.0, 0.1), "disparity must hold real numbers"),
+        (lambda: reprojection_matrix(500.0, 0.1, ()), r"size must be \(width, height\)"),
+        (lambda: reprojection_matrix(500.0, None, (9, 5)), "baseline"),
+        (lambda: bad_pixel_rate(d, d, None), r"threshold \(pixels\) must be a real"),
+        (lambda: disparity_to_points(d, np.full((4, 4), np.nan)), "Q must be finite"),
+    ]
+
+
+@pytest.mark.parametrize("i", range(len(_bad_stereo_calls())))
+def test_bad_scalars_give_input_errors(i):
+    call, words = _bad_stereo_calls()[i]
+    with pytest.raises(InputError, match=words):
+        call()
+
+
+def test_cost_volume_is_bounded():
+    """A 4000x3000 pair with 2001 disparities would need 134 GiB: refused, limit named."""
+    big = np.broadcast_to(np.zeros(1, np.uint8), (3000, 4000))
+    with pytest.raises(
+        InputError,
+        match=r"134\.9 GiB cost volume, over the limit of 4 GiB: search fewer",
+    ):
+        semi_global_matching(big, big, 2000)
+
+
+def test_valid_edge_scalars_still_work():
+    left, right = _shifted_pair((30, 50), 3)
+    ref = block_matching(left, right, 8, 5)
+    got = block_matching(left, right, np.int64(8), np.int32(5), min_disparity=np.int16(0))
+    np.testing.assert_array_equal(got, ref)
+    # fractional penalties round to the integer costs
+    np.testing.assert_array_equal(
+        semi_global_matching(left, right, 8, P1=10.4, P2=40.6),
+        semi_global_matching(left, right, 8, P1=10, P2=41),
+    )
+    # a tiny but positive baseline gives z = f B / d exactly, not 0 or NaN
+    assert disparity_to_depth(np.array([2.0]), 500.0, 1e-10)[0] == pytest.approx(2.5e-8)
+    Q = reprojection_matrix(500.0, 0.1, (9.0, 5.0))  # integral floats are sizes too
+    assert Q[0, 3] == -4.0 and Q[1, 3] == -2.0

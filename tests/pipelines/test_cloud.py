@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from robopercept.errors import InputError
 from robopercept.pipelines import process_cloud
 from robopercept.pointcloud import PointCloud
 
@@ -44,3 +46,32 @@ def test_no_steps_keeps_the_finite_points():
     res = process_cloud(PointCloud(pts))
     assert len(res.cloud) == len(pts) - 1 and not res.segment.any()
     assert [s["step"] for s in res.steps] == ["read"] and res.planes == [] == res.cluster_sizes
+
+
+# issue 25: every step's parameters are checked before any step runs
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"sor": ("3", "3")}, "k must be an integer; got '3'"),
+        ({"sor": (1,)}, r"sor must be \(k, std_ratio\), 2 values; got \(1,\)"),
+        ({"clusters": ("3", "3")}, r"clusters must be \(tolerance, min_size, max_size\), 3"),
+        ({"clusters": ()}, "clusters must be"),
+        ({"clusters": (0.02, 10.5, 100)}, "min_size must be an integer"),
+        ({"boxes": [[]]}, r"each pass-through box must be \(axis, low, high\)"),
+        ({"boxes": "z"}, "boxes must be a list of"),
+        ({"boxes": [("z", "0", 1)]}, "min_value must be a real number"),
+        ({"planes": (1,)}, r"planes must be \(max_planes, threshold\)"),
+        ({"planes": (1, -0.01)}, r"threshold must be in \(0, inf\]"),
+        ({"voxel": np.nan}, "voxel_size must be finite"),
+        ({"min_plane": None}, "min_inliers must be an integer"),
+    ],
+)
+def test_bad_step_parameters(kwargs, words):
+    cloud = PointCloud(_scene(np.random.default_rng(0)))
+    with pytest.raises(InputError, match=words):
+        process_cloud(cloud, **kwargs)
+
+
+def test_a_bare_array_is_refused():
+    with pytest.raises(InputError, match=r"cloud must be a PointCloud; got ndarray: wrap"):
+        process_cloud(np.zeros((0, 3)))

@@ -92,3 +92,37 @@ def test_mot17_rows_round_trip_through_write_mot(tmp_path):
     assert write_mot(tmp_path / "r.txt", rows) == len(rows) > 100
     back = read_mot(tmp_path / "r.txt")
     np.testing.assert_allclose(back.boxes, np.array([r[2] for r in rows]), atol=0.006)
+
+
+# issue 25: arguments of the wrong type are refused at the call, typed
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"min_area": None}, "min_area must be an integer; got None"),
+        ({"min_area": np.inf}, "min_area must be an integer; got inf"),
+        ({"min_area": [1, 2]}, "min_area must be an integer"),
+        ({"detections": np.nan}, "detections must be MotRows"),
+        ({"detections": []}, "detections must be MotRows"),
+        ({"tracker": 3}, "tracker must be a MultiObjectTracker or None; got int"),
+        ({"tracker": {}}, "tracker must be a MultiObjectTracker or None; got dict"),
+        ({"min_score": "0.5"}, "min_score must be a real number"),
+    ],
+)
+def test_bad_arguments_are_refused_at_the_call(kwargs, words):
+    with pytest.raises(InputError, match=words):
+        track_objects(_blank(2), **kwargs)  # not even iterated: refused at once
+    with pytest.raises(InputError, match=words):
+        run_mot(_blank(2), **kwargs)
+
+
+def test_bad_frames():
+    with pytest.raises(InputError, match="frames must be an iterable of"):
+        track_objects(None)
+    with pytest.raises(InputError, match=r"each item of frames must be an \(index, image\) pair"):
+        run_mot([np.zeros((4, 4, 3))], _detections())
+    with pytest.raises(InputError, match="the frame index must be >= 0"):
+        run_mot([(-1, np.zeros((4, 4, 3)))], _detections())
+    # numpy scalars are numbers: the same rows as Python ones
+    ref = run_mot(_blank(12), _detections(), min_score=0.5)
+    got = run_mot(_blank(12), _detections(), min_score=np.float32(0.5), min_area=np.int64(7))
+    assert [(n, i) for n, i, _, _ in got] == [(n, i) for n, i, _, _ in ref]

@@ -13,6 +13,8 @@ from robopercept.errors import InputError
 from robopercept.estimation import Plane, ransac
 from robopercept.pipelines import (
     PlaneHueModel,
+    PlaneMeasurer,
+    PlaneMeasurerConfig,
     PlaneTracker,
     PlaneTrackerConfig,
     plane_errors,
@@ -342,3 +344,48 @@ def test_a_realsense_recording_gives_the_same_figures(tmp_path):
     ref = summarize(mem, mem_truths)
     assert summary.tracked.angle_deg.median == pytest.approx(ref.tracked.angle_deg.median, rel=0.1)
     assert summary.tracked.offset_mm.median == pytest.approx(ref.tracked.offset_mm.median, rel=0.1)
+
+
+# issue 25: configs, models and inputs of the wrong type are refused, typed
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda: PlaneHueModel(None), r"hue_tolerance \(OpenCV hue units\) must be a real"),
+        (lambda: PlaneHueModel([1, 2]), "hue_tolerance .* must be a real number"),
+        (lambda: PlaneMeasurer(np.nan), "config must be a PlaneMeasurerConfig or None; got float"),
+        (lambda: PlaneMeasurer(np.eye(3)), "config must be a PlaneMeasurerConfig or None"),
+        (lambda: PlaneTracker(np.eye(3)), "config must be a PlaneTrackerConfig or None"),
+        (lambda: PlaneMeasurerConfig(occlusion_tolerance=[1, 2]), "occlusion_tolerance"),
+        (lambda: PlaneMeasurerConfig(refit_iterations=None), "refit_iterations must be an int"),
+        (lambda: PlaneMeasurerConfig(threshold_1m="0.01"), r"threshold_1m \(metres\) must be"),
+        (lambda: PlaneMeasurerConfig(rng=-1), "rng must be >= 0"),
+        (lambda: PlaneTrackerConfig(process_noise=(5.0, [1, 2], 2e4)), "process_noise"),
+        (lambda: PlaneTrackerConfig(smoothing_lag=1.5), "smoothing_lag must be an integer"),
+        (lambda: plane_errors(np.ones(4), 1.0, np.ones(3), 1.0), r"normal must be 3 numbers"),
+        (lambda: plane_errors(np.ones(3), 1.0, np.ones(4), 1.0), "true_normal must be 3 finite"),
+        (lambda: plane_errors(np.ones(3), 1.0, np.zeros(3), 1.0), "normals must be non-zero"),
+        (lambda: plane_errors(np.ones(3), "1", np.ones(3), 1.0), "d must be a number"),
+        (lambda: summarize(None), "results must be a list of PlaneTrackResult; got NoneType"),
+        (lambda: summarize([3]), "results must hold PlaneTrackResult objects; got int"),
+        (lambda: summarize([], skipped=None), "skipped must be an integer"),
+    ],
+)
+def test_bad_arguments_give_input_errors(call, words):
+    with pytest.raises(InputError, match=words):
+        call()
+
+
+def test_bad_predicted_plane_and_valid_edge_values():
+    scene = SyntheticRGBDScene(n_frames=1, depth_size=(212, 120), color_size=(320, 180))
+    frame = scene.frame(0)
+    with pytest.raises(InputError, match=r"predicted must be a closest point .* shape \(3, 3\)"):
+        PlaneMeasurer().measure(frame, np.eye(3))
+    with pytest.raises(InputError, match="predicted must hold real numbers"):
+        PlaneMeasurer().measure(frame, np.array([None, 1, 2]))
+    ref = PlaneMeasurer().measure(frame)
+    # a far prediction (1e300 m: its norm overflows float64) is scored and loses
+    far = PlaneMeasurer().measure(frame, np.array([1e300, 1e300, 1e300]))
+    assert far.found and far.inliers == ref.inliers
+    # normals of any finite scale give the same angle
+    big = plane_errors(np.array([0, 0, 1e300]), 1.0, np.array([0, 1e-300, 1e-300]), 1.0)
+    assert big[0] == pytest.approx(45.0)

@@ -281,3 +281,47 @@ def test_ply_list_coordinates_are_refused(tmp_path, props, rows, bad):
     with pytest.raises(FileFormatError, match=f"property {bad} declared as a list") as info:
         read_point_cloud(path)
     assert "list.ply" in str(info.value) and "must be scalar properties" in str(info.value)
+
+
+# issue 25: paths that cannot name a file are InputErrors, before the OS sees them
+@pytest.mark.parametrize(
+    "path, words",
+    [
+        (None, "must be a file or folder path .* got None"),
+        (3, "must be a file or folder path .* got 3"),
+        ("nul\x00name.pcd", "contains a NUL byte"),
+        ("n" * 300 + ".pcd", "file name too long"),
+    ],
+)
+def test_unusable_paths_are_input_errors(path, words, tmp_path):
+    for read in (read_pcd, read_point_cloud):
+        with pytest.raises(InputError, match=words):
+            read(path)
+    with pytest.raises(InputError, match=words):
+        write_point_cloud(path, PointCloud(np.zeros((1, 3))))
+
+
+def test_bytes_path_and_binary_flag(tmp_path):
+    cloud = PointCloud(np.arange(6.0).reshape(2, 3))
+    p = write_point_cloud(str(tmp_path / "c.pcd").encode(), cloud, binary=np.False_)
+    assert b"DATA ascii" in p.read_bytes()
+    np.testing.assert_array_equal(read_pcd(bytes(p)).fields["x"], [0.0, 3.0])
+    with pytest.raises(InputError, match="binary must be True or False"):
+        write_point_cloud(tmp_path / "d.pcd", cloud, binary="yes")
+    with pytest.raises(FileFormatError, match="no such file"):
+        read_pcd(tmp_path / "missing.pcd")
+
+
+@pytest.mark.parametrize(
+    "shape, words",
+    [
+        ((np.nan, np.nan), r"shape \(H, W\) must be an integer; got nan"),
+        ((), r"shape must be \(H, W\), two integers, or None; got \(\)"),
+        ((2.0, 1.0), r"shape \(H, W\) must be an integer"),
+        (7, "shape must be"),
+    ],
+)
+def test_bad_organized_shape(shape, words):
+    with pytest.raises(InputError, match=words):
+        PointCloud(np.zeros((2, 3)), shape=shape)
+    assert PointCloud(np.zeros((2, 3)), shape=(np.int64(2), 1)).shape == (2, 1)

@@ -394,3 +394,35 @@ def test_point_cloud_container():
         PointCloud(np.zeros((4, 3)), shape=(3, 2))
     with pytest.raises(InputError, match="indices"):
         cloud.select([7])
+
+
+# issue 25: typed errors for scalars of the wrong type, seeds and coordinates out of range
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda c: segment_planes(c, 0.01, rng=-5), "rng must be a non-negative int seed"),
+        (lambda c: segment_plane(PointCloud(c.points * 1e300), 0.01), "rescale your data"),
+        (lambda c: segment_planes(PointCloud(c.points * 1e300), 0.01), "rescale your data"),
+        (lambda c: segment_plane(c, "0.01"), "threshold must be a real number"),
+        (lambda c: voxel_downsample(c, "0.1"), "voxel_size must be a real number"),
+        (lambda c: radius_outlier_removal(c, None, 3), "radius must be a real number"),
+        (lambda c: statistical_outlier_removal(c, 5, [1, 2]), "std_ratio must be a real"),
+        (lambda c: pass_through(c, "z", "0", 1.0), "min_value must be a real number"),
+        (lambda c: euclidean_clusters(c, 1 + 1j), "tolerance must be a real number"),
+        (lambda c: estimate_normals(c, radius=True), "radius must be a real number"),
+        (lambda c: estimate_normals(c, 5, viewpoint=(0, [1, 2], 0)), "viewpoint must be 3"),
+    ],
+)
+def test_bad_scalars_give_input_errors(call, words):
+    cloud = PointCloud(np.random.default_rng(0).uniform(-1, 1, (100, 3)) * [1, 1, 0.001])
+    with pytest.raises(InputError, match=words):
+        call(cloud)
+
+
+def test_numpy_scalars_still_work():
+    cloud = PointCloud(np.random.default_rng(0).uniform(-1, 1, (100, 3)) * [1, 1, 0.001])
+    plane, inliers = segment_plane(cloud, np.float32(0.01), rng=np.int64(0))
+    assert inliers.size == 100 and abs(plane.normal[2]) == pytest.approx(1.0, abs=1e-3)
+    # coordinates near the limit of 1e70 (fourth powers near 1e276) are still segmented
+    plane, inliers = segment_plane(PointCloud(cloud.points * 1e69), 1e67, rng=0)
+    assert inliers.size == 100 and abs(plane.normal[2]) == pytest.approx(1.0, abs=1e-3)

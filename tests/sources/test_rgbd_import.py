@@ -305,7 +305,9 @@ class TestBadInput:
             import_rgbd_folder(src, tmp_path / "o")
         with pytest.raises(InputError, match="exactly one"):
             import_rgbd_folder(src, tmp_path / "o", preset="fr1", intrinsics=(1, 1, 1, 1))
-        with pytest.raises(InputError, match="fx must be finite"):
+        with pytest.raises(
+            InputError, match=r"--intrinsics fx,fy \(pixels\) must be > 0; got -1, 1"
+        ):
             import_rgbd_folder(src, tmp_path / "o", intrinsics=(-1, 1, 1, 1))
 
     def test_flag_values(self, tmp_path):
@@ -407,3 +409,56 @@ def test_camera_json_errors_name_the_fields_and_the_fix(tmp_path, content, what)
         "docs/tracking.md",
     ):
         assert needle in msg
+
+
+# issue 25: names, patterns, paths and scalars of the wrong type are InputErrors
+class TestIssue25:
+    def test_preset_of_another_type(self):
+        with pytest.raises(InputError, match=r"unknown camera preset \['fr1'\]"):
+            camera_preset(["fr1"])
+
+    @pytest.mark.parametrize(
+        "kwargs, words",
+        [
+            ({"match": ["x"]}, r"match \(--match\) must be a shell pattern string"),
+            ({"max_difference": [1, 2]}, r"max_difference \(seconds\) must be a real"),
+            ({"fps": 1 + 1j}, "--fps must be a real number"),
+            ({"progress": "yes"}, "progress must be True or False"),
+            ({"depth_encoding": ["sun"]}, r"must be one of linear, sun, nyu \(--depth-encoding\)"),
+            ({"depth_scale": "1000"}, r"--depth-scale\) must be a real number"),
+            ({"preset": 3}, "unknown camera preset 3"),
+            ({"intrinsics": (5, 5, [2], 1.5)}, "--intrinsics fx,fy,cx,cy must be 4 finite"),
+        ],
+    )
+    def test_bad_arguments(self, tmp_path, kwargs, words):
+        src = pair_folder(tmp_path, [("a.png", "a_depth.png")])
+        call = {"intrinsics": (5, 5, 2, 1.5), **kwargs}
+        if "preset" in kwargs:
+            del call["intrinsics"]
+        with pytest.raises(InputError, match=words):
+            import_rgbd_folder(src, tmp_path / "o", **call)
+        assert not (tmp_path / "o").exists()
+
+    @pytest.mark.parametrize(
+        "src, out, words",
+        [
+            (None, "o", "SRC_DIR must be a file or folder path"),
+            ("s", "o" * 300, "OUT_DIR: file name too long"),
+            ("s", "nul\x00", "OUT_DIR contains a NUL byte"),
+        ],
+    )
+    def test_bad_paths(self, tmp_path, src, out, words):
+        src = pair_folder(tmp_path, [("a.png", "a_depth.png")]) if src else src
+        with pytest.raises(InputError, match=words):
+            import_rgbd_folder(src, str(tmp_path / out), intrinsics=(5, 5, 2, 1.5))
+
+    def test_decode_and_units_refuse_non_numbers(self):
+        with pytest.raises(InputError, match=r"--depth-scale\) must be a real number"):
+            decode_depth(np.ones((2, 2), np.uint16), "linear", None)
+        with pytest.raises(InputError, match="depth must be numeric"):
+            decode_depth(np.array([["a"]]))
+        with pytest.raises(InputError, match="metres must hold real numbers"):
+            depth_to_units([["a"]], 5000)
+        # a huge scale saturates to "out of range", not to an overflow warning or error
+        d, n = depth_to_units(np.array([[10.0]]), 1e308)
+        assert d.tolist() == [[0]] and n == 1

@@ -441,3 +441,32 @@ def test_distractor_options():
     scene = SyntheticRGBDScene(distractor="wall", **TINY)
     seen = [_green_off_board(scene, i).sum() > 50 for i in range(0, 300, 30)]
     assert np.mean(seen) >= 0.7
+
+
+# issue 25: sizes and scalars of the wrong type or size are InputErrors
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"color_size": (64, [1, 2])}, r"color_size must be \(width, height\)"),
+        ({"depth_size": (100000, 100000)}, r"depth_size must be \(width, height\) with each"),
+        ({"depth_size": (8192, 8192)}, "more than the 16777216 allowed"),
+        ({"disparity_noise": 1 + 1j}, "disparity_noise must be a real number"),
+        ({"fps": None}, "fps must be a real number"),
+        ({"baseline": np.inf}, "baseline must be finite"),
+        ({"flying_pixel_rate": "0.3"}, "flying_pixel_rate must be a real number"),
+        ({"motion": ["smooth"]}, "motion must be one of"),
+        ({"distractor": np.array(["box"])}, "distractor must be one of"),
+    ],
+)
+def test_bad_parameters_give_input_errors(kwargs, words):
+    with pytest.raises(InputError, match=words):
+        SyntheticRGBDScene(**kwargs)
+
+
+def test_integral_float_sizes_and_numpy_scalars_still_work():
+    scene = SyntheticRGBDScene(
+        n_frames=1, depth_size=(212.0, 120), color_size=(np.int64(320), 180), fps=np.float32(30)
+    )
+    f = scene.frame(0)
+    assert f.depth.shape == (120, 212) and f.color.shape == (180, 320, 3)
+    assert scene.depth_size == (212, 120) and type(scene.fps) is float

@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from robopercept.errors import FileFormatError
+from robopercept.errors import FileFormatError, InputError
 from robopercept.geometry import CameraIntrinsics, se3
 from robopercept.imaging.io import write_image
 from robopercept.sources import RGBDFrame, TUMFolderSource, read_camera_json, write_tum_folder
@@ -161,7 +161,8 @@ def test_over_long_names_are_named(tmp_path):
     (folder / "rgb.txt").write_text(f"1000.0 {long_name}\n")
     with pytest.raises(FileFormatError, match=r"rgb\.txt:1: file name too long"):
         TUMFolderSource(folder)
-    with pytest.raises(FileFormatError, match="cannot open"):
+    # issue 25: a folder name the OS would refuse is a bad argument, refused before use
+    with pytest.raises(InputError, match="file name too long"):
         TUMFolderSource(tmp_path / ("y" * 300))
 
 
@@ -182,3 +183,46 @@ def test_bad_folders(tmp_path, damage, match):
         TUMFolderSource(folder)
     with pytest.raises(FileFormatError, match="not a folder"):
         TUMFolderSource(tmp_path / "nothing")
+
+
+# issue 25: paths, frames, cameras and scalars of the wrong type are InputErrors
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda t: read_camera_json(None), "must be a file or folder path .* got None"),
+        (lambda t: read_camera_json(3), "must be a file or folder path .* got 3"),
+        (lambda t: TUMFolderSource(3), "must be a file or folder path"),
+        (lambda t: TUMFolderSource(t, max_difference=[1, 2]), r"max_difference \(seconds\)"),
+        (lambda t: write_tum_folder(None, frames(1)), "must be a file or folder path"),
+        (lambda t: write_tum_folder(str(t / "nul\x00name"), frames(1)), "NUL byte"),
+        (lambda t: write_tum_folder(t / ("n" * 300), frames(1)), "file name too long"),
+        (lambda t: write_tum_folder(t / "o", 3), "frames must be an iterable of RGBDFrame"),
+        (lambda t: write_tum_folder(t / "o", [3]), "frames must be RGBDFrame objects"),
+    ],
+)
+def test_bad_arguments_give_input_errors(tmp_path, call, words):
+    write_tum_folder(tmp_path / "seq", frames(1))
+    with pytest.raises(InputError, match=words):
+        call(tmp_path / "seq")
+
+
+def test_bytes_paths_still_work(tmp_path):
+    folder = write_tum_folder(str(tmp_path / "seq").encode(), frames(2))
+    assert read_camera_json(bytes(folder / "camera.json"))["depth_scale"] == 0.001
+    assert len(list(TUMFolderSource(bytes(folder), max_difference=np.float32(0.02)))) == 2
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        ({"depth_intrinsics": np.nan}, "depth_intrinsics must be a CameraIntrinsics; got float"),
+        ({"color_intrinsics": []}, "color_intrinsics must be a CameraIntrinsics; got list"),
+        ({"depth": np.uint16(3)}, "depth must be a numpy array; got uint16"),
+        ({"depth_scale": "0.001"}, r"depth_scale \(metres per unit\) must be a real number"),
+    ],
+)
+def test_bad_frames(change, words):
+    import dataclasses
+
+    with pytest.raises(InputError, match=words):
+        dataclasses.replace(next(frames(1)), **change)

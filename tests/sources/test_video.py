@@ -101,3 +101,26 @@ def test_real_video_frames():
     src = VideoSource(path, max_frames=3)
     frames = list(src)
     assert len(frames) == 3 and frames[0][1].shape == (360, 480, 3)
+
+
+# issue 25: paths and scalars of the wrong type are InputErrors
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"max_frames": 1 + 1j}, r"max_frames \(--max-frames\) must be an integer"),
+        ({"max_frames": [1, 2]}, r"max_frames \(--max-frames\) must be an integer"),
+        ({"fps": 1 + 1j}, r"fps \(--fps\) must be a real number"),
+        ({"fps": np.nan}, r"fps \(--fps\) must be finite"),
+    ],
+)
+def test_bad_scalars_give_input_errors(tmp_path, kwargs, words):
+    folder = _folder(tmp_path / "seq", _frames(2))
+    with pytest.raises(InputError, match=words):
+        VideoSource(folder, **kwargs)
+    assert len(VideoSource(folder, fps=np.float32(10), max_frames=np.int64(1))) == 1
+
+
+@pytest.mark.parametrize("path", [3, None, "nul\x00name"])
+def test_unusable_paths_give_input_errors(path):
+    with pytest.raises(InputError, match="the video or image folder"):
+        VideoSource(path)

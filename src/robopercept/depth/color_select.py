@@ -38,8 +38,14 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit, prange
 
-from robopercept._checks import check_positive
-from robopercept.depth.rgbd import check_depth, pixel_rays, project_to_color
+from robopercept._checks import check_real
+from robopercept.depth.rgbd import (
+    check_depth,
+    check_intrinsics,
+    check_pixels,
+    pixel_rays,
+    project_to_color,
+)
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.camera import compiled_params
@@ -272,13 +278,11 @@ class ColorRangeSelector:
     ) -> None:
         self.hsv_low, self.hsv_high = _check_hsv_bounds(hsv_low, hsv_high)
         if occlusion_tolerance is not None:
-            tol = float(occlusion_tolerance)
-            if not tol >= 0:
-                raise InputError(
-                    f"occlusion_tolerance must be >= 0 metres, or None for no occlusion "
-                    f"test; got {occlusion_tolerance}"
-                )
-            occlusion_tolerance = tol
+            occlusion_tolerance = check_real(
+                occlusion_tolerance,
+                "occlusion_tolerance (metres >= 0, or None for no occlusion test)",
+                0.0,
+            )
         self.occlusion_tolerance = occlusion_tolerance
         self._rays_key: CameraIntrinsics | None = None
         self._rays = np.zeros((0, 3))
@@ -396,9 +400,8 @@ def _check_frame(
     depth_scale: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """The checked inputs of :meth:`ColorRangeSelector.__call__`."""
-    for name, k in (("depth_intrinsics", depth_intrinsics), ("color_intrinsics", color_intrinsics)):
-        if not isinstance(k, CameraIntrinsics):
-            raise InputError(f"{name} must be a CameraIntrinsics; got {type(k).__name__}")
+    check_intrinsics(depth_intrinsics, "depth_intrinsics")
+    check_pixels(check_intrinsics(color_intrinsics, "color_intrinsics"), "color_intrinsics")
     d = check_depth(depth, depth_intrinsics, "depth_intrinsics")
     c = np.asarray(color)
     kc = color_intrinsics
@@ -427,7 +430,7 @@ def _check_frame(
             "(CameraIntrinsics.scaled for another resolution)"
         )
     T = check_transform(T_color_depth, "T_color_depth")
-    scale = check_positive(depth_scale, "depth_scale")
+    scale = check_real(depth_scale, "depth_scale (metres per unit)", 0.0, low_inclusive=False)
     return d, c, T, float(scale)
 
 

@@ -18,16 +18,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_positive
+from robopercept._checks import check_bool, check_numeric, check_real
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics, apply, deproject, project
 from robopercept.geometry.camera import compiled_params, distort_point
 from robopercept.geometry.transforms import check_transform
 
 __all__ = [
+    "MAX_PIXELS",
     "align_color_to_depth",
     "align_depth_to_color",
     "check_depth",
+    "check_intrinsics",
+    "check_pixels",
     "depth_to_points",
     "pixel_rays",
     "project_to_color",
@@ -36,19 +39,62 @@ __all__ = [
 ]
 
 
+#: most pixels a camera may have where a function allocates per-pixel arrays for it
+#: (2**26: 8K video has 2**25; the rays of 2**26 pixels take 1.5 GiB)
+MAX_PIXELS = 1 << 26
+
+
+def check_pixels(k: CameraIntrinsics, name: str) -> None:
+    """InputError (naming ``name``) when camera ``k`` has more than :data:`MAX_PIXELS`
+    pixels: a bound on the per-pixel arrays (rays, z-buffers) made for it."""
+    if k.width * k.height > MAX_PIXELS:
+        raise InputError(
+            f"{name} describe a {k.width}x{k.height} image, more than {MAX_PIXELS} pixels "
+            "(its per-pixel arrays would take several GiB): use "
+            "CameraIntrinsics.scaled(width, height) for a smaller resolution"
+        )
+
+
+def check_intrinsics(value: object, name: str = "intrinsics") -> CameraIntrinsics:
+    """``value`` itself after checking that it is a
+    :class:`~robopercept.geometry.CameraIntrinsics`; InputError naming ``name`` otherwise.
+
+    Examples
+    --------
+    >>> check_intrinsics(np.eye(3), "color_intrinsics")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: color_intrinsics must be a CameraIntrinsics; got ndarray...
+    """
+    if not isinstance(value, CameraIntrinsics):
+        hint = (
+            ": wrap a 3x3 matrix K with CameraIntrinsics.from_matrix(K, width, height)"
+            if isinstance(value, np.ndarray) and value.shape == (3, 3)
+            else ": build one with CameraIntrinsics(width, height, fx, fy, cx, cy)"
+        )
+        raise InputError(f"{name} must be a CameraIntrinsics; got {type(value).__name__}{hint}")
+    return value
+
+
 def check_depth(
     depth: np.ndarray, intrinsics: CameraIntrinsics, name: str = "intrinsics"
 ) -> np.ndarray:
     """``depth`` as an array after checking that it is a numeric (H, W) image of the size
-    ``intrinsics`` (called ``name`` in the message) describe; InputError otherwise."""
+    ``intrinsics`` (called ``name`` in the message, and checked to be a
+    :class:`~robopercept.geometry.CameraIntrinsics`) describe; InputError otherwise."""
+    check_intrinsics(intrinsics, name)
     d = np.asarray(depth)
     if d.ndim != 2:
         hint = (
             ": drop the channel axis with depth[..., 0]" if d.ndim == 3 and d.shape[2] == 1 else ""
         )
         raise InputError(f"depth must be a 2-D (H, W) image; got shape {d.shape}{hint}")
-    if d.dtype.kind not in "uif":
-        raise InputError(f"depth must be numeric (uint16 raw units or float); got {d.dtype}")
+    if d.dtype.kind not in "uif" or d.dtype == np.float16:
+        hint = ": convert with depth.astype(np.float32)" if d.dtype.kind == "f" else ""
+        raise InputError(
+            "depth must be numeric (uint16 raw units or float32/float64 metres); got "
+            f"{d.dtype}{hint}"
+        )
     if d.shape != (intrinsics.height, intrinsics.width):
         raise InputError(
             f"depth is {d.shape[1]}x{d.shape[0]} but {name} describe "
@@ -61,8 +107,22 @@ def check_depth(
 def pixel_rays(intrinsics: CameraIntrinsics) -> np.ndarray:
     """``(H * W, 3)`` unit-depth rays of every pixel in row-major order,
     ``deproject((u, v), 1)``: the point at depth ``z`` behind pixel ``i`` is
-    ``z * rays[i]`` (undistortion does not depend on depth)."""
-    v, u = np.mgrid[0 : intrinsics.height, 0 : intrinsics.width]
+    ``z * rays[i]`` (undistortion does not depend on depth).
+
+    Raises
+    ------
+    InputError
+        ``intrinsics`` not a CameraIntrinsics, or more than :data:`MAX_PIXELS` pixels.
+
+    Examples
+    --------
+    >>> from robopercept.geometry import CameraIntrinsics
+    >>> pixel_rays(CameraIntrinsics(2, 1, 2.0, 2.0, 0.5, 0.0)).tolist()
+    [[-0.25, 0.0, 1.0], [0.25, 0.0, 1.0]]
+    """
+    k = check_intrinsics(intrinsics)
+    check_pixels(k, "intrinsics")
+    v, u = np.mgrid[0 : k.height, 0 : k.width]
     pix = np.stack([u, v], axis=-1).reshape(-1, 2).astype(np.float64)
     return np.ascontiguousarray(deproject(pix, 1.0, intrinsics))
 
@@ -96,7 +156,8 @@ def depth_to_points(
         ``rs2::pointcloud`` where the depth is valid.
     """
     d = check_depth(depth, intrinsics)
-    s = check_positive(depth_scale, "depth_scale")
+    s = check_real(depth_scale, "depth_scale (metres per unit)", 0.0, low_inclusive=False)
+    organized = check_bool(organized, "organized")
     z = d.astype(np.float64) * s
     valid = np.isfinite(z) & (z > 0)
     if organized:
@@ -210,14 +271,15 @@ def texture_coordinates(
     valid : (...) bool ndarray
         False for points without depth, outside the colour image, or occluded.
     """
-    p = np.asarray(points, dtype=np.float64)
+    p = check_numeric(points, "points")
     if p.shape[-1:] != (3,):
         raise InputError(f"points must have shape (..., 3); got {p.shape}")
     T = check_transform(T_color_depth, "T_color_depth")
-    k = color_intrinsics
-    tol = -1.0 if occlusion_tolerance is None else float(occlusion_tolerance)
-    if occlusion_tolerance is not None and not tol >= 0:
-        raise InputError(f"occlusion_tolerance must be >= 0 or None; got {occlusion_tolerance}")
+    k = check_intrinsics(color_intrinsics, "color_intrinsics")
+    check_pixels(k, "color_intrinsics")
+    tol = -1.0
+    if occlusion_tolerance is not None:
+        tol = check_real(occlusion_tolerance, "occlusion_tolerance (metres, or None)", 0.0)
     flat = np.ascontiguousarray(p.reshape(-1, 3))
     uv = np.empty((flat.shape[0], 2))
     valid = np.empty(flat.shape[0], dtype=bool)
@@ -259,14 +321,24 @@ def sample_colors(
     img = np.asarray(color_image)
     if img.ndim != 3 or img.shape[2] != 3:
         raise InputError(f"color_image must be (H, W, 3); got {img.shape}")
-    t = np.asarray(uv, dtype=np.float64)
+    t = check_numeric(uv, "uv")
+    if t.shape[-1:] != (2,):
+        raise InputError(f"uv must have shape (..., 2); got {t.shape}")
+    if valid is not None:
+        valid = np.asarray(valid)
+        if valid.shape != t.shape[:-1] or valid.dtype.kind not in "biu":
+            raise InputError(
+                f"valid must be a boolean array of shape uv.shape[:-1] = {t.shape[:-1]}; got "
+                f"{valid.dtype} of shape {valid.shape}: pass the valid mask that "
+                "texture_coordinates returned with uv"
+            )
     h, w = img.shape[:2]
     with np.errstate(invalid="ignore"):
         col = np.rint(t[..., 0] * w)
         row = np.rint(t[..., 1] * h)
         ok = (col >= 0) & (col < w) & (row >= 0) & (row < h)
     if valid is not None:
-        ok &= np.asarray(valid, dtype=bool)
+        ok &= valid.astype(bool)
     out = np.zeros((*t.shape[:-1], 3), dtype=img.dtype)
     out[ok] = img[row[ok].astype(np.int64), col[ok].astype(np.int64)]
     return out
@@ -288,6 +360,8 @@ def align_color_to_depth(
         Black where there is no depth or no colour.
     valid : (Hd, Wd) bool ndarray
     """
+    check_intrinsics(depth_intrinsics, "depth_intrinsics")
+    check_intrinsics(color_intrinsics, "color_intrinsics")
     pts = depth_to_points(depth, depth_intrinsics, depth_scale)
     uv, valid = texture_coordinates(pts, T_color_depth, color_intrinsics)
     return sample_colors(color_image, uv, valid), valid
@@ -311,10 +385,13 @@ def align_depth_to_color(
         Depth in the input's units and dtype, measured along the colour camera's z.
     """
     d = check_depth(depth, depth_intrinsics, "depth_intrinsics")
+    k = check_intrinsics(color_intrinsics, "color_intrinsics")
+    check_pixels(k, "color_intrinsics")
+    T = check_transform(T_color_depth, "T_color_depth")
+    depth_scale = check_real(depth_scale, "depth_scale (metres per unit)", 0.0, low_inclusive=False)
     pts = depth_to_points(d, depth_intrinsics, depth_scale, organized=False)
-    pc = apply(check_transform(T_color_depth, "T_color_depth"), pts)
-    pix = np.rint(project(pc, color_intrinsics))
-    k = color_intrinsics
+    pc = apply(T, pts)
+    pix = np.rint(project(pc, k))
     with np.errstate(invalid="ignore"):
         ok = (pix[:, 0] >= 0) & (pix[:, 0] < k.width) & (pix[:, 1] >= 0) & (pix[:, 1] < k.height)
     ids = (pix[ok, 1] * k.width + pix[ok, 0]).astype(np.int64)

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_int, check_numeric, check_real
 from robopercept.errors import InputError
 
 __all__ = [
@@ -56,24 +57,28 @@ __all__ = [
 SPEED_OF_LIGHT = 299_792_458.0  # m/s
 
 
+#: most distance candidates (phases x wraps) :func:`tof_unwrap` compares (in blocks of
+#: 2**20, so memory stays small; this bounds the time, about two seconds)
+MAX_CANDIDATES = 1 << 24
+
+
 def _positive(value: float, name: str) -> float:
-    v = float(value)
-    if not (np.isfinite(v) and v > 0):
-        raise InputError(f"{name} must be a positive number; got {value!r}")
-    return v
+    """``value`` as a float after checking that it is one finite real number > 0."""
+    return check_real(value, name, 0.0, low_inclusive=False)
 
 
 def tof_pulse_distance(round_trip_time: npt.ArrayLike) -> np.ndarray:
     """Distance :math:`c t / 2` (m) of a pulse back after ``round_trip_time`` seconds."""
-    t = np.asarray(round_trip_time, dtype=np.float64)
-    if (t < 0).any():
-        raise InputError("round_trip_time must be >= 0")
+    t = check_numeric(round_trip_time, "round_trip_time")
+    with np.errstate(invalid="ignore"):
+        if (t < 0).any():
+            raise InputError("round_trip_time must be >= 0 seconds")
     return SPEED_OF_LIGHT * t / 2.0
 
 
 def tof_pulse_time(distance: npt.ArrayLike) -> np.ndarray:
     """Round-trip time :math:`2 d / c` (s) of a pulse to ``distance`` metres."""
-    return 2.0 * np.asarray(distance, dtype=np.float64) / SPEED_OF_LIGHT
+    return 2.0 * check_numeric(distance, "distance") / SPEED_OF_LIGHT
 
 
 def tof_ambiguity_range(modulation_frequency: float) -> float:
@@ -84,7 +89,7 @@ def tof_ambiguity_range(modulation_frequency: float) -> float:
 def tof_phase(distance: npt.ArrayLike, modulation_frequency: float) -> np.ndarray:
     r"""Measured phase :math:`4 \pi f_{mod} d / c \bmod 2\pi` of a target at ``distance``."""
     f = _positive(modulation_frequency, "modulation_frequency")
-    d = np.asarray(distance, dtype=np.float64)
+    d = check_numeric(distance, "distance")
     return np.mod(4.0 * np.pi * f * d / SPEED_OF_LIGHT, 2.0 * np.pi)
 
 
@@ -92,7 +97,7 @@ def tof_phase_distance(phase: npt.ArrayLike, modulation_frequency: float) -> np.
     r"""Distance :math:`c \varphi / (4 \pi f_{mod})` (m) in :math:`[0, d_{max})` of a
     phase (wrapped into :math:`[0, 2\pi)` first)."""
     f = _positive(modulation_frequency, "modulation_frequency")
-    phi = np.mod(np.asarray(phase, dtype=np.float64), 2.0 * np.pi)
+    phi = np.mod(check_numeric(phase, "phase"), 2.0 * np.pi)
     return SPEED_OF_LIGHT * phi / (4.0 * np.pi * f)
 
 
@@ -105,24 +110,50 @@ def tof_unwrap(
     phase it would give at the second; the candidate whose predicted phase is closest
     (on the circle) wins. Unambiguous up to the range of the frequencies' greatest
     common divisor, :math:`c / (2 \gcd(f_1, f_2))`.
+
+    ``phase1`` and ``phase2`` must have the same shape; the number of candidates,
+    ``phase1.size * (max_distance / d_max,1 + 1)``, is bounded by
+    :data:`MAX_CANDIDATES`.
     """
-    r1 = tof_ambiguity_range(f1)
+    r1 = SPEED_OF_LIGHT / (2.0 * _positive(f1, "f1"))
     _positive(f2, "f2")
-    d1 = tof_phase_distance(phase1, f1)
-    p2 = np.mod(np.asarray(phase2, dtype=np.float64), 2.0 * np.pi)
-    k = np.arange(int(np.ceil(_positive(max_distance, "max_distance") / r1)) + 1)
-    cand = d1[..., None] + k * r1
-    err = np.angle(np.exp(1j * (tof_phase(cand, f2) - p2[..., None])))
-    err = np.where(cand <= max_distance + r1 * 1e-9, np.abs(err), np.inf)
-    return np.take_along_axis(cand, np.argmin(err, axis=-1)[..., None], axis=-1)[..., 0]
+    dmax = _positive(max_distance, "max_distance")
+    ph1, ph2 = check_numeric(phase1, "phase1"), check_numeric(phase2, "phase2")
+    if ph1.shape != ph2.shape:
+        raise InputError(
+            f"phase1 and phase2 must have the same shape (one pair of phases per pixel); "
+            f"got {ph1.shape} and {ph2.shape}"
+        )
+    wraps = dmax / r1 + 1.0
+    if wraps * max(ph1.size, 1) > MAX_CANDIDATES:
+        raise InputError(
+            f"max_distance {dmax:g} m spans {wraps:.3g} ambiguity ranges of f1 ({r1:.3g} m) "
+            f"for {ph1.size} phases, more than {MAX_CANDIDATES} candidates to compare: "
+            "lower max_distance or raise f1"
+        )
+    d1 = tof_phase_distance(ph1, f1)
+    p2 = np.mod(ph2, 2.0 * np.pi)[..., None]
+    n_wraps = int(np.ceil(dmax / r1)) + 1
+    # candidates in blocks of wraps, at most 2**20 values at a time: the first best one
+    # wins (as argmin over all of them would pick)
+    best, out = np.full(d1.shape, np.inf), d1.copy()
+    step = max(1, (1 << 20) // max(d1.size, 1))
+    for k0 in range(0, n_wraps, step):
+        cand = d1[..., None] + np.arange(k0, min(k0 + step, n_wraps)) * r1
+        err = np.abs(np.angle(np.exp(1j * (tof_phase(cand, f2) - p2))))
+        err = np.where(cand <= dmax + r1 * 1e-9, err, np.inf)
+        i = np.argmin(err, axis=-1)[..., None]
+        e = np.take_along_axis(err, i, axis=-1)[..., 0]
+        better = e < best
+        best = np.where(better, e, best)
+        out = np.where(better, np.take_along_axis(cand, i, axis=-1)[..., 0], out)
+    return out
 
 
 def focal_from_fov(width: int, hfov_deg: float) -> float:
     r"""Focal length in pixels of a camera ``width`` pixels wide with a horizontal field
     of view of ``hfov_deg``: :math:`f = (W / 2) / \tan(\mathrm{HFOV} / 2)`."""
-    h = _positive(hfov_deg, "hfov_deg")
-    if h >= 180:
-        raise InputError(f"hfov_deg must be below 180; got {hfov_deg}")
+    h = check_real(hfov_deg, "hfov_deg", 0.0, 180.0, low_inclusive=False, high_inclusive=False)
     return 0.5 * _positive(width, "width") / np.tan(np.radians(h) / 2.0)
 
 
@@ -150,6 +181,18 @@ class ActiveStereoSensor:
     subpixel: float = 0.08
     max_disparity: int = 126
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "baseline", _positive(self.baseline, "baseline"))
+        object.__setattr__(self, "width", check_int(self.width, "width", 1))
+        object.__setattr__(
+            self,
+            "hfov_deg",
+            check_real(self.hfov_deg, "hfov_deg", 0.0, 180.0, low_inclusive=False,
+                       high_inclusive=False),
+        )  # fmt: skip
+        object.__setattr__(self, "subpixel", check_real(self.subpixel, "subpixel", 0.0))
+        object.__setattr__(self, "max_disparity", check_int(self.max_disparity, "max_disparity", 1))
+
     @property
     def focal(self) -> float:
         """Focal length in pixels."""
@@ -157,7 +200,7 @@ class ActiveStereoSensor:
 
     def depth_rms_error(self, depth: npt.ArrayLike) -> np.ndarray:
         r"""Intel's depth RMS error :math:`z^2 s / (f B)` (m) at ``depth`` metres."""
-        z = np.asarray(depth, dtype=np.float64)
+        z = check_numeric(depth, "depth")
         return z * z * self.subpixel / (self.focal * self.baseline)
 
     @property
@@ -167,7 +210,8 @@ class ActiveStereoSensor:
 
     def disparity(self, depth: npt.ArrayLike) -> np.ndarray:
         """Disparity :math:`f B / z` (px) of a point at ``depth`` metres."""
-        return self.focal * self.baseline / np.asarray(depth, dtype=np.float64)
+        with np.errstate(divide="ignore"):
+            return self.focal * self.baseline / check_numeric(depth, "depth")
 
 
 # Intel RealSense D435 at its recommended 848 x 480 depth mode: 50 mm baseline, 87 deg

@@ -47,6 +47,15 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit, prange
 
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_finite,
+    check_int,
+    check_numeric,
+    check_real,
+    check_size,
+)
 from robopercept.errors import InputError
 from robopercept.imaging.color import gray_255
 
@@ -65,23 +74,20 @@ _BIG = 1 << 14  # path-cost sentinel beyond any reachable value (costs stay < 2^
 
 
 def _pair(left: np.ndarray, right: np.ndarray, max_disparity: int, min_disparity: int):
+    """The pair as gray 0-255 images and the disparity range as ints, checked."""
     L, R = gray_255(left, "left"), gray_255(right, "right")
     if L.shape != R.shape:
         raise InputError(
             f"left and right must have the same size; got {L.shape} and {R.shape}: "
             "rectify the pair first"
         )
-    if int(max_disparity) != max_disparity or int(min_disparity) != min_disparity:
-        raise InputError("min_disparity and max_disparity must be integers")
-    if not 0 <= min_disparity < max_disparity:
-        raise InputError(
-            f"need 0 <= min_disparity < max_disparity; got {min_disparity} and {max_disparity}"
-        )
-    if max_disparity >= L.shape[1]:
-        raise InputError(
-            f"max_disparity {max_disparity} must be below the image width {L.shape[1]}"
-        )
-    return L, R
+    dmax = check_int(max_disparity, "max_disparity", 1)
+    dmin = check_int(min_disparity, "min_disparity", 0)
+    if not dmin < dmax:
+        raise InputError(f"need 0 <= min_disparity < max_disparity; got {dmin} and {dmax}")
+    if dmax >= L.shape[1]:
+        raise InputError(f"max_disparity {dmax} must be below the image width {L.shape[1]}")
+    return L, R, dmax, dmin
 
 
 # ---------------------------------------------------------------- census
@@ -112,14 +118,32 @@ def _census_kernel(pad, r, out):  # pragma: no cover - compiled
         out[y] = bits
 
 
+def _census_window(window: int, name: str) -> int:
+    """``window`` as an int after checking that it is 3, 5 or 7 (InputError naming ``name``)."""
+    w = check_int(window, name)
+    if w not in (3, 5, 7):
+        raise InputError(
+            f"{name} (the census window) must be 3, 5 or 7 (its bits must fit in 64); got {w}"
+        )
+    return w
+
+
 def census_transform(image: np.ndarray, window: int = 7) -> np.ndarray:
     """Census transform: per pixel, one bit per neighbour in the ``window`` (odd, at
     most 7 so the bits fit in 64), set where the neighbour is darker than the centre
-    (borders replicated). Returns (H, W) uint64."""
-    if int(window) != window or window < 3 or window % 2 == 0 or window > 7:
-        raise InputError(f"census window must be 3, 5 or 7; got {window}")
+    (borders replicated). Returns (H, W) uint64.
+
+    Examples
+    --------
+    A bright centre pixel: all eight neighbours of a 3x3 window are darker.
+
+    >>> img = np.zeros((3, 3), np.uint8); img[1, 1] = 9
+    >>> int(census_transform(img, 3)[1, 1])
+    255
+    """
+    window = _census_window(window, "window")
     g = gray_255(image, "image")
-    r = int(window) // 2
+    r = window // 2
     out = np.empty(g.shape, dtype=np.uint64)
     _census_kernel(np.pad(g, r, mode="edge"), r, out)
     return out
@@ -521,11 +545,29 @@ def _post(disp: np.ndarray, right: np.ndarray, lr_check: float | None, median: b
     return disp
 
 
-def _check_options(uniqueness: float, lr_check: float | None) -> None:
-    if not 0.0 <= uniqueness < 1.0:
-        raise InputError(f"uniqueness must be in [0, 1); got {uniqueness}")
-    if lr_check is not None and not lr_check >= 0:
-        raise InputError(f"lr_check must be None or a number of pixels >= 0; got {lr_check}")
+#: largest cost volume (bytes) semi_global_matching allocates
+MAX_VOLUME_BYTES = 4 * 2**30
+
+
+def _check_volume(w: int, h: int, nd: int, need: int) -> None:
+    """InputError when the cost volume of a ``w x h`` pair with ``nd`` disparities,
+    ``need`` bytes, would pass :data:`MAX_VOLUME_BYTES`."""
+    if need > MAX_VOLUME_BYTES:
+        raise InputError(
+            f"a {w}x{h} pair with {nd} disparities needs a {need / 2**30:.1f} GiB cost volume, "
+            f"over the limit of {MAX_VOLUME_BYTES / 2**30:.0f} GiB: search fewer disparities "
+            "(max_disparity, min_disparity) or downscale the pair"
+        )
+
+
+def _check_options(
+    uniqueness: float, lr_check: float | None, subpixel: bool, median: bool
+) -> tuple[float, float | None, bool, bool]:
+    """The options shared by both matchers, checked and converted."""
+    u = check_real(uniqueness, "uniqueness", 0.0, 1.0, high_inclusive=False)
+    if lr_check is not None:
+        lr_check = check_real(lr_check, "lr_check (pixels; None: no check)", 0.0)
+    return u, lr_check, check_bool(subpixel, "subpixel"), check_bool(median, "median")
 
 
 def semi_global_matching(
@@ -573,30 +615,37 @@ def semi_global_matching(
     (H, W) float32 ndarray
         Disparities in pixels, NaN where rejected or outside the search range.
     """
-    L, R = _pair(left, right, max_disparity, min_disparity)
+    L, R, max_disparity, min_disparity = _pair(left, right, max_disparity, min_disparity)
+    paths = check_int(paths, "paths")
     if paths not in (4, 8):
         raise InputError(f"paths must be 4 or 8; got {paths}")
-    if int(block) != block or block < 1 or block % 2 == 0:
-        raise InputError(f"block must be an odd integer >= 1; got {block}")
-    _check_options(uniqueness, lr_check)
-    area = int(block) ** 2
-    p1 = round(3 * area if P1 is None else P1)
-    p2 = round(16 * area if P2 is None else P2)
+    block = check_int(block, "block", 1)
+    if block % 2 == 0:
+        raise InputError(f"block must be an odd integer >= 1; got {block}: try {block + 1}")
+    census = _census_window(census, "census")
+    uniqueness, lr_check, subpixel, median = _check_options(uniqueness, lr_check, subpixel, median)
+    area = block**2
+    # penalties beyond the 16-bit costs are refused below; bound them first so that
+    # round() never sees an overflowing value
+    p1 = round(3 * area if P1 is None else check_real(P1, "P1", 0.0, 1 << 13))
+    p2 = round(16 * area if P2 is None else check_real(P2, "P2", 0.0, 1 << 13))
     if not 0 < p1 <= p2:
         raise InputError(f"need 0 < P1 <= P2; got P1={p1}, P2={p2}")
-    nbits = int(census) ** 2 - 1
+    nbits = census**2 - 1
     if area * nbits + p2 >= (1 << 13):
         raise InputError(
             f"block {block} with census {census} and P2 {p2} overflow the 16-bit costs: "
             "use a smaller block or P2"
         )
     nd = int(max_disparity) - int(min_disparity) + 1
-    cl, cr = census_transform(L, census), census_transform(R, census)
     h, w = L.shape
+    n_chunks = max(1, min(h, 2 * numba.get_num_threads()))
+    # the uint16 cost and two path sums per cell, and the float32 block-sum rings
+    _check_volume(w, h, nd, h * w * nd * 6 + n_chunks * (block + 1) * w * nd * 4)
+    cl, cr = census_transform(L, census), census_transform(R, census)
     cost = np.empty((h, w, nd), dtype=np.uint16)
     crr = _reversed_rows(cr, int(max_disparity))
     r = int(block) // 2
-    n_chunks = max(1, min(h, 2 * numba.get_num_threads()))
     rings = np.empty((n_chunks, 2 * r + 1, w, nd), dtype=np.float32)
     cols = np.empty((n_chunks, w, nd), dtype=np.float32)
     _census_block_cost(cl, crr, int(min_disparity), r, np.float32(nbits), rings, cols, cost)
@@ -620,11 +669,23 @@ def disparity_to_depth(disparity: np.ndarray, focal: float, baseline: float) -> 
     >>> disparity_to_depth(np.array([[64.0, 32.0, 0.0]]), focal=640.0, baseline=0.05)
     array([[0.5, 1. , nan]])
     """
-    d = np.asarray(disparity, dtype=np.float64)
-    if not focal > 0 or not baseline > 0:
-        raise InputError(f"focal and baseline must be positive; got {focal} and {baseline}")
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(d > 0, focal * baseline / d, np.nan)
+    d = check_numeric(disparity, "disparity")
+    fb = _focal_baseline(focal, baseline)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return np.where(d > 0, fb / d, np.nan)
+
+
+def _focal_baseline(focal: float, baseline: float) -> float:
+    """:math:`f B` after checking that both are positive and their product is finite."""
+    f = check_real(focal, "focal (pixels)", 0.0, low_inclusive=False)
+    b = check_real(baseline, "baseline", 0.0, low_inclusive=False)
+    fb = f * b
+    if not (0.0 < fb < np.inf and 1.0 / b < np.inf):
+        raise InputError(
+            f"focal * baseline overflows or underflows float64; got {f:g} * {b:g} = {fb:g}: "
+            "give the focal length in pixels and the baseline in metres"
+        )
+    return fb
 
 
 def depth_resolution(
@@ -632,22 +693,24 @@ def depth_resolution(
 ) -> np.ndarray:
     r"""Depth change of one disparity step at depth :math:`z`:
     :math:`\Delta z = z^2 \Delta d / (f B)` (the first-order error of :math:`z = fB/d`)."""
-    z = np.asarray(depth, dtype=np.float64)
-    if not focal > 0 or not baseline > 0 or not disparity_step > 0:
-        raise InputError("focal, baseline and disparity_step must be positive")
-    return z * z * disparity_step / (focal * baseline)
+    z = check_numeric(depth, "depth")
+    fb = _focal_baseline(focal, baseline)
+    step = check_real(disparity_step, "disparity_step", 0.0, low_inclusive=False)
+    with np.errstate(over="ignore"):
+        return z * z * (step / fb)
 
 
 def disparity_to_points(disparity: np.ndarray, Q: npt.ArrayLike) -> np.ndarray:
     r"""3-D points ``(H, W, 3)`` from a disparity map and the rectification's
     :math:`Q` (``cv2.reprojectImageTo3D``): :math:`(X, Y, Z, W)^T = Q (x, y, d, 1)^T`,
     point :math:`(X, Y, Z) / W`; NaN where the disparity is NaN or not positive."""
-    d = np.asarray(disparity, dtype=np.float64)
+    d = check_numeric(disparity, "disparity")
     if d.ndim != 2:
         raise InputError(f"disparity must be (H, W); got shape {d.shape}")
-    q = np.asarray(Q, dtype=np.float64)
+    q = check_numeric(Q, "Q")
     if q.shape != (4, 4):
         raise InputError(f"Q must be 4x4; got shape {q.shape}")
+    check_finite(q, "Q")
     h, w = d.shape
     ys, xs = np.mgrid[:h, :w].astype(np.float64)
     hom = np.stack([xs, ys, d, np.ones_like(d)], axis=-1) @ q.T
@@ -688,15 +751,15 @@ def reprojection_matrix(focal: float, baseline: float, size: tuple[int, int]) ->
     >>> disparity_to_points(np.full((3, 5), 25.0), Q)[1, 2].tolist()
     [0.0, 0.0, 2.0]
     """
-    if not focal > 0 or not baseline > 0:
-        raise InputError(f"focal and baseline must be positive; got {focal} and {baseline}")
-    w, h = size
+    _focal_baseline(focal, baseline)
+    f, b = float(focal), float(baseline)
+    w, h = check_size(size, "size")
     return np.array(
         [
             [1.0, 0.0, 0.0, -(w - 1) / 2],
             [0.0, 1.0, 0.0, -(h - 1) / 2],
-            [0.0, 0.0, 0.0, focal],
-            [0.0, 0.0, 1.0 / baseline, 0.0],
+            [0.0, 0.0, 0.0, f],
+            [0.0, 0.0, 1.0 / b, 0.0],
         ]
     )
 
@@ -705,8 +768,8 @@ def bad_pixel_rate(disparity: np.ndarray, truth: np.ndarray, threshold: float = 
     """Middlebury's bad-pixel rate: the share of pixels with known truth (``truth > 0``)
     whose disparity is off by more than ``threshold`` pixels; invalid (NaN) disparities
     count as bad."""
-    d = np.asarray(disparity, dtype=np.float64)
-    t = np.asarray(truth, dtype=np.float64)
+    d, t = check_numeric(disparity, "disparity"), check_numeric(truth, "truth")
+    threshold = check_real(threshold, "threshold (pixels)", 0.0)
     if d.shape != t.shape:
         raise InputError(f"disparity and truth must have the same shape; got {d.shape}, {t.shape}")
     known = t > 0
@@ -859,12 +922,14 @@ def block_matching(
     (H, W) float32 ndarray
         Disparities, NaN where rejected or outside the search range.
     """
-    L, R = _pair(left, right, max_disparity, min_disparity)
-    if int(window) != window or window < 1 or window % 2 == 0 or window > 45:
+    L, R, max_disparity, min_disparity = _pair(left, right, max_disparity, min_disparity)
+    window = check_int(window, "window")
+    if window < 1 or window % 2 == 0 or window > 45:
         raise InputError(f"window must be an odd integer in 1..45; got {window}")
-    if cost not in ("sad", "ssd", "ncc"):
+    if not isinstance(cost, str):
         raise InputError(f"cost must be 'sad', 'ssd' or 'ncc'; got {cost!r}")
-    _check_options(uniqueness, lr_check)
+    check_choice(cost, "cost", ("sad", "ssd", "ncc"))
+    uniqueness, lr_check, subpixel, median = _check_options(uniqueness, lr_check, subpixel, median)
     nd = int(max_disparity) - int(min_disparity) + 1
     r = int(window) // 2
     h, w = L.shape

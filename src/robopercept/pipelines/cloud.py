@@ -16,6 +16,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from robopercept._checks import check_int, check_real, plain_repr
+from robopercept.errors import InputError
 from robopercept.pointcloud import (
     PointCloud,
     euclidean_clusters,
@@ -24,6 +26,7 @@ from robopercept.pointcloud import (
     statistical_outlier_removal,
     voxel_downsample,
 )
+from robopercept.pointcloud.cloud import check_cloud
 
 __all__ = ["CloudProcessing", "process_cloud"]
 
@@ -52,6 +55,22 @@ class CloudProcessing:
     steps: list[dict[str, Any]]
     planes: list[dict[str, Any]]
     cluster_sizes: list[int]
+
+
+def _seq(value: Any) -> list[Any]:
+    """``boxes`` as a list after checking that it is a list or tuple."""
+    if not isinstance(value, (list, tuple)):
+        raise InputError(
+            f"boxes must be a list of (axis, low, high) tuples; got {type(value).__name__}"
+        )
+    return list(value)
+
+
+def _parts(value: Any, name: str, n: int, form: str) -> tuple[Any, ...]:
+    """``value`` as a tuple after checking that it is a list or tuple of ``n`` items."""
+    if not isinstance(value, (list, tuple)) or len(value) != n:
+        raise InputError(f"{name} must be {form}, {n} values; got {plain_repr(value)}")
+    return tuple(value)
 
 
 def process_cloud(
@@ -87,7 +106,37 @@ def process_cloud(
     Returns
     -------
     CloudProcessing
+
+    Raises
+    ------
+    InputError
+        ``cloud`` not a PointCloud, or a step's parameters of the wrong type, number or
+        range (checked before any step runs; named as the steps name them, ``voxel_size``,
+        ``k``, ``std_ratio``, ``max_planes``, ``threshold``, ``min_inliers``,
+        ``tolerance``, ``min_size``, ``max_size``, ``min_value``, ``max_value``).
     """
+    check_cloud(cloud)
+    boxes = [_parts(b, "each pass-through box", 3, "(axis, low, high)") for b in _seq(boxes)]
+    boxes = [(a, check_real(lo, "min_value"), check_real(hi, "max_value")) for a, lo, hi in boxes]
+    if voxel is not None:
+        voxel = check_real(voxel, "voxel_size", 0.0, low_inclusive=False)
+    if sor is not None:
+        k, ratio = _parts(sor, "sor", 2, "(k, std_ratio)")
+        sor = (check_int(k, "k", 2), check_real(ratio, "std_ratio", 0.0))
+    min_plane = check_int(min_plane, "min_inliers", 3)
+    if planes is not None:
+        n, thr = _parts(planes, "planes", 2, "(max_planes, threshold)")
+        planes = (
+            check_int(n, "max_planes", 1),
+            check_real(thr, "threshold", 0.0, low_inclusive=False),
+        )
+    if clusters is not None:
+        tol, cmin, cmax = _parts(clusters, "clusters", 3, "(tolerance, min_size, max_size)")
+        clusters = (
+            check_real(tol, "tolerance", 0.0, low_inclusive=False),
+            check_int(cmin, "min_size", 1),
+            check_int(cmax, "max_size", 1),
+        )
     steps: list[dict[str, Any]] = []
 
     def step(name: str, n_in: int, n_out: int, t0: float, **extra: Any) -> None:

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robopercept._checks import check_int, check_real
 from robopercept.errors import InputError
 from robopercept.motion import GaussianBackground, detections_from_mask
 from robopercept.tracking import MotRows, MultiObjectTracker, Track
@@ -99,13 +100,49 @@ def track_objects(
     Raises
     ------
     InputError
-        ``min_area`` not a positive integer.
+        At the call: ``frames`` not iterable, ``detections`` not MotRows, ``tracker``
+        not a MultiObjectTracker, ``min_score`` not a number, ``min_area`` not a
+        positive integer; while iterating: an item of ``frames`` that is not an
+        ``(index, image)`` pair.
     """
-    if int(min_area) != min_area or min_area < 1:
-        raise InputError(f"min_area must be an integer >= 1; got {min_area}")
-    tracker = MultiObjectTracker() if tracker is None else tracker
+    if isinstance(frames, (str, bytes)) or not isinstance(frames, Iterable):
+        raise InputError(
+            f"frames must be an iterable of (index, image) pairs (a VideoSource); got "
+            f"{type(frames).__name__}"
+        )
+    if detections is not None and not isinstance(detections, MotRows):
+        raise InputError(
+            f"detections must be MotRows (robopercept.tracking.read_mot) or None; got "
+            f"{type(detections).__name__}"
+        )
+    if tracker is not None and not isinstance(tracker, MultiObjectTracker):
+        raise InputError(
+            f"tracker must be a MultiObjectTracker or None; got {type(tracker).__name__}"
+        )
+    if min_score is not None:
+        min_score = check_real(min_score, "min_score")
+    min_area = check_int(min_area, "min_area", 1)
+    return _track(
+        frames, detections, MultiObjectTracker() if tracker is None else tracker, min_score,
+        min_area,
+    )  # fmt: skip
+
+
+def _track(
+    frames: Iterable[tuple[int, np.ndarray]],
+    detections: MotRows | None,
+    tracker: MultiObjectTracker,
+    min_score: float | None,
+    min_area: int,
+) -> Iterator[MotFrame]:
+    """The loop of :func:`track_objects`, on checked arguments."""
     background = None if detections is not None else GaussianBackground()
-    for index, frame in frames:
+    for item in frames:
+        if not (isinstance(item, tuple) and len(item) == 2):
+            raise InputError(
+                f"each item of frames must be an (index, image) pair; got {type(item).__name__}"
+            )
+        index, frame = check_int(item[0], "the frame index", 0), item[1]
         number = index + 1  # MOTChallenge frames count from 1
         if detections is not None:
             rows = detections.at(number)

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from robopercept._checks import check_int, check_numeric, check_real, check_reals, plain_repr
 from robopercept.errors import InputError
 from robopercept.pipelines.plane_tracking import STAGES, PlaneTrackResult
 from robopercept.tracking.gated import TrackStatus
@@ -33,13 +34,39 @@ def plane_errors(
     normal: np.ndarray, d: float, true_normal: np.ndarray, true_d: float
 ) -> tuple[float, float]:
     """Angle between the normals (degrees, sign ignored) and ``|d - d_true|`` (metres),
-    with both planes in the ``n.x = d``, ``d >= 0`` form; NaN for a missing plane."""
-    n = np.asarray(normal, dtype=np.float64)
-    m = np.asarray(true_normal, dtype=np.float64)
+    with both planes in the ``n.x = d``, ``d >= 0`` form; NaN for a missing plane
+    (a non-finite ``normal`` or ``d``).
+
+    The normals need not be unit vectors: each is divided by its largest component
+    first, so any finite non-zero scale gives the same angle.
+
+    Raises
+    ------
+    InputError
+        A normal that is not 3 real numbers, a zero or non-finite ``true_normal``, a
+        non-finite ``true_d``, or a ``d`` that is not a number.
+
+    Examples
+    --------
+    >>> plane_errors(np.array([0.0, 0.0, 2.0]), 1.5, np.array([0.0, 0.0, 1.0]), 1.0)
+    (0.0, 0.5)
+    """
+    n = check_numeric(normal, "normal")
+    if n.shape != (3,):
+        raise InputError(f"normal must be 3 numbers (nx, ny, nz); got shape {n.shape}")
+    m = check_reals(true_normal, "true_normal", 3)
+    true_d = check_real(true_d, "true_d")
+    if isinstance(d, (bool, np.bool_)) or not isinstance(d, (int, float, np.integer, np.floating)):
+        raise InputError(f"d must be a number (NaN for a missing plane); got {plain_repr(d)}")
     if not (np.isfinite(n).all() and np.isfinite(d)):
         return math.nan, math.nan
+    if not (np.abs(m).max() > 0 and np.abs(n).max() > 0):
+        raise InputError(
+            f"normals must be non-zero; got normal={n.tolist()}, true_normal={m.tolist()}"
+        )
+    n, m = n / np.abs(n).max(), m / np.abs(m).max()
     c = abs(float(n @ m) / (np.linalg.norm(n) * np.linalg.norm(m)))
-    return math.degrees(math.acos(min(c, 1.0))), abs(float(d) - float(true_d))
+    return math.degrees(math.acos(min(c, 1.0))), abs(float(d) - true_d)
 
 
 @dataclass(frozen=True)
@@ -176,7 +203,28 @@ def summarize(
     Returns
     -------
     PlaneTrackSummary
+
+    Raises
+    ------
+    InputError
+        ``results`` not a sequence of PlaneTrackResult, ``truths`` not None or a
+        sequence of dicts (one per result), or a count or time of the wrong type.
     """
+    if not isinstance(results, Sequence) or isinstance(results, (str, bytes)):
+        raise InputError(
+            f"results must be a list of PlaneTrackResult; got {type(results).__name__}"
+        )
+    bad = next((r for r in results if not isinstance(r, PlaneTrackResult)), None)
+    if bad is not None:
+        raise InputError(f"results must hold PlaneTrackResult objects; got {type(bad).__name__}")
+    if truths is not None and (
+        not isinstance(truths, Sequence) or not all(isinstance(t, dict) for t in truths)
+    ):
+        raise InputError("truths must be None or a list of dicts (one frame's ground truth each)")
+    min_board_pixels = check_int(min_board_pixels, "min_board_pixels", 0)
+    skipped = check_int(skipped, "skipped", 0)
+    if wall_seconds is not None:
+        wall_seconds = check_real(wall_seconds, "wall_seconds", 0.0)
     counts = {str(s): 0 for s in TrackStatus}
     for r in results:
         counts[str(r.status)] += 1

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robopercept._checks import check_int, check_numeric, check_real
 from robopercept.depth import ColorRangeSelector
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation import Plane, PlaneModel, fit_plane_inverse_depth, ransac
@@ -100,15 +101,24 @@ class PlaneMeasurerConfig:
         sel = ColorRangeSelector(self.hsv_low, self.hsv_high, self.occlusion_tolerance)
         object.__setattr__(self, "hsv_low", tuple(float(v) for v in sel.hsv_low))
         object.__setattr__(self, "hsv_high", tuple(float(v) for v in sel.hsv_high))
+        object.__setattr__(self, "occlusion_tolerance", sel.occlusion_tolerance)
         for name in ("threshold_1m", "threshold_min"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"{name} must be > 0; got {getattr(self, name)}")
-        if not 0 < self.probability < 1:
-            raise InputError(f"probability must be in (0, 1); got {self.probability}")
-        if self.min_points < 3 or self.max_iterations < 1:
-            raise InputError("min_points >= 3 and max_iterations >= 1 required")
-        if self.refit_iterations < 0 or self.effective_points < 1:
-            raise InputError("refit_iterations >= 0 and effective_points >= 1 required")
+            v = check_real(getattr(self, name), f"{name} (metres)", 0.0, low_inclusive=False)
+            object.__setattr__(self, name, v)
+        p = check_real(self.probability, "probability", 0.0, 1.0, low_inclusive=False,
+                       high_inclusive=False)  # fmt: skip
+        object.__setattr__(self, "probability", p)
+        if self.hue_tolerance is not None:
+            tol = check_real(self.hue_tolerance, "hue_tolerance (OpenCV hue units)", 0.0)
+            object.__setattr__(self, "hue_tolerance", tol)
+        for name, low in (
+            ("min_points", 3),
+            ("max_iterations", 1),
+            ("refit_iterations", 0),
+            ("effective_points", 1),
+            ("rng", 0),
+        ):
+            object.__setattr__(self, name, check_int(getattr(self, name), name, low))
 
 
 @dataclass(frozen=True)
@@ -172,7 +182,7 @@ class PlaneHueModel(Model[Plane]):
     name = "plane with hue"
 
     def __init__(self, hue_tolerance: float) -> None:
-        self.tol = float(hue_tolerance)
+        self.tol = check_real(hue_tolerance, "hue_tolerance (OpenCV hue units)", 0.0)
         self._plane = PlaneModel()
 
     def fit_minimal(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -227,7 +237,11 @@ class PlaneMeasurer:
     """
 
     def __init__(self, config: PlaneMeasurerConfig | None = None) -> None:
-        self.config = config or PlaneMeasurerConfig()
+        self.config = PlaneMeasurerConfig() if config is None else config
+        if not isinstance(self.config, PlaneMeasurerConfig):
+            raise InputError(
+                f"config must be a PlaneMeasurerConfig or None; got {type(self.config).__name__}"
+            )
         c = self.config
         self.selector = ColorRangeSelector(c.hsv_low, c.hsv_high, c.occlusion_tolerance)
         self._prev_ratio: float | None = None
@@ -259,6 +273,13 @@ class PlaneMeasurer:
         """
         if not isinstance(frame, RGBDFrame):
             raise InputError(f"frame must be an RGBDFrame; got {type(frame).__name__}")
+        if predicted is not None:
+            predicted = check_numeric(predicted, "predicted")
+            if predicted.shape != (3,):
+                raise InputError(
+                    "predicted must be a closest point d * n, 3 numbers, or None; got shape "
+                    f"{predicted.shape}"
+                )
         cp = self.selector(
             frame.depth,
             frame.color,
@@ -297,8 +318,8 @@ class PlaneMeasurer:
         thr = self.threshold(pts)
         initial = None
         if predicted is not None and np.all(np.isfinite(predicted)):
-            dp = float(np.linalg.norm(predicted))
-            if dp > 0:
+            dp = math.hypot(*predicted)  # no overflow for large finite coordinates
+            if 0 < dp < math.inf:
                 initial = np.append(predicted / dp, -dp)[None]
         min_inl = None
         if self._prev_ratio is not None:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from robopercept._checks import check_int
 from robopercept.errors import InputError
 from robopercept.estimation.least_squares import scatter_matrix
 from robopercept.pipelines.plane_measure import (
@@ -73,6 +74,7 @@ class PlaneTrackerConfig(PlaneMeasurerConfig, GatedTrackConfig):
     def __post_init__(self) -> None:
         PlaneMeasurerConfig.__post_init__(self)
         GatedTrackConfig.__post_init__(self)
+        object.__setattr__(self, "smoothing_lag", check_int(self.smoothing_lag, "smoothing_lag", 0))
 
     @property
     def measurer(self) -> PlaneMeasurerConfig:
@@ -202,10 +204,10 @@ class PlaneTracker:
     """
 
     def __init__(self, config: PlaneTrackerConfig | None = None) -> None:
-        self.config = config or PlaneTrackerConfig()
+        self.config = PlaneTrackerConfig() if config is None else config
         if not isinstance(self.config, PlaneTrackerConfig):
             raise InputError(
-                f"config must be a PlaneTrackerConfig; got {type(self.config).__name__}"
+                f"config must be a PlaneTrackerConfig or None; got {type(self.config).__name__}"
             )
         self.measurer = PlaneMeasurer(self.config.measurer)
         self.track = GatedTrack(self.config.track, dim=3)

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_points
+from robopercept._checks import check_int, check_points, plain_repr
 from robopercept.errors import InputError
 
 __all__ = ["PointCloud", "check_cloud"]
@@ -59,7 +59,11 @@ class PointCloud:
         object.__setattr__(self, "colors", _optional(self.colors, "colors", n))
         object.__setattr__(self, "normals", _optional(self.normals, "normals", n))
         if self.shape is not None:
-            h, w = (int(v) for v in self.shape)
+            if not (isinstance(self.shape, (tuple, list)) and len(self.shape) == 2):
+                raise InputError(
+                    f"shape must be (H, W), two integers, or None; got {plain_repr(self.shape)}"
+                )
+            h, w = (check_int(v, "shape (H, W)", 0) for v in self.shape)
             if h * w != n:
                 raise InputError(f"shape {self.shape} must have H * W == N ({n}) points")
             object.__setattr__(self, "shape", (h, w))

@@ -19,7 +19,7 @@ import pynanoflann
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from robopercept._checks import check_int, check_positive, check_range
+from robopercept._checks import check_int, check_real
 from robopercept.errors import InputError
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
@@ -68,8 +68,8 @@ def pass_through(
     ax = _AXES.get(axis, axis) if isinstance(axis, str) else axis
     if isinstance(ax, bool) or ax not in (0, 1, 2):
         raise InputError(f"axis must be 'x', 'y', 'z' or 0, 1, 2; got {axis!r}")
-    lo = check_range(min_value, "min_value")
-    hi = check_range(max_value, "max_value")
+    lo = check_real(min_value, "min_value")
+    hi = check_real(max_value, "max_value")
     if lo > hi:
         raise InputError(f"min_value must be <= max_value; got {lo:g} > {hi:g}: swap them")
     v = cloud.points[:, ax]
@@ -177,7 +177,7 @@ def voxel_downsample(cloud: PointCloud, voxel_size: float) -> tuple[PointCloud, 
     ([[0.02, 0.01, 0.0], [0.51, 0.0, 0.0]], [0, 0, 1])
     """
     cloud = check_cloud(cloud)
-    s = check_positive(voxel_size, "voxel_size")
+    s = check_real(voxel_size, "voxel_size", 0.0, low_inclusive=False)
     fin = _finite_index(cloud)
     inverse = np.full(len(cloud), -1, dtype=np.int64)
     if fin.size == 0:
@@ -400,7 +400,7 @@ def statistical_outlier_removal(
     """
     cloud = check_cloud(cloud)
     k = check_int(k, "k", 2)
-    ratio = check_range(std_ratio, "std_ratio", 0.0)
+    ratio = check_real(std_ratio, "std_ratio", 0.0)
     finite = cloud.finite_mask()
     fin = None if finite.all() else np.flatnonzero(finite)  # None: no copy of the points
     del finite
@@ -441,7 +441,7 @@ def radius_outlier_removal(
     indices : (M,) int64 ndarray
     """
     cloud = check_cloud(cloud)
-    r = check_positive(radius, "radius")
+    r = check_real(radius, "radius", 0.0, low_inclusive=False)
     need = check_int(min_neighbors, "min_neighbors", 0)
     fin = _finite_index(cloud)
     if fin.size == 0:

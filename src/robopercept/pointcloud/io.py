@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_extension, check_file
+from robopercept._checks import check_bool, check_extension, check_file
 from robopercept.errors import FileFormatError
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
@@ -165,7 +165,7 @@ def read_pcd(path: str | os.PathLike[str]) -> PcdData:
     FileFormatError
         Missing, truncated or corrupt file, or a header that does not match the data.
     """
-    p = Path(path)
+    p = check_file(path, "a PCD file")
     try:
         raw = p.read_bytes()
     except OSError as exc:
@@ -569,6 +569,7 @@ def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: b
     """
     check_cloud(cloud)
     p = check_cloud_path(path)
+    binary = check_bool(binary, "binary")
     suffix = p.suffix.lower()
     if p.parent and not p.parent.exists():
         p.parent.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from robopercept._checks import check_int, check_positive
+from robopercept._checks import check_int, check_real, check_reals
 from robopercept.errors import InputError
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
@@ -55,10 +55,8 @@ def estimate_normals(
     if k is not None:
         k = check_int(k, "k", 3)
     if radius is not None:
-        radius = check_positive(radius, "radius")
-    vp = np.asarray(viewpoint, dtype=np.float64).reshape(-1)
-    if vp.shape != (3,) or not np.isfinite(vp).all():
-        raise InputError(f"viewpoint must be 3 finite numbers; got {viewpoint!r}")
+        radius = check_real(radius, "radius", 0.0, low_inclusive=False)
+    vp = check_reals(viewpoint, "viewpoint", 3)
     n = len(cloud)
     normals = np.full((n, 3), np.nan)
     curvature = np.full(n, np.nan)

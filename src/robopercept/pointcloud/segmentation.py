@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robopercept._checks import as_rng, check_int, check_range
-from robopercept.errors import DegenerateError
+from robopercept._checks import as_rng, check_int, check_magnitude, check_real
+from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation import Plane, PlaneModel, ransac
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
@@ -33,8 +33,12 @@ class PlaneSegment:
 
 
 def _check(cloud: PointCloud, threshold: float) -> float:
+    """``threshold`` as a float after checking it and the cloud: a PointCloud whose finite
+    coordinates stay within 1e70 (the minimal plane fit multiplies squared edge lengths,
+    a fourth power of the coordinates, which must stay below float64's 1.8e308)."""
     check_cloud(cloud)
-    return check_range(threshold, "threshold", 0.0, None, low_inclusive=False)
+    check_magnitude(cloud.points, "cloud.points", 1e70)
+    return check_real(threshold, "threshold", 0.0, low_inclusive=False)
 
 
 def segment_plane(
@@ -76,6 +80,9 @@ def segment_plane(
     ------
     DegenerateError
         Fewer than 3 finite points, or all of them collinear.
+    InputError
+        Not a PointCloud, a threshold that is not a positive number, or coordinates
+        beyond 1e70 in magnitude (rescale the cloud).
     """
     threshold = _check(cloud, threshold)
     finite = cloud.finite_mask()
@@ -135,6 +142,8 @@ def segment_planes(
     threshold = _check(cloud, threshold)
     max_planes = check_int(max_planes, "max_planes", 1)
     min_inliers = check_int(min_inliers, "min_inliers", 3)
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
+        raise InputError(f"rng must be a non-negative int seed, a Generator or None; got {rng}")
     gen = as_rng(rng)
     remaining = np.flatnonzero(cloud.finite_mask())
     found: list[PlaneSegment] = []

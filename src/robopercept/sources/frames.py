@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from robopercept._checks import check_int, check_real
+from robopercept.depth.rgbd import check_intrinsics
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.transforms import check_transform
@@ -48,7 +50,15 @@ class RGBDFrame:
     ground_truth: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        kd, kc = self.depth_intrinsics, self.color_intrinsics
+        object.__setattr__(self, "index", check_int(self.index, "index", 0))
+        kd = check_intrinsics(self.depth_intrinsics, "depth_intrinsics")
+        kc = check_intrinsics(self.color_intrinsics, "color_intrinsics")
+        for name in ("depth", "color"):
+            if not isinstance(getattr(self, name), np.ndarray):
+                raise InputError(
+                    f"frame {self.index}: {name} must be a numpy array; got "
+                    f"{type(getattr(self, name)).__name__}"
+                )
         if self.depth.ndim != 2 or self.depth.shape != (kd.height, kd.width):
             raise InputError(
                 f"frame {self.index}: depth is {self.depth.shape[::-1]} but the depth "
@@ -60,5 +70,8 @@ class RGBDFrame:
                 f"intrinsics say {kc.width}x{kc.height}: check camera.json"
             )
         object.__setattr__(self, "T_color_depth", check_transform(self.T_color_depth))
-        if not (self.depth_scale > 0):
-            raise InputError(f"depth_scale must be > 0; got {self.depth_scale}")
+        object.__setattr__(
+            self,
+            "depth_scale",
+            check_real(self.depth_scale, "depth_scale (metres per unit)", 0.0, low_inclusive=False),
+        )

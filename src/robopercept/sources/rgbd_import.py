@@ -53,6 +53,14 @@ from typing import Any
 
 import numpy as np
 
+from robopercept._checks import (
+    as_path,
+    check_bool,
+    check_numeric,
+    check_real,
+    check_reals,
+    plain_repr,
+)
 from robopercept.errors import FileFormatError, InputError
 from robopercept.geometry import CameraIntrinsics
 from robopercept.imaging.io import read_image
@@ -143,13 +151,28 @@ def camera_preset(name: str) -> CameraIntrinsics:
     >>> (k.fx, k.fy, k.cx, k.cy, k.model)
     (535.4, 539.2, 320.1, 247.6, 'none')
     """
-    try:
-        return CAMERA_PRESETS[name]
-    except KeyError:
+    if not isinstance(name, str) or name not in CAMERA_PRESETS:
         raise InputError(
-            f"unknown camera preset {name!r} (--preset); choose from "
+            f"unknown camera preset {plain_repr(name)} (--preset); choose from "
             f"{', '.join(CAMERA_PRESETS)}, or give --intrinsics fx,fy,cx,cy"
-        ) from None
+        )
+    return CAMERA_PRESETS[name]
+
+
+def _check_encoding(encoding: str) -> None:
+    """InputError unless ``encoding`` is one of :data:`DEPTH_ENCODINGS`."""
+    if not isinstance(encoding, str) or encoding not in DEPTH_ENCODINGS:
+        raise InputError(
+            f"depth encoding must be one of {', '.join(DEPTH_ENCODINGS)} (--depth-encoding); "
+            f"got {plain_repr(encoding)}"
+        )
+
+
+def _units(units_per_metre: float) -> float:
+    """``units_per_metre`` as a float after checking that it is a real number > 0."""
+    return check_real(
+        units_per_metre, "depth units per metre (--depth-scale)", 0.0, low_inclusive=False
+    )
 
 
 def decode_depth(
@@ -189,17 +212,12 @@ def decode_depth(
     raw = np.asarray(raw)
     if raw.ndim != 2:
         raise InputError(f"depth must be a single-channel (H, W) image; got shape {raw.shape}")
-    if encoding not in DEPTH_ENCODINGS:
-        raise InputError(
-            f"depth encoding must be one of {', '.join(DEPTH_ENCODINGS)} (--depth-encoding); "
-            f"got {encoding!r}"
-        )
+    if raw.dtype.kind not in "buif":
+        raise InputError(f"depth must be numeric; got dtype {raw.dtype}")
+    _check_encoding(encoding)
     if encoding == "linear":
-        if not (np.isfinite(units_per_metre) and units_per_metre > 0):
-            raise InputError(
-                f"depth units per metre (--depth-scale) must be > 0; got {units_per_metre}"
-            )
-        z = raw.astype(np.float64) / float(units_per_metre)
+        units_per_metre = _units(units_per_metre)
+        z = raw.astype(np.float64) / units_per_metre
         z[~np.isfinite(z) | (z < 0)] = 0.0
         return z
     if raw.dtype.kind not in "ui" or (raw.size and (raw.min() < 0 or raw.max() > 65535)):
@@ -237,10 +255,14 @@ def depth_to_units(metres: np.ndarray, units_per_metre: float) -> tuple[np.ndarr
     >>> d.tolist(), n
     ([[5000, 0, 0]], 1)
     """
-    scaled = np.rint(np.asarray(metres, dtype=np.float64) * float(units_per_metre))
-    scaled[~np.isfinite(scaled) | (scaled < 0)] = 0.0
-    over = scaled > 65535
-    scaled[over] = 0.0
+    units = _units(units_per_metre)
+    z = check_numeric(metres, "metres")
+    with np.errstate(over="ignore", invalid="ignore"):
+        scaled = np.rint(z * units)
+        measured = np.isfinite(z) & (z > 0)
+        # a finite depth whose units overflow to inf is out of range too
+        over = measured & ~(scaled <= 65535)
+        scaled[~measured | over | (scaled < 0)] = 0.0
     return scaled.astype(np.uint16), int(over.sum())
 
 
@@ -369,7 +391,13 @@ def find_rgbd_pairs(
     FileFormatError
         ``src`` is not a folder, or no pair is found (the message lists the layouts).
     """
-    folder = Path(src)
+    folder = as_path(src, "SRC_DIR")
+    if match is not None and not isinstance(match, str):
+        raise InputError(
+            f"match (--match) must be a shell pattern string such as 'TUM*'; got "
+            f"{plain_repr(match)}"
+        )
+    max_difference = check_real(max_difference, "max_difference (seconds)", 0.0)
     if not folder.is_dir():
         raise FileFormatError(f"{folder}: not a folder (SRC_DIR must be an RGB-D folder)")
     layout, pairs = "pairs", []
@@ -472,10 +500,16 @@ def _camera(
             )
         return k
     assert intrinsics is not None
-    if len(intrinsics) != 4:
-        raise InputError(f"--intrinsics needs fx,fy,cx,cy (four numbers); got {intrinsics}")
-    fx, fy, cx, cy = (float(v) for v in intrinsics)
+    fx, fy, cx, cy = _check_intrinsics(intrinsics)
     return CameraIntrinsics(width, height, fx, fy, cx, cy)
+
+
+def _check_intrinsics(intrinsics: Any) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` as floats after checking four finite numbers, focals > 0."""
+    fx, fy, cx, cy = (float(v) for v in check_reals(intrinsics, "--intrinsics fx,fy,cx,cy", 4))
+    if not (fx > 0 and fy > 0):
+        raise InputError(f"--intrinsics fx,fy (pixels) must be > 0; got {fx:g}, {fy:g}")
+    return fx, fy, cx, cy
 
 
 def _read_pair(pair: RGBDPair) -> tuple[np.ndarray, np.ndarray]:
@@ -559,22 +593,20 @@ def import_rgbd_folder(
     """
     from robopercept.progress import progress_bar
 
-    src_p, out_p = Path(src), Path(out)
-    if depth_encoding not in DEPTH_ENCODINGS:
-        raise InputError(
-            f"depth encoding must be one of {', '.join(DEPTH_ENCODINGS)} (--depth-encoding); "
-            f"got {depth_encoding!r}"
-        )
+    src_p, out_p = as_path(src, "SRC_DIR"), as_path(out, "OUT_DIR")
+    _check_encoding(depth_encoding)
     if depth_scale is not None and depth_encoding != "linear":
         raise InputError(
             f"--depth-scale applies to --depth-encoding linear only; {depth_encoding} fixes "
             "its own units"
         )
-    units = 5000.0 if depth_scale is None else float(depth_scale)
-    if not (np.isfinite(units) and units > 0):
-        raise InputError(f"--depth-scale (depth units per metre) must be > 0; got {units}")
-    if not (np.isfinite(fps) and fps > 0):
-        raise InputError(f"--fps must be > 0; got {fps}")
+    units = 5000.0 if depth_scale is None else _units(depth_scale)
+    fps = check_real(fps, "--fps", 0.0, low_inclusive=False)
+    progress = check_bool(progress, "progress")
+    if preset is not None:
+        camera_preset(preset)
+    if intrinsics is not None:
+        _check_intrinsics(intrinsics)
     layout, pairs = find_rgbd_pairs(src_p, match=match, max_difference=max_difference)
     if out_p.resolve() == src_p.resolve():
         raise InputError(f"OUT_DIR must differ from SRC_DIR ({src_p}): give a new folder")

@@ -90,7 +90,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from robopercept._checks import check_int, check_positive
+from robopercept._checks import check_bool, check_int, check_real, check_size
 from robopercept.depth import pixel_rays
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics
@@ -603,28 +603,27 @@ class SyntheticRGBDScene:
 
     def __post_init__(self) -> None:
         check_int(self.n_frames, "n_frames", 1)
-        if self.motion not in MOTIONS:
+        if not isinstance(self.motion, str) or self.motion not in MOTIONS:
             raise InputError(f"motion must be one of {', '.join(MOTIONS)}; got {self.motion!r}")
-        if self.distractor not in DISTRACTORS:
+        if not isinstance(self.distractor, str) or self.distractor not in DISTRACTORS:
             raise InputError(
                 f"distractor must be one of {', '.join(DISTRACTORS)}; got {self.distractor!r}"
             )
-        if not isinstance(self.occluder, (bool, np.bool_)):
-            raise InputError(f"occluder must be True or False; got {self.occluder!r}")
+        check_bool(self.occluder, "occluder")
         check_int(self.seed, "seed", 0)
         for name in ("depth_size", "color_size"):
-            size = tuple(getattr(self, name))
-            if len(size) != 2 or min(size) < 8 or not all(isinstance(v, int) for v in size):
-                raise InputError(f"{name} must be (width, height) integers >= 8; got {size!r}")
+            # each frame renders a few float64 arrays per pixel: 2**24 pixels (4K UHD has
+            # 2**23) keep a frame within a few GiB
+            size = check_size(getattr(self, name), name, minimum=8, max_pixels=1 << 24)
             object.__setattr__(self, name, size)
         for name in ("fps", "depth_scale", "baseline", "max_depth", "period"):
-            check_positive(getattr(self, name), name)
+            object.__setattr__(
+                self, name, check_real(getattr(self, name), name, 0.0, low_inclusive=False)
+            )
         for name in ("disparity_noise", "subpixel", "color_noise", "min_depth"):
-            if not getattr(self, name) >= 0:
-                raise InputError(f"{name} must be >= 0; got {getattr(self, name)}")
+            object.__setattr__(self, name, check_real(getattr(self, name), name, 0.0))
         for name in ("flying_pixel_rate", "dropout_rate"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise InputError(f"{name} must be in [0, 1]; got {getattr(self, name)}")
+            object.__setattr__(self, name, check_real(getattr(self, name), name, 0.0, 1.0))
         wd, hd = self.depth_size
         wc, hc = self.color_size
         # D435: depth HFOV about 87 deg, colour HFOV about 69 deg; square pixels

@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from robopercept._checks import as_path, check_real
+from robopercept.depth.rgbd import check_intrinsics
 from robopercept.errors import FileFormatError, InputError
 from robopercept.geometry import CameraIntrinsics
 from robopercept.imaging.io import read_image, write_image
@@ -104,8 +106,10 @@ def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
     FileFormatError
         Missing, unreadable or incomplete file; the message ends with
         :data:`CAMERA_JSON_HELP` (the fields and ``robopercept rgbd-import``).
+    InputError
+        ``path`` cannot name a file (:func:`~robopercept._checks.as_path`).
     """
-    p = Path(path)
+    p = as_path(path, "the path of camera.json")
     try:
         if not p.is_file():
             raise FileFormatError(f"{p}: missing; {CAMERA_JSON_HELP}")
@@ -160,8 +164,10 @@ def read_timestamp_list(path: str | os.PathLike[str]) -> list[tuple[float, str]]
     FileFormatError
         A missing file (naming ``robopercept rgbd-import`` for other layouts) or a line
         that is not ``timestamp file``.
+    InputError
+        ``path`` cannot name a file (:func:`~robopercept._checks.as_path`).
     """
-    path = Path(path)
+    path = as_path(path, "the path of the timestamp list")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -225,6 +231,7 @@ def associate_timestamps(
     >>> associate_timestamps([(1.0, "d1"), (2.0, "d2")], [(1.01, "c1"), (5.0, "c5")], 0.02)
     [(1.0, 'd1', 'c1')]
     """
+    max_difference = check_real(max_difference, "max_difference (seconds)", 0.0)
     if not rgb:
         return []
     t_rgb = np.array([t for t, _ in rgb])
@@ -267,7 +274,8 @@ class TUMFolderSource:
     """
 
     def __init__(self, path: str | os.PathLike[str], max_difference: float = 0.02) -> None:
-        self.path = Path(path)
+        self.path = as_path(path, "the TUM folder")
+        max_difference = check_real(max_difference, "max_difference (seconds)", 0.0)
         try:
             is_dir = self.path.is_dir()
         except OSError as exc:  # ENAMETOOLONG, ELOOP, EACCES
@@ -372,6 +380,7 @@ def _exists(p: Path) -> bool:
 def camera_dict(k: CameraIntrinsics) -> dict[str, Any]:
     """The camera as camera.json stores it: ``width``, ``height``, ``fx``, ``fy``,
     ``cx``, ``cy`` (pixels), ``model`` and ``coeffs`` (see ``docs/tracking.md``)."""
+    check_intrinsics(k, "k")
     return {
         "width": k.width,
         "height": k.height,
@@ -390,8 +399,18 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
 
     Files are written frame by frame, and the lists are flushed as they grow, so an
     interrupted write leaves a readable folder with the frames written so far.
+
+    Raises
+    ------
+    InputError
+        ``path`` cannot name a folder (:func:`~robopercept._checks.as_path`), or
+        ``frames`` is not an iterable of :class:`RGBDFrame`.
     """
-    out = Path(path)
+    out = as_path(path, "the output folder")
+    if isinstance(frames, (str, bytes, RGBDFrame)) or not isinstance(frames, Iterable):
+        raise InputError(
+            f"frames must be an iterable of RGBDFrame objects; got {type(frames).__name__}"
+        )
     (out / "rgb").mkdir(parents=True, exist_ok=True)
     (out / "depth").mkdir(parents=True, exist_ok=True)
     header = "# written by robopercept\n"

@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from robopercept.errors import FileFormatError, InputError
+from robopercept._checks import as_path, check_int, check_real
+from robopercept.errors import FileFormatError
 from robopercept.imaging.io import VideoReader, read_image
 
 __all__ = ["IMAGE_EXTENSIONS", "VideoSource"]
@@ -83,11 +84,11 @@ class VideoSource:
         fps: float | None = None,
         max_frames: int | None = None,
     ) -> None:
-        if fps is not None and not fps > 0:
-            raise InputError(f"fps must be > 0; got {fps}")
-        if max_frames is not None and (int(max_frames) != max_frames or max_frames < 1):
-            raise InputError(f"max_frames must be an integer >= 1; got {max_frames}")
-        self.path = Path(path)
+        if fps is not None:
+            fps = check_real(fps, "fps (--fps)", 0.0, low_inclusive=False)
+        if max_frames is not None:
+            max_frames = check_int(max_frames, "max_frames (--max-frames)", 1)
+        self.path = as_path(path, "the video or image folder")
         self.skipped: list[tuple[int, str]] = []
         self.max_frames = max_frames
         self.files: list[Path] = []
