@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
@@ -70,7 +71,7 @@ class TestConvBNAct:
         assert (z < 0).any()
 
     def test_bad_arguments(self) -> None:
-        with pytest.raises(InputError, match="in_channels must be a positive integer"):
+        with pytest.raises(InputError, match="in_channels must be >= 1"):
             ConvBNAct(0, 4)
         with pytest.raises(InputError, match="activation must be one of relu"):
             make_activation("swish")
@@ -251,3 +252,60 @@ class TestBadInput:
     def test_good_input_passes_unchanged(self) -> None:
         x = torch.zeros(2, 3, 4, 4).to(memory_format=torch.channels_last)
         assert check_input(x, 3) is x  # channels_last memory format is still NCHW
+
+
+# issue 25: sizes that would allocate terabytes (or loop 2**40 times), lists where a
+# name goes, floats and strings where an int or a probability goes
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: make_activation(["relu"]), r"activation must be one of .* got list"),
+        (lambda: ResidualBlock(4, 4, act=["relu"]), r"activation must be one of"),
+        (lambda: ConvBNAct(3, 4, groups=np.float32(2.0)), r"groups must be an integer"),
+        (lambda: ConvBNAct(3, 4, groups=2), r"groups=2 must divide in_channels \(3\)"),
+        (lambda: ConvBNAct(2**20, 2**20), r"3x3 convolution .* would take 36 TiB"),
+        (lambda: ConvBNAct(3, 4, kernel_size=2**40), r"kernel_size must be at most 65536"),
+        (lambda: ConvBNAct(3, 4, bn=1), r"bn must be True or False"),
+        (lambda: Bottleneck(8, 4, expansion=2**63), r"expansion must be at most 1024"),
+        (lambda: VGGStage(1, 4, n_convs=2**40), r"n_convs must be at most 1024"),
+        (lambda: InceptionBlock(2**64 - 1, 4, 4, 4, 2, 2, 2), r"in_channels must be at most"),
+        (lambda: Classifier(ConvBNAct(1, 4), 4, 10, 1, dropout=[1, 2]), r"dropout must be a real"),
+        (lambda: Classifier(ConvBNAct(1, 4), -1, 10, 1), r"num_features must be >= 1"),
+        (lambda: Classifier(None, 4, 10, 1), r"features must be a torch.nn.Module"),
+        (lambda: Classifier(ConvBNAct(1, 4), 2**20, 2**20, 1), r"linear head .* would take"),
+        (lambda: vgg_small(widths=None), r"widths must be a non-empty sequence"),
+        (lambda: vgg_small(convs_per_stage=2**63), r"convs_per_stage must be at most 1024"),
+        (lambda: vgg_small(num_classes=2**63), r"num_classes must be at most"),
+        (lambda: vgg_small(dropout="3"), r"dropout must be a real number.*--dropout"),
+        (lambda: vgg_small(widths=(2**40,)), r"widths must be .*\(at most 268435456"),
+        (lambda: vgg_small(widths=(2**20,)), r"3x3 convolution from 1048576 to 1048576"),
+        (lambda: resnet_small(depth=1.4e252), r"depth must be a non-empty sequence"),
+        (lambda: resnet_small(num_classes=2**40), r"num_classes must be at most"),
+        (lambda: resnet_small(num_classes=2**27), r"linear head \(134217728 classes"),
+        (lambda: resnet_small(block=["basic"]), r"block must be 'basic' or 'bottleneck'"),
+        (lambda: inception_small(in_channels=2**64 - 1), r"in_channels must be at most"),
+        (lambda: inception_small(blocks=None), r"blocks must be a non-empty sequence"),
+        # each layer is affordable, the whole is not: counted on the meta device
+        (
+            lambda: resnet_small(widths=(2048,) * 8, depth=8),
+            r"resnet_small .* would have [\d,]+ parameters; the limit is 268,435,456",
+        ),
+        (lambda: build_model(["vgg_small"]), r"unknown model"),
+    ],
+)
+def test_issue25_hostile_arguments_are_refused(call, match) -> None:
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_numpy_integers_and_bounds_still_build() -> None:
+    torch.manual_seed(0)
+    a = vgg_small(widths=(np.int64(4), 8), num_classes=np.int64(3), convs_per_stage=np.int64(1))
+    torch.manual_seed(0)
+    b = vgg_small(widths=(4, 8), num_classes=3, convs_per_stage=1)
+    # the meta-device count draws no random numbers: same seed, same weights
+    for p, q in zip(a.parameters(), b.parameters(), strict=True):
+        assert torch.equal(p, q)
+    assert isinstance(a.num_classes, int) and a(torch.zeros(1, 1, 8, 8)).shape == (1, 3)
+    assert Bottleneck(8, 2, expansion=1024).out_channels == 2048
+    assert ConvBNAct(4, 4, groups=np.int64(2)).conv.groups == 2

@@ -378,3 +378,68 @@ class TestAugmentations:
         ds.transform = Compose([RandomCrop(12, 2, generator=0), RandomFlip(generator=0)])
         xb, yb = next(iter(torch.utils.data.DataLoader(ds, batch_size=16)))
         assert xb.shape == (16, 1, 12, 12) and yb.shape == (16,)
+
+
+# issue 25: hostile scalars, containers and paths refused by name at construction
+_IMGS = np.random.default_rng(0).uniform(0, 1, (6, 1, 8, 8)).astype(np.float32)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: Compose(None), r"transforms must be a list of callables"),
+        (lambda: Compose(float("nan")), r"transforms must be a list"),
+        (lambda: GaussianNoise(std=[1, 2]), r"std must be a real number"),
+        (lambda: GaussianNoise(std="3"), r"std must be a real number"),
+        (lambda: GaussianNoise(std=float("inf")), r"std must be finite"),
+        (lambda: Normalize([0.5], [1 + 1j]), r"std must be real numbers"),
+        (lambda: Normalize([float("nan")], [1.0]), r"mean must be finite"),
+        (lambda: Normalize([0.5], [1e-40]), r"std must be >= 1e-30"),
+        (lambda: Normalize([0.5], [0.25])(None), r"Normalize takes a floating-point torch"),
+        (lambda: RandomFlip(p=float("nan")), r"p \(a probability\) must be finite"),
+        (lambda: RandomFlip(axis=["horizontal"]), r"axis must be one of"),
+        (lambda: RandomAffine(scale=(1.0, None)), r"scale must be a real number"),
+        (lambda: RandomAffine(scale=(1,)), r"scale must be a pair"),
+        (lambda: RandomAffine(scale=(1e-300, 1.0)), r"scale must be in \[0.001, 1000\]"),
+        (lambda: RandomAffine(translate=(1e300, 0.0)), r"translate must be in \[0, 1\]"),
+        (lambda: RandomAffine(degrees=float("nan")), r"degrees must be finite"),
+        (lambda: ColorJitter(brightness=(1 + 1j)), r"brightness must be a real number"),
+        (lambda: ColorJitter(clip="yes"), r"clip must be True or False"),
+        (lambda: RandomCrop((4,)), r"size must be an int or \(height, width\)"),
+        (lambda: RandomFlip(generator=2**64), r"seed \(generator\) must be in"),
+        (lambda: RandomFlip()(torch.zeros(1, 4, 4, dtype=torch.uint8)), r"floating-point"),
+        (lambda: GaussianNoise()(np.zeros((1, 4, 4))), r"takes a torch tensor"),
+        (lambda: ArrayDataset(_IMGS, [0] * 6, None), r"classes must be a sequence"),
+        (lambda: ArrayDataset(_IMGS, [0] * 6, ["a"], transform=3), r"transform must be a call"),
+        (lambda: ArrayDataset(_IMGS * 1e20, [0] * 6, ["a"]), r"images has values up to"),
+        (lambda: ArrayDataset([[1, 2], [3]], [0], ["a"]), r"images must be array-like"),
+        (lambda: ArrayDataset(_IMGS, [[0], [1, 2]], ["a"]), r"labels must be array-like"),
+        (lambda: ImageFolder(3), r"root \(the image folder\) must be a file or folder path"),
+        (lambda: ImageFolder(".", size=()), r"size must be \(width, height\)"),
+        (lambda: ImageFolder(".", size=(2**30, 2**30)), r"would take .* lower size"),
+        (lambda: ImageFolder(".", mode=None), r"mode must be one of 'rgb', 'gray'"),
+        (lambda: shapes_dataset(4, noise=1 + 1j), r"noise \(a standard deviation\) must be"),
+        (lambda: shapes_dataset(4, rng=-5), r"rng must be a seed >= 0"),
+        (lambda: shapes_dataset(2**40, 16), r"would take .*lower n or size"),
+        (lambda: shapes_dataset(4, 2**20), r"would take"),
+        (lambda: stratified_split(np.arange(30) % 3, (0.7, [1, 2], 0.15)), r"fractions must"),
+        (lambda: stratified_split(np.arange(30) % 3, ("a", "b")), r"fractions must be positive"),
+        (lambda: stratified_split([0.0, 1.0, float("nan")], (0.5, 0.5)), r"labels must be finite"),
+    ],
+)
+def test_issue25_hostile_arguments_are_refused(call, match) -> None:
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_valid_extremes_still_work() -> None:
+    # the bounds themselves are accepted and give correct results
+    x = torch.full((1, 4, 4), 0.5)
+    assert torch.equal(RandomFlip(p=np.float32(1.0), generator=0)(x), x)
+    assert torch.equal(GaussianNoise(std=0.0, generator=0)(x), x)
+    assert torch.allclose(RandomAffine(scale=(1.0, 1.0), translate=(0, 0))(x), x, atol=1e-6)
+    assert torch.allclose(Normalize([0.5], [1e-30])(x), torch.zeros_like(x))
+    ds = shapes_dataset(np.int64(4), 8, rng=np.int64(0), noise=0)
+    assert len(ds) == 4 and ds.images.min() >= 0 and np.isfinite(ds.images).all()
+    parts = stratified_split(np.arange(30) % 3, np.array([0.5, 0.5]))
+    assert sorted(np.concatenate(parts).tolist()) == list(range(30))

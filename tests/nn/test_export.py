@@ -69,3 +69,32 @@ def test_every_model_of_the_family_exports(tmp_path, name) -> None:
     with torch.no_grad():
         ref = net(torch.from_numpy(x)).numpy()
     np.testing.assert_allclose(ours, ref, atol=1e-4, rtol=1e-4)
+
+
+# issue 25: no model, bytes or int paths, shapes of bools, NaN or 2**40, opsets of 0.99
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"model": None}, r"model must be a torch.nn.Module"),
+        ({"path": 3}, r"must be a file or folder path"),
+        ({"path": "net.onx"}, r"needs the extension .onnx"),
+        ({"input_shape": (1, 16, True)}, r"input_shape must be \(C, H, W\) of positive"),
+        ({"input_shape": (float("nan"),) * 3}, r"input_shape must be \(C, H, W\)"),
+        ({"input_shape": None}, r"input_shape must be \(C, H, W\)"),
+        ({"input_shape": (1, 2**20, 2**20)}, r"at most 4,194,304"),
+        ({"input_shape": (1, 1, 1)}, r"the model cannot run on input_shape \(1, 1, 1\)"),
+        ({"input_shape": (3, 8, 8)}, r"the model cannot run on input_shape"),
+        ({"opset": 0.99999}, r"opset must be an integer"),
+        ({"opset": 99}, r"opset must be an ONNX operator set in 7 .. 23"),
+    ],
+)
+def test_issue25_bad_arguments_are_refused(tmp_path, kwargs, match) -> None:
+    args = {"model": _net(), "path": tmp_path / "net.onnx", "input_shape": (1, 8, 8), **kwargs}
+    with pytest.raises(InputError, match=match):
+        export_onnx(**args)
+    assert not (tmp_path / "net.onnx").exists()
+
+
+def test_issue25_bytes_path_and_numpy_shape_export(tmp_path) -> None:
+    p = export_onnx(_net(), str(tmp_path / "net.onnx").encode(), (np.int64(1), 8, 8))
+    assert p.exists() and p.stat().st_size > 0

@@ -394,3 +394,58 @@ class TestBadInput:
             receptive_field([(3, 1, 1, 1, 1)])
         with pytest.raises(InputError, match="works per axis"):
             receptive_field([ConvSpec(1, 1, (3, 5))])
+
+
+# issue 25: sizes that would allocate terabytes, huge strides, non-iterable layer lists,
+# values whose products overflow, and a groups message that enumerated 2**40 divisors
+_X = np.random.default_rng(0).uniform(0, 1, (1, 1, 16, 16))
+_W = np.ones((2, 1, 3, 3)) / 9
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: im2col(_X, 3, padding=2**63), r"at most 2\*\*31 - 1"),
+        (lambda: im2col(_X, 3, padding=2**20), r"padded input .* would take .*TiB.*lower padding"),
+        (lambda: conv2d(_X, _W, stride=2**63), r"stride must be at most"),
+        (lambda: conv2d(_X, _W, padding=100_000), r"limit is 1 GiB"),
+        (
+            lambda: conv_transpose2d(_X, np.ones((1, 2, 3, 3)), dilation=2**30),
+            r"the output .* would take .* GiB",
+        ),
+        (lambda: conv2d(_X * 1e300, _W), r"x has values up to .*e\+299.*rescale"),
+        (lambda: conv_transpose2d(_X, np.ones((1, 2, 3, 3)) * 1e200), r"w has values up to"),
+        (lambda: conv2d(_X.astype(np.float32) * 1e20, _W.astype(np.float32)), r"x has values"),
+        (lambda: conv2d(_X, _W.astype(object)), r"w must be a real numeric array"),
+        (lambda: conv2d(_X, _W, np.array(["a", "b"])), r"bias must be a real numeric"),
+        (lambda: conv2d(_X, _W, [[1], [2, 3]]), r"bias must be array-like"),
+        (lambda: parameter_count(None), r"spec must be a ConvSpec or a sequence"),
+        (lambda: parameter_count(3), r"spec must be a ConvSpec"),
+        (lambda: receptive_field(None), r"layers must be a sequence"),
+        (lambda: receptive_field([float("nan"), (2, 2, 0)]), r"layers\[0\] must be"),
+        (lambda: receptive_field([None]), r"layers\[0\] must be"),
+        (
+            lambda: parameter_count(ConvSpec(2**40, 2**41, 3, groups=3)),
+            r"choose groups a divisor of gcd\(1099511627776, 2199023255552\)",
+        ),
+    ],
+)
+def test_issue25_hostile_parameters_are_refused(call, match) -> None:
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_valid_extremes_still_work() -> None:
+    # a large but affordable padding and tiny values keep torch's answers
+    x = _X * 1e-300
+    np.testing.assert_allclose(
+        conv2d(x, _W, padding=40) * 1e300,
+        F.conv2d(_t(_X), _t(_W), padding=40).numpy(),
+        **TOL,
+    )
+    assert im2col(_X, 3, padding=200).shape == (1, 9, 414 * 414)
+    # x at the bound (1e150) is still computed, finite
+    assert np.isfinite(conv2d(_X * 1e150, _W)).all()
+    # a huge group count on a divisible layer is plain arithmetic
+    assert parameter_count(ConvSpec(2**40, 2**40, 1, groups=2**40, bias=False)) == 2**40
+    assert receptive_field([(3, 2**40, 0)])[-1].jump == 2**40

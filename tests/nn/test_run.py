@@ -11,7 +11,14 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.errors import FileFormatError, InputError  # noqa: E402
-from robopercept.nn.run import Architecture, load_data, predict, train_run  # noqa: E402
+from robopercept.nn.run import (  # noqa: E402
+    Architecture,
+    evaluate_run,
+    load_data,
+    load_run,
+    predict,
+    train_run,
+)
 
 ARCH = Architecture(
     model="resnet_small",
@@ -125,3 +132,34 @@ def test_ctrl_c_keeps_the_checkpoint_and_writes_the_history(tmp_path, monkeypatc
     lines = (out / "history.csv").read_text().splitlines()
     assert len(lines) == 3 and lines[2].startswith("2,0.5,")
     assert (out / "checkpoint.pt").exists()
+
+
+# issue 25: devices torch does not know, paths of the wrong type, a bare string of paths
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda p: load_run(p, device="CPU"), r"device \(--device\) must be 'cpu', 'cuda'"),
+        (lambda p: load_run(p, device=" cpu "), r"got ' cpu '"),
+        (lambda p: load_run(p, device=["cpu"]), r"device \(--device\) must be"),
+        (lambda p: load_run(p, device=3), r"device \(--device\) must be"),
+        (lambda p: load_run(3), r"the checkpoint .* must be a file or folder path"),
+        (lambda p: load_run(p / ("n" * 300)), r"file name too long"),
+        (lambda p: predict(p, ["a.png"], device=""), r"got ''"),
+        (lambda p: predict(p, ["a.png"], device=float("nan")), r"device \(--device\)"),
+        (lambda p: predict(p, ["a.png"], top_k=2.5), r"top_k \(--top-k\) must be an integer"),
+        (lambda p: predict(p, 3), r"image_paths must be a list of image files"),
+        (lambda p: predict(p, [None]), r"each image path must be a file or folder path"),
+        (lambda p: evaluate_run(p, "digits", device="bogus"), r"got 'bogus'"),
+        (lambda p: load_data(3), r"--data \(digits, lfw or an image folder\) must be a file"),
+        (lambda p: load_data("digits", mode="grey"), r"mode must be one of 'rgb', 'gray'"),
+        (lambda p: load_data(p, size=()), r"size must be \(width, height\)"),
+    ],
+)
+def test_issue25_bad_arguments_are_refused(tmp_path, call, match) -> None:
+    (tmp_path / "a").mkdir()
+    with pytest.raises(InputError, match=match):
+        call(tmp_path)
+
+
+def test_issue25_bytes_names_the_built_in_set() -> None:
+    assert load_data(b"digits").image_shape == (1, 8, 8)

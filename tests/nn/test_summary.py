@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 torch = pytest.importorskip("torch")
@@ -107,3 +108,32 @@ def test_bad_shape() -> None:
         summary(vgg_small(), (8, 8))
     with pytest.raises(InputError, match="in_channels=3"):
         summary(vgg_small(), (3, 8, 8))
+
+
+# issue 25: no model, a device or dtype torch does not know, an input of 2**40 values
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"model": None}, r"model must be a torch.nn.Module"),
+        ({"device": ""}, r"device must be 'cpu', 'cuda', 'cuda:N' or 'mps'; got ''"),
+        ({"device": "CPU"}, r"device must be .* got 'CPU'"),
+        ({"device": ["cpu"]}, r"device must be .* got \['cpu'\]"),
+        ({"device": "xla"}, r"device 'xla' is not available here"),
+        ({"dtype": np.float64}, r"dtype must be a floating-point torch.dtype"),
+        ({"dtype": torch.int64}, r"dtype must be a floating-point torch.dtype"),
+        ({"input_shape": None}, r"input_shape must be \(N, C, H, W\)"),
+        ({"input_shape": (1, 1, 2**20, 2**20)}, r"a summary runs one small batch"),
+        ({"input_shape": (1, True, 8, 8)}, r"input_shape must be"),
+    ],
+)
+def test_issue25_bad_arguments(kwargs, match) -> None:
+    args = {"model": vgg_small(), "input_shape": (1, 1, 8, 8), **kwargs}
+    with pytest.raises(InputError, match=match):
+        summary(**args)
+
+
+def test_issue25_numpy_sizes_and_explicit_device() -> None:
+    s = summary(vgg_small().double(), (np.int64(1), 8, 8), device="cpu", dtype=torch.float64)
+    assert s.total_params == 72666 and s.output_shape == (1, 10)
+    with pytest.raises(InputError, match=r"differs from the model's weights \(torch.float32\)"):
+        summary(vgg_small(), (1, 8, 8), dtype=torch.float64)

@@ -20,6 +20,7 @@ from robopercept.nn.training import (  # noqa: E402
     evaluate,
     fit,
     load_checkpoint,
+    save_checkpoint,
 )
 
 
@@ -220,3 +221,58 @@ def test_cosine_and_onecycle_schedules() -> None:
             ref.step()
     np.testing.assert_allclose(hist.lr, starts, rtol=1e-12)
     assert hist.lr[0] < hist.lr[1]  # warm-up
+
+
+# issue 25: objects, paths and devices of the wrong kind are refused by name, before
+# any work (no AttributeError from inside torch)
+_DATA = _blobs(12)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: TrainConfig(batch_size=1 + 1j), r"batch_size \(--batch-size\) must be an int"),
+        (lambda: TrainConfig(epochs=2**40), r"epochs \(--epochs\) must be at most 100000"),
+        (lambda: TrainConfig(lr=float("nan")), r"lr \(the learning rate, --lr\) must be finite"),
+        (lambda: TrainConfig(momentum=2.0), r"momentum must be in \[0, 1\]"),
+        (lambda: TrainConfig(nesterov="yes"), r"nesterov must be True or False"),
+        (lambda: TrainConfig(amp="always"), r"amp \('auto', True or False\)"),
+        (lambda: TrainConfig(seed=2**64), r"seed \(--seed\) must be below 2\*\*64"),
+        (lambda: TrainConfig(device="gpu"), r"device \(--device\) must be 'cpu', 'cuda'"),
+        (lambda: TrainConfig(patience=0), r"patience \(or None\) must be >= 1"),
+        (lambda: TrainConfig(lr_multipliers=[1]), r"lr_multipliers must be a dict"),
+        (lambda: TrainConfig(unfreeze_at={1: "head"}), r"unfreeze_at must be a dict"),
+        (lambda: evaluate(None, _DATA), r"model must be a torch.nn.Module"),
+        (lambda: evaluate(_model(), None), r"data must be a data set of \(image, label\)"),
+        (lambda: evaluate(_model(), "object"), r"data must be a data set"),
+        (lambda: evaluate(_model(), np.zeros((3, 3))), r"data must be a data set"),
+        (lambda: evaluate(_model(), [1, 2]), r"must give \(image, label\) pairs"),
+        (lambda: evaluate(_model(), _DATA, batch_size=0), r"batch_size must be >= 1"),
+        (lambda: evaluate(_model(), _DATA, device=float("nan")), r"device \(--device\) must be"),
+        (lambda: fit(None, _DATA, progress=False), r"model must be a torch.nn.Module"),
+        (lambda: fit(_model(), float("nan"), progress=False), r"the training set must be a"),
+        (lambda: fit(_model(), _DATA, "object", progress=False), r"the validation set must be"),
+        (lambda: fit(_model(), _DATA, config=3, progress=False), r"config must be a TrainConfig"),
+        (
+            lambda: fit(_model(), _DATA, checkpoint=float("nan"), progress=False),
+            r"checkpoint must be a file or folder path",
+        ),
+        (lambda: load_checkpoint(3), r"the checkpoint path must be a file or folder path"),
+        (lambda: load_checkpoint("x.pt", model=float("nan")), r"model must be a torch.nn"),
+        (lambda: save_checkpoint("nul\x00name.pt", {}), r"contains a NUL byte"),
+        (lambda: save_checkpoint(3, {}), r"the checkpoint path must be a file or folder"),
+    ],
+)
+def test_issue25_bad_arguments_are_refused(call, match) -> None:
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_numpy_integers_and_defaults_still_work(tmp_path) -> None:
+    cfg = TrainConfig(epochs=np.int64(1), batch_size=np.int64(4), device="cpu")
+    assert cfg.batch_size == 4 and type(cfg.batch_size) is int
+    assert cfg.lr_multipliers == {} and cfg.unfreeze_at == {}
+    ev = evaluate(_model(), _DATA, batch_size=np.int64(3), device=torch.device("cpu"))
+    assert len(ev.y_true) == 12
+    p = save_checkpoint(tmp_path / "c.pt", {"model": _model().state_dict()})
+    assert set(load_checkpoint(str(p).encode(), _model())) == {"model"}

@@ -89,3 +89,33 @@ def test_unfreeze_and_bad_names() -> None:
     with pytest.raises(InputError, match="num_classes"):
         replace_head(net, 1)
     np.testing.assert_equal(len(list(net.parameters())), 6)
+
+
+# issue 25: a model that is not a module, prefixes that are not names, a head of 2**40
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: freeze(None), r"model must be a torch.nn.Module"),
+        (lambda: unfreeze({}), r"model must be a torch.nn.Module"),
+        (lambda: trainable_parameter_names([]), r"model must be a torch.nn.Module"),
+        (lambda: keep_frozen_batchnorm_in_eval("object"), r"model must be a torch.nn.Module"),
+        (lambda: replace_head(np.eye(3), 5), r"model must be a torch.nn.Module"),
+        (lambda: freeze(_Net(), float("nan")), r"prefixes must be a list of parameter-name"),
+        (lambda: unfreeze(_Net(), b"x"), r"prefixes must be a list"),
+        (lambda: unfreeze(_Net(), [3]), r"prefixes must be a list"),
+        (lambda: replace_head(_Net(), [1, 2]), r"num_classes must be an integer"),
+        (lambda: replace_head(_Net(), 2**63), r"num_classes must be at most"),
+        (lambda: replace_head(_Net(), 2**27), r"the new head .* would take 8 GiB"),
+        (lambda: replace_head(_Net(), 5, name=["head"]), r"name must be the qualified name"),
+    ],
+)
+def test_issue25_bad_arguments_are_refused(call, match) -> None:
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_a_single_prefix_string_is_one_prefix() -> None:
+    net = _Net()
+    assert freeze(net, "features") == freeze(net, ["features"])
+    assert trainable_parameter_names(net) == ["head.weight", "head.bias"]
+    assert replace_head(net, np.int64(4)).out_features == 4

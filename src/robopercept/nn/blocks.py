@@ -28,7 +28,14 @@ from typing import cast
 import torch
 from torch import nn
 
+from robopercept._checks import check_bool, check_int
 from robopercept.errors import InputError
+from robopercept.nn._guards import (
+    MAX_LAYERS,
+    MAX_PARAMETERS,
+    check_allocation,
+    check_count,
+)
 
 __all__ = [
     "Bottleneck",
@@ -135,6 +142,11 @@ def make_activation(act: str | nn.Module | None) -> nn.Module | None:
     """
     if act is None or isinstance(act, nn.Module):
         return act
+    if not isinstance(act, str):
+        raise InputError(
+            f"activation must be one of {', '.join(ACTIVATIONS)}, an nn.Module or None; "
+            f"got {type(act).__name__} {act!r}"
+        )
     table: dict[str, Callable[[], nn.Module | None]] = {
         "relu": lambda: nn.ReLU(inplace=True),
         "gelu": nn.GELU,
@@ -148,10 +160,8 @@ def make_activation(act: str | nn.Module | None) -> nn.Module | None:
     return table[act]()
 
 
-def _check_positive_int(value: int, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise InputError(f"{name} must be a positive integer; got {value!r}")
-    return value
+#: the largest kernel size, stride, padding or dilation a block takes (pixels)
+MAX_GEOMETRY = 2**16
 
 
 class ConvBNAct(nn.Sequential):
@@ -202,12 +212,29 @@ class ConvBNAct(nn.Sequential):
         bn: bool = True,
         act: str | nn.Module | None = "relu",
     ) -> None:
-        _check_positive_int(in_channels, "in_channels")
-        _check_positive_int(out_channels, "out_channels")
-        _check_positive_int(kernel_size, "kernel_size")
-        _check_positive_int(stride, "stride")
+        in_channels = check_count(in_channels, "in_channels", 1, MAX_PARAMETERS)
+        out_channels = check_count(out_channels, "out_channels", 1, MAX_PARAMETERS)
+        kernel_size = check_count(kernel_size, "kernel_size", 1, MAX_GEOMETRY)
+        stride = check_count(stride, "stride", 1, MAX_GEOMETRY)
+        dilation = check_count(dilation, "dilation", 1, MAX_GEOMETRY)
+        groups = check_count(groups, "groups", 1, MAX_PARAMETERS)
+        if in_channels % groups or out_channels % groups:
+            raise InputError(
+                f"groups={groups} must divide in_channels ({in_channels}) and out_channels "
+                f"({out_channels}): choose a common divisor"
+            )
         if padding is None:
             padding = dilation * (kernel_size - 1) // 2
+        else:
+            padding = check_count(padding, "padding", 0, MAX_GEOMETRY)
+        bn = check_bool(bn, "bn")
+        check_allocation(
+            out_channels * (in_channels // groups) * kernel_size**2,
+            torch.get_default_dtype().itemsize,
+            f"the weights of a {kernel_size}x{kernel_size} convolution from {in_channels} "
+            f"to {out_channels} channels",
+            "lower the channel counts (widths) or kernel_size",
+        )
         layers: OrderedDict[str, nn.Module] = OrderedDict()
         layers["conv"] = nn.Conv2d(
             in_channels,
@@ -262,7 +289,8 @@ class VGGStage(nn.Sequential):
         pool: bool = True,
         act: str | nn.Module | None = "relu",
     ) -> None:
-        _check_positive_int(n_convs, "n_convs")
+        n_convs = check_count(n_convs, "n_convs", 1, MAX_LAYERS)
+        pool = check_bool(pool, "pool")
         layers: OrderedDict[str, nn.Module] = OrderedDict()
         for i in range(n_convs):
             layers[f"conv{i + 1}"] = ConvBNAct(
@@ -321,6 +349,7 @@ class InceptionBlock(nn.Module):
         act: str | nn.Module | None = "relu",
     ) -> None:
         super().__init__()
+        factorize_5x5 = check_bool(factorize_5x5, "factorize_5x5")
         self.branch1 = ConvBNAct(in_channels, ch1x1, 1, act=act)
         self.branch3 = nn.Sequential(
             ConvBNAct(in_channels, ch3x3red, 1, act=act), ConvBNAct(ch3x3red, ch3x3, 3, act=act)
@@ -341,7 +370,7 @@ class InceptionBlock(nn.Module):
         )
         self.in_channels = in_channels
         #: channels of the concatenated output
-        self.out_channels = ch1x1 + ch3x3 + ch5x5 + pool_proj
+        self.out_channels = int(ch1x1 + ch3x3 + ch5x5 + pool_proj)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Concatenate the four branches along channels.
@@ -404,6 +433,7 @@ class ResidualBlock(nn.Module):
         act: str | nn.Module | None = "relu",
     ) -> None:
         super().__init__()
+        zero_init_residual = check_bool(zero_init_residual, "zero_init_residual")
         self.conv1 = ConvBNAct(in_channels, out_channels, 3, stride=stride, act=act)
         self.conv2 = ConvBNAct(out_channels, out_channels, 3, act=None)
         self.shortcut = _shortcut(in_channels, out_channels, stride)
@@ -467,9 +497,10 @@ class Bottleneck(nn.Module):
         act: str | nn.Module | None = "relu",
     ) -> None:
         super().__init__()
-        _check_positive_int(expansion, "expansion")
+        expansion = check_count(expansion, "expansion", 1, MAX_LAYERS)
+        zero_init_residual = check_bool(zero_init_residual, "zero_init_residual")
         self.expansion = expansion
-        out_channels = width * expansion
+        out_channels = check_int(width, "width", 1) * expansion
         self.conv1 = ConvBNAct(in_channels, width, 1, act=act)
         self.conv2 = ConvBNAct(width, width, 3, stride=stride, act=act)
         self.conv3 = ConvBNAct(width, out_channels, 1, act=None)

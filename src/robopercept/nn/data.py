@@ -31,7 +31,7 @@ batch ``(N, C, H, W)`` (one independent draw per image) and returns the same sha
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -39,9 +39,20 @@ import numpy.typing as npt
 import torch
 import torch.nn.functional as F
 
-from robopercept._checks import as_rng, check_int
+from robopercept._checks import (
+    as_path,
+    as_rng,
+    check_bool,
+    check_choice,
+    check_finite,
+    check_int,
+    check_magnitude,
+    check_ndim,
+    check_real,
+)
 from robopercept.errors import FileFormatError, InputError
 from robopercept.imaging.io import read_image
+from robopercept.nn._guards import MAX_BYTES, check_allocation
 from robopercept.nn.training import Normalize
 
 __all__ = [
@@ -72,9 +83,21 @@ Transform = Callable[[torch.Tensor], torch.Tensor]
 # --------------------------------------------------------------------------- datasets
 
 
+def _check_transform(transform: object) -> Transform | None:
+    """``transform`` if it is None or callable."""
+    if transform is not None and not callable(transform):
+        raise InputError(
+            "transform must be a callable Tensor -> Tensor (e.g. RandomFlip()) or None; "
+            f"got {type(transform).__name__} {transform!r}"[:200]
+        )
+    return transform
+
+
 def _check_images(images: npt.ArrayLike) -> np.ndarray:
     """``images`` as float32 ``(N, C, H, W)``: gray ``(N, H, W)`` gets ``C = 1``."""
-    arr = np.asarray(images)
+    if isinstance(images, torch.Tensor):
+        images = images.detach().cpu().numpy()
+    arr = check_ndim(images, "images", (2, 3, 4))
     if arr.ndim == 3:
         arr = arr[:, None]
     if arr.ndim != 4:
@@ -98,12 +121,14 @@ def _check_images(images: npt.ArrayLike) -> np.ndarray:
         raise InputError(f"images must be floating point; got dtype {arr.dtype}")
     if not np.isfinite(arr).all():
         raise InputError("images contain NaN or inf: drop or repair those images first")
+    # float32 storage: beyond 1e18 squares (variances, losses) overflow float32
+    check_magnitude(arr, "images", 1e18)
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
 def _check_labels(labels: npt.ArrayLike, n: int, n_classes: int) -> np.ndarray:
     """``labels`` as int64 ``(n,)`` with values in ``0 .. n_classes - 1``."""
-    arr = np.asarray(labels)
+    arr = check_ndim(labels, "labels", (0, 1, 2, 3))
     if arr.ndim != 1 or arr.shape[0] != n:
         raise InputError(f"labels must have shape ({n},), one per image; got {arr.shape}")
     if arr.dtype.kind not in "iu":
@@ -171,13 +196,17 @@ class ArrayDataset:
         classes: Sequence[str],
         transform: Transform | None = None,
     ) -> None:
+        if isinstance(classes, bytes) or not isinstance(classes, Iterable):
+            raise InputError(
+                f"classes must be a sequence of class names, e.g. ['cat', 'dog']; got {classes!r}"
+            )
         classes = tuple(str(c) for c in classes)
         if len(classes) == 0:
             raise InputError("classes is empty: pass one name per class, e.g. ['cat', 'dog']")
         self.images = _check_images(images)
         self.labels = _check_labels(labels, self.images.shape[0], len(classes))
         self.classes = classes
-        self.transform = transform
+        self.transform = _check_transform(transform)
 
     def __len__(self) -> int:
         """Number of images ``N``."""
@@ -345,9 +374,14 @@ class ImageFolder(ArrayDataset):
         transform: Transform | None = None,
         skip_invalid: bool = False,
     ) -> None:
-        root = Path(root)
-        if mode not in ("rgb", "gray"):
-            raise InputError(f"mode must be 'rgb' or 'gray'; got {mode!r}")
+        root = as_path(root, "root (the image folder)")
+        mode = check_choice(mode, "mode", ("rgb", "gray"))
+        skip_invalid = check_bool(skip_invalid, "skip_invalid")
+        transform = _check_transform(transform)
+        if size is not None:
+            size = _check_size(size)
+            check_allocation(3 * size[0] * size[1], 4, f"one image resized to {size}", "lower size")
+        loaded = 0
         if not root.is_dir():
             raise InputError(f"image folder {str(root)!r} does not exist or is not a folder")
         class_dirs = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
@@ -387,6 +421,12 @@ class ImageFolder(ArrayDataset):
                 arr = arr[None] if arr.ndim == 2 else arr.transpose(2, 0, 1)
                 if size is not None:
                     arr = _resize(arr, size)
+                loaded += arr.nbytes
+                if loaded > MAX_BYTES:
+                    raise InputError(
+                        f"the images of {str(root)!r} take more than 1 GiB as float32 (at "
+                        f"{f}): pass a smaller size=(width, height), or split the folder"
+                    )
                 images.append(np.ascontiguousarray(arr))
                 labels.append(label)
                 paths.append(f)
@@ -413,9 +453,24 @@ class ImageFolder(ArrayDataset):
         self.skipped = tuple(skipped)
 
 
+def _as_rng(rng: int | np.random.Generator | None) -> np.random.Generator:
+    """:func:`robopercept._checks.as_rng`, with a negative seed refused by name (NumPy
+    raises a bare ``ValueError``)."""
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
+        raise InputError(f"rng must be a seed >= 0, a numpy.random.Generator or None; got {rng}")
+    return as_rng(rng)
+
+
+def _check_size(size: object) -> tuple[int, int]:
+    """``size`` as a ``(width, height)`` pair of positive ints."""
+    if not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise InputError(f"size must be (width, height), e.g. (32, 32); got {size!r}")
+    return check_int(size[0], "size (width)", 1), check_int(size[1], "size (height)", 1)
+
+
 def _resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """``(C, H, W)`` resized to ``size = (width, height)`` by antialiased bilinear."""
-    w, h = (check_int(s, "size", 1) for s in size)
+    w, h = _check_size(size)
     t = torch.from_numpy(image)[None]
     out = F.interpolate(t, size=(h, w), mode="bilinear", align_corners=False, antialias=True)
     return out[0].numpy()
@@ -467,9 +522,16 @@ def shapes_dataset(
     """
     n = check_int(n, "n", 1)
     size = check_int(size, "size", 8)
-    if not np.isfinite(noise) or noise < 0:
-        raise InputError(f"noise must be a standard deviation >= 0; got {noise!r}")
-    gen = as_rng(rng)
+    noise = check_real(noise, "noise (a standard deviation)", 0.0)
+    transform = _check_transform(transform)
+    # about 100 bytes of intermediate arrays per pixel (masks, float64 coordinates)
+    check_allocation(
+        n * size * size,
+        100,
+        f"{n} images of {size} x {size} (with their intermediate arrays)",
+        "lower n or size, or make the data set in chunks with different seeds",
+    )
+    gen = _as_rng(rng)
     labels = gen.permutation(np.arange(n) % 4)
     r = gen.uniform(size / 6, size / 3, n)
     cx = gen.uniform(r, size - r)
@@ -542,17 +604,23 @@ def stratified_split(
     >>> len(train), len(test)
     (4, 4)
     """
-    y = np.asarray(labels)
+    y = check_ndim(labels, "labels", (0, 1, 2, 3))
     if y.ndim != 1 or y.size == 0:
         raise InputError(f"labels must be a non-empty (N,) array; got shape {y.shape}")
-    f = np.asarray(fractions, dtype=np.float64)
+    y = check_finite(y, "labels")
+    f = check_ndim(fractions, "fractions", (0, 1, 2))
+    if f.dtype.kind not in "iuf":
+        raise InputError(
+            f"fractions must be positive numbers, e.g. (0.7, 0.15, 0.15); got {fractions!r}"
+        )
+    f = f.astype(np.float64)
     if f.ndim != 1 or f.size < 1 or not np.all(np.isfinite(f)) or np.any(f <= 0):
         raise InputError(
             f"fractions must be positive numbers, e.g. (0.7, 0.15, 0.15); got {fractions!r}"
         )
     if abs(f.sum() - 1.0) > 1e-6:
         raise InputError(f"fractions must sum to 1; got {fractions!r} (sum {f.sum():.6g})")
-    gen = as_rng(rng)
+    gen = _as_rng(rng)
     parts: list[list[np.ndarray]] = [[] for _ in f]
     for k in np.unique(y):
         members = gen.permutation(np.flatnonzero(y == k))
@@ -604,6 +672,8 @@ def _as_generator(generator: torch.Generator | int | None) -> torch.Generator:
         generator = 0
     if isinstance(generator, bool) or not isinstance(generator, (int, np.integer)):
         raise InputError(f"generator must be a torch.Generator or an int seed; got {generator!r}")
+    if not -(2**63) <= int(generator) < 2**64:
+        raise InputError(f"the seed (generator) must be in [-2**63, 2**64); got {generator}")
     return torch.Generator().manual_seed(int(generator))
 
 
@@ -613,11 +683,25 @@ def _batched(x: torch.Tensor, name: str) -> tuple[torch.Tensor, bool]:
         raise InputError(
             f"{name} takes a torch tensor; got {type(x).__name__}: use torch.from_numpy"
         )
+    if not x.is_floating_point():
+        raise InputError(
+            f"{name} takes floating-point images; got dtype {x.dtype}: use x.float() / 255 "
+            "for 8-bit images"
+        )
     if x.ndim == 3:
         return x[None], True
     if x.ndim == 4:
         return x, False
     raise InputError(f"{name} takes (C, H, W) or (N, C, H, W); got shape {tuple(x.shape)}")
+
+
+def _real_pair(
+    value: object, name: str, low: float | None, high: float | None
+) -> tuple[float, float]:
+    """``value`` as a pair of finite floats in ``[low, high]``."""
+    if not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 2:
+        raise InputError(f"{name} must be a pair (a, b) of numbers; got {value!r}")
+    return check_real(value[0], name, low, high), check_real(value[1], name, low, high)
 
 
 def _uniform(n: int, lo: float, hi: float, gen: torch.Generator) -> torch.Tensor:
@@ -665,8 +749,8 @@ class RandomCrop(_Augmentation):
         generator: torch.Generator | int | None = None,
     ) -> None:
         super().__init__(generator)
-        hw = (size, size) if isinstance(size, (int, np.integer)) else tuple(size)
-        if len(hw) != 2:
+        hw = (size, size) if isinstance(size, (int, np.integer)) else size
+        if not isinstance(hw, (tuple, list)) or len(hw) != 2:
             raise InputError(f"size must be an int or (height, width); got {size!r}")
         self.size = (check_int(hw[0], "size", 1), check_int(hw[1], "size", 1))
         self.padding = check_int(padding, "padding", 0)
@@ -709,11 +793,8 @@ class RandomFlip(_Augmentation):
         generator: torch.Generator | int | None = None,
     ) -> None:
         super().__init__(generator)
-        if not 0.0 <= float(p) <= 1.0:
-            raise InputError(f"p must be a probability in [0, 1]; got {p!r}")
-        if axis not in ("horizontal", "vertical"):
-            raise InputError(f"axis must be 'horizontal' or 'vertical'; got {axis!r}")
-        self.p = float(p)
+        self.p = check_real(p, "p (a probability)", 0.0, 1.0)
+        axis = check_choice(axis, "axis", ("horizontal", "vertical"))
         self.axis = axis
 
     def _apply(self, x: torch.Tensor) -> torch.Tensor:
@@ -741,9 +822,9 @@ class RandomAffine(_Augmentation):
     degrees : float or (low, high)
         Rotation range in degrees (a float ``d`` means ``(-d, d)``).
     translate : (float, float)
-        Largest shift as fractions of width and height.
+        Largest shift as fractions of width and height, in [0, 1] (as torchvision).
     scale : (low, high)
-        Range of the scale factor (> 0).
+        Range of the scale factor, within [0.001, 1000].
     generator : torch.Generator or int, optional
         Source of randomness.
     """
@@ -756,20 +837,17 @@ class RandomAffine(_Augmentation):
         generator: torch.Generator | int | None = None,
     ) -> None:
         super().__init__(generator)
-        if isinstance(degrees, (int, float, np.integer, np.floating)):
-            if degrees < 0:
-                raise InputError(f"degrees must be >= 0 or a (low, high) pair; got {degrees!r}")
-            degrees = (-float(degrees), float(degrees))
-        self.degrees = (float(degrees[0]), float(degrees[1]))
-        self.translate = (float(translate[0]), float(translate[1]))
-        self.scale = (float(scale[0]), float(scale[1]))
+        if isinstance(degrees, (int, float, np.integer, np.floating)) and not isinstance(
+            degrees, (bool, np.bool_)
+        ):
+            d = check_real(degrees, "degrees", 0.0)
+            degrees = (-d, d)
+        self.degrees = _real_pair(degrees, "degrees", None, None)
+        # beyond a shift of the whole image or a scale of 1000 nothing of it is left
+        self.translate = _real_pair(translate, "translate", 0.0, 1.0)
+        self.scale = _real_pair(scale, "scale", 1e-3, 1e3)
         if self.degrees[0] > self.degrees[1] or self.scale[0] > self.scale[1]:
             raise InputError("degrees and scale ranges must be (low, high) with low <= high")
-        if min(self.translate) < 0 or self.scale[0] <= 0:
-            raise InputError(
-                f"translate must be >= 0 and scale > 0; got translate={translate!r}, "
-                f"scale={scale!r}"
-            )
 
     def _apply(self, x: torch.Tensor) -> torch.Tensor:
         """Warp each image of the batch with its own random affine map."""
@@ -820,12 +898,9 @@ class ColorJitter(_Augmentation):
         generator: torch.Generator | int | None = None,
     ) -> None:
         super().__init__(generator)
-        for name, v in (("brightness", brightness), ("contrast", contrast)):
-            if not 0.0 <= float(v) <= 1.0:
-                raise InputError(f"{name} must be in [0, 1]; got {v!r}")
-        self.brightness = float(brightness)
-        self.contrast = float(contrast)
-        self.clip = bool(clip)
+        self.brightness = check_real(brightness, "brightness", 0.0, 1.0)
+        self.contrast = check_real(contrast, "contrast", 0.0, 1.0)
+        self.clip = check_bool(clip, "clip")
 
     def _apply(self, x: torch.Tensor) -> torch.Tensor:
         """Scale brightness, then stretch about the mean, per image."""
@@ -853,9 +928,7 @@ class GaussianNoise(_Augmentation):
 
     def __init__(self, std: float = 0.05, generator: torch.Generator | int | None = None) -> None:
         super().__init__(generator)
-        if not np.isfinite(std) or std < 0:
-            raise InputError(f"std must be >= 0; got {std!r}")
-        self.std = float(std)
+        self.std = check_real(std, "std", 0.0)
 
     def _apply(self, x: torch.Tensor) -> torch.Tensor:
         """``x + std * z`` with ``z`` standard normal from the generator."""
@@ -872,6 +945,11 @@ class Compose:
     """
 
     def __init__(self, transforms: Sequence[Transform]) -> None:
+        if not isinstance(transforms, (tuple, list)):
+            raise InputError(
+                "transforms must be a list of callables, e.g. [RandomFlip(), "
+                f"GaussianNoise()]; got {transforms!r}"
+            )
         self.transforms = list(transforms)
         for t in self.transforms:
             if not callable(t):

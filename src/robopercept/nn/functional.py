@@ -24,14 +24,16 @@ their dtype (float32 stays float32); integer inputs are computed in float64.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_ndim
+from robopercept._checks import check_magnitude, check_ndim
 from robopercept.errors import InputError
+from robopercept.nn._guards import check_allocation
 
 __all__ = [
     "ConvSpec",
@@ -53,8 +55,15 @@ IntPair = int | tuple[int, int]
 # --------------------------------------------------------------------------- checks
 
 
-def _pair(value: object, name: str, minimum: int) -> tuple[int, int]:
-    """``value`` (an int or a pair of ints) as a pair, each ``>= minimum``."""
+#: the largest size, kernel, stride, padding or dilation (NumPy strides are C longs)
+MAX_GEOMETRY = 2**31 - 1
+
+
+def _pair(
+    value: object, name: str, minimum: int, maximum: int | None = MAX_GEOMETRY
+) -> tuple[int, int]:
+    """``value`` (an int or a pair of ints) as a pair, each in ``[minimum, maximum]``
+    (``maximum=None``: pure arithmetic, no bound)."""
     items = tuple(value) if isinstance(value, (tuple, list)) else (value, value)
     if len(items) != 2 or not all(
         isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in items
@@ -63,6 +72,8 @@ def _pair(value: object, name: str, minimum: int) -> tuple[int, int]:
     h, w = int(items[0]), int(items[1])
     if h < minimum or w < minimum:
         raise InputError(f"{name} must be >= {minimum}; got {value!r}")
+    if maximum is not None and (h > maximum or w > maximum):
+        raise InputError(f"{name} must be at most 2**31 - 1 (pixels); got {value!r}")
     return h, w
 
 
@@ -77,8 +88,25 @@ def _batch(x: npt.ArrayLike, name: str = "x") -> tuple[np.ndarray, bool]:
     return (arr[None] if unbatched else arr), unbatched
 
 
+def _weights(w: npt.ArrayLike) -> np.ndarray:
+    """``w`` as a real numeric 4-D array."""
+    arr = check_ndim(w, "w", (4,))
+    if arr.dtype.kind not in "fiub":
+        raise InputError(f"w must be a real numeric array; got dtype {arr.dtype}")
+    return arr
+
+
 def _out_dtype(*arrays: np.ndarray) -> np.dtype:
     return np.result_type(*[a.dtype for a in arrays], np.float32)
+
+
+def _check_products(dtype: np.dtype, **arrays: np.ndarray) -> None:
+    """Refuse inputs whose products overflow ``dtype``: each value must stay within
+    ``sqrt(max) / 1e4`` (about 1e150 in float64, 2e15 in float32), so that a product is
+    below ``max / 1e8`` and a sum of up to 1e8 of them stays finite."""
+    limit = float(np.sqrt(np.finfo(dtype).max)) / 1e4
+    for name, arr in arrays.items():
+        check_magnitude(arr, name, limit)
 
 
 def _size(n: int, k: int, s: int, p: int, d: int, axis: str, flag: str) -> int:
@@ -120,6 +148,19 @@ def _padded_windows(
 ) -> np.ndarray:
     ho = _size(x.shape[2], k[0], s[0], p[0], d[0], "height", "")
     wo = _size(x.shape[3], k[1], s[1], p[1], d[1], "width", "")
+    n, c, h, w = x.shape
+    check_allocation(
+        n * c * (h + 2 * p[0]) * (w + 2 * p[1]),
+        x.itemsize,
+        f"the padded input ({n}, {c}, {h + 2 * p[0]}, {w + 2 * p[1]})",
+        "lower padding",
+    )
+    check_allocation(
+        n * c * k[0] * k[1] * ho * wo,
+        x.itemsize,
+        f"the unrolled windows ({n}, {c} * {k[0]} * {k[1]}, {ho} * {wo})",
+        "lower kernel_size or padding, raise the stride, or pass fewer images at a time",
+    )
     xp = np.pad(x, ((0, 0), (0, 0), (p[0], p[0]), (p[1], p[1])), constant_values=fill)
     return _windows(xp, k, s, d, (ho, wo))
 
@@ -186,22 +227,27 @@ def im2col(
 
 def _check_groups(c_in: int, c_out: int, groups: int, what: str) -> None:
     if c_in % groups or c_out % groups:
-        common = [g for g in range(1, min(c_in, c_out) + 1) if not c_in % g and not c_out % g]
+        gcd = math.gcd(c_in, c_out)
+        if gcd <= 4096:
+            among = f"among the common divisors {[g for g in range(1, gcd + 1) if not gcd % g]}"
+        else:
+            among = f"a divisor of gcd({c_in}, {c_out}) = {gcd}"
         raise InputError(
             f"groups={groups} must divide both the input channels ({c_in}) and the "
-            f"output channels ({c_out}) of the {what}: choose groups among the common "
-            f"divisors {common}"
+            f"output channels ({c_out}) of the {what}: choose groups {among}"
         )
 
 
 def _check_bias(b: npt.ArrayLike | None, c_out: int) -> np.ndarray | None:
     if b is None:
         return None
-    arr = np.asarray(b)
+    arr = check_ndim(b, "bias", (0, 1, 2, 3, 4))
     if arr.shape != (c_out,):
         raise InputError(
             f"bias must have shape ({c_out},), one value per output channel; got {arr.shape}"
         )
+    if arr.dtype.kind not in "fiub":
+        raise InputError(f"bias must be a real numeric array; got dtype {arr.dtype}")
     return arr
 
 
@@ -271,7 +317,7 @@ def conv2d(
     (1, 1, 2, 2)
     """
     xb, unbatched = _batch(x)
-    wa = check_ndim(w, "w", (4,))
+    wa = _weights(w)
     g = _pair(groups, "groups", 1)[0]
     o, cg, kh, kw = wa.shape
     c = xb.shape[1]
@@ -286,6 +332,7 @@ def conv2d(
     p = _pair(padding, "padding", 0)
     d = _pair(dilation, "dilation", 1)
     dtype = _out_dtype(xb, wa)
+    _check_products(dtype, x=xb, w=wa)
     win = _padded_windows(xb.astype(dtype, copy=False), (kh, kw), s, p, d)
     n, _, _, _, ho, wo = win.shape
     cols = win.reshape(n, g, cg * kh * kw, ho * wo)  # copies the strided view once
@@ -364,7 +411,7 @@ def conv_transpose2d(
            [3., 3., 4., 4.]])
     """
     xb, unbatched = _batch(x)
-    wa = check_ndim(w, "w", (4,))
+    wa = _weights(w)
     g = _pair(groups, "groups", 1)[0]
     cw, og, kh, kw = wa.shape
     n, c, h, wd = xb.shape
@@ -389,11 +436,23 @@ def conv_transpose2d(
     out = conv_output_size((h, wd), (kh, kw), s, p, d, transposed=True, output_padding=op)
     assert isinstance(out, tuple)  # pairs in, a pair out
     dtype = _out_dtype(xb, wa)
+    _check_products(dtype, x=xb, w=wa)
+    full_h = (h - 1) * s[0] + d[0] * (kh - 1) + 1 + op[0]
+    full_w = (wd - 1) * s[1] + d[1] * (kw - 1) + 1 + op[1]
+    itemsize = np.dtype(dtype).itemsize
+    fix = "lower stride, dilation or output_padding, or pass fewer images at a time"
+    check_allocation(
+        n * o * full_h * full_w, itemsize, f"the output ({n}, {o}, {full_h}, {full_w})", fix
+    )
+    check_allocation(
+        n * o * kh * kw * h * wd,
+        itemsize,
+        f"the scattered taps ({n}, {o}, {kh}, {kw}, {h}, {wd})",
+        fix,
+    )
     xg = xb.astype(dtype, copy=False).reshape(n, g, c // g, h * wd)
     wg = wa.astype(dtype, copy=False).reshape(g, c // g, og * kh * kw)
     cols = np.einsum("gck,ngcl->ngkl", wg, xg, optimize=True).reshape(n, o, kh, kw, h, wd)
-    full_h = (h - 1) * s[0] + d[0] * (kh - 1) + 1 + op[0]
-    full_w = (wd - 1) * s[1] + d[1] * (kw - 1) + 1 + op[1]
     full = np.zeros((n, o, full_h, full_w), dtype=dtype)
     for a in range(kh):  # col2im: scatter-add each kernel tap (kh * kw vectorized adds)
         for bb in range(kw):
@@ -738,7 +797,7 @@ LayerLike = ConvSpec | int | Sequence[int]
 def _layer_geometry(layer: LayerLike, index: int) -> tuple[int, int, int, int]:
     if isinstance(layer, ConvSpec):
         pairs = [
-            _pair(v, f"layers[{index}].{n}", m)
+            _pair(v, f"layers[{index}].{n}", m, None)
             for v, n, m in (
                 (layer.kernel_size, "kernel_size", 1),
                 (layer.stride, "stride", 1),
@@ -752,7 +811,13 @@ def _layer_geometry(layer: LayerLike, index: int) -> tuple[int, int, int, int]:
                 "(kernel, stride, padding, dilation) tuples for one axis"
             )
         return pairs[0][0], pairs[1][0], pairs[2][0], pairs[3][0]
-    items = [layer] if isinstance(layer, (int, np.integer)) else list(layer)
+    items = (
+        [layer]
+        if isinstance(layer, (int, np.integer))
+        else list(layer)
+        if isinstance(layer, (tuple, list, np.ndarray))
+        else []
+    )
     if not 1 <= len(items) <= 4 or not all(
         isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in items
     ):
@@ -810,6 +875,11 @@ def receptive_field(layers: Iterable[LayerLike]) -> list[ReceptiveField]:
     >>> receptive_field([(3, 2, 1), (3, 2, 1)])[-1]
     ReceptiveField(kernel=3, stride=2, padding=1, dilation=1, size=7, jump=4, start=0.0)
     """
+    if isinstance(layers, (str, bytes)) or not isinstance(layers, Iterable):
+        raise InputError(
+            "layers must be a sequence of ConvSpec or (kernel, stride, padding, dilation) "
+            f"tuples, e.g. [(3, 1, 1), (2, 2, 0)]; got {layers!r}"
+        )
     r, j, start = 1, 1, 0.0
     out = []
     for i, layer in enumerate(layers):
@@ -853,7 +923,14 @@ def parameter_count(spec: ConvSpec | Iterable[ConvSpec]) -> int:
     >>> parameter_count(two_3x3), parameter_count(ConvSpec(64, 64, 5, bias=False))
     (73728, 102400)
     """
-    specs = [spec] if isinstance(spec, ConvSpec) else list(spec)
+    if isinstance(spec, ConvSpec):
+        specs = [spec]
+    elif isinstance(spec, Iterable) and not isinstance(spec, (str, bytes)):
+        specs = list(spec)
+    else:
+        raise InputError(
+            f"spec must be a ConvSpec or a sequence of them, e.g. ConvSpec(3, 16, 3); got {spec!r}"
+        )
     total = 0
     for i, layer in enumerate(specs):
         if not isinstance(layer, ConvSpec):
@@ -861,10 +938,10 @@ def parameter_count(spec: ConvSpec | Iterable[ConvSpec]) -> int:
                 f"parameter_count takes ConvSpec layers; item {i} is {type(layer).__name__}: "
                 "wrap it as ConvSpec(in_channels, out_channels, kernel_size, ...)"
             )
-        c = _pair(layer.in_channels, "in_channels", 1)[0]
-        o = _pair(layer.out_channels, "out_channels", 1)[0]
-        g = _pair(layer.groups, "groups", 1)[0]
+        c = _pair(layer.in_channels, "in_channels", 1, None)[0]
+        o = _pair(layer.out_channels, "out_channels", 1, None)[0]
+        g = _pair(layer.groups, "groups", 1, None)[0]
         _check_groups(c, o, g, f"layer {i}")
-        kh, kw = _pair(layer.kernel_size, "kernel_size", 1)
+        kh, kw = _pair(layer.kernel_size, "kernel_size", 1, None)
         total += o * (c // g) * kh * kw + (o if layer.bias else 0)
     return total

@@ -16,10 +16,19 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
 
+from robopercept._checks import check_bool, check_real
 from robopercept.errors import InputError
+from robopercept.nn._guards import (
+    MAX_LAYERS,
+    MAX_PARAMETERS,
+    check_allocation,
+    check_count,
+    check_module,
+)
 from robopercept.nn.blocks import (
     Bottleneck,
     ConvBNAct,
@@ -40,18 +49,42 @@ __all__ = [
 
 
 def _check_dropout(dropout: float) -> float:
-    if not 0.0 <= dropout < 1.0:
-        raise InputError(f"dropout must be in [0, 1); got {dropout!r} (--dropout)")
-    return float(dropout)
+    try:
+        return check_real(dropout, "dropout", 0.0, 1.0, high_inclusive=False)
+    except InputError as exc:
+        raise InputError(f"{exc} (--dropout)") from None
 
 
-def _check_widths(widths: Sequence[int], name: str = "widths") -> tuple[int, ...]:
-    widths = tuple(widths)
-    if not widths or any(isinstance(w, bool) or not isinstance(w, int) or w < 1 for w in widths):
+def _check_widths(
+    widths: object, name: str = "widths", maximum: int = MAX_PARAMETERS
+) -> tuple[int, ...]:
+    bad = InputError(
+        f"{name} must be a non-empty sequence of positive integers (at most {maximum}, "
+        f"at most {MAX_LAYERS} of them); got {widths!r}"
+    )
+    if not isinstance(widths, (tuple, list)) or not 1 <= len(widths) <= MAX_LAYERS:
+        raise bad
+    if any(
+        isinstance(w, bool) or not isinstance(w, (int, np.integer)) or not 1 <= w <= maximum
+        for w in widths
+    ):
+        raise bad
+    return tuple(int(w) for w in widths)
+
+
+def _within_budget(build: Callable[[], Classifier], name: str) -> Classifier:
+    """Build the model once on torch's ``meta`` device (shapes only, no memory) to count
+    its parameters, refuse it beyond :data:`~robopercept.nn._guards.MAX_PARAMETERS`,
+    then build it for real."""
+    with torch.device("meta"):
+        count = sum(p.numel() for p in build().parameters())
+    if count > MAX_PARAMETERS:
         raise InputError(
-            f"{name} must be a non-empty sequence of positive integers; got {widths!r}"
+            f"{name} with these arguments would have {count:,} parameters; the limit is "
+            f"{MAX_PARAMETERS:,} (1 GiB of float32 weights): lower widths, depth or "
+            "num_classes"
         )
-    return widths
+    return build()
 
 
 class Classifier(nn.Module):
@@ -86,8 +119,16 @@ class Classifier(nn.Module):
         dropout: float = 0.0,
     ) -> None:
         super().__init__()
-        if isinstance(num_classes, bool) or not isinstance(num_classes, int) or num_classes < 1:
-            raise InputError(f"num_classes must be a positive integer; got {num_classes!r}")
+        features = check_module(features, "features")
+        num_classes = check_count(num_classes, "num_classes", 1, MAX_PARAMETERS)
+        num_features = check_count(num_features, "num_features", 1, MAX_PARAMETERS)
+        in_channels = check_count(in_channels, "in_channels", 1, MAX_PARAMETERS)
+        check_allocation(
+            num_features * num_classes,
+            torch.get_default_dtype().itemsize,
+            f"the linear head ({num_classes} classes x {num_features} features)",
+            "lower num_classes or the last width",
+        )
         self.in_channels = in_channels
         self.num_classes = num_classes
         self.num_features = num_features
@@ -153,12 +194,18 @@ def vgg_small(
     torch.Size([2, 10])
     """
     widths = _check_widths(widths)
-    stages = []
-    channels = in_channels
-    for width in widths:
-        stages.append(VGGStage(channels, width, n_convs=convs_per_stage))
-        channels = width
-    return Classifier(nn.Sequential(*stages), channels, num_classes, in_channels, dropout)
+    convs_per_stage = check_count(convs_per_stage, "convs_per_stage", 1, MAX_LAYERS)
+    dropout = _check_dropout(dropout)
+
+    def build() -> Classifier:
+        stages = []
+        channels = in_channels
+        for width in widths:
+            stages.append(VGGStage(channels, width, n_convs=convs_per_stage))
+            channels = width
+        return Classifier(nn.Sequential(*stages), channels, num_classes, in_channels, dropout)
+
+    return _within_budget(build, "vgg_small")
 
 
 #: default Inception configuration: (ch1x1, ch3x3red, ch3x3, ch5x5red, ch5x5, pool_proj)
@@ -203,26 +250,34 @@ def inception_small(
     >>> inception_small()(torch.zeros(2, 1, 8, 8)).shape
     torch.Size([2, 10])
     """
-    blocks = tuple(tuple(b) for b in blocks)
-    if not blocks or any(len(b) != 6 for b in blocks):
+    if (
+        not isinstance(blocks, (tuple, list))
+        or not 1 <= len(blocks) <= MAX_LAYERS
+        or any(not isinstance(b, (tuple, list)) or len(b) != 6 for b in blocks)
+    ):
         raise InputError(
             "blocks must be a non-empty sequence of 6-tuples (ch1x1, ch3x3red, ch3x3, "
             f"ch5x5red, ch5x5, pool_proj); got {blocks!r}"
         )
-    for b in blocks:
-        _check_widths(b, "each Inception block")
-    layers: list[nn.Module] = [ConvBNAct(in_channels, stem_width, 3)]
-    channels = stem_width
-    for i, config in enumerate(blocks):
-        ch1x1, ch3x3red, ch3x3, ch5x5red, ch5x5, pool_proj = config
-        block = InceptionBlock(
-            channels, ch1x1, ch3x3red, ch3x3, ch5x5red, ch5x5, pool_proj, factorize_5x5
-        )
-        layers.append(block)
-        channels = block.out_channels
-        if i < len(blocks) - 1:
-            layers.append(nn.MaxPool2d(2, 2))
-    return Classifier(nn.Sequential(*layers), channels, num_classes, in_channels, dropout)
+    configs = [_check_widths(b, "each Inception block") for b in blocks]
+    factorize_5x5 = check_bool(factorize_5x5, "factorize_5x5")
+    dropout = _check_dropout(dropout)
+
+    def build() -> Classifier:
+        layers: list[nn.Module] = [ConvBNAct(in_channels, stem_width, 3)]
+        channels = stem_width
+        for i, config in enumerate(configs):
+            ch1x1, ch3x3red, ch3x3, ch5x5red, ch5x5, pool_proj = config
+            block = InceptionBlock(
+                channels, ch1x1, ch3x3red, ch3x3, ch5x5red, ch5x5, pool_proj, factorize_5x5
+            )
+            layers.append(block)
+            channels = block.out_channels
+            if i < len(configs) - 1:
+                layers.append(nn.MaxPool2d(2, 2))
+        return Classifier(nn.Sequential(*layers), channels, num_classes, in_channels, dropout)
+
+    return _within_budget(build, "inception_small")
 
 
 def resnet_small(
@@ -267,32 +322,42 @@ def resnet_small(
     >>> resnet_small(block="bottleneck")(torch.zeros(2, 1, 8, 8)).shape
     torch.Size([2, 10])
     """
-    if block not in ("basic", "bottleneck"):
+    if not isinstance(block, str) or block not in ("basic", "bottleneck"):
         raise InputError(f"block must be 'basic' or 'bottleneck'; got {block!r} (--block)")
     if widths is None:
         widths = (16, 32, 64) if block == "basic" else (8, 16, 32)
     widths = _check_widths(widths)
-    depths = (depth,) * len(widths) if isinstance(depth, int) else tuple(depth)
-    depths = _check_widths(depths, "depth")
+    if isinstance(depth, (int, np.integer)) and not isinstance(depth, bool):
+        depths = (check_count(depth, "depth", 1, MAX_LAYERS),) * len(widths)
+    else:
+        depths = _check_widths(depth, "depth", MAX_LAYERS)
     if len(depths) != len(widths):
         raise InputError(
             f"depth must give one number of blocks per stage ({len(widths)} stages); got {depths!r}"
         )
-    layers: list[nn.Module] = [ConvBNAct(in_channels, widths[0], 3)]
-    channels = widths[0]
-    for stage, (width, n) in enumerate(zip(widths, depths, strict=True)):
-        blocks: list[nn.Module] = []
-        for i in range(n):
-            stride = 2 if stage > 0 and i == 0 else 1
-            unit: ResidualBlock | Bottleneck
-            if block == "basic":
-                unit = ResidualBlock(channels, width, stride, zero_init_residual)
-            else:
-                unit = Bottleneck(channels, width, stride, zero_init_residual=zero_init_residual)
-            blocks.append(unit)
-            channels = unit.out_channels
-        layers.append(nn.Sequential(*blocks))
-    return Classifier(nn.Sequential(*layers), channels, num_classes, in_channels, dropout)
+    zero_init_residual = check_bool(zero_init_residual, "zero_init_residual")
+    dropout = _check_dropout(dropout)
+
+    def build() -> Classifier:
+        layers: list[nn.Module] = [ConvBNAct(in_channels, widths[0], 3)]
+        channels = widths[0]
+        for stage, (width, n) in enumerate(zip(widths, depths, strict=True)):
+            blocks: list[nn.Module] = []
+            for i in range(n):
+                stride = 2 if stage > 0 and i == 0 else 1
+                unit: ResidualBlock | Bottleneck
+                if block == "basic":
+                    unit = ResidualBlock(channels, width, stride, zero_init_residual)
+                else:
+                    unit = Bottleneck(
+                        channels, width, stride, zero_init_residual=zero_init_residual
+                    )
+                blocks.append(unit)
+                channels = unit.out_channels
+            layers.append(nn.Sequential(*blocks))
+        return Classifier(nn.Sequential(*layers), channels, num_classes, in_channels, dropout)
+
+    return _within_budget(build, "resnet_small")
 
 
 #: the model family by name, for :func:`build_model` and ``robopercept nn ... --model``
@@ -327,7 +392,7 @@ def build_model(name: str, **kwargs: Any) -> Classifier:
     >>> build_model("resnet_small", num_classes=2).num_classes
     2
     """
-    if name not in MODELS:
+    if not isinstance(name, str) or name not in MODELS:
         raise InputError(
             f"unknown model {name!r} (--model): choose one of {', '.join(sorted(MODELS))}"
         )

@@ -41,7 +41,9 @@ import torch.nn.functional as F
 from torch import nn
 from torch.utils.data import Dataset
 
+from robopercept._checks import as_path, check_choice, check_int
 from robopercept.errors import FileFormatError, InputError
+from robopercept.nn._guards import check_device
 from robopercept.nn.data import (
     ArrayDataset,
     Compose,
@@ -280,7 +282,8 @@ def load_data(
     FileFormatError
         A non-image or unreadable file in the folder.
     """
-    text = os.fspath(data)
+    text = str(as_path(data, "--data (digits, lfw or an image folder)"))
+    mode = check_choice(mode, "mode", ("rgb", "gray"))
     if text == "digits":
         return load_digits()
     if text == "lfw":
@@ -538,7 +541,8 @@ def load_run(
         Missing or unreadable file, no recorded architecture, or weights that do not fit
         the recorded architecture.
     """
-    p = Path(checkpoint)
+    p = as_path(checkpoint, "the checkpoint (a run's checkpoint.pt or its folder)")
+    dev = check_device(device, "device (--device)")
     if p.is_dir():
         p = p / BEST_CHECKPOINT
     if not p.exists():
@@ -548,8 +552,8 @@ def load_run(
     model = arch.build()
     load_checkpoint(p, model)
     model.eval()
-    if device is not None:
-        model.to(device)
+    if dev is not None:
+        model.to(dev)
     return model, arch
 
 
@@ -642,10 +646,16 @@ def predict(
     """
     from robopercept.imaging import read_image
 
+    if isinstance(image_paths, (str, bytes, os.PathLike)):
+        image_paths = [image_paths]
+    if not isinstance(image_paths, (list, tuple)):
+        raise InputError(
+            f"image_paths must be a list of image files; got {type(image_paths).__name__}"
+        )
     if not image_paths:
         raise InputError("no images to predict: give one or more image files")
-    if isinstance(top_k, bool) or int(top_k) < 1:
-        raise InputError(f"top_k (--top-k) must be >= 1; got {top_k}")
+    image_paths = [as_path(p, "each image path") for p in image_paths]
+    top_k = check_int(top_k, "top_k (--top-k)", 1)
     model, arch = load_run(checkpoint, device=device)
     h, w = arch.input_size
     k = min(int(top_k), arch.num_classes)

@@ -20,14 +20,20 @@ field is the whole input and is not reported (``None``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import torch
 from torch import nn
 
 from robopercept.errors import InputError
+from robopercept.nn._guards import check_device, check_float_dtype, check_module
+
+#: the most values the dummy input of :func:`summary` may have (16 MiB of float32)
+MAX_INPUT_VALUES = 2**22
 
 __all__ = ["LayerRow", "ModelSummary", "summary"]
 
@@ -198,8 +204,10 @@ def summary(
     Raises
     ------
     InputError
-        A shape that is not 3 or 4 positive integers, or one the model refuses (the
-        model's own message is kept).
+        A shape that is not 3 or 4 positive integers (or of more than
+        :data:`MAX_INPUT_VALUES` values), one the model refuses (the model's own message
+        is kept), a ``model`` that is not an ``nn.Module``, a device this machine does
+        not have, or a ``dtype`` that is not a floating-point ``torch.dtype``.
 
     Examples
     --------
@@ -210,18 +218,35 @@ def summary(
     >>> s.rows[1].receptive_field  # the first 3x3 convolution's batch norm
     (3, 3)
     """
+    model = check_module(model)
+    bad_shape = InputError(
+        f"input_shape must be (N, C, H, W) or (C, H, W) of positive integers; got "
+        f"{input_shape!r} (e.g. (1, 8, 8) for 8x8 grey digits)"
+    )
+    if not isinstance(input_shape, (tuple, list, torch.Size)):
+        raise bad_shape
     shape = tuple(input_shape)
     if len(shape) == 3:
         shape = (1, *shape)
     if len(shape) != 4 or any(
-        isinstance(s, bool) or not isinstance(s, int) or s < 1 for s in shape
+        isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 1 for s in shape
     ):
+        raise bad_shape
+    shape = tuple(int(s) for s in shape)
+    dtype = check_float_dtype(dtype)
+    if math.prod(shape) > MAX_INPUT_VALUES:
         raise InputError(
-            f"input_shape must be (N, C, H, W) or (C, H, W) of positive integers; got "
-            f"{tuple(input_shape)!r} (e.g. (1, 8, 8) for 8x8 grey digits)"
+            f"input_shape {shape} has {math.prod(shape):,} values; a summary runs one "
+            f"small batch: at most {MAX_INPUT_VALUES:,} (e.g. (1, 3, 224, 224))"
+        )
+    device = check_device(device)
+    first = next(model.parameters(), None)
+    if first is not None and first.is_floating_point() and first.dtype != dtype:
+        raise InputError(
+            f"dtype {dtype} differs from the model's weights ({first.dtype}): pass "
+            f"dtype={first.dtype} or convert the model (model.to({dtype}))"
         )
     if device is None:
-        first = next(model.parameters(), None)
         device = first.device if first is not None else torch.device("cpu")
     names = {m: n for n, m in model.named_modules()}
     counted: set[int] = set()

@@ -38,8 +38,23 @@ import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset
 
+from robopercept._checks import (
+    as_path,
+    check_bool,
+    check_finite,
+    check_int,
+    check_magnitude,
+    check_ndim,
+    check_real,
+)
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import atomic_path
+from robopercept.nn._guards import (
+    check_count,
+    check_dataset,
+    check_device,
+    check_module,
+)
 
 __all__ = [
     "Evaluation",
@@ -51,6 +66,9 @@ __all__ = [
     "load_checkpoint",
     "save_checkpoint",
 ]
+
+#: the most epochs (and the largest step size or patience) a run may ask for
+MAX_EPOCHS = 100_000
 
 Optimizer = Literal["sgd", "adamw"]
 Schedule = Literal["constant", "step", "cosine", "onecycle"]
@@ -92,11 +110,11 @@ class TrainConfig:
         Seeds the initial weights' random state, the shuffling and dropout.
     device : str or None
         ``"cpu"``, ``"cuda"``, ...; None: CUDA when available, else the CPU.
-    lr_multipliers : dict of str to float
+    lr_multipliers : dict of str to float, optional
         Discriminative learning rates: parameters whose qualified name starts with a
         key train at ``lr`` times its value (the longest matching key wins), e.g.
         ``{"features": 0.1}`` for a pretrained trunk under a new head.
-    unfreeze_at : dict of int to list of str
+    unfreeze_at : dict of int to list of str, optional
         At the start of epoch ``k`` (1-based), make the parameters under these name
         prefixes trainable (``[""]``: all): gradual unfreezing.
     """
@@ -117,15 +135,54 @@ class TrainConfig:
     amp: bool | Literal["auto"] = "auto"
     seed: int = 0
     device: str | None = None
-    lr_multipliers: dict[str, float] = field(default_factory=dict)
-    unfreeze_at: dict[int, list[str]] = field(default_factory=dict)
+    lr_multipliers: dict[str, float] | None = None
+    unfreeze_at: dict[int, list[str]] | None = None
 
     def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size", "step_size"):
-            if int(getattr(self, name)) < 1:
-                raise InputError(f"{name} must be >= 1; got {getattr(self, name)}")
-        if not (math.isfinite(self.lr) and self.lr > 0):
-            raise InputError(f"lr (the learning rate) must be > 0; got {self.lr}")
+        self.epochs = check_count(self.epochs, "epochs (--epochs)", 1, MAX_EPOCHS)
+        self.batch_size = check_count(self.batch_size, "batch_size (--batch-size)", 1, 2**31)
+        self.step_size = check_count(self.step_size, "step_size", 1, MAX_EPOCHS)
+        self.lr = check_real(self.lr, "lr (the learning rate, --lr)", 0.0, low_inclusive=False)
+        self.momentum = check_real(self.momentum, "momentum", 0.0, 1.0)
+        self.nesterov = check_bool(self.nesterov, "nesterov")
+        self.weight_decay = check_real(self.weight_decay, "weight_decay", 0.0)
+        self.gamma = check_real(self.gamma, "gamma", 0.0, low_inclusive=False)
+        if self.clip_grad_norm is not None:
+            self.clip_grad_norm = check_real(
+                self.clip_grad_norm, "clip_grad_norm", 0.0, low_inclusive=False
+            )
+        if not (self.amp == "auto" and isinstance(self.amp, str)):
+            self.amp = check_bool(self.amp, "amp ('auto', True or False)")
+        self.seed = check_int(self.seed, "seed (--seed)", -(2**63))
+        if self.seed >= 2**64:
+            raise InputError(f"seed (--seed) must be below 2**64; got {self.seed}")
+        dev = check_device(self.device, "device (--device)")
+        self.device = None if dev is None else str(dev)
+        if self.lr_multipliers is None:
+            self.lr_multipliers = {}
+        if self.unfreeze_at is None:
+            self.unfreeze_at = {}
+        if not isinstance(self.lr_multipliers, dict) or not all(
+            isinstance(k, str) for k in self.lr_multipliers
+        ):
+            raise InputError(
+                "lr_multipliers must be a dict of parameter-name prefix to factor, e.g. "
+                f"{{'features': 0.1}}; got {self.lr_multipliers!r}"
+            )
+        self.lr_multipliers = {
+            k: check_real(v, f"lr_multipliers[{k!r}]", 0.0) for k, v in self.lr_multipliers.items()
+        }
+        if not isinstance(self.unfreeze_at, dict) or not all(
+            isinstance(v, (list, tuple)) and all(isinstance(pf, str) for pf in v)
+            for v in self.unfreeze_at.values()
+        ):
+            raise InputError(
+                "unfreeze_at must be a dict of epoch to a list of parameter-name prefixes, "
+                f"e.g. {{5: ['features.2']}}; got {self.unfreeze_at!r}"
+            )
+        self.unfreeze_at = {
+            check_int(k, "unfreeze_at epoch", 1): list(v) for k, v in self.unfreeze_at.items()
+        }
         if self.optimizer not in ("sgd", "adamw"):
             raise InputError(f"optimizer must be 'sgd' or 'adamw'; got {self.optimizer!r}")
         if self.schedule not in ("constant", "step", "cosine", "onecycle"):
@@ -135,8 +192,8 @@ class TrainConfig:
             )
         if self.monitor not in ("val_loss", "val_accuracy"):
             raise InputError(f"monitor must be 'val_loss' or 'val_accuracy'; got {self.monitor!r}")
-        if self.patience is not None and self.patience < 1:
-            raise InputError(f"patience must be >= 1 or None; got {self.patience}")
+        if self.patience is not None:
+            self.patience = check_count(self.patience, "patience (or None)", 1, MAX_EPOCHS)
 
 
 @dataclass
@@ -207,6 +264,21 @@ class History:
         return plot_series(panels, width=1200, panel_height=260, xlabel="epoch")
 
 
+def _statistics(value: Any, name: str) -> np.ndarray:
+    """``value`` (a number or a (C,) sequence) as finite float32 ``(C,)`` statistics."""
+    arr = check_ndim(value, name, (0, 1))
+    if arr.dtype.kind not in "iuf" or arr.size == 0:
+        raise InputError(
+            f"{name} must be real numbers, one per channel (e.g. [0.5]); got {value!r}"
+        )
+    arr = check_finite(arr.astype(np.float64), name)
+    # float32 buffers: beyond 1e30 the statistics (and 1/std) leave float32's range
+    arr = check_magnitude(arr, name, 1e30, smallest=None)
+    if name == "std" and np.any((arr > 0) & (arr < 1e-30)):
+        raise InputError(f"std must be >= 1e-30 in every channel (float32); got {value!r}")
+    return np.atleast_1d(arr.astype(np.float32))
+
+
 class Normalize(nn.Module):
     """``(x - mean_c) / std_c`` per channel, with the statistics as buffers (saved in the
     checkpoint, moved with the model, exported to ONNX): put it first in a model, with
@@ -225,8 +297,7 @@ class Normalize(nn.Module):
 
     def __init__(self, mean: Any, std: Any) -> None:
         super().__init__()
-        m = np.atleast_1d(np.asarray(mean, dtype=np.float32))
-        s = np.atleast_1d(np.asarray(std, dtype=np.float32))
+        m, s = (_statistics(v, n) for v, n in ((mean, "mean"), (std, "std")))
         if m.shape != s.shape or m.ndim != 1:
             raise InputError(
                 f"mean and std must be (C,) of one length; got {m.shape} and {s.shape}"
@@ -240,6 +311,13 @@ class Normalize(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Normalize ``(C, H, W)`` or ``(N, C, H, W)``."""
+        if not isinstance(x, torch.Tensor) or not x.is_floating_point():
+            raise InputError(
+                "Normalize takes a floating-point torch tensor (C, H, W) or (N, C, H, W); "
+                f"got {type(x).__name__}"
+                + (f" of dtype {x.dtype}" if isinstance(x, torch.Tensor) else "")
+                + ": use torch.from_numpy(images).float()"
+            )
         single = x.ndim == 3
         batch = x[None] if single else x
         if batch.ndim != 4 or batch.shape[1] != self.mean.shape[1]:
@@ -276,15 +354,10 @@ class Evaluation:
         return confusion_matrix(self.y_true, self.y_pred, labels=np.arange(k))
 
 
-def _device(name: str | None) -> torch.device:
-    if name is None:
+def _device(name: str | torch.device | None) -> torch.device:
+    dev = check_device(name, "device (--device)")
+    if dev is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        dev = torch.device(name)
-    except RuntimeError as exc:
-        raise InputError(f"device {name!r} is not a torch device ('cpu', 'cuda', ...)") from exc
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise InputError("device 'cuda' asked for, but torch sees no CUDA device: use 'cpu'")
     return dev
 
 
@@ -349,8 +422,9 @@ def evaluate(
     -------
     Evaluation
     """
-    if len(data) == 0:  # type: ignore[arg-type]
-        raise InputError("the dataset is empty: nothing to evaluate")
+    model = check_module(model)
+    data = check_dataset(data, "data")
+    batch_size = check_count(batch_size, "batch_size", 1, 2**31)
     dev = _device(device)
     model = model.to(dev)
     was = model.training
@@ -375,12 +449,13 @@ def _optimizer(model: nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
     optimizer, frozen ones too: torch's optimizers skip a parameter without a gradient
     (no step, no weight decay), so unfreezing later needs no new group."""
     named = list(model.named_parameters())
+    multipliers = cfg.lr_multipliers or {}
     if not any(p.requires_grad for _, p in named) and not cfg.unfreeze_at:
         raise InputError("the model has no trainable parameters (everything is frozen)")
     groups: dict[float, list[nn.Parameter]] = {}
     for name, param in named:
-        keys = [k for k in cfg.lr_multipliers if name.startswith(k)]
-        mult = cfg.lr_multipliers[max(keys, key=len)] if keys else 1.0
+        keys = [k for k in multipliers if name.startswith(k)]
+        mult = multipliers[max(keys, key=len)] if keys else 1.0
         groups.setdefault(float(mult), []).append(param)
     arg = [{"params": ps, "lr": cfg.lr * m} for m, ps in groups.items()]
     if cfg.optimizer == "sgd":
@@ -412,7 +487,9 @@ def _scheduler(opt: torch.optim.Optimizer, cfg: TrainConfig, steps_per_epoch: in
 def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path:
     """Write ``state`` (tensors and plain values) to ``path`` atomically (a temporary
     file renamed over it), so an interruption never leaves half a checkpoint."""
-    p = Path(path)
+    p = as_path(path, "the checkpoint path")
+    if not isinstance(state, dict):
+        raise InputError(f"state must be a dict of tensors and plain values; got {state!r}"[:200])
     p.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(p) as tmp:  # the one atomic writer (robopercept.fileio)
         torch.save(state, tmp)
@@ -429,7 +506,9 @@ def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None
         Missing or unreadable file, not a robopercept checkpoint, or weights of another
         architecture (the message names the architecture recorded in the checkpoint).
     """
-    p = Path(path)
+    p = as_path(path, "the checkpoint path")
+    if model is not None:
+        model = check_module(model)
     if p.is_dir():
         raise FileFormatError(f"{p} is a folder; give a checkpoint file (.pt)")
     if not p.exists():
@@ -502,11 +581,20 @@ def fit(
     """
     from robopercept.progress import progress_bar
 
+    model = check_module(model)
+    if config is not None and not isinstance(config, TrainConfig):
+        raise InputError(
+            f"config must be a TrainConfig (e.g. TrainConfig(epochs=10)) or None; got {config!r}"
+        )
     cfg = config or TrainConfig()
-    if len(train) == 0:  # type: ignore[arg-type]
-        raise InputError("the training set is empty")
-    if val is not None and len(val) == 0:  # type: ignore[arg-type]
-        raise InputError("the validation set is empty (give none, or a non-empty one)")
+    train = check_dataset(train, "the training set")
+    if val is not None:
+        val = check_dataset(val, "the validation set")
+    if checkpoint is not None:
+        checkpoint = as_path(checkpoint, "checkpoint")
+    resume = check_bool(resume, "resume")
+    if not isinstance(architecture, str):
+        raise InputError(f"architecture must be a str; got {architecture!r}")
     if resume and checkpoint is None:
         raise InputError("resume needs the checkpoint to resume from")
     dev = _device(cfg.device)
@@ -537,7 +625,7 @@ def fit(
         torch.set_rng_state(state["torch_rng_state"])
         hist = History.from_dict(state["history"])
         start_epoch = int(state["epoch"]) + 1
-        for k, prefixes in cfg.unfreeze_at.items():  # what the run had unfrozen by then
+        for k, prefixes in (cfg.unfreeze_at or {}).items():  # what the run had unfrozen
             if k <= start_epoch:
                 for name, param in model.named_parameters():
                     if any(name.startswith(pf) for pf in prefixes):
@@ -553,7 +641,7 @@ def fit(
         with _deterministic():
             for epoch in range(start_epoch, cfg.epochs):
                 t0 = time.perf_counter()
-                for prefix in cfg.unfreeze_at.get(epoch + 1, []):
+                for prefix in (cfg.unfreeze_at or {}).get(epoch + 1, []):
                     for name, param in model.named_parameters():
                         if name.startswith(prefix):
                             param.requires_grad_(True)

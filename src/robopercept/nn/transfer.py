@@ -21,6 +21,7 @@ from collections.abc import Iterable
 from torch import nn
 
 from robopercept.errors import InputError
+from robopercept.nn._guards import MAX_PARAMETERS, check_allocation, check_count, check_module
 
 __all__ = [
     "freeze",
@@ -32,9 +33,18 @@ __all__ = [
 
 
 def _matching(model: nn.Module, prefixes: Iterable[str] | None) -> list[tuple[str, nn.Parameter]]:
-    named = list(model.named_parameters())
+    named = list(check_module(model).named_parameters())
     if prefixes is None:
         return named
+    if isinstance(prefixes, str):
+        prefixes = [prefixes]
+    if isinstance(prefixes, Iterable) and not isinstance(prefixes, (bytes, dict)):
+        prefixes = list(prefixes)
+    if not isinstance(prefixes, list) or not all(isinstance(pf, str) for pf in prefixes):
+        raise InputError(
+            "prefixes must be a list of parameter-name prefixes such as ['features.0', "
+            f"'head'] (or None for all); got {prefixes!r}"
+        )
     wanted = list(prefixes)
     out = [
         (n, p)
@@ -72,7 +82,7 @@ def unfreeze(model: nn.Module, prefixes: Iterable[str] | None = None) -> list[st
 
 def trainable_parameter_names(model: nn.Module) -> list[str]:
     """Names of the parameters that will be trained (``requires_grad``)."""
-    return [n for n, p in model.named_parameters() if p.requires_grad]
+    return [n for n, p in check_module(model).named_parameters() if p.requires_grad]
 
 
 def replace_head(model: nn.Module, num_classes: int, name: str | None = None) -> nn.Linear:
@@ -92,8 +102,10 @@ def replace_head(model: nn.Module, num_classes: int, name: str | None = None) ->
     torch.nn.Linear
         The new head (trainable), same input features as the old one.
     """
-    if int(num_classes) < 2:
-        raise InputError(f"num_classes must be >= 2; got {num_classes}")
+    model = check_module(model)
+    num_classes = check_count(num_classes, "num_classes", 2, MAX_PARAMETERS)
+    if name is not None and not isinstance(name, str):
+        raise InputError(f"name must be the qualified name of a linear layer (str); got {name!r}")
     linears = [(n, m) for n, m in model.named_modules() if isinstance(m, nn.Linear)]
     if name is None:
         if not linears:
@@ -106,7 +118,13 @@ def replace_head(model: nn.Module, num_classes: int, name: str | None = None) ->
                 f"{name!r} is not a linear layer of the model; its linear layers are "
                 f"{', '.join(n for n, _ in linears) or 'none'}"
             )
-    new = nn.Linear(old.in_features, int(num_classes), bias=old.bias is not None)
+    check_allocation(
+        old.in_features * num_classes,
+        old.weight.element_size(),
+        f"the new head ({num_classes} classes x {old.in_features} features)",
+        "lower num_classes",
+    )
+    new = nn.Linear(old.in_features, num_classes, bias=old.bias is not None)
     new.to(old.weight.device)
     parent_name, _, attr = name.rpartition(".")
     parent = model.get_submodule(parent_name) if parent_name else model
@@ -126,7 +144,7 @@ def keep_frozen_batchnorm_in_eval(model: nn.Module) -> int:
             module.eval()
 
     count = 0
-    for m in model.modules():
+    for m in check_module(model).modules():
         if isinstance(m, nn.modules.batchnorm._BatchNorm):
             if not getattr(m, "_robopercept_frozen_bn_hook", False):
                 m.register_forward_pre_hook(hook)
