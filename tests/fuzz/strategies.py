@@ -144,14 +144,14 @@ class Layout(Recipe):
             Same shape, dtype and values as :attr:`array` (``"broadcast"`` repeats the
             first row), with the requested strides and flags.
         """
-        a = self.array
-        if self.layout == "fortran":
+        a = np.asarray(self.array)  # a 0-d cast may have come back a NumPy scalar
+        if self.layout == "fortran" and a.ndim >= 1:  # asfortranarray makes 0-d 1-d
             return np.asfortranarray(a)
         if self.layout == "strided" and a.ndim >= 1:
             big = np.repeat(a, 2, axis=0)
             return big[::2]
         if self.layout == "readonly":
-            b = a.copy()
+            b = np.array(a, copy=True)
             b.flags.writeable = False
             return b
         if self.layout == "broadcast" and a.ndim >= 1 and a.shape[0] > 0:
@@ -294,15 +294,15 @@ def _cast(values: np.ndarray, dtype: str) -> np.ndarray:
     """``values`` (float64) cast to ``dtype`` the way a user's array would hold them."""
     with np.errstate(all="ignore"):
         if dtype == "bool":
-            return values > 0.5
+            return np.asarray(values > 0.5)
         if dtype == "object":
-            return values.astype(object)
+            return np.asarray(values.astype(object))
         dt = np.dtype(dtype)
         if dt.kind in "iu":
             info = np.iinfo(dt)
             clean = np.nan_to_num(values, nan=0.0, posinf=info.max, neginf=info.min)
-            return np.clip(clean, info.min, info.max).astype(dt)
-        return values.astype(dt)
+            return np.asarray(np.clip(clean, info.min, info.max).astype(dt))
+        return np.asarray(values.astype(dt))
 
 
 @st.composite

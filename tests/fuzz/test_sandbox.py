@@ -9,6 +9,7 @@ import pytest
 
 from robopercept.errors import InputError
 from tests.fuzz.sandbox import Outcome, Sandbox, array_bytes, resolve
+from tests.fuzz.strategies import LAYOUTS, Layout, _cast
 
 
 # module-level targets: the worker receives them pickled by reference
@@ -172,3 +173,14 @@ def test_warm_calls_are_replayed_in_every_new_worker(tmp_path):
         b.warm([])
         assert b.run(segfault).kind == "crash" and b.run("math:sqrt", (4.0,)).kind == "ok"
         assert len(log.read_text().split()) == 2 and b.spawns == 3
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32", "uint8", "int16", "bool"])
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_every_layout_of_a_0d_array_is_a_0d_array(dtype, layout):
+    """A 0-d value in any layout materializes as a 0-d ndarray (a NumPy scalar from the
+    integer cast once made "readonly" raise 'Cannot set flags on array scalars' in the
+    harness, which the reports counted as the target's untyped error)."""
+    a = Layout(_cast(np.array(3.7), dtype), layout).make()
+    assert isinstance(a, np.ndarray) and a.shape == ()
+    assert a.flags.writeable == (layout != "readonly")  # 0-d: nothing to broadcast
