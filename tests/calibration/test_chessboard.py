@@ -148,3 +148,37 @@ def test_check_pattern_size():
         check_pattern_size((4, 1), "circles")
     with pytest.raises(InputError, match=r"\(circles per row"):
         check_pattern_size((1, 2, 3), "circles")
+
+
+# issue 25: pattern_size (2**40, 3) allocated 72 TiB, (inf, 3) raised OverflowError, a
+# square of None/[1, 2]/2**64 TypeError or ValueError; each is now an InputError, and
+# integral floats and NumPy integers are still taken
+@pytest.mark.parametrize(
+    ("pattern", "square", "match"),
+    [
+        ((2**40, 3), 1.0, "has 3298534883328 corners, more than 1000000"),
+        ((4, 3.066986865876131e16), 1.0, "more than 1000000"),
+        ((2**63, 3), 1.0, "more than 1000000"),
+        ((np.inf, 3), 1.0, "two whole numbers; got \\(inf, 3\\)"),
+        ((4, -np.inf), 1.0, "two whole numbers"),
+        ((4.5, 3), 1.0, "two whole numbers"),
+        ((True, 3), 1.0, "two whole numbers"),
+        ("ab", 1.0, "two whole numbers"),
+        ((4, 3), None, "square must be a real number"),
+        ((4, 3), [1, 2], "square must be a real number"),
+        ((4, 3), 1e200, r"square must be in \(0, 1e\+140\]"),
+        ((4, 3), 0.0, r"square must be in \(0, 1e\+140\]"),
+    ],
+)
+def test_issue25_hostile_pattern_sizes_are_input_errors(pattern, square, match):
+    with pytest.raises(InputError, match=match):
+        chessboard_points(pattern, square)
+
+
+def test_issue25_pattern_size_accepts_integral_numbers():
+    assert check_pattern_size((9.0, np.int64(6))) == (9, 6)
+    assert check_pattern_size(np.array([4, 3])) == (4, 3)
+    assert chessboard_points((1000, 1000)).shape == (1_000_000, 3)  # the largest allowed
+    assert chessboard_points((2, 2), 2**64)[-1].tolist() == [2.0**64, 2.0**64, 0.0]
+    with pytest.raises(InputError, match="max_seeds must be >= 1"):
+        find_chessboard_corners(np.zeros((16, 16), np.uint8), (3, 3), max_seeds=0)

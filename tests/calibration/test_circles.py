@@ -233,3 +233,35 @@ def test_open3dv_eye_to_hand_captures_match_opencv():
         assert ok
         err = np.linalg.norm(det.centers - c.reshape(-1, 2), axis=1)
         assert err.mean() < 0.1 and err.max() < 0.3, (k, err.mean(), err.max())
+
+
+# issue 25: pattern_size (4, 2**40) allocated 32 TiB and (inf, inf) raised
+# OverflowError; a complex min_area raised TypeError; each is now an InputError
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: circles_grid_points((4, 2**40)), "more than 1000000"),
+        (lambda: circles_grid_points((4, -np.inf)), "two whole numbers"),
+        (lambda: circles_grid_points((4, 3), None), "spacing must be a real number"),
+        (lambda: circles_grid_points((4, 3), asymmetric="no"), "asymmetric must be True"),
+        (
+            lambda: find_circles_grid(np.zeros((16, 16), np.uint8), (np.inf, np.inf)),
+            "two whole numbers",
+        ),
+        (
+            lambda: find_circles_grid(np.zeros((16, 16), np.uint8), (4, 3), min_area=1 + 1j),
+            "min_area must be a real number",
+        ),
+        (
+            lambda: find_circles_grid(np.zeros((16, 16), np.uint8), (4, 3), blob_color=None),
+            "blob_color must be one of",
+        ),
+        (
+            lambda: find_circles_grid(np.zeros((16, 16), np.uint8), (4, 3), max_seeds=2**0.5),
+            "max_seeds must be an integer",
+        ),
+    ],
+)
+def test_issue25_hostile_arguments_are_input_errors(call, match):
+    with pytest.raises(InputError, match=match):
+        call()

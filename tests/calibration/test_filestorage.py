@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from robopercept.calibration import load_calibration, read_opencv_storage
-from robopercept.errors import FileFormatError
+from robopercept.errors import FileFormatError, InputError
 from tests.conftest import data_path
 
 K = np.array([[812.5, 0.0, 330.25], [0.0, 815.0, 241.75], [0.0, 0.0, 1.0]])
@@ -412,3 +412,25 @@ def test_yaml_image_size_fields_are_checked(tmp_path):
     ros.write_text("camera_matrix:\n  rows: .inf\n  cols: 3\n  data: [1, 2, 3]\n")
     with pytest.raises(FileFormatError, match="'K': rows x cols"):
         load_calibration(ros)
+
+
+# issue 25: bytes, None or an int for the path raised TypeError, a NUL byte ValueError;
+# paths now go through the shared path check (InputError), a missing file is a
+# FileFormatError, and bytes paths are read
+def test_issue25_read_opencv_storage_paths(tmp_path):
+    f = tmp_path / "c.yml"
+    f.write_text("%YAML:1.0\nimage_width: 640\n")
+    assert read_opencv_storage(bytes(f)) == {"image_width": 640}
+    cases = [
+        (None, "must be a file or folder path"),
+        (3, "must be a file or folder"),
+        (str(f) + "\x00.yml", "NUL byte"),
+        ("n" * 300, "file name too long"),
+    ]
+    for bad, match in cases:
+        with pytest.raises(InputError, match=match):
+            read_opencv_storage(bad)
+    with pytest.raises(FileFormatError, match="is a folder"):
+        read_opencv_storage(tmp_path)
+    with pytest.raises(FileFormatError, match="no such file"):
+        read_opencv_storage(tmp_path / "missing.yml")

@@ -215,3 +215,47 @@ def test_open3dv_eye_to_hand_end_to_end():
     Y_cv = se3(nearest_rotation(Ys[:, :3, :3].sum(axis=0)), Ys[:, :3, 3].mean(axis=0))
     assert ours.max() < 0.3 and ours.mean() <= chain_rms(X_cv, Y_cv).mean(), ours
     assert res.X[2, 2] < -0.9
+
+
+# issue 25: empty or mismatched stacks of poses raised IndexError/ValueError inside
+# hand_eye_residuals, and bytes or missing paths TypeError/OSError in read_xyz_rpy;
+# each is now an InputError (or FileFormatError for a missing file)
+def _far(T):
+    """The offset that moves T's translation to 1e300 (its squares overflow)."""
+    d = np.zeros((4, 4))
+    d[:3, 3] = 1e300
+    return d
+
+
+def test_issue25_hand_eye_residuals_check_the_stations(rng):
+    X, _, G, C = _stations(rng, "eye_in_hand", 4)
+    cases = [
+        ((X, np.zeros((0, 4, 4)), C), "T_base_gripper must hold at least one"),
+        ((X, G, np.zeros((0, 4, 4))), "T_camera_target must hold at least one"),
+        ((X, G, C[:3]), "4 robot poses and 3 target poses"),
+        ((X, G[:1], C[:1]), "at least 2 stations"),
+        ((X, G, [c + _far(c) for c in C]), "values up to"),
+        ((X, "abcd", C), "T_base_gripper"),
+    ]
+    for args, match in cases:
+        with pytest.raises(InputError, match=match):
+            hand_eye_residuals(*args)
+    rot, trans = hand_eye_residuals(X, G[:2], C[:2])  # two stations: one pair
+    assert rot.shape == trans.shape == (1,) and rot[0] < 1e-9
+
+
+def test_issue25_pose_file_paths_and_flags(tmp_path):
+    f = tmp_path / "pose.txt"
+    f.write_text("0 0 90 1 2 3\n")
+    T = read_xyz_rpy(bytes(f))  # bytes paths are paths
+    np.testing.assert_allclose(T[:3, 3], [1, 2, 3])
+    with pytest.raises(InputError, match="NUL byte"):
+        read_xyz_rpy(str(f) + "\x00x")
+    with pytest.raises(InputError, match="must be a file or folder path"):
+        read_xyz_rpy(3)
+    with pytest.raises(FileFormatError, match="no such file"):
+        read_xyz_rpy(tmp_path / "missing.txt")
+    with pytest.raises(InputError, match="degrees must be True or False"):
+        read_xyz_rpy(f, degrees="yes")
+    with pytest.raises(InputError, match="xyz must hold real numbers"):
+        pose_from_xyz_rpy(["a", "b", "c"], [0, 0, 0])

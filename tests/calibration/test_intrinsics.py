@@ -196,3 +196,98 @@ def test_rectify_pair_without_distortion_is_the_bouguet_remap():
         rectify_pair(left, right, {"K": K, "dist": np.zeros(5)})
     with pytest.raises(InputError, match="differ in size"):
         rectify_pair(left, right[:, :-1], cal)
+
+
+# issue 25: hostile arguments (a string for the views, mis-shaped rvecs/tvecs/K, an
+# oversized max_iterations, a singular or complex camera matrix, an int for the
+# calibration or the result, paths that are empty, bytes or folders) raised ValueError,
+# IndexError, OverflowError, LinAlgError, AttributeError or OSError; each is now an
+# InputError (or FileFormatError for a file that cannot be written)
+def _exact(rng, n=3):
+    obj = chessboard_points((5, 4), 0.03)
+    rv, tv = _poses(n, rng)
+    return obj, rv, tv, _views(obj, rv, tv)
+
+
+def test_issue25_hostile_views_and_camera_matrices(rng):
+    from robopercept.calibration import board_pose
+
+    obj, rv, tv, img = _exact(rng)
+    cases = [
+        (lambda: calibrate_camera("abc", img, (640, 480)), "object_points must be a list"),
+        (lambda: calibrate_camera(obj, img, (640, 480), max_iterations=2**63), "max_iterations"),
+        (lambda: calibrate_camera(obj, img, (640, 480), tangential=None), "tangential must be"),
+        (lambda: calibrate_camera(obj, [p * 1e300 for p in img], (640, 480)), "values up to"),
+        (lambda: calibrate_camera(obj, [[["a", "b"]]] * 3, (640, 480)), "must hold real"),
+        (lambda: reprojection_errors(obj, img, K_TRUE, D_TRUE, rv[:2], tv), r"rvecs must be 3 "),
+        (lambda: reprojection_errors(obj, img, K_TRUE, D_TRUE, rv, 1.0), r"tvecs must be 3 "),
+        (lambda: reprojection_errors(obj, img, np.stack([K_TRUE] * 2), D_TRUE, rv, tv), "K must"),
+        (lambda: board_pose(obj, img[0], np.ones((3, 3))), "K must be a camera matrix"),
+        (lambda: board_pose(obj, img[0], np.full((3, 3), np.inf)), "K must be a finite 3x3"),
+        (lambda: board_pose(obj, img[0] * 1e300, K_TRUE), "image_points.* values up to"),
+        (lambda: stereo_calibrate(obj, img, img, (640, 480), K1=np.ones((2, 3))), "K1 must"),
+        (lambda: stereo_calibrate("abc", img, img, (640, 480)), "object_points must be a list"),
+        (lambda: undistort(np.zeros((8, 8)), np.eye(3, dtype=np.complex64), D_TRUE), "K must"),
+        (
+            lambda: undistort(np.zeros((8, 8)), K_TRUE, D_TRUE, np.full((3, 3), 1, object)),
+            "new_K must",
+        ),
+    ]
+    for call, match in cases:
+        with pytest.raises(InputError, match=match):
+            call()
+    # the valid call still works
+    rms, per = reprojection_errors(obj, img, K_TRUE, D_TRUE, rv[:, :, None], tv)
+    assert rms < 1e-9 and per.shape == (3,)
+
+
+def test_issue25_rectify_pair_and_save_calibration_check_their_arguments(tmp_path):
+    from robopercept.calibration import rectify_pair
+
+    img = np.zeros((8, 8), np.uint8)
+    for bad in (3, None, [], np.eye(3)):
+        with pytest.raises(InputError, match="calibration must be a dict"):
+            rectify_pair(img, img, bad)
+    with pytest.raises(InputError, match="left must"):
+        rectify_pair([[1, 2]], img, {"K1": 0, "K2": 0, "R": 0, "T": 0})
+    for bad in (3, None, {}, np.eye(3)):
+        with pytest.raises(InputError, match="result must be a CalibrationResult"):
+            save_calibration(tmp_path / "cam.json", bad)
+
+
+def test_issue25_save_calibration_paths(rng, tmp_path):
+    obj, _, _, img = _exact(rng)
+    res = calibrate_camera(obj, img, (640, 480))
+    for bad, match in (
+        ("", "must not be empty"),
+        (3, "path must be a file"),
+        (tmp_path, "is a folder"),
+    ):
+        with pytest.raises(InputError, match=match):
+            save_calibration(bad, res)
+    with pytest.raises(InputError, match="file name too long"):
+        save_calibration(str(tmp_path / ("n" * 300)), res)
+    with pytest.raises(FileFormatError, match="cannot write the calibration"):
+        save_calibration(tmp_path / "missing" / "cam.json", res)
+    save_calibration(bytes(tmp_path / "cam.json"), res)  # bytes paths are paths
+    np.testing.assert_allclose(load_calibration(tmp_path / "cam.json")["K"], res.K)
+
+
+def test_issue25_levenberg_marquardt_budgets_are_bounded(rng, monkeypatch):
+    # absurd distortion (coefficients in the hundreds) made stereo_calibrate spend
+    # scipy's default budget, minutes of Jacobians; every LM run now has a bound of a
+    # few hundred steps (valid views converge in under ten), and the call returns
+    import scipy.optimize
+
+    budgets = []
+    real = scipy.optimize.least_squares
+
+    def spy(*args, **kwargs):
+        budgets.append(kwargs.get("max_nfev"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(scipy.optimize, "least_squares", spy)
+    obj, _, _, img = _exact(rng, 4)
+    d = np.array([209.7, -596.7, 1126.6, 362.5, -1500.2])
+    res = stereo_calibrate(obj, img, img, (640, 480), K1=K_TRUE, dist1=d, K2=K_TRUE, dist2=D_TRUE)
+    assert np.isfinite(res.rms) and budgets and all(b is not None and b <= 200 for b in budgets)

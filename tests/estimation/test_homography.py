@@ -66,7 +66,11 @@ def test_degenerate_and_bad_input(rng):
 def test_no_inliers_runs_max_iterations(rng):
     src, dst, _ = _matches(rng, n=50, noise=0.5)
     fit = find_homography(src, dst, 1e-300, max_iterations=30)
-    assert fit.n_iterations == 30 and fit.n_inliers == 0 and np.isnan(fit.rms)
+    # only points of a minimal sample, which the DLT fits exactly, can meet a 1e-300
+    # threshold, and only where their residual rounds to exactly 0 (it depends on the
+    # data's last bits): at most 4, never a noisy match
+    assert fit.n_iterations == 30 and fit.n_inliers <= 4
+    assert np.isnan(fit.rms) if fit.n_inliers == 0 else fit.rms < 1e-9
     assert fit.H.shape == (3, 3) and np.isfinite(fit.H).all()
 
 

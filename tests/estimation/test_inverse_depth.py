@@ -89,3 +89,20 @@ def test_bad_input():
         fit_plane_inverse_depth(np.array([[0, 0, 1.0], [1, 0, 1.0], [0, 0, -1.0]]))
     with pytest.raises(DegenerateError, match="one line"):
         fit_plane_inverse_depth(np.array([[0, 0, 1.0], [1, 0, 1.0], [2, 0, 1.0], [3, 0, 1.0]]))
+
+
+def test_issue25_non_finite_rows_are_input_errors():
+    # an infinite x (or values whose ratios overflow) made the moments inf/NaN and
+    # numpy's eigvalsh raised LinAlgError; rows with a NaN z are still skipped
+    gen = np.random.default_rng(0)
+    pts = np.c_[gen.uniform(-1, 1, (50, 2)), gen.uniform(1, 2, 50)].astype(np.float32)
+    bad = pts.copy()
+    bad[3, 0] = np.inf
+    with pytest.raises(InputError, match="points must be finite"):
+        fit_plane_inverse_depth(bad)
+    mask = np.ones(50, bool)
+    mask[3] = False
+    fit_plane_inverse_depth(bad, mask)  # the row is not selected: no error
+    nan_z = pts.astype(np.float64)
+    nan_z[5, 2] = np.nan
+    assert np.isfinite(fit_plane_inverse_depth(nan_z).normal).all()

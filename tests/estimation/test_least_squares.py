@@ -124,3 +124,19 @@ def test_scatter_matrix_hand_case_and_mask(rng):
     # integer input and an empty selection
     c, s = scatter_matrix(np.arange(6).reshape(3, 2), np.zeros(3, dtype=bool))
     assert np.array_equal(c, [0, 0]) and np.array_equal(s, np.zeros((2, 2)))
+
+
+# issue 25: points near 1e300 overflowed the scatter matrix to inf and numpy's eigh
+# raised LinAlgError; coordinates beyond 1e150 are refused with an InputError, and large
+# coordinates within it still give the right plane
+def test_issue25_huge_coordinates_are_refused_and_large_ones_fit():
+    gen = np.random.default_rng(0)
+    xy = gen.uniform(-1, 1, (500, 2))
+    pts = np.c_[xy, 0.5 * xy[:, 0] - 0.25 * xy[:, 1] + 2.0]
+    with pytest.raises(InputError, match=r"points has values up to 2\.7"):
+        fit_plane(pts * 1e300)
+    with pytest.raises(InputError, match="points has values up to"):
+        fit_line(pts[:, :2] * 1e200)
+    fit = fit_plane(pts * 1e140)  # within the bound: the same plane, scaled offset
+    n = fit.plane.normal * np.sign(fit.plane.normal[2])
+    np.testing.assert_allclose(n, np.array([-0.5, 0.25, 1.0]) / np.sqrt(1.3125), atol=1e-9)

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
+from robopercept.errors import DegenerateError, InputError
+from robopercept.estimation import AffineModel, HomographyModel
 from robopercept.estimation.models import hartley_normalization, homography_dlt
 
 H = np.array([[1.1, 0.05, 30.0], [-0.08, 0.95, -12.0], [2e-4, -1e-4, 1.0]])
@@ -61,3 +64,34 @@ class TestHomographyDlt:
         corners = np.array([[0, 0], [640, 0], [640, 640], [0, 640]], float)
         assert np.abs(_map(ours, corners) - _map(ref, corners)).max() < 0.1
         assert abs(ours[2, 2] - 1.0) < 1e-12
+
+
+# issue 25: Model.fit on hostile data (a list, one column, NaN, values near 1e300, too
+# few rows) raised TypeError, IndexError, ValueError or LinAlgError; it now raises an
+# InputError (or a DegenerateError for too few rows) and still fits valid data
+@pytest.mark.parametrize("model", [AffineModel(), HomographyModel()])
+@pytest.mark.parametrize(
+    ("data", "error", "match"),
+    [
+        ([], InputError, r"data must have shape \(N, 4\)"),
+        (np.ones((4, 1)), InputError, r"data must have shape \(N, 4\)"),
+        (np.ones((20, 2)), InputError, r"data must have shape \(N, 4\)"),
+        (np.full((10, 4), np.nan), InputError, "data must be finite"),
+        (np.full((10, 4), 1e300), InputError, "data has values up to 1e\\+300"),
+        (np.ones((2, 4)), DegenerateError, "needs [34] rows"),
+    ],
+)
+def test_issue25_fit_refuses_hostile_data(model, data, error, match):
+    with pytest.raises(error, match=match):
+        model.fit(data)
+
+
+def test_issue25_fit_takes_lists_and_still_fits():
+    gen = np.random.default_rng(3)
+    src = gen.uniform(0, 100, (12, 2))
+    A = np.array([[1.1, 0.2, 3.0], [-0.1, 0.9, -2.0]])
+    dst = src @ A[:, :2].T + A[:, 2]
+    data = np.c_[src, dst].tolist()  # a plain list of rows
+    np.testing.assert_allclose(AffineModel().fit(data).reshape(2, 3), A, atol=1e-9)
+    H = HomographyModel().fit(np.asfortranarray(np.c_[src, dst].astype(np.float32)))
+    np.testing.assert_allclose(H.reshape(3, 3)[:2], A, atol=1e-3)

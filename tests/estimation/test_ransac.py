@@ -15,6 +15,7 @@ from robopercept.estimation import (
     LineModel,
     Plane,
     PlaneModel,
+    find_homography,
     ransac,
     required_iterations,
 )
@@ -313,3 +314,51 @@ def test_scalar_parameters_are_checked(kwargs, match):
     kw = {"threshold": 0.1, **kwargs}
     with pytest.raises(InputError, match=match):
         ransac(np.eye(3), PlaneModel(), **kw)
+
+
+# issue 25: required_iterations compared complex, None or a string with floats (TypeError)
+# and a negative seed reached NumPy's default_rng (ValueError); both are InputErrors
+@pytest.mark.parametrize(
+    ("args", "match"),
+    [
+        ((1 + 1j, 3, 0.99), "inlier_ratio must be a real number"),
+        ((0.5, 1 + 1j, 0.99), "sample_size must be an integer"),
+        ((0.5, 3, None), "probability must be a real number"),
+        ((0.5, 3, "3"), "probability must be a real number"),
+        ((1.5, 3, 0.99), r"inlier_ratio must be in \[0, 1\]"),
+        ((0.5, 0, 0.99), "sample_size must be >= 1"),
+    ],
+)
+def test_issue25_required_iterations_refuses_hostile_arguments(args, match):
+    with pytest.raises(InputError, match=match):
+        required_iterations(*args)
+
+
+def test_issue25_negative_seed_is_an_input_error(rng):
+    data = np.c_[np.arange(10.0), 2 * np.arange(10.0)]
+    with pytest.raises(InputError, match="rng must be a non-negative int seed"):
+        ransac(data, LineModel(), 0.1, rng=-1)
+    with pytest.raises(InputError, match="rng must be a non-negative int seed"):
+        find_homography(rng.uniform(0, 9, (8, 2)), rng.uniform(0, 9, (8, 2)), rng=-17125068)
+    assert ransac(data, LineModel(), 0.1, rng=np.int64(7)).n_inliers == 10
+
+
+def test_issue25_huge_data_is_refused():
+    # points near 1e300 overflowed the plane model's scatter matrix (LinAlgError)
+    gen = np.random.default_rng(0)
+    data = gen.uniform(-1, 1, (500, 3)) * 1e300
+    with pytest.raises(InputError, match="data has values up to"):
+        ransac(data, PlaneModel(), 1.0)
+    with pytest.raises(InputError, match="data has values up to"):
+        PlaneModel().fit(data)
+
+
+def test_issue25_initial_hypotheses_are_checked(rng):
+    # a (3, 3) or (0, 3) initial for a plane (4 parameters) indexed past the end or took
+    # the argmax of nothing; both are InputErrors, and a right one is still used
+    pts, _, true = plane_data(rng, n=500)
+    for bad in (np.zeros((3, 3)), np.zeros((0, 4)), [[0, 0, 1, np.nan]], "abcd"):
+        with pytest.raises(InputError, match="initial must"):
+            ransac(pts, PlaneModel(), 0.01, initial=bad, rng=0)
+    res = ransac(pts, PlaneModel(), 0.01, initial=true.equation, min_inliers=100, rng=0)
+    assert res.n_iterations == 1 and res.n_inliers > 100

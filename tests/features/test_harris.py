@@ -233,3 +233,51 @@ def test_harris_refuses_values_whose_4th_power_overflows(dtype, scale):
     big = harris_response((img * 2.0**20).astype(dtype))  # exact scaling, 2^80 response
     np.testing.assert_allclose(big, small * 2.0**80, rtol=1e-4, atol=1e-30)
     assert (harris_response(img * 1e-300) == 0).all()  # (1e-300)^4 underflows to 0
+
+
+# issue 25: block_size 2**40 allocated terabytes (2**63: OverflowError), and NaN or
+# infinite zero_zone/corners raised ValueError/OverflowError; each is now an InputError
+_IMG = np.zeros((32, 40), np.uint8)
+_IMG[8:24, 10:30] = 255
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: min_eigenvalue(_IMG, 2**40), "block_size must be at most the image's larger"),
+        (lambda: harris_corners(_IMG, block_size=2**63), "block_size must be at most"),
+        (
+            lambda: harris_response(_IMG, 41),
+            "block_size must be at most the image's larger side, 40",
+        ),
+        (lambda: harris_response(_IMG, 3, np.array(3)), "ksize must be 1, 3, 5 or 7"),
+        (lambda: harris_response(_IMG, 3, True), "ksize must be 1, 3, 5 or 7"),
+        (lambda: refine_corners(_IMG, [[10.0, 8.0]], zero_zone=np.nan), "zero_zone must be an int"),
+        (
+            lambda: refine_corners(_IMG, [[10.0, 8.0]], zero_zone=-np.inf),
+            "zero_zone must be an int",
+        ),
+        (lambda: refine_corners(_IMG, [[10.0, 8.0]], 3, zero_zone=3), "zero_zone must be smaller"),
+        (lambda: refine_corners(_IMG, [[10.0, 8.0]], (3, 2, 1)), "window must be an int or a pair"),
+        (lambda: refine_corners(_IMG, [[np.nan, 8.0]]), "corners must be finite"),
+        (lambda: refine_corners(_IMG, "ab"), "corners must hold real numbers"),
+    ],
+)
+def test_issue25_hostile_arguments_are_input_errors(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_largest_valid_block_and_zero_zone_still_work():
+    r = min_eigenvalue(_IMG, 40)  # a block of the image's larger side is allowed
+    assert r.shape == _IMG.shape and np.isfinite(r).all()
+    out = refine_corners(_IMG.astype(np.float32), [[10.2, 8.3]], (4, 4), zero_zone=(1, 1))
+    np.testing.assert_allclose(out, [[9.5, 7.5]], atol=0.05)  # the square's corner
+
+
+def test_issue25_max_corners_beyond_the_pixels_keeps_all():
+    # max_corners = 2**64 - 1 overflowed the compiled kernel's int64 (OverflowError)
+    every = harris_corners(_IMG, min_distance=1.0)
+    many = harris_corners(_IMG, min_distance=1.0, max_corners=2**64 - 1)
+    np.testing.assert_array_equal(many.xy, every.xy)
+    assert len(harris_corners(_IMG, min_distance=1.0, max_corners=1)) == 1

@@ -208,3 +208,39 @@ def test_hog_refuses_values_that_overflow_the_block_norms():
     # (at 1e6 and 1e12 the block norm's epsilon is negligible; float32 rounding: 1e-5)
     np.testing.assert_allclose(hog(img * 1e12), hog(img * 1e6), atol=1e-5)
     assert np.isfinite(hog(img * 1e-300)).all()
+
+
+# issue 25: orientations=2**31 + 1 allocated 768 GiB; the number of bins is now bounded
+@pytest.mark.parametrize("call", [cell_histograms, hog])
+def test_issue25_orientations_are_bounded(call):
+    img = np.zeros((32, 32), np.uint8)
+    with pytest.raises(InputError, match="orientations must be at most 360 bins"):
+        call(img, orientations=2**31 + 1)
+    with pytest.raises(InputError, match="orientations must be an integer"):
+        call(img, orientations=9.5)
+    assert cell_histograms(img, 8, orientations=360).shape == (4, 4, 360)
+
+
+def test_issue25_block_sigma_and_flags_are_checked():
+    # block_sigma=[1, 2] raised TypeError from float(); a block_sigma whose square
+    # underflows (1e-162) gave 0 / 0 = NaN weights at the block centre
+    img = np.zeros((64, 32), np.uint8)
+    img[:, 16:] = 200
+    for bad, match in (([1, 2], "block_sigma must be a real number"), (-1.0, "block_sigma")):
+        with pytest.raises(InputError, match=match):
+            hog_windows(img, block_sigma=bad)
+    with pytest.raises(InputError, match="signed must be True or False"):
+        hog(img, signed="yes")
+    tiny = hog(img, block_sigma=1e-162)
+    assert np.isfinite(tiny).all() and tiny.any()
+    # a large block_sigma is the flat window, as block_sigma=0 (no weighting)
+    np.testing.assert_allclose(hog(img, block_sigma=1e12), hog(img, block_sigma=0.0), atol=1e-6)
+
+
+def test_issue25_sizes_are_bounded():
+    # block_stride=2**63 overflowed the int64 grid arithmetic (OverflowError)
+    img = np.zeros((64, 32), np.uint8)
+    with pytest.raises(InputError, match="block_stride must be at most 65536"):
+        hog(img, block_stride=2**63)
+    with pytest.raises(InputError, match=r"cell_size\[1\] must be at most 65536"):
+        hog(img, cell_size=(8, 2**40))

@@ -189,3 +189,31 @@ def test_rows_fuller_than_the_parallel_store(monkeypatch):
     assert len(small) > 100
     np.testing.assert_array_equal(small.keypoints.xy, large.keypoints.xy)
     np.testing.assert_array_equal(small.descriptors, large.descriptors)
+
+
+# issue 25: a contrast_threshold near 1e225 (or 2**63) overflowed the integer threshold,
+# None raised TypeError, and n_octave_layers or sigma had no bound on the pyramid they
+# build; each is now refused with an InputError, and a huge finite threshold finds nothing
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"contrast_threshold": None}, "contrast_threshold must be a real number"),
+        ({"contrast_threshold": np.nan}, "contrast_threshold must be finite"),
+        ({"edge_threshold": "3"}, "edge_threshold must be a real number"),
+        ({"n_octave_layers": 2**40}, "n_octave_layers must be at most 32"),
+        ({"sigma": 2.0**40}, "sigma must be at most the image's larger side"),
+        ({"upsample": "yes"}, "upsample must be True or False"),
+    ],
+)
+def test_issue25_hostile_parameters_are_input_errors(kwargs, match):
+    with pytest.raises(InputError, match=match):
+        sift(np.zeros((32, 32), np.uint8), **kwargs)
+
+
+def test_issue25_huge_contrast_threshold_finds_no_keypoint():
+    img = np.zeros((64, 64), np.uint8)
+    img[20:44, 20:44] = 255
+    assert len(sift(img).keypoints) > 0
+    for c in (2.1e225, 2**63):
+        f = sift(img, contrast_threshold=c)
+        assert len(f.keypoints) == 0 and f.descriptors.shape == (0, 128)

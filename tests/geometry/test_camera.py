@@ -385,3 +385,44 @@ def test_depth_broadcasting_that_is_allowed():
     assert deproject(np.zeros((5, 2)), np.ones((3, 1)), k).shape == (3, 5, 3)
     # NaN depth (no measurement) gives a NaN point, as depth_to_points relies on
     assert np.isnan(deproject(np.zeros((2, 2)), [np.nan, 1.0], k)[0]).all()
+
+
+# issue 25: hostile arguments (strings, None, complex or ragged arrays, shapes that do
+# not broadcast, objects that are not a CameraIntrinsics) raised TypeError, ValueError or
+# AttributeError; each is now an InputError naming the argument
+_K = CameraIntrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: _K.scaled("3", 480), "width must be an integer"),
+        (lambda: _K.scaled(640, None), "height must be an integer"),
+        (lambda: project(np.ones((2, 3)), 3), "intrinsics must be a CameraIntrinsics; got int"),
+        (lambda: project(np.ones((2, 3)), np.eye(3)), "intrinsics must be a CameraIntrinsics"),
+        (lambda: compiled_params(None), "intrinsics must be a CameraIntrinsics; got NoneType"),
+        (lambda: project(np.array([["a", "b", "c"]]), _K), "points must hold real numbers"),
+        (lambda: distort(np.ones(41), np.ones(39), COEFFS), "x of shape .* do not broadcast"),
+        (lambda: undistort(np.ones(0), np.ones(40), COEFFS), "xd of shape .* do not broadcast"),
+        (lambda: undistort(0.1, 0.1, [[1, 2], -0.05, 0.001, 0.001, 0.0]), "coeffs must be"),
+        (lambda: distort(0.1, 0.1, (np.nan, 0, 0, 0, 0)), "coeffs must be finite"),
+        (lambda: distort("a", 0.1, COEFFS), "x must hold real numbers"),
+        (lambda: undistort_points([[1.0, 2.0]], np.zeros((3, 3))), "non-zero focal lengths"),
+        (lambda: check_distortion("abcde"), "D must hold real numbers"),
+        (lambda: CameraIntrinsics.from_matrix(np.eye(3, dtype=complex), 4, 4), "K must hold"),
+    ],
+)
+def test_issue25_hostile_arguments_are_input_errors(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_valid_edge_values_still_work():
+    np.testing.assert_allclose(
+        _K.scaled(1280, 960).K, [[1000, 0, 640.5], [0, 1000, 480.5], [0, 0, 1]]
+    )
+    # a scalar broadcasts against an array (one y for all x)
+    xd, yd = distort(np.array([0.1, 0.2]), 0.0, COEFFS)
+    assert xd.shape == yd.shape == (2,)
+    x, y = undistort(xd, yd, COEFFS)
+    np.testing.assert_allclose(np.c_[x, y], [[0.1, 0.0], [0.2, 0.0]], atol=1e-4)

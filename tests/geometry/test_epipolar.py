@@ -196,3 +196,59 @@ def test_bad_input():
         decompose_essential(np.zeros((3, 3)), x1, x2)
     with pytest.raises(InputError, match="method"):
         find_fundamental(x1, x2, method="lmeds")
+
+
+# issue 25: hostile arguments (wrong shapes, complex/object arrays, singular camera
+# matrices, negative seeds, coordinates near 1e300) raised NumPy's ValueError or
+# LinAlgError; each is now an InputError naming the argument
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda x1, x2: skew([1.0, 2.0]), r"v must be 3 finite numbers, shape \(3,\)"),
+        (lambda x1, x2: skew(np.nan), "v must be 3 finite numbers"),
+        (lambda x1, x2: skew([1.0, np.nan, 0.0]), "v must be 3 finite numbers"),
+        (lambda x1, x2: essential_from_pose(np.eye(3), np.ones((2, 3))), "t must be 3 finite"),
+        (lambda x1, x2: essential_from_pose(np.eye(3), []), "t must be 3 finite"),
+        (
+            lambda x1, x2: fundamental_from_essential(np.eye(3), np.ones((3, 3)), K),
+            "K1 is singular",
+        ),
+        (
+            lambda x1, x2: fundamental_from_essential(np.zeros((3, 3)), K, K),
+            "E is the zero matrix",
+        ),
+        (
+            lambda x1, x2: decompose_essential(np.eye(3), x1, x2, np.full((3, 3), 1, object)),
+            "K must hold real numbers",
+        ),
+        (lambda x1, x2: find_essential(x1, x2, np.zeros((3, 3))), "K is singular"),
+        (lambda x1, x2: find_fundamental(x1, x2, rng=-1), "rng must be a non-negative"),
+        (lambda x1, x2: find_essential(x1, x2, K, rng=-5), "rng must be a non-negative"),
+        (lambda x1, x2: eight_point(x1 * 1e300, x2), "x1 has values up to"),
+        (lambda x1, x2: sampson_distance(np.eye(3), x1, x2.astype(complex)), "x2 must hold"),
+    ],
+)
+def test_issue25_hostile_arguments_are_input_errors(call, match):
+    _, _, _, x1, x2 = _scene(20)
+    with pytest.raises(InputError, match=match):
+        call(x1, x2)
+
+
+def test_issue25_scale_extremes_still_give_the_right_matrices():
+    _, R, t, x1, x2 = _scene(20)
+    E = essential_from_pose(R, t.reshape(3, 1))  # a (3, 1) column is still a vector
+    F = fundamental_from_essential(E, K, K)
+    # E and K near 1e300 (or 1e-300) are normalized first: the same unit F, not NaN
+    np.testing.assert_allclose(fundamental_from_essential(1e300 * E, K, K), F, atol=1e-12)
+    np.testing.assert_allclose(fundamental_from_essential(E, 1e-300 * K, K), F, atol=1e-12)
+    d = sampson_distance(F, x1, x2)
+    np.testing.assert_allclose(sampson_distance(1e300 * F, x1, x2), d, rtol=1e-9, atol=1e-12)
+    assert d.max() < 1e-6
+
+
+def test_issue25_find_essential_checks_threshold_and_focal_lengths():
+    _, _, _, x1, x2 = _scene(20)
+    with pytest.raises(InputError, match="threshold must be a real number"):
+        find_essential(x1, x2, K, threshold=None)
+    with pytest.raises(InputError, match="K must have positive focal lengths"):
+        find_essential(x1, x2, np.diag([-700.0, 690.0, 1.0]))

@@ -8,7 +8,11 @@ import pytest
 
 from robopercept.errors import DegenerateError, InputError
 from robopercept.geometry.epipolar import essential_from_pose, fundamental_from_essential
-from robopercept.geometry.rectification import rectify_stereo, rectify_uncalibrated
+from robopercept.geometry.rectification import (
+    rectify_stereo,
+    rectify_uncalibrated,
+    undistort_rectify_map,
+)
 from robopercept.geometry.transforms import rotation_from_rotvec, rotvec_from_rotation
 
 K1 = np.array([[700.0, 0, 318.0], [0, 705.0, 242.0], [0, 0, 1]])
@@ -130,3 +134,73 @@ def test_undistort_rectify_map_equals_opencv():
         assert np.abs(mx - rx).max() < 1e-3 and np.abs(my - ry).max() < 1e-3
     with pytest.raises(InputError):
         undistort_rectify_map(K, d, None, np.eye(2), (640, 480))
+
+
+# issue 25: hostile sizes and matrices (an int for a size, NaN/inf sides, a singular or
+# complex P) raised TypeError, IndexError, OverflowError or LinAlgError, and a huge size
+# allocated without bound; each is now an InputError naming the argument
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: rectify_stereo(K1, D1, K2, D2, np.eye(3), [0.1, 0, 0], 7), "size must be"),
+        (lambda: rectify_stereo(K1, D1, K2, D2, np.eye(3), [0.1, 0, 0], (1,)), "size must be"),
+        (
+            lambda: rectify_stereo(K1, D1, K2, D2, np.eye(3), [0.1, 0, 0], (np.nan, 48)),
+            "size must be",
+        ),
+        (
+            lambda: rectify_stereo(K1, D1, K2, D2, np.eye(3), [0.1, 0, 0], (64, None)),
+            "size must be",
+        ),
+        (
+            lambda: rectify_stereo(np.ones((3, 3)), D1, K2, D2, np.eye(3), [0.1, 0, 0], (64, 48)),
+            "K1 is singular",
+        ),
+        (
+            lambda: rectify_stereo(K1, D1, K2, D2, np.eye(3), ["a", 0, 0], (64, 48)),
+            "T must hold real numbers",
+        ),
+        (lambda: rectify_uncalibrated(np.eye(3), np.ones((5, 2)), np.ones((5, 2)), ()), "size"),
+        (
+            lambda: rectify_uncalibrated(np.eye(3), np.ones((5, 2)), np.ones((5, 2)), (64, np.inf)),
+            "size must be",
+        ),
+        (
+            lambda: rectify_uncalibrated(
+                np.zeros((3, 3)), np.ones((5, 2)), np.ones((5, 2)), (64, 48)
+            ),
+            "F must be a fundamental matrix \\(rank 2\\)",
+        ),
+        (
+            lambda: undistort_rectify_map(K1, D1, None, np.eye(3, dtype=np.complex64), (64, 48)),
+            "P must hold real numbers",
+        ),
+        (
+            lambda: undistort_rectify_map(K1, D1, None, np.ones((3, 3)), (64, 48)),
+            "singular",
+        ),
+        (
+            lambda: undistort_rectify_map(K1, D1, None, K1, (65536, 65536)),
+            "more than the 268435456 allowed",
+        ),
+        (lambda: undistort_rectify_map(K1, D1, None, K1, (2**40, 4)), r"in \[1, 65536\]"),
+    ],
+)
+def test_issue25_hostile_arguments_are_input_errors(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_maps_in_blocks_of_rows_equal_the_whole(monkeypatch):
+    """The maps are computed in blocks of rows (bounded intermediates): blocks of 7 rows
+    of a 50 x 33 map give exactly the one-block result."""
+    import robopercept.geometry.rectification as rect
+
+    R = rotation_from_rotvec([0.01, -0.02, 0.005])
+    P = np.array([[500.0, 0, 20, 0], [0, 500, 15, 0], [0, 0, 1, 0]])
+    whole = rect.undistort_rectify_map(K1, D1, R, P, (50, 33.0))  # integral float sides
+    monkeypatch.setattr(rect, "_BLOCK_PIXELS", 7 * 50)
+    blocks = rect.undistort_rectify_map(K1, D1, R, P, (50, 33))
+    for a, b in zip(whole, blocks, strict=True):
+        assert a.shape == (33, 50)
+        np.testing.assert_array_equal(a, b)

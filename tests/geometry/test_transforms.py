@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from robopercept.errors import InputError
-from robopercept.geometry import rotation_from_rotvec, rotvec_from_rotation
+from robopercept.geometry import nearest_rotation, rotation_from_rotvec, rotvec_from_rotation, se3
 from robopercept.geometry.transforms import check_matrix3
 
 
@@ -68,3 +68,34 @@ class TestCheckMatrix3:
     def test_bad_input(self, bad):
         with pytest.raises(InputError, match="F must be a finite 3x3 matrix"):
             check_matrix3(bad, "F")
+
+
+# issue 25: hostile scalars and arrays (strings, complex, object arrays, wrong shapes,
+# singular matrices) gave NumPy's ValueError/LinAlgError; each is now an InputError that
+# names the argument, and valid edge values still work
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: check_matrix3(np.eye(3, dtype=complex), "K"), "K must hold real numbers"),
+        (lambda: check_matrix3(np.array([["a"] * 3] * 3), "K"), "K must hold real numbers"),
+        (lambda: check_matrix3(np.full((3, 3), None), "K"), "K must"),
+        (lambda: check_matrix3([[1, 2], [3]], "K"), "K must be a numeric array"),
+        (lambda: check_matrix3(np.ones((3, 3)), "K", invertible=True), "K is singular"),
+        (lambda: nearest_rotation(np.float64(1.0)), "M must be a finite 3x3"),
+        (lambda: nearest_rotation(np.ones((4, 3))), "M must be a finite 3x3"),
+        (lambda: nearest_rotation(np.full((3, 3), np.inf, dtype=np.complex64)), "M must hold"),
+        (lambda: rotation_from_rotvec("abc"), "rotvec must hold real numbers"),
+        (lambda: se3(translation=[1.0, np.nan, 0.0]), "translation must be 3 finite"),
+    ],
+)
+def test_issue25_hostile_matrices_are_input_errors(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_issue25_nearest_rotation_still_works_on_valid_and_extreme_scales():
+    R = rotation_from_rotvec([0.1, -0.2, 0.3])
+    np.testing.assert_allclose(nearest_rotation(R + 1e-9), R, atol=1e-8)
+    # a scaled rotation (entries near 1e300) gives the rotation, not NaN
+    np.testing.assert_allclose(nearest_rotation(1e300 * R), R, atol=1e-12)
+    assert check_matrix3(np.diag([500.0, 500.0, 1.0]), "K", invertible=True).dtype == np.float64

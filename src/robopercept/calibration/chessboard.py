@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from robopercept._checks import check_bool, check_int, check_real, plain_repr
 from robopercept.calibration._lattice import along, grow_lattice
 from robopercept.errors import InputError
 from robopercept.features.harris import refine_corners
@@ -54,6 +55,12 @@ __all__ = [
     "chessboard_points",
     "find_chessboard_corners",
 ]
+
+#: most points a calibration pattern may have (w * h): 24 MB of board coordinates
+MAX_PATTERN_POINTS = 1_000_000
+#: largest square side or circle spacing: board coordinates up to it times the pattern
+#: size stay within the 1e150 the calibration accepts
+MAX_LENGTH = 1e140
 
 _RING = 32
 _RADIUS = 5.0
@@ -100,10 +107,20 @@ def chessboard_points(pattern_size: tuple[int, int], square: float = 1.0) -> np.
     Returns
     -------
     (w * h, 3) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        A ``pattern_size`` that :func:`check_pattern_size` refuses, or ``square`` not a
+        real number in (0, 1e150].
+
+    Examples
+    --------
+    >>> chessboard_points((3, 2), 0.5)[:, :2].tolist()
+    [[0.0, 0.0], [0.5, 0.0], [1.0, 0.0], [0.0, 0.5], [0.5, 0.5], [1.0, 0.5]]
     """
     w, h = check_pattern_size(pattern_size)
-    if not (np.isfinite(square) and square > 0):
-        raise InputError(f"square must be a positive length; got {square!r}")
+    square = check_real(square, "square", 0.0, MAX_LENGTH, low_inclusive=False)
     out = np.zeros((w * h, 3))
     out[:, 0] = np.tile(np.arange(w), h) * square
     out[:, 1] = np.repeat(np.arange(h), w) * square
@@ -114,8 +131,9 @@ def check_pattern_size(pattern_size: tuple[int, int], noun: str = "corners") -> 
     """Validate the size of a calibration pattern, as OpenCV's ``patternSize``.
 
     ``(w, h)``: the number of points (a chessboard's inner corners, a grid's circles)
-    per row and per column, each at least 2. Used by every detector and board model of
-    this package.
+    per row and per column, each a whole number at least 2, and at most
+    :data:`MAX_PATTERN_POINTS` points in all (a bound on the arrays built from it). Used
+    by every detector and board model of this package.
 
     Parameters
     ----------
@@ -132,22 +150,39 @@ def check_pattern_size(pattern_size: tuple[int, int], noun: str = "corners") -> 
     Raises
     ------
     InputError
-        If ``pattern_size`` is not a pair of integers, or either is below 2.
+        If ``pattern_size`` is not a pair of whole numbers (``9.0`` is taken; ``9.5``,
+        NaN/inf, bools and strings are not), either is below 2, or ``w * h`` exceeds
+        :data:`MAX_PATTERN_POINTS`.
 
     Examples
     --------
     >>> check_pattern_size((9, 6))
     (9, 6)
     """
-    try:
-        w, h = (int(v) for v in pattern_size)
-    except (TypeError, ValueError) as exc:
-        raise InputError(
-            f"pattern_size must be ({noun} per row, {noun} per column); got {pattern_size!r}"
-        ) from exc
+    want = (
+        f"pattern_size must be ({noun} per row, {noun} per column), two whole numbers; "
+        f"got {plain_repr(pattern_size)}"
+    )
+    items = pattern_size.tolist() if isinstance(pattern_size, np.ndarray) else pattern_size
+    if not isinstance(items, (tuple, list)) or len(items) != 2:
+        raise InputError(want)
+    wh = []
+    for v in items:
+        if isinstance(v, (float, np.floating)) and np.isfinite(v) and float(v).is_integer():
+            v = int(v)
+        try:
+            wh.append(check_int(v, "pattern_size"))
+        except InputError:
+            raise InputError(want) from None
+    w, h = wh
     if w < 2 or h < 2:
         inner = "inner " if noun == "corners" else ""
         raise InputError(f"pattern_size needs at least 2 x 2 {inner}{noun}; got {(w, h)}")
+    if w * h > MAX_PATTERN_POINTS:
+        raise InputError(
+            f"pattern_size {(w, h)} has {w * h} {noun}, more than {MAX_PATTERN_POINTS}: "
+            f"give the {noun} per row and per column of the printed pattern, e.g. (9, 6)"
+        )
     return w, h
 
 
@@ -418,8 +453,19 @@ def find_chessboard_corners(
     -------
     ChessboardDetection
         ``found`` is False (with the reason) unless every inner corner was found.
+
+    Raises
+    ------
+    InputError
+        An image that :func:`~robopercept.imaging.rgb_to_gray` refuses, a
+        ``pattern_size`` that :func:`check_pattern_size` refuses, or a parameter of the
+        wrong type or range.
     """
     w, h = check_pattern_size(pattern_size)
+    refine = check_bool(refine, "refine")
+    if half_window is not None:
+        half_window = check_int(half_window, "half_window", 1)
+    max_seeds = check_int(max_seeds, "max_seeds", 1)
     gray = np.ascontiguousarray(rgb_to_gray(image), dtype=np.float64)  # validates; same scale
     if gray.dtype.kind == "f" and gray.max() <= 1.0 + 1e-9 and image.dtype.kind == "f":
         gray = gray * 255.0

@@ -51,8 +51,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
+from robopercept._checks import check_bool, check_choice, check_int, check_real
 from robopercept.calibration._lattice import grow_lattice
-from robopercept.calibration.chessboard import check_pattern_size
+from robopercept.calibration.chessboard import MAX_LENGTH, check_pattern_size
 from robopercept.errors import InputError
 from robopercept.imaging.blobs import label_components
 from robopercept.imaging.color import rgb_to_gray
@@ -105,10 +106,32 @@ def circles_grid_points(
     a symmetric grid and at ``((2 j + i % 2) s / 2, i s / 2, 0)`` on an asymmetric one,
     ``s = spacing`` being the distance between neighbouring centres of one row
     (OpenCV's sample passes ``s / 2`` as its "square size" for the asymmetric grid).
+
+    Parameters
+    ----------
+    pattern_size : (int, int)
+        Circles per row and rows (:func:`~robopercept.calibration.chessboard.check_pattern_size`).
+    spacing : float
+        In (0, 1e140].
+    asymmetric : bool
+
+    Returns
+    -------
+    (w * h, 3) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        A parameter of the wrong type or out of its range.
+
+    Examples
+    --------
+    >>> circles_grid_points((2, 2), 2.0, asymmetric=False)[:, :2].tolist()
+    [[0.0, 0.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0]]
     """
     w, h = check_pattern_size(pattern_size, "circles")
-    if not spacing > 0:
-        raise InputError(f"spacing must be positive; got {spacing}")
+    spacing = check_real(spacing, "spacing", 0.0, MAX_LENGTH, low_inclusive=False)
+    asymmetric = check_bool(asymmetric, "asymmetric")
     i, j = np.divmod(np.arange(w * h), w)
     if asymmetric:
         x, y = (2 * j + i % 2) * spacing / 2.0, i * spacing / 2.0
@@ -329,12 +352,23 @@ def find_circles_grid(
         ``found`` is False (with the reason) unless every circle was found. Extra
         circles on the grid's extension (stray blobs) are left out; a grid larger than
         ``pattern_size`` is not found.
+
+    Raises
+    ------
+    InputError
+        An image that :func:`~robopercept.imaging.rgb_to_gray` refuses, a
+        ``pattern_size`` that
+        :func:`~robopercept.calibration.chessboard.check_pattern_size` refuses, or a
+        parameter of the wrong type or range.
     """
     w, h = check_pattern_size(pattern_size, "circles")
-    if blob_color not in ("dark", "light"):
-        raise InputError(f"blob_color must be 'dark' or 'light'; got {blob_color!r}")
-    if not 0 < min_area <= max_area:
+    asymmetric = check_bool(asymmetric, "asymmetric")
+    check_choice(blob_color, "blob_color", ("dark", "light"))
+    min_area = check_real(min_area, "min_area", 0.0, low_inclusive=False)
+    max_area = check_real(max_area, "max_area", 0.0, low_inclusive=False)
+    if not min_area <= max_area:
         raise InputError(f"need 0 < min_area <= max_area; got {min_area}, {max_area}")
+    max_seeds = check_int(max_seeds, "max_seeds", 1)
     gray = np.ascontiguousarray(rgb_to_gray(image), dtype=np.float64)  # validates; same scale
     if image.dtype.kind == "f" and gray.max() <= 1.0 + 1e-9:
         gray = gray * 255.0

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from robopercept._checks import check_file
 from robopercept.errors import FileFormatError
 
 __all__ = ["read_opencv_storage"]
@@ -66,9 +67,11 @@ def read_opencv_storage(path: str | Path) -> dict[str, Any]:
 
     Raises
     ------
+    InputError
+        ``path`` is not a usable path (None, a number, a NUL byte, a name too long).
     FileFormatError
-        Unreadable, not well-formed (the message gives the line), or a matrix whose
-        ``data`` does not hold ``rows x cols x channels`` numbers.
+        Missing, a folder, unreadable, not well-formed (the message gives the line), or
+        a matrix whose ``data`` does not hold ``rows x cols x channels`` numbers.
 
     Examples
     --------
@@ -92,7 +95,7 @@ def read_opencv_storage(path: str | Path) -> dict[str, Any]:
     >>> fs["image_width"]
     640
     """
-    p = Path(path)
+    p = check_file(path, "an OpenCV FileStorage file (.yml, .yaml, .xml or .json)")
     try:
         text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:

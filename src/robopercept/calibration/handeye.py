@@ -49,7 +49,13 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_choice
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_file,
+    check_magnitude,
+    check_numeric,
+)
 from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.geometry.epipolar import skew
 from robopercept.geometry.transforms import (
@@ -144,12 +150,21 @@ def pose_from_xyz_rpy(
         Roll, pitch, yaw.
     degrees : bool
         Angles in degrees (default) or radians.
+
+    Returns
+    -------
+    (4, 4) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        ``xyz`` or ``rpy`` not 3 finite real numbers, or ``degrees`` not a bool.
     """
-    t = np.asarray(xyz, dtype=np.float64).ravel()
-    a = np.asarray(rpy, dtype=np.float64).ravel()
+    t = check_numeric(xyz, "xyz").ravel()
+    a = check_numeric(rpy, "rpy").ravel()
     if t.shape != (3,) or a.shape != (3,) or not (np.isfinite(t).all() and np.isfinite(a).all()):
         raise InputError(f"xyz and rpy must be 3 finite numbers each; got {t} and {a}")
-    if degrees:
+    if check_bool(degrees, "degrees"):
         a = np.deg2rad(a)
     (cx, cy, cz), (sx, sy, sz) = np.cos(a), np.sin(a)
     rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
@@ -190,11 +205,14 @@ def read_xyz_rpy(path: str | Path, order: str = "rpy_xyz", *, degrees: bool = Tr
 
     Raises
     ------
+    InputError
+        ``path`` not a usable path, or an unknown ``order``.
     FileFormatError
-        Not six numbers.
+        Missing, a folder, or not six numbers.
     """
     check_choice(order, "order", ("rpy_xyz", "xyz_rpy"))
-    p = Path(path)
+    degrees = check_bool(degrees, "degrees")
+    p = check_file(path, "a robot pose file (six numbers)")
     try:
         v = np.array(p.read_text().split(), dtype=np.float64)
     except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -213,10 +231,13 @@ def _stack(poses: npt.ArrayLike, name: str) -> np.ndarray:
     out = []
     for i, T in enumerate(poses):
         m = check_transform(T, f"{name}[{i}]")
+        check_magnitude(m, f"{name}[{i}]", 1e150)  # the solvers multiply translations
         r = m[:3, :3]
         if not np.allclose(r @ r.T, np.eye(3), atol=1e-5) or np.linalg.det(r) < 0:
             raise InputError(f"{name}[{i}] does not hold a rotation (orthonormal, det +1)")
         out.append(m)
+    if not out:
+        raise InputError(f"{name} must hold at least one 4x4 transform; got none")
     return np.array(out)
 
 
@@ -382,7 +403,8 @@ def _refine(G: np.ndarray, C: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np
             rv, tr = parts(q)
             return np.c_[rv * s, tr].ravel()
 
-        sol = least_squares(fun, p, method="lm", x_scale="jac")
+        # (bounded: valid stations converge in a few steps)
+        sol = least_squares(fun, p, method="lm", x_scale="jac", max_nfev=200)
         if not np.isfinite(sol.x).all() or sol.cost > 0.5 * (fun(p) ** 2).sum():
             break
         p = sol.x
@@ -407,10 +429,21 @@ def hand_eye_residuals(
     rotation_deg, translation : (P,) ndarray
         Angle of :math:`(R_A R_X)^T R_X R_B` in degrees and
         :math:`\\|R_A t_X + t_A - R_X t_B - t_X\\|`, for each of the P = n(n-1)/2 pairs.
+
+    Raises
+    ------
+    InputError
+        Poses that are not rigid 4x4 transforms (translations within 1e150), fewer
+        than 2 stations, or counts that differ.
     """
     check_choice(setup, "setup", SETUPS)
     G = _stack(T_base_gripper, "T_base_gripper")
     C = _stack(T_camera_target, "T_camera_target")
+    if len(G) != len(C) or len(G) < 2:
+        raise InputError(
+            f"{len(G)} robot poses and {len(C)} target poses: give one target pose per "
+            "robot station, in the same order, at least 2 stations"
+        )
     if setup == "eye_to_hand":
         G = np.array([invert(g) for g in G])
     Xm = check_transform(X, "X")
@@ -461,6 +494,7 @@ def calibrate_hand_eye(
     """
     check_choice(setup, "setup", SETUPS)
     check_choice(method, "method", METHODS)
+    refine = check_bool(refine, "refine")
     G = _stack(T_base_gripper, "T_base_gripper")
     C = _stack(T_camera_target, "T_camera_target")
     if len(G) != len(C):

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,7 +47,16 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_file, plain_repr
+from robopercept._checks import (
+    as_path,
+    check_bool,
+    check_file,
+    check_image,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    plain_repr,
+)
 from robopercept.calibration.filestorage import read_opencv_storage
 from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.estimation.models import homography_dlt
@@ -60,6 +69,7 @@ from robopercept.geometry.camera import (
 from robopercept.geometry.epipolar import essential_from_pose, fundamental_from_essential
 from robopercept.geometry.rectification import rectify_stereo, undistort_rectify_map
 from robopercept.geometry.transforms import (
+    check_matrix3,
     nearest_rotation,
     rotation_from_rotvec,
     rotvec_from_rotation,
@@ -188,20 +198,58 @@ class StereoCalibration:
 # --------------------------------------------------------------------------- inputs
 
 
+#: largest coordinate of board and image points: the projection and the homographies
+#: square them (products beyond about 1e308 overflow)
+_MAX_COORDINATE = 1e150
+_MAX_ITERATIONS = 100_000  # Levenberg-Marquardt iterations (scipy's max_nfev is a C long)
+_LM_STEPS = 100  # Levenberg-Marquardt steps of a board pose (twice that for a stereo pair)
+
+
 def _views(points: Sequence[npt.ArrayLike] | np.ndarray, name: str, dim: int) -> list[np.ndarray]:
     if isinstance(points, np.ndarray) and points.ndim == 3:
         points = list(points)
-    if not isinstance(points, Sequence) and not isinstance(points, np.ndarray):
-        raise InputError(f"{name} must be a list with one (N, {dim}) array per view")
+    if isinstance(points, (str, bytes)) or (
+        not isinstance(points, Sequence) and not isinstance(points, np.ndarray)
+    ):
+        raise InputError(
+            f"{name} must be a list with one (N, {dim}) array per view; got {type(points).__name__}"
+        )
     out = []
     for i, p in enumerate(points):
-        a = np.asarray(p, dtype=np.float64)
+        a = check_numeric(p, f"{name}[{i}]")
         if a.ndim == 3 and a.shape[1] == 1:  # OpenCV's (N, 1, 2) corners
             a = a[:, 0]
         if a.ndim != 2 or a.shape[1] != dim or not np.isfinite(a).all():
             raise InputError(f"{name}[{i}] must be a finite (N, {dim}) array; got {a.shape}")
-        out.append(a)
+        out.append(check_magnitude(a, f"{name}[{i}]", _MAX_COORDINATE))
     return out
+
+
+def _camera_matrix(K: npt.ArrayLike, name: str) -> np.ndarray:
+    """``K`` as a float64 camera matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` with
+    ``fx, fy > 0`` (finite, entries within 1e150), or InputError naming ``name``."""
+    k = check_matrix3(K, name)
+    if not (k[0, 0] > 0 and k[1, 1] > 0 and k[1, 0] == 0 and np.array_equal(k[2], [0, 0, 1])):
+        raise InputError(
+            f"{name} must be a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with "
+            f"fx, fy > 0; got {k.tolist()}: take it from a calibration (calibrate_camera, "
+            "cv2.calibrateCamera)"
+        )
+    return check_magnitude(k, name, _MAX_COORDINATE)
+
+
+def _pose_vectors(value: Any, name: str, n_views: int) -> np.ndarray:
+    """Rotation or translation vectors, one per view: ``(V, 3)`` (OpenCV's list of
+    ``(3, 1)`` columns too), finite."""
+    a = check_numeric(value, name)
+    if a.ndim == 3 and a.shape[1:] == (3, 1):
+        a = a[:, :, 0]
+    if a.shape != (n_views, 3) or not np.isfinite(a).all():
+        raise InputError(
+            f"{name} must be {n_views} finite 3-vectors, one per view, shape ({n_views}, 3); "
+            f"got shape {a.shape}"
+        )
+    return check_magnitude(a, name, _MAX_COORDINATE)
 
 
 def _inputs(
@@ -296,16 +344,26 @@ def reprojection_errors(
     Returns
     -------
     rms : float
-        :math:`\\sqrt{\\sum_{i,j} \\|e_{ij}\\|^2 / N}`.
+        :math:`\\sqrt{\\sum_{i,j} \\|e_{ij}\\|^2 / N}` (inf when a point lies on or
+        behind the camera plane of its view).
     per_view : (V,) ndarray
+
+    Raises
+    ------
+    InputError
+        Views as in :func:`calibrate_camera`, a ``K`` that is not a camera matrix,
+        ``dist`` that is not 4 or 5 finite numbers, or ``rvecs``/``tvecs`` that are not
+        one finite 3-vector per view.
     """
     objs, img = _inputs(object_points, image_points)
     obj = np.concatenate(objs)
     view = np.repeat(np.arange(len(objs)), [len(o) for o in objs])
-    r = np.asarray(rvecs, dtype=np.float64).reshape(-1, 3)
-    t = np.asarray(tvecs, dtype=np.float64).reshape(-1, 3)
+    r = _pose_vectors(rvecs, "rvecs", len(objs))
+    t = _pose_vectors(tvecs, "tvecs", len(objs))
     d = check_distortion(dist, "dist")
-    e = _project(obj, view, r, t, np.asarray(K, dtype=np.float64), d) - np.concatenate(img)
+    with np.errstate(all="ignore"):  # points behind or on the camera plane: inf below
+        e = _project(obj, view, r, t, _camera_matrix(K, "K"), d) - np.concatenate(img)
+        e = np.where(np.isfinite(e), e, np.inf)
     sq = (e**2).sum(axis=1)
     per = np.sqrt(np.bincount(view, sq) / np.bincount(view))
     return float(np.sqrt(sq.mean())), per
@@ -357,7 +415,13 @@ def _zhang_K(H: np.ndarray) -> np.ndarray:
 def _pose_from_homography(K: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Board pose from ``H = K [r1 r2 t]`` (rotation vector, translation)."""
     m = np.linalg.solve(K, H)
-    lam = 1.0 / np.linalg.norm(m[:, 0])
+    norm = np.linalg.norm(m[:, 0])
+    if not (np.isfinite(m).all() and norm > 0):
+        raise DegenerateError(
+            "the board's homography is degenerate (points on a line, or coinciding): "
+            "check that the points match the board"
+        )
+    lam = 1.0 / norm
     if m[2, 2] * lam < 0:  # the board must lie in front of the camera
         lam = -lam
     r1, r2, t = lam * m[:, 0], lam * m[:, 1], lam * m[:, 2]
@@ -367,15 +431,25 @@ def _pose_from_homography(K: np.ndarray, H: np.ndarray) -> tuple[np.ndarray, np.
 def _view_pose(K: np.ndarray, dist: np.ndarray, obj: np.ndarray, img: np.ndarray):
     from scipy.optimize import least_squares
 
-    xy = undistort_points(img, K, dist)
-    h = homography_dlt(obj[None, :, :2], xy[None])[0]
+    with np.errstate(all="ignore"):  # non-finite values are refused below
+        xy = undistort_points(img, K, dist)
+        h = homography_dlt(obj[None, :, :2], xy[None])[0]
     r, t = _pose_from_homography(np.eye(3), h)
     view = np.zeros(len(obj), dtype=np.intp)
 
     def fun(p: np.ndarray) -> np.ndarray:
         return (_project(obj, view, p[None, :3], p[None, 3:], K, dist) - img).ravel()
 
-    sol = least_squares(fun, np.r_[r, t], method="lm")
+    with np.errstate(all="ignore"):
+        start_ok = np.isfinite(fun(np.r_[r, t])).all()
+    if not start_ok:
+        raise DegenerateError(
+            "the board pose cannot be started: a board point projects to infinity (on the "
+            "camera plane); check that the points match the board and K is this camera's"
+        )
+    # (a bound on the steps: valid views converge in a few; absurd distortion or K
+    # would otherwise spend the default budget of 100 * n * (n + 1) evaluations)
+    sol = least_squares(fun, np.r_[r, t], method="lm", max_nfev=_LM_STEPS)
     return sol.x[:3], sol.x[3:]
 
 
@@ -400,13 +474,24 @@ def board_pose(
     K : (3, 3) array_like
     dist : array_like, optional
         ``(k1, k2, p1, p2[, k3])``.
+
+    Returns
+    -------
+    (4, 4) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        Points that are not finite ``(N, 3)``/``(N, 2)`` arrays of one length (N >= 4)
+        within 1e150, non-planar board points, a ``K`` that is not a camera matrix
+        ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` with ``fx, fy > 0``.
+    DegenerateError
+        Points that do not determine the pose (collinear, coinciding).
     """
     obj = _views([object_points], "object_points", 3)[0]
     img = _views([image_points], "image_points", 2)[0]
     _check_view(obj, img, 0)
-    Km = np.asarray(K, dtype=np.float64)
-    if Km.shape != (3, 3) or not np.isfinite(Km).all():
-        raise InputError(f"K must be a finite 3x3 matrix; got shape {Km.shape}")
+    Km = _camera_matrix(K, "K")
     r, t = _view_pose(Km, check_distortion(dist, "dist"), obj, img)
     T = np.eye(4)
     T[:3, :3] = rotation_from_rotvec(r)
@@ -452,8 +537,8 @@ def calibrate_camera(
     fix_principal_point : bool
         Hold the principal point at the image centre (``cv2.CALIB_FIX_PRINCIPAL_POINT``).
     max_iterations : int
-        Bound on Levenberg-Marquardt iterations (function evaluations are bounded by
-        this times the number of parameters).
+        Bound on Levenberg-Marquardt steps (evaluations of the residuals, each with its
+        finite-difference Jacobian), 1 to 100000; calibrations converge in a few.
 
     Returns
     -------
@@ -462,7 +547,9 @@ def calibrate_camera(
     Raises
     ------
     InputError
-        Fewer than 3 views, counts that differ, non-planar object points.
+        Fewer than 3 views, counts that differ, non-planar object points, points that
+        are not finite numbers within 1e150, or a parameter of the wrong type or range
+        (``max_iterations`` up to 100000).
     DegenerateError
         Views that do not determine K (the board at one orientation throughout).
     """
@@ -470,8 +557,14 @@ def calibrate_camera(
 
     objs, img = _inputs(object_points, image_points)
     w, h = _size(image_size)
-    if n_radial not in (0, 1, 2, 3):
+    n_radial = check_int(n_radial, "n_radial", 0)
+    if n_radial > 3:
         raise InputError(f"n_radial must be 0, 1, 2 or 3; got {n_radial!r}")
+    tangential = check_bool(tangential, "tangential")
+    fix_principal_point = check_bool(fix_principal_point, "fix_principal_point")
+    max_iterations = check_int(max_iterations, "max_iterations", 1)
+    if max_iterations > _MAX_ITERATIONS:
+        raise InputError(f"max_iterations must be at most {_MAX_ITERATIONS}; got {max_iterations}")
     n_views = len(objs)
     # 1. homographies in a normalized pixel frame (conditioning), 2. closed-form K
     s = 1.0 / max(w, h)
@@ -523,7 +616,7 @@ def calibrate_camera(
 
     centre = [] if fix_principal_point else K[:2, 2]
     p0 = np.r_[K[0, 0], K[1, 1], centre, dist[free], np.c_[rvecs, tvecs].ravel()]
-    sol = least_squares(fun, p0, method="lm", x_scale="jac", max_nfev=max_iterations * p0.size)
+    sol = least_squares(fun, p0, method="lm", x_scale="jac", max_nfev=max_iterations)
     K, dist, rvecs, tvecs = unpack(sol.x)
     if not (np.isfinite(sol.x).all() and K[0, 0] > 0 and K[1, 1] > 0):
         raise DegenerateError("the refinement diverged: check that the points match the board")
@@ -560,16 +653,28 @@ def stereo_calibrate(
         The same board points in camera 1 and camera 2, view by view.
     image_size : (int, int)
     K1, dist1, K2, dist2 : array_like, optional
+        Camera matrices ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` (``fx, fy > 0``) and
+        distortion ``(k1, k2, p1, p2[, k3])``.
+    fix_intrinsics : bool
 
     Returns
     -------
     StereoCalibration
+
+    Raises
+    ------
+    InputError
+        Views as in :func:`calibrate_camera`, a ``K1``/``K2`` that is not a camera
+        matrix, or distortion that is not 4 or 5 finite numbers.
+    DegenerateError
+        Views that determine neither camera nor the relative pose.
     """
     from scipy.optimize import least_squares
 
     objs, img1 = _inputs(object_points, image_points1, "image_points1")
     _, img2 = _inputs(objs, image_points2, "image_points2")
     size = _size(image_size)
+    fix_intrinsics = check_bool(fix_intrinsics, "fix_intrinsics")
     for i, (a, b) in enumerate(zip(img1, img2, strict=True)):
         if a.shape != b.shape:
             raise InputError(f"view {i}: camera 1 has {len(a)} points but camera 2 {len(b)}")
@@ -579,8 +684,8 @@ def stereo_calibrate(
             c = calibrate_camera(objs, img, size)
             cams.append((c.K, c.dist))
         else:
-            Km = np.asarray(K, dtype=np.float64).reshape(3, 3)
-            cams.append((Km, check_distortion(d, "dist")))
+            Km = _camera_matrix(K, "K1" if img is img1 else "K2")
+            cams.append((Km, check_distortion(d, "dist1" if img is img1 else "dist2")))
     (k1, d1), (k2, d2) = cams
     poses1 = [_view_pose(k1, d1, o, p) for o, p in zip(objs, img1, strict=True)]
     poses2 = [_view_pose(k2, d2, o, p) for o, p in zip(objs, img2, strict=True)]
@@ -619,7 +724,7 @@ def stereo_calibrate(
     if not fix_intrinsics:
         for K, d in cams:
             p0 = np.r_[p0, K[0, 0], K[1, 1], K[0, 2], K[1, 2], d]
-    sol = least_squares(fun, p0, method="lm", x_scale="jac", max_nfev=100 * p0.size)
+    sol = least_squares(fun, p0, method="lm", x_scale="jac", max_nfev=2 * _LM_STEPS)
     r, t, _, (k1, d1, k2, d2) = unpack(sol.x)
     R, T = rotation_from_rotvec(r), t.copy()
     e = (sol.fun.reshape(-1, 2) ** 2).sum(axis=1)
@@ -651,12 +756,24 @@ def undistort(
         ``(k1, k2, p1, p2[, k3])``.
     new_K : (3, 3) array_like, optional
         Camera matrix of the output (default ``K``).
+
+    Returns
+    -------
+    ndarray
+        Of the shape and dtype of ``image``.
+
+    Raises
+    ------
+    InputError
+        An image that :func:`~robopercept.imaging.remap` does not take, a ``K`` or
+        ``new_K`` that is not a camera matrix ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``
+        with ``fx, fy > 0``, or ``dist`` that is not 4 or 5 finite numbers.
     """
-    img = np.asarray(image)
-    if img.ndim not in (2, 3):
-        raise InputError(f"image must be (H, W) or (H, W, C); got shape {img.shape}")
+    img = check_image(image, "image")
     h, w = img.shape[:2]
-    mx, my = undistort_rectify_map(K, dist, None, K if new_K is None else new_K, (w, h))
+    k = _camera_matrix(K, "K")
+    nk = k if new_K is None else _camera_matrix(new_K, "new_K")
+    mx, my = undistort_rectify_map(k, dist, None, nk, (w, h))
     return remap(img, mx, my)
 
 
@@ -688,10 +805,18 @@ def rectify_pair(
     Raises
     ------
     InputError
-        Not a stereo calibration, or images of different sizes.
+        Not a stereo calibration (a dict with ``K1, K2, R, T`` whose entries
+        :func:`~robopercept.geometry.rectify_stereo` takes), or images that are not
+        images of one size.
     """
+    if not isinstance(calibration, Mapping):
+        raise InputError(
+            "calibration must be a dict as load_calibration returns it (K1, dist1, K2, "
+            f"dist2, R, T); got {type(calibration).__name__}"
+        )
     if not {"K1", "K2", "R", "T"} <= calibration.keys():
         raise InputError("not a stereo calibration: it needs K1 dist1 K2 dist2 R T")
+    left, right = check_image(left, "left"), check_image(right, "right")
     if left.shape != right.shape:
         raise InputError(f"the images differ in size: {left.shape} and {right.shape}")
     size = (left.shape[1], left.shape[0])
@@ -708,8 +833,35 @@ def rectify_pair(
 
 
 def save_calibration(path: str | Path, result: CalibrationResult | StereoCalibration) -> None:
-    """Write a calibration as JSON (see :func:`load_calibration`)."""
-    Path(path).write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+    """Write a calibration as JSON (see :func:`load_calibration`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The JSON file to write (replaced if it exists; its folder must exist).
+    result : CalibrationResult or StereoCalibration
+
+    Raises
+    ------
+    InputError
+        ``result`` of another type, or ``path`` that is not a usable file path (None,
+        empty, a NUL byte, a name too long, a folder).
+    FileFormatError
+        The file cannot be written (no such folder, no permission).
+    """
+    if not isinstance(result, (CalibrationResult, StereoCalibration)):
+        raise InputError(
+            "result must be a CalibrationResult (calibrate_camera) or StereoCalibration "
+            f"(stereo_calibrate); got {type(result).__name__}"
+        )
+    p = as_path(path, "path")
+    if p.is_dir():
+        raise InputError(f"path {p} is a folder; give a file name such as {p / 'camera.json'}")
+    text = json.dumps(result.to_dict(), indent=2) + "\n"
+    try:
+        p.write_text(text)
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot write the calibration ({exc.strerror or exc})") from exc
 
 
 #: other names of the fields, as OpenCV's samples, cv2.FileStorage users and ROS write them

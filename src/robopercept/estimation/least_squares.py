@@ -26,10 +26,11 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_choice, check_points
+from robopercept._checks import check_choice, check_magnitude, check_points
 from robopercept.errors import DegenerateError, InputError
 
 __all__ = [
+    "MAX_COORDINATE",
     "DepthPlaneFit",
     "Line",
     "LineFit",
@@ -164,6 +165,11 @@ class PlaneFit:
     method: str = field(default="total")
 
 
+#: largest coordinate the fits take (and :func:`~robopercept.estimation.ransac`): their
+#: scatter matrices sum squares of coordinates, which overflow beyond about 1e154
+MAX_COORDINATE = 1e150
+
+
 def _checked(points: np.ndarray, dim: int, need: int, what: str) -> np.ndarray:
     p = check_points(points, "points", dim)
     if not np.isfinite(p).all():
@@ -172,7 +178,8 @@ def _checked(points: np.ndarray, dim: int, need: int, what: str) -> np.ndarray:
         )
     if p.shape[0] < need:
         raise DegenerateError(f"a {what} needs at least {need} points; got {p.shape[0]}")
-    return p
+    # the scatter matrix sums squares of the coordinates: beyond 1e150 they overflow
+    return check_magnitude(p, "points", MAX_COORDINATE)
 
 
 @njit(cache=True, nogil=True)
@@ -341,6 +348,10 @@ def fit_plane_inverse_depth(points: np.ndarray, mask: np.ndarray | None = None) 
 
     Raises
     ------
+    InputError
+        Points that are not ``(N, 3)`` real numbers, or selected rows with NaN/inf
+        ``x``/``y`` or values whose ratios overflow (rows whose ``z`` is NaN or not
+        positive are ignored).
     DegenerateError
         Fewer than 3 points, or all of them on one ray line (collinear in the image).
 
@@ -350,9 +361,7 @@ def fit_plane_inverse_depth(points: np.ndarray, mask: np.ndarray | None = None) 
     the disparity-space plane is the model of slanted-plane stereo (e.g. Bleyer et al.,
     PatchMatch Stereo, 2011).
     """
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise InputError(f"points must have shape (N, 3); got {pts.shape}")
+    pts = check_points(points, "points", 3)
     if mask is None:
         m, b, ww, count = _inverse_depth_moments(pts, np.zeros(1, dtype=np.bool_), False)
     else:
@@ -360,6 +369,13 @@ def fit_plane_inverse_depth(points: np.ndarray, mask: np.ndarray | None = None) 
         if sel.shape != (pts.shape[0],):
             raise InputError(f"mask must have shape ({pts.shape[0]},); got {sel.shape}")
         m, b, ww, count = _inverse_depth_moments(pts, sel, True)
+    if not (np.isfinite(m).all() and np.isfinite(b).all() and math.isfinite(ww)):
+        # (checked on the sums: no pass over the points; rows with z NaN are skipped)
+        raise InputError(
+            "points must be finite, with x / z, y / z and 1 / z within about 1e150: the "
+            "fit's sums overflowed or hold NaN; drop those rows first, "
+            "points[np.isfinite(points).all(1)]"
+        )
     if count < 3:
         raise DegenerateError(f"a plane needs at least 3 points with z > 0; got {count}")
     evals = np.linalg.eigvalsh(m)

@@ -7,7 +7,9 @@ works on a data matrix with one row per observation and implements
     ``(B, n, D)`` minimal samples -> ``(B, P)`` parameters and a ``(B,)`` validity mask;
     degenerate samples (coincident or collinear points) are marked invalid, never fitted.
 ``fit(data)``
-    least-squares parameters from all rows (raises :class:`DegenerateError`).
+    least-squares parameters from all rows (raises :class:`DegenerateError`; the models
+    here also refuse data that is not a finite ``(N, dim)`` array within 1e150 with
+    :class:`InputError`).
 ``residuals(params, data)``
     ``(B, P)`` hypotheses and ``(N, D)`` data -> ``(B, N)`` non-negative errors, all
     hypotheses at once.
@@ -27,8 +29,10 @@ from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 import numpy as np
 from numba import njit, prange
 
-from robopercept.errors import DegenerateError
+from robopercept._checks import check_magnitude, check_points
+from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation.least_squares import (
+    MAX_COORDINATE,
     Line,
     Plane,
     fit_line,
@@ -270,6 +274,24 @@ class Model(Protocol[ResultT_co]):
         return mask
 
 
+def _fit_data(data: np.ndarray, model: Model[Any]) -> np.ndarray:
+    """``data`` of a public :meth:`Model.fit` call as a finite float64 ``(n, dim)`` array
+    with at least ``sample_size`` rows and values within 1e150 (their squares, which the
+    normal equations and Hartley's normalization form, stay finite)."""
+    x = check_points(data, "data", model.dim)
+    if not np.isfinite(x).all():
+        raise InputError(
+            "data must be finite; drop NaN/inf rows first: data[np.isfinite(data).all(1)]"
+        )
+    check_magnitude(x, "data", MAX_COORDINATE)
+    if x.shape[0] < model.sample_size:
+        raise DegenerateError(
+            f"a {model.name} needs {model.sample_size} rows (points or correspondences); "
+            f"got {x.shape[0]}"
+        )
+    return x
+
+
 def _scale(points: np.ndarray) -> float:
     return max(float(np.abs(points).max()) if points.size else 0.0, 1.0)
 
@@ -294,7 +316,7 @@ class LineModel(Model[Line]):
         return np.column_stack([n, c]), valid
 
     def fit(self, data: np.ndarray) -> np.ndarray:
-        return fit_line(data).line.coefficients
+        return fit_line(_fit_data(data, self)).line.coefficients
 
     def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
         return np.abs(params[:, :2] @ data.T + params[:, 2:3])
@@ -334,7 +356,7 @@ class PlaneModel(Model[Plane]):
         return np.column_stack([n, d]), valid
 
     def fit(self, data: np.ndarray) -> np.ndarray:
-        return fit_plane(data).plane.equation
+        return fit_plane(_fit_data(data, self)).plane.equation
 
     def residuals(self, params: np.ndarray, data: np.ndarray) -> np.ndarray:
         r = params[:, :3] @ data.T
@@ -418,6 +440,7 @@ class AffineModel(Model[np.ndarray]):
         return m.transpose(0, 2, 1).reshape(-1, 6), valid
 
     def fit(self, data: np.ndarray) -> np.ndarray:
+        data = _fit_data(data, self)
         self.check(data)
         a = self._design(data[:, :2])
         m = np.linalg.lstsq(a, data[:, 2:], rcond=None)[0]
@@ -552,8 +575,7 @@ class HomographyModel(Model[np.ndarray]):
         return h.reshape(-1, 9), valid
 
     def fit(self, data: np.ndarray) -> np.ndarray:
-        if data.shape[0] < 4:
-            raise DegenerateError(f"a homography needs 4 correspondences; got {data.shape[0]}")
+        data = _fit_data(data, self)
         self.check(data)
         return homography_dlt(data[None, :, :2], data[None, :, 2:])[0].reshape(9)
 

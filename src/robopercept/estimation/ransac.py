@@ -47,10 +47,13 @@ from robopercept._checks import (
     check_bool,
     check_choice,
     check_int,
+    check_magnitude,
+    check_numeric,
     check_points,
     check_real,
 )
 from robopercept.errors import DegenerateError, InputError
+from robopercept.estimation.least_squares import MAX_COORDINATE
 from robopercept.estimation.models import Model
 
 __all__ = ["RansacResult", "ransac", "required_iterations"]
@@ -103,7 +106,34 @@ class RansacResult(Generic[ResultT]):
 
 def required_iterations(inlier_ratio: float, sample_size: int, probability: float) -> float:
     r"""Samples needed to draw one all-inlier sample with ``probability``:
-    :math:`\log(1 - p) / \log(1 - w^n)` (``inf`` when ``w = 0``, ``0`` when ``w = 1``)."""
+    :math:`\log(1 - p) / \log(1 - w^n)` (``inf`` when ``w = 0``, ``0`` when ``w = 1``).
+
+    Parameters
+    ----------
+    inlier_ratio : float
+        :math:`w` in [0, 1].
+    sample_size : int
+        :math:`n \ge 1`.
+    probability : float
+        :math:`p` in [0, 1].
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        A parameter of the wrong type or out of its range.
+
+    Examples
+    --------
+    >>> round(required_iterations(0.5, 4, 0.99), 2)  # log(0.01) / log(1 - 1/16)
+    71.36
+    """
+    inlier_ratio = check_real(inlier_ratio, "inlier_ratio", 0.0, 1.0)
+    sample_size = check_int(sample_size, "sample_size", 1)
+    probability = check_real(probability, "probability", 0.0, 1.0)
     good = inlier_ratio**sample_size
     if good <= 0.0:
         return math.inf
@@ -174,7 +204,8 @@ def ransac(
     Parameters
     ----------
     data : (N, D) array_like
-        One row per observation (points, or correspondences ``(x, y, x', y')``); finite.
+        One row per observation (points, or correspondences ``(x, y, x', y')``); finite,
+        within 1e150 in magnitude.
     model : Model
         :class:`LineModel`, :class:`PlaneModel`, :class:`AffineModel`,
         :class:`HomographyModel` or any object satisfying the :class:`Model` protocol.
@@ -211,6 +242,10 @@ def ransac(
 
     Raises
     ------
+    InputError
+        Data that is not a finite ``(N, D)`` array within 1e150, a ``model`` that is not
+        a :class:`Model`, a parameter of the wrong type or range (a negative ``rng``
+        seed included).
     DegenerateError
         Fewer rows than ``sample_size``, data that cannot determine the model (e.g. all
         points collinear for a plane), or only degenerate samples drawn.
@@ -235,6 +270,7 @@ def ransac(
         raise InputError(
             "data must be finite; drop NaN/inf rows first: data[np.isfinite(data).all(1)]"
         )
+    check_magnitude(x, "data", MAX_COORDINATE)  # the models square coordinates
     threshold = check_real(threshold, "threshold", 0.0, None, low_inclusive=False)
     probability = check_real(probability, "probability", 0.0, 1.0, high_inclusive=False)
     check_choice(scoring, "scoring", ("ransac", "msac"))
@@ -254,6 +290,8 @@ def ransac(
         raise DegenerateError(
             f"a {model.name} needs samples of {n_sample} rows; the data has only {n}"
         )
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
+        raise InputError(f"rng must be a non-negative int seed, a Generator or None; got {rng}")
     model.check(x)
     prepared = model.prepare(x)
     gen = as_rng(rng)
@@ -266,9 +304,16 @@ def ransac(
     drawn = 0
     redraws = 0
     if initial is not None:
-        init = np.atleast_2d(np.asarray(initial, dtype=np.float64))
-        if init.ndim != 2 or not np.isfinite(init).all():
-            raise InputError(f"initial must be finite (K, P) model parameters; got {init.shape}")
+        init = np.atleast_2d(check_numeric(initial, "initial"))
+        # P, the parameters of one hypothesis: the width of a minimal fit's output
+        width = model.fit_minimal(x[None, : model.sample_size])[0].shape[1]
+        if init.ndim != 2 or init.shape[0] < 1 or init.shape[1] != width:
+            raise InputError(
+                f"initial must be (K, {width}) {model.name} parameters, K >= 1; got shape "
+                f"{init.shape}"
+            )
+        if not np.isfinite(init).all():
+            raise InputError("initial must be finite; drop the hypotheses with NaN/inf")
         scores, counts = model.score(init, prepared, threshold, msac)
         k = int(np.argmax(scores))
         best_params, best_score, best_count = init[k], float(scores[k]), int(counts[k])

@@ -43,7 +43,13 @@ from typing import Literal
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_choice, check_int, check_magnitude, check_range
+from robopercept._checks import (
+    check_choice,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_range,
+)
 from robopercept.errors import InputError
 from robopercept.features.keypoints import Keypoints
 from robopercept.imaging.color import rgb_to_gray
@@ -77,9 +83,24 @@ def _checked(
     # overflows (float32 on the fast path), as a typed error rather than NaN/inf inside
     gray = check_magnitude(gray, "image", 1e8 if gray.dtype == np.float32 else 1e60)
     block_size = check_int(block_size, "block_size", 1)
+    if block_size > max(gray.shape[:2]):  # beyond it the window only repeats the image
+        raise InputError(
+            f"block_size must be at most the image's larger side, {max(gray.shape[:2])} "
+            f"pixels; got {block_size}: use a window smaller than the image"
+        )
     check_choice(window, "window", ("box", "gaussian"))
     check_choice(border, "border", BORDERS)
-    if ksize not in (1, 3, 5, 7):
+    if (
+        not isinstance(ksize, (int, np.integer))
+        or isinstance(ksize, bool)
+        or ksize
+        not in (
+            1,
+            3,
+            5,
+            7,
+        )
+    ):
         raise InputError(f"ksize must be 1, 3, 5 or 7; got {ksize!r}")
     return gray, block_size, _scale(gray.dtype, ksize, block_size)
 
@@ -543,9 +564,9 @@ def harris_corners(
     order = np.lexsort((-(ys * resp.shape[1] + xs), -vals))
     ys, xs, vals = ys[order], xs[order], vals[order]
     if min_distance >= 1:
-        keep = _min_distance(
-            xs, ys, resp.shape[1], resp.shape[0], float(min_distance), max_corners or 0
-        )
+        # (more corners than pixels is no bound: clamp to fit the kernel's int64)
+        cap = min(max_corners, resp.size) if max_corners is not None else 0
+        keep = _min_distance(xs, ys, resp.shape[1], resp.shape[0], float(min_distance), cap)
         ys, xs, vals = ys[keep], xs[keep], vals[keep]
     elif max_corners is not None:
         ys, xs, vals = ys[:max_corners], xs[:max_corners], vals[:max_corners]
@@ -685,6 +706,17 @@ def good_features_to_track(
     return kp.xy
 
 
+def _pair(value: int | tuple[int, int], name: str, minimum: int) -> tuple[int, int]:
+    """An int or a pair of ints ``(x, y)``, each >= ``minimum``."""
+    items = value.tolist() if isinstance(value, np.ndarray) else value
+    if isinstance(items, (tuple, list)):
+        if len(items) != 2:
+            raise InputError(f"{name} must be an int or a pair (x, y) of ints; got {items!r}")
+        return check_int(items[0], name, minimum), check_int(items[1], name, minimum)
+    v = check_int(items, name, minimum)
+    return v, v
+
+
 def refine_corners(
     image: np.ndarray,
     corners: np.ndarray,
@@ -727,13 +759,20 @@ def refine_corners(
     (N, 2) float64 ndarray
     """
     gray = rgb_to_gray(image).astype(np.float64)
-    pts = np.asarray(corners, dtype=np.float64)
+    pts = check_numeric(corners, "corners")
     if pts.ndim != 2 or pts.shape[1] != 2:
         raise InputError(f"corners must be (N, 2) (x, y); got shape {pts.shape}")
-    hw, hh = (window, window) if np.isscalar(window) else tuple(window)
-    hw = check_int(hw, "window", 1)
-    hh = check_int(hh, "window", 1)
-    zx, zy = (zero_zone, zero_zone) if np.isscalar(zero_zone) else tuple(zero_zone)
+    if not np.isfinite(pts).all():
+        raise InputError(
+            "corners must be finite; drop NaN/inf rows first: corners[np.isfinite(corners).all(1)]"
+        )
+    hw, hh = _pair(window, "window", 1)
+    zx, zy = _pair(zero_zone, "zero_zone", -1)
+    if zx >= hw or zy >= hh:
+        raise InputError(
+            f"zero_zone must be smaller than the window ({hw}, {hh}); got ({zx}, {zy}): "
+            "use -1 for no dead zone"
+        )
     if 2 * hw + 5 > gray.shape[1] or 2 * hh + 5 > gray.shape[0]:
         raise InputError(
             f"the {2 * hw + 1}x{2 * hh + 1} window needs an image of at least "
@@ -744,8 +783,8 @@ def refine_corners(
     ry = np.arange(-hh, hh + 1) / hh
     rx = np.arange(-hw, hw + 1) / hw
     mask = np.exp(-(ry[:, None] ** 2)) * np.exp(-(rx[None, :] ** 2))
-    if int(zx) >= 0 and int(zy) >= 0:
-        mask[hh - int(zy) : hh + int(zy) + 1, hw - int(zx) : hw + int(zx) + 1] = 0
+    if zx >= 0 and zy >= 0:
+        mask[hh - zy : hh + zy + 1, hw - zx : hw + zx + 1] = 0
     out = np.empty_like(pts)
     if pts.shape[0]:
         _subpix_kernel(gray, pts, hw, hh, mask, max_iter, eps * eps, out)

@@ -53,11 +53,13 @@ import numpy as np
 from numba import njit, prange
 
 from robopercept._checks import (
+    check_bool,
     check_choice,
     check_image,
     check_int,
     check_magnitude,
     check_positive,
+    check_real,
 )
 from robopercept.errors import InputError
 from robopercept.features._atan import atan2_deg
@@ -72,17 +74,28 @@ _NORM_CODE = {n: i for i, n in enumerate(NORMS)}
 
 _MAX_VALUE = 1e15  # |image| beyond it overflows the float32 block norms' sums of squares
 
+_MAX_SIDE = 65536  # cell, block and stride sizes
+
 
 def _pair(value: int | tuple[int, int], name: str) -> tuple[int, int]:
+    # sizes in cells or pixels, each in [1, 65536] (an image side at most: larger ones
+    # fit no block, and their products overflow the int64 grid arithmetic)
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        v = check_int(value, name, 1)
+        v = _side(value, name)
         return v, v
     try:
         a, b = value  # type: ignore[misc]
     except (TypeError, ValueError):
         msg = f"{name} must be an int or a (height, width) pair; got {value!r}"
         raise InputError(msg) from None
-    return check_int(a, f"{name}[0]", 1), check_int(b, f"{name}[1]", 1)
+    return _side(a, f"{name}[0]"), _side(b, f"{name}[1]")
+
+
+def _side(value: int, name: str) -> int:
+    v = check_int(value, name, 1)
+    if v > _MAX_SIDE:
+        raise InputError(f"{name} must be at most {_MAX_SIDE}; got {v}")
+    return v
 
 
 # --------------------------------------------------------------------------- gradients
@@ -277,8 +290,12 @@ def _cell_weights(
     bh, bw = block_px
     gy = (np.arange(bh) - bh * 0.5) ** 2
     gx = (np.arange(bw) - bw * 0.5) ** 2
-    if sigma > 0:
-        g = np.exp(-(gy[:, None] + gx[None, :]) / (2.0 * sigma * sigma))
+    d2 = gy[:, None] + gx[None, :]
+    if sigma > 0 and 2.0 * sigma * sigma > 0:
+        with np.errstate(over="ignore"):  # exp(-inf) = 0 far from a tiny sigma's centre
+            g = np.exp(-d2 / (2.0 * sigma * sigma))
+    elif sigma > 0:  # sigma^2 underflows to 0 (0 / 0 = NaN at the centre): a delta
+        g = (d2 == 0).astype(np.float64)
     else:
         g = np.ones((bh, bw))
     fy = (np.arange(bh) + 0.5) / cell[0] - 0.5
@@ -305,6 +322,19 @@ def _cell_weights(
 # ----------------------------------------------------------------------------- public
 
 
+_MAX_ORIENTATIONS = 360  # bins: half a degree each over [0, pi), a degree over [0, 2 pi)
+
+
+def _orientations(value: int) -> int:
+    n = check_int(value, "orientations", 1)
+    if n > _MAX_ORIENTATIONS:
+        raise InputError(
+            f"orientations must be at most {_MAX_ORIENTATIONS} bins; got {n}: HOG uses 9 "
+            "(Dalal and Triggs)"
+        )
+    return n
+
+
 class _Params:
     # the checked parameters shared by hog and hog_windows
     def __init__(
@@ -320,24 +350,26 @@ class _Params:
         signed: bool,
         gamma: bool,
     ) -> None:
-        self.nbins = check_int(orientations, "orientations", 1)
+        self.nbins = _orientations(orientations)
         self.cell = _pair(cell_size, "cell_size")
         self.block = _pair(block_size, "block_size")
         self.stride = _pair(block_stride, "block_stride")
         self.norm = _NORM_CODE[check_choice(block_norm, "block_norm", NORMS)]
         self.clip = check_positive(clip, "clip")
         self.convention = check_choice(convention, "convention", ("opencv", "skimage"))
-        self.signed = bool(signed)
-        self.gamma = bool(gamma)
+        self.signed = check_bool(signed, "signed")
+        self.gamma = check_bool(gamma, "gamma")
         bh, bw = self.block_px
         if self.convention == "opencv":
             if self.nbins > 255:
                 raise InputError(f"orientations must be <= 255; got {self.nbins}")
-            self.sigma = (bh + bw) / 8.0 if block_sigma is None else float(block_sigma)
-            if not self.sigma >= 0:
-                raise InputError(f"block_sigma must be >= 0; got {block_sigma!r}")
+            self.sigma = (
+                (bh + bw) / 8.0
+                if block_sigma is None
+                else check_real(block_sigma, "block_sigma", 0.0)
+            )
         else:
-            if block_sigma not in (None, 0, 0.0):
+            if block_sigma is not None and check_real(block_sigma, "block_sigma") != 0.0:
                 raise InputError("block_sigma applies to convention='opencv' only")
             if self.signed:
                 raise InputError("signed orientations apply to convention='opencv' only")
@@ -634,12 +666,13 @@ def cell_histograms(
     Raises
     ------
     InputError
-        If the image is smaller than one cell.
+        If the image is smaller than one cell, or ``orientations`` is not an integer in
+        [1, 360].
     """
     # gradient magnitudes and block norms square sums of votes: refuse what overflows
     image = check_magnitude(check_image(image), "image", _MAX_VALUE)
     cell = _pair(cell_size, "cell_size")
-    nbins = check_int(orientations, "orientations", 1)
+    nbins = _orientations(orientations)
     h, w = image.shape[:2]
     ny, nx = h // cell[0], w // cell[1]
     if ny == 0 or nx == 0:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from robopercept._checks import check_numeric
 from robopercept.errors import InputError
 
 __all__ = ["Keypoints"]
@@ -38,16 +39,19 @@ class Keypoints:
     octave: np.ndarray
 
     def __post_init__(self) -> None:
-        xy = np.asarray(self.xy, dtype=np.float64).reshape(-1, 2)
+        xy = check_numeric(self.xy, "Keypoints.xy")
+        if xy.shape == (2,) or xy.shape == (0,):
+            xy = xy.reshape(-1, 2)
+        if xy.ndim != 2 or xy.shape[1] != 2:
+            raise InputError(f"Keypoints.xy must be (N, 2) positions (x, y); got shape {xy.shape}")
         n = xy.shape[0]
         cols = {"xy": xy}
-        for name, dtype in (
-            ("scale", np.float64),
-            ("orientation", np.float64),
-            ("response", np.float64),
-            ("octave", np.int64),
-        ):
-            arr = np.asarray(getattr(self, name), dtype=dtype).reshape(-1)
+        for name in ("scale", "orientation", "response", "octave"):
+            arr = check_numeric(getattr(self, name), f"Keypoints.{name}").reshape(-1)
+            if name == "octave":
+                if not (np.isfinite(arr).all() and (arr == np.round(arr)).all()):
+                    raise InputError(f"Keypoints.octave must hold integers; got {arr.tolist()[:5]}")
+                arr = arr.astype(np.int64)
             if arr.shape[0] != n:
                 raise InputError(f"Keypoints.{name} has {arr.shape[0]} entries for {n} points")
             cols[name] = arr

@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from robopercept._checks import check_int, check_positive
+from robopercept._checks import check_bool, check_int, check_real
 from robopercept.errors import InputError
 from robopercept.features._atan import atan2_deg
 from robopercept.features.keypoints import Keypoints
@@ -61,6 +61,7 @@ __all__ = ["Features", "sift"]
 _BORDER = 5  # SIFT_IMG_BORDER
 _MAX_STEPS = 5  # refinement moves
 _ORI_BINS = 36
+_MAX_LAYERS = 32  # n_octave_layers: (layers + 3) Gaussian images per octave
 _ORI_SIG = 1.5
 _ORI_RADIUS = 3.0 * _ORI_SIG
 _ORI_PEAK = 0.8
@@ -549,7 +550,9 @@ def sift(
     ------
     InputError
         If the image is smaller than 6x6 pixels (12x12 without ``upsample``): no octave
-        would hold a pixel away from the 5-pixel border, or a parameter is invalid.
+        would hold a pixel away from the 5-pixel border, or a parameter is invalid
+        (not a number, out of range, ``n_octave_layers`` beyond 32, ``sigma`` beyond the
+        image's larger side).
 
     Notes
     -----
@@ -559,11 +562,19 @@ def sift(
     gray = rgb_to_gray(image)  # validates; gray input passes through
     n_features = check_int(n_features, "n_features", 0)
     layers = check_int(n_octave_layers, "n_octave_layers", 1)
-    contrast = float(contrast_threshold)
-    if not contrast >= 0:
-        raise InputError(f"contrast_threshold must be >= 0; got {contrast_threshold!r}")
-    edge = check_positive(edge_threshold, "edge_threshold")
-    sigma = check_positive(sigma, "sigma")
+    if layers > _MAX_LAYERS:  # each layer is two more images per octave
+        raise InputError(
+            f"n_octave_layers must be at most {_MAX_LAYERS}; got {layers}: SIFT uses 3"
+        )
+    contrast = check_real(contrast_threshold, "contrast_threshold", 0.0)
+    edge = check_real(edge_threshold, "edge_threshold", 0.0, low_inclusive=False)
+    sigma = check_real(sigma, "sigma", 0.0, low_inclusive=False)
+    if sigma > max(gray.shape):  # the blur kernel (8 sigma + 1 taps) would exceed the image
+        raise InputError(
+            f"sigma must be at most the image's larger side, {max(gray.shape)} pixels; "
+            f"got {sigma}: SIFT uses 1.6"
+        )
+    upsample = check_bool(upsample, "upsample")
     if np.dtype(descriptor_dtype) not in (np.dtype(np.float32), np.dtype(np.uint8)):
         raise InputError(
             f"descriptor_dtype must be np.float32 or np.uint8; got {descriptor_dtype!r}"
@@ -590,7 +601,8 @@ def sift(
         base = _blur(img, math.sqrt(max(sigma * sigma - 0.25, 0.01)))
     n_oct = max(round(math.log2(min(base.shape)) - 2) - first, 1)
     gauss, dogs = _pyramid(base, n_oct, layers, sigma)
-    threshold = math.floor(0.5 * contrast / layers * 255.0)
+    # (no |D| reaches a threshold beyond 2**53: any larger one keeps no keypoint)
+    threshold = math.floor(min(0.5 * contrast / layers * 255.0, 2.0**53))
 
     cols: dict[str, list[np.ndarray]] = {k: [] for k in ("x", "y", "size", "ang", "resp", "oct")}
     desc_parts: list[np.ndarray] = []

@@ -3,20 +3,53 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
+
+from robopercept._checks import check_finite, check_magnitude, check_numeric
+from robopercept.errors import InputError
 
 __all__ = ["box_iou_matrix"]
 
 
-def box_iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _boxes(boxes: npt.ArrayLike, name: str) -> np.ndarray:
+    """``boxes`` as a finite float64 ``(N, 4)`` array (one ``(4,)`` box too)."""
+    arr = check_numeric(boxes, name)
+    if arr.shape == (4,):
+        arr = arr[None]
+    if arr.ndim != 2 or arr.shape[1] != 4:
+        raise InputError(
+            f"{name} must be (N, 4) boxes (x, y, w, h) or one (4,) box; got {arr.shape}"
+        )
+    check_finite(arr, name)
+    return check_magnitude(arr, name, 1e150)  # w * h of larger boxes overflows
+
+
+def box_iou_matrix(a: npt.ArrayLike, b: npt.ArrayLike) -> np.ndarray:
     r"""Intersection over union of every box of ``a`` ``(M, 4)`` with every box of ``b``
     ``(N, 4)``: :math:`|A \cap B| / |A \cup B|`, 0 where the union is empty.
+
+    Parameters
+    ----------
+    a, b : (M, 4), (N, 4) array_like
+        Boxes ``(x, y, w, h)`` in pixels (a single ``(4,)`` box counts as ``(1, 4)``),
+        finite and at most 1e150 in magnitude.
 
     Returns
     -------
     (M, N) ndarray
+
+    Raises
+    ------
+    InputError
+        Another shape, non-numeric values, NaN/inf, or values beyond 1e150.
+
+    Examples
+    --------
+    >>> box_iou_matrix([0, 0, 2, 2], [[1, 0, 2, 2], [5, 5, 1, 1]]).round(4).tolist()
+    [[0.3333, 0.0]]
     """
-    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
-    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    a = _boxes(a, "a")
+    b = _boxes(b, "b")
     x0 = np.maximum(a[:, None, 0], b[None, :, 0])
     y0 = np.maximum(a[:, None, 1], b[None, :, 1])
     x1 = np.minimum(a[:, None, 0] + a[:, None, 2], b[None, :, 0] + b[None, :, 2])

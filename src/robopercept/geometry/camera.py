@@ -48,7 +48,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_choice, check_int, check_real, plain_repr
+from robopercept._checks import check_choice, check_int, check_numeric, check_real, plain_repr
 from robopercept.errors import DegenerateError, InputError
 
 __all__ = [
@@ -140,14 +140,18 @@ class CameraIntrinsics:
         coeffs: Sequence[float] = (0.0,) * 5,
     ) -> CameraIntrinsics:
         """From a 3x3 camera matrix (skew must be 0)."""
-        k = np.asarray(K, dtype=np.float64)
+        k = check_numeric(K, "K")
         if k.shape != (3, 3) or k[0, 1] != 0 or not np.allclose(k[2], [0, 0, 1]):
             raise InputError(f"K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]; got {k.tolist()}")
         return cls(width, height, k[0, 0], k[1, 1], k[0, 2], k[1, 2], model, tuple(coeffs))  # type: ignore[arg-type]
 
     def scaled(self, width: int, height: int) -> CameraIntrinsics:
         """The same camera at another resolution (focal lengths and principal point scale;
-        pixel centres stay pixel centres)."""
+        pixel centres stay pixel centres).
+
+        Raises :class:`InputError` if ``width`` or ``height`` is not a positive integer
+        (at most 65536)."""
+        width, height = check_int(width, "width", 1), check_int(height, "height", 1)
         sx, sy = width / self.width, height / self.height
         return CameraIntrinsics(
             width,
@@ -158,6 +162,15 @@ class CameraIntrinsics:
             (self.cy + 0.5) * sy - 0.5,
             self.model,
             self.coeffs,
+        )
+
+
+def _check_intrinsics(intrinsics: object) -> None:
+    if not isinstance(intrinsics, CameraIntrinsics):
+        raise InputError(
+            f"intrinsics must be a CameraIntrinsics; got {type(intrinsics).__name__}: build "
+            "one with robopercept.geometry.CameraIntrinsics(width, height, fx, fy, cx, cy) "
+            "or CameraIntrinsics.from_matrix(K, width, height)"
         )
 
 
@@ -183,6 +196,7 @@ def compiled_params(intrinsics: CameraIntrinsics) -> tuple[np.ndarray, int, np.n
     >>> k.tolist(), code
     ([500.0, 500.0, 320.0, 240.0], 0)
     """
+    _check_intrinsics(intrinsics)
     k = intrinsics
     return (
         np.array([k.fx, k.fy, k.cx, k.cy]),
@@ -324,9 +338,7 @@ def distort(
     """
     code = lens_model_code(model)
     c = _coeffs(coeffs)
-    bx, by = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-    if bx.shape != by.shape:
-        bx, by = np.broadcast_arrays(bx, by)
+    bx, by = _xy(x, y, "x", "y")
     fx, fy = np.ascontiguousarray(bx).reshape(-1), np.ascontiguousarray(by).reshape(-1)
     xd, yd = np.empty_like(fx), np.empty_like(fy)
     _distort_kernel(fx, fy, c, code, xd, yd)
@@ -386,10 +398,9 @@ def undistort(
             "in librealsense); use 'inverse_brown_conrady' or 'brown_conrady'"
         )
     iterations = _check_iterations(iterations)
-    xo, yo = np.asarray(xd, dtype=np.float64), np.asarray(yd, dtype=np.float64)
+    xo, yo = _xy(xd, yd, "xd", "yd")
     if model == "none":
-        bx, by = np.broadcast_arrays(xo, yo)
-        return bx.copy(), by.copy()
+        return xo.copy(), yo.copy()
     return _undistort(xo, yo, tuple(_coeffs(coeffs)), model == "inverse_brown_conrady",
                       iterations)  # fmt: skip
 
@@ -401,10 +412,24 @@ def _check_iterations(iterations: int) -> int:
 
 
 def _coeffs(coeffs: npt.ArrayLike) -> np.ndarray:
-    c = np.asarray(coeffs, dtype=np.float64).reshape(-1)
+    c = check_numeric(coeffs, "coeffs").reshape(-1)
     if c.shape != (5,):
         raise InputError(f"coeffs must be 5 numbers (k1, k2, p1, p2, k3); got {c.size}")
+    if not np.isfinite(c).all():
+        raise InputError(f"coeffs must be finite; got {c.tolist()}")
     return c
+
+
+def _xy(x: npt.ArrayLike, y: npt.ArrayLike, xname: str, yname: str) -> tuple:
+    """``x`` and ``y`` as float64 arrays broadcast to one shape (views)."""
+    bx, by = check_numeric(x, xname), check_numeric(y, yname)
+    try:
+        return np.broadcast_arrays(bx, by)
+    except ValueError:
+        raise InputError(
+            f"{xname} of shape {bx.shape} and {yname} of shape {by.shape} do not broadcast "
+            f"together: give one {yname} per {xname} (the same shape) or a single number"
+        ) from None
 
 
 def _undistort(xo: np.ndarray, yo: np.ndarray, c: tuple, modified: bool, iterations: int) -> tuple:
@@ -451,7 +476,7 @@ def check_distortion(D: npt.ArrayLike | None, name: str = "D") -> np.ndarray:
     """
     if D is None:
         return np.zeros(5)
-    d = np.asarray(D, dtype=np.float64).ravel()
+    d = check_numeric(D, name).ravel()
     if d.size not in (4, 5) or not np.isfinite(d).all():
         raise InputError(
             f"{name} must hold 4 or 5 coefficients (k1, k2, p1, p2[, k3]); got {d.size}"
@@ -491,12 +516,14 @@ def undistort_points(
     >>> undistort_points([[370.0, 140.0]], K).tolist()
     [[0.1, -0.2]]
     """
-    xy = np.asarray(pixels, dtype=np.float64)
+    xy = check_numeric(pixels, "pixels")
     if xy.ndim != 2 or xy.shape[1] != 2:
         raise InputError(f"pixels must be (N, 2); got shape {xy.shape}")
-    k = np.asarray(K, dtype=np.float64)
+    k = check_numeric(K, "K")
     if k.shape != (3, 3) or not np.isfinite(k).all():
         raise InputError(f"K must be a finite 3x3 matrix; got shape {k.shape}")
+    if not (k[0, 0] != 0 and k[1, 1] != 0):
+        raise InputError(f"K must have non-zero focal lengths K[0, 0], K[1, 1]; got {k.tolist()}")
     d = check_distortion(dist, "dist")
     iterations = _check_iterations(iterations)
     x0 = (xy[:, 0] - k[0, 2] - k[0, 1] * (xy[:, 1] - k[1, 2]) / k[1, 1]) / k[0, 0]
@@ -518,8 +545,15 @@ def project(points: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
     -------
     (..., 2) float64 ndarray
         Matches ``pyrealsense2.rs2_project_point_to_pixel`` for every model.
+
+    Raises
+    ------
+    InputError
+        ``intrinsics`` that is not a :class:`CameraIntrinsics`, or points that are not
+        real ``(..., 3)`` numbers.
     """
-    p = np.asarray(points, dtype=np.float64)
+    _check_intrinsics(intrinsics)
+    p = check_numeric(points, "points")
     if p.shape[-1:] != (3,):
         raise InputError(f"points must have shape (..., 3); got {p.shape}")
     k = intrinsics
@@ -575,7 +609,10 @@ def deproject(
     >>> deproject([[345.0, 190.0]], 2.0, k).tolist()
     [[0.1, -0.2, 2.0]]
     """
-    px = np.asarray(pixels)
+    try:
+        px = np.asarray(pixels)
+    except ValueError:  # ragged
+        px = check_numeric(pixels, "pixels")
     if px.shape[-1:] != (2,):
         raise InputError(f"pixels must have shape (..., 2); got {px.shape}")
     if px.dtype.kind not in "iuf":
@@ -587,7 +624,7 @@ def deproject(
             f"pixels must be finite; got {n_bad} with NaN/inf: drop them first, "
             "pixels[np.isfinite(pixels).all(-1)]"
         )
-    d = np.asarray(depth)
+    d = np.asarray(depth) if not isinstance(depth, (list, tuple)) else check_numeric(depth, "depth")
     if d.dtype.kind not in "iuf":
         raise InputError(
             f"depth must be a number or a numeric array of metres; got {plain_repr(depth)}"
@@ -603,8 +640,7 @@ def deproject(
         ) from None
     d = d.astype(np.float64, copy=False)
     k = intrinsics
-    if not isinstance(k, CameraIntrinsics):
-        raise InputError(f"intrinsics must be a CameraIntrinsics; got {type(k).__name__}")
+    _check_intrinsics(k)
     if k.model == "modified_brown_conrady":
         raise InputError(
             "cannot deproject with model 'modified_brown_conrady' (a forward-only model, as "
@@ -682,7 +718,7 @@ def invert_lens(
             "in librealsense); use 'inverse_brown_conrady' or 'brown_conrady'"
         )
     c = _coeffs(coeffs)
-    bx, by = np.broadcast_arrays(np.asarray(xd, dtype=np.float64), np.asarray(yd, dtype=np.float64))
+    bx, by = _xy(xd, yd, "xd", "yd")
     shape = bx.shape
     xo, yo = bx.reshape(-1), by.reshape(-1)
     if code == 0:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_magnitude, check_numeric, check_real
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation.models import Model, hartley_normalization
 from robopercept.geometry.transforms import check_matrix3
@@ -49,43 +50,87 @@ __all__ = [
 ]
 
 
+def _vector3(v: npt.ArrayLike, name: str) -> np.ndarray:
+    """``v`` as a finite float64 (3,) vector (a (3, 1) column too)."""
+    a = check_numeric(v, name)
+    if a.shape not in ((3,), (3, 1), (1, 3)):
+        raise InputError(f"{name} must be 3 finite numbers, shape (3,); got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise InputError(f"{name} must be 3 finite numbers; got {a.reshape(3).tolist()}")
+    return a.reshape(3)
+
+
 def skew(v: npt.ArrayLike) -> np.ndarray:
-    r"""The cross-product matrix :math:`[v]_\times` with :math:`[v]_\times u = v \times u`."""
-    x, y, z = np.asarray(v, dtype=np.float64).reshape(3)
+    r"""The cross-product matrix :math:`[v]_\times` with :math:`[v]_\times u = v \times u`.
+
+    Parameters
+    ----------
+    v : (3,) array_like
+        Finite (a ``(3, 1)`` column too).
+
+    Returns
+    -------
+    (3, 3) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        Not 3 finite real numbers.
+
+    Examples
+    --------
+    >>> skew([1.0, 2.0, 3.0]).tolist()
+    [[0.0, -3.0, 2.0], [3.0, 0.0, -1.0], [-2.0, 1.0, 0.0]]
+    """
+    x, y, z = _vector3(v, "v")
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def _rotation(R: npt.ArrayLike, name: str = "R") -> np.ndarray:
-    r = np.asarray(R, dtype=np.float64)
-    if r.shape != (3, 3) or not np.isfinite(r).all():
-        raise InputError(f"{name} must be a finite 3x3 rotation matrix; got shape {r.shape}")
+    r = check_matrix3(R, name)
     if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
         raise InputError(f"{name} is not a rotation (R^T R != I or det < 0)")
     return r
 
 
 def essential_from_pose(R: npt.ArrayLike, t: npt.ArrayLike) -> np.ndarray:
-    r"""Essential matrix :math:`E = [t]_\times R` of the motion :math:`X_2 = R X_1 + t`."""
-    return skew(np.asarray(t, dtype=np.float64).reshape(3)) @ _rotation(R)
+    r"""Essential matrix :math:`E = [t]_\times R` of the motion :math:`X_2 = R X_1 + t`.
+
+    Raises :class:`InputError` if ``R`` is not a rotation or ``t`` not 3 finite numbers."""
+    return skew(_vector3(t, "t")) @ _rotation(R)
 
 
 def fundamental_from_essential(
     E: npt.ArrayLike, K1: npt.ArrayLike, K2: npt.ArrayLike
 ) -> np.ndarray:
-    r""":math:`F = K_2^{-T} E K_1^{-1}`, scaled to unit Frobenius norm."""
+    r""":math:`F = K_2^{-T} E K_1^{-1}`, scaled to unit Frobenius norm.
+
+    Each matrix is divided by its largest absolute entry first (F is defined up to
+    scale), so entries near 1e300 or 1e-300 neither overflow nor underflow.
+
+    Raises
+    ------
+    InputError
+        A matrix that is not finite, real and 3x3, a singular ``K1`` or ``K2``, or an
+        all-zero ``E``.
+    """
     e = check_matrix3(E, "E")
-    k1, k2 = check_matrix3(K1, "K1"), check_matrix3(K2, "K2")
+    k1, k2 = check_matrix3(K1, "K1", invertible=True), check_matrix3(K2, "K2", invertible=True)
+    if not np.abs(e).max() > 0:
+        raise InputError("E is the zero matrix: give the essential matrix [t]x R of the motion")
+    e, k1, k2 = (m / np.abs(m).max() for m in (e, k1, k2))
     F = np.linalg.inv(k2).T @ e @ np.linalg.inv(k1)
+    F /= np.abs(F).max()
     return F / np.linalg.norm(F)
 
 
 def _points(x: npt.ArrayLike, name: str) -> np.ndarray:
-    p = np.asarray(x, dtype=np.float64)
+    p = check_numeric(x, name)
     if p.ndim != 2 or p.shape[1] != 2:
         raise InputError(f"{name} must be (N, 2) pixel coordinates; got shape {p.shape}")
     if not np.isfinite(p).all():
         raise InputError(f"{name} contains NaN or inf; drop those correspondences first")
-    return p
+    return check_magnitude(p, name, 1e150)
 
 
 def _pairs(x1: npt.ArrayLike, x2: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -186,6 +231,8 @@ def sampson_distance(F: npt.ArrayLike, x1: npt.ArrayLike, x2: npt.ArrayLike) -> 
     """
     Fm = check_matrix3(F, "F")
     p1, p2 = _pairs(x1, x2)
+    if np.abs(Fm).max() > 0:  # F is defined up to scale: keep its products finite
+        Fm = Fm / np.abs(Fm).max()
     return _sampson(Fm[None], p1, p2)[0]
 
 
@@ -328,7 +375,13 @@ def find_essential(
     """Essential matrix from pixel correspondences of one calibrated camera ``K``
     (eight-point on :math:`K^{-1} x`; ``threshold`` in pixels, divided by the focal
     length for the normalized residual, as ``cv2.findEssentialMat`` does)."""
-    k = check_matrix3(K, "K")
+    k = check_matrix3(K, "K", invertible=True)
+    if not (k[0, 0] > 0 and k[1, 1] > 0):
+        raise InputError(
+            f"K must have positive focal lengths K[0, 0], K[1, 1]; got {k.tolist()}: a "
+            "camera matrix is [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]"
+        )
+    threshold = check_real(threshold, "threshold", 0.0, low_inclusive=False)
     p1, p2 = _pairs(x1, x2)
     kinv = np.linalg.inv(k)
     n1 = p1 @ kinv[:2, :2].T + kinv[:2, 2]
@@ -419,7 +472,7 @@ def decompose_essential(
     e = check_matrix3(E, "E")
     p1, p2 = _pairs(x1, x2)
     if K is not None:
-        kinv = np.linalg.inv(check_matrix3(K, "K"))
+        kinv = np.linalg.inv(check_matrix3(K, "K", invertible=True))
         p1 = p1 @ kinv[:2, :2].T + kinv[:2, 2]
         p2 = p2 @ kinv[:2, :2].T + kinv[:2, 2]
     U, sv, Vt = np.linalg.svd(e)

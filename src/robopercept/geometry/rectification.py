@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_bool, check_magnitude, check_numeric, check_size
 from robopercept.errors import DegenerateError, InputError
 from robopercept.geometry.camera import check_distortion, distort, undistort_points
 from robopercept.geometry.transforms import (
@@ -44,6 +45,11 @@ __all__ = [
     "rectify_uncalibrated",
     "undistort_rectify_map",
 ]
+
+#: largest ``width * height`` of :func:`undistort_rectify_map` (2**28, 16384 x 16384:
+#: its two float32 maps take 2 GiB at this bound)
+_MAX_MAP_PIXELS = 1 << 28
+_BLOCK_PIXELS = 1 << 20  # pixels per block of the maps' float64 intermediates
 
 
 @dataclass(frozen=True)
@@ -100,16 +106,24 @@ def rectify_stereo(
     Returns
     -------
     StereoRectification
+
+    Raises
+    ------
+    InputError
+        Matrices that are not finite, real and 3x3 (or a singular camera matrix),
+        distortion that is not 4 or 5 finite numbers, a zero ``T`` or one beyond 1e150,
+        or ``size`` not two whole numbers in [2, 65536].
     """
-    k1, k2 = check_matrix3(K1, "K1"), check_matrix3(K2, "K2")
+    k1 = check_matrix3(K1, "K1", invertible=True)
+    k2 = check_matrix3(K2, "K2", invertible=True)
     d1, d2 = check_distortion(D1, "D1"), check_distortion(D2, "D2")
     Rm = check_matrix3(R, "R")
-    t_in = np.asarray(T, dtype=np.float64).ravel()
-    if t_in.size != 3 or not np.isfinite(t_in).all() or not np.linalg.norm(t_in) > 0:
+    t_in = check_numeric(T, "T").ravel()
+    if t_in.size != 3 or not np.isfinite(t_in).all() or not np.abs(t_in).max() > 0:
         raise InputError(f"T must be a non-zero 3-vector; got {T!r}")
-    nx, ny = int(size[0]), int(size[1])
-    if nx < 2 or ny < 2:
-        raise InputError(f"size must be (width, height) >= 2; got {size!r}")
+    check_magnitude(t_in, "T", 1e150)
+    nx, ny = check_size(size, "size", minimum=2)
+    zero_disparity = check_bool(zero_disparity, "zero_disparity")
     r_r = rotation_from_rotvec(-0.5 * rotvec_from_rotation(Rm))
     t = r_r @ t_in
     idx = 0 if abs(t[0]) > abs(t[1]) else 1
@@ -171,20 +185,36 @@ def rectify_uncalibrated(
 
     Raises
     ------
+    InputError
+        ``F`` not a finite real 3x3 matrix of rank 2 or more, points that are not
+        finite ``(N, 2)`` arrays of one shape within 1e150, or ``size`` not two whole
+        numbers in [1, 65536].
     DegenerateError
         The epipole lies inside the image (a forward motion cannot be rectified by
-        homographies without tearing the picture), or too few correspondences.
+        homographies without tearing the picture), too few correspondences, or
+        correspondences that the homographies send to infinity.
     """
     from robopercept.geometry.epipolar import epipoles, skew
 
     Fm = check_matrix3(F, "F")
-    p1 = np.asarray(x1, dtype=np.float64)
-    p2 = np.asarray(x2, dtype=np.float64)
+    p1 = check_numeric(x1, "x1")
+    p2 = check_numeric(x2, "x2")
     if p1.ndim != 2 or p1.shape[1] != 2 or p2.shape != p1.shape:
         raise InputError(f"x1 and x2 must both be (N, 2); got {p1.shape} and {p2.shape}")
+    for p, name in ((p1, "x1"), (p2, "x2")):
+        if not np.isfinite(p).all():
+            raise InputError(f"{name} contains NaN or inf; drop those correspondences first")
+        check_magnitude(p, name, 1e150)
     if len(p1) < 3:
         raise DegenerateError(f"rectify_uncalibrated needs >= 3 correspondences; got {len(p1)}")
-    w, h = float(size[0]), float(size[1])
+    Fm = Fm / max(np.abs(Fm).max(), 1e-300)  # F is defined up to scale
+    sv = np.linalg.svd(Fm, compute_uv=False)
+    if not sv[1] > 1e-12 * sv[0]:
+        raise InputError(
+            f"F must be a fundamental matrix (rank 2); got singular values {sv.tolist()}: "
+            "estimate it with find_fundamental"
+        )
+    w, h = (float(v) for v in check_size(size, "size"))
     _, e2 = epipoles(Fm)
     if abs(e2[2]) > 1e-12:
         ex, ey = e2[0] / e2[2], e2[1] / e2[2]
@@ -213,8 +243,15 @@ def rectify_uncalibrated(
     H0 = H2 @ M
     a = np.c_[p1, np.ones(len(p1))] @ H0.T
     b = np.c_[p2, np.ones(len(p2))] @ H2.T
-    a = a[:, :2] / a[:, 2:]
-    b = b[:, :2] / b[:, 2:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = a[:, :2] / a[:, 2:]
+        b = b[:, :2] / b[:, 2:]
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        raise DegenerateError(
+            "the rectifying homographies send some correspondences to infinity (points on "
+            "the line through the epipole that they map to the line at infinity): check "
+            "that F belongs to x1 and x2, or drop the points far outside the image"
+        )
     abc, *_ = np.linalg.lstsq(np.c_[a, np.ones(len(a))], b[:, 0], rcond=None)
     HA = np.array([[abc[0], abc[1], abc[2]], [0, 1.0, 0], [0, 0, 1.0]])
     H1 = HA @ H0
@@ -254,20 +291,38 @@ def undistort_rectify_map(
     Returns
     -------
     map_x, map_y : (height, width) float32 ndarray
+
+    Raises
+    ------
+    InputError
+        Matrices that are not finite and real, of the wrong shape, a singular
+        :math:`P_{3 \times 3} R`, distortion that is not 4 or 5 finite numbers, or a
+        ``size`` that is not two whole numbers in [1, 65536] with at most
+        2**28 pixels in all (the maps take 8 bytes per pixel; they are
+        computed in blocks of rows).
     """
     k = check_matrix3(K, "K")
     d = check_distortion(D, "D")
     r = np.eye(3) if R is None else check_matrix3(R, "R")
-    p = np.asarray(P, dtype=np.float64)
+    p = check_numeric(P, "P")
     if p.shape not in ((3, 3), (3, 4)) or not np.isfinite(p).all():
         raise InputError(f"P must be a finite 3x3 or 3x4 matrix; got shape {p.shape}")
-    w, h = int(size[0]), int(size[1])
-    if w < 1 or h < 1:
-        raise InputError(f"size must be (width, height) >= 1; got {size!r}")
-    ir = np.linalg.inv(p[:, :3] @ r)
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    ray = np.stack([u, v, np.ones_like(u)], axis=-1) @ ir.T
-    xd, yd = distort(ray[..., 0] / ray[..., 2], ray[..., 1] / ray[..., 2], d)
-    map_x = k[0, 0] * xd + k[0, 1] * yd + k[0, 2]
-    map_y = k[1, 1] * yd + k[1, 2]
-    return map_x.astype(np.float32), map_y.astype(np.float32)
+    w, h = check_size(size, "size", max_pixels=_MAX_MAP_PIXELS)
+    pr = p[:, :3] @ r
+    if not np.isfinite(pr).all() or np.linalg.matrix_rank(pr) < 3:
+        raise InputError(
+            "P[:, :3] @ R is singular (or overflows): give the new camera matrix "
+            "[[f, 0, cx], [0, f, cy], [0, 0, 1]] (P1 or P2 of rectify_stereo) and a rotation R"
+        )
+    ir = np.linalg.inv(pr)
+    map_x = np.empty((h, w), dtype=np.float32)
+    map_y = np.empty((h, w), dtype=np.float32)
+    u = np.arange(w, dtype=np.float64)
+    step = max(1, _BLOCK_PIXELS // w)  # rows per block: bounded intermediates
+    for top in range(0, h, step):
+        uu, vv = np.meshgrid(u, np.arange(top, min(h, top + step), dtype=np.float64))
+        ray = np.stack([uu, vv, np.ones_like(uu)], axis=-1) @ ir.T
+        xd, yd = distort(ray[..., 0] / ray[..., 2], ray[..., 1] / ray[..., 2], d)
+        map_x[top : top + step] = k[0, 0] * xd + k[0, 1] * yd + k[0, 2]
+        map_y[top : top + step] = k[1, 1] * yd + k[1, 2]
+    return map_x, map_y

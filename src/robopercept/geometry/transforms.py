@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_numeric
 from robopercept.errors import InputError
 
 __all__ = [
@@ -27,8 +28,9 @@ __all__ = [
 
 
 def check_transform(T: npt.ArrayLike, name: str = "T") -> np.ndarray:
-    """``T`` as a float64 4x4 array after checking its shape and last row."""
-    m = np.asarray(T, dtype=np.float64)
+    """``T`` as a float64 4x4 array after checking its dtype (real numbers), shape and
+    last row."""
+    m = check_numeric(T, name)
     if m.shape != (4, 4) or not np.isfinite(m).all():
         raise InputError(f"{name} must be a finite 4x4 matrix; got shape {m.shape}")
     if not np.allclose(m[3], [0, 0, 0, 1]):
@@ -36,8 +38,9 @@ def check_transform(T: npt.ArrayLike, name: str = "T") -> np.ndarray:
     return m
 
 
-def check_matrix3(M: npt.ArrayLike, name: str = "M") -> np.ndarray:
-    """``M`` as a float64 3x3 array after checking its shape and that it is finite.
+def check_matrix3(M: npt.ArrayLike, name: str = "M", *, invertible: bool = False) -> np.ndarray:
+    """``M`` as a float64 3x3 array after checking its dtype (real numbers), its shape
+    and that it is finite (and, with ``invertible``, that it has rank 3).
 
     Parameters
     ----------
@@ -45,6 +48,10 @@ def check_matrix3(M: npt.ArrayLike, name: str = "M") -> np.ndarray:
         A camera matrix, rotation, essential or fundamental matrix, homography.
     name : str
         The argument's name in the error message.
+    invertible : bool
+        Also refuse a singular matrix (numerical rank below 3, from its singular values
+        as ``numpy.linalg.matrix_rank``): a camera matrix or a homography that will be
+        inverted.
 
     Returns
     -------
@@ -53,16 +60,22 @@ def check_matrix3(M: npt.ArrayLike, name: str = "M") -> np.ndarray:
     Raises
     ------
     InputError
-        Another shape, or NaN/inf.
+        Not real numbers, another shape, NaN/inf, or (``invertible``) singular.
 
     Examples
     --------
     >>> check_matrix3(np.eye(3), "K").dtype
     dtype('float64')
     """
-    m = np.asarray(M, dtype=np.float64)
+    m = check_numeric(M, name)
     if m.shape != (3, 3) or not np.isfinite(m).all():
         raise InputError(f"{name} must be a finite 3x3 matrix; got shape {m.shape}")
+    if invertible and np.linalg.matrix_rank(m) < 3:
+        raise InputError(
+            f"{name} is singular (rank {np.linalg.matrix_rank(m)}) and cannot be inverted; "
+            f"got {m.tolist()}: give a rank-3 matrix (a camera matrix is [[fx, 0, cx], "
+            "[0, fy, cy], [0, 0, 1]] with fx, fy > 0)"
+        )
     return m
 
 
@@ -75,7 +88,9 @@ def se3(rotation: np.ndarray | None = None, translation: np.ndarray | None = Non
     """
     T = np.eye(4)
     if rotation is not None:
-        r = np.asarray(rotation, dtype=np.float64)
+        r = check_numeric(rotation, "rotation")
+        if not np.isfinite(r).all():
+            raise InputError("rotation must be finite; got NaN/inf")
         if r.shape == (3,):
             r = rotation_from_rotvec(r)
         if r.shape != (3, 3):
@@ -84,9 +99,9 @@ def se3(rotation: np.ndarray | None = None, translation: np.ndarray | None = Non
             raise InputError("rotation must be orthonormal with determinant +1")
         T[:3, :3] = r
     if translation is not None:
-        t = np.asarray(translation, dtype=np.float64).reshape(-1)
-        if t.shape != (3,):
-            raise InputError(f"translation must have 3 elements; got {t.shape}")
+        t = check_numeric(translation, "translation").reshape(-1)
+        if t.shape != (3,) or not np.isfinite(t).all():
+            raise InputError(f"translation must be 3 finite numbers; got {t.tolist()}")
         T[:3, 3] = t
     return T
 
@@ -121,7 +136,7 @@ def rotation_from_rotvec(rotvec: np.ndarray) -> np.ndarray:
     >>> np.round(rotation_from_rotvec([0.0, 0.0, np.pi / 2]), 12).tolist()
     [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
     """
-    r = np.asarray(rotvec, dtype=np.float64)
+    r = check_numeric(rotvec, "rotvec")
     single = r.shape in ((3,), (3, 1))
     if single:
         r = r.reshape(1, 3)
@@ -145,7 +160,7 @@ def rotvec_from_rotation(R: np.ndarray) -> np.ndarray:
     :math:`\theta = \arccos((\operatorname{tr} R - 1) / 2)` and the axis from the
     antisymmetric part :math:`(R - R^T) / (2 \sin\theta)`; near :math:`\theta = \pi`
     (where that part vanishes) the axis comes from :math:`(R + I) / 2 = k k^T`."""
-    r = np.asarray(R, dtype=np.float64)
+    r = check_numeric(R, "R")
     if r.shape != (3, 3) or not np.isfinite(r).all():
         raise InputError(f"R must be a finite 3x3 rotation matrix; got shape {r.shape}")
     v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / 2.0
@@ -168,8 +183,10 @@ def nearest_rotation(M: np.ndarray) -> np.ndarray:
     r"""The rotation closest to a 3x3 matrix in the Frobenius norm (orthogonal
     Procrustes): :math:`U \operatorname{diag}(1, 1, \det U V^T) V^T` from
     :math:`M = U S V^T`. Orthonormalizes a noisy rotation, and averages rotations when M
-    is their sum (the chordal mean)."""
-    u, _, vt = np.linalg.svd(np.asarray(M, dtype=np.float64))
+    is their sum (the chordal mean).
+
+    Raises :class:`InputError` if ``M`` is not a finite real 3x3 matrix."""
+    u, _, vt = np.linalg.svd(check_matrix3(M, "M"))
     return u @ np.diag([1.0, 1.0, np.linalg.det(u @ vt)]) @ vt
 
 
@@ -193,7 +210,7 @@ def compose(*transforms: np.ndarray) -> np.ndarray:
 def apply(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Map ``(..., 3)`` points by ``T``: :math:`R p + t`."""
     m = check_transform(T)
-    p = np.asarray(points, dtype=np.float64)
+    p = check_numeric(points, "points")
     if p.shape[-1:] != (3,):
         raise InputError(f"points must have shape (..., 3); got {p.shape}")
     return p @ m[:3, :3].T + m[:3, 3]
