@@ -257,3 +257,55 @@ def test_svm_refuses_features_whose_squares_overflow(make, scale):
     assert (model.predict(X) == y).mean() > 0.9
     with pytest.raises(InputError, match="X has values up to"):
         model.predict(X * 1e300)
+
+
+# issue 25: hyperparameters of the wrong type reached float()/int() or a truth test
+# (TypeError, ValueError, OverflowError at 2**63), a forest of 2**40 trees was allocated,
+# and score() compared predictions with a y of another length by broadcasting
+_G = np.random.default_rng(25)
+_X = np.concatenate([_G.normal(c, 0.5, (20, 4)) for c in (0.0, 3.0, 6.0)])
+_Y = np.repeat(np.arange(3), 20)
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda: SVC(coef0=None), "coef0 must be a real number"),
+        (lambda: SVC(kernel=np.eye(3)), "kernel must be one of"),
+        (lambda: SVC(gamma=np.eye(3)), "gamma"),
+        (lambda: SVC(C="1"), "C must be a real number"),
+        (lambda: SVC(max_iter=2**63), "max_iter must be in 1..2\\*\\*62"),
+        (lambda: SVC(kernel="poly", degree=200, gamma=10.0), "kernel of X overflows"),
+        (lambda: LinearSVC(intercept_scaling=[1, 2]), "intercept_scaling must be a real"),
+        (lambda: LinearSVC(fit_intercept=np.eye(3)), "fit_intercept must be True or False"),
+        (lambda: LinearSVC(random_state=-1), "random_state must be an int seed >= 0"),
+        (lambda: DecisionTreeClassifier(criterion=np.eye(3)), "criterion must be one of"),
+        (lambda: DecisionTreeClassifier(max_features=np.nan), "max_features as a fraction"),
+        (lambda: RandomForestClassifier(n_estimators=2**40), "n_estimators must be in"),
+        (lambda: RandomForestClassifier(n_estimators=3, bootstrap=np.eye(3)), "bootstrap"),
+        (lambda: RandomForestClassifier(n_estimators=3, voting=np.eye(3)), "voting"),
+        (lambda: RandomForestClassifier(n_estimators=3, progress="yes"), "progress"),
+    ],
+)
+def test_hostile_hyperparameters_are_refused_at_fit(make, match):
+    with pytest.raises(InputError, match=match):
+        make().fit(_X, _Y)
+
+
+def test_huge_limits_mean_no_limit_and_score_checks_y():
+    # issue 25: max_depth and the sample limits beyond int64 are "no limit", not an
+    # OverflowError; score() refuses a y that is not one label per row of X
+    big = DecisionTreeClassifier(max_depth=2**63, random_state=0).fit(_X, _Y)
+    ref = DecisionTreeClassifier(random_state=0).fit(_X, _Y)
+    np.testing.assert_array_equal(big.predict(_X), ref.predict(_X))
+    one_leaf = DecisionTreeRegressor(min_samples_split=2**63).fit(_X, _X[:, 0])
+    np.testing.assert_allclose(one_leaf.predict(_X[:3]), _X[:, 0].mean())
+    with pytest.raises(InputError, match="y must be a 1-D array of 60"):
+        ref.score(_X, _Y[:59])
+    with pytest.raises(InputError, match="y must be a 1-D array of 3"):
+        ref.score(_X[:3], _Y)
+    with pytest.raises(InputError, match="y must be a 1-D array of 60"):
+        one_leaf.score(_X, np.zeros(0))
+    with pytest.raises(InputError, match="y has values up to"):
+        one_leaf.score(_X[:2], [1e300, 0.0])
+    assert ref.score(_X, _Y) == 1.0

@@ -8,7 +8,7 @@ import pytest
 from robopercept.errors import InputError, NotFittedError
 from robopercept.learning.dbscan import DBSCAN
 from robopercept.learning.kmeans import KMeans, kmeans_plusplus
-from robopercept.learning.meanshift import MeanShift
+from robopercept.learning.meanshift import MeanShift, estimate_bandwidth
 
 
 def _blobs(gen: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -184,3 +184,45 @@ def test_kmeans_at_1e140_is_the_rescaled_answer():
     a, b = KMeans(2, random_state=0).fit(X), KMeans(2, random_state=0).fit(X * 1e140)
     np.testing.assert_array_equal(a.labels_, b.labels_)
     np.testing.assert_allclose(b.cluster_centers_, a.cluster_centers_ * 1e140, rtol=1e-9)
+
+
+# issue 25: kmeans_plusplus took any n_clusters / n_local_trials (ValueError on NaN,
+# TypeError on 1.9e16, an empty X reached numpy's choice), estimate_bandwidth any
+# n_samples, and data near 1e300 broke the k-d tree (DBSCAN: a TypeError)
+_XC = np.concatenate([np.random.default_rng(25).normal(c, 0.5, (20, 4)) for c in (0, 3, 6)])
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: kmeans_plusplus(np.zeros((0, 4)), 3), "X is empty"),
+        (lambda: kmeans_plusplus(_XC, np.nan), "n_clusters must be an integer"),
+        (lambda: kmeans_plusplus(_XC, 2**63), "n_clusters=.* is more than the 60 samples"),
+        (lambda: kmeans_plusplus(_XC, 3, n_local_trials=1.9e16), "n_local_trials must be an"),
+        (lambda: kmeans_plusplus(_XC, 3, n_local_trials=0), "n_local_trials must be >= 1"),
+        (lambda: kmeans_plusplus(_XC, 3, n_local_trials=2**40), "n_local_trials must be in"),
+        (lambda: kmeans_plusplus(_XC * 1e300, 3), "X has values up to"),
+        (lambda: estimate_bandwidth(_XC, n_samples=np.float32(2.0)), "n_samples must be an"),
+        (lambda: estimate_bandwidth(_XC, n_samples=-1.3e89), "n_samples must be an integer"),
+        (lambda: estimate_bandwidth(_XC, quantile="0.3"), "quantile must be a real number"),
+        (lambda: DBSCAN().fit(_XC * 1e300), "X has values up to"),
+        (lambda: DBSCAN(progress=np.nan).fit(_XC), "progress must be True or False"),
+        (lambda: KMeans(3, n_init=2**40).fit(_XC), "n_init must be in 1..1000"),
+        (lambda: KMeans(3, n_init=np.eye(3)).fit(_XC), "n_init"),
+        (lambda: KMeans(3, tol="0"), "tol must be a real number"),
+        (lambda: MeanShift(kernel=np.eye(3)).fit(_XC), "kernel must be one of"),
+        (lambda: MeanShift(cluster_all="no").fit(_XC), "cluster_all must be True or False"),
+        (lambda: MeanShift(seeds=[["a"]]).fit(_XC), "seeds must hold real numbers"),
+    ],
+)
+def test_hostile_arguments_are_refused_by_name(call, match):
+    with pytest.raises(InputError, match=match):
+        est = call()
+        est.fit(_XC)  # the ones that only build an estimator
+
+
+def test_kmeans_plusplus_edges_still_work():
+    # one centre per sample and a single trial are valid
+    C = kmeans_plusplus(_XC[:5], 5, random_state=0, n_local_trials=1)
+    assert sorted(map(tuple, C)) == sorted(map(tuple, _XC[:5]))
+    assert estimate_bandwidth(_XC, n_samples=10**9, random_state=0) == estimate_bandwidth(_XC)

@@ -100,5 +100,53 @@ def test_adjusted_rand_score_equals_sklearn():
     assert adjusted_rand_score(a, (a + 1) * 7) == 1.0  # a renaming
     assert adjusted_rand_score([0, 0, 0], [1, 1, 1]) == ref([0, 0, 0], [1, 1, 1])
     assert adjusted_rand_score([0, 1, 2], [5, 6, 7]) == ref([0, 1, 2], [5, 6, 7])
+    # class names against cluster numbers: a partition comparison, as in scikit-learn
+    names, clusters = ["a", "a", "b", "b", "c"], [2, 2, 0, 1, 1]
+    assert adjusted_rand_score(names, clusters) == pytest.approx(ref(names, clusters), abs=1e-12)
     with pytest.raises(InputError):
         adjusted_rand_score([0, 1], [0])
+
+
+# issue 25: labels, pos_label and scores of the wrong shape or type raised NumPy's
+# errors ("object too deep", broadcasting, unhashable), and adjusted_rand_score built a
+# dense n x n table for n distinct labels
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: m.confusion_matrix([0, 1, 2], [0, 1, 1], labels=np.eye(3)), "labels must be"),
+        (lambda: m.confusion_matrix([0, 1, 2], [0, 1, 1], labels=np.float64(1.0)), "1-D"),
+        (lambda: m.confusion_matrix([0, 1, 2], [0, 1, 1], labels=[]), "at least one class"),
+        (lambda: m.confusion_matrix([0, 1, 2], [0, 1, 1], labels=["a", "b"]), "mix labels"),
+        (lambda: m.confusion_matrix(["a", "b"], [0, 1]), "mix labels"),
+        (lambda: m.accuracy_score([0, np.nan], [0, 1]), "NaN or inf labels"),
+        (lambda: m.accuracy_score([[0, 1]], [0, 1]), "y_true must be a 1-D array"),
+        (lambda: m.precision_score([0, 1], [0, 1], pos_label=[1, 2]), "pos_label must be one"),
+        (lambda: m.roc_curve([0, 1], [0.1, 0.9], pos_label=None, drop_intermediate=2), "drop"),
+        (lambda: m.precision_recall_curve([0, 1], [0.1, 0.9], pos_label=[1, 2]), "pos_label"),
+        (lambda: m.roc_curve([0, 1], ["a", "b"]), "y_score must hold real numbers"),
+        (lambda: m.auc(["a", "b"], [0, 1]), "x must hold real numbers"),
+        (lambda: m.auc([0, np.nan], [0, 1]), "auc needs finite x and y"),
+    ],
+)
+def test_hostile_arguments_are_refused_by_name(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_adjusted_rand_score_of_all_distinct_labels_needs_no_dense_table():
+    import tracemalloc
+
+    n = 5000  # a dense n x n table of int64 would take 200 MB
+    a = np.arange(n)
+    b = a.copy()
+    b[:2] = 0  # two samples merged
+    tracemalloc.start()
+    try:
+        same, merged = m.adjusted_rand_score(a, a), m.adjusted_rand_score(a, b)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20e6, f"{peak / 1e6:.0f} MB"
+    # scikit-learn counts with a sparse table: the same values to rounding
+    assert same == 1.0
+    assert merged == pytest.approx(skm.adjusted_rand_score(a, b), abs=1e-12)

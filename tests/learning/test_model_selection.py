@@ -113,3 +113,51 @@ def test_sklearn_clone_pipeline_cross_val_score(iris):
     assert ours.mean() > 0.9
     gs = GridSearchCV(pipe, {"pca__n_components": [2, 3]}, cv=3).fit(X, y)
     assert gs.best_params_["pca__n_components"] in (2, 3)
+
+
+# issue 25: estimators, X/y lengths, grids and flags were not checked: None.fit raised
+# AttributeError, a y shorter than X an IndexError in the folds, a scalar grid value
+# TypeError, and scoring=[...] an unhashable-type error
+_G = np.random.default_rng(25)
+_X = np.concatenate([_G.normal(c, 0.5, (20, 4)) for c in (0.0, 3.0, 6.0)])
+_Y = np.repeat(np.arange(3), 20)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: cross_val_score(None, _X, _Y), "estimator must be an estimator instance"),
+        (lambda: cross_val_score(np.eye(3), _X, _Y), "estimator must be an estimator"),
+        (lambda: cross_val_score(LDA, _X, _Y), "estimator must be an estimator instance"),
+        (lambda: cross_val_score(LDA(), _X[:3], _Y), "one value per sample of X \\(3\\)"),
+        (lambda: cross_val_score(LDA(), _X, np.zeros((2, 60))), "y must be 1-D"),
+        (lambda: cross_val_score(LDA(), _X, _Y, scoring=["accuracy"]), "scoring must be"),
+        (lambda: cross_val_score(LDA(), _X, _Y, cv=True), "cv must be an int or a splitter"),
+        (lambda: cross_val_score(LDA(), _X, _Y, cv="3"), "cv must be an int or a splitter"),
+        (lambda: cross_val_score(LDA(), _X, _Y, progress="yes"), "progress must be True"),
+        (lambda: GridSearch(LDA(), {"shrinkage": 0.1}), "must be a list of values to try"),
+        (lambda: GridSearch(LDA(), 3), "param_grid must be a dict"),
+        (lambda: GridSearch(LDA(), {"a": range(1000), "b": range(1000)}), "more than 100000"),
+        (lambda: GridSearch(LDA(), {"shrinkage": [0.1]}, refit=None), "refit must be True"),
+        (lambda: GridSearch(LDA(), {"shrinkage": [0.1]}).fit(_X, _Y[:59]), "one value per"),
+        (lambda: KFold(n_splits=np.nan), "n_splits must be an integer"),
+        (lambda: KFold(shuffle="yes"), "shuffle must be True or False"),
+        (lambda: KFold(random_state="seed"), "random_state must be an int seed"),
+        (lambda: list(KFold(2).split(3)), "X must be an array of samples"),
+        (lambda: list(StratifiedKFold(2).split(_X[:10], _Y)), "X has 10 samples but y has 60"),
+        (lambda: train_test_split(_X, 3), "arrays\\[1\\] must be an array of samples"),
+        (lambda: train_test_split(_X, shuffle=None), "shuffle must be True or False"),
+        (lambda: train_test_split(_X, _Y, stratify=np.eye(3)), "stratify must be a 1-D"),
+    ],
+)
+def test_hostile_arguments_are_refused_by_name(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_grid_search_of_one_candidate_and_a_column_y_still_work():
+    gs = GridSearch(LDA(), {"shrinkage": [0.1]}, cv=3).fit(_X, _Y)
+    assert gs.best_params_ == {"shrinkage": 0.1} and gs.best_score_ == 1.0
+    np.testing.assert_array_equal(
+        cross_val_score(LDA(), _X, _Y[:, None], cv=3), cross_val_score(LDA(), _X, _Y, cv=3)
+    )

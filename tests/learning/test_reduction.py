@@ -130,3 +130,30 @@ def test_pca_refuses_data_whose_squares_overflow(scale):
     a, b = PCA(2).fit(X), PCA(2).fit(X * 1e140)
     np.testing.assert_allclose(b.components_, a.components_, atol=1e-9)
     np.testing.assert_allclose(b.explained_variance_ratio_, a.explained_variance_ratio_)
+
+
+# issue 25: n_components and shrinkage reached int()/float() unchecked, standardize a
+# truth test, and LDA's scatter matrices overflowed for data near 1e300
+_X = np.random.default_rng(25).normal(size=(30, 3))
+_Y = np.repeat([0, 1, 2], 10)
+
+
+@pytest.mark.parametrize(
+    ("make", "X", "match"),
+    [
+        (lambda: LDA(n_components=np.nan), _X, "n_components \\(or None\\) must be an integer"),
+        (lambda: LDA(n_components=[1, 2]), _X, "n_components"),
+        (lambda: LDA(shrinkage="bogus"), _X, "shrinkage \\(or None\\) must be a real number"),
+        (lambda: LDA(shrinkage=1 + 1j), _X, "shrinkage"),
+        (lambda: LDA(), _X * 1e300, "X has values up to"),
+        (lambda: PCA(standardize=np.eye(3)), _X, "standardize must be True or False"),
+    ],
+)
+def test_hostile_hyperparameters_are_refused_at_fit(make, X, match):
+    with pytest.raises(InputError, match=match):
+        make().fit(X, _Y)
+
+
+def test_lda_edge_shrinkage_and_components_still_fit():
+    lda = LDA(n_components=2, shrinkage=1.0).fit(_X, _Y)
+    assert lda.transform(_X).shape == (30, 2) and lda.shrinkage_ == 1.0

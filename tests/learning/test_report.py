@@ -134,3 +134,49 @@ def test_confusion_table_by_hand():
         "     cat        3        1",
         "elephant        0       12",
     ]
+
+
+# issue 25: the report helpers trusted their arguments: None as the model raised
+# AttributeError, float codes an IndexError, a float confusion matrix a format error,
+# a 2-D y "unhashable type", and standardize broadcast tables of other widths
+_G = np.random.default_rng(25)
+_X = np.concatenate([_G.normal(c, 0.5, (20, 4)) for c in (0.0, 3.0, 6.0)])
+_C = np.repeat(np.arange(3), 20)
+_NAMES = np.array(["a", "b", "c"])
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda m: class_scores(None, _X, 3), "model must be a fitted classifier"),
+        (lambda m: class_scores(m, _X, np.nan), "n_classes must be an integer"),
+        (lambda m: class_scores(m, _X, 4), "n_classes must be the model's number"),
+        (lambda m: evaluate_classifier(None, _X, _C, _NAMES), "model must be a fitted"),
+        (lambda m: evaluate_classifier(m, _X, _C + 0.5, _NAMES), "codes must be whole"),
+        (lambda m: evaluate_classifier(m, _X, _C[:59], _NAMES), "one code per row of X"),
+        (lambda m: evaluate_classifier(m, _X, _C, _NAMES[:2]), "must be whole numbers in 0..1"),
+        (lambda m: label_codes(np.eye(3)), "y must be a 1-D array of labels"),
+        (lambda m: label_codes(np.float64(1.0)), "y must be a 1-D array of labels"),
+        (lambda m: label_codes([1.0, np.nan]), "NaN or inf labels"),
+        (lambda m: confusion_table(np.array([[5, 1], [2, 7]]), []), "confusion must be a square"),
+        (lambda m: confusion_table(np.array([[5, 1], [2, 7]]), ["a"]), "one row per name"),
+        (lambda m: confusion_table(np.array([[5, 1], [2, 7]]), [None, "b"]), "names must be"),
+        (lambda m: confusion_table(np.array([[0.5, 1], [2, 7]]), ["a", "b"]), "counts"),
+        (lambda m: standardize(_X, _X[:, :2]), "others\\[0\\] has 2 columns, train 4"),
+        (lambda m: standardize([]), "train must be 2-D"),
+        (lambda m: standardize(_X * 1e300), "train has values up to"),
+        (lambda m: read_table("t.csv", label=3), "label \\(the --label column\\) must be"),
+    ],
+)
+def test_hostile_arguments_are_refused_by_name(call, match, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "t.csv").write_text("a,b\n1,2\n")
+    model = SVC().fit(_X, _C)
+    with pytest.raises(InputError, match=match):
+        call(model)
+
+
+def test_float_counts_print_as_whole_numbers():
+    # issue 25: a confusion matrix of whole floats (a sum of matrices) is printed
+    table = confusion_table(np.array([[3.0, 1.0], [0.0, 4.0]]), ["cat", "dog"])
+    assert table == confusion_table(np.array([[3, 1], [0, 4]]), ["cat", "dog"])

@@ -234,3 +234,54 @@ def test_foreground_model_checks_frame_shapes():
         model._frame(np.zeros((5, 4), np.uint8))
     with pytest.raises(InputError, match="noise must be one of"):
         ForegroundModel("blur", 3)
+
+
+# issue 25: scalar settings reached int()/float()/np.isfinite unchecked (TypeError on
+# None, ValueError on NaN or a list), noise sizes had no bound (a 2**40 structuring
+# element) and masks of any dtype or rank reached the compiled vote
+_MASK = np.zeros((12, 16), dtype=bool)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: AveragedBackground(n_frames=None), "n_frames must be an integer"),
+        (lambda: FrameDifference(n=np.nan), "n must be an integer"),
+        (lambda: FrameDifference(n=2**63), "n must be in 1..10000 frames"),
+        (lambda: GaussianBackground(k=[1, 2]), "k must be a real number"),
+        (lambda: GaussianBackground(learning_rate="0.5"), "learning_rate must be a real"),
+        (lambda: GaussianBackground(min_std=1e30), "min_std must be at most 1e6"),
+        (lambda: StaticBackground(_MASK.astype(np.uint8), threshold=[1, 2]), "threshold must"),
+        (lambda: ThreeFrameDifference(noise_size=2**40 + 1), "noise_size must be an odd"),
+        (lambda: ThreeFrameDifference(noise=b"median"), "noise must be one of"),
+        (lambda: ThreeFrameDifference(noise_size=4), "noise_size must be an odd"),
+        (lambda: clean_mask(_MASK, size=-np.inf), "size must be an odd integer"),
+        (lambda: clean_mask(_MASK, "open-close", 2**40 + 1), "size must be an odd integer in"),
+        (lambda: clean_mask(np.zeros((3, 9, 14, 1), np.float32)), "mask must be 2-D"),
+        (lambda: clean_mask(np.zeros((9, 14), np.float16)), "mask must be a bool"),
+        (lambda: detections_from_mask(_MASK, min_area=-np.inf), "min_area must be an integer"),
+        (lambda: detections_from_mask(_MASK, connectivity=6), "connectivity must be one of"),
+        (lambda: detections_from_mask(np.full((4, 4), "a")), "mask must be a bool"),
+        (lambda: moving_blobs(3, (64, 48), noise_std=-723785), "noise_std must be in"),
+        (lambda: moving_blobs(3, (3, 48)), "size must be"),
+        (lambda: moving_blobs(3, (64, 48), radius=(4.0, 30.0)), "radius must be"),
+        (lambda: moving_blobs(np.float32(2.0), (64, 48)), "n_frames must be an integer"),
+        (lambda: moving_blobs(3, (64, 48), n_blobs=-1), "n_blobs must be >= 0"),
+        (lambda: moving_blobs(2**20, (640, 480)), "n_frames x width x height"),
+        (lambda: moving_blobs(3, (64, 48), rng=np.nan), "rng must be an int seed"),
+        (lambda: moving_blobs(3, (64, 48), rng=-1), "rng must be an int seed >= 0"),
+    ],
+)
+def test_hostile_settings_are_refused_by_name(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_integer_masks_and_size_one_still_clean():
+    # issue 25: a 0/1 integer mask is read as mask != 0; size 1 leaves the mask as it is
+    m = np.zeros((9, 9), dtype=bool)
+    m[4, 4] = True  # an isolated pixel
+    m[0:4, 0:4] = True
+    np.testing.assert_array_equal(clean_mask(m, size=1), m)
+    np.testing.assert_array_equal(clean_mask(m.astype(np.uint8) * 255), clean_mask(m))
+    assert not clean_mask(m)[4, 4] and clean_mask(m)[1, 1]

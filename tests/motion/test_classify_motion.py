@@ -109,3 +109,22 @@ def test_degenerate_and_bad_input():
         classify_motion(np.ones((5, 2)), np.ones((5, 2)))
     with pytest.raises(InputError, match=r"\(N, 2\)"):
         classify_motion(np.zeros((5, 2)), np.zeros((4, 2)))
+
+
+# issue 25: min_motion and trim reached comparisons and float() unchecked, and vectors
+# near 1e300 overflowed the fit into NaN
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"min_motion": "3"}, "min_motion must be a real number"),
+        ({"trim": 1 + 1j}, "trim must be a real number"),
+        ({"trim": 0.0}, "trim must be in"),
+        ({"points": _points() * 1e300}, "points has values up to"),
+        ({"flow": np.full((150, 2), 1e200)}, "flow has values up to"),
+        ({"points": "ab"}, "points must hold real numbers"),
+    ],
+)
+def test_hostile_arguments_are_refused_by_name(kwargs, match):
+    args = {"points": _points(), "flow": _similar(_points(), scale=1.05), **kwargs}
+    with pytest.raises(InputError, match=match):
+        classify_motion(**args)

@@ -153,3 +153,39 @@ def test_rubberwhale_endpoint_error_matches_opencv():
     both = ours.status & st
     assert np.median(np.abs(ours.end - ref)[both]) < 1e-3
     assert np.mean(np.abs(ours.end - ref)[both].max(axis=1) < 0.01) > 0.99
+
+
+# issue 25: iterations, step and the other settings reached int()/float() unchecked
+# (TypeError on a list, ValueError on NaN), a window larger than the image padded it to
+# any size, and NaN guesses reached the compiled tracker
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"iterations": [1, 2]}, "iterations must be an integer"),
+        ({"iterations": 2**40}, "iterations must be in 1..1000"),
+        ({"window": 2**40 + 1}, "window must be an odd integer in 3..300"),
+        ({"levels": np.nan}, "levels must be an integer"),
+        ({"eps": "0.01"}, "eps must be a real number"),
+        ({"min_eigenvalue": -1.0}, "min_eigenvalue must be in"),
+        ({"max_residual": 0.0}, "max_residual"),
+        ({"initial": [[np.nan, 1.0]]}, "initial contains NaN"),
+        ({"points": "ab"}, "points must hold real numbers"),
+    ],
+)
+def test_hostile_settings_are_refused_by_name(kwargs, match):
+    a = _texture()
+    args = {"points": [[150.0, 130.0]], **kwargs}
+    with pytest.raises(InputError, match=match):
+        lucas_kanade(a, a, **args)
+
+
+def test_dense_flow_step_and_far_points():
+    a = _texture()
+    with pytest.raises(InputError, match="step must be an integer"):
+        dense_flow(a, a, step=np.nan)
+    with pytest.raises(InputError, match=r"step must be in 1\.\.300"):
+        dense_flow(a, a, step=2**63)
+    # issue 25: a point far outside the image is flagged as leaving it, with its start kept
+    res = lucas_kanade(a, a, [[1e300, -1e300], [150.0, 130.0]])
+    assert res.start[0].tolist() == [1e300, -1e300]
+    assert res.reason[0] == FlowStatus.LEFT_IMAGE and res.status[1]

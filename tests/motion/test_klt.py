@@ -101,6 +101,9 @@ def test_a_frame_of_another_size_is_refused_naming_it():
         ({"window": 20}, "window"),
         ({"levels": -1}, "levels"),
         ({"trail": 0}, "trail"),
+        # issue 25: strings were parsed as numbers
+        ({"quality": "0.5"}, "quality must be a real number"),
+        ({"min_distance": "7"}, "min_distance must be a real number"),
     ],
 )
 def test_bad_parameters(kwargs, match):

@@ -124,3 +124,47 @@ def test_time_going_back_drops_the_track_and_bad_input():
         GatedTrackConfig(smoothing_lag=31)
     with pytest.raises(InputError, match="switch_probability"):
         GatedTrackConfig(switch_probability=1.0)
+
+
+# issue 25: config, dim, the step's arguments and lagged_model's sizes were not checked
+# (AttributeError on a float config, OverflowError on dim=inf, broadcasting errors)
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: GatedTrack(np.nan), "config must be a GatedTrackConfig"),
+        (lambda: GatedTrack(np.eye(3)), "config must be a GatedTrackConfig"),
+        (lambda: GatedTrack(dim=np.inf), "dim must be an integer"),
+        (lambda: GatedTrack(dim=2**40), "dim must be <= 4096"),
+        (lambda: GatedTrackConfig(process_noise="abc"), "process_noise must hold real"),
+        (lambda: GatedTrackConfig(process_noise=(1.0,) * 17), "process_noise needs 1 to 16"),
+        (lambda: GatedTrackConfig(switch_probability=[1, 2]), "switch_probability must be a real"),
+        (lambda: GatedTrackConfig(max_coast=np.nan), "max_coast must be an integer"),
+        (lambda: GatedTrackConfig(smoothing_lag=1.5), "smoothing_lag must be an integer"),
+        (lambda: GatedTrackConfig(initial_velocity_std=1e300), "initial_velocity_std must be"),
+        (lambda: GatedTrack(dim=2).step([0.0, 0.0], np.eye(2), support=None), "support must"),
+        (lambda: GatedTrack(dim=2).step([0.0, 0.0], np.eye(2), dominant="yes"), "dominant must"),
+        (lambda: GatedTrack(dim=2).step([0.0, 0.0], np.ones((3, 2))), "R must be the \\(2, 2\\)"),
+        (lambda: GatedTrack(dim=2).step([0.0, 1e300], np.eye(2)), "z has values up to"),
+        (lambda: GatedTrack(dim=2).predict("soon"), "t must be a real number"),
+        (lambda: lagged_model(np.eye(4), np.eye(4), 3.3e16, 1), "k must be an integer"),
+        (lambda: lagged_model(np.eye(4), np.eye(4), -1, 1), "k must be >= 1"),
+        (lambda: lagged_model(np.eye(4), np.eye(4), 2, -1), "lag must be >= 0"),
+        (lambda: lagged_model(np.eye(4), np.eye(4), 2, 2**40), "lag must be <= 2046"),
+        (lambda: lagged_model(np.eye(2), np.zeros((0, 2)), 1, 1), "A and Q must be finite"),
+        (lambda: lagged_model(np.eye(2), np.eye(2), None, 1), "k must be an integer"),
+    ],
+)
+def test_hostile_arguments_are_refused_by_name(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_lagged_model_edge_values_still_work():
+    # issue 25: lag 0 keeps the model; the largest lag within the size bound builds it
+    A, Q = np.eye(4), np.eye(4) * 2.0
+    same = lagged_model(A, Q, 2, 0)
+    assert same[0] is A and same[1] is Q
+    a, q = lagged_model(A, Q, 2, 3)
+    assert a.shape == q.shape == (10, 10)
+    np.testing.assert_array_equal(a[4:6, :2], np.eye(2))  # p_{t-1} <- p_t
+    assert q[4:, :].sum() == 0.0

@@ -318,3 +318,23 @@ def test_bad_inputs():
     with pytest.raises(InputError, match="must have 2 elements"):
         imm.predict()
         imm.update([1.0, 2.0, 3.0])
+
+
+# issue 25: filters, probabilities and per-step models of the wrong type raised
+# TypeError/ValueError from list() and float()
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda f: IMMEstimator(None, [0.5, 0.5], np.eye(2)), "filters must be a list"),
+        (lambda f: IMMEstimator(3, [0.5, 0.5], np.eye(2)), "filters must be a list"),
+        (lambda f: IMMEstimator(f, "ab", np.eye(2)), "mu must hold real numbers"),
+        (lambda f: IMMEstimator(f, [0.5, 0.5], [[1, 0], [0]]), "M must be a numeric array"),
+        (lambda f: IMMEstimator(f, [0.5, 0.5], np.eye(2)).predict(models=3), "models must"),
+        (lambda f: IMMEstimator(f, [0.5, 0.5], np.eye(2)).predict(models=[3, None]), "pair"),
+        (lambda f: IMMEstimator(f, [0.5, 0.5], np.eye(2)).update("a"), "z must hold real"),
+    ],
+)
+def test_hostile_arguments_are_refused_by_name(make, match):
+    filters = [constant_velocity(1, 1.0, q, 1.0) for q in (0.01, 1.0)]
+    with pytest.raises(InputError, match=match):
+        make(filters)

@@ -191,3 +191,66 @@ def test_tiny_covariances_stay_exact():
     kf.update([1.0, 1.0])
     np.testing.assert_allclose(kf.x, [2 / 3, 2 / 3], rtol=1e-12)
     assert np.isfinite(kf.P).all()
+
+
+# issue 25: sizes, scalar parameters and the pure steps' arrays were not checked: a
+# dim_z of 1e9 asked for EiB, the pure functions raised NumPy's broadcasting errors,
+# strings reached float() and any object passed as a flag or a callback
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: KalmanFilter(2**40, 1), "dim_x must be <= 4096"),
+        (lambda: KalmanFilter(2, 1.5), "dim_z must be an integer"),
+        (lambda: KalmanFilter(2, 1, A="abc"), "A must hold real numbers"),
+        (lambda: KalmanFilter(2, 1, x=[1 + 1j, 0]), "x must hold real numbers"),
+        (lambda: KalmanFilter(2, 1, P=[[1, 0], [0]]), "P must be a numeric array"),
+        (lambda: KalmanFilter(2, 1, joseph=np.eye(2)), "joseph must be True or False"),
+        (
+            lambda: ExtendedKalmanFilter(1059262574, 1, h=np.sin, H_jacobian=np.cos),
+            "dim_x must be <= 4096",
+        ),
+        (
+            lambda: ExtendedKalmanFilter(2, 2**63, h=np.sin, H_jacobian=np.cos),
+            "dim_z must be <= 4096",
+        ),
+        (lambda: ExtendedKalmanFilter(2, 1, h=3, H_jacobian=np.cos), "h must be a function"),
+        (lambda: ExtendedKalmanFilter(2, 1, h=None, H_jacobian=None), "h and H_jacobian"),
+        (lambda: kf_predict(np.zeros(2), np.eye(2), np.eye(2), np.zeros((0, 2))), "Q must"),
+        (lambda: kf_predict(np.zeros(1), np.eye(2), np.eye(2), np.eye(2)), "P must have shape"),
+        (lambda: kf_update(np.zeros(2), np.eye(2), np.zeros(0), np.eye(2), np.eye(2)), ">= 1"),
+        (
+            lambda: kf_update(np.zeros(2), np.eye(2), [1.0], np.ones((1, 2)), np.zeros((0, 1))),
+            "R must have shape",
+        ),
+        (
+            lambda: kf_update(np.zeros(3), np.eye(2), [1.0], np.ones((1, 2)), 1.0),
+            "P must have shape \\(3, 3\\)",
+        ),
+        (
+            lambda: kf_update(np.zeros(2), np.eye(2), [1.0], np.ones((1, 2)), 1.0, joseph="no"),
+            "joseph must be True or False",
+        ),
+        (lambda: constant_velocity(2**40, 1.0, 1.0, 1.0), "dim must be <= 4096"),
+        (lambda: constant_acceleration(2000, 1.0, 1.0, 1.0), "dim must be <= 1365"),
+        (lambda: constant_velocity(2, 1e300, 1.0, 1.0), "dt must be in"),
+        (lambda: constant_velocity(2, 1.0, "3", 1.0), "q must be a real number"),
+        (lambda: constant_position(2, 1.0, 1.0, np.nan), "r must be finite"),
+        (lambda: KalmanFilter(1, 1).gate([0.0], probability="0.5"), "probability must be a real"),
+    ],
+)
+def test_bad_sizes_scalars_and_arrays_are_refused_by_name(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_pure_steps_accept_scalars_and_agree_with_the_filter():
+    # issue 25: the checked pure steps still take scalar covariances (multiples of I),
+    # and tiny positive dt / noise give finite, exact results (no NaN)
+    x, P = kf_predict([1.0, 2.0], 2.0, np.eye(2), 0.5)
+    np.testing.assert_allclose(P, 2.5 * np.eye(2))
+    res = kf_update(x, P, [3.0], [[1.0, 0.0]], 2.5)
+    np.testing.assert_allclose(res.x, [2.0, 2.0])  # equal variances: the mean of 1 and 3
+    kf = constant_velocity(1, 1e-162, 1.0, 1e-300)
+    kf.predict()
+    kf.update([1.0])
+    assert np.isfinite(kf.x).all() and np.isfinite(kf.P).all()

@@ -131,3 +131,26 @@ def test_bad_input():
         MeanShiftTracker(gray, (10, 10, 20, 20))
     with pytest.raises(InputError, match="feature"):
         MeanShiftTracker(frame, (10, 10, 20, 20), feature="hog")
+
+
+# issue 25: scalar parameters reached int()/float() unchecked (TypeError on a list,
+# ValueError on NaN) and max_iter / bins had no upper bound
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"min_value": [1, 2]}, "min_value must be an integer"),
+        ({"min_saturation": np.nan}, "min_saturation must be an integer"),
+        ({"min_value": 300}, "min_value must be in 0..255"),
+        ({"max_iter": 2**40}, "max_iter must be in 1..10000"),
+        ({"bins": 2**40}, "bins must be in 1..256"),
+        ({"eps": "3"}, "eps must be a real number"),
+        ({"adaptive": "yes"}, "adaptive must be True or False"),
+        ({"background_weighting": None}, "background_weighting must be True or False"),
+        ({"feature": ["hue"]}, "feature must be one of"),
+        ({"box": "abcd"}, "box must hold real numbers"),
+    ],
+)
+def test_hostile_parameters_are_refused_by_name(kwargs, match):
+    args = {"box": (10, 10, 20, 20), **kwargs}
+    with pytest.raises(InputError, match=match):
+        MeanShiftTracker(_scene((40, 50)), **args)

@@ -100,3 +100,38 @@ def test_mutated_lines_are_read_exactly_or_refused(tmp_path):
         assert rows.frame[0] == float(fields[0]) >= 1
         assert rows.id[0] == float(fields[1]) >= -1
         assert np.isfinite(rows.boxes).all() and np.isfinite(rows.extra).all()
+
+
+# issue 25: write_mot opened whatever came as a path (TypeError for 3, OSError for a long
+# name or a missing folder) and unpacked rows unchecked, leaving a partial file
+@pytest.mark.parametrize(
+    ("path", "rows", "match"),
+    [
+        (3, [], "path must be a file or folder path"),
+        ("n" * 300 + ".txt", [], "file name too long"),
+        ("r.txt", None, "rows must be a list"),
+        ("r.txt", "abc", "rows must be a list"),
+        ("r.txt", [(1, 1, (1, 2, 3, 4), 1.0), {}], "rows\\[1\\] must be"),
+        ("r.txt", [None], "rows\\[0\\] must be"),
+        ("r.txt", [(np.nan, 1, (1, 2, 3, 4), 1.0)], "rows\\[0\\] must be"),
+        ("r.txt", [(0, 1, (1, 2, 3, 4), 1.0)], "frame a whole number >= 1"),
+        ("r.txt", [(1, 1, (1, 2, 3), 1.0)], "rows\\[0\\] must be"),
+        ("r.txt", [(1, 1, (1, 2, 3, np.inf), 1.0)], "four finite box numbers"),
+    ],
+)
+def test_write_mot_refuses_bad_paths_and_rows(tmp_path, monkeypatch, path, rows, match):
+    from robopercept.errors import InputError
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(InputError, match=match):
+        write_mot(path, rows)
+    assert not (tmp_path / "r.txt").exists()  # nothing written
+
+
+def test_write_mot_folder_errors_are_typed_and_bytes_paths_work(tmp_path):
+    with pytest.raises(FileFormatError, match="cannot write"):
+        write_mot(tmp_path / "no" / "such" / "r.txt", [(1, 1, (1, 2, 3, 4), 1.0)])
+    path = bytes(tmp_path / "r.txt")
+    assert write_mot(path, [(np.int64(2), -1, np.array([1.0, 2, 3, 4]), np.nan)]) == 1
+    back = read_mot(tmp_path / "r.txt")
+    assert back.frame.tolist() == [2] and back.id.tolist() == [-1] and back.conf.tolist() == [1.0]

@@ -183,3 +183,38 @@ def test_mot17_public_detections_with_motmetrics(sequence):
     print(f"{sequence}: MOTA {mota:.3f} IDF1 {idf1:.3f}")
     assert mota > 0.1 and idf1 > 0.4  # measured 0.18 / 0.47 (02) and 0.48 / 0.67 (04)
     assert int(summary["num_switches"].iloc[0]) == 0
+
+
+# issue 25: settings reached float()/int() unchecked (TypeError on a list, ValueError on
+# NaN), an IoU gate above 1 never matched, and detections near 1e300 overflowed
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: MultiObjectTracker(gate=[1, 2]), "gate must be a real number"),
+        (lambda: MultiObjectTracker(gate=1.5), "gate must be in \\(0, 1\\]"),
+        (lambda: MultiObjectTracker(min_hits=[1, 2]), "min_hits must be an integer"),
+        (lambda: MultiObjectTracker(min_hits=np.nan), "min_hits must be an integer"),
+        (lambda: MultiObjectTracker(max_age=-1), "max_age must be >= 0"),
+        (lambda: MultiObjectTracker(cost=["iou"]), "cost must be one of"),
+        (lambda: MultiObjectTracker(process_noise="1"), "process_noise must be a real number"),
+        (lambda: MultiObjectTracker(measurement_noise=0.0), "measurement_noise must be in"),
+        (lambda: MultiObjectTracker(report_coasting="yes"), "report_coasting must be True"),
+        (lambda: MultiObjectTracker().update("abcd"), "detections must hold real numbers"),
+        (lambda: MultiObjectTracker().update([[1e300, 0, 5, 5]]), "detections has values"),
+        (
+            lambda: MultiObjectTracker().update([[0, 0, 5, 5]], classes=[[1, 2], [3]]),
+            "classes must be one label per detection",
+        ),
+    ],
+)
+def test_hostile_settings_are_refused_by_name(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
+
+
+def test_euclidean_gate_may_exceed_one():
+    # issue 25: the (0, 1] bound is the IoU gate's only; a pixel gate of 80 still works
+    trk = MultiObjectTracker(cost="euclidean", gate=80.0, min_hits=1)
+    trk.update([[0.0, 0.0, 10.0, 10.0]])
+    (t,) = trk.update([[50.0, 0.0, 10.0, 10.0]])
+    assert t.id == 1 and t.detection == 0

@@ -35,16 +35,23 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_choice, check_int, check_magnitude, plain_repr
 from robopercept.errors import InputError, NotFittedError
 
 __all__ = [
+    "MAX_ITER",
     "ClassifierMixin",
     "DataConversionWarning",
     "Estimator",
     "RegressorMixin",
     "TransformerMixin",
+    "check_max_iter",
+    "check_option",
     "clone",
 ]
+
+#: largest iteration count the compiled solvers take (they count in int64)
+MAX_ITER = 2**62
 
 RandomStateLike = int | np.integer | np.random.Generator | np.random.RandomState | None
 
@@ -171,8 +178,10 @@ class ClassifierMixin:
     _estimator_type: str | None = "classifier"
 
     def score(self, X: npt.ArrayLike, y: npt.ArrayLike) -> float:
-        """Mean accuracy of ``predict(X)`` against ``y``."""
-        return float(np.mean(self.predict(X) == np.asarray(y)))  # type: ignore[attr-defined]
+        """Mean accuracy of ``predict(X)`` against ``y`` (one label per row of ``X``)."""
+        pred = np.asarray(self.predict(X))  # type: ignore[attr-defined]
+        y = _target_vector(y, pred.shape[0], type(self).__name__, "labels of the rows of X")
+        return float(np.mean(pred == y))
 
     def _encode_labels(self, y: npt.ArrayLike, n_samples: int) -> np.ndarray:
         y = _target_vector(y, n_samples, type(self).__name__, "labels")
@@ -209,9 +218,11 @@ class RegressorMixin:
     _estimator_type: str | None = "regressor"
 
     def score(self, X: npt.ArrayLike, y: npt.ArrayLike) -> float:
-        r"""R^2 = 1 - \sum (y - \hat y)^2 / \sum (y - \bar y)^2."""
-        y = np.asarray(y, dtype=np.float64)
+        r"""R^2 = 1 - \sum (y - \hat y)^2 / \sum (y - \bar y)^2 (one target per row of
+        ``X``)."""
         pred = self.predict(X)  # type: ignore[attr-defined]
+        y = check_target(y, pred.shape[0], type(self).__name__)
+        check_magnitude(y, "y", 1e150)  # squared below
         ss_res = float(np.sum((y - pred) ** 2))
         ss_tot = float(np.sum((y - y.mean()) ** 2))
         return 1.0 - ss_res / ss_tot if ss_tot > 0 else 0.0
@@ -327,7 +338,10 @@ def _target_vector(y: npt.ArrayLike | None, n_samples: int, owner: str, what: st
         )
     if _is_sparse(y):
         raise InputError("y is sparse: sparse input is not supported; call y.toarray().ravel()")
-    arr = np.asarray(y)
+    try:
+        arr = np.asarray(y)
+    except (TypeError, ValueError) as exc:  # ragged nested lists
+        raise InputError(f"y must be a 1-D array of {n_samples} {what}; {exc}") from None
     if arr.ndim == 2 and arr.shape[1] == 1:
         warnings.warn(
             # no quotes in the text: scikit-learn's check reads the warning's repr
@@ -403,6 +417,8 @@ def random_generator(
     if random_state is None or (
         isinstance(random_state, (int, np.integer)) and not isinstance(random_state, bool)
     ):
+        if random_state is not None and random_state < 0:
+            raise InputError(f"{name} must be an int seed >= 0; got {random_state}")
         return np.random.default_rng(random_state)
     raise InputError(
         f"{name} must be an int seed, None, a numpy.random.Generator or a RandomState; "
@@ -522,3 +538,56 @@ def not_fitted_error(message: str) -> NotFittedError:
     """
     error: NotFittedError = sklearn_twin(NotFittedError, "NotFittedError")(message)
     return error
+
+
+def check_option(value: Any, name: str, choices: tuple[str, ...]) -> str:
+    """Return the string option ``value`` after checking that it is one of ``choices``.
+
+    :func:`~robopercept._checks.check_choice` after refusing anything that is not a
+    ``str`` (an array would make ``value in choices`` ambiguous).
+
+    Parameters
+    ----------
+    value : str
+    name : str
+        The parameter named in the message.
+    choices : tuple of str
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    InputError
+        Not one of ``choices``.
+    """
+    if not isinstance(value, str):
+        raise InputError(
+            f"{name} must be one of {', '.join(map(repr, choices))}; got "
+            f"{type(value).__name__} {plain_repr(value)[:60]}"
+        )
+    return str(check_choice(value, name, choices))
+
+
+def check_max_iter(value: Any, name: str = "max_iter") -> int:
+    """Return an iteration limit: an integer in ``1..MAX_ITER``.
+
+    Parameters
+    ----------
+    value : int
+    name : str
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    InputError
+        Not an integer, below 1 or beyond :data:`MAX_ITER`.
+    """
+    n = check_int(value, name, 1)
+    if n > MAX_ITER:
+        raise InputError(f"{name} must be in 1..2**62; got {n}")
+    return n

@@ -30,7 +30,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_int, check_positive
+from robopercept._checks import check_bool, check_int, check_magnitude, check_real
 from robopercept.imaging.blobs import uf_roots, uf_union_pairs
 from robopercept.learning._base import ClusterMixin, Estimator
 from robopercept.progress import progress_bar
@@ -101,8 +101,10 @@ class DBSCAN(ClusterMixin, Estimator):
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> DBSCAN:
         """Cluster ``X`` (N, d)."""
-        X = self._check_X(X, fitting=True)
-        eps = check_positive(self.eps, "eps")
+        # squared distances (the k-d tree's too) overflow beyond 1e150
+        X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150)
+        eps = check_real(self.eps, "eps", 0.0, low_inclusive=False)
+        check_bool(self.progress, "progress")
         min_samples = check_int(self.min_samples, "min_samples", 1)
         n = X.shape[0]
         search = _Neighbours(X, eps)

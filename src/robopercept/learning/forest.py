@@ -25,20 +25,24 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_int
+from robopercept._checks import check_bool, check_int
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClassifierMixin,
     Estimator,
     RandomStateLike,
     RegressorMixin,
+    check_option,
     check_target,
     seed_from,
 )
 from robopercept.learning.tree import Tree, grow_tree, tree_settings
 from robopercept.progress import progress_bar
 
-__all__ = ["RandomForestClassifier", "RandomForestRegressor"]
+__all__ = ["MAX_ESTIMATORS", "RandomForestClassifier", "RandomForestRegressor"]
+
+#: most trees in a forest (each one is grown and kept)
+MAX_ESTIMATORS = 100_000
 
 
 def _threads(n_jobs: int | None) -> int:
@@ -79,6 +83,11 @@ class _BaseForest(Estimator):
     ) -> None:
         n, d = X.shape
         n_trees = check_int(self.n_estimators, "n_estimators", 1)
+        if n_trees > MAX_ESTIMATORS:
+            raise InputError(f"n_estimators must be in 1..{MAX_ESTIMATORS}; got {n_trees}")
+        bootstrap = check_bool(self.bootstrap, "bootstrap")
+        oob_score = check_bool(self.oob_score, "oob_score")
+        progress = check_bool(self.progress, "progress")
         settings = tree_settings(
             self.criterion,
             self._criteria,
@@ -88,13 +97,13 @@ class _BaseForest(Estimator):
             self.max_features,
             d,
         )
-        if self.oob_score and not self.bootstrap:
+        if oob_score and not bootstrap:
             raise InputError("oob_score needs bootstrap=True (without it no sample is left out)")
         seeds = seed_from(self._random_state(stacklevel=5)).integers(0, 2**63, size=n_trees)
         XT = np.ascontiguousarray(X.T)
 
         def one(seed: int) -> tuple[Tree, np.ndarray]:
-            if self.bootstrap:
+            if bootstrap:
                 samples = np.random.default_rng(seed).integers(0, n, size=n)
             else:
                 samples = np.arange(n, dtype=np.int64)
@@ -106,13 +115,13 @@ class _BaseForest(Estimator):
                     pool.map(one, seeds.tolist()),
                     total=n_trees,
                     desc="random forest",
-                    disable=not self.progress,
+                    disable=not progress,
                 )
             )
         self.estimators_ = [t for t, _ in grown]
         imp = np.mean([t.importances(d) for t in self.estimators_], axis=0)
         self.feature_importances_ = imp / imp.sum() if imp.sum() > 0 else imp
-        if self.oob_score:
+        if oob_score:
             self._oob(X, [s for _, s in grown], target)
 
     def _tree_outputs(self, X: np.ndarray) -> np.ndarray:
@@ -213,8 +222,7 @@ class RandomForestClassifier(ClassifierMixin, _BaseForest):
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> RandomForestClassifier:
         """Grow the forest on ``X`` (N, d) and labels ``y`` (N,)."""
         X = self._check_X(X, fitting=True)
-        if self.voting not in ("hard", "soft"):
-            raise InputError(f"voting must be 'hard' or 'soft'; got {self.voting!r}")
+        check_option(self.voting, "voting", ("hard", "soft"))
         codes = self._encode_labels(y, X.shape[0])
         self._grow_all(X, codes, np.zeros(1), self.classes_.size, codes)
         return self

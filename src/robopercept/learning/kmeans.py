@@ -31,18 +31,30 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_choice, check_int, check_magnitude
+from robopercept._checks import (
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_real,
+)
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClusterMixin,
     Estimator,
     RandomStateLike,
     TransformerMixin,
+    check_matrix,
+    check_option,
     renamed_rng,
     seed_from,
 )
 
-__all__ = ["KMeans", "kmeans_plusplus"]
+__all__ = ["MAX_LOCAL_TRIALS", "MAX_N_INIT", "KMeans", "kmeans_plusplus"]
+
+#: most k-means++ candidates per centre (scikit-learn's default is 2 + ln k)
+MAX_LOCAL_TRIALS = 1000
+#: most seedings KMeans tries (each one a full run)
+MAX_N_INIT = 1000
 
 _CHUNK = 8192
 
@@ -133,8 +145,18 @@ def kmeans_plusplus(
     (n_clusters, d) ndarray
     """
     random_state = renamed_rng("kmeans_plusplus", random_state, rng)
-    X = np.ascontiguousarray(X, dtype=np.float64)
-    return _plusplus(X, int(n_clusters), seed_from(random_state), n_local_trials)
+    X = check_magnitude(check_matrix(X, "X"), "X", 1e150)  # squared distances
+    k = check_int(n_clusters, "n_clusters", 1)
+    if k > X.shape[0]:
+        raise InputError(f"n_clusters={k} is more than the {X.shape[0]} samples: lower n_clusters")
+    if n_local_trials is not None:
+        n_local_trials = check_int(n_local_trials, "n_local_trials", 1)
+        if n_local_trials > MAX_LOCAL_TRIALS:
+            raise InputError(
+                f"n_local_trials must be in 1..{MAX_LOCAL_TRIALS} (each trial is a row of "
+                f"N distances); got {n_local_trials}"
+            )
+    return _plusplus(X, k, seed_from(random_state), n_local_trials)
 
 
 def _plusplus(
@@ -229,23 +251,27 @@ class KMeans(ClusterMixin, TransformerMixin, Estimator):
                 f"n_clusters={k} is more than the {X.shape[0]} samples; lower n_clusters"
             )
         if isinstance(self.init, str):
-            check_choice(self.init, "init", ("k-means++", "random"))
-            if self.n_init == "auto":
+            check_option(self.init, "init", ("k-means++", "random"))
+            if isinstance(self.n_init, str) and self.n_init == "auto":
                 runs = 1 if self.init == "k-means++" else 10
             else:
-                runs = check_int(self.n_init, "n_init", 1)
+                runs = check_int(self.n_init, "n_init (or 'auto')", 1)
+                if runs > MAX_N_INIT:
+                    raise InputError(f"n_init must be in 1..{MAX_N_INIT} or 'auto'; got {runs}")
             return None, runs
-        C = np.asarray(self.init, dtype=np.float64)
+        C = check_numeric(self.init, "init")
         if C.shape != (k, X.shape[1]):
             raise InputError(f"init centres must have shape ({k}, {X.shape[1]}); got {C.shape}")
+        if not np.isfinite(C).all():
+            raise InputError("init centres must be finite")
+        check_magnitude(C, "init", 1e150)
         return [C.copy()], 1
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> KMeans:
         """Cluster ``X`` (N, d); keeps the best of ``n_init`` runs."""
         X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
         check_int(self.max_iter, "max_iter", 1)
-        if not np.isfinite(self.tol) or self.tol < 0:
-            raise InputError(f"tol must be a finite number >= 0; got {self.tol}")
+        check_real(self.tol, "tol", 0.0)
         given, runs = self._seeds(X)
         gen = seed_from(self._random_state())
         # centred data give more accurate |x|^2 - 2 x.c + |c|^2 distances (as sklearn)

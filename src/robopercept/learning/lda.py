@@ -33,6 +33,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.linalg import eigh
 
+from robopercept._checks import check_int, check_magnitude, check_real
 from robopercept.errors import InputError
 from robopercept.learning._base import ClassifierMixin, Estimator, TransformerMixin
 
@@ -69,7 +70,12 @@ class LDA(ClassifierMixin, TransformerMixin, Estimator):
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> LDA:
         """Estimate the scatter matrices and solve the generalized eigenproblem."""
-        X = self._check_X(X, fitting=True)
+        # scatter matrices square X: beyond 1e150 they overflow, below 1e-150 vanish
+        X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
+        if self.n_components is not None:
+            check_int(self.n_components, "n_components (or None)", 1)
+        if self.shrinkage is not None:
+            check_real(self.shrinkage, "shrinkage (or None)", 0.0, 1.0)
         codes = self._encode_labels(y, X.shape[0])
         n, d = X.shape
         c = self.classes_.size

@@ -34,13 +34,20 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_choice, check_int, check_positive
+from robopercept._checks import (
+    check_bool,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_real,
+)
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClusterMixin,
     Estimator,
     RandomStateLike,
     check_matrix,
+    check_option,
     renamed_rng,
     seed_from,
 )
@@ -79,9 +86,10 @@ def estimate_bandwidth(
     float
     """
     random_state = renamed_rng("estimate_bandwidth", random_state, rng)
-    X = check_matrix(X, "X")
-    if not 0.0 < quantile <= 1.0:
-        raise InputError(f"quantile must be in (0, 1]; got {quantile}")
+    X = check_magnitude(check_matrix(X, "X"), "X", 1e150)  # squared distances
+    quantile = check_real(quantile, "quantile", 0.0, 1.0, low_inclusive=False)
+    if n_samples is not None:
+        n_samples = check_int(n_samples, "n_samples", 1)
     if n_samples is not None and n_samples < X.shape[0]:
         X = X[seed_from(random_state).choice(X.shape[0], size=n_samples, replace=False)]
     return _bandwidth(X, quantile)
@@ -151,8 +159,10 @@ class MeanShift(ClusterMixin, Estimator):
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike | None = None) -> MeanShift:
         """Find the modes of ``X`` (N, d) and label every sample."""
-        X = self._check_X(X, fitting=True)
-        check_choice(self.kernel, "kernel", ("flat", "gaussian"))
+        X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150)  # squared distances
+        check_option(self.kernel, "kernel", ("flat", "gaussian"))
+        cluster_all = check_bool(self.cluster_all, "cluster_all")
+        check_bool(self.progress, "progress")
         max_iter = check_int(self.max_iter, "max_iter", 1)
         if self.bandwidth is None:
             h = _bandwidth(X, 0.3)
@@ -162,17 +172,20 @@ class MeanShift(ClusterMixin, Estimator):
                     "point?): pass bandwidth= explicitly"
                 )
         else:
-            h = check_positive(self.bandwidth, "bandwidth")
+            h = check_real(self.bandwidth, "bandwidth", 0.0, low_inclusive=False)
         if isinstance(self.seeds, str):
-            check_choice(self.seeds, "seeds", ("all", "grid"))
+            check_option(self.seeds, "seeds", ("all", "grid"))
             if self.seeds == "all":
                 seeds = X.copy()
             else:
                 seeds = grid_seeds(X, h, check_int(self.min_bin_freq, "min_bin_freq", 1))
         else:
-            seeds = np.asarray(self.seeds, dtype=np.float64)
+            seeds = check_numeric(self.seeds, "seeds")
             if seeds.ndim != 2 or seeds.shape[1] != X.shape[1] or seeds.shape[0] == 0:
                 raise InputError(f"seeds must be (S, {X.shape[1]}); got shape {seeds.shape}")
+            if not np.isfinite(seeds).all():
+                raise InputError("seeds must be finite")
+            check_magnitude(seeds, "seeds", 1e150)
         if seeds.shape[0] == 0:
             raise InputError(
                 "no grid cell holds min_bin_freq samples; lower min_bin_freq or bandwidth"
@@ -191,7 +204,7 @@ class MeanShift(ClusterMixin, Estimator):
         modes, counts = modes[order[::-1]], counts[order[::-1]]
         centers = self._merge(modes, h)
         labels, dist = _nearest(X, centers)
-        if not self.cluster_all:
+        if not cluster_all:
             labels = np.where(dist <= h * h, labels, -1)
         self.bandwidth_ = h
         self.cluster_centers_ = centers

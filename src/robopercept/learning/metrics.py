@@ -29,6 +29,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from robopercept._checks import check_bool, check_numeric, plain_repr
 from robopercept.errors import InputError
 
 __all__ = [
@@ -37,6 +38,7 @@ __all__ = [
     "adjusted_rand_score",
     "auc",
     "average_precision_score",
+    "check_labels",
     "classification_report",
     "confusion_matrix",
     "f1_score",
@@ -50,19 +52,86 @@ __all__ = [
 Average = Literal["binary", "macro", "micro", "weighted"] | None
 
 
+def check_labels(y: npt.ArrayLike, name: str = "y", *, finite: bool = True) -> np.ndarray:
+    """Return ``y`` as a 1-D array of class labels: numbers or strings.
+
+    Parameters
+    ----------
+    y : (N,) array_like
+    name : str
+        The argument named in the message.
+    finite : bool
+        Refuse NaN and inf labels (NaN is not equal to itself, so it would make a
+        class of its own per sample).
+
+    Returns
+    -------
+    (N,) ndarray
+        An object array of strings becomes a string array.
+
+    Raises
+    ------
+    InputError
+        Not 1-D, a ragged list, complex numbers or other objects, NaN/inf labels.
+
+    Examples
+    --------
+    >>> check_labels(["a", "b"]).tolist()
+    ['a', 'b']
+    """
+    try:
+        arr = np.asarray(y)
+    except (TypeError, ValueError) as exc:  # ragged nested lists
+        raise InputError(f"{name} must be a 1-D array of labels; {exc}") from None
+    if arr.ndim != 1:
+        raise InputError(
+            f"{name} must be a 1-D array of labels; got shape {arr.shape}: one label per "
+            f"sample ({name}.ravel() for a column)"
+        )
+    if arr.dtype.kind == "O" and all(isinstance(v, str) for v in arr.tolist()):
+        arr = arr.astype(str)
+    if arr.dtype.kind not in "biufUS":
+        raise InputError(f"{name} must hold labels (numbers or strings); got dtype {arr.dtype}")
+    if finite and arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        raise InputError(f"{name} has NaN or inf labels: drop or relabel those samples")
+    return arr
+
+
+def _same_kind(a: np.ndarray, b: np.ndarray, names: str) -> None:
+    """Refuse string labels mixed with numbers (NumPy would turn the numbers into text)."""
+    if (a.dtype.kind in "US") != (b.dtype.kind in "US") and a.size and b.size:
+        raise InputError(
+            f"{names} mix labels of different types (strings and numbers); pass one type"
+        )
+
+
 def _pair(
     y_true: npt.ArrayLike, y_pred: npt.ArrayLike, second: str = "y_pred"
 ) -> tuple[np.ndarray, np.ndarray]:
-    a, b = np.asarray(y_true), np.asarray(y_pred)
-    if a.ndim != 1 or b.ndim != 1:
-        raise InputError(f"y_true and {second} must be 1-D; got shapes {a.shape} and {b.shape}")
+    a = check_labels(y_true, "y_true")
+    b = check_labels(y_pred, second, finite=second != "y_score")
     if a.shape != b.shape:
         raise InputError(
             f"y_true and {second} must have the same length; got {a.size} and {b.size}"
         )
     if a.size == 0:
         raise InputError("y_true is empty; metrics need at least one sample")
+    # y_score holds scores; labels_pred (a clustering) is compared as a partition, so
+    # its label names need not be of y_true's type (class names vs cluster numbers)
+    if second not in ("y_score", "labels_pred"):
+        _same_kind(a, b, f"y_true and {second}")
     return a, b
+
+
+def _check_pos_label(pos_label: object, optional: bool = False) -> None:
+    """``pos_label`` must be one label: a number or a string (or None where optional)."""
+    if pos_label is None and optional:
+        return
+    scalar = isinstance(pos_label, (int, float, str, np.integer, np.floating, np.str_))
+    if not scalar or isinstance(pos_label, (bool, np.bool_)):
+        raise InputError(
+            f"pos_label must be one label (a number or a string); got {plain_repr(pos_label)}"
+        )
 
 
 def confusion_matrix(
@@ -88,7 +157,13 @@ def confusion_matrix(
            [0, 0, 1]])
     """
     y_true, y_pred = _pair(y_true, y_pred)
-    labels = np.union1d(y_true, y_pred) if labels is None else np.asarray(labels)
+    if labels is None:
+        labels = np.union1d(y_true, y_pred)
+    else:
+        labels = check_labels(labels, "labels")
+        if labels.size == 0:
+            raise InputError("labels must name at least one class; got none")
+        _same_kind(labels, y_true, "labels and y_true")
     k = labels.size
     order = np.argsort(labels, kind="stable")
     sorted_labels = labels[order]
@@ -116,6 +191,7 @@ def _prf(
     pos_label: int | float | str | np.generic,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-class true positives, predicted counts and true counts (support)."""
+    _check_pos_label(pos_label)
     y_true, y_pred = _pair(y_true, y_pred)
     labels = np.union1d(y_true, y_pred)
     cm = confusion_matrix(y_true, y_pred, labels=labels)
@@ -258,8 +334,9 @@ def classification_report(y_true: npt.ArrayLike, y_pred: npt.ArrayLike) -> Class
 def _binary_truth(
     y_true: npt.ArrayLike, y_score: npt.ArrayLike, pos_label: int | float | str | np.generic | None
 ) -> tuple[np.ndarray, np.ndarray]:
+    _check_pos_label(pos_label, optional=True)
     y_true, y_score = _pair(y_true, y_score, "y_score")
-    score = np.asarray(y_score, dtype=np.float64)
+    score = check_numeric(y_score, "y_score")
     if not np.all(np.isfinite(score)):
         raise InputError("y_score contains NaN or inf; scores must be finite")
     classes = np.unique(y_true)
@@ -308,6 +385,7 @@ def roc_curve(
     (they do not change the curve or its area). The first threshold is ``inf`` so the
     curve starts at (0, 0). Equal to ``sklearn.metrics.roc_curve``.
     """
+    drop_intermediate = check_bool(drop_intermediate, "drop_intermediate")
     truth, score = _binary_truth(y_true, y_score, pos_label)
     fps, tps, thr = _counts_at_thresholds(truth, score)
     if drop_intermediate and fps.size > 2:
@@ -323,11 +401,13 @@ def roc_curve(
 
 def auc(x: npt.ArrayLike, y: npt.ArrayLike) -> float:
     """Area under a curve by the trapezoid rule (``x`` monotonic)."""
-    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    x, y = check_numeric(x, "x"), check_numeric(y, "y")
     if x.shape != y.shape or x.ndim != 1 or x.size < 2:
         raise InputError(
             f"auc needs two 1-D arrays of >= 2 equal lengths; got {x.shape}, {y.shape}"
         )
+    if not (np.isfinite(x).all() and np.isfinite(y).all()):
+        raise InputError("auc needs finite x and y; drop the NaN/inf points")
     dx = np.diff(x)
     direction = 1.0
     if np.any(dx < 0):
@@ -367,6 +447,7 @@ def precision_recall_curve(
     Recall decreases along the arrays; the last point is (recall 0, precision 1) and has
     no threshold. Equal to ``sklearn.metrics.precision_recall_curve``.
     """
+    drop_intermediate = check_bool(drop_intermediate, "drop_intermediate")
     truth, score = _binary_truth(y_true, y_score, pos_label)
     fps, tps, thr = _counts_at_thresholds(truth, score)
     if drop_intermediate and fps.size > 2:
@@ -408,16 +489,19 @@ def adjusted_rand_score(labels_true: npt.ArrayLike, labels_pred: npt.ArrayLike) 
     a, b = _pair(labels_true, labels_pred, "labels_pred")
     _, ia = np.unique(a, return_inverse=True)
     _, ib = np.unique(b, return_inverse=True)
-    table = np.zeros((ia.max() + 1, ib.max() + 1), dtype=np.int64)
-    np.add.at(table, (ia, ib), 1)
+    ia, ib = ia.reshape(-1).astype(np.int64), ib.reshape(-1).astype(np.int64)
+    na, nb = int(ia.max()) + 1, int(ib.max()) + 1
+    # the non-zero cells of the contingency table only (n distinct labels on both
+    # sides would make a dense n x n table)
+    _, cells = np.unique(ia * nb + ib, return_counts=True)
 
     def pairs(v: np.ndarray) -> float:
         v = v.astype(np.float64)
         return float(np.sum(v * (v - 1) / 2))
 
     n = a.size
-    index, rows, cols = pairs(table.ravel()), pairs(table.sum(1)), pairs(table.sum(0))
-    if table.shape[0] == table.shape[1] == 1 or (table.shape[0] == table.shape[1] == n and n > 0):
+    index, rows, cols = pairs(cells), pairs(np.bincount(ia)), pairs(np.bincount(ib))
+    if na == nb == 1 or (na == nb == n and n > 0):
         return 1.0  # one cluster each, or every sample alone in both: the same partition
     expected = rows * cols / (n * (n - 1) / 2)
     top = 0.5 * (rows + cols) - expected

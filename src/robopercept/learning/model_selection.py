@@ -16,20 +16,22 @@ deprecated alias for one release) and gives the same splits for the same seed.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterator, Mapping, Sequence, Sized
+import math
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence, Sized
 from dataclasses import InitVar, dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_int
+from robopercept._checks import check_bool, check_int, plain_repr
 from robopercept.errors import InputError
 from robopercept.learning import metrics
 from robopercept.learning._base import RandomStateLike, clone, random_generator, renamed_rng
 from robopercept.progress import progress_bar
 
 __all__ = [
+    "MAX_CANDIDATES",
     "GridSearch",
     "KFold",
     "StratifiedKFold",
@@ -39,10 +41,35 @@ __all__ = [
 ]
 
 
+#: most parameter combinations a GridSearch tries (each is a full cross-validation)
+MAX_CANDIDATES = 100_000
+
+
+def _length(a: Any, name: str) -> int:
+    """Number of samples (rows) of ``a``: ``len(a)``, refused for scalars and None."""
+    if isinstance(a, (str, bytes)) or not isinstance(a, Sized) or getattr(a, "ndim", 1) == 0:
+        raise InputError(
+            f"{name} must be an array of samples (rows); got {type(a).__name__} "
+            f"{plain_repr(a)[:60]}"
+        )
+    return len(a)
+
+
+def _check_estimator(estimator: Any, name: str = "estimator") -> None:
+    """An estimator has ``fit`` and ``get_params`` (so that it can be cloned)."""
+    missing = [m for m in ("fit", "get_params") if not hasattr(estimator, m)]
+    if missing or isinstance(estimator, type):
+        raise InputError(
+            f"{name} must be an estimator instance (with fit and get_params, e.g. "
+            f"DecisionTreeClassifier()); got {type(estimator).__name__} "
+            f"{plain_repr(estimator)[:60]}"
+        )
+
+
 def _n_samples(arrays: Sequence[Any]) -> int:
     if not arrays:
         raise InputError("train_test_split needs at least one array")
-    lengths = {len(a) for a in arrays}
+    lengths = {_length(a, f"arrays[{i}]") for i, a in enumerate(arrays)}
     if len(lengths) != 1:
         raise InputError(f"all arrays must have the same number of samples; got {sorted(lengths)}")
     return lengths.pop()
@@ -117,6 +144,7 @@ def train_test_split(
         ``[a_train, a_val, a_test, ...]`` when ``val_size`` is given.
     """
     random_state = renamed_rng("train_test_split", random_state, rng)
+    shuffle = check_bool(shuffle, "shuffle")
     n = _n_samples(arrays)
     n_test = _count(test_size, n, "test_size")
     n_val = _count(val_size, n, "val_size")
@@ -128,7 +156,7 @@ def train_test_split(
         )
     gen = random_generator(random_state)
     if stratify is not None:
-        y = np.asarray(stratify)
+        y = metrics.check_labels(stratify, "stratify")
         if y.shape[0] != n:
             raise InputError(f"stratify must have {n} labels; got {y.shape[0]}")
         if not shuffle:
@@ -186,6 +214,18 @@ class KFold:
         if rng is not None:  # deprecated alias of random_state
             seed = renamed_rng(type(self).__name__, self.random_state, rng, stacklevel=4)
             object.__setattr__(self, "random_state", seed)
+        check_int(self.n_splits, "n_splits", 2)
+        check_bool(self.shuffle, "shuffle")
+        rs = self.random_state
+        if not (
+            rs is None
+            or isinstance(rs, (np.random.Generator, np.random.RandomState))
+            or (isinstance(rs, (int, np.integer)) and not isinstance(rs, bool))
+        ):
+            raise InputError(
+                "random_state must be an int seed, None, a numpy.random.Generator or a "
+                f"RandomState; got {plain_repr(rs)[:60]}"
+            )
 
     def _check(self, n: int) -> int:
         k = check_int(self.n_splits, "n_splits", 2)
@@ -197,7 +237,7 @@ class KFold:
         self, X: Sized, y: npt.ArrayLike | None = None, groups: npt.ArrayLike | None = None
     ) -> Iterator[tuple]:
         """Yield ``(train_indices, test_indices)`` for each fold."""
-        n = len(X)
+        n = _length(X, "X")
         k = self._check(n)
         order = random_generator(self.random_state).permutation(n) if self.shuffle else np.arange(n)
         sizes = np.full(k, n // k)
@@ -229,8 +269,10 @@ class StratifiedKFold(KFold):
     ) -> Iterator[tuple]:
         if y is None:
             raise InputError("StratifiedKFold needs the labels y")
-        y = np.asarray(y)
+        y = metrics.check_labels(y, "y")
         n = y.shape[0]
+        if _length(X, "X") != n:
+            raise InputError(f"X has {len(X)} samples but y has {n} labels: one label per sample")
         k = self._check(n)
         _, codes, counts = np.unique(y, return_inverse=True, return_counts=True)
         if counts.max() < k:
@@ -275,6 +317,10 @@ def get_scorer(scoring: str | Callable | None) -> Callable[[Any, np.ndarray, np.
         return lambda est, X, y: float(est.score(X, y))
     if callable(scoring):
         return scoring
+    if not isinstance(scoring, str):
+        raise InputError(
+            f"scoring must be a scorer name, a callable or None; got {plain_repr(scoring)[:60]}"
+        )
 
     def binary(fn: Callable) -> Callable:
         return lambda est, X, y: float(fn(y, est.predict(X), pos_label=np.max(y)))
@@ -298,11 +344,13 @@ def get_scorer(scoring: str | Callable | None) -> Callable[[Any, np.ndarray, np.
 
 
 def _cv(cv: Any, estimator: Any) -> Any:
-    if isinstance(cv, (int, np.integer)):
+    if isinstance(cv, (int, np.integer)) and not isinstance(cv, (bool, np.bool_)):
         classifier = getattr(estimator, "_estimator_type", None) == "classifier"
         return StratifiedKFold(int(cv)) if classifier else KFold(int(cv))
-    if not hasattr(cv, "split"):
-        raise InputError(f"cv must be an int or a splitter with .split(X, y); got {cv!r}")
+    if isinstance(cv, (str, bytes)) or not callable(getattr(cv, "split", None)):
+        raise InputError(
+            f"cv must be an int or a splitter with .split(X, y); got {plain_repr(cv)[:60]}"
+        )
     return cv
 
 
@@ -320,8 +368,25 @@ def cross_val_score(
     ``cv`` is a number of folds (stratified for classifiers, like scikit-learn) or a
     splitter; returns the ``(k,)`` scores.
     """
-    X = np.asarray(X)
-    y_arr = None if y is None else np.asarray(y)
+    _check_estimator(estimator)
+    progress = check_bool(progress, "progress")
+    try:
+        X = np.asarray(X)
+    except (TypeError, ValueError) as exc:  # ragged
+        raise InputError(f"X must be a (n_samples, n_features) array; {exc}") from None
+    n = _length(X, "X")
+    y_arr = None
+    if y is not None:
+        try:
+            y_arr = np.asarray(y)
+        except (TypeError, ValueError) as exc:  # ragged
+            raise InputError(f"y must be a 1-D array of targets; {exc}") from None
+        if y_arr.ndim == 2 and y_arr.shape[1] == 1:
+            y_arr = y_arr.ravel()
+        if y_arr.ndim != 1 or y_arr.shape[0] != n:
+            raise InputError(
+                f"y must be 1-D with one value per sample of X ({n}); got shape {y_arr.shape}"
+            )
     scorer = get_scorer(scoring)
     splitter = _cv(cv, estimator)
     scores = []
@@ -365,19 +430,43 @@ class GridSearch:
         refit: bool = True,
         progress: bool = False,
     ) -> None:
+        _check_estimator(estimator)
         self.estimator = estimator
         self.param_grid = param_grid
+        self._candidates()  # refuses a malformed grid now, not after the first fits
+        _cv(cv, estimator)
         self.cv = cv
+        get_scorer(scoring)
         self.scoring = scoring
-        self.refit = refit
-        self.progress = progress
+        self.refit = check_bool(refit, "refit")
+        self.progress = check_bool(progress, "progress")
 
     def _candidates(self) -> list[dict[str, Any]]:
-        grids = [self.param_grid] if isinstance(self.param_grid, Mapping) else self.param_grid
-        out = []
+        pg = self.param_grid
+        grids = [pg] if isinstance(pg, Mapping) else pg
+        if not isinstance(grids, (list, tuple)) or not all(isinstance(g, Mapping) for g in grids):
+            raise InputError(
+                "param_grid must be a dict of name -> list of values (or a list of such "
+                f"dicts); got {plain_repr(pg)[:80]}"
+            )
+        out: list[dict[str, Any]] = []
         for grid in grids:
             names = sorted(grid)
-            for values in itertools.product(*(list(grid[k]) for k in names)):
+            lists = []
+            for k in names:
+                v = grid[k]
+                if isinstance(v, (str, bytes)) or not isinstance(v, Iterable):
+                    raise InputError(
+                        f"param_grid[{k!r}] must be a list of values to try; got "
+                        f"{plain_repr(v)[:60]}: write [{plain_repr(v)[:30]}]"
+                    )
+                lists.append(list(v))
+            if math.prod(len(v) for v in lists) + len(out) > MAX_CANDIDATES:
+                raise InputError(
+                    f"param_grid has more than {MAX_CANDIDATES} combinations (each one a "
+                    "full cross-validation): give fewer values"
+                )
+            for values in itertools.product(*lists):
                 out.append(dict(zip(names, values, strict=True)))
         if not out:
             raise InputError("param_grid is empty; give at least one value per parameter")

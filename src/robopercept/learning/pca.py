@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_magnitude
+from robopercept._checks import check_bool, check_magnitude
 from robopercept.errors import InputError
 from robopercept.learning._base import Estimator, TransformerMixin
 
@@ -70,7 +70,7 @@ class PCA(TransformerMixin, Estimator):
             )
         self.mean_ = X.mean(axis=0)
         Xc = X - self.mean_
-        if self.standardize:
+        if check_bool(self.standardize, "standardize"):
             std = Xc.std(axis=0)
             self.scale_ = np.where(std > 0, std, 1.0)
             Xc = Xc / self.scale_

@@ -25,11 +25,20 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import check_file
+from robopercept._checks import (
+    check_file,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_text,
+    plain_repr,
+)
 from robopercept.errors import FileFormatError, InputError
+from robopercept.learning._base import check_matrix
 from robopercept.learning.metrics import (
     ClassificationReport,
     average_precision_score,
+    check_labels,
     classification_report,
     precision_recall_curve,
     roc_auc_score,
@@ -88,6 +97,8 @@ def read_table(
     ([[1.0, 2.0], [3.0, 4.0]], ['x', 'y'], ['a', 'b'])
     """
     path = check_file(path, "a CSV file")
+    if label is not None:
+        label = check_text(label, "label (the --label column)")
     try:
         with path.open(newline="") as fh:
             rows = [row for row in csv.reader(fh) if row]
@@ -148,9 +159,19 @@ def standardize(train: np.ndarray, *others: np.ndarray) -> list[np.ndarray]:
     >>> [a.tolist() for a in standardize(train, test)]
     [[[-1.0, 0.0], [1.0, 0.0]], [[3.0, 1.0]]]
     """
-    mean, std = train.mean(axis=0), train.std(axis=0)
+    tables = [check_matrix(train, "train")]
+    for i, a in enumerate(others):
+        tables.append(check_matrix(a, f"others[{i}]"))
+        if tables[-1].shape[1] != tables[0].shape[1]:
+            raise InputError(
+                f"others[{i}] has {tables[-1].shape[1]} columns, train "
+                f"{tables[0].shape[1]}: every table needs train's features"
+            )
+    # squared in the standard deviation: beyond 1e150 it overflows
+    check_magnitude(tables[0], "train", 1e150)
+    mean, std = tables[0].mean(axis=0), tables[0].std(axis=0)
     std = np.where(std > 0, std, 1.0)
-    return [(a - mean) / std for a in (train, *others)]
+    return [(a - mean) / std for a in tables]
 
 
 def label_codes(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,6 +197,7 @@ def label_codes(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     >>> codes.tolist(), names.tolist()
     ([1, 0, 1], ['2', '10'])
     """
+    y = check_labels(y, "y")
     names = np.unique(y)
     try:
         names = names[np.argsort([float(v) for v in names], kind="stable")]
@@ -183,6 +205,17 @@ def label_codes(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         pass
     lookup = {v: i for i, v in enumerate(names)}
     return np.array([lookup[v] for v in y], dtype=np.int64), names
+
+
+def _model(model: Any, need: tuple[str, ...]) -> Any:
+    """``model`` after checking that it has the methods in ``need``."""
+    missing = [m for m in need if not hasattr(model, m)]
+    if missing:
+        raise InputError(
+            f"model must be a fitted classifier (with {', '.join(need)}); got "
+            f"{type(model).__name__} {plain_repr(model)[:60]}, which lacks {', '.join(missing)}"
+        )
+    return model
 
 
 def class_scores(model: Any, X: np.ndarray, n_classes: int) -> np.ndarray:
@@ -203,10 +236,26 @@ def class_scores(model: Any, X: np.ndarray, n_classes: int) -> np.ndarray:
     -------
     (N, n_classes) ndarray
     """
+    n_classes = check_int(n_classes, "n_classes", 2)
+    X = check_matrix(X, "X")
+    if not hasattr(model, "predict_proba"):
+        _model(model, ("decision_function",))
+    return _scores(model, X, n_classes)
+
+
+def _scores(model: Any, X: np.ndarray, n_classes: int) -> np.ndarray:
+    """:func:`class_scores` without the checks of its arguments (the scores are)."""
     if hasattr(model, "predict_proba"):
-        return model.predict_proba(X)
-    f = model.decision_function(X)
-    return np.c_[-f, f] if n_classes == 2 else f
+        out = np.asarray(model.predict_proba(X))
+    else:
+        f = np.asarray(model.decision_function(X))
+        out = np.c_[-f, f] if n_classes == 2 and f.ndim == 1 else f
+    if out.shape != (X.shape[0], n_classes):
+        raise InputError(
+            f"the model gives scores of shape {out.shape} for {X.shape[0]} rows; expected "
+            f"({X.shape[0]}, {n_classes}): n_classes must be the model's number of classes"
+        )
+    return out
 
 
 @dataclass(frozen=True)
@@ -303,12 +352,30 @@ def evaluate_classifier(
     >>> ev.report.accuracy, list(ev.curves), ev.curves["b"].roc_auc
     (1.0, ['b'], 1.0)
     """
-    codes = np.asarray(codes)
-    pred = model.predict(X)
+    _model(model, ("predict", "classes_"))
+    if not hasattr(model, "predict_proba"):
+        _model(model, ("predict", "classes_", "decision_function"))
+    X = check_matrix(X, "X")
+    classes = check_labels(classes, "classes")
+    codes = check_numeric(codes, "codes")
+    if codes.shape != (X.shape[0],):
+        raise InputError(
+            f"codes must hold one code per row of X ({X.shape[0]}); got shape {codes.shape}"
+        )
+    known = np.asarray(model.classes_)
+    trained = check_numeric(known, "the model's classes_ (train it on codes)")
+    for name, c in (("codes", codes), ("the model's classes_", trained)):
+        if not ((c == np.round(c)) & (c >= 0) & (c < classes.size)).all():
+            raise InputError(
+                f"{name} must be whole numbers in 0..{classes.size - 1} (indices into "
+                "classes, as label_codes gives); train the model on those codes"
+            )
+    codes = codes.astype(np.int64)
+    pred = np.asarray(model.predict(X))
     rep = classification_report(codes, pred)  # codes: classes in numeric order
     rep = dataclasses.replace(rep, labels=classes[rep.labels])
     # the report's classes are the ones seen in test; the scores cover the model's
-    scores = class_scores(model, X, model.classes_.size)
+    scores = _scores(model, X, known.size)
     curves: dict[str, ClassCurves] = {}
     columns = list(enumerate(model.classes_))
     if len(columns) == 2:
@@ -352,8 +419,19 @@ def confusion_table(confusion: np.ndarray, names: list[str]) -> str:
        cat      3      1
        dog      0      4
     """
+    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
+        raise InputError(f"names must be a list of class names (str); got {plain_repr(names)[:80]}")
+    c = check_numeric(confusion, "confusion")
+    if c.shape != (len(names), len(names)) or not names:
+        raise InputError(
+            f"confusion must be a square (c, c) matrix with one row per name ({len(names)}); "
+            f"got shape {c.shape}"
+        )
+    if not (np.isfinite(c) & (c == np.round(c))).all():
+        raise InputError("confusion must hold counts (whole numbers)")
+    confusion = c.astype(np.int64) if np.abs(c).max() < 2**62 else c
     w = max(6, *(len(n) for n in names))
     lines = [" " * w + " " + " ".join(f"{n:>{w}}" for n in names)]
     for n, row in zip(names, np.asarray(confusion), strict=True):
-        lines.append(f"{n:>{w}} " + " ".join(f"{v:>{w}d}" for v in row))
+        lines.append(f"{n:>{w}} " + " ".join(f"{v:>{w}.0f}" for v in row))
     return "\n".join(lines)

@@ -41,12 +41,14 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_choice, check_int, check_magnitude, check_positive
+from robopercept._checks import check_bool, check_int, check_magnitude, check_real
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClassifierMixin,
     Estimator,
     RandomStateLike,
+    check_max_iter,
+    check_option,
     seed_from,
 )
 
@@ -212,14 +214,14 @@ def _smo(K: np.ndarray, y: np.ndarray, C: float, tol: float, max_iter: int):
 
 
 def _gamma(gamma: float | str, X: np.ndarray) -> float:
-    if gamma == "scale":
+    if isinstance(gamma, str) and gamma == "scale":
         var = float(X.var())
         return 1.0 / (X.shape[1] * var) if var > 0 else 1.0
-    if gamma == "auto":
+    if isinstance(gamma, str) and gamma == "auto":
         return 1.0 / X.shape[1]
     if isinstance(gamma, str):
         raise InputError(f"gamma must be 'scale', 'auto' or a positive number; got {gamma!r}")
-    return check_positive(gamma, "gamma")
+    return check_real(gamma, "gamma (or 'scale', 'auto')", 0.0, low_inclusive=False)
 
 
 class SVC(ClassifierMixin, Estimator):
@@ -280,16 +282,23 @@ class SVC(ClassifierMixin, Estimator):
         """Train one machine per pair of classes on ``X`` (N, d), ``y`` (N,)."""
         X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
         codes = self._encode_labels(y, X.shape[0])
-        C = check_positive(self.C, "C")
-        tol = check_positive(self.tol, "tol")
-        check_choice(self.kernel, "kernel", ("rbf", "linear", "poly"))
-        check_choice(self.decision_function_shape, "decision_function_shape", ("ovr", "ovo"))
+        C = check_real(self.C, "C", 0.0, low_inclusive=False)
+        tol = check_real(self.tol, "tol", 0.0, low_inclusive=False)
+        check_option(self.kernel, "kernel", ("rbf", "linear", "poly"))
+        check_option(self.decision_function_shape, "decision_function_shape", ("ovr", "ovo"))
         check_int(self.degree, "degree", 1)
+        check_real(self.coef0, "coef0")
         n = X.shape[0]
         max_iter = max(10_000_000, 100 * n) if self.max_iter is None else self.max_iter
-        max_iter = check_int(max_iter, "max_iter", 1)
+        max_iter = check_max_iter(max_iter)
         self._gamma = _gamma(self.gamma, X)
-        K = self._kernel(X, X)
+        with np.errstate(over="ignore", invalid="ignore"):  # refused just below
+            K = self._kernel(X, X)
+        if not np.isfinite(K).all():
+            raise InputError(
+                f"the {self.kernel} kernel of X overflows (values beyond 1e308): rescale X "
+                "(e.g. StandardScaler) or lower gamma, coef0 or degree"
+            )
         c = self.classes_.size
         pairs = list(itertools.combinations(range(c), 2))
         machines = []
@@ -475,12 +484,14 @@ class LinearSVC(ClassifierMixin, Estimator):
         """Train on ``X`` (N, d) and labels ``y`` (N,)."""
         X = check_magnitude(self._check_X(X, fitting=True), "X", 1e150, smallest=1e-150)
         codes = self._encode_labels(y, X.shape[0])
-        C = check_positive(self.C, "C")
-        check_choice(self.loss, "loss", ("hinge", "squared_hinge"))
-        tol = check_positive(self.tol, "tol")
-        max_iter = check_int(self.max_iter, "max_iter", 1)
-        scale = float(self.intercept_scaling)
-        Xa = np.c_[X, np.full(X.shape[0], scale)] if self.fit_intercept else X
+        C = check_real(self.C, "C", 0.0, low_inclusive=False)
+        check_option(self.loss, "loss", ("hinge", "squared_hinge"))
+        tol = check_real(self.tol, "tol", 0.0, low_inclusive=False)
+        max_iter = check_max_iter(self.max_iter)
+        fit_intercept = check_bool(self.fit_intercept, "fit_intercept")
+        # an extra feature column of this value: squared like X
+        scale = check_real(self.intercept_scaling, "intercept_scaling", -1e150, 1e150)
+        Xa = np.c_[X, np.full(X.shape[0], scale)] if fit_intercept else X
         Xa = np.ascontiguousarray(Xa)
         c = self.classes_.size
         targets = [1] if c == 2 else list(range(c))
@@ -493,7 +504,7 @@ class LinearSVC(ClassifierMixin, Estimator):
             W.append(w)
             epochs = max(epochs, e)
         W = np.array(W)
-        if self.fit_intercept:
+        if fit_intercept:
             self.coef_, self.intercept_ = W[:, :-1].copy(), W[:, -1] * scale
         else:
             self.coef_, self.intercept_ = W, np.zeros(W.shape[0])

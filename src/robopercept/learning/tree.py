@@ -34,13 +34,14 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit, prange
 
-from robopercept._checks import check_choice, check_int
+from robopercept._checks import check_int
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClassifierMixin,
     Estimator,
     RandomStateLike,
     RegressorMixin,
+    check_option,
     check_target,
     seed_from,
 )
@@ -344,11 +345,11 @@ def resolve_max_features(value: int | float | str | None, n_features: int) -> in
     if value is None:
         return n_features
     if isinstance(value, str):
-        check_choice(value, "max_features", ("sqrt", "log2"))
+        check_option(value, "max_features", ("sqrt", "log2"))
         f = math.sqrt(n_features) if value == "sqrt" else math.log2(n_features)
         return max(1, int(f))
     if isinstance(value, (float, np.floating)):
-        if not 0.0 < value <= 1.0:
+        if not 0.0 < value <= 1.0:  # (False for NaN)
             raise InputError(f"max_features as a fraction must be in (0, 1]; got {value}")
         return max(1, int(value * n_features))
     k = check_int(value, "max_features", 1)
@@ -455,13 +456,14 @@ def tree_settings(
     ``max_depth=None`` means no limit; ``max_features`` as :func:`resolve_max_features`.
     Raises :class:`~robopercept.errors.InputError` naming the parameter otherwise.
     """
-    check_choice(criterion, "criterion", criteria)
+    check_option(criterion, "criterion", criteria)
+    # beyond 2^62 (int64 in the compiled tree) every limit is no limit
     depth = _NO_LIMIT if max_depth is None else check_int(max_depth, "max_depth", 1)
     return TreeSettings(
         _CRITERIA[criterion],
-        depth,
-        check_int(min_samples_split, "min_samples_split", 2),
-        check_int(min_samples_leaf, "min_samples_leaf", 1),
+        min(depth, _NO_LIMIT),
+        min(check_int(min_samples_split, "min_samples_split", 2), _NO_LIMIT),
+        min(check_int(min_samples_leaf, "min_samples_leaf", 1), _NO_LIMIT),
         resolve_max_features(max_features, n_features),
     )
 

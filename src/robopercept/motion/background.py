@@ -34,18 +34,30 @@ closing fills small holes, with a ``size`` square), or None.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_image
+from robopercept._checks import (
+    check_image,
+    check_int,
+    check_magnitude,
+    check_ndim,
+    check_odd_size,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import InputError
 
 __all__ = [
+    "MAX_NOISE_SIZE",
     "AveragedBackground",
     "ForegroundModel",
     "GaussianBackground",
     "StaticBackground",
+    "check_noise",
     "check_threshold",
     "clean_mask",
 ]
@@ -55,11 +67,49 @@ NOISE = ("median", "open-close", None)
 
 def _as255(frame: npt.ArrayLike, name: str = "frame") -> np.ndarray:
     img = check_image(frame, name)
+    check_magnitude(img, name, 1e30)  # times 255 in float32 (max 3.4e38)
     if img.dtype == np.uint8:
         return img.astype(np.float32)
     if img.dtype.kind == "f":
         return img.astype(np.float32) * np.float32(255.0)
     raise InputError(f"{name} must be uint8 or float in [0, 1]; got {img.dtype}")
+
+
+#: largest noise window side: clean-up windows are a few pixels; beyond this a typo
+#: (2**40) would build a structuring element of 2**80 bytes
+MAX_NOISE_SIZE = 255
+
+
+def check_noise(noise: Any, size: Any, size_name: str = "size") -> tuple[str | None, int]:
+    """Return ``(noise, size)`` after checking the mask clean-up settings.
+
+    Parameters
+    ----------
+    noise : {"median", "open-close", None}
+    size : int
+        An odd window side in ``1..MAX_NOISE_SIZE``.
+    size_name : str
+        The size's parameter name in the message (``noise_size`` on the models).
+
+    Returns
+    -------
+    noise : str or None
+    size : int
+
+    Raises
+    ------
+    InputError
+        Another ``noise``, or a ``size`` that is no odd integer in range.
+    """
+    if not (noise is None or isinstance(noise, str)) or noise not in NOISE:
+        raise InputError(f"noise must be one of {NOISE}; got {plain_repr(noise)}")
+    n = check_odd_size(size, size_name)
+    if n > MAX_NOISE_SIZE:
+        raise InputError(
+            f"{size_name} must be an odd integer in 1..{MAX_NOISE_SIZE} (a clean-up window of "
+            f"a few pixels); got {n}"
+        )
+    return noise, n
 
 
 def clean_mask(mask: np.ndarray, noise: str | None = "median", size: int = 3) -> np.ndarray:
@@ -68,27 +118,45 @@ def clean_mask(mask: np.ndarray, noise: str | None = "median", size: int = 3) ->
     Parameters
     ----------
     mask : (H, W) bool ndarray
+        Integer masks are read as ``mask != 0``.
     noise : {"median", "open-close", None}
         Majority vote over a ``size`` x ``size`` window, or an opening then a closing
         with a ``size`` square, or nothing.
     size : int
-        Odd window side.
+        Odd window side, at most :data:`MAX_NOISE_SIZE`.
+
+    Returns
+    -------
+    (H, W) bool ndarray
+
+    Raises
+    ------
+    InputError
+        A mask that is not 2-D bool (or integer), a bad ``noise`` or ``size``.
     """
-    if noise not in NOISE:
-        raise InputError(f"noise must be one of {NOISE}; got {noise!r}")
-    if noise is None:
-        return mask
-    if int(size) != size or size < 1 or size % 2 == 0:
-        raise InputError(f"noise size must be an odd integer >= 1; got {size}")
-    if size == 1:
+    noise, size = check_noise(noise, size)
+    m = check_ndim(mask, "mask", (2,))
+    if m.dtype.kind in "iu":
+        m = m != 0
+    elif m.dtype != np.bool_:
+        raise InputError(
+            f"mask must be a bool (H, W) array; got dtype {m.dtype}: pass mask > 0 "
+            "(or mask.astype(bool))"
+        )
+    return _clean_mask(np.ascontiguousarray(m), noise, size)
+
+
+def _clean_mask(mask: np.ndarray, noise: str | None, size: int) -> np.ndarray:
+    """:func:`clean_mask` of a C-contiguous 2-D bool ``mask``, without the checks."""
+    if noise is None or size == 1:
         return mask
     if noise == "median":
         out = np.empty_like(mask)
-        _majority(mask.view(np.uint8), int(size), out.view(np.uint8))
+        _majority(mask.view(np.uint8), size, out.view(np.uint8))
         return out
     from robopercept.imaging.morphology import closing, opening, structuring_element
 
-    se = structuring_element("rect", int(size))
+    se = structuring_element("rect", size)
     m = mask.view(np.uint8)
     return closing(opening(m, se), se).astype(bool)
 
@@ -124,15 +192,16 @@ def _majority(m, size, out):  # pragma: no cover - compiled
 
 
 def check_threshold(value: float, name: str = "threshold", unit: str = "0-255 scale") -> float:
-    """Return ``value`` as a float after checking that it is finite and > 0.
+    """Return ``value`` as a float after checking that it is a finite real number > 0.
 
     The error names the parameter and its ``unit`` (grey levels on the 0-255 scale for
     intensity thresholds, ``"standard deviations"`` for :class:`GaussianBackground`'s
     ``k``).
     """
-    if not np.isfinite(value) or value <= 0:
-        raise InputError(f"{name} must be a positive number ({unit}); got {value}")
-    return float(value)
+    v = check_real(value, name)
+    if v <= 0:
+        raise InputError(f"{name} must be a positive number ({unit}); got {plain_repr(value)}")
+    return v
 
 
 class ForegroundModel:
@@ -152,10 +221,7 @@ class ForegroundModel:
     """
 
     def __init__(self, noise: str | None, noise_size: int) -> None:
-        if noise not in NOISE:
-            raise InputError(f"noise must be one of {NOISE}; got {noise!r}")
-        self.noise = noise
-        self.noise_size = noise_size
+        self.noise, self.noise_size = check_noise(noise, noise_size, "noise_size")
         self.frame_count = 0
         self._shape: tuple[int, ...] | None = None
 
@@ -174,7 +240,7 @@ class ForegroundModel:
     def _clean(self, mask: np.ndarray) -> np.ndarray:
         if mask.ndim == 3:
             mask = mask.any(axis=2)
-        return clean_mask(np.ascontiguousarray(mask), self.noise, self.noise_size)
+        return _clean_mask(np.ascontiguousarray(mask), self.noise, self.noise_size)
 
 
 class StaticBackground(ForegroundModel):
@@ -230,9 +296,7 @@ class AveragedBackground(ForegroundModel):
         noise_size: int = 3,
     ) -> None:
         super().__init__(noise, noise_size)
-        if int(n_frames) != n_frames or n_frames < 1:
-            raise InputError(f"n_frames must be an integer >= 1; got {n_frames}")
-        self.n_frames = int(n_frames)
+        self.n_frames = check_int(n_frames, "n_frames", 1)
         self.threshold = check_threshold(threshold)
         self._sum: np.ndarray | None = None
         self.background: np.ndarray | None = None
@@ -318,15 +382,19 @@ class GaussianBackground(ForegroundModel):
     ) -> None:
         super().__init__(noise, noise_size)
         self.k = check_threshold(k, "k", "standard deviations")
-        if not 0.0 < learning_rate <= 1.0:
-            raise InputError(f"learning_rate must be in (0, 1]; got {learning_rate}")
-        self.learning_rate = float(learning_rate)
-        if int(init_frames) != init_frames or init_frames < 1:
-            raise InputError(f"init_frames must be an integer >= 1; got {init_frames}")
-        self.init_frames = int(init_frames)
+        self.learning_rate = check_real(
+            learning_rate, "learning_rate", 0.0, 1.0, low_inclusive=False
+        )
+        self.init_frames = check_int(init_frames, "init_frames", 1)
         self._init: list[np.ndarray] = []
+        # squared in float32 (max 3.4e38); a spread beyond 255 levels means nothing
         self.initial_std = check_threshold(initial_std, "initial_std")
         self.min_std = check_threshold(min_std, "min_std")
+        for name, v in (("initial_std", self.initial_std), ("min_std", self.min_std)):
+            if v > 1e6:
+                raise InputError(
+                    f"{name} must be at most 1e6 (0-255 scale: a few grey levels); got {v:g}"
+                )
         self.background: np.ndarray | None = None
         self.variance: np.ndarray | None = None
 

@@ -7,9 +7,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from robopercept._checks import (
+    as_rng,
+    check_choice,
+    check_int,
+    check_ndim,
+    check_real,
+    check_reals,
+    check_size,
+    plain_repr,
+)
 from robopercept.errors import InputError
 
-__all__ = ["MaskDetections", "detections_from_mask", "moving_blobs"]
+__all__ = ["MAX_BLOB_PIXELS", "MaskDetections", "detections_from_mask", "moving_blobs"]
+
+#: most pixels :func:`moving_blobs` makes in all (n_frames x width x height)
+MAX_BLOB_PIXELS = 2**28
 
 
 @dataclass(frozen=True)
@@ -42,11 +55,13 @@ def detections_from_mask(
     :func:`robopercept.imaging.blob_features`)."""
     from robopercept.imaging.blobs import blob_features, label_components
 
-    m = np.asarray(mask)
-    if m.ndim != 2:
-        raise InputError(f"mask must be (H, W); got shape {m.shape}")
-    if int(min_area) != min_area or min_area < 1:
-        raise InputError(f"min_area must be an integer >= 1; got {min_area}")
+    m = check_ndim(mask, "mask", (2,))
+    if m.dtype.kind not in "biuf":
+        raise InputError(f"mask must be a bool (H, W) array; got dtype {m.dtype}")
+    if m.dtype.kind == "f" and not np.isfinite(m).all():
+        raise InputError("mask has NaN or inf: pass a bool mask (e.g. mask > 0)")
+    min_area = check_int(min_area, "min_area", 1)
+    connectivity = check_choice(check_int(connectivity, "connectivity"), "connectivity", (4, 8))
     labels, n = label_components(m.astype(bool), connectivity)
     if n == 0:
         return MaskDetections(np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0, dtype=np.int64))
@@ -91,13 +106,34 @@ def moving_blobs(
     frames : (n_frames, H, W) uint8 ndarray
     masks : (n_frames, H, W) bool ndarray
     """
-    gen = np.random.default_rng(rng)
-    w, h = size
+    n_frames = check_int(n_frames, "n_frames", 1)
+    w, h = check_size(size, "size", minimum=8)
+    if n_frames * w * h > MAX_BLOB_PIXELS:
+        raise InputError(
+            f"n_frames x width x height must be at most {MAX_BLOB_PIXELS} pixels (the "
+            f"frames and masks take one byte each); got {n_frames} x {w} x {h}: use fewer "
+            "or smaller frames"
+        )
+    n_blobs = check_int(n_blobs, "n_blobs", 0)
+    if n_blobs > 1000:
+        raise InputError(f"n_blobs must be in 0..1000; got {n_blobs}")
+    r_low, r_high = check_reals(radius, "radius", 2, 0.0)
+    if not 0 < r_low <= r_high or 2 * r_high + 2 >= min(w, h):
+        raise InputError(
+            f"radius must be (smallest, largest) with 0 < smallest <= largest and discs that "
+            f"fit the {w}x{h} frame (largest < {(min(w, h) - 2) / 2:g}); got {plain_repr(radius)}"
+        )
+    speed = check_real(speed, "speed", 0.0)
+    noise_std = check_real(noise_std, "noise_std", 0.0)
+    illumination_drift = check_real(illumination_drift, "illumination_drift", -1.0)
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
+        raise InputError(f"rng must be an int seed >= 0, a Generator or None; got {rng}")
+    gen = as_rng(rng)
     from robopercept.imaging.filters import gaussian_blur
 
     texture = gaussian_blur(gen.uniform(0, 1, (h, w)), 3.0)
     texture = 60 + 80 * (texture - texture.min()) / np.ptp(texture)
-    r = gen.uniform(*radius, n_blobs)
+    r = gen.uniform(r_low, r_high, n_blobs)
     pos = np.c_[gen.uniform(r + 1, w - r - 1), gen.uniform(r + 1, h - r - 1)]
     angle = gen.uniform(0, 2 * np.pi, n_blobs)
     vel = speed * np.c_[np.cos(angle), np.sin(angle)]

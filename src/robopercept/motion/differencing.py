@@ -24,10 +24,14 @@ from collections import deque
 
 import numpy as np
 
+from robopercept._checks import check_int
 from robopercept.errors import InputError
 from robopercept.motion.background import ForegroundModel, check_threshold
 
-__all__ = ["FrameDifference", "ThreeFrameDifference"]
+__all__ = ["MAX_LAG", "FrameDifference", "ThreeFrameDifference"]
+
+#: most frames between the two that FrameDifference compares (it keeps them all)
+MAX_LAG = 10_000
 
 
 class FrameDifference(ForegroundModel):
@@ -52,9 +56,9 @@ class FrameDifference(ForegroundModel):
         noise_size: int = 3,
     ) -> None:
         super().__init__(noise, noise_size)
-        if int(n) != n or n < 1:
-            raise InputError(f"n must be an integer >= 1; got {n}")
-        self.n = int(n)
+        self.n = check_int(n, "n", 1)
+        if self.n > MAX_LAG:
+            raise InputError(f"n must be in 1..{MAX_LAG} frames (each one is kept); got {n}")
         self.threshold = check_threshold(threshold)
         self._frames: deque[np.ndarray] = deque(maxlen=self.n)
 

@@ -43,7 +43,14 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit, prange
 
-from robopercept._checks import check_image
+from robopercept._checks import (
+    check_image,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_odd_size,
+    check_real,
+)
 from robopercept.errors import DegenerateError, InputError
 from robopercept.features.harris import good_features_to_track  # re-exported
 from robopercept.imaging.color import gray_255
@@ -58,6 +65,9 @@ __all__ = [
     "good_features_to_track",
     "lucas_kanade",
 ]
+
+#: most Lucas-Kanade iterations per point and level (OpenCV's default: 30)
+MAX_ITERATIONS = 1000
 
 
 class FlowStatus(enum.IntEnum):
@@ -393,13 +403,21 @@ def lucas_kanade(
     J0 = gray_255(next, "next")
     if I0.shape != J0.shape:
         raise InputError(f"prev and next must have the same size; got {I0.shape} and {J0.shape}")
-    if int(window) != window or window < 3 or window % 2 == 0:
-        raise InputError(f"window must be an odd integer >= 3; got {window}")
-    if int(levels) != levels or levels < 0:
-        raise InputError(f"levels must be an integer >= 0; got {levels}")
-    if int(iterations) != iterations or iterations < 1:
-        raise InputError(f"iterations must be an integer >= 1; got {iterations}")
-    pts = np.asarray(points, dtype=np.float64)
+    window = check_odd_size(window, "window", 3)
+    largest = max(I0.shape)
+    if window > largest:
+        raise InputError(
+            f"window must be an odd integer in 3..{largest} (the image's larger side); got {window}"
+        )
+    levels = check_int(levels, "levels", 0)
+    iterations = check_int(iterations, "iterations", 1)
+    if iterations > MAX_ITERATIONS:
+        raise InputError(f"iterations must be in 1..{MAX_ITERATIONS}; got {iterations}")
+    eps = check_real(eps, "eps", 0.0)
+    min_eigenvalue = check_real(min_eigenvalue, "min_eigenvalue", 0.0)
+    if max_residual is not None:
+        max_residual = check_real(max_residual, "max_residual (or None)", 0.0, low_inclusive=False)
+    pts = check_numeric(points, "points")
     if pts.size == 0:
         pts = pts.reshape(0, 2)
     if pts.ndim != 2 or pts.shape[1] != 2:
@@ -407,11 +425,17 @@ def lucas_kanade(
     if not np.isfinite(pts).all():
         raise InputError("points contain NaN or inf; drop them before tracking")
     n = pts.shape[0]
-    guess = pts.copy() if initial is None else np.asarray(initial, dtype=np.float64).copy()
+    guess = pts.copy() if initial is None else check_numeric(initial, "initial").copy()
     if guess.shape != pts.shape:
         raise InputError(f"initial must have the shape of points {pts.shape}; got {guess.shape}")
-    window = int(window)
-    pyr_i = _pyramid(I0, int(levels), window)
+    if not np.isfinite(guess).all():
+        raise InputError("initial contains NaN or inf: give finite guesses (or initial=None)")
+    # far outside the image a point just leaves it; clipping keeps the compiled
+    # tracker's integer window corners in range
+    big = 4.0 * largest + 4.0 * window
+    start = np.clip(pts, -big, big)
+    guess = np.clip(guess, -big, big)
+    pyr_i = _pyramid(I0, levels, window)
     pyr_j = _pyramid(J0, len(pyr_i) - 1, window)
     top = len(pyr_i) - 1
     nxt = guess / 2.0**top
@@ -430,8 +454,8 @@ def lucas_kanade(
         _padded(img_i, pad, Ip)
         _padded(img_j, pad, Jp)
         _scharr_padded(Ip, pad, ixp, iyp)
-        _lk_level(Ip, ixp, iyp, Jp, pad, img_i.shape[0], img_i.shape[1], pts, nxt, 1.0 / 2.0**level,
-                  window, int(iterations), float(eps) ** 2, float(min_eigenvalue), level == 0,
+        _lk_level(Ip, ixp, iyp, Jp, pad, img_i.shape[0], img_i.shape[1], start, nxt,
+                  1.0 / 2.0**level, window, iterations, eps**2, min_eigenvalue, level == 0,
                   reason, err, eig, rel)  # fmt: skip
         if level > 0:
             nxt = nxt * 2.0
@@ -458,10 +482,13 @@ def dense_flow(
     result : SparseFlow
         The raw per-point result.
     """
-    if int(step) != step or step < 1:
-        raise InputError(f"step must be an integer >= 1; got {step}")
+    step = check_int(step, "step", 1)
     img = check_image(prev, "prev")
     h, w = img.shape[:2]
+    if step > max(h, w):
+        raise InputError(
+            f"step must be in 1..{max(h, w)} (the image's larger side) pixels; got {step}"
+        )
     ys, xs = np.mgrid[step // 2 : h : step, step // 2 : w : step]
     grid = np.stack([xs, ys], axis=-1).astype(np.float64)
     res = lucas_kanade(prev, next, grid.reshape(-1, 2), **kwargs)
@@ -563,10 +590,15 @@ def classify_motion(
     DegenerateError
         Fewer than two usable vectors, or all at one position.
     """
-    p = np.asarray(points, dtype=np.float64)
-    f = np.asarray(flow, dtype=np.float64)
+    p = check_numeric(points, "points")
+    f = check_numeric(flow, "flow")
     if p.ndim != 2 or p.shape[1] != 2 or f.shape != p.shape:
         raise InputError(f"points and flow must both be (N, 2); got shapes {p.shape} and {f.shape}")
+    # squared below: beyond 1e150 the sums overflow
+    check_magnitude(p, "points", 1e150)
+    check_magnitude(f, "flow", 1e150)
+    min_motion = check_real(min_motion, "min_motion", 0.0)
+    trim = check_real(trim, "trim", 0.0, low_inclusive=False)
     usable = np.isfinite(p).all(axis=1) & np.isfinite(f).all(axis=1)
     if usable.sum() < 2:
         raise DegenerateError(

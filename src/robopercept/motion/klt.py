@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robopercept._checks import check_image, check_int, check_odd_size, check_range
+from robopercept._checks import check_image, check_int, check_odd_size, check_real
 from robopercept.errors import DegenerateError, InputError
 from robopercept.imaging.color import rgb_to_gray
 from robopercept.motion.flow import classify_motion, good_features_to_track, lucas_kanade
@@ -122,8 +122,8 @@ class KLTTracker:
         trail: int = 15,
     ) -> None:
         self.max_corners = check_int(max_corners, "max_corners", minimum=1)
-        self.quality = check_range(quality, "quality", 0.0, 1.0, low_inclusive=False)
-        self.min_distance = check_range(min_distance, "min_distance", 0.0)
+        self.quality = check_real(quality, "quality", 0.0, 1.0, low_inclusive=False)
+        self.min_distance = check_real(min_distance, "min_distance", 0.0)
         self.window = check_odd_size(window, "window", minimum=3)
         self.levels = check_int(levels, "levels", minimum=0)
         self.trail = check_int(trail, "trail", minimum=1)

@@ -55,11 +55,22 @@ from enum import Enum
 import numpy as np
 from scipy.stats import chi2
 
+from robopercept._checks import (
+    check_bool,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import InputError
 from robopercept.tracking.imm import IMMEstimator
-from robopercept.tracking.kalman import KalmanFilter, constant_velocity
+from robopercept.tracking.kalman import MAX_DIM, KalmanFilter, check_dim, constant_velocity
 
 __all__ = ["GatedTrack", "GatedTrackConfig", "TrackStatus", "TrackStep", "lagged_model"]
+
+#: most motion models of one track (each is a Kalman filter run every step)
+MAX_MODELS = 16
 
 
 class TrackStatus(str, Enum):
@@ -117,26 +128,32 @@ class GatedTrackConfig:
     smoothing_lag: int = 0
 
     def __post_init__(self) -> None:
-        q = tuple(float(v) for v in np.atleast_1d(self.process_noise))
-        if not q or not all(v > 0 and math.isfinite(v) for v in q):
-            raise InputError(f"process_noise needs one or more values > 0; got {q}")
-        object.__setattr__(self, "process_noise", q)
-        if not 0 < self.switch_probability < 1:
-            raise InputError(f"switch_probability must be in (0, 1); got {self.switch_probability}")
-        if not 0 < self.gate_probability < 1:
-            raise InputError(f"gate_probability must be in (0, 1); got {self.gate_probability}")
-        if self.max_coast < 0:
-            raise InputError(f"max_coast must be >= 0; got {self.max_coast}")
-        if self.reacquire_frames is not None and self.reacquire_frames < 2:
+        q = check_numeric(self.process_noise, "process_noise").reshape(-1)
+        if not 1 <= q.size <= MAX_MODELS or not (np.isfinite(q) & (q > 0) & (q <= 1e100)).all():
             raise InputError(
-                f"reacquire_frames must be >= 2 or None (never); got {self.reacquire_frames}"
+                f"process_noise needs 1 to {MAX_MODELS} values in (0, 1e100]; got "
+                f"{plain_repr(self.process_noise)[:80]}"
             )
-        if self.support_ratio is not None and not self.support_ratio > 0:
-            raise InputError(f"support_ratio must be > 0 or None; got {self.support_ratio}")
-        if not 0 <= self.smoothing_lag <= 30:
-            raise InputError(f"smoothing_lag must be in 0..30 frames; got {self.smoothing_lag}")
-        if not self.initial_velocity_std > 0:
-            raise InputError(f"initial_velocity_std must be > 0; got {self.initial_velocity_std}")
+        object.__setattr__(self, "process_noise", tuple(float(v) for v in q))
+        for name, value in (
+            ("switch_probability", self.switch_probability),
+            ("gate_probability", self.gate_probability),
+        ):
+            check_real(value, name, 0.0, 1.0, low_inclusive=False, high_inclusive=False)
+        check_int(self.max_coast, "max_coast", 0)
+        if self.reacquire_frames is not None:
+            check_int(self.reacquire_frames, "reacquire_frames (or None: never)", 2)
+        if self.support_ratio is not None:
+            check_real(
+                self.support_ratio, "support_ratio (or None: never)", 0.0, low_inclusive=False
+            )
+        lag = check_int(self.smoothing_lag, "smoothing_lag", 0)
+        if lag > 30:
+            raise InputError(f"smoothing_lag must be in 0..30 frames; got {lag}")
+        # its square is a variance of the filter, which refuses values beyond 1e150
+        check_real(
+            self.initial_velocity_std, "initial_velocity_std", 0.0, 1e75, low_inclusive=False
+        )
 
 
 @dataclass(frozen=True)
@@ -197,7 +214,37 @@ def lagged_model(A: np.ndarray, Q: np.ndarray, k: int, lag: int) -> tuple[np.nda
     Returns
     -------
     A, Q : (n + lag k, n + lag k) ndarray
+
+    Raises
+    ------
+    InputError
+        ``A`` or ``Q`` not a finite square matrix of the same size, ``k`` not in
+        ``1..n``, ``lag`` negative or an augmented state beyond
+        :data:`~robopercept.tracking.kalman.MAX_DIM`.
     """
+    A = check_numeric(A, "A")
+    n = A.shape[0] if A.ndim == 2 else 0
+    Q = check_numeric(Q, "Q")
+    for name, a in (("A", A), ("Q", Q)):
+        if a.shape != (n, n) or n == 0 or not np.isfinite(a).all():
+            raise InputError(
+                f"A and Q must be finite square matrices of one size (n, n), n >= 1; "
+                f"got {name} of shape {a.shape} (A has shape {A.shape})"
+            )
+    k = check_int(k, "k", 1)
+    if k > n:
+        raise InputError(f"k (the position size) must be <= the state size {n}; got {k}")
+    lag = check_int(lag, "lag", 0)
+    if n + lag * k > MAX_DIM:
+        raise InputError(
+            f"lag must be <= {(MAX_DIM - n) // k} here: the augmented state n + lag k "
+            f"would exceed {MAX_DIM}; got {lag}"
+        )
+    return _lagged(A, Q, k, lag)
+
+
+def _lagged(A: np.ndarray, Q: np.ndarray, k: int, lag: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`lagged_model` without the checks."""
     n = A.shape[0]
     if lag == 0:
         return A, Q
@@ -251,7 +298,7 @@ class _Filter:
         models = []
         for q in self.qs:
             m = constant_velocity(self.k, dt, q, 1.0)
-            models.append(lagged_model(m.A, m.Q, self.k, self.lag))
+            models.append(_lagged(m.A, m.Q, self.k, self.lag))
         if self.imm is not None:
             self.imm.predict(models)
         else:
@@ -318,10 +365,19 @@ class GatedTrack:
     """
 
     def __init__(self, config: GatedTrackConfig | None = None, dim: int = 3) -> None:
+        if config is not None and not isinstance(config, GatedTrackConfig):
+            raise InputError(
+                f"config must be a GatedTrackConfig (or None: the defaults); got "
+                f"{type(config).__name__} {plain_repr(config)[:60]}"
+            )
         self.config = config or GatedTrackConfig()
-        if dim < 1:
-            raise InputError(f"dim must be >= 1; got {dim}")
-        self.dim = int(dim)
+        self.dim = check_dim(dim, "dim")
+        per_dim = 2 + self.config.smoothing_lag  # state values per position coordinate
+        if per_dim * self.dim > MAX_DIM:
+            raise InputError(
+                f"dim must be <= {MAX_DIM // per_dim} with smoothing_lag "
+                f"{self.config.smoothing_lag}; got {self.dim}"
+            )
         self._gate = float(chi2.ppf(self.config.gate_probability, self.dim))
         self.reset()
 
@@ -349,7 +405,7 @@ class GatedTrack:
         """Advance the track (and a tentative one) to time ``t`` (seconds) and return the
         predicted position, or None without a track. A time before the last one (a
         recording that restarted) drops the track."""
-        t = float(t)
+        t = check_real(t, "t")
         if self._t is not None:
             dt = t - self._t
             if dt < 0:
@@ -414,11 +470,20 @@ class GatedTrack:
         c = self.config
         d2 = math.nan
         accepted = False
+        support = check_real(support, "support")
+        dominant = check_bool(dominant, "dominant")
         if z is not None:
-            z = np.asarray(z, dtype=np.float64).reshape(-1)
-            if z.shape != (self.dim,) or R is None:
-                raise InputError(f"z must have {self.dim} values and R must be given")
-            R = np.asarray(R, dtype=np.float64)
+            k = self.dim
+            z = check_numeric(z, "z").reshape(-1)
+            if z.shape != (k,) or R is None:
+                raise InputError(f"z must have {k} values and R must be given")
+            R = check_numeric(R, "R")
+            if R.shape != (k, k):
+                raise InputError(f"R must be the ({k}, {k}) covariance of z; got {R.shape}")
+            for name, a in (("z", z), ("R", R)):
+                if not np.isfinite(a).all():
+                    raise InputError(f"{name} must be finite; got {plain_repr(a)[:80]}")
+                check_magnitude(a, name, 1e150)
             if self._filter is None:
                 self._filter, status, accepted = _Filter(self.config, z, R), TrackStatus.NEW, True
             else:
@@ -438,7 +503,7 @@ class GatedTrack:
             status = TrackStatus.COASTING if self._filter is not None else TrackStatus.LOST
         if accepted:
             self._coast = 0
-            s = float(support)
+            s = support
             self._support = (
                 s
                 if self._support is None or status is TrackStatus.NEW

@@ -62,6 +62,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.linalg import cho_factor, cho_solve
 
+from robopercept._checks import check_magnitude, check_numeric, plain_repr
 from robopercept.errors import DegenerateError, InputError
 from robopercept.tracking.kalman import KalmanFilter
 
@@ -84,7 +85,7 @@ def _quad(S: np.ndarray, y: np.ndarray) -> tuple[float, float]:
 
 def _as_r(R: npt.ArrayLike | float | None) -> np.ndarray | None:
     """``R`` as a float array (0-d for a scalar, which the filters read as ``R I``)."""
-    return None if R is None else np.asarray(R, dtype=np.float64)
+    return None if R is None else check_numeric(R, "R")
 
 
 def _moments(weights: np.ndarray, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -155,6 +156,11 @@ class IMMEstimator:
         mu: npt.ArrayLike,
         M: npt.ArrayLike,
     ) -> None:
+        if not isinstance(filters, (list, tuple)):
+            raise InputError(
+                "filters must be a list of KalmanFilter, one per motion model; got "
+                f"{type(filters).__name__} {plain_repr(filters)[:60]}"
+            )
         filters = list(filters)
         if len(filters) < 2:
             raise InputError(
@@ -175,7 +181,7 @@ class IMMEstimator:
                     "as [p, v] with A zeroing v)"
                 )
         r = len(filters)
-        mu_a = np.asarray(mu, dtype=np.float64).reshape(-1)
+        mu_a = check_numeric(mu, "mu").reshape(-1)
         if mu_a.shape != (r,):
             raise InputError(f"mu must have one probability per filter ({r}); got {mu_a.size}")
         if not np.isfinite(mu_a).all() or (mu_a < 0).any() or abs(mu_a.sum() - 1) > _SUM_TOL:
@@ -183,7 +189,7 @@ class IMMEstimator:
                 f"mu must be a probability vector (non-negative, summing to 1); got {mu_a} "
                 f"(sum {mu_a.sum():.6g}): use mu / mu.sum()"
             )
-        M_a = np.asarray(M, dtype=np.float64)
+        M_a = check_numeric(M, "M")
         if M_a.shape != (r, r):
             raise InputError(f"M must be ({r}, {r}), one row per filter; got {M_a.shape}")
         rows = M_a.sum(axis=1)
@@ -248,6 +254,11 @@ class IMMEstimator:
         r, nx = len(self.filters), self.filters[0].dim_x
         overrides: list[tuple[np.ndarray, np.ndarray] | None] = [None] * r
         if models is not None:
+            if not isinstance(models, (list, tuple)):
+                raise InputError(
+                    f"models must be a list of one (A, Q) or None per filter ({r}); got "
+                    f"{plain_repr(models)[:60]}"
+                )
             models = list(models)
             if len(models) != r:
                 raise InputError(
@@ -256,18 +267,23 @@ class IMMEstimator:
             for j, m in enumerate(models):
                 if m is None:
                     continue
-                if len(m) != 2:
-                    raise InputError(f"models[{j}] must be a pair (A, Q) or None")
-                A = np.asarray(m[0], dtype=np.float64)
-                Q = np.asarray(m[1], dtype=np.float64)
+                if not isinstance(m, (tuple, list)) or len(m) != 2:
+                    raise InputError(
+                        f"models[{j}] must be a pair (A, Q) or None; got {plain_repr(m)[:60]}"
+                    )
+                A = check_numeric(m[0], f"models[{j}] A")
+                Q = check_numeric(m[1], f"models[{j}] Q")
                 for name, a in (("A", A), ("Q", Q)):
                     if a.shape != (nx, nx) or not np.isfinite(a).all():
                         raise InputError(
                             f"models[{j}] {name} must be a finite ({nx}, {nx}) matrix; "
                             f"got shape {a.shape}"
                         )
+                    check_magnitude(a, f"models[{j}] {name}", 1e150)
                 overrides[j] = (A, Q)
-        uu = None if u is None else np.asarray(u, dtype=np.float64)
+        uu = None if u is None else check_numeric(u, "u")
+        if uu is not None and not np.isfinite(uu).all():
+            raise InputError(f"u must be finite; got {plain_repr(u)[:80]}")
         xs, Ps = self._stack()
         x0 = self.omega.T @ xs  # x0[j] = sum_i omega[i, j] x_i
         d = xs[:, None, :] - x0[None, :, :]  # d[i, j] = x_i - x0_j
@@ -306,7 +322,7 @@ class IMMEstimator:
         r = len(self.filters)
         logl = np.empty(r)
         nz = self.filters[0].dim_z
-        zz, rr = np.asarray(z, dtype=np.float64), _as_r(R)
+        zz, rr = check_numeric(z, "z"), _as_r(R)
         for j, f in enumerate(self.filters):
             res = f.update(zz, R=rr)
             _, logdet = _quad(res.S, res.y)
@@ -361,7 +377,7 @@ class IMMEstimator:
         """
         best = np.inf
         for f in self.filters:
-            y, S = f.innovation(np.asarray(z, dtype=np.float64), R=_as_r(R))
+            y, S = f.innovation(check_numeric(z, "z"), R=_as_r(R))
             best = min(best, _quad(S, y)[0])
         return float(best)
 
@@ -391,7 +407,7 @@ class IMMEstimator:
         y : (dim_z,) ndarray
         S : (dim_z, dim_z) ndarray
         """
-        zz = np.asarray(z, dtype=np.float64).reshape(-1)
+        zz = check_numeric(z, "z").reshape(-1)
         rr = _as_r(R)
         parts = [f.innovation(zz, R=rr) for f in self.filters]
         zhat = np.stack([zz - y for y, _ in parts])

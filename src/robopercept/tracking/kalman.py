@@ -27,18 +27,28 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 from scipy.stats import chi2
 
-from robopercept._checks import check_int, check_magnitude, check_positive, check_range
+from robopercept._checks import (
+    check_bool,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import DegenerateError, InputError
 
 __all__ = [
+    "MAX_DIM",
     "ExtendedKalmanFilter",
     "KalmanFilter",
     "UpdateResult",
+    "check_dim",
     "constant_acceleration",
     "constant_position",
     "constant_velocity",
@@ -47,8 +57,13 @@ __all__ = [
 ]
 
 
+#: largest state or measurement size: a (dim, dim) float64 matrix of it takes 128 MiB,
+#: and a filter keeps several (P, A, Q); beyond it a typo (2**40) would ask for EiB
+MAX_DIM = 4096
+
+
 def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
-    a = np.asarray(value, dtype=np.float64)
+    a = check_numeric(value, name)
     if a.ndim == 0:
         a = a * np.eye(shape[0]) if shape[0] == shape[1] else np.full(shape, float(a))
     if a.shape != shape:
@@ -59,12 +74,41 @@ def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
 
 
 def _vec(value: object, name: str, n: int) -> np.ndarray:
-    a = np.asarray(value, dtype=np.float64).reshape(-1)
+    a = check_numeric(value, name).reshape(-1)
     if a.shape != (n,):
         raise InputError(f"{name} must have {n} elements; got shape {np.shape(value)}")
     if not np.isfinite(a).all():
-        raise InputError(f"{name} must be finite; got {value!r}")
+        raise InputError(f"{name} must be finite; got {plain_repr(value)[:80]}")
     return check_magnitude(a, name, 1e150)
+
+
+def check_dim(value: Any, name: str, minimum: int = 1) -> int:
+    """A state or measurement size: an integer in ``[minimum, MAX_DIM]``.
+
+    Parameters
+    ----------
+    value : int
+    name : str
+        The parameter named in the message.
+    minimum : int
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    InputError
+        Not an integer, below ``minimum``, or above :data:`MAX_DIM` (the ``(n, n)``
+        covariance would take ``8 n^2`` bytes).
+    """
+    n = check_int(value, name, minimum)
+    if n > MAX_DIM:
+        raise InputError(
+            f"{name} must be <= {MAX_DIM}; got {n}: a ({name}, {name}) float64 matrix "
+            f"would take {8.0 * n * n / 2**30:.3g} GiB"
+        )
+    return n
 
 
 @dataclass(frozen=True)
@@ -101,7 +145,49 @@ def kf_predict(
     B: np.ndarray | None = None,
     u: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """One prediction: ``x = A x + B u``, ``P = A P A^T + Q`` (pure function)."""
+    """One prediction: ``x = A x + B u``, ``P = A P A^T + Q`` (pure function).
+
+    Parameters
+    ----------
+    x : (n,) array_like
+    P, A, Q : (n, n) array_like
+        A scalar ``P`` or ``Q`` is that multiple of the identity.
+    B : (n, m) array_like, optional
+    u : (m,) array_like, optional
+        The control term ``B u`` is added when both are given.
+
+    Returns
+    -------
+    x : (n,) ndarray
+    P : (n, n) ndarray
+
+    Raises
+    ------
+    InputError
+        Shapes that do not agree with ``x``, non-finite values, values beyond 1e150.
+    """
+    xx = check_numeric(x, "x").reshape(-1)
+    n = check_dim(xx.size, "the state size len(x)")
+    xx = _vec(xx, "x", n)
+    P = _mat(P, "P", (n, n))
+    A = _mat(A, "A", (n, n))
+    Q = _mat(Q, "Q", (n, n))
+    if B is not None and u is not None:
+        uu = check_numeric(u, "u").reshape(-1)
+        uu = _vec(uu, "u", uu.size)
+        return _predict(xx, P, A, Q, _mat(B, "B", (n, uu.size)), uu)
+    return _predict(xx, P, A, Q, None, None)
+
+
+def _predict(
+    x: np.ndarray,
+    P: np.ndarray,
+    A: np.ndarray,
+    Q: np.ndarray,
+    B: np.ndarray | None,
+    u: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`kf_predict` without the checks."""
     x = A @ x
     if B is not None and u is not None:
         x = x + B @ u
@@ -126,7 +212,49 @@ def kf_update(
     R: np.ndarray,
     joseph: bool = True,
 ) -> UpdateResult:
-    """One measurement update (pure function); see the module docstring."""
+    """One measurement update (pure function); see the module docstring.
+
+    Parameters
+    ----------
+    x : (n,) array_like
+    P : (n, n) array_like
+    z : (m,) array_like
+    H : (m, n) array_like
+    R : (m, m) array_like
+        A scalar ``P`` or ``R`` is that multiple of the identity.
+    joseph : bool
+        Joseph-form covariance update.
+
+    Returns
+    -------
+    UpdateResult
+
+    Raises
+    ------
+    InputError
+        Shapes that do not agree with ``x`` and ``z``, non-finite values, values beyond
+        1e150.
+    DegenerateError
+        ``H P H^T + R`` is not positive definite.
+    """
+    xx = check_numeric(x, "x").reshape(-1)
+    zz = check_numeric(z, "z").reshape(-1)
+    n = check_dim(xx.size, "the state size len(x)")
+    m = check_dim(zz.size, "the measurement size len(z)")
+    return _update(
+        _vec(xx, "x", n),
+        _mat(P, "P", (n, n)),
+        _vec(zz, "z", m),
+        _mat(H, "H", (m, n)),
+        _mat(R, "R", (m, m)),
+        check_bool(joseph, "joseph"),
+    )
+
+
+def _update(
+    x: np.ndarray, P: np.ndarray, z: np.ndarray, H: np.ndarray, R: np.ndarray, joseph: bool
+) -> UpdateResult:
+    """:func:`kf_update` without the checks."""
     y = z - H @ x
     PHt = P @ H.T
     S = H @ PHt + R
@@ -188,9 +316,9 @@ class KalmanFilter:
         F: np.ndarray | None = None,
         joseph: bool = True,
     ) -> None:
-        self.dim_x = check_int(dim_x, "dim_x", 1)
-        self.dim_z = check_int(dim_z, "dim_z", 1)
-        self.dim_u = check_int(dim_u, "dim_u", 0)
+        self.dim_x = check_dim(dim_x, "dim_x")
+        self.dim_z = check_dim(dim_z, "dim_z")
+        self.dim_u = check_dim(dim_u, "dim_u", 0)
         if A is not None and F is not None:
             raise InputError("give A or F (the same matrix), not both")
         A = F if A is None else A
@@ -202,7 +330,7 @@ class KalmanFilter:
         self.H = np.zeros((nz, nx)) if H is None else _mat(H, "H", (nz, nx))
         self.R = np.eye(nz) if R is None else _mat(R, "R", (nz, nz))
         self.B = None if B is None or self.dim_u == 0 else _mat(B, "B", (nx, self.dim_u))
-        self.joseph = bool(joseph)
+        self.joseph = check_bool(joseph, "joseph")
         self.y: np.ndarray | None = None
         self.S: np.ndarray | None = None
         self.K: np.ndarray | None = None
@@ -233,7 +361,7 @@ class KalmanFilter:
             b = self.B if B is None else _mat(B, "B", (nx, uu.size))
             if b is None:
                 raise InputError("a control input needs B (set it or pass B=...)")
-        self.x, self.P = kf_predict(self.x, self.P, a, q, b, uu)
+        self.x, self.P = _predict(self.x, self.P, a, q, b, uu)
         return self.x, self.P
 
     def _parts(
@@ -254,7 +382,7 @@ class KalmanFilter:
         """Correct with the measurement ``z``; ``R``, ``H`` override the model for this
         call only."""
         zz, r, h = self._parts(z, R, H)
-        res = kf_update(self.x, self.P, zz, h, r, self.joseph)
+        res = _update(self.x, self.P, zz, h, r, self.joseph)
         self.x, self.P = res.x, res.P
         self.y, self.S, self.K = res.y, res.S, res.K
         return res
@@ -274,7 +402,7 @@ class KalmanFilter:
     def gate(self, z: np.ndarray, probability: float = 0.99, **overrides: np.ndarray) -> bool:
         """True if ``z`` passes the chi-square gate: :math:`d^2 \\le
         \\chi^2_{\\text{dim\\_z}}(\\text{probability})`."""
-        p = check_range(
+        p = check_real(
             probability, "probability", 0.0, 1.0, low_inclusive=False, high_inclusive=False
         )
         return self.mahalanobis(z, **overrides) ** 2 <= float(chi2.ppf(p, self.dim_z))
@@ -317,15 +445,30 @@ class ExtendedKalmanFilter:
     ) -> None:
         if (f is None) != (F_jacobian is None):
             raise InputError("give both f and F_jacobian, or neither (identity motion)")
-        self.dim_x = check_int(dim_x, "dim_x", 1)
-        self.dim_z = check_int(dim_z, "dim_z", 1)
+        self.dim_x = check_dim(dim_x, "dim_x")
+        self.dim_z = check_dim(dim_z, "dim_z")
+        for cname, fn in (
+            ("h", h),
+            ("H_jacobian", H_jacobian),
+            ("f", f),
+            ("F_jacobian", F_jacobian),
+        ):
+            if fn is not None and not callable(fn):
+                raise InputError(
+                    f"{cname} must be a function (callable); got {type(fn).__name__} "
+                    f"{plain_repr(fn)[:60]}"
+                )
+        if h is None or H_jacobian is None:
+            raise InputError(
+                "h and H_jacobian are required: the measurement function and its Jacobian"
+            )
         nx, nz = self.dim_x, self.dim_z
         self.f, self.F_jacobian, self.h, self.H_jacobian = f, F_jacobian, h, H_jacobian
         self.x = np.zeros(nx) if x is None else _vec(x, "x", nx)
         self.P = np.eye(nx) if P is None else _mat(P, "P", (nx, nx))
         self.Q = np.eye(nx) if Q is None else _mat(Q, "Q", (nx, nx))
         self.R = np.eye(nz) if R is None else _mat(R, "R", (nz, nz))
-        self.joseph = bool(joseph)
+        self.joseph = check_bool(joseph, "joseph")
 
     def predict(
         self, u: np.ndarray | None = None, *, Q: np.ndarray | float | None = None
@@ -348,7 +491,7 @@ class ExtendedKalmanFilter:
         hj = _mat(self.H_jacobian(self.x), "H_jacobian(x)", (self.dim_z, self.dim_x))
         hx = _vec(self.h(self.x), "h(x)", self.dim_z)
         # the linear update around the prior, with y = z - h(x) instead of z - H x
-        res = kf_update(self.x, self.P, zz - hx + hj @ self.x, hj, r, self.joseph)
+        res = _update(self.x, self.P, zz - hx + hj @ self.x, hj, r, self.joseph)
         self.x, self.P = res.x, res.P
         return res
 
@@ -356,11 +499,17 @@ class ExtendedKalmanFilter:
 # --------------------------------------------------------------------------- builders
 def _kinematic(order: int, dim: int, dt: float, q: float, r: float) -> KalmanFilter:
     """State ``[p (dim), v (dim), a (dim)]`` up to ``order``; position measured."""
-    dt = check_positive(dt, "dt")
-    q = check_range(q, "q", 0.0)
-    r = check_positive(r, "r")
-    dim = check_int(dim, "dim", 1)
+    # bounds that keep A (dt^2 / 2), Q (q dt^4 / 4) and R below the 1e150 that
+    # KalmanFilter accepts (their squares would overflow)
+    dt = check_real(dt, "dt", 0.0, 1e12, low_inclusive=False)
+    q = check_real(q, "q", 0.0, 1e100)
+    r = check_real(r, "r", 0.0, 1e150, low_inclusive=False)
     n = order + 1
+    dim = check_dim(dim, "dim")
+    if n * dim > MAX_DIM:
+        raise InputError(
+            f"dim must be <= {MAX_DIM // n} for this model ({n} values per dimension); got {dim}"
+        )
     # 1-D blocks: transition of a Taylor expansion, and the discrete white-noise
     # acceleration models of Bar-Shalom (Q = q G G^T with G = [dt^2/2, dt] for constant
     # velocity, [dt^2/2, dt, 1] for constant acceleration), as filterpy's

@@ -32,10 +32,21 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_image, plain_repr
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_image,
+    check_int,
+    check_numeric,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import InputError
 
 __all__ = ["MeanShiftResult", "MeanShiftTracker"]
+
+#: most mean-shift iterations per frame (OpenCV's sample uses 10)
+MAX_ITER = 10_000
 
 
 @dataclass(frozen=True)
@@ -63,7 +74,7 @@ class MeanShiftResult:
 
 
 def _check_box(box: npt.ArrayLike, shape: tuple[int, ...], name: str = "box") -> np.ndarray:
-    b = np.asarray(box, dtype=np.float64).ravel()
+    b = check_numeric(box, name).ravel()
     if b.size != 4 or not np.isfinite(b).all():
         raise InputError(f"{name} must be 4 finite numbers x, y, w, h; got {plain_repr(box)}")
     x, y, w, h = b
@@ -122,25 +133,28 @@ class MeanShiftTracker:
         min_value: int = 32,
         background_weighting: bool = True,
     ) -> None:
-        if feature not in ("hue", "rgb"):
-            raise InputError(f"feature must be 'hue' or 'rgb'; got {feature!r}")
-        self.feature = feature
-        self.bins = int(bins if bins is not None else (16 if feature == "hue" else 8))
-        if self.bins < 1 or self.bins > 256:
+        self.feature = check_choice(feature, "feature", ("hue", "rgb"))
+        if bins is None:
+            bins = 16 if feature == "hue" else 8
+        self.bins = check_int(bins, "bins", 1)
+        if self.bins > 256:
             raise InputError(f"bins must be in 1..256; got {bins}")
-        if int(max_iter) != max_iter or max_iter < 1:
-            raise InputError(f"max_iter must be an integer >= 1; got {max_iter}")
-        self.adaptive = bool(adaptive)
-        self.max_iter = int(max_iter)
-        self.eps = float(eps)
-        self.min_saturation = int(min_saturation)
-        self.min_value = int(min_value)
+        self.adaptive = check_bool(adaptive, "adaptive")
+        self.max_iter = check_int(max_iter, "max_iter", 1)
+        if self.max_iter > MAX_ITER:
+            raise InputError(f"max_iter must be in 1..{MAX_ITER}; got {max_iter}")
+        self.eps = check_real(eps, "eps", 0.0)
+        self.min_saturation = check_int(min_saturation, "min_saturation", 0)
+        self.min_value = check_int(min_value, "min_value", 0)
+        for name, v in (("min_saturation", self.min_saturation), ("min_value", self.min_value)):
+            if v > 255:
+                raise InputError(f"{name} must be in 0..255 (OpenCV's HSV scale); got {v}")
         img = self._rgb(frame)
         self.box = _check_box(box, img.shape)
         codes, valid = self._codes(img)
         x, y, w, h = np.round(self.box).astype(int)
         self.model = self._histogram(codes[y : y + h, x : x + w], valid[y : y + h, x : x + w])
-        self.background_weighting = bool(background_weighting)
+        self.background_weighting = check_bool(background_weighting, "background_weighting")
         if self.background_weighting:
             self.model = self._weigh_by_background(codes, valid, x, y, w, h)
         if self.model.sum() == 0:

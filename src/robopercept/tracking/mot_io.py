@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from robopercept._checks import check_file, plain_repr
-from robopercept.errors import FileFormatError
+from robopercept._checks import as_path, check_file, plain_repr
+from robopercept.errors import FileFormatError, InputError
 
 __all__ = ["MotRows", "read_mot", "write_mot"]
 
@@ -148,12 +148,82 @@ def _check_rows(a: np.ndarray, lines: list[int], path: Path) -> None:
 
 def write_mot(path: str | Path, rows: Iterable[tuple[int, int, Iterable[float], float]]) -> int:
     """Write ``(frame, id, (x, y, w, h), conf)`` rows as a MOTChallenge results file
-    (``frame,id,x,y,w,h,conf,-1,-1,-1``); returns the number of rows."""
-    count = 0
-    with Path(path).open("w") as fh:
-        for frame, tid, box, conf in rows:
-            x, y, w, h = (float(v) for v in box)
-            c = float(conf) if np.isfinite(conf) else 1.0
-            fh.write(f"{int(frame)},{int(tid)},{x:.2f},{y:.2f},{w:.2f},{h:.2f},{c:.4g},-1,-1,-1\n")
-            count += 1
-    return count
+    (``frame,id,x,y,w,h,conf,-1,-1,-1``); returns the number of rows.
+
+    Parameters
+    ----------
+    path : str or Path
+        The text file (its folder must exist).
+    rows : iterable of (frame, id, (x, y, w, h), conf)
+        ``frame`` a whole number >= 1, ``id`` a whole number >= -1 (the rules of
+        :func:`read_mot`), the box four finite numbers; a non-finite ``conf`` is
+        written as 1.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    InputError
+        A path that cannot name a file, or a row that breaks the rules above (the
+        message names the row); nothing is written then.
+    FileFormatError
+        The file cannot be written (a missing folder, no permission).
+    """
+    target = as_path(path, "path")
+    if isinstance(rows, (str, bytes)) or not isinstance(rows, Iterable):
+        raise InputError(
+            "rows must be a list of (frame, id, (x, y, w, h), conf) tuples; got "
+            f"{type(rows).__name__} {plain_repr(rows)[:60]}"
+        )
+    lines = [_mot_line(i, row) for i, row in enumerate(rows)]
+    try:
+        with target.open("w") as fh:
+            fh.writelines(lines)
+    except OSError as exc:
+        raise FileFormatError(
+            f"{target}: cannot write the results ({exc.strerror or exc}): check that its "
+            "folder exists and is writable"
+        ) from None
+    return len(lines)
+
+
+def _whole(value: object, low: int) -> int | None:
+    """``value`` as an int when it is a whole real number in ``[low, 2^53)``, else None."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        return None
+    v = float(value)
+    return int(v) if np.isfinite(v) and v.is_integer() and low <= v < MOT_MAX_NUMBER else None
+
+
+def _mot_line(i: int, row: object) -> str:
+    """One row of :func:`write_mot` as its text line, or an InputError naming it."""
+    want = (
+        f"rows[{i}] must be (frame, id, (x, y, w, h), conf) with frame a whole number >= 1, "
+        f"id a whole number >= -1 and four finite box numbers; got {plain_repr(row)[:100]}"
+    )
+    if not isinstance(row, (tuple, list)) or len(row) != 4:
+        raise InputError(want)
+    frame, tid, box, conf = row
+    f, t = _whole(frame, 1), _whole(tid, -1)
+    if isinstance(box, np.ndarray):
+        items = box.reshape(-1).tolist()
+    else:
+        items = list(box) if isinstance(box, (tuple, list)) else []
+    ok_box = len(items) == 4 and all(
+        isinstance(v, (int, float, np.integer, np.floating))
+        and not isinstance(v, (bool, np.bool_))
+        and np.isfinite(float(v))
+        for v in items
+    )
+    ok_conf = isinstance(conf, (int, float, np.integer, np.floating)) and not isinstance(
+        conf, (bool, np.bool_)
+    )
+    if f is None or t is None or not ok_box or not ok_conf:
+        raise InputError(want)
+    x, y, w, h = (float(v) for v in items)
+    c = float(conf) if np.isfinite(float(conf)) else 1.0
+    return f"{f},{t},{x:.2f},{y:.2f},{w:.2f},{h:.2f},{c:.4g},-1,-1,-1\n"

@@ -41,6 +41,15 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import linear_sum_assignment
 
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_magnitude,
+    check_numeric,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import InputError
 from robopercept.geometry.boxes import box_iou_matrix
 from robopercept.tracking.kalman import KalmanFilter, constant_velocity
@@ -105,6 +114,21 @@ def _z_to_xywh(z: np.ndarray) -> np.ndarray:
     return np.stack([z[..., 0] - w / 2, z[..., 1] - h / 2, w, h], axis=-1)
 
 
+def _labels(classes: npt.ArrayLike) -> list:
+    """``classes`` as a flat list of hashable labels (numbers or strings)."""
+    try:
+        arr = np.asarray(classes)
+    except (TypeError, ValueError) as exc:  # ragged
+        raise InputError(
+            f"classes must be one label per detection; got {plain_repr(classes)[:60]} ({exc})"
+        ) from None
+    if arr.dtype.kind not in "biufUS":
+        raise InputError(
+            f"classes must be numbers or strings, one per detection; got dtype {arr.dtype}"
+        )
+    return list(arr.ravel())
+
+
 class MultiObjectTracker:
     """Track boxes over frames (see the module docstring).
 
@@ -139,21 +163,21 @@ class MultiObjectTracker:
         measurement_noise: float = 4.0,
         report_coasting: bool = False,
     ) -> None:
-        if motion_model != "constant_velocity":
-            raise InputError(f"motion_model must be 'constant_velocity'; got {motion_model!r}")
-        if cost not in ("iou", "mahalanobis", "euclidean"):
-            raise InputError(f"cost must be 'iou', 'mahalanobis' or 'euclidean'; got {cost!r}")
+        check_choice(motion_model, "motion_model", ("constant_velocity",))
+        self.cost = check_choice(cost, "cost", ("iou", "mahalanobis", "euclidean"))
         defaults = {"iou": 0.3, "mahalanobis": 13.28, "euclidean": 50.0}
-        self.cost = cost
-        self.gate = float(defaults[cost] if gate is None else gate)
-        if not np.isfinite(self.gate) or self.gate <= 0:
-            raise InputError(f"gate must be a positive number; got {gate}")
-        for name, v in (("min_hits", min_hits), ("max_age", max_age)):
-            if int(v) != v or v < 0:
-                raise InputError(f"{name} must be an integer >= 0; got {v}")
-        self.min_hits, self.max_age = int(min_hits), int(max_age)
-        self.process_noise, self.measurement_noise = process_noise, measurement_noise
-        self.report_coasting = report_coasting
+        high = 1.0 if cost == "iou" else None  # an IoU is at most 1
+        self.gate = check_real(
+            defaults[cost] if gate is None else gate, "gate", 0.0, high, low_inclusive=False
+        )
+        self.min_hits = check_int(min_hits, "min_hits", 0)
+        self.max_age = check_int(max_age, "max_age", 0)
+        # the bounds of constant_velocity, named as here
+        self.process_noise = check_real(process_noise, "process_noise", 0.0, 1e100)
+        self.measurement_noise = check_real(
+            measurement_noise, "measurement_noise", 0.0, 1e100, low_inclusive=False
+        )
+        self.report_coasting = check_bool(report_coasting, "report_coasting")
         proto = constant_velocity(4, 1.0, process_noise, measurement_noise)
         self._A, self._Q, self._H, self._R = proto.A, proto.Q, proto.H, proto.R
         self._ids = itertools.count(1)
@@ -190,20 +214,21 @@ class MultiObjectTracker:
         Returns the confirmed tracks matched this frame (and, with
         ``report_coasting``, the coasting ones), each naming its detection.
         """
-        boxes = np.asarray(detections, dtype=np.float64)
+        boxes = check_numeric(detections, "detections")
         if boxes.size == 0:
             boxes = np.zeros((0, 4))
         if boxes.ndim != 2 or boxes.shape[1] != 4:
             raise InputError(f"detections must be (N, 4) x, y, w, h; got shape {boxes.shape}")
         if not np.isfinite(boxes).all():
             raise InputError(f"frame {self.frame}: detections contain NaN or inf; drop them")
+        check_magnitude(boxes, "detections", 1e150)  # squared in the costs and the filter
         if (boxes[:, 2:] < 0).any():
             raise InputError(f"frame {self.frame}: detections have negative width or height")
         n = boxes.shape[0]
-        sc = np.full(n, np.nan) if scores is None else np.asarray(scores, dtype=np.float64)
+        sc = np.full(n, np.nan) if scores is None else check_numeric(scores, "scores")
         if sc.shape != (n,):
             raise InputError(f"scores must have one value per detection ({n}); got {sc.shape}")
-        labels = [None] * n if classes is None else list(np.asarray(classes).ravel())
+        labels = [None] * n if classes is None else _labels(classes)
         if len(labels) != n:
             raise InputError(f"classes must have one value per detection ({n}); got {len(labels)}")
         self.frame += 1
