@@ -17,6 +17,8 @@ BENCHMARKS = {
     "motion": "benchmarks.motion",
     "depth": "benchmarks.depth",
     "calibration": "benchmarks.calibration",
+    "detection": "benchmarks.detection",
+    "coco_eval": "benchmarks.coco_eval",
 }
 
 

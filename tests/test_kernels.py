@@ -623,6 +623,60 @@ def _geometry_cases() -> list[Case]:
     ]
 
 
+def _nn_cases() -> list[Case]:
+    """Detection's kernels (greedy NMS, COCO matching): only with the deep extra."""
+    if importlib.util.find_spec("torch") is None:
+        return []
+    import torch
+
+    from robopercept.nn.boxes import batched_nms
+    from robopercept.nn.coco import coco_from_dict, evaluate_detections, results_from_list
+
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(0, 40, (60, 2))
+    boxes = np.concatenate([xy, xy + rng.uniform(4, 20, (60, 2))], axis=1)
+    scores, classes = rng.permutation(60) / 60.0, rng.integers(0, 3, 60)
+    jitter = rng.normal(0, 2, (20, 2))  # drawn once: each case runs twice
+
+    def nms() -> np.ndarray:
+        t = torch.from_numpy
+        return batched_nms(t(boxes), t(scores), t(classes), 0.4).numpy()
+
+    def coco() -> list[np.ndarray]:
+        images = [{"id": i, "file_name": f"{i}.png", "width": 64, "height": 64} for i in (1, 2)]
+        anns = [
+            {
+                "id": k + 1,
+                "image_id": 1 + k % 2,
+                "category_id": 1 + k % 2,
+                "iscrowd": 0,
+                "bbox": [*xy[k], 10.0, 12.0],
+                "area": 120.0,
+            }
+            for k in range(12)
+        ]
+        gt = coco_from_dict(
+            {
+                "images": images,
+                "annotations": anns,
+                "categories": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}],
+            }
+        )
+        dets = [
+            {
+                "image_id": 1 + k % 2,
+                "category_id": 1 + k % 2,
+                "score": float(scores[k]),
+                "bbox": [*(xy[k] + jitter[k]), 10.0, 12.0],
+            }
+            for k in range(20)
+        ]
+        ev = evaluate_detections(gt, results_from_list(dets))
+        return [ev.precision, ev.recall, ev.scores, np.asarray(ev.stats)]
+
+    return [Case("batched_nms", nms), Case("coco_matching", coco)]
+
+
 CASES: list[Case] = [
     *_geometry_cases(),
     *_depth_cases(),
@@ -634,6 +688,7 @@ CASES: list[Case] = [
     *_features_cases(),
     *_motion_cases(),
     *_estimation_cases(),
+    *_nn_cases(),
 ]
 
 

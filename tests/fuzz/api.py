@@ -36,6 +36,7 @@ import enum
 import functools
 import importlib
 import inspect
+import json
 import os
 import shutil
 import tempfile
@@ -225,6 +226,9 @@ ARRAY_DATA = _b(
     np.arange(12) % 3,
     ("a", "b", "c"),
 )
+TBOXES = _b("tests.fuzz.api:torch_tensor", [[0, 0, 4, 4], [1, 1, 5, 6], [2, 0, 7, 3]])
+TSCORES = _b("tests.fuzz.api:torch_tensor", [0.9, 0.8, 0.3])
+TROIS = _b("tests.fuzz.api:torch_tensor", [[0, 0, 0, 4, 4], [0, 1, 2, 7, 6]])
 TRAIN_CFG = _b("robopercept.nn.training:TrainConfig", epochs=1, batch_size=4, device="cpu")
 
 
@@ -268,6 +272,13 @@ def torch_image(*shape: int) -> Any:
 
     g = torch.Generator().manual_seed(0)
     return torch.rand(shape, generator=g)
+
+
+def torch_tensor(values: Any, dtype: str = "float32") -> Any:
+    """``torch.tensor(values)`` of ``dtype`` (boxes, scores, class ids)."""
+    import torch
+
+    return torch.tensor(values, dtype=getattr(torch, dtype))
 
 
 def _write_image(path: Path) -> None:
@@ -446,6 +457,7 @@ VALID: dict[str, dict[str, Any]] = {
     },
     "geometry.CameraIntrinsics.scaled": {"width": 32, "height": 24},
     "geometry.apply": {"T": T4, "points": PTS3},
+    "geometry.box_convert": {"boxes": BOXES, "in_fmt": "xywh", "out_fmt": "cxcywh"},
     "geometry.box_iou_matrix": {"a": BOXES, "b": BOXES[::-1].copy()},
     "geometry.compose": {"*": [T4, np.linalg.inv(T4)]},
     "geometry.decompose_essential": {"E": E_MAT, "x1": X1, "x2": X2, "K": K},
@@ -948,6 +960,41 @@ VALID: dict[str, dict[str, Any]] = {
         "path": _out("net.onnx"),
         "input_shape": (1, 16, 16),
     },
+    "nn.boxes.box_area": {"boxes": TBOXES},
+    "nn.boxes.box_convert": {"boxes": TBOXES, "in_fmt": "xyxy", "out_fmt": "cxcywh"},
+    "nn.boxes.box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
+    "nn.boxes.generalized_box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
+    "nn.boxes.nms": {"boxes": TBOXES, "scores": TSCORES, "iou_threshold": 0.5},
+    "nn.boxes.batched_nms": {
+        "boxes": TBOXES,
+        "scores": TSCORES,
+        "idxs": _b("tests.fuzz.api:torch_tensor", [0, 1, 0], "int64"),
+        "iou_threshold": 0.5,
+    },
+    "nn.boxes.non_max_suppression": {"boxes": TBOXES, "scores": TSCORES, "top_k": 2},
+    "nn.boxes.roi_align": {
+        "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
+        "boxes": TROIS,
+        "output_size": 2,
+    },
+    "nn.boxes.roi_pool": {
+        "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
+        "boxes": TROIS,
+        "output_size": 2,
+    },
+    "nn.boxes.RoIAlign": {"output_size": 2},
+    "nn.boxes.RoIPool": {"output_size": 2},
+    "nn.boxes.BoxCoder.encode": {"reference_boxes": TBOXES, "proposals": TBOXES},
+    "nn.boxes.BoxCoder.decode": {"deltas": TBOXES, "boxes": TBOXES},
+    "nn.boxes.RoIAlign.forward": {
+        "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
+        "boxes": TROIS,
+    },
+    "nn.boxes.RoIPool.forward": {
+        "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
+        "boxes": TROIS,
+    },
+    "nn.boxes.AnchorGenerator.__call__": {"image_shape": (32, 32), "feature_shapes": [(4, 4)]},
     "nn.run.evaluate_run": {
         "checkpoint": Fixture("run/checkpoint.pt"),
         "data": "digits",
@@ -1031,6 +1078,10 @@ METHODS: dict[str, tuple[str, ...]] = {
     "imaging.SnapshotVideoWriter": ("add",),
     "imaging.VideoReader": ("__iter__",),
     "geometry.CameraIntrinsics": ("scaled",),
+    "nn.boxes.BoxCoder": ("encode", "decode"),
+    "nn.boxes.AnchorGenerator": ("__call__", "base_anchors"),
+    "nn.boxes.RoIAlign": ("forward",),
+    "nn.boxes.RoIPool": ("forward",),
     "estimation.Plane": ("distance", "project"),
     "estimation.Line": ("distance",),
     "estimation.LineModel": ("fit",),
@@ -1108,6 +1159,75 @@ for _cls in (
 ):
     VALID.setdefault(f"nn.data.{_cls}.__call__", {"x": TORCH_IMG})
 VALID["nn.data.Normalize"] = {"mean": [0.5], "std": [0.25]}
+
+
+# nn.coco (issue 26): a one-image COCO set, its results, a VOC file, an evaluation
+_COCO_GT = {
+    "images": [{"id": 1, "file_name": "a.png", "width": 64, "height": 48}],
+    "categories": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}],
+    "annotations": [
+        {"id": 1, "image_id": 1, "category_id": 1, "bbox": [2.0, 3.0, 20.0, 10.0]},
+        {"id": 2, "image_id": 1, "category_id": 2, "bbox": [30.0, 5.0, 8.0, 8.0], "iscrowd": 0},
+    ],
+}
+_COCO_RES = [
+    {"image_id": 1, "category_id": 1, "bbox": [2.0, 4.0, 20.0, 10.0], "score": 0.9},
+    {"image_id": 1, "category_id": 2, "bbox": [0.0, 0.0, 5.0, 5.0], "score": 0.4},
+]
+_VOC_XML = (
+    "<annotation><filename>a.png</filename><size><width>64</width><height>48</height>"
+    "<depth>3</depth></size><object><name>tree</name><difficult>0</difficult><bndbox>"
+    "<xmin>2</xmin><ymin>3</ymin><xmax>22</xmax><ymax>13</ymax></bndbox></object>"
+    "</annotation>"
+)
+
+
+def coco_value(kind: str) -> Any:
+    """A valid nn.coco value: ``gt`` (CocoDataset), ``results`` (CocoResults),
+    ``evaluation`` (CocoEvaluation) or ``voc`` (a list of one VocAnnotation)."""
+    from robopercept.nn import coco
+
+    gt = coco.coco_from_dict(_COCO_GT)
+    res = coco.results_from_list(_COCO_RES)
+    if kind == "voc":
+        obj = coco.VocObject("tree", (2.0, 3.0, 22.0, 13.0))
+        return [coco.VocAnnotation("a.png", 64, 48, 3, (obj,))]
+    return {"gt": gt, "results": res, "evaluation": coco.evaluate_detections(gt, res)}[kind]
+
+
+FIXTURES.update(
+    {
+        "coco.json": lambda p: p.write_text(json.dumps(_COCO_GT)),
+        "coco_results.json": lambda p: p.write_text(json.dumps(_COCO_RES)),
+        "voc.xml": lambda p: p.write_text(_VOC_XML),
+    }
+)
+_CGT = _b("tests.fuzz.api:coco_value", "gt")
+_CRES = _b("tests.fuzz.api:coco_value", "results")
+_CEV = _b("tests.fuzz.api:coco_value", "evaluation")
+VALID.update(
+    {
+        "nn.coco.coco_from_dict": {"data": _COCO_GT},
+        "nn.coco.read_coco_json": {"path": Fixture("coco.json")},
+        "nn.coco.coco_to_dict": {"dataset": _CGT},
+        "nn.coco.write_coco_json": {"dataset": _CGT, "path": _out("gt.json")},
+        "nn.coco.results_from_list": {"results": _COCO_RES},
+        "nn.coco.read_coco_results": {"path": Fixture("coco_results.json")},
+        "nn.coco.results_to_list": {"results": _CRES},
+        "nn.coco.write_coco_results": {"results": _CRES, "path": _out("results.json")},
+        "nn.coco.results_from_ground_truth": {"dataset": _CGT},
+        "nn.coco.read_voc_xml": {"path": Fixture("voc.xml")},
+        "nn.coco.voc_to_coco": {"annotations": _b("tests.fuzz.api:coco_value", "voc")},
+        "nn.coco.evaluate_detections": {"gt": _CGT, "results": _COCO_RES},
+        "nn.coco.evaluate_voc": {"gt": _CGT, "results": _CRES},
+        "nn.coco.voc_average_precision": {
+            "recall": np.array([0.5, 0.5, 1.0]),
+            "precision": np.array([1.0, 0.5, 2 / 3]),
+        },
+        "nn.coco.pr_curves_picture": {"evaluation": _CEV, "width": 200, "height": 150},
+        "nn.coco.write_pr_curves": {"evaluation": _CEV, "path": _out("pr.png")},
+    }
+)
 
 #: callables not fuzzed, with the reason
 SKIP: dict[str, str] = {

@@ -39,3 +39,46 @@ def test_issue25_one_box_and_large_finite_boxes_still_work():
     np.testing.assert_allclose(box_iou_matrix([0, 0, 2, 2], [[1, 0, 2, 2]]), [[1 / 3]])
     big = np.array([[0, 0, 1e150, 1e150]])
     np.testing.assert_allclose(box_iou_matrix(big, big), [[1.0]])
+
+
+def test_box_iou_matrix_equals_pycocotools():
+    # pycocotools' bbox IoU (iscrowd 0) in double: equal up to rounding (1e-9); the
+    # torch box_iou of robopercept.nn.boxes is pinned to the same reference
+    mask = pytest.importorskip("pycocotools.mask")
+    rng = np.random.default_rng(0)
+    a = np.concatenate([rng.uniform(0, 100, (40, 2)), rng.uniform(0, 30, (40, 2))], 1)
+    b = np.concatenate([rng.uniform(0, 100, (30, 2)), rng.uniform(0, 30, (30, 2))], 1)
+    b[:6] = a[:6] + rng.uniform(-1, 1, (6, 4))  # heavy overlaps
+    b[6, 2] = 0.0  # a zero-width box
+    ours = box_iou_matrix(a, b)
+    ref = np.asarray(mask.iou(a.tolist(), b.tolist(), [0] * len(b)))
+    np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-9)
+    assert (ours > 0.5).sum() >= 6 and (ours[:, 6] == 0).all()
+
+
+def test_box_convert_hand_case_and_round_trips():
+    from robopercept.geometry import BOX_FORMATS, box_convert
+
+    b = [10.0, 20.0, 4.0, 6.0]  # xywh
+    assert box_convert(b, "xywh", "xyxy").tolist() == [[10.0, 20.0, 14.0, 26.0]]
+    assert box_convert(b, "xywh", "cxcywh").tolist() == [[12.0, 23.0, 4.0, 6.0]]
+    assert box_convert([[12.0, 23.0, 4.0, 6.0]], "cxcywh", "xyxy").tolist() == [
+        [10.0, 20.0, 14.0, 26.0]
+    ]
+    x = np.random.default_rng(1).uniform(0, 50, (10, 4))
+    for a in BOX_FORMATS:
+        for c in BOX_FORMATS:
+            back = box_convert(box_convert(x, a, c), c, a)
+            np.testing.assert_allclose(back, x, rtol=0, atol=1e-12)
+    # the IoU of converted boxes does not depend on the route (xywh -> xyxy -> xywh)
+    np.testing.assert_allclose(
+        box_iou_matrix(x, x),
+        box_iou_matrix(box_convert(box_convert(x, "xywh", "cxcywh"), "cxcywh", "xywh"), x),
+        atol=1e-12,
+    )
+    with pytest.raises(InputError, match="out_fmt must be one of"):
+        box_convert(x, "xyxy", "yxyx")
+    with pytest.raises(InputError, match=r"boxes must be \(N, 4\) boxes in the format 'xyxy'"):
+        box_convert(np.ones((2, 3)), "xyxy", "xywh")
+    with pytest.raises(InputError, match="boxes must be finite"):
+        box_convert([[0, 0, np.nan, 1]], "xyxy", "xywh")

@@ -1,6 +1,6 @@
 """Camera models, rigid transforms, boxes, two-view geometry and triangulation."""
 
-from robopercept.geometry.boxes import box_iou_matrix
+from robopercept.geometry.boxes import BOX_FORMATS, box_convert, box_iou_matrix
 from robopercept.geometry.camera import (
     MODELS,
     CameraIntrinsics,
@@ -44,6 +44,7 @@ from robopercept.geometry.transforms import (
 from robopercept.geometry.triangulation import triangulate
 
 __all__ = [
+    "BOX_FORMATS",
     "MODELS",
     "CameraIntrinsics",
     "EssentialModel",
@@ -52,6 +53,7 @@ __all__ = [
     "RelativePose",
     "StereoRectification",
     "apply",
+    "box_convert",
     "box_iou_matrix",
     "compose",
     "decompose_essential",

@@ -23,6 +23,8 @@ _SUBMODULES = (
     "transfer",
     "export",
     "run",
+    "boxes",
+    "coco",
 )
 
 __all__ = list(_SUBMODULES)

@@ -1,0 +1,1521 @@
+r"""Detection data and its evaluation: COCO JSON, Pascal-VOC XML, COCO and VOC metrics.
+
+NumPy only (no torch): the formats and the metrics of object detection.
+
+Formats
+-------
+* :class:`CocoDataset` is a frozen record of a COCO ground-truth file: images
+  (id, file_name, width, height), categories (id, name) and bounding-box annotations as
+  arrays (id, image_id, category_id, ``bbox`` = ``[x, y, w, h]``, area, iscrowd). Read it
+  with :func:`read_coco_json` or :func:`coco_from_dict`, write it with
+  :func:`write_coco_json` / :func:`coco_to_dict`. Segmentations and keypoints in a file
+  are not kept (this module is about boxes).
+* :class:`CocoResults` is a COCO results file, a list of
+  ``{"image_id", "category_id", "bbox", "score"}``: :func:`read_coco_results`,
+  :func:`results_from_list`, :func:`write_coco_results`, :func:`results_to_list`.
+* :func:`read_voc_xml` reads one Pascal-VOC annotation file (:class:`VocAnnotation`);
+  :func:`voc_to_coco` turns a set of them into a :class:`CocoDataset`.
+
+Evaluation
+----------
+:func:`evaluate_detections` is the COCO evaluation of ``pycocotools.cocoeval.COCOeval``
+(``iouType="bbox"``) reimplemented with NumPy arrays and one compiled matching kernel.
+For every image and category, detections sorted by score (stable) and cut to the last
+``max_dets`` are matched greedily to ground truth, for each of the 10 IoU thresholds
+:math:`t \in \{.50, .55, \ldots, .95\}` and each area range (all, small < 32², medium,
+large > 96²):
+
+* the IoU of boxes :math:`d, g` (xywh) is
+  :math:`\mathrm{IoU} = |d \cap g| / (|d| + |g| - |d \cap g|)`, except for a crowd
+  ground truth, where the denominator is the detection's own area :math:`|d|`;
+* ground truth is *ignored* when it is a crowd region or its ``area`` lies outside the
+  area range; ignored ground truth is tried last, and a detection already matched to
+  a real one stops there;
+* each detection takes the ground truth of largest IoU :math:`\ge \min(t, 1-10^{-10})`
+  not yet taken (a crowd region may be taken again); a detection matched to ignored
+  ground truth is ignored, and so is an unmatched detection whose area (``w h``) lies
+  outside the area range.
+
+Per category, area range and ``max_dets`` :math:`M`, the first :math:`M` detections of
+each image are pooled and sorted by score (stable: image order, then rank), and with
+:math:`TP_n, FP_n` the cumulative counts of matched and unmatched non-ignored detections
+and :math:`P` the number of non-ignored ground truth,
+
+.. math::
+
+    r_n = TP_n / P, \qquad p_n = TP_n / (TP_n + FP_n + \epsilon),\qquad
+    \hat p_n = \max_{m \ge n} p_m,
+
+and precision is :math:`\hat p` sampled at the 101 recall points
+:math:`\rho \in \{0, .01, \ldots, 1\}` (at the first :math:`n` with :math:`r_n \ge \rho`;
+0 where recall never reaches :math:`\rho`); recall is :math:`r` at the last detection.
+A category with no non-ignored ground truth gets -1 throughout. The 12 summary numbers
+are means over the entries that are not -1: AP, AP50, AP75, APs, APm, APl (precision),
+AR1, AR10, AR100, ARs, ARm, ARl (recall), -1 when there are none.
+
+The result equals pycocotools to rounding (the tests check 1e-9 on the arrays and the
+summary) with one deliberate difference: pycocotools records a match by the matched
+annotation's ``id``, so ground truth with ``id`` 0 counts as unmatched there; here a
+match is a match whatever the id.
+
+Edge cases, each tested: a box of zero width or height has IoU 0 with everything (the
+object stays in the recall, the detection is a false positive), as in pycocotools; an
+empty results list gives AP 0 for every category with ground truth (pycocotools'
+``loadRes`` cannot take one); a data set without ground truth gives -1 everywhere.
+
+:func:`voc_average_precision` is the all-point interpolated AP of the Pascal VOC devkit
+(2010 onwards), and :func:`evaluate_voc` the VOC matching at one IoU threshold per class.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from robopercept._checks import (
+    as_path,
+    check_bool,
+    check_choice,
+    check_file,
+    check_int,
+    check_numeric,
+    check_real,
+    plain_repr,
+)
+from robopercept.errors import FileFormatError, InputError
+
+__all__ = [
+    "AREA_RANGES",
+    "IOU_THRESHOLDS",
+    "RECALL_THRESHOLDS",
+    "SUMMARY_NAMES",
+    "CocoCategory",
+    "CocoDataset",
+    "CocoEvaluation",
+    "CocoImage",
+    "CocoResults",
+    "VocAnnotation",
+    "VocEvaluation",
+    "VocObject",
+    "coco_from_dict",
+    "coco_to_dict",
+    "evaluate_detections",
+    "evaluate_voc",
+    "pr_curves_picture",
+    "read_coco_json",
+    "read_coco_results",
+    "read_voc_xml",
+    "results_from_ground_truth",
+    "results_from_list",
+    "results_to_list",
+    "voc_average_precision",
+    "voc_to_coco",
+    "write_coco_json",
+    "write_coco_results",
+    "write_pr_curves",
+]
+
+#: the 10 IoU thresholds .50:.05:.95 of COCO (as ``np.linspace`` makes them, like pycocotools)
+IOU_THRESHOLDS = np.linspace(0.5, 0.95, 10)
+#: the 101 recall points 0:.01:1
+RECALL_THRESHOLDS = np.linspace(0.0, 1.0, 101)
+#: area ranges (all, small, medium, large) in pixels², bounds included
+AREA_RANGES = np.array(
+    [[0.0, 1e5**2], [0.0, 32.0**2], [32.0**2, 96.0**2], [96.0**2, 1e5**2]], dtype=np.float64
+)
+AREA_NAMES = ("all", "small", "medium", "large")
+#: the names of the 12 summary numbers, in COCOeval.stats' order
+SUMMARY_NAMES = (
+    "AP",
+    "AP50",
+    "AP75",
+    "APs",
+    "APm",
+    "APl",
+    "AR1",
+    "AR10",
+    "AR100",
+    "ARs",
+    "ARm",
+    "ARl",
+)
+
+_EMPTY_I = np.zeros(0, dtype=np.int64)
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+# ----------------------------------------------------------------------------- records
+
+
+@dataclass(frozen=True)
+class CocoImage:
+    """One image of a COCO file: ``id``, ``file_name``, ``width``, ``height`` (pixels)."""
+
+    id: int
+    file_name: str
+    width: int
+    height: int
+
+
+@dataclass(frozen=True)
+class CocoCategory:
+    """One category of a COCO file: ``id``, ``name`` and (optional) ``supercategory``."""
+
+    id: int
+    name: str
+    supercategory: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class CocoDataset:
+    """COCO ground truth: images, categories and box annotations (arrays, read-only).
+
+    Attributes
+    ----------
+    images : tuple of CocoImage
+    categories : tuple of CocoCategory
+    ann_ids, image_ids, category_ids : (N,) int64 ndarray
+    boxes : (N, 4) float64 ndarray
+        ``[x, y, w, h]`` in pixels (COCO's ``bbox``).
+    areas : (N,) float64 ndarray
+        COCO's ``area`` (the segmentation's area in COCO files; ``w h`` when absent).
+    iscrowd : (N,) bool ndarray
+
+    Examples
+    --------
+    >>> ds = coco_from_dict({
+    ...     "images": [{"id": 1, "file_name": "a.jpg", "width": 64, "height": 48}],
+    ...     "categories": [{"id": 3, "name": "cat"}],
+    ...     "annotations": [{"id": 7, "image_id": 1, "category_id": 3,
+    ...                      "bbox": [2, 4, 10, 20]}]})
+    >>> len(ds), ds.areas.tolist(), ds.category_names()
+    (1, [200.0], {3: 'cat'})
+    """
+
+    images: tuple[CocoImage, ...]
+    categories: tuple[CocoCategory, ...]
+    ann_ids: np.ndarray
+    image_ids: np.ndarray
+    category_ids: np.ndarray
+    boxes: np.ndarray
+    areas: np.ndarray
+    iscrowd: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.ann_ids.size)
+
+    def category_names(self) -> dict[int, str]:
+        """``{category id: name}``."""
+        return {c.id: c.name for c in self.categories}
+
+
+@dataclass(frozen=True, eq=False)
+class CocoResults:
+    """COCO detection results: one row per detection (arrays, read-only).
+
+    Attributes
+    ----------
+    image_ids, category_ids : (N,) int64 ndarray
+    boxes : (N, 4) float64 ndarray
+        ``[x, y, w, h]``.
+    scores : (N,) float64 ndarray
+
+    Examples
+    --------
+    >>> r = results_from_list([{"image_id": 1, "category_id": 3,
+    ...                         "bbox": [0, 0, 4, 4], "score": 0.9}])
+    >>> len(r), r.scores.tolist()
+    (1, [0.9])
+    """
+
+    image_ids: np.ndarray
+    category_ids: np.ndarray
+    boxes: np.ndarray
+    scores: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.scores.size)
+
+
+# ----------------------------------------------------------------------------- parsing
+
+
+def _field(item: Any, key: str, where: str, fix: str, err: type[Exception]) -> Any:
+    if not isinstance(item, Mapping):
+        raise err(f"{where} must be a JSON object; got {type(item).__name__} {plain_repr(item)}")
+    if key not in item:
+        raise err(f"{where} has no '{key}' field: {fix}")
+    return item[key]
+
+
+def _as_int(value: Any, what: str, err: type[Exception]) -> int:
+    """``value`` as an int that fits int64 (integral floats such as ``3.0`` accepted)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        if not (isinstance(value, float) and value.is_integer()):
+            raise err(f"{what} must be an integer; got {plain_repr(value)}")
+    out = int(value)
+    if not -(2**63) <= out < 2**63:
+        raise err(f"{what} must fit in 64 bits; got {out}")
+    return out
+
+
+def _boxes_array(
+    rows: list[Any], ids: Sequence[Any], what: str, err: type[Exception]
+) -> np.ndarray:
+    """``rows`` (each a 4-list) as a (N, 4) float64 array of finite boxes with w, h >= 0."""
+    try:
+        boxes = np.array(rows, dtype=np.float64).reshape(len(rows), 4)
+    except (TypeError, ValueError):
+        for k, b in enumerate(rows):
+            ok = (
+                isinstance(b, (list, tuple))
+                and len(b) == 4
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in b)
+            )
+            if not ok:
+                raise err(
+                    f"{what} {ids[k]}: bbox must be 4 numbers [x, y, width, height]; got "
+                    f"{plain_repr(b)}"
+                ) from None
+        raise err(f"{what}: bbox must be 4 numbers [x, y, width, height]") from None
+    bad = ~np.isfinite(boxes).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise err(
+            f"{what} {ids[k]}: bbox {plain_repr(rows[k])} is not finite (NaN or inf); "
+            "drop or fix that box"
+        )
+    big = (np.abs(boxes) > 1e15).any(axis=1)
+    if big.any():
+        k = int(np.flatnonzero(big)[0])
+        raise err(
+            f"{what} {ids[k]}: bbox {plain_repr(rows[k])} has coordinates beyond 1e15 pixels, "
+            "where areas and IoU lose their precision: rescale the boxes"
+        )
+    neg = (boxes[:, 2] < 0) | (boxes[:, 3] < 0)
+    if neg.any():
+        k = int(np.flatnonzero(neg)[0])
+        raise err(
+            f"{what} {ids[k]}: bbox {plain_repr(rows[k])} has a negative width or height; "
+            "COCO boxes are [x, y, width, height], not [x1, y1, x2, y2]"
+        )
+    return boxes
+
+
+def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
+    if not isinstance(data, Mapping):
+        raise err(
+            f"a COCO dataset must be a JSON object with 'images', 'categories' and "
+            f"'annotations'; got {type(data).__name__}"
+        )
+    lists = {}
+    for key in ("images", "categories", "annotations"):
+        if key not in data:
+            raise err(f"the COCO dataset has no '{key}' list: add \"{key}\": [...]")
+        if not isinstance(data[key], list):
+            raise err(f"the COCO dataset's '{key}' must be a list; got {type(data[key]).__name__}")
+        lists[key] = data[key]
+    images = []
+    for k, im in enumerate(lists["images"]):
+        where = f"images[{k}]"
+        fix = "each image needs id, file_name, width and height"
+        iid = _as_int(_field(im, "id", where, fix, err), f"{where}.id", err)
+        name = _field(im, "file_name", where, fix, err)
+        if not isinstance(name, str):
+            raise err(f"{where}.file_name must be a string; got {plain_repr(name)}")
+        w = _as_int(_field(im, "width", where, fix, err), f"{where}.width", err)
+        h = _as_int(_field(im, "height", where, fix, err), f"{where}.height", err)
+        if w < 0 or h < 0:
+            raise err(f"{where} (id {iid}) has a negative size {w} x {h}")
+        images.append(CocoImage(iid, name, w, h))
+    cats = []
+    for k, c in enumerate(lists["categories"]):
+        where = f"categories[{k}]"
+        fix = "each category needs id and name"
+        cid = _as_int(_field(c, "id", where, fix, err), f"{where}.id", err)
+        name = _field(c, "name", where, fix, err)
+        sup = c.get("supercategory") or ""
+        if not isinstance(name, str) or not isinstance(sup, str):
+            raise err(f"{where}: name and supercategory must be strings; got {plain_repr(name)}")
+        cats.append(CocoCategory(cid, name, sup))
+    for what, ids in (("image", [i.id for i in images]), ("category", [c.id for c in cats])):
+        if len(set(ids)) != len(ids):
+            dup = next(i for i in ids if ids.count(i) > 1)
+            raise err(f"{what} id {dup} appears more than once; ids must be unique")
+    anns = lists["annotations"]
+    n = len(anns)
+    ann_ids = np.empty(n, dtype=np.int64)
+    img_ids = np.empty(n, dtype=np.int64)
+    cat_ids = np.empty(n, dtype=np.int64)
+    areas = np.empty(n, dtype=np.float64)
+    crowd = np.zeros(n, dtype=bool)
+    has_area = np.zeros(n, dtype=bool)
+    rows = []
+    fix = "each annotation needs id, image_id, category_id and bbox [x, y, w, h]"
+    for k, a in enumerate(anns):
+        where = f"annotations[{k}]"
+        aid = _as_int(_field(a, "id", where, fix, err), f"{where}.id", err)
+        where = f"annotation id {aid}"
+        ann_ids[k] = aid
+        img_ids[k] = _as_int(_field(a, "image_id", where, fix, err), f"{where}: image_id", err)
+        cat_ids[k] = _as_int(
+            _field(a, "category_id", where, fix, err), f"{where}: category_id", err
+        )
+        rows.append(_field(a, "bbox", where, fix, err))
+        if "area" in a:
+            ar = a["area"]
+            if isinstance(ar, bool) or not isinstance(ar, (int, float)) or not math.isfinite(ar):
+                raise err(f"{where}: area must be a finite number; got {plain_repr(ar)}")
+            areas[k] = ar
+            has_area[k] = True
+        if "iscrowd" in a:
+            ic = a["iscrowd"]
+            if not isinstance(ic, (int, np.integer)) or ic not in (0, 1):
+                raise err(f"{where}: iscrowd must be 0 or 1; got {plain_repr(ic)}")
+            crowd[k] = bool(ic)
+    boxes = _boxes_array(rows, ann_ids.tolist(), "annotation id", err)
+    areas[~has_area] = boxes[~has_area, 2] * boxes[~has_area, 3]
+    if np.unique(ann_ids).size != n:
+        u, c = np.unique(ann_ids, return_counts=True)
+        raise err(f"annotation id {int(u[c > 1][0])} appears more than once; ids must be unique")
+    for what, col, known in (
+        ("image_id", img_ids, [i.id for i in images]),
+        ("category_id", cat_ids, [c.id for c in cats]),
+    ):
+        unknown = ~np.isin(col, np.array(known, dtype=np.int64))
+        if unknown.any():
+            k = int(np.flatnonzero(unknown)[0])
+            listed = "images" if what == "image_id" else "categories"
+            raise err(
+                f"annotation id {int(ann_ids[k])} has {what} {int(col[k])}, which is not in "
+                f"the '{listed}' list: add it there or drop the annotation"
+            )
+    return CocoDataset(
+        tuple(images),
+        tuple(cats),
+        _readonly(ann_ids),
+        _readonly(img_ids),
+        _readonly(cat_ids),
+        _readonly(boxes),
+        _readonly(areas),
+        _readonly(crowd),
+    )
+
+
+def coco_from_dict(data: Mapping[str, Any]) -> CocoDataset:
+    """A COCO ground-truth dict (as ``json.load`` gives it) as a :class:`CocoDataset`.
+
+    Parameters
+    ----------
+    data : dict
+        ``{"images": [{id, file_name, width, height}, ...], "categories": [{id, name},
+        ...], "annotations": [{id, image_id, category_id, bbox: [x, y, w, h], area?,
+        iscrowd?}, ...]}``. Other fields (segmentation, keypoints, info) are not kept;
+        a missing ``area`` is ``w * h``, a missing ``iscrowd`` 0.
+
+    Returns
+    -------
+    CocoDataset
+
+    Raises
+    ------
+    InputError
+        A missing list or field, a duplicate id, an ``image_id`` or ``category_id`` not
+        listed, a bbox that is not 4 finite numbers with ``w, h >= 0``: the message
+        names the annotation id and the fix.
+
+    Examples
+    --------
+    >>> coco_from_dict({"images": [], "categories": [], "annotations": [
+    ...     {"id": 5, "image_id": 1, "category_id": 1, "bbox": [0, 0, 1, 1]}]})
+    ... # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: annotation id 5 has image_id 1, which is not in the ...
+    """
+    return _parse_coco(data, InputError)
+
+
+def _load_json(path: str | os.PathLike[str], what: str) -> Any:
+    p = check_file(path, what)
+    try:
+        with open(p, encoding="utf-8") as f:
+            return json.load(f)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise FileFormatError(f"{p}: not a JSON file ({exc})") from None
+
+
+def read_coco_json(path: str | os.PathLike[str]) -> CocoDataset:
+    """Read a COCO ground-truth JSON file (instances or keypoints; boxes are kept).
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    CocoDataset
+
+    Raises
+    ------
+    FileFormatError
+        Not a file, not JSON, or any problem :func:`coco_from_dict` names (with the
+        same message, prefixed by the path).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = {"images": [{"id": 1, "file_name": "a.png", "width": 8, "height": 8}],
+    ...      "categories": [{"id": 1, "name": "x"}], "annotations": []}
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "gt.json"
+    >>> _ = write_coco_json(coco_from_dict(d), p)
+    >>> len(read_coco_json(p).images)
+    1
+    """
+    data = _load_json(path, "a COCO JSON file")
+    try:
+        return _parse_coco(data, FileFormatError)
+    except FileFormatError as exc:
+        raise FileFormatError(f"{path}: {exc}") from None
+
+
+def coco_to_dict(dataset: CocoDataset) -> dict[str, Any]:
+    """:class:`CocoDataset` as a COCO dict (``images``, ``categories``, ``annotations``).
+
+    Examples
+    --------
+    >>> d = {"images": [{"id": 1, "file_name": "a.png", "width": 8, "height": 8}],
+    ...      "categories": [{"id": 1, "name": "x"}],
+    ...      "annotations": [{"id": 1, "image_id": 1, "category_id": 1,
+    ...                       "bbox": [1.0, 2.0, 3.0, 4.0], "area": 12.0, "iscrowd": 0}]}
+    >>> coco_to_dict(coco_from_dict(d))["annotations"] == d["annotations"]
+    True
+    """
+    if not isinstance(dataset, CocoDataset):
+        raise InputError(f"dataset must be a CocoDataset; got {type(dataset).__name__}")
+    return {
+        "images": [
+            {"id": i.id, "file_name": i.file_name, "width": i.width, "height": i.height}
+            for i in dataset.images
+        ],
+        "categories": [
+            {"id": c.id, "name": c.name, "supercategory": c.supercategory}
+            for c in dataset.categories
+        ],
+        "annotations": [
+            {
+                "id": int(a),
+                "image_id": int(i),
+                "category_id": int(c),
+                "bbox": b.tolist(),
+                "area": float(ar),
+                "iscrowd": int(cr),
+            }
+            for a, i, c, b, ar, cr in zip(
+                dataset.ann_ids,
+                dataset.image_ids,
+                dataset.category_ids,
+                dataset.boxes,
+                dataset.areas,
+                dataset.iscrowd,
+                strict=True,
+            )
+        ],
+    }
+
+
+def _write_json(obj: Any, path: str | os.PathLike[str]) -> Path:
+    p = as_path(path)
+    if p.is_dir():
+        raise InputError(f"{p} is a folder; give a .json file path")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(obj), encoding="utf-8")
+    return p
+
+
+def write_coco_json(dataset: CocoDataset, path: str | os.PathLike[str]) -> Path:
+    """Write a :class:`CocoDataset` as COCO JSON; returns the path (see
+    :func:`read_coco_json` for an example). Folders are created."""
+    return _write_json(coco_to_dict(dataset), path)
+
+
+def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
+    if not isinstance(data, list):
+        raise err(
+            "COCO results must be a list of {image_id, category_id, bbox, score}; got "
+            f"{type(data).__name__}"
+        )
+    n = len(data)
+    img = np.empty(n, dtype=np.int64)
+    cat = np.empty(n, dtype=np.int64)
+    scores = np.empty(n, dtype=np.float64)
+    rows = []
+    fix = "each result needs image_id, category_id, bbox [x, y, w, h] and score"
+    for k, r in enumerate(data):
+        where = f"results[{k}]"
+        img[k] = _as_int(_field(r, "image_id", where, fix, err), f"{where}.image_id", err)
+        cat[k] = _as_int(_field(r, "category_id", where, fix, err), f"{where}.category_id", err)
+        rows.append(_field(r, "bbox", where, fix, err))
+        s = _field(r, "score", where, fix, err)
+        if isinstance(s, bool) or not isinstance(s, (int, float, np.floating, np.integer)):
+            raise err(f"{where}.score must be a number; got {plain_repr(s)}")
+        if not math.isfinite(s):
+            raise err(f"{where}.score is {s}; scores must be finite: drop that detection")
+        scores[k] = s
+    boxes = _boxes_array(rows, [f"[{k}]" for k in range(n)], "results", err)
+    return CocoResults(_readonly(img), _readonly(cat), _readonly(boxes), _readonly(scores))
+
+
+def results_from_list(results: Sequence[Mapping[str, Any]]) -> CocoResults:
+    """A COCO results list (``[{"image_id", "category_id", "bbox", "score"}, ...]``) as
+    :class:`CocoResults`.
+
+    Raises
+    ------
+    InputError
+        Not a list, a missing field, a bbox that is not 4 finite numbers with
+        ``w, h >= 0``, a NaN/inf score.
+
+    Examples
+    --------
+    >>> results_from_list([{"image_id": 1, "category_id": 1, "bbox": [0, 0, 1, 1],
+    ...                     "score": float("nan")}])  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: results[0].score is nan; scores must be finite: ...
+    """
+    return _parse_results(results, InputError)
+
+
+def read_coco_results(path: str | os.PathLike[str]) -> CocoResults:
+    """Read a COCO results JSON file (a list of detections); errors as
+    :func:`results_from_list` but as :class:`FileFormatError` prefixed by the path.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "res.json"
+    >>> r = results_from_list([{"image_id": 1, "category_id": 2, "bbox": [0, 0, 3, 3],
+    ...                         "score": 0.5}])
+    >>> read_coco_results(write_coco_results(r, p)).category_ids.tolist()
+    [2]
+    """
+    data = _load_json(path, "a COCO results JSON file")
+    try:
+        return _parse_results(data, FileFormatError)
+    except FileFormatError as exc:
+        raise FileFormatError(f"{path}: {exc}") from None
+
+
+def results_to_list(results: CocoResults) -> list[dict[str, Any]]:
+    """:class:`CocoResults` as the COCO results list.
+
+    Examples
+    --------
+    >>> r = results_from_list([{"image_id": 1, "category_id": 2, "bbox": [0, 0, 3, 3],
+    ...                         "score": 0.5}])
+    >>> results_to_list(r)
+    [{'image_id': 1, 'category_id': 2, 'bbox': [0.0, 0.0, 3.0, 3.0], 'score': 0.5}]
+    """
+    if not isinstance(results, CocoResults):
+        raise InputError(f"results must be CocoResults; got {type(results).__name__}")
+    return [
+        {"image_id": int(i), "category_id": int(c), "bbox": b.tolist(), "score": float(s)}
+        for i, c, b, s in zip(
+            results.image_ids, results.category_ids, results.boxes, results.scores, strict=True
+        )
+    ]
+
+
+def write_coco_results(results: CocoResults, path: str | os.PathLike[str]) -> Path:
+    """Write :class:`CocoResults` as a COCO results JSON file; returns the path."""
+    return _write_json(results_to_list(results), path)
+
+
+def results_from_ground_truth(dataset: CocoDataset, score: float = 1.0) -> CocoResults:
+    """The non-crowd ground-truth boxes as detections of one ``score`` (a perfect
+    detector, whose every AP is 1).
+
+    Examples
+    --------
+    >>> ds = coco_from_dict({
+    ...     "images": [{"id": 1, "file_name": "a", "width": 9, "height": 9}],
+    ...     "categories": [{"id": 1, "name": "x"}],
+    ...     "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [0, 0, 2, 2]},
+    ...                     {"id": 2, "image_id": 1, "category_id": 1, "bbox": [0, 0, 9, 9],
+    ...                      "iscrowd": 1}]})
+    >>> len(results_from_ground_truth(ds))
+    1
+    """
+    if not isinstance(dataset, CocoDataset):
+        raise InputError(f"dataset must be a CocoDataset; got {type(dataset).__name__}")
+    s = check_real(score, "score")
+    keep = ~dataset.iscrowd
+    n = int(keep.sum())
+    return CocoResults(
+        _readonly(dataset.image_ids[keep].copy()),
+        _readonly(dataset.category_ids[keep].copy()),
+        _readonly(dataset.boxes[keep].copy()),
+        _readonly(np.full(n, s)),
+    )
+
+
+# ----------------------------------------------------------------------------- VOC XML
+
+
+@dataclass(frozen=True)
+class VocObject:
+    """One ``<object>`` of a VOC file: class ``name``, ``bbox`` = (xmin, ymin, xmax,
+    ymax) in pixels as written, and the ``difficult`` and ``truncated`` flags."""
+
+    name: str
+    bbox: tuple[float, float, float, float]
+    difficult: bool = False
+    truncated: bool = False
+
+
+@dataclass(frozen=True)
+class VocAnnotation:
+    """One Pascal-VOC annotation file: ``filename``, ``width``, ``height``, ``depth`` and
+    its ``objects``."""
+
+    filename: str
+    width: int
+    height: int
+    depth: int
+    objects: tuple[VocObject, ...] = field(default_factory=tuple)
+
+
+def _voc_text(node: ET.Element, tag: str, where: str, required: bool = True) -> str | None:
+    child = node.find(tag)
+    if child is None or child.text is None or not child.text.strip():
+        if required:
+            raise FileFormatError(f"{where} has no <{tag}>: a Pascal-VOC file needs it")
+        return None
+    return child.text.strip()
+
+
+def _voc_number(node: ET.Element, tag: str, where: str, required: bool = True) -> float | None:
+    text = _voc_text(node, tag, where, required)
+    if text is None:
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise FileFormatError(f"{where}: <{tag}> must be a number; got {text!r}") from None
+    if not math.isfinite(v):
+        raise FileFormatError(f"{where}: <{tag}> is {text!r}; it must be finite")
+    return v
+
+
+def read_voc_xml(path: str | os.PathLike[str]) -> VocAnnotation:
+    """Read one Pascal-VOC annotation XML file.
+
+    Reads ``<filename>``, ``<size>`` (width, height, depth) and every ``<object>``
+    (``<name>``, ``<difficult>``, ``<truncated>``, ``<bndbox>`` xmin/ymin/xmax/ymax).
+    Files with a DOCTYPE or entity declarations are refused (no entity expansion).
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    VocAnnotation
+
+    Raises
+    ------
+    FileFormatError
+        Not a file, not XML, a root other than ``<annotation>``, a DTD, a missing tag,
+        a coordinate that is not a finite number, ``xmax < xmin`` or ``ymax < ymin``.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.xml"
+    >>> _ = p.write_text("<annotation><filename>a.jpg</filename><size><width>10</width>"
+    ...     "<height>8</height><depth>3</depth></size><object><name>tree</name>"
+    ...     "<bndbox><xmin>1</xmin><ymin>2</ymin><xmax>5</xmax><ymax>6</ymax></bndbox>"
+    ...     "</object></annotation>")
+    >>> read_voc_xml(p).objects[0]
+    VocObject(name='tree', bbox=(1.0, 2.0, 5.0, 6.0), difficult=False, truncated=False)
+    """
+    p = check_file(path, "a Pascal-VOC XML file")
+    raw = p.read_bytes()
+    if b"<!DOCTYPE" in raw or b"<!ENTITY" in raw:
+        raise FileFormatError(
+            f"{p}: has a DOCTYPE/ENTITY declaration; VOC files have none and they are "
+            "refused (entity expansion)"
+        )
+    try:
+        root = ET.fromstring(raw)
+    except ET.ParseError as exc:
+        raise FileFormatError(f"{p}: not an XML file ({exc})") from None
+    if root.tag != "annotation":
+        raise FileFormatError(f"{p}: the root element is <{root.tag}>, not <annotation>")
+    where = str(p)
+    filename = _voc_text(root, "filename", where) or ""
+    size = root.find("size")
+    if size is None:
+        raise FileFormatError(f"{p} has no <size>: a Pascal-VOC file needs it")
+    w = int(_voc_number(size, "width", f"{p} <size>") or 0)
+    h = int(_voc_number(size, "height", f"{p} <size>") or 0)
+    d = int(_voc_number(size, "depth", f"{p} <size>", required=False) or 0)
+    objects = []
+    for k, obj in enumerate(root.findall("object")):
+        ow = f"{p} <object> {k}"
+        name = _voc_text(obj, "name", ow) or ""
+        box = obj.find("bndbox")
+        if box is None:
+            raise FileFormatError(f"{ow} ({name}) has no <bndbox>")
+        x0, y0, x1, y1 = (
+            float(_voc_number(box, t, f"{ow} ({name}) <bndbox>") or 0.0)
+            for t in ("xmin", "ymin", "xmax", "ymax")
+        )
+        if x1 < x0 or y1 < y0:
+            raise FileFormatError(
+                f"{ow} ({name}): bndbox ({x0:g}, {y0:g}, {x1:g}, {y1:g}) has xmax < xmin or "
+                "ymax < ymin; swap them"
+            )
+        diff = _voc_number(obj, "difficult", ow, required=False) or 0.0
+        trunc = _voc_number(obj, "truncated", ow, required=False) or 0.0
+        objects.append(VocObject(name, (x0, y0, x1, y1), bool(diff), bool(trunc)))
+    return VocAnnotation(filename, w, h, d, tuple(objects))
+
+
+def voc_to_coco(
+    annotations: Sequence[VocAnnotation],
+    categories: Sequence[str] | None = None,
+    *,
+    include_difficult: bool = True,
+) -> CocoDataset:
+    """A set of VOC annotations as one :class:`CocoDataset`.
+
+    Images get ids 1, 2, ... in the order given; categories ids 1, 2, ... in the order
+    of ``categories`` (default: the sorted class names found); annotations ids 1, 2, ...
+    A VOC box ``(xmin, ymin, xmax, ymax)`` becomes ``[xmin, ymin, xmax - xmin,
+    ymax - ymin]`` (continuous coordinates, no "+1"), with ``area = w h``.
+
+    Parameters
+    ----------
+    annotations : sequence of VocAnnotation
+    categories : sequence of str, optional
+    include_difficult : bool
+        ``False`` drops objects marked difficult.
+
+    Returns
+    -------
+    CocoDataset
+
+    Raises
+    ------
+    InputError
+        Not VocAnnotation items, or a class name not in ``categories``.
+
+    Examples
+    --------
+    >>> a = VocAnnotation("a.jpg", 10, 8, 3, (VocObject("tree", (1, 2, 5, 6)),))
+    >>> ds = voc_to_coco([a])
+    >>> ds.boxes.tolist(), ds.category_names()
+    ([[1.0, 2.0, 4.0, 4.0]], {1: 'tree'})
+    """
+    if not isinstance(annotations, (list, tuple)) or not all(
+        isinstance(a, VocAnnotation) for a in annotations
+    ):
+        raise InputError(
+            "annotations must be a list of VocAnnotation (from read_voc_xml); got "
+            f"{type(annotations).__name__}"
+        )
+    keep_difficult = check_bool(include_difficult, "include_difficult")
+    names = sorted({o.name for a in annotations for o in a.objects})
+    if categories is None:
+        cats = names
+    else:
+        if not isinstance(categories, (list, tuple)) or not all(
+            isinstance(c, str) for c in categories
+        ):
+            raise InputError(
+                f"categories must be a list of class names; got {plain_repr(categories)}"
+            )
+        cats = list(categories)
+        missing = sorted(set(names) - set(cats))
+        if missing:
+            raise InputError(
+                f"class {missing[0]!r} is not in categories {plain_repr(cats)}: add it"
+            )
+    cat_id = {c: k + 1 for k, c in enumerate(cats)}
+    rows: list[tuple[int, int, tuple[float, float, float, float]]] = []
+    for i, a in enumerate(annotations):
+        for o in a.objects:
+            if o.difficult and not keep_difficult:
+                continue
+            rows.append((i + 1, cat_id[o.name], o.bbox))
+    n = len(rows)
+    boxes = np.array([b for _, _, b in rows], dtype=np.float64).reshape(n, 4)
+    boxes[:, 2:] -= boxes[:, :2]
+    return CocoDataset(
+        tuple(CocoImage(i + 1, a.filename, a.width, a.height) for i, a in enumerate(annotations)),
+        tuple(CocoCategory(k + 1, c) for k, c in enumerate(cats)),
+        _readonly(np.arange(1, n + 1, dtype=np.int64)),
+        _readonly(np.array([r[0] for r in rows], dtype=np.int64)),
+        _readonly(np.array([r[1] for r in rows], dtype=np.int64)),
+        _readonly(boxes),
+        _readonly(boxes[:, 2] * boxes[:, 3]),
+        _readonly(np.zeros(n, dtype=bool)),
+    )
+
+
+# ----------------------------------------------------------------------------- matching
+
+
+def _match_groups(
+    groups: np.ndarray,
+    gt_boxes: np.ndarray,
+    gt_area: np.ndarray,
+    gt_crowd: np.ndarray,
+    dt_boxes: np.ndarray,
+    params: tuple[np.ndarray, np.ndarray],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """COCO's greedy matching for every (image, category) group.
+
+    ``groups`` (G, 4) int64 holds ``gt_start, gt_stop, dt_start, dt_stop``; the
+    detections of a group are sorted by score (stable) and cut to max_dets[-1].
+    ``params`` = (iou thresholds (T,), area ranges (A, 2)). Returns ``dt_matched``,
+    ``dt_ignored`` (A, T, n_dt) and ``gt_ignored`` (A, n_gt) bool arrays.
+
+    This plain-Python function is the reference; :func:`_match_groups_jit` is it
+    compiled by numba (the tests compare them).
+    """
+    thrs, areas = params
+    n_t = thrs.shape[0]
+    n_a = areas.shape[0]
+    n_dt = dt_boxes.shape[0]
+    n_gt = gt_boxes.shape[0]
+    dt_m = np.zeros((n_a, n_t, n_dt), dtype=np.bool_)
+    dt_ig = np.zeros((n_a, n_t, n_dt), dtype=np.bool_)
+    gt_ig = np.zeros((n_a, n_gt), dtype=np.bool_)
+    dt_area = dt_boxes[:, 2] * dt_boxes[:, 3]
+    for g in range(groups.shape[0]):
+        g0, g1, d0, d1 = groups[g, 0], groups[g, 1], groups[g, 2], groups[g, 3]
+        ng = g1 - g0
+        nd = d1 - d0
+        if nd == 0:
+            for a in range(n_a):
+                for j in range(g0, g1):
+                    gt_ig[a, j] = (
+                        gt_crowd[j] or gt_area[j] < areas[a, 0] or gt_area[j] > areas[a, 1]
+                    )
+            continue
+        # IoU (nd, ng) as pycocotools' bbIou computes it (same operations, same order)
+        ious = np.zeros((nd, ng))
+        for j in range(ng):
+            gx, gy, gw, gh = (
+                gt_boxes[g0 + j, 0],
+                gt_boxes[g0 + j, 1],
+                gt_boxes[g0 + j, 2],
+                gt_boxes[g0 + j, 3],
+            )
+            ga = gw * gh
+            for i in range(nd):
+                dx, dy, dw, dh = (
+                    dt_boxes[d0 + i, 0],
+                    dt_boxes[d0 + i, 1],
+                    dt_boxes[d0 + i, 2],
+                    dt_boxes[d0 + i, 3],
+                )
+                w = min(dw + dx, gw + gx) - max(dx, gx)
+                if w <= 0:
+                    continue
+                h = min(dh + dy, gh + gy) - max(dy, gy)
+                if h <= 0:
+                    continue
+                inter = w * h
+                da = dw * dh
+                u = da if gt_crowd[g0 + j] else da + ga - inter
+                ious[i, j] = inter / u
+        order = np.empty(ng, dtype=np.int64)
+        ign = np.zeros(ng, dtype=np.bool_)
+        taken = np.zeros(ng, dtype=np.bool_)
+        for a in range(n_a):
+            lo, hi = areas[a, 0], areas[a, 1]
+            # ground truth: not ignored first, then ignored (each in file order)
+            k = 0
+            for flag in (False, True):
+                for j in range(ng):
+                    ig = gt_crowd[g0 + j] or gt_area[g0 + j] < lo or gt_area[g0 + j] > hi
+                    if ig == flag:
+                        order[k] = j
+                        ign[k] = ig
+                        k += 1
+            for j in range(ng):
+                gt_ig[a, g0 + order[j]] = ign[j]
+            for t in range(n_t):
+                taken[:] = False
+                for i in range(nd):
+                    best = min(thrs[t], 1 - 1e-10)
+                    m = -1
+                    for jj in range(ng):
+                        j = order[jj]
+                        if taken[jj] and not gt_crowd[g0 + j]:
+                            continue
+                        if m > -1 and not ign[m] and ign[jj]:
+                            break
+                        if ious[i, j] < best:
+                            continue
+                        best = ious[i, j]
+                        m = jj
+                    if m > -1:
+                        dt_ig[a, t, d0 + i] = ign[m]
+                        dt_m[a, t, d0 + i] = True
+                        taken[m] = True
+                    elif dt_area[d0 + i] < lo or dt_area[d0 + i] > hi:
+                        dt_ig[a, t, d0 + i] = True
+    return dt_m, dt_ig, gt_ig
+
+
+_match_groups_jit = njit(cache=True)(_match_groups)
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+
+@dataclass(frozen=True, eq=False)
+class CocoEvaluation:
+    """The COCO evaluation's arrays and summary (what ``COCOeval.eval`` and ``.stats`` hold).
+
+    Attributes
+    ----------
+    precision : (T, R, K, A, M) float64 ndarray
+        Interpolated precision at the 101 recall points (-1 where undefined).
+    recall : (T, K, A, M) float64 ndarray
+    scores : (T, R, K, A, M) float64 ndarray
+        The score at which each precision sample is reached (0 beyond the last).
+    stats : (12,) float64 ndarray
+        AP, AP50, AP75, APs, APm, APl, AR1, AR10, AR100, ARs, ARm, ARl (-1 undefined).
+    category_ids : (K,) int64 ndarray
+    iou_thresholds : (T,) ndarray
+    recall_thresholds : (R,) ndarray
+    max_dets : tuple of int
+        (M,) values.
+    """
+
+    precision: np.ndarray
+    recall: np.ndarray
+    scores: np.ndarray
+    stats: np.ndarray
+    category_ids: np.ndarray
+    iou_thresholds: np.ndarray
+    recall_thresholds: np.ndarray
+    max_dets: tuple[int, ...]
+
+    def summary(self) -> dict[str, float]:
+        """The 12 summary numbers by name (:data:`SUMMARY_NAMES`)."""
+        return dict(zip(SUMMARY_NAMES, self.stats.tolist(), strict=True))
+
+    def per_category_ap(self, iou: str = "0.50:0.95") -> dict[int, float]:
+        """AP per category id (area all, the largest max_dets): ``iou`` is
+        ``"0.50:0.95"``, ``"0.50"`` or ``"0.75"``; -1 for a category without ground truth.
+        """
+        t = {"0.50:0.95": slice(None), "0.50": slice(0, 1), "0.75": slice(5, 6)}
+        check_choice(iou, "iou", t)
+        p = self.precision[t[iou], :, :, 0, -1]
+        out = {}
+        for k, c in enumerate(self.category_ids.tolist()):
+            v = p[:, :, k]
+            out[c] = float(v[v > -1].mean()) if (v > -1).any() else -1.0
+        return out
+
+
+def _check_dataset(gt: Any) -> CocoDataset:
+    if isinstance(gt, CocoDataset):
+        return gt
+    if isinstance(gt, Mapping):
+        return coco_from_dict(gt)
+    raise InputError(
+        f"gt must be a CocoDataset or a COCO dict; got {type(gt).__name__}: use "
+        "read_coco_json(path) or coco_from_dict(d)"
+    )
+
+
+def _check_results(results: Any, gt: CocoDataset) -> CocoResults:
+    if isinstance(results, CocoResults):
+        res = results
+    elif isinstance(results, list):
+        res = results_from_list(results)
+    else:
+        raise InputError(
+            f"results must be CocoResults or a COCO results list; got {type(results).__name__}"
+        )
+    img_known = np.array([i.id for i in gt.images], dtype=np.int64)
+    cat_known = np.array([c.id for c in gt.categories], dtype=np.int64)
+    for what, ids, known in (
+        ("image_id", res.image_ids, img_known),
+        ("category_id", res.category_ids, cat_known),
+    ):
+        bad = ~np.isin(ids, known)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise InputError(
+                f"results[{k}] has {what} {int(ids[k])}, which the ground truth does not "
+                "list: detections must refer to the ground truth's images and categories"
+            )
+    return res
+
+
+def _stable_rank_in_groups(keys: np.ndarray) -> np.ndarray:
+    """Rank of each element within its run of equal ``keys`` (keys sorted)."""
+    n = keys.size
+    if n == 0:
+        return _EMPTY_I
+    start = np.r_[0, np.flatnonzero(np.diff(keys)) + 1]
+    lengths = np.diff(np.r_[start, n])
+    return np.arange(n) - np.repeat(start, lengths)
+
+
+def evaluate_detections(
+    gt: CocoDataset | Mapping[str, Any],
+    results: CocoResults | list[Mapping[str, Any]],
+    iou_type: str = "bbox",
+    *,
+    max_dets: Sequence[int] = (1, 10, 100),
+    use_jit: bool = True,
+) -> CocoEvaluation:
+    """COCO box evaluation of ``results`` against ``gt``; equals ``pycocotools``'
+    ``COCOeval(gt, dt, "bbox")`` ``evaluate(); accumulate(); summarize()``.
+
+    The algorithm is in the module docstring: greedy matching by score per image and
+    category at IoU .50:.05:.95, crowd and out-of-range ground truth ignored, the
+    monotone precision envelope sampled at 101 recall points.
+
+    Parameters
+    ----------
+    gt : CocoDataset or dict
+        Ground truth; its images and categories are those evaluated.
+    results : CocoResults or list of dict
+        Detections; every ``image_id`` and ``category_id`` must be in ``gt``.
+    iou_type : {"bbox"}
+        Only boxes are evaluated here.
+    max_dets : three increasing positive ints
+        Detections kept per image (COCO: 1, 10, 100); the summary's AR1/AR10/AR100
+        use them in order, and the APs the last. (pycocotools' ``summarize`` asks for
+        ``maxDets=100`` by value for its first number, AP, which is -1 there when 100
+        is not among them; here it is the AP at ``max_dets[-1]``.)
+    use_jit : bool
+        ``False`` runs the plain-Python matching (the reference of the compiled one).
+
+    Returns
+    -------
+    CocoEvaluation
+
+    Raises
+    ------
+    InputError
+        ``iou_type`` other than "bbox", bad ``max_dets``, results naming an image or
+        category the ground truth lacks, or anything :func:`coco_from_dict` /
+        :func:`results_from_list` refuse.
+
+    Examples
+    --------
+    >>> gt = coco_from_dict({
+    ...     "images": [{"id": 1, "file_name": "a", "width": 100, "height": 100}],
+    ...     "categories": [{"id": 1, "name": "x"}],
+    ...     "annotations": [{"id": 1, "image_id": 1, "category_id": 1,
+    ...                      "bbox": [10, 10, 50, 50]}]})
+    >>> ev = evaluate_detections(gt, [
+    ...     {"image_id": 1, "category_id": 1, "bbox": [10, 10, 50, 40], "score": 0.9}])
+    >>> round(ev.summary()["AP50"], 9), round(ev.summary()["AP"], 9)  # IoU 0.8
+    (1.0, 0.7)
+    """
+    check_choice(iou_type, "iou_type", ("bbox",))
+    if not isinstance(max_dets, (list, tuple)) or len(max_dets) != 3:
+        raise InputError(
+            f"max_dets must be three increasing ints like (1, 10, 100); got {plain_repr(max_dets)}"
+        )
+    md = tuple(check_int(m, "max_dets", minimum=1) for m in max_dets)
+    if not md[0] < md[1] < md[2]:
+        raise InputError(f"max_dets must be increasing; got {plain_repr(max_dets)}")
+    jit = check_bool(use_jit, "use_jit")
+    gtd = _check_dataset(gt)
+    res = _check_results(results, gtd)
+
+    img_ids = np.unique(np.array([i.id for i in gtd.images], dtype=np.int64))
+    cat_ids = np.unique(np.array([c.id for c in gtd.categories], dtype=np.int64))
+    n_i, n_k = img_ids.size, cat_ids.size
+    T, R, A, M = IOU_THRESHOLDS.size, RECALL_THRESHOLDS.size, AREA_RANGES.shape[0], len(md)
+
+    # group keys: category-major, then image (pycocotools' evalImgs order)
+    g_key = np.searchsorted(cat_ids, gtd.category_ids) * n_i + np.searchsorted(
+        img_ids, gtd.image_ids
+    )
+    g_ord = np.argsort(g_key, kind="stable")
+    g_key = g_key[g_ord]
+    d_key = np.searchsorted(cat_ids, res.category_ids) * n_i + np.searchsorted(
+        img_ids, res.image_ids
+    )
+    d_ord = np.lexsort((-res.scores, d_key))  # by key, then score descending, stable
+    d_key = d_key[d_ord]
+    d_rank = _stable_rank_in_groups(d_key)
+    keep = d_rank < md[-1]
+    d_ord, d_key, d_rank = d_ord[keep], d_key[keep], d_rank[keep]
+    keys = np.union1d(np.unique(g_key), np.unique(d_key))
+    groups = np.stack(
+        [
+            np.searchsorted(g_key, keys, "left"),
+            np.searchsorted(g_key, keys, "right"),
+            np.searchsorted(d_key, keys, "left"),
+            np.searchsorted(d_key, keys, "right"),
+        ],
+        axis=1,
+    ).astype(np.int64)
+    gt_boxes = np.ascontiguousarray(gtd.boxes[g_ord])
+    gt_area = np.ascontiguousarray(gtd.areas[g_ord])
+    gt_crowd = np.ascontiguousarray(gtd.iscrowd[g_ord])
+    dt_boxes = np.ascontiguousarray(res.boxes[d_ord])
+    dt_scores = res.scores[d_ord]
+    match = _match_groups_jit if jit else _match_groups
+    dt_m, dt_ig, gt_ig = match(
+        groups, gt_boxes, gt_area, gt_crowd, dt_boxes, (IOU_THRESHOLDS, AREA_RANGES)
+    )
+
+    precision = -np.ones((T, R, K := n_k, A, M))
+    recall = -np.ones((T, K, A, M))
+    scores = -np.ones((T, R, K, A, M))
+    g_cat = g_key // max(n_i, 1)
+    d_cat = d_key // max(n_i, 1)
+    g_bounds = np.searchsorted(g_cat, np.arange(K + 1))
+    d_bounds = np.searchsorted(d_cat, np.arange(K + 1))
+    eps = np.spacing(1)
+    for k in range(K):
+        gs, ge, ds, de = g_bounds[k], g_bounds[k + 1], d_bounds[k], d_bounds[k + 1]
+        if ge == gs and de == ds:
+            continue
+        for a in range(A):
+            npig = int(np.count_nonzero(~gt_ig[a, gs:ge]))
+            if npig == 0:
+                continue
+            for m, maxdet in enumerate(md):
+                sel = np.flatnonzero(d_rank[ds:de] < maxdet) + ds
+                sc = dt_scores[sel]
+                o = np.argsort(-sc, kind="mergesort")
+                sel, sc = sel[o], sc[o]
+                mt = dt_m[a][:, sel]
+                ig = dt_ig[a][:, sel]
+                tp = np.cumsum(mt & ~ig, axis=1, dtype=np.float64)
+                fp = np.cumsum(~mt & ~ig, axis=1, dtype=np.float64)
+                nd = sel.size
+                if nd == 0:
+                    recall[:, k, a, m] = 0
+                    precision[:, :, k, a, m] = 0
+                    scores[:, :, k, a, m] = 0
+                    continue
+                rc = tp / npig
+                pr = tp / (fp + tp + eps)
+                recall[:, k, a, m] = rc[:, -1]
+                pr = np.maximum.accumulate(pr[:, ::-1], axis=1)[:, ::-1]
+                for t in range(T):
+                    idx = np.searchsorted(rc[t], RECALL_THRESHOLDS, side="left")
+                    ok = idx < nd
+                    q = np.zeros(R)
+                    ss = np.zeros(R)
+                    q[ok] = pr[t, idx[ok]]
+                    ss[ok] = sc[idx[ok]]
+                    precision[t, :, k, a, m] = q
+                    scores[t, :, k, a, m] = ss
+
+    def mean(s: np.ndarray) -> float:
+        v = s[s > -1]
+        return float(np.mean(v)) if v.size else -1.0
+
+    stats = np.array(
+        [
+            mean(precision[:, :, :, 0, -1]),
+            mean(precision[0, :, :, 0, -1]),
+            mean(precision[5, :, :, 0, -1]),
+            mean(precision[:, :, :, 1, -1]),
+            mean(precision[:, :, :, 2, -1]),
+            mean(precision[:, :, :, 3, -1]),
+            mean(recall[:, :, 0, 0]),
+            mean(recall[:, :, 0, 1]),
+            mean(recall[:, :, 0, 2]),
+            mean(recall[:, :, 1, -1]),
+            mean(recall[:, :, 2, -1]),
+            mean(recall[:, :, 3, -1]),
+        ]
+    )
+    return CocoEvaluation(
+        _readonly(precision),
+        _readonly(recall),
+        _readonly(scores),
+        _readonly(stats),
+        _readonly(cat_ids),
+        IOU_THRESHOLDS.copy(),
+        RECALL_THRESHOLDS.copy(),
+        md,
+    )
+
+
+# ----------------------------------------------------------------------------- VOC AP
+
+
+def voc_average_precision(recall: Any, precision: Any) -> float:
+    r"""All-point interpolated average precision (Pascal VOC devkit, 2010 onwards).
+
+    With the points framed as :math:`r = (0, r_1, \ldots, r_n, 1)`,
+    :math:`p = (0, p_1, \ldots, p_n, 0)` and the envelope
+    :math:`\hat p_i = \max_{j \ge i} p_j`,
+
+    .. math:: AP = \sum_{i : r_{i+1} \ne r_i} (r_{i+1} - r_i)\, \hat p_{i+1},
+
+    the area under the monotone envelope of the PR curve (``voc_ap(rec, prec,
+    use_07_metric=False)`` of the devkit's Python port).
+
+    Parameters
+    ----------
+    recall, precision : (N,) array_like
+        Recall (non-decreasing) and precision after each detection in score order.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        Not 1-D arrays of one length, values outside [0, 1], recall decreasing.
+
+    Examples
+    --------
+    >>> voc_average_precision([0.5, 0.5, 1.0], [1.0, 0.5, 2 / 3])
+    0.8333333333333333
+    """
+    rec = check_numeric(recall, "recall")
+    prec = check_numeric(precision, "precision")
+    if rec.ndim != 1 or prec.shape != rec.shape:
+        raise InputError(
+            f"recall and precision must be 1-D arrays of one length; got shapes {rec.shape} "
+            f"and {prec.shape}"
+        )
+    for name, v in (("recall", rec), ("precision", prec)):
+        if not (np.isfinite(v).all() and (v >= 0).all() and (v <= 1).all()):
+            raise InputError(f"{name} must hold finite values in [0, 1]")
+    if (np.diff(rec) < 0).any():
+        raise InputError("recall must be non-decreasing (detections in score order)")
+    mrec = np.concatenate(([0.0], rec, [1.0]))
+    mpre = np.concatenate(([0.0], prec, [0.0]))
+    mpre = np.maximum.accumulate(mpre[::-1])[::-1]
+    i = np.flatnonzero(mrec[1:] != mrec[:-1])
+    return float(np.sum((mrec[i + 1] - mrec[i]) * mpre[i + 1]))
+
+
+@dataclass(frozen=True)
+class VocEvaluation:
+    """VOC evaluation at one IoU threshold: ``ap`` per category id (NaN for a category
+    without ground truth), ``mean_ap`` over the categories with ground truth."""
+
+    ap: dict[int, float]
+    mean_ap: float
+    iou_threshold: float
+
+
+def evaluate_voc(
+    gt: CocoDataset | Mapping[str, Any],
+    results: CocoResults | list[Mapping[str, Any]],
+    iou_threshold: float = 0.5,
+) -> VocEvaluation:
+    r"""Pascal-VOC mAP: per class, detections of all images in score order (stable)
+    each take the unmatched ground truth of highest IoU in their image if that IoU
+    exceeds ``iou_threshold`` (strictly, as the devkit); crowd ground truth plays VOC's
+    "difficult" (a detection on it is neither TP nor FP, and it is not counted in the
+    recall). AP is :func:`voc_average_precision`. IoU is continuous
+    (:math:`|d \cap g| / |d \cup g|`, no "+1" pixel).
+
+    Parameters
+    ----------
+    gt : CocoDataset or dict
+    results : CocoResults or list of dict
+    iou_threshold : float in [0, 1)
+
+    Returns
+    -------
+    VocEvaluation
+
+    Examples
+    --------
+    >>> gt = coco_from_dict({
+    ...     "images": [{"id": 1, "file_name": "a", "width": 100, "height": 100}],
+    ...     "categories": [{"id": 1, "name": "x"}],
+    ...     "annotations": [{"id": 1, "image_id": 1, "category_id": 1,
+    ...                      "bbox": [0, 0, 10, 10]},
+    ...                     {"id": 2, "image_id": 1, "category_id": 1,
+    ...                      "bbox": [50, 50, 10, 10]}]})
+    >>> evaluate_voc(gt, [
+    ...     {"image_id": 1, "category_id": 1, "bbox": [0, 0, 10, 10], "score": 0.9},
+    ...     {"image_id": 1, "category_id": 1, "bbox": [20, 20, 10, 10], "score": 0.8},
+    ...     {"image_id": 1, "category_id": 1, "bbox": [50, 50, 10, 10], "score": 0.7}]).mean_ap
+    0.8333333333333333
+    """
+    thr = check_real(iou_threshold, "iou_threshold", 0.0, 1.0, high_inclusive=False)
+    gtd = _check_dataset(gt)
+    res = _check_results(results, gtd)
+    ap: dict[int, float] = {}
+    for c in sorted(x.id for x in gtd.categories):
+        gsel = np.flatnonzero(gtd.category_ids == c)
+        npos = int(np.count_nonzero(~gtd.iscrowd[gsel]))
+        if npos == 0:
+            ap[c] = float("nan")
+            continue
+        dsel = np.flatnonzero(res.category_ids == c)
+        dsel = dsel[np.argsort(-res.scores[dsel], kind="stable")]
+        taken = np.zeros(gsel.size, dtype=bool)
+        tp = np.zeros(dsel.size)
+        fp = np.zeros(dsel.size)
+        g_img = gtd.image_ids[gsel]
+        gb = gtd.boxes[gsel]
+        for n, d in enumerate(dsel):
+            cand = np.flatnonzero(g_img == res.image_ids[d])
+            if cand.size == 0:
+                fp[n] = 1
+                continue
+            b = res.boxes[d]
+            g = gb[cand]
+            w = np.minimum(b[0] + b[2], g[:, 0] + g[:, 2]) - np.maximum(b[0], g[:, 0])
+            h = np.minimum(b[1] + b[3], g[:, 1] + g[:, 3]) - np.maximum(b[1], g[:, 1])
+            inter = np.clip(w, 0, None) * np.clip(h, 0, None)
+            union = b[2] * b[3] + g[:, 2] * g[:, 3] - inter
+            iou = np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
+            j = int(np.argmax(iou))
+            if iou[j] > thr:
+                if gtd.iscrowd[gsel[cand[j]]]:
+                    continue
+                if not taken[cand[j]]:
+                    taken[cand[j]] = True
+                    tp[n] = 1
+                else:
+                    fp[n] = 1
+            else:
+                fp[n] = 1
+        keep = (tp + fp) > 0
+        ctp, cfp = np.cumsum(tp[keep]), np.cumsum(fp[keep])
+        rec = ctp / npos
+        prec = ctp / np.maximum(ctp + cfp, np.finfo(np.float64).eps)
+        ap[c] = voc_average_precision(rec, prec) if rec.size else 0.0
+    vals = [v for v in ap.values() if not math.isnan(v)]
+    return VocEvaluation(ap, float(np.mean(vals)) if vals else float("nan"), thr)
+
+
+# ----------------------------------------------------------------------------- pictures
+
+
+def pr_curves_picture(
+    evaluation: CocoEvaluation,
+    *,
+    iou_threshold: float = 0.5,
+    names: Mapping[int, str] | None = None,
+    width: int = 1600,
+    height: int = 1000,
+) -> np.ndarray:
+    """Per-class precision-recall curves (COCO's 101-point interpolated precision, area
+    "all", the largest max_dets) at one of the 10 IoU thresholds, as an RGB picture
+    (:func:`robopercept.viz.curves_picture`; 1600 x 1000 reads well on a 1080p screen).
+
+    Parameters
+    ----------
+    evaluation : CocoEvaluation
+    iou_threshold : float
+        One of .50, .55, ..., .95.
+    names : dict, optional
+        ``{category id: name}`` for the legend (:meth:`CocoDataset.category_names`).
+    width, height : int
+
+    Returns
+    -------
+    (height, width, 3) uint8 ndarray
+
+    Examples
+    --------
+    >>> gt = coco_from_dict({
+    ...     "images": [{"id": 1, "file_name": "a", "width": 99, "height": 99}],
+    ...     "categories": [{"id": 1, "name": "x"}],
+    ...     "annotations": [{"id": 1, "image_id": 1, "category_id": 1,
+    ...                      "bbox": [1, 1, 40, 40]}]})
+    >>> ev = evaluate_detections(gt, [{"image_id": 1, "category_id": 1,
+    ...                                "bbox": [1, 1, 40, 40], "score": 1.0}])
+    >>> pr_curves_picture(ev, width=400, height=300).shape
+    (300, 400, 3)
+    """
+    from robopercept.viz import curves_picture
+
+    if not isinstance(evaluation, CocoEvaluation):
+        raise InputError(f"evaluation must be a CocoEvaluation; got {type(evaluation).__name__}")
+    thr = check_real(iou_threshold, "iou_threshold")
+    t = np.flatnonzero(np.isclose(evaluation.iou_thresholds, thr, atol=1e-9))
+    if t.size == 0:
+        raise InputError(
+            f"iou_threshold must be one of {plain_repr(np.round(evaluation.iou_thresholds, 2))}; "
+            f"got {thr}"
+        )
+    if names is not None and not isinstance(names, Mapping):
+        raise InputError(f"names must be a dict {{category id: name}}; got {plain_repr(names)}")
+    curves = []
+    for k, c in enumerate(evaluation.category_ids.tolist()):
+        p = evaluation.precision[t[0], :, k, 0, -1]
+        if (p < 0).all():
+            continue
+        ap = float(p.mean())
+        label = str(names.get(c, c)) if names is not None else str(c)
+        curves.append((evaluation.recall_thresholds, p, f"{label} (AP {ap:.3f})"))
+    if not curves:
+        raise InputError("no category has ground truth: there is no PR curve to draw")
+    return curves_picture(
+        curves,
+        title=f"precision-recall per class, IoU {thr:.2f}",
+        xlabel="recall",
+        ylabel="precision",
+        width=width,
+        height=height,
+    )
+
+
+def write_pr_curves(
+    evaluation: CocoEvaluation,
+    path: str | os.PathLike[str],
+    *,
+    iou_threshold: float = 0.5,
+    names: Mapping[int, str] | None = None,
+) -> Path:
+    """Write :func:`pr_curves_picture` (1600 x 1000) as a PNG; returns the path.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> gt = coco_from_dict({
+    ...     "images": [{"id": 1, "file_name": "a", "width": 99, "height": 99}],
+    ...     "categories": [{"id": 1, "name": "x"}],
+    ...     "annotations": [{"id": 1, "image_id": 1, "category_id": 1,
+    ...                      "bbox": [1, 1, 40, 40]}]})
+    >>> ev = evaluate_detections(gt, [{"image_id": 1, "category_id": 1,
+    ...                                "bbox": [1, 1, 40, 40], "score": 1.0}])
+    >>> write_pr_curves(ev, pathlib.Path(tempfile.mkdtemp()) / "pr.png").suffix
+    '.png'
+    """
+    from robopercept.imaging import write_image
+
+    p = as_path(path)
+    if p.suffix.lower() != ".png":
+        raise InputError(f"{p}: PR curves are written as PNG; give a path ending in .png")
+    img = pr_curves_picture(evaluation, iou_threshold=iou_threshold, names=names)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    return write_image(p, img)
