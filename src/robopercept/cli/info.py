@@ -15,7 +15,7 @@ __all__ = ["register", "report"]
 _OPTIONAL = (
     ("torch", "torch", "deep", "CNNs, PointNet, DGCNN"),
     ("pyrealsense2", "pyrealsense2", "realsense", "RealSense cameras and .bag recordings"),
-    ("cv2", "opencv-python-headless", "dev", "reference for tests and benchmarks"),
+    ("cv2", "opencv-contrib-python-headless", "dev", "reference for tests and benchmarks"),
     ("skimage", "scikit-image", "dev", "reference for tests"),
     ("sklearn", "scikit-learn", "dev", "reference for tests"),
     ("open3d", "open3d", "dev", "reference for tests and benchmarks"),
