@@ -1229,6 +1229,95 @@ VALID.update(
     }
 )
 
+
+# nn.detection_data (issue 26): a small detection set, a batch of it, a DeepForest folder
+def detection_value(kind: str) -> Any:
+    """A valid nn.detection_data value: ``dataset`` (DetectionDataset) or ``batch``
+    (two items of it)."""
+    from robopercept.nn.detection_data import DetectionDataset
+
+    ds = DetectionDataset(
+        [np.full((16, 16, 3), 0.5, np.float32)] * 2,
+        [[[1.0, 2.0, 9.0, 12.0]], np.zeros((0, 4))],
+        [[1], []],
+        ["a"],
+    )
+    return {"dataset": ds, "batch": [ds[0], ds[1]]}[kind]
+
+
+def _write_deepforest(path: Path) -> None:
+    """The four DeepForest file pairs as 80 x 72 images with one box each."""
+    from robopercept.imaging import write_image
+    from robopercept.nn.detection_data import DEEPFOREST_IMAGES
+
+    path.mkdir(parents=True, exist_ok=True)
+    for stem in DEEPFOREST_IMAGES:
+        write_image(path / f"{stem}.png", np.full((72, 80, 3), 90, np.uint8))
+        (path / f"{stem}.xml").write_text(
+            _VOC_XML.replace(
+                "<width>64</width><height>48</height>", "<width>80</width><height>72</height>"
+            )
+        )
+
+
+FIXTURES["deepforest"] = _write_deepforest
+_DDS = _b("tests.fuzz.api:detection_value", "dataset")
+VALID.update(
+    {
+        "nn.data.shape_masks": {
+            "kinds": [0, 1, 2, 3],
+            "cx": [8.0] * 4,
+            "cy": [8.0] * 4,
+            "r": [5.0] * 4,
+            "phi": [0.3] * 4,
+            "size": (16, 16),
+        },
+        "nn.detection_data.mask_to_box": {"mask": np.eye(5, dtype=bool)},
+        "nn.detection_data.DetectionDataset": {
+            "images": [np.full((16, 16, 3), 0.5, np.float32)] * 2,
+            "boxes": [[[1.0, 2.0, 9.0, 12.0]], [[0.0, 0.0, 16.0, 16.0]]],
+            "labels": [[1], [1]],
+            "classes": ["a"],
+        },
+        "nn.detection_data.DetectionDataset.subset": {"indices": [1, 0]},
+        "nn.detection_data.DetectionDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
+        "nn.detection_data.DetectionDataset.areas": {"index": 0},
+        "nn.detection_data.DetectionDataset.__getitem__": {"index": 0},
+        "nn.detection_data.collate_detection": {
+            "batch": _b("tests.fuzz.api:detection_value", "batch")
+        },
+        "nn.detection_data.procedural_detection_set": {"n_images": 2, "size": (32, 32), "rng": 0},
+        "nn.detection_data.digits_detection_set": {
+            "n_images": 2,
+            "size": (32, 32),
+            "rng": 0,
+            "scale": (8, 16),
+        },
+        "nn.detection_data.single_digit_set": {
+            "n_images": 2,
+            "size": (32, 32),
+            "rng": 0,
+            "scale": (8, 16),
+        },
+        "nn.detection_data.deepforest_tiles": {"folder": Fixture("deepforest"), "tile": 64},
+        "nn.detection_data.draw_detections": {
+            "image": IMG_RGB,
+            "boxes": [[1.0, 2.0, 9.0, 12.0]],
+            "labels": [1],
+            "classes": ["a"],
+        },
+        "nn.detection_data.samples_picture": {"dataset": _DDS},
+        "nn.detection_data.DeepForestTiles": {"train": _DDS, "test": _DDS},
+    }
+)
+METHODS["nn.detection_data.DetectionDataset"] = (
+    "subset",
+    "split",
+    "areas",
+    "to_coco",
+    "__getitem__",
+)
+
 #: callables not fuzzed, with the reason
 SKIP: dict[str, str] = {
     "imaging.sample_image_path": "takes no argument (returns the path of a bundled image)",

@@ -25,6 +25,7 @@ _SUBMODULES = (
     "run",
     "boxes",
     "coco",
+    "detection_data",
 )
 
 __all__ = list(_SUBMODULES)

@@ -48,7 +48,10 @@ from robopercept._checks import (
     check_int,
     check_magnitude,
     check_ndim,
+    check_numeric,
     check_real,
+    check_size,
+    plain_repr,
 )
 from robopercept.errors import FileFormatError, InputError
 from robopercept.imaging.io import read_image
@@ -57,6 +60,7 @@ from robopercept.nn.training import Normalize
 
 __all__ = [
     "IMAGE_EXTENSIONS",
+    "SHAPES",
     "ArrayDataset",
     "ColorJitter",
     "Compose",
@@ -69,6 +73,7 @@ __all__ = [
     "load_digits",
     "load_lfw_subset",
     "normalization_stats",
+    "shape_masks",
     "shapes_dataset",
     "stratified_split",
     "to_unit_float",
@@ -476,6 +481,98 @@ def _resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return out[0].numpy()
 
 
+#: the shape classes of :func:`shapes_dataset` and :func:`shape_masks`, in label order
+SHAPES = ("circle", "square", "triangle", "cross")
+
+
+def shape_masks(
+    kinds: npt.ArrayLike,
+    cx: npt.ArrayLike,
+    cy: npt.ArrayLike,
+    r: npt.ArrayLike,
+    phi: npt.ArrayLike,
+    size: tuple[int, int],
+) -> np.ndarray:
+    """Rasterize rotated shapes of :data:`SHAPES`, one per row: the masks of
+    :func:`shapes_dataset`.
+
+    Pixel ``p`` (its centre, ``(col + 0.5, row + 0.5)`` with edges on integers) is in
+    shape ``i`` when, with ``q = R(-phi_i) (p - c_i)`` and ``r = r_i``:
+
+    - circle (kind 0): ``|q| <= r``;
+    - square (1): ``max(|q_x|, |q_y|) <= r / sqrt(2)``;
+    - triangle (2): equilateral, vertices ``r (cos a_k, sin a_k)``,
+      ``a_k = 2 pi k / 3 - pi/2``, ``q`` on the inner side of its three edges;
+    - cross (3): ``min(|q_x|, |q_y|) <= r / 4`` and ``max(|q_x|, |q_y|) <= r``.
+
+    Parameters
+    ----------
+    kinds : (N,) int array_like
+        Index into :data:`SHAPES` of each shape.
+    cx, cy, r, phi : (N,) float array_like
+        Centres, radii (> 0) and rotations (radians).
+    size : (int, int)
+        ``(width, height)`` of the masks.
+
+    Returns
+    -------
+    (N, H, W) bool ndarray
+
+    Examples
+    --------
+    >>> m = shape_masks([1], [4.0], [4.0], [2 * 2**0.5], [0.0], (8, 8))
+    >>> int(m.sum()), m[0, 2:6, 2:6].all()
+    (16, np.True_)
+    """
+    kf = check_finite(check_numeric(kinds, "kinds"), "kinds").reshape(-1)
+    if np.any((kf < 0) | (kf > len(SHAPES) - 1) | (kf != np.floor(kf))):
+        raise InputError(
+            f"kinds must be integers in [0, {len(SHAPES) - 1}] (indices into {SHAPES}); "
+            f"got {plain_repr(kinds)}"
+        )
+    k = kf.astype(np.int64)
+    rows = []
+    for name, v in (("cx", cx), ("cy", cy), ("r", r), ("phi", phi)):
+        arr = check_finite(check_numeric(v, name), name).astype(np.float64).reshape(-1)
+        if arr.shape != k.shape:
+            raise InputError(f"{name} must have one value per shape ({k.size}); got {arr.size}")
+        rows.append(check_magnitude(arr, name, 1e100))
+    cx_, cy_, r_, phi_ = rows
+    if np.any(r_ <= 0):
+        raise InputError(f"r must be > 0; got {plain_repr(r)}")
+    w, h = check_size(size, "size", max_pixels=1 << 26)
+    check_allocation(k.size * w * h, 100, f"{k.size} masks of {w} x {h}", "lower N or size")
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+    dx = xx[None] - cx_[:, None, None]
+    dy = yy[None] - cy_[:, None, None]
+    cos, sin = np.cos(phi_)[:, None, None], np.sin(phi_)[:, None, None]
+    qx = cos * dx + sin * dy
+    qy = -sin * dx + cos * dy
+    rr = r_[:, None, None]
+    ax, ay = np.abs(qx), np.abs(qy)
+    out = np.zeros((k.size, h, w), dtype=bool)
+    sel = k == 0
+    out[sel] = (qx**2 + qy**2 <= rr**2)[sel]
+    sel = k == 1
+    out[sel] = (np.maximum(ax, ay) <= rr / np.sqrt(2))[sel]
+    sel = k == 2
+    if sel.any():
+        inside = np.ones((int(sel.sum()), h, w), dtype=bool)
+        qxs, qys, rrs = qx[sel], qy[sel], rr[sel]
+        for j in range(3):
+            a = 2 * np.pi * j / 3 - np.pi / 2
+            b = 2 * np.pi * (j + 1) / 3 - np.pi / 2
+            # edge from vertex a to vertex b; the centre (origin) is on its inner side
+            ex, ey = np.cos(b) - np.cos(a), np.sin(b) - np.sin(a)
+            cross_p = ex * (qys / rrs - np.sin(a)) - ey * (qxs / rrs - np.cos(a))
+            cross_0 = ex * (0 - np.sin(a)) - ey * (0 - np.cos(a))
+            inside &= cross_p * np.sign(cross_0) >= 0
+        out[sel] = inside
+    sel = k == 3
+    out[sel] = ((np.minimum(ax, ay) <= rr / 4) & (np.maximum(ax, ay) <= rr))[sel]
+    return out
+
+
 def shapes_dataset(
     n: int,
     size: int = 32,
@@ -539,33 +636,11 @@ def shapes_dataset(
     phi = gen.uniform(0, 2 * np.pi, n)
     bg = gen.uniform(0.0, 0.4, n)
     fg = gen.uniform(0.6, 1.0, n)
-    yy, xx = np.mgrid[0:size, 0:size].astype(np.float64) + 0.5
-    dx = xx[None] - cx[:, None, None]
-    dy = yy[None] - cy[:, None, None]
-    cos, sin = np.cos(phi)[:, None, None], np.sin(phi)[:, None, None]
-    qx = cos * dx + sin * dy
-    qy = -sin * dx + cos * dy
-    rr = r[:, None, None]
-    ax, ay = np.abs(qx), np.abs(qy)
-    masks = np.empty((4, n, size, size), dtype=bool)
-    masks[0] = qx**2 + qy**2 <= rr**2
-    masks[1] = np.maximum(ax, ay) <= rr / np.sqrt(2)
-    inside = np.ones((n, size, size), dtype=bool)
-    for k in range(3):
-        a = 2 * np.pi * k / 3 - np.pi / 2
-        b = 2 * np.pi * (k + 1) / 3 - np.pi / 2
-        # edge from vertex a to vertex b; the centre (origin) is on its inner side
-        ex, ey = np.cos(b) - np.cos(a), np.sin(b) - np.sin(a)
-        cross_p = ex * (qy / rr - np.sin(a)) - ey * (qx / rr - np.cos(a))
-        cross_0 = ex * (0 - np.sin(a)) - ey * (0 - np.cos(a))
-        inside &= cross_p * np.sign(cross_0) >= 0
-    masks[2] = inside
-    masks[3] = (np.minimum(ax, ay) <= rr / 4) & (np.maximum(ax, ay) <= rr)
-    mask = masks[labels, np.arange(n)]
+    mask = shape_masks(labels, cx, cy, r, phi, (size, size))
     images = np.where(mask, fg[:, None, None], bg[:, None, None])
     images = images + noise * gen.standard_normal(images.shape)
     images = np.clip(images, 0.0, 1.0).astype(np.float32)[:, None]
-    return ArrayDataset(images, labels, ("circle", "square", "triangle", "cross"), transform)
+    return ArrayDataset(images, labels, SHAPES, transform)
 
 
 # --------------------------------------------------------------------------- splits and stats
