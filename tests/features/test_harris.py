@@ -191,6 +191,9 @@ def test_flat_image_and_bad_input():
         harris_response(np.zeros((3, 20, 20)))
     with pytest.raises(InputError, match="at least"):
         refine_corners(np.zeros((8, 8)), [[4.0, 4.0]], 5)
+    # issue 25 (long fuzz campaign): an OverflowError from the int64 kernel argument
+    with pytest.raises(InputError, match=r"max_iter must be at most 2\*\*31 - 1"):
+        refine_corners(img, [[13.0, 15.0]], 4, max_iter=2**63)
     with pytest.raises(InputError, match=r"\(N, 2\)"):
         refine_corners(img, [1.0, 2.0, 3.0])
 

@@ -9,7 +9,7 @@ robopercept, see :class:`Sandbox`) and sends it one call at a time over a pipe:
 - it raises a :class:`robopercept.errors.RoboperceptError`: ``"typed"`` (the contract
   holds: a typed error whose message names the fix);
 - it raises ``MemoryError`` (the worker's address space is capped with ``RLIMIT_AS`` at
-  its size when it started plus ``memory_mb``): ``"memory"``;
+  its size before the call plus ``memory_mb``): ``"memory"``;
 - it raises anything else: ``"untyped"``;
 - the worker dies (SIGSEGV, SIGABRT, ``os._exit``): ``"crash"``, and a new worker is
   forked for the next call;
@@ -232,6 +232,22 @@ def _call(target: Any, args: tuple, kwargs: dict) -> Outcome:
     return Outcome(kind, error, message, seconds, peak, rss, where, nbytes)
 
 
+def _limit_address_space(memory_mb: float) -> None:
+    """Cap the worker's address space at its size now plus ``memory_mb`` (set before
+    every call: a long-lived worker's size grows with every kernel compiled and every
+    module imported, and a cap set once at start left later calls too little headroom:
+    a 24 MB array or LLVM's compile of a new signature then failed, and the campaign
+    blamed the call)."""
+    size_kib = _proc_status_kib("VmSize")
+    if size_kib is None or memory_mb <= 0:
+        return
+    limit = int(size_kib * 1024 + memory_mb * _MIB)
+    _, hard = resource.getrlimit(resource.RLIMIT_AS)
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+
+
 def _worker(conn: Any, log_path: str, memory_mb: float) -> None:
     """The worker's loop: receive ``(target, args, kwargs)``, send an :class:`Outcome`;
     ``None`` ends it."""
@@ -243,14 +259,8 @@ def _worker(conn: Any, log_path: str, memory_mb: float) -> None:
     faulthandler.enable(file=log)  # pytest's faulthandler writes to its own copy of fd 2
     warnings.simplefilter("ignore")  # a reader's warning is not an error here
     signal.signal(signal.SIGINT, signal.SIG_DFL)
-    size_kib = _proc_status_kib("VmSize")
-    if size_kib is not None and memory_mb > 0:
-        limit = int(size_kib * 1024 + memory_mb * _MIB)
-        _, hard = resource.getrlimit(resource.RLIMIT_AS)
-        if hard != resource.RLIM_INFINITY:
-            limit = min(limit, hard)
-        resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
     while True:
+        _limit_address_space(memory_mb)
         try:
             raw = conn.recv_bytes()
         except (EOFError, OSError):
@@ -299,7 +309,7 @@ class Sandbox:
     timeout : float
         Seconds a call may take before it is killed and counted as ``"hang"``.
     memory_mb : float
-        Address space the worker may add to its size at start (``RLIMIT_AS``), MiB;
+        Address space one call may add to the worker's size (``RLIMIT_AS``), MiB;
         beyond it allocations fail with ``MemoryError`` (kind ``"memory"``).
 
     Attributes

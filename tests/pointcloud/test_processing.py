@@ -409,6 +409,9 @@ def test_point_cloud_container():
         (lambda c: statistical_outlier_removal(c, 5, [1, 2]), "std_ratio must be a real"),
         (lambda c: pass_through(c, "z", "0", 1.0), "min_value must be a real number"),
         (lambda c: euclidean_clusters(c, 1 + 1j), "tolerance must be a real number"),
+        # issue 25 (long fuzz campaign): SciPy's k-d tree raised an untyped ValueError
+        (lambda c: euclidean_clusters(PointCloud(c.points * 1e300), 0.1), "rescale your data"),
+        (lambda c: euclidean_clusters(c, 1e200), "tolerance"),
         (lambda c: estimate_normals(c, radius=True), "radius must be a real number"),
         (lambda c: estimate_normals(c, 5, viewpoint=(0, [1, 2], 0)), "viewpoint must be 3"),
     ],

@@ -779,6 +779,8 @@ def refine_corners(
             f"{2 * hw + 5}x{2 * hh + 5}; got {gray.shape[1]}x{gray.shape[0]}"
         )
     max_iter = check_int(max_iter, "max_iter", 1)
+    if max_iter > 2**31 - 1:  # the kernel counts in int64; OpenCV's maxCount is an int
+        raise InputError(f"max_iter must be at most 2**31 - 1; got {max_iter}")
     eps = check_range(eps, "eps", 0.0)
     ry = np.arange(-hh, hh + 1) / hh
     rx = np.arange(-hw, hw + 1) / hw

@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from robopercept._checks import check_int, check_real
+from robopercept._checks import check_int, check_magnitude, check_real
 from robopercept.errors import InputError
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
@@ -80,7 +80,9 @@ def euclidean_clusters(
         point), ``-1`` for rejected clusters and non-finite points.
     """
     check_cloud(cloud)
-    tol = check_real(tolerance, "tolerance", 0.0, low_inclusive=False)
+    # the k-d tree squares coordinate differences: 1e150 keeps them below float64's max
+    check_magnitude(cloud.points, "cloud.points", 1e150)
+    tol = check_real(tolerance, "tolerance", 0.0, 1e150, low_inclusive=False)
     min_size = check_int(min_size, "min_size", 1)
     max_size = max(len(cloud), 1) if max_size is None else check_int(max_size, "max_size", 1)
     if max_size < min_size:
