@@ -19,6 +19,7 @@ BENCHMARKS = {
     "calibration": "benchmarks.calibration",
     "detection": "benchmarks.detection",
     "coco_eval": "benchmarks.coco_eval",
+    "proposals": "benchmarks.proposals",
 }
 
 

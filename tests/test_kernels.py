@@ -307,6 +307,7 @@ def _imaging_cases() -> list[Case]:
 def _features_cases() -> list[Case]:
     from robopercept.features import harris_corners, hog, knn_match, refine_corners, sift
     from robopercept.features.hog import cell_histograms, hog_windows
+    from robopercept.imaging.segmentation import felzenszwalb
 
     rng = np.random.default_rng(3)
     bits_q = rng.integers(0, 256, (40, 32), dtype=np.uint8)
@@ -332,6 +333,7 @@ def _features_cases() -> list[Case]:
         ),
         Case("knn_hamming", lambda: knn_match(bits_q, bits_t, 2, metric="hamming")),
         Case("sift", lambda: sift(big, contrast_threshold=0.01)),
+        Case("felzenszwalb", lambda: felzenszwalb(RGB_U8, scale=50, min_size=5)),
     ]
 
 

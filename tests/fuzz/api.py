@@ -2036,3 +2036,14 @@ def run_api_campaign(
             log(f"api round {round_}: {n} inputs, {time.monotonic() - start:.0f} s")
     return list(tallies.values()), skipped, broken
 
+
+# imaging.segmentation and features.selective_search (issue 26, item 2)
+VALID.update(
+    {
+        "imaging.felzenszwalb": {"image": IMG_RGB, "scale": 50.0},
+        "imaging.grid_edges": {"shape": (4, 5)},
+        "features.hierarchical_grouping": {"image": IMG_RGB, "labels": LABELS},
+        "features.selective_search": {"image": IMG_RGB, "rng": 0},
+    }
+)
+

@@ -11,10 +11,16 @@ from robopercept.features.harris import (
 from robopercept.features.hog import cell_histograms, hog, hog_windows
 from robopercept.features.keypoints import Keypoints
 from robopercept.features.matching import Matches, knn_match, match_descriptors
+from robopercept.features.selective_search import (
+    SIMILARITIES,
+    hierarchical_grouping,
+    selective_search,
+)
 from robopercept.features.sift import Features, sift
 from robopercept.features.stitching import ImageMatch, Panorama, match_images, stitch
 
 __all__ = [
+    "SIMILARITIES",
     "Features",
     "ImageMatch",
     "Keypoints",
@@ -23,6 +29,7 @@ __all__ = [
     "cell_histograms",
     "harris_corners",
     "harris_response",
+    "hierarchical_grouping",
     "hog",
     "hog_windows",
     "knn_match",
@@ -30,6 +37,7 @@ __all__ = [
     "match_images",
     "min_eigenvalue",
     "refine_corners",
+    "selective_search",
     "sift",
     "stitch",
     "structure_tensor",

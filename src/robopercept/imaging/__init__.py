@@ -37,6 +37,7 @@ from robopercept.imaging.io import (
 )
 from robopercept.imaging.morphology import closing, dilate, erode, opening, structuring_element
 from robopercept.imaging.pyramids import gaussian_pyramid, pyr_down
+from robopercept.imaging.segmentation import felzenszwalb, grid_edges
 from robopercept.imaging.warp import remap, transform_points, warp_perspective
 
 __all__ = [
@@ -57,12 +58,14 @@ __all__ = [
     "derivative_kernel",
     "dilate",
     "erode",
+    "felzenszwalb",
     "gaussian_blur",
     "gaussian_kernel",
     "gaussian_ksize",
     "gaussian_pyramid",
     "gradient",
     "gray_255",
+    "grid_edges",
     "hsv_range_mask",
     "hsv_to_rgb",
     "label_components",
