@@ -2047,3 +2047,75 @@ VALID.update(
     }
 )
 
+
+# nn.detection (issue 26): tiny detectors, a batch of two images with their targets
+def detector_value(kind: str) -> Any:
+    """A valid nn.detection value: a tiny ``fcos`` / ``faster`` / ``fast`` /
+    ``localizer`` model (seeded), ``images`` (two 3 x 16 x 16 tensors) or ``targets``
+    (one box each)."""
+    import torch
+
+    from robopercept.nn import detection as det
+
+    torch.manual_seed(0)
+    if kind == "images":
+        return [torch_image(3, 16, 16), torch_image(3, 16, 24)]
+    if kind == "targets":
+        return [
+            {"boxes": torch.tensor([[1.0, 2.0, 9.0, 12.0]]), "labels": torch.tensor([1])},
+            {"boxes": torch.tensor([[4.0, 0.0, 20.0, 10.0]]), "labels": torch.tensor([2])},
+        ]
+    if kind == "fcos":
+        return det.FCOS(2, width=4, head_channels=8)
+    if kind == "faster":
+        return det.FasterRCNN(2, width=4, hidden=8)
+    if kind == "fast":
+        return det.FastRCNN(2, width=4, hidden=8)
+    return det.SingleObjectLocalizer(2, width=4)
+
+
+_DIMAGES = _b("tests.fuzz.api:detector_value", "images")
+_DTARGETS = _b("tests.fuzz.api:detector_value", "targets")
+_DPROPS = _b("tests.fuzz.api:torch_tensor", [[0.0, 0.0, 8.0, 8.0], [2.0, 2.0, 14.0, 12.0]])
+VALID.update(
+    {
+        "nn.training.resolve_device": {"name": "cpu"},
+        "nn.detection.FPN": {"in_channels": [4, 8], "out_channels": 4},
+        "nn.detection.DetectionBackbone": {"width": 4, "strides": (8, 16)},
+        "nn.detection.SingleObjectLocalizer": {"num_classes": 2, "width": 4},
+        "nn.detection.FastRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
+        "nn.detection.FasterRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
+        "nn.detection.FCOS": {"num_classes": 2, "width": 4, "head_channels": 8},
+        "nn.detection.FCOS.forward": {"images": _DIMAGES, "targets": _DTARGETS},
+        "nn.detection.FasterRCNN.forward": {"images": _DIMAGES, "targets": _DTARGETS},
+        "nn.detection.FastRCNN.forward": {
+            "images": _DIMAGES,
+            "targets": _DTARGETS,
+            "proposals": [_DPROPS, _DPROPS],
+        },
+        "nn.detection.SingleObjectLocalizer.forward": {"images": _DIMAGES, "targets": _DTARGETS},
+        "nn.detection.match_boxes": {
+            "iou": _b("tests.fuzz.api:torch_tensor", [[0.9, 0.2, 0.5]]),
+            "fg_threshold": 0.7,
+            "bg_threshold": 0.3,
+        },
+        "nn.detection.sample_balanced": {
+            "labels": _b("tests.fuzz.api:torch_tensor", [1, 0, -1, 0], "int64"),
+            "batch_size": 2,
+            "positive_fraction": 0.5,
+        },
+        "nn.detection.sigmoid_focal_loss": {"inputs": TSCORES, "targets": TSCORES},
+        "nn.detection.train_detector": {
+            "model": _b("tests.fuzz.api:detector_value", "fcos"),
+            "dataset": _DDS,
+            "config": TRAIN_CFG,
+            "progress": False,
+        },
+        "nn.detection.evaluate_detector": {
+            "model": _b("tests.fuzz.api:detector_value", "fcos"),
+            "dataset": _DDS,
+        },
+    }
+)
+for _cls in ("FCOS", "FasterRCNN", "FastRCNN", "SingleObjectLocalizer"):
+    METHODS[f"nn.detection.{_cls}"] = ("forward",)

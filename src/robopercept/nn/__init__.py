@@ -26,6 +26,7 @@ _SUBMODULES = (
     "boxes",
     "coco",
     "detection_data",
+    "detection",
 )
 
 __all__ = list(_SUBMODULES)

@@ -61,9 +61,11 @@ __all__ = [
     "History",
     "Normalize",
     "TrainConfig",
+    "deterministic_algorithms",
     "evaluate",
     "fit",
     "load_checkpoint",
+    "resolve_device",
     "save_checkpoint",
 ]
 
@@ -354,7 +356,20 @@ class Evaluation:
         return confusion_matrix(self.y_true, self.y_pred, labels=np.arange(k))
 
 
-def _device(name: str | torch.device | None) -> torch.device:
+def resolve_device(name: str | torch.device | None) -> torch.device:
+    """The torch device a run uses: ``name`` checked, or, for None, CUDA when
+    available, else the CPU (what :func:`fit` and the detectors' trainer do).
+
+    Raises
+    ------
+    InputError
+        A name torch does not know (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ...).
+
+    Examples
+    --------
+    >>> resolve_device("cpu")
+    device(type='cpu')
+    """
     dev = check_device(name, "device (--device)")
     if dev is None:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -372,7 +387,17 @@ def _check_batch(x: torch.Tensor, y: torch.Tensor, n_classes: int) -> None:
 
 
 @contextlib.contextmanager
-def _deterministic() -> Iterator[None]:
+def deterministic_algorithms() -> Iterator[None]:
+    """Within the block, torch uses deterministic algorithms only
+    (``torch.use_deterministic_algorithms(True, warn_only=True)``), restored after:
+    the same seed and thread count give bit-identical training runs on the CPU.
+
+    Examples
+    --------
+    >>> with deterministic_algorithms():
+    ...     torch.are_deterministic_algorithms_enabled()
+    True
+    """
     before = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(True, warn_only=True)
     try:
@@ -425,7 +450,7 @@ def evaluate(
     model = check_module(model)
     data = check_dataset(data, "data")
     batch_size = check_count(batch_size, "batch_size", 1, 2**31)
-    dev = _device(device)
+    dev = resolve_device(device)
     model = model.to(dev)
     was = model.training
     model.eval()
@@ -597,7 +622,7 @@ def fit(
         raise InputError(f"architecture must be a str; got {architecture!r}")
     if resume and checkpoint is None:
         raise InputError("resume needs the checkpoint to resume from")
-    dev = _device(cfg.device)
+    dev = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
     model.to(dev)
     x0, _ = train[0]
@@ -638,7 +663,7 @@ def fit(
         total=cfg.epochs - start_epoch, desc="training", unit="epoch", disable=not progress
     )
     try:
-        with _deterministic():
+        with deterministic_algorithms():
             for epoch in range(start_epoch, cfg.epochs):
                 t0 = time.perf_counter()
                 for prefix in (cfg.unfreeze_at or {}).get(epoch + 1, []):

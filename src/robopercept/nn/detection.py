@@ -1,0 +1,1778 @@
+r"""Object detectors in pure torch: single-object localisation, Fast R-CNN, Faster
+R-CNN and FCOS, on small backbones built from :mod:`robopercept.nn.blocks`.
+
+Every detector keeps torchvision's detection-model contract:
+``model(images, targets=None)`` with ``images`` a list of ``(3, H, W)`` float tensors
+in [0, 1] (sizes may differ: they are zero-padded to one batch whose sides are
+multiples of the largest stride) and ``targets`` a list of dicts with ``"boxes"``
+(``(K, 4)`` float ``"xyxy"`` pixels) and ``"labels"`` (``(K,)`` int64, 1-based; 0 is
+the background). In train mode the call returns a dict of scalar losses, in eval mode
+a list of ``{"boxes": (D, 4), "labels": (D,), "scores": (D,)}``, one per image, boxes
+in the input image's pixels. The input normalization
+:math:`(x - \mu) / \sigma` (ImageNet's mean and std) happens inside the model.
+
+The detectors (the course's object-detection chapter):
+
+- :class:`SingleObjectLocalizer`: one object per image. Backbone, global average
+  pooling, a classification head (``num_classes`` logits) and a box head giving the box
+  as **normalized cxcywh** (centre and size divided by the image's width and height,
+  in [0, 1] through a sigmoid). Loss
+  :math:`L = \mathrm{CE}(p, y) + \lambda\,\mathrm{smoothL1}_\beta(\hat b, b)`.
+- :class:`FastRCNN` (Girshick 2015): shared backbone, **external** proposals per image
+  (``proposal_fn``, e.g. selective search; the ground-truth boxes are added to them in
+  training), RoI max pooling (:func:`~robopercept.nn.boxes.roi_pool`) and a per-region
+  head (class logits and class-specific deltas, :class:`~robopercept.nn.boxes.BoxCoder`
+  weights (10, 10, 5, 5)). Training samples 25 % foreground regions (IoU >= 0.5 with a
+  ground-truth box) and background ones (IoU in [0.1, 0.5)), as the paper.
+- :class:`FasterRCNN` (Ren et al. 2015): a region proposal network (3 x 3 conv,
+  objectness logit and deltas per anchor of
+  :class:`~robopercept.nn.boxes.AnchorGenerator`), anchors labelled positive at
+  IoU >= 0.7 (and the best anchor of each ground-truth box, even below), negative
+  below 0.3, 256 sampled per image, half positive; proposals by decoding, clipping,
+  removing small boxes and NMS (top-k before and after, fewer in eval); RoI Align
+  (:func:`~robopercept.nn.boxes.roi_align`) and the per-region head of Fast R-CNN.
+  The four losses are reported separately under torchvision's names:
+  ``loss_rpn_objectness``, ``loss_rpn_box``, ``loss_classifier``, ``loss_box``.
+- :class:`FCOS` (Tian et al. 2019), the single-stage detector. **Why FCOS** rather
+  than an anchor-based RetinaNet: it has no anchor sizes or ratios to tune (each
+  feature-map location inside a ground-truth box's centre region regresses its
+  distances to the four sides), which suits small objects of varying shape such as the
+  tree crowns of :func:`~robopercept.nn.detection_data.deepforest_tiles`, and it is the
+  single-stage detector of the notes. Per location: classification with the sigmoid
+  focal loss (:func:`sigmoid_focal_loss`), ``ltrb`` regression (divided by the
+  level's stride) with the GIoU loss, and centerness with binary cross-entropy;
+  losses ``classification``, ``bbox_regression``, ``bbox_ctrness`` (torchvision's).
+
+Shared training pieces, public and tested by hand: :func:`match_boxes` (IoU
+thresholds with ignored bands and low-quality matches) and :func:`sample_balanced`
+(a fixed number of examples with a cap on the positive fraction). Conventions follow
+torchvision's ``models.detection`` (looked up, not imported: torchvision is not a
+dependency); smooth-L1 with :math:`\beta = 1/9` summed and divided by the number of
+sampled examples, as there.
+
+Determinism: sampling draws from torch's global generator, so a run seeded by
+:func:`train_detector` (``TrainConfig.seed``) gives identical losses and weights on the
+CPU for the same thread count. Models run on CUDA when moved there (``config.device``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from robopercept._checks import as_path, check_bool, check_int, check_real, plain_repr
+from robopercept.errors import InputError
+from robopercept.nn._guards import check_count, check_module
+from robopercept.nn.blocks import ConvBNAct, ResidualBlock
+from robopercept.nn.boxes import (
+    AnchorGenerator,
+    BoxCoder,
+    batched_nms,
+    box_convert,
+    box_iou,
+    generalized_box_iou,
+    nms,
+    roi_align,
+    roi_pool,
+)
+
+__all__ = [
+    "FCOS",
+    "FPN",
+    "DetectionBackbone",
+    "DetectionHistory",
+    "FastRCNN",
+    "FasterRCNN",
+    "SingleObjectLocalizer",
+    "evaluate_detector",
+    "match_boxes",
+    "sample_balanced",
+    "sigmoid_focal_loss",
+    "train_detector",
+]
+
+#: ImageNet mean and std: the normalization inside every detector
+IMAGE_MEAN = (0.485, 0.456, 0.406)
+IMAGE_STD = (0.229, 0.224, 0.225)
+
+_STRIDES = (4, 8, 16, 32)
+
+
+# --------------------------------------------------------------------------- backbone
+class FPN(nn.Module):
+    r"""Feature pyramid network (Lin et al. 2017): lateral 1 x 1 convolutions to
+    ``out_channels``, a top-down pathway adding the nearest-upsampled coarser level,
+    and a 3 x 3 convolution on each sum: :math:`P_l = \mathrm{conv}_{3}(\mathrm{lat}(C_l)
+    + \mathrm{up}(P'_{l+1}))`.
+
+    Parameters
+    ----------
+    in_channels : sequence of int
+        Channels of the input maps, finest first.
+    out_channels : int
+
+    Examples
+    --------
+    >>> import torch
+    >>> fpn = FPN([8, 16], 12)
+    >>> [tuple(p.shape) for p in fpn([torch.zeros(1, 8, 8, 8), torch.zeros(1, 16, 4, 4)])]
+    [(1, 12, 8, 8), (1, 12, 4, 4)]
+    """
+
+    def __init__(self, in_channels: Sequence[int], out_channels: int) -> None:
+        super().__init__()
+        if not isinstance(in_channels, (list, tuple)) or not in_channels:
+            raise InputError(
+                f"in_channels must be a non-empty list of ints; got {plain_repr(in_channels)}"
+            )
+        chans = [check_count(c, "in_channels", 1, 1 << 16) for c in in_channels]
+        out_channels = check_count(out_channels, "out_channels", 1, 1 << 16)
+        self.lateral = nn.ModuleList(nn.Conv2d(c, out_channels, 1) for c in chans)
+        self.output = nn.ModuleList(
+            nn.Conv2d(out_channels, out_channels, 3, padding=1) for _ in chans
+        )
+        self.out_channels = out_channels
+
+    def forward(self, features: list[torch.Tensor]) -> list[torch.Tensor]:
+        if not isinstance(features, (list, tuple)) or len(features) != len(self.lateral):
+            raise InputError(
+                f"features must be a list of {len(self.lateral)} (N, C, H, W) maps, finest "
+                f"first; got {plain_repr(features)}"
+            )
+        inner = self.lateral[-1](features[-1])
+        out = [self.output[-1](inner)]
+        for i in range(len(features) - 2, -1, -1):
+            lat = self.lateral[i](features[i])
+            inner = lat + F.interpolate(inner, size=lat.shape[-2:], mode="nearest")
+            out.insert(0, self.output[i](inner))
+        return out
+
+
+class DetectionBackbone(nn.Module):
+    """A small ResNet-style feature extractor from the foundation's blocks, with an
+    optional :class:`FPN`.
+
+    Layout: a stride-2 3 x 3 :class:`~robopercept.nn.blocks.ConvBNAct` stem of ``width``
+    channels and a :class:`~robopercept.nn.blocks.ResidualBlock`, then one stride-2
+    residual block per further stride (4, 8, 16, 32), doubling the channels up to
+    ``8 width``. The maps at ``strides`` are returned, finest first (through the FPN
+    when ``fpn_channels`` is given).
+
+    Parameters
+    ----------
+    width : int
+        Channels of the stem.
+    strides : sequence of int
+        Output strides, increasing, from {4, 8, 16, 32}.
+    fpn_channels : int, optional
+        Build an FPN with this many channels on the outputs.
+
+    Attributes
+    ----------
+    out_channels : list of int
+        Channels of each output map.
+
+    Examples
+    --------
+    >>> import torch
+    >>> bb = DetectionBackbone(8, strides=(8, 16), fpn_channels=16)
+    >>> [tuple(f.shape) for f in bb(torch.zeros(1, 3, 64, 64))]
+    [(1, 16, 8, 8), (1, 16, 4, 4)]
+    """
+
+    def __init__(
+        self, width: int = 16, strides: Sequence[int] = (8,), fpn_channels: int | None = None
+    ) -> None:
+        super().__init__()
+        width = check_count(width, "width", 1, 1024)
+        if (
+            not isinstance(strides, (list, tuple))
+            or not strides
+            or any(s not in _STRIDES for s in strides)
+            or list(strides) != sorted(set(strides))
+        ):
+            raise InputError(
+                f"strides must be increasing values from {_STRIDES}, e.g. (8, 16); got "
+                f"{plain_repr(strides)}"
+            )
+        self.strides = tuple(int(s) for s in strides)
+        self.stem = nn.Sequential(ConvBNAct(3, width, 3, stride=2), ResidualBlock(width, width))
+        stages = []
+        chans = {2: width}
+        c = width
+        for s in _STRIDES:
+            if s > max(self.strides):
+                break
+            c_out = min(2 * c, 8 * width)
+            stages.append(ResidualBlock(c, c_out, stride=2))
+            c = c_out
+            chans[s] = c
+        self.stages = nn.ModuleList(stages)
+        channels = [chans[s] for s in self.strides]
+        self.fpn = FPN(channels, fpn_channels) if fpn_channels is not None else None
+        self.out_channels = [self.fpn.out_channels] * len(channels) if self.fpn else channels
+
+    def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
+        x = self.stem(x)
+        out = []
+        s = 2
+        for stage in self.stages:
+            x = stage(x)
+            s *= 2
+            if s in self.strides:
+                out.append(x)
+        return self.fpn(out) if self.fpn is not None else out
+
+
+# --------------------------------------------------------------------------- matching
+def match_boxes(
+    iou: torch.Tensor,
+    fg_threshold: float,
+    bg_threshold: float,
+    bg_low: float = 0.0,
+    allow_low_quality: bool = False,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    r"""Label each candidate (anchor or proposal) from its IoU with the ground truth.
+
+    With :math:`q_j = \max_i \mathrm{IoU}(g_i, c_j)`: label 1 (foreground) when
+    :math:`q_j \ge` ``fg_threshold``, 0 (background) when ``bg_low`` :math:`\le q_j <`
+    ``bg_threshold``, -1 (ignored) otherwise. With ``allow_low_quality``, every
+    candidate whose IoU with some :math:`g_i` equals that box's best IoU
+    :math:`\max_j \mathrm{IoU}(g_i, c_j) > 0` is foreground too (the Faster R-CNN RPN
+    rule: every ground-truth box gets at least one anchor), matched to that
+    :math:`g_i` (as torchvision's ``Matcher``). Without ground truth every candidate
+    with ``bg_low == 0`` is background.
+
+    Parameters
+    ----------
+    iou : (G, N) torch.Tensor
+        IoU of G ground-truth boxes (rows) with N candidates.
+    fg_threshold, bg_threshold : float
+        In [0, 1], ``bg_threshold <= fg_threshold``.
+    bg_low : float
+        Lowest IoU of a background candidate (0.1 in Fast R-CNN).
+    allow_low_quality : bool
+
+    Returns
+    -------
+    labels : (N,) int64 torch.Tensor
+        1, 0 or -1.
+    matched : (N,) int64 torch.Tensor
+        Index of the matched ground-truth box (0 where there is none).
+
+    Examples
+    --------
+    >>> import torch
+    >>> iou = torch.tensor([[0.9, 0.5, 0.2, 0.05]])
+    >>> match_boxes(iou, 0.7, 0.3)[0].tolist()
+    [1, -1, 0, 0]
+    >>> match_boxes(torch.tensor([[0.6, 0.2]]), 0.7, 0.3, allow_low_quality=True)[0].tolist()
+    [1, 0]
+    """
+    if not isinstance(iou, torch.Tensor) or iou.ndim != 2 or not iou.is_floating_point():
+        raise InputError(
+            "iou must be a (G, N) floating torch.Tensor (box_iou(gt, candidates)); got "
+            + plain_repr(iou)
+        )
+    if iou.numel() and not bool(torch.isfinite(iou).all()):
+        raise InputError("iou must be finite; got NaN or inf: check the boxes for NaN")
+    fg = check_real(fg_threshold, "fg_threshold", 0.0, 1.0)
+    bg = check_real(bg_threshold, "bg_threshold", 0.0, fg)
+    lo = check_real(bg_low, "bg_low", 0.0, bg)
+    low_q = check_bool(allow_low_quality, "allow_low_quality")
+    n = iou.shape[1]
+    if iou.shape[0] == 0:
+        labels = torch.full((n,), 0 if lo <= 0.0 else -1, dtype=torch.int64, device=iou.device)
+        return labels, torch.zeros(n, dtype=torch.int64, device=iou.device)
+    q, matched = iou.max(dim=0)
+    labels = torch.full((n,), -1, dtype=torch.int64, device=iou.device)
+    labels[(q >= lo) & (q < bg)] = 0
+    labels[q >= fg] = 1
+    if low_q and n:
+        best = iou.max(dim=1).values
+        g_idx, c_idx = torch.nonzero((iou == best[:, None]) & (best[:, None] > 0), as_tuple=True)
+        labels[c_idx] = 1
+        matched[c_idx] = g_idx
+    return labels, matched
+
+
+def sample_balanced(
+    labels: torch.Tensor, batch_size: int, positive_fraction: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    r"""Sample at most ``batch_size`` candidates with at most a ``positive_fraction`` of
+    positives: :math:`n_+ = \min(\#\{l = 1\}, \lfloor b f \rfloor)`,
+    :math:`n_- = \min(\#\{l = 0\}, b - n_+)`, each drawn uniformly without replacement
+    (torch's global generator: seed it with :func:`torch.manual_seed`); ignored (-1)
+    candidates are never drawn. torchvision's ``BalancedPositiveNegativeSampler``.
+
+    Parameters
+    ----------
+    labels : (N,) int torch.Tensor
+        1 positive, 0 negative, -1 ignored.
+    batch_size : int
+        >= 1 (256 anchors in the RPN, 512 or 128 regions in the head).
+    positive_fraction : float
+        In [0, 1] (0.5 in the RPN, 0.25 in the head).
+
+    Returns
+    -------
+    positive, negative : (N,) bool torch.Tensor
+        The sampled candidates.
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> pos, neg = sample_balanced(torch.tensor([1, 1, 1, 0, 0, 0, 0, -1]), 4, 0.25)
+    >>> int(pos.sum()), int(neg.sum()), bool(pos[7] or neg[7])
+    (1, 3, False)
+    """
+    if (
+        not isinstance(labels, torch.Tensor)
+        or labels.ndim != 1
+        or labels.is_floating_point()
+        or labels.is_complex()
+    ):
+        raise InputError(
+            "labels must be a (N,) integer torch.Tensor of 1 / 0 / -1; got " + plain_repr(labels)
+        )
+    b = check_int(batch_size, "batch_size", 1)
+    f = check_real(positive_fraction, "positive_fraction", 0.0, 1.0)
+    pos_idx = torch.nonzero(labels == 1).flatten()
+    neg_idx = torch.nonzero(labels == 0).flatten()
+    n_pos = min(pos_idx.numel(), int(b * f))
+    n_neg = min(neg_idx.numel(), b - n_pos)
+    pos_pick = pos_idx[torch.randperm(pos_idx.numel())[:n_pos].to(labels.device)]
+    neg_pick = neg_idx[torch.randperm(neg_idx.numel())[:n_neg].to(labels.device)]
+    pos = torch.zeros_like(labels, dtype=torch.bool)
+    neg = torch.zeros_like(labels, dtype=torch.bool)
+    pos[pos_pick] = True
+    neg[neg_pick] = True
+    return pos, neg
+
+
+def sigmoid_focal_loss(
+    inputs: torch.Tensor,
+    targets: torch.Tensor,
+    alpha: float = 0.25,
+    gamma: float = 2.0,
+    reduction: str = "none",
+) -> torch.Tensor:
+    r"""Focal loss (Lin et al. 2017, RetinaNet) on logits, per element:
+
+    .. math::
+        p_t = p y + (1 - p)(1 - y),\quad
+        \mathrm{FL} = -\alpha_t (1 - p_t)^\gamma \log p_t,\quad
+        \alpha_t = \alpha y + (1 - \alpha)(1 - y)
+
+    with :math:`p = \sigma(x)` (no :math:`\alpha_t` when ``alpha < 0``), the BCE term
+    computed stably from the logits. Matches torchvision's ``ops.sigmoid_focal_loss``.
+
+    Parameters
+    ----------
+    inputs : torch.Tensor
+        Logits, any shape.
+    targets : torch.Tensor
+        Same shape, in [0, 1].
+    alpha : float
+        In [0, 1], or negative for no weighting.
+    gamma : float
+        >= 0; 0 gives (alpha-weighted) binary cross-entropy.
+    reduction : {"none", "mean", "sum"}
+
+    Returns
+    -------
+    torch.Tensor
+
+    Examples
+    --------
+    >>> import torch
+    >>> round(float(sigmoid_focal_loss(torch.tensor([0.0]), torch.tensor([1.0]))), 6)
+    0.043322
+    """
+    if not isinstance(inputs, torch.Tensor) or not inputs.is_floating_point():
+        raise InputError(
+            f"inputs must be a floating torch.Tensor of logits; got {plain_repr(inputs)}"
+        )
+    if not isinstance(targets, torch.Tensor) or targets.shape != inputs.shape:
+        raise InputError(
+            f"targets must be a torch.Tensor of the shape of inputs {tuple(inputs.shape)}; got "
+            + plain_repr(targets)
+        )
+    a = check_real(alpha, "alpha", None, 1.0)
+    g = check_real(gamma, "gamma", 0.0, 1e3)
+    if reduction not in ("none", "mean", "sum"):
+        raise InputError(f"reduction must be 'none', 'mean' or 'sum'; got {plain_repr(reduction)}")
+    t = targets.to(inputs.dtype)
+    p = torch.sigmoid(inputs)
+    ce = F.binary_cross_entropy_with_logits(inputs, t, reduction="none")
+    p_t = p * t + (1 - p) * (1 - t)
+    loss = ce * (1 - p_t) ** g
+    if a >= 0:
+        loss = (a * t + (1 - a) * (1 - t)) * loss
+    if reduction == "mean":
+        return loss.mean()
+    if reduction == "sum":
+        return loss.sum()
+    return loss
+
+
+# --------------------------------------------------------------------------- inputs
+def _check_images(images: Any) -> list[torch.Tensor]:
+    if isinstance(images, torch.Tensor) and images.ndim == 4:
+        images = list(images)
+    if not isinstance(images, (list, tuple)) or not images:
+        raise InputError(
+            "images must be a non-empty list of (3, H, W) float tensors in [0, 1] (or a "
+            f"(N, 3, H, W) batch); got {plain_repr(images)}"
+        )
+    out = []
+    for i, im in enumerate(images):
+        if not isinstance(im, torch.Tensor):
+            raise InputError(
+                f"images[{i}] must be a (3, H, W) torch.Tensor; got {type(im).__name__}: "
+                "use torch.from_numpy(image.transpose(2, 0, 1))"
+            )
+        if im.ndim != 3 or im.shape[0] != 3:
+            fix = (
+                ": channels-last? use image.permute(2, 0, 1)"
+                if im.ndim == 3 and im.shape[-1] == 3
+                else ": give RGB images channels first"
+            )
+            raise InputError(f"images[{i}] must be (3, H, W); got {tuple(im.shape)}{fix}")
+        if not im.is_floating_point():
+            raise InputError(
+                f"images[{i}] must be floating point in [0, 1]; got {im.dtype}: use "
+                "image.float() / 255 for uint8"
+            )
+        if im.shape[1] < 1 or im.shape[2] < 1:
+            raise InputError(f"images[{i}] is empty: {tuple(im.shape)}")
+        if not bool(torch.isfinite(im).all()):
+            raise InputError(f"images[{i}] has NaN or inf pixels: replace them first")
+        out.append(im)
+    return out
+
+
+def _check_targets(
+    targets: Any, images: list[torch.Tensor], num_classes: int
+) -> list[dict[str, torch.Tensor]]:
+    if not isinstance(targets, (list, tuple)) or len(targets) != len(images):
+        raise InputError(
+            f"targets must be a list of {len(images)} dicts (one per image) with 'boxes' and "
+            f"'labels' in train mode; got {plain_repr(targets)}: call model.eval() to predict"
+        )
+    out = []
+    for i, t in enumerate(targets):
+        if not isinstance(t, Mapping) or "boxes" not in t or "labels" not in t:
+            raise InputError(
+                f"targets[{i}] must be a dict with 'boxes' and 'labels'; got {plain_repr(t)}"
+            )
+        b, lab = t["boxes"], t["labels"]
+        if (
+            not isinstance(b, torch.Tensor)
+            or not b.is_floating_point()
+            or b.ndim != 2
+            or b.shape[1] != 4
+        ):
+            raise InputError(
+                f"targets[{i}]['boxes'] must be a (K, 4) float torch.Tensor, xyxy pixels; got "
+                f"{plain_repr(b)}: use torch.as_tensor(boxes, dtype=torch.float32)"
+            )
+        if (
+            not isinstance(lab, torch.Tensor)
+            or lab.dtype != torch.int64
+            or lab.shape != (b.shape[0],)
+        ):
+            raise InputError(
+                f"targets[{i}]['labels'] must be a ({b.shape[0]},) int64 torch.Tensor; got "
+                f"{plain_repr(lab)}: use torch.as_tensor(labels, dtype=torch.int64)"
+            )
+        if b.numel():
+            if not bool(torch.isfinite(b).all()):
+                raise InputError(f"targets[{i}]['boxes'] has NaN or inf: drop those boxes")
+            if bool(((b[:, 2] <= b[:, 0]) | (b[:, 3] <= b[:, 1])).any()):
+                raise InputError(
+                    f"targets[{i}]['boxes'] has a degenerate box (x2 <= x1 or y2 <= y1): drop "
+                    "them, e.g. keep = (b[:, 2] > b[:, 0]) & (b[:, 3] > b[:, 1])"
+                )
+            if int(lab.min()) < 1 or int(lab.max()) > num_classes:
+                raise InputError(
+                    f"targets[{i}]['labels'] must be in 1..{num_classes} (0 is the background); "
+                    f"got {int(lab.min())}..{int(lab.max())}"
+                )
+        out.append({"boxes": b, "labels": lab})
+    return out
+
+
+def _clip(boxes: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    h, w = size
+    return torch.stack(
+        (
+            boxes[..., 0].clamp(0, w),
+            boxes[..., 1].clamp(0, h),
+            boxes[..., 2].clamp(0, w),
+            boxes[..., 3].clamp(0, h),
+        ),
+        dim=-1,
+    )
+
+
+def _empty_detections(device: torch.device) -> dict[str, torch.Tensor]:
+    return {
+        "boxes": torch.zeros((0, 4), device=device),
+        "labels": torch.zeros((0,), dtype=torch.int64, device=device),
+        "scores": torch.zeros((0,), device=device),
+    }
+
+
+class _Detector(nn.Module):
+    """Shared plumbing: input checks, normalization, padding to one batch."""
+
+    num_classes: int
+    size_divisible: int
+    mean: torch.Tensor
+    std: torch.Tensor
+
+    def _init_common(self, num_classes: int, size_divisible: int) -> None:
+        self.num_classes = check_count(num_classes, "num_classes", 1, 1 << 16)
+        self.size_divisible = size_divisible
+        self.register_buffer("mean", torch.tensor(IMAGE_MEAN).view(3, 1, 1), persistent=False)
+        self.register_buffer("std", torch.tensor(IMAGE_STD).view(3, 1, 1), persistent=False)
+
+    def _prepare(
+        self, images: Any, targets: Any
+    ) -> tuple[torch.Tensor, list[tuple[int, int]], list[dict[str, torch.Tensor]] | None]:
+        ims = _check_images(images)
+        tgts = None
+        if self.training:
+            if targets is None:
+                raise InputError(
+                    "targets are required in train mode (a list of dicts with 'boxes' and "
+                    "'labels'): pass them, or call model.eval() to predict"
+                )
+            tgts = _check_targets(targets, ims, self.num_classes)
+        elif targets is not None:
+            tgts = _check_targets(targets, ims, self.num_classes)
+        dev = self.mean.device
+        sizes = [(int(im.shape[1]), int(im.shape[2])) for im in ims]
+        d = self.size_divisible
+        hp = max(h for h, _ in sizes)
+        wp = max(w for _, w in sizes)
+        hp, wp = -(-hp // d) * d, -(-wp // d) * d
+        batch = torch.zeros((len(ims), 3, hp, wp), device=dev)
+        for i, im in enumerate(ims):
+            batch[i, :, : im.shape[1], : im.shape[2]] = (
+                im.to(dev, torch.float32) - self.mean
+            ) / self.std
+        if tgts is not None:
+            tgts = [{k: v.to(dev) for k, v in t.items()} for t in tgts]
+        return batch, sizes, tgts
+
+    def predict(self, images: Any) -> list[dict[str, torch.Tensor]]:
+        """Detections of ``images`` (eval mode, no gradients; the mode is restored)."""
+        was = self.training
+        self.eval()
+        try:
+            with torch.no_grad():
+                return self(images)
+        finally:
+            self.train(was)
+
+
+# --------------------------------------------------------------------------- (a) localizer
+class SingleObjectLocalizer(_Detector):
+    r"""Single-object localisation: a class and one box per image.
+
+    Backbone (:class:`DetectionBackbone`, stride 16), global average pooling, then a
+    linear classification head (``num_classes`` logits for labels 1..num_classes) and a
+    linear box head whose sigmoid gives the box as normalized ``cxcywh``:
+    :math:`(c_x / W, c_y / H, w / W, h / H)` of the (unpadded) image. Loss:
+
+    .. math:: L = \mathrm{CE}(z, y - 1) + \lambda\,\mathrm{smoothL1}_{\beta}(\hat b, b)
+
+    (smooth-L1 averaged over the 4 coordinates and the batch, :math:`\beta` = ``beta``).
+    Train mode returns ``{"loss_classifier", "loss_box"}`` (``loss_box`` already times
+    ``lam``); eval mode one detection per image (score = softmax probability of the
+    label). Each target must hold exactly one box.
+
+    Parameters
+    ----------
+    num_classes : int
+    width : int
+        Backbone width.
+    lam : float
+        :math:`\lambda`, >= 0.
+    beta : float
+        Smooth-L1 transition, > 0 (in normalized units).
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> m = SingleObjectLocalizer(3, width=8).eval()
+    >>> out = m([torch.rand(3, 32, 48)])
+    >>> tuple(out[0]["boxes"].shape), tuple(out[0]["labels"].shape)
+    ((1, 4), (1,))
+    """
+
+    def __init__(
+        self, num_classes: int, width: int = 16, lam: float = 1.0, beta: float = 0.05
+    ) -> None:
+        super().__init__()
+        self._init_common(num_classes, 16)
+        self.lam = check_real(lam, "lam", 0.0)
+        self.beta = check_real(beta, "beta", 0.0, low_inclusive=False)
+        self.backbone = DetectionBackbone(width, strides=(16,))
+        c = self.backbone.out_channels[-1]
+        self.classifier = nn.Linear(c, self.num_classes)
+        self.box_head = nn.Sequential(nn.Linear(c, c), nn.ReLU(), nn.Linear(c, 4))
+
+    def forward(
+        self, images: Any, targets: Any = None
+    ) -> dict[str, torch.Tensor] | list[dict[str, torch.Tensor]]:
+        """Losses (train mode) or detections (eval mode) of ``images``.
+
+        Parameters
+        ----------
+        images : list of (3, H, W) float torch.Tensor, or (N, 3, H, W)
+            RGB in [0, 1]; sizes may differ.
+        targets : list of dict, optional
+            ``"boxes"`` (K, 4) float ``"xyxy"`` and ``"labels"`` (K,) int64 in
+            1..num_classes; required in train mode.
+
+        Returns
+        -------
+        dict of str to scalar torch.Tensor (train) or list of dict (eval)
+            The losses, or ``{"boxes": (D, 4), "labels": (D,), "scores": (D,)}`` per image.
+
+        Raises
+        ------
+        InputError
+            Images not (3, H, W) floating point and finite; missing targets in train
+            mode; boxes not (K, 4) float, with NaN or of zero width or height; labels not
+            int64 or out of range.
+        """
+        batch, sizes, tgts = self._prepare(images, targets)
+        feats = self.backbone(batch)[-1]
+        hp, wp = batch.shape[-2:]
+        # pool over each image's own (unpadded) extent
+        pooled = []
+        s = self.backbone.strides[-1]
+        for i, (h, w) in enumerate(sizes):
+            fh, fw = max(1, -(-h // s)), max(1, -(-w // s))
+            pooled.append(feats[i, :, :fh, :fw].mean(dim=(1, 2)))
+        z = torch.stack(pooled)
+        logits = self.classifier(z)
+        box = torch.sigmoid(self.box_head(z))
+        scale = torch.tensor([[w, h, w, h] for h, w in sizes], dtype=box.dtype, device=box.device)
+        if self.training:
+            assert tgts is not None
+            for i, t in enumerate(tgts):
+                if t["boxes"].shape[0] != 1:
+                    raise InputError(
+                        f"targets[{i}] must hold exactly one box for single-object localisation; "
+                        f"got {t['boxes'].shape[0]}: use FasterRCNN or FCOS for several"
+                    )
+            gt = torch.cat([t["boxes"] for t in tgts]).to(box.dtype)
+            gt_n = box_convert(gt, "xyxy", "cxcywh") / scale
+            labels = torch.cat([t["labels"] for t in tgts]) - 1
+            return {
+                "loss_classifier": F.cross_entropy(logits, labels),
+                "loss_box": self.lam * F.smooth_l1_loss(box, gt_n, beta=self.beta),
+            }
+        prob = F.softmax(logits, dim=1)
+        scores, lab = prob.max(dim=1)
+        xyxy = _clip(box_convert(box * scale, "cxcywh", "xyxy"), (int(hp), int(wp)))
+        out = []
+        for i, (h, w) in enumerate(sizes):
+            out.append(
+                {
+                    "boxes": _clip(xyxy[i : i + 1], (h, w)),
+                    "labels": lab[i : i + 1] + 1,
+                    "scores": scores[i : i + 1],
+                }
+            )
+        return out
+
+
+# --------------------------------------------------------------------------- RoI head
+class _RoIHead(nn.Module):
+    """Two fully connected layers on pooled regions, then class logits (background + C)
+    and class-specific deltas (torchvision's TwoMLPHead + FastRCNNPredictor)."""
+
+    def __init__(self, in_channels: int, pool: int, hidden: int, num_classes: int) -> None:
+        super().__init__()
+        self.fc = nn.Sequential(
+            nn.Flatten(),
+            nn.Linear(in_channels * pool * pool, hidden),
+            nn.ReLU(),
+            nn.Linear(hidden, hidden),
+            nn.ReLU(),
+        )
+        self.cls_score = nn.Linear(hidden, num_classes + 1)
+        self.bbox_pred = nn.Linear(hidden, 4 * (num_classes + 1))
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = self.fc(x)
+        return self.cls_score(h), self.bbox_pred(h)
+
+
+class _TwoStage(_Detector):
+    """The per-region part shared by Fast and Faster R-CNN."""
+
+    box_coder: BoxCoder
+    roi: _RoIHead
+    backbone: DetectionBackbone
+    pooler: str
+    pool_size: int
+    bg_low: float
+    box_batch_size: int
+    box_positive_fraction: float
+    score_thresh: float
+    nms_thresh: float
+    detections_per_img: int
+
+    def _init_heads(
+        self,
+        width: int,
+        hidden: int,
+        pool_size: int,
+        box_batch_size: int,
+        box_positive_fraction: float,
+        score_thresh: float,
+        nms_thresh: float,
+        detections_per_img: int,
+    ) -> None:
+        self.backbone = DetectionBackbone(width, strides=(8,))
+        self.pool_size = check_count(pool_size, "pool_size", 1, 64)
+        hidden = check_count(hidden, "hidden", 1, 1 << 14)
+        self.roi = _RoIHead(
+            self.backbone.out_channels[-1], self.pool_size, hidden, self.num_classes
+        )
+        self.box_coder = BoxCoder((10.0, 10.0, 5.0, 5.0))
+        self.box_batch_size = check_count(box_batch_size, "box_batch_size", 1, 1 << 20)
+        self.box_positive_fraction = check_real(
+            box_positive_fraction, "box_positive_fraction", 0.0, 1.0
+        )
+        self.score_thresh = check_real(score_thresh, "score_thresh", 0.0, 1.0)
+        self.nms_thresh = check_real(nms_thresh, "nms_thresh", 0.0, 1.0)
+        self.detections_per_img = check_count(detections_per_img, "detections_per_img", 1, 1 << 20)
+
+    def _pool(self, feats: torch.Tensor, rois: list[torch.Tensor]) -> torch.Tensor:
+        scale = 1.0 / self.backbone.strides[-1]
+        if self.pooler == "align":
+            return roi_align(feats, rois, self.pool_size, scale, sampling_ratio=2)
+        return roi_pool(feats, rois, self.pool_size, scale)
+
+    def select_training_samples(
+        self, proposals: list[torch.Tensor], targets: list[dict[str, torch.Tensor]]
+    ) -> tuple[list[torch.Tensor], list[torch.Tensor], list[torch.Tensor]]:
+        """Add the ground truth to the proposals, label them (IoU >= 0.5 foreground,
+        [bg_low, 0.5) background) and sample ``box_batch_size`` with at most
+        ``box_positive_fraction`` foreground; returns the regions, their class labels
+        (0 background) and their regression targets."""
+        rois, labels, deltas = [], [], []
+        for p, t in zip(proposals, targets, strict=True):
+            gt = t["boxes"].to(p.dtype)
+            cand = torch.cat((p, gt))
+            iou = box_iou(gt, cand)
+            # an image without objects: every proposal is background (no IoU band)
+            lab, matched = match_boxes(iou, 0.5, 0.5, self.bg_low if gt.shape[0] else 0.0)
+            pos, neg = sample_balanced(lab, self.box_batch_size, self.box_positive_fraction)
+            keep = torch.nonzero(pos | neg).flatten()
+            cls = torch.zeros(keep.numel(), dtype=torch.int64, device=p.device)
+            fg = pos[keep]
+            if gt.shape[0]:
+                cls[fg] = t["labels"][matched[keep][fg]]
+                d = torch.zeros((keep.numel(), 4), dtype=p.dtype, device=p.device)
+                if bool(fg.any()):
+                    d[fg] = self.box_coder.encode(gt[matched[keep][fg]], cand[keep][fg])
+            else:
+                d = torch.zeros((keep.numel(), 4), dtype=p.dtype, device=p.device)
+            rois.append(cand[keep])
+            labels.append(cls)
+            deltas.append(d)
+        return rois, labels, deltas
+
+    def _head_losses(
+        self,
+        logits: torch.Tensor,
+        box_reg: torch.Tensor,
+        labels: list[torch.Tensor],
+        deltas: list[torch.Tensor],
+    ) -> dict[str, torch.Tensor]:
+        lab = torch.cat(labels)
+        tgt = torch.cat(deltas)
+        if lab.numel() == 0:
+            z = logits.sum() * 0.0
+            return {"loss_classifier": z, "loss_box": box_reg.sum() * 0.0}
+        loss_cls = F.cross_entropy(logits, lab)
+        fg = torch.nonzero(lab > 0).flatten()
+        reg = box_reg.reshape(box_reg.shape[0], -1, 4)[fg, lab[fg]]
+        loss_box = F.smooth_l1_loss(reg, tgt[fg], beta=1.0 / 9, reduction="sum") / lab.numel()
+        return {"loss_classifier": loss_cls, "loss_box": loss_box}
+
+    def _postprocess(
+        self,
+        logits: torch.Tensor,
+        box_reg: torch.Tensor,
+        rois: list[torch.Tensor],
+        sizes: list[tuple[int, int]],
+    ) -> list[dict[str, torch.Tensor]]:
+        out = []
+        start = 0
+        c = self.num_classes
+        probs = F.softmax(logits, dim=1)
+        for r, size in zip(rois, sizes, strict=True):
+            k = r.shape[0]
+            if k == 0:
+                out.append(_empty_detections(logits.device))
+                continue
+            p = probs[start : start + k, 1:]
+            d = box_reg[start : start + k]
+            start += k
+            boxes = _clip(self.box_coder.decode(d, r).reshape(k, c + 1, 4)[:, 1:], size)
+            labels = torch.arange(1, c + 1, device=r.device).expand(k, c)
+            boxes, scores, labels = boxes.reshape(-1, 4), p.reshape(-1), labels.reshape(-1)
+            keep = (
+                (scores > self.score_thresh)
+                & (boxes[:, 2] - boxes[:, 0] >= 1e-2)
+                & (boxes[:, 3] - boxes[:, 1] >= 1e-2)
+            )
+            boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
+            kept = batched_nms(boxes.detach(), scores.detach(), labels, self.nms_thresh)
+            kept = kept[: self.detections_per_img]
+            out.append({"boxes": boxes[kept], "labels": labels[kept], "scores": scores[kept]})
+        return out
+
+    def _run_heads(
+        self,
+        feats: torch.Tensor,
+        proposals: list[torch.Tensor],
+        sizes: list[tuple[int, int]],
+        tgts: list[dict[str, torch.Tensor]] | None,
+    ) -> dict[str, torch.Tensor] | list[dict[str, torch.Tensor]]:
+        if self.training:
+            assert tgts is not None
+            rois, labels, deltas = self.select_training_samples(proposals, tgts)
+            logits, reg = self.roi(self._pool(feats, rois))
+            return self._head_losses(logits, reg, labels, deltas)
+        logits, reg = self.roi(self._pool(feats, proposals))
+        return self._postprocess(logits, reg, proposals, sizes)
+
+
+def _check_proposals(proposals: Any, sizes: list[tuple[int, int]]) -> list[torch.Tensor]:
+    if not isinstance(proposals, (list, tuple)) or len(proposals) != len(sizes):
+        raise InputError(
+            f"proposals must be a list of {len(sizes)} (P, 4) float tensors (xyxy), one per "
+            f"image; got {plain_repr(proposals)}"
+        )
+    out = []
+    for i, (p, size) in enumerate(zip(proposals, sizes, strict=True)):
+        if (
+            not isinstance(p, torch.Tensor)
+            or not p.is_floating_point()
+            or p.ndim != 2
+            or p.shape[1] != 4
+        ):
+            raise InputError(
+                f"proposals[{i}] must be a (P, 4) float torch.Tensor, xyxy pixels; got "
+                + plain_repr(p)
+            )
+        if p.numel() and not bool(torch.isfinite(p).all()):
+            raise InputError(f"proposals[{i}] has NaN or inf: drop those boxes")
+        p = _clip(p.float(), size)
+        keep = (p[:, 2] - p[:, 0] > 0) & (p[:, 3] - p[:, 1] > 0)
+        out.append(p[keep])
+    return out
+
+
+# --------------------------------------------------------------------------- (b) Fast R-CNN
+class FastRCNN(_TwoStage):
+    r"""Fast R-CNN (Girshick 2015): a shared backbone (stride 8), RoI max pooling of
+    external proposals, two fully connected layers, then class logits (background and
+    ``num_classes``) and class-specific deltas (:class:`~robopercept.nn.boxes.BoxCoder`
+    weights (10, 10, 5, 5)).
+
+    Training: the ground-truth boxes join the proposals; regions with IoU >= 0.5 are
+    foreground (the matched box's class), those in [0.1, 0.5) background, the rest
+    ignored (in an image without objects every proposal is background);
+    ``box_batch_size`` regions per image are sampled with at most 25 % foreground.
+    Losses: ``loss_classifier`` (cross-entropy) and ``loss_box`` (smooth-L1,
+    :math:`\beta = 1/9`, on the true class's deltas of foreground regions, summed and
+    divided by the number of sampled regions). Eval: per class, decode, clip, score
+    threshold, NMS, the ``detections_per_img`` best.
+
+    Proposals come from ``proposal_fn(image) -> (P, 4)`` (e.g. selective search) or the
+    ``proposals`` argument of the call, which wins.
+
+    Parameters
+    ----------
+    num_classes : int
+    proposal_fn : callable, optional
+        ``(3, H, W)`` image in [0, 1] -> ``(P, 4)`` float ``"xyxy"`` proposals.
+    width, hidden, pool_size
+        Backbone width, fully connected width, RoI pooling output side.
+    box_batch_size, box_positive_fraction
+        Regions sampled per image and their foreground cap.
+    score_thresh, nms_thresh, detections_per_img
+        Post-processing.
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> m = FastRCNN(2, width=8, hidden=32).eval()
+    >>> out = m([torch.rand(3, 32, 32)], proposals=[torch.tensor([[2.0, 2, 20, 20]])])
+    >>> sorted(out[0])
+    ['boxes', 'labels', 'scores']
+    """
+
+    def __init__(
+        self,
+        num_classes: int,
+        proposal_fn: Callable[[torch.Tensor], torch.Tensor] | None = None,
+        *,
+        width: int = 16,
+        hidden: int = 256,
+        pool_size: int = 7,
+        box_batch_size: int = 128,
+        box_positive_fraction: float = 0.25,
+        score_thresh: float = 0.05,
+        nms_thresh: float = 0.5,
+        detections_per_img: int = 100,
+    ) -> None:
+        super().__init__()
+        self._init_common(num_classes, 8)
+        if proposal_fn is not None and not callable(proposal_fn):
+            raise InputError(f"proposal_fn must be callable or None; got {plain_repr(proposal_fn)}")
+        self.proposal_fn = proposal_fn
+        self.pooler = "pool"
+        self.bg_low = 0.1
+        self._init_heads(
+            width,
+            hidden,
+            pool_size,
+            box_batch_size,
+            box_positive_fraction,
+            score_thresh,
+            nms_thresh,
+            detections_per_img,
+        )
+
+    def forward(
+        self, images: Any, targets: Any = None, proposals: Any = None
+    ) -> dict[str, torch.Tensor] | list[dict[str, torch.Tensor]]:
+        """Losses (train mode) or detections (eval mode) of ``images``.
+
+        Parameters
+        ----------
+        images : list of (3, H, W) float torch.Tensor, or (N, 3, H, W)
+            RGB in [0, 1]; sizes may differ.
+        targets : list of dict, optional
+            ``"boxes"`` (K, 4) float ``"xyxy"`` and ``"labels"`` (K,) int64 in
+            1..num_classes; required in train mode.
+        proposals : list of (P, 4) float torch.Tensor, optional
+            ``"xyxy"`` proposals per image (clipped; empty ones dropped); None: from
+            ``proposal_fn``.
+
+        Returns
+        -------
+        dict of str to scalar torch.Tensor (train) or list of dict (eval)
+            The losses, or ``{"boxes": (D, 4), "labels": (D,), "scores": (D,)}`` per image.
+
+        Raises
+        ------
+        InputError
+            Images not (3, H, W) floating point and finite; missing targets in train
+            mode; boxes not (K, 4) float, with NaN or of zero width or height; labels not
+            int64 or out of range.
+        """
+        batch, sizes, tgts = self._prepare(images, targets)
+        if proposals is None:
+            if self.proposal_fn is None:
+                raise InputError(
+                    "Fast R-CNN needs proposals: pass proposals=[(P, 4) tensor per image] or "
+                    "build the model with proposal_fn (e.g. selective search)"
+                )
+            proposals = [self.proposal_fn(im) for im in _check_images(images)]
+        props = [p.to(batch.device) for p in _check_proposals(proposals, sizes)]
+        feats = self.backbone(batch)[-1]
+        return self._run_heads(feats, props, sizes, tgts)
+
+
+# --------------------------------------------------------------------------- (c) Faster R-CNN
+class FasterRCNN(_TwoStage):
+    r"""Faster R-CNN (Ren et al. 2015): a region proposal network on a stride-8
+    backbone, RoI Align, and the per-region head of :class:`FastRCNN`.
+
+    RPN: a 3 x 3 convolution and ReLU, then per anchor an objectness logit and deltas
+    (:class:`~robopercept.nn.boxes.BoxCoder` weights (1, 1, 1, 1)). Anchors
+    (:class:`~robopercept.nn.boxes.AnchorGenerator`, centred on cells) are positive at
+    IoU >= 0.7 with a ground-truth box or when they are a box's best anchor
+    (:func:`match_boxes` with ``allow_low_quality``), negative below 0.3, else
+    ignored; ``rpn_batch_size`` are sampled per image, at most half positive
+    (:func:`sample_balanced`). ``loss_rpn_objectness`` is the binary cross-entropy of
+    the sampled anchors' logits; ``loss_rpn_box`` the smooth-L1 (:math:`\beta = 1/9`)
+    of the positives' deltas, summed and divided by the number sampled (0 without
+    positives). Proposals: the ``pre_nms_top_n`` best anchors by objectness, decoded,
+    clipped, boxes under ``min_size`` dropped, NMS at ``rpn_nms_thresh``, the
+    ``post_nms_top_n`` best kept (train / eval counts separately, as torchvision);
+    they are detached, as in the approximate joint training of the paper. The head
+    (``loss_classifier``, ``loss_box``) samples regions with IoU >= 0.5 foreground and
+    [0, 0.5) background.
+
+    Parameters
+    ----------
+    num_classes : int
+    width, hidden, pool_size
+        Backbone width, fully connected width, RoI Align output side.
+    anchor_sizes, aspect_ratios
+        Of the :class:`~robopercept.nn.boxes.AnchorGenerator`, pixels and h / w.
+    rpn_fg_iou, rpn_bg_iou, rpn_batch_size, rpn_positive_fraction
+        Anchor labelling and sampling.
+    pre_nms_top_n, post_nms_top_n : (train, eval) pairs of int
+    rpn_nms_thresh, min_size
+        Proposal NMS IoU, smallest proposal side in pixels.
+    box_batch_size, box_positive_fraction, score_thresh, nms_thresh, detections_per_img
+        As in :class:`FastRCNN`.
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> m = FasterRCNN(2, width=8, hidden=32)
+    >>> t = [{"boxes": torch.tensor([[4.0, 4, 20, 28]]), "labels": torch.tensor([1])}]
+    >>> sorted(m([torch.rand(3, 32, 32)], t))
+    ['loss_box', 'loss_classifier', 'loss_rpn_box', 'loss_rpn_objectness']
+    """
+
+    def __init__(
+        self,
+        num_classes: int,
+        *,
+        width: int = 16,
+        hidden: int = 256,
+        pool_size: int = 7,
+        anchor_sizes: Sequence[float] = (16.0, 32.0, 64.0),
+        aspect_ratios: Sequence[float] = (0.5, 1.0, 2.0),
+        rpn_fg_iou: float = 0.7,
+        rpn_bg_iou: float = 0.3,
+        rpn_batch_size: int = 256,
+        rpn_positive_fraction: float = 0.5,
+        pre_nms_top_n: tuple[int, int] = (1000, 500),
+        post_nms_top_n: tuple[int, int] = (500, 300),
+        rpn_nms_thresh: float = 0.7,
+        min_size: float = 1e-3,
+        box_batch_size: int = 128,
+        box_positive_fraction: float = 0.25,
+        score_thresh: float = 0.05,
+        nms_thresh: float = 0.5,
+        detections_per_img: int = 100,
+    ) -> None:
+        super().__init__()
+        self._init_common(num_classes, 8)
+        self.pooler = "align"
+        self.bg_low = 0.0
+        self._init_heads(
+            width,
+            hidden,
+            pool_size,
+            box_batch_size,
+            box_positive_fraction,
+            score_thresh,
+            nms_thresh,
+            detections_per_img,
+        )
+        self.anchor_generator = AnchorGenerator(
+            tuple(anchor_sizes), tuple(aspect_ratios), offset=0.5
+        )
+        a = self.anchor_generator.num_anchors_per_location()[0]
+        c = self.backbone.out_channels[-1]
+        self.rpn_conv = nn.Conv2d(c, c, 3, padding=1)
+        self.rpn_cls = nn.Conv2d(c, a, 1)
+        self.rpn_bbox = nn.Conv2d(c, 4 * a, 1)
+        for layer in (self.rpn_conv, self.rpn_cls, self.rpn_bbox):
+            _init_conv(layer, 0.0)
+        self.rpn_coder = BoxCoder((1.0, 1.0, 1.0, 1.0))
+        self.rpn_fg_iou = check_real(rpn_fg_iou, "rpn_fg_iou", 0.0, 1.0)
+        self.rpn_bg_iou = check_real(rpn_bg_iou, "rpn_bg_iou", 0.0, self.rpn_fg_iou)
+        self.rpn_batch_size = check_count(rpn_batch_size, "rpn_batch_size", 1, 1 << 20)
+        self.rpn_positive_fraction = check_real(
+            rpn_positive_fraction, "rpn_positive_fraction", 0.0, 1.0
+        )
+        self.pre_nms_top_n = _pair(pre_nms_top_n, "pre_nms_top_n")
+        self.post_nms_top_n = _pair(post_nms_top_n, "post_nms_top_n")
+        self.rpn_nms_thresh = check_real(rpn_nms_thresh, "rpn_nms_thresh", 0.0, 1.0)
+        self.min_size = check_real(min_size, "min_size", 0.0)
+
+    def rpn(
+        self, feats: torch.Tensor, image_shape: tuple[int, int]
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Objectness logits ``(N, A_total)``, deltas ``(N, A_total, 4)`` and the anchors
+        ``(A_total, 4)`` (ordered cell-major, as :class:`AnchorGenerator`)."""
+        h = F.relu(self.rpn_conv(feats))
+        n, _, fh, fw = h.shape
+        obj = self.rpn_cls(h).permute(0, 2, 3, 1).reshape(n, -1)
+        reg = self.rpn_bbox(h).reshape(n, -1, 4, fh, fw).permute(0, 3, 4, 1, 2).reshape(n, -1, 4)
+        anchors = self.anchor_generator(image_shape, [(fh, fw)], dtype=h.dtype).to(h.device)
+        return obj, reg, anchors
+
+    def rpn_losses(
+        self,
+        obj: torch.Tensor,
+        reg: torch.Tensor,
+        anchors: torch.Tensor,
+        targets: list[dict[str, torch.Tensor]],
+    ) -> dict[str, torch.Tensor]:
+        """The RPN's two losses over the anchors sampled from each image."""
+        sel_obj, sel_lab, sel_reg, sel_tgt, n_sampled = [], [], [], [], 0
+        for i, t in enumerate(targets):
+            gt = t["boxes"].to(anchors.dtype)
+            lab, matched = match_boxes(
+                box_iou(gt, anchors), self.rpn_fg_iou, self.rpn_bg_iou, allow_low_quality=True
+            )
+            pos, neg = sample_balanced(lab, self.rpn_batch_size, self.rpn_positive_fraction)
+            keep = pos | neg
+            n_sampled += int(keep.sum())
+            sel_obj.append(obj[i][keep])
+            sel_lab.append(pos[keep].to(obj.dtype))
+            if bool(pos.any()):
+                sel_reg.append(reg[i][pos])
+                sel_tgt.append(self.rpn_coder.encode(gt[matched[pos]], anchors[pos]))
+        o = torch.cat(sel_obj)
+        loss_obj = (
+            F.binary_cross_entropy_with_logits(o, torch.cat(sel_lab))
+            if o.numel()
+            else obj.sum() * 0
+        )
+        if sel_reg:
+            loss_box = F.smooth_l1_loss(
+                torch.cat(sel_reg), torch.cat(sel_tgt), beta=1.0 / 9, reduction="sum"
+            ) / max(n_sampled, 1)
+        else:
+            loss_box = reg.sum() * 0.0
+        return {"loss_rpn_objectness": loss_obj, "loss_rpn_box": loss_box}
+
+    def proposals(
+        self,
+        obj: torch.Tensor,
+        reg: torch.Tensor,
+        anchors: torch.Tensor,
+        sizes: list[tuple[int, int]],
+    ) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        """Per image: top ``pre_nms_top_n`` anchors by objectness, decoded, clipped,
+        small boxes removed, NMS, top ``post_nms_top_n``; returns the proposals and
+        their objectness logits (detached)."""
+        mode = 0 if self.training else 1
+        pre, post = self.pre_nms_top_n[mode], self.post_nms_top_n[mode]
+        obj, reg = obj.detach(), reg.detach()
+        boxes_out, scores_out = [], []
+        for i, size in enumerate(sizes):
+            k = min(pre, obj.shape[1])
+            s, idx = obj[i].topk(k)
+            b = _clip(self.rpn_coder.decode(reg[i][idx], anchors[idx]), size)
+            keep = (b[:, 2] - b[:, 0] >= self.min_size) & (b[:, 3] - b[:, 1] >= self.min_size)
+            b, s = b[keep], s[keep]
+            kept = nms(b, s, self.rpn_nms_thresh)[:post]
+            boxes_out.append(b[kept])
+            scores_out.append(s[kept])
+        return boxes_out, scores_out
+
+    def forward(
+        self, images: Any, targets: Any = None
+    ) -> dict[str, torch.Tensor] | list[dict[str, torch.Tensor]]:
+        """Losses (train mode) or detections (eval mode) of ``images``.
+
+        Parameters
+        ----------
+        images : list of (3, H, W) float torch.Tensor, or (N, 3, H, W)
+            RGB in [0, 1]; sizes may differ.
+        targets : list of dict, optional
+            ``"boxes"`` (K, 4) float ``"xyxy"`` and ``"labels"`` (K,) int64 in
+            1..num_classes; required in train mode.
+
+        Returns
+        -------
+        dict of str to scalar torch.Tensor (train) or list of dict (eval)
+            The losses, or ``{"boxes": (D, 4), "labels": (D,), "scores": (D,)}`` per image.
+
+        Raises
+        ------
+        InputError
+            Images not (3, H, W) floating point and finite; missing targets in train
+            mode; boxes not (K, 4) float, with NaN or of zero width or height; labels not
+            int64 or out of range.
+        """
+        batch, sizes, tgts = self._prepare(images, targets)
+        feats = self.backbone(batch)[-1]
+        obj, reg, anchors = self.rpn(feats, (int(batch.shape[2]), int(batch.shape[3])))
+        props, _ = self.proposals(obj, reg, anchors, sizes)
+        if self.training:
+            assert tgts is not None
+            losses = self.rpn_losses(obj, reg, anchors, tgts)
+            head = self._run_heads(feats, props, sizes, tgts)
+            assert isinstance(head, dict)
+            losses.update(head)
+            return losses
+        return self._run_heads(feats, props, sizes, None)
+
+
+def _init_conv(layer: nn.Conv2d, bias: float) -> None:
+    """Weights ~ N(0, 0.01^2) and a constant bias (torchvision's RPN and FCOS heads)."""
+    nn.init.normal_(layer.weight, std=0.01)
+    if layer.bias is not None:
+        nn.init.constant_(layer.bias, bias)
+
+
+def _pair(value: Any, name: str) -> tuple[int, int]:
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise InputError(f"{name} must be a (train, eval) pair of ints; got {plain_repr(value)}")
+    a, b = (check_count(v, name, 1, 1 << 20) for v in value)
+    return a, b
+
+
+# --------------------------------------------------------------------------- (d) FCOS
+class FCOS(_Detector):
+    r"""FCOS (Tian et al. 2019): anchor-free single-stage detection on an FPN (strides 8
+    and 16 by default).
+
+    A location :math:`(x, y) = ((j + \tfrac12) s, (i + \tfrac12) s)` of a level of
+    stride :math:`s` is assigned to a ground-truth box when it lies inside the box and
+    within ``center_radius`` :math:`\cdot s` of its centre (centre sampling), and when
+    :math:`m = \max(l, t, r, b)` of its distances to the sides is in the level's range
+    :math:`[4 s, 8 s]` (0 below the first level, no upper bound on the last); among
+    several boxes, the one of smallest area (torchvision's FCOS rules). Per location
+    the head predicts class logits (sigmoid focal loss, summed over all locations and
+    divided by the number of foreground ones), :math:`(l, t, r, b) / s` through a ReLU
+    (GIoU loss of the decoded box, foreground only) and a centerness logit with target
+    :math:`\sqrt{\frac{\min(l, r)}{\max(l, r)} \frac{\min(t, b)}{\max(t, b)}}`
+    (binary cross-entropy, foreground only). Eval: score
+    :math:`\sqrt{\sigma(c) \sigma(o)}`, threshold, top ``topk_candidates`` per level,
+    clip, per-class NMS, the ``detections_per_img`` best.
+
+    Parameters
+    ----------
+    num_classes : int
+    width : int
+        Backbone width.
+    strides : sequence of int
+        FPN levels.
+    head_channels : int
+        FPN and head width.
+    center_radius : float
+    score_thresh, nms_thresh, topk_candidates, detections_per_img
+        Post-processing.
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> m = FCOS(2, width=8, head_channels=16)
+    >>> t = [{"boxes": torch.tensor([[4.0, 4, 20, 28]]), "labels": torch.tensor([1])}]
+    >>> sorted(m([torch.rand(3, 32, 32)], t))
+    ['bbox_ctrness', 'bbox_regression', 'classification']
+    """
+
+    def __init__(
+        self,
+        num_classes: int,
+        *,
+        width: int = 16,
+        strides: Sequence[int] = (8, 16),
+        head_channels: int = 64,
+        center_radius: float = 1.5,
+        score_thresh: float = 0.2,
+        nms_thresh: float = 0.6,
+        topk_candidates: int = 1000,
+        detections_per_img: int = 100,
+    ) -> None:
+        super().__init__()
+        head_channels = check_count(head_channels, "head_channels", 1, 1 << 14)
+        self.backbone = DetectionBackbone(width, strides, fpn_channels=head_channels)
+        self._init_common(num_classes, max(self.backbone.strides))
+        c = head_channels
+        groups = math.gcd(c, 8)
+
+        def tower() -> nn.Sequential:
+            return nn.Sequential(
+                nn.Conv2d(c, c, 3, padding=1),
+                nn.GroupNorm(groups, c),
+                nn.ReLU(),
+                nn.Conv2d(c, c, 3, padding=1),
+                nn.GroupNorm(groups, c),
+                nn.ReLU(),
+            )
+
+        self.cls_tower = tower()
+        self.reg_tower = tower()
+        self.cls_logits = nn.Conv2d(c, self.num_classes, 3, padding=1)
+        self.bbox_reg = nn.Conv2d(c, 4, 3, padding=1)
+        self.bbox_ctrness = nn.Conv2d(c, 1, 3, padding=1)
+        for layer in (self.bbox_reg, self.bbox_ctrness):
+            _init_conv(layer, 0.0)
+        # the prior: every location starts at foreground probability 0.01 (RetinaNet)
+        _init_conv(self.cls_logits, -math.log((1 - 0.01) / 0.01))
+        self.center_radius = check_real(center_radius, "center_radius", 0.0, low_inclusive=False)
+        self.score_thresh = check_real(score_thresh, "score_thresh", 0.0, 1.0)
+        self.nms_thresh = check_real(nms_thresh, "nms_thresh", 0.0, 1.0)
+        self.topk_candidates = check_count(topk_candidates, "topk_candidates", 1, 1 << 20)
+        self.detections_per_img = check_count(detections_per_img, "detections_per_img", 1, 1 << 20)
+
+    def head(
+        self, feats: list[torch.Tensor]
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, list[int]]:
+        """Per location of all levels (concatenated): class logits ``(N, L, C)``, ltrb /
+        stride ``(N, L, 4)``, centerness logits ``(N, L)``, the locations ``(L, 2)``,
+        their strides ``(L,)`` and the number of locations per level."""
+        cls, reg, ctr, locs, strides, counts = [], [], [], [], [], []
+        for f, s in zip(feats, self.backbone.strides, strict=True):
+            n, _, fh, fw = f.shape
+            ct, rt = self.cls_tower(f), self.reg_tower(f)
+            cls.append(self.cls_logits(ct).permute(0, 2, 3, 1).reshape(n, -1, self.num_classes))
+            reg.append(F.relu(self.bbox_reg(rt)).permute(0, 2, 3, 1).reshape(n, -1, 4))
+            ctr.append(self.bbox_ctrness(rt).reshape(n, -1))
+            ys = (torch.arange(fh, device=f.device, dtype=f.dtype) + 0.5) * s
+            xs = (torch.arange(fw, device=f.device, dtype=f.dtype) + 0.5) * s
+            yy, xx = torch.meshgrid(ys, xs, indexing="ij")
+            locs.append(torch.stack((xx, yy), dim=-1).reshape(-1, 2))
+            strides.append(torch.full((fh * fw,), float(s), device=f.device, dtype=f.dtype))
+            counts.append(fh * fw)
+        return (
+            torch.cat(cls, 1),
+            torch.cat(reg, 1),
+            torch.cat(ctr, 1),
+            torch.cat(locs),
+            torch.cat(strides),
+            counts,
+        )
+
+    def assign(
+        self, locs: torch.Tensor, strides: torch.Tensor, counts: list[int], gt: torch.Tensor
+    ) -> torch.Tensor:
+        """Index of the ground-truth box of each location, -1 for background."""
+        n = locs.shape[0]
+        if gt.shape[0] == 0:
+            return torch.full((n,), -1, dtype=torch.int64, device=locs.device)
+        x, y = locs[:, 0, None], locs[:, 1, None]
+        ltrb = torch.stack((x - gt[:, 0], y - gt[:, 1], gt[:, 2] - x, gt[:, 3] - y), dim=-1)
+        inside = ltrb.min(dim=-1).values > 0
+        cx, cy = (gt[:, 0] + gt[:, 2]) / 2, (gt[:, 1] + gt[:, 3]) / 2
+        r = self.center_radius * strides[:, None]
+        center = ((x - cx).abs() < r) & ((y - cy).abs() < r)
+        m = ltrb.max(dim=-1).values
+        lower = strides * 4
+        upper = strides * 8
+        lower[: counts[0]] = 0
+        upper[n - counts[-1] :] = math.inf
+        ok = inside & center & (m >= lower[:, None]) & (m <= upper[:, None])
+        area = ((gt[:, 2] - gt[:, 0]) * (gt[:, 3] - gt[:, 1]))[None].expand(n, -1)
+        area = torch.where(ok, area, torch.full_like(area, math.inf))
+        best, idx = area.min(dim=1)
+        idx[torch.isinf(best)] = -1
+        return idx
+
+    def forward(
+        self, images: Any, targets: Any = None
+    ) -> dict[str, torch.Tensor] | list[dict[str, torch.Tensor]]:
+        """Losses (train mode) or detections (eval mode) of ``images``.
+
+        Parameters
+        ----------
+        images : list of (3, H, W) float torch.Tensor, or (N, 3, H, W)
+            RGB in [0, 1]; sizes may differ.
+        targets : list of dict, optional
+            ``"boxes"`` (K, 4) float ``"xyxy"`` and ``"labels"`` (K,) int64 in
+            1..num_classes; required in train mode.
+
+        Returns
+        -------
+        dict of str to scalar torch.Tensor (train) or list of dict (eval)
+            The losses, or ``{"boxes": (D, 4), "labels": (D,), "scores": (D,)}`` per image.
+
+        Raises
+        ------
+        InputError
+            Images not (3, H, W) floating point and finite; missing targets in train
+            mode; boxes not (K, 4) float, with NaN or of zero width or height; labels not
+            int64 or out of range.
+        """
+        batch, sizes, tgts = self._prepare(images, targets)
+        feats = self.backbone(batch)
+        cls, reg, ctr, locs, strides, counts = self.head(feats)
+        if self.training:
+            assert tgts is not None
+            return self._losses(cls, reg, ctr, locs, strides, counts, tgts)
+        return self._postprocess(cls, reg, ctr, locs, strides, counts, sizes)
+
+    def _decode(self, reg: torch.Tensor, locs: torch.Tensor, strides: torch.Tensor) -> torch.Tensor:
+        d = reg * strides[:, None]
+        return torch.stack(
+            (
+                locs[:, 0] - d[:, 0],
+                locs[:, 1] - d[:, 1],
+                locs[:, 0] + d[:, 2],
+                locs[:, 1] + d[:, 3],
+            ),
+            dim=1,
+        )
+
+    def _losses(
+        self,
+        cls: torch.Tensor,
+        reg: torch.Tensor,
+        ctr: torch.Tensor,
+        locs: torch.Tensor,
+        strides: torch.Tensor,
+        counts: list[int],
+        tgts: list[dict[str, torch.Tensor]],
+    ) -> dict[str, torch.Tensor]:
+        cls_t = torch.zeros_like(cls)
+        fg_pred, fg_gt, fg_ctr, fg_ctr_t = [], [], [], []
+        for i, t in enumerate(tgts):
+            gt = t["boxes"].to(locs.dtype)
+            idx = self.assign(locs, strides, counts, gt)
+            fg = idx >= 0
+            if not bool(fg.any()):
+                continue
+            g = gt[idx[fg]]
+            cls_t[i, fg, t["labels"][idx[fg]] - 1] = 1.0
+            fg_pred.append(self._decode(reg[i][fg], locs[fg], strides[fg]))
+            fg_gt.append(g)
+            lo = locs[fg]
+            l_, t_ = lo[:, 0] - g[:, 0], lo[:, 1] - g[:, 1]
+            r_, b_ = g[:, 2] - lo[:, 0], g[:, 3] - lo[:, 1]
+            ctr_t = torch.sqrt(
+                (torch.minimum(l_, r_) / torch.maximum(l_, r_))
+                * (torch.minimum(t_, b_) / torch.maximum(t_, b_))
+            )
+            fg_ctr.append(ctr[i][fg])
+            fg_ctr_t.append(ctr_t)
+        n_fg = max(1, sum(p.shape[0] for p in fg_pred))
+        loss_cls = sigmoid_focal_loss(cls, cls_t, reduction="sum") / n_fg
+        if fg_pred:
+            pred, gtb = torch.cat(fg_pred), torch.cat(fg_gt)
+            giou = torch.diagonal(generalized_box_iou(pred, gtb)) if pred.shape[0] else pred.sum(1)
+            loss_reg = (1 - giou).sum() / n_fg
+            loss_ctr = (
+                F.binary_cross_entropy_with_logits(
+                    torch.cat(fg_ctr), torch.cat(fg_ctr_t), reduction="sum"
+                )
+                / n_fg
+            )
+        else:
+            loss_reg = reg.sum() * 0.0
+            loss_ctr = ctr.sum() * 0.0
+        return {"classification": loss_cls, "bbox_regression": loss_reg, "bbox_ctrness": loss_ctr}
+
+    def _postprocess(
+        self,
+        cls: torch.Tensor,
+        reg: torch.Tensor,
+        ctr: torch.Tensor,
+        locs: torch.Tensor,
+        strides: torch.Tensor,
+        counts: list[int],
+        sizes: list[tuple[int, int]],
+    ) -> list[dict[str, torch.Tensor]]:
+        out = []
+        c = self.num_classes
+        for i, size in enumerate(sizes):
+            scores_all = torch.sqrt(torch.sigmoid(cls[i]) * torch.sigmoid(ctr[i])[:, None])
+            boxes_l, scores_l, labels_l = [], [], []
+            start = 0
+            for n in counts:
+                sc = scores_all[start : start + n].reshape(-1)
+                keep = torch.nonzero(sc > self.score_thresh).flatten()
+                sc = sc[keep]
+                if sc.numel() > self.topk_candidates:
+                    sc, top = sc.topk(self.topk_candidates)
+                    keep = keep[top]
+                loc_idx = keep // c + start
+                boxes_l.append(self._decode(reg[i][loc_idx], locs[loc_idx], strides[loc_idx]))
+                scores_l.append(sc)
+                labels_l.append(keep % c + 1)
+                start += n
+            boxes = _clip(torch.cat(boxes_l), size)
+            scores, labels = torch.cat(scores_l), torch.cat(labels_l)
+            ok = (boxes[:, 2] > boxes[:, 0]) & (boxes[:, 3] > boxes[:, 1])
+            boxes, scores, labels = boxes[ok], scores[ok], labels[ok]
+            kept = batched_nms(boxes.detach(), scores.detach(), labels, self.nms_thresh)
+            kept = kept[: self.detections_per_img]
+            out.append({"boxes": boxes[kept], "labels": labels[kept], "scores": scores[kept]})
+        return out
+
+
+# --------------------------------------------------------------------------- train / evaluate
+@dataclass(frozen=True)
+class DetectionHistory:
+    """What :func:`train_detector` measured: per epoch, the mean of each loss over the
+    batches (and of their sum, ``"loss"``), and the seconds it took.
+
+    Attributes
+    ----------
+    losses : list of dict of str to float
+    seconds : list of float
+    """
+
+    losses: list[dict[str, float]] = field(default_factory=list)
+    seconds: list[float] = field(default_factory=list)
+
+
+def _detection_dataset(dataset: Any) -> Any:
+    from robopercept.nn.detection_data import DetectionDataset
+
+    if not isinstance(dataset, DetectionDataset):
+        raise InputError(
+            "dataset must be a DetectionDataset (procedural_detection_set, digits_detection_set, "
+            f"deepforest_tiles, ...); got {type(dataset).__name__}"
+        )
+    if len(dataset) == 0:
+        raise InputError("dataset is empty: give at least one image")
+    return dataset
+
+
+def train_detector(
+    model: nn.Module,
+    dataset: Any,
+    config: Any = None,
+    *,
+    checkpoint: str | os.PathLike[str] | None = None,
+    progress: bool = True,
+) -> DetectionHistory:
+    """Train a detector of this module (or any model keeping the torchvision detection
+    contract) on a :class:`~robopercept.nn.detection_data.DetectionDataset`.
+
+    Each step: a shuffled mini-batch of ``config.batch_size`` images (a generator seeded
+    by ``config.seed``), the model's loss dict in train mode, their sum back-propagated,
+    an optimizer step (``config.optimizer``, ``lr``, ``weight_decay``; gradient clipping
+    with ``clip_grad_norm``) and, per epoch, the schedule of ``config.schedule``. Torch's
+    global generator is seeded with ``config.seed`` first (weights are not re-initialized:
+    build the model after your own ``torch.manual_seed`` for a fully seeded run) and
+    deterministic algorithms are on, so the same seed gives identical losses on the CPU.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+    dataset : DetectionDataset
+    config : TrainConfig, optional
+        :class:`~robopercept.nn.training.TrainConfig` (``patience``, ``monitor`` and
+        the learning-rate multipliers are not used here).
+    checkpoint : path, optional
+        Written after every epoch (:func:`~robopercept.nn.training.save_checkpoint`:
+        ``{"model", "epoch", "losses", "architecture"}``, the class name); read it back
+        with :func:`~robopercept.nn.training.load_checkpoint` ``(path, model)``.
+    progress : bool
+        A bar per epoch on stderr.
+
+    Returns
+    -------
+    DetectionHistory
+
+    Raises
+    ------
+    InputError
+        Not a detection dataset or model, or a loss that became NaN or infinite.
+
+    Examples
+    --------
+    >>> import torch
+    >>> from robopercept.nn.detection_data import digits_detection_set
+    >>> from robopercept.nn.training import TrainConfig
+    >>> _ = torch.manual_seed(0)
+    >>> ds = digits_detection_set(2, (32, 32), (1, 1), rng=0, scale=(12, 16))
+    >>> h = train_detector(FCOS(10, width=8, head_channels=16), ds,
+    ...                    TrainConfig(epochs=1, batch_size=2, device="cpu"), progress=False)
+    >>> sorted(h.losses[0])
+    ['bbox_ctrness', 'bbox_regression', 'classification', 'loss']
+    """
+    from robopercept.nn.detection_data import collate_detection
+    from robopercept.nn.training import (
+        TrainConfig,
+        deterministic_algorithms,
+        resolve_device,
+        save_checkpoint,
+    )
+    from robopercept.progress import progress_bar
+
+    model = check_module(model)
+    ds = _detection_dataset(dataset)
+    if config is not None and not isinstance(config, TrainConfig):
+        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
+    cfg = config or TrainConfig()
+    progress = check_bool(progress, "progress")
+    ckpt = as_path(checkpoint, "checkpoint") if checkpoint is not None else None
+    dev = resolve_device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    model.to(dev)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    params = [p for p in model.parameters() if p.requires_grad]
+    if not params:
+        raise InputError("the model has no trainable parameters (everything is frozen)")
+    if cfg.optimizer == "sgd":
+        opt: torch.optim.Optimizer = torch.optim.SGD(
+            params,
+            lr=cfg.lr,
+            momentum=cfg.momentum,
+            nesterov=cfg.nesterov,
+            weight_decay=cfg.weight_decay,
+        )
+    else:
+        opt = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
+    n = len(ds)
+    steps = -(-n // cfg.batch_size)
+    if cfg.schedule == "cosine":
+        sched: Any = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=cfg.epochs * steps)
+    elif cfg.schedule == "step":
+        sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size * steps, cfg.gamma)
+    elif cfg.schedule == "onecycle":
+        sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps)
+    else:
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
+    hist = DetectionHistory()
+    bar = progress_bar(
+        total=cfg.epochs, desc="training detector", unit="epoch", disable=not progress
+    )
+    try:
+        with deterministic_algorithms():
+            for epoch in range(cfg.epochs):
+                t0 = time.perf_counter()
+                model.train()
+                sums: dict[str, float] = {}
+                order = torch.randperm(n, generator=gen).tolist()
+                for b in range(steps):
+                    images, targets = collate_detection(
+                        [ds[j] for j in order[b * cfg.batch_size : (b + 1) * cfg.batch_size]]
+                    )
+                    images = [im.to(dev) for im in images]
+                    targets = [
+                        {"boxes": t["boxes"].to(dev), "labels": t["labels"].to(dev)}
+                        for t in targets
+                    ]
+                    losses = model(images, targets)
+                    if not isinstance(losses, dict) or not losses:
+                        raise InputError(
+                            "the model must return a dict of losses in train mode (the "
+                            f"torchvision detection contract); got {type(losses).__name__}"
+                        )
+                    loss = sum(losses.values())
+                    assert isinstance(loss, torch.Tensor)
+                    if not bool(torch.isfinite(loss)):
+                        raise InputError(
+                            f"the loss became {loss.item()} at epoch {epoch + 1}, batch {b + 1}: "
+                            f"lower the learning rate (lr {cfg.lr:g})"
+                        )
+                    opt.zero_grad(set_to_none=True)
+                    loss.backward()
+                    if cfg.clip_grad_norm is not None:
+                        nn.utils.clip_grad_norm_(params, cfg.clip_grad_norm)
+                    opt.step()
+                    sched.step()
+                    for k, v in losses.items():
+                        sums[k] = sums.get(k, 0.0) + float(v.detach())
+                    sums["loss"] = sums.get("loss", 0.0) + float(loss.detach())
+                hist.losses.append({k: v / steps for k, v in sums.items()})
+                hist.seconds.append(time.perf_counter() - t0)
+                if ckpt is not None:
+                    save_checkpoint(
+                        ckpt,
+                        {
+                            "model": model.state_dict(),
+                            "epoch": epoch + 1,
+                            "losses": hist.losses,
+                            "architecture": type(model).__name__,
+                        },
+                    )
+                bar.update(1)
+                bar.set_postfix(loss=f"{hist.losses[-1]['loss']:.3f}")
+    finally:
+        bar.close()
+    return hist
+
+
+@torch.no_grad()
+def evaluate_detector(
+    model: nn.Module,
+    dataset: Any,
+    *,
+    batch_size: int = 8,
+    device: str | None = None,
+) -> Any:
+    """COCO box evaluation (:func:`~robopercept.nn.coco.evaluate_detections`, equal to
+    pycocotools) of ``model``'s eval-mode detections on ``dataset``.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        Eval mode returns ``[{"boxes", "labels", "scores"}]`` per image.
+    dataset : DetectionDataset
+    batch_size : int
+    device : str, optional
+        None: the device of the model's parameters.
+
+    Returns
+    -------
+    CocoEvaluation
+        ``.stats[0]`` is mAP@[.5:.95], ``.stats[1]`` mAP@0.5.
+
+    Examples
+    --------
+    >>> import torch
+    >>> from robopercept.nn.detection_data import digits_detection_set
+    >>> _ = torch.manual_seed(0)
+    >>> ds = digits_detection_set(2, (32, 32), (1, 1), rng=0, scale=(12, 16))
+    >>> ev = evaluate_detector(FCOS(10, width=8, head_channels=16), ds)
+    >>> ev.stats.shape
+    (12,)
+    """
+    from robopercept.nn.coco import evaluate_detections
+    from robopercept.nn.detection_data import collate_detection
+    from robopercept.nn.training import resolve_device
+
+    model = check_module(model)
+    ds = _detection_dataset(dataset)
+    bs = check_count(batch_size, "batch_size", 1, 1 << 16)
+    if device is None:
+        p = next(model.parameters(), None)
+        dev = p.device if p is not None else torch.device("cpu")
+    else:
+        dev = resolve_device(device)
+        model.to(dev)
+    was = model.training
+    model.eval()
+    results: list[Mapping[str, Any]] = []
+    try:
+        for start in range(0, len(ds), bs):
+            images, targets = collate_detection(
+                [ds[j] for j in range(start, min(len(ds), start + bs))]
+            )
+            dets = model([im.to(dev) for im in images])
+            for t, d in zip(targets, dets, strict=True):
+                b = d["boxes"].detach().cpu().double().numpy()
+                for box, lab, sc in zip(
+                    b, d["labels"].cpu().numpy(), d["scores"].cpu().double().numpy(), strict=True
+                ):
+                    results.append(
+                        {
+                            "image_id": int(t["image_id"]),
+                            "category_id": int(lab),
+                            "bbox": [
+                                float(box[0]),
+                                float(box[1]),
+                                float(box[2] - box[0]),
+                                float(box[3] - box[1]),
+                            ],
+                            "score": float(sc),
+                        }
+                    )
+    finally:
+        model.train(was)
+    return evaluate_detections(ds.to_coco(), results)

@@ -1,0 +1,485 @@
+"""Tests of robopercept.nn.detection: matching and sampling by hand, the focal loss by
+its formula, shapes and losses of every detector in train and eval mode, gradients,
+seeded determinism, overfitting tiny sets (losses and decoding agree) and bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from robopercept.errors import InputError  # noqa: E402
+from robopercept.nn.boxes import box_iou  # noqa: E402
+from robopercept.nn.detection import (  # noqa: E402
+    FCOS,
+    FPN,
+    DetectionBackbone,
+    FasterRCNN,
+    FastRCNN,
+    SingleObjectLocalizer,
+    evaluate_detector,
+    match_boxes,
+    sample_balanced,
+    sigmoid_focal_loss,
+    train_detector,
+)
+from robopercept.nn.detection_data import digits_detection_set, single_digit_set  # noqa: E402
+from robopercept.nn.training import TrainConfig  # noqa: E402
+
+
+def grid_proposals(image: torch.Tensor) -> torch.Tensor:
+    """Sliding-window proposals (squares of 16, 24, 32 px every 8 px): a stand-in for
+    selective search, so Fast R-CNN's tests do not depend on it."""
+    h, w = image.shape[1:]
+    rows = [
+        [x, y, x + s, y + s]
+        for s in (16, 24, 32)
+        for y in range(0, h - s + 1, 8)
+        for x in range(0, w - s + 1, 8)
+    ]
+    return torch.tensor(rows, dtype=torch.float32)
+
+
+def build(kind: str, num_classes: int = 10, **kw):
+    torch.manual_seed(0)
+    if kind == "loc":
+        return SingleObjectLocalizer(num_classes, width=8, **kw)
+    if kind == "fast":
+        kw = {"width": 8, "hidden": 64, "box_batch_size": 64, **kw}
+        return FastRCNN(num_classes, grid_proposals, **kw)
+    if kind == "faster":
+        kw = {"width": 8, "hidden": 64, "box_batch_size": 64, "rpn_batch_size": 64, **kw}
+        return FasterRCNN(num_classes, **kw)
+    return FCOS(num_classes, width=8, head_channels=32, **kw)
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """One intra-op thread: the 2-core CI machine runs other jobs beside these tests,
+    and two contending threads make the training tests several times slower."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+LOSSES = {
+    "loc": {"loss_classifier", "loss_box"},
+    "fast": {"loss_classifier", "loss_box"},
+    "faster": {"loss_rpn_objectness", "loss_rpn_box", "loss_classifier", "loss_box"},
+    "fcos": {"classification", "bbox_regression", "bbox_ctrness"},
+}
+KINDS = tuple(LOSSES)
+
+
+def tiny_batch(one_box: bool = False):
+    g = torch.Generator().manual_seed(1)
+    images = [torch.rand(3, 64, 64, generator=g), torch.rand(3, 48, 56, generator=g)]
+    targets = [
+        {"boxes": torch.tensor([[8.0, 10, 40, 50]]), "labels": torch.tensor([3])},
+        {"boxes": torch.tensor([[20.0, 4, 50, 30]]), "labels": torch.tensor([7])},
+    ]
+    if not one_box:
+        targets[0] = {
+            "boxes": torch.tensor([[8.0, 10, 40, 50], [44, 40, 62, 62]]),
+            "labels": torch.tensor([3, 1]),
+        }
+    return images, targets
+
+
+# --------------------------------------------------------------------------- matching
+class TestMatchBoxes:
+    def test_anchor_equal_to_gt_is_positive(self):
+        gt = torch.tensor([[10.0, 10, 30, 30]])
+        anchors = torch.tensor([[10.0, 10, 30, 30], [0, 0, 8, 8], [12, 10, 32, 30]])
+        labels, matched = match_boxes(box_iou(gt, anchors), 0.7, 0.3)
+        # IoU 1, 0 and 18*20 / (20*20 + 2*20) = 0.818
+        assert labels.tolist() == [1, 0, 1]
+        assert matched.tolist() == [0, 0, 0]
+
+    def test_best_anchor_per_gt_is_positive_below_threshold(self):
+        gt = torch.tensor([[0.0, 0, 10, 10], [50, 50, 60, 60]])
+        anchors = torch.tensor(
+            [[0.0, 0, 20, 10], [0, 0, 40, 40], [50, 50, 70, 70], [80, 80, 90, 90]]
+        )
+        iou = box_iou(gt, anchors)  # [[0.5, 1/16, 0, 0], [0, 0, 0.25, 0]]
+        labels, matched = match_boxes(iou, 0.7, 0.3, allow_low_quality=True)
+        assert labels.tolist() == [1, 0, 1, 0]
+        assert matched[2] == 1
+        labels, _ = match_boxes(iou, 0.7, 0.3)
+        assert labels.tolist() == [-1, 0, 0, 0]  # 0.5 in the ignored band
+
+    def test_low_quality_needs_some_overlap(self):
+        # a ground-truth box that overlaps no anchor promotes nothing
+        iou = torch.tensor([[0.0, 0.0], [0.8, 0.1]])
+        assert match_boxes(iou, 0.7, 0.3, allow_low_quality=True)[0].tolist() == [1, 0]
+
+    def test_low_quality_ties_all_positive(self):
+        iou = torch.tensor([[0.4, 0.4, 0.1]])
+        assert match_boxes(iou, 0.7, 0.3, allow_low_quality=True)[0].tolist() == [1, 1, 0]
+
+    def test_background_band_of_fast_rcnn(self):
+        iou = torch.tensor([[0.05, 0.1, 0.49, 0.5]])
+        assert match_boxes(iou, 0.5, 0.5, 0.1)[0].tolist() == [-1, 0, 0, 1]
+
+    def test_no_ground_truth(self):
+        labels, matched = match_boxes(torch.zeros(0, 3), 0.7, 0.3)
+        assert labels.tolist() == [0, 0, 0] and matched.tolist() == [0, 0, 0]
+        assert match_boxes(torch.zeros(0, 2), 0.5, 0.5, 0.1)[0].tolist() == [-1, -1]
+
+    @pytest.mark.parametrize(
+        ("args", "msg"),
+        [
+            ((torch.zeros(3), 0.7, 0.3), "iou must be a \\(G, N\\)"),
+            ((torch.tensor([[math.nan]]), 0.7, 0.3), "finite"),
+            ((torch.zeros(1, 1), 0.3, 0.7), "bg_threshold"),
+            ((torch.zeros(1, 1), 1.5, 0.3), "fg_threshold"),
+        ],
+    )
+    def test_bad_input(self, args, msg):
+        with pytest.raises(InputError, match=msg):
+            match_boxes(*args)
+
+
+class TestSampleBalanced:
+    def test_counts_and_fractions(self):
+        torch.manual_seed(0)
+        labels = torch.tensor([1] * 10 + [0] * 1000 + [-1] * 50)
+        pos, neg = sample_balanced(labels, 256, 0.5)
+        assert int(pos.sum()) == 10 and int(neg.sum()) == 246  # few positives: negatives fill
+        assert not bool((pos | neg)[-50:].any())  # ignored never drawn
+        assert bool((labels[pos] == 1).all()) and bool((labels[neg] == 0).all())
+        labels = torch.tensor([1] * 300 + [0] * 1000)
+        pos, neg = sample_balanced(labels, 256, 0.5)
+        assert int(pos.sum()) == 128 and int(neg.sum()) == 128
+        pos, neg = sample_balanced(labels, 512, 0.25)  # Fast R-CNN's 25 % foreground
+        assert int(pos.sum()) == 128 and int(neg.sum()) == 384
+
+    def test_few_candidates(self):
+        pos, neg = sample_balanced(torch.tensor([1, 0, -1]), 256, 0.5)
+        assert pos.tolist() == [True, False, False] and neg.tolist() == [False, True, False]
+
+    def test_seeded(self):
+        labels = torch.tensor([1] * 50 + [0] * 50)
+        torch.manual_seed(3)
+        a = sample_balanced(labels, 20, 0.5)
+        torch.manual_seed(3)
+        b = sample_balanced(labels, 20, 0.5)
+        assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1])
+
+    def test_bad_input(self):
+        with pytest.raises(InputError, match=r"integer torch\.Tensor"):
+            sample_balanced(torch.zeros(3), 4, 0.5)
+        with pytest.raises(InputError, match="batch_size"):
+            sample_balanced(torch.zeros(3, dtype=torch.int64), 0, 0.5)
+        with pytest.raises(InputError, match="positive_fraction"):
+            sample_balanced(torch.zeros(3, dtype=torch.int64), 4, 2.0)
+
+
+class TestFocalLoss:
+    def test_hand_value(self):
+        # x = 0: p = 0.5, y = 1: 0.25 * 0.5^2 * log 2
+        got = sigmoid_focal_loss(torch.tensor([0.0]), torch.tensor([1.0]))
+        assert float(got) == pytest.approx(0.25 * 0.25 * math.log(2), rel=1e-6)
+        # y = 0, x = 2: p = sigma(2), (1 - alpha) p^2 (-log(1 - p))
+        p = 1 / (1 + math.exp(-2))
+        got = sigmoid_focal_loss(torch.tensor([2.0]), torch.tensor([0.0]))
+        assert float(got) == pytest.approx(0.75 * p**2 * -math.log(1 - p), rel=1e-6)
+
+    def test_gamma_zero_no_alpha_is_bce(self):
+        x, y = torch.randn(20), (torch.rand(20) > 0.5).float()
+        bce = torch.nn.functional.binary_cross_entropy_with_logits(x, y, reduction="sum")
+        got = sigmoid_focal_loss(x, y, alpha=-1, gamma=0, reduction="sum")
+        assert float(got) == pytest.approx(float(bce), rel=1e-6)
+        assert float(sigmoid_focal_loss(x, y, reduction="mean")) == pytest.approx(
+            float(sigmoid_focal_loss(x, y).mean()), rel=1e-6
+        )
+
+    def test_bad_input(self):
+        with pytest.raises(InputError, match="logits"):
+            sigmoid_focal_loss(torch.zeros(2, dtype=torch.int64), torch.zeros(2))
+        with pytest.raises(InputError, match="shape of inputs"):
+            sigmoid_focal_loss(torch.zeros(2), torch.zeros(3))
+        with pytest.raises(InputError, match="reduction"):
+            sigmoid_focal_loss(torch.zeros(2), torch.zeros(2), reduction="max")
+
+
+# --------------------------------------------------------------------------- backbone
+def test_backbone_and_fpn_shapes():
+    bb = DetectionBackbone(8, strides=(8, 16, 32))
+    outs = bb(torch.zeros(2, 3, 64, 96))
+    assert [tuple(o.shape) for o in outs] == [(2, 32, 8, 12), (2, 64, 4, 6), (2, 64, 2, 3)]
+    assert bb.out_channels == [32, 64, 64]
+    fpn = FPN([32, 64], 16)
+    assert [tuple(o.shape) for o in fpn(outs[:2])] == [(2, 16, 8, 12), (2, 16, 4, 6)]
+    with pytest.raises(InputError, match="strides"):
+        DetectionBackbone(8, strides=(16, 8))
+    with pytest.raises(InputError, match="features must be a list of 2"):
+        fpn(outs)
+
+
+# --------------------------------------------------------------------------- contract
+@pytest.mark.parametrize("kind", KINDS)
+def test_train_losses_finite_positive_and_gradients_flow(kind):
+    m = build(kind).train()
+    images, targets = tiny_batch(one_box=kind == "loc")
+    losses = m(images, targets)
+    assert set(losses) == LOSSES[kind]
+    for name, v in losses.items():
+        assert v.ndim == 0 and bool(torch.isfinite(v)), name
+        assert float(v.detach()) > 0, name
+    sum(losses.values()).backward()
+    for name, p in m.named_parameters():
+        assert p.grad is not None and bool(p.grad.abs().sum() > 0), name
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_eval_output_shapes_on_images_of_different_sizes(kind):
+    m = build(kind, score_thresh=0.0) if kind != "loc" else build(kind)
+    images, _ = tiny_batch()
+    out = m.predict(images)
+    assert len(out) == 2 and m.training  # predict restores the mode
+    for o, im in zip(out, images, strict=True):
+        assert set(o) == {"boxes", "labels", "scores"}
+        d = o["boxes"].shape[0]
+        assert (
+            o["boxes"].shape == (d, 4) and o["labels"].shape == (d,) and o["scores"].shape == (d,)
+        )
+        assert o["labels"].dtype == torch.int64 and d >= 1
+        h, w = im.shape[1:]
+        b = o["boxes"]
+        assert bool((b[:, 0] >= 0).all() and (b[:, 2] <= w).all() and (b[:, 3] <= h).all())
+        assert bool((o["labels"] >= 1).all() and (o["labels"] <= 10).all())
+        assert bool((o["scores"][:-1] >= o["scores"][1:]).all())  # sorted by score
+    if kind == "loc":
+        assert all(o["boxes"].shape[0] == 1 for o in out)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_batch_tensor_equals_list_of_images(kind):
+    m = build(kind, score_thresh=0.0) if kind != "loc" else build(kind)
+    images = torch.rand(2, 3, 32, 40, generator=torch.Generator().manual_seed(2))
+    a, b = m.predict(images), m.predict(list(images))
+    for da, db in zip(a, b, strict=True):
+        for k in ("boxes", "labels", "scores"):
+            assert torch.equal(da[k], db[k])
+
+
+def test_resolve_device_and_deterministic_algorithms():
+    from robopercept.nn.training import deterministic_algorithms, resolve_device
+
+    assert resolve_device("cpu") == torch.device("cpu")
+    with pytest.raises(InputError, match="device"):
+        resolve_device("gpu7")
+    before = torch.are_deterministic_algorithms_enabled()
+    with deterministic_algorithms():
+        assert torch.are_deterministic_algorithms_enabled()
+    assert torch.are_deterministic_algorithms_enabled() == before
+
+
+@pytest.mark.parametrize("kind", ["fast", "faster", "fcos"])
+def test_eval_empty_detections_have_right_shapes(kind):
+    # nothing passes the score threshold (strictly above 1) or, for Fast R-CNN, no
+    # proposals: empty tensors of the usual shapes and dtypes
+    m = build(kind, score_thresh=1.0).eval()
+    image = torch.zeros(3, 40, 40)
+    out = m([image], proposals=[torch.zeros(0, 4)]) if kind == "fast" else m([image])
+    o = out[0]
+    assert o["boxes"].shape == (0, 4) and o["labels"].shape == (0,) and o["scores"].shape == (0,)
+    assert o["labels"].dtype == torch.int64 and o["scores"].is_floating_point()
+
+
+def test_fcos_untrained_on_blank_image_is_empty():
+    # the classification prior (0.01) keeps every score below the 0.2 threshold
+    o = build("fcos").eval()([torch.zeros(3, 32, 32)])[0]
+    assert o["boxes"].shape == (0, 4)
+
+
+@pytest.mark.parametrize("kind", ["fast", "faster", "fcos"])
+def test_image_without_objects_trains(kind):
+    m = build(kind).train()
+    losses = m(
+        [torch.rand(3, 32, 32)],
+        [{"boxes": torch.zeros(0, 4), "labels": torch.zeros(0, dtype=torch.int64)}],
+    )
+    assert all(bool(torch.isfinite(v)) for v in losses.values())
+    box_loss = {"fast": "loss_box", "faster": "loss_rpn_box", "fcos": "bbox_regression"}[kind]
+    assert float(losses[box_loss].detach()) == 0.0  # no positives: no box loss
+    if kind == "faster":
+        assert float(losses["loss_box"].detach()) == 0.0
+    assert float(sum(losses.values()).detach()) > 0  # the classification terms still teach
+
+
+def test_faster_rcnn_rpn_sampling_and_proposal_counts():
+    m = build("faster", post_nms_top_n=(40, 7)).train()
+    images, targets = tiny_batch()
+    torch.manual_seed(0)
+    batch, sizes, _ = m._prepare(images, targets)
+    feats = m.backbone(batch)[-1]
+    obj, reg, anchors = m.rpn(feats, tuple(batch.shape[2:]))
+    assert obj.shape == (2, 8 * 8 * 9) and reg.shape == (2, 8 * 8 * 9, 4)
+    assert anchors.shape == (8 * 8 * 9, 4)
+    props, _ = m.proposals(obj, reg, anchors, sizes)
+    assert [p.shape[0] <= 40 for p in props] == [True, True]
+    for p, (h, w) in zip(props, sizes, strict=True):
+        assert bool((p[:, 2] <= w).all() and (p[:, 3] <= h).all() and (p[:, 0] >= 0).all())
+    m.eval()
+    props, _ = m.proposals(obj, reg, anchors, sizes)
+    assert all(p.shape[0] <= 7 for p in props)
+
+
+def test_roi_sampling_fractions_and_bands():
+    m = build("fast", box_batch_size=32).train()
+    torch.manual_seed(0)
+    gt = {"boxes": torch.tensor([[8.0, 8, 40, 40]]), "labels": torch.tensor([4])}
+    props = [grid_proposals(torch.zeros(3, 64, 64))]
+    rois, labels, deltas = m.select_training_samples(props, [gt])
+    iou = box_iou(gt["boxes"], rois[0])[0]
+    fg = labels[0] > 0
+    assert rois[0].shape[0] == 32 and int(fg.sum()) == 8  # 25 % of 32
+    assert bool((labels[0][fg] == 4).all()) and bool((iou[fg] >= 0.5).all())
+    assert bool(((iou[~fg] >= 0.1) & (iou[~fg] < 0.5)).all())  # Fast R-CNN's background band
+    assert bool((deltas[0][~fg] == 0).all())
+
+
+def test_fcos_assignment_hand_case():
+    m = build("fcos", num_classes=2)
+    locs = torch.tensor([[20.0, 20.0], [4.0, 4.0], [30.0, 30.0]])
+    strides = torch.full((3,), 8.0)
+    gt = torch.tensor([[0.0, 0, 40, 40], [14, 14, 26, 26]])
+    idx = m.assign(locs, strides, [3], gt)
+    # (20, 20) lies in both centre regions: the smaller box wins; (4, 4) is outside the
+    # big box's centre region (radius 12 around (20, 20)); (30, 30) is in it
+    assert idx.tolist() == [1, -1, 0]
+
+
+# --------------------------------------------------------------------------- training
+def test_seeded_determinism():
+    ds = digits_detection_set(2, (48, 48), (1, 2), rng=0, scale=(12, 24))
+    cfg = TrainConfig(epochs=2, batch_size=2, lr=1e-3, device="cpu", seed=5)
+    runs = []
+    for _ in range(2):
+        m = build("faster")
+        runs.append(train_detector(m, ds, cfg, progress=False).losses)
+    assert runs[0] == runs[1]
+
+
+def test_checkpoint_round_trip(tmp_path):
+    from robopercept.nn.training import load_checkpoint
+
+    ds = digits_detection_set(1, (32, 32), (1, 1), rng=0, scale=(12, 16))
+    m = build("fcos")
+    cfg = TrainConfig(epochs=2, batch_size=1, device="cpu")
+    hist = train_detector(m, ds, cfg, checkpoint=tmp_path / "det.pt", progress=False)
+    other = build("fcos", num_classes=10)
+    torch.nn.init.zeros_(other.cls_logits.weight)
+    state = load_checkpoint(tmp_path / "det.pt", other)
+    assert state["epoch"] == 2 and state["architecture"] == "FCOS"
+    assert state["losses"] == hist.losses
+    for a, b in zip(m.state_dict().values(), other.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+
+
+def _overfit(kind: str, epochs: int, lr: float):
+    if kind == "loc":
+        ds = single_digit_set(2, (64, 64), rng=0, scale=(20, 40))
+    else:
+        ds = digits_detection_set(2, (64, 64), (1, 1), rng=0, scale=(16, 32))
+    m = build(kind)
+    cfg = TrainConfig(
+        epochs=epochs, batch_size=2, lr=lr, device="cpu", schedule="constant", weight_decay=0.0
+    )
+    hist = train_detector(m, ds, cfg, progress=False)
+    return m, ds, hist
+
+
+@pytest.mark.parametrize(
+    ("kind", "epochs", "lr"), [("fcos", 60, 3e-3), ("faster", 60, 1e-3), ("fast", 60, 1e-3)]
+)
+def test_overfits_two_images(kind, epochs, lr):
+    # two 64 x 64 canvases of one real digit each: a correct detector (losses and
+    # decoding that agree) fits them to AP50 = 1 in 60 steps (measured with model seeds
+    # 0-2 and 1 or 2 threads: AP50 1.0, AP 0.75-1.0); a wrong sign or scale in the box
+    # decoding leaves AP50 near 0
+    m, ds, hist = _overfit(kind, epochs, lr)
+    assert hist.losses[-1]["loss"] < 0.5 * hist.losses[0]["loss"]
+    ev = evaluate_detector(m, ds)
+    assert ev.stats[1] >= 0.9, ev.stats
+    assert ev.stats[0] >= 0.6, ev.stats
+
+
+def test_localizer_overfits_to_high_iou():
+    m, ds, _ = _overfit("loc", 60, 3e-3)
+    out = m.predict([ds[i][0] for i in range(len(ds))])
+    for i, o in enumerate(out):
+        gt = torch.from_numpy(ds.boxes[i]).float()
+        assert float(box_iou(o["boxes"], gt)[0, 0]) >= 0.8
+        assert int(o["labels"][0]) == int(ds.labels[i][0])
+    assert evaluate_detector(m, ds).stats[1] == pytest.approx(1.0)
+
+
+# --------------------------------------------------------------------------- bad input
+def _t(boxes, labels, bdtype=torch.float32, ldtype=torch.int64):
+    return [
+        {"boxes": torch.tensor(boxes, dtype=bdtype), "labels": torch.tensor(labels, dtype=ldtype)}
+    ]
+
+
+@pytest.mark.parametrize(
+    ("targets", "msg"),
+    [
+        (_t([[1.0, 2, math.nan, 9]], [1]), "NaN or inf"),
+        (_t([[5.0, 2, 5, 9]], [1]), "degenerate box"),
+        (_t([[1, 2, 8, 9]], [1], bdtype=torch.int64), "float torch.Tensor"),
+        (_t([[1.0, 2, 8, 9]], [1], ldtype=torch.int32), "int64"),
+        (_t([[1.0, 2, 8, 9]], [0]), "0 is the background"),
+        (_t([[1.0, 2, 8, 9]], [11]), "in 1..10"),
+        (None, "targets are required in train mode"),
+        ([{"boxes": torch.zeros(0, 4)}], "'boxes' and 'labels'"),
+        ([], "list of 1 dicts"),
+    ],
+)
+@pytest.mark.parametrize("kind", ["faster", "fcos"])
+def test_bad_targets(kind, targets, msg):
+    m = build(kind).train()
+    with pytest.raises(InputError, match=msg):
+        m([torch.rand(3, 16, 16)], targets)
+
+
+@pytest.mark.parametrize(
+    ("images", "msg"),
+    [
+        ([torch.rand(16, 16, 3)], "channels-last"),
+        ([torch.rand(1, 16, 16)], "must be \\(3, H, W\\)"),
+        ([torch.zeros(3, 8, 8, dtype=torch.uint8)], "floating point"),
+        ([np.zeros((3, 8, 8))], "torch.from_numpy"),
+        ([torch.full((3, 8, 8), math.nan)], "NaN"),
+        ([], "non-empty list"),
+    ],
+)
+def test_bad_images(images, msg):
+    m = build("fcos").eval()
+    with pytest.raises(InputError, match=msg):
+        m(images)
+
+
+def test_model_specific_errors():
+    images, targets = tiny_batch()
+    with pytest.raises(InputError, match="exactly one box"):
+        build("loc").train()(images, targets)
+    m = FastRCNN(3, width=8, hidden=16).eval()
+    with pytest.raises(InputError, match="needs proposals"):
+        m([torch.rand(3, 16, 16)])
+    with pytest.raises(InputError, match=r"proposals\[0\]"):
+        m([torch.rand(3, 16, 16)], proposals=[torch.zeros(3, 5)])
+    with pytest.raises(InputError, match="num_classes"):
+        FCOS(0)
+    with pytest.raises(InputError, match="DetectionDataset"):
+        train_detector(build("fcos"), [1, 2], progress=False)
+    with pytest.raises(InputError, match="TrainConfig"):
+        train_detector(build("fcos"), single_digit_set(1, rng=0), {"epochs": 1}, progress=False)
+    with pytest.raises(InputError, match="DetectionDataset"):
+        evaluate_detector(build("fcos"), "shapes")
