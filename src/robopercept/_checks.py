@@ -160,7 +160,11 @@ def check_odd_size(value: npt.ArrayLike, name: str, minimum: int = 1) -> int:
 def check_choice(value: npt.ArrayLike, name: str, choices: Iterable[Any]) -> Any:
     """Return ``value`` after checking that it is one of ``choices``."""
     choices = tuple(choices)
-    if value not in choices:
+    try:  # an array compares element-wise and has no single truth value
+        known = not isinstance(value, np.ndarray) and value in choices
+    except (TypeError, ValueError):
+        known = False
+    if not known:
         raise InputError(
             f"{name} must be one of {', '.join(map(plain_repr, choices))}; got {plain_repr(value)}"
         )
@@ -256,8 +260,14 @@ def as_rng(rng: int | np.integer | np.random.Generator | None) -> np.random.Gene
     """``rng`` as a NumPy Generator: an int seed, a Generator, or None (fresh entropy)."""
     if isinstance(rng, np.random.Generator):
         return rng
-    if rng is None or (isinstance(rng, (int, np.integer)) and not isinstance(rng, bool)):
-        return np.random.default_rng(rng)
+    if rng is None:
+        return np.random.default_rng()
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        if rng < 0:  # NumPy's SeedSequence raises an untyped ValueError
+            raise InputError(
+                f"rng must be an int seed >= 0, a numpy.random.Generator or None; got {rng}"
+            )
+        return np.random.default_rng(int(rng))
     raise InputError(f"rng must be an int seed, a numpy.random.Generator or None; got {rng!r}")
 
 

@@ -83,6 +83,11 @@ class TestHierarchicalGrouping:
             ((np.zeros((4, 4)), np.zeros((4, 4), np.int64), ("colour",)), "similarity term"),
             ((np.zeros((4, 4)), np.zeros((4, 4), np.int64), "color"), "tuple of names"),
             ((np.zeros((4, 4)), np.zeros((4, 4), np.int64), ()), "at least one"),
+            # issue 25 campaign: an array among the terms raised NumPy's truth-value error
+            (
+                (np.zeros((4, 4)), np.zeros((4, 4), np.int64), [np.eye(3), "size"]),
+                "similarity term must be one of",
+            ),
         ],
     )
     def test_errors(self, args, match):
@@ -136,6 +141,7 @@ class TestSelectiveSearch:
         [
             ({"mode": "slow"}, "mode"),
             ({"rng": "seed"}, "rng must be an int seed"),
+            ({"rng": -1}, "rng must be an int seed >= 0"),  # was NumPy's ValueError
             ({"max_proposals": 0}, "max_proposals must be >= 1"),
             ({"max_proposals": 2.0}, "max_proposals must be an integer"),
         ],
@@ -147,6 +153,15 @@ class TestSelectiveSearch:
     def test_bad_image(self):
         with pytest.raises(InputError, match="RGBA"):
             selective_search(np.zeros((8, 8, 4)))
+
+    def test_negative_signed_integers_count_as_black(self):
+        """Issue 25 campaign: negative int32 values made the colour histogram's bincount
+        raise; they are clipped to 0 as values above the range are clipped to 1."""
+        img = np.random.default_rng(0).integers(-(2**31), 2**31 - 1, (16, 16, 3), np.int32)
+        clipped = np.where(img < 0, 0, img).astype(np.int32)
+        np.testing.assert_array_equal(
+            selective_search(img, rng=0), selective_search(clipped, rng=0)
+        )
 
 
 @pytest.mark.realdata

@@ -33,6 +33,9 @@ class TestGridEdges:
             grid_edges([2, 2])  # type: ignore[arg-type]
         with pytest.raises(InputError, match="H must be >= 1"):
             grid_edges((0, 3))
+        # issue 25 campaign: (4, 24256621) allocated 740 MiB before failing
+        with pytest.raises(InputError, match=r"more than the 16777216 \(2\*\*24\)"):
+            grid_edges((4, 24256621))
 
 
 class TestFelzenszwalbHand:
@@ -109,6 +112,14 @@ class TestFelzenszwalbParity:
 
 
 class TestFelzenszwalbErrors:
+    def test_tiny_sigma_is_no_smoothing(self):
+        """Issue 25 campaign: sigma=1e-162 squared to 0 and divided by it; a sigma below
+        1/8 has SciPy's one-tap kernel, the same result as sigma=0."""
+        img = np.random.default_rng(1).random((12, 16, 3))
+        ref = felzenszwalb(img, scale=5, sigma=0)
+        for sigma in (1e-162, 1e-300, 0.1):
+            np.testing.assert_array_equal(felzenszwalb(img, scale=5, sigma=sigma), ref)
+
     @pytest.mark.parametrize(
         ("kwargs", "match"),
         [

@@ -203,3 +203,29 @@ def test_crafted_model_files_are_refused(tmp_path):
         z.writestr("meta.npy", meta_npy.getvalue())
     with pytest.raises(FileFormatError, match=r"header says 1000000000000 x 8 bytes"):
         HogDetector.load(tmp_path / "lie.npz")
+
+
+@pytest.mark.parametrize("word", [0x7FFFFFFF, 0x80000000])
+def test_huge_stated_member_sizes_cost_no_memory(tmp_path, word):
+    """Issue 25, long fuzz campaign: a model file whose zip entries state a 2 GiB
+    compressed size made ZipFile.read allocate 1 GiB before the short read came back
+    (6 kB file); now refused by name, with a small peak."""
+    import struct
+    import tracemalloc
+
+    m = bytearray(_shipped_model_bytes())
+    # every central-directory entry (PK\x01\x02): compressed size at offset 20
+    at = 0
+    while (at := m.find(b"PK\x01\x02", at)) >= 0:
+        m[at + 20 : at + 24] = struct.pack("<I", word)
+        at += 4
+    path = tmp_path / "huge.npz"
+    path.write_bytes(bytes(m))
+    tracemalloc.start()
+    try:
+        with pytest.raises(FileFormatError, match=r"huge\.npz"):
+            HogDetector.load(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 * 2**20, peak

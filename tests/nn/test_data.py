@@ -419,7 +419,7 @@ _IMGS = np.random.default_rng(0).uniform(0, 1, (6, 1, 8, 8)).astype(np.float32)
         (lambda: ImageFolder(".", size=(2**30, 2**30)), r"would take .* lower size"),
         (lambda: ImageFolder(".", mode=None), r"mode must be one of 'rgb', 'gray'"),
         (lambda: shapes_dataset(4, noise=1 + 1j), r"noise \(a standard deviation\) must be"),
-        (lambda: shapes_dataset(4, rng=-5), r"rng must be a seed >= 0"),
+        (lambda: shapes_dataset(4, rng=-5), r"rng must be an int seed >= 0"),
         (lambda: shapes_dataset(2**40, 16), r"would take .*lower n or size"),
         (lambda: shapes_dataset(4, 2**20), r"would take"),
         (lambda: stratified_split(np.arange(30) % 3, (0.7, [1, 2], 0.15)), r"fractions must"),

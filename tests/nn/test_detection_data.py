@@ -517,7 +517,7 @@ def test_draw_detections_and_samples_picture(digits_set):
         (lambda: procedural_detection_set(0), r"n_images must be >= 1"),
         (lambda: procedural_detection_set(2, classes=("hexagon",)), r"names from \('circle'"),
         (lambda: procedural_detection_set(2, (8, 8)), r"size must be \(width, height\)"),
-        (lambda: procedural_detection_set(2, rng=-1), r"rng must be a seed >= 0"),
+        (lambda: procedural_detection_set(2, rng=-1), r"rng must be an int seed >= 0"),
         (lambda: procedural_detection_set(2, min_visible=0.0), r"min_visible must be"),
         (lambda: procedural_detection_set(2, scale=(0.3, 0.1)), r"scale must be a \(low, high\)"),
         (lambda: procedural_detection_set(10**9), r"lower n_images"),

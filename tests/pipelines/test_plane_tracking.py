@@ -365,6 +365,7 @@ def test_a_realsense_recording_gives_the_same_figures(tmp_path):
         (lambda: plane_errors(np.ones(3), 1.0, np.ones(4), 1.0), "true_normal must be 3 finite"),
         (lambda: plane_errors(np.ones(3), 1.0, np.zeros(3), 1.0), "normals must be non-zero"),
         (lambda: plane_errors(np.ones(3), "1", np.ones(3), 1.0), "d must be a number"),
+        (lambda: plane_errors(np.ones(3), 10**400, np.ones(3), 1.0), "within float64's range"),
         (lambda: summarize(None), "results must be a list of PlaneTrackResult; got NoneType"),
         (lambda: summarize([3]), "results must hold PlaneTrackResult objects; got int"),
         (lambda: summarize([], skipped=None), "skipped must be an integer"),

@@ -400,7 +400,7 @@ def test_point_cloud_container():
 @pytest.mark.parametrize(
     "call, words",
     [
-        (lambda c: segment_planes(c, 0.01, rng=-5), "rng must be a non-negative int seed"),
+        (lambda c: segment_planes(c, 0.01, rng=-5), "rng must be an int seed >= 0"),
         (lambda c: segment_plane(PointCloud(c.points * 1e300), 0.01), "rescale your data"),
         (lambda c: segment_planes(PointCloud(c.points * 1e300), 0.01), "rescale your data"),
         (lambda c: segment_plane(c, "0.01"), "threshold must be a real number"),

@@ -290,8 +290,6 @@ def ransac(
         raise DegenerateError(
             f"a {model.name} needs samples of {n_sample} rows; the data has only {n}"
         )
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
-        raise InputError(f"rng must be a non-negative int seed, a Generator or None; got {rng}")
     model.check(x)
     prepared = model.prepare(x)
     gen = as_rng(rng)

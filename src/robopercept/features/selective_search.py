@@ -81,10 +81,12 @@ _SPACES = {"fast": ("hsv", "lab"), "quality": ("hsv", "lab", "gray", "hue", "lig
 
 
 def _unit_rgb(image: np.ndarray) -> np.ndarray:
-    # RGB (or gray) in [0, 1] as float64
+    # RGB (or gray) in [0, 1] as float64 (negative values of signed integer or float
+    # images clipped to 0, as values above 1: the histograms' bins cover [0, 1])
+    out = image.astype(np.float64)
     if image.dtype.kind in "ui":
-        return image.astype(np.float64) / float(np.iinfo(image.dtype).max)
-    return np.clip(image.astype(np.float64), 0.0, 1.0)
+        out /= float(np.iinfo(image.dtype).max)
+    return np.clip(out, 0.0, 1.0)
 
 
 def _rgb_to_lab_unit(rgb: np.ndarray) -> np.ndarray:

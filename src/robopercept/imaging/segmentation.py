@@ -39,12 +39,17 @@ from robopercept.errors import InputError
 from robopercept.imaging.blobs import uf_find
 from robopercept.imaging.filters import separable_filter_unchecked
 
-__all__ = ["felzenszwalb", "grid_edges"]
+__all__ = ["MAX_PIXELS", "felzenszwalb", "grid_edges"]
+
+#: most pixels of the grid graph (its edges take 64 bytes a pixel: 1 GiB at the cap)
+MAX_PIXELS = 2**24
 
 
 def _scipy_gaussian_kernel(sigma: float) -> np.ndarray:
     # scipy.ndimage.gaussian_filter's 1-D kernel: radius int(4 sigma + 0.5)
     radius = int(4.0 * sigma + 0.5)
+    if radius == 0:  # sigma < 1/8: one tap (sigma * sigma may underflow to 0)
+        return np.ones(1)
     x = np.arange(-radius, radius + 1)
     w = np.exp(-0.5 / (sigma * sigma) * x**2)
     return w / w.sum()
@@ -94,6 +99,11 @@ def grid_edges(shape: tuple[int, int]) -> np.ndarray:
     (E, 2) int64 ndarray
         ``E = H(W-1) + (H-1)W + 2(H-1)(W-1)`` edges.
 
+    Raises
+    ------
+    InputError
+        ``shape`` not two positive ints, or more than :data:`MAX_PIXELS` pixels.
+
     Examples
     --------
     >>> grid_edges((2, 2)).tolist()
@@ -106,8 +116,11 @@ def grid_edges(shape: tuple[int, int]) -> np.ndarray:
     ):
         raise InputError(f"shape must be a tuple (H, W) of ints; got {shape!r}")
     h, w = check_int(shape[0], "H", 1), check_int(shape[1], "W", 1)
-    if h * w > 2**31:
-        raise InputError(f"shape {shape} has more than 2**31 pixels: downscale the image")
+    if h * w > MAX_PIXELS:
+        raise InputError(
+            f"shape {shape} has {h * w} pixels, more than the {MAX_PIXELS} (2**24) the "
+            "graph of grid_edges/felzenszwalb may take: downscale the image"
+        )
     idx = np.arange(h * w, dtype=np.int64).reshape(h, w)
     pairs = [
         (idx[:, 1:], idx[:, :-1]),  # right
@@ -199,7 +212,7 @@ def felzenszwalb(
     ------
     InputError
         A bad image (see ``check_image``), ``scale`` or ``sigma`` negative or not finite,
-        ``min_size`` not a non-negative integer.
+        ``min_size`` not a non-negative integer, more than :data:`MAX_PIXELS` pixels.
 
     Examples
     --------

@@ -420,17 +420,19 @@ def _read_npz(p: Path, names: tuple[str, ...], not_model: str) -> dict[str, np.n
         raise FileFormatError(f"{not_model}: it holds one array, not an archive")
     arrays: dict[str, np.ndarray] = {}
     try:
+        size = p.stat().st_size
         with zipfile.ZipFile(p) as z:
             members = {i.filename: i for i in z.infolist()}
             for name in names:
                 info = members.get(f"{name}.npy")
                 if info is None:
                     raise FileFormatError(f"{not_model}: it has no {name!r} array")
-                if info.file_size > _MAX_MEMBER:
+                if info.file_size > _MAX_MEMBER or info.compress_size > size:
                     raise FileFormatError(
-                        f"{not_model}: its {name!r} array claims {info.file_size} bytes"
+                        f"{not_model}: its {name!r} array claims {info.file_size} bytes "
+                        f"({info.compress_size} stored) in a {size}-byte file"
                     )
-                arrays[name] = _npy_from_bytes(z.read(info), name, not_model)
+                arrays[name] = _npy_from_bytes(_read_member(z, info), name, not_model)
     except FileFormatError:
         raise
     except Exception as exc:
@@ -440,6 +442,19 @@ def _read_npz(p: Path, names: tuple[str, ...], not_model: str) -> dict[str, np.n
         # MemoryError...: every one of them means a damaged or foreign file
         raise FileFormatError(f"{not_model} ({type(exc).__name__}: {exc})") from None
     return arrays
+
+
+def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> bytes:
+    """The unpacked bytes of ``info``, read in 1 MiB pieces: ``ZipFile.read`` asks the
+    file for the whole stated compressed size at once, and Python allocates that much
+    before the read comes back short (a 2 GiB length word cost 1 GiB on a 6 kB file)."""
+    out = bytearray()
+    with z.open(info) as f:
+        while piece := f.read(1 << 20):
+            out += piece
+            if len(out) > info.file_size:
+                break  # zipfile's CRC/size check raises at the end of a sound stream
+    return bytes(out)
 
 
 def _npy_from_bytes(raw: bytes, name: str, not_model: str) -> np.ndarray:

@@ -126,8 +126,6 @@ def moving_blobs(
     speed = check_real(speed, "speed", 0.0)
     noise_std = check_real(noise_std, "noise_std", 0.0)
     illumination_drift = check_real(illumination_drift, "illumination_drift", -1.0)
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
-        raise InputError(f"rng must be an int seed >= 0, a Generator or None; got {rng}")
     gen = as_rng(rng)
     from robopercept.imaging.filters import gaussian_blur
 

@@ -458,14 +458,6 @@ class ImageFolder(ArrayDataset):
         self.skipped = tuple(skipped)
 
 
-def _as_rng(rng: int | np.random.Generator | None) -> np.random.Generator:
-    """:func:`robopercept._checks.as_rng`, with a negative seed refused by name (NumPy
-    raises a bare ``ValueError``)."""
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
-        raise InputError(f"rng must be a seed >= 0, a numpy.random.Generator or None; got {rng}")
-    return as_rng(rng)
-
-
 def _check_size(size: object) -> tuple[int, int]:
     """``size`` as a ``(width, height)`` pair of positive ints."""
     if not isinstance(size, (tuple, list)) or len(size) != 2:
@@ -628,7 +620,7 @@ def shapes_dataset(
         f"{n} images of {size} x {size} (with their intermediate arrays)",
         "lower n or size, or make the data set in chunks with different seeds",
     )
-    gen = _as_rng(rng)
+    gen = as_rng(rng)
     labels = gen.permutation(np.arange(n) % 4)
     r = gen.uniform(size / 6, size / 3, n)
     cx = gen.uniform(r, size - r)
@@ -695,7 +687,7 @@ def stratified_split(
         )
     if abs(f.sum() - 1.0) > 1e-6:
         raise InputError(f"fractions must sum to 1; got {fractions!r} (sum {f.sum():.6g})")
-    gen = _as_rng(rng)
+    gen = as_rng(rng)
     parts: list[list[np.ndarray]] = [[] for _ in f]
     for k in np.unique(y):
         members = gen.permutation(np.flatnonzero(y == k))

@@ -61,6 +61,7 @@ import torch
 
 from robopercept._checks import (
     as_path,
+    as_rng,
     check_bool,
     check_int,
     check_numeric,
@@ -508,18 +509,6 @@ def collate_detection(
 # --------------------------------------------------------------------------- helpers
 
 
-def _as_rng(rng: Any) -> np.random.Generator:
-    if isinstance(rng, np.random.Generator):
-        return rng
-    if rng is None:
-        return np.random.default_rng()
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, (bool, np.bool_)) and rng >= 0:
-        return np.random.default_rng(int(rng))
-    raise InputError(
-        f"rng must be a seed >= 0, a numpy.random.Generator or None; got {plain_repr(rng)}"
-    )
-
-
 def _check_range(value: Any, name: str, low: float, high: float, integer: bool) -> tuple:
     want = f"{name} must be a (low, high) pair with {low} <= low <= high <= {high}"
     if not isinstance(value, (list, tuple)) or len(value) != 2:
@@ -732,7 +721,7 @@ def procedural_detection_set(
         raise InputError(f"clutter must be in [0, 50]; got {clutter}")
     occlusion = check_real(occlusion, "occlusion", 0.0, 1.0)
     min_visible = check_real(min_visible, "min_visible", 0.0, 1.0, low_inclusive=False)
-    gen = _as_rng(rng)
+    gen = as_rng(rng)
     side = min(w, h)
     images, boxes, labels, masks, meta = [], [], [], [], []
     for _ in range(n):
@@ -872,7 +861,7 @@ def digits_detection_set(
     lo, hi = _check_range(digits_per_image, "digits_per_image", 0, 50, True)
     s_lo, s_hi = _check_range(scale, "scale", 8, min(w, h), True)
     max_iou = check_real(max_iou, "max_iou", 0.0, 1.0)
-    gen = _as_rng(rng)
+    gen = as_rng(rng)
     digits, targets = _digits()
     glyph_cache: dict[tuple[int, int], np.ndarray] = {}
     images, boxes, labels, masks, meta = [], [], [], [], []

@@ -58,7 +58,11 @@ def plane_errors(
     true_d = check_real(true_d, "true_d")
     if isinstance(d, (bool, np.bool_)) or not isinstance(d, (int, float, np.integer, np.floating)):
         raise InputError(f"d must be a number (NaN for a missing plane); got {plain_repr(d)}")
-    if not (np.isfinite(n).all() and np.isfinite(d)):
+    try:
+        d = float(d)  # a Python int beyond float64 (2**1024) does not convert
+    except OverflowError:
+        raise InputError(f"d must be a number within float64's range; got {d}") from None
+    if not (np.isfinite(n).all() and math.isfinite(d)):
         return math.nan, math.nan
     if not (np.abs(m).max() > 0 and np.abs(n).max() > 0):
         raise InputError(

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robopercept._checks import as_rng, check_int, check_magnitude, check_real
-from robopercept.errors import DegenerateError, InputError
+from robopercept.errors import DegenerateError
 from robopercept.estimation import Plane, PlaneModel, ransac
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
@@ -142,8 +142,6 @@ def segment_planes(
     threshold = _check(cloud, threshold)
     max_planes = check_int(max_planes, "max_planes", 1)
     min_inliers = check_int(min_inliers, "min_inliers", 3)
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng < 0:
-        raise InputError(f"rng must be a non-negative int seed, a Generator or None; got {rng}")
     gen = as_rng(rng)
     remaining = np.flatnonzero(cloud.finite_mask())
     found: list[PlaneSegment] = []
