@@ -329,6 +329,12 @@ def _write_checkpoint(path: Path) -> None:
     save_checkpoint(path, {"epoch": 1, "model": materialize(TINY_NET).state_dict()})
 
 
+def _write_detector(path: Path) -> None:
+    from robopercept.nn.detection import build_detector, save_detector
+
+    save_detector(path, build_detector("fcos", 2, width=4), "fcos", {"width": 4}, ["a", "b"])
+
+
 def _write_run(path: Path) -> None:
     from robopercept.nn.run import train_run
     from robopercept.nn.training import TrainConfig
@@ -376,6 +382,7 @@ FIXTURES: dict[str, Callable[[Path], None]] = {
         + "".join(f"{x:.3f},{y:.3f},{'xy'[i % 2]}\n" for i, (x, y) in enumerate(PTS2[:20]))
     ),
     "checkpoint.pt": _write_checkpoint,
+    "detector.pt": _write_detector,
     "run": _write_run,
     "run/checkpoint.pt": lambda p: _write_run(p.parent),
     "images": _write_image_folder,
@@ -2119,3 +2126,35 @@ VALID.update(
 )
 for _cls in ("FCOS", "FasterRCNN", "FastRCNN", "SingleObjectLocalizer"):
     METHODS[f"nn.detection.{_cls}"] = ("forward",)
+VALID.update(
+    {
+        "nn.detection.RCNN": {"num_classes": 2, "warp_size": 8, "width": 4, "hidden": 8},
+        "nn.detection.RCNN.forward": {
+            "images": _DIMAGES,
+            "targets": _DTARGETS,
+            "proposals": [_DPROPS, _DPROPS],
+        },
+        "nn.detection.RCNN.warp": {
+            "image": _b("tests.fuzz.api:torch_image", 3, 16, 16),
+            "boxes": _DPROPS,
+        },
+        "nn.detection.selective_search_proposals": {
+            "image": _b("tests.fuzz.api:torch_image", 3, 16, 16),
+            "max_proposals": 5,
+        },
+        "nn.detection.build_detector": {"kind": "fcos", "num_classes": 2, "width": 4},
+        "nn.detection.save_detector": {
+            "path": _out("detector.pt"),
+            "model": _b("tests.fuzz.api:detector_value", "fcos"),
+            "kind": "fcos",
+            "settings": {"width": 4},
+            "classes": ["a", "b"],
+        },
+        "nn.detection.load_detector": {"path": Fixture("detector.pt")},
+        "nn.detection.detect_arrays": {
+            "model": _b("tests.fuzz.api:detector_value", "fcos"),
+            "images": [IMG_RGB],
+        },
+    }
+)
+METHODS["nn.detection.RCNN"] = ("forward", "warp")

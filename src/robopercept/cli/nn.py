@@ -140,6 +140,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--json", action="store_true", help="print the table as JSON")
     s.set_defaults(func=run_summary)
 
+    from robopercept.cli import detect
+
+    detect.register(ns, type(p))
+
 
 def _split(text: str) -> tuple[float, float, float]:
     """``0.7,0.15,0.15`` -> three positive shares summing to 1 (argparse type)."""

@@ -1,0 +1,187 @@
+"""``robopercept nn detect train|eval|IMAGE...`` (issue 26, item 6): tiny runs (a few
+64 x 64 digit canvases, a few epochs) so the file runs in well under a minute."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from robopercept.cli import detect as cli_detect  # noqa: E402
+from robopercept.cli.main import main  # noqa: E402
+from robopercept.imaging import read_image, write_image  # noqa: E402
+from robopercept.nn.coco import read_coco_results, write_coco_json  # noqa: E402
+from robopercept.nn.detection import evaluate_detector, load_detector  # noqa: E402
+from robopercept.nn.detection_data import digits_detection_set  # noqa: E402
+
+DATA = ["--data", "digits", "--images", "8", "--size", "64x64", "--seed", "0"]
+TRAIN = ["nn", "detect", "train", *DATA, "--model", "fcos", "--width", "8"]
+TRAIN += ["--lr", "3e-3", "--batch-size", "4", "--quiet"]
+FILES = {"model.pt", "history.json", "metrics.json", "pr_curves.png", "samples.png"}
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> tuple[Path, dict]:
+    """6 epochs of a width-8 FCOS on 6 training canvases (about 5 s): enough for
+    non-zero validation metrics, so the equality checks below can fail."""
+    out = tmp_path_factory.mktemp("det") / "run"
+    torch.set_num_threads(1)
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main([*TRAIN, "--epochs", "6", "--json", "-o", str(out)]) == 0
+    return out, json.loads(buf.getvalue())
+
+
+def _val():
+    # the CLI's split of --images 8 --size 64x64 --seed 0: 80 / 20 with the seed
+    ds = digits_detection_set(8, (64, 64), rng=0)
+    return ds.split((0.8, 0.2), rng=0)[1]
+
+
+def test_train_writes_the_run_folder(run):
+    out, printed = run
+    assert FILES <= {p.name for p in out.iterdir()}
+    assert set(printed) >= {"metrics", "stats", "files", "epochs", "images", "model"}
+    assert printed["epochs"] == 6 and printed["images"] == 2
+    names = ["AP", "AP50", "AP75", "APs", "APm", "APl"]
+    names += ["AR1", "AR10", "AR100", "ARs", "ARm", "ARl"]
+    assert list(printed["metrics"]) == names
+    assert json.loads((out / "metrics.json").read_text())["stats"] == printed["stats"]
+    hist = json.loads((out / "history.json").read_text())
+    assert len(hist["losses"]) == 6 and len(hist["seconds"]) == 6
+    assert hist["losses"][-1]["loss"] < hist["losses"][0]["loss"]
+    assert read_image(out / "pr_curves.png").shape[:2] == (1000, 1600)
+    assert read_image(out / "samples.png").shape[0] == 64
+
+
+def test_metrics_equal_evaluate_detector_on_saved_model(run, capsys):
+    out, printed = run
+    model, info = load_detector(out / "model.pt")
+    assert info["kind"] == "fcos" and info["settings"] == {"width": 8}
+    assert info["classes"] == [str(d) for d in range(10)]
+    ev = evaluate_detector(model, _val())
+    assert ev.stats[1] > 0  # a trained model: the comparisons below are not of zeros
+    assert printed["stats"] == ev.stats.tolist()
+    # eval of the run folder gives the same 12 numbers
+    assert main(["nn", "detect", "eval", str(out), *DATA, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["stats"] == ev.stats.tolist()
+
+
+def test_eval_writes_metrics_and_curves(run, tmp_path, capsys):
+    out, printed = run
+    assert main(["nn", "detect", "eval", str(out / "model.pt"), *DATA, "-o", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "AP50" in text and "metrics.json" in text
+    assert json.loads((tmp_path / "metrics.json").read_text())["stats"] == printed["stats"]
+    assert (tmp_path / "pr_curves.png").is_file()
+
+
+def test_eval_on_coco_json(run, tmp_path, capsys):
+    # the validation canvases as a COCO file with PNG images: same numbers
+    out, printed = run
+    val = _val()
+    coco = val.to_coco()
+    for im, rec in zip(val.images, coco.images, strict=True):
+        write_image(tmp_path / rec.file_name, (np.asarray(im) * 255).round().astype(np.uint8))
+    write_coco_json(coco, tmp_path / "val.json")
+    argv = ["nn", "detect", "eval", str(out), "--data", str(tmp_path / "val.json"), "--json"]
+    assert main(argv) == 0
+    stats = json.loads(capsys.readouterr().out)["stats"]
+    assert stats[1] == pytest.approx(printed["stats"][1], abs=0.35)  # uint8 round trip
+    assert len(stats) == 12
+
+
+def test_detect_images_draws_and_prints_coco_results(run, tmp_path, capsys):
+    out, _ = run
+    val = _val()
+    paths = []
+    for k in range(2):
+        p = tmp_path / f"canvas{k}.png"
+        write_image(p, (np.asarray(val.images[k]) * 255).round().astype(np.uint8))
+        paths.append(str(p))
+    argv = ["nn", "detect", *paths, "--model", str(out / "model.pt"), "-o", str(tmp_path / "o")]
+    assert main([*argv, "--json", "--score-thresh", "0.05"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert rows, "a trained model finds something at score 0.05"
+    assert {r["image_id"] for r in rows} <= {1, 2}
+    assert len(read_coco_results_list(rows, tmp_path)) == len(rows)
+    for k in range(2):
+        pic = read_image(tmp_path / "o" / f"canvas{k}.png")
+        assert pic.shape == (64, 64, 3)
+
+
+def read_coco_results_list(rows, tmp_path):
+    """The printed rows are a valid COCO results file (read back by our reader)."""
+    f = tmp_path / "results.json"
+    f.write_text(json.dumps(rows))
+    return read_coco_results(f)
+
+
+def test_default_model_missing_names_the_build_command(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(cli_detect, "DEFAULT_MODEL", "data/no_such_model.pt")
+    img = tmp_path / "a.png"
+    write_image(img, np.zeros((32, 32, 3), np.uint8))
+    assert main(["nn", "detect", str(img), "-o", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "robopercept nn detect train --data shapes --model fcos" in err
+    assert "robopercept nn detect train --data shapes --model fcos" in cli_detect.__doc__
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [
+        (["train", "--data", "foo", "-o", "x"], "--data"),
+        (["train", "--data", "missing.json", "-o", "x"], "--data"),
+        (["train", "--data", "digits", "--epochs", "0", "-o", "x"], "--epochs"),
+        (["train", "--data", "trees", "-o", "x"], "--images-dir"),
+        (["train", "--data", "digits", "--model", "yolo"], "--model"),
+        (["train", "--data", "digits", "--size", "4x4"], "--size"),
+        (["eval", "run", "--data", "foo"], "--data"),
+        (["eval", "no_run", "--data", "digits"], "RUN_OR_MODEL"),
+        (["a.png", "--model", "no.pt", "-o", "x"], "--model"),
+        (["a.png", "--score-thresh", "2"], "--score-thresh"),
+        (["nothing.png", "--model", "a.png", "-o", "x"], "IMAGE"),
+    ],
+)
+def test_bad_arguments_exit_2_naming_the_flag(argv, flag, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    write_image(tmp_path / "a.png", np.zeros((32, 32, 3), np.uint8))
+    assert main(["nn", "detect", *argv]) == 2
+    assert flag in capsys.readouterr().err
+
+
+def test_coco_images_dir_missing_exits_2(tmp_path, capsys):
+    f = tmp_path / "c.json"
+    f.write_text(json.dumps({"images": [], "categories": [], "annotations": []}))
+    argv = ["nn", "detect", "train", "--data", str(f), "--images-dir", str(tmp_path / "no")]
+    assert main(argv) == 2
+    assert "--images-dir" in capsys.readouterr().err
+
+
+def test_not_a_detector_checkpoint_fails(tmp_path, capsys):
+    bad = tmp_path / "m.pt"
+    torch.save({"model": {}}, bad)
+    img = tmp_path / "a.png"
+    write_image(img, np.zeros((32, 32, 3), np.uint8))
+    assert main(["nn", "detect", str(img), "--model", str(bad), "-o", str(tmp_path)]) == 1
+    assert "not a detector checkpoint" in capsys.readouterr().err
+
+
+def test_no_words_prints_help_and_exits_2(capsys):
+    assert main(["nn", "detect"]) == 2
+    assert "nn detect train" in capsys.readouterr().out
