@@ -39,6 +39,7 @@ FIRST_USE_SECONDS: dict[str, float] = {
     "bgsub": 3.0,
     "hog": 3.0,
     "blobs": 3.0,
+    "proposals": 4.0,
     "track": 2.0,
 }
 
@@ -85,6 +86,7 @@ _LINES = {
     "detect-hog": "detect-hog {image} -o {o}/dh.png",
     "blobs": "blobs {image} -o {o}/b.png",
     "stitch": "stitch {image} {image2} -o {o}/s.png",
+    "proposals": "proposals {image} --max 20 -o {o}/p.png --quiet",
     "cloud": "cloud {cloud} --voxel 0.02 --sor 8:2 --planes 1:0.01 --clusters 0.05:10:100000 "
     "-o {o}/c.ply",
     "learn kmeans": f"learn cluster {_T} -o {{o}}/k.png",
