@@ -65,6 +65,12 @@ def test_train_writes_the_run_folder(run):
     hist = json.loads((out / "history.json").read_text())
     assert len(hist["losses"]) == 6 and len(hist["seconds"]) == 6
     assert hist["losses"][-1]["loss"] < hist["losses"][0]["loss"]
+    # --val-every defaults to epochs / 10 (here every epoch); the kept epoch has the
+    # best validation AP, and the printed metrics are that epoch's
+    val = {int(k): v for k, v in hist["val_AP"].items()}
+    assert sorted(val) == [1, 2, 3, 4, 5, 6]
+    assert hist["best_epoch"] == printed["best_epoch"] == max(val, key=lambda e: (val[e], -e))
+    assert printed["stats"][0] == pytest.approx(val[hist["best_epoch"]], abs=1e-12)
     assert read_image(out / "pr_curves.png").shape[:2] == (1000, 1600)
     assert read_image(out / "samples.png").shape[0] == 64
 
@@ -138,8 +144,9 @@ def test_default_model_missing_names_the_build_command(tmp_path, capsys, monkeyp
     write_image(img, np.zeros((32, 32, 3), np.uint8))
     assert main(["nn", "detect", str(img), "-o", str(tmp_path)]) == 1
     err = capsys.readouterr().err
-    assert "robopercept nn detect train --data shapes --model fcos" in err
-    assert "robopercept nn detect train --data shapes --model fcos" in cli_detect.__doc__
+    build = "python -m benchmarks.detection_figures --only shapes-fcos shapes-faster"
+    assert build in err and "data/no_such_model.pt" in err
+    assert build in " ".join(cli_detect.__doc__.split())
 
 
 @pytest.mark.parametrize(

@@ -21,6 +21,7 @@ from robopercept.nn.detection import (  # noqa: E402
     FastRCNN,
     SingleObjectLocalizer,
     evaluate_detector,
+    evaluate_localizer,
     match_boxes,
     sample_balanced,
     sigmoid_focal_loss,
@@ -331,6 +332,24 @@ def test_faster_rcnn_rpn_sampling_and_proposal_counts():
     assert all(p.shape[0] <= 7 for p in props)
 
 
+def test_rpn_outputs_agree_with_the_rpn_and_keep_the_mode():
+    m = build("faster", post_nms_top_n=(40, 7)).train()
+    images, _ = tiny_batch()
+    out = m.rpn_outputs(images)
+    assert m.training  # restored
+    m.eval()
+    batch, sizes, _ = m._prepare(images, None)
+    obj, reg, anchors = m.rpn(m.backbone(batch)[-1], tuple(batch.shape[2:]))
+    props, scores = m.proposals(obj, reg, anchors, sizes)
+    for i, o in enumerate(out):
+        assert o["objectness"].shape == (8, 8, 9) and o["anchors"].shape == (8, 8, 9, 4)
+        # cell (r, c), anchor a is flat index (r * 8 + c) * 9 + a, as AnchorGenerator
+        assert torch.equal(o["objectness"][2, 5, 4], torch.sigmoid(obj[i, (2 * 8 + 5) * 9 + 4]))
+        assert torch.equal(o["anchors"][2, 5, 4], anchors[(2 * 8 + 5) * 9 + 4])
+        assert torch.equal(o["proposals"], props[i]) and len(o["proposals"]) <= 7
+        assert torch.equal(o["proposal_scores"], scores[i])
+
+
 def test_roi_sampling_fractions_and_bands():
     m = build("fast", box_batch_size=32).train()
     torch.manual_seed(0)
@@ -419,6 +438,80 @@ def test_localizer_overfits_to_high_iou():
         assert float(box_iou(o["boxes"], gt)[0, 0]) >= 0.8
         assert int(o["labels"][0]) == int(ds.labels[i][0])
     assert evaluate_detector(m, ds).stats[1] == pytest.approx(1.0)
+
+
+def test_localizer_metric_equals_hand_iou_and_label_check():
+    m, ds, _ = _overfit("loc", 60, 3e-3)
+    res = evaluate_localizer(m, ds)
+    out = m.predict([ds[i][0] for i in range(len(ds))])
+    for i, o in enumerate(out):
+        gt = torch.from_numpy(ds.boxes[i]).double()
+        assert res.iou[i] == pytest.approx(float(box_iou(o["boxes"].double(), gt)[0, 0]), abs=1e-6)
+        assert res.correct[i] == (int(o["labels"][0]) == int(ds.labels[i][0]))
+    assert res.mean_iou == pytest.approx(res.iou.mean()) and res.mean_iou >= 0.8
+    assert res.accuracy == 1.0
+
+
+def test_localizer_metric_refuses_several_boxes_per_image():
+    ds = digits_detection_set(2, (64, 64), (2, 2), rng=0, scale=(12, 16))
+    with pytest.raises(InputError, match="exactly one box per image; image 0 has 2"):
+        evaluate_localizer(build("loc"), ds)
+
+
+def test_validation_keeps_the_best_evaluated_epoch(monkeypatch):
+    # scripted validation figures (epochs 2, 4, 6 score 0.4, 0.9, 0.2): the model must
+    # end with epoch 4's weights, i.e. equal to a run of the same seed stopped at 4
+    import robopercept.nn.detection as det
+
+    ds = digits_detection_set(2, (48, 48), (1, 1), rng=0, scale=(12, 24))
+    cfg = TrainConfig(epochs=6, batch_size=2, lr=3e-3, device="cpu", schedule="constant")
+    scripted = iter([0.4, 0.9, 0.2])
+
+    class Fake:
+        def __init__(self) -> None:
+            self.stats = np.full(12, next(scripted))
+
+    monkeypatch.setattr(det, "evaluate_detector", lambda model, dataset: Fake())
+    m = build("fcos")
+    hist = train_detector(m, ds, cfg, progress=False, val=ds, val_every=2)
+    assert hist.val == {2: 0.4, 4: 0.9, 6: 0.2} and hist.best_epoch == 4
+    assert hist.val_seconds >= 0
+    monkeypatch.undo()
+    ref = build("fcos")
+    train_detector(ref, ds, TrainConfig(**{**cfg.__dict__, "epochs": 4}), progress=False)
+    for (k, a), b in zip(m.state_dict().items(), ref.state_dict().values(), strict=True):
+        assert torch.equal(a, b), k
+
+
+def test_validation_figure_is_the_coco_number_of_the_kept_weights():
+    ds = digits_detection_set(2, (64, 64), (1, 1), rng=0, scale=(16, 32))
+    cfg = TrainConfig(epochs=6, batch_size=2, lr=3e-3, device="cpu", schedule="constant")
+    m = build("fcos")
+    hist = train_detector(m, ds, cfg, progress=False, val=ds, val_every=4, val_metric="AP50")
+    assert sorted(hist.val) == [4, 6]  # every 4th epoch and the last
+    assert evaluate_detector(m, ds).stats[1] == pytest.approx(hist.val[hist.best_epoch])
+
+
+def test_without_validation_the_last_epoch_is_kept():
+    ds = digits_detection_set(1, (32, 32), (1, 1), rng=0, scale=(12, 16))
+    hist = train_detector(
+        build("fcos"), ds, TrainConfig(epochs=2, batch_size=1, device="cpu"), progress=False
+    )
+    assert hist.best_epoch == 2 and hist.val == {}
+
+
+@pytest.mark.parametrize(
+    ("kw", "msg"),
+    [
+        ({"val_metric": "mAP"}, "val_metric must be one of"),
+        ({"val_every": 0}, "val_every"),
+        ({"val": [1, 2]}, "dataset must be a DetectionDataset"),
+    ],
+)
+def test_bad_validation_arguments(kw, msg):
+    ds = digits_detection_set(1, (32, 32), (1, 1), rng=0, scale=(12, 16))
+    with pytest.raises(InputError, match=msg):
+        train_detector(build("fcos"), ds, TrainConfig(epochs=1, device="cpu"), progress=False, **kw)
 
 
 # --------------------------------------------------------------------------- bad input

@@ -6,21 +6,23 @@ Three forms, chosen by the first word after ``detect``::
     robopercept nn detect eval RUN_OR_MODEL --data ... [-o DIR]
     robopercept nn detect IMAGE... [--model PATH] -o out/
 
-``train`` writes ``run/model.pt`` (weights with the constructor settings and class
-names, :func:`~robopercept.nn.detection.save_detector`), ``history.json``,
-``metrics.json`` (the 12 COCO numbers of :func:`~robopercept.nn.detection.
+``train`` keeps the weights of the epoch with the best validation mAP@[.5:.95]
+(evaluated every ``--val-every`` epochs) and writes ``run/model.pt`` (weights with the
+constructor settings and class names, :func:`~robopercept.nn.detection.save_detector`),
+``history.json``, ``metrics.json`` (the 12 COCO numbers of :func:`~robopercept.nn.detection.
 evaluate_detector` on the validation split), ``pr_curves.png`` and ``samples.png``.
 ``eval`` evaluates a run (or its ``model.pt``) on the validation split of the same
 built-in set (same ``--images``, ``--size`` and ``--seed``) or on a whole COCO file.
 ``IMAGE...`` draws the boxes, labels and scores to ``out/NAME.png`` (``--json``: COCO
 results, ``image_id`` the 1-based position of the image on the command line).
 
-Without ``--model`` the ``IMAGE`` form uses the shipped model
-``robopercept/data/detector_fcos_shapes.pt``. It is built by::
+Without ``--model`` the ``IMAGE`` form uses the shipped FCOS model
+``robopercept/data/detector_fcos_shapes.pt``; ``--model faster`` the shipped Faster
+R-CNN (``detector_faster_shapes.pt``). Both were trained on the procedural shapes set
+(``circle``, ``square``, ``triangle``, ``cross``) and are rebuilt, from a checkout, by::
 
-    robopercept nn detect train --data shapes --model fcos --images 600 --size 128x128 \\
-        --epochs 40 --seed 0 -o runs/fcos_shapes
-    cp runs/fcos_shapes/model.pt src/robopercept/data/detector_fcos_shapes.pt
+    python -m benchmarks.detection_figures --only shapes-fcos shapes-faster --seeds 0 \\
+        --save src/robopercept/data
 
 The work is done by :mod:`robopercept.nn.detection`, :mod:`robopercept.nn.detection_data`
 and :mod:`robopercept.nn.coco`; this module parses and prints. torch is imported only
@@ -40,18 +42,23 @@ from typing import Any
 from robopercept.cli._args import UsageError, positive_int
 from robopercept.errors import InputError
 
-__all__ = ["BUILTIN_DATA", "DEFAULT_MODEL", "DETECTOR_NAMES", "register"]
+__all__ = ["BUILTIN_DATA", "DEFAULT_MODEL", "DETECTOR_NAMES", "SHIPPED_MODELS", "register"]
 
 #: the names of :data:`robopercept.nn.detection.DETECTORS` (the parser needs no torch)
 DETECTOR_NAMES = ("fcos", "faster", "fast", "rcnn", "localizer")
 #: the built-in data sets of ``--data`` (anything else must be a COCO JSON file)
 BUILTIN_DATA = ("shapes", "digits", "trees")
-#: the shipped default model, relative to the ``robopercept`` package
-DEFAULT_MODEL = "data/detector_fcos_shapes.pt"
-_BUILD_DEFAULT = (
-    "robopercept nn detect train --data shapes --model fcos --images 600 --size 128x128 "
-    "--epochs 40 --seed 0 -o runs/fcos_shapes && cp runs/fcos_shapes/model.pt "
-    "src/robopercept/data/detector_fcos_shapes.pt"
+#: the shipped models (trained on the procedural shapes set), by the name ``--model``
+#: takes, relative to the ``robopercept`` package
+SHIPPED_MODELS = {
+    "fcos": "data/detector_fcos_shapes.pt",
+    "faster": "data/detector_faster_shapes.pt",
+}
+#: the model of ``robopercept nn detect IMAGE`` without ``--model``
+DEFAULT_MODEL = SHIPPED_MODELS["fcos"]
+_BUILD_SHIPPED = (
+    "python -m benchmarks.detection_figures --only shapes-fcos shapes-faster --seeds 0 "
+    "--save src/robopercept/data"
 )
 _VAL_FRACTION = 0.2
 
@@ -109,6 +116,13 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     t.add_argument("--batch-size", type=positive_int, default=8, help="default 8")
     t.add_argument("--lr", type=float, default=1e-3, help="AdamW learning rate (default 1e-3)")
     t.add_argument("--width", type=positive_int, default=16, help="backbone width (default 16)")
+    t.add_argument(
+        "--val-every",
+        type=positive_int,
+        default=None,
+        help="evaluate the validation split every N epochs and keep the best epoch's "
+        "weights (default: epochs / 10)",
+    )
     t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
     e = cls(
         prog="robopercept nn detect eval",
@@ -123,7 +137,10 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Detect objects in IMAGE... and draw boxes, labels and scores to OUT/NAME.png.",
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
-    r.add_argument("--model", help=f"a model.pt or run folder (default: {DEFAULT_MODEL})")
+    r.add_argument(
+        "--model",
+        help="a model.pt or run folder, or a shipped model: fcos (the default) or faster",
+    )
     r.add_argument("-o", "--out", help="folder for the pictures")
     r.add_argument("--score-thresh", type=_score, default=0.3, help="detections kept (default 0.3)")
     r.add_argument("--device", help="cpu, cuda, ...")
@@ -312,7 +329,14 @@ def _train(args: argparse.Namespace) -> int:
             f"{len(val)} validation images)",
             file=sys.stderr,
         )
-    hist = train_detector(model, train, cfg, progress=not quiet)
+    hist = train_detector(
+        model,
+        train,
+        cfg,
+        progress=not quiet,
+        val=val,
+        val_every=args.val_every or max(1, args.epochs // 10),
+    )
     model_path = save_detector(
         out / "model.pt",
         model,
@@ -326,11 +350,27 @@ def _train(args: argparse.Namespace) -> int:
         epochs=args.epochs,
     )
     (out / "history.json").write_text(
-        json.dumps({"losses": hist.losses, "seconds": hist.seconds}, indent=1)
+        json.dumps(
+            {
+                "losses": hist.losses,
+                "seconds": hist.seconds,
+                "val_AP": hist.val,
+                "best_epoch": hist.best_epoch,
+            },
+            indent=1,
+        )
     )
     ev = evaluate_detector(model, val)
     metrics = _write_metrics(
-        ev, val, out, {"model": args.model, "data": str(args.data), "split": "validation"}
+        ev,
+        val,
+        out,
+        {
+            "model": args.model,
+            "data": str(args.data),
+            "split": "validation",
+            "best_epoch": hist.best_epoch,
+        },
     )
     _samples(model, val, out / "samples.png")
     files = {
@@ -343,8 +383,8 @@ def _train(args: argparse.Namespace) -> int:
         return 0
     print(
         f"nn detect train: {args.model} on {args.data}, {len(hist.losses)} epochs in "
-        f"{sum(hist.seconds):.1f} s; validation mAP@0.5 {ev.stats[1]:.4f}, "
-        f"mAP@[.5:.95] {ev.stats[0]:.4f}"
+        f"{sum(hist.seconds):.1f} s, kept epoch {hist.best_epoch} (best validation "
+        f"mAP@[.5:.95]); validation mAP@0.5 {ev.stats[1]:.4f}, mAP@[.5:.95] {ev.stats[0]:.4f}"
     )
     for name, path in files.items():
         print(f"  {name:<13} {path}")
@@ -391,16 +431,16 @@ def _images(args: argparse.Namespace) -> int:
     from robopercept.nn.detection_data import draw_detections
     from robopercept.nn.training import resolve_device
 
-    if args.model is None:
+    if args.model is None or args.model in SHIPPED_MODELS:
         from importlib.resources import files
 
-        default = Path(str(files("robopercept"))) / DEFAULT_MODEL
-        if not default.is_file():
+        rel = SHIPPED_MODELS[args.model] if args.model else DEFAULT_MODEL
+        model_path = Path(str(files("robopercept"))) / rel
+        if not model_path.is_file():
             raise InputError(
-                f"no --model given and the default model {DEFAULT_MODEL} is not installed: "
-                f"give --model PATH, or build it with: {_BUILD_DEFAULT}"
+                f"the shipped model {rel} is not installed: give --model PATH (a run "
+                f"folder or model.pt), or build it from a checkout with: {_BUILD_SHIPPED}"
             )
-        model_path = default
     else:
         model_path = _model_path(args.model)
         if not model_path.is_file():

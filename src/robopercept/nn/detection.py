@@ -66,6 +66,7 @@ CPU for the same thread count. Models run on CUDA when moved there (``config.dev
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import time
@@ -77,7 +78,14 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from robopercept._checks import as_path, check_bool, check_int, check_real, plain_repr
+from robopercept._checks import (
+    as_path,
+    check_bool,
+    check_choice,
+    check_int,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count, check_module
 from robopercept.nn.blocks import ConvBNAct, ResidualBlock
@@ -98,14 +106,17 @@ __all__ = [
     "FCOS",
     "FPN",
     "RCNN",
+    "VAL_METRICS",
     "DetectionBackbone",
     "DetectionHistory",
     "FastRCNN",
     "FasterRCNN",
+    "LocalizationResult",
     "SingleObjectLocalizer",
     "build_detector",
     "detect_arrays",
     "evaluate_detector",
+    "evaluate_localizer",
     "load_detector",
     "match_boxes",
     "sample_balanced",
@@ -1144,6 +1155,34 @@ class FasterRCNN(_TwoStage):
         anchors = self.anchor_generator(image_shape, [(fh, fw)], dtype=h.dtype).to(h.device)
         return obj, reg, anchors
 
+    @torch.no_grad()
+    def rpn_outputs(self, images: Any) -> list[dict[str, torch.Tensor]]:
+        """What the region proposal network makes of ``images`` (eval-mode counts):
+        per image, ``"objectness"`` ``(h, w, A)`` sigmoid probabilities of the ``A``
+        anchors at each cell of the stride-8 feature map (of the padded batch),
+        ``"anchors"`` ``(h, w, A, 4)`` ``xyxy``, and ``"proposals"`` ``(P, 4)`` with
+        their ``"proposal_scores"`` ``(P,)`` (logits) after NMS, best first.
+        """
+        was = self.training
+        self.eval()
+        try:
+            batch, sizes, _ = self._prepare(images, None)
+            feats = self.backbone(batch)[-1]
+            obj, reg, anchors = self.rpn(feats, (int(batch.shape[2]), int(batch.shape[3])))
+            props, scores = self.proposals(obj, reg, anchors, sizes)
+        finally:
+            self.train(was)
+        fh, fw = int(feats.shape[2]), int(feats.shape[3])
+        return [
+            {
+                "objectness": torch.sigmoid(obj[i]).reshape(fh, fw, -1),
+                "anchors": anchors.reshape(fh, fw, -1, 4),
+                "proposals": props[i],
+                "proposal_scores": scores[i],
+            }
+            for i in range(len(sizes))
+        ]
+
     def rpn_losses(
         self,
         obj: torch.Tensor,
@@ -1530,19 +1569,35 @@ class FCOS(_Detector):
 
 
 # --------------------------------------------------------------------------- train / evaluate
-@dataclass(frozen=True)
+@dataclass
 class DetectionHistory:
     """What :func:`train_detector` measured: per epoch, the mean of each loss over the
-    batches (and of their sum, ``"loss"``), and the seconds it took.
+    batches (and of their sum, ``"loss"``), and the seconds it took; with a validation
+    set, the validation figure at each evaluated epoch and the epoch that was kept.
 
     Attributes
     ----------
     losses : list of dict of str to float
     seconds : list of float
+        Training seconds per epoch (validation not included).
+    val : dict of int to float
+        Epoch (1-based) -> validation ``val_metric`` (empty without ``val``).
+    best_epoch : int
+        The epoch whose weights the model holds at the end (the last epoch without
+        ``val``).
+    val_seconds : float
+        Seconds spent evaluating the validation set.
     """
 
     losses: list[dict[str, float]] = field(default_factory=list)
     seconds: list[float] = field(default_factory=list)
+    val: dict[int, float] = field(default_factory=dict)
+    best_epoch: int = 0
+    val_seconds: float = 0.0
+
+
+#: validation figures :func:`train_detector` can select on: index into the COCO stats
+VAL_METRICS = {"AP": 0, "AP50": 1, "AP75": 2}
 
 
 def _detection_dataset(dataset: Any) -> Any:
@@ -1565,6 +1620,9 @@ def train_detector(
     *,
     checkpoint: str | os.PathLike[str] | None = None,
     progress: bool = True,
+    val: Any = None,
+    val_every: int = 1,
+    val_metric: str = "AP",
 ) -> DetectionHistory:
     """Train a detector of this module (or any model keeping the torchvision detection
     contract) on a :class:`~robopercept.nn.detection_data.DetectionDataset`.
@@ -1576,6 +1634,12 @@ def train_detector(
     global generator is seeded with ``config.seed`` first (weights are not re-initialized:
     build the model after your own ``torch.manual_seed`` for a fully seeded run) and
     deterministic algorithms are on, so the same seed gives identical losses on the CPU.
+
+    With ``val``, the model is evaluated on it (:func:`evaluate_detector`, COCO) every
+    ``val_every`` epochs and after the last, and at the end holds the weights of the
+    evaluated epoch with the highest ``val_metric`` (the earliest on ties), as
+    :func:`~robopercept.nn.training.fit` keeps its best epoch; the schedule still runs
+    its full ``config.epochs`` (no early stopping).
 
     Parameters
     ----------
@@ -1590,6 +1654,12 @@ def train_detector(
         with :func:`~robopercept.nn.training.load_checkpoint` ``(path, model)``.
     progress : bool
         A bar per epoch on stderr.
+    val : DetectionDataset, optional
+        Validation set that selects the epoch kept.
+    val_every : int
+        Evaluate every this many epochs (>= 1).
+    val_metric : {"AP", "AP50", "AP75"}
+        mAP@[.5:.95], mAP@0.5 or mAP@0.75 (:data:`VAL_METRICS`).
 
     Returns
     -------
@@ -1598,7 +1668,8 @@ def train_detector(
     Raises
     ------
     InputError
-        Not a detection dataset or model, or a loss that became NaN or infinite.
+        Not a detection dataset or model, an unknown ``val_metric``, or a loss that
+        became NaN or infinite.
 
     Examples
     --------
@@ -1628,6 +1699,9 @@ def train_detector(
     cfg = config or TrainConfig()
     progress = check_bool(progress, "progress")
     ckpt = as_path(checkpoint, "checkpoint") if checkpoint is not None else None
+    val_ds = _detection_dataset(val) if val is not None else None
+    val_every = check_count(val_every, "val_every", 1, 1 << 30)
+    check_choice(val_metric, "val_metric", VAL_METRICS)
     dev = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
     model.to(dev)
@@ -1656,6 +1730,8 @@ def train_detector(
     else:
         sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
     hist = DetectionHistory()
+    best_state: dict[str, torch.Tensor] | None = None
+    best_value = -math.inf
     bar = progress_bar(
         total=cfg.epochs, desc="training detector", unit="epoch", disable=not progress
     )
@@ -1699,6 +1775,17 @@ def train_detector(
                     sums["loss"] = sums.get("loss", 0.0) + float(loss.detach())
                 hist.losses.append({k: v / steps for k, v in sums.items()})
                 hist.seconds.append(time.perf_counter() - t0)
+                last = epoch + 1 == cfg.epochs
+                if val_ds is not None and ((epoch + 1) % val_every == 0 or last):
+                    t1 = time.perf_counter()
+                    value = float(evaluate_detector(model, val_ds).stats[VAL_METRICS[val_metric]])
+                    hist.val_seconds += time.perf_counter() - t1
+                    hist.val[epoch + 1] = value
+                    if best_state is None or value > best_value:
+                        best_value, hist.best_epoch = value, epoch + 1
+                        best_state = copy.deepcopy(model.state_dict())
+                elif val_ds is None:
+                    hist.best_epoch = epoch + 1
                 if ckpt is not None:
                     save_checkpoint(
                         ckpt,
@@ -1710,9 +1797,14 @@ def train_detector(
                         },
                     )
                 bar.update(1)
-                bar.set_postfix(loss=f"{hist.losses[-1]['loss']:.3f}")
+                post = {"loss": f"{hist.losses[-1]['loss']:.3f}"}
+                if hist.val:
+                    post[f"val {val_metric}"] = f"{hist.val[max(hist.val)]:.3f}"
+                bar.set_postfix(**post)
     finally:
         bar.close()
+    if best_state is not None:
+        model.load_state_dict(best_state)
     return hist
 
 
@@ -1794,6 +1886,95 @@ def evaluate_detector(
     finally:
         model.train(was)
     return evaluate_detections(ds.to_coco(), results)
+
+
+@dataclass(frozen=True, eq=False)
+class LocalizationResult:
+    """Single-object localisation figures (:func:`evaluate_localizer`).
+
+    Attributes
+    ----------
+    iou : numpy.ndarray
+        ``(N,)`` IoU of each image's predicted box with its one ground-truth box.
+    correct : numpy.ndarray
+        ``(N,)`` bool, predicted label equals the true one.
+    mean_iou : float
+    accuracy : float
+        Fraction of correct labels.
+    """
+
+    iou: Any
+    correct: Any
+    mean_iou: float
+    accuracy: float
+
+
+@torch.no_grad()
+def evaluate_localizer(
+    model: nn.Module, dataset: Any, *, batch_size: int = 32
+) -> LocalizationResult:
+    r"""Mean IoU and label accuracy of a single-object localizer (one box per image).
+
+    For image :math:`i` with its one ground-truth box :math:`b_i` and the model's
+    highest-scoring detection :math:`\hat b_i` (an image without a detection counts IoU
+    0 and a wrong label),
+
+    .. math:: \mathrm{mIoU} = \frac1N \sum_i \mathrm{IoU}(\hat b_i, b_i).
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        A :class:`SingleObjectLocalizer` or any model of the detection contract.
+    dataset : DetectionDataset
+        Exactly one box per image (:func:`~robopercept.nn.detection_data.single_digit_set`).
+    batch_size : int
+
+    Returns
+    -------
+    LocalizationResult
+
+    Raises
+    ------
+    InputError
+        An image without exactly one ground-truth box.
+    """
+    import numpy as np
+
+    from robopercept.nn.detection_data import collate_detection
+
+    model = check_module(model)
+    ds = _detection_dataset(dataset)
+    bs = check_count(batch_size, "batch_size", 1, 1 << 16)
+    counts = [len(b) for b in ds.boxes]
+    if any(c != 1 for c in counts):
+        bad = next(i for i, c in enumerate(counts) if c != 1)
+        raise InputError(
+            f"localisation needs exactly one box per image; image {bad} has {counts[bad]} "
+            "(use single_digit_set or evaluate_detector)"
+        )
+    p = next(model.parameters(), None)
+    dev = p.device if p is not None else torch.device("cpu")
+    was = model.training
+    model.eval()
+    ious, correct = [], []
+    try:
+        for start in range(0, len(ds), bs):
+            images, targets = collate_detection(
+                [ds[j] for j in range(start, min(len(ds), start + bs))]
+            )
+            for t, d in zip(targets, model([im.to(dev) for im in images]), strict=True):
+                if len(d["boxes"]) == 0:
+                    ious.append(0.0)
+                    correct.append(False)
+                    continue
+                k = int(torch.argmax(d["scores"]))
+                pred = d["boxes"][k : k + 1].detach().cpu().double()
+                ious.append(float(box_iou(pred, t["boxes"].double())[0, 0]))
+                correct.append(int(d["labels"][k]) == int(t["labels"][0]))
+    finally:
+        model.train(was)
+    iou, ok = np.asarray(ious), np.asarray(correct, dtype=bool)
+    return LocalizationResult(iou, ok, float(iou.mean()), float(ok.mean()))
 
 
 # --------------------------------------------------------------------------- R-CNN (2014)
