@@ -111,6 +111,7 @@ def _part(
     epochs: int,
     batch_size: int = 8,
     lr: float = 2e-3,
+    augment: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     train = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "weight_decay": 1e-4}
     return {
@@ -120,10 +121,17 @@ def _part(
         "settings": settings,
         "train": train,
         "metric": metric,
+        "augment": augment,
     }
 
 
 _FCOS = {"width": 16, "score_thresh": 0.05}
+#: every flip and quarter turn (FlipRotate): for top-down trees and the rotated shapes,
+#: not for digits
+_DIHEDRAL = {"horizontal": 0.5, "vertical": 0.5, "rotate90": True}
+#: every flip and quarter turn (FlipRotate): for top-down trees and the rotated shapes,
+#: not for digits
+_DIHEDRAL = {"horizontal": 0.5, "vertical": 0.5, "rotate90": True}
 #: part -> data builder ((train, val, test) image counts, seed) -> (train, val, test,
 #: cross-image tests), the counts, detector kind, settings, TrainConfig keywords and the
 #: validation metric that picks the epoch
@@ -134,11 +142,14 @@ PARTS: dict[str, dict[str, Any]] = {
         "fcos",
         {**_FCOS, "strides": (8, 16), "head_channels": 64},
         "AP50",
-        40,
+        100,
         batch_size=4,
+        augment=_DIHEDRAL,
     ),
-    "shapes-fcos": _part(_shapes, (600, 100, 200), "fcos", _FCOS, "AP", 30),
-    "shapes-faster": _part(_shapes, (600, 100, 200), "faster", {"width": 16}, "AP", 30),
+    "shapes-fcos": _part(_shapes, (2000, 100, 200), "fcos", _FCOS, "AP", 30, augment=_DIHEDRAL),
+    "shapes-faster": _part(
+        _shapes, (2000, 100, 200), "faster", {"width": 16}, "AP", 30, augment=_DIHEDRAL
+    ),
     "digits": _part(_digits, (600, 100, 200), "fcos", _FCOS, "AP50", 30),
     "localizer": _part(
         _single, (1000, 200, 500), "localizer", {"width": 16}, "AP", 30, batch_size=32
@@ -193,6 +204,9 @@ def run_one(
         seed=seed, device="cpu", schedule="cosine", clip_grad_norm=10.0, **spec["train"]
     )
     t0 = time.perf_counter()
+    augment = None
+    if spec["augment"]:
+        augment = dd.FlipRotate(**spec["augment"], generator=seed)
     hist = train_detector(
         model,
         train,
@@ -201,6 +215,7 @@ def run_one(
         val=val,
         val_every=max(1, cfg.epochs // 10),
         val_metric=spec["metric"],
+        augment=augment,
     )
     wall = time.perf_counter() - t0
     ev = evaluate_detector(model, test)
@@ -210,6 +225,7 @@ def run_one(
         "kind": spec["kind"],
         "settings": {k: v for k, v in spec["settings"].items()},
         "train": spec["train"],
+        "augment": spec["augment"],
         "parameters": sum(p.numel() for p in model.parameters()),
         "images": {"train": len(train), "val": len(val), "test": len(test)},
         "train_seconds": round(wall, 1),

@@ -500,12 +500,30 @@ def test_without_validation_the_last_epoch_is_kept():
     assert hist.best_epoch == 2 and hist.val == {}
 
 
+def test_augment_sees_every_training_sample_and_changes_the_run():
+    from robopercept.nn.detection_data import FlipRotate
+
+    ds = digits_detection_set(3, (48, 48), (1, 1), rng=0, scale=(12, 24))
+    cfg = TrainConfig(epochs=2, batch_size=2, lr=1e-3, device="cpu")
+    seen = []
+
+    def spy(image, target):
+        seen.append(int(target["image_id"]))
+        return FlipRotate(1.0, 1.0, generator=0)(image, target)
+
+    plain = train_detector(build("fcos"), ds, cfg, progress=False).losses
+    flipped = train_detector(build("fcos"), ds, cfg, progress=False, augment=spy).losses
+    assert sorted(seen) == sorted(ds.image_ids * 2)  # each image once per epoch
+    assert flipped != plain
+
+
 @pytest.mark.parametrize(
     ("kw", "msg"),
     [
         ({"val_metric": "mAP"}, "val_metric must be one of"),
         ({"val_every": 0}, "val_every"),
         ({"val": [1, 2]}, "dataset must be a DetectionDataset"),
+        ({"augment": "flip"}, "augment must be a callable"),
     ],
 )
 def test_bad_validation_arguments(kw, msg):

@@ -22,6 +22,7 @@ from robopercept.nn.detection_data import (  # noqa: E402
     BACKGROUNDS,
     DEEPFOREST_IMAGES,
     DetectionDataset,
+    FlipRotate,
     collate_detection,
     deepforest_tiles,
     digits_detection_set,
@@ -535,3 +536,60 @@ def test_draw_detections_and_samples_picture(digits_set):
 def test_bad_input(call, message):
     with pytest.raises(InputError, match=message):
         call()
+
+
+# --------------------------------------------------------------------------- FlipRotate
+def _tight(mask: torch.Tensor) -> list[float]:
+    ys, xs = torch.nonzero(mask, as_tuple=True)
+    return [float(xs.min()), float(ys.min()), float(xs.max() + 1), float(ys.max() + 1)]
+
+
+@pytest.mark.parametrize(
+    ("kw", "seed"),
+    [({"horizontal": 1.0}, 0), ({"horizontal": 0.0, "vertical": 1.0}, 0)]
+    + [({"horizontal": 0.5, "vertical": 0.5, "rotate90": True}, s) for s in range(12)],
+)
+def test_flip_rotate_moves_boxes_and_masks_with_the_pixels(kw, seed):
+    # a non-square image with two lit rectangles: after any transform, each box must be
+    # the tight box of its lit pixels, and the mask must be those pixels
+    h, w = 12, 20
+    image = torch.zeros(3, h, w)
+    rects = [(2, 1, 7, 4), (11, 5, 19, 12)]  # xyxy, pixel edges
+    masks = torch.zeros(2, h, w, dtype=torch.uint8)
+    for k, (x1, y1, x2, y2) in enumerate(rects):
+        image[k, y1:y2, x1:x2] = 1.0
+        masks[k, y1:y2, x1:x2] = 1
+    target = {"boxes": torch.tensor(rects, dtype=torch.float32), "masks": masks, "labels": 7}
+    out_im, out_t = FlipRotate(**kw, generator=seed)(image, target)
+    assert out_t["labels"] == 7 and sorted(out_im.shape[1:]) == [h, w]
+    for k in range(2):
+        assert out_t["boxes"][k].tolist() == _tight(out_im[k] > 0)
+        assert torch.equal(out_t["masks"][k].bool(), out_im[k] > 0)
+    assert torch.equal(target["boxes"], torch.tensor(rects, dtype=torch.float32))  # not in place
+
+
+def test_flip_rotate_is_seeded_and_draws_every_turn():
+    image = torch.arange(12.0).reshape(1, 3, 4)
+    t = {"boxes": torch.zeros(0, 4)}
+    runs = []
+    for _ in range(2):
+        f = FlipRotate(0.5, 0.5, True, generator=3)
+        runs.append([f(image, t)[0] for _ in range(40)])
+    assert all(torch.equal(x, y) for x, y in zip(*runs, strict=True))
+    # 8 distinct outcomes of the dihedral group on an asymmetric image
+    assert len({tuple(x.flatten().tolist()) + tuple(x.shape) for x in runs[0]}) == 8
+
+
+@pytest.mark.parametrize(
+    ("kw", "args", "msg"),
+    [
+        ({"horizontal": 1.5}, None, "horizontal"),
+        ({"rotate90": "yes"}, None, "rotate90"),
+        ({}, (torch.zeros(8, 8), {"boxes": torch.zeros(0, 4)}), "(C, H, W)"),
+        ({}, (torch.zeros(3, 8, 8), {"labels": 1}), "'boxes'"),
+    ],
+)
+def test_flip_rotate_bad_input(kw, args, msg):
+    with pytest.raises(InputError, match=msg.replace("(", r"\(").replace(")", r"\)")):
+        f = FlipRotate(**kw)
+        f(*args)

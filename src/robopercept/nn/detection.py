@@ -1623,6 +1623,8 @@ def train_detector(
     val: Any = None,
     val_every: int = 1,
     val_metric: str = "AP",
+    augment: Callable[[torch.Tensor, dict[str, Any]], tuple[torch.Tensor, dict[str, Any]]]
+    | None = None,
 ) -> DetectionHistory:
     """Train a detector of this module (or any model keeping the torchvision detection
     contract) on a :class:`~robopercept.nn.detection_data.DetectionDataset`.
@@ -1660,6 +1662,10 @@ def train_detector(
         Evaluate every this many epochs (>= 1).
     val_metric : {"AP", "AP50", "AP75"}
         mAP@[.5:.95], mAP@0.5 or mAP@0.75 (:data:`VAL_METRICS`).
+    augment : callable, optional
+        ``(image, target) -> (image, target)`` applied to each training sample as it
+        is drawn, e.g. :class:`~robopercept.nn.detection_data.FlipRotate` (seed it for a
+        repeatable run).
 
     Returns
     -------
@@ -1700,6 +1706,11 @@ def train_detector(
     progress = check_bool(progress, "progress")
     ckpt = as_path(checkpoint, "checkpoint") if checkpoint is not None else None
     val_ds = _detection_dataset(val) if val is not None else None
+    if augment is not None and not callable(augment):
+        raise InputError(
+            f"augment must be a callable (image, target) -> (image, target), e.g. "
+            f"FlipRotate(); got {plain_repr(augment)}"
+        )
     val_every = check_count(val_every, "val_every", 1, 1 << 30)
     check_choice(val_metric, "val_metric", VAL_METRICS)
     dev = resolve_device(cfg.device)
@@ -1743,9 +1754,10 @@ def train_detector(
                 sums: dict[str, float] = {}
                 order = torch.randperm(n, generator=gen).tolist()
                 for b in range(steps):
-                    images, targets = collate_detection(
-                        [ds[j] for j in order[b * cfg.batch_size : (b + 1) * cfg.batch_size]]
-                    )
+                    items = [ds[j] for j in order[b * cfg.batch_size : (b + 1) * cfg.batch_size]]
+                    if augment is not None:
+                        items = [augment(im, t) for im, t in items]
+                    images, targets = collate_detection(items)
                     images = [im.to(dev) for im in images]
                     targets = [
                         {"boxes": t["boxes"].to(dev), "labels": t["labels"].to(dev)}

@@ -83,6 +83,7 @@ __all__ = [
     "DIGIT_CLASSES",
     "DeepForestTiles",
     "DetectionDataset",
+    "FlipRotate",
     "collate_detection",
     "deepforest_tiles",
     "digits_detection_set",
@@ -457,6 +458,98 @@ def _check_masks(masks: Any, name: str, k: int, shape: tuple[int, ...]) -> np.nd
     if m.shape != (k, *shape):
         raise InputError(f"{name} must be (K, H, W) = {(k, *shape)}; got {m.shape}")
     return m != 0
+
+
+class FlipRotate:
+    r"""Random mirror images and quarter turns of a detection sample, boxes (and masks)
+    moved with the pixels: the dihedral augmentation of aerial and top-down images.
+
+    For an image of width :math:`W` and height :math:`H` and an ``xyxy`` box
+    :math:`(x_1, y_1, x_2, y_2)` in continuous pixel coordinates:
+
+    - horizontal flip (probability ``horizontal``): :math:`(W - x_2, y_1, W - x_1, y_2)`;
+    - vertical flip (probability ``vertical``): :math:`(x_1, H - y_2, x_2, H - y_1)`;
+    - with ``rotate90``, :math:`k \sim U\{0..3\}` counter-clockwise quarter turns
+      (``torch.rot90(image, k, (1, 2))``), each mapping a point :math:`(x, y)` to
+      :math:`(y, W - x)` and the size to :math:`H \times W`, so a box becomes
+      :math:`(y_1, W - x_2, y_2, W - x_1)`.
+
+    Applied in that order. Same generator seed, same sequence of draws.
+
+    Parameters
+    ----------
+    horizontal, vertical : float
+        Probabilities in [0, 1].
+    rotate90 : bool
+        Random quarter turns (use only where orientation carries no meaning).
+    generator : int or torch.Generator, optional
+        Seed or source of the draws.
+
+    Examples
+    --------
+    >>> t = FlipRotate(horizontal=1.0, generator=0)
+    >>> image, target = t(torch.zeros(3, 10, 20), {"boxes": torch.tensor([[2.0, 1, 5, 4]])})
+    >>> target["boxes"].tolist()
+    [[15.0, 1.0, 18.0, 4.0]]
+    """
+
+    def __init__(
+        self,
+        horizontal: float = 0.5,
+        vertical: float = 0.0,
+        rotate90: bool = False,
+        generator: int | torch.Generator | None = None,
+    ) -> None:
+        self.horizontal = check_real(horizontal, "horizontal (a probability)", 0.0, 1.0)
+        self.vertical = check_real(vertical, "vertical (a probability)", 0.0, 1.0)
+        self.rotate90 = check_bool(rotate90, "rotate90")
+        if isinstance(generator, torch.Generator):
+            self.generator = generator
+        elif generator is None:
+            self.generator = torch.Generator()
+            self.generator.seed()
+        else:
+            self.generator = torch.Generator().manual_seed(check_int(generator, "generator", 0))
+
+    def __repr__(self) -> str:
+        return (
+            f"FlipRotate(horizontal={self.horizontal}, vertical={self.vertical}, "
+            f"rotate90={self.rotate90})"
+        )
+
+    def __call__(
+        self, image: torch.Tensor, target: Mapping[str, Any]
+    ) -> tuple[torch.Tensor, dict[str, Any]]:
+        """Transform one ``(C, H, W)`` image and its target (``"boxes"`` ``(K, 4)``
+        ``xyxy``, optional ``"masks"`` ``(K, H, W)``; other keys are kept)."""
+        if not isinstance(image, torch.Tensor) or image.ndim != 3:
+            raise InputError(f"image must be a (C, H, W) torch.Tensor; got {plain_repr(image)}")
+        if not isinstance(target, Mapping) or "boxes" not in target:
+            raise InputError("target must be a dict with 'boxes' ((K, 4) xyxy)")
+        out = dict(target)
+        b = torch.as_tensor(target["boxes"]).clone()
+        masks = target.get("masks")
+        u = torch.rand(3, generator=self.generator)
+        h, w = int(image.shape[1]), int(image.shape[2])
+        if u[0] < self.horizontal:
+            image = torch.flip(image, [2])
+            b = torch.stack([w - b[:, 2], b[:, 1], w - b[:, 0], b[:, 3]], 1)
+            masks = torch.flip(masks, [2]) if masks is not None else None
+        if u[1] < self.vertical:
+            image = torch.flip(image, [1])
+            b = torch.stack([b[:, 0], h - b[:, 3], b[:, 2], h - b[:, 1]], 1)
+            masks = torch.flip(masks, [1]) if masks is not None else None
+        if self.rotate90:
+            k = int(torch.randint(4, (1,), generator=self.generator))
+            for _ in range(k):
+                w = int(image.shape[2])
+                image = torch.rot90(image, 1, (1, 2))
+                b = torch.stack([b[:, 1], w - b[:, 2], b[:, 3], w - b[:, 0]], 1)
+                masks = torch.rot90(masks, 1, (1, 2)) if masks is not None else None
+        out["boxes"] = b.reshape(-1, 4)
+        if masks is not None:
+            out["masks"] = masks
+        return image.contiguous(), out
 
 
 def collate_detection(
