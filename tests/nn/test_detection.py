@@ -577,6 +577,48 @@ def test_bad_images(images, msg):
         m(images)
 
 
+@pytest.mark.parametrize(
+    ("call", "msg"),
+    [
+        # the fuzz campaign of issue 25 (run 3): an untyped error each before
+        (lambda: DetectionBackbone(4, strides=(8,), fpn_channels=21313), "fpn_channels"),
+        (lambda: FCOS(2, width=4, head_channels=5000), "head_channels"),
+        (lambda: FasterRCNN(2, width=4, aspect_ratios=None), "aspect_ratios must be a non-empty"),
+        (lambda: FasterRCNN(2, width=4, anchor_sizes=3.0), "anchor_sizes must be a non-empty"),
+    ],
+)
+def test_issue25_run3_constructor_arguments(call, msg):
+    with pytest.raises(InputError, match=msg):
+        call()
+
+
+def test_fcos_with_few_head_channels_runs_on_an_image_smaller_than_its_stride():
+    # head_channels 8 made 8 GroupNorm groups of one channel: on the 1 x 1 map of a
+    # 16 x 16 image a group held one value and torch raised a ValueError
+    m = FCOS(2, width=4, head_channels=8, strides=(8, 16)).eval()
+    out = m([torch.rand(3, 16, 16)])
+    assert out[0]["boxes"].shape[1] == 4
+    assert all(g.num_groups == 4 for g in m.modules() if isinstance(g, torch.nn.GroupNorm))
+
+
+@pytest.mark.parametrize(
+    ("settings", "classes", "msg"),
+    [
+        (3, ["a", "b"], "settings must be a dict"),
+        (None, ["a", "b"], "settings must be a dict"),
+        (np.eye(3), ["a", "b"], "settings must be a dict"),
+        ({"width": 4}, 2, "classes must be a non-empty list"),
+        ({"width": 4}, [1, 2], "classes must be a non-empty list"),
+    ],
+)
+def test_save_detector_bad_settings_or_classes(tmp_path, settings, classes, msg):
+    from robopercept.nn.detection import save_detector
+
+    with pytest.raises(InputError, match=msg):
+        save_detector(tmp_path / "d.pt", build("fcos", 2), "fcos", settings, classes)
+    assert not (tmp_path / "d.pt").exists()
+
+
 def test_model_specific_errors():
     images, targets = tiny_batch()
     with pytest.raises(InputError, match="exactly one box"):

@@ -126,6 +126,10 @@ __all__ = [
     "train_detector",
 ]
 
+#: the most channels a detector's FPN or head may have (a 3 x 3 convolution of 4096 to
+#: 4096 channels holds 600 MB of weights)
+MAX_CHANNELS = 4096
+
 #: ImageNet mean and std: the normalization inside every detector
 IMAGE_MEAN = (0.485, 0.456, 0.406)
 IMAGE_STD = (0.229, 0.224, 0.225)
@@ -161,7 +165,7 @@ class FPN(nn.Module):
                 f"in_channels must be a non-empty list of ints; got {plain_repr(in_channels)}"
             )
         chans = [check_count(c, "in_channels", 1, 1 << 16) for c in in_channels]
-        out_channels = check_count(out_channels, "out_channels", 1, 1 << 16)
+        out_channels = check_count(out_channels, "out_channels", 1, MAX_CHANNELS)
         self.lateral = nn.ModuleList(nn.Conv2d(c, out_channels, 1) for c in chans)
         self.output = nn.ModuleList(
             nn.Conv2d(out_channels, out_channels, 3, padding=1) for _ in chans
@@ -244,6 +248,8 @@ class DetectionBackbone(nn.Module):
             chans[s] = c
         self.stages = nn.ModuleList(stages)
         channels = [chans[s] for s in self.strides]
+        if fpn_channels is not None:
+            fpn_channels = check_count(fpn_channels, "fpn_channels", 1, MAX_CHANNELS)
         self.fpn = FPN(channels, fpn_channels) if fpn_channels is not None else None
         self.out_channels = [self.fpn.out_channels] * len(channels) if self.fpn else channels
 
@@ -1122,7 +1128,9 @@ class FasterRCNN(_TwoStage):
             detections_per_img,
         )
         self.anchor_generator = AnchorGenerator(
-            tuple(anchor_sizes), tuple(aspect_ratios), offset=0.5
+            _sequence(anchor_sizes, "anchor_sizes"),
+            _sequence(aspect_ratios, "aspect_ratios"),
+            offset=0.5,
         )
         a = self.anchor_generator.num_anchors_per_location()[0]
         c = self.backbone.out_channels[-1]
@@ -1290,6 +1298,14 @@ def _init_conv(layer: nn.Conv2d, bias: float) -> None:
         nn.init.constant_(layer.bias, bias)
 
 
+def _sequence(value: Any, name: str) -> tuple[Any, ...]:
+    if not isinstance(value, (tuple, list)) or not value:
+        raise InputError(
+            f"{name} must be a non-empty tuple of positive numbers; got {plain_repr(value)}"
+        )
+    return tuple(value)
+
+
 def _pair(value: Any, name: str) -> tuple[int, int]:
     if not isinstance(value, (tuple, list)) or len(value) != 2:
         raise InputError(f"{name} must be a (train, eval) pair of ints; got {plain_repr(value)}")
@@ -1353,11 +1369,16 @@ class FCOS(_Detector):
         detections_per_img: int = 100,
     ) -> None:
         super().__init__()
-        head_channels = check_count(head_channels, "head_channels", 1, 1 << 14)
+        head_channels = check_count(head_channels, "head_channels", 2, MAX_CHANNELS)
         self.backbone = DetectionBackbone(width, strides, fpn_channels=head_channels)
         self._init_common(num_classes, max(self.backbone.strides))
         c = head_channels
+        # GroupNorm with 8 groups (fewer where the channels do not divide), each of at
+        # least 2 channels: a group of one channel on a 1 x 1 map (a tiny image at the
+        # coarsest stride) has one value and no variance, and torch refuses it
         groups = math.gcd(c, 8)
+        while groups > 1 and c // groups < 2:
+            groups //= 2
 
         def tower() -> nn.Sequential:
             return nn.Sequential(
@@ -2352,7 +2373,20 @@ def save_detector(
     model = check_module(model)
     if not isinstance(kind, str) or kind not in DETECTORS:
         raise InputError(f"kind must be one of {sorted(DETECTORS)}; got {plain_repr(kind)}")
-    names = [str(c) for c in classes]
+    if not isinstance(settings, Mapping) or not all(isinstance(k, str) for k in settings):
+        raise InputError(
+            "settings must be a dict of the class's keyword arguments (e.g. {'width': 8}); "
+            f"got {plain_repr(settings)}"
+        )
+    if (
+        not isinstance(classes, (list, tuple))
+        or not classes
+        or not all(isinstance(c, str) for c in classes)
+    ):
+        raise InputError(
+            f"classes must be a non-empty list of class names (str); got {plain_repr(classes)}"
+        )
+    names = list(classes)
     return save_checkpoint(
         path,
         {
