@@ -85,7 +85,8 @@ def _shapes(n: tuple[int, int, int], seed: int) -> tuple:
 
 
 def _digits(n: tuple[int, int, int], seed: int) -> tuple:
-    return _synthetic(lambda k, rng: dd.digits_detection_set(k, (128, 128), rng=rng), n, seed)
+    make = functools.partial(dd.digits_detection_set, size=(128, 128))
+    return _synthetic(functools.partial(_chunked, make), n, seed)
 
 
 def _family_digits(n: tuple[int, int, int], seed: int) -> tuple:
@@ -254,7 +255,7 @@ def run_one(
             data=part,
             seed=seed,
             built_by=f"python -m benchmarks.detection_figures --only {part} --seeds {seed} "
-            f"--save {save}",
+            "--save DIR",
             test=row["test"],
         )
         row["saved"] = str(path)

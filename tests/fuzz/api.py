@@ -1249,6 +1249,10 @@ def detection_value(kind: str) -> Any:
         [[1], []],
         ["a"],
     )
+    if kind == "one_box":
+        return ds.subset([0])
+    if kind == "target":
+        return {"boxes": torch_tensor([[1.0, 2.0, 9.0, 12.0]])}
     return {"dataset": ds, "batch": [ds[0], ds[1]]}[kind]
 
 
@@ -2158,3 +2162,20 @@ VALID.update(
     }
 )
 METHODS["nn.detection.RCNN"] = ("forward", "warp")
+_ONE_BOX = _b("tests.fuzz.api:detection_value", "one_box")
+VALID.update(
+    {
+        "nn.detection.evaluate_localizer": {
+            "model": _b("tests.fuzz.api:detector_value", "localizer"),
+            "dataset": _ONE_BOX,
+        },
+        "nn.detection.FasterRCNN.rpn_outputs": {"images": _DIMAGES},
+        "nn.detection_data.FlipRotate": {"horizontal": 0.5, "vertical": 0.5, "rotate90": True},
+        "nn.detection_data.FlipRotate.__call__": {
+            "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
+            "target": _b("tests.fuzz.api:detection_value", "target"),
+        },
+    }
+)
+METHODS["nn.detection.FasterRCNN"] = ("forward", "rpn_outputs")
+METHODS["nn.detection_data.FlipRotate"] = ("__call__",)
