@@ -265,7 +265,12 @@ def test_save_load_round_trip_and_not_a_detector(tmp_path):
 
     m = build_detector("rcnn", 2, seed=0, warp_size=16, width=4, hidden=8)
     save_detector(
-        tmp_path / "m.pt", m, "rcnn", {"warp_size": 16, "width": 4, "hidden": 8}, "ab", epochs=3
+        tmp_path / "m.pt",
+        m,
+        "rcnn",
+        {"warp_size": 16, "width": 4, "hidden": 8},
+        ["a", "b"],
+        epochs=3,
     )
     m2, info = load_detector(tmp_path / "m.pt")
     assert info["classes"] == ["a", "b"] and info["epochs"] == 3 and not m2.training
