@@ -108,7 +108,7 @@ def anchors(faster: torch.nn.Module, image: np.ndarray) -> None:
     colors = [(255, 80, 80), (80, 255, 80), (80, 160, 255)]
     for cell, col in zip(((3, 3), (8, 7), (12, 12)), colors, strict=True):
         pic = draw_boxes(pic, _xywh(a[cell[0], cell[1]], SCALE), color=col, width=2)
-    pic = _title(pic, f"anchors: 3 sizes x 3 ratios at 3 of {fh}x{fw} cells (stride {stride})")
+    pic = _title(pic, f"9 anchors at 3 of {fh}x{fw} cells, stride {stride}")
     write_image(IMG / "detection_anchors.png", pic)
 
 
@@ -180,10 +180,9 @@ def main() -> None:
     write_pr_curves(ev, IMG / "detection_pr_curves.png", names=dict(enumerate(classes, 1)))
     rows = []
     for model, name in ((fcos, "FCOS"), (faster, "Faster R-CNN")):
-        dets = [
-            {k: v.numpy() for k, v in d.items()}
-            for d in model([_as_tensor(test.images[i]) for i in range(4)])
-        ]
+        with torch.no_grad():
+            out = model([_as_tensor(test.images[i]) for i in range(4)])
+        dets = [{k: v.numpy() for k, v in d.items()} for d in out]
         pics = [_detections(test.images[i], dets[i], classes, 0.3) for i in range(4)]
         rows.append(_row([_title(pics[0], name), *pics[1:]]))
     write_image(IMG / "detection_samples.png", np.concatenate(rows, 0))

@@ -62,3 +62,14 @@ def digits() -> tuple[np.ndarray, np.ndarray]:
     from sklearn.datasets import load_digits
 
     return load_digits(return_X_y=True)
+
+
+@pytest.fixture
+def torch_one_thread():
+    """One torch intra-op thread for the test: the 2-core CI machine runs other jobs
+    beside the tests, and two contending threads make training several times slower."""
+    torch = pytest.importorskip("torch")
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
