@@ -24,12 +24,7 @@ TRAIN += ["--lr", "3e-3", "--batch-size", "4", "--quiet"]
 FILES = {"model.pt", "history.json", "metrics.json", "pr_curves.png", "samples.png"}
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 
 @pytest.fixture(scope="module")

@@ -57,14 +57,7 @@ def build(kind: str, num_classes: int = 10, **kw):
     return FCOS(num_classes, width=8, head_channels=32, **kw)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One intra-op thread: the 2-core CI machine runs other jobs beside these tests,
-    and two contending threads make the training tests several times slower."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 
 LOSSES = {

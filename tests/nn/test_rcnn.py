@@ -19,14 +19,7 @@ from robopercept.nn.detection import (  # noqa: E402
 from robopercept.nn.detection_data import digits_detection_set  # noqa: E402
 from robopercept.nn.training import TrainConfig  # noqa: E402
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One intra-op thread: the CI machine runs other jobs beside these tests."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 
 def build(**kw):

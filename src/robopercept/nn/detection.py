@@ -1877,7 +1877,6 @@ def evaluate_detector(
     (12,)
     """
     from robopercept.nn.coco import evaluate_detections
-    from robopercept.nn.detection_data import collate_detection
     from robopercept.nn.training import resolve_device
 
     model = check_module(model)
@@ -1889,36 +1888,47 @@ def evaluate_detector(
     else:
         dev = resolve_device(device)
         model.to(dev)
+    results: list[Mapping[str, Any]] = []
+    for t, d in _detections_per_image(model, ds, bs, dev):
+        b = d["boxes"].detach().cpu().double().numpy()
+        for box, lab, sc in zip(
+            b, d["labels"].cpu().numpy(), d["scores"].cpu().double().numpy(), strict=True
+        ):
+            results.append(
+                {
+                    "image_id": int(t["image_id"]),
+                    "category_id": int(lab),
+                    "bbox": [
+                        float(box[0]),
+                        float(box[1]),
+                        float(box[2] - box[0]),
+                        float(box[3] - box[1]),
+                    ],
+                    "score": float(sc),
+                }
+            )
+    return evaluate_detections(ds.to_coco(), results)
+
+
+def _detections_per_image(
+    model: nn.Module, ds: Any, batch_size: int, dev: torch.device
+) -> list[tuple[dict[str, Any], dict[str, torch.Tensor]]]:
+    """(target, eval-mode detections) of every image of ``ds``, in batches; the model's
+    train/eval mode is restored after."""
+    from robopercept.nn.detection_data import collate_detection
+
     was = model.training
     model.eval()
-    results: list[Mapping[str, Any]] = []
+    out: list[tuple[dict[str, Any], dict[str, torch.Tensor]]] = []
     try:
-        for start in range(0, len(ds), bs):
+        for start in range(0, len(ds), batch_size):
             images, targets = collate_detection(
-                [ds[j] for j in range(start, min(len(ds), start + bs))]
+                [ds[j] for j in range(start, min(len(ds), start + batch_size))]
             )
-            dets = model([im.to(dev) for im in images])
-            for t, d in zip(targets, dets, strict=True):
-                b = d["boxes"].detach().cpu().double().numpy()
-                for box, lab, sc in zip(
-                    b, d["labels"].cpu().numpy(), d["scores"].cpu().double().numpy(), strict=True
-                ):
-                    results.append(
-                        {
-                            "image_id": int(t["image_id"]),
-                            "category_id": int(lab),
-                            "bbox": [
-                                float(box[0]),
-                                float(box[1]),
-                                float(box[2] - box[0]),
-                                float(box[3] - box[1]),
-                            ],
-                            "score": float(sc),
-                        }
-                    )
+            out.extend(zip(targets, model([im.to(dev) for im in images]), strict=True))
     finally:
         model.train(was)
-    return evaluate_detections(ds.to_coco(), results)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -1973,8 +1983,6 @@ def evaluate_localizer(
     """
     import numpy as np
 
-    from robopercept.nn.detection_data import collate_detection
-
     model = check_module(model)
     ds = _detection_dataset(dataset)
     bs = check_count(batch_size, "batch_size", 1, 1 << 16)
@@ -1987,25 +1995,16 @@ def evaluate_localizer(
         )
     p = next(model.parameters(), None)
     dev = p.device if p is not None else torch.device("cpu")
-    was = model.training
-    model.eval()
     ious, correct = [], []
-    try:
-        for start in range(0, len(ds), bs):
-            images, targets = collate_detection(
-                [ds[j] for j in range(start, min(len(ds), start + bs))]
-            )
-            for t, d in zip(targets, model([im.to(dev) for im in images]), strict=True):
-                if len(d["boxes"]) == 0:
-                    ious.append(0.0)
-                    correct.append(False)
-                    continue
-                k = int(torch.argmax(d["scores"]))
-                pred = d["boxes"][k : k + 1].detach().cpu().double()
-                ious.append(float(box_iou(pred, t["boxes"].double())[0, 0]))
-                correct.append(int(d["labels"][k]) == int(t["labels"][0]))
-    finally:
-        model.train(was)
+    for t, d in _detections_per_image(model, ds, bs, dev):
+        if len(d["boxes"]) == 0:
+            ious.append(0.0)
+            correct.append(False)
+            continue
+        k = int(torch.argmax(d["scores"]))
+        pred = d["boxes"][k : k + 1].detach().cpu().double()
+        ious.append(float(box_iou(pred, t["boxes"].double())[0, 0]))
+        correct.append(int(d["labels"][k]) == int(t["labels"][0]))
     iou, ok = np.asarray(ious), np.asarray(correct, dtype=bool)
     return LocalizationResult(iou, ok, float(iou.mean()), float(ok.mean()))
 
