@@ -17,6 +17,7 @@ from robopercept.pipelines import (
     PlaneMeasurerConfig,
     PlaneTracker,
     PlaneTrackerConfig,
+    PlaneTrackResult,
     plane_errors,
     summarize,
 )
@@ -90,29 +91,74 @@ def test_the_causal_filter_alone_also_improves_the_jitter(default_run):
     assert summary.tracked.angle_deg.median <= 0.05
 
 
-@pytest.mark.parametrize("motion", ["fast", "stop-go"])
+@pytest.mark.parametrize("motion", ["fast", "stop-go", "jerky", "handheld"])
 def test_motion_profiles_tracked_beats_raw(motion):
     scene = SyntheticRGBDScene(motion=motion, seed=1)
     results, truths = _track(scene)
     check_beats_raw(summarize(results, truths))
 
 
-@pytest.mark.parametrize("motion", ["jerky", "handheld"])
-def test_unpredictable_motion_is_tracked_as_well_as_the_raw_fit(motion):
-    # issue 24 is open here: on velocity jumps (jerky) and 3-10 Hz tremor (handheld) the
-    # motion is less predictable than the 848x480 fit is noisy (0.02-0.05 deg median),
-    # and the tracker only ties the raw fit (docs/tracking.md has the figures). What
-    # holds: every error figure within 5 % of the raw fit's (10 % for the p95 offset,
-    # a few frames' worth), jitter no worse, every visible frame accepted
-    scene = SyntheticRGBDScene(motion=motion, seed=1)
-    summary = summarize(*_track(scene))
-    raw, trk = summary.raw, summary.tracked
-    assert trk.angle_deg.median <= 1.05 * raw.angle_deg.median
-    assert trk.angle_deg.p95 <= 1.05 * raw.angle_deg.p95
-    assert trk.offset_mm.median <= 1.05 * raw.offset_mm.median
-    assert trk.offset_mm.p95 <= 1.10 * raw.offset_mm.p95
-    assert summary.jitter_tracked_deg <= 1.01 * summary.jitter_raw_deg
-    assert summary.detection_rate >= 0.99
+def test_white_noise_weighting_loses_to_the_raw_fit_on_tremor():
+    # why measurement_scale is below 1: taking the fit covariances as independent
+    # errors (scale 1) averages neighbouring frames too much on hand-held tremor, and the
+    # p95 offset comes out above the raw fit's (1.67 vs 1.57 mm with seed 1)
+    scene = SyntheticRGBDScene(motion="handheld", seed=1)
+    summary = summarize(*_track(scene, PlaneTrackerConfig(measurement_scale=1.0)))
+    assert summary.tracked.offset_mm.p95 > summary.raw.offset_mm.p95
+
+
+def _result(index, *, normal, accepted, track_normal):
+    # a result as PlaneTracker.process gives it, with only what summarize reads set
+    return PlaneTrackResult(
+        index=index,
+        timestamp=index / 30,
+        status=TrackStatus.TRACKING if accepted else TrackStatus.GATED,
+        measured=True,
+        accepted=accepted,
+        normal=normal,
+        d=1.0,
+        inliers=1000,
+        track_normal=track_normal,
+        track_d=1.0,
+        covariance_trace=1e-6,
+        mode_probabilities=np.ones(1),
+        n_points=2000,
+        n_green=1000,
+        ms=dict.fromkeys(("points", "color", "ransac", "kalman", "total"), 1.0),
+        inlier_points=np.zeros((0, 3)),
+    )
+
+
+def test_jitter_compares_raw_and_tracked_on_the_same_frames():
+    # hand-made: seven frames of a still board, the fit wobbles by +-0.1 deg and the
+    # middle frame is gated (no raw normal); the track is exact but coasts wrongly (by
+    # 2 deg) on the gated frame
+    def unit(deg):
+        a = np.radians(deg)
+        return np.array([np.sin(a), 0.0, np.cos(a)])
+
+    truth = [0.0] * 7
+    wobble = [0.1, -0.1, 0.1, -0.1, 0.1, -0.1, 0.1]
+    gated = 3
+    results = []
+    for i, (t, w) in enumerate(zip(truth, wobble, strict=True)):
+        ok = i != gated
+        results.append(
+            _result(
+                i,
+                normal=unit(t + w),
+                accepted=ok,
+                track_normal=unit(t + (0.0 if ok else 2.0)),
+            )
+        )
+    s = summarize(results)
+    # raw triples without the gated frame: (0,1,2) and (4,5,6), second differences of
+    # 4 sin(0.1 deg) rad, about 0.4 deg; the track is still there: 0
+    assert s.jitter_raw_deg == pytest.approx(0.4, rel=1e-3)
+    assert s.jitter_tracked_deg == pytest.approx(0.0, abs=1e-9)
+    # over every frame the track's wrong coast shows: triples (1,2,3), (2,3,4), (3,4,5)
+    # give about 2, 4, 2 deg (2, 4, 2 sin(1 deg) rad), the other two 0
+    assert s.jitter_tracked_all_deg == pytest.approx(np.sqrt(24 / 5), rel=1e-3)
 
 
 def test_tracker_coasts_through_the_occlusion_and_reacquires(default_run):

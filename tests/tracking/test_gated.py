@@ -77,6 +77,36 @@ def test_one_model_is_the_kalman_filter_with_the_timestamps_dt():
         np.testing.assert_allclose(s.covariance, kf.P[:3, :3], rtol=1e-10, atol=1e-18)
 
 
+def test_measurement_scale_is_the_covariance_scaled_in_gate_and_update():
+    # measurement_scale s with R runs exactly as s = 1 with s R: the same positions,
+    # covariances, gate distances and statuses (the far measurement is gated by both)
+    rng = np.random.default_rng(1)
+    zs = [np.array([0.3 * k / 30, 0.1, 1.0]) + rng.normal(0, 2e-3, 3) for k in range(20)]
+    zs[12] = zs[12] + 0.5
+    a = GatedTrack(GatedTrackConfig(measurement_scale=0.25, smoothing_lag=2))
+    b = GatedTrack(GatedTrackConfig(measurement_scale=1.0, smoothing_lag=2))
+    statuses = []
+    for k, z in enumerate(zs):
+        a.predict(k / 30)
+        b.predict(k / 30)
+        sa, sb = a.step(z, R * 4), b.step(z, R)
+        statuses.append(str(sa.status))
+        assert sa.status is sb.status
+        np.testing.assert_allclose(sa.position, sb.position, rtol=1e-12)
+        np.testing.assert_allclose(sa.covariance, sb.covariance, rtol=1e-10)
+        np.testing.assert_allclose(sa.lagged, sb.lagged, rtol=1e-12)
+        np.testing.assert_allclose(sa.mahalanobis2, sb.mahalanobis2, rtol=1e-10)
+    assert statuses[12] == "gated" and statuses.count("tracking") == 18
+    # and a smaller scale leans on each measurement: the estimate moves closer to it
+    c = GatedTrack(GatedTrackConfig(measurement_scale=1.0, smoothing_lag=0))
+    d = GatedTrack(GatedTrackConfig(measurement_scale=0.1, smoothing_lag=0))
+    for k, z in enumerate(zs[:12]):
+        c.predict(k / 30)
+        d.predict(k / 30)
+        sc, sd = c.step(z, R * 100), d.step(z, R * 100)
+    assert np.linalg.norm(sd.position - zs[11]) < np.linalg.norm(sc.position - zs[11])
+
+
 def test_lagged_model_shifts_the_positions():
     m = constant_velocity(2, 0.1, 1.0, 1.0)
     A, Q = lagged_model(m.A, m.Q, 2, 2)
@@ -141,6 +171,11 @@ def test_time_going_back_drops_the_track_and_bad_input():
         (lambda: GatedTrackConfig(max_coast=np.nan), "max_coast must be an integer"),
         (lambda: GatedTrackConfig(smoothing_lag=1.5), "smoothing_lag must be an integer"),
         (lambda: GatedTrackConfig(initial_velocity_std=1e300), "initial_velocity_std must be"),
+        (
+            lambda: GatedTrackConfig(measurement_scale=0.0),
+            r"measurement_scale must be in \(0, 1e\+06\]",
+        ),
+        (lambda: GatedTrackConfig(measurement_scale=np.inf), "measurement_scale must be"),
         (lambda: GatedTrack(dim=2).step([0.0, 0.0], np.eye(2), support=None), "support must"),
         (lambda: GatedTrack(dim=2).step([0.0, 0.0], np.eye(2), dominant="yes"), "dominant must"),
         (lambda: GatedTrack(dim=2).step([0.0, 0.0], np.ones((3, 2))), "R must be the \\(2, 2\\)"),

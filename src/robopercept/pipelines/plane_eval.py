@@ -117,7 +117,12 @@ class PlaneTrackSummary:
     fps : float or None
         ``1000 / median total ms``: the tracker's rate.
     jitter_raw_deg, jitter_tracked_deg : float or None
-        Normal jitter of the accepted measurements and of the track.
+        Normal jitter (:func:`jitter`) of the accepted measurements and of the track,
+        over the same frames: the second differences whose three frames all have an
+        accepted measurement (a frame the gate rejected has no raw normal, and leaving
+        only the track's hardest frames in would compare different motions).
+    jitter_tracked_all_deg : float or None
+        The track's jitter over every frame, coasting ones included.
     evaluated_frames : int or None
         Frames with a ground truth and at least ``min_board_pixels`` valid board pixels
         (None without ground truth).
@@ -147,6 +152,7 @@ class PlaneTrackSummary:
     detection_rate: float | None = None
     raw: PlaneErrorStats | None = None
     tracked: PlaneErrorStats | None = None
+    jitter_tracked_all_deg: float | None = None
     wall_seconds: float | None = None
     wall_fps: float | None = None
     stopped: str | None = None
@@ -246,7 +252,8 @@ def summarize(
         ms_per_stage_median=med,
         fps=1000.0 / total if total else None,
         jitter_raw_deg=jitter(raw_n.reshape(-1, 3)),
-        jitter_tracked_deg=jitter(trk_n.reshape(-1, 3)),
+        jitter_tracked_deg=jitter(np.where(np.isfinite(raw_n), trk_n, np.nan).reshape(-1, 3)),
+        jitter_tracked_all_deg=jitter(trk_n.reshape(-1, 3)),
         wall_seconds=wall_seconds,
         wall_fps=len(results) / wall_seconds if wall_seconds else None,
     )

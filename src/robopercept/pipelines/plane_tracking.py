@@ -67,9 +67,12 @@ class PlaneTrackerConfig(PlaneMeasurerConfig, GatedTrackConfig):
 
     The tracker smooths over two frames by default (``smoothing_lag=2``: each frame's
     plane also uses the next two frames' measurements, 67 ms of latency at 30 fps); 0
-    gives the causal filter."""
+    gives the causal filter, and trusts each measurement more than white noise would
+    (``measurement_scale=0.4``: the board's fit errors in consecutive frames are
+    correlated, see :mod:`robopercept.tracking.gated`)."""
 
     smoothing_lag: int = 2
+    measurement_scale: float = 0.4
 
     def __post_init__(self) -> None:
         PlaneMeasurerConfig.__post_init__(self)
