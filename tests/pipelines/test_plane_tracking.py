@@ -384,12 +384,16 @@ def test_a_realsense_recording_gives_the_same_figures(tmp_path):
         truths.append(frames[k0 + f.index].ground_truth)
     summary = summarize(results, truths)
     check_beats_raw(summary)
-    # the same figures as in memory (the intrinsics and extrinsics round-trip through
-    # librealsense in float32: a few hundredths of a millimetre at most)
+    # the same figures as in memory, statistically: the intrinsics and extrinsics
+    # round-trip through librealsense in float32, which moves points in their last bits,
+    # and a point on the inlier threshold then sends RANSAC's later draws elsewhere. The
+    # tracked medians agree within 0.02 deg and 0.1 mm (the 424x240 fits' own median
+    # offset error is about 0.7 mm): seen 0.4612 vs 0.4638 mm on one run and 0.5185 vs
+    # 0.4638 mm on another (a CI run with the first frameset lost)
     mem, mem_truths = _track(frames[k0 : k0 + len(played)])
     ref = summarize(mem, mem_truths)
-    assert summary.tracked.angle_deg.median == pytest.approx(ref.tracked.angle_deg.median, rel=0.1)
-    assert summary.tracked.offset_mm.median == pytest.approx(ref.tracked.offset_mm.median, rel=0.1)
+    assert summary.tracked.angle_deg.median == pytest.approx(ref.tracked.angle_deg.median, abs=0.02)
+    assert summary.tracked.offset_mm.median == pytest.approx(ref.tracked.offset_mm.median, abs=0.1)
 
 
 # issue 25: configs, models and inputs of the wrong type are refused, typed
