@@ -2096,7 +2096,13 @@ VALID.update(
         "nn.detection.SingleObjectLocalizer": {"num_classes": 2, "width": 4},
         "nn.detection.FastRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
         "nn.detection.FasterRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
-        "nn.detection.FCOS": {"num_classes": 2, "width": 4, "head_channels": 8},
+        "nn.detection.FCOS": {
+            "num_classes": 2,
+            "width": 4,
+            "head_channels": 8,
+            "box_activation": "exp",
+            "centerness_weighted": True,
+        },
         "nn.detection.FCOS.forward": {"images": _DIMAGES, "targets": _DTARGETS},
         "nn.detection.FasterRCNN.forward": {"images": _DIMAGES, "targets": _DTARGETS},
         "nn.detection.FastRCNN.forward": {

@@ -368,6 +368,55 @@ def test_fcos_assignment_hand_case():
     assert idx.tolist() == [1, -1, 0]
 
 
+def test_fcos_exp_box_activation_starts_at_one_stride_and_cannot_die():
+    # the paper's exp(s_l x): with the head's zero bias and N(0, 0.01^2) weights every
+    # (l, t, r, b) starts near one stride (exactly one with zero weights), and a box
+    # branch pushed far negative still passes gradient, where the ReLU passes none (the
+    # FlipRotate failure of the shapes set, benchmarks/detection_figures.py)
+    images, targets = tiny_batch()
+    grads = {}
+    for act in ("relu", "exp"):
+        m = build("fcos", box_activation=act).train()
+        torch.nn.init.zeros_(m.bbox_reg.weight)
+        if act == "exp":
+            feats = m.backbone(m._prepare(images, targets)[0])
+            _, reg, _, _, strides, _ = m.head(feats)
+            assert torch.allclose(
+                reg * strides[None, :, None], strides[None, :, None].expand_as(reg)
+            )
+            assert m.scales.shape == (len(m.backbone.strides),)
+        torch.nn.init.constant_(m.bbox_reg.bias, -5.0)
+        m(images, targets)["bbox_regression"].backward()
+        grads[act] = float(m.bbox_reg.bias.grad.abs().sum())
+    assert grads["relu"] == 0.0 and grads["exp"] > 0.0
+    with pytest.raises(InputError, match="box_activation"):
+        build("fcos", box_activation="softplus")
+
+
+@pytest.mark.parametrize("weighted", [False, True])
+def test_fcos_regression_loss_hand_case(weighted):
+    # box (0, 0, 30, 20) on a 32 x 32 image: the stride-8 locations in its centre region
+    # (radius 12 around (15, 10)) and inside it are x in {4, 12, 20}, y in {4, 12}; with
+    # zero box weights and exp every prediction is the 16 x 16 box around its location.
+    # Uniform: the mean of 1 - GIoU; centerness_weighted (FCOS v2): weighted by each
+    # location's centerness target
+    from robopercept.nn.boxes import generalized_box_iou
+
+    m = build("fcos", num_classes=2, box_activation="exp", centerness_weighted=weighted)
+    torch.nn.init.zeros_(m.bbox_reg.weight)
+    torch.nn.init.zeros_(m.bbox_reg.bias)
+    gt = torch.tensor([[0.0, 0, 30, 20]])
+    loss = m([torch.rand(3, 32, 32)], [{"boxes": gt, "labels": torch.tensor([1])}])
+    locs = torch.tensor([[x, y] for y in (4.0, 12.0) for x in (4.0, 12.0, 20.0)])
+    pred = torch.cat((locs - 8, locs + 8), dim=1)
+    g = torch.diagonal(generalized_box_iou(pred, gt.expand(6, 4)))
+    lr = torch.stack((locs[:, 0], 30 - locs[:, 0]), 1)
+    tb = torch.stack((locs[:, 1], 20 - locs[:, 1]), 1)
+    c = torch.sqrt(lr.min(1).values / lr.max(1).values * tb.min(1).values / tb.max(1).values)
+    want = ((1 - g) * c).sum() / c.sum() if weighted else (1 - g).mean()
+    assert float(loss["bbox_regression"].detach()) == pytest.approx(float(want), rel=1e-5)
+
+
 # --------------------------------------------------------------------------- training
 def test_seeded_determinism():
     ds = digits_detection_set(2, (48, 48), (1, 2), rng=0, scale=(12, 24))

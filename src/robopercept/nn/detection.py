@@ -1326,7 +1326,9 @@ class FCOS(_Detector):
     several boxes, the one of smallest area (torchvision's FCOS rules). Per location
     the head predicts class logits (sigmoid focal loss, summed over all locations and
     divided by the number of foreground ones), :math:`(l, t, r, b) / s` through a ReLU
-    (GIoU loss of the decoded box, foreground only) and a centerness logit with target
+    (torchvision's) or the paper's :math:`\exp(s_l x)` with a learnable scale
+    :math:`s_l` per level (``box_activation``; GIoU loss of the decoded box, foreground
+    only) and a centerness logit with target
     :math:`\sqrt{\frac{\min(l, r)}{\max(l, r)} \frac{\min(t, b)}{\max(t, b)}}`
     (binary cross-entropy, foreground only). Eval: score
     :math:`\sqrt{\sigma(c) \sigma(o)}`, threshold, top ``topk_candidates`` per level,
@@ -1342,6 +1344,16 @@ class FCOS(_Detector):
     head_channels : int
         FPN and head width.
     center_radius : float
+    box_activation : {"relu", "exp"}
+        ``"relu"`` (the default, torchvision's) can die: once every pre-activation of
+        the box branch is negative, every box has zero size and no gradient flows back
+        (seen with flips and quarter turns on the shapes set). ``"exp"`` cannot (its
+        gradient is never zero) and starts every side at one stride.
+    centerness_weighted : bool
+        Weight each foreground location's GIoU loss by its centerness target and
+        divide by their sum (FCOS v2, Tian et al. 2020), instead of the plain mean:
+        the box is learnt best where the score (which includes the centerness) makes
+        it survive NMS.
     score_thresh, nms_thresh, topk_candidates, detections_per_img
         Post-processing.
 
@@ -1363,6 +1375,8 @@ class FCOS(_Detector):
         strides: Sequence[int] = (8, 16),
         head_channels: int = 64,
         center_radius: float = 1.5,
+        box_activation: str = "relu",
+        centerness_weighted: bool = False,
         score_thresh: float = 0.2,
         nms_thresh: float = 0.6,
         topk_candidates: int = 1000,
@@ -1400,6 +1414,15 @@ class FCOS(_Detector):
         # the prior: every location starts at foreground probability 0.01 (RetinaNet)
         _init_conv(self.cls_logits, -math.log((1 - 0.01) / 0.01))
         self.center_radius = check_real(center_radius, "center_radius", 0.0, low_inclusive=False)
+        if box_activation not in ("relu", "exp"):
+            raise InputError(
+                f"box_activation must be 'relu' or 'exp'; got {plain_repr(box_activation)}"
+            )
+        self.box_activation = box_activation
+        self.centerness_weighted = check_bool(centerness_weighted, "centerness_weighted")
+        if box_activation == "exp":
+            # the paper's exp(s_l x): one learnable scale per level, starting at 1
+            self.scales = nn.Parameter(torch.ones(len(self.backbone.strides)))
         self.score_thresh = check_real(score_thresh, "score_thresh", 0.0, 1.0)
         self.nms_thresh = check_real(nms_thresh, "nms_thresh", 0.0, 1.0)
         self.topk_candidates = check_count(topk_candidates, "topk_candidates", 1, 1 << 20)
@@ -1412,11 +1435,17 @@ class FCOS(_Detector):
         stride ``(N, L, 4)``, centerness logits ``(N, L)``, the locations ``(L, 2)``,
         their strides ``(L,)`` and the number of locations per level."""
         cls, reg, ctr, locs, strides, counts = [], [], [], [], [], []
-        for f, s in zip(feats, self.backbone.strides, strict=True):
+        for level, (f, s) in enumerate(zip(feats, self.backbone.strides, strict=True)):
             n, _, fh, fw = f.shape
             ct, rt = self.cls_tower(f), self.reg_tower(f)
             cls.append(self.cls_logits(ct).permute(0, 2, 3, 1).reshape(n, -1, self.num_classes))
-            reg.append(F.relu(self.bbox_reg(rt)).permute(0, 2, 3, 1).reshape(n, -1, 4))
+            r = self.bbox_reg(rt)
+            if self.box_activation == "exp":
+                # clamped so that exp cannot overflow: ltrb <= e^8 strides
+                r = torch.exp((self.scales[level] * r).clamp(max=8.0))
+            else:
+                r = F.relu(r)
+            reg.append(r.permute(0, 2, 3, 1).reshape(n, -1, 4))
             ctr.append(self.bbox_ctrness(rt).reshape(n, -1))
             ys = (torch.arange(fh, device=f.device, dtype=f.dtype) + 0.5) * s
             xs = (torch.arange(fw, device=f.device, dtype=f.dtype) + 0.5) * s
@@ -1539,7 +1568,11 @@ class FCOS(_Detector):
         if fg_pred:
             pred, gtb = torch.cat(fg_pred), torch.cat(fg_gt)
             giou = torch.diagonal(generalized_box_iou(pred, gtb)) if pred.shape[0] else pred.sum(1)
-            loss_reg = (1 - giou).sum() / n_fg
+            if self.centerness_weighted:
+                w = torch.cat(fg_ctr_t)
+                loss_reg = ((1 - giou) * w).sum() / w.sum().clamp(min=1e-6)
+            else:
+                loss_reg = (1 - giou).sum() / n_fg
             loss_ctr = (
                 F.binary_cross_entropy_with_logits(
                     torch.cat(fg_ctr), torch.cat(fg_ctr_t), reduction="sum"
