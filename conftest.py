@@ -5,15 +5,34 @@ it starts and the file is removed when the session ends. A process that dies ins
 test (a C-level ``abort()``, a segfault) runs no Python afterwards, so the file is what
 says which test it was; ``.ci/run`` prints it after a failed ``make test``, at the end of
 the log, where a truncated CI log still shows it.
+
+Crash traceback: :mod:`faulthandler` writes the Python stacks of every thread at such a
+crash to ``.pytest-crash.txt`` instead of stderr (where CPython 3.12+ follows them with
+a list of extension modules that pushes them out of a log's tail); ``.ci/run`` prints
+the stacks last, after the marker.
 """
 
 from __future__ import annotations
 
+import faulthandler
 from pathlib import Path
+from typing import IO
 
 import pytest
 
-_MARKER = Path(__file__).resolve().parent / ".pytest-running"
+_ROOT = Path(__file__).resolve().parent
+_MARKER = _ROOT / ".pytest-running"
+_CRASH = _ROOT / ".pytest-crash.txt"
+_crash_file: IO[str] | None = None
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_configure(config: pytest.Config) -> None:
+    # trylast: after pytest's own faulthandler plugin, whose stderr target this replaces
+    global _crash_file
+    if _crash_file is None:
+        _crash_file = _CRASH.open("w", encoding="utf-8")
+        faulthandler.enable(file=_crash_file, all_threads=True)
 
 
 def pytest_runtest_logstart(nodeid: str, location: tuple[str, int | None, str]) -> None:
@@ -22,3 +41,13 @@ def pytest_runtest_logstart(nodeid: str, location: tuple[str, int | None, str]) 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     _MARKER.unlink(missing_ok=True)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    global _crash_file
+    if _crash_file is not None:
+        faulthandler.disable()
+        _crash_file.close()
+        _crash_file = None
+        if _CRASH.exists() and _CRASH.stat().st_size == 0:
+            _CRASH.unlink()
