@@ -476,3 +476,31 @@ def test_real_bag_plays_in_the_child_as_it_did_in_process():
     assert (a.index, a.timestamp, a.depth_scale) == (b.index, b.timestamp, b.depth_scale)
     with pytest.raises(InputError, match="watchdog must be a positive"):
         RealSenseSource(BAG, watchdog=0)
+
+
+def test_write_realsense_recording_keeps_librealsense_out_of_this_process(tmp_path, monkeypatch):
+    # librealsense's recorder threads and the software device's teardown can abort the
+    # process that held them, later and at random (CI died so): the recording is made in
+    # a child process, so no SoftwareCamera is ever built here
+    pytest.importorskip("pyrealsense2")
+    from robopercept.sources import SyntheticRGBDScene, realsense
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a SoftwareCamera was built in the calling process")
+
+    monkeypatch.setattr(realsense.SoftwareCamera, "__init__", refuse)
+    frames = list(SyntheticRGBDScene(n_frames=4, depth_size=(64, 48), color_size=(80, 60)))
+    assert realsense.write_realsense_recording(tmp_path / "c.db3", frames, pace=0.0) == 4
+    assert (tmp_path / "c.db3").stat().st_size > 0
+
+
+def test_write_realsense_recording_names_what_failed_in_the_child(tmp_path):
+    pytest.importorskip("pyrealsense2")
+    from robopercept.sources import SyntheticRGBDScene
+    from robopercept.sources.realsense import SourceError, write_realsense_recording
+
+    frames = list(SyntheticRGBDScene(n_frames=2, depth_size=(64, 48), color_size=(80, 60)))
+    with pytest.raises(SourceError, match=r"librealsense failed writing .*no_dir"):
+        write_realsense_recording(tmp_path / "no_dir" / "x.db3", frames, pace=0.0)
+    with pytest.raises(InputError, match="pace"):
+        write_realsense_recording(tmp_path / "y.db3", frames, pace=-1.0)

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from robopercept._checks import check_real
 from robopercept.errors import FileFormatError, InputError, RoboperceptError
 from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.transforms import se3
@@ -887,9 +888,69 @@ class SoftwareCamera:
         self.recorder = None
 
 
+#: the recorder's child process (see :func:`write_realsense_recording`)
+_RECORDER = (
+    "import sys; from robopercept.sources.realsense import _recorder_main; "
+    "_recorder_main(sys.argv[1], float(sys.argv[2]))"
+)
+
+
+def _receive(inp: Any) -> tuple[bytes, Any] | None:
+    """Read one message written by :func:`_send` from the binary stream ``inp``
+    (blocking); None at end of stream."""
+    head = inp.read(_HEAD.size)
+    if len(head) < _HEAD.size:
+        return None
+    kind, n_meta, n_buf = _HEAD.unpack(head)
+    lens = struct.unpack(f"<{n_buf}Q", inp.read(8 * n_buf))
+    meta = inp.read(n_meta)
+    bufs = [inp.read(n) for n in lens]
+    if len(meta) < n_meta or any(len(b) < n for b, n in zip(bufs, lens, strict=True)):
+        return None
+    return kind, pickle.loads(meta, buffers=bufs)
+
+
+def _recorder_main(path: str, pace: float) -> None:
+    """The child process of :func:`write_realsense_recording`: read frames from stdin
+    (:func:`_send` messages, ``D`` at the end), push them through a
+    :class:`SoftwareCamera` recording to ``path``, and answer on stdout with the count
+    (``D``) or the error (``E``). Ends with ``os._exit`` once the recorder has been
+    released (the recording is complete then): librealsense's teardown of the software
+    device is not waited for."""
+    inp, out = sys.stdin.buffer, os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)  # whatever librealsense prints goes to stderr, not into the answer
+    cam: SoftwareCamera | None = None
+    try:
+        while (msg := _receive(inp)) is not None and msg[0] == b"F":
+            frame = msg[1]
+            if cam is None:
+                cam = SoftwareCamera(frame, record_to=path, queue_size=64)
+                time.sleep(0.5)  # the recorder starts on its own thread: early frames can be lost
+            cam.push(frame)
+            while cam.queue.poll_for_frame():  # nobody reads them here
+                pass
+            time.sleep(pace)
+        count = 0 if cam is None else cam.count
+        if cam is not None:
+            cam.close(settle=1.0)
+        _send(out, b"D", count)
+    except RoboperceptError as exc:
+        _send(out, b"E", (type(exc).__name__, str(exc)))
+    except Exception as exc:  # librealsense's own errors, named
+        _send(out, b"E", ("", f"{type(exc).__name__}: {exc}"))
+    out.close()
+    os._exit(0)
+
+
 def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: float = 0.03) -> int:
     """Write ``frames`` (RGBDFrames of one calibration) to a RealSense recording through
     a :class:`SoftwareCamera` and librealsense's recorder.
+
+    librealsense records from threads of its own, and tearing its software device down
+    in a process that goes on (a test run, a notebook) is not safe: it can abort the
+    whole process later. So, as playback does, the recording is made in a child process
+    (a fresh interpreter) that the frames are streamed to; this process holds no
+    librealsense object.
 
     Parameters
     ----------
@@ -903,22 +964,58 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
     -------
     int
         Frames pushed.
-    """
-    import time
 
+    Raises
+    ------
+    InputError
+        No frames, or pyrealsense2 is not installed.
+    SourceError
+        The recorder process failed or died (its last words are quoted).
+    """
+    import_pyrealsense2()  # the missing extra is named here, not in the child
     it = iter(frames)
     try:
         first = next(it)
     except StopIteration:
         raise InputError("no frames to record") from None
-    cam = SoftwareCamera(first, record_to=path, queue_size=64)
-    time.sleep(0.5)  # the recorder starts on its own thread: early frames can be lost
-    try:
-        for frame in (first, *it):
-            cam.push(frame)
-            while cam.queue.poll_for_frame():  # nobody reads them here
+    pace = check_real(pace, "pace (seconds)", 0.0)
+    root = str(Path(__file__).resolve().parents[2])  # the folder holding robopercept/
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    with tempfile.TemporaryFile() as err:
+        proc = subprocess.Popen(
+            [sys.executable, "-c", _RECORDER, str(path), repr(pace)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=err,
+            env=env,
+        )
+        assert proc.stdin is not None and proc.stdout is not None
+        try:
+            try:
+                for frame in (first, *it):
+                    _send(proc.stdin, b"F", frame)
+                _send(proc.stdin, b"D", None)
+                proc.stdin.close()
+            except BrokenPipeError:  # the child died: said below
                 pass
-            time.sleep(pace)
-    finally:
-        cam.close(settle=1.0)
-    return cam.count
+            answer = _receive(proc.stdout)
+            code = proc.wait()
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        if answer is not None and answer[0] == b"D":
+            return int(answer[1])
+        if answer is not None and answer[0] == b"E":
+            name, message = answer[1]
+            if name in _TYPED:
+                raise _TYPED[name](message)
+            raise SourceError(f"librealsense failed writing {path}: {message}")
+        why = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit status {code}"
+        err.seek(0)
+        tail = " | ".join(err.read()[-300:].decode("utf-8", "replace").split())
+        raise SourceError(
+            f"the RealSense recorder process died writing {path} ({why})"
+            + (f"; it said: {tail}" if tail else "")
+        )
