@@ -2181,7 +2181,13 @@ VALID.update(
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
             "target": _b("tests.fuzz.api:detection_value", "target"),
         },
+        "nn.detection_data.ScaleJitter": {"scale": (0.75, 1.33), "min_visible": 0.5},
+        "nn.detection_data.ScaleJitter.__call__": {
+            "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
+            "target": _b("tests.fuzz.api:detection_value", "target"),
+        },
     }
 )
 METHODS["nn.detection.FasterRCNN"] = ("forward", "rpn_outputs")
 METHODS["nn.detection_data.FlipRotate"] = ("__call__",)
+METHODS["nn.detection_data.ScaleJitter"] = ("__call__",)
