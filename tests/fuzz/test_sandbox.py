@@ -157,7 +157,9 @@ def test_parallel_kernels_run_after_the_caller_used_openmp(box):
 
     image = np.arange(256, dtype=np.uint8).reshape(16, 16)
     here = census_transform(image)  # a parallel kernel in this process
-    out = box.run("robopercept.depth.stereo:census_transform", (image,))
+    # loading numba and the kernel in a fresh worker took over the module's 3 s on a
+    # loaded CI machine: this test is about the worker surviving, not its speed
+    out = box.run("robopercept.depth.stereo:census_transform", (image,), timeout=60.0)
     assert (out.kind, out.error) == ("ok", ""), out
     assert out.result_bytes == here.nbytes
 
