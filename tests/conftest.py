@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import multiprocessing
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -73,3 +76,14 @@ def torch_one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def librealsense() -> Iterator[ProcessPoolExecutor]:
+    """A spawned worker process for tests' direct librealsense work (software devices,
+    recorders, pipelines): their threads never run in the test process, where their
+    teardown can abort it later (CI died so while a RealSense recording was written in
+    the test process). ``librealsense.submit(fn, *args).result(timeout=...)``; ``fn``
+    must be importable (a module-level function of a test module)."""
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        yield pool

@@ -34,13 +34,18 @@ def _extrinsics(e) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def bag_frame():
+def bag_frame(librealsense):
     """The one depth + colour frame of librealsense's unit-test recording, read with
     pyrealsense2, and its rs2::pointcloud vertices and texture coordinates."""
     path = data_path("rgbd", "realsense_bag", "single_depth_color_640x480.bag")
+    return librealsense.submit(_read_bag, str(path)).result(timeout=120)
+
+
+def _read_bag(path: str) -> dict:
+    """:func:`bag_frame`'s work, in the librealsense worker."""
     pipe = rs.pipeline()
     cfg = rs.config()
-    cfg.enable_device_from_file(str(path), repeat_playback=False)
+    cfg.enable_device_from_file(path, repeat_playback=False)
     profile = pipe.start(cfg)
     profile.get_device().as_playback().set_real_time(False)
     try:
@@ -149,9 +154,11 @@ def test_bad_input():
         sample_colors(np.zeros((3, 4)), np.zeros((1, 2)))
 
 
-def _software_frames(depth, color, di, ci, translation):
+def _software_frames(depth, color, kd, kc, translation):
     """Push one depth and one colour frame through a pyrealsense2 software device and
-    return rs2::pointcloud's vertices and texture coordinates for them."""
+    return rs2::pointcloud's vertices and texture coordinates for them (in the
+    librealsense worker)."""
+    di, ci = _rs_intr(kd), _rs_intr(kc)
     h, w = depth.shape
     hc, wc = color.shape[:2]
     dev = rs.software_device()
@@ -211,7 +218,7 @@ def _rs_intr(k: CameraIntrinsics):
         ("brown_conrady", "inverse_brown_conrady"),
     ],
 )
-def test_uv_match_librealsense_on_software_device_frames(depth_model, color_model):
+def test_uv_match_librealsense_on_software_device_frames(depth_model, color_model, librealsense):
     # the colour side takes every lens model; the depth side has zero coefficients, as on
     # real D4xx depth streams: with non-zero ones, librealsense 2.59 itself disagrees
     # between rs2::pointcloud (one-step polynomial) and rs2_deproject_pixel_to_point
@@ -223,7 +230,8 @@ def test_uv_match_librealsense_on_software_device_frames(depth_model, color_mode
     depth[rng.random((48, 64)) < 0.1] = 0
     color = rng.integers(0, 255, (60, 80, 3), dtype=np.uint8)
     t = (-0.015, 0.001, 0.0002)
-    vertices, uv_ref = _software_frames(depth, color, _rs_intr(kd), _rs_intr(kc), t)
+    work = librealsense.submit(_software_frames, depth, color, kd, kc, t)
+    vertices, uv_ref = work.result(timeout=120)
     pts = depth_to_points(depth, kd, 0.001).reshape(-1, 3)
     uv, _ = texture_coordinates(pts, se3(None, t), kc)
     kept = vertices[:, 2] > 0

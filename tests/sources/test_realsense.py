@@ -86,8 +86,27 @@ def record(path, n=5, with_color=True, w=64, h=48):
     del rec
 
 
+def _record(pool, path, *args, **kwargs) -> None:
+    """:func:`record` in the librealsense worker process."""
+    pool.submit(record, str(path), *args, **kwargs).result(timeout=120)
+
+
+def _bag_calibration(path: str):
+    """Depth intrinsics and depth-to-colour transform of a recording, as pyrealsense2's
+    pipeline reports them (in the librealsense worker process)."""
+    pipe, cfg = rs.pipeline(), rs.config()
+    cfg.enable_device_from_file(path, repeat_playback=False)
+    prof = pipe.start(cfg)
+    try:
+        d = prof.get_stream(rs.stream.depth).as_video_stream_profile()
+        c = prof.get_stream(rs.stream.color).as_video_stream_profile()
+        return intrinsics_from_rs(d.get_intrinsics()), transform_from_rs(d.get_extrinsics_to(c))
+    finally:
+        pipe.stop()
+
+
 @pytest.mark.realdata
-def test_real_recording():
+def test_real_recording(librealsense):
     if not BAG.exists():
         pytest.skip(f"{BAG} absent")
     frames = list(RealSenseSource(BAG, timeout=1.0))
@@ -98,27 +117,20 @@ def test_real_recording():
     assert f.depth_scale == pytest.approx(0.001)
     assert (f.depth > 0).mean() > 0.5
     # the intrinsics and extrinsics are librealsense's own, read back through pyrealsense2
-    pipe, cfg = rs.pipeline(), rs.config()
-    cfg.enable_device_from_file(str(BAG), repeat_playback=False)
-    prof = pipe.start(cfg)
-    try:
-        d = prof.get_stream(rs.stream.depth).as_video_stream_profile()
-        c = prof.get_stream(rs.stream.color).as_video_stream_profile()
-        assert intrinsics_from_rs(d.get_intrinsics()) == f.depth_intrinsics
-        np.testing.assert_allclose(transform_from_rs(d.get_extrinsics_to(c)), f.T_color_depth)
-    finally:
-        pipe.stop()
+    k, T = librealsense.submit(_bag_calibration, str(BAG)).result(timeout=120)
+    assert k == f.depth_intrinsics
+    np.testing.assert_allclose(T, f.T_color_depth)
     # the tracker runs on it (no green board in this scene: a row, no crash)
     r = PlaneTracker().process(f)
     assert r.n_points == int((f.depth > 0).sum())
 
 
-def test_software_device_recording_plays_back_in_order_and_in_sync(tmp_path):
+def test_software_device_recording_plays_back_in_order_and_in_sync(tmp_path, librealsense):
     # librealsense's software-device recorder and syncer may lose the first or last
     # frameset of a short recording (seen under load; not our playback): what comes
     # back must be a run of consecutive recorded frames, each depth with its own colour
     path = tmp_path / "rec.db3"
-    record(path, n=8)
+    _record(librealsense, path, n=8)
     src = RealSenseSource(path, timeout=1.0)
     frames = list(src)
     assert len(frames) >= 6
@@ -136,9 +148,9 @@ def test_software_device_recording_plays_back_in_order_and_in_sync(tmp_path):
     assert src.skipped == []
 
 
-def test_recording_without_colour_is_refused(tmp_path):
+def test_recording_without_colour_is_refused(tmp_path, librealsense):
     path = tmp_path / "depth_only.db3"
-    record(path, n=2, with_color=False)
+    _record(librealsense, path, n=2, with_color=False)
     with pytest.raises(InputError, match="no colour stream"):
         list(RealSenseSource(path, timeout=1.0))
 
@@ -267,7 +279,7 @@ def test_bag_with_broken_length_words_is_refused_naming_the_offset(tmp_path):
 
 
 @pytest.mark.realdata
-def test_bag_that_hung_librealsense_now_fails_fast_and_a_good_one_plays(tmp_path):
+def test_bag_that_hung_librealsense_now_fails_fast_and_a_good_one_plays(tmp_path, librealsense):
     # the chunk record's header_len set to 0xFFFFFFFF: librealsense 2.59 spun forever
     if not BAG.exists():
         pytest.skip(f"{BAG} absent")
@@ -280,13 +292,13 @@ def test_bag_that_hung_librealsense_now_fails_fast_and_a_good_one_plays(tmp_path
     assert _play_in_child(BAG) == "1"
 
 
-def test_corrupt_db3_recording_gives_file_format_error(tmp_path):
+def test_corrupt_db3_recording_gives_file_format_error(tmp_path, librealsense):
     import sqlite3
 
     from robopercept.sources.realsense import check_db3_recording
 
     path = tmp_path / "rec.db3"
-    record(path, n=2)
+    _record(librealsense, path, n=2)
     check_db3_recording(path)  # a sound recording passes
     data = path.read_bytes()
     for name, bad in (
@@ -351,13 +363,13 @@ def _edit_db3(path, sql, *params):
     con.close()
 
 
-def test_db3_whose_tf_message_crashed_librealsense_gives_file_format_error(tmp_path):
+def test_db3_whose_tf_message_crashed_librealsense_gives_file_format_error(tmp_path, librealsense):
     # fuzz finding: a few flipped bits in a message blob gave SIGSEGV in pipeline.start;
     # minimal form: one byte of the depth-to-colour transform string set to 0xAC
     import sqlite3
 
     path = tmp_path / "tf.db3"
-    record(path, n=3)
+    _record(librealsense, path, n=3)
     con = sqlite3.connect(path)
     rows = con.execute(
         "SELECT m.id, m.data FROM messages m JOIN topics t ON m.topic_id = t.id "
@@ -377,11 +389,11 @@ def test_db3_whose_tf_message_crashed_librealsense_gives_file_format_error(tmp_p
     assert "SIGSEGV" in line
 
 
-def test_db3_that_hung_librealsense_is_refused_or_stopped_by_the_watchdog(tmp_path):
+def test_db3_that_hung_librealsense_is_refused_or_stopped_by_the_watchdog(tmp_path, librealsense):
     # fuzz finding: a 32-bit word of the topics table set to 0x80000000 (a topic name
     # with bytes 00 00 00 80 in it) made librealsense spin forever
     path = tmp_path / "name.db3"
-    record(path, n=3)
+    _record(librealsense, path, n=3)
     _edit_db3(
         path,
         "UPDATE topics SET name = CAST(? AS TEXT) WHERE name LIKE '%Frames_Queue_Size/value'"
@@ -395,7 +407,7 @@ def test_db3_that_hung_librealsense_is_refused_or_stopped_by_the_watchdog(tmp_pa
         RealSenseSource(path)
     # and were it to pass the checks, the watchdog stops the player and says so
     good = tmp_path / "good.db3"
-    record(good, n=2)
+    _record(librealsense, good, n=2)
     src = RealSenseSource(good, timeout=0.5, watchdog=3.0)
     src.path = path
     t = time.monotonic()
@@ -462,13 +474,19 @@ def test_bag_chunk_and_index_fields_are_checked(tmp_path):
 
 
 @pytest.mark.realdata
-def test_real_bag_plays_in_the_child_as_it_did_in_process():
-    # the frames through the player process are the frames librealsense gives here
+def _frames_in_process(path: str) -> list:
+    """RealSenseSource's frames read by librealsense in the calling process, with no
+    player process (run in the librealsense worker)."""
+    return list(RealSenseSource(path, timeout=1.0)._frames_here())
+
+
+def test_real_bag_plays_in_the_child_as_it_did_in_process(librealsense):
+    # the frames through the player process are the frames librealsense gives in the
+    # process that reads them (the librealsense worker, not this one)
     if not BAG.exists():
         pytest.skip(f"{BAG} absent")
-    src = RealSenseSource(BAG, timeout=1.0)
-    (a,) = list(src)
-    (b,) = list(src._frames_here())
+    (a,) = list(RealSenseSource(BAG, timeout=1.0))
+    (b,) = librealsense.submit(_frames_in_process, str(BAG)).result(timeout=120)
     assert np.array_equal(a.depth, b.depth) and np.array_equal(a.color, b.color)
     assert a.depth.flags.writeable and a.color.flags.c_contiguous
     assert (a.depth_intrinsics, a.color_intrinsics) == (b.depth_intrinsics, b.color_intrinsics)
