@@ -17,6 +17,8 @@ Parts:
   above the held-out strip split 85/15 (seeded) into train and validation, AP50 on the
   held-out strip of YELL crop2, AP50 on the three other images reported. FCOS's final
   NMS threshold is chosen on the validation tiles (:func:`choose_nms`).
+  ``trees-fcos-zoom`` is FCOS with :class:`~robopercept.nn.detection_data.ScaleJitter`
+  (zoom 0.67-1.5) after the flips.
 - ``shapes-fcos``, ``shapes-faster``: the procedural set at 128 x 128 (target
   mAP@0.5 >= 0.90 and mAP@[.5:.95] >= 0.60).
 - ``digits``: Faster R-CNN on the real-digits canvases (target mAP@0.5 >= 0.90). FCOS
