@@ -10,6 +10,7 @@ profiles and the depth sensor, as the camera reports them.
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import pickle
 import select
@@ -616,6 +617,25 @@ _HEAD = struct.Struct("<cQB")  # kind, length of the pickled part, number of raw
 _TYPED = {"InputError": InputError, "FileFormatError": FileFormatError, "SourceError": SourceError}
 
 
+def _child_env() -> dict[str, str]:
+    """The environment of a librealsense child process: this one's, with the folder
+    holding ``robopercept/`` first on ``PYTHONPATH``."""
+    root = str(Path(__file__).resolve().parents[2])
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    return env
+
+
+def _how_it_died(code: int, err: Any) -> tuple[str, str]:
+    """For an error message: ``signal SIGSEGV`` or ``exit status N``, and ``; it said:
+    ...`` with the last words the child wrote to the file ``err`` (its stderr; empty if
+    none)."""
+    why = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit status {code}"
+    err.seek(0)
+    tail = " | ".join(err.read()[-300:].decode("utf-8", "replace").split())
+    return why, (f"; it said: {tail}" if tail else "")
+
+
 def _send(out: Any, kind: bytes, obj: Any) -> None:
     """Write one message ``<kind:c><meta_len:u64><n:u8><len_i:u64 x n><meta><buffers>``;
     NumPy arrays travel as raw out-of-band buffers (pickle protocol 5), not copied
@@ -706,9 +726,6 @@ def _play_in_child(src: RealSenseSource) -> Iterator[RGBDFrame]:
 
     path = src.path
     assert path is not None
-    root = str(Path(__file__).resolve().parents[2])  # the folder holding robopercept/
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     r, w = os.pipe()
     with contextlib.suppress(OSError, AttributeError):  # fewer wake-ups per frame (Linux)
         fcntl.fcntl(w, fcntl.F_SETPIPE_SZ, 1 << 20)  # type: ignore[attr-defined]
@@ -721,7 +738,7 @@ def _play_in_child(src: RealSenseSource) -> Iterator[RGBDFrame]:
             stdin=subprocess.DEVNULL,
             stdout=err,
             stderr=err,
-            env=env,
+            env=_child_env(),
         )
     except OSError as exc:
         os.close(r)
@@ -774,13 +791,10 @@ def _play_in_child(src: RealSenseSource) -> Iterator[RGBDFrame]:
         except subprocess.TimeoutExpired:
             proc.kill()
             code = proc.wait()
-        why = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit status {code}"
-        err.seek(0)
-        tail = " | ".join(err.read()[-300:].decode("utf-8", "replace").split())
+        why, said = _how_it_died(code, err)
         raise FileFormatError(
             f"librealsense crashed reading {path} at frame {index} ({why}); the recording "
-            "is corrupt (copy it again, or record it again)"
-            + (f"; it said: {tail}" if tail else "")
+            f"is corrupt (copy it again, or record it again){said}"
         )
     finally:
         os.close(r)
@@ -979,21 +993,18 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
     except StopIteration:
         raise InputError("no frames to record") from None
     pace = check_real(pace, "pace (seconds)", 0.0)
-    root = str(Path(__file__).resolve().parents[2])  # the folder holding robopercept/
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
     with tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(
             [sys.executable, "-c", _RECORDER, str(path), repr(pace)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=err,
-            env=env,
+            env=_child_env(),
         )
         assert proc.stdin is not None and proc.stdout is not None
         try:
             try:
-                for frame in (first, *it):
+                for frame in itertools.chain((first,), it):  # streamed, never all held
                     _send(proc.stdin, b"F", frame)
                 _send(proc.stdin, b"D", None)
                 proc.stdin.close()
@@ -1012,10 +1023,5 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
             if name in _TYPED:
                 raise _TYPED[name](message)
             raise SourceError(f"librealsense failed writing {path}: {message}")
-        why = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit status {code}"
-        err.seek(0)
-        tail = " | ".join(err.read()[-300:].decode("utf-8", "replace").split())
-        raise SourceError(
-            f"the RealSense recorder process died writing {path} ({why})"
-            + (f"; it said: {tail}" if tail else "")
-        )
+        why, said = _how_it_died(code, err)
+        raise SourceError(f"the RealSense recorder process died writing {path} ({why}){said}")
