@@ -83,6 +83,26 @@ def test_metrics_equal_evaluate_detector_on_saved_model(run, capsys):
     assert json.loads(capsys.readouterr().out)["stats"] == ev.stats.tolist()
 
 
+def test_tta_flag_equals_the_wrapper_in_eval_and_detect(run, tmp_path, capsys):
+    from robopercept.nn.detection import TestTimeAugmentation, detect_arrays
+
+    out, _ = run
+    model, _ = load_detector(out / "model.pt")
+    tta = TestTimeAugmentation(model, "hflip")
+    assert main(["nn", "detect", "eval", str(out), *DATA, "--tta", "hflip", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["tta"] == "hflip"
+    assert printed["stats"] == evaluate_detector(tta, _val()).stats.tolist()
+    image = (np.asarray(_val().images[0]) * 255).round().astype(np.uint8)
+    write_image(tmp_path / "c.png", image)
+    argv = ["nn", "detect", str(tmp_path / "c.png"), "--model", str(out), "--tta", "hflip"]
+    assert main([*argv, "--json", "--score-thresh", "0.0"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    d = detect_arrays(tta, [image])[0]
+    assert len(rows) == len(d["scores"]) > 0
+    assert [r["score"] for r in rows] == pytest.approx(d["scores"].tolist(), abs=1e-7)
+
+
 def test_eval_writes_metrics_and_curves(run, tmp_path, capsys):
     out, printed = run
     assert main(["nn", "detect", "eval", str(out / "model.pt"), *DATA, "-o", str(tmp_path)]) == 0

@@ -971,6 +971,13 @@ VALID: dict[str, dict[str, Any]] = {
     "nn.boxes.box_convert": {"boxes": TBOXES, "in_fmt": "xyxy", "out_fmt": "cxcywh"},
     "nn.boxes.box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
     "nn.boxes.generalized_box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
+    "nn.boxes.dihedral_boxes": {
+        "boxes": TBOXES,
+        "size": (16, 24),
+        "hflip": True,
+        "quarter_turns": 1,
+        "inverse": True,
+    },
     "nn.boxes.nms": {"boxes": TBOXES, "scores": TSCORES, "iou_threshold": 0.5},
     "nn.boxes.batched_nms": {
         "boxes": TBOXES,
@@ -2181,6 +2188,12 @@ VALID.update(
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
             "target": _b("tests.fuzz.api:detection_value", "target"),
         },
+        "nn.detection.TestTimeAugmentation": {
+            "model": _b("tests.fuzz.api:detector_value", "fcos"),
+            "views": "flips",
+        },
+        "nn.detection.TestTimeAugmentation.forward": {"images": _DIMAGES},
+        "nn.detection.TestTimeAugmentation.predict": {"images": _DIMAGES},
         "nn.detection_data.ScaleJitter": {"scale": (0.75, 1.33), "min_visible": 0.5},
         "nn.detection_data.ScaleJitter.__call__": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
@@ -2191,3 +2204,4 @@ VALID.update(
 METHODS["nn.detection.FasterRCNN"] = ("forward", "rpn_outputs")
 METHODS["nn.detection_data.FlipRotate"] = ("__call__",)
 METHODS["nn.detection_data.ScaleJitter"] = ("__call__",)
+METHODS["nn.detection.TestTimeAugmentation"] = ("forward", "predict")

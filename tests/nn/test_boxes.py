@@ -21,6 +21,7 @@ from robopercept.nn.boxes import (  # noqa: E402
     box_area,
     box_convert,
     box_iou,
+    dihedral_boxes,
     generalized_box_iou,
     nms,
     non_max_suppression,
@@ -485,3 +486,41 @@ T4 = torch.tensor([[0.0, 0.0, 1.0, 1.0]])
 def test_bad_input(call, match):
     with pytest.raises(InputError, match=match):
         call()
+
+
+def _dihedral_image(image, hflip, vflip, k):
+    dims = [d for d, on in ((-1, hflip), (-2, vflip)) if on]
+    image = torch.flip(image, dims) if dims else image
+    return torch.rot90(image, k, (-2, -1))
+
+
+@pytest.mark.parametrize("hflip", [False, True])
+@pytest.mark.parametrize("vflip", [False, True])
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+def test_dihedral_boxes_follow_the_pixels_and_invert(hflip, vflip, k):
+    # a filled rectangle: its box after the image transform is read off the pixels
+    h, w = 10, 17
+    image = torch.zeros(1, h, w)
+    image[0, 2:5, 3:9] = 1.0
+    box = torch.tensor([[3.0, 2.0, 9.0, 5.0]])
+    moved = _dihedral_image(image, hflip, vflip, k)[0]
+    ys, xs = torch.nonzero(moved, as_tuple=True)
+    seen = [[xs.min().item(), ys.min().item(), xs.max().item() + 1, ys.max().item() + 1]]
+    t = {"hflip": hflip, "vflip": vflip, "quarter_turns": k}
+    assert dihedral_boxes(box, (h, w), **t).tolist() == np.array(seen, float).tolist()
+    rand = torch.rand(20, 2, generator=torch.Generator().manual_seed(k)) * torch.tensor([w, h])
+    boxes = torch.cat([rand, rand + 2.5], 1)
+    back = dihedral_boxes(dihedral_boxes(boxes, (h, w), **t), (h, w), **t, inverse=True)
+    torch.testing.assert_close(back, boxes, rtol=0, atol=1e-5)  # float32 rounding of W - x
+
+
+def test_dihedral_boxes_quarter_turns_modulo_four_and_bad_input():
+    b = torch.tensor([[1.0, 2.0, 3.0, 4.0]])
+    assert torch.equal(
+        dihedral_boxes(b, (8, 6), quarter_turns=5), dihedral_boxes(b, (8, 6), quarter_turns=1)
+    )
+    assert dihedral_boxes(torch.zeros(0, 4), (8, 6), hflip=True).shape == (0, 4)
+    with pytest.raises(InputError, match="size must be the image's"):
+        dihedral_boxes(b, 8)
+    with pytest.raises(InputError, match="x1 <= x2"):
+        dihedral_boxes(torch.tensor([[3.0, 0, 1, 1]]), (8, 6))

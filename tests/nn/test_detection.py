@@ -678,3 +678,134 @@ def test_model_specific_errors():
         train_detector(build("fcos"), single_digit_set(1, rng=0), {"epochs": 1}, progress=False)
     with pytest.raises(InputError, match="DetectionDataset"):
         evaluate_detector(build("fcos"), "shapes")
+
+
+class _BrightBox(torch.nn.Module):
+    """A stand-in detector: the bounding box of the pixels above 0.5 (label 1, score
+    0.9): exact in every view, so TTA must give back the box of the original image."""
+
+    def forward(self, images):
+        out = []
+        for im in images:
+            ys, xs = torch.nonzero(im[0] > 0.5, as_tuple=True)
+            box = [xs.min(), ys.min(), xs.max() + 1, ys.max() + 1]
+            out.append(
+                {
+                    "boxes": torch.stack(box).float()[None],
+                    "labels": torch.tensor([1]),
+                    "scores": torch.tensor([0.9]),
+                }
+            )
+        return out
+
+
+class _Scripted(torch.nn.Module):
+    """Returns scripted detections per call (one call per view, one image)."""
+
+    def __init__(self, per_view):
+        super().__init__()
+        self.per_view = iter(per_view)
+
+    def forward(self, images):
+        boxes, scores = next(self.per_view)
+        n = len(scores)
+        return [
+            {
+                "boxes": torch.tensor(boxes, dtype=torch.float32).reshape(n, 4),
+                "labels": torch.ones(n, dtype=torch.int64),
+                "scores": torch.tensor(scores),
+            }
+        ]
+
+
+@pytest.mark.parametrize("views", ["hflip", "flips", "dihedral"])
+def test_tta_maps_every_view_back_onto_the_original_box(views):
+    from robopercept.nn.detection import TTA_VIEWS, TestTimeAugmentation
+
+    image = torch.zeros(3, 20, 31)
+    image[:, 3:11, 5:24] = 1.0  # box (5, 3, 24, 11), not symmetric in the image
+    tta = TestTimeAugmentation(_BrightBox(), views).eval()
+    out = tta([image])[0]
+    assert len(TTA_VIEWS[views]) == {"hflip": 2, "flips": 4, "dihedral": 8}[views]
+    # exact up to float32 rounding of the score-weighted mean (sum of 0.9 b / sum of 0.9)
+    torch.testing.assert_close(out["boxes"], torch.tensor([[5.0, 3.0, 24.0, 11.0]]))
+    assert out["scores"].tolist() == pytest.approx([0.9])  # seen in every view
+
+
+def test_tta_fusion_hand_case():
+    from robopercept.nn.detection import TestTimeAugmentation
+
+    # 'hflip' on a 100-px-wide image: view 1's boxes are mirrored back (x -> 100 - x).
+    # Cluster A: (10,10,20,20) s=0.8 in view 0, and view 1's (80,10,90,20) -> (10,10,20,20)
+    #   shifted by 2 px: (78,10,88,20) -> (12,10,22,20), s=0.4.
+    # Cluster B: (50,50,60,60) s=0.6 in view 0 only.
+    per_view = [
+        ([[10, 10, 20, 20], [50, 50, 60, 60]], [0.8, 0.6]),
+        ([[78, 10, 88, 20]], [0.4]),
+    ]
+    tta = TestTimeAugmentation(_Scripted(per_view), "hflip", iou_thresh=0.5).eval()
+    out = tta([torch.zeros(3, 100, 100)])[0]
+    # A: box x1 (0.8 * 10 + 0.4 * 12) / 1.2 = 32 / 3, x2 (0.8 * 20 + 0.4 * 22) / 1.2
+    #    = 62 / 3; score (0.8 + 0.4) / 2 = 0.6
+    # B: score (0.6 + 0) / 2 = 0.3
+    torch.testing.assert_close(
+        out["boxes"], torch.tensor([[32 / 3, 10, 62 / 3, 20], [50.0, 50, 60, 60]])
+    )
+    torch.testing.assert_close(out["scores"], torch.tensor([0.6, 0.3]))
+    assert out["labels"].tolist() == [1, 1]
+
+
+def test_tta_with_an_untrained_fcos_shapes_and_refusals():
+    from robopercept.nn.detection import TestTimeAugmentation
+
+    model = build("fcos").eval()
+    model.score_thresh = 0.0  # every location: many detections per view
+    tta = TestTimeAugmentation(model, "dihedral", detections_per_img=7).eval()
+    out = tta([torch.rand(3, 32, 48), torch.rand(3, 40, 24)])
+    for det, (h, w) in zip(out, [(32, 48), (40, 24)], strict=True):
+        assert det["boxes"].shape == (7, 4) and det["scores"].shape == (7,)
+        assert bool((det["scores"][:-1] >= det["scores"][1:]).all())
+        assert bool(
+            (det["boxes"][:, 2] <= w + 1e-4).all() and (det["boxes"][:, 3] <= h + 1e-4).all()
+        )
+    model.score_thresh = 1.0  # nothing survives any view
+    empty = tta([torch.rand(3, 32, 32)])[0]
+    assert empty["boxes"].shape == (0, 4) and empty["scores"].shape == (0,)
+    with pytest.raises(InputError, match="only predicts"):
+        tta.train()([torch.rand(3, 32, 32)])
+    with pytest.raises(InputError, match="views"):
+        TestTimeAugmentation(model, "rotations")
+
+
+def test_weight_average_follows_the_warmed_up_ema_formula():
+    from robopercept.nn.detection import _weight_average
+
+    lin = torch.nn.Linear(1, 1, bias=False)
+    avg = _weight_average(lin, 0.2)
+    seen = []
+    for w in (1.0, 3.0, 5.0):
+        with torch.no_grad():
+            lin.weight.fill_(w)
+        avg.update_parameters(lin)
+        seen.append(float(avg.module.weight.detach()))
+    # n = 0 copies; n = 1: d = min(0.2, 2 / 11); n = 2: d = min(0.2, 3 / 12) = 0.2
+    second = 2 / 11 * 1.0 + 9 / 11 * 3.0
+    assert seen == pytest.approx([1.0, second, 0.2 * second + 0.8 * 5.0])
+
+
+def test_ema_keeps_the_averaged_weights_and_checks_its_value():
+    ds = digits_detection_set(2, (48, 48), (1, 1), rng=0, scale=(12, 24))
+    cfg = TrainConfig(epochs=3, batch_size=1, lr=3e-3, device="cpu", schedule="constant")
+    plain, averaged = build("fcos"), build("fcos")
+    train_detector(plain, ds, cfg, progress=False)
+    hist = train_detector(averaged, ds, cfg, progress=False, val=ds, ema=0.9)
+    # the raw weights of both runs are identical (same seed, the EMA does not feed
+    # back); what comes back differs, and is what validation scored
+    pairs = zip(plain.parameters(), averaged.parameters(), strict=True)
+    differ = [not torch.equal(a, b) for a, b in pairs]
+    assert any(differ)
+    value = evaluate_detector(averaged, ds).stats[0]
+    assert value == pytest.approx(hist.val[hist.best_epoch], abs=1e-12)
+    for bad in (0.0, 1.0, float("nan")):
+        with pytest.raises(InputError, match="--ema"):
+            train_detector(build("fcos"), ds, cfg, progress=False, ema=bad)

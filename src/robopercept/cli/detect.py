@@ -132,6 +132,12 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     e.add_argument("model", metavar="RUN_OR_MODEL")
     _data_args(e)
     e.add_argument("-o", "--out", help="folder for metrics.json and pr_curves.png")
+    e.add_argument(
+        "--tta",
+        choices=("hflip", "flips", "dihedral"),
+        help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
+        "8 views: for top-down images) copies and fuse the boxes (default: none)",
+    )
     r = cls(
         prog="robopercept nn detect",
         description="Detect objects in IMAGE... and draw boxes, labels and scores to OUT/NAME.png.",
@@ -144,6 +150,12 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("-o", "--out", help="folder for the pictures")
     r.add_argument("--score-thresh", type=_score, default=0.3, help="detections kept (default 0.3)")
     r.add_argument("--device", help="cpu, cuda, ...")
+    r.add_argument(
+        "--tta",
+        choices=("hflip", "flips", "dihedral"),
+        help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
+        "8 views: for top-down images) copies and fuse the boxes (default: none)",
+    )
     r.add_argument("--json", action="store_true", help="print COCO results")
     r.add_argument("--quiet", action="store_true")
     return {"train": t, "eval": e, "images": r}
@@ -397,7 +409,7 @@ def _model_path(text: str) -> Path:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from robopercept.nn.detection import evaluate_detector, load_detector
+    from robopercept.nn.detection import TestTimeAugmentation, evaluate_detector, load_detector
 
     _, val = _load_data(args, None)
     path = _model_path(args.model)
@@ -409,8 +421,10 @@ def _eval(args: argparse.Namespace) -> int:
             f"--data: its classes {list(val.classes)} differ from the model's "
             f"{info['classes']}: evaluate on the data the model was trained for"
         )
+    if args.tta:
+        model = TestTimeAugmentation(model, args.tta)
     ev = evaluate_detector(model, val, device=args.device)
-    extra = {"model": str(args.model), "data": str(args.data)}
+    extra = {"model": str(args.model), "data": str(args.data), "tta": args.tta}
     if args.out:
         metrics = _write_metrics(ev, val, Path(args.out), extra)
     else:
@@ -427,7 +441,7 @@ def _eval(args: argparse.Namespace) -> int:
 
 def _images(args: argparse.Namespace) -> int:
     from robopercept.imaging import read_image, write_image
-    from robopercept.nn.detection import detect_arrays, load_detector
+    from robopercept.nn.detection import TestTimeAugmentation, detect_arrays, load_detector
     from robopercept.nn.detection_data import draw_detections
     from robopercept.nn.training import resolve_device
 
@@ -454,6 +468,8 @@ def _images(args: argparse.Namespace) -> int:
     model, info = load_detector(model_path)
     dev = resolve_device(args.device)
     model.to(dev)
+    if args.tta:
+        model = TestTimeAugmentation(model, args.tta)
     classes = info["classes"]
     results: list[dict[str, Any]] = []
     out = Path(args.out) if args.out else None

@@ -43,6 +43,7 @@ __all__ = [
     "box_area",
     "box_convert",
     "box_iou",
+    "dihedral_boxes",
     "generalized_box_iou",
     "nms",
     "non_max_suppression",
@@ -276,6 +277,86 @@ def generalized_box_iou(boxes1: torch.Tensor, boxes2: torch.Tensor) -> torch.Ten
     wh = rb - lt
     hull = wh[..., 0] * wh[..., 1]
     return iou - _safe_div(hull - union, hull)
+
+
+def dihedral_boxes(
+    boxes: torch.Tensor,
+    size: tuple[int, int],
+    *,
+    hflip: bool = False,
+    vflip: bool = False,
+    quarter_turns: int = 0,
+    inverse: bool = False,
+) -> torch.Tensor:
+    r"""Move ``"xyxy"`` boxes with their image under mirror images and quarter turns
+    (the dihedral group of the rectangle), or back.
+
+    For an image of height :math:`H` and width :math:`W` (continuous pixel
+    coordinates), in this order:
+
+    - ``hflip`` (``torch.flip(image, [-1])``): :math:`(W - x_2, y_1, W - x_1, y_2)`;
+    - ``vflip`` (``torch.flip(image, [-2])``): :math:`(x_1, H - y_2, x_2, H - y_1)`;
+    - ``quarter_turns`` :math:`k` counter-clockwise turns
+      (``torch.rot90(image, k, (-2, -1))``), each mapping a point :math:`(x, y)` to
+      :math:`(y, W - x)` and the size to :math:`W \times H`: a box becomes
+      :math:`(y_1, W - x_2, y_2, W - x_1)`.
+
+    With ``inverse``, the boxes are in the transformed image and are moved back into
+    the original one (the inverse steps in reverse order), so
+    ``dihedral_boxes(dihedral_boxes(b, s, **t), s, **t, inverse=True)`` is ``b``.
+
+    Parameters
+    ----------
+    boxes : (K, 4) torch.Tensor
+    size : (int, int)
+        ``(H, W)`` of the original (untransformed) image, in both directions.
+    hflip, vflip : bool
+    quarter_turns : int
+        Taken modulo 4.
+    inverse : bool
+
+    Returns
+    -------
+    (K, 4) torch.Tensor
+
+    Examples
+    --------
+    >>> import torch
+    >>> b = torch.tensor([[2.0, 1.0, 5.0, 4.0]])
+    >>> dihedral_boxes(b, (10, 20), quarter_turns=1).tolist()  # (y1, W - x2, y2, W - x1)
+    [[1.0, 15.0, 4.0, 18.0]]
+    >>> dihedral_boxes(torch.tensor([[1.0, 15, 4, 18]]), (10, 20), quarter_turns=1,
+    ...                inverse=True).tolist()
+    [[2.0, 1.0, 5.0, 4.0]]
+    """
+    b = _check_boxes(boxes, "boxes")
+    if not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise InputError(f"size must be the image's (height, width); got {plain_repr(size)}")
+    h, w = (check_int(v, "size (the image's height and width)", 1) for v in size)
+    hflip = check_bool(hflip, "hflip")
+    vflip = check_bool(vflip, "vflip")
+    k = check_int(quarter_turns, "quarter_turns") % 4
+
+    def turn(b: torch.Tensor, width: float) -> torch.Tensor:
+        return torch.stack([b[:, 1], width - b[:, 2], b[:, 3], width - b[:, 0]], 1)
+
+    def mirror(b: torch.Tensor) -> torch.Tensor:
+        if hflip:
+            b = torch.stack([w - b[:, 2], b[:, 1], w - b[:, 0], b[:, 3]], 1)
+        if vflip:
+            b = torch.stack([b[:, 0], h - b[:, 3], b[:, 2], h - b[:, 1]], 1)
+        return b
+
+    if not inverse:
+        b = mirror(b)
+        for i in range(k):  # the width before each turn: W, H, W, ...
+            b = turn(b, (w, h)[i % 2])
+        return b
+    # k turns back are 4 - k more turns on, from the turned image (W x H when k is odd)
+    widths = (h, w) if k % 2 else (w, h)
+    for i in range((4 - k) % 4):
+        b = turn(b, widths[i % 2])
+    return mirror(b)
 
 
 # --------------------------------------------------------------------------- coding

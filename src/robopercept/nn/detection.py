@@ -95,6 +95,7 @@ from robopercept.nn.boxes import (
     batched_nms,
     box_convert,
     box_iou,
+    dihedral_boxes,
     generalized_box_iou,
     nms,
     roi_align,
@@ -106,6 +107,7 @@ __all__ = [
     "FCOS",
     "FPN",
     "RCNN",
+    "TTA_VIEWS",
     "VAL_METRICS",
     "DetectionBackbone",
     "DetectionHistory",
@@ -113,6 +115,7 @@ __all__ = [
     "FasterRCNN",
     "LocalizationResult",
     "SingleObjectLocalizer",
+    "TestTimeAugmentation",
     "build_detector",
     "detect_arrays",
     "evaluate_detector",
@@ -1622,6 +1625,155 @@ class FCOS(_Detector):
         return out
 
 
+# --------------------------------------------------------------------------- test-time augmentation
+#: the views of :class:`TestTimeAugmentation`: (hflip, vflip, quarter turns) per view
+TTA_VIEWS: dict[str, tuple[tuple[bool, bool, int], ...]] = {
+    "hflip": ((False, False, 0), (True, False, 0)),
+    "flips": ((False, False, 0), (True, False, 0), (False, True, 0), (True, True, 0)),
+    "dihedral": tuple((h, v, k) for h in (False, True) for v in (False, True) for k in (0, 1)),
+    # hflip + vflip is a half turn, so these 8 are the whole dihedral group
+}
+
+
+class TestTimeAugmentation(nn.Module):
+    r"""Test-time augmentation of any detector here: its detections on mirrored and
+    turned copies of each image, mapped back and fused (ultralytics' ``augment=True``
+    and mmdetection's TTA, with the fusion below).
+
+    Each image is seen in :math:`V` views (:data:`TTA_VIEWS`: ``"hflip"`` the image and
+    its mirror, ``"flips"`` the four mirrorings, ``"dihedral"`` those and their quarter
+    turns, 8 views: for top-down images whose orientation means nothing). The wrapped
+    model detects in every view (its own NMS included); the boxes are mapped back with
+    :func:`~robopercept.nn.boxes.dihedral_boxes` and pooled. Per class, greedy NMS at
+    ``iou_thresh`` on the pool picks cluster heads; every pooled box joins the
+    highest-scoring head it overlaps with IoU > ``iou_thresh`` (the head that
+    suppressed it). A cluster :math:`C` gives one detection: the score-weighted mean
+    box (box voting, Gidaris and Komodakis 2015) and the score
+
+    .. math:: s_C = \frac{1}{V} \sum_{v=1}^{V} \max_{i \in C,\ \mathrm{view}(i) = v} s_i
+
+    (0 for a view with no member): the mean over the views of the best score each gave,
+    so an object seen in one view only is ranked down (as weighted boxes fusion does,
+    Solovyev et al. 2021). The ``detections_per_img`` best are kept. The wrapper is
+    built in eval mode (it refuses train mode); it puts the wrapped model in eval mode.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        A detector of this module (any model with the torchvision eval contract).
+    views : {"hflip", "flips", "dihedral"}
+    iou_thresh : float, optional
+        Clustering IoU in [0, 1]; default the model's ``nms_thresh`` (0.5 without one).
+    detections_per_img : int, optional
+        Default the model's (100 without one).
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> tta = TestTimeAugmentation(FCOS(2, width=8, head_channels=16), "flips").eval()
+    >>> sorted(tta([torch.rand(3, 32, 48)])[0])
+    ['boxes', 'labels', 'scores']
+    """
+
+    def __init__(
+        self,
+        model: nn.Module,
+        views: str = "dihedral",
+        *,
+        iou_thresh: float | None = None,
+        detections_per_img: int | None = None,
+    ) -> None:
+        super().__init__()
+        self.model = check_module(model)
+        check_choice(views, "views (--tta)", tuple(TTA_VIEWS))
+        self.views = views
+        thr = iou_thresh if iou_thresh is not None else getattr(model, "nms_thresh", 0.5)
+        self.iou_thresh = check_real(thr, "iou_thresh", 0.0, 1.0)
+        top = detections_per_img or getattr(model, "detections_per_img", 100)
+        self.detections_per_img = check_count(top, "detections_per_img", 1, 1 << 20)
+        self.eval()  # it only predicts
+
+    def forward(self, images: Any, targets: Any = None) -> list[dict[str, torch.Tensor]]:
+        """Fused detections of ``images`` (eval mode only).
+
+        Parameters
+        ----------
+        images : list of (3, H, W) float torch.Tensor, or (N, 3, H, W)
+        targets : None
+            Refused: train the wrapped model, not this wrapper.
+
+        Returns
+        -------
+        list of dict
+            ``{"boxes": (D, 4), "labels": (D,), "scores": (D,)}`` per image.
+        """
+        if self.training or targets is not None:
+            raise InputError(
+                "TestTimeAugmentation only predicts: train the wrapped model "
+                "(tta.model), then call tta.eval()"
+            )
+        ims = _check_images(images)
+        views = TTA_VIEWS[self.views]
+        pooled: list[list[dict[str, torch.Tensor]]] = [[] for _ in ims]
+        with torch.no_grad():
+            for v, (hflip, vflip, k) in enumerate(views):
+                seen = []
+                for im in ims:
+                    dims = [d for d, on in ((-1, hflip), (-2, vflip)) if on]
+                    x = torch.flip(im, dims) if dims else im
+                    seen.append(torch.rot90(x, k, (-2, -1)) if k else x)
+                out = self.model(seen)
+                for i, (im, det) in enumerate(zip(ims, out, strict=True)):
+                    size = (int(im.shape[-2]), int(im.shape[-1]))
+                    b = dihedral_boxes(
+                        det["boxes"].float(),
+                        size,
+                        hflip=hflip,
+                        vflip=vflip,
+                        quarter_turns=k,
+                        inverse=True,
+                    )
+                    view = torch.full_like(det["labels"], v)
+                    pooled[i].append({**det, "boxes": b, "view": view})
+        return [self._fuse(p, len(views)) for p in pooled]
+
+    def predict(self, images: Any) -> list[dict[str, torch.Tensor]]:
+        """Fused detections of ``images`` (eval mode; the mode is restored)."""
+        was = self.training
+        self.eval()
+        try:
+            return self(images)
+        finally:
+            self.train(was)
+
+    def _fuse(self, dets: list[dict[str, torch.Tensor]], n_views: int) -> dict[str, torch.Tensor]:
+        boxes = torch.cat([d["boxes"] for d in dets])
+        scores = torch.cat([d["scores"] for d in dets]).float()
+        labels = torch.cat([d["labels"] for d in dets])
+        view = torch.cat([d["view"] for d in dets])
+        if boxes.shape[0] == 0:
+            return {"boxes": boxes, "labels": labels, "scores": scores}
+        heads = batched_nms(boxes, scores, labels, self.iou_thresh)
+        over = box_iou(boxes[heads], boxes) > self.iou_thresh
+        over &= labels[heads][:, None] == labels[None]
+        over[torch.arange(heads.numel()), heads] = True
+        member = over.any(0)
+        # heads are in decreasing score: the first overlapping head is the best one
+        cluster = over.to(torch.uint8).argmax(0)[member]
+        b, s, vw = boxes[member], scores[member], view[member]
+        k = heads.numel()
+        w = torch.zeros(k, dtype=s.dtype).index_add_(0, cluster, s)
+        fused = torch.zeros(k, 4, dtype=b.dtype).index_add_(0, cluster, b * s[:, None])
+        fused = torch.where(w[:, None] > 0, fused / w.clamp(min=1e-12)[:, None], boxes[heads])
+        best = torch.zeros(k * n_views, dtype=s.dtype).scatter_reduce(
+            0, cluster * n_views + vw, s, "amax"
+        )
+        score = best.view(k, n_views).sum(1) / n_views
+        order = torch.argsort(score, descending=True, stable=True)[: self.detections_per_img]
+        return {"boxes": fused[order], "labels": labels[heads][order], "scores": score[order]}
+
+
 # --------------------------------------------------------------------------- train / evaluate
 @dataclass
 class DetectionHistory:
@@ -1679,8 +1831,9 @@ def train_detector(
     val_metric: str = "AP",
     augment: Callable[[torch.Tensor, dict[str, Any]], tuple[torch.Tensor, dict[str, Any]]]
     | None = None,
+    ema: float | None = None,
 ) -> DetectionHistory:
-    """Train a detector of this module (or any model keeping the torchvision detection
+    r"""Train a detector of this module (or any model keeping the torchvision detection
     contract) on a :class:`~robopercept.nn.detection_data.DetectionDataset`.
 
     Each step: a shuffled mini-batch of ``config.batch_size`` images (a generator seeded
@@ -1720,6 +1873,15 @@ def train_detector(
         ``(image, target) -> (image, target)`` applied to each training sample as it
         is drawn, e.g. :class:`~robopercept.nn.detection_data.FlipRotate` (seed it for a
         repeatable run).
+    ema : float, optional
+        Keep an exponential moving average of the weights and buffers (Polyak
+        averaging, as ultralytics' ``ModelEMA``), updated after every optimizer step
+        ``n = 1, 2, ...`` as :math:`\bar\theta \leftarrow d_n \bar\theta + (1 - d_n)
+        \theta` with :math:`d_n = \min(\texttt{ema}, \frac{1 + n}{10 + n})` (the
+        warm-up of ``tf.train.ExponentialMovingAverage``'s ``num_updates``, so the
+        random initial weights are forgotten early), through
+        :class:`torch.optim.swa_utils.AveragedModel`. The averaged weights are the ones
+        validated, kept and returned in ``model``. In (0, 1); None: no averaging.
 
     Returns
     -------
@@ -1767,6 +1929,8 @@ def train_detector(
         )
     val_every = check_count(val_every, "val_every", 1, 1 << 30)
     check_choice(val_metric, "val_metric", VAL_METRICS)
+    if ema is not None:
+        ema = check_real(ema, "ema (--ema)", 0.0, 1.0, low_inclusive=False, high_inclusive=False)
     dev = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
     model.to(dev)
@@ -1797,6 +1961,9 @@ def train_detector(
     hist = DetectionHistory()
     best_state: dict[str, torch.Tensor] | None = None
     best_value = -math.inf
+    averaged = _weight_average(model, ema) if ema is not None else None
+    # the model validated and kept: the average when there is one
+    kept = averaged.module if averaged is not None else model
     bar = progress_bar(
         total=cfg.epochs, desc="training detector", unit="epoch", disable=not progress
     )
@@ -1836,6 +2003,8 @@ def train_detector(
                         nn.utils.clip_grad_norm_(params, cfg.clip_grad_norm)
                     opt.step()
                     sched.step()
+                    if averaged is not None:
+                        averaged.update_parameters(model)
                     for k, v in losses.items():
                         sums[k] = sums.get(k, 0.0) + float(v.detach())
                     sums["loss"] = sums.get("loss", 0.0) + float(loss.detach())
@@ -1844,19 +2013,19 @@ def train_detector(
                 last = epoch + 1 == cfg.epochs
                 if val_ds is not None and ((epoch + 1) % val_every == 0 or last):
                     t1 = time.perf_counter()
-                    value = float(evaluate_detector(model, val_ds).stats[VAL_METRICS[val_metric]])
+                    value = float(evaluate_detector(kept, val_ds).stats[VAL_METRICS[val_metric]])
                     hist.val_seconds += time.perf_counter() - t1
                     hist.val[epoch + 1] = value
                     if best_state is None or value > best_value:
                         best_value, hist.best_epoch = value, epoch + 1
-                        best_state = copy.deepcopy(model.state_dict())
+                        best_state = copy.deepcopy(kept.state_dict())
                 elif val_ds is None:
                     hist.best_epoch = epoch + 1
                 if ckpt is not None:
                     save_checkpoint(
                         ckpt,
                         {
-                            "model": model.state_dict(),
+                            "model": kept.state_dict(),
                             "epoch": epoch + 1,
                             "losses": hist.losses,
                             "architecture": type(model).__name__,
@@ -1871,7 +2040,21 @@ def train_detector(
         bar.close()
     if best_state is not None:
         model.load_state_dict(best_state)
+    elif averaged is not None:
+        model.load_state_dict(kept.state_dict())
     return hist
+
+
+def _weight_average(model: nn.Module, decay: float) -> Any:
+    """``AveragedModel`` of ``model`` (weights and buffers) with the warmed-up EMA of
+    :func:`train_detector`'s ``ema``."""
+    from torch.optim.swa_utils import AveragedModel
+
+    def ema_step(avg: torch.Tensor, new: torch.Tensor, n: torch.Tensor | int) -> torch.Tensor:
+        d = min(decay, (1.0 + float(n)) / (10.0 + float(n)))
+        return d * avg + (1.0 - d) * new
+
+    return AveragedModel(model, avg_fn=ema_step, use_buffers=True)
 
 
 @torch.no_grad()

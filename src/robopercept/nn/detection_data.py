@@ -72,6 +72,7 @@ from robopercept._checks import (
 from robopercept.errors import InputError
 from robopercept.imaging.io import read_image
 from robopercept.nn._guards import check_allocation
+from robopercept.nn.boxes import dihedral_boxes
 from robopercept.nn.coco import CocoDataset, coco_from_dict, read_voc_xml
 from robopercept.nn.data import SHAPES, shape_masks, stratified_split
 from robopercept.viz.colormap import label_colors
@@ -487,7 +488,8 @@ class FlipRotate:
       :math:`(y, W - x)` and the size to :math:`H \times W`, so a box becomes
       :math:`(y_1, W - x_2, y_2, W - x_1)`.
 
-    Applied in that order. Same generator seed, same sequence of draws.
+    Applied in that order (:func:`~robopercept.nn.boxes.dihedral_boxes`). Same generator
+    seed, same sequence of draws.
 
     Parameters
     ----------
@@ -537,22 +539,17 @@ class FlipRotate:
         b = torch.as_tensor(target["boxes"]).clone()
         masks = target.get("masks")
         u = torch.rand(3, generator=self.generator)
-        h, w = int(image.shape[1]), int(image.shape[2])
-        if u[0] < self.horizontal:
-            image = torch.flip(image, [2])
-            b = torch.stack([w - b[:, 2], b[:, 1], w - b[:, 0], b[:, 3]], 1)
-            masks = torch.flip(masks, [2]) if masks is not None else None
-        if u[1] < self.vertical:
-            image = torch.flip(image, [1])
-            b = torch.stack([b[:, 0], h - b[:, 3], b[:, 2], h - b[:, 1]], 1)
-            masks = torch.flip(masks, [1]) if masks is not None else None
-        if self.rotate90:
-            k = int(torch.randint(4, (1,), generator=self.generator))
-            for _ in range(k):
-                w = int(image.shape[2])
-                image = torch.rot90(image, 1, (1, 2))
-                b = torch.stack([b[:, 1], w - b[:, 2], b[:, 3], w - b[:, 0]], 1)
-                masks = torch.rot90(masks, 1, (1, 2)) if masks is not None else None
+        hflip, vflip = bool(u[0] < self.horizontal), bool(u[1] < self.vertical)
+        k = int(torch.randint(4, (1,), generator=self.generator)) if self.rotate90 else 0
+        size = (int(image.shape[1]), int(image.shape[2]))
+        b = dihedral_boxes(b.reshape(-1, 4), size, hflip=hflip, vflip=vflip, quarter_turns=k)
+        dims = [d for d, on in ((2, hflip), (1, vflip)) if on]
+        if dims:
+            image = torch.flip(image, dims)
+            masks = torch.flip(masks, dims) if masks is not None else None
+        if k:
+            image = torch.rot90(image, k, (1, 2))
+            masks = torch.rot90(masks, k, (1, 2)) if masks is not None else None
         out["boxes"] = b.reshape(-1, 4)
         if masks is not None:
             out["masks"] = masks
