@@ -176,6 +176,14 @@ PARTS: dict[str, dict[str, Any]] = {
         "ema": 0.995,
         "tta": "dihedral",
     },
+    # and with torchvision's 4-layer head towers instead of 2
+    "trees-fcos-deep": {
+        **_TREES_FCOS,
+        "settings": {**_TREES_FCOS["settings"], "num_convs": 4},
+        "augment": {**_DIHEDRAL, "scale": (0.67, 1.5)},
+        "ema": 0.995,
+        "tta": "dihedral",
+    },
     # Faster R-CNN beside it, reported: anchors 16/32/64 px for crowns of 15-69 px
     "trees-faster": _part(
         _trees,
@@ -188,6 +196,8 @@ PARTS: dict[str, dict[str, Any]] = {
         augment=_DIHEDRAL,
     ),
     "shapes-fcos": _part(_shapes, (2000, 100, 200), "fcos", _FCOS, "AP", 30),
+    # the same with an EMA of the weights (horizon 1000 steps, 4 of the 30 epochs)
+    "shapes-fcos-ema": _part(_shapes, (2000, 100, 200), "fcos", _FCOS, "AP", 30, ema=0.999),
     "shapes-faster": _part(_shapes, (2000, 100, 200), "faster", {"width": 16}, "AP", 30),
     "digits": _part(_digits, (1000, 100, 200), "faster", {"width": 16}, "AP50", 30),
     "localizer": _part(

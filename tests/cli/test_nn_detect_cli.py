@@ -173,6 +173,8 @@ def test_default_model_missing_names_the_build_command(tmp_path, capsys, monkeyp
         (["train", "--data", "trees", "-o", "x"], "--images-dir"),
         (["train", "--data", "digits", "--model", "yolo"], "--model"),
         (["train", "--data", "digits", "--size", "4x4"], "--size"),
+        (["train", "--data", "digits", "--ema", "1.5"], "--ema"),
+        (["eval", "run", "--data", "digits", "--tta", "rotations"], "--tta"),
         (["eval", "run", "--data", "foo"], "--data"),
         (["eval", "no_run", "--data", "digits"], "RUN_OR_MODEL"),
         (["a.png", "--model", "no.pt", "-o", "x"], "--model"),
@@ -207,3 +209,20 @@ def test_not_a_detector_checkpoint_fails(tmp_path, capsys):
 def test_no_words_prints_help_and_exits_2(capsys):
     assert main(["nn", "detect"]) == 2
     assert "nn detect train" in capsys.readouterr().out
+
+
+def test_ema_flag_reaches_train_detector(tmp_path, monkeypatch, capsys):
+    import robopercept.nn.detection as det
+
+    seen = {}
+    real = det.train_detector
+
+    def spy(*args, **kwargs):
+        seen["ema"] = kwargs.get("ema")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(det, "train_detector", spy)
+    argv = [*TRAIN, "--epochs", "1", "--ema", "0.9", "--json", "-o", str(tmp_path / "r")]
+    assert main(argv) == 0
+    assert seen == {"ema": 0.9}
+    assert json.loads(capsys.readouterr().out)["epochs"] == 1

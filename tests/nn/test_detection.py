@@ -809,3 +809,16 @@ def test_ema_keeps_the_averaged_weights_and_checks_its_value():
     for bad in (0.0, 1.0, float("nan")):
         with pytest.raises(InputError, match="--ema"):
             train_detector(build("fcos"), ds, cfg, progress=False, ema=bad)
+
+
+def test_fcos_num_convs_sets_the_tower_depth():
+    deep = FCOS(3, width=8, head_channels=16, num_convs=4)
+    for tower in (deep.cls_tower, deep.reg_tower):
+        convs = [m for m in tower if isinstance(m, torch.nn.Conv2d)]
+        assert len(convs) == 4
+    # the default keeps the 2-layer towers (and so the shipped models' state dicts)
+    assert sum(isinstance(m, torch.nn.Conv2d) for m in FCOS(3, width=8).cls_tower) == 2
+    deep.eval()
+    assert deep([torch.rand(3, 32, 32)])[0]["boxes"].shape[1] == 4
+    with pytest.raises(InputError, match="num_convs"):
+        FCOS(3, num_convs=0)

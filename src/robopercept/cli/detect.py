@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -85,6 +86,16 @@ def _score(text: str) -> float:
     return v
 
 
+def _decay(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0 < v < 1:
+        raise argparse.ArgumentTypeError(f"expects a decay in (0, 1), e.g. 0.999; got {text!r}")
+    return v
+
+
 def _data_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--data",
@@ -122,6 +133,14 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         default=None,
         help="evaluate the validation split every N epochs and keep the best epoch's "
         "weights (default: epochs / 10)",
+    )
+    t.add_argument(
+        "--ema",
+        type=_decay,
+        default=None,
+        metavar="DECAY",
+        help="keep an exponential moving average of the weights with this decay, e.g. "
+        "0.999, and validate and save it (default: none)",
     )
     t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
     e = cls(
@@ -348,6 +367,7 @@ def _train(args: argparse.Namespace) -> int:
         progress=not quiet,
         val=val,
         val_every=args.val_every or max(1, args.epochs // 10),
+        ema=args.ema,
     )
     model_path = save_detector(
         out / "model.pt",

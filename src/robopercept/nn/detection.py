@@ -1346,6 +1346,10 @@ class FCOS(_Detector):
         FPN levels.
     head_channels : int
         FPN and head width.
+    num_convs : int
+        3 x 3 convolution + GroupNorm + ReLU layers in each of the two towers (class
+        and box) before their outputs: 2 here by default, 4 in torchvision's
+        ``FCOSHead`` and the paper.
     center_radius : float
     box_activation : {"relu", "exp"}
         ``"relu"`` (the default, torchvision's) can die: once every pre-activation of
@@ -1377,6 +1381,7 @@ class FCOS(_Detector):
         width: int = 16,
         strides: Sequence[int] = (8, 16),
         head_channels: int = 64,
+        num_convs: int = 2,
         center_radius: float = 1.5,
         box_activation: str = "relu",
         centerness_weighted: bool = False,
@@ -1397,15 +1402,13 @@ class FCOS(_Detector):
         while groups > 1 and c // groups < 2:
             groups //= 2
 
+        self.num_convs = check_count(num_convs, "num_convs", 1, 16)
+
         def tower() -> nn.Sequential:
-            return nn.Sequential(
-                nn.Conv2d(c, c, 3, padding=1),
-                nn.GroupNorm(groups, c),
-                nn.ReLU(),
-                nn.Conv2d(c, c, 3, padding=1),
-                nn.GroupNorm(groups, c),
-                nn.ReLU(),
-            )
+            layers: list[nn.Module] = []
+            for _ in range(self.num_convs):
+                layers += [nn.Conv2d(c, c, 3, padding=1), nn.GroupNorm(groups, c), nn.ReLU()]
+            return nn.Sequential(*layers)
 
         self.cls_tower = tower()
         self.reg_tower = tower()
