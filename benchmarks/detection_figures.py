@@ -176,6 +176,14 @@ PARTS: dict[str, dict[str, Any]] = {
         "ema": 0.995,
         "tta": "dihedral",
     },
+    # and with the IoU of the decoded box as the third branch's target (IoU-aware)
+    "trees-fcos-iou": {
+        **_TREES_FCOS,
+        "settings": {**_TREES_FCOS["settings"], "quality": "iou"},
+        "augment": {**_DIHEDRAL, "scale": (0.67, 1.5)},
+        "ema": 0.995,
+        "tta": "dihedral",
+    },
     # and with torchvision's 4-layer head towers instead of 2
     "trees-fcos-deep": {
         **_TREES_FCOS,

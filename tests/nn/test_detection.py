@@ -417,6 +417,36 @@ def test_fcos_regression_loss_hand_case(weighted):
     assert float(loss["bbox_regression"].detach()) == pytest.approx(float(want), rel=1e-5)
 
 
+@pytest.mark.parametrize("quality", ["centerness", "iou"])
+def test_fcos_quality_target_hand_case(quality):
+    # the same setting as above; the third branch outputs the logit 1 everywhere, so
+    # its loss is the mean over the 6 locations of BCE(sigmoid(1), target), with the
+    # centerness target, or the IoU of each location's 16 x 16 box with the truth
+    m = build("fcos", num_classes=2, box_activation="exp", quality=quality)
+    for layer in (m.bbox_reg, m.bbox_ctrness):
+        torch.nn.init.zeros_(layer.weight)
+        torch.nn.init.zeros_(layer.bias)
+    torch.nn.init.constant_(m.bbox_ctrness.bias, 1.0)
+    gt = torch.tensor([[0.0, 0, 30, 20]])
+    loss = m([torch.rand(3, 32, 32)], [{"boxes": gt, "labels": torch.tensor([1])}])
+    locs = torch.tensor([[x, y] for y in (4.0, 12.0) for x in (4.0, 12.0, 20.0)])
+    pred = torch.cat((locs - 8, locs + 8), dim=1)
+    if quality == "iou":
+        target = torch.diagonal(box_iou(pred, gt.expand(6, 4)))
+    else:
+        lr = torch.stack((locs[:, 0], 30 - locs[:, 0]), 1)
+        tb = torch.stack((locs[:, 1], 20 - locs[:, 1]), 1)
+        target = torch.sqrt(
+            lr.min(1).values / lr.max(1).values * tb.min(1).values / tb.max(1).values
+        )
+    # BCE with logit 1: -(t log sigmoid(1) + (1 - t) log(1 - sigmoid(1)))
+    p1 = torch.sigmoid(torch.tensor(1.0))
+    want = -(target * torch.log(p1) + (1 - target) * torch.log(1 - p1)).mean()
+    assert float(loss["bbox_ctrness"].detach()) == pytest.approx(float(want), rel=1e-5)
+    with pytest.raises(InputError, match="quality"):
+        build("fcos", quality="giou")
+
+
 # --------------------------------------------------------------------------- training
 def test_seeded_determinism():
     ds = digits_detection_set(2, (48, 48), (1, 2), rng=0, scale=(12, 24))

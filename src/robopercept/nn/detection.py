@@ -1301,6 +1301,15 @@ def _init_conv(layer: nn.Conv2d, bias: float) -> None:
         nn.init.constant_(layer.bias, bias)
 
 
+def _paired_iou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """IoU of ``a[i]`` with ``b[i]`` (``xyxy``, same length): the diagonal of
+    :func:`~robopercept.nn.boxes.box_iou` without the ``(K, K)`` matrix."""
+    wh = (torch.minimum(a[:, 2:], b[:, 2:]) - torch.maximum(a[:, :2], b[:, :2])).clamp(min=0)
+    inter = wh[:, 0] * wh[:, 1]
+    union = (a[:, 2:] - a[:, :2]).prod(1) + (b[:, 2:] - b[:, :2]).prod(1) - inter
+    return torch.where(union > 0, inter / union.clamp(min=1e-12), torch.zeros_like(inter))
+
+
 def _sequence(value: Any, name: str) -> tuple[Any, ...]:
     if not isinstance(value, (tuple, list)) or not value:
         raise InputError(
@@ -1361,6 +1370,12 @@ class FCOS(_Detector):
         divide by their sum (FCOS v2, Tian et al. 2020), instead of the plain mean:
         the box is learnt best where the score (which includes the centerness) makes
         it survive NMS.
+    quality : {"centerness", "iou"}
+        The target of the third branch: the centerness above (the paper's), or the IoU
+        of the location's decoded box with its ground-truth box, detached (the IoU
+        prediction of IoU-aware detectors, Wu et al. 2020, and of YOLOX's objectness):
+        the score then ranks boxes by how well they are placed, not by where the
+        location sits in the box. Eval is the same for both.
     score_thresh, nms_thresh, topk_candidates, detections_per_img
         Post-processing.
 
@@ -1385,6 +1400,7 @@ class FCOS(_Detector):
         center_radius: float = 1.5,
         box_activation: str = "relu",
         centerness_weighted: bool = False,
+        quality: str = "centerness",
         score_thresh: float = 0.2,
         nms_thresh: float = 0.6,
         topk_candidates: int = 1000,
@@ -1426,6 +1442,8 @@ class FCOS(_Detector):
             )
         self.box_activation = box_activation
         self.centerness_weighted = check_bool(centerness_weighted, "centerness_weighted")
+        check_choice(quality, "quality", ("centerness", "iou"))
+        self.quality = quality
         if box_activation == "exp":
             # the paper's exp(s_l x): one learnable scale per level, starting at 1
             self.scales = nn.Parameter(torch.ones(len(self.backbone.strides)))
@@ -1574,15 +1592,15 @@ class FCOS(_Detector):
         if fg_pred:
             pred, gtb = torch.cat(fg_pred), torch.cat(fg_gt)
             giou = torch.diagonal(generalized_box_iou(pred, gtb)) if pred.shape[0] else pred.sum(1)
+            centerness = torch.cat(fg_ctr_t)
             if self.centerness_weighted:
-                w = torch.cat(fg_ctr_t)
+                w = centerness
                 loss_reg = ((1 - giou) * w).sum() / w.sum().clamp(min=1e-6)
             else:
                 loss_reg = (1 - giou).sum() / n_fg
+            target = _paired_iou(pred.detach(), gtb) if self.quality == "iou" else centerness
             loss_ctr = (
-                F.binary_cross_entropy_with_logits(
-                    torch.cat(fg_ctr), torch.cat(fg_ctr_t), reduction="sum"
-                )
+                F.binary_cross_entropy_with_logits(torch.cat(fg_ctr), target, reduction="sum")
                 / n_fg
             )
         else:
