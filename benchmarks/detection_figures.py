@@ -412,6 +412,52 @@ def table(results: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
+    """The training time of ``part`` measured on a few epochs: ``epochs`` epochs of its
+    seed-0 run (same data, model, batch size and augmentation; no validation), plus one
+    evaluation of its validation split, extrapolated to the part's epochs and its
+    validations (every epochs / 10 epochs and after the last, as :func:`run_one`). Run
+    it with nothing else on the machine: the figure is the time a full run takes alone."""
+    spec = PARTS[part]
+    train, val, _, _ = spec["data"](spec["n"], 0)
+    settings = dict(spec["settings"])
+    if spec["kind"] in ("fast", "rcnn"):
+        settings["proposal_fn"] = CachedProposals()
+    model = build_detector(spec["kind"], len(train.classes), seed=0, **settings)
+    cfg = TrainConfig(
+        seed=0,
+        device="cpu",
+        schedule="cosine",
+        clip_grad_norm=10.0,
+        **{**spec["train"], "epochs": epochs},
+    )
+    t0 = time.perf_counter()
+    train_detector(
+        model,
+        train,
+        cfg,
+        progress=False,
+        augment=_augmenter(spec["augment"], 0),
+        ema=spec.get("ema"),
+    )
+    per_epoch = (time.perf_counter() - t0) / epochs
+    t0 = time.perf_counter()
+    evaluate_detector(model, val)
+    per_val = time.perf_counter() - t0
+    full = spec["train"]["epochs"]
+    every = max(1, full // 10)
+    n_val = len(range(every, full + 1, every)) + (full % every != 0)
+    return {
+        "part": part,
+        "threads": threads,
+        "epochs_timed": epochs,
+        "seconds_per_epoch": round(per_epoch, 2),
+        "seconds_per_validation": round(per_val, 2),
+        "estimated_train_seconds": round(per_epoch * full + per_val * n_val, 1),
+        "epochs": full,
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="+", choices=sorted(PARTS), default=sorted(PARTS))
@@ -425,8 +471,24 @@ def main(argv: list[str] | None = None) -> int:
         help="write each trained model to DIR/detector_KIND_DATA.pt (the shipped models: "
         "--only shapes-fcos shapes-faster --seeds 0 --save src/robopercept/data)",
     )
+    ap.add_argument(
+        "--time-epochs",
+        type=int,
+        default=None,
+        metavar="K",
+        help="instead of full runs, time K epochs of each part and extrapolate its "
+        "training time (stored under 'timing'; run alone on the machine)",
+    )
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
+    if args.time_epochs:
+        for part in args.only:
+            row = time_part(part, args.time_epochs, args.threads)
+            print(json.dumps(row), flush=True)
+            results = _load()
+            results.setdefault("timing", {})[part] = {**row, "machine": machine()}
+            PATH.write_text(json.dumps(results, indent=1))
+        return 0
     for part in args.only:
         for seed in args.seeds:
             row = run_one(part, seed, progress=not args.quiet, save=args.save)
