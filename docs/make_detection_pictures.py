@@ -2,7 +2,7 @@
 
 Run from the repository root (about a minute on 2 cores)::
 
-    python docs/make_detection_pictures.py [../shared/data/detection/deepforest_neon]
+    python docs/make_detection_pictures.py [../shared/data/detection/deepforest_neon [TREES_MODEL]]
 
 Writes to docs/img/:
 
@@ -14,7 +14,11 @@ Writes to docs/img/:
   anchors of each cell, sigmoid) and the 30 best proposals after NMS;
 - detection_nms.png: FCOS's scored candidates (score >= 0.2) before and after NMS;
 - detection_pr_curves.png: precision-recall per class of FCOS on the 200 test images;
-- detection_samples.png: FCOS and Faster R-CNN detections on test images.
+- detection_samples.png: FCOS and Faster R-CNN detections on test images;
+- detection_trees.png, only with TREES_MODEL (a trees FCOS saved by
+  ``python -m benchmarks.detection_figures --only trees-fcos-ema --seeds 0 --save DIR``):
+  two tiles of the held-out strip, the hand-drawn crowns and the detections with
+  score >= 0.3.
 
 Images of 128 x 128 are enlarged 4x (nearest neighbour) so that boxes and captions
 read at 1080p.
@@ -161,6 +165,31 @@ def nms_picture(fcos: torch.nn.Module, image: np.ndarray, classes: list[str]) ->
     write_image(IMG / "detection_nms.png", pic)
 
 
+def trees_picture(neon: Path, model_path: Path) -> None:
+    from robopercept.nn.detection_data import deepforest_tiles
+
+    model, info = load_detector(model_path)
+    model.nms_thresh = info["settings"].get("nms_thresh", model.nms_thresh)
+    test = deepforest_tiles(neon).test
+    pics = []
+    for i in (1, 4):
+        image = test.images[i]
+        with torch.no_grad():
+            det = model([_as_tensor(image)])[0]
+        keep = (det["scores"] >= 0.3).numpy()
+        k = 2
+        pic = draw_boxes(_big(image, k), _xywh(test.boxes[i], k), color=(255, 255, 0), width=3)
+        pic = draw_boxes(pic, _xywh(det["boxes"].numpy()[keep], k), color=(0, 255, 255), width=2)
+        pics.append(
+            _title(
+                pic,
+                f"tile {i}: crowns (yellow) {len(test.boxes[i])}, "
+                f"detections >= 0.3 (cyan) {int(keep.sum())}",
+            )
+        )
+    write_image(IMG / "detection_trees.png", _row(pics))
+
+
 def main() -> None:
     neon = Path(sys.argv[1] if len(sys.argv) > 1 else "../shared/data/detection/deepforest_neon")
     torch.set_num_threads(2)
@@ -173,6 +202,8 @@ def main() -> None:
         proposals(neon)
     else:
         print(f"{neon} missing: detection_proposals.png not made")
+    if len(sys.argv) > 2 and neon.is_dir():
+        trees_picture(neon, Path(sys.argv[2]))
     anchors(faster, image)
     rpn(faster, image)
     nms_picture(fcos, image, classes)
