@@ -184,6 +184,14 @@ PARTS: dict[str, dict[str, Any]] = {
         "ema": 0.995,
         "tta": "dihedral",
     },
+    # and with AdamW's usual weight decay (0.05) instead of 1e-4, against memorisation
+    "trees-fcos-wd": {
+        **_TREES_FCOS,
+        "train": {**_TREES_FCOS["train"], "weight_decay": 0.05},
+        "augment": {**_DIHEDRAL, "scale": (0.67, 1.5)},
+        "ema": 0.995,
+        "tta": "dihedral",
+    },
     # and with torchvision's 4-layer head towers instead of 2
     "trees-fcos-deep": {
         **_TREES_FCOS,
@@ -469,7 +477,7 @@ def main(argv: list[str] | None = None) -> int:
         type=Path,
         default=None,
         help="write each trained model to DIR/detector_KIND_DATA.pt (the shipped models: "
-        "--only shapes-fcos shapes-faster --seeds 0 --save src/robopercept/data)",
+        "--only shapes-fcos-ema shapes-faster --seeds 0 --save src/robopercept/data)",
     )
     ap.add_argument(
         "--time-epochs",

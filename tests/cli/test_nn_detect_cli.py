@@ -159,7 +159,7 @@ def test_default_model_missing_names_the_build_command(tmp_path, capsys, monkeyp
     write_image(img, np.zeros((32, 32, 3), np.uint8))
     assert main(["nn", "detect", str(img), "-o", str(tmp_path)]) == 1
     err = capsys.readouterr().err
-    build = "python -m benchmarks.detection_figures --only shapes-fcos shapes-faster"
+    build = "python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster"
     assert build in err and "data/no_such_model.pt" in err
     assert build in " ".join(cli_detect.__doc__.split())
 

@@ -21,7 +21,7 @@ Without ``--model`` the ``IMAGE`` form uses the shipped FCOS model
 R-CNN (``detector_faster_shapes.pt``). Both were trained on the procedural shapes set
 (``circle``, ``square``, ``triangle``, ``cross``) and are rebuilt, from a checkout, by::
 
-    python -m benchmarks.detection_figures --only shapes-fcos shapes-faster --seeds 0 \\
+    python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster --seeds 0 \\
         --save src/robopercept/data
 
 The work is done by :mod:`robopercept.nn.detection`, :mod:`robopercept.nn.detection_data`
@@ -58,7 +58,7 @@ SHIPPED_MODELS = {
 #: the model of ``robopercept nn detect IMAGE`` without ``--model``
 DEFAULT_MODEL = SHIPPED_MODELS["fcos"]
 _BUILD_SHIPPED = (
-    "python -m benchmarks.detection_figures --only shapes-fcos shapes-faster --seeds 0 "
+    "python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster --seeds 0 "
     "--save src/robopercept/data"
 )
 _VAL_FRACTION = 0.2
