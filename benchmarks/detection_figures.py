@@ -285,20 +285,28 @@ def _augmenter(spec: dict[str, Any] | None, seed: int) -> Any:
     return both
 
 
-def run_one(
-    part: str, seed: int, progress: bool = True, save: Path | None = None
-) -> dict[str, Any]:
-    spec = PARTS[part]
-    train, val, test, cross = spec["data"](spec["n"], seed)
+def _setup(
+    spec: dict[str, Any], train: Any, seed: int, epochs: int | None = None
+) -> tuple[torch.nn.Module, TrainConfig, CachedProposals | None]:
+    """The model (weights from ``seed``), the TrainConfig (``epochs`` overriding the
+    part's) and the proposal cache (R-CNN and Fast R-CNN) of a run of ``spec``."""
     settings = dict(spec["settings"])
     cached = None
     if spec["kind"] in ("fast", "rcnn"):
         cached = CachedProposals()
         settings["proposal_fn"] = cached
     model = build_detector(spec["kind"], len(train.classes), seed=seed, **settings)
-    cfg = TrainConfig(
-        seed=seed, device="cpu", schedule="cosine", clip_grad_norm=10.0, **spec["train"]
-    )
+    train_kw = {**spec["train"], **({"epochs": epochs} if epochs else {})}
+    cfg = TrainConfig(seed=seed, device="cpu", schedule="cosine", clip_grad_norm=10.0, **train_kw)
+    return model, cfg, cached
+
+
+def run_one(
+    part: str, seed: int, progress: bool = True, save: Path | None = None
+) -> dict[str, Any]:
+    spec = PARTS[part]
+    train, val, test, cross = spec["data"](spec["n"], seed)
+    model, cfg, cached = _setup(spec, train, seed)
     t0 = time.perf_counter()
     augment = _augmenter(spec["augment"], seed)
     hist = train_detector(
@@ -428,17 +436,7 @@ def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
     it with nothing else on the machine: the figure is the time a full run takes alone."""
     spec = PARTS[part]
     train, val, _, _ = spec["data"](spec["n"], 0)
-    settings = dict(spec["settings"])
-    if spec["kind"] in ("fast", "rcnn"):
-        settings["proposal_fn"] = CachedProposals()
-    model = build_detector(spec["kind"], len(train.classes), seed=0, **settings)
-    cfg = TrainConfig(
-        seed=0,
-        device="cpu",
-        schedule="cosine",
-        clip_grad_norm=10.0,
-        **{**spec["train"], "epochs": epochs},
-    )
+    model, cfg, _ = _setup(spec, train, 0, epochs)
     t0 = time.perf_counter()
     train_detector(
         model,

@@ -151,12 +151,6 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     e.add_argument("model", metavar="RUN_OR_MODEL")
     _data_args(e)
     e.add_argument("-o", "--out", help="folder for metrics.json and pr_curves.png")
-    e.add_argument(
-        "--tta",
-        choices=("hflip", "flips", "dihedral"),
-        help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
-        "8 views: for top-down images) copies and fuse the boxes (default: none)",
-    )
     r = cls(
         prog="robopercept nn detect",
         description="Detect objects in IMAGE... and draw boxes, labels and scores to OUT/NAME.png.",
@@ -169,14 +163,15 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("-o", "--out", help="folder for the pictures")
     r.add_argument("--score-thresh", type=_score, default=0.3, help="detections kept (default 0.3)")
     r.add_argument("--device", help="cpu, cuda, ...")
-    r.add_argument(
-        "--tta",
-        choices=("hflip", "flips", "dihedral"),
-        help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
-        "8 views: for top-down images) copies and fuse the boxes (default: none)",
-    )
     r.add_argument("--json", action="store_true", help="print COCO results")
     r.add_argument("--quiet", action="store_true")
+    for p in (e, r):  # the views of nn.detection.TTA_VIEWS (torch is not imported here)
+        p.add_argument(
+            "--tta",
+            choices=("hflip", "flips", "dihedral"),
+            help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
+            "8 views: for top-down images) copies and fuse the boxes (default: none)",
+        )
     return {"train": t, "eval": e, "images": r}
 
 

@@ -1301,15 +1301,6 @@ def _init_conv(layer: nn.Conv2d, bias: float) -> None:
         nn.init.constant_(layer.bias, bias)
 
 
-def _paired_iou(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """IoU of ``a[i]`` with ``b[i]`` (``xyxy``, same length): the diagonal of
-    :func:`~robopercept.nn.boxes.box_iou` without the ``(K, K)`` matrix."""
-    wh = (torch.minimum(a[:, 2:], b[:, 2:]) - torch.maximum(a[:, :2], b[:, :2])).clamp(min=0)
-    inter = wh[:, 0] * wh[:, 1]
-    union = (a[:, 2:] - a[:, :2]).prod(1) + (b[:, 2:] - b[:, :2]).prod(1) - inter
-    return torch.where(union > 0, inter / union.clamp(min=1e-12), torch.zeros_like(inter))
-
-
 def _sequence(value: Any, name: str) -> tuple[Any, ...]:
     if not isinstance(value, (tuple, list)) or not value:
         raise InputError(
@@ -1598,7 +1589,10 @@ class FCOS(_Detector):
                 loss_reg = ((1 - giou) * w).sum() / w.sum().clamp(min=1e-6)
             else:
                 loss_reg = (1 - giou).sum() / n_fg
-            target = _paired_iou(pred.detach(), gtb) if self.quality == "iou" else centerness
+            if self.quality == "iou":
+                target = torch.diagonal(box_iou(pred.detach(), gtb))
+            else:
+                target = centerness
             loss_ctr = (
                 F.binary_cross_entropy_with_logits(torch.cat(fg_ctr), target, reduction="sum")
                 / n_fg
