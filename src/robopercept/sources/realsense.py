@@ -9,6 +9,7 @@ profiles and the depth sensor, as the camera reports them.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import itertools
 import os
@@ -415,8 +416,10 @@ class RealSenseSource:
     fps : int
         Live camera only.
     timeout : float
-        Seconds to wait for a frame before deciding the camera is gone (live) or the
-        recording has ended.
+        Seconds to wait for a frame before deciding the camera is gone (live), or
+        before asking the player whether the recording has ended (it has when the
+        player has stopped; while it still plays, the wait goes on, up to ``timeout +
+        watchdog`` seconds without a frame).
     max_frames : int, optional
         Stop after this many frames (a live camera never ends on its own).
     watchdog : float
@@ -507,39 +510,58 @@ class RealSenseSource:
                 f"{', '.join(serials)}"
             )
 
-    def _start(self) -> tuple[Any, Any]:
+    def _start(self) -> tuple[Any, Any, Any, Any, Any]:
+        """Start streaming: ``(waiter, depth_scale, depth_profile, colour_profile,
+        playback)``; ``waiter.try_wait_for_frames(ms)`` gives ``(ok, frameset)`` and
+        ``waiter.stop()`` ends it; ``playback`` is None for a live camera.
+
+        A live camera streams through a ``pipeline``. A recording is loaded as a
+        playback device whose player is switched to non-real-time (it waits for the
+        reader) *before* its sensors start into a ``syncer``: through a pipeline the
+        player starts in real time at ``start`` and the switch comes after it, and the
+        first framesets of a short recording were often lost in between."""
         rs = self.rs
-        pipe = rs.pipeline()
-        cfg = rs.config()
-        if self.path is not None:
-            try:
-                cfg.enable_device_from_file(str(self.path), repeat_playback=False)
-            except RuntimeError as exc:
-                raise FileFormatError(f"{self.path}: cannot open the recording: {exc}") from None
-        else:
+        if self.path is None:
+            pipe, cfg = rs.pipeline(), rs.config()
             if self.device is not None:
                 cfg.enable_device(str(self.device))
             w, h = self.depth_size
             cfg.enable_stream(rs.stream.depth, w, h, rs.format.z16, self.fps)
             w, h = self.color_size
             cfg.enable_stream(rs.stream.color, w, h, rs.format.rgb8, self.fps)
+            try:
+                profile = pipe.start(cfg)
+            except RuntimeError as exc:
+                raise FileFormatError(
+                    f"the RealSense camera: cannot start streaming: {exc}"
+                ) from None
+            scale = float(profile.get_device().first_depth_sensor().get_depth_scale())
+            dprof = profile.get_stream(rs.stream.depth).as_video_stream_profile()
+            cprof = profile.get_stream(rs.stream.color).as_video_stream_profile()
+            return pipe, scale, dprof, cprof, None
         try:
-            profile = pipe.start(cfg)
-        except RuntimeError as exc:
-            where = self.path or "the RealSense camera"
-            raise FileFormatError(f"{where}: cannot start streaming: {exc}") from None
-        if self.path is not None:
-            playback = profile.get_device().as_playback()
+            dev = rs.context().load_device(str(self.path))
+            playback = dev.as_playback()
             playback.set_real_time(False)
-        kinds = {s.stream_type() for s in profile.get_streams()}
+            sensors = list(dev.query_sensors())
+            profiles = {p.stream_type(): p for s in sensors for p in s.get_stream_profiles()}
+        except RuntimeError as exc:
+            raise FileFormatError(f"{self.path}: cannot open the recording: {exc}") from None
         for kind, name in ((rs.stream.depth, "depth"), (rs.stream.color, "colour")):
-            if kind not in kinds:
-                pipe.stop()
+            if kind not in profiles:
                 raise InputError(
-                    f"{self.path or 'the camera'} has no {name} stream; the plane tracker "
-                    "needs depth and colour (record both)"
+                    f"{self.path} has no {name} stream; the plane tracker needs depth and "
+                    "colour (record both)"
                 )
-        return pipe, profile
+        player = _RecordingPlayer(rs, sensors)
+        try:
+            scale = float(dev.first_depth_sensor().get_depth_scale())
+        except RuntimeError as exc:
+            player.stop()
+            raise FileFormatError(f"{self.path}: no depth scale in the recording: {exc}") from None
+        dprof = profiles[rs.stream.depth].as_video_stream_profile()
+        cprof = profiles[rs.stream.color].as_video_stream_profile()
+        return player, scale, dprof, cprof, playback
 
     def __iter__(self) -> Iterator[RGBDFrame]:
         if self.path is not None and os.name == "posix":
@@ -550,31 +572,43 @@ class RealSenseSource:
         """The frames, read by librealsense in this process (a live camera; recordings
         where no child process can be watched)."""
         rs = self.rs
-        pipe, profile = self._start()
+        waiter, scale, dprof, cprof, playback = self._start()
         try:
-            depth_sensor = profile.get_device().first_depth_sensor()
-            scale = float(depth_sensor.get_depth_scale())
-            dprof = profile.get_stream(rs.stream.depth).as_video_stream_profile()
-            cprof = profile.get_stream(rs.stream.color).as_video_stream_profile()
             kd = intrinsics_from_rs(dprof.get_intrinsics())
             kc = intrinsics_from_rs(cprof.get_intrinsics())
             T = transform_from_rs(dprof.get_extrinsics_to(cprof))
             index = 0
             t0: float | None = None
             last_number: int | None = None
+            silent = 0.0  # seconds waited since the last frameset
             while self.max_frames is None or index < self.max_frames:
                 try:
-                    ok, frames = pipe.try_wait_for_frames(int(self.timeout * 1000))
+                    ok, frames = waiter.try_wait_for_frames(int(self.timeout * 1000))
                 except RuntimeError as exc:
                     raise SourceError(f"the RealSense stream failed: {exc}") from None
                 if not ok:
-                    if self.path is not None:
-                        return  # end of the recording
-                    raise SourceError(
-                        f"no frame from the RealSense camera for {self.timeout:g} s (unplugged?)"
-                    )
-                depth = frames.get_depth_frame()
-                color = frames.get_color_frame()
+                    if playback is None:
+                        raise SourceError(
+                            f"no frame from the RealSense camera for {self.timeout:g} s "
+                            "(unplugged?)"
+                        )
+                    if playback.current_status() != rs.playback_status.playing:
+                        return  # the player has reached the end of the recording
+                    # still playing: the machine is slow, not the recording over (a
+                    # timeout alone cut recordings short under load)
+                    silent += self.timeout
+                    if silent >= self.timeout + self.watchdog:
+                        raise FileFormatError(
+                            f"{self.path}: librealsense stopped responding for {silent:g} s "
+                            f"reading frame {index} (a corrupt recording; if it is sound but "
+                            "slow to open, raise the watchdog)"
+                        )
+                    continue
+                silent = 0.0
+                if isinstance(frames, tuple):  # a recording: already split
+                    depth, color = frames
+                else:
+                    depth, color = frames.get_depth_frame(), frames.get_color_frame()
                 if not depth or not color:
                     reason = "frameset without both depth and colour"
                     warnings.warn(f"skipping frame {index}: {reason}", stacklevel=2)
@@ -602,16 +636,84 @@ class RealSenseSource:
                 index += 1
         finally:
             try:
-                pipe.stop()
+                waiter.stop()
             except RuntimeError:  # pragma: no cover - already stopped
                 pass
+
+
+class _RecordingPlayer:
+    """The sensors of a playback device started into a ``syncer``, read as
+    ``(ok, (depth, colour))`` like a pipeline: one pair per recorded depth frame.
+
+    A syncer passes a frame on alone until it has seen every stream (on each recording
+    here the first depth and the first colour frame come as two framesets), and a
+    recording may hold a stream's frames at different times or rates. As a pipeline
+    does, each depth frame is paired with the last colour frame seen; depth frames
+    that come before any colour frame wait for the first one (a pipeline drops them),
+    at most ``max_waiting`` of them; any beyond, and those no colour frame follows, are
+    passed on without colour (and skipped, counted, by the reader)."""
+
+    max_waiting = 8
+
+    def __init__(self, rs: Any, sensors: list[Any]) -> None:
+        self.rs, self.sensors = rs, sensors
+        self.sync = rs.syncer()
+        self.color: Any = None  # the last colour frame
+        self.waiting: collections.deque[Any] = collections.deque()  # depth, no colour yet
+        self.ready: collections.deque[tuple[Any, Any]] = collections.deque()
+        opened: list[Any] = []
+        try:
+            for s in sensors:
+                s.open(s.get_stream_profiles())
+                opened.append(s)
+            for s in sensors:
+                s.start(self.sync)
+        except RuntimeError:
+            for s in opened:
+                with contextlib.suppress(RuntimeError):
+                    s.close()
+            raise
+
+    def try_wait_for_frames(self, ms: int) -> tuple[bool, tuple[Any, Any] | None]:
+        while True:
+            if self.ready:
+                return True, self.ready.popleft()
+            ok, frames = self.sync.try_wait_for_frames(ms)
+            if not ok:
+                if self.waiting:  # depth frames that no colour frame followed
+                    self.ready.extend((d, None) for d in self.waiting)
+                    self.waiting.clear()
+                    continue
+                return False, None
+            depth, color = frames.get_depth_frame(), frames.get_color_frame()
+            if color:
+                self.color = color
+                self.ready.extend((d, color) for d in self.waiting)
+                self.waiting.clear()
+            if not depth:
+                continue
+            if self.color is not None:
+                self.ready.append((depth, self.color))
+                continue
+            self.waiting.append(depth)
+            if len(self.waiting) > self.max_waiting:
+                self.ready.append((self.waiting.popleft(), None))
+
+    def stop(self) -> None:
+        for s in self.sensors:
+            with contextlib.suppress(RuntimeError):
+                s.stop()
+        for s in self.sensors:
+            with contextlib.suppress(RuntimeError):
+                s.close()
 
 
 #: the child process's entry point (a fresh interpreter: no fork of a process that holds
 #: locks or librealsense threads, and no re-import of the user's ``__main__``)
 _PLAYER = (
     "import sys; from robopercept.sources.realsense import _player_main; "
-    "_player_main(int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), int(sys.argv[4]))"
+    "_player_main(int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), int(sys.argv[4]), "
+    "float(sys.argv[5]))"
 )
 _HEAD = struct.Struct("<cQB")  # kind, length of the pickled part, number of raw buffers
 _TYPED = {"InputError": InputError, "FileFormatError": FileFormatError, "SourceError": SourceError}
@@ -651,7 +753,9 @@ def _send(out: Any, kind: bytes, obj: Any) -> None:
     out.flush()
 
 
-def _player_main(fd: int, path: str, timeout: float, max_frames: int) -> None:
+def _player_main(
+    fd: int, path: str, timeout: float, max_frames: int, watchdog: float = 10.0
+) -> None:
     """The child process of :func:`_play_in_child`: play the recording ``path`` with
     librealsense and send every frame, skip and error up the pipe ``fd``; ``max_frames``
     < 0 means all. Ends with ``os._exit`` (librealsense's teardown is not waited for)."""
@@ -661,6 +765,7 @@ def _player_main(fd: int, path: str, timeout: float, max_frames: int) -> None:
         src = RealSenseSource.__new__(RealSenseSource)
         src.rs, src.device, src.path = import_pyrealsense2(), path, Path(path)
         src.timeout, src.max_frames = timeout, (None if max_frames < 0 else max_frames)
+        src.watchdog = watchdog
         src.skipped = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the parent warns about skips
@@ -729,7 +834,12 @@ def _play_in_child(src: RealSenseSource) -> Iterator[RGBDFrame]:
     r, w = os.pipe()
     with contextlib.suppress(OSError, AttributeError):  # fewer wake-ups per frame (Linux)
         fcntl.fcntl(w, fcntl.F_SETPIPE_SZ, 1 << 20)  # type: ignore[attr-defined]
-    args = [str(path), repr(src.timeout), str(-1 if src.max_frames is None else src.max_frames)]
+    args = [
+        str(path),
+        repr(src.timeout),
+        str(-1 if src.max_frames is None else src.max_frames),
+        repr(src.watchdog),
+    ]
     err = tempfile.TemporaryFile()
     try:
         proc = subprocess.Popen(
@@ -839,8 +949,8 @@ class SoftwareCamera:
     Notes
     -----
     librealsense writes a recording from its own threads: :meth:`close` waits
-    ``settle`` seconds for the last frames before it stops the sensors (the recorder or
-    its syncer may still lose the first or last frameset of a recording).
+    ``settle`` seconds for the last frames before it stops the sensors (frames still in
+    flight then are lost).
     """
 
     def __init__(
