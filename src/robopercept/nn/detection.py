@@ -208,6 +208,10 @@ class DetectionBackbone(nn.Module):
         Output strides, increasing, from {4, 8, 16, 32}.
     fpn_channels : int, optional
         Build an FPN with this many channels on the outputs.
+    blocks : int
+        Residual blocks per stride-2 stage (1 by default; ResNet-18 has 2): each extra
+        block (stride 1, same channels) adds two 3 x 3 convolutions, so :math:`4 s`
+        pixels of receptive field at the stage's stride :math:`s`.
 
     Attributes
     ----------
@@ -223,10 +227,15 @@ class DetectionBackbone(nn.Module):
     """
 
     def __init__(
-        self, width: int = 16, strides: Sequence[int] = (8,), fpn_channels: int | None = None
+        self,
+        width: int = 16,
+        strides: Sequence[int] = (8,),
+        fpn_channels: int | None = None,
+        blocks: int = 1,
     ) -> None:
         super().__init__()
         width = check_count(width, "width", 1, 1024)
+        self.blocks = check_count(blocks, "blocks", 1, 16)
         if (
             not isinstance(strides, (list, tuple))
             or not strides
@@ -246,7 +255,11 @@ class DetectionBackbone(nn.Module):
             if s > max(self.strides):
                 break
             c_out = min(2 * c, 8 * width)
-            stages.append(ResidualBlock(c, c_out, stride=2))
+            stage: nn.Module = ResidualBlock(c, c_out, stride=2)
+            if self.blocks > 1:  # (one block alone keeps the shipped checkpoints' keys)
+                more = [ResidualBlock(c_out, c_out) for _ in range(self.blocks - 1)]
+                stage = nn.Sequential(stage, *more)
+            stages.append(stage)
             c = c_out
             chans[s] = c
         self.stages = nn.ModuleList(stages)
@@ -1346,6 +1359,8 @@ class FCOS(_Detector):
         FPN levels.
     head_channels : int
         FPN and head width.
+    blocks : int
+        Residual blocks per backbone stage (:class:`DetectionBackbone`).
     num_convs : int
         3 x 3 convolution + GroupNorm + ReLU layers in each of the two towers (class
         and box) before their outputs: 2 here by default, 4 in torchvision's
@@ -1387,6 +1402,7 @@ class FCOS(_Detector):
         width: int = 16,
         strides: Sequence[int] = (8, 16),
         head_channels: int = 64,
+        blocks: int = 1,
         num_convs: int = 2,
         center_radius: float = 1.5,
         box_activation: str = "relu",
@@ -1399,7 +1415,7 @@ class FCOS(_Detector):
     ) -> None:
         super().__init__()
         head_channels = check_count(head_channels, "head_channels", 2, MAX_CHANNELS)
-        self.backbone = DetectionBackbone(width, strides, fpn_channels=head_channels)
+        self.backbone = DetectionBackbone(width, strides, fpn_channels=head_channels, blocks=blocks)
         self._init_common(num_classes, max(self.backbone.strides))
         c = head_channels
         # GroupNorm with 8 groups (fewer where the channels do not divide), each of at
