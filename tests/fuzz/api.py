@@ -1244,6 +1244,32 @@ VALID.update(
 )
 
 
+# nn.coco_mask (issue 27): the compressed RLE of a 4 x 3 mask
+_RLE = {"size": [4, 3], "counts": "12114"}  # runs 1, 2, 1, 3, 5
+VALID.update(
+    {
+        "nn.coco_mask.rle_encode": {"mask": np.eye(4, 3, dtype=np.uint8)},
+        "nn.coco_mask.rle_decode": {"rle": _RLE},
+        "nn.coco_mask.rle_counts": {"rle": _RLE},
+        "nn.coco_mask.rle_from_counts": {"counts": [1, 2, 1, 3, 5], "size": (4, 3)},
+        "nn.coco_mask.rle_area": {"rle": _RLE},
+        "nn.coco_mask.rle_to_bbox": {"rle": _RLE},
+        "nn.coco_mask.rle_iou": {"dt": [_RLE], "gt": [_RLE, _RLE], "iscrowd": [0, 1]},
+        "nn.coco_mask.rle_merge": {"rles": [_RLE, _RLE]},
+        "nn.coco_mask.polygon_to_rle": {
+            "polygon": [0.5, 0.5, 2.5, 0.5, 1.5, 3.5],
+            "height": 4,
+            "width": 3,
+        },
+        "nn.coco_mask.annotation_to_rle": {
+            "segmentation": [[0.5, 0.5, 2.5, 0.5, 1.5, 3.5]],
+            "height": 4,
+            "width": 3,
+        },
+    }
+)
+
+
 # nn.detection_data (issue 26): a small detection set, a batch of it, a DeepForest folder
 def detection_value(kind: str) -> Any:
     """A valid nn.detection_data value: ``dataset`` (DetectionDataset) or ``batch``

@@ -25,6 +25,7 @@ _SUBMODULES = (
     "run",
     "boxes",
     "coco",
+    "coco_mask",
     "detection_data",
     "detection",
 )
