@@ -84,6 +84,7 @@ def pycocotools_eval(
     res: list[dict[str, Any]],
     faster: bool = False,
     max_dets: tuple[int, int, int] = (1, 10, 100),
+    iou_type: str = "bbox",
 ) -> Any:
     """``COCOeval`` (or faster-coco-eval's ``COCOeval_faster``) on copies of the dicts,
     its prints silenced; returns the evaluator after summarize()."""
@@ -95,7 +96,7 @@ def pycocotools_eval(
             g.dataset = copy.deepcopy(gt)
             g.createIndex()
             d = g.loadRes(copy.deepcopy(res))
-            ev = COCOeval_faster(g, d, "bbox")
+            ev = COCOeval_faster(g, d, iou_type)
         else:
             from pycocotools.coco import COCO
             from pycocotools.cocoeval import COCOeval
@@ -104,7 +105,7 @@ def pycocotools_eval(
             g.dataset = copy.deepcopy(gt)
             g.createIndex()
             d = g.loadRes(copy.deepcopy(res))
-            ev = COCOeval(g, d, "bbox")
+            ev = COCOeval(g, d, iou_type)
         ev.params.maxDets = list(max_dets)
         ev.evaluate()
         ev.accumulate()

@@ -38,9 +38,11 @@ from robopercept.nn.coco import (
     write_coco_results,
     write_pr_curves,
 )
+from robopercept.nn.coco_mask import rle_counts, rle_encode
 from tests.conftest import data_path
 
 pytest.importorskip("pycocotools")
+M = pytest.importorskip("pycocotools.mask")
 
 TOL = 1e-9
 
@@ -120,6 +122,132 @@ class TestParityWithPycocotools:
         np.testing.assert_array_equal(a.precision, b.precision)
         np.testing.assert_array_equal(a.recall, b.recall)
         np.testing.assert_array_equal(a.stats, b.stats)
+
+
+def synthetic_masks(seed: int) -> tuple[dict, list[dict]]:
+    """A seeded ``segm`` set: 8 images of 20-90 px, 3 categories (one without ground
+    truth), polygon ground truth with its mask area as ``area``, crowd regions as
+    uncompressed RLE (as COCO stores them), an image without ground truth and one
+    without results; results: each ground-truth mask grown, shrunk or moved, plus
+    random blobs, scores drawn from a few values (ties)."""
+    rng = np.random.default_rng(seed)
+    images, anns, res = [], [], []
+    for i in range(1, 9):
+        h, w = (int(v) for v in rng.integers(20, 90, 2))
+        images.append({"id": i, "file_name": f"{i}.png", "width": w, "height": h})
+        n = 0 if i == 2 else int(rng.integers(1, 6))
+        for _ in range(n):
+            cat = int(rng.integers(1, 3))
+            cx, cy = rng.uniform(0, w), rng.uniform(0, h)
+            r = rng.uniform(2, min(h, w) / 2)
+            t = np.sort(rng.uniform(0, 2 * np.pi, int(rng.integers(3, 9))))
+            poly = np.column_stack([cx + r * np.cos(t), cy + r * np.sin(t)]).ravel()
+            crowd = rng.random() < 0.15
+            m = M.decode(M.frPyObjects([poly.tolist()], h, w)[0])
+            if crowd:
+                seg = {"size": [h, w], "counts": rle_counts(rle_encode(m))[1].tolist()}
+            else:
+                seg = [poly.tolist()]
+            x, y, bw, bh = M.toBbox(M.encode(np.asfortranarray(m))).tolist()
+            anns.append(
+                {
+                    "id": len(anns) + 1,
+                    "image_id": i,
+                    "category_id": cat,
+                    "bbox": [x, y, bw, bh],
+                    "area": float(m.sum()),
+                    "iscrowd": int(crowd),
+                    "segmentation": seg,
+                }
+            )
+            if i == 3:
+                continue
+            for _ in range(int(rng.integers(0, 3))):
+                mm = m.copy()
+                op = rng.integers(0, 3)
+                if op == 0:
+                    mm = np.roll(mm, (int(rng.integers(-3, 4)), int(rng.integers(-3, 4))), (0, 1))
+                elif op == 1:
+                    mm[:: int(rng.integers(2, 4))] = 0
+                else:
+                    mm = np.maximum(mm, np.roll(mm, 2, 1))
+                res.append(_mask_result(i, cat, mm, rng))
+        if i != 3:
+            for _ in range(int(rng.integers(0, 4))):
+                blob = (rng.random((h, w)) < 0.02).astype(np.uint8)
+                res.append(_mask_result(i, int(rng.integers(1, 4)), blob, rng))
+    cats = [{"id": c, "name": f"c{c}"} for c in (1, 2, 3)]
+    return {"images": images, "categories": cats, "annotations": anns}, res
+
+
+def _mask_result(img: int, cat: int, m: np.ndarray, rng: np.random.Generator) -> dict:
+    return {
+        "image_id": img,
+        "category_id": cat,
+        "segmentation": rle_encode(m),
+        "score": float(rng.choice([0.3, 0.5, 0.7, 0.9])),
+    }
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # pycocotools under NumPy 2
+class TestSegmParity:
+    @pytest.mark.parametrize("seed", [0, 1, 2])
+    def test_randomized_mask_sets(self, seed):
+        gt, res = synthetic_masks(seed)
+        # what the set promises: crowd regions, an image without ground truth and one
+        # without results, a category without ground truth that has detections
+        assert any(a["iscrowd"] for a in gt["annotations"])
+        assert 2 not in {a["image_id"] for a in gt["annotations"]}
+        assert 3 not in {r["image_id"] for r in res}
+        assert 3 in {r["category_id"] for r in res} - {a["category_id"] for a in gt["annotations"]}
+        ours = evaluate_detections(gt, res, iou_type="segm")
+        ref = pycocotools_eval(gt, res, iou_type="segm")
+        np.testing.assert_allclose(ours.precision, ref.eval["precision"], rtol=0, atol=TOL)
+        np.testing.assert_allclose(ours.recall, ref.eval["recall"], rtol=0, atol=TOL)
+        np.testing.assert_allclose(ours.stats, ref.stats, rtol=0, atol=TOL)
+        # the compiled matching equals its Python reference on given IoUs too
+        py = evaluate_detections(gt, res, iou_type="segm", use_jit=False)
+        np.testing.assert_array_equal(py.precision, ours.precision)
+
+    def test_masks_change_the_figure_boxes_would_give(self):
+        # an L-shaped ground truth and a detection filling its 8 x 8 box: box IoU 1,
+        # mask IoU 48 / 64 = 0.75 (the L covers 48 of the 64 pixels)
+        m = np.zeros((16, 16), np.uint8)
+        m[4:12, 4:8] = 1
+        m[8:12, 4:12] = 1
+        full = np.zeros_like(m)
+        full[4:12, 4:12] = 1
+        seg = {"size": [16, 16], "counts": rle_counts(rle_encode(m))[1].tolist()}
+        gt = one_image([{"bbox": [4, 4, 8, 8], "area": 48.0, "segmentation": seg}])
+        gt["images"][0] |= {"width": 16, "height": 16}
+        r = [{"image_id": 1, "category_id": 1, "segmentation": rle_encode(full), "score": 1.0}]
+        box = evaluate_detections(gt, [r[0] | {"bbox": [4, 4, 8, 8]}]).summary()["AP"]
+        segm = evaluate_detections(gt, r, iou_type="segm").summary()
+        # thresholds .50 to .75 pass, 6 of 10
+        assert box == pytest.approx(1.0) and segm["AP"] == pytest.approx(0.6)
+        assert segm["AP50"] == pytest.approx(1.0)
+        # a result's box is its mask's when no bbox is given (pycocotools' loadRes)
+        assert results_from_list(r).boxes.tolist() == [[4.0, 4.0, 8.0, 8.0]]
+        with pytest.raises(InputError, match=r"results\[0\] has no segmentation"):
+            evaluate_detections(gt, [det([4, 4, 8, 8], 0.5)], iou_type="segm")
+        with pytest.raises(InputError, match="must be an RLE dict"):
+            results_from_list(
+                [
+                    {
+                        "image_id": 1,
+                        "category_id": 1,
+                        "score": 1.0,
+                        "segmentation": [[0, 0, 4, 0, 4, 4]],
+                    }
+                ]
+            )
+        wrong = dict(r[0], segmentation=rle_encode(np.ones((8, 8))))
+        with pytest.raises(InputError, match="8 x 8 but the image is 16 x 16"):
+            evaluate_detections(gt, [wrong], iou_type="segm")
+        # segmentations survive the round trip through dicts
+        back = coco_from_dict(coco_to_dict(coco_from_dict(gt)))
+        assert back.segmentations[0] == seg
+        assert results_to_list(results_from_list(r))[0]["segmentation"] == r[0]["segmentation"]
 
 
 # ----------------------------------------------------------------------------- hand cases
@@ -206,6 +334,8 @@ class TestBadInput:
     def test_evaluate_arguments(self):
         gt = one_image([{"bbox": [0, 0, 10, 10]}])
         with pytest.raises(InputError, match="iou_type"):
+            evaluate_detections(gt, [], iou_type="keypoints")
+        with pytest.raises(InputError, match="annotation id 1 has no segmentation"):
             evaluate_detections(gt, [], iou_type="segm")
         with pytest.raises(InputError, match="max_dets must be increasing"):
             evaluate_detections(gt, [], max_dets=(10, 1, 100))

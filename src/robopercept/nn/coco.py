@@ -8,8 +8,8 @@ Formats
   (id, file_name, width, height), categories (id, name) and bounding-box annotations as
   arrays (id, image_id, category_id, ``bbox`` = ``[x, y, w, h]``, area, iscrowd). Read it
   with :func:`read_coco_json` or :func:`coco_from_dict`, write it with
-  :func:`write_coco_json` / :func:`coco_to_dict`. Segmentations and keypoints in a file
-  are not kept (this module is about boxes).
+  :func:`write_coco_json` / :func:`coco_to_dict`. Each annotation's ``segmentation``
+  is kept as the file gives it (for the ``segm`` evaluation); keypoints are not.
 * :class:`CocoResults` is a COCO results file, a list of
   ``{"image_id", "category_id", "bbox", "score"}``: :func:`read_coco_results`,
   :func:`results_from_list`, :func:`write_coco_results`, :func:`results_to_list`.
@@ -19,7 +19,9 @@ Formats
 Evaluation
 ----------
 :func:`evaluate_detections` is the COCO evaluation of ``pycocotools.cocoeval.COCOeval``
-(``iouType="bbox"``) reimplemented with NumPy arrays and one compiled matching kernel.
+(``iouType="bbox"`` and ``"segm"``) reimplemented with NumPy arrays and one compiled
+matching kernel (for masks, the IoU below is that of the masks,
+:func:`~robopercept.nn.coco_mask.rle_iou`, with the same crowd rule).
 For every image and category, detections sorted by score (stable) and cut to the last
 ``max_dets`` are matched greedily to ground truth, for each of the 10 IoU thresholds
 :math:`t \in \{.50, .55, \ldots, .95\}` and each area range (all, small < 32², medium,
@@ -92,6 +94,7 @@ from robopercept._checks import (
     plain_repr,
 )
 from robopercept.errors import FileFormatError, InputError
+from robopercept.nn.coco_mask import annotation_to_rle, rle_area, rle_iou, rle_to_bbox
 
 __all__ = [
     "AREA_RANGES",
@@ -193,6 +196,11 @@ class CocoDataset:
     areas : (N,) float64 ndarray
         COCO's ``area`` (the segmentation's area in COCO files; ``w h`` when absent).
     iscrowd : (N,) bool ndarray
+    segmentations : tuple
+        Each annotation's ``segmentation`` as the file gives it (polygons, an RLE) or
+        None where it has none; empty when no annotation has one. Read as masks by
+        :func:`~robopercept.nn.coco_mask.annotation_to_rle` for the ``segm``
+        evaluation.
 
     Examples
     --------
@@ -213,6 +221,7 @@ class CocoDataset:
     boxes: np.ndarray
     areas: np.ndarray
     iscrowd: np.ndarray
+    segmentations: tuple[Any, ...] = ()
 
     def __len__(self) -> int:
         return int(self.ann_ids.size)
@@ -232,6 +241,9 @@ class CocoResults:
     boxes : (N, 4) float64 ndarray
         ``[x, y, w, h]``.
     scores : (N,) float64 ndarray
+    segmentations : tuple
+        Each detection's mask as a COCO RLE dict (the ``segm`` results), or empty for
+        box results.
 
     Examples
     --------
@@ -245,6 +257,7 @@ class CocoResults:
     category_ids: np.ndarray
     boxes: np.ndarray
     scores: np.ndarray
+    segmentations: tuple[Any, ...] = ()
 
     def __len__(self) -> int:
         return int(self.scores.size)
@@ -364,6 +377,7 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
     crowd = np.zeros(n, dtype=bool)
     has_area = np.zeros(n, dtype=bool)
     rows = []
+    segs: list[Any] = []
     fix = "each annotation needs id, image_id, category_id and bbox [x, y, w, h]"
     for k, a in enumerate(anns):
         where = f"annotations[{k}]"
@@ -375,6 +389,7 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
             _field(a, "category_id", where, fix, err), f"{where}: category_id", err
         )
         rows.append(_field(a, "bbox", where, fix, err))
+        segs.append(a.get("segmentation"))
         if "area" in a:
             ar = a["area"]
             if isinstance(ar, bool) or not isinstance(ar, (int, float)) or not math.isfinite(ar):
@@ -412,6 +427,7 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
         _readonly(boxes),
         _readonly(areas),
         _readonly(crowd),
+        tuple(segs) if any(sg is not None for sg in segs) else (),
     )
 
 
@@ -523,14 +539,16 @@ def coco_to_dict(dataset: CocoDataset) -> dict[str, Any]:
                 "bbox": b.tolist(),
                 "area": float(ar),
                 "iscrowd": int(cr),
+                **({"segmentation": sg} if sg is not None else {}),
             }
-            for a, i, c, b, ar, cr in zip(
+            for a, i, c, b, ar, cr, sg in zip(
                 dataset.ann_ids,
                 dataset.image_ids,
                 dataset.category_ids,
                 dataset.boxes,
                 dataset.areas,
                 dataset.iscrowd,
+                dataset.segmentations or (None,) * len(dataset),
                 strict=True,
             )
         ],
@@ -563,12 +581,31 @@ def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
     cat = np.empty(n, dtype=np.int64)
     scores = np.empty(n, dtype=np.float64)
     rows = []
-    fix = "each result needs image_id, category_id, bbox [x, y, w, h] and score"
+    segs: list[Any] = []
+    fix = (
+        "each result needs image_id, category_id, score and bbox [x, y, w, h] (or a "
+        "segmentation RLE)"
+    )
     for k, r in enumerate(data):
         where = f"results[{k}]"
         img[k] = _as_int(_field(r, "image_id", where, fix, err), f"{where}.image_id", err)
         cat[k] = _as_int(_field(r, "category_id", where, fix, err), f"{where}.category_id", err)
-        rows.append(_field(r, "bbox", where, fix, err))
+        seg = r.get("segmentation") if isinstance(r, Mapping) else None
+        if seg is not None:
+            try:
+                box = rle_to_bbox(seg).tolist() if isinstance(seg, Mapping) else None
+            except InputError as exc:
+                raise err(f"{where}.segmentation: {exc}") from None
+            if box is None:
+                raise err(
+                    f"{where}.segmentation must be an RLE dict {{'size': [h, w], 'counts': "
+                    "...}} (COCO results hold masks as RLE)"
+                )
+            # as pycocotools' loadRes: the mask's box where no bbox is given
+            rows.append(r["bbox"] if "bbox" in r else box)
+        else:
+            rows.append(_field(r, "bbox", where, fix, err))
+        segs.append(seg)
         s = _field(r, "score", where, fix, err)
         if isinstance(s, bool) or not isinstance(s, (int, float, np.floating, np.integer)):
             raise err(f"{where}.score must be a number; got {plain_repr(s)}")
@@ -576,7 +613,8 @@ def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
             raise err(f"{where}.score is {s}; scores must be finite: drop that detection")
         scores[k] = s
     boxes = _boxes_array(rows, [f"[{k}]" for k in range(n)], "results", err)
-    return CocoResults(_readonly(img), _readonly(cat), _readonly(boxes), _readonly(scores))
+    kept = tuple(segs) if any(sg is not None for sg in segs) else ()
+    return CocoResults(_readonly(img), _readonly(cat), _readonly(boxes), _readonly(scores), kept)
 
 
 def results_from_list(results: Sequence[Mapping[str, Any]]) -> CocoResults:
@@ -633,9 +671,20 @@ def results_to_list(results: CocoResults) -> list[dict[str, Any]]:
     if not isinstance(results, CocoResults):
         raise InputError(f"results must be CocoResults; got {type(results).__name__}")
     return [
-        {"image_id": int(i), "category_id": int(c), "bbox": b.tolist(), "score": float(s)}
-        for i, c, b, s in zip(
-            results.image_ids, results.category_ids, results.boxes, results.scores, strict=True
+        {
+            "image_id": int(i),
+            "category_id": int(c),
+            "bbox": b.tolist(),
+            "score": float(s),
+            **({"segmentation": sg} if sg is not None else {}),
+        }
+        for i, c, b, s, sg in zip(
+            results.image_ids,
+            results.category_ids,
+            results.boxes,
+            results.scores,
+            results.segmentations or (None,) * len(results),
+            strict=True,
         )
     ]
 
@@ -887,12 +936,18 @@ def _match_groups(
     gt_area: np.ndarray,
     gt_crowd: np.ndarray,
     dt_boxes: np.ndarray,
+    dt_area: np.ndarray,
+    given: tuple[np.ndarray, np.ndarray],
     params: tuple[np.ndarray, np.ndarray],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """COCO's greedy matching for every (image, category) group.
 
     ``groups`` (G, 4) int64 holds ``gt_start, gt_stop, dt_start, dt_stop``; the
     detections of a group are sorted by score (stable) and cut to max_dets[-1].
+    ``dt_area`` (n_dt,) is each detection's area (for the area ranges). ``given`` =
+    (IoUs, offsets): when ``offsets`` (G,) is not empty, group ``g``'s (nd, ng) IoU
+    matrix is ``IoUs[offsets[g]:offsets[g] + nd ng]`` row-major (masks, computed
+    outside), otherwise the IoU of the boxes (xywh) is computed here.
     ``params`` = (iou thresholds (T,), area ranges (A, 2)). Returns ``dt_matched``,
     ``dt_ignored`` (A, T, n_dt) and ``gt_ignored`` (A, n_gt) bool arrays.
 
@@ -907,7 +962,7 @@ def _match_groups(
     dt_m = np.zeros((n_a, n_t, n_dt), dtype=np.bool_)
     dt_ig = np.zeros((n_a, n_t, n_dt), dtype=np.bool_)
     gt_ig = np.zeros((n_a, n_gt), dtype=np.bool_)
-    dt_area = dt_boxes[:, 2] * dt_boxes[:, 3]
+    given_ious, offsets = given
     for g in range(groups.shape[0]):
         g0, g1, d0, d1 = groups[g, 0], groups[g, 1], groups[g, 2], groups[g, 3]
         ng = g1 - g0
@@ -921,31 +976,37 @@ def _match_groups(
             continue
         # IoU (nd, ng) as pycocotools' bbIou computes it (same operations, same order)
         ious = np.zeros((nd, ng))
-        for j in range(ng):
-            gx, gy, gw, gh = (
-                gt_boxes[g0 + j, 0],
-                gt_boxes[g0 + j, 1],
-                gt_boxes[g0 + j, 2],
-                gt_boxes[g0 + j, 3],
-            )
-            ga = gw * gh
+        if offsets.size:
+            o = offsets[g]
             for i in range(nd):
-                dx, dy, dw, dh = (
-                    dt_boxes[d0 + i, 0],
-                    dt_boxes[d0 + i, 1],
-                    dt_boxes[d0 + i, 2],
-                    dt_boxes[d0 + i, 3],
+                for j in range(ng):
+                    ious[i, j] = given_ious[o + i * ng + j]
+        else:
+            for j in range(ng):
+                gx, gy, gw, gh = (
+                    gt_boxes[g0 + j, 0],
+                    gt_boxes[g0 + j, 1],
+                    gt_boxes[g0 + j, 2],
+                    gt_boxes[g0 + j, 3],
                 )
-                w = min(dw + dx, gw + gx) - max(dx, gx)
-                if w <= 0:
-                    continue
-                h = min(dh + dy, gh + gy) - max(dy, gy)
-                if h <= 0:
-                    continue
-                inter = w * h
-                da = dw * dh
-                u = da if gt_crowd[g0 + j] else da + ga - inter
-                ious[i, j] = inter / u
+                ga = gw * gh
+                for i in range(nd):
+                    dx, dy, dw, dh = (
+                        dt_boxes[d0 + i, 0],
+                        dt_boxes[d0 + i, 1],
+                        dt_boxes[d0 + i, 2],
+                        dt_boxes[d0 + i, 3],
+                    )
+                    w = min(dw + dx, gw + gx) - max(dx, gx)
+                    if w <= 0:
+                        continue
+                    h = min(dh + dy, gh + gy) - max(dy, gy)
+                    if h <= 0:
+                        continue
+                    inter = w * h
+                    da = dw * dh
+                    u = da if gt_crowd[g0 + j] else da + ga - inter
+                    ious[i, j] = inter / u
         order = np.empty(ng, dtype=np.int64)
         ign = np.zeros(ng, dtype=np.bool_)
         taken = np.zeros(ng, dtype=np.bool_)
@@ -1075,6 +1136,55 @@ def _check_results(results: Any, gt: CocoDataset) -> CocoResults:
     return res
 
 
+def _mask_ious(
+    gt: CocoDataset,
+    res: CocoResults,
+    g_ord: np.ndarray,
+    d_ord: np.ndarray,
+    groups: np.ndarray,
+) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """The ``segm`` evaluation's IoUs: per group (rows of ``groups``, over the ground
+    truth in ``g_ord`` and the detections in ``d_ord`` order) the (nd, ng) mask IoU,
+    flattened into one array with each group's offset, and each detection's mask
+    area."""
+    sizes = {i.id: (i.height, i.width) for i in gt.images}
+    if not gt.segmentations or any(sg is None for sg in gt.segmentations):
+        k = 0 if not gt.segmentations else [sg is None for sg in gt.segmentations].index(True)
+        raise InputError(
+            f"annotation id {int(gt.ann_ids[k])} has no segmentation: iou_type='segm' "
+            "needs polygons or an RLE on every ground-truth annotation"
+        )
+    if not res.segmentations or any(sg is None for sg in res.segmentations):
+        k = 0 if not res.segmentations else [sg is None for sg in res.segmentations].index(True)
+        raise InputError(
+            f"results[{k}] has no segmentation: iou_type='segm' needs an RLE mask "
+            "('segmentation': {'size': [h, w], 'counts': ...}) on every result"
+        )
+
+    def rle(seg: Any, image_id: int, what: str) -> dict[str, Any]:
+        try:
+            return annotation_to_rle(seg, *sizes[int(image_id)])
+        except InputError as exc:
+            raise InputError(f"{what}: {exc}") from None
+
+    g_rle = [
+        rle(gt.segmentations[k], gt.image_ids[k], f"annotation id {int(gt.ann_ids[k])}")
+        for k in g_ord
+    ]
+    d_rle = [rle(res.segmentations[k], res.image_ids[k], f"results[{k}]") for k in d_ord]
+    d_area = np.asarray(rle_area(d_rle), dtype=np.float64) if d_rle else np.zeros(0)
+    crowd = gt.iscrowd[g_ord]
+    parts, offsets, at = [], np.zeros(groups.shape[0], np.int64), 0
+    for g, (g0, g1, d0, d1) in enumerate(groups):
+        offsets[g] = at
+        if g1 > g0 and d1 > d0:
+            iou = rle_iou(d_rle[d0:d1], g_rle[g0:g1], crowd[g0:g1])
+            parts.append(iou.ravel())
+            at += iou.size
+    flat = np.concatenate(parts) if parts else np.zeros(0)
+    return (flat, offsets), d_area
+
+
 def _stable_rank_in_groups(keys: np.ndarray) -> np.ndarray:
     """Rank of each element within its run of equal ``keys`` (keys sorted)."""
     n = keys.size
@@ -1093,8 +1203,9 @@ def evaluate_detections(
     max_dets: Sequence[int] = (1, 10, 100),
     use_jit: bool = True,
 ) -> CocoEvaluation:
-    """COCO box evaluation of ``results`` against ``gt``; equals ``pycocotools``'
-    ``COCOeval(gt, dt, "bbox")`` ``evaluate(); accumulate(); summarize()``.
+    """COCO box or mask evaluation of ``results`` against ``gt``; equals
+    ``pycocotools``' ``COCOeval(gt, dt, iou_type)`` ``evaluate(); accumulate();
+    summarize()`` for ``"bbox"`` and ``"segm"``.
 
     The algorithm is in the module docstring: greedy matching by score per image and
     category at IoU .50:.05:.95, crowd and out-of-range ground truth ignored, the
@@ -1106,8 +1217,12 @@ def evaluate_detections(
         Ground truth; its images and categories are those evaluated.
     results : CocoResults or list of dict
         Detections; every ``image_id`` and ``category_id`` must be in ``gt``.
-    iou_type : {"bbox"}
-        Only boxes are evaluated here.
+    iou_type : {"bbox", "segm"}
+        ``"segm"``: the IoU of the masks (:func:`~robopercept.nn.coco_mask.rle_iou`,
+        the crowd rule as for boxes) replaces that of the boxes: every ground-truth
+        annotation needs a ``segmentation`` (polygons or RLE, rasterized at its
+        image's size) and every result an RLE ``segmentation``; a detection's area
+        for the area ranges is its mask's, a ground truth's is its ``area`` field.
     max_dets : three increasing positive ints
         Detections kept per image (COCO: 1, 10, 100); the summary's AR1/AR10/AR100
         use them in order, and the APs the last. (pycocotools' ``summarize`` asks for
@@ -1123,7 +1238,8 @@ def evaluate_detections(
     Raises
     ------
     InputError
-        ``iou_type`` other than "bbox", bad ``max_dets``, results naming an image or
+        ``iou_type`` other than "bbox" or "segm", a missing or bad segmentation for
+        "segm", bad ``max_dets``, results naming an image or
         category the ground truth lacks, or anything :func:`coco_from_dict` /
         :func:`results_from_list` refuse.
 
@@ -1139,7 +1255,7 @@ def evaluate_detections(
     >>> round(ev.summary()["AP50"], 9), round(ev.summary()["AP"], 9)  # IoU 0.8
     (1.0, 0.7)
     """
-    check_choice(iou_type, "iou_type", ("bbox",))
+    check_choice(iou_type, "iou_type", ("bbox", "segm"))
     if not isinstance(max_dets, (list, tuple)) or len(max_dets) != 3:
         raise InputError(
             f"max_dets must be three increasing ints like (1, 10, 100); got {plain_repr(max_dets)}"
@@ -1185,9 +1301,21 @@ def evaluate_detections(
     gt_crowd = np.ascontiguousarray(gtd.iscrowd[g_ord])
     dt_boxes = np.ascontiguousarray(res.boxes[d_ord])
     dt_scores = res.scores[d_ord]
+    if iou_type == "segm":
+        given, dt_area = _mask_ious(gtd, res, g_ord, d_ord, groups)
+    else:
+        given = (np.zeros(0), np.zeros(0, np.int64))
+        dt_area = np.ascontiguousarray(dt_boxes[:, 2] * dt_boxes[:, 3])
     match = _match_groups_jit if jit else _match_groups
     dt_m, dt_ig, gt_ig = match(
-        groups, gt_boxes, gt_area, gt_crowd, dt_boxes, (IOU_THRESHOLDS, AREA_RANGES)
+        groups,
+        gt_boxes,
+        gt_area,
+        gt_crowd,
+        dt_boxes,
+        dt_area,
+        given,
+        (IOU_THRESHOLDS, AREA_RANGES),
     )
 
     precision = -np.ones((T, R, K := n_k, A, M))
