@@ -1270,6 +1270,26 @@ VALID.update(
 )
 
 
+# nn.segmentation_eval (issue 27): two 3 x 4 label maps of 3 classes
+_SEG_T = np.array([[0, 0, 1, 1], [0, 2, 2, 1], [0, 2, 2, 1]])
+_SEG_P = np.array([[0, 1, 1, 1], [0, 2, 2, 2], [0, 0, 2, 1]])
+VALID.update(
+    {
+        "nn.segmentation_eval.segmentation_confusion": {
+            "y_true": _SEG_T,
+            "y_pred": _SEG_P,
+            "num_classes": 3,
+        },
+        "nn.segmentation_eval.segmentation_scores": {"confusion": [[3, 1], [0, 4]]},
+        "nn.segmentation_eval.boundary_f_score": {
+            "y_true": _SEG_T,
+            "y_pred": _SEG_P,
+            "num_classes": 3,
+        },
+    }
+)
+
+
 # nn.detection_data (issue 26): a small detection set, a batch of it, a DeepForest folder
 def detection_value(kind: str) -> Any:
     """A valid nn.detection_data value: ``dataset`` (DetectionDataset) or ``batch``

@@ -26,6 +26,7 @@ _SUBMODULES = (
     "boxes",
     "coco",
     "coco_mask",
+    "segmentation_eval",
     "detection_data",
     "detection",
 )
