@@ -1290,6 +1290,27 @@ VALID.update(
 )
 
 
+# nn.segmentation (issue 27): tiny networks, logits and labels of two 8 x 8 images
+_SLOGITS = _b("tests.fuzz.api:torch_image", 2, 3, 8, 8)
+_SLABELS = _b("tests.fuzz.api:torch_tensor", np.tile([[0, 1, 2, 1]], (2, 8, 2)), "int64")
+VALID.update(
+    {
+        "nn.segmentation.NaiveFCN": {"num_classes": 3, "width": 4, "depth": 2},
+        "nn.segmentation.FCN": {"num_classes": 3, "width": 4},
+        "nn.segmentation.UNet": {"num_classes": 3, "width": 4, "depth": 2},
+        "nn.segmentation.NaiveFCN.forward": {"x": _b("tests.fuzz.api:torch_image", 1, 3, 8, 8)},
+        "nn.segmentation.FCN.forward": {"x": _b("tests.fuzz.api:torch_image", 2, 3, 8, 8)},
+        "nn.segmentation.UNet.forward": {"x": _b("tests.fuzz.api:torch_image", 1, 3, 8, 8)},
+        "nn.segmentation.bilinear_kernel": {"channels": 2, "factor": 2},
+        "nn.segmentation.build_segmenter": {"name": "unet", "num_classes": 2, "width": 4},
+        "nn.segmentation.segmentation_cross_entropy": {"logits": _SLOGITS, "target": _SLABELS},
+        "nn.segmentation.dice_loss": {"logits": _SLOGITS, "target": _SLABELS},
+    }
+)
+for _cls in ("NaiveFCN", "FCN", "UNet"):
+    METHODS[f"nn.segmentation.{_cls}"] = ("forward",)
+
+
 # nn.detection_data (issue 26): a small detection set, a batch of it, a DeepForest folder
 def detection_value(kind: str) -> Any:
     """A valid nn.detection_data value: ``dataset`` (DetectionDataset) or ``batch``

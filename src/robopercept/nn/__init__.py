@@ -27,6 +27,7 @@ _SUBMODULES = (
     "coco",
     "coco_mask",
     "segmentation_eval",
+    "segmentation",
     "detection_data",
     "detection",
 )

@@ -1,0 +1,441 @@
+r"""Semantic segmentation networks and losses in torch: the notes' naive
+full-resolution network, FCN-32s/16s/8s and U-Net.
+
+Every network maps ``(N, C, H, W)`` images to ``(N, K, H, W)`` class logits for any
+``H, W``: the downsampling ones pad the input on the right and bottom to a multiple of
+their total stride and crop the logits back (the role of FCN's crop layers).
+
+* :class:`NaiveFCN`: ``depth`` 3 x 3 convolutions at full resolution (padding only),
+  then a 1 x 1 classifier: receptive field :math:`1 + 2\,\mathrm{depth}` pixels and
+  :math:`O(\mathrm{depth}\, H W c^2)` operations, the cost the notes warn of.
+* :class:`FCN` (Long et al. 2015): a strided backbone (the detection backbone's
+  residual stages, strides 8, 16, 32), a 1 x 1 class scorer on the stride-32 map,
+  upsampled by 2 and added to the scores of the stride-16 map (16s), again to those of
+  the stride-8 map (8s), then upsampled to the input size. Upsampling is a learned
+  transposed convolution initialised to bilinear interpolation (the paper's) or fixed
+  bilinear interpolation (``upsample``).
+* :class:`UNet` (Ronneberger et al. 2015): an encoder of double 3 x 3 convolutions and
+  2 x 2 max pools, a decoder that upsamples by 2 (transposed convolution or bilinear
+  interpolation followed by a 1 x 1 convolution), concatenates the encoder map of the
+  same resolution (skip connection) and applies a double convolution.
+
+Losses: :func:`segmentation_cross_entropy` (per-pixel softmax cross entropy with class
+weights and an ignore index, ``torch.nn.functional.cross_entropy``) and
+:func:`dice_loss` (soft Dice, Milletari et al. 2016).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from robopercept._checks import check_choice, check_int, check_real, plain_repr
+from robopercept.errors import InputError
+from robopercept.nn._guards import check_count
+from robopercept.nn.blocks import ConvBNAct, check_input
+from robopercept.nn.detection import MAX_CHANNELS, DetectionBackbone
+
+__all__ = [
+    "FCN",
+    "NaiveFCN",
+    "UNet",
+    "bilinear_kernel",
+    "build_segmenter",
+    "dice_loss",
+    "segmentation_cross_entropy",
+]
+
+UPSAMPLE = ("transposed", "bilinear")
+
+
+def bilinear_kernel(channels: int, factor: int) -> torch.Tensor:
+    r"""The ``(channels, channels, k, k)`` weight, :math:`k = 2 f - f \bmod 2`, that
+    makes ``conv_transpose2d(x, w, stride=f, padding=(k - f) // 2 ... )`` bilinear
+    upsampling by :math:`f` channel by channel (FCN's initialisation,
+    ``upsample_filt``):
+
+    .. math:: w_{cc}(i, j) = \left(1 - \frac{|i - c_0|}{s}\right)
+                             \left(1 - \frac{|j - c_0|}{s}\right),\quad
+              s = \lceil k / 2 \rceil,\;
+              c_0 = s - 1 \text{ (k odd) or } s - \tfrac12 \text{ (k even)},
+
+    and 0 between different channels.
+
+    Examples
+    --------
+    >>> bilinear_kernel(1, 2)[0, 0]
+    tensor([[0.0625, 0.1875, 0.1875, 0.0625],
+            [0.1875, 0.5625, 0.5625, 0.1875],
+            [0.1875, 0.5625, 0.5625, 0.1875],
+            [0.0625, 0.1875, 0.1875, 0.0625]])
+    """
+    c = check_count(channels, "channels", 1, MAX_CHANNELS)
+    f = check_count(factor, "factor", 1, 64)
+    k = 2 * f - f % 2
+    s = (k + 1) // 2
+    center = s - 1 if k % 2 == 1 else s - 0.5
+    r = torch.arange(k, dtype=torch.float32)
+    filt = 1 - (r - center).abs() / s
+    w = torch.zeros(c, c, k, k)
+    w[range(c), range(c)] = filt[:, None] * filt[None, :]
+    return w
+
+
+class _Upsample(nn.Module):
+    """Upsample by ``factor``: a transposed convolution initialised to bilinear
+    interpolation (learned), or fixed bilinear interpolation."""
+
+    def __init__(self, channels: int, factor: int, mode: str) -> None:
+        super().__init__()
+        self.factor, self.mode = factor, mode
+        if mode == "transposed":
+            k = 2 * factor - factor % 2
+            self.conv: nn.ConvTranspose2d | None = nn.ConvTranspose2d(
+                channels, channels, k, stride=factor, padding=(k - factor) // 2, bias=False
+            )
+            with torch.no_grad():
+                self.conv.weight.copy_(bilinear_kernel(channels, factor))
+        else:
+            self.conv = None
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if self.conv is None:
+            return F.interpolate(x, scale_factor=self.factor, mode="bilinear", align_corners=False)
+        return self.conv(x)
+
+
+def _pad_to(x: torch.Tensor, multiple: int, training: bool) -> tuple[torch.Tensor, int, int]:
+    """``x`` padded right and bottom to a multiple of ``multiple``, with its size;
+    refuses a training batch whose coarsest map would hold one value per channel
+    (batch norm cannot normalise it)."""
+    h, w = x.shape[-2:]
+    ph, pw = (-h) % multiple, (-w) % multiple
+    if training and x.shape[0] * ((h + ph) // multiple) * ((w + pw) // multiple) == 1:
+        raise InputError(
+            f"a batch of one {h} x {w} image is too small to train on: the stride-"
+            f"{multiple} map has a single value per channel, which batch norm cannot "
+            f"normalise; use batches of 2 or more, or images larger than {multiple} px "
+            "(model.eval() for inference)"
+        )
+    if ph or pw:
+        x = F.pad(x, (0, pw, 0, ph))
+    return x, h, w
+
+
+class NaiveFCN(nn.Module):
+    """The notes' naive fully convolutional network: ``depth`` 3 x 3
+    :class:`~robopercept.nn.blocks.ConvBNAct` layers of ``width`` channels at full
+    resolution, then a 1 x 1 classifier.
+
+    Parameters
+    ----------
+    num_classes : int
+    in_channels : int
+    width : int
+    depth : int
+
+    Examples
+    --------
+    >>> NaiveFCN(3, depth=2)(torch.zeros(1, 3, 10, 7)).shape
+    torch.Size([1, 3, 10, 7])
+    """
+
+    def __init__(self, num_classes: int, in_channels: int = 3, width: int = 16, depth: int = 6):
+        super().__init__()
+        self.num_classes = check_count(num_classes, "num_classes", 1, MAX_CHANNELS)
+        self.in_channels = check_count(in_channels, "in_channels", 1, MAX_CHANNELS)
+        width = check_count(width, "width", 1, MAX_CHANNELS)
+        depth = check_count(depth, "depth", 1, 256)
+        layers: list[nn.Module] = []
+        c = self.in_channels
+        for _ in range(depth):
+            layers.append(ConvBNAct(c, width))
+            c = width
+        self.features = nn.Sequential(*layers)
+        self.classifier = nn.Conv2d(width, self.num_classes, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        check_input(x, self.in_channels)
+        return self.classifier(self.features(x))
+
+
+class FCN(nn.Module):
+    """FCN-32s, 16s or 8s on the detection backbone (strides 8, 16, 32).
+
+    Parameters
+    ----------
+    num_classes : int
+    variant : {"32s", "16s", "8s"}
+    width : int
+        Backbone width (its stride-8, 16, 32 maps have 4, 8, 8 times ``width``
+        channels).
+    upsample : {"transposed", "bilinear"}
+        Learned transposed convolutions initialised to bilinear interpolation (the
+        paper's), or fixed bilinear interpolation.
+    in_channels : int
+        3 only (the backbone's stem takes RGB).
+
+    Examples
+    --------
+    >>> FCN(4, "8s", width=4)(torch.zeros(2, 3, 50, 37)).shape
+    torch.Size([2, 4, 50, 37])
+    """
+
+    def __init__(
+        self,
+        num_classes: int,
+        variant: str = "8s",
+        width: int = 16,
+        upsample: str = "transposed",
+        in_channels: int = 3,
+    ) -> None:
+        super().__init__()
+        self.num_classes = check_count(num_classes, "num_classes", 1, MAX_CHANNELS)
+        self.variant = check_choice(variant, "variant", ("32s", "16s", "8s"))
+        self.upsample = check_choice(upsample, "upsample", UPSAMPLE)
+        if in_channels != 3:
+            raise InputError(f"FCN takes RGB images (in_channels=3); got {plain_repr(in_channels)}")
+        self.in_channels = 3
+        self.backbone = DetectionBackbone(width, strides=(8, 16, 32))
+        k = self.num_classes
+        c8, c16, c32 = self.backbone.out_channels
+        self.score32 = nn.Conv2d(c32, k, 1)
+        self.score16 = nn.Conv2d(c16, k, 1) if variant in ("16s", "8s") else None
+        self.score8 = nn.Conv2d(c8, k, 1) if variant == "8s" else None
+        self.up2a = _Upsample(k, 2, self.upsample) if self.score16 is not None else None
+        self.up2b = _Upsample(k, 2, self.upsample) if self.score8 is not None else None
+        final = {"32s": 32, "16s": 16, "8s": 8}[variant]
+        self.up_final = _Upsample(k, final, self.upsample)
+        for s in (self.score16, self.score8):
+            if s is not None and s.bias is not None:  # the skips start silent (the paper
+                nn.init.zeros_(s.weight)  # zero-initialises them)
+                nn.init.zeros_(s.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        check_input(x, 3)
+        x, h, w = _pad_to(x, 32, self.training)
+        f8, f16, f32 = self.backbone(x)
+        s = self.score32(f32)
+        if self.score16 is not None and self.up2a is not None:
+            s = self.up2a(s) + self.score16(f16)
+        if self.score8 is not None and self.up2b is not None:
+            s = self.up2b(s) + self.score8(f8)
+        return self.up_final(s)[..., :h, :w]
+
+
+class _Double(nn.Sequential):
+    def __init__(self, c_in: int, c_out: int) -> None:
+        super().__init__(ConvBNAct(c_in, c_out), ConvBNAct(c_out, c_out))
+
+
+class UNet(nn.Module):
+    """U-Net: ``depth`` levels of double 3 x 3 convolutions (``width`` channels at the
+    top, doubling each level down) with 2 x 2 max pooling, a bottom double
+    convolution, and a decoder of 2 x upsampling, skip concatenation and double
+    convolution; a 1 x 1 classifier.
+
+    Parameters
+    ----------
+    num_classes : int
+    in_channels : int
+    width : int
+    depth : int
+        Downsampling steps (total stride :math:`2^{\\mathrm{depth}}`).
+    upsample : {"transposed", "bilinear"}
+        A 2 x 2 stride-2 transposed convolution halving the channels, or bilinear
+        interpolation then a 1 x 1 convolution halving them.
+
+    Examples
+    --------
+    >>> net = UNet(2, in_channels=1, width=8, depth=3)
+    >>> net(torch.zeros(1, 1, 30, 21)).shape
+    torch.Size([1, 2, 30, 21])
+    """
+
+    def __init__(
+        self,
+        num_classes: int,
+        in_channels: int = 3,
+        width: int = 16,
+        depth: int = 4,
+        upsample: str = "transposed",
+    ) -> None:
+        super().__init__()
+        self.num_classes = check_count(num_classes, "num_classes", 1, MAX_CHANNELS)
+        self.in_channels = check_count(in_channels, "in_channels", 1, MAX_CHANNELS)
+        width = check_count(width, "width", 1, MAX_CHANNELS)
+        self.depth = check_count(depth, "depth", 1, 8)
+        self.upsample = check_choice(upsample, "upsample", UPSAMPLE)
+        if width << self.depth > MAX_CHANNELS:
+            raise InputError(
+                f"width {width} doubled {self.depth} times passes {MAX_CHANNELS} channels: "
+                "lower the width or the depth"
+            )
+        chans = [width << i for i in range(self.depth + 1)]
+        self.down = nn.ModuleList()
+        c = self.in_channels
+        for ch in chans[:-1]:
+            self.down.append(_Double(c, ch))
+            c = ch
+        self.bottom = _Double(chans[-2], chans[-1])
+        self.ups = nn.ModuleList()
+        self.decode = nn.ModuleList()
+        for i in range(self.depth - 1, -1, -1):
+            hi, lo = chans[i + 1], chans[i]
+            if self.upsample == "transposed":
+                self.ups.append(nn.ConvTranspose2d(hi, lo, 2, stride=2))
+            else:
+                self.ups.append(
+                    nn.Sequential(
+                        nn.Upsample(scale_factor=2, mode="bilinear", align_corners=False),
+                        nn.Conv2d(hi, lo, 1),
+                    )
+                )
+            self.decode.append(_Double(2 * lo, lo))
+        self.classifier = nn.Conv2d(chans[0], self.num_classes, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        check_input(x, self.in_channels)
+        x, h, w = _pad_to(x, 1 << self.depth, self.training)
+        skips = []
+        for block in self.down:
+            x = block(x)
+            skips.append(x)
+            x = F.max_pool2d(x, 2)
+        x = self.bottom(x)
+        for up, dec, skip in zip(self.ups, self.decode, reversed(skips), strict=True):
+            x = dec(torch.cat([skip, up(x)], dim=1))
+        return self.classifier(x)[..., :h, :w]
+
+
+def _check_logits_target(logits: Any, target: Any) -> tuple[torch.Tensor, torch.Tensor]:
+    if not isinstance(logits, torch.Tensor) or logits.ndim != 4:
+        raise InputError(f"logits must be a (N, K, H, W) tensor; got {plain_repr(logits)}")
+    if not isinstance(target, torch.Tensor) or target.dtype not in (
+        torch.int64,
+        torch.int32,
+        torch.uint8,
+    ):
+        raise InputError(
+            f"target must be an integer (N, H, W) label tensor; got {plain_repr(target)}: "
+            "use torch.as_tensor(labels).long()"
+        )
+    n, _, h, w = logits.shape
+    if tuple(target.shape) != (n, h, w):
+        raise InputError(
+            f"target has shape {tuple(target.shape)}; the logits {tuple(logits.shape)} need "
+            f"({n}, {h}, {w})"
+        )
+    return logits, target.long()
+
+
+def _check_labels(target: torch.Tensor, k: int, ignore_index: int) -> None:
+    bad = (target != ignore_index) & ((target < 0) | (target >= k))
+    if bool(bad.any()):
+        v = int(target[bad][0])
+        raise InputError(
+            f"target holds label {v}, outside the {k} classes [0, {k}) and not the "
+            f"ignore_index {ignore_index}"
+        )
+
+
+def segmentation_cross_entropy(
+    logits: torch.Tensor,
+    target: torch.Tensor,
+    weight: torch.Tensor | None = None,
+    ignore_index: int = -100,
+) -> torch.Tensor:
+    r"""Per-pixel softmax cross entropy, averaged over the pixels that are not ignored,
+    each weighted by its true class's weight :math:`w_{y}`:
+
+    .. math:: L = \frac{\sum_p w_{y_p} (-\log \mathrm{softmax}(z_p)_{y_p})}{\sum_p w_{y_p}},
+
+    ``torch.nn.functional.cross_entropy(logits, target, weight, ignore_index=...)``,
+    after checking the shapes and labels (a label outside the classes is an error
+    naming it, not a CUDA assert).
+
+    Parameters
+    ----------
+    logits : tensor (N, K, H, W)
+    target : integer tensor (N, H, W)
+    weight : tensor (K,), optional
+    ignore_index : int
+    """
+    logits, target = _check_logits_target(logits, target)
+    k = logits.shape[1]
+    ig = check_int(ignore_index, "ignore_index")
+    _check_labels(target, k, ig)
+    if weight is not None:
+        try:
+            weight = torch.as_tensor(weight, dtype=logits.dtype, device=logits.device)
+        except (TypeError, ValueError, RuntimeError):
+            weight = torch.full((0,), math.nan)
+        if (
+            weight.shape != (k,)
+            or not bool(torch.isfinite(weight).all())
+            or bool((weight < 0).any())
+        ):
+            raise InputError(f"weight must be {k} finite class weights >= 0")
+    if not bool((target != ig).any()):
+        return logits.sum() * 0.0  # every pixel ignored: no loss, a zero gradient
+    return F.cross_entropy(logits, target, weight=weight, ignore_index=ig)
+
+
+def dice_loss(
+    logits: torch.Tensor,
+    target: torch.Tensor,
+    ignore_index: int = -100,
+    eps: float = 1.0,
+) -> torch.Tensor:
+    r"""Soft Dice loss over the classes (Milletari et al. 2016, V-Net; averaged over
+    classes as in segmentation_models_pytorch's ``DiceLoss``):
+
+    .. math:: L = 1 - \frac{1}{K} \sum_k \frac{2 \sum_p P_{pk} T_{pk} + \epsilon}
+                                         {\sum_p P_{pk} + \sum_p T_{pk} + \epsilon},
+
+    :math:`P = \mathrm{softmax}(z)`, :math:`T` the one-hot target, over the pixels not
+    ignored.
+
+    Parameters
+    ----------
+    logits : tensor (N, K, H, W)
+    target : integer tensor (N, H, W)
+    ignore_index : int
+    eps : float
+        Smoothing :math:`\epsilon > 0` (an absent class then scores 1, not 0 / 0).
+    """
+    logits, target = _check_logits_target(logits, target)
+    k = logits.shape[1]
+    ig = check_int(ignore_index, "ignore_index")
+    _check_labels(target, k, ig)
+    e = check_real(eps, "eps", 0.0, low_inclusive=False)
+    keep = (target != ig).unsqueeze(1).to(logits.dtype)
+    prob = logits.softmax(dim=1) * keep
+    onehot = F.one_hot(torch.where(target == ig, 0, target), k).permute(0, 3, 1, 2)
+    onehot = onehot.to(logits.dtype) * keep
+    dims = (0, 2, 3)
+    inter = (prob * onehot).sum(dims)
+    denom = prob.sum(dims) + onehot.sum(dims)
+    return 1 - ((2 * inter + e) / (denom + e)).mean()
+
+
+def build_segmenter(name: str, num_classes: int, **kwargs: Any) -> nn.Module:
+    """A segmentation network by name: ``"naive"``, ``"fcn32s"``, ``"fcn16s"``,
+    ``"fcn8s"`` or ``"unet"``, the other keywords passed on.
+
+    Examples
+    --------
+    >>> type(build_segmenter("fcn16s", 3, width=4)).__name__, build_segmenter(
+    ...     "fcn16s", 3, width=4).variant
+    ('FCN', '16s')
+    """
+    check_choice(name, "name", ("naive", "fcn32s", "fcn16s", "fcn8s", "unet"))
+    if name == "naive":
+        return NaiveFCN(num_classes, **kwargs)
+    if name == "unet":
+        return UNet(num_classes, **kwargs)
+    return FCN(num_classes, variant=name[3:], **kwargs)

@@ -1,0 +1,157 @@
+"""Segmentation networks and losses (issue 27): shapes for any image size, the
+transposed-convolution upsampler equal to the foundation's NumPy conv_transpose2d and to
+torch's, its bilinear initialisation, receptive fields, losses against hand
+computations, refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+from torch.nn import functional as F  # noqa: E402
+
+from robopercept.errors import InputError  # noqa: E402
+from robopercept.nn import functional as nf  # noqa: E402
+from robopercept.nn.segmentation import (  # noqa: E402
+    FCN,
+    NaiveFCN,
+    UNet,
+    bilinear_kernel,
+    build_segmenter,
+    dice_loss,
+    segmentation_cross_entropy,
+)
+
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
+
+
+@pytest.mark.parametrize("upsample", ["transposed", "bilinear"])
+@pytest.mark.parametrize("name", ["naive", "fcn32s", "fcn16s", "fcn8s", "unet"])
+def test_logits_have_the_image_size_for_any_size(name, upsample):
+    torch.manual_seed(0)
+    kw = {} if name == "naive" else {"upsample": upsample}
+    net = build_segmenter(name, 3, width=4, **kw).eval()
+    for h, w in ((32, 32), (37, 50), (9, 70)):
+        assert net(torch.rand(2, 3, h, w)).shape == (2, 3, h, w)
+
+
+def test_transposed_convolution_equals_numpy_and_torch():
+    rng = np.random.default_rng(0)
+    for stride, pad, k in ((2, 1, 4), (8, 4, 16), (3, 1, 5), (2, 0, 3)):
+        x = rng.standard_normal((2, 3, 5, 6))
+        w = rng.standard_normal((3, 4, k, k))
+        ours = nf.conv_transpose2d(x, w, stride=stride, padding=pad)
+        ref = F.conv_transpose2d(
+            torch.from_numpy(x), torch.from_numpy(w), stride=stride, padding=pad
+        ).numpy()
+        np.testing.assert_allclose(ours, ref, rtol=0, atol=1e-12)
+    # the FCN upsampler's layer computes the same
+    net = FCN(2, "32s", width=4)
+    up = net.up_final.conv
+    x = torch.randn(1, 2, 3, 4)
+    np.testing.assert_allclose(
+        up(x).detach().numpy(),
+        nf.conv_transpose2d(x.numpy(), up.weight.detach().numpy(), stride=32, padding=16),
+        rtol=0,
+        atol=1e-5,
+    )
+
+
+@pytest.mark.parametrize("factor", [2, 4, 8])
+def test_bilinear_initialisation_is_bilinear_interpolation_inside(factor):
+    # away from the border (where the transposed convolution sees zeros and
+    # interpolation repeats the edge) the initial upsampler is bilinear interpolation
+    x = torch.rand(1, 2, 6, 7, dtype=torch.float64)
+    k = 2 * factor - factor % 2
+    w = bilinear_kernel(2, factor).double()
+    up = F.conv_transpose2d(x, w, stride=factor, padding=(k - factor) // 2)
+    ref = F.interpolate(x, scale_factor=factor, mode="bilinear", align_corners=False)
+    m = factor
+    torch.testing.assert_close(up[..., m:-m, m:-m], ref[..., m:-m, m:-m], rtol=0, atol=1e-12)
+    # and it does not mix channels
+    assert w[0, 1].abs().sum() == 0 and w[1, 0].abs().sum() == 0
+
+
+def _reach(net: torch.nn.Module, size: int) -> int:
+    """How far (in pixels) from the centre the input moves the centre output."""
+    net.eval()
+    torch.manual_seed(0)  # a random image: at zero every ReLU sits at its kink
+    x = torch.rand(1, net.in_channels, size, size, requires_grad=True)
+    (g,) = torch.autograd.grad(net(x)[0, :, size // 2, size // 2].sum(), x)
+    ys, xs = torch.nonzero(g.abs().sum((0, 1)) > 0, as_tuple=True)
+    return int(max((ys - size // 2).abs().max(), (xs - size // 2).abs().max()))
+
+
+def test_receptive_fields_naive_small_unet_large():
+    # depth 3 x 3 convolutions reach `depth` pixels; a 3-level U-Net reaches far more
+    assert _reach(NaiveFCN(2, width=16, depth=3), 31) == 3
+    assert _reach(NaiveFCN(2, width=16, depth=6), 31) == 6
+    assert _reach(UNet(2, width=8, depth=3), 64) > 20
+
+
+def test_cross_entropy_weights_and_ignore_by_hand():
+    logits = torch.tensor([[[[2.0, 0.0]], [[0.0, 1.0]]]])  # (1, 2, 1, 2)
+    target = torch.tensor([[[0, 1]]])
+    lp = logits.log_softmax(1)
+    nll = torch.stack([-lp[0, 0, 0, 0], -lp[0, 1, 0, 1]])
+    assert segmentation_cross_entropy(logits, target) == pytest.approx(float(nll.mean()))
+    w = torch.tensor([1.0, 3.0])
+    want = float((nll[0] + 3 * nll[1]) / 4)
+    assert segmentation_cross_entropy(logits, target, weight=w) == pytest.approx(want)
+    ig = torch.tensor([[[0, 255]]])
+    assert segmentation_cross_entropy(logits, ig, ignore_index=255) == pytest.approx(float(nll[0]))
+    every = torch.full((1, 1, 2), 255)
+    assert float(segmentation_cross_entropy(logits, every, ignore_index=255)) == 0.0
+
+
+def test_dice_loss_by_hand():
+    target = torch.tensor([[[0, 1], [1, 1]]])
+    perfect = F.one_hot(target, 2).permute(0, 3, 1, 2).float() * 50
+    assert float(dice_loss(perfect, target, eps=1e-6)) == pytest.approx(0.0, abs=1e-6)
+    # uniform logits: P = 1/2 everywhere; class 0: 2 * 0.5 / (2 + 1), class 1: 2 * 1.5 / (2 + 3)
+    flat = torch.zeros(1, 2, 2, 2)
+    want = 1 - (1 / 3 + 3 / 5) / 2
+    assert float(dice_loss(flat, target, eps=1e-9)) == pytest.approx(want, abs=1e-7)
+    # an ignored pixel counts on neither side: with pixel (0, 0) ignored, class 0 has
+    # no true pixel and 3 x 0.5 predicted (score ~0), class 1: 2 * 1.5 / (1.5 + 3)
+    ig = torch.tensor([[[255, 1], [1, 1]]])
+    want = 1 - (0.0 + 2 * 1.5 / (1.5 + 3)) / 2
+    assert float(dice_loss(flat, ig, ignore_index=255, eps=1e-9)) == pytest.approx(want, abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda: build_segmenter("segnet", 2), "name"),
+        (lambda: FCN(2, "4s"), "variant"),
+        (lambda: FCN(2, in_channels=1), "RGB"),
+        (lambda: UNet(2, upsample="nearest"), "upsample"),
+        (lambda: UNet(2, width=1024, depth=4), "lower the width"),
+        (lambda: UNet(2, in_channels=1)(torch.zeros(1, 3, 8, 8)), "1 input channel"),
+        (lambda: FCN(2, width=4)(torch.zeros(1, 3, 20, 30)), "batches of 2"),
+        (
+            lambda: segmentation_cross_entropy(torch.zeros(1, 2, 2, 2), torch.full((1, 2, 2), 2)),
+            "label 2, outside the 2 classes",
+        ),
+        (
+            lambda: segmentation_cross_entropy(
+                torch.zeros(1, 2, 2, 2), torch.zeros(1, 3, 2).long()
+            ),
+            r"need \(1, 2, 2\)",
+        ),
+        (
+            lambda: dice_loss(torch.zeros(1, 2, 2, 2), torch.zeros(1, 2, 2)),
+            "integer",
+        ),
+        (
+            lambda: segmentation_cross_entropy(
+                torch.zeros(1, 2, 1, 1), torch.zeros(1, 1, 1).long(), weight=torch.ones(3)
+            ),
+            "2 finite class weights",
+        ),
+    ],
+)
+def test_bad_input(call, match):
+    with pytest.raises(InputError, match=match):
+        call()
