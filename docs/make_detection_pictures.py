@@ -16,7 +16,7 @@ Writes to docs/img/:
 - detection_pr_curves.png: precision-recall per class of FCOS on the 200 test images;
 - detection_samples.png: FCOS and Faster R-CNN detections on test images;
 - detection_trees.png, only with TREES_MODEL (a trees FCOS saved by
-  ``python -m benchmarks.detection_figures --only trees-fcos-ema --seeds 0 --save DIR``):
+  ``python -m benchmarks.detection_figures --only trees-fcos-blocks2 --seeds 0 --save DIR``):
   two tiles of the held-out strip, the hand-drawn crowns and the detections with
   score >= 0.3.
 
