@@ -685,3 +685,48 @@ def test_issue25_bytes_paths_and_numpy_scalars_work(tmp_path):
         with pytest.raises(InputError, match="index must be an integer"):
             out.add(0.0, np.zeros((8, 8, 3), np.uint8))
     assert [Path(f).name for f in out.written] == ["s.mp4", "s_000000.png"]
+
+
+# ----------------------------------------------------------------------------- palette PNGs
+@pytest.mark.realdata
+def test_voc_label_pngs_read_as_indices_and_write_back_identical(tmp_path):
+    from PIL import Image
+
+    from robopercept.viz import voc_palette
+
+    folder = data_path("detection", "labelme_voc_instances", "voc")
+    cls = folder / "SegmentationClass" / "2011_000003.png"
+    labels = read_image(cls, mode="index")
+    # the class map: background 0, two VOC classes, the void border 255, as PIL reads it
+    assert labels.dtype == np.uint8 and labels.shape == (338, 500)
+    np.testing.assert_array_equal(labels, np.asarray(Image.open(cls)))
+    assert np.unique(labels).tolist() == [0, 5, 15, 255]
+    # the file's palette is the VOC colour map
+    pal = np.asarray(Image.open(cls).getpalette()).reshape(-1, 3)[:256]
+    np.testing.assert_array_equal(pal, voc_palette())
+    out = write_image(tmp_path / "c.png", labels, palette=voc_palette())
+    np.testing.assert_array_equal(read_image(out, mode="index"), labels)
+    np.testing.assert_array_equal(read_image(out), read_image(cls))  # same colours
+    objects = read_image(folder / "SegmentationObject" / "2011_000003.png", mode="index")
+    assert np.unique(objects).tolist() == [0, 1, 2, 3]
+
+
+def test_palette_png_refusals(tmp_path):
+    from robopercept.viz import voc_palette
+
+    rgb = write_image(tmp_path / "rgb.png", np.zeros((4, 4, 3), np.uint8))
+    with pytest.raises(FileFormatError, match="colour type 2"):
+        read_image(rgb, mode="index")
+    jpg = write_image(tmp_path / "a.jpg", np.zeros((8, 8), np.uint8))
+    with pytest.raises(FileFormatError, match="not a PNG"):
+        read_image(jpg, mode="index")
+    with pytest.raises(InputError, match="holds index 7 but the palette has 4"):
+        write_image(tmp_path / "x.png", np.full((2, 2), 7, np.uint8), palette=voc_palette(4))
+    with pytest.raises(InputError, match=r"\(H, W\) uint8 map"):
+        write_image(tmp_path / "x.png", np.zeros((2, 2, 3), np.uint8), palette=voc_palette())
+    with pytest.raises(InputError, match="PNG only"):
+        write_image(tmp_path / "x.jpg", np.zeros((2, 2), np.uint8), palette=voc_palette())
+    with pytest.raises(InputError, match=r"\(n, 3\)"):
+        write_image(tmp_path / "x.png", np.zeros((2, 2), np.uint8), palette=[[1, 2]])
+    with pytest.raises(InputError, match="mode must be"):
+        read_image(rgb, mode="palette")

@@ -225,3 +225,15 @@ def test_issue25_colorize_depth_handles_extreme_ranges():
     np.testing.assert_array_equal(out[1, 1], ends[0, 1])
     step = colorize_depth(np.array([[1.0, 3.0]]), min_depth=2.0, max_depth=2.0)
     np.testing.assert_array_equal(step, ends)
+
+
+def test_voc_palette_bits():
+    from robopercept.viz import voc_palette
+
+    pal = voc_palette()
+    assert pal.shape == (256, 3) and pal.dtype == np.uint8
+    # label 5 = 0b101: bit 0 -> R bit 7, bit 2 -> B bit 7; 255: all bits
+    assert pal[5].tolist() == [128, 0, 128] and pal[255].tolist() == [224, 224, 192]
+    assert len({tuple(c) for c in pal}) == 256  # every label its own colour
+    with pytest.raises(InputError, match="at most 256"):
+        voc_palette(257)

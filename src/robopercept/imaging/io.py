@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept._checks import (
     as_path,
@@ -125,11 +126,14 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     ----------
     path : path-like
         PNG, JPEG, TIFF, BMP or PNM.
-    mode : {None, 'rgb', 'gray'}
+    mode : {None, 'rgb', 'gray', 'index'}
         None keeps what the file stores (gray (H, W), gray + alpha (H, W, 2), RGB
         (H, W, 3), RGBA (H, W, 4), uint8 or uint16); 'rgb' gives (H, W, 3) (gray
         replicated, alpha dropped); 'gray' gives (H, W) (BT.601 luma of colour files,
-        :func:`~robopercept.imaging.rgb_to_gray`, in the file's dtype).
+        :func:`~robopercept.imaging.rgb_to_gray`, in the file's dtype); 'index' gives
+        a palette PNG's indices (H, W) uint8, not their colours (the label maps of
+        Pascal VOC's SegmentationClass and SegmentationObject: 0 background, 255 void;
+        ``cv2.imread`` has no such mode, PIL's ``Image.open(path)`` in mode "P" does).
 
     Returns
     -------
@@ -153,13 +157,13 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     from robopercept.imaging.color import rgb_to_gray
 
     p = as_path(path, "path")
-    if mode not in (None, "rgb", "gray"):
-        raise InputError(f"mode must be None, 'rgb' or 'gray'; got {mode!r}")
+    if mode not in (None, "rgb", "gray", "index"):
+        raise InputError(f"mode must be None, 'rgb', 'gray' or 'index'; got {mode!r}")
     check_file(p, "an image file")
     if p.stat().st_size == 0:
         raise FileFormatError(f"{p}: the file is empty")
     try:
-        img = _decode_image(p)
+        img = _decode_image(p, indexed=mode == "index")
     except (RoboperceptError, MemoryError):
         raise
     except Exception as exc:  # decoders raise many kinds (OSError, SyntaxError, ...)
@@ -188,7 +192,7 @@ def read_image(path: str | os.PathLike[str], *, mode: str | None = None) -> np.n
     return img
 
 
-def _decode_image(p: Path) -> np.ndarray:
+def _decode_image(p: Path, indexed: bool = False) -> np.ndarray:
     """The array of an image file as its decoder gives it, after the header checks.
 
     PNG goes through :func:`_read_png` (every PNG, so its data is checked against its
@@ -199,6 +203,9 @@ def _decode_image(p: Path) -> np.ndarray:
     ----------
     p : Path
         An existing, non-empty file.
+    indexed : bool
+        A palette PNG's indices (H, W) instead of its colours; any other file is
+        refused.
 
     Returns
     -------
@@ -215,7 +222,12 @@ def _decode_image(p: Path) -> np.ndarray:
     with open(p, "rb") as fh:
         head = fh.read(4096)  # a PNG's IHDR; a netpbm header, comments included
     if head.startswith(_PNG_SIGNATURE):
-        return _read_png(p.read_bytes(), p)
+        return _read_png(p.read_bytes(), p, indexed)
+    if indexed:
+        raise FileFormatError(
+            f"{p}: mode='index' reads palette PNGs (label maps such as Pascal VOC's "
+            "SegmentationClass); this is not a PNG: read it with mode=None"
+        )
     _check_declared_size(p)
     header = _netpbm_header(head)
     if header is not None and header[3] > 255:
@@ -246,7 +258,11 @@ def sample_image_path() -> Path:
 
 
 def write_image(
-    path: str | os.PathLike[str], image: np.ndarray, *, png_compression: int | None = None
+    path: str | os.PathLike[str],
+    image: np.ndarray,
+    *,
+    png_compression: int | None = None,
+    palette: npt.ArrayLike | None = None,
 ) -> Path:
     """Write an image; the format follows the extension.
 
@@ -263,6 +279,11 @@ def write_image(
     png_compression : int, optional
         zlib level 0..9 for PNG (the writer's default when None; 1 is about 5x faster
         than the default for 20% larger files, what sequences of frames want).
+    palette : (n, 3) array-like of uint8, optional
+        Write a palette PNG: ``image`` is then an (H, W) uint8 map of indices below
+        ``n <= 256`` and index ``i`` shows as colour ``palette[i]`` (the label maps of
+        Pascal VOC with its palette; read the indices back with
+        ``read_image(path, mode="index")``).
 
     Returns
     -------
@@ -319,9 +340,16 @@ def write_image(
             raise InputError(f"png_compression must be in 0..9; got {level}")
         if ext == ".png":
             extra["compress_level"] = level
+    pal = None if palette is None else _check_palette(palette, arr, ext, p)
     p.parent.mkdir(parents=True, exist_ok=True)
     try:
-        if arr.dtype == np.uint16 and ext == ".png" and arr.ndim == 3:
+        if pal is not None:
+            from PIL import Image
+
+            im = Image.fromarray(np.ascontiguousarray(arr))  # mode "L"
+            im.putpalette(pal.ravel().tolist())  # "L" -> "P", the values kept as indices
+            im.save(p, format="PNG", compress_level=extra.get("compress_level", 6))
+        elif arr.dtype == np.uint16 and ext == ".png" and arr.ndim == 3:
             p.write_bytes(_encode_png16(arr, extra.get("compress_level", 6)))
         elif arr.dtype == np.uint16 and ext in _PNM_EXTS:
             p.write_bytes(_encode_netpbm16(arr))
@@ -330,6 +358,36 @@ def write_image(
     except Exception as exc:
         raise FileFormatError(f"{p}: cannot write ({type(exc).__name__}: {exc})") from exc
     return p
+
+
+def _check_palette(palette: Any, arr: np.ndarray, ext: str, p: Path) -> np.ndarray:
+    """``palette`` as an (n, 3) uint8 array fit to write ``arr`` (indices) to ``p``."""
+    if ext != ".png":
+        raise InputError(f"{p}: a palette is written to PNG only; use a .png path")
+    pal = np.asarray(palette)
+    if (
+        pal.ndim != 2
+        or pal.shape[1] != 3
+        or not 1 <= pal.shape[0] <= 256
+        or pal.dtype.kind not in "iu"
+        or pal.min() < 0
+        or pal.max() > 255
+    ):
+        raise InputError(
+            f"palette must be (n, 3) integer colours in 0..255 with 1 <= n <= 256; got "
+            f"{plain_repr(palette)}"
+        )
+    if arr.ndim != 2 or arr.dtype != np.uint8:
+        raise InputError(
+            f"with a palette, image must be an (H, W) uint8 map of indices; got "
+            f"{arr.dtype} {arr.shape}"
+        )
+    if arr.size and int(arr.max()) >= pal.shape[0]:
+        raise InputError(
+            f"image holds index {int(arr.max())} but the palette has {pal.shape[0]} "
+            "colours: extend the palette (e.g. robopercept.viz.voc_palette(256))"
+        )
+    return pal.astype(np.uint8)
 
 
 # -- 16-bit PNG and netpbm ---------------------------------------------------------------
@@ -607,7 +665,7 @@ def _check_pixels(p: Path, fmt: str, w: int, h: int, decoded_bytes: int) -> None
         )
 
 
-def _read_png(data: bytes, p: Path) -> np.ndarray:
+def _read_png(data: bytes, p: Path, indexed: bool = False) -> np.ndarray:
     """Decode a PNG, its data checked against its header before and while decoding.
 
     1. The chunks are walked and checked (:func:`_png_chunks`); IHDR must come first
@@ -656,6 +714,11 @@ def _read_png(data: bytes, p: Path) -> np.ndarray:
             f"{p}: interlaced (Adam7) 16-bit colour PNGs are not read; re-save it without "
             "interlacing, e.g. cv2.imwrite(out, cv2.imread(path, cv2.IMREAD_UNCHANGED))"
         )
+    if indexed and ctype != 3:
+        raise FileFormatError(
+            f"{p}: mode='index' reads palette PNGs (colour type 3); this one has colour "
+            f"type {ctype}: read it with mode=None (a gray PNG holds its labels as values)"
+        )
     channels = 4 if ctype == 3 else _PNG_CHANNELS[ctype]  # palette: expanded to RGB(A)
     _check_pixels(p, "PNG", w, h, w * h * channels * max(depth // 8, 1))
     idat = b"".join(data[a + 8 : b - 4] for kind, a, b in chunks if kind == b"IDAT")
@@ -684,6 +747,8 @@ def _read_png(data: bytes, p: Path) -> np.ndarray:
         elif stored:
             parts.append(stored)
             stored = b""
+    if indexed:  # the palette indices, not their colours (Pillow's mode "P")
+        return np.asarray(iio.imread(b"".join(parts), plugin="pillow", extension=".png", mode="P"))
     return np.asarray(iio.imread(b"".join(parts), plugin="pillow", extension=".png"))
 
 

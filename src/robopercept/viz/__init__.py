@@ -1,7 +1,12 @@
 """Drawing on images and colour maps for scalar fields."""
 
 from robopercept.viz.cloud import render_points
-from robopercept.viz.colormap import colorize_depth, colorize_signed, label_colors
+from robopercept.viz.colormap import (
+    colorize_depth,
+    colorize_signed,
+    label_colors,
+    voc_palette,
+)
 from robopercept.viz.draw import (
     draw_boxes,
     draw_chessboard,
@@ -47,4 +52,5 @@ __all__ = [
     "render_points",
     "scatter_picture",
     "tiles_picture",
+    "voc_palette",
 ]

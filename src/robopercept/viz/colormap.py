@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from robopercept._checks import check_finite, check_ndim, check_real
+from robopercept._checks import check_finite, check_int, check_ndim, check_real
 from robopercept.errors import InputError
 from robopercept.viz.draw import check_color
 
-__all__ = ["colorize_depth", "colorize_signed", "label_colors", "turbo"]
+__all__ = ["colorize_depth", "colorize_signed", "label_colors", "turbo", "voc_palette"]
 
 # Turbo (Mikhailov 2019) as the published polynomial fit: each channel a degree-5
 # polynomial of t in [0, 1].
@@ -156,4 +156,29 @@ def label_colors(labels: np.ndarray, *, background: tuple[int, int, int] = (0, 0
     rgb = np.stack([r, g, b], axis=-1) * 0.85 + 0.15
     out = np.round(rgb * 255.0).astype(np.uint8)
     out[lab <= 0] = background
+    return out
+
+
+def voc_palette(n: int = 256) -> np.ndarray:
+    """The Pascal VOC colour map: ``(n, 3)`` uint8, colour ``i`` from the bits of ``i``
+    spread over the high bits of R, G and B (bit ``3k`` of ``i`` to bit ``7 - k`` of R,
+    ``3k + 1`` to G, ``3k + 2`` to B), as the VOC devkit's ``labelcolormap.m`` and every
+    VOC-style label PNG (0 black background, 255 the cream void border).
+
+    Examples
+    --------
+    >>> voc_palette(4).tolist()
+    [[0, 0, 0], [128, 0, 0], [0, 128, 0], [128, 128, 0]]
+    >>> voc_palette()[255].tolist()
+    [224, 224, 192]
+    """
+    n = check_int(n, "n", 1)
+    if n > 256:
+        raise InputError(f"n must be at most 256 (the colours of a palette PNG); got {n}")
+    idx = np.arange(n)
+    out = np.zeros((n, 3), np.uint8)
+    for k in range(8):
+        for ch in range(3):
+            bit = (idx >> (3 * k + ch)) & 1
+            out[:, ch] |= (bit << (7 - k)).astype(np.uint8)
     return out
