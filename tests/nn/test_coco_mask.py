@@ -178,3 +178,34 @@ def test_a_square_covers_the_pixels_whose_centres_it_holds():
 def test_bad_input_is_refused_clearly(call, match):
     with pytest.raises(InputError, match=match):
         call()
+
+
+@pytest.mark.realdata
+def test_real_labelme_coco_polygons_match_pycocotools_and_the_voc_instance_pngs():
+    import json
+
+    from pycocotools.coco import COCO
+
+    from robopercept.imaging import read_image
+    from tests.conftest import data_path
+
+    root = data_path("detection", "labelme_voc_instances")
+    path = root / "coco" / "annotations.json"
+    data = json.loads(path.read_text())
+    ref = COCO(str(path))
+    images = {i["id"]: i for i in data["images"]}
+    assert len(data["annotations"]) == 12
+    for ann in data["annotations"]:
+        im = images[ann["image_id"]]
+        ours = rle_decode(annotation_to_rle(ann["segmentation"], im["height"], im["width"]))
+        # exactly pycocotools' rasterization (the one with four polygons included)
+        np.testing.assert_array_equal(ours, ref.annToMask(ann))
+        # labelme drew the same polygons into the VOC instance PNG with PIL's rule
+        # (boundary pixels in): one instance there overlaps it at IoU >= 0.93
+        png = im["file_name"].split("/")[-1].replace(".jpg", ".png")
+        obj = read_image(root / "voc" / "SegmentationObject" / png, mode="index")
+        m = ours > 0
+        best = max(
+            (m & (obj == k)).sum() / (m | (obj == k)).sum() for k in range(1, int(obj.max()) + 1)
+        )
+        assert best >= 0.93, (ann["id"], best)
