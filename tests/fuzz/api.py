@@ -1311,6 +1311,28 @@ for _cls in ("NaiveFCN", "FCN", "UNet"):
     METHODS[f"nn.segmentation.{_cls}"] = ("forward",)
 
 
+# nn.segmentation_data (issue 27): a nuclei folder of two 16 x 16 TIFFs
+def _write_nuclei(path: Path) -> None:
+    """img2d.tif (a ramp) and mask2d.tif (four labelled squares), 16 x 16 uint16."""
+    from robopercept.imaging import write_image
+
+    path.mkdir(parents=True, exist_ok=True)
+    write_image(path / "img2d.tif", np.arange(256, dtype=np.uint16).reshape(16, 16))
+    labels = np.zeros((16, 16), np.uint16)
+    for k, (y, x) in enumerate(((2, 2), (2, 10), (10, 2), (10, 10)), 1):
+        labels[y : y + 4, x : x + 4] = k
+    write_image(path / "mask2d.tif", labels)
+
+
+FIXTURES["nuclei"] = _write_nuclei
+VALID.update(
+    {
+        "nn.segmentation_data.nuclei_quadrants": {"folder": Fixture("nuclei")},
+        "nn.segmentation_data.percentile_normalize": {"image": IMG_F},
+    }
+)
+
+
 # nn.detection_data (issue 26): a small detection set, a batch of it, a DeepForest folder
 def detection_value(kind: str) -> Any:
     """A valid nn.detection_data value: ``dataset`` (DetectionDataset) or ``batch``

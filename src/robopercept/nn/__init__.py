@@ -28,6 +28,7 @@ _SUBMODULES = (
     "coco_mask",
     "segmentation_eval",
     "segmentation",
+    "segmentation_data",
     "detection_data",
     "detection",
 )
