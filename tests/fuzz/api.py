@@ -1309,6 +1309,31 @@ VALID.update(
 )
 for _cls in ("NaiveFCN", "FCN", "UNet"):
     METHODS[f"nn.segmentation.{_cls}"] = ("forward",)
+_SEG_X = np.tile(np.linspace(0, 1, 8, dtype=np.float32)[None, :, None, None], (2, 1, 8, 1))
+_SEG_Y = (_SEG_X[..., 0] > 0.5).astype(np.int64)
+_SEG_NET = _b("robopercept.nn.segmentation:UNet", 2, 1, 4, 2)
+VALID.update(
+    {
+        "nn.segmentation.train_segmenter": {
+            "model": _SEG_NET,
+            "images": _SEG_X,
+            "masks": _SEG_Y,
+            "config": TRAIN_CFG,
+            "progress": False,
+        },
+        "nn.segmentation.predict_segmentation": {"model": _SEG_NET, "images": _SEG_X},
+        "nn.training.step_optimizer": {
+            "params": _b("tests.fuzz.api:parameters_of", TINY_NET),
+            "cfg": TRAIN_CFG,
+            "steps_per_epoch": 2,
+        },
+    }
+)
+
+
+def parameters_of(model: Any) -> list[Any]:
+    """The parameters of a built model, as a list (step_optimizer's input)."""
+    return list(model.parameters())
 
 
 # nn.segmentation_data (issue 27): a nuclei folder of two 16 x 16 TIFFs

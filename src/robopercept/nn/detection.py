@@ -1942,6 +1942,7 @@ def train_detector(
         deterministic_algorithms,
         resolve_device,
         save_checkpoint,
+        step_optimizer,
     )
     from robopercept.progress import progress_bar
 
@@ -1967,28 +1968,9 @@ def train_detector(
     model.to(dev)
     gen = torch.Generator().manual_seed(cfg.seed)
     params = [p for p in model.parameters() if p.requires_grad]
-    if not params:
-        raise InputError("the model has no trainable parameters (everything is frozen)")
-    if cfg.optimizer == "sgd":
-        opt: torch.optim.Optimizer = torch.optim.SGD(
-            params,
-            lr=cfg.lr,
-            momentum=cfg.momentum,
-            nesterov=cfg.nesterov,
-            weight_decay=cfg.weight_decay,
-        )
-    else:
-        opt = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
     n = len(ds)
     steps = -(-n // cfg.batch_size)
-    if cfg.schedule == "cosine":
-        sched: Any = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=cfg.epochs * steps)
-    elif cfg.schedule == "step":
-        sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size * steps, cfg.gamma)
-    elif cfg.schedule == "onecycle":
-        sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps)
-    else:
-        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
+    opt, sched = step_optimizer(params, cfg, steps)
     hist = DetectionHistory()
     best_state: dict[str, torch.Tensor] | None = None
     best_value = -math.inf

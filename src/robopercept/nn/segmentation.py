@@ -26,7 +26,10 @@ weights and an ignore index, ``torch.nn.functional.cross_entropy``) and
 
 from __future__ import annotations
 
+import copy
 import math
+import time
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -42,11 +45,14 @@ from robopercept.nn.detection import MAX_CHANNELS, DetectionBackbone
 __all__ = [
     "FCN",
     "NaiveFCN",
+    "SegmentationHistory",
     "UNet",
     "bilinear_kernel",
     "build_segmenter",
     "dice_loss",
+    "predict_segmentation",
     "segmentation_cross_entropy",
+    "train_segmenter",
 ]
 
 UPSAMPLE = ("transposed", "bilinear")
@@ -439,3 +445,250 @@ def build_segmenter(name: str, num_classes: int, **kwargs: Any) -> nn.Module:
     if name == "unet":
         return UNet(num_classes, **kwargs)
     return FCN(num_classes, variant=name[3:], **kwargs)
+
+
+# ----------------------------------------------------------------------------- training
+@dataclass
+class SegmentationHistory:
+    """What :func:`train_segmenter` did: the mean training loss per epoch, the
+    validation mIoU by epoch, the epoch kept and the seconds per epoch."""
+
+    losses: list[float] = field(default_factory=list)
+    val: dict[int, float] = field(default_factory=dict)
+    best_epoch: int = 0
+    seconds: list[float] = field(default_factory=list)
+
+
+def _segmentation_arrays(images: Any, masks: Any, what: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(N, H, W, C)`` float images and ``(N, H, W)`` integer masks as ``(N, C, H, W)``
+    float32 and ``(N, H, W)`` int64 tensors."""
+    import numpy as np
+
+    try:
+        x = np.asarray(images)
+        y = np.asarray(masks)
+    except (TypeError, ValueError):
+        x = y = np.zeros(0)
+    if x.ndim != 4 or x.dtype.kind not in "fiu" or x.shape[0] == 0:
+        raise InputError(
+            f"{what} images must be a non-empty (N, H, W, C) array (channels last, "
+            f"floats); got {plain_repr(images)}"
+        )
+    if y.shape != x.shape[:3] or y.dtype.kind not in "iu":
+        raise InputError(
+            f"{what} masks must be (N, H, W) integer labels matching the images "
+            f"{x.shape[:3]}; got {plain_repr(masks)}"
+        )
+    if not np.isfinite(x).all():
+        raise InputError(f"{what} images hold NaN or infinite values")
+    xt = torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2), dtype=np.float32))
+    return xt, torch.from_numpy(y.astype(np.int64))
+
+
+@torch.no_grad()
+def predict_segmentation(model: nn.Module, images: Any) -> torch.Tensor:
+    """Class labels ``(N, H, W)`` (argmax of the logits) of ``(N, H, W, C)`` images,
+    one image at a time, in eval mode."""
+    if not isinstance(model, nn.Module):
+        raise InputError(f"model must be a torch.nn.Module; got {plain_repr(model)}")
+    x, _ = _segmentation_arrays(images, _zeros_like_masks(images), "predict")
+    return _predict(model, x)
+
+
+@torch.no_grad()
+def _predict(model: nn.Module, x: torch.Tensor) -> torch.Tensor:
+    model.eval()
+    dev = next((p.device for p in model.parameters()), torch.device("cpu"))
+    return torch.cat([model(x[i : i + 1].to(dev)).argmax(1).cpu() for i in range(len(x))])
+
+
+def _zeros_like_masks(images: Any) -> Any:
+    import numpy as np
+
+    a = np.asarray(images)
+    return np.zeros(a.shape[:3], np.int64) if a.ndim == 4 else np.zeros(0, np.int64)
+
+
+def train_segmenter(
+    model: nn.Module,
+    images: Any,
+    masks: Any,
+    config: Any = None,
+    *,
+    val: tuple[Any, Any] | None = None,
+    loss: str = "ce+dice",
+    class_weights: Any = None,
+    ignore_index: int = -100,
+    crop: int | None = None,
+    dihedral: bool = True,
+    samples_per_epoch: int | None = None,
+    progress: bool = True,
+) -> SegmentationHistory:
+    r"""Train a segmentation network on labelled images.
+
+    Each step takes ``config.batch_size`` samples: an image drawn from a seeded
+    shuffle, a random ``crop x crop`` window of it (the whole image without ``crop``),
+    and with ``dihedral`` a random flip and quarter turn of image and mask together
+    (the 8 symmetries of the square; turns only for square samples). The loss is
+    :func:`segmentation_cross_entropy` (``"ce"``), :func:`dice_loss` (``"dice"``) or
+    their sum (``"ce+dice"``); the optimizer and per-step schedule come from
+    :func:`~robopercept.nn.training.step_optimizer` (``config``), gradients clipped
+    at ``config.clip_grad_norm``. With ``val``, the mIoU of the whole validation
+    images (:func:`~robopercept.nn.segmentation_eval.segmentation_scores`) is
+    measured after every epoch and the best epoch's weights are kept.
+
+    Parameters
+    ----------
+    model : nn.Module
+        Logits ``(N, K, H, W)`` for images ``(N, C, H, W)``.
+    images : array (N, H, W, C) float
+    masks : array (N, H, W) int
+        Labels in ``[0, K)`` or ``ignore_index``.
+    config : TrainConfig, optional
+    val : (images, masks), optional
+    loss : {"ce", "dice", "ce+dice"}
+    class_weights : sequence of K floats, optional
+        For the cross entropy.
+    ignore_index : int
+    crop : int, optional
+        Side of the random training window (at most the image's sides).
+    dihedral : bool
+    samples_per_epoch : int, optional
+        Samples per epoch (the number of images by default; more when ``crop`` cuts
+        several windows from few images).
+    progress : bool
+
+    Returns
+    -------
+    SegmentationHistory
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from robopercept.nn.training import TrainConfig
+    >>> x = np.zeros((4, 16, 16, 1), np.float32); x[:, 4:12, 4:12] = 1
+    >>> y = (x[..., 0] > 0).astype(np.int64)
+    >>> net = UNet(2, in_channels=1, width=4, depth=2)
+    >>> h = train_segmenter(net, x, y, TrainConfig(epochs=2, batch_size=2, device="cpu"),
+    ...                     val=(x, y), progress=False)
+    >>> len(h.losses), sorted(h.val)
+    (2, [1, 2])
+    """
+    from robopercept.nn.segmentation_eval import segmentation_confusion, segmentation_scores
+    from robopercept.nn.training import (
+        TrainConfig,
+        deterministic_algorithms,
+        resolve_device,
+        step_optimizer,
+    )
+    from robopercept.progress import progress_bar
+
+    if not isinstance(model, nn.Module):
+        raise InputError(f"model must be a torch.nn.Module; got {plain_repr(model)}")
+    if config is not None and not isinstance(config, TrainConfig):
+        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
+    cfg = config or TrainConfig()
+    x, y = _segmentation_arrays(images, masks, "training")
+    if val is not None and (not isinstance(val, (tuple, list)) or len(val) != 2):
+        raise InputError(f"val must be (images, masks); got {plain_repr(val)}")
+    vx, vy = _segmentation_arrays(*val, "validation") if val is not None else (None, None)
+    check_choice(loss, "loss", ("ce", "dice", "ce+dice"))
+    ig = check_int(ignore_index, "ignore_index")
+    n, _, h, w = x.shape
+    if crop is not None:
+        crop = check_count(crop, "crop", 1, 1 << 16)
+        if crop > min(h, w):
+            raise InputError(f"crop {crop} is larger than the {h} x {w} images")
+    per_epoch = (
+        n
+        if samples_per_epoch is None
+        else check_count(samples_per_epoch, "samples_per_epoch", 1, 1 << 30)
+    )
+    dev = resolve_device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    model.to(dev)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    k = getattr(model, "num_classes", None)
+    weight = None if class_weights is None else torch.as_tensor(class_weights, dtype=torch.float32)
+    steps = -(-per_epoch // cfg.batch_size)
+    params = [p for p in model.parameters() if p.requires_grad]
+    opt, sched = step_optimizer(params, cfg, steps)
+
+    def sample() -> tuple[torch.Tensor, torch.Tensor]:
+        i = int(torch.randint(n, (1,), generator=gen))
+        xi, yi = x[i], y[i]
+        if crop is not None:
+            y0 = int(torch.randint(h - crop + 1, (1,), generator=gen))
+            x0 = int(torch.randint(w - crop + 1, (1,), generator=gen))
+            xi, yi = xi[:, y0 : y0 + crop, x0 : x0 + crop], yi[y0 : y0 + crop, x0 : x0 + crop]
+        if dihedral:
+            if int(torch.randint(2, (1,), generator=gen)):
+                xi, yi = xi.flip(-1), yi.flip(-1)
+            if xi.shape[-1] == xi.shape[-2]:
+                t = int(torch.randint(4, (1,), generator=gen))
+                xi, yi = torch.rot90(xi, t, (1, 2)), torch.rot90(yi, t, (0, 1))
+        return xi, yi
+
+    def objective(out: torch.Tensor, yb: torch.Tensor) -> torch.Tensor:
+        total = out.new_zeros(())
+        if loss in ("ce", "ce+dice"):
+            total = total + segmentation_cross_entropy(out, yb, weight, ig)
+        if loss in ("dice", "ce+dice"):
+            total = total + dice_loss(out, yb, ig)
+        return total
+
+    hist = SegmentationHistory()
+    best: dict[str, torch.Tensor] | None = None
+    best_value = -math.inf
+    bar = progress_bar(
+        total=cfg.epochs, desc="training segmenter", unit="epoch", disable=not progress
+    )
+    try:
+        with deterministic_algorithms():
+            for epoch in range(cfg.epochs):
+                t0 = time.perf_counter()
+                model.train()
+                total = 0.0
+                for b in range(steps):
+                    m = min(cfg.batch_size, per_epoch - b * cfg.batch_size)
+                    pairs = [sample() for _ in range(m)]
+                    xb = torch.stack([p[0] for p in pairs]).to(dev)
+                    yb = torch.stack([p[1] for p in pairs]).to(dev)
+                    value = objective(model(xb), yb)
+                    if not bool(torch.isfinite(value)):
+                        raise InputError(
+                            f"the loss became {float(value)} at epoch {epoch + 1}: lower the "
+                            f"learning rate (lr {cfg.lr:g})"
+                        )
+                    opt.zero_grad(set_to_none=True)
+                    value.backward()
+                    if cfg.clip_grad_norm is not None:
+                        nn.utils.clip_grad_norm_(params, cfg.clip_grad_norm)
+                    opt.step()
+                    sched.step()
+                    total += float(value.detach())
+                hist.losses.append(total / steps)
+                hist.seconds.append(time.perf_counter() - t0)
+                if vx is not None and vy is not None:
+                    pred = _predict(model, vx)
+                    classes = k if isinstance(k, int) else int(max(pred.max(), vy.max())) + 1
+                    conf = segmentation_confusion(
+                        vy.numpy(), pred.numpy(), classes, None if ig < 0 else ig
+                    )
+                    score = segmentation_scores(conf).miou
+                    hist.val[epoch + 1] = score
+                    if best is None or score > best_value:
+                        best_value, hist.best_epoch = score, epoch + 1
+                        best = copy.deepcopy(model.state_dict())
+                else:
+                    hist.best_epoch = epoch + 1
+                bar.update(1)
+                post = {"loss": f"{hist.losses[-1]:.3f}"}
+                if hist.val:
+                    post["val mIoU"] = f"{hist.val[epoch + 1]:.3f}"
+                bar.set_postfix(**post)
+    finally:
+        bar.close()
+    if best is not None:
+        model.load_state_dict(best)
+    return hist

@@ -46,6 +46,7 @@ from robopercept._checks import (
     check_magnitude,
     check_ndim,
     check_real,
+    plain_repr,
 )
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import atomic_path
@@ -67,6 +68,7 @@ __all__ = [
     "load_checkpoint",
     "resolve_device",
     "save_checkpoint",
+    "step_optimizer",
 ]
 
 #: the most epochs (and the largest step size or patience) a run may ask for
@@ -507,6 +509,68 @@ def _scheduler(opt: torch.optim.Optimizer, cfg: TrainConfig, steps_per_epoch: in
             steps_per_epoch=steps_per_epoch,
         )
     return torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
+
+
+def step_optimizer(
+    params: list[nn.Parameter], cfg: TrainConfig, steps_per_epoch: int
+) -> tuple[torch.optim.Optimizer, Any]:
+    """The optimizer and a learning-rate schedule stepped after every batch (not every
+    epoch, as :func:`fit`'s), for loops that step per batch: the detectors' and the
+    segmenters'.
+
+    ``cfg.optimizer``: SGD (``momentum``, ``nesterov``, ``weight_decay``) or AdamW
+    (``lr``, ``weight_decay``); ``cfg.schedule``: ``"cosine"`` anneals to 0 over
+    ``epochs * steps_per_epoch`` steps, ``"step"`` multiplies by ``gamma`` every
+    ``step_size`` epochs, ``"onecycle"`` is OneCycleLR over all the steps,
+    ``"constant"`` keeps ``lr``.
+
+    Parameters
+    ----------
+    params : list of Parameter
+        The trainable parameters (at least one).
+    cfg : TrainConfig
+    steps_per_epoch : int
+
+    Returns
+    -------
+    (torch.optim.Optimizer, torch.optim.lr_scheduler.LRScheduler)
+
+    Raises
+    ------
+    InputError
+        No parameter to train.
+    """
+    if not isinstance(cfg, TrainConfig):
+        raise InputError(f"cfg must be a TrainConfig; got {plain_repr(cfg)}")
+    if not isinstance(params, (list, tuple)) or not all(
+        isinstance(p, torch.Tensor) for p in params
+    ):
+        raise InputError(
+            f"params must be a list of tensors, e.g. list(model.parameters()); got "
+            f"{plain_repr(params)}"
+        )
+    if not params:
+        raise InputError("the model has no trainable parameters (everything is frozen)")
+    steps = check_count(steps_per_epoch, "steps_per_epoch", 1, 1 << 40)
+    if cfg.optimizer == "sgd":
+        opt: torch.optim.Optimizer = torch.optim.SGD(
+            params,
+            lr=cfg.lr,
+            momentum=cfg.momentum,
+            nesterov=cfg.nesterov,
+            weight_decay=cfg.weight_decay,
+        )
+    else:
+        opt = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
+    if cfg.schedule == "cosine":
+        sched: Any = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=cfg.epochs * steps)
+    elif cfg.schedule == "step":
+        sched = torch.optim.lr_scheduler.StepLR(opt, cfg.step_size * steps, cfg.gamma)
+    elif cfg.schedule == "onecycle":
+        sched = torch.optim.lr_scheduler.OneCycleLR(opt, cfg.lr, total_steps=cfg.epochs * steps)
+    else:
+        sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
+    return opt, sched
 
 
 def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path:
