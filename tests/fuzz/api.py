@@ -1322,6 +1322,14 @@ VALID.update(
             "progress": False,
         },
         "nn.segmentation.predict_segmentation": {"model": _SEG_NET, "images": _SEG_X},
+        "nn.training.optimizer_step": {
+            "loss": _b("tests.fuzz.api:step_value", "loss"),
+            "opt": _b("tests.fuzz.api:step_value", "opt"),
+            "sched": _b("tests.fuzz.api:step_value", "sched"),
+            "params": _b("tests.fuzz.api:step_value", "params"),
+            "cfg": TRAIN_CFG,
+            "where": "epoch 1",
+        },
         "nn.training.step_optimizer": {
             "params": _b("tests.fuzz.api:parameters_of", TINY_NET),
             "cfg": TRAIN_CFG,
@@ -1334,6 +1342,22 @@ VALID.update(
 def parameters_of(model: Any) -> list[Any]:
     """The parameters of a built model, as a list (step_optimizer's input)."""
     return list(model.parameters())
+
+
+def step_value(kind: str) -> Any:
+    """A valid nn.training.optimizer_step argument: ``loss`` (a scalar with a graph),
+    ``params`` (one parameter), ``opt`` and ``sched`` (SGD on it, a constant schedule)."""
+    import torch
+
+    w = torch.nn.Parameter(torch.ones(2))
+    opt = torch.optim.SGD([w], lr=0.1)
+    values = {
+        "loss": (w * w).sum(),
+        "params": [w],
+        "opt": opt,
+        "sched": torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0),
+    }
+    return values[kind]
 
 
 # nn.segmentation_data (issue 27): a nuclei folder of two 16 x 16 TIFFs

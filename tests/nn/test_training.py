@@ -276,3 +276,30 @@ def test_issue25_numpy_integers_and_defaults_still_work(tmp_path) -> None:
     assert len(ev.y_true) == 12
     p = save_checkpoint(tmp_path / "c.pt", {"model": _model().state_dict()})
     assert set(load_checkpoint(str(p).encode(), _model())) == {"model"}
+
+
+def test_optimizer_step_by_hand():
+    from robopercept.nn.training import TrainConfig, optimizer_step, step_optimizer
+
+    w = torch.nn.Parameter(torch.ones(2, dtype=torch.float64))
+    cfg = TrainConfig(optimizer="sgd", lr=0.1, momentum=0.0, weight_decay=0.0, schedule="constant")
+    opt, sched = step_optimizer([w], cfg, 1)
+    optimizer_step((w * w).sum(), opt, sched, [w], cfg, "epoch 1")
+    # gradient 2 w = 2: w = 1 - 0.1 * 2
+    torch.testing.assert_close(w.detach(), torch.full((2,), 0.8, dtype=torch.float64))
+    # clipped: the gradient (1.6, 1.6) of norm 2.26 scaled to norm 0.5
+    clip = TrainConfig(
+        optimizer="sgd",
+        lr=0.1,
+        momentum=0.0,
+        weight_decay=0.0,
+        schedule="constant",
+        clip_grad_norm=0.5,
+    )
+    opt, sched = step_optimizer([w], clip, 1)
+    optimizer_step((w * w).sum(), opt, sched, [w], clip, "epoch 2")
+    torch.testing.assert_close(
+        w.detach(), torch.full((2,), 0.8 - 0.1 * 0.5 / 2**0.5, dtype=torch.float64)
+    )
+    with pytest.raises(InputError, match="the loss became nan at epoch 3, batch 1: lower"):
+        optimizer_step(w.sum() * float("nan"), opt, sched, [w], clip, "epoch 3, batch 1")

@@ -1940,6 +1940,7 @@ def train_detector(
     from robopercept.nn.training import (
         TrainConfig,
         deterministic_algorithms,
+        optimizer_step,
         resolve_device,
         save_checkpoint,
         step_optimizer,
@@ -2005,17 +2006,9 @@ def train_detector(
                         )
                     loss = sum(losses.values())
                     assert isinstance(loss, torch.Tensor)
-                    if not bool(torch.isfinite(loss)):
-                        raise InputError(
-                            f"the loss became {loss.item()} at epoch {epoch + 1}, batch {b + 1}: "
-                            f"lower the learning rate (lr {cfg.lr:g})"
-                        )
-                    opt.zero_grad(set_to_none=True)
-                    loss.backward()
-                    if cfg.clip_grad_norm is not None:
-                        nn.utils.clip_grad_norm_(params, cfg.clip_grad_norm)
-                    opt.step()
-                    sched.step()
+                    optimizer_step(
+                        loss, opt, sched, params, cfg, f"epoch {epoch + 1}, batch {b + 1}"
+                    )
                     if averaged is not None:
                         averaged.update_parameters(model)
                     for k, v in losses.items():

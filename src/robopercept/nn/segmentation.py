@@ -459,30 +459,40 @@ class SegmentationHistory:
     seconds: list[float] = field(default_factory=list)
 
 
-def _segmentation_arrays(images: Any, masks: Any, what: str) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(N, H, W, C)`` float images and ``(N, H, W)`` integer masks as ``(N, C, H, W)``
-    float32 and ``(N, H, W)`` int64 tensors."""
+def _images_tensor(images: Any, what: str) -> torch.Tensor:
+    """``(N, H, W, C)`` float images as an ``(N, C, H, W)`` float32 tensor."""
     import numpy as np
 
     try:
         x = np.asarray(images)
-        y = np.asarray(masks)
     except (TypeError, ValueError):
-        x = y = np.zeros(0)
+        x = np.zeros(0)
     if x.ndim != 4 or x.dtype.kind not in "fiu" or x.shape[0] == 0:
         raise InputError(
             f"{what} images must be a non-empty (N, H, W, C) array (channels last, "
             f"floats); got {plain_repr(images)}"
         )
-    if y.shape != x.shape[:3] or y.dtype.kind not in "iu":
-        raise InputError(
-            f"{what} masks must be (N, H, W) integer labels matching the images "
-            f"{x.shape[:3]}; got {plain_repr(masks)}"
-        )
     if not np.isfinite(x).all():
         raise InputError(f"{what} images hold NaN or infinite values")
-    xt = torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2), dtype=np.float32))
-    return xt, torch.from_numpy(y.astype(np.int64))
+    return torch.from_numpy(np.ascontiguousarray(x.transpose(0, 3, 1, 2), dtype=np.float32))
+
+
+def _segmentation_arrays(images: Any, masks: Any, what: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`_images_tensor` and ``(N, H, W)`` integer masks as an int64 tensor."""
+    import numpy as np
+
+    x = _images_tensor(images, what)
+    try:
+        y = np.asarray(masks)
+    except (TypeError, ValueError):
+        y = np.zeros(0)
+    n, _, h, w = x.shape
+    if y.shape != (n, h, w) or y.dtype.kind not in "iu":
+        raise InputError(
+            f"{what} masks must be (N, H, W) integer labels matching the images "
+            f"{(n, h, w)}; got {plain_repr(masks)}"
+        )
+    return x, torch.from_numpy(y.astype(np.int64))
 
 
 @torch.no_grad()
@@ -491,8 +501,7 @@ def predict_segmentation(model: nn.Module, images: Any) -> torch.Tensor:
     one image at a time, in eval mode."""
     if not isinstance(model, nn.Module):
         raise InputError(f"model must be a torch.nn.Module; got {plain_repr(model)}")
-    x, _ = _segmentation_arrays(images, _zeros_like_masks(images), "predict")
-    return _predict(model, x)
+    return _predict(model, _images_tensor(images, "predict"))
 
 
 @torch.no_grad()
@@ -500,13 +509,6 @@ def _predict(model: nn.Module, x: torch.Tensor) -> torch.Tensor:
     model.eval()
     dev = next((p.device for p in model.parameters()), torch.device("cpu"))
     return torch.cat([model(x[i : i + 1].to(dev)).argmax(1).cpu() for i in range(len(x))])
-
-
-def _zeros_like_masks(images: Any) -> Any:
-    import numpy as np
-
-    a = np.asarray(images)
-    return np.zeros(a.shape[:3], np.int64) if a.ndim == 4 else np.zeros(0, np.int64)
 
 
 def train_segmenter(
@@ -578,6 +580,7 @@ def train_segmenter(
     from robopercept.nn.training import (
         TrainConfig,
         deterministic_algorithms,
+        optimizer_step,
         resolve_device,
         step_optimizer,
     )
@@ -655,17 +658,7 @@ def train_segmenter(
                     xb = torch.stack([p[0] for p in pairs]).to(dev)
                     yb = torch.stack([p[1] for p in pairs]).to(dev)
                     value = objective(model(xb), yb)
-                    if not bool(torch.isfinite(value)):
-                        raise InputError(
-                            f"the loss became {float(value)} at epoch {epoch + 1}: lower the "
-                            f"learning rate (lr {cfg.lr:g})"
-                        )
-                    opt.zero_grad(set_to_none=True)
-                    value.backward()
-                    if cfg.clip_grad_norm is not None:
-                        nn.utils.clip_grad_norm_(params, cfg.clip_grad_norm)
-                    opt.step()
-                    sched.step()
+                    optimizer_step(value, opt, sched, params, cfg, f"epoch {epoch + 1}")
                     total += float(value.detach())
                 hist.losses.append(total / steps)
                 hist.seconds.append(time.perf_counter() - t0)

@@ -199,14 +199,10 @@ def segmentation_scores(confusion: npt.ArrayLike) -> SegmentationScores:
 
 
 def _boundary(mask: np.ndarray) -> np.ndarray:
-    """The pixels of ``mask`` with a 4-neighbour outside it (or on the image border)."""
-    inner = ndimage.binary_erosion(mask, structure=ndimage.generate_binary_structure(2, 1))
-    inner &= mask
-    # binary_erosion treats outside the image as set: a mask touching the border keeps
-    # its border pixels inside; mark them as boundary
-    edge = np.zeros_like(mask)
-    edge[0, :] = edge[-1, :] = edge[:, 0] = edge[:, -1] = True
-    return mask & (~inner | edge)
+    """The pixels of ``mask`` with a 4-neighbour outside it or outside the image (the
+    erosion counts pixels beyond the border as unset, ``border_value=0``)."""
+    cross = ndimage.generate_binary_structure(2, 1)
+    return mask & ~ndimage.binary_erosion(mask, structure=cross, border_value=0)
 
 
 def boundary_f_score(

@@ -66,6 +66,7 @@ __all__ = [
     "evaluate",
     "fit",
     "load_checkpoint",
+    "optimizer_step",
     "resolve_device",
     "save_checkpoint",
     "step_optimizer",
@@ -571,6 +572,48 @@ def step_optimizer(
     else:
         sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda _: 1.0)
     return opt, sched
+
+
+def optimizer_step(
+    loss: torch.Tensor,
+    opt: torch.optim.Optimizer,
+    sched: Any,
+    params: list[nn.Parameter],
+    cfg: TrainConfig,
+    where: str,
+) -> None:
+    """One step of a per-batch loop (:func:`step_optimizer`'s pair): refuse a loss that
+    is not finite (naming ``where``, e.g. "epoch 3, batch 2", and the learning rate to
+    lower), then zero the gradients, back-propagate, clip their norm at
+    ``cfg.clip_grad_norm`` (when set), step the optimizer and the schedule.
+
+    Raises
+    ------
+    InputError
+        The loss is NaN or infinite.
+    """
+    if (
+        not isinstance(loss, torch.Tensor)
+        or loss.numel() != 1
+        or not isinstance(opt, torch.optim.Optimizer)
+        or not callable(getattr(sched, "step", None))
+        or not isinstance(cfg, TrainConfig)
+        or not isinstance(params, (list, tuple))
+    ):
+        raise InputError(
+            "optimizer_step takes a scalar loss tensor, the optimizer and schedule of "
+            "step_optimizer, their parameters (a list) and the TrainConfig"
+        )
+    if not bool(torch.isfinite(loss)):
+        raise InputError(
+            f"the loss became {float(loss)} at {where}: lower the learning rate (lr {cfg.lr:g})"
+        )
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    if cfg.clip_grad_norm is not None:
+        nn.utils.clip_grad_norm_(params, cfg.clip_grad_norm)
+    opt.step()
+    sched.step()
 
 
 def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path:
