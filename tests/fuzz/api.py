@@ -2221,6 +2221,26 @@ def detector_value(kind: str) -> Any:
             {"boxes": torch.tensor([[1.0, 2.0, 9.0, 12.0]]), "labels": torch.tensor([1])},
             {"boxes": torch.tensor([[4.0, 0.0, 20.0, 10.0]]), "labels": torch.tensor([2])},
         ]
+    if kind == "mtargets":
+        masks = []
+        for box, (h, w) in (([1, 2, 9, 12], (16, 16)), ([4, 0, 20, 10], (16, 24))):
+            m = torch.zeros(1, h, w, dtype=torch.uint8)
+            m[0, box[1] : box[3], box[0] : box[2]] = 1
+            masks.append(m)
+        return [
+            {
+                "boxes": torch.tensor([[1.0, 2.0, 9.0, 12.0]]),
+                "labels": torch.tensor([1]),
+                "masks": masks[0],
+            },
+            {
+                "boxes": torch.tensor([[4.0, 0.0, 20.0, 10.0]]),
+                "labels": torch.tensor([2]),
+                "masks": masks[1],
+            },
+        ]
+    if kind == "maskrcnn":
+        return det.MaskRCNN(2, width=4, hidden=8, mask_channels=4, mask_convs=1)
     if kind == "fcos":
         return det.FCOS(2, width=4, head_channels=8)
     if kind == "faster":
@@ -2340,6 +2360,27 @@ VALID.update(
     }
 )
 METHODS["nn.detection.FasterRCNN"] = ("forward", "rpn_outputs")
+VALID.update(
+    {
+        "nn.boxes.paste_masks": {
+            "masks": _b("tests.fuzz.api:torch_image", 3, 6, 6),
+            "boxes": TBOXES,
+            "size": (16, 24),
+        },
+        "nn.detection.MaskRCNN": {
+            "num_classes": 2,
+            "width": 4,
+            "hidden": 8,
+            "mask_channels": 4,
+            "mask_convs": 1,
+        },
+        "nn.detection.MaskRCNN.forward": {
+            "images": _DIMAGES,
+            "targets": _b("tests.fuzz.api:detector_value", "mtargets"),
+        },
+    }
+)
+METHODS["nn.detection.MaskRCNN"] = ("forward",)
 METHODS["nn.detection_data.FlipRotate"] = ("__call__",)
 METHODS["nn.detection_data.ScaleJitter"] = ("__call__",)
 METHODS["nn.detection.TestTimeAugmentation"] = ("forward", "predict")

@@ -1,5 +1,6 @@
 r"""Box operations of the R-CNN family, in torch: formats, IoU and GIoU, Faster R-CNN
-box coding, anchors, greedy non-maximum suppression, RoI pooling and RoI Align.
+box coding, anchors, greedy non-maximum suppression, RoI pooling, RoI Align and its
+inverse, pasting per-box masks back into the image.
 
 Box formats (all in pixels, floating point, one box per row):
 
@@ -47,6 +48,7 @@ __all__ = [
     "generalized_box_iou",
     "nms",
     "non_max_suppression",
+    "paste_masks",
     "roi_align",
     "roi_pool",
 ]
@@ -1104,6 +1106,115 @@ def roi_align(
 
 def _round_half_away(v: torch.Tensor) -> torch.Tensor:
     return torch.sign(v) * torch.floor(v.abs() + 0.5)
+
+
+def paste_masks(masks: torch.Tensor, boxes: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    r"""Paste ``M x M`` per-box masks (Mask R-CNN's 28 x 28 outputs) back into an image of
+    ``size`` ``(H, W)``: the inverse of :func:`roi_align` with ``aligned=True``.
+
+    Mask cell :math:`j` of a box :math:`(x_1, y_1, x_2, y_2)` is centred at
+    :math:`x_1 + (j + \tfrac12)(x_2 - x_1)/M` (same in y). Image pixel :math:`(c, r)`,
+    centred at :math:`(c + \tfrac12, r + \tfrac12)` in the same continuous coordinates,
+    takes the bilinear interpolation of the mask at
+    :math:`u = (c + \tfrac12 - x_1) M / (x_2 - x_1) - \tfrac12` (clamped to the edge
+    cells) when its centre lies inside the box, and 0 outside it. torchvision's
+    ``paste_masks_in_image`` resizes a zero-padded mask to the integer box instead, which
+    spreads a mask half a cell beyond its box; here a mask of ones pastes exactly the
+    pixels whose centres the box covers (tested).
+
+    Parameters
+    ----------
+    masks : (D, M, M) or (D, 1, M, M) float torch.Tensor
+        Probabilities (or logits) per box.
+    boxes : (D, 4) float torch.Tensor
+        ``"xyxy"`` pixels.
+    size : (H, W)
+        Image shape.
+
+    Returns
+    -------
+    (D, H, W) torch.Tensor
+        Of ``masks``' dtype.
+
+    Raises
+    ------
+    InputError
+        Masks not ``(D, M, M)`` floating point, boxes not ``(D, 4)`` ordered and finite,
+        or a size that is not two positive ints.
+
+    Examples
+    --------
+    >>> import torch
+    >>> out = paste_masks(torch.ones(1, 4, 4), torch.tensor([[1.0, 0.5, 3.0, 2.4]]), (3, 4))
+    >>> out[0].int().tolist()
+    [[0, 1, 1, 0], [0, 1, 1, 0], [0, 0, 0, 0]]
+    """
+    if isinstance(masks, torch.Tensor) and masks.ndim == 4 and masks.shape[1] == 1:
+        masks = masks[:, 0]
+    if (
+        not isinstance(masks, torch.Tensor)
+        or masks.ndim != 3
+        or masks.shape[1] < 1
+        or masks.shape[2] < 1
+        or not masks.is_floating_point()
+    ):
+        raise InputError(
+            f"masks must be a (D, M, M) float torch.Tensor, one mask per box; got "
+            f"{plain_repr(masks)}"
+        )
+    b = _check_boxes(boxes, "boxes")
+    if b.shape[0] != masks.shape[0]:
+        raise InputError(
+            f"masks and boxes must pair up: {masks.shape[0]} masks, {b.shape[0]} boxes"
+        )
+    if (
+        not isinstance(size, (tuple, list))
+        or len(size) != 2
+        or not all(isinstance(s, int) and not isinstance(s, bool) and s > 0 for s in size)
+    ):
+        raise InputError(f"size must be (H, W), two positive ints; got {plain_repr(size)}")
+    h, w = int(size[0]), int(size[1])
+    d = masks.shape[0]
+    check_allocation(
+        d * h * w,
+        masks.element_size(),
+        f"({d}, {h}, {w}) pasted masks",
+        "use fewer boxes or a smaller image",
+    )
+    out = masks.new_zeros((d, h, w))
+    mh, mw = masks.shape[1], masks.shape[2]
+    bd = b.detach().to(torch.float64).cpu()
+    for i in range(d):
+        x1, y1, x2, y2 = (float(v) for v in bd[i])
+        # pixels whose centres c + 1/2 lie in [x1, x2]
+        c0, c1 = max(math.ceil(x1 - 0.5), 0), min(math.floor(x2 - 0.5), w - 1)
+        r0, r1 = max(math.ceil(y1 - 0.5), 0), min(math.floor(y2 - 0.5), h - 1)
+        if c1 < c0 or r1 < r0 or x2 <= x1 or y2 <= y1:
+            continue
+        dev = masks.device
+        cx = torch.arange(c0, c1 + 1, dtype=torch.float64, device=dev) + 0.5
+        cy = torch.arange(r0, r1 + 1, dtype=torch.float64, device=dev) + 0.5
+        u = ((cx - x1) * mw / (x2 - x1) - 0.5).clamp(0, mw - 1)
+        v = ((cy - y1) * mh / (y2 - y1) - 0.5).clamp(0, mh - 1)
+        out[i, r0 : r1 + 1, c0 : c1 + 1] = _bilinear_grid(masks[i], v, u)
+    return out
+
+
+def _bilinear_grid(m: torch.Tensor, v: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+    """``m`` (h, w) sampled bilinearly at rows ``v`` x columns ``u`` (both in range):
+    the separable weights as two small matrix products ``A_v m A_u^T``."""
+
+    def weights(t: torch.Tensor, n: int) -> torch.Tensor:
+        lo = t.floor().long().clamp(max=n - 1)
+        hi = (lo + 1).clamp(max=n - 1)
+        f = t - lo.to(t.dtype)
+        a = torch.zeros((t.shape[0], n), dtype=t.dtype, device=t.device)
+        rows = torch.arange(t.shape[0], device=t.device)
+        a.index_put_((rows, lo), 1.0 - f, accumulate=True)
+        a.index_put_((rows, hi), f, accumulate=True)
+        return a.to(m.dtype)
+
+    return weights(v, m.shape[0]) @ m @ weights(u, m.shape[1]).T
 
 
 def roi_pool(

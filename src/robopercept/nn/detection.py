@@ -98,6 +98,7 @@ from robopercept.nn.boxes import (
     dihedral_boxes,
     generalized_box_iou,
     nms,
+    paste_masks,
     roi_align,
     roi_pool,
 )
@@ -114,6 +115,7 @@ __all__ = [
     "FastRCNN",
     "FasterRCNN",
     "LocalizationResult",
+    "MaskRCNN",
     "SingleObjectLocalizer",
     "TestTimeAugmentation",
     "build_detector",
@@ -557,7 +559,11 @@ def _check_targets(
                     f"targets[{i}]['labels'] must be in 1..{num_classes} (0 is the background); "
                     f"got {int(lab.min())}..{int(lab.max())}"
                 )
-        out.append({"boxes": b, "labels": lab})
+        checked = {"boxes": b, "labels": lab}
+        if "masks" in t:
+            # checked against the image size where a model uses them (MaskRCNN)
+            checked["masks"] = t["masks"]
+        out.append(checked)
     return out
 
 
@@ -830,7 +836,16 @@ class _TwoStage(_Detector):
         [bg_low, 0.5) background) and sample ``box_batch_size`` with at most
         ``box_positive_fraction`` foreground; returns the regions, their class labels
         (0 background) and their regression targets."""
-        rois, labels, deltas = [], [], []
+        rois, labels, deltas, _ = self.sample_regions(proposals, targets)
+        return rois, labels, deltas
+
+    def sample_regions(
+        self, proposals: list[torch.Tensor], targets: list[dict[str, torch.Tensor]]
+    ) -> tuple[list[torch.Tensor], list[torch.Tensor], list[torch.Tensor], list[torch.Tensor]]:
+        """:meth:`select_training_samples` and, per image, the index of the ground-truth
+        box each sampled region is matched to (meaningful for the foreground ones; the
+        mask targets of :class:`MaskRCNN`)."""
+        rois, labels, deltas, matches = [], [], [], []
         for p, t in zip(proposals, targets, strict=True):
             gt = t["boxes"].to(p.dtype)
             cand = torch.cat((p, gt))
@@ -851,7 +866,8 @@ class _TwoStage(_Detector):
             rois.append(cand[keep])
             labels.append(cls)
             deltas.append(d)
-        return rois, labels, deltas
+            matches.append(matched[keep])
+        return rois, labels, deltas, matches
 
     def _head_losses(
         self,
@@ -913,11 +929,34 @@ class _TwoStage(_Detector):
     ) -> dict[str, torch.Tensor] | list[dict[str, torch.Tensor]]:
         if self.training:
             assert tgts is not None
-            rois, labels, deltas = self.select_training_samples(proposals, tgts)
+            rois, labels, deltas, matched = self.sample_regions(proposals, tgts)
             logits, reg = self.roi(self._pool(feats, rois))
-            return self._head_losses(logits, reg, labels, deltas)
+            losses = self._head_losses(logits, reg, labels, deltas)
+            losses.update(self._region_losses(feats, sizes, tgts, rois, labels, matched))
+            return losses
         logits, reg = self.roi(self._pool(feats, proposals))
-        return self._postprocess(logits, reg, proposals, sizes)
+        return self._region_outputs(feats, sizes, self._postprocess(logits, reg, proposals, sizes))
+
+    def _region_losses(
+        self,
+        feats: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        tgts: list[dict[str, torch.Tensor]],
+        rois: list[torch.Tensor],
+        labels: list[torch.Tensor],
+        matched: list[torch.Tensor],
+    ) -> dict[str, torch.Tensor]:
+        """Losses of further per-region branches on the sampled regions (Mask R-CNN's)."""
+        return {}
+
+    def _region_outputs(
+        self,
+        feats: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        dets: list[dict[str, torch.Tensor]],
+    ) -> list[dict[str, torch.Tensor]]:
+        """Outputs of further per-region branches on the final detections."""
+        return dets
 
 
 def _check_proposals(proposals: Any, sizes: list[tuple[int, int]]) -> list[torch.Tensor]:
@@ -1305,6 +1344,191 @@ class FasterRCNN(_TwoStage):
             losses.update(head)
             return losses
         return self._run_heads(feats, props, sizes, None)
+
+
+# --------------------------------------------------------------------------- Mask R-CNN
+class _MaskHead(nn.Module):
+    """``convs`` 3 x 3 convolutions with ReLU, a 2 x 2 stride-2 transposed convolution
+    with ReLU, and a 1 x 1 convolution to one mask logit map per class (torchvision's
+    MaskRCNNHeads + MaskRCNNPredictor, with fewer channels)."""
+
+    def __init__(self, in_channels: int, channels: int, convs: int, num_classes: int) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        c = in_channels
+        for _ in range(convs):
+            layers += [nn.Conv2d(c, channels, 3, padding=1), nn.ReLU()]
+            c = channels
+        self.convs = nn.Sequential(*layers)
+        self.up = nn.ConvTranspose2d(c, channels, 2, stride=2)
+        self.logits = nn.Conv2d(channels, num_classes, 1)
+        for m in self.modules():
+            if isinstance(m, (nn.Conv2d, nn.ConvTranspose2d)):
+                nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
+                nn.init.zeros_(m.bias)  # type: ignore[arg-type]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.logits(F.relu(self.up(self.convs(x))))
+
+
+def _check_masks_target(t: Mapping[str, Any], i: int, size: tuple[int, int]) -> torch.Tensor:
+    m = t.get("masks")
+    k = int(t["boxes"].shape[0])
+    if m is None:
+        raise InputError(
+            f"targets[{i}] has no 'masks': Mask R-CNN trains on instance masks, a (K, H, W) "
+            "uint8 or bool tensor per image (e.g. procedural_detection_set's)"
+        )
+    if not isinstance(m, torch.Tensor) or tuple(m.shape) != (k, *size):
+        raise InputError(
+            f"targets[{i}]['masks'] must be ({k}, {size[0]}, {size[1]}): one mask of the "
+            f"image's size per box; got {plain_repr(m)}"
+        )
+    if m.is_floating_point() and not bool(torch.isfinite(m).all()):
+        raise InputError(f"targets[{i}]['masks'] has NaN or inf")
+    return m
+
+
+class MaskRCNN(FasterRCNN):
+    r"""Mask R-CNN (He et al. 2017): :class:`FasterRCNN` with a mask branch beside its
+    box head.
+
+    The mask branch pools each region with RoI Align (``aligned=True``, pixel centres
+    at half-integers) to ``mask_pool_size`` cells of the stride-8 features, runs
+    ``mask_convs`` 3 x 3 convolutions of ``mask_channels``, a 2 x 2 stride-2 transposed
+    convolution and a 1 x 1 convolution to :math:`C` logit maps of side
+    :math:`M = 2\,` ``mask_pool_size`` (28 by default): one mask per class, decoupled
+    from the classification (no competition between classes).
+
+    Training adds ``loss_mask`` to the four losses of :class:`FasterRCNN`: for each
+    sampled foreground region :math:`r` with ground-truth class :math:`k` and matched
+    instance mask :math:`G`, the target :math:`T` is :math:`G` RoI-aligned to
+    :math:`M \times M` over the region (soft values in [0, 1], as torchvision's
+    ``project_masks_on_boxes``), and the loss is the mean per-pixel binary cross
+    entropy :math:`-\overline{T \log \sigma(z_k) + (1 - T) \log(1 - \sigma(z_k))}` of
+    the class-:math:`k` map only (0 without foreground regions).
+
+    At inference the final boxes go through the mask branch, the map of each box's
+    predicted class is passed through the sigmoid and pasted into the image
+    (:func:`~robopercept.nn.boxes.paste_masks`).
+
+    Parameters
+    ----------
+    num_classes : int
+    mask_pool_size : int
+        RoI Align side of the mask branch (14: 28 x 28 masks).
+    mask_channels, mask_convs : int
+        Width and depth of the mask branch (torchvision: 256 and 4).
+    **settings
+        Those of :class:`FasterRCNN`.
+
+    Returns (eval mode)
+    -------------------
+    Per image ``{"boxes", "labels", "scores", "masks"}``, ``"masks"`` ``(D, 1, H, W)``
+    float probabilities (torchvision's layout: threshold at 0.5 for binary masks).
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> m = MaskRCNN(2, width=8, hidden=32, mask_channels=8, mask_convs=1)
+    >>> masks = torch.zeros(1, 32, 32, dtype=torch.uint8); masks[0, 4:28, 4:20] = 1
+    >>> t = [{"boxes": torch.tensor([[4.0, 4, 20, 28]]), "labels": torch.tensor([1]),
+    ...       "masks": masks}]
+    >>> sorted(m([torch.rand(3, 32, 32)], t))[:2]
+    ['loss_box', 'loss_classifier']
+    >>> "loss_mask" in m([torch.rand(3, 32, 32)], t)
+    True
+    """
+
+    def __init__(
+        self,
+        num_classes: int,
+        *,
+        mask_pool_size: int = 14,
+        mask_channels: int = 64,
+        mask_convs: int = 4,
+        **settings: Any,
+    ) -> None:
+        super().__init__(num_classes, **settings)
+        self.mask_pool_size = check_count(mask_pool_size, "mask_pool_size", 1, 64)
+        self.mask_resolution = 2 * self.mask_pool_size
+        channels = check_count(mask_channels, "mask_channels", 1, MAX_CHANNELS)
+        convs = check_count(mask_convs, "mask_convs", 0, 16)
+        self.mask_head = _MaskHead(self.backbone.out_channels[-1], channels, convs, num_classes)
+
+    def mask_logits(self, feats: torch.Tensor, rois: list[torch.Tensor]) -> torch.Tensor:
+        """``(R, C, M, M)`` mask logits of the regions ``rois`` (one list entry per image,
+        ``xyxy`` pixels) on the stride-8 features."""
+        pooled = roi_align(
+            feats,
+            rois,
+            self.mask_pool_size,
+            1.0 / self.backbone.strides[-1],
+            sampling_ratio=2,
+            aligned=True,
+        )
+        return self.mask_head(pooled)
+
+    def mask_targets(
+        self, rois: torch.Tensor, masks: torch.Tensor, matched: torch.Tensor
+    ) -> torch.Tensor:
+        """``(R, M, M)`` soft targets: instance mask ``masks[matched[r]]`` RoI-aligned over
+        region ``rois[r]`` (``aligned=True``, 2 x 2 samples per cell)."""
+        if rois.shape[0] == 0:
+            return rois.new_zeros((0, self.mask_resolution, self.mask_resolution))
+        rows = torch.cat((matched.to(rois.dtype)[:, None], rois), dim=1)
+        m = masks.to(rois.dtype)[:, None]
+        return roi_align(m, rows, self.mask_resolution, 1.0, sampling_ratio=2, aligned=True)[:, 0]
+
+    def _region_losses(
+        self,
+        feats: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        tgts: list[dict[str, torch.Tensor]],
+        rois: list[torch.Tensor],
+        labels: list[torch.Tensor],
+        matched: list[torch.Tensor],
+    ) -> dict[str, torch.Tensor]:
+        gt_masks = [
+            _check_masks_target(t, i, s) for i, (t, s) in enumerate(zip(tgts, sizes, strict=True))
+        ]
+        fg = [lab > 0 for lab in labels]
+        fg_labels = torch.cat([lab[f] for lab, f in zip(labels, fg, strict=True)])
+        if fg_labels.numel() == 0:
+            # zero, with a graph through the mask branch (as torchvision's)
+            zero = torch.stack([p.sum() for p in self.mask_head.parameters()]).sum() * 0.0
+            return {"loss_mask": zero}
+        z = self.mask_logits(feats, [r[f] for r, f in zip(rois, fg, strict=True)])
+        z = z[torch.arange(z.shape[0], device=z.device), fg_labels - 1]
+        target = torch.cat(
+            [
+                self.mask_targets(r[f], gm, mt[f])
+                for r, f, gm, mt in zip(rois, fg, gt_masks, matched, strict=True)
+            ]
+        )
+        return {"loss_mask": F.binary_cross_entropy_with_logits(z, target)}
+
+    def _region_outputs(
+        self,
+        feats: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        dets: list[dict[str, torch.Tensor]],
+    ) -> list[dict[str, torch.Tensor]]:
+        boxes = [d["boxes"] for d in dets]
+        if not sum(b.shape[0] for b in boxes):
+            for d, size in zip(dets, sizes, strict=True):
+                d["masks"] = feats.new_zeros((0, 1, *size))
+            return dets
+        z = self.mask_logits(feats, boxes)
+        start = 0
+        for d, size in zip(dets, sizes, strict=True):
+            k = d["boxes"].shape[0]
+            zi = z[start : start + k]
+            start += k
+            probs = torch.sigmoid(zi[torch.arange(k, device=zi.device), d["labels"] - 1])
+            d["masks"] = paste_masks(probs, d["boxes"].detach(), size)[:, None]
+        return dets
 
 
 def _init_conv(layer: nn.Conv2d, bias: float) -> None:
@@ -1863,6 +2087,7 @@ def train_detector(
     augment: Callable[[torch.Tensor, dict[str, Any]], tuple[torch.Tensor, dict[str, Any]]]
     | None = None,
     ema: float | None = None,
+    val_iou_type: str = "bbox",
 ) -> DetectionHistory:
     r"""Train a detector of this module (or any model keeping the torchvision detection
     contract) on a :class:`~robopercept.nn.detection_data.DetectionDataset`.
@@ -1913,6 +2138,9 @@ def train_detector(
         random initial weights are forgotten early), through
         :class:`torch.optim.swa_utils.AveragedModel`. The averaged weights are the ones
         validated, kept and returned in ``model``. In (0, 1); None: no averaging.
+    val_iou_type : {"bbox", "segm"}
+        What validation scores (:func:`evaluate_detector`'s ``iou_type``): the masks
+        of a :class:`MaskRCNN` with ``"segm"``.
 
     Returns
     -------
@@ -1962,6 +2190,7 @@ def train_detector(
         )
     val_every = check_count(val_every, "val_every", 1, 1 << 30)
     check_choice(val_metric, "val_metric", VAL_METRICS)
+    check_choice(val_iou_type, "val_iou_type", ("bbox", "segm"))
     if ema is not None:
         ema = check_real(ema, "ema (--ema)", 0.0, 1.0, low_inclusive=False, high_inclusive=False)
     dev = resolve_device(cfg.device)
@@ -1995,7 +2224,7 @@ def train_detector(
                     images, targets = collate_detection(items)
                     images = [im.to(dev) for im in images]
                     targets = [
-                        {"boxes": t["boxes"].to(dev), "labels": t["labels"].to(dev)}
+                        {k: t[k].to(dev) for k in ("boxes", "labels", "masks") if k in t}
                         for t in targets
                     ]
                     losses = model(images, targets)
@@ -2019,7 +2248,11 @@ def train_detector(
                 last = epoch + 1 == cfg.epochs
                 if val_ds is not None and ((epoch + 1) % val_every == 0 or last):
                     t1 = time.perf_counter()
-                    value = float(evaluate_detector(kept, val_ds).stats[VAL_METRICS[val_metric]])
+                    value = float(
+                        evaluate_detector(kept, val_ds, iou_type=val_iou_type).stats[
+                            VAL_METRICS[val_metric]
+                        ]
+                    )
                     hist.val_seconds += time.perf_counter() - t1
                     hist.val[epoch + 1] = value
                     if best_state is None or value > best_value:
@@ -2070,18 +2303,25 @@ def evaluate_detector(
     *,
     batch_size: int = 8,
     device: str | None = None,
+    iou_type: str = "bbox",
 ) -> Any:
-    """COCO box evaluation (:func:`~robopercept.nn.coco.evaluate_detections`, equal to
-    pycocotools) of ``model``'s eval-mode detections on ``dataset``.
+    """COCO evaluation (:func:`~robopercept.nn.coco.evaluate_detections`, equal to
+    pycocotools) of ``model``'s eval-mode detections on ``dataset``: of the boxes, or
+    with ``iou_type="segm"`` of the instance masks (a :class:`MaskRCNN`'s
+    probabilities thresholded at 0.5, run-length encoded by
+    :func:`~robopercept.nn.coco_mask.rle_encode`, against the dataset's masks).
 
     Parameters
     ----------
     model : torch.nn.Module
-        Eval mode returns ``[{"boxes", "labels", "scores"}]`` per image.
+        Eval mode returns ``[{"boxes", "labels", "scores"}]`` per image (and
+        ``"masks"`` ``(D, 1, H, W)`` for ``"segm"``).
     dataset : DetectionDataset
+        With masks for ``"segm"``.
     batch_size : int
     device : str, optional
         None: the device of the model's parameters.
+    iou_type : {"bbox", "segm"}
 
     Returns
     -------
@@ -2099,11 +2339,18 @@ def evaluate_detector(
     (12,)
     """
     from robopercept.nn.coco import evaluate_detections
+    from robopercept.nn.coco_mask import rle_encode
     from robopercept.nn.training import resolve_device
 
     model = check_module(model)
     ds = _detection_dataset(dataset)
     bs = check_count(batch_size, "batch_size", 1, 1 << 16)
+    segm = check_choice(iou_type, "iou_type", ("bbox", "segm")) == "segm"
+    if segm and ds.masks is None:
+        raise InputError(
+            "iou_type='segm' scores masks, and this dataset has none: use a set with "
+            "instance masks (procedural_detection_set, digits_detection_set)"
+        )
     if device is None:
         p = next(model.parameters(), None)
         dev = p.device if p is not None else torch.device("cpu")
@@ -2113,23 +2360,30 @@ def evaluate_detector(
     results: list[Mapping[str, Any]] = []
     for t, d in _detections_per_image(model, ds, bs, dev):
         b = d["boxes"].detach().cpu().double().numpy()
-        for box, lab, sc in zip(
-            b, d["labels"].cpu().numpy(), d["scores"].cpu().double().numpy(), strict=True
-        ):
-            results.append(
-                {
-                    "image_id": int(t["image_id"]),
-                    "category_id": int(lab),
-                    "bbox": [
-                        float(box[0]),
-                        float(box[1]),
-                        float(box[2] - box[0]),
-                        float(box[3] - box[1]),
-                    ],
-                    "score": float(sc),
-                }
+        if segm and "masks" not in d:
+            raise InputError(
+                f"iou_type='segm' needs masks, and {type(model).__name__} gives none: use "
+                "a MaskRCNN, or iou_type='bbox'"
             )
-    return evaluate_detections(ds.to_coco(), results)
+        masks = (d["masks"][:, 0] > 0.5).cpu().numpy() if segm else None
+        for j, (box, lab, sc) in enumerate(
+            zip(b, d["labels"].cpu().numpy(), d["scores"].cpu().double().numpy(), strict=True)
+        ):
+            res: dict[str, Any] = {
+                "image_id": int(t["image_id"]),
+                "category_id": int(lab),
+                "bbox": [
+                    float(box[0]),
+                    float(box[1]),
+                    float(box[2] - box[0]),
+                    float(box[3] - box[1]),
+                ],
+                "score": float(sc),
+            }
+            if masks is not None:
+                res["segmentation"] = rle_encode(masks[j])
+            results.append(res)
+    return evaluate_detections(ds.to_coco(), results, iou_type="segm" if segm else "bbox")
 
 
 def _detections_per_image(
@@ -2514,6 +2768,7 @@ class RCNN(_TwoStage):
 DETECTORS: dict[str, type[nn.Module]] = {
     "fcos": FCOS,
     "faster": FasterRCNN,
+    "maskrcnn": MaskRCNN,
     "fast": FastRCNN,
     "rcnn": RCNN,
     "localizer": SingleObjectLocalizer,
@@ -2668,7 +2923,8 @@ def detect_arrays(model: nn.Module, images: Sequence[Any]) -> list[dict[str, Any
     Returns
     -------
     list of dict
-        ``{"boxes": (D, 4) float64 xyxy, "labels": (D,) int64, "scores": (D,) float64}``.
+        ``{"boxes": (D, 4) float64 xyxy, "labels": (D,) int64, "scores": (D,) float64}``,
+        and for a :class:`MaskRCNN` ``"masks"`` ``(D, H, W)`` bool (probability > 0.5).
 
     Raises
     ------
@@ -2706,11 +2962,12 @@ def detect_arrays(model: nn.Module, images: Sequence[Any]) -> list[dict[str, Any
             )
         x = np.ascontiguousarray(to_unit_float(im).astype(np.float32).transpose(2, 0, 1))
         d = model.predict([torch.from_numpy(x).to(dev)])[0]  # type: ignore[operator]
-        out.append(
-            {
-                "boxes": d["boxes"].detach().cpu().double().numpy(),
-                "labels": d["labels"].cpu().numpy(),
-                "scores": d["scores"].detach().cpu().double().numpy(),
-            }
-        )
+        res = {
+            "boxes": d["boxes"].detach().cpu().double().numpy(),
+            "labels": d["labels"].cpu().numpy(),
+            "scores": d["scores"].detach().cpu().double().numpy(),
+        }
+        if "masks" in d:
+            res["masks"] = (d["masks"][:, 0] > 0.5).cpu().numpy()
+        out.append(res)
     return out

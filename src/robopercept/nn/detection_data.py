@@ -365,7 +365,9 @@ class DetectionDataset:
 
     def to_coco(self) -> CocoDataset:
         """The ground truth as a :class:`~robopercept.nn.coco.CocoDataset` (boxes as COCO
-        ``[x, y, w, h]``, ``area`` as :meth:`areas`, category ``k`` = ``classes[k - 1]``).
+        ``[x, y, w, h]``, ``area`` as :meth:`areas`, category ``k`` = ``classes[k - 1]``;
+        where the set has masks, each object's ``segmentation`` is its mask's RLE,
+        :func:`~robopercept.nn.coco_mask.rle_encode`).
 
         Examples
         --------
@@ -374,20 +376,25 @@ class DetectionDataset:
         >>> ds.to_coco().boxes.tolist()
         [[1.0, 1.0, 2.0, 3.0]]
         """
+        from robopercept.nn.coco_mask import rle_encode
+
         anns: list[dict[str, Any]] = []
         for i in range(len(self)):
             b = self.boxes[i]
-            for box, lab, area in zip(b, self.labels[i], self.areas(i), strict=True):
-                anns.append(
-                    {
-                        "id": len(anns) + 1,
-                        "image_id": self.image_ids[i],
-                        "category_id": int(lab),
-                        "bbox": [box[0], box[1], box[2] - box[0], box[3] - box[1]],
-                        "area": float(area),
-                        "iscrowd": 0,
-                    }
-                )
+            for j, (box, lab, area) in enumerate(
+                zip(b, self.labels[i], self.areas(i), strict=True)
+            ):
+                ann: dict[str, Any] = {
+                    "id": len(anns) + 1,
+                    "image_id": self.image_ids[i],
+                    "category_id": int(lab),
+                    "bbox": [box[0], box[1], box[2] - box[0], box[3] - box[1]],
+                    "area": float(area),
+                    "iscrowd": 0,
+                }
+                if self.masks is not None:
+                    ann["segmentation"] = rle_encode(self.masks[i][j])
+                anns.append(ann)
         return coco_from_dict(
             {
                 "images": [
