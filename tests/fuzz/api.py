@@ -1286,6 +1286,11 @@ VALID.update(
             "y_pred": _SEG_P,
             "num_classes": 3,
         },
+        "nn.segmentation_eval.match_instances": {
+            "true_labels": _SEG_T,
+            "pred_labels": _SEG_P,
+            "iou_threshold": 0.5,
+        },
     }
 )
 
@@ -1398,6 +1403,10 @@ def detection_value(kind: str) -> Any:
         return ds.subset([0])
     if kind == "target":
         return {"boxes": torch_tensor([[1.0, 2.0, 9.0, 12.0]])}
+    if kind == "masks":
+        first = np.zeros((1, 16, 16), bool)
+        first[0, 2:12, 1:9] = True
+        return [first, np.ones((1, 16, 16), bool)]
     return {"dataset": ds, "batch": [ds[0], ds[1]]}[kind]
 
 
@@ -1434,6 +1443,12 @@ VALID.update(
             "boxes": [[[1.0, 2.0, 9.0, 12.0]], [[0.0, 0.0, 16.0, 16.0]]],
             "labels": [[1], [1]],
             "classes": ["a"],
+            "masks": _b("tests.fuzz.api:detection_value", "masks"),
+        },
+        "nn.detection_data.DetectionDataset.from_instance_labels": {
+            "images": [np.full((6, 8), 0.5)],
+            "instances": [np.repeat([[0, 0, 3, 3, 0, 7, 7, 0]], 6, axis=0)],
+            "class_name": "cell",
         },
         "nn.detection_data.DetectionDataset.subset": {"indices": [1, 0]},
         "nn.detection_data.DetectionDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
@@ -1472,6 +1487,8 @@ METHODS["nn.detection_data.DetectionDataset"] = (
     "areas",
     "to_coco",
     "__getitem__",
+    "class_maps",
+    "from_instance_labels",
 )
 
 #: callables not fuzzed, with the reason

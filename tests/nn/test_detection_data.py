@@ -696,3 +696,18 @@ def test_flip_rotate_bad_input(kw, args, msg):
     with pytest.raises(InputError, match=msg.replace("(", r"\(").replace(")", r"\)")):
         f = FlipRotate(**kw)
         f(*args)
+
+
+def test_class_maps_of_the_procedural_set_label_each_visible_object():
+    # the semantic ground truth of the shapes: pixel (r, c) has class k exactly where a
+    # visible mask of a class-k object covers it (masks are the visible parts, so they
+    # do not overlap), 0 elsewhere
+    ds = procedural_detection_set(4, (64, 64), rng=3)
+    maps = ds.class_maps()
+    assert maps.shape == (4, 64, 64) and maps.dtype == np.int64
+    for i in range(4):
+        m, lab = ds.masks[i], ds.labels[i]
+        assert int(m.sum(0).max()) <= 1  # no overlap
+        expect = (m * lab[:, None, None]).sum(0)
+        np.testing.assert_array_equal(maps[i], expect)
+        assert set(np.unique(maps[i])) <= {0, *lab.tolist()}

@@ -59,3 +59,46 @@ def test_percentile_normalize_hand_case_and_refusals(tmp_path):
     (tmp_path / "mask2d.tif").unlink()
     with pytest.raises(FileFormatError):
         nuclei_quadrants(tmp_path)
+
+
+@pytest.mark.realdata
+def test_real_nuclei_as_a_detection_set_with_exact_boxes_and_masks():
+    # the held-out tile as Mask R-CNN's data: one object per nucleus id, its mask that
+    # id's pixels, its box the tight box, the class maps the foreground
+    from robopercept.nn.detection_data import DetectionDataset
+
+    s = nuclei_quadrants(data_path("segmentation", "stardist_nuclei"))
+    ds = DetectionDataset.from_instance_labels(
+        [np.clip(s.test_image, 0, 1)], [s.test_instances], "nucleus"
+    )
+    ids = [i for i in np.unique(s.test_instances) if i]
+    assert ds.classes == ("nucleus",) and len(ds.boxes[0]) == len(ids) == 29
+    assert ds.images[0].shape == (256, 256, 3)
+    for k, i in enumerate(ids):
+        m = s.test_instances == i
+        np.testing.assert_array_equal(ds.masks[0][k], m)
+        rows, cols = np.nonzero(m)
+        assert ds.boxes[0][k].tolist() == [cols.min(), rows.min(), cols.max() + 1, rows.max() + 1]
+    np.testing.assert_array_equal(ds.class_maps()[0], s.test_mask)
+
+
+def test_from_instance_labels_and_class_maps_refusals():
+    from robopercept.nn.detection_data import DetectionDataset
+
+    im = np.zeros((4, 5))
+    with pytest.raises(InputError, match="image's size"):
+        DetectionDataset.from_instance_labels([im], [np.zeros((4, 4), int)])
+    with pytest.raises(InputError, match="image's size"):
+        DetectionDataset.from_instance_labels([im], [np.zeros((4, 5))])  # floats
+    with pytest.raises(InputError, match="negative ids"):
+        DetectionDataset.from_instance_labels([im], [-np.ones((4, 5), int)])
+    empty = DetectionDataset.from_instance_labels([im], [np.zeros((4, 5), int)])
+    assert empty.boxes[0].shape == (0, 4) and empty.class_maps().sum() == 0
+    no_masks = DetectionDataset([np.zeros((4, 5, 3))], [[[0, 0, 2, 2]]], [[1]], ["a"])
+    with pytest.raises(InputError, match="no masks"):
+        no_masks.class_maps()
+    two = DetectionDataset.from_instance_labels(
+        [im, np.zeros((3, 3))], [np.zeros((4, 5), int), np.zeros((3, 3), int)]
+    )
+    with pytest.raises(InputError, match="one size"):
+        two.class_maps()

@@ -279,6 +279,96 @@ class DetectionDataset:
                 raise InputError("meta must be dicts, one per image")
             self.meta = tuple(dict(m) for m in metas)
 
+    @classmethod
+    def from_instance_labels(
+        cls,
+        images: Sequence[np.ndarray],
+        instances: Sequence[npt.ArrayLike],
+        class_name: str = "object",
+    ) -> DetectionDataset:
+        """A one-class set from instance label images (0 background, each positive id one
+        object, as StarDist's and the Data Science Bowl's ground truth): each object's
+        mask is its id's pixels and its box the mask's tight box (:func:`mask_to_box`).
+
+        Parameters
+        ----------
+        images : list of (H, W, 3) or (H, W) or (H, W, 1) float ndarray
+            In [0, 1]; a grey image is repeated into three channels.
+        instances : list of (H, W) int array_like
+            One label image per image, of its size.
+        class_name : str
+
+        Raises
+        ------
+        InputError
+            A label image of another size, negative ids, or a bad image.
+
+        Examples
+        --------
+        >>> lab = np.array([[0, 4, 4], [0, 0, 9]])
+        >>> ds = DetectionDataset.from_instance_labels([np.zeros((2, 3))], [lab], "cell")
+        >>> ds.boxes[0].tolist(), ds.masks[0].sum((1, 2)).tolist(), ds.classes
+        ([[1.0, 0.0, 3.0, 1.0], [2.0, 1.0, 3.0, 2.0]], [2, 1], ('cell',))
+        """
+        imgs = _check_list(images, "images", None)
+        labs = _check_list(instances, "instances", len(imgs))
+        rgb, boxes, labels, masks = [], [], [], []
+        for i, (im, lab) in enumerate(zip(imgs, labs, strict=True)):
+            a = np.asarray(im) if isinstance(im, np.ndarray) else im
+            if isinstance(a, np.ndarray) and (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 1)):
+                a = np.repeat(a.reshape(a.shape[0], a.shape[1], 1), 3, axis=2)
+            a = _check_image(a, f"images[{i}]")
+            y = np.asarray(lab)
+            if y.shape != a.shape[:2] or y.dtype.kind not in "iu":
+                raise InputError(
+                    f"instances[{i}] must be an integer (H, W) label image of the image's size "
+                    f"{a.shape[:2]}; got {plain_repr(lab)}"
+                )
+            if y.size and y.min() < 0:
+                raise InputError(f"instances[{i}] has negative ids: 0 is the background")
+            ids = np.unique(y)
+            ids = ids[ids > 0]
+            m = y[None] == ids[:, None, None]
+            rgb.append(a)
+            masks.append(m)
+            boxes.append(np.array([mask_to_box(k) for k in m]) if len(ids) else np.zeros((0, 4)))
+            labels.append(np.ones(len(ids), np.int64))
+        return cls(rgb, boxes, labels, [class_name], masks=masks)
+
+    def class_maps(self) -> np.ndarray:
+        """Per-pixel class labels ``(N, H, W)`` int64 from the instance masks: 0 the
+        background, ``k`` where an object of ``classes[k - 1]`` is visible (masks are
+        the visible parts, so they do not overlap; where they would, the later object
+        wins). The semantic-segmentation ground truth of the procedural and digit sets.
+
+        Raises
+        ------
+        InputError
+            The set has no masks, or its images differ in size.
+
+        Examples
+        --------
+        >>> m = np.zeros((1, 2, 3), bool); m[0, 0, 1:] = True
+        >>> ds = DetectionDataset([np.zeros((2, 3, 3))], [[[1, 0, 3, 1]]], [[2]], ["a", "b"],
+        ...                       masks=[m])
+        >>> ds.class_maps().tolist()
+        [[[0, 2, 2], [0, 0, 0]]]
+        """
+        if self.masks is None:
+            raise InputError(
+                "this set has no masks, so no class maps: build it with masks "
+                "(procedural_detection_set and digits_detection_set have them)"
+            )
+        shapes = {im.shape[:2] for im in self.images}
+        if len(shapes) != 1:
+            raise InputError(f"class maps stack images of one size; these have {sorted(shapes)}")
+        h, w = shapes.pop()
+        out = np.zeros((len(self), h, w), np.int64)
+        for i, (m, lab) in enumerate(zip(self.masks, self.labels, strict=True)):
+            for mk, k in zip(m, lab, strict=True):
+                out[i][mk] = k
+        return out
+
     def __len__(self) -> int:
         return len(self.images)
 
