@@ -810,6 +810,19 @@ VALID: dict[str, dict[str, Any]] = {
         "rows": [(1, 1, (5.0, 5.0, 10.0, 10.0), 1.0), (2, 1, (6.0, 5.0, 10.0, 10.0), 0.9)],
     },
     # ------------------------------------------------------------------ viz
+    "viz.class_overlay": {
+        "image": IMG_RGB,
+        "labels": (IMG // 100).astype(np.int64),
+        "classes": ["a", "b"],
+    },
+    "viz.instance_overlay": {
+        "image": IMG_RGB,
+        "masks": np.stack([IMG > 100, IMG > 200]),
+        "labels": [1, 2],
+        "classes": ["a", "b"],
+        "scores": [0.9, 0.5],
+    },
+    "viz.panels_picture": {"pictures": [IMG_RGB, IMG], "titles": ["a", "b"]},
     "viz.colorize_depth": {"depth": DEPTH_M},
     "viz.colorize_signed": {"field": IMG_F - 0.5},
     "viz.confusion_picture": {"matrix": np.array([[5, 1], [2, 7]]), "names": ["a", "b"]},

@@ -29,8 +29,10 @@ from robopercept.viz.learning import (
     scatter_picture,
     tiles_picture,
 )
+from robopercept.viz.segmentation import class_overlay, instance_overlay, panels_picture
 
 __all__ = [
+    "class_overlay",
     "colorize_depth",
     "colorize_signed",
     "confusion_picture",
@@ -48,7 +50,9 @@ __all__ = [
     "flow_to_color",
     "flow_wheel",
     "hog_picture",
+    "instance_overlay",
     "label_colors",
+    "panels_picture",
     "render_points",
     "scatter_picture",
     "tiles_picture",

@@ -1,0 +1,353 @@
+"""Issue 27's accuracy figures for semantic and instance segmentation, trained here on
+the CPU (run ``python -m benchmarks.segmentation_figures --only PART --seeds 0 1 2``;
+each run is merged into ``benchmarks/results/segmentation_figures.json`` and the table
+printed).
+
+Every run draws its weights from ``torch.manual_seed(seed)`` and trains with the
+seed's data order; nothing is chosen on the test data.
+
+Parts:
+
+- ``nuclei-unet``: a U-Net of 121k parameters (width 8, depth 3; the target allows
+  150k) on the real fluorescence nuclei
+  (:func:`~robopercept.nn.segmentation_data.nuclei_quadrants`): three 256 x 256
+  quadrants to train on, random 128 x 128 windows with flips and quarter turns, cross
+  entropy + Dice, the last epoch kept (three tiles leave no validation split; the
+  number of epochs was fixed before the held-out quadrant was scored). Test on the
+  held-out quadrant: foreground IoU (target >= 0.85) and instance F1 at IoU 0.5
+  (target >= 0.85) of the connected components of the predicted foreground
+  (4-connected, :func:`~robopercept.imaging.label_components`) against the true
+  nuclei (:func:`~robopercept.nn.segmentation_eval.match_instances`).
+- ``nuclei-maskrcnn``: Mask R-CNN on the same tiles
+  (:meth:`~robopercept.nn.detection_data.DetectionDataset.from_instance_labels`), mask
+  AP50 on the held-out quadrant (target >= 0.70) through our COCO evaluation.
+- ``shapes-unet``, ``shapes-fcn32s``, ``shapes-naive``: the three semantic networks on
+  the procedural shapes' class maps
+  (:meth:`~robopercept.nn.detection_data.DetectionDataset.class_maps`, 5 classes with
+  the background), the same images, epochs and optimizer: test mIoU (U-Net target >=
+  0.85 and above the other two), parameters, FLOPs of one 128 x 128 image
+  (:class:`torch.utils.flop_counter.FlopCounterMode`, a multiply-add counted as 2) and
+  the latency of one image (1 thread, median). The validation mIoU picks the epoch.
+- ``shapes-maskrcnn``: Mask R-CNN on the procedural shapes, mask AP50 (target >= 0.85)
+  and mask AP, the epoch picked on the validation split's mask AP50.
+
+Synthetic sets use disjoint seeds: train ``seed``, validation ``1000 + seed``, test
+always ``99``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from benchmarks._harness import RESULTS, machine
+from robopercept.imaging import label_components
+from robopercept.nn import detection_data as dd
+from robopercept.nn.detection import build_detector, evaluate_detector, train_detector
+from robopercept.nn.segmentation import build_segmenter, predict_segmentation, train_segmenter
+from robopercept.nn.segmentation_data import nuclei_quadrants
+from robopercept.nn.segmentation_eval import (
+    match_instances,
+    segmentation_confusion,
+    segmentation_scores,
+)
+from robopercept.nn.training import TrainConfig
+
+PATH = RESULTS / "segmentation_figures.json"
+NUCLEI = Path("../shared/data/segmentation/stardist_nuclei")
+
+
+def _procedural(k: int, rng: int, chunk: int = 500) -> dd.DetectionDataset:
+    """``k`` procedural 128 x 128 canvases with their masks, built ``chunk`` at a time
+    (seeds ``rng * 100 + j`` beyond one chunk: the generator's allocation guard)."""
+    make = functools.partial(dd.procedural_detection_set, size=(128, 128))
+    if k <= chunk:
+        return make(k, rng=rng)
+    parts = [make(min(chunk, k - s), rng=rng * 100 + j) for j, s in enumerate(range(0, k, chunk))]
+    return dd.DetectionDataset(
+        [im for p in parts for im in p.images],
+        [b for p in parts for b in p.boxes],
+        [lab for p in parts for lab in p.labels],
+        parts[0].classes,
+        masks=[m for p in parts for m in p.masks or ()],
+    )
+
+
+def _shapes(n: tuple[int, int, int], seed: int) -> tuple:
+    return _procedural(n[0], seed), _procedural(n[1], 1000 + seed), _procedural(n[2], 99)
+
+
+def _nuclei_sets() -> tuple[dd.DetectionDataset, dd.DetectionDataset]:
+    s = nuclei_quadrants(NUCLEI)
+    train = dd.DetectionDataset.from_instance_labels(
+        list(np.clip(s.train_images, 0, 1)), list(s.train_instances), "nucleus"
+    )
+    test = dd.DetectionDataset.from_instance_labels(
+        [np.clip(s.test_image, 0, 1)], [s.test_instances], "nucleus"
+    )
+    return train, test
+
+
+def _images(ds: dd.DetectionDataset) -> np.ndarray:
+    return np.stack(ds.images)
+
+
+def _flops(model: torch.nn.Module, shape: tuple[int, ...]) -> int:
+    from torch.utils.flop_counter import FlopCounterMode
+
+    model.eval()
+    with torch.no_grad(), FlopCounterMode(display=False) as counter:
+        model(torch.zeros(shape))
+    return int(counter.get_total_flops())
+
+
+def _latency_ms(model: torch.nn.Module, shape: tuple[int, ...], repeats: int = 20) -> float:
+    model.eval()
+    x = torch.rand(shape, generator=torch.Generator().manual_seed(0))
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with torch.no_grad():
+            model(x)
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                model(x)
+                times.append(time.perf_counter() - t0)
+    finally:
+        torch.set_num_threads(threads)
+    return 1000 * statistics.median(times)
+
+
+# ------------------------------------------------------------------------ parts
+def nuclei_unet(seed: int, progress: bool) -> dict[str, Any]:
+    s = nuclei_quadrants(NUCLEI)
+    torch.manual_seed(seed)
+    settings = {"in_channels": 1, "width": 8, "depth": 3}
+    net = build_segmenter("unet", 2, **settings)
+    cfg = TrainConfig(epochs=40, batch_size=8, lr=3e-3, device="cpu", seed=seed)
+    t0 = time.perf_counter()
+    hist = train_segmenter(
+        net, s.train_images, s.train_masks, cfg, crop=128, samples_per_epoch=96, progress=progress
+    )
+    wall = time.perf_counter() - t0
+    pred = predict_segmentation(net, s.test_image[None])[0].numpy()
+    truth = s.test_mask
+    fg_iou = float(((pred == 1) & (truth == 1)).sum() / ((pred == 1) | (truth == 1)).sum())
+    components, _ = label_components(pred == 1, connectivity=4)
+    m = match_instances(s.test_instances, components, 0.5)
+    return {
+        "settings": settings,
+        "train": {"epochs": cfg.epochs, "batch_size": 8, "lr": 3e-3, "crop": 128},
+        "parameters": sum(p.numel() for p in net.parameters()),
+        "train_seconds": round(wall, 1),
+        "losses": [round(v, 4) for v in hist.losses],
+        "test": {
+            "foreground_iou": round(fg_iou, 4),
+            "instance_f1": round(m.f1, 4),
+            "instance_precision": round(m.precision, 4),
+            "instance_recall": round(m.recall, 4),
+            "true_nuclei": m.tp + m.fn,
+            "predicted_nuclei": m.tp + m.fp,
+        },
+    }
+
+
+def _maskrcnn_run(
+    train: dd.DetectionDataset,
+    val: dd.DetectionDataset | None,
+    test: dd.DetectionDataset,
+    seed: int,
+    settings: dict[str, Any],
+    train_kw: dict[str, Any],
+    augment: Callable[..., Any] | None,
+    progress: bool,
+) -> dict[str, Any]:
+    model = build_detector("maskrcnn", len(train.classes), seed=seed, **settings)
+    cfg = TrainConfig(
+        seed=seed, device="cpu", schedule="cosine", clip_grad_norm=10.0, **train_kw
+    )
+    t0 = time.perf_counter()
+    hist = train_detector(
+        model,
+        train,
+        cfg,
+        progress=progress,
+        val=val,
+        val_every=max(1, cfg.epochs // 10),
+        val_metric="AP50",
+        val_iou_type="segm",
+        augment=augment,
+    )
+    wall = time.perf_counter() - t0
+    segm = evaluate_detector(model, test, iou_type="segm").summary()
+    box = evaluate_detector(model, test).summary()
+    return {
+        "settings": settings,
+        "train": train_kw,
+        "parameters": sum(p.numel() for p in model.parameters()),
+        "train_seconds": round(wall, 1),
+        "val": hist.val,
+        "best_epoch": hist.best_epoch,
+        "test": {
+            "mask_AP50": round(segm["AP50"], 4),
+            "mask_AP": round(segm["AP"], 4),
+            "box_AP50": round(box["AP50"], 4),
+            "box_AP": round(box["AP"], 4),
+        },
+    }
+
+
+def nuclei_maskrcnn(seed: int, progress: bool) -> dict[str, Any]:
+    train, test = _nuclei_sets()
+    settings = {
+        "width": 16,
+        "anchor_sizes": (8.0, 16.0, 32.0),
+        "mask_channels": 32,
+        "mask_convs": 2,
+        "detections_per_img": 200,
+    }
+    flips = dd.FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
+    return _maskrcnn_run(
+        train,
+        None,
+        test,
+        seed,
+        settings,
+        {"epochs": 150, "batch_size": 3, "lr": 2e-3, "weight_decay": 1e-4},
+        flips,
+        progress,
+    )
+
+
+def shapes_maskrcnn(seed: int, progress: bool) -> dict[str, Any]:
+    train, val, test = _shapes((1000, 100, 200), seed)
+    settings = {"width": 16, "mask_channels": 32, "mask_convs": 2}
+    return {
+        **_maskrcnn_run(
+            train,
+            val,
+            test,
+            seed,
+            settings,
+            {"epochs": 20, "batch_size": 8, "lr": 2e-3, "weight_decay": 1e-4},
+            None,
+            progress,
+        ),
+        "images": {"train": len(train), "val": len(val), "test": len(test)},
+    }
+
+
+#: the semantic networks compared at one budget: same data, epochs and optimizer
+SEMANTIC = {
+    "shapes-unet": ("unet", {"width": 16, "depth": 4}),
+    "shapes-fcn32s": ("fcn32s", {"width": 16}),
+    "shapes-naive": ("naive", {"width": 32, "depth": 6}),
+}
+
+
+def shapes_semantic(part: str, seed: int, progress: bool) -> dict[str, Any]:
+    name, settings = SEMANTIC[part]
+    train, val, test = _shapes((1000, 100, 200), seed)
+    k = len(train.classes) + 1
+    torch.manual_seed(seed)
+    net = build_segmenter(name, k, **settings)
+    cfg = TrainConfig(epochs=12, batch_size=16, lr=3e-3, device="cpu", seed=seed)
+    t0 = time.perf_counter()
+    hist = train_segmenter(
+        net,
+        _images(train),
+        train.class_maps(),
+        cfg,
+        val=(_images(val), val.class_maps()),
+        dihedral=False,
+        progress=progress,
+    )
+    wall = time.perf_counter() - t0
+    pred = predict_segmentation(net, _images(test)).numpy()
+    scores = segmentation_scores(segmentation_confusion(test.class_maps(), pred, k))
+    return {
+        "model": name,
+        "settings": settings,
+        "train": {"epochs": cfg.epochs, "batch_size": 16, "lr": 3e-3},
+        "images": {"train": len(train), "val": len(val), "test": len(test)},
+        "parameters": sum(p.numel() for p in net.parameters()),
+        "flops_128": _flops(net, (1, 3, 128, 128)),
+        "latency_ms_128": round(_latency_ms(net, (1, 3, 128, 128)), 2),
+        "train_seconds": round(wall, 1),
+        "val": hist.val,
+        "best_epoch": hist.best_epoch,
+        "test": {
+            "mIoU": round(float(scores.miou), 4),
+            "pixel_accuracy": round(float(scores.pixel_accuracy), 4),
+            "per_class_iou": [round(float(v), 4) for v in scores.iou],
+        },
+    }
+
+
+PARTS: dict[str, Callable[[int, bool], dict[str, Any]]] = {
+    "nuclei-unet": nuclei_unet,
+    "nuclei-maskrcnn": nuclei_maskrcnn,
+    "shapes-maskrcnn": shapes_maskrcnn,
+    **{p: functools.partial(shapes_semantic, p) for p in SEMANTIC},
+}
+
+
+def _load() -> dict[str, Any]:
+    if PATH.exists():
+        return json.loads(PATH.read_text())
+    return {"benchmark": "segmentation_figures", "runs": {}}
+
+
+def table(results: dict[str, Any]) -> str:
+    """Mean +- std over the seeds run, per part and figure."""
+    by: dict[str, list[dict[str, Any]]] = {}
+    for row in results["runs"].values():
+        by.setdefault(row["part"], []).append(row)
+    lines = ["| part | seeds | figure | mean ± std | train s |", "|---|---|---|---:|---:|"]
+    for part, rows in sorted(by.items()):
+        seeds = ",".join(str(r["seed"]) for r in sorted(rows, key=lambda r: r["seed"]))
+        t = np.mean([r["train_seconds"] for r in rows])
+        for key, v in rows[0]["test"].items():
+            if not isinstance(v, float):
+                continue
+            vals = [r["test"][key] for r in rows]
+            lines.append(
+                f"| {part} | {seeds} | {key} | {np.mean(vals):.3f} ± {np.std(vals):.3f} "
+                f"| {t:.0f} |"
+            )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="+", choices=sorted(PARTS), default=sorted(PARTS))
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--quiet", action="store_true")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    for part in args.only:
+        for seed in args.seeds:
+            row = {"part": part, "seed": seed, "threads": args.threads}
+            row.update(PARTS[part](seed, not args.quiet))
+            print(json.dumps(row), flush=True)
+            results = _load()
+            results["machine"] = machine()
+            results["runs"][f"{part}/{seed}"] = row
+            PATH.write_text(json.dumps(results, indent=1))
+    print(table(_load()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
