@@ -98,3 +98,25 @@ def save(name: str, records: list[Record], settings: dict[str, Any]) -> Path:
     }
     path.write_text(json.dumps(payload, indent=2) + "\n")
     return path
+
+
+def load_runs(name: str) -> dict[str, Any]:
+    """The accumulated record ``benchmarks/results/NAME.json`` of a figures script
+    (``{"benchmark", "machine", "runs": {key: row}}``, plus what the script adds), or a
+    new empty one."""
+    path = RESULTS / f"{name}.json"
+    if path.exists():
+        return json.loads(path.read_text())
+    return {"benchmark": name, "runs": {}}
+
+
+def store_run(name: str, key: str, row: dict[str, Any]) -> Path:
+    """Merge one run's ``row`` under ``runs[key]`` of ``NAME.json`` (re-read first, so
+    runs written meanwhile by other processes are kept) with this machine's details."""
+    results = load_runs(name)
+    results["machine"] = machine()
+    results["runs"][key] = row
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path = RESULTS / f"{name}.json"
+    path.write_text(json.dumps(results, indent=1))
+    return path

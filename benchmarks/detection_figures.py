@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import RESULTS, machine
+from benchmarks._harness import RESULTS, load_runs, machine, store_run
 from robopercept.nn import detection_data as dd
 from robopercept.nn.detection import (
     TestTimeAugmentation,
@@ -61,7 +61,8 @@ from robopercept.nn.detection import (
 )
 from robopercept.nn.training import TrainConfig
 
-PATH = RESULTS / "detection_figures.json"
+NAME = "detection_figures"
+PATH = RESULTS / f"{NAME}.json"
 TREES = os.environ.get("ROBOPERCEPT_DEEPFOREST", "../shared/data/detection/deepforest_neon")
 
 
@@ -69,10 +70,13 @@ def _synthetic(make: Callable[..., Any], n: tuple[int, int, int], seed: int) -> 
     return make(n[0], rng=seed), make(n[1], rng=1000 + seed), make(n[2], rng=99), {}
 
 
-def _chunked(make: Callable[..., Any], k: int, rng: int, chunk: int = 500) -> Any:
-    """``make(k, rng)`` built ``chunk`` images at a time (seeds ``rng * 100 + j``), the
-    masks dropped: a generated set's masks would pass the 1 GiB guard beyond ~1000
-    images."""
+def chunked(
+    make: Callable[..., Any], k: int, rng: int, chunk: int = 500, masks: bool = False
+) -> Any:
+    """``make(k, rng)`` built ``chunk`` images at a time (seeds ``rng * 100 + j``): one
+    generator call's masks would pass the 1 GiB guard beyond ~1000 images. The chunks'
+    masks are dropped unless ``masks`` (the detectors do not use them; a set of up to
+    ``chunk`` images keeps them either way)."""
     if k <= chunk:
         return make(k, rng=rng)
     parts = [make(min(chunk, k - s), rng=rng * 100 + j) for j, s in enumerate(range(0, k, chunk))]
@@ -81,17 +85,18 @@ def _chunked(make: Callable[..., Any], k: int, rng: int, chunk: int = 500) -> An
         [b for p in parts for b in p.boxes],
         [lab for p in parts for lab in p.labels],
         parts[0].classes,
+        masks=[m for p in parts for m in p.masks or ()] if masks else None,
     )
 
 
 def _shapes(n: tuple[int, int, int], seed: int) -> tuple:
     make = functools.partial(dd.procedural_detection_set, size=(128, 128))
-    return _synthetic(functools.partial(_chunked, make), n, seed)
+    return _synthetic(functools.partial(chunked, make), n, seed)
 
 
 def _digits(n: tuple[int, int, int], seed: int) -> tuple:
     make = functools.partial(dd.digits_detection_set, size=(128, 128))
-    return _synthetic(functools.partial(_chunked, make), n, seed)
+    return _synthetic(functools.partial(chunked, make), n, seed)
 
 
 def _family_digits(n: tuple[int, int, int], seed: int) -> tuple:
@@ -407,9 +412,7 @@ def run_one(
 
 
 def _load() -> dict[str, Any]:
-    if PATH.exists():
-        return json.loads(PATH.read_text())
-    return {"benchmark": "detection_figures", "runs": {}}
+    return load_runs(NAME)
 
 
 def table(results: dict[str, Any]) -> str:
@@ -509,10 +512,7 @@ def main(argv: list[str] | None = None) -> int:
         for seed in args.seeds:
             row = run_one(part, seed, progress=not args.quiet, save=args.save)
             print(json.dumps(row), flush=True)
-            results = _load()
-            results["machine"] = machine()
-            results["runs"][f"{part}/{seed}"] = row
-            PATH.write_text(json.dumps(results, indent=1))
+            store_run(NAME, f"{part}/{seed}", row)
     print(table(_load()))
     return 0
 

@@ -49,7 +49,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import RESULTS, machine
+from benchmarks._harness import load_runs, store_run
+from benchmarks.detection_figures import chunked
 from robopercept.imaging import label_components
 from robopercept.nn import detection_data as dd
 from robopercept.nn.detection import build_detector, evaluate_detector, train_detector
@@ -62,24 +63,14 @@ from robopercept.nn.segmentation_eval import (
 )
 from robopercept.nn.training import TrainConfig
 
-PATH = RESULTS / "segmentation_figures.json"
+NAME = "segmentation_figures"
 NUCLEI = Path("../shared/data/segmentation/stardist_nuclei")
 
 
-def _procedural(k: int, rng: int, chunk: int = 500) -> dd.DetectionDataset:
-    """``k`` procedural 128 x 128 canvases with their masks, built ``chunk`` at a time
-    (seeds ``rng * 100 + j`` beyond one chunk: the generator's allocation guard)."""
+def _procedural(k: int, rng: int) -> dd.DetectionDataset:
+    """``k`` procedural 128 x 128 canvases with their masks."""
     make = functools.partial(dd.procedural_detection_set, size=(128, 128))
-    if k <= chunk:
-        return make(k, rng=rng)
-    parts = [make(min(chunk, k - s), rng=rng * 100 + j) for j, s in enumerate(range(0, k, chunk))]
-    return dd.DetectionDataset(
-        [im for p in parts for im in p.images],
-        [b for p in parts for b in p.boxes],
-        [lab for p in parts for lab in p.labels],
-        parts[0].classes,
-        masks=[m for p in parts for m in p.masks or ()],
-    )
+    return chunked(make, k, rng, masks=True)
 
 
 def _shapes(n: tuple[int, int, int], seed: int) -> tuple:
@@ -173,9 +164,7 @@ def _maskrcnn_run(
     progress: bool,
 ) -> dict[str, Any]:
     model = build_detector("maskrcnn", len(train.classes), seed=seed, **settings)
-    cfg = TrainConfig(
-        seed=seed, device="cpu", schedule="cosine", clip_grad_norm=10.0, **train_kw
-    )
+    cfg = TrainConfig(seed=seed, device="cpu", schedule="cosine", clip_grad_norm=10.0, **train_kw)
     t0 = time.perf_counter()
     hist = train_detector(
         model,
@@ -302,12 +291,6 @@ PARTS: dict[str, Callable[[int, bool], dict[str, Any]]] = {
 }
 
 
-def _load() -> dict[str, Any]:
-    if PATH.exists():
-        return json.loads(PATH.read_text())
-    return {"benchmark": "segmentation_figures", "runs": {}}
-
-
 def table(results: dict[str, Any]) -> str:
     """Mean +- std over the seeds run, per part and figure."""
     by: dict[str, list[dict[str, Any]]] = {}
@@ -322,8 +305,7 @@ def table(results: dict[str, Any]) -> str:
                 continue
             vals = [r["test"][key] for r in rows]
             lines.append(
-                f"| {part} | {seeds} | {key} | {np.mean(vals):.3f} ± {np.std(vals):.3f} "
-                f"| {t:.0f} |"
+                f"| {part} | {seeds} | {key} | {np.mean(vals):.3f} ± {np.std(vals):.3f} | {t:.0f} |"
             )
     return "\n".join(lines)
 
@@ -341,11 +323,8 @@ def main(argv: list[str] | None = None) -> int:
             row = {"part": part, "seed": seed, "threads": args.threads}
             row.update(PARTS[part](seed, not args.quiet))
             print(json.dumps(row), flush=True)
-            results = _load()
-            results["machine"] = machine()
-            results["runs"][f"{part}/{seed}"] = row
-            PATH.write_text(json.dumps(results, indent=1))
-    print(table(_load()))
+            store_run(NAME, f"{part}/{seed}", row)
+    print(table(load_runs(NAME)))
     return 0
 
 
