@@ -238,19 +238,28 @@ def shapes_maskrcnn(seed: int, progress: bool) -> dict[str, Any]:
 
 #: the semantic networks compared at one budget: same data, epochs and optimizer
 SEMANTIC = {
-    "shapes-unet": ("unet", {"width": 16, "depth": 4}),
-    "shapes-fcn32s": ("fcn32s", {"width": 16}),
-    "shapes-naive": ("naive", {"width": 32, "depth": 6}),
+    "shapes-unet": ("unet", {"width": 8, "depth": 4}),
+    "shapes-fcn32s": ("fcn32s", {"width": 8}),
+    "shapes-naive": ("naive", {"width": 16, "depth": 6}),
 }
+#: their common budget: training images, epochs, batch size and AdamW learning rate
+SEMANTIC_TRAIN = {"images": 2000, "epochs": 20, "batch_size": 8, "lr": 2e-3}
 
 
 def shapes_semantic(part: str, seed: int, progress: bool) -> dict[str, Any]:
     name, settings = SEMANTIC[part]
-    train, val, test = _shapes((1000, 100, 200), seed)
+    budget = SEMANTIC_TRAIN
+    train, val, test = _shapes((budget["images"], 100, 200), seed)
     k = len(train.classes) + 1
     torch.manual_seed(seed)
     net = build_segmenter(name, k, **settings)
-    cfg = TrainConfig(epochs=12, batch_size=16, lr=3e-3, device="cpu", seed=seed)
+    cfg = TrainConfig(
+        epochs=budget["epochs"],
+        batch_size=budget["batch_size"],
+        lr=budget["lr"],
+        device="cpu",
+        seed=seed,
+    )
     t0 = time.perf_counter()
     hist = train_segmenter(
         net,
@@ -267,7 +276,7 @@ def shapes_semantic(part: str, seed: int, progress: bool) -> dict[str, Any]:
     return {
         "model": name,
         "settings": settings,
-        "train": {"epochs": cfg.epochs, "batch_size": 16, "lr": 3e-3},
+        "train": budget,
         "images": {"train": len(train), "val": len(val), "test": len(test)},
         "parameters": sum(p.numel() for p in net.parameters()),
         "flops_128": _flops(net, (1, 3, 128, 128)),

@@ -157,7 +157,7 @@ def test_default_model_missing_names_the_build_command(tmp_path, capsys, monkeyp
     monkeypatch.setattr(cli_detect, "DEFAULT_MODEL", "data/no_such_model.pt")
     img = tmp_path / "a.png"
     write_image(img, np.zeros((32, 32, 3), np.uint8))
-    assert main(["nn", "detect", str(img), "-o", str(tmp_path)]) == 1
+    assert main(["nn", "detect", str(img), "-o", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
     build = "python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster"
     assert build in err and "data/no_such_model.pt" in err
@@ -202,7 +202,7 @@ def test_not_a_detector_checkpoint_fails(tmp_path, capsys):
     torch.save({"model": {}}, bad)
     img = tmp_path / "a.png"
     write_image(img, np.zeros((32, 32, 3), np.uint8))
-    assert main(["nn", "detect", str(img), "--model", str(bad), "-o", str(tmp_path)]) == 1
+    assert main(["nn", "detect", str(img), "--model", str(bad), "-o", str(tmp_path / "o")]) == 1
     assert "not a detector checkpoint" in capsys.readouterr().err
 
 
@@ -226,3 +226,11 @@ def test_ema_flag_reaches_train_detector(tmp_path, monkeypatch, capsys):
     assert main(argv) == 0
     assert seen == {"ema": 0.9}
     assert json.loads(capsys.readouterr().out)["epochs"] == 1
+
+
+def test_outputs_over_the_inputs_are_refused(tmp_path, capsys):
+    img = tmp_path / "a.png"
+    write_image(img, np.zeros((32, 32, 3), np.uint8))
+    assert main(["nn", "detect", str(img), "-o", str(tmp_path)]) == 2
+    assert "would overwrite the input" in capsys.readouterr().err
+    assert read_image(img).max() == 0  # untouched

@@ -2414,3 +2414,62 @@ METHODS["nn.detection.MaskRCNN"] = ("forward",)
 METHODS["nn.detection_data.FlipRotate"] = ("__call__",)
 METHODS["nn.detection_data.ScaleJitter"] = ("__call__",)
 METHODS["nn.detection.TestTimeAugmentation"] = ("forward", "predict")
+
+
+# nn.segmentation checkpoints and inference, the built-in sets (issue 27)
+def _write_segmenter(path: Path) -> None:
+    """A width-4 U-Net checkpoint of two classes (save_segmenter)."""
+    from robopercept.nn.segmentation import UNet, save_segmenter
+
+    save_segmenter(path, UNet(3, 3, 4, 2), "unet", {"width": 4, "depth": 2}, ["a", "b"])
+
+
+FIXTURES["segmenter.pt"] = _write_segmenter
+_SEG3 = _b("robopercept.nn.segmentation:UNet", 3, 3, 4, 2)
+VALID.update(
+    {
+        "nn.segmentation.save_segmenter": {
+            "path": _out("segmenter.pt"),
+            "model": _SEG3,
+            "name": "unet",
+            "settings": {"width": 4, "depth": 2},
+            "classes": ["a", "b"],
+        },
+        "nn.segmentation.load_segmenter": {"path": Fixture("segmenter.pt")},
+        "nn.segmentation.segment_arrays": {"model": _SEG3, "images": [IMG_RGB, IMG]},
+        "nn.segmentation.coco_segmentation_results": {
+            "image_id": 1,
+            "labels": (IMG // 100).astype(np.int64),
+        },
+        "nn.training.save_built_model": {
+            "path": _out("built.pt"),
+            "model": _SEG3,
+            "kind": "unet",
+            "settings": {"width": 4, "depth": 2},
+            "classes": ["a", "b"],
+        },
+        "nn.training.load_built_model": {
+            "path": Fixture("segmenter.pt"),
+            "kinds": ["unet"],
+            "build": _b("tests.fuzz.api:unet_builder"),
+            "what": "segmenter",
+            "writer": "save_segmenter",
+        },
+        "nn.segmentation_data.segmentation_sets": {
+            "data": "shapes",
+            "n_images": 3,
+            "size": (32, 32),
+            "seed": 0,
+        },
+    }
+)
+
+
+def unet_builder() -> Any:
+    """A builder for load_built_model: (kind, n_classes, **settings) -> a U-Net."""
+    from robopercept.nn.segmentation import UNet
+
+    def build(kind: str, n_classes: int, **settings: Any) -> Any:
+        return UNet(n_classes + 1, **settings)
+
+    return build

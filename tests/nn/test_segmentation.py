@@ -20,6 +20,7 @@ from robopercept.nn.segmentation import (  # noqa: E402
     bilinear_kernel,
     build_segmenter,
     dice_loss,
+    predict_segmentation,
     segmentation_cross_entropy,
 )
 
@@ -223,3 +224,97 @@ def test_train_segmenter_ignore_index_weights_and_refusals():
     bad[0, 0, 0, 0] = np.nan
     with pytest.raises(InputError, match="NaN"):
         train_segmenter(net, bad, y, cfg, ignore_index=255, progress=False)
+
+
+# ----------------------------------------------------------------------------- io
+def test_save_and_load_segmenter_round_trip_and_refuse_other_checkpoints(tmp_path):
+    from robopercept.errors import FileFormatError
+    from robopercept.nn.detection import build_detector, save_detector
+    from robopercept.nn.segmentation import load_segmenter, save_segmenter, segment_arrays
+
+    torch.manual_seed(0)
+    net = build_segmenter("fcn8s", 3, width=4)
+    save_segmenter(tmp_path / "s.pt", net, "fcn8s", {"width": 4}, ["a", "b"], data="x")
+    back, info = load_segmenter(tmp_path / "s.pt")
+    assert info["classes"] == ["a", "b"] and info["data"] == "x" and not back.training
+    for (k, a), b in zip(net.state_dict().items(), back.state_dict().values(), strict=True):
+        assert torch.equal(a, b), k
+    img = np.random.default_rng(0).uniform(0, 1, (24, 40, 3)).astype(np.float32)
+    np.testing.assert_array_equal(segment_arrays(net, [img])[0], segment_arrays(back, [img])[0])
+    save_detector(tmp_path / "d.pt", build_detector("fcos", 2, width=4), "fcos", {}, ["a", "b"])
+    with pytest.raises(FileFormatError, match="not a segmenter checkpoint"):
+        load_segmenter(tmp_path / "d.pt")
+    with pytest.raises(InputError, match="name"):
+        save_segmenter(tmp_path / "t.pt", net, "resnet", {}, ["a"])
+    with pytest.raises(InputError, match="classes"):
+        save_segmenter(tmp_path / "t.pt", net, "fcn8s", {}, [])
+
+
+def test_segment_arrays_converts_images_for_the_network():
+    from robopercept.nn.segmentation import segment_arrays
+
+    torch.manual_seed(0)
+    grey_net = UNet(2, in_channels=1, width=4, depth=2)
+    rgb = np.random.default_rng(1).integers(0, 256, (16, 20, 3)).astype(np.uint8)
+    # a one-channel network sees the channel mean of the unit-scaled image
+    mean = (rgb / 255.0).mean(axis=2, keepdims=True).astype(np.float32)[None]
+    want = predict_segmentation(grey_net, mean)[0].numpy()
+    np.testing.assert_array_equal(segment_arrays(grey_net, [rgb])[0], want)
+    # a grey image through a three-channel network is repeated into RGB
+    net = UNet(3, width=4, depth=2)
+    grey = rgb[..., 0]
+    rep = np.repeat((grey / 255.0)[..., None], 3, axis=2).astype(np.float32)[None]
+    np.testing.assert_array_equal(
+        segment_arrays(net, [grey])[0], predict_segmentation(net, rep)[0].numpy()
+    )
+    with pytest.raises(InputError, match="images\\[0\\]"):
+        segment_arrays(net, [np.zeros((4, 4, 2))])
+    with pytest.raises(InputError, match="segmenter"):
+        segment_arrays(torch.nn.Linear(2, 2), [grey])
+
+
+def test_coco_segmentation_results_round_trip_the_masks():
+    from robopercept.nn.coco_mask import rle_decode
+    from robopercept.nn.segmentation import coco_segmentation_results
+
+    lab = np.zeros((6, 7), np.int64)
+    lab[1:3, 2:5] = 2
+    lab[4:, :2] = 4
+    res = coco_segmentation_results(5, labels=lab)
+    assert [r["category_id"] for r in res] == [2, 4] and all(r["image_id"] == 5 for r in res)
+    for r in res:
+        np.testing.assert_array_equal(rle_decode(r["segmentation"]), lab == r["category_id"])
+    masks = np.stack([lab == 2, lab == 4])
+    det = {
+        "boxes": np.array([[2.0, 1, 5, 3], [0, 4, 2, 6]]),
+        "labels": np.array([1, 3]),
+        "scores": np.array([0.9, 0.6]),
+        "masks": masks,
+    }
+    res = coco_segmentation_results(1, detections=det)
+    assert [r["bbox"] for r in res] == [[2.0, 1.0, 3.0, 2.0], [0.0, 4.0, 2.0, 2.0]]
+    assert [r["score"] for r in res] == [0.9, 0.6]
+    for r, m in zip(res, masks, strict=True):
+        np.testing.assert_array_equal(rle_decode(r["segmentation"]).astype(bool), m)
+    with pytest.raises(InputError, match="either labels"):
+        coco_segmentation_results(1)
+    with pytest.raises(InputError, match="no 'masks'"):
+        coco_segmentation_results(1, detections={k: v for k, v in det.items() if k != "masks"})
+
+
+def test_segmentation_sets_split_the_builtin_data():
+    from robopercept.nn.segmentation_data import segmentation_sets
+
+    s = segmentation_sets("shapes", 10, (48, 40), seed=2)
+    assert len(s.train) == 8 and len(s.val) == 2 and s.classes == s.train.classes
+    assert s.train.images[0].shape == (40, 48, 3) and s.val.class_maps().shape == (2, 40, 48)
+    again = segmentation_sets("shapes", 10, (48, 40), seed=2)
+    np.testing.assert_array_equal(again.val.images[0], s.val.images[0])
+    d = segmentation_sets("digits", 4, (64, 64), seed=0)
+    assert d.classes[0] == "0" and d.train.masks is not None
+    with pytest.raises(InputError, match="one of shapes"):
+        segmentation_sets("coco")
+    with pytest.raises(InputError, match="folder"):
+        segmentation_sets("nuclei")
+    with pytest.raises(InputError, match="n_images"):
+        segmentation_sets("shapes", 1)

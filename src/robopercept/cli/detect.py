@@ -33,14 +33,21 @@ names the flag), 1 when the work fails.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import sys
 from pathlib import Path
 from typing import Any
 
-from robopercept.cli._args import UsageError, positive_int
+from robopercept.cli._args import (
+    UsageError,
+    built_in_data_args,
+    images_form_inputs,
+    positive_int,
+    register_forms,
+    run_or_model_path,
+    unit_interval,
+)
 from robopercept.errors import InputError
 
 __all__ = ["BUILTIN_DATA", "DEFAULT_MODEL", "DETECTOR_NAMES", "SHIPPED_MODELS", "register"]
@@ -64,28 +71,6 @@ _BUILD_SHIPPED = (
 _VAL_FRACTION = 0.2
 
 
-def _size(text: str) -> tuple[int, int]:
-    """``WxH`` -> (width, height), both >= 16 (argparse type)."""
-    parts = text.lower().split("x")
-    try:
-        w, h = (int(v) for v in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects WxH, e.g. 128x128; got {text!r}") from None
-    if min(w, h) < 16:
-        raise argparse.ArgumentTypeError(f"expects both sides >= 16; got {text!r}")
-    return w, h
-
-
-def _score(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects a number in [0, 1]; got {text!r}") from None
-    if not 0 <= v <= 1:
-        raise argparse.ArgumentTypeError(f"expects a number in [0, 1]; got {text!r}")
-    return v
-
-
 def _decay(text: str) -> float:
     try:
         v = float(text)
@@ -97,22 +82,11 @@ def _decay(text: str) -> float:
 
 
 def _data_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--data",
-        required=True,
-        help="shapes, digits, trees (with --images-dir: the DeepForest folder) or a COCO JSON",
+    built_in_data_args(
+        p,
+        "shapes, digits, trees (with --images-dir: the DeepForest folder) or a COCO JSON",
+        "COCO: folder of the images (default: the JSON's folder)",
     )
-    p.add_argument("--images-dir", help="COCO: folder of the images (default: the JSON's folder)")
-    p.add_argument(
-        "--images", type=positive_int, default=200, help="shapes/digits: images (default 200)"
-    )
-    p.add_argument(
-        "--size", type=_size, default=(128, 128), help="shapes/digits: WxH (default 128x128)"
-    )
-    p.add_argument("--seed", type=int, default=0, help="data, split and weights (default 0)")
-    p.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")
-    p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentParser]:
@@ -161,7 +135,9 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         help="a model.pt or run folder, or a shipped model: fcos (the default) or faster",
     )
     r.add_argument("-o", "--out", help="folder for the pictures")
-    r.add_argument("--score-thresh", type=_score, default=0.3, help="detections kept (default 0.3)")
+    r.add_argument(
+        "--score-thresh", type=unit_interval, default=0.3, help="detections kept (default 0.3)"
+    )
     r.add_argument("--device", help="cpu, cuda, ...")
     r.add_argument("--json", action="store_true", help="print COCO results")
     r.add_argument("--quiet", action="store_true")
@@ -178,33 +154,13 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
 def register(ns: argparse._SubParsersAction, parser_class: type[argparse.ArgumentParser]) -> None:
     """Add ``detect`` to the ``nn`` task parsers ``ns``; ``parser_class`` parses the
     three forms (so their errors exit 2 like the others)."""
-    d = ns.add_parser(
+    register_forms(
+        ns,
         "detect",
-        help="object detectors: train, eval, or detect in images (needs torch)",
-        description="robopercept nn detect train|eval|IMAGE... (see --help of each form)",
-        prefix_chars="\x00",
-        add_help=False,
+        "object detectors: train, eval, or detect in images (needs torch)",
+        lambda: _parsers(parser_class),
+        {"train": _train, "eval": _eval, "images": _images},
     )
-    d.add_argument("words", nargs="*")
-    d.set_defaults(func=run_detect, detect_parsers=lambda: _parsers(parser_class))
-
-
-def run_detect(args: argparse.Namespace) -> int:
-    """Dispatch ``robopercept nn detect`` to its form; returns the exit status."""
-    words = list(args.words)
-    parsers = args.detect_parsers()
-    if not words or words[0] in ("-h", "--help"):
-        for p in parsers.values():
-            p.print_help()
-            print()
-        return 0 if words else 2
-    form = words[0] if words[0] in ("train", "eval") else "images"
-    sub = parsers[form].parse_args(words[1:] if form != "images" else words)
-    if importlib.util.find_spec("torch") is None:
-        raise InputError(
-            "robopercept nn detect needs the deep extra: pip install 'robopercept[deep]'"
-        )
-    return {"train": _train, "eval": _eval, "images": _images}[form](sub)
 
 
 # --------------------------------------------------------------------------- data
@@ -418,16 +374,11 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _model_path(text: str) -> Path:
-    p = Path(text)
-    return p / "model.pt" if p.is_dir() else p
-
-
 def _eval(args: argparse.Namespace) -> int:
     from robopercept.nn.detection import TestTimeAugmentation, evaluate_detector, load_detector
 
     _, val = _load_data(args, None)
-    path = _model_path(args.model)
+    path = run_or_model_path(args.model)
     if not path.is_file():
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
     model, info = load_detector(path)
@@ -460,25 +411,9 @@ def _images(args: argparse.Namespace) -> int:
     from robopercept.nn.detection_data import draw_detections
     from robopercept.nn.training import resolve_device
 
-    if args.model is None or args.model in SHIPPED_MODELS:
-        from importlib.resources import files
-
-        rel = SHIPPED_MODELS[args.model] if args.model else DEFAULT_MODEL
-        model_path = Path(str(files("robopercept"))) / rel
-        if not model_path.is_file():
-            raise InputError(
-                f"the shipped model {rel} is not installed: give --model PATH (a run "
-                f"folder or model.pt), or build it from a checkout with: {_BUILD_SHIPPED}"
-            )
-    else:
-        model_path = _model_path(args.model)
-        if not model_path.is_file():
-            raise UsageError(f"--model: {model_path} does not exist (a run folder or model.pt)")
-    if not args.out and not args.json:
-        raise UsageError("-o/--out: give a folder for the pictures (or --json for results)")
-    for name in args.images:
-        if not Path(name).is_file():
-            raise UsageError(f"IMAGE: {name} does not exist")
+    model_path = images_form_inputs(
+        args, SHIPPED_MODELS, DEFAULT_MODEL, _BUILD_SHIPPED, lambda stem: [f"{stem}.png"]
+    )
     model: Any
     model, info = load_detector(model_path)
     dev = resolve_device(args.device)

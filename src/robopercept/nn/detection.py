@@ -2844,36 +2844,11 @@ def save_detector(
     >>> info["classes"], type(m2).__name__
     (['a', 'b'], 'FCOS')
     """
-    from robopercept.nn.training import save_checkpoint
+    from robopercept.nn.training import save_built_model
 
-    model = check_module(model)
     if not isinstance(kind, str) or kind not in DETECTORS:
         raise InputError(f"kind must be one of {sorted(DETECTORS)}; got {plain_repr(kind)}")
-    if not isinstance(settings, Mapping) or not all(isinstance(k, str) for k in settings):
-        raise InputError(
-            "settings must be a dict of the class's keyword arguments (e.g. {'width': 8}); "
-            f"got {plain_repr(settings)}"
-        )
-    if (
-        not isinstance(classes, (list, tuple))
-        or not classes
-        or not all(isinstance(c, str) for c in classes)
-    ):
-        raise InputError(
-            f"classes must be a non-empty list of class names (str); got {plain_repr(classes)}"
-        )
-    names = list(classes)
-    return save_checkpoint(
-        path,
-        {
-            **extra,
-            "model": model.state_dict(),
-            "architecture": type(model).__name__,
-            "kind": kind,
-            "settings": dict(settings),
-            "classes": names,
-        },
-    )
+    return save_built_model(path, model, kind, settings, classes, **extra)
 
 
 def load_detector(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, Any]]:
@@ -2891,20 +2866,15 @@ def load_detector(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, An
         Missing or unreadable file, or a checkpoint without ``kind``/``classes``
         (e.g. a classifier's).
     """
-    from robopercept.errors import FileFormatError
-    from robopercept.nn.training import load_checkpoint
+    from robopercept.nn.training import load_built_model
 
-    state = load_checkpoint(path)
-    info = {k: v for k, v in state.items() if k != "model"}
-    kind, classes = info.get("kind"), info.get("classes")
-    if kind not in DETECTORS or not isinstance(classes, list) or not classes:
-        raise FileFormatError(
-            f"{path}: not a detector checkpoint (no 'kind' and 'classes'): write it with "
-            "save_detector or `robopercept nn detect train`"
-        )
-    model = build_detector(str(kind), len(classes), **dict(info.get("settings") or {}))
-    model.load_state_dict(state["model"])
-    return model.eval(), info
+    return load_built_model(
+        path,
+        tuple(DETECTORS),
+        build_detector,
+        "detector",
+        "save_detector or `robopercept nn detect train`",
+    )
 
 
 def detect_arrays(model: nn.Module, images: Sequence[Any]) -> list[dict[str, Any]]:

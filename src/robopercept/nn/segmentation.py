@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -44,13 +46,18 @@ from robopercept.nn.detection import MAX_CHANNELS, DetectionBackbone
 
 __all__ = [
     "FCN",
+    "SEGMENTERS",
     "NaiveFCN",
     "SegmentationHistory",
     "UNet",
     "bilinear_kernel",
     "build_segmenter",
+    "coco_segmentation_results",
     "dice_loss",
+    "load_segmenter",
     "predict_segmentation",
+    "save_segmenter",
+    "segment_arrays",
     "segmentation_cross_entropy",
     "train_segmenter",
 ]
@@ -429,6 +436,10 @@ def dice_loss(
     return 1 - ((2 * inter + e) / (denom + e)).mean()
 
 
+#: the names :func:`build_segmenter` takes
+SEGMENTERS = ("naive", "fcn32s", "fcn16s", "fcn8s", "unet")
+
+
 def build_segmenter(name: str, num_classes: int, **kwargs: Any) -> nn.Module:
     """A segmentation network by name: ``"naive"``, ``"fcn32s"``, ``"fcn16s"``,
     ``"fcn8s"`` or ``"unet"``, the other keywords passed on.
@@ -439,12 +450,65 @@ def build_segmenter(name: str, num_classes: int, **kwargs: Any) -> nn.Module:
     ...     "fcn16s", 3, width=4).variant
     ('FCN', '16s')
     """
-    check_choice(name, "name", ("naive", "fcn32s", "fcn16s", "fcn8s", "unet"))
+    check_choice(name, "name", SEGMENTERS)
     if name == "naive":
         return NaiveFCN(num_classes, **kwargs)
     if name == "unet":
         return UNet(num_classes, **kwargs)
     return FCN(num_classes, variant=name[3:], **kwargs)
+
+
+def save_segmenter(
+    path: str | os.PathLike[str],
+    model: nn.Module,
+    name: str,
+    settings: Mapping[str, Any],
+    classes: Sequence[str],
+    **extra: Any,
+) -> Any:
+    """Write a segmenter's weights with what rebuilds it (``name`` of
+    :data:`SEGMENTERS`, its keyword ``settings``, the ``classes`` of labels 1..K-1,
+    label 0 being the background) and ``extra`` plain values; the format of
+    :func:`~robopercept.nn.detection.save_detector`. Returns the path.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> net = build_segmenter("unet", 3, width=4, depth=2)
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "seg.pt"
+    >>> _ = save_segmenter(p, net, "unet", {"width": 4, "depth": 2}, ["a", "b"])
+    >>> net2, info = load_segmenter(p)
+    >>> info["classes"], type(net2).__name__, net2.num_classes
+    (['a', 'b'], 'UNet', 3)
+    """
+    from robopercept.nn.training import save_built_model
+
+    check_choice(name, "name", SEGMENTERS)
+    return save_built_model(path, model, name, settings, classes, **extra)
+
+
+def _build_from_classes(name: str, n_classes: int, **settings: Any) -> nn.Module:
+    # the checkpoint names the foreground classes; the network also scores the background
+    return build_segmenter(name, n_classes + 1, **settings)
+
+
+def load_segmenter(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, Any]]:
+    """Rebuild a segmenter written by :func:`save_segmenter` (eval mode, on the CPU).
+
+    Raises
+    ------
+    FileFormatError
+        Missing or unreadable file, or a checkpoint that is not a segmenter's.
+    """
+    from robopercept.nn.training import load_built_model
+
+    return load_built_model(
+        path,
+        SEGMENTERS,
+        _build_from_classes,
+        "segmenter",
+        "save_segmenter or `robopercept nn segment train`",
+    )
 
 
 # ----------------------------------------------------------------------------- training
@@ -685,3 +749,116 @@ def train_segmenter(
     if best is not None:
         model.load_state_dict(best)
     return hist
+
+
+# ----------------------------------------------------------------------------- inference
+def segment_arrays(model: nn.Module, images: Sequence[Any]) -> list[Any]:
+    """Class labels ``(H, W)`` int64 of NumPy images through a semantic segmenter.
+
+    Each image, ``(H, W)`` or ``(H, W, 3)``, ``uint8``, ``uint16`` or float in [0, 1],
+    is scaled to [0, 1] (:func:`~robopercept.nn.data.to_unit_float`), made grey (the
+    channel mean) for a one-channel network or RGB for a three-channel one, and
+    predicted one at a time in eval mode (:func:`predict_segmentation`).
+
+    Raises
+    ------
+    InputError
+        Not a segmenter of this module, or an image that is not 2-D grey or RGB.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> net = build_segmenter("unet", 3, width=4, depth=2)
+    >>> [lab.shape for lab in segment_arrays(net, [np.zeros((20, 30, 3), np.uint8)])]
+    [(20, 30)]
+    """
+    import numpy as np
+
+    from robopercept.nn.data import to_unit_float
+
+    c = getattr(model, "in_channels", None)
+    if not isinstance(model, nn.Module) or c not in (1, 3):
+        raise InputError(
+            f"model must be a segmenter of this module taking 1 or 3 channels; got "
+            f"{plain_repr(model)}"
+        )
+    if isinstance(images, np.ndarray) or not isinstance(images, Sequence):
+        raise InputError(f"images must be a list of images; got {plain_repr(images)}")
+    out = []
+    for i, im in enumerate(images):
+        a = np.asarray(im) if isinstance(im, np.ndarray) else None
+        if a is None or not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)):
+            raise InputError(
+                f"images[{i}] must be an (H, W) or (H, W, 3) array; got {plain_repr(im)}"
+            )
+        x = to_unit_float(a).astype(np.float32)
+        if x.ndim == 2:
+            x = x[..., None]
+        x = x.mean(axis=2, keepdims=True) if c == 1 else np.broadcast_to(x, (*x.shape[:2], 3))
+        out.append(predict_segmentation(model, x[None])[0].numpy())
+    return out
+
+
+def coco_segmentation_results(
+    image_id: int,
+    *,
+    labels: Any = None,
+    detections: Mapping[str, Any] | None = None,
+) -> list[dict[str, Any]]:
+    """COCO result entries with run-length encoded masks
+    (:func:`~robopercept.nn.coco_mask.rle_encode`) for one image: from a semantic label
+    map, one entry per class present (``category_id`` = label, score 1, the class's
+    pixels as its mask: COCO's stuff-segmentation format); from instance detections
+    (:func:`~robopercept.nn.detection.detect_arrays` of a Mask R-CNN), one entry per
+    instance with its box and score (COCO's ``segm`` results).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> r = coco_segmentation_results(3, labels=np.array([[0, 2], [2, 2]]))  # runs 1, 3
+    >>> [(e["image_id"], e["category_id"], e["segmentation"]["counts"]) for e in r]
+    [(3, 2, '13')]
+    """
+    import numpy as np
+
+    from robopercept.nn.coco_mask import rle_encode
+
+    if (labels is None) == (detections is None):
+        raise InputError("give either labels (semantic) or detections (instances)")
+    out: list[dict[str, Any]] = []
+    if labels is not None:
+        lab = np.asarray(labels)
+        if lab.ndim != 2 or lab.dtype.kind not in "iu":
+            raise InputError(f"labels must be an (H, W) integer map; got {plain_repr(labels)}")
+        for k in np.unique(lab):
+            if k <= 0:
+                continue
+            out.append(
+                {
+                    "image_id": int(image_id),
+                    "category_id": int(k),
+                    "segmentation": rle_encode(lab == k),
+                    "score": 1.0,
+                }
+            )
+        return out
+    assert detections is not None
+    if "masks" not in detections:
+        raise InputError("detections have no 'masks': run an instance segmenter (Mask R-CNN)")
+    for b, k, s, m in zip(
+        detections["boxes"],
+        detections["labels"],
+        detections["scores"],
+        detections["masks"],
+        strict=True,
+    ):
+        out.append(
+            {
+                "image_id": int(image_id),
+                "category_id": int(k),
+                "bbox": [float(b[0]), float(b[1]), float(b[2] - b[0]), float(b[3] - b[1])],
+                "score": float(s),
+                "segmentation": rle_encode(np.asarray(m)),
+            }
+        )
+    return out

@@ -1,20 +1,28 @@
 """Segmentation data with ground truth: the real fluorescence nuclei image, split into
-quadrants for training and a held-out test.
+quadrants for training and a held-out test, and the built-in sets by name.
 
-NumPy only (no torch).
+NumPy only at import (the detection sets are built lazily through torch).
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from robopercept._checks import as_path, check_int, check_real
 from robopercept.errors import FileFormatError, InputError
 
-__all__ = ["NucleiSplit", "nuclei_quadrants", "percentile_normalize"]
+__all__ = [
+    "BUILTIN_SEGMENTATION_DATA",
+    "NucleiSplit",
+    "SegmentationSets",
+    "nuclei_quadrants",
+    "percentile_normalize",
+    "segmentation_sets",
+]
 
 #: the files of the stardist_nuclei folder
 NUCLEI_FILES = ("img2d.tif", "mask2d.tif")
@@ -147,3 +155,82 @@ def nuclei_quadrants(folder: str | os.PathLike[str], test_quadrant: int = 3) -> 
         tiles[q][1].astype(np.int32),
         q,
     )
+
+
+#: the built-in data of ``robopercept nn segment train --data``
+BUILTIN_SEGMENTATION_DATA = ("shapes", "digits", "nuclei")
+
+
+@dataclass(frozen=True)
+class SegmentationSets:
+    """Training and validation images with instance masks (and so class maps), as
+    :class:`~robopercept.nn.detection_data.DetectionDataset` objects.
+
+    Attributes
+    ----------
+    train, val : DetectionDataset
+        With ``masks``; :meth:`~robopercept.nn.detection_data.DetectionDataset.class_maps`
+        gives their semantic labels.
+    classes : tuple of str
+        The names of labels 1..K (0 is the background).
+    """
+
+    train: Any
+    val: Any
+    classes: tuple[str, ...]
+
+
+def segmentation_sets(
+    data: str,
+    n_images: int = 200,
+    size: tuple[int, int] = (128, 128),
+    seed: int = 0,
+    folder: str | os.PathLike[str] | None = None,
+    val_fraction: float = 0.2,
+) -> SegmentationSets:
+    """The built-in segmentation data by name (:data:`BUILTIN_SEGMENTATION_DATA`).
+
+    * ``"shapes"``: :func:`~robopercept.nn.detection_data.procedural_detection_set`
+      (``n_images`` canvases of ``size`` = (width, height), seeded), split
+      ``1 - val_fraction`` / ``val_fraction``;
+    * ``"digits"``: the real-digit canvases of
+      :func:`~robopercept.nn.detection_data.digits_detection_set` with their stroke
+      masks, split the same way;
+    * ``"nuclei"``: the real fluorescence nuclei in ``folder``
+      (:func:`nuclei_quadrants`): the three training quadrants and the held-out one as
+      the validation set, grey repeated to RGB and clipped to [0, 1]
+      (``n_images``, ``size`` and ``seed`` do not apply).
+
+    Raises
+    ------
+    InputError
+        Unknown name, fewer than 2 images to split, or ``"nuclei"`` without its folder.
+    """
+    from robopercept.nn import detection_data as dd
+
+    if data not in BUILTIN_SEGMENTATION_DATA:
+        raise InputError(
+            f"data must be one of {', '.join(BUILTIN_SEGMENTATION_DATA)}; got {data!r}"
+        )
+    if data == "nuclei":
+        if folder is None:
+            raise InputError(
+                "the nuclei data needs its folder: pass the stardist_nuclei folder "
+                "(e.g. ../shared/data/segmentation/stardist_nuclei)"
+            )
+        s = nuclei_quadrants(folder)
+        train = dd.DetectionDataset.from_instance_labels(
+            list(np.clip(s.train_images, 0, 1)), list(s.train_instances), "nucleus"
+        )
+        val = dd.DetectionDataset.from_instance_labels(
+            [np.clip(s.test_image, 0, 1)], [s.test_instances], "nucleus"
+        )
+        return SegmentationSets(train, val, tuple(train.classes))
+    n = check_int(n_images, "n_images", 2)
+    frac = check_real(
+        val_fraction, "val_fraction", 0.0, 1.0, low_inclusive=False, high_inclusive=False
+    )
+    make = dd.procedural_detection_set if data == "shapes" else dd.digits_detection_set
+    ds = make(n, size, rng=seed)
+    train, val = ds.split((1 - frac, frac), rng=seed)
+    return SegmentationSets(train, val, tuple(ds.classes))

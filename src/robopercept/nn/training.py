@@ -28,7 +28,7 @@ import csv
 import math
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -65,9 +65,11 @@ __all__ = [
     "deterministic_algorithms",
     "evaluate",
     "fit",
+    "load_built_model",
     "load_checkpoint",
     "optimizer_step",
     "resolve_device",
+    "save_built_model",
     "save_checkpoint",
     "step_optimizer",
 ]
@@ -626,6 +628,99 @@ def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path
     with atomic_path(p) as tmp:  # the one atomic writer (robopercept.fileio)
         torch.save(state, tmp)
     return p
+
+
+def save_built_model(
+    path: str | os.PathLike[str],
+    model: nn.Module,
+    kind: str,
+    settings: Mapping[str, Any],
+    classes: Sequence[str],
+    **extra: Any,
+) -> Path:
+    """Write ``model``'s weights with what rebuilds it through a builder (``kind``, the
+    constructor ``settings``, the ``classes``) and ``extra`` plain values beside them:
+    the checkpoint format of the detectors and segmenters
+    (:func:`~robopercept.nn.detection.save_detector`,
+    :func:`~robopercept.nn.segmentation.save_segmenter`). Returns the path.
+
+    Raises
+    ------
+    InputError
+        Settings not a dict of keyword arguments, or no class names.
+    """
+    model = check_module(model)
+    if not isinstance(settings, Mapping) or not all(isinstance(k, str) for k in settings):
+        raise InputError(
+            "settings must be a dict of the class's keyword arguments (e.g. {'width': 8}); "
+            f"got {plain_repr(settings)}"
+        )
+    if (
+        not isinstance(classes, (list, tuple))
+        or not classes
+        or not all(isinstance(c, str) for c in classes)
+    ):
+        raise InputError(
+            f"classes must be a non-empty list of class names (str); got {plain_repr(classes)}"
+        )
+    return save_checkpoint(
+        path,
+        {
+            **extra,
+            "model": model.state_dict(),
+            "architecture": type(model).__name__,
+            "kind": kind,
+            "settings": dict(settings),
+            "classes": list(classes),
+        },
+    )
+
+
+def load_built_model(
+    path: str | os.PathLike[str],
+    kinds: Sequence[str],
+    build: Callable[..., nn.Module],
+    what: str,
+    writer: str,
+) -> tuple[nn.Module, dict[str, Any]]:
+    """Rebuild a model written by :func:`save_built_model`: ``build(kind, n_classes,
+    **settings)``, its weights loaded, eval mode, on the CPU.
+
+    Parameters
+    ----------
+    path : path-like
+    kinds : sequence of str
+        The kinds this loader accepts (a detector's checkpoint is not a segmenter's).
+    build : callable
+    what, writer : str
+        What the model is ("detector") and what writes such checkpoints, for the
+        message.
+
+    Raises
+    ------
+    FileFormatError
+        Missing or unreadable file, or a checkpoint of another kind (or without
+        ``kind``/``classes``).
+    """
+    if (
+        not isinstance(kinds, (list, tuple))
+        or not kinds
+        or not all(isinstance(k, str) for k in kinds)
+    ):
+        raise InputError(f"kinds must be a non-empty list of names; got {plain_repr(kinds)}")
+    if not callable(build):
+        raise InputError(f"build must be a callable (kind, n_classes, **settings); got {build!r}")
+    state = load_checkpoint(path)
+    info = {k: v for k, v in state.items() if k != "model"}
+    kind, classes = info.get("kind"), info.get("classes")
+    if kind not in kinds or not isinstance(classes, list) or not classes:
+        raise FileFormatError(
+            f"{path}: not a {what} checkpoint (kind {plain_repr(kind)}, not one of "
+            f"{', '.join(sorted(kinds))}): write it with {writer}"
+        )
+    model = build(str(kind), len(classes), **dict(info.get("settings") or {}))
+    model.load_state_dict(state["model"])
+    return model.eval(), info
 
 
 def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None) -> dict[str, Any]:
