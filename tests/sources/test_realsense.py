@@ -534,3 +534,79 @@ def test_write_realsense_recording_names_what_failed_in_the_child(tmp_path):
         write_realsense_recording(tmp_path / "no_dir" / "x.db3", frames, pace=0.0)
     with pytest.raises(InputError, match="pace"):
         write_realsense_recording(tmp_path / "y.db3", frames, pace=-1.0)
+
+
+class _Frame:
+    """A stand-in for a librealsense frame: truthy, with a timestamp (ms) and a name."""
+
+    def __init__(self, name: str, ms: float) -> None:
+        self.name, self.ms = name, ms
+
+    def get_timestamp(self) -> float:
+        return self.ms
+
+
+class _Frameset:
+    def __init__(self, depth=None, color=None) -> None:
+        self.depth, self.color = depth, color
+
+    def get_depth_frame(self):
+        return self.depth
+
+    def get_color_frame(self):
+        return self.color
+
+
+class _Sync:
+    def __init__(self, sets) -> None:
+        self.sets = list(sets)
+
+    def try_wait_for_frames(self, ms):
+        return (True, self.sets.pop(0)) if self.sets else (False, None)
+
+
+def _pairs(sets, *, max_waiting: int = 8):
+    import collections
+
+    from robopercept.sources.realsense import _RecordingPlayer
+
+    player = _RecordingPlayer.__new__(_RecordingPlayer)
+    player.rs, player.sensors, player.playback = None, [], None
+    player.max_waiting = max_waiting
+    player.sync = _Sync(sets)
+    player.colors = collections.deque(maxlen=player.max_colors)
+    player.waiting = collections.deque()
+    player.ready = collections.deque()
+    out = []
+    while True:
+        ok, pair = player.try_wait_for_frames(10)
+        if not ok:
+            return out
+        out.append((pair[0].name, None if pair[1] is None else pair[1].name))
+
+
+def test_recording_player_pairs_each_depth_with_the_colour_nearest_in_time():
+    # no librealsense here: the pairing of _RecordingPlayer on scripted framesets.
+    # Under load a syncer may pass depth k on before colour k: depth k still gets
+    # colour k (the old rule, the last colour seen, gave it colour k - 1)
+    D = [_Frame(f"d{k}", 33.3 * k) for k in range(4)]
+    C = [_Frame(f"c{k}", 33.3 * k) for k in range(4)]
+    sets = [_Frameset(D[0]), _Frameset(color=C[0]), _Frameset(D[1], C[1])]
+    sets += [_Frameset(D[2]), _Frameset(color=C[2]), _Frameset(D[3]), _Frameset(color=C[3])]
+    assert _pairs(sets) == [("d0", "c0"), ("d1", "c1"), ("d2", "c2"), ("d3", "c3")]
+    # the real bag's layout: depth, one colour frame 30 ms later, depth 167 ms later:
+    # both depth frames get that colour frame (the second when the player stops)
+    bag = [_Frameset(_Frame("a", 0.0)), _Frameset(color=_Frame("c", 30.0))]
+    bag += [_Frameset(_Frame("b", 166.7))]
+    assert _pairs(bag) == [("a", "c"), ("b", "c")]
+    # between two colour frames, the nearer one (the earlier on a tie)
+    mid = [_Frameset(color=_Frame("c0", 0.0)), _Frameset(_Frame("d", 20.0))]
+    mid += [_Frameset(color=_Frame("c1", 33.0))]
+    assert _pairs(mid) == [("d", "c1")]
+    tie = [_Frameset(color=_Frame("c0", 0.0)), _Frameset(_Frame("d", 10.0))]
+    tie += [_Frameset(color=_Frame("c1", 20.0))]
+    assert _pairs(tie) == [("d", "c0")]
+    # no colour at all: passed on without colour (the reader skips and counts them),
+    # the oldest first once more than max_waiting wait
+    lone = [_Frameset(_Frame(f"d{k}", 10.0 * k)) for k in range(4)]
+    assert _pairs(lone, max_waiting=2) == [(f"d{k}", None) for k in range(4)]

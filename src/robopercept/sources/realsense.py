@@ -553,7 +553,7 @@ class RealSenseSource:
                     f"{self.path} has no {name} stream; the plane tracker needs depth and "
                     "colour (record both)"
                 )
-        player = _RecordingPlayer(rs, sensors)
+        player = _RecordingPlayer(rs, sensors, playback)
         try:
             scale = float(dev.first_depth_sensor().get_depth_scale())
         except RuntimeError as exc:
@@ -643,23 +643,31 @@ class RealSenseSource:
 
 class _RecordingPlayer:
     """The sensors of a playback device started into a ``syncer``, read as
-    ``(ok, (depth, colour))`` like a pipeline: one pair per recorded depth frame.
+    ``(ok, (depth, colour))`` like a pipeline: one pair per recorded depth frame, in
+    order.
 
     A syncer passes a frame on alone until it has seen every stream (on each recording
-    here the first depth and the first colour frame come as two framesets), and a
-    recording may hold a stream's frames at different times or rates. As a pipeline
-    does, each depth frame is paired with the last colour frame seen; depth frames
-    that come before any colour frame wait for the first one (a pipeline drops them),
-    at most ``max_waiting`` of them; any beyond, and those no colour frame follows, are
-    passed on without colour (and skipped, counted, by the reader)."""
+    here the first depth and the first colour frame come as two framesets), and under
+    load it may pass a depth frame on before the colour frame of the same instant. So
+    each depth frame waits until a colour frame at or after its timestamp has come
+    (or the player has stopped), and is then paired with the colour frame nearest to
+    it in time among those seen (the earlier one on a tie): recordings whose streams
+    share timestamps come back exactly paired, and a depth frame between two colour
+    frames gets the nearer, as a pipeline's syncer pairs them. Depth frames that come
+    after the last colour frame are paired with it when the player stops. At most
+    ``max_waiting`` depth frames wait: any beyond are paired with the nearest colour
+    frame seen so far, or passed on without colour (and skipped, counted, by the
+    reader) when there is none."""
 
     max_waiting = 8
+    #: colour frames kept to pair the waiting depth frames with
+    max_colors = 4
 
-    def __init__(self, rs: Any, sensors: list[Any]) -> None:
-        self.rs, self.sensors = rs, sensors
+    def __init__(self, rs: Any, sensors: list[Any], playback: Any = None) -> None:
+        self.rs, self.sensors, self.playback = rs, sensors, playback
         self.sync = rs.syncer()
-        self.color: Any = None  # the last colour frame
-        self.waiting: collections.deque[Any] = collections.deque()  # depth, no colour yet
+        self.colors: collections.deque[Any] = collections.deque(maxlen=self.max_colors)
+        self.waiting: collections.deque[Any] = collections.deque()  # depth, in order
         self.ready: collections.deque[tuple[Any, Any]] = collections.deque()
         opened: list[Any] = []
         try:
@@ -674,30 +682,48 @@ class _RecordingPlayer:
                     s.close()
             raise
 
+    def _nearest(self, depth: Any) -> Any:
+        """The colour frame seen nearest in time to ``depth`` (None if none)."""
+        if not self.colors:
+            return None
+        t = depth.get_timestamp()
+        return min(self.colors, key=lambda c: abs(c.get_timestamp() - t))
+
+    def _release(self, flush: bool) -> None:
+        """Pair the waiting depth frames, front first, whose colour has come (all of
+        them with ``flush``; the oldest beyond ``max_waiting`` in any case)."""
+        latest = self.colors[-1].get_timestamp() if self.colors else None
+        while self.waiting:
+            front = self.waiting[0]
+            due = latest is not None and latest >= front.get_timestamp()
+            if not (due or flush or len(self.waiting) > self.max_waiting):
+                break
+            self.ready.append((self.waiting.popleft(), self._nearest(front)))
+
+    def _stopped(self) -> bool:
+        if self.playback is None:
+            return True
+        try:
+            return bool(self.playback.current_status() != self.rs.playback_status.playing)
+        except RuntimeError:  # pragma: no cover - a device already gone
+            return True
+
     def try_wait_for_frames(self, ms: int) -> tuple[bool, tuple[Any, Any] | None]:
         while True:
             if self.ready:
                 return True, self.ready.popleft()
             ok, frames = self.sync.try_wait_for_frames(ms)
             if not ok:
-                if self.waiting:  # depth frames that no colour frame followed
-                    self.ready.extend((d, None) for d in self.waiting)
-                    self.waiting.clear()
+                if self.waiting and self._stopped():
+                    self._release(flush=True)  # no later colour frame will come
                     continue
                 return False, None
             depth, color = frames.get_depth_frame(), frames.get_color_frame()
             if color:
-                self.color = color
-                self.ready.extend((d, color) for d in self.waiting)
-                self.waiting.clear()
-            if not depth:
-                continue
-            if self.color is not None:
-                self.ready.append((depth, self.color))
-                continue
-            self.waiting.append(depth)
-            if len(self.waiting) > self.max_waiting:
-                self.ready.append((self.waiting.popleft(), None))
+                self.colors.append(color)
+            if depth:
+                self.waiting.append(depth)
+            self._release(flush=False)
 
     def stop(self) -> None:
         for s in self.sensors:
