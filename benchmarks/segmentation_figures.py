@@ -210,6 +210,7 @@ def _maskrcnn_run(
     augment: Callable[..., Any] | None,
     progress: bool,
     save: Path | None = None,
+    part: str = "shapes-maskrcnn",
 ) -> dict[str, Any]:
     model, hist, wall = _maskrcnn_train(train, val, seed, settings, train_kw, augment, progress)
     segm = evaluate_detector(model, test, iou_type="segm").summary()
@@ -222,7 +223,8 @@ def _maskrcnn_run(
             settings,
             list(train.classes),
             seed=seed,
-            built_by=f"python -m benchmarks.segmentation_figures --seeds {seed} --save DIR",
+            built_by=f"python -m benchmarks.segmentation_figures --only {part} --seeds {seed} "
+            "--save DIR",
             test={"mask_AP50": segm["AP50"], "mask_AP": segm["AP"]},
         )
     return {
@@ -266,7 +268,15 @@ def nuclei_maskrcnn(seed: int, progress: bool, save: Path | None = None) -> dict
     train, test = _nuclei_sets()
     flips = dd.FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
     return _maskrcnn_run(
-        train, None, test, seed, NUCLEI_MASKRCNN, NUCLEI_MASKRCNN_TRAIN, flips, progress
+        train,
+        None,
+        test,
+        seed,
+        NUCLEI_MASKRCNN,
+        NUCLEI_MASKRCNN_TRAIN,
+        flips,
+        progress,
+        part="nuclei-maskrcnn",
     )
 
 
@@ -296,7 +306,9 @@ SEMANTIC = {
     "shapes-naive": ("naive", {"width": 16, "depth": 6}),
 }
 #: their common budget: training images, epochs, batch size and AdamW learning rate
-SEMANTIC_TRAIN = {"images": 2000, "epochs": 20, "batch_size": 8, "lr": 2e-3}
+#: (20 epochs at lr 2e-3 without flips and turns gave the U-Net test mIoU 0.849 on
+#: seed 0, its validation mIoU still rising at epoch 19)
+SEMANTIC_TRAIN = {"images": 2000, "epochs": 24, "batch_size": 8, "lr": 3e-3, "dihedral": True}
 
 
 def shapes_semantic(
@@ -322,7 +334,7 @@ def shapes_semantic(
         train.class_maps(),
         cfg,
         val=(_images(val), val.class_maps()),
-        dihedral=False,
+        dihedral=budget["dihedral"],
         progress=progress,
     )
     wall = time.perf_counter() - t0
