@@ -120,3 +120,13 @@ def store_run(name: str, key: str, row: dict[str, Any]) -> Path:
     path = RESULTS / f"{name}.json"
     path.write_text(json.dumps(results, indent=1))
     return path
+
+
+def store_timing(name: str, part: str, row: dict[str, Any]) -> Path:
+    """Merge a timing ``row`` (a figures script's ``--time-epochs``) under
+    ``timing[part]`` of ``NAME.json``, with this machine's details."""
+    results = load_runs(name)
+    results.setdefault("timing", {})[part] = {**row, "machine": machine()}
+    path = RESULTS / f"{name}.json"
+    path.write_text(json.dumps(results, indent=1))
+    return path

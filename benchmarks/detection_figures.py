@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import RESULTS, load_runs, machine, store_run
+from benchmarks._harness import load_runs, store_run, store_timing
 from robopercept.nn import detection_data as dd
 from robopercept.nn.detection import (
     TestTimeAugmentation,
@@ -62,7 +62,6 @@ from robopercept.nn.detection import (
 from robopercept.nn.training import TrainConfig
 
 NAME = "detection_figures"
-PATH = RESULTS / f"{NAME}.json"
 TREES = os.environ.get("ROBOPERCEPT_DEEPFOREST", "../shared/data/detection/deepforest_neon")
 
 
@@ -504,9 +503,7 @@ def main(argv: list[str] | None = None) -> int:
         for part in args.only:
             row = time_part(part, args.time_epochs, args.threads)
             print(json.dumps(row), flush=True)
-            results = _load()
-            results.setdefault("timing", {})[part] = {**row, "machine": machine()}
-            PATH.write_text(json.dumps(results, indent=1))
+            store_timing(NAME, part, row)
         return 0
     for part in args.only:
         for seed in args.seeds:

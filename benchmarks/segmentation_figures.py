@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import load_runs, store_run
+from benchmarks._harness import load_runs, store_run, store_timing
 from benchmarks.detection_figures import chunked
 from robopercept.imaging import label_components
 from robopercept.nn import detection_data as dd
@@ -280,17 +280,22 @@ def nuclei_maskrcnn(seed: int, progress: bool, save: Path | None = None) -> dict
     )
 
 
+#: the shapes Mask R-CNN: the detection page's Faster R-CNN with a lighter mask branch
+SHAPES_MASKRCNN = {"width": 16, "mask_channels": 32, "mask_convs": 2}
+SHAPES_MASKRCNN_TRAIN = {"epochs": 20, "batch_size": 8, "lr": 2e-3, "weight_decay": 1e-4}
+SHAPES_MASKRCNN_IMAGES = (1000, 100, 200)
+
+
 def shapes_maskrcnn(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
-    train, val, test = _shapes((1000, 100, 200), seed)
-    settings = {"width": 16, "mask_channels": 32, "mask_convs": 2}
+    train, val, test = _shapes(SHAPES_MASKRCNN_IMAGES, seed)
     return {
         **_maskrcnn_run(
             train,
             val,
             test,
             seed,
-            settings,
-            {"epochs": 20, "batch_size": 8, "lr": 2e-3, "weight_decay": 1e-4},
+            SHAPES_MASKRCNN,
+            SHAPES_MASKRCNN_TRAIN,
             None,
             progress,
             None if save is None else save / "segmenter_maskrcnn_shapes.pt",
@@ -371,6 +376,54 @@ def shapes_semantic(
     }
 
 
+def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
+    """The training time of a shapes part measured on a few epochs: ``epochs`` epochs
+    of its seed-0 run (same data, model and batch size; no validation), plus one
+    validation pass, extrapolated to the part's epochs and validations (every epoch
+    for the semantic networks, every epochs / 10 for Mask R-CNN). Run it with nothing
+    else on the machine: the figure is the time a full run takes alone."""
+    if part == "shapes-maskrcnn":
+        train, val, _ = _shapes(SHAPES_MASKRCNN_IMAGES, 0)
+        kw = {**SHAPES_MASKRCNN_TRAIN, "epochs": epochs}
+        t0 = time.perf_counter()
+        model, _, _ = _maskrcnn_train(train, None, 0, SHAPES_MASKRCNN, kw, None, False)
+        per_epoch = (time.perf_counter() - t0) / epochs
+        t0 = time.perf_counter()
+        evaluate_detector(model, val, iou_type="segm")
+        per_val = time.perf_counter() - t0
+        full = SHAPES_MASKRCNN_TRAIN["epochs"]
+        n_val = full // max(1, full // 10)
+    elif part in SEMANTIC:
+        name, settings = SEMANTIC[part]
+        budget = SEMANTIC_TRAIN
+        train, val, _ = _shapes((budget["images"], 100, 200), 0)
+        torch.manual_seed(0)
+        net = build_segmenter(name, len(train.classes) + 1, **settings)
+        cfg = TrainConfig(
+            epochs=epochs, batch_size=budget["batch_size"], lr=budget["lr"], device="cpu"
+        )
+        x, y = _images(train), train.class_maps()
+        t0 = time.perf_counter()
+        train_segmenter(net, x, y, cfg, dihedral=budget["dihedral"], progress=False)
+        per_epoch = (time.perf_counter() - t0) / epochs
+        t0 = time.perf_counter()
+        predict_segmentation(net, _images(val))
+        per_val = time.perf_counter() - t0
+        full = budget["epochs"]
+        n_val = full
+    else:
+        raise SystemExit(f"--time-epochs: times the shapes parts only; got {part}")
+    return {
+        "part": part,
+        "threads": threads,
+        "epochs_timed": epochs,
+        "seconds_per_epoch": round(per_epoch, 2),
+        "seconds_per_validation": round(per_val, 2),
+        "estimated_train_seconds": round(per_epoch * full + per_val * n_val, 1),
+        "epochs": full,
+    }
+
+
 PARTS: dict[str, Callable[..., dict[str, Any]]] = {
     "nuclei-unet": nuclei_unet,
     "nuclei-maskrcnn": nuclei_maskrcnn,
@@ -411,8 +464,22 @@ def main(argv: list[str] | None = None) -> int:
         help="write the shapes models to DIR/segmenter_NAME_shapes.pt (the shipped ones: "
         "--only shapes-unet shapes-maskrcnn --seeds 0 --save src/robopercept/data)",
     )
+    ap.add_argument(
+        "--time-epochs",
+        type=int,
+        default=None,
+        metavar="K",
+        help="instead of full runs, time K epochs of each shapes part and extrapolate its "
+        "training time (stored under 'timing'; run alone on the machine)",
+    )
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
+    if args.time_epochs:
+        for part in args.only:
+            row = time_part(part, args.time_epochs, args.threads)
+            print(json.dumps(row), flush=True)
+            store_timing(NAME, part, row)
+        return 0
     for part in args.only:
         for seed in args.seeds:
             row = {"part": part, "seed": seed, "threads": args.threads}
