@@ -130,3 +130,21 @@ def store_timing(name: str, part: str, row: dict[str, Any]) -> Path:
     path = RESULTS / f"{name}.json"
     path.write_text(json.dumps(results, indent=1))
     return path
+
+
+def timing_row(
+    part: str, threads: int, timed: int, per_epoch: float, per_val: float, epochs: int, every: int
+) -> dict[str, Any]:
+    """A ``--time-epochs`` record: ``timed`` epochs took ``per_epoch`` s each and one
+    validation ``per_val`` s; a run of ``epochs`` epochs validating every ``every``
+    epochs and after the last is estimated from them."""
+    n_val = len(range(every, epochs + 1, every)) + (epochs % every != 0)
+    return {
+        "part": part,
+        "threads": threads,
+        "epochs_timed": timed,
+        "seconds_per_epoch": round(per_epoch, 2),
+        "seconds_per_validation": round(per_val, 2),
+        "estimated_train_seconds": round(per_epoch * epochs + per_val * n_val, 1),
+        "epochs": epochs,
+    }

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import load_runs, store_run, store_timing
+from benchmarks._harness import load_runs, store_run, store_timing, timing_row
 from robopercept.nn import detection_data as dd
 from robopercept.nn.detection import (
     TestTimeAugmentation,
@@ -463,17 +463,7 @@ def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
     evaluate_detector(model, val)
     per_val = time.perf_counter() - t0
     full = spec["train"]["epochs"]
-    every = max(1, full // 10)
-    n_val = len(range(every, full + 1, every)) + (full % every != 0)
-    return {
-        "part": part,
-        "threads": threads,
-        "epochs_timed": epochs,
-        "seconds_per_epoch": round(per_epoch, 2),
-        "seconds_per_validation": round(per_val, 2),
-        "estimated_train_seconds": round(per_epoch * full + per_val * n_val, 1),
-        "epochs": full,
-    }
+    return timing_row(part, threads, epochs, per_epoch, per_val, full, max(1, full // 10))
 
 
 def main(argv: list[str] | None = None) -> int:

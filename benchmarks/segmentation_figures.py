@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import load_runs, store_run, store_timing
+from benchmarks._harness import load_runs, store_run, store_timing, timing_row
 from benchmarks.detection_figures import chunked
 from robopercept.imaging import label_components
 from robopercept.nn import detection_data as dd
@@ -392,7 +392,7 @@ def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
         evaluate_detector(model, val, iou_type="segm")
         per_val = time.perf_counter() - t0
         full = SHAPES_MASKRCNN_TRAIN["epochs"]
-        n_val = full // max(1, full // 10)
+        every = max(1, full // 10)
     elif part in SEMANTIC:
         name, settings = SEMANTIC[part]
         budget = SEMANTIC_TRAIN
@@ -410,18 +410,10 @@ def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
         predict_segmentation(net, _images(val))
         per_val = time.perf_counter() - t0
         full = budget["epochs"]
-        n_val = full
+        every = 1
     else:
         raise SystemExit(f"--time-epochs: times the shapes parts only; got {part}")
-    return {
-        "part": part,
-        "threads": threads,
-        "epochs_timed": epochs,
-        "seconds_per_epoch": round(per_epoch, 2),
-        "seconds_per_validation": round(per_val, 2),
-        "estimated_train_seconds": round(per_epoch * full + per_val * n_val, 1),
-        "epochs": full,
-    }
+    return timing_row(part, threads, epochs, per_epoch, per_val, full, every)
 
 
 PARTS: dict[str, Callable[..., dict[str, Any]]] = {
