@@ -69,9 +69,9 @@ def test_nn_segment_maskrcnn_finds_every_shape(tmp_path, test_set, capsys):
 
 
 def test_shipped_unet_still_segments_the_shapes(test_set):
-    # measured on these 40 canvases: mIoU 0.854 (the 24-epoch run) / see
-    # docs/segmentation.md for the shipped run; an untrained or wrongly loaded network
-    # labels every pixel background (mIoU near 0.19)
+    # measured on these 40 canvases: mIoU 0.873. The margin allows for pixels flipping
+    # with another CPU's arithmetic; an untrained or wrongly loaded network labels
+    # every pixel background (mIoU near 0.19)
     model, info = load_segmenter(_path("unet"))
     assert info["kind"] == "unet" and info["seed"] == 0 and info["classes"] == CLASSES
     assert "--only shapes-unet" in info["built_by"]
@@ -86,7 +86,8 @@ def test_nn_segment_without_model_uses_the_shipped_unet(tmp_path, test_set):
     out = tmp_path / "out"
     assert main(["nn", "segment", str(img), "-o", str(out), "--quiet"]) == 0
     labels = read_image(out / "shapes_labels.png", mode="index")
+    # the labels PNG is the shipped U-Net's prediction of the image read back
+    model, _ = load_segmenter(_path("unet"))
+    np.testing.assert_array_equal(labels, segment_arrays(model, [read_image(img)])[0])
     truth = test_set.class_maps()[1]
-    # the labels PNG is the prediction: most of each shape carries its class
-    for k in np.unique(truth[truth > 0]):
-        assert (labels[truth == k] == k).mean() >= 0.7
+    assert (labels[truth > 0] == truth[truth > 0]).mean() >= 0.5  # mostly the right class
