@@ -148,3 +148,55 @@ def timing_row(
         "estimated_train_seconds": round(per_epoch * epochs + per_val * n_val, 1),
         "epochs": epochs,
     }
+
+
+def figures_main(
+    argv: list[str] | None,
+    *,
+    name: str,
+    description: str,
+    parts: list[str],
+    run: Callable[[str, int, bool, Path | None], dict[str, Any]],
+    time_part: Callable[[str, int, int], dict[str, Any]],
+    table: Callable[[dict[str, Any]], str],
+    save_help: str,
+) -> int:
+    """The command line of a figures script (``detection_figures``,
+    ``segmentation_figures``): ``--only PART...``, ``--seeds``, ``--threads``,
+    ``--quiet``, ``--save DIR`` and ``--time-epochs K``. Each ``run(part, seed,
+    progress, save)`` row is printed and merged into ``NAME.json`` as it finishes
+    (:func:`store_run`), then the table of all runs is printed; with ``--time-epochs``
+    each part's :func:`timing_row` is stored instead (:func:`store_timing`)."""
+    import argparse
+
+    import torch
+
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--only", nargs="+", choices=sorted(parts), default=sorted(parts))
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--save", type=Path, default=None, help=save_help)
+    ap.add_argument(
+        "--time-epochs",
+        type=int,
+        default=None,
+        metavar="K",
+        help="instead of full runs, time K epochs of each part and extrapolate its "
+        "training time (stored under 'timing'; run alone on the machine)",
+    )
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    if args.time_epochs:
+        for part in args.only:
+            row = time_part(part, args.time_epochs, args.threads)
+            print(json.dumps(row), flush=True)
+            store_timing(name, part, row)
+        return 0
+    for part in args.only:
+        for seed in args.seeds:
+            row = run(part, seed, not args.quiet, args.save)
+            print(json.dumps(row), flush=True)
+            store_run(name, f"{part}/{seed}", row)
+    print(table(load_runs(name)))
+    return 0

@@ -34,10 +34,8 @@ Parts:
 
 from __future__ import annotations
 
-import argparse
 import functools
 import hashlib
-import json
 import os
 import statistics
 import time
@@ -48,7 +46,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import load_runs, store_run, store_timing, timing_row
+from benchmarks._harness import figures_main, load_runs, timing_row
 from robopercept.nn import detection_data as dd
 from robopercept.nn.detection import (
     TestTimeAugmentation,
@@ -467,41 +465,17 @@ def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--only", nargs="+", choices=sorted(PARTS), default=sorted(PARTS))
-    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--quiet", action="store_true")
-    ap.add_argument(
-        "--save",
-        type=Path,
-        default=None,
-        help="write each trained model to DIR/detector_KIND_DATA.pt (the shipped models: "
-        "--only shapes-fcos-ema shapes-faster --seeds 0 --save src/robopercept/data)",
+    return figures_main(
+        argv,
+        name=NAME,
+        description=__doc__.splitlines()[0],
+        parts=list(PARTS),
+        run=lambda part, seed, progress, save: run_one(part, seed, progress, save),
+        time_part=time_part,
+        table=table,
+        save_help="write each trained model to DIR/detector_KIND_DATA.pt (the shipped "
+        "models: --only shapes-fcos-ema shapes-faster --seeds 0 --save src/robopercept/data)",
     )
-    ap.add_argument(
-        "--time-epochs",
-        type=int,
-        default=None,
-        metavar="K",
-        help="instead of full runs, time K epochs of each part and extrapolate its "
-        "training time (stored under 'timing'; run alone on the machine)",
-    )
-    args = ap.parse_args(argv)
-    torch.set_num_threads(args.threads)
-    if args.time_epochs:
-        for part in args.only:
-            row = time_part(part, args.time_epochs, args.threads)
-            print(json.dumps(row), flush=True)
-            store_timing(NAME, part, row)
-        return 0
-    for part in args.only:
-        for seed in args.seeds:
-            row = run_one(part, seed, progress=not args.quiet, save=args.save)
-            print(json.dumps(row), flush=True)
-            store_run(NAME, f"{part}/{seed}", row)
-    print(table(_load()))
-    return 0
 
 
 if __name__ == "__main__":

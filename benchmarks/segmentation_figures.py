@@ -37,9 +37,7 @@ always ``99``.
 
 from __future__ import annotations
 
-import argparse
 import functools
-import json
 import statistics
 import time
 from collections.abc import Callable
@@ -49,7 +47,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import load_runs, store_run, store_timing, timing_row
+from benchmarks._harness import figures_main, timing_row
 from benchmarks.detection_figures import chunked
 from robopercept.imaging import label_components
 from robopercept.nn import detection_data as dd
@@ -444,43 +442,24 @@ def table(results: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _run(part: str, seed: int, progress: bool, save: Path | None) -> dict[str, Any]:
+    row = {"part": part, "seed": seed, "threads": torch.get_num_threads()}
+    row.update(PARTS[part](seed, progress, save))
+    return row
+
+
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--only", nargs="+", choices=sorted(PARTS), default=sorted(PARTS))
-    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--quiet", action="store_true")
-    ap.add_argument(
-        "--save",
-        type=Path,
-        default=None,
-        help="write the shapes models to DIR/segmenter_NAME_shapes.pt (the shipped ones: "
-        "--only shapes-unet shapes-maskrcnn --seeds 0 --save src/robopercept/data)",
+    return figures_main(
+        argv,
+        name=NAME,
+        description=__doc__.splitlines()[0],
+        parts=list(PARTS),
+        run=_run,
+        time_part=time_part,
+        table=table,
+        save_help="write the shapes models to DIR/segmenter_NAME_shapes.pt (the shipped "
+        "ones: --only shapes-unet shapes-maskrcnn --seeds 0 --save src/robopercept/data)",
     )
-    ap.add_argument(
-        "--time-epochs",
-        type=int,
-        default=None,
-        metavar="K",
-        help="instead of full runs, time K epochs of each shapes part and extrapolate its "
-        "training time (stored under 'timing'; run alone on the machine)",
-    )
-    args = ap.parse_args(argv)
-    torch.set_num_threads(args.threads)
-    if args.time_epochs:
-        for part in args.only:
-            row = time_part(part, args.time_epochs, args.threads)
-            print(json.dumps(row), flush=True)
-            store_timing(NAME, part, row)
-        return 0
-    for part in args.only:
-        for seed in args.seeds:
-            row = {"part": part, "seed": seed, "threads": args.threads}
-            row.update(PARTS[part](seed, not args.quiet, args.save))
-            print(json.dumps(row), flush=True)
-            store_run(NAME, f"{part}/{seed}", row)
-    print(table(load_runs(NAME)))
-    return 0
 
 
 if __name__ == "__main__":
