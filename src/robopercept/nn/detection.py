@@ -2383,7 +2383,7 @@ def evaluate_detector(
             if masks is not None:
                 res["segmentation"] = rle_encode(masks[j])
             results.append(res)
-    return evaluate_detections(ds.to_coco(), results, iou_type="segm" if segm else "bbox")
+    return evaluate_detections(ds.to_coco(masks=segm), results, iou_type="segm" if segm else "bbox")
 
 
 def _detections_per_image(

@@ -453,11 +453,12 @@ class DetectionDataset:
         parts = stratified_split(np.zeros(len(self), dtype=np.int64), fractions, rng)
         return tuple(self.subset(p) for p in parts)
 
-    def to_coco(self) -> CocoDataset:
+    def to_coco(self, masks: bool = True) -> CocoDataset:
         """The ground truth as a :class:`~robopercept.nn.coco.CocoDataset` (boxes as COCO
         ``[x, y, w, h]``, ``area`` as :meth:`areas`, category ``k`` = ``classes[k - 1]``;
-        where the set has masks, each object's ``segmentation`` is its mask's RLE,
-        :func:`~robopercept.nn.coco_mask.rle_encode`).
+        where the set has masks and ``masks`` is true, each object's ``segmentation``
+        is its mask's RLE, :func:`~robopercept.nn.coco_mask.rle_encode`; box
+        evaluation passes ``masks=False`` and skips the encoding).
 
         Examples
         --------
@@ -482,7 +483,7 @@ class DetectionDataset:
                     "area": float(area),
                     "iscrowd": 0,
                 }
-                if self.masks is not None:
+                if masks and self.masks is not None:
                     ann["segmentation"] = rle_encode(self.masks[i][j])
                 anns.append(ann)
         return coco_from_dict(
