@@ -31,6 +31,7 @@ _SUBMODULES = (
     "segmentation_data",
     "detection_data",
     "detection",
+    "skeleton",
 )
 
 __all__ = list(_SUBMODULES)
