@@ -25,7 +25,7 @@ that every OKS in the project reads the same constants.
 
 Examples
 --------
->>> MPII_16.num_joints, MPII_16.index("pelvis"), MPII_16.parents("pelvis")[MPII_16.index("thorax")]
+>>> MPII_16.num_joints, MPII_16.index("pelvis"), int(MPII_16.parents("pelvis")[7])
 (16, 6, 6)
 >>> COCO_17.flip_permutation()[:5].tolist()
 [0, 2, 1, 4, 3]
