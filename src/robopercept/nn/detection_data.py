@@ -91,7 +91,9 @@ __all__ = [
     "digits_detection_set",
     "draw_detections",
     "mask_to_box",
+    "photo_background",
     "procedural_detection_set",
+    "random_texture",
     "samples_picture",
     "single_digit_set",
 ]
@@ -889,9 +891,33 @@ def _photo(name: str) -> np.ndarray:
     return im
 
 
-def _background(gen: np.random.Generator, w: int, h: int) -> tuple[np.ndarray, dict[str, Any]]:
-    """A random crop (aspect w/h, 30-100 % of the largest) of a random bundled photo,
-    resized to (h, w), contrast reduced to ``0.2 + 0.6 I``."""
+def photo_background(
+    gen: np.random.Generator, w: int, h: int
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """A random crop of a random bundled photo (:data:`BACKGROUNDS`): aspect ``w / h``,
+    30-100 % of the largest such crop, resized (bilinear, antialiased) to ``(h, w)``, its
+    contrast reduced to ``0.2 + 0.6 I``.
+
+    Parameters
+    ----------
+    gen : numpy.random.Generator
+        The generator the caller draws everything else from (not re-seeded here).
+    w, h : int
+        Width and height in pixels.
+
+    Returns
+    -------
+    (h, w, 3) float64 ndarray
+        RGB in [0.2, 0.8].
+    dict
+        ``"photo"``: the image's name, ``"crop"``: ``(x, y, w, h)`` in the photo.
+
+    Examples
+    --------
+    >>> tile, info = photo_background(np.random.default_rng(0), 32, 24)
+    >>> tile.shape, bool(tile.min() >= 0.2 and tile.max() <= 0.8), info["photo"] in BACKGROUNDS
+    ((24, 32, 3), True, True)
+    """
     name = BACKGROUNDS[int(gen.integers(len(BACKGROUNDS)))]
     photo = _photo(name)
     ph, pw = photo.shape[:2]
@@ -907,9 +933,16 @@ def _background(gen: np.random.Generator, w: int, h: int) -> tuple[np.ndarray, d
     return 0.2 + 0.6 * np.clip(tile, 0, 1), {"photo": name, "crop": (x0, y0, cw_i, ch_i)}
 
 
-def _texture(gen: np.random.Generator, w: int, h: int) -> np.ndarray:
-    """An (h, w, 3) fill: a random colour modulated by one of flat, stripes, checker or
-    noise, ``c (0.65 + 0.35 t)`` with the pattern ``t`` in [0, 1]."""
+def random_texture(gen: np.random.Generator, w: int, h: int) -> np.ndarray:
+    """An ``(h, w, 3)`` fill: a random saturated colour ``c`` modulated by one of flat,
+    stripes, checker or noise, ``c (0.65 + 0.35 t)`` with the pattern ``t`` in [0, 1].
+
+    Examples
+    --------
+    >>> t = random_texture(np.random.default_rng(0), 8, 6)
+    >>> t.shape, bool(t.min() >= 0 and t.max() <= 1)
+    ((6, 8, 3), True)
+    """
     colour = gen.uniform(0.25, 1.0, 3)
     colour[int(gen.integers(3))] = gen.uniform(0.0, 0.3)  # a saturated hue
     kind = int(gen.integers(4))
@@ -1054,10 +1087,10 @@ def procedural_detection_set(
     side = min(w, h)
     images, boxes, labels, masks, meta = [], [], [], [], []
     for _ in range(n):
-        canvas, info = _background(gen, w, h)
+        canvas, info = photo_background(gen, w, h)
         for _ in range(int(gen.integers(0, clutter + 1))):
             m = _clutter_mask(gen, w, h, side)
-            canvas[m] = _texture(gen, w, h)[m]
+            canvas[m] = random_texture(gen, w, h)[m]
         vis: list[np.ndarray] = []
         full: list[int] = []
         geo: list[tuple[float, float, float, float]] = []
@@ -1078,7 +1111,7 @@ def procedural_detection_set(
             full.append(int(m.sum()))
             geo.append((cx, cy, r, phi))
             labs.append(j + 1)
-            canvas[m] = _texture(gen, w, h)[m]
+            canvas[m] = random_texture(gen, w, h)[m]
         occluded = False
         if vis and gen.random() < occlusion:
             for _try in range(20):
@@ -1094,7 +1127,7 @@ def procedural_detection_set(
                 )
                 if _visible_ok(vis, full, m, min_visible):
                     vis = [v & ~m for v in vis]
-                    canvas[m] = _texture(gen, w, h)[m]
+                    canvas[m] = random_texture(gen, w, h)[m]
                     occluded = True
                     break
         images.append(np.clip(canvas, 0.0, 1.0).astype(np.float32))
