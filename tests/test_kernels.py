@@ -676,7 +676,20 @@ def _nn_cases() -> list[Case]:
         ev = evaluate_detections(gt, results_from_list(dets))
         return [ev.precision, ev.recall, ev.scores, np.asarray(ev.stats)]
 
-    return [Case("batched_nms", nms), Case("coco_matching", coco)]
+    from robopercept.nn.pictorial import pictorial_structures
+
+    costs = rng.normal(size=(4, 9, 11))
+    costs[rng.random(costs.shape) < 0.2] = np.inf  # forbidden cells skip the envelope
+    springs = (rng.normal(0, 2, (4, 2)), rng.uniform(0.1, 2.0, (4, 2)))
+
+    def pictorial() -> object:
+        return pictorial_structures(costs, [1, -1, 1, 2], *springs, min_marginals=True)
+
+    return [
+        Case("batched_nms", nms),
+        Case("coco_matching", coco),
+        Case("pictorial_structures", pictorial),
+    ]
 
 
 CASES: list[Case] = [

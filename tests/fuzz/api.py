@@ -859,6 +859,27 @@ VALID: dict[str, dict[str, Any]] = {
         "tiles": np.random.default_rng(0).uniform(0, 1, (4, 8, 8)),
         "tile_px": 16,
     },
+    # viz.pose (issue 28): a 4-joint pose, its heatmaps, a 3-D pose
+    "viz.draw_skeleton": {
+        "image": IMG_RGB,
+        "keypoints": np.array([[10.0, 10.0, 2.0], [30.0, 20.0, 2.0], [50.0, 30.0, 1.0]]),
+        "links": [(0, 1), (1, 2)],
+        "confidence": np.array([0.9, 0.5, 0.2]),
+        "labels": ["a", "b", "c"],
+        "flip_pairs": [(0, 2)],
+    },
+    "viz.heatmap_grid": {
+        "image": IMG_RGB,
+        "heatmaps": np.random.default_rng(0).uniform(0, 1, (3, 6, 8)),
+        "names": ["a", "b", "c"],
+        "tile_px": 32,
+    },
+    "viz.skeleton_3d_picture": {
+        "joints3d": PTS3[:4] - np.array([0.0, 0.0, 5.0]),
+        "links": [(0, 1), (1, 2), (2, 3)],
+        "reference": PTS3[4:8] - np.array([0.0, 0.0, 5.0]),
+        "size": (300, 160),
+    },
     # ------------------------------------------------------------------ sources
     "sources.RGBDFrame": {
         "index": 0,
@@ -1245,7 +1266,7 @@ VALID.update(
         "nn.coco.results_from_ground_truth": {"dataset": _CGT},
         "nn.coco.read_voc_xml": {"path": Fixture("voc.xml")},
         "nn.coco.voc_to_coco": {"annotations": _b("tests.fuzz.api:coco_value", "voc")},
-        "nn.coco.evaluate_detections": {"gt": _CGT, "results": _COCO_RES},
+        "nn.coco.evaluate_detections": {"gt": _CGT, "results": _COCO_RES, "max_dets": (1, 10, 100)},
         "nn.coco.evaluate_voc": {"gt": _CGT, "results": _CRES},
         "nn.coco.voc_average_precision": {
             "recall": np.array([0.5, 0.5, 1.0]),
@@ -1253,6 +1274,56 @@ VALID.update(
         },
         "nn.coco.pr_curves_picture": {"evaluation": _CEV, "width": 200, "height": 150},
         "nn.coco.write_pr_curves": {"evaluation": _CEV, "path": _out("pr.png")},
+    }
+)
+
+# nn.coco keypoints and nn.pose_eval (issue 28): two persons of 3 keypoints, a detection
+_KP_GT = np.array([[[10.0, 10.0, 2.0], [20.0, 12.0, 2.0], [15.0, 30.0, 1.0]], np.zeros((3, 3))])
+_KP_DT = np.array([[[11.0, 10.0], [19.0, 13.0], [15.0, 28.0]]])
+_I2 = np.array([1, 2], dtype=np.int64)
+VALID.update(
+    {
+        "nn.coco.keypoint_oks": {
+            "dt_keypoints": _KP_DT,
+            "gt_keypoints": _KP_GT,
+            "gt_area": np.array([200.0, 50.0]),
+            "gt_box": np.array([[8.0, 8.0, 14.0, 24.0], [40.0, 5.0, 5.0, 10.0]]),
+            "sigmas": np.array([0.05, 0.07, 0.09]),
+        },
+        "nn.coco.CocoDataset": {
+            "images": (),
+            "categories": (),
+            "ann_ids": _I2,
+            "image_ids": _I2,
+            "category_ids": _I2,
+            "boxes": np.array([[8.0, 8.0, 14.0, 24.0], [40.0, 5.0, 5.0, 10.0]]),
+            "areas": np.array([200.0, 50.0]),
+            "iscrowd": np.zeros(2, dtype=bool),
+            "keypoints": _KP_GT,
+            "num_keypoints": np.array([3, 0]),
+        },
+        "nn.coco.CocoResults": {
+            "image_ids": _I2[:1],
+            "category_ids": _I2[:1],
+            "boxes": np.array([[11.0, 10.0, 8.0, 18.0]]),
+            "scores": np.array([0.9]),
+            "keypoints": np.concatenate([_KP_DT, np.ones((1, 3, 1))], axis=2),
+        },
+        "nn.pose_eval.pck": {
+            "pred": _KP_GT[:, :, :2] + 1.0,
+            "truth": _KP_GT,
+            "visible": None,
+            "threshold": 0.2,
+            "normalizer": np.array([28.0, 11.0]),
+        },
+        "nn.pose_eval.pckh": {
+            "pred": _KP_GT[:, :, :2] + 1.0,
+            "truth": _KP_GT,
+            "visible": np.ones((2, 3), dtype=bool),
+            "head_sizes": np.array([6.0, 4.0]),
+        },
+        "nn.pose_eval.bbox_diagonal": {"boxes": np.array([[8.0, 8.0, 14.0, 24.0]])},
+        "nn.pose_eval.mpii_head_sizes": {"head_boxes": np.array([[8.0, 8.0, 22.0, 32.0]])},
     }
 )
 
@@ -2269,6 +2340,20 @@ def detector_value(kind: str) -> Any:
                 "masks": masks[1],
             },
         ]
+    if kind == "ktargets":
+        kps = [[[2.0, 3.0, 2.0], [8.0, 11.0, 1.0]], [[5.0, 1.0, 2.0], [19.0, 9.0, 0.0]]]
+        return [
+            {
+                "boxes": torch.tensor([[1.0, 2.0, 9.0, 12.0]]),
+                "labels": torch.tensor([1]),
+                "keypoints": torch.tensor([kps[0]]),
+            },
+            {
+                "boxes": torch.tensor([[4.0, 0.0, 20.0, 10.0]]),
+                "labels": torch.tensor([2]),
+                "keypoints": torch.tensor([kps[1]]),
+            },
+        ]
     if kind == "maskrcnn":
         return det.MaskRCNN(2, width=4, hidden=8, mask_channels=4, mask_convs=1)
     if kind == "fcos":
@@ -2473,3 +2558,241 @@ def unet_builder() -> Any:
         return UNet(n_classes + 1, **settings)
 
     return build
+
+
+# nn.pose_io (issue 28): a two-person MPII list and an imgaug keypoint file
+_MPII_JSON = [
+    {
+        "image": f"{i:03d}.jpg",
+        "joints": [[float(10 + j), float(20 + i + j)] for j in range(16)],
+        "joints_vis": [1] * 15 + [0],
+        "center": [30.0, 30.0],
+        "scale": 0.2,
+    }
+    for i in range(2)
+]
+_IMGAUG_JSON = {
+    "bounding_boxes": [{"x1": 2.0, "y1": 3.0, "x2": 40.0, "y2": 30.0, "label": "animal"}],
+    "keypoints": [
+        {"x": 10.0, "y": 5.0, "label": "eye_left"},
+        {"x": 20.0, "y": 5.0, "label": "eye_right"},
+    ],
+    "polygons": [{"keypoints": [{"x": 2.0, "y": 3.0}, {"x": 40.0, "y": 3.0}, {"x": 20, "y": 30}]}],
+}
+FIXTURES.update(
+    {
+        "mpii.json": lambda p: p.write_text(json.dumps(_MPII_JSON)),
+        "imgaug.json": lambda p: p.write_text(json.dumps(_IMGAUG_JSON)),
+    }
+)
+VALID.update(
+    {
+        "nn.pose_io.read_mpii_json": {"path": Fixture("mpii.json")},
+        "nn.pose_io.read_imgaug_keypoints": {"path": Fixture("imgaug.json")},
+    }
+)
+
+# nn.pictorial (issue 28): cost maps, a 3-joint chain, four 16x16 pictures with poses
+_PS_RNG = np.random.default_rng(28)
+PS_COSTS = _PS_RNG.normal(size=(3, 6, 7))
+PS_IMAGES = _PS_RNG.uniform(0, 1, (4, 16, 16, 3))
+PS_KEYPOINTS = np.concatenate([_PS_RNG.uniform(2, 13, (4, 3, 2)), np.full((4, 3, 1), 2.0)], axis=2)
+_PS_ARM = _b("robopercept.nn.skeleton:Skeleton", "arm", ["a", "b", "c"], [(0, 1), (1, 2)], [])
+VALID.update(
+    {
+        "nn.pictorial.distance_transform_1d": {"f": _PS_RNG.normal(size=(5, 9))},
+        "nn.pictorial.generalized_distance_transform": {"f": PS_COSTS[0]},
+        "nn.pictorial.pictorial_structures": {
+            "unary_costs": PS_COSTS,
+            "parents": [-1, 0, 1],
+            "offsets": np.ones((3, 2)),
+            "weights": np.ones((3, 2)),
+        },
+        "nn.pictorial.grid_descriptors": {"image": IMG_RGB},
+        "nn.pictorial.PictorialStructures": {"skeleton": _PS_ARM, "random_state": 0},
+        "nn.pictorial.PictorialStructures.fit": {
+            "images": PS_IMAGES,
+            "keypoints": PS_KEYPOINTS,
+        },
+        "nn.pictorial.PictorialStructures.predict": {"images": PS_IMAGES[:2]},
+        "nn.pictorial.PictorialStructures.predict_costs": {"image": IMG_RGB},
+    }
+)
+METHODS["nn.pictorial.PictorialStructures"] = ("fit", "predict", "predict_costs")
+PRE["nn.pictorial.PictorialStructures.predict"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
+PRE["nn.pictorial.PictorialStructures.predict_costs"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
+
+
+# nn.skeleton, nn.pose_data, nn.pose and the keypoint detector (issue 28)
+_ARM = {"name": "arm", "joints": ["a", "left_b", "right_b"], "links": [(0, 1), (0, 2)]}
+_POSE_DS = _b("robopercept.nn.pose_data:procedural_pose_set", 2, (32, 32), 0)
+_POSE_NET = _b("robopercept.nn.pose:SimpleBaseline", 16, 2)
+_POSE_STAGE = _b("robopercept.nn.pose:DeepPoseRefiner", 16, 8.0, 8, 2)
+_K = np.array([[40.0, 0.0, 16.0], [0.0, 40.0, 16.0], [0.0, 0.0, 1.0]])
+
+
+def _write_pose_model(path: Path) -> None:
+    """A width-2 SimpleBaseline checkpoint of MPII's 16 joints (save_pose_model)."""
+    from robopercept.nn.pose import SimpleBaseline, save_pose_model
+    from robopercept.nn.skeleton import MPII_16
+
+    save_pose_model(path, SimpleBaseline(16, 2), "heatmap", {"width": 2}, MPII_16)
+
+
+FIXTURES["pose.pt"] = _write_pose_model
+VALID.update(
+    {
+        "nn.skeleton.Skeleton": {**_ARM, "flip_pairs": [(1, 2)]},
+        "nn.skeleton.Skeleton.index": {"joint": "left_b"},
+        "nn.skeleton.Skeleton.parents": {"root": 0},
+        "nn.skeleton.Skeleton.from_dict": {"data": {**_ARM, "flip_pairs": [[1, 2]]}},
+        "nn.skeleton.skeleton_from_coco_category": {
+            "category": {
+                "id": 1,
+                "name": "person",
+                "keypoints": ["a", "left_b", "right_b"],
+                "skeleton": [[1, 2], [1, 3]],
+            },
+        },
+        "nn.detection_data.photo_background": {
+            "gen": _b("numpy.random:default_rng", 0),
+            "w": 16,
+            "h": 12,
+        },
+        "nn.detection_data.random_texture": {
+            "gen": _b("numpy.random:default_rng", 0),
+            "w": 16,
+            "h": 12,
+        },
+        "nn.detection.KeypointRCNN": {
+            "num_classes": 2,
+            "num_keypoints": 2,
+            "width": 4,
+            "hidden": 8,
+            "keypoint_channels": 4,
+            "keypoint_convs": 1,
+        },
+        "nn.detection.KeypointRCNN.forward": {
+            "images": _DIMAGES,
+            "targets": _b("tests.fuzz.api:detector_value", "ktargets"),
+        },
+        "nn.pose_data.random_poses_3d": {"n": 2, "rng": 0},
+        "nn.pose_data.project_points": {"points": [[0.1, -0.2, 2.0]], "camera_matrix": _K},
+        "nn.pose_data.procedural_pose_set": {"n_images": 2, "size": (32, 32), "rng": 0},
+        "nn.pose_data.procedural_pose_scenes": {"n_images": 1, "size": (48, 40), "rng": 0},
+        "nn.pose_data.pose_sets": {"data": "figures", "images": 2, "size": (32, 32)},
+        "nn.pose_data.PoseDataset": {
+            "images": np.zeros((2, 8, 8, 3), np.float32),
+            "keypoints": np.full((2, 16, 3), 2.0),
+            "boxes": np.array([[0.0, 0.0, 8.0, 8.0]] * 2),
+            "skeleton": _b("tests.fuzz.api:mpii_skeleton"),
+            "joints3d": np.ones((2, 16, 3)),
+            "cameras": np.stack([_K, _K]),
+        },
+        "nn.pose_data.PoseDataset.subset": {"indices": [1, 0]},
+        "nn.pose_data.PoseDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
+        "nn.pose_data.PoseDataset.__getitem__": {"i": 0},
+        "nn.pose.gaussian_heatmaps": {
+            "keypoints": [[[6.0, 2.0, 2.0], [1.0, 7.0, 1.0]]],
+            "image_size": (8, 8),
+            "stride": 4,
+        },
+        "nn.pose.decode_heatmaps": {
+            "heatmaps": np.random.default_rng(0).uniform(0, 1, (1, 2, 4, 5)),
+            "stride": 4,
+        },
+        "nn.pose.heatmap_loss": {
+            "output": _b("tests.fuzz.api:torch_image", 2, 3, 4, 4),
+            "target": _b("tests.fuzz.api:torch_image", 2, 3, 4, 4),
+            "weight": _b("tests.fuzz.api:torch_tensor", [[1.0, 0.0, 1.0], [1.0, 1.0, 1.0]]),
+        },
+        "nn.pose.predict_heatmaps": {"model": _POSE_NET, "images": np.zeros((1, 32, 32, 3))},
+        "nn.pose.SimpleBaseline": {"num_joints": 3, "width": 2},
+        "nn.pose.HRNet": {"num_joints": 3, "width": 2, "blocks": 1},
+        "nn.pose.DeepPose": {"num_joints": 3, "image_size": (32, 32), "width": 2, "hidden": 8},
+        "nn.pose.DeepPoseRefiner": {"num_joints": 3, "crop": 8.0, "patch": 8, "width": 2},
+        "nn.pose.build_pose_model": {"name": "heatmap", "num_joints": 3},
+        "nn.pose.crop_patches": {
+            "images": _b("tests.fuzz.api:torch_image", 1, 1, 6, 6),
+            "centres": _b("tests.fuzz.api:torch_tensor", [[[2.0, 3.0], [4.5, 1.0]]]),
+            "crop": 2.0,
+            "patch": 2,
+        },
+        "nn.pose.augment_pose_batch": {
+            "images": _b("tests.fuzz.api:torch_image", 2, 3, 8, 8),
+            "keypoints": _b("tests.fuzz.api:torch_tensor", [[[2.0, 3.0, 2.0]], [[5.0, 1.0, 1.0]]]),
+            "flip_permutation": [0],
+            "generator": _b("torch:Generator"),
+        },
+        "nn.pose.predict_keypoints": {"model": _POSE_NET, "images": np.zeros((1, 32, 32, 3))},
+        "nn.pose.refine_keypoints": {
+            "images": np.zeros((1, 32, 32, 3)),
+            "keypoints": np.full((1, 16, 2), 16.0),
+            "refiners": [_POSE_STAGE],
+        },
+        "nn.pose.train_pose": {
+            "model": _POSE_NET,
+            "train": _POSE_DS,
+            "config": TRAIN_CFG,
+            "progress": False,
+        },
+        "nn.pose.train_refiner": {
+            "refiner": _POSE_STAGE,
+            "train": _POSE_DS,
+            "estimates": np.full((2, 16, 2), 16.0),
+            "config": TRAIN_CFG,
+            "progress": False,
+        },
+        "nn.pose.save_pose_model": {
+            "path": _out("pose.pt"),
+            "model": _POSE_NET,
+            "name": "heatmap",
+            "settings": {"width": 2},
+            "skeleton": _b("tests.fuzz.api:mpii_skeleton"),
+        },
+        "nn.pose.load_pose_model": {"path": Fixture("pose.pt")},
+        "nn.pose.pose_arrays": {"model": _POSE_NET, "images": [IMG_RGB, IMG]},
+        "nn.pose.evaluate_pose": {"model": _POSE_NET, "data": _POSE_DS},
+    }
+)
+METHODS["nn.skeleton.Skeleton"] = ("index", "flip_permutation", "parents", "to_dict", "from_dict")
+METHODS["nn.pose_data.PoseDataset"] = ("subset", "split", "areas", "to_coco", "__getitem__")
+METHODS["nn.detection.KeypointRCNN"] = ("forward",)
+
+
+def mpii_skeleton() -> Any:
+    """MPII's 16-joint skeleton."""
+    from robopercept.nn.skeleton import MPII_16
+
+    return MPII_16
+
+
+# nn.pose3d (issue 28): three 16-joint 3-D poses (metres), 2-D joints, a tiny lifter
+_P3_RNG = np.random.default_rng(283)
+P3D = _P3_RNG.normal(0.0, 0.3, (3, 16, 3))
+P3D_PRED = P3D[:2] + _P3_RNG.normal(0.0, 0.05, (2, 16, 3))
+KP2D = _P3_RNG.uniform(0.0, 100.0, (6, 16, 2))
+_LIFTER = _b("robopercept.nn.pose3d:LiftingMLP", 16, 8, 1)
+VALID.update(
+    {
+        "nn.pose3d.procrustes_align": {"pred": P3D_PRED, "truth": P3D[:2]},
+        "nn.pose3d.mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
+        "nn.pose3d.pa_mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
+        "nn.pose3d.normalize_pose2d": {"keypoints2d": KP2D},
+        "nn.pose3d.random_views": {"poses3d": P3D, "views_per_pose": 2, "rng": 0},
+        "nn.pose3d.PoseLibrary": {"poses3d": P3D, "views_per_pose": 2},
+        "nn.pose3d.PoseLibrary.lift": {"keypoints2d": KP2D},
+        "nn.pose3d.LiftingMLP": {"width": 8, "blocks": 1},
+        "nn.pose3d.LiftingMLP.lift": {"keypoints2d": KP2D},
+        "nn.pose3d.LiftingMLP.forward": {"x": _b("tests.fuzz.api:torch_image", 2, 32)},
+        "nn.pose3d.train_lifter": {
+            "model": _LIFTER,
+            "keypoints2d": KP2D,
+            "joints3d": P3D_PRED[[0, 1, 0, 1, 0, 1]],
+            "epochs": 1,
+            "batch_size": 4,
+        },
+    }
+)
+METHODS["nn.pose3d.PoseLibrary"] = ("lift",)
+METHODS["nn.pose3d.LiftingMLP"] = ("lift", "forward")

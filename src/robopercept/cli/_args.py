@@ -325,17 +325,29 @@ def built_in_data_args(
     data_help: str,
     dir_help: str,
     choices: tuple[str, ...] | None = None,
+    *,
+    images: int = 200,
+    generated: str = "shapes/digits",
 ) -> None:
-    """The data flags of the ``nn detect`` and ``nn segment`` forms: ``--data`` (with
-    ``choices`` where only built-in sets are taken), ``--images-dir``, ``--images``,
-    ``--size``, ``--seed``, ``--device``, ``--json`` and ``--quiet``."""
+    """The data flags of the ``nn detect``, ``nn segment`` and ``nn pose`` forms:
+    ``--data`` (with ``choices`` where only built-in sets are taken), ``--images-dir``
+    (unless ``dir_help`` is empty), ``--images`` (default ``images``), ``--size``,
+    ``--seed``, ``--device``, ``--json`` and ``--quiet``; ``generated`` names the
+    generated sets in the help."""
     p.add_argument("--data", required=True, choices=choices, help=data_help)
-    p.add_argument("--images-dir", help=dir_help)
+    if dir_help:
+        p.add_argument("--images-dir", help=dir_help)
     p.add_argument(
-        "--images", type=positive_int, default=200, help="shapes/digits: images (default 200)"
+        "--images",
+        type=positive_int,
+        default=images,
+        help=f"{generated}: images (default {images})",
     )
     p.add_argument(
-        "--size", type=image_size, default=(128, 128), help="shapes/digits: WxH (default 128x128)"
+        "--size",
+        type=image_size,
+        default=(128, 128),
+        help=f"{generated}: WxH (default 128x128)",
     )
     p.add_argument("--seed", type=int, default=0, help="data, split and weights (default 0)")
     p.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")

@@ -140,10 +140,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--json", action="store_true", help="print the table as JSON")
     s.set_defaults(func=run_summary)
 
-    from robopercept.cli import detect, segment
+    from robopercept.cli import detect, pose, segment
 
     detect.register(ns, type(p))
     segment.register(ns, type(p))
+    pose.register(ns, type(p))
 
 
 def _split(text: str) -> tuple[float, float, float]:

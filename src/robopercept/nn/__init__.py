@@ -32,6 +32,12 @@ _SUBMODULES = (
     "detection_data",
     "detection",
     "skeleton",
+    "pose_eval",
+    "pose_io",
+    "pictorial",
+    "pose3d",
+    "pose_data",
+    "pose",
 )
 
 __all__ = list(_SUBMODULES)

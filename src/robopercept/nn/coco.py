@@ -5,13 +5,18 @@ NumPy only (no torch): the formats and the metrics of object detection.
 Formats
 -------
 * :class:`CocoDataset` is a frozen record of a COCO ground-truth file: images
-  (id, file_name, width, height), categories (id, name) and bounding-box annotations as
-  arrays (id, image_id, category_id, ``bbox`` = ``[x, y, w, h]``, area, iscrowd). Read it
-  with :func:`read_coco_json` or :func:`coco_from_dict`, write it with
+  (id, file_name, width, height), categories (id, name and, for keypoint categories,
+  the ``keypoints`` names and 1-based ``skeleton`` links) and annotations as arrays (id,
+  image_id, category_id, ``bbox`` = ``[x, y, w, h]``, area, iscrowd, and the keypoints
+  ``[x, y, v] * K`` as a ``(N, K, 3)`` array with ``num_keypoints``). Read it with
+  :func:`read_coco_json` or :func:`coco_from_dict`, write it with
   :func:`write_coco_json` / :func:`coco_to_dict`. Each annotation's ``segmentation``
-  is kept as the file gives it (for the ``segm`` evaluation); keypoints are not.
+  is kept as the file gives it (for the ``segm`` evaluation). One data set holds one
+  keypoint layout: every annotation with keypoints has the same ``K``, and an
+  annotation without them gets ``K`` unlabelled points (``v = 0``).
 * :class:`CocoResults` is a COCO results file, a list of
-  ``{"image_id", "category_id", "bbox", "score"}``: :func:`read_coco_results`,
+  ``{"image_id", "category_id", "bbox", "score"}`` (or ``"segmentation"`` masks, or
+  ``"keypoints"`` ``[x, y, s] * K``): :func:`read_coco_results`,
   :func:`results_from_list`, :func:`write_coco_results`, :func:`results_to_list`.
 * :func:`read_voc_xml` reads one Pascal-VOC annotation file (:class:`VocAnnotation`);
   :func:`voc_to_coco` turns a set of them into a :class:`CocoDataset`.
@@ -65,12 +70,40 @@ object stays in the recall, the detection is a false positive), as in pycocotool
 empty results list gives AP 0 for every category with ground truth (pycocotools'
 ``loadRes`` cannot take one); a data set without ground truth gives -1 everywhere.
 
+Keypoints
+---------
+``evaluate_detections(gt, results, "keypoints")`` is ``COCOeval(..., iouType="keypoints")``:
+the same matching and accumulation with the object keypoint similarity (OKS) in place
+of the IoU (:func:`keypoint_oks`). For a detection :math:`d` and ground truth
+:math:`g` of area :math:`s` (its ``area`` field) with keypoints
+:math:`(x_i, y_i, v_i)`, per-keypoint constants :math:`\sigma_i` and
+:math:`\kappa_i^2 = (2\sigma_i)^2`,
+
+.. math::
+
+    e_i = \frac{\Delta x_i^2 + \Delta y_i^2}{2\, \kappa_i^2\, (s + \epsilon)},\qquad
+    \mathrm{OKS} = \frac{1}{|L|}\sum_{i \in L} e^{-e_i},
+
+with :math:`L = \{i : v_i > 0\}` and :math:`\Delta = d_i - g_i`; when the ground truth
+has no labelled keypoint, :math:`L` is every keypoint and :math:`\Delta` is the
+distance from :math:`d_i` to the box :math:`[x - w, x + 2w] \times [y - h, y + 2h]`
+(its ``bbox`` tripled about its centre). :math:`\epsilon` is ``np.spacing(1)``. Ground
+truth with ``num_keypoints == 0`` is ignored (as crowd regions are); a detection's
+area, for the area ranges, is that of its box, which for keypoint results without a
+``bbox`` is the tight box of all its keypoints (as ``loadRes`` makes it). The area
+ranges are all, medium and large, ``max_dets`` is (20,), and the 10 summary numbers
+are AP, AP50, AP75, APm, APl, AR, AR50, AR75, ARm, ARl
+(:data:`KEYPOINT_SUMMARY_NAMES`). The sigmas default to COCO's 17
+(:data:`robopercept.nn.skeleton.COCO_17`); any other layout passes its own
+(pycocotools' ``params.kpt_oks_sigmas``).
+
 :func:`voc_average_precision` is the all-point interpolated AP of the Pascal VOC devkit
 (2010 onwards), and :func:`evaluate_voc` the VOC matching at one IoU threshold per class.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -81,6 +114,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from robopercept._checks import (
@@ -95,10 +129,12 @@ from robopercept._checks import (
 )
 from robopercept.errors import FileFormatError, InputError
 from robopercept.nn.coco_mask import annotation_to_rle, rle_area, rle_iou, rle_to_bbox
+from robopercept.nn.skeleton import COCO_17
 
 __all__ = [
     "AREA_RANGES",
     "IOU_THRESHOLDS",
+    "KEYPOINT_SUMMARY_NAMES",
     "RECALL_THRESHOLDS",
     "SUMMARY_NAMES",
     "CocoCategory",
@@ -113,6 +149,7 @@ __all__ = [
     "coco_to_dict",
     "evaluate_detections",
     "evaluate_voc",
+    "keypoint_oks",
     "pr_curves_picture",
     "read_coco_json",
     "read_coco_results",
@@ -152,6 +189,24 @@ SUMMARY_NAMES = (
     "ARl",
 )
 
+#: the names of the 10 keypoint summary numbers, in COCOeval.stats' order (iouType
+#: "keypoints"; OKS thresholds in place of IoU, maxDets 20)
+KEYPOINT_SUMMARY_NAMES = (
+    "AP",
+    "AP50",
+    "AP75",
+    "APm",
+    "APl",
+    "AR",
+    "AR50",
+    "AR75",
+    "ARm",
+    "ARl",
+)
+#: the keypoint evaluation's area ranges: all, medium, large (pycocotools' setKpParams)
+_KP_AREAS = AREA_RANGES[[0, 2, 3]]
+_KP_AREA_NAMES = ("all", "medium", "large")
+
 _EMPTY_I = np.zeros(0, dtype=np.int64)
 
 
@@ -161,6 +216,35 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- records
+
+
+def _record_rows(value: Any, name: str) -> int:
+    """The number of rows ``N`` of a record's column (its first dimension)."""
+    try:
+        shape = np.shape(value)
+    except (TypeError, ValueError):
+        shape = ()
+    if len(shape) < 1:
+        raise InputError(f"{name} must be a 1-D array, one entry per row; got {plain_repr(value)}")
+    return int(shape[0])
+
+
+def _keypoint_array(value: Any, n: int, name: str) -> np.ndarray:
+    """``value`` as a read-only finite (n, K, 3) float64 array; an empty (0, 0, 3) one
+    (the records' default) gives (n, 0, 3)."""
+    kp = check_numeric(value, name)
+    if kp.shape == (0, 0, 3):
+        return _readonly(np.zeros((n, 0, 3)))
+    if kp.ndim != 3 or kp.shape[0] != n or kp.shape[2] != 3:
+        raise InputError(
+            f"{name} must be ({n}, K, 3) (x, y, v per keypoint, one row per entry); got "
+            f"shape {kp.shape}"
+        )
+    if not np.isfinite(kp).all():
+        raise InputError(f"{name} holds NaN or inf; keypoints must be finite (v = 0 if unlabelled)")
+    if isinstance(value, np.ndarray) and value.dtype == np.float64 and not value.flags.writeable:
+        return value  # read-only already (the readers' arrays): no copy
+    return _readonly(kp.copy())
 
 
 @dataclass(frozen=True)
@@ -175,11 +259,38 @@ class CocoImage:
 
 @dataclass(frozen=True)
 class CocoCategory:
-    """One category of a COCO file: ``id``, ``name`` and (optional) ``supercategory``."""
+    """One category of a COCO file: ``id``, ``name``, (optional) ``supercategory`` and,
+    for a keypoint category, its ``keypoints`` names and ``skeleton`` links (pairs of
+    1-based keypoint numbers, as COCO writes them).
+
+    Examples
+    --------
+    >>> from robopercept.nn.skeleton import skeleton_from_coco_category
+    >>> c = CocoCategory(1, "arm", "", ("shoulder", "elbow", "wrist"), ((1, 2), (2, 3)))
+    >>> skeleton_from_coco_category(c.to_dict()).links
+    ((0, 1), (1, 2))
+    """
 
     id: int
     name: str
     supercategory: str = ""
+    keypoints: tuple[str, ...] = ()
+    skeleton: tuple[tuple[int, int], ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The COCO ``categories`` entry (``keypoints`` and ``skeleton`` as lists, when
+        the category has them): what
+        :func:`~robopercept.nn.skeleton.skeleton_from_coco_category` reads."""
+        out: dict[str, Any] = {
+            "id": self.id,
+            "name": self.name,
+            "supercategory": self.supercategory,
+        }
+        if self.keypoints:
+            out["keypoints"] = list(self.keypoints)
+        if self.keypoints or self.skeleton:
+            out["skeleton"] = [list(p) for p in self.skeleton]
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -201,6 +312,21 @@ class CocoDataset:
         None where it has none; empty when no annotation has one. Read as masks by
         :func:`~robopercept.nn.coco_mask.annotation_to_rle` for the ``segm``
         evaluation.
+    keypoints : (N, K, 3) float64 ndarray
+        Each annotation's keypoints ``x, y, v`` (COCO's ``keypoints`` list reshaped;
+        ``v`` 0 unlabelled, 1 labelled but hidden, 2 visible); ``(N, 0, 3)`` when no
+        annotation has keypoints, zeros on an annotation without them. The
+        constructor's default, an empty ``(0, 0, 3)`` array, becomes ``(N, 0, 3)``.
+    num_keypoints : (N,) int64 ndarray
+        COCO's ``num_keypoints`` (the keypoint evaluation ignores ground truth where it
+        is 0); where a file leaves it out, the count of ``v > 0``, and so for the
+        constructor's default, an empty array.
+
+    Raises
+    ------
+    InputError
+        ``keypoints`` not a finite ``(N, K, 3)`` array or ``num_keypoints`` not ``N``
+        integers >= 0 (N = ``len(ann_ids)``).
 
     Examples
     --------
@@ -209,8 +335,8 @@ class CocoDataset:
     ...     "categories": [{"id": 3, "name": "cat"}],
     ...     "annotations": [{"id": 7, "image_id": 1, "category_id": 3,
     ...                      "bbox": [2, 4, 10, 20]}]})
-    >>> len(ds), ds.areas.tolist(), ds.category_names()
-    (1, [200.0], {3: 'cat'})
+    >>> len(ds), ds.areas.tolist(), ds.category_names(), ds.keypoints.shape
+    (1, [200.0], {3: 'cat'}, (1, 0, 3))
     """
 
     images: tuple[CocoImage, ...]
@@ -222,6 +348,29 @@ class CocoDataset:
     areas: np.ndarray
     iscrowd: np.ndarray
     segmentations: tuple[Any, ...] = ()
+    keypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))
+    num_keypoints: np.ndarray = field(default_factory=lambda: _EMPTY_I)
+
+    def __post_init__(self) -> None:
+        n = _record_rows(self.ann_ids, "CocoDataset.ann_ids")
+        kp = _keypoint_array(self.keypoints, n, "CocoDataset.keypoints")
+        raw = check_numeric(self.num_keypoints, "CocoDataset.num_keypoints")
+        if raw.size == 0:  # the default: the count of labelled keypoints
+            nk = np.count_nonzero(kp[:, :, 2] > 0, axis=1).astype(np.int64)
+        else:
+            if (
+                raw.shape != (n,)
+                or not np.isfinite(raw).all()
+                or (raw < 0).any()
+                or (raw != np.round(raw)).any()
+            ):
+                raise InputError(
+                    f"CocoDataset.num_keypoints must be {n} integers >= 0, one per "
+                    f"annotation; got {plain_repr(self.num_keypoints)}"
+                )
+            nk = raw.astype(np.int64)
+        object.__setattr__(self, "keypoints", kp)
+        object.__setattr__(self, "num_keypoints", _readonly(nk))
 
     def __len__(self) -> int:
         return int(self.ann_ids.size)
@@ -244,6 +393,16 @@ class CocoResults:
     segmentations : tuple
         Each detection's mask as a COCO RLE dict (the ``segm`` results), or empty for
         box results.
+    keypoints : (N, K, 3) float64 ndarray
+        Each detection's keypoints ``x, y, s`` (the keypoint results; ``s`` is a
+        per-keypoint score the evaluation does not read); ``(N, 0, 3)`` for box and
+        mask results (the constructor's default, an empty ``(0, 0, 3)`` array, becomes
+        that).
+
+    Raises
+    ------
+    InputError
+        ``keypoints`` not a finite ``(N, K, 3)`` array (N = ``len(scores)``).
 
     Examples
     --------
@@ -251,6 +410,10 @@ class CocoResults:
     ...                         "bbox": [0, 0, 4, 4], "score": 0.9}])
     >>> len(r), r.scores.tolist()
     (1, [0.9])
+    >>> k = results_from_list([{"image_id": 1, "category_id": 1, "score": 0.8,
+    ...                         "keypoints": [2, 3, 1, 6, 11, 1]}])
+    >>> k.keypoints.shape, k.boxes.tolist()  # the tight box of the keypoints
+    ((1, 2, 3), [[2.0, 3.0, 4.0, 8.0]])
     """
 
     image_ids: np.ndarray
@@ -258,6 +421,13 @@ class CocoResults:
     boxes: np.ndarray
     scores: np.ndarray
     segmentations: tuple[Any, ...] = ()
+    keypoints: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))
+
+    def __post_init__(self) -> None:
+        n = _record_rows(self.scores, "CocoResults.scores")
+        object.__setattr__(
+            self, "keypoints", _keypoint_array(self.keypoints, n, "CocoResults.keypoints")
+        )
 
     def __len__(self) -> int:
         return int(self.scores.size)
@@ -328,6 +498,83 @@ def _boxes_array(
     return boxes
 
 
+def _category_keypoints(
+    c: Mapping[str, Any], where: str, err: type[Exception]
+) -> tuple[tuple[str, ...], tuple[tuple[int, int], ...]]:
+    """A category's ``keypoints`` names and 1-based ``skeleton`` links (both optional)."""
+    names = c.get("keypoints") or []
+    if not isinstance(names, list) or not all(isinstance(x, str) for x in names):
+        raise err(f"{where}: keypoints must be a list of keypoint names; got {plain_repr(names)}")
+    raw = c.get("skeleton") or []
+    links = []
+    ok = isinstance(raw, list)
+    for pair in raw if ok else []:
+        if not (
+            isinstance(pair, (list, tuple))
+            and len(pair) == 2
+            and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in pair)
+        ):
+            ok = False
+            break
+        a, b = int(pair[0]), int(pair[1])
+        if names and not (1 <= a <= len(names) and 1 <= b <= len(names)):
+            raise err(
+                f"{where}: skeleton link {plain_repr(pair)} must join keypoints 1..{len(names)} "
+                "(COCO numbers keypoints from 1)"
+            )
+        links.append((a, b))
+    if not ok:
+        raise err(
+            f"{where}: skeleton must be a list of [i, j] pairs of 1-based keypoint numbers; "
+            f"got {plain_repr(raw)}"
+        )
+    return tuple(names), tuple(links)
+
+
+def _keypoints_rows(rows: list[Any], where: list[str], err: type[Exception]) -> np.ndarray:
+    """Each entry's ``keypoints`` list ``[x, y, v] * K`` (or None / [] for none) as a
+    read-only finite (N, K, 3) float64 array, zeros where an entry has none; one K."""
+    n = len(rows)
+    k_of = -1
+    first = -1
+    parsed: list[np.ndarray | None] = []
+    for j, r in enumerate(rows):
+        if r is None or (isinstance(r, list) and not r):
+            parsed.append(None)
+            continue
+        arr = None
+        if isinstance(r, (list, tuple, np.ndarray)):
+            try:
+                raw = np.asarray(r)
+            except (TypeError, ValueError):
+                raw = np.zeros(0, dtype=object)
+            if raw.dtype.kind in "iuf":
+                arr = raw.astype(np.float64)
+        if arr is None or arr.ndim != 1 or arr.size == 0 or arr.size % 3:
+            raise err(
+                f"{where[j]}: keypoints must be a flat list of numbers [x1, y1, v1, x2, y2, "
+                f"v2, ...] (3 per keypoint); got {plain_repr(r)}"
+            )
+        if not np.isfinite(arr).all():
+            raise err(
+                f"{where[j]}: keypoints {plain_repr(r)} hold NaN or inf; write 0, 0, 0 for a "
+                "keypoint that is not labelled"
+            )
+        if k_of < 0:
+            k_of, first = arr.size // 3, j
+        elif arr.size // 3 != k_of:
+            raise err(
+                f"{where[j]} has {arr.size // 3} keypoints but {where[first]} has {k_of}: "
+                "one data set holds one keypoint layout"
+            )
+        parsed.append(arr)
+    out = np.zeros((n, max(k_of, 0), 3))
+    for j, arr in enumerate(parsed):
+        if arr is not None:
+            out[j] = arr.reshape(-1, 3)
+    return _readonly(out)
+
+
 def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
     if not isinstance(data, Mapping):
         raise err(
@@ -363,7 +610,8 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
         sup = c.get("supercategory") or ""
         if not isinstance(name, str) or not isinstance(sup, str):
             raise err(f"{where}: name and supercategory must be strings; got {plain_repr(name)}")
-        cats.append(CocoCategory(cid, name, sup))
+        names, links = _category_keypoints(c, f"{where} (id {cid})", err)
+        cats.append(CocoCategory(cid, name, sup, names, links))
     for what, ids in (("image", [i.id for i in images]), ("category", [c.id for c in cats])):
         if len(set(ids)) != len(ids):
             dup = next(i for i in ids if ids.count(i) > 1)
@@ -378,6 +626,8 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
     has_area = np.zeros(n, dtype=bool)
     rows = []
     segs: list[Any] = []
+    kp_rows: list[Any] = []
+    num_kp = np.full(n, -1, dtype=np.int64)  # -1: not given, counted below
     fix = "each annotation needs id, image_id, category_id and bbox [x, y, w, h]"
     for k, a in enumerate(anns):
         where = f"annotations[{k}]"
@@ -390,6 +640,12 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
         )
         rows.append(_field(a, "bbox", where, fix, err))
         segs.append(a.get("segmentation"))
+        kp_rows.append(a.get("keypoints"))
+        if "num_keypoints" in a:
+            nk = _as_int(a["num_keypoints"], f"{where}: num_keypoints", err)
+            if nk < 0:
+                raise err(f"{where}: num_keypoints must be >= 0; got {nk}")
+            num_kp[k] = nk
         if "area" in a:
             ar = a["area"]
             if isinstance(ar, bool) or not isinstance(ar, (int, float)) or not math.isfinite(ar):
@@ -403,6 +659,17 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
             crowd[k] = bool(ic)
     boxes = _boxes_array(rows, ann_ids.tolist(), "annotation id", err)
     areas[~has_area] = boxes[~has_area, 2] * boxes[~has_area, 3]
+    keypoints = _keypoints_rows(kp_rows, [f"annotation id {a}" for a in ann_ids.tolist()], err)
+    counted = np.count_nonzero(keypoints[:, :, 2] > 0, axis=1)
+    num_kp[num_kp < 0] = counted[num_kp < 0]
+    n_kp = keypoints.shape[1]
+    if n_kp:
+        for c in cats:
+            if c.keypoints and len(c.keypoints) != n_kp:
+                raise err(
+                    f"category id {c.id} names {len(c.keypoints)} keypoints but the "
+                    f"annotations hold {n_kp} per object: one data set holds one layout"
+                )
     if np.unique(ann_ids).size != n:
         u, c = np.unique(ann_ids, return_counts=True)
         raise err(f"annotation id {int(u[c > 1][0])} appears more than once; ids must be unique")
@@ -428,6 +695,8 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
         _readonly(areas),
         _readonly(crowd),
         tuple(segs) if any(sg is not None for sg in segs) else (),
+        keypoints,
+        _readonly(num_kp),
     )
 
 
@@ -437,10 +706,12 @@ def coco_from_dict(data: Mapping[str, Any]) -> CocoDataset:
     Parameters
     ----------
     data : dict
-        ``{"images": [{id, file_name, width, height}, ...], "categories": [{id, name},
-        ...], "annotations": [{id, image_id, category_id, bbox: [x, y, w, h], area?,
-        iscrowd?}, ...]}``. Other fields (segmentation, keypoints, info) are not kept;
-        a missing ``area`` is ``w * h``, a missing ``iscrowd`` 0.
+        ``{"images": [{id, file_name, width, height}, ...], "categories": [{id, name,
+        keypoints?, skeleton?}, ...], "annotations": [{id, image_id, category_id, bbox:
+        [x, y, w, h], area?, iscrowd?, segmentation?, keypoints?, num_keypoints?},
+        ...]}``. Other fields (info, licenses) are not kept; a missing ``area`` is
+        ``w * h``, a missing ``iscrowd`` 0, a missing ``num_keypoints`` the count of
+        keypoints with ``v > 0``.
 
     Returns
     -------
@@ -450,8 +721,10 @@ def coco_from_dict(data: Mapping[str, Any]) -> CocoDataset:
     ------
     InputError
         A missing list or field, a duplicate id, an ``image_id`` or ``category_id`` not
-        listed, a bbox that is not 4 finite numbers with ``w, h >= 0``: the message
-        names the annotation id and the fix.
+        listed, a bbox that is not 4 finite numbers with ``w, h >= 0``, keypoints that
+        are not ``3 K`` finite numbers, annotations with different ``K`` (or a ``K``
+        other than their category's ``keypoints`` names), a ``skeleton`` link outside
+        ``1..K``: the message names the annotation id and the fix.
 
     Examples
     --------
@@ -475,7 +748,8 @@ def _load_json(path: str | os.PathLike[str], what: str) -> Any:
 
 
 def read_coco_json(path: str | os.PathLike[str]) -> CocoDataset:
-    """Read a COCO ground-truth JSON file (instances or keypoints; boxes are kept).
+    """Read a COCO ground-truth JSON file (instances or keypoints: boxes, segmentations and
+    keypoints are kept).
 
     Parameters
     ----------
@@ -511,6 +785,10 @@ def read_coco_json(path: str | os.PathLike[str]) -> CocoDataset:
 def coco_to_dict(dataset: CocoDataset) -> dict[str, Any]:
     """:class:`CocoDataset` as a COCO dict (``images``, ``categories``, ``annotations``).
 
+    Keypoints (``keypoints`` ``[x, y, v] * K`` and ``num_keypoints``) are written on every
+    annotation when the data set has them (``K > 0``), and a keypoint category's names
+    and 1-based ``skeleton``; :func:`coco_from_dict` reads the dict back unchanged.
+
     Examples
     --------
     >>> d = {"images": [{"id": 1, "file_name": "a.png", "width": 8, "height": 8}],
@@ -527,10 +805,7 @@ def coco_to_dict(dataset: CocoDataset) -> dict[str, Any]:
             {"id": i.id, "file_name": i.file_name, "width": i.width, "height": i.height}
             for i in dataset.images
         ],
-        "categories": [
-            {"id": c.id, "name": c.name, "supercategory": c.supercategory}
-            for c in dataset.categories
-        ],
+        "categories": [c.to_dict() for c in dataset.categories],
         "annotations": [
             {
                 "id": int(a),
@@ -540,8 +815,9 @@ def coco_to_dict(dataset: CocoDataset) -> dict[str, Any]:
                 "area": float(ar),
                 "iscrowd": int(cr),
                 **({"segmentation": sg} if sg is not None else {}),
+                **({"keypoints": kp.ravel().tolist(), "num_keypoints": int(nk)} if kp.size else {}),
             }
-            for a, i, c, b, ar, cr, sg in zip(
+            for a, i, c, b, ar, cr, sg, kp, nk in zip(
                 dataset.ann_ids,
                 dataset.image_ids,
                 dataset.category_ids,
@@ -549,6 +825,8 @@ def coco_to_dict(dataset: CocoDataset) -> dict[str, Any]:
                 dataset.areas,
                 dataset.iscrowd,
                 dataset.segmentations or (None,) * len(dataset),
+                dataset.keypoints,
+                dataset.num_keypoints,
                 strict=True,
             )
         ],
@@ -580,17 +858,20 @@ def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
     img = np.empty(n, dtype=np.int64)
     cat = np.empty(n, dtype=np.int64)
     scores = np.empty(n, dtype=np.float64)
-    rows = []
+    rows: list[Any] = []
     segs: list[Any] = []
+    kps: list[Any] = []
     fix = (
         "each result needs image_id, category_id, score and bbox [x, y, w, h] (or a "
-        "segmentation RLE)"
+        "segmentation RLE, or keypoints [x, y, s] * K)"
     )
     for k, r in enumerate(data):
         where = f"results[{k}]"
         img[k] = _as_int(_field(r, "image_id", where, fix, err), f"{where}.image_id", err)
         cat[k] = _as_int(_field(r, "category_id", where, fix, err), f"{where}.category_id", err)
-        seg = r.get("segmentation") if isinstance(r, Mapping) else None
+        seg = r.get("segmentation")
+        kp = r.get("keypoints")
+        kps.append(kp)
         if seg is not None:
             try:
                 box = rle_to_bbox(seg).tolist() if isinstance(seg, Mapping) else None
@@ -603,6 +884,8 @@ def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
                 )
             # as pycocotools' loadRes: the mask's box where no bbox is given
             rows.append(r["bbox"] if "bbox" in r else box)
+        elif kp is not None and "bbox" not in r:
+            rows.append(None)  # the tight box of the keypoints, below
         else:
             rows.append(_field(r, "bbox", where, fix, err))
         segs.append(seg)
@@ -612,9 +895,29 @@ def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
         if not math.isfinite(s):
             raise err(f"{where}.score is {s}; scores must be finite: drop that detection")
         scores[k] = s
+    has_kp = [kp is not None for kp in kps]
+    if any(has_kp) and not all(has_kp):
+        k = has_kp.index(not has_kp[0])
+        which = "has no" if has_kp[0] else "has"
+        raise err(
+            f"results[{k}] {which} 'keypoints' unlike results[0]: keypoint results give "
+            "keypoints [x, y, s] * K on every detection, box and mask results on none"
+        )
+    keypoints = _keypoints_rows(kps, [f"results[{k}]" for k in range(n)], err)
+    empty = [j for j, kp in enumerate(kps) if isinstance(kp, list) and not kp]
+    if any(has_kp) and empty:
+        k = empty[0]
+        raise err(f"results[{k}].keypoints is empty: give [x, y, s] for each of the K keypoints")
+    for k in [j for j, row in enumerate(rows) if row is None]:
+        # as pycocotools' loadRes: the tight box of all the keypoints, area (x1-x0)(y1-y0)
+        x, y = keypoints[k, :, 0], keypoints[k, :, 1]
+        x0, x1, y0, y1 = x.min(), x.max(), y.min(), y.max()
+        rows[k] = [x0, y0, x1 - x0, y1 - y0]
     boxes = _boxes_array(rows, [f"[{k}]" for k in range(n)], "results", err)
     kept = tuple(segs) if any(sg is not None for sg in segs) else ()
-    return CocoResults(_readonly(img), _readonly(cat), _readonly(boxes), _readonly(scores), kept)
+    return CocoResults(
+        _readonly(img), _readonly(cat), _readonly(boxes), _readonly(scores), kept, keypoints
+    )
 
 
 def results_from_list(results: Sequence[Mapping[str, Any]]) -> CocoResults:
@@ -659,7 +962,8 @@ def read_coco_results(path: str | os.PathLike[str]) -> CocoResults:
 
 
 def results_to_list(results: CocoResults) -> list[dict[str, Any]]:
-    """:class:`CocoResults` as the COCO results list.
+    """:class:`CocoResults` as the COCO results list (with ``keypoints`` ``[x, y, s] * K``
+    on each detection of keypoint results, and always the ``bbox``).
 
     Examples
     --------
@@ -677,13 +981,15 @@ def results_to_list(results: CocoResults) -> list[dict[str, Any]]:
             "bbox": b.tolist(),
             "score": float(s),
             **({"segmentation": sg} if sg is not None else {}),
+            **({"keypoints": kp.ravel().tolist()} if kp.size else {}),
         }
-        for i, c, b, s, sg in zip(
+        for i, c, b, s, sg, kp in zip(
             results.image_ids,
             results.category_ids,
             results.boxes,
             results.scores,
             results.segmentations or (None,) * len(results),
+            results.keypoints,
             strict=True,
         )
     ]
@@ -694,9 +1000,27 @@ def write_coco_results(results: CocoResults, path: str | os.PathLike[str]) -> Pa
     return _write_json(results_to_list(results), path)
 
 
-def results_from_ground_truth(dataset: CocoDataset, score: float = 1.0) -> CocoResults:
-    """The non-crowd ground-truth boxes as detections of one ``score`` (a perfect
-    detector, whose every AP is 1).
+def results_from_ground_truth(
+    dataset: CocoDataset, score: float = 1.0, *, require_keypoints: bool = False
+) -> CocoResults:
+    """The non-crowd ground-truth boxes (and keypoints, when the data set has them) as
+    detections of one ``score``: a perfect detector, whose every AP is 1.
+
+    Parameters
+    ----------
+    dataset : CocoDataset
+    score : float
+    require_keypoints : bool
+        Keep only the annotations with labelled keypoints (``num_keypoints > 0``): the
+        perfect keypoint detector. The keypoint evaluation ignores the others, so as
+        detections they would be false positives there (their OKS with themselves uses
+        the box-extended distance of unlabelled ground truth).
+
+    Returns
+    -------
+    CocoResults
+        Boxes, scores and ``keypoints`` ``(N, K, 3)`` (the ground truth's ``v`` stands in
+        the score column).
 
     Examples
     --------
@@ -713,12 +1037,16 @@ def results_from_ground_truth(dataset: CocoDataset, score: float = 1.0) -> CocoR
         raise InputError(f"dataset must be a CocoDataset; got {type(dataset).__name__}")
     s = check_real(score, "score")
     keep = ~dataset.iscrowd
+    if check_bool(require_keypoints, "require_keypoints"):
+        keep &= dataset.num_keypoints > 0
     n = int(keep.sum())
     return CocoResults(
         _readonly(dataset.image_ids[keep].copy()),
         _readonly(dataset.category_ids[keep].copy()),
         _readonly(dataset.boxes[keep].copy()),
         _readonly(np.full(n, s)),
+        (),
+        dataset.keypoints[keep],
     )
 
 
@@ -934,7 +1262,7 @@ def _match_groups(
     groups: np.ndarray,
     gt_boxes: np.ndarray,
     gt_area: np.ndarray,
-    gt_crowd: np.ndarray,
+    gt_flags: np.ndarray,
     dt_boxes: np.ndarray,
     dt_area: np.ndarray,
     given: tuple[np.ndarray, np.ndarray],
@@ -944,6 +1272,9 @@ def _match_groups(
 
     ``groups`` (G, 4) int64 holds ``gt_start, gt_stop, dt_start, dt_stop``; the
     detections of a group are sorted by score (stable) and cut to max_dets[-1].
+    ``gt_flags`` (2, n_gt) bool: row 0 crowd (IoU over the detection's area, may be
+    matched again), row 1 ignored in every area range (crowd regions; for keypoints
+    also ground truth without labelled keypoints).
     ``dt_area`` (n_dt,) is each detection's area (for the area ranges). ``given`` =
     (IoUs, offsets): when ``offsets`` (G,) is not empty, group ``g``'s (nd, ng) IoU
     matrix is ``IoUs[offsets[g]:offsets[g] + nd ng]`` row-major (masks, computed
@@ -963,6 +1294,8 @@ def _match_groups(
     dt_ig = np.zeros((n_a, n_t, n_dt), dtype=np.bool_)
     gt_ig = np.zeros((n_a, n_gt), dtype=np.bool_)
     given_ious, offsets = given
+    gt_crowd = gt_flags[0]
+    gt_base = gt_flags[1]
     for g in range(groups.shape[0]):
         g0, g1, d0, d1 = groups[g, 0], groups[g, 1], groups[g, 2], groups[g, 3]
         ng = g1 - g0
@@ -970,9 +1303,7 @@ def _match_groups(
         if nd == 0:
             for a in range(n_a):
                 for j in range(g0, g1):
-                    gt_ig[a, j] = (
-                        gt_crowd[j] or gt_area[j] < areas[a, 0] or gt_area[j] > areas[a, 1]
-                    )
+                    gt_ig[a, j] = gt_base[j] or gt_area[j] < areas[a, 0] or gt_area[j] > areas[a, 1]
             continue
         # IoU (nd, ng) as pycocotools' bbIou computes it (same operations, same order)
         ious = np.zeros((nd, ng))
@@ -1016,7 +1347,7 @@ def _match_groups(
             k = 0
             for flag in (False, True):
                 for j in range(ng):
-                    ig = gt_crowd[g0 + j] or gt_area[g0 + j] < lo or gt_area[g0 + j] > hi
+                    ig = gt_base[g0 + j] or gt_area[g0 + j] < lo or gt_area[g0 + j] > hi
                     if ig == flag:
                         order[k] = j
                         ign[k] = ig
@@ -1064,13 +1395,23 @@ class CocoEvaluation:
     recall : (T, K, A, M) float64 ndarray
     scores : (T, R, K, A, M) float64 ndarray
         The score at which each precision sample is reached (0 beyond the last).
-    stats : (12,) float64 ndarray
-        AP, AP50, AP75, APs, APm, APl, AR1, AR10, AR100, ARs, ARm, ARl (-1 undefined).
+    stats : (S,) float64 ndarray
+        The summary numbers named by ``summary_names`` (-1 undefined): for boxes and
+        masks the 12 AP, AP50, AP75, APs, APm, APl, AR1, AR10, AR100, ARs, ARm, ARl;
+        for keypoints the 10 AP, AP50, AP75, APm, APl, AR, AR50, AR75, ARm, ARl.
     category_ids : (K,) int64 ndarray
     iou_thresholds : (T,) ndarray
+        IoU thresholds (OKS thresholds for keypoints).
     recall_thresholds : (R,) ndarray
     max_dets : tuple of int
         (M,) values.
+    summary_names : tuple of str
+        The names of ``stats``: :data:`SUMMARY_NAMES` or :data:`KEYPOINT_SUMMARY_NAMES`.
+    area_names : tuple of str
+        The (A,) area ranges: all, small, medium, large (all, medium, large for
+        keypoints).
+    iou_type : str
+        "bbox", "segm" or "keypoints".
     """
 
     precision: np.ndarray
@@ -1081,10 +1422,14 @@ class CocoEvaluation:
     iou_thresholds: np.ndarray
     recall_thresholds: np.ndarray
     max_dets: tuple[int, ...]
+    summary_names: tuple[str, ...] = SUMMARY_NAMES
+    area_names: tuple[str, ...] = AREA_NAMES
+    iou_type: str = "bbox"
 
     def summary(self) -> dict[str, float]:
-        """The 12 summary numbers by name (:data:`SUMMARY_NAMES`)."""
-        return dict(zip(SUMMARY_NAMES, self.stats.tolist(), strict=True))
+        """The summary numbers by name (``summary_names``: the 12 of
+        :data:`SUMMARY_NAMES`, or the 10 of :data:`KEYPOINT_SUMMARY_NAMES`)."""
+        return dict(zip(self.summary_names, self.stats.tolist(), strict=True))
 
     def per_category_ap(self, iou: str = "0.50:0.95") -> dict[int, float]:
         """AP per category id (area all, the largest max_dets): ``iou`` is
@@ -1195,21 +1540,253 @@ def _stable_rank_in_groups(keys: np.ndarray) -> np.ndarray:
     return np.arange(n) - np.repeat(start, lengths)
 
 
+def _oks(
+    dt_xy: np.ndarray,
+    gt_kp: np.ndarray,
+    gt_area: np.ndarray,
+    gt_box: np.ndarray,
+    variances: np.ndarray,
+) -> np.ndarray:
+    """OKS of broadcastable stacks (unchecked): ``dt_xy`` (..., K, 2), ``gt_kp``
+    (..., K, 3), ``gt_area`` (...), ``gt_box`` (..., 4), ``variances`` (K,) =
+    ``(2 sigma)^2``; returns (...). The operations of pycocotools' computeOks."""
+    xd, yd = dt_xy[..., 0], dt_xy[..., 1]
+    xg, yg = gt_kp[..., 0], gt_kp[..., 1]
+    labelled = gt_kp[..., 2] > 0
+    n_lab = np.count_nonzero(labelled, axis=-1)
+    none = (n_lab == 0)[..., None]
+    # ground truth without labelled keypoints: the distance to its box tripled about
+    # the centre, [x - w, x + 2w] x [y - h, y + 2h], over every keypoint
+    bx, by, bw, bh = (gt_box[..., c, None] for c in range(4))
+    x0, x1, y0, y1 = bx - bw, bx + bw * 2, by - bh, by + bh * 2
+    dx = np.where(none, np.maximum(0, x0 - xd) + np.maximum(0, xd - x1), xd - xg)
+    dy = np.where(none, np.maximum(0, y0 - yd) + np.maximum(0, yd - y1), yd - yg)
+    e = (dx**2 + dy**2) / variances / (gt_area[..., None] + np.spacing(1)) / 2
+    counted = labelled | none
+    total = np.sum(np.where(counted, np.exp(-e), 0.0), axis=-1)
+    return total / np.count_nonzero(counted, axis=-1)
+
+
+def keypoint_oks(
+    dt_keypoints: npt.ArrayLike,
+    gt_keypoints: npt.ArrayLike,
+    gt_area: npt.ArrayLike,
+    gt_box: npt.ArrayLike,
+    sigmas: npt.ArrayLike,
+) -> np.ndarray:
+    r"""Object keypoint similarity of every detection with every ground truth (COCO's
+    OKS, ``pycocotools.cocoeval.COCOeval.computeOks``).
+
+    With per-keypoint variances :math:`\kappa_i^2 = (2 \sigma_i)^2`, the ground truth's
+    area :math:`s` and :math:`\epsilon` = ``np.spacing(1)``,
+
+    .. math::
+
+        e_i = \frac{\Delta x_i^2 + \Delta y_i^2}{2\, \kappa_i^2\, (s + \epsilon)},
+        \qquad \mathrm{OKS}(d, g) = \frac{1}{|L|} \sum_{i \in L} e^{-e_i},
+
+    where :math:`L` is the ground truth's labelled keypoints (:math:`v_i > 0`) and
+    :math:`\Delta = d_i - g_i`. For ground truth with no labelled keypoint, :math:`L` is
+    all :math:`K` keypoints and :math:`\Delta x_i = \max(0, x_0 - x^d_i) + \max(0, x^d_i
+    - x_1)` (likewise :math:`y`), the distance to the box
+    :math:`[x - w, x + 2w] \times [y - h, y + 2h]` of its ``bbox`` :math:`(x, y, w, h)`.
+
+    Parameters
+    ----------
+    dt_keypoints : (D, K, 2) or (D, K, 3) array_like
+        Detected keypoints ``x, y`` (a third column, the score, is not read).
+    gt_keypoints : (G, K, 3) array_like
+        Ground-truth keypoints ``x, y, v``.
+    gt_area : (G,) array_like
+        The ground truth's ``area`` (>= 0; the segmentation's area in COCO files).
+    gt_box : (G, 4) array_like
+        The ground truth's ``bbox`` ``[x, y, w, h]`` (read only where no keypoint is
+        labelled).
+    sigmas : (K,) array_like
+        Per-keypoint constants, > 0 (:data:`robopercept.nn.skeleton.COCO_17` ``.sigmas``
+        for COCO's persons).
+
+    Returns
+    -------
+    (D, G) float64 ndarray
+        OKS in [0, 1].
+
+    Raises
+    ------
+    InputError
+        Shapes that do not agree (the message names both), non-finite values, a
+        negative area, sigmas <= 0.
+
+    Examples
+    --------
+    >>> gt = [[[10.0, 10.0, 2.0], [20.0, 10.0, 2.0]]]
+    >>> dt = [[[10.0, 10.0], [20.0, 12.0]]]  # the second keypoint 2 px off
+    >>> oks = keypoint_oks(dt, gt, [100.0], [[10, 10, 10, 1]], [0.5, 0.5])
+    >>> round(float(oks[0, 0]), 6)  # (1 + exp(-4 / (2 * 1.0 * 100))) / 2
+    0.990099
+    """
+    dt = check_numeric(dt_keypoints, "dt_keypoints")
+    gk = check_numeric(gt_keypoints, "gt_keypoints")
+    area = check_numeric(gt_area, "gt_area")
+    box = check_numeric(gt_box, "gt_box")
+    sig = check_numeric(sigmas, "sigmas")
+    if gk.ndim != 3 or gk.shape[2] != 3:
+        raise InputError(
+            f"gt_keypoints must be (G, K, 3) (x, y, v per keypoint); got shape {gk.shape}"
+        )
+    n_g, n_k = gk.shape[0], gk.shape[1]
+    if dt.ndim != 3 or dt.shape[2] not in (2, 3) or dt.shape[1] != n_k:
+        raise InputError(
+            f"dt_keypoints must be (D, {n_k}, 2) or (D, {n_k}, 3), as many keypoints as "
+            f"gt_keypoints ({n_k}); got shape {dt.shape}"
+        )
+    if area.shape != (n_g,) or box.shape != (n_g, 4):
+        raise InputError(
+            f"gt_area must be ({n_g},) and gt_box ({n_g}, 4), one per ground truth; got "
+            f"shapes {area.shape} and {box.shape}"
+        )
+    if sig.shape != (n_k,) or not np.isfinite(sig).all() or (sig <= 0).any():
+        raise InputError(
+            f"sigmas must be {n_k} positive numbers, one per keypoint; got {plain_repr(sigmas)}"
+        )
+    for name, arr in (("dt_keypoints", dt), ("gt_keypoints", gk), ("gt_area", area)):
+        if not np.isfinite(arr).all():
+            raise InputError(f"{name} holds NaN or inf; OKS needs finite coordinates")
+    if not np.isfinite(box).all():
+        raise InputError("gt_box holds NaN or inf; give finite [x, y, w, h] boxes")
+    if (area < 0).any():
+        raise InputError(f"gt_area must be >= 0; got {plain_repr(area)}")
+    if n_k == 0:
+        raise InputError("keypoint arrays hold no keypoints (K = 0); OKS needs K >= 1")
+    return _oks(dt[:, None, :, :2], gk[None], area[None], box[None], (sig * 2) ** 2)
+
+
+def _keypoint_ious(
+    gt: CocoDataset,
+    res: CocoResults,
+    g_ord: np.ndarray,
+    d_ord: np.ndarray,
+    groups: np.ndarray,
+    sigmas: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``keypoints`` evaluation's OKS: per group (rows of ``groups``) the (nd, ng)
+    OKS matrix row-major, all groups in one flat array, with each group's offset; every
+    pair of every group is computed in one vectorized call."""
+    ng = groups[:, 1] - groups[:, 0]
+    nd = groups[:, 3] - groups[:, 2]
+    sizes = ng * nd
+    offsets = (np.cumsum(sizes) - sizes).astype(np.int64)
+    total = int(sizes.sum())
+    if total == 0:
+        return np.zeros(0), offsets
+    grp = np.repeat(np.arange(groups.shape[0]), sizes)
+    local = np.arange(total) - offsets[grp]
+    gi = g_ord[groups[grp, 0] + local % np.maximum(ng[grp], 1)]
+    di = d_ord[groups[grp, 2] + local // np.maximum(ng[grp], 1)]
+    oks = _oks(
+        res.keypoints[di, :, :2],
+        gt.keypoints[gi],
+        gt.areas[gi],
+        gt.boxes[gi],
+        (sigmas * 2) ** 2,
+    )
+    return np.ascontiguousarray(oks, dtype=np.float64), offsets
+
+
+def _check_sigmas(sigmas: Any, n_k: int) -> np.ndarray:
+    if sigmas is None:
+        if n_k == COCO_17.num_joints:
+            return np.array(COCO_17.sigmas)
+        raise InputError(
+            f"sigmas is needed: the keypoints have K = {n_k}, not COCO's 17, so there are "
+            f"no default OKS constants; pass sigmas=[...] ({n_k} positive numbers, e.g. "
+            "a Skeleton's .sigmas)"
+        )
+    sig = check_numeric(sigmas, "sigmas")
+    if sig.shape != (n_k,) or not np.isfinite(sig).all() or (sig <= 0).any():
+        raise InputError(
+            f"sigmas must be {n_k} positive numbers, one per keypoint; got {plain_repr(sigmas)}"
+        )
+    return sig
+
+
+def _summary_stats(precision: np.ndarray, recall: np.ndarray, keypoints: bool) -> np.ndarray:
+    """COCOeval.summarize's numbers from the (T, R, K, A, M) precision and (T, K, A, M)
+    recall: the 12 of boxes and masks or the 10 of keypoints (areas all, medium,
+    large); the last max_dets throughout but for AR1/AR10."""
+
+    def mean(s: np.ndarray) -> float:
+        v = s[s > -1]
+        return float(np.mean(v)) if v.size else -1.0
+
+    if keypoints:
+        return np.array(
+            [
+                mean(precision[:, :, :, 0, -1]),
+                mean(precision[0, :, :, 0, -1]),
+                mean(precision[5, :, :, 0, -1]),
+                mean(precision[:, :, :, 1, -1]),
+                mean(precision[:, :, :, 2, -1]),
+                mean(recall[:, :, 0, -1]),
+                mean(recall[0, :, 0, -1]),
+                mean(recall[5, :, 0, -1]),
+                mean(recall[:, :, 1, -1]),
+                mean(recall[:, :, 2, -1]),
+            ]
+        )
+    return np.array(
+        [
+            mean(precision[:, :, :, 0, -1]),
+            mean(precision[0, :, :, 0, -1]),
+            mean(precision[5, :, :, 0, -1]),
+            mean(precision[:, :, :, 1, -1]),
+            mean(precision[:, :, :, 2, -1]),
+            mean(precision[:, :, :, 3, -1]),
+            mean(recall[:, :, 0, 0]),
+            mean(recall[:, :, 0, 1]),
+            mean(recall[:, :, 0, 2]),
+            mean(recall[:, :, 1, -1]),
+            mean(recall[:, :, 2, -1]),
+            mean(recall[:, :, 3, -1]),
+        ]
+    )
+
+
+def _check_max_dets(max_dets: Any, keypoints: bool) -> tuple[int, ...]:
+    if max_dets is None:
+        return (20,) if keypoints else (1, 10, 100)
+    if keypoints:
+        if not isinstance(max_dets, (list, tuple)) or len(max_dets) < 1:
+            raise InputError(
+                "max_dets for iou_type='keypoints' must be increasing ints like (20,); got "
+                f"{plain_repr(max_dets)}"
+            )
+    elif not isinstance(max_dets, (list, tuple)) or len(max_dets) != 3:
+        raise InputError(
+            f"max_dets must be three increasing ints like (1, 10, 100); got {plain_repr(max_dets)}"
+        )
+    md = tuple(check_int(m, "max_dets", minimum=1) for m in max_dets)
+    if any(a >= b for a, b in itertools.pairwise(md)):
+        raise InputError(f"max_dets must be increasing; got {plain_repr(max_dets)}")
+    return md
+
+
 def evaluate_detections(
     gt: CocoDataset | Mapping[str, Any],
     results: CocoResults | list[Mapping[str, Any]],
     iou_type: str = "bbox",
     *,
-    max_dets: Sequence[int] = (1, 10, 100),
+    max_dets: Sequence[int] | None = None,
     use_jit: bool = True,
+    sigmas: npt.ArrayLike | None = None,
 ) -> CocoEvaluation:
-    """COCO box or mask evaluation of ``results`` against ``gt``; equals
+    r"""COCO box, mask or keypoint evaluation of ``results`` against ``gt``; equals
     ``pycocotools``' ``COCOeval(gt, dt, iou_type)`` ``evaluate(); accumulate();
-    summarize()`` for ``"bbox"`` and ``"segm"``.
+    summarize()`` for ``"bbox"``, ``"segm"`` and ``"keypoints"``.
 
     The algorithm is in the module docstring: greedy matching by score per image and
-    category at IoU .50:.05:.95, crowd and out-of-range ground truth ignored, the
-    monotone precision envelope sampled at 101 recall points.
+    category at IoU (or OKS) .50:.05:.95, crowd and out-of-range ground truth ignored,
+    the monotone precision envelope sampled at 101 recall points.
 
     Parameters
     ----------
@@ -1217,30 +1794,44 @@ def evaluate_detections(
         Ground truth; its images and categories are those evaluated.
     results : CocoResults or list of dict
         Detections; every ``image_id`` and ``category_id`` must be in ``gt``.
-    iou_type : {"bbox", "segm"}
+    iou_type : {"bbox", "segm", "keypoints"}
         ``"segm"``: the IoU of the masks (:func:`~robopercept.nn.coco_mask.rle_iou`,
         the crowd rule as for boxes) replaces that of the boxes: every ground-truth
         annotation needs a ``segmentation`` (polygons or RLE, rasterized at its
         image's size) and every result an RLE ``segmentation``; a detection's area
         for the area ranges is its mask's, a ground truth's is its ``area`` field.
-    max_dets : three increasing positive ints
-        Detections kept per image (COCO: 1, 10, 100); the summary's AR1/AR10/AR100
-        use them in order, and the APs the last. (pycocotools' ``summarize`` asks for
-        ``maxDets=100`` by value for its first number, AP, which is -1 there when 100
-        is not among them; here it is the AP at ``max_dets[-1]``.)
+        ``"keypoints"``: the OKS (:func:`keypoint_oks`) replaces the IoU; the ground
+        truth needs keypoints and the results ``keypoints`` of the same ``K``; ground
+        truth with ``num_keypoints == 0`` is ignored; area ranges all, medium, large;
+        the 10 keypoint summary numbers (:data:`KEYPOINT_SUMMARY_NAMES`).
+    max_dets : increasing positive ints, optional
+        Detections kept per image: for boxes and masks three (default COCO's 1, 10,
+        100), the summary's AR1/AR10/AR100 use them in order and the APs the last;
+        for keypoints one or more (default COCO's (20,)), the summary uses the last.
+        (pycocotools' ``summarize`` asks for ``maxDets=100`` (20 for keypoints) by
+        value, giving -1 where that value is not among them; here it is the value at
+        ``max_dets[-1]``.)
     use_jit : bool
         ``False`` runs the plain-Python matching (the reference of the compiled one).
+    sigmas : (K,) array_like, optional
+        The per-keypoint OKS constants (``iou_type="keypoints"`` only; pycocotools'
+        ``params.kpt_oks_sigmas``). Default: COCO's 17
+        (:data:`robopercept.nn.skeleton.COCO_17`) when ``K == 17``; required otherwise.
 
     Returns
     -------
     CocoEvaluation
+        Its ``summary_names`` say which summary numbers ``stats`` holds.
 
     Raises
     ------
     InputError
-        ``iou_type`` other than "bbox" or "segm", a missing or bad segmentation for
-        "segm", bad ``max_dets``, results naming an image or
-        category the ground truth lacks, or anything :func:`coco_from_dict` /
+        ``iou_type`` other than "bbox", "segm" or "keypoints"; a missing or bad
+        segmentation for "segm"; for "keypoints", ground truth without keypoints,
+        results without keypoints or with another ``K``, missing ``sigmas`` when
+        ``K != 17`` or sigmas that are not ``K`` positive numbers; ``sigmas`` for
+        another ``iou_type``; bad ``max_dets``; results naming an image or category
+        the ground truth lacks, or anything :func:`coco_from_dict` /
         :func:`results_from_list` refuse.
 
     Examples
@@ -1254,23 +1845,53 @@ def evaluate_detections(
     ...     {"image_id": 1, "category_id": 1, "bbox": [10, 10, 50, 40], "score": 0.9}])
     >>> round(ev.summary()["AP50"], 9), round(ev.summary()["AP"], 9)  # IoU 0.8
     (1.0, 0.7)
+
+    Keypoints (two of them, sigmas given as K is not 17): the detection's OKS is
+    :math:`(e^{-4/160} + e^{-25/160}) / 2 \approx 0.915`, a match at the thresholds
+    .50 to .90:
+
+    >>> gt = coco_from_dict({
+    ...     "images": [{"id": 1, "file_name": "a", "width": 100, "height": 100}],
+    ...     "categories": [{"id": 1, "name": "x"}],
+    ...     "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "area": 2000,
+    ...                      "bbox": [10, 10, 50, 50], "keypoints": [20, 20, 2, 40, 50, 2]}]})
+    >>> ev = evaluate_detections(gt, [{"image_id": 1, "category_id": 1, "score": 0.9,
+    ...     "keypoints": [22, 20, 1, 40, 55, 1]}], "keypoints", sigmas=[0.1, 0.1])
+    >>> ev.summary_names[:3], round(ev.summary()["AP"], 9)
+    (('AP', 'AP50', 'AP75'), 0.9)
     """
-    check_choice(iou_type, "iou_type", ("bbox", "segm"))
-    if not isinstance(max_dets, (list, tuple)) or len(max_dets) != 3:
+    check_choice(iou_type, "iou_type", ("bbox", "segm", "keypoints"))
+    kp_eval = iou_type == "keypoints"
+    if sigmas is not None and not kp_eval:
         raise InputError(
-            f"max_dets must be three increasing ints like (1, 10, 100); got {plain_repr(max_dets)}"
+            f"sigmas are the OKS constants of iou_type='keypoints'; got iou_type={iou_type!r}: "
+            "drop sigmas or evaluate keypoints"
         )
-    md = tuple(check_int(m, "max_dets", minimum=1) for m in max_dets)
-    if not md[0] < md[1] < md[2]:
-        raise InputError(f"max_dets must be increasing; got {plain_repr(max_dets)}")
+    md = _check_max_dets(max_dets, kp_eval)
     jit = check_bool(use_jit, "use_jit")
     gtd = _check_dataset(gt)
     res = _check_results(results, gtd)
+    if kp_eval:
+        n_kp = gtd.keypoints.shape[1]
+        if n_kp == 0:
+            raise InputError(
+                "the ground truth has no keypoints: iou_type='keypoints' needs annotations "
+                "with 'keypoints' [x, y, v] * K (a COCO person_keypoints file)"
+            )
+        if len(res) and res.keypoints.shape[1] != n_kp:
+            got = res.keypoints.shape[1]
+            raise InputError(
+                f"iou_type='keypoints' needs results with 'keypoints' [x, y, s] * {n_kp} (the "
+                f"ground truth's K); got "
+                + ("none (box or mask results)" if got == 0 else f"K = {got}")
+            )
+        sig = _check_sigmas(sigmas, n_kp)
+    area_ranges = _KP_AREAS if kp_eval else AREA_RANGES
 
     img_ids = np.unique(np.array([i.id for i in gtd.images], dtype=np.int64))
     cat_ids = np.unique(np.array([c.id for c in gtd.categories], dtype=np.int64))
     n_i, n_k = img_ids.size, cat_ids.size
-    T, R, A, M = IOU_THRESHOLDS.size, RECALL_THRESHOLDS.size, AREA_RANGES.shape[0], len(md)
+    T, R, A, M = IOU_THRESHOLDS.size, RECALL_THRESHOLDS.size, area_ranges.shape[0], len(md)
 
     # group keys: category-major, then image (pycocotools' evalImgs order)
     g_key = np.searchsorted(cat_ids, gtd.category_ids) * n_i + np.searchsorted(
@@ -1298,24 +1919,29 @@ def evaluate_detections(
     ).astype(np.int64)
     gt_boxes = np.ascontiguousarray(gtd.boxes[g_ord])
     gt_area = np.ascontiguousarray(gtd.areas[g_ord])
-    gt_crowd = np.ascontiguousarray(gtd.iscrowd[g_ord])
+    gt_crowd = gtd.iscrowd[g_ord]
+    # ignored in every area range: crowd regions, and for keypoints unlabelled persons
+    gt_base = gt_crowd | (gtd.num_keypoints[g_ord] == 0) if kp_eval else gt_crowd
+    gt_flags = np.ascontiguousarray(np.stack([gt_crowd, gt_base]))
     dt_boxes = np.ascontiguousarray(res.boxes[d_ord])
     dt_scores = res.scores[d_ord]
+    dt_area = np.ascontiguousarray(dt_boxes[:, 2] * dt_boxes[:, 3])
     if iou_type == "segm":
         given, dt_area = _mask_ious(gtd, res, g_ord, d_ord, groups)
+    elif kp_eval:
+        given = _keypoint_ious(gtd, res, g_ord, d_ord, groups, sig)
     else:
         given = (np.zeros(0), np.zeros(0, np.int64))
-        dt_area = np.ascontiguousarray(dt_boxes[:, 2] * dt_boxes[:, 3])
     match = _match_groups_jit if jit else _match_groups
     dt_m, dt_ig, gt_ig = match(
         groups,
         gt_boxes,
         gt_area,
-        gt_crowd,
+        gt_flags,
         dt_boxes,
         dt_area,
         given,
-        (IOU_THRESHOLDS, AREA_RANGES),
+        (IOU_THRESHOLDS, np.ascontiguousarray(area_ranges)),
     )
 
     precision = -np.ones((T, R, K := n_k, A, M))
@@ -1363,35 +1989,18 @@ def evaluate_detections(
                     precision[t, :, k, a, m] = q
                     scores[t, :, k, a, m] = ss
 
-    def mean(s: np.ndarray) -> float:
-        v = s[s > -1]
-        return float(np.mean(v)) if v.size else -1.0
-
-    stats = np.array(
-        [
-            mean(precision[:, :, :, 0, -1]),
-            mean(precision[0, :, :, 0, -1]),
-            mean(precision[5, :, :, 0, -1]),
-            mean(precision[:, :, :, 1, -1]),
-            mean(precision[:, :, :, 2, -1]),
-            mean(precision[:, :, :, 3, -1]),
-            mean(recall[:, :, 0, 0]),
-            mean(recall[:, :, 0, 1]),
-            mean(recall[:, :, 0, 2]),
-            mean(recall[:, :, 1, -1]),
-            mean(recall[:, :, 2, -1]),
-            mean(recall[:, :, 3, -1]),
-        ]
-    )
     return CocoEvaluation(
         _readonly(precision),
         _readonly(recall),
         _readonly(scores),
-        _readonly(stats),
+        _readonly(_summary_stats(precision, recall, kp_eval)),
         _readonly(cat_ids),
         IOU_THRESHOLDS.copy(),
         RECALL_THRESHOLDS.copy(),
         md,
+        KEYPOINT_SUMMARY_NAMES if kp_eval else SUMMARY_NAMES,
+        _KP_AREA_NAMES if kp_eval else AREA_NAMES,
+        iou_type,
     )
 
 

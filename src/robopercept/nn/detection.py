@@ -114,6 +114,7 @@ __all__ = [
     "DetectionHistory",
     "FastRCNN",
     "FasterRCNN",
+    "KeypointRCNN",
     "LocalizationResult",
     "MaskRCNN",
     "SingleObjectLocalizer",
@@ -560,9 +561,10 @@ def _check_targets(
                     f"got {int(lab.min())}..{int(lab.max())}"
                 )
         checked = {"boxes": b, "labels": lab}
-        if "masks" in t:
-            # checked against the image size where a model uses them (MaskRCNN)
-            checked["masks"] = t["masks"]
+        for extra in ("masks", "keypoints"):
+            # checked where a model uses them (MaskRCNN, KeypointRCNN)
+            if extra in t:
+                checked[extra] = t[extra]
         out.append(checked)
     return out
 
@@ -1531,6 +1533,205 @@ class MaskRCNN(FasterRCNN):
         return dets
 
 
+class _KeypointHead(nn.Module):
+    """``convs`` 3 x 3 convolutions with ReLU and a 4 x 4 stride-2 transposed convolution
+    to one logit map per keypoint (torchvision's KeypointRCNNHeads +
+    KeypointRCNNPredictor, with fewer channels and without the final 2x bilinear
+    upsampling)."""
+
+    def __init__(self, in_channels: int, channels: int, convs: int, num_keypoints: int) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        c = in_channels
+        for _ in range(convs):
+            layers += [nn.Conv2d(c, channels, 3, padding=1), nn.ReLU()]
+            c = channels
+        self.convs = nn.Sequential(*layers)
+        self.logits = nn.ConvTranspose2d(c, num_keypoints, 4, stride=2, padding=1)
+        for m in self.modules():
+            if isinstance(m, (nn.Conv2d, nn.ConvTranspose2d)):
+                nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
+                nn.init.zeros_(m.bias)  # type: ignore[arg-type]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.logits(self.convs(x))
+
+
+def _check_keypoints_target(t: Mapping[str, Any], i: int, j: int) -> torch.Tensor:
+    kp = t.get("keypoints")
+    k = int(t["boxes"].shape[0])
+    if kp is None:
+        raise InputError(
+            f"targets[{i}] has no 'keypoints': Keypoint R-CNN trains on a (K, J, 3) float "
+            "tensor of (x, y, v) per box (e.g. procedural_pose_scenes')"
+        )
+    if not isinstance(kp, torch.Tensor) or tuple(kp.shape) != (k, j, 3):
+        raise InputError(
+            f"targets[{i}]['keypoints'] must be ({k}, {j}, 3): {j} keypoints (x, y, v) per "
+            f"box; got {plain_repr(kp)}"
+        )
+    return kp
+
+
+class KeypointRCNN(FasterRCNN):
+    r"""Keypoint R-CNN (He et al. 2017, section 5): :class:`FasterRCNN` with a keypoint
+    branch beside its box head, for several people per image.
+
+    The branch pools each region with RoI Align (``aligned=True``) to
+    ``keypoint_pool_size`` cells of the stride-8 features, runs ``keypoint_convs``
+    3 x 3 convolutions of ``keypoint_channels`` and a 4 x 4 stride-2 transposed
+    convolution to :math:`J` logit maps of side :math:`M = 2\,` ``keypoint_pool_size``.
+    Each keypoint is a *one-hot mask*: its target is the single cell of the
+    :math:`M \times M` grid over the region that contains it,
+    :math:`(\lfloor (x - x_1) M / w \rfloor, \lfloor (y - y_1) M / h \rfloor)` (as
+    torchvision's ``keypoints_to_heatmap``), and ``loss_keypoint`` is the cross
+    entropy of the softmax over the :math:`M^2` cells, averaged over the labelled
+    keypoints (``v > 0``) that fall inside their sampled foreground region (0 when
+    there are none).
+
+    At inference each final box's maps go through a softmax over the cells and are
+    decoded by :func:`~robopercept.nn.pose.decode_heatmaps` (the argmax cell refined by
+    the parabola through the log-probabilities), mapped back into the box:
+    :math:`x = x_1 + \hat u\, w / M` with :math:`\hat u` the decoded position in cell
+    units (cell centres at :math:`j + \tfrac12`).
+
+    Parameters
+    ----------
+    num_classes : int
+    num_keypoints : int
+    keypoint_pool_size : int
+        RoI Align side (14: 28 x 28 maps).
+    keypoint_channels, keypoint_convs : int
+        Width and depth of the branch (torchvision: 512 and 8).
+    **settings
+        Those of :class:`FasterRCNN`.
+
+    Returns (eval mode)
+    -------------------
+    Per image ``{"boxes", "labels", "scores", "keypoints", "keypoints_scores"}``:
+    ``"keypoints"`` ``(D, J, 3)`` rows ``(x, y, 1)`` (torchvision's layout),
+    ``"keypoints_scores"`` ``(D, J)`` the peak softmax probability.
+
+    Examples
+    --------
+    >>> import torch
+    >>> _ = torch.manual_seed(0)
+    >>> m = KeypointRCNN(1, num_keypoints=2, width=8, hidden=32, keypoint_channels=8,
+    ...                  keypoint_convs=1)
+    >>> t = [{"boxes": torch.tensor([[4.0, 4, 20, 28]]), "labels": torch.tensor([1]),
+    ...       "keypoints": torch.tensor([[[8.0, 9, 2], [15, 20, 2]]])}]
+    >>> "loss_keypoint" in m([torch.rand(3, 32, 32)], t)
+    True
+    """
+
+    def __init__(
+        self,
+        num_classes: int,
+        *,
+        num_keypoints: int = 16,
+        keypoint_pool_size: int = 14,
+        keypoint_channels: int = 64,
+        keypoint_convs: int = 4,
+        **settings: Any,
+    ) -> None:
+        super().__init__(num_classes, **settings)
+        self.num_keypoints = check_count(num_keypoints, "num_keypoints", 1, 1024)
+        self.keypoint_pool_size = check_count(keypoint_pool_size, "keypoint_pool_size", 1, 64)
+        self.keypoint_resolution = 2 * self.keypoint_pool_size
+        channels = check_count(keypoint_channels, "keypoint_channels", 1, MAX_CHANNELS)
+        convs = check_count(keypoint_convs, "keypoint_convs", 0, 16)
+        self.keypoint_head = _KeypointHead(
+            self.backbone.out_channels[-1], channels, convs, self.num_keypoints
+        )
+
+    def keypoint_logits(self, feats: torch.Tensor, rois: list[torch.Tensor]) -> torch.Tensor:
+        """``(R, J, M, M)`` keypoint logits of the regions ``rois`` (one list entry per
+        image, ``xyxy`` pixels)."""
+        pooled = roi_align(
+            feats,
+            rois,
+            self.keypoint_pool_size,
+            1.0 / self.backbone.strides[-1],
+            sampling_ratio=2,
+            aligned=True,
+        )
+        return self.keypoint_head(pooled)
+
+    def keypoint_targets(
+        self, rois: torch.Tensor, keypoints: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The one-hot targets of keypoints ``(R, J, 3)`` in regions ``rois`` ``(R, 4)``:
+        the flat cell index ``(R, J)`` (row ``M + column``) and whether it counts
+        (labelled and inside the region)."""
+        m = self.keypoint_resolution
+        x1, y1 = rois[:, 0:1], rois[:, 1:2]
+        w = (rois[:, 2:3] - x1).clamp_min(1e-6)
+        h = (rois[:, 3:4] - y1).clamp_min(1e-6)
+        cx = torch.floor((keypoints[..., 0] - x1) * m / w)
+        cy = torch.floor((keypoints[..., 1] - y1) * m / h)
+        valid = (keypoints[..., 2] > 0) & (cx >= 0) & (cx < m) & (cy >= 0) & (cy < m)
+        index = (cy.clamp(0, m - 1) * m + cx.clamp(0, m - 1)).long()
+        return index, valid
+
+    def _region_losses(
+        self,
+        feats: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        tgts: list[dict[str, torch.Tensor]],
+        rois: list[torch.Tensor],
+        labels: list[torch.Tensor],
+        matched: list[torch.Tensor],
+    ) -> dict[str, torch.Tensor]:
+        gt = [_check_keypoints_target(t, i, self.num_keypoints) for i, t in enumerate(tgts)]
+        fg = [lab > 0 for lab in labels]
+        idx, val = [], []
+        for r, f, g, mt in zip(rois, fg, gt, matched, strict=True):
+            i, v = self.keypoint_targets(r[f], g.to(r.dtype)[mt[f]])
+            idx.append(i)
+            val.append(v)
+        index, valid = torch.cat(idx), torch.cat(val)
+        if not bool(valid.any()):
+            zero = torch.stack([p.sum() for p in self.keypoint_head.parameters()]).sum() * 0.0
+            return {"loss_keypoint": zero}
+        z = self.keypoint_logits(feats, [r[f] for r, f in zip(rois, fg, strict=True)])
+        z = z.flatten(2)  # (R, J, M^2)
+        return {"loss_keypoint": F.cross_entropy(z[valid], index[valid])}
+
+    def _region_outputs(
+        self,
+        feats: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        dets: list[dict[str, torch.Tensor]],
+    ) -> list[dict[str, torch.Tensor]]:
+        from robopercept.nn.pose import decode_heatmaps
+
+        j, m = self.num_keypoints, self.keypoint_resolution
+        boxes = [d["boxes"] for d in dets]
+        if not sum(b.shape[0] for b in boxes):
+            for d in dets:
+                d["keypoints"] = feats.new_zeros((0, j, 3))
+                d["keypoints_scores"] = feats.new_zeros((0, j))
+            return dets
+        z = self.keypoint_logits(feats, boxes)
+        probs = torch.softmax(z.flatten(2), -1).reshape(z.shape)
+        cells, score = decode_heatmaps(probs.detach(), 1, "quadratic")
+        cells_t = torch.as_tensor(cells, dtype=feats.dtype, device=feats.device)
+        score_t = torch.as_tensor(score, dtype=feats.dtype, device=feats.device)
+        start = 0
+        for d in dets:
+            b = d["boxes"].detach()
+            k = b.shape[0]
+            c = cells_t[start : start + k]
+            w = (b[:, 2] - b[:, 0])[:, None]
+            h = (b[:, 3] - b[:, 1])[:, None]
+            x = b[:, 0:1] + c[..., 0] * w / m
+            y = b[:, 1:2] + c[..., 1] * h / m
+            d["keypoints"] = torch.stack([x, y, torch.ones_like(x)], -1)
+            d["keypoints_scores"] = score_t[start : start + k]
+            start += k
+        return dets
+
+
 def _init_conv(layer: nn.Conv2d, bias: float) -> None:
     """Weights ~ N(0, 0.01^2) and a constant bias (torchvision's RPN and FCOS heads)."""
     nn.init.normal_(layer.weight, std=0.01)
@@ -2088,6 +2289,7 @@ def train_detector(
     | None = None,
     ema: float | None = None,
     val_iou_type: str = "bbox",
+    val_sigmas: Any = None,
 ) -> DetectionHistory:
     r"""Train a detector of this module (or any model keeping the torchvision detection
     contract) on a :class:`~robopercept.nn.detection_data.DetectionDataset`.
@@ -2138,9 +2340,12 @@ def train_detector(
         random initial weights are forgotten early), through
         :class:`torch.optim.swa_utils.AveragedModel`. The averaged weights are the ones
         validated, kept and returned in ``model``. In (0, 1); None: no averaging.
-    val_iou_type : {"bbox", "segm"}
+    val_iou_type : {"bbox", "segm", "keypoints"}
         What validation scores (:func:`evaluate_detector`'s ``iou_type``): the masks
-        of a :class:`MaskRCNN` with ``"segm"``.
+        of a :class:`MaskRCNN` with ``"segm"``, the keypoints of a
+        :class:`KeypointRCNN` with ``"keypoints"`` (OKS with ``val_sigmas``).
+    val_sigmas : (J,) array_like, optional
+        The OKS constants for ``"keypoints"``.
 
     Returns
     -------
@@ -2190,7 +2395,7 @@ def train_detector(
         )
     val_every = check_count(val_every, "val_every", 1, 1 << 30)
     check_choice(val_metric, "val_metric", VAL_METRICS)
-    check_choice(val_iou_type, "val_iou_type", ("bbox", "segm"))
+    check_choice(val_iou_type, "val_iou_type", ("bbox", "segm", "keypoints"))
     if ema is not None:
         ema = check_real(ema, "ema (--ema)", 0.0, 1.0, low_inclusive=False, high_inclusive=False)
     dev = resolve_device(cfg.device)
@@ -2224,7 +2429,11 @@ def train_detector(
                     images, targets = collate_detection(items)
                     images = [im.to(dev) for im in images]
                     targets = [
-                        {k: t[k].to(dev) for k in ("boxes", "labels", "masks") if k in t}
+                        {
+                            k: t[k].to(dev)
+                            for k in ("boxes", "labels", "masks", "keypoints")
+                            if k in t
+                        }
                         for t in targets
                     ]
                     losses = model(images, targets)
@@ -2249,9 +2458,9 @@ def train_detector(
                 if val_ds is not None and ((epoch + 1) % val_every == 0 or last):
                     t1 = time.perf_counter()
                     value = float(
-                        evaluate_detector(kept, val_ds, iou_type=val_iou_type).stats[
-                            VAL_METRICS[val_metric]
-                        ]
+                        evaluate_detector(
+                            kept, val_ds, iou_type=val_iou_type, sigmas=val_sigmas
+                        ).stats[VAL_METRICS[val_metric]]
                     )
                     hist.val_seconds += time.perf_counter() - t1
                     hist.val[epoch + 1] = value
@@ -2304,12 +2513,15 @@ def evaluate_detector(
     batch_size: int = 8,
     device: str | None = None,
     iou_type: str = "bbox",
+    sigmas: Any = None,
 ) -> Any:
     """COCO evaluation (:func:`~robopercept.nn.coco.evaluate_detections`, equal to
     pycocotools) of ``model``'s eval-mode detections on ``dataset``: of the boxes, or
     with ``iou_type="segm"`` of the instance masks (a :class:`MaskRCNN`'s
     probabilities thresholded at 0.5, run-length encoded by
-    :func:`~robopercept.nn.coco_mask.rle_encode`, against the dataset's masks).
+    :func:`~robopercept.nn.coco_mask.rle_encode`, against the dataset's masks), or
+    with ``iou_type="keypoints"`` of a :class:`KeypointRCNN`'s keypoints by OKS with
+    the per-joint ``sigmas`` (required unless the set has COCO's 17 keypoints).
 
     Parameters
     ----------
@@ -2321,7 +2533,9 @@ def evaluate_detector(
     batch_size : int
     device : str, optional
         None: the device of the model's parameters.
-    iou_type : {"bbox", "segm"}
+    iou_type : {"bbox", "segm", "keypoints"}
+    sigmas : (J,) array_like, optional
+        The OKS constants of ``"keypoints"`` (e.g. ``MPII_16.sigmas``).
 
     Returns
     -------
@@ -2345,7 +2559,14 @@ def evaluate_detector(
     model = check_module(model)
     ds = _detection_dataset(dataset)
     bs = check_count(batch_size, "batch_size", 1, 1 << 16)
-    segm = check_choice(iou_type, "iou_type", ("bbox", "segm")) == "segm"
+    kind = check_choice(iou_type, "iou_type", ("bbox", "segm", "keypoints"))
+    segm = kind == "segm"
+    keypoints = kind == "keypoints"
+    if keypoints and ds.keypoints is None:
+        raise InputError(
+            "iou_type='keypoints' scores keypoints, and this dataset has none: use a set "
+            "with keypoints (procedural_pose_scenes)"
+        )
     if segm and ds.masks is None:
         raise InputError(
             "iou_type='segm' scores masks, and this dataset has none: use a set with "
@@ -2365,7 +2586,13 @@ def evaluate_detector(
                 f"iou_type='segm' needs masks, and {type(model).__name__} gives none: use "
                 "a MaskRCNN, or iou_type='bbox'"
             )
+        if keypoints and "keypoints" not in d:
+            raise InputError(
+                f"iou_type='keypoints' needs keypoints, and {type(model).__name__} gives none: "
+                "use a KeypointRCNN, or iou_type='bbox'"
+            )
         masks = (d["masks"][:, 0] > 0.5).cpu().numpy() if segm else None
+        kps = d["keypoints"].detach().cpu().double().numpy() if keypoints else None
         for j, (box, lab, sc) in enumerate(
             zip(b, d["labels"].cpu().numpy(), d["scores"].cpu().double().numpy(), strict=True)
         ):
@@ -2382,8 +2609,10 @@ def evaluate_detector(
             }
             if masks is not None:
                 res["segmentation"] = rle_encode(masks[j])
+            if kps is not None:
+                res["keypoints"] = kps[j].ravel().tolist()
             results.append(res)
-    return evaluate_detections(ds.to_coco(masks=segm), results, iou_type="segm" if segm else "bbox")
+    return evaluate_detections(ds.to_coco(masks=segm), results, iou_type=kind, sigmas=sigmas)
 
 
 def _detections_per_image(
@@ -2769,6 +2998,7 @@ DETECTORS: dict[str, type[nn.Module]] = {
     "fcos": FCOS,
     "faster": FasterRCNN,
     "maskrcnn": MaskRCNN,
+    "keypointrcnn": KeypointRCNN,
     "fast": FastRCNN,
     "rcnn": RCNN,
     "localizer": SingleObjectLocalizer,
@@ -2894,7 +3124,9 @@ def detect_arrays(model: nn.Module, images: Sequence[Any]) -> list[dict[str, Any
     -------
     list of dict
         ``{"boxes": (D, 4) float64 xyxy, "labels": (D,) int64, "scores": (D,) float64}``,
-        and for a :class:`MaskRCNN` ``"masks"`` ``(D, H, W)`` bool (probability > 0.5).
+        and for a :class:`MaskRCNN` ``"masks"`` ``(D, H, W)`` bool (probability > 0.5),
+        for a :class:`KeypointRCNN` ``"keypoints"`` ``(D, J, 3)`` float64 rows
+        ``(x, y, score)``.
 
     Raises
     ------
@@ -2939,5 +3171,9 @@ def detect_arrays(model: nn.Module, images: Sequence[Any]) -> list[dict[str, Any
         }
         if "masks" in d:
             res["masks"] = (d["masks"][:, 0] > 0.5).cpu().numpy()
+        if "keypoints" in d:
+            kp = d["keypoints"].detach().cpu().double().numpy().copy()
+            kp[..., 2] = d["keypoints_scores"].detach().cpu().double().numpy()
+            res["keypoints"] = kp
         out.append(res)
     return out

@@ -216,6 +216,10 @@ class DetectionDataset:
         Names for :meth:`to_coco` (default ``"{id:06d}.png"``).
     meta : sequence of dict, optional
         Free per-image information (the generators record their sources there).
+    keypoints : list of (K_i, J, 3) array_like, optional
+        Per object, ``J`` keypoints ``(x, y, v)`` in pixels with COCO's visibility
+        (0 unlabelled, 1 hidden, 2 seen): the targets of a keypoint detector
+        (:class:`~robopercept.nn.detection.KeypointRCNN`), ``target["keypoints"]``.
 
     Examples
     --------
@@ -237,6 +241,7 @@ class DetectionDataset:
         image_ids: Sequence[int] | None = None,
         file_names: Sequence[str] | None = None,
         meta: Sequence[Mapping[str, Any]] | None = None,
+        keypoints: Sequence[npt.ArrayLike] | None = None,
     ) -> None:
         self.classes = _check_classes(classes)
         imgs = _check_list(images, "images", None)
@@ -259,6 +264,14 @@ class DetectionDataset:
                 _check_masks(m, f"masks[{i}]", len(self.boxes[i]), self.images[i].shape[:2])
                 for i, m in enumerate(_check_list(masks, "masks", n))
             )
+        self.keypoints: tuple[np.ndarray, ...] | None = None
+        if keypoints is not None:
+            self.keypoints = tuple(
+                _check_keypoints(k, f"keypoints[{i}]", len(self.boxes[i]))
+                for i, k in enumerate(_check_list(keypoints, "keypoints", n))
+            )
+            if len({k.shape[1] for k in self.keypoints if len(k)}) > 1:
+                raise InputError("keypoints must have the same number of joints in every image")
         if image_ids is None:
             ids = list(range(1, n + 1))
         else:
@@ -416,6 +429,8 @@ class DetectionDataset:
         }
         if self.masks is not None:
             target["masks"] = torch.from_numpy(self.masks[i].astype(np.uint8))
+        if self.keypoints is not None:
+            target["keypoints"] = torch.from_numpy(self.keypoints[i].astype(np.float32))
         return image, target
 
     def subset(self, indices: npt.ArrayLike) -> DetectionDataset:
@@ -430,6 +445,7 @@ class DetectionDataset:
             image_ids=[self.image_ids[i] for i in sel],
             file_names=[self.file_names[i] for i in sel],
             meta=[self.meta[i] for i in sel],
+            keypoints=None if self.keypoints is None else [self.keypoints[i] for i in sel],
         )
 
     def split(
@@ -460,7 +476,9 @@ class DetectionDataset:
         ``[x, y, w, h]``, ``area`` as :meth:`areas`, category ``k`` = ``classes[k - 1]``;
         where the set has masks and ``masks`` is true, each object's ``segmentation``
         is its mask's RLE, :func:`~robopercept.nn.coco_mask.rle_encode`; box
-        evaluation passes ``masks=False`` and skips the encoding).
+        evaluation passes ``masks=False`` and skips the encoding; where it has
+        keypoints, each object's ``keypoints`` (``[x, y, v] * J``, unlabelled ones as
+        ``0, 0, 0`` as in COCO files) and ``num_keypoints``).
 
         Examples
         --------
@@ -487,6 +505,10 @@ class DetectionDataset:
                 }
                 if masks and self.masks is not None:
                     ann["segmentation"] = rle_encode(self.masks[i][j])
+                if self.keypoints is not None:
+                    kp = self.keypoints[i][j]
+                    ann["keypoints"] = np.where(kp[:, 2:] > 0, kp, 0.0).ravel().tolist()
+                    ann["num_keypoints"] = int((kp[:, 2] > 0).sum())
                 anns.append(ann)
         return coco_from_dict(
             {
@@ -560,6 +582,24 @@ def _check_masks(masks: Any, name: str, k: int, shape: tuple[int, ...]) -> np.nd
     if m.shape != (k, *shape):
         raise InputError(f"{name} must be (K, H, W) = {(k, *shape)}; got {m.shape}")
     return m != 0
+
+
+def _check_keypoints(value: Any, name: str, k: int) -> np.ndarray:
+    a = np.asarray(value, dtype=np.float64) if not isinstance(value, np.ndarray) else value
+    if a.ndim == 3 and a.shape[0] == 0:
+        a = a.reshape(0, a.shape[1], 3) if a.shape[-1] == 3 else np.zeros((0, 0, 3))
+    if a.ndim != 3 or a.shape[0] != k or a.shape[2] != 3:
+        raise InputError(
+            f"{name} must be ({k}, J, 3): rows (x, y, v) of J keypoints for each of the "
+            f"{k} boxes; got {plain_repr(value)}"
+        )
+    a = a.astype(np.float64)
+    v = a[..., 2]
+    if not np.isin(v, (0.0, 1.0, 2.0)).all():
+        raise InputError(f"{name}: visibility v must be 0, 1 or 2 (COCO); got {np.unique(v)}")
+    if not np.isfinite(a[..., :2][v > 0]).all():
+        raise InputError(f"{name}: labelled keypoints (v > 0) must have finite x, y")
+    return a
 
 
 def _augment_generator(generator: int | torch.Generator | None) -> torch.Generator:
@@ -891,9 +931,7 @@ def _photo(name: str) -> np.ndarray:
     return im
 
 
-def photo_background(
-    gen: np.random.Generator, w: int, h: int
-) -> tuple[np.ndarray, dict[str, Any]]:
+def photo_background(gen: np.random.Generator, w: int, h: int) -> tuple[np.ndarray, dict[str, Any]]:
     """A random crop of a random bundled photo (:data:`BACKGROUNDS`): aspect ``w / h``,
     30-100 % of the largest such crop, resized (bilinear, antialiased) to ``(h, w)``, its
     contrast reduced to ``0.2 + 0.6 I``.

@@ -63,12 +63,20 @@ import torch
 
 from robopercept._checks import as_rng, check_int, check_real, check_size, plain_repr
 from robopercept.errors import InputError
-from robopercept.nn.detection_data import mask_to_box, photo_background, random_texture
+from robopercept.nn.detection_data import (
+    DetectionDataset,
+    mask_to_box,
+    photo_background,
+    random_texture,
+)
 from robopercept.nn.skeleton import MPII_16, Skeleton
 
 __all__ = [
     "BONE_LENGTHS",
     "PoseDataset",
+    "PoseSets",
+    "pose_sets",
+    "procedural_pose_scenes",
     "procedural_pose_set",
     "project_points",
     "random_poses_3d",
@@ -475,6 +483,67 @@ class PoseDataset:
             None if self.masks is None else self.masks[idx],
         )
 
+    def areas(self) -> np.ndarray:
+        """``(N,)`` the person's area: the silhouette's pixel count where masks are known
+        (as COCO's ``area``, the segmentation's), else the box's ``w h``."""
+        if self.masks is not None:
+            return self.masks.reshape(len(self), -1).sum(1).astype(np.float64)
+        b = self.boxes
+        return (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+
+    def to_coco(self) -> Any:
+        """The ground truth as a COCO keypoint :class:`~robopercept.nn.coco.CocoDataset`:
+        image ``i`` has id ``i + 1`` and one ``person`` annotation (id ``i + 1``) with
+        its box (``xywh``), :meth:`areas`, ``keypoints`` (unlabelled ones ``0, 0, 0``)
+        and ``num_keypoints``; the category carries the skeleton's names and 1-based
+        links. Scored by :func:`~robopercept.nn.coco.evaluate_detections` with
+        ``iou_type="keypoints"`` and the skeleton's sigmas.
+
+        Examples
+        --------
+        >>> ds = procedural_pose_set(2, (64, 64), rng=0)
+        >>> c = ds.to_coco()
+        >>> len(c), c.keypoints.shape
+        (2, (2, 16, 3))
+        """
+        from robopercept.nn.coco import coco_from_dict
+
+        w, h = self.image_size
+        areas = self.areas()
+        anns = []
+        for i in range(len(self)):
+            kp = self.keypoints[i]
+            b = self.boxes[i]
+            anns.append(
+                {
+                    "id": i + 1,
+                    "image_id": i + 1,
+                    "category_id": 1,
+                    "bbox": [b[0], b[1], b[2] - b[0], b[3] - b[1]],
+                    "area": float(areas[i]),
+                    "iscrowd": 0,
+                    "keypoints": np.where(kp[:, 2:] > 0, kp, 0.0).ravel().tolist(),
+                    "num_keypoints": int((kp[:, 2] > 0).sum()),
+                }
+            )
+        return coco_from_dict(
+            {
+                "images": [
+                    {"id": i + 1, "file_name": f"{i + 1:06d}.png", "width": w, "height": h}
+                    for i in range(len(self))
+                ],
+                "categories": [
+                    {
+                        "id": 1,
+                        "name": "person",
+                        "keypoints": list(self.skeleton.joints),
+                        "skeleton": [[a + 1, b + 1] for a, b in self.skeleton.links],
+                    }
+                ],
+                "annotations": anns,
+            }
+        )
+
     def split(
         self,
         fractions: Sequence[float] = (0.8, 0.1, 0.1),
@@ -588,3 +657,148 @@ def _occluder(
     canvas[m] = random_texture(gen, w, h)[m]
     zbuf[m] = float(jz.min()) - 0.5
     owner[m] = 64  # not the person
+
+
+def procedural_pose_scenes(
+    n_images: int,
+    size: tuple[int, int] = (192, 160),
+    rng: int | np.random.Generator | None = None,
+    *,
+    people: tuple[int, int] = (1, 3),
+    scale: tuple[float, float] = (0.35, 0.75),
+    min_visible: float = 0.3,
+) -> DetectionDataset:
+    """Several procedural figures per image: the multi-person set of a keypoint detector.
+
+    Each figure is posed, turned and framed as in :func:`procedural_pose_set` (its own
+    camera: a height ``U(scale)`` of the image height and a random position), and all
+    are drawn through one z-buffer, so nearer figures hide farther ones; a joint
+    hidden by another figure gets ``v = 1``. A figure with less than ``min_visible`` of
+    its silhouette seen is redrawn (20 tries, then left out).
+
+    Parameters
+    ----------
+    n_images : int
+    size : (int, int)
+        ``(width, height)``, each in [32, 1024].
+    rng : int, numpy.random.Generator or None
+    people : (int, int)
+        Inclusive range of figures per image (0 <= low <= high <= 10).
+    scale : (float, float)
+        Range of a figure's height over the image height (within [0.2, 1.0]).
+    min_visible : float
+        In (0, 1].
+
+    Returns
+    -------
+    DetectionDataset
+        One class, ``"person"``; boxes and masks of the visible silhouettes, keypoints
+        ``(K, 16, 3)`` in the :data:`~robopercept.nn.skeleton.MPII_16` layout.
+
+    Examples
+    --------
+    >>> ds = procedural_pose_scenes(2, (96, 80), rng=0)
+    >>> ds.classes, ds.keypoints[0].shape[1:]
+    (('person',), (16, 3))
+    """
+    w, h = check_size(size, "size", 32, 1024)
+    n = check_int(n_images, "n_images", 1)
+    if n * w * h > MAX_PIXELS:
+        raise InputError(
+            f"n_images x width x height must be at most {MAX_PIXELS} pixels; got {n * w * h}: "
+            "make fewer or smaller images"
+        )
+    try:
+        lo_p, hi_p = (check_int(v, "people", 0) for v in people)
+    except (TypeError, ValueError):
+        raise InputError(f"people must be (low, high) counts; got {plain_repr(people)}") from None
+    if not lo_p <= hi_p <= 10:
+        raise InputError(f"people must satisfy 0 <= low <= high <= 10; got {(lo_p, hi_p)}")
+    s_lo, s_hi = _real_range(scale, "scale", 0.2, 1.0)
+    min_visible = check_real(min_visible, "min_visible", 0.0, 1.0, low_inclusive=False)
+    gen = as_rng(rng)
+    images, boxes, labels, masks, keypoints = [], [], [], [], []
+    for _ in range(n):
+        canvas, _info = photo_background(gen, w, h)
+        zbuf = np.full((h, w), np.inf)
+        owner = np.full((h, w), -1, np.int64)
+        placed: list[tuple[_Figure, np.ndarray, int, int]] = []
+        for person in range(int(gen.integers(lo_p, hi_p + 1))):
+            for _try in range(20):
+                pose = random_poses_3d(1, gen)[0]
+                pts, k, facing = _camera(gen, pose, w, h, (s_lo, s_hi))
+                body = float(np.linalg.norm(pose[_THOR] - pose[_PELV]) / BONE_LENGTHS["spine"])
+                fig = _Figure(pts, body, facing)
+                state = gen.bit_generator.state
+                alone = np.full((h, w), -1, np.int64)
+                _render(gen, canvas.copy(), np.full((h, w), np.inf), alone, fig, k, person)
+                gen.bit_generator.state = state  # the same textures when drawn for real
+                c2, z2, o2 = canvas.copy(), zbuf.copy(), owner.copy()
+                _render(gen, c2, z2, o2, fig, k, person)
+                areas = [*[(q, a) for _f, _k, q, a in placed], (person, int((alone >= 0).sum()))]
+                if areas[-1][1] > 0 and all(
+                    (o2 // 64 == q).sum() >= min_visible * a for q, a in areas
+                ):
+                    canvas, zbuf, owner = c2, z2, o2
+                    placed.append((fig, k, person, areas[-1][1]))
+                    break
+        kps, bxs, ms = [], [], []
+        for fig, k, person, _area in placed:
+            m = owner // 64 == person
+            kps.append(_visibility(fig, k, zbuf, w, h))
+            bxs.append(mask_to_box(m))
+            ms.append(m)
+        images.append(np.clip(canvas, 0, 1).astype(np.float32))
+        keypoints.append(np.array(kps).reshape(len(kps), 16, 3))
+        boxes.append(np.array(bxs).reshape(len(bxs), 4))
+        masks.append(np.array(ms, dtype=bool).reshape(len(ms), h, w))
+        labels.append(np.ones(len(kps), np.int64))
+    return DetectionDataset(images, boxes, labels, ["person"], masks=masks, keypoints=keypoints)
+
+
+@dataclass(frozen=True)
+class PoseSets:
+    """A built-in pose data set split three ways (train, validation, test)."""
+
+    train: PoseDataset
+    val: PoseDataset
+    test: PoseDataset
+
+
+#: the built-in data of :func:`pose_sets`
+POSE_DATA = ("figures",)
+
+
+def pose_sets(
+    data: str = "figures",
+    images: int = 2000,
+    size: tuple[int, int] = (128, 128),
+    seed: int = 0,
+    *,
+    val_images: int | None = None,
+    test_images: int | None = None,
+) -> PoseSets:
+    """The built-in single-person pose sets, as the CLI and the benchmarks make them.
+
+    ``"figures"``: :func:`procedural_pose_set` with disjoint seeds, training ``seed``,
+    validation ``1000 + seed``, test ``99`` (the same test figures for every seed);
+    ``val_images`` and ``test_images`` default to a tenth of ``images`` (at least 1).
+
+    Examples
+    --------
+    >>> s = pose_sets("figures", 10, (64, 64))
+    >>> len(s.train), len(s.val), len(s.test)
+    (10, 1, 1)
+    """
+    from robopercept._checks import check_choice
+
+    check_choice(data, "data", POSE_DATA)
+    n = check_int(images, "images", 1)
+    nv = max(1, n // 10) if val_images is None else check_int(val_images, "val_images", 1)
+    nt = max(1, n // 10) if test_images is None else check_int(test_images, "test_images", 1)
+    seed = check_int(seed, "seed", 0)
+    return PoseSets(
+        procedural_pose_set(n, size, seed),
+        procedural_pose_set(nv, size, 1000 + seed),
+        procedural_pose_set(nt, size, 99),
+    )

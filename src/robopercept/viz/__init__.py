@@ -29,6 +29,7 @@ from robopercept.viz.learning import (
     scatter_picture,
     tiles_picture,
 )
+from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
 from robopercept.viz.segmentation import class_overlay, instance_overlay, panels_picture
 
 __all__ = [
@@ -45,16 +46,19 @@ __all__ = [
     "draw_mask",
     "draw_matches",
     "draw_points",
+    "draw_skeleton",
     "draw_text",
     "draw_trails",
     "flow_to_color",
     "flow_wheel",
+    "heatmap_grid",
     "hog_picture",
     "instance_overlay",
     "label_colors",
     "panels_picture",
     "render_points",
     "scatter_picture",
+    "skeleton_3d_picture",
     "tiles_picture",
     "voc_palette",
 ]

@@ -42,6 +42,7 @@ __all__ = [
     "draw_mask",
     "draw_points",
     "draw_text",
+    "enlarge_picture",
     "pil_canvas",
     "to_rgb8",
 ]
@@ -54,6 +55,24 @@ MAX_PICTURE_PIXELS = 2**26
 #: the largest line width, circle radius or font size in pixels (Pillow takes about a
 #: minute to rasterize a circle of radius 1e6)
 MAX_STROKE = 10_000
+
+
+def enlarge_picture(img: np.ndarray, min_side: int) -> tuple[np.ndarray, int]:
+    """Enlarge a small picture by the whole factor ``f = max(1, min_side // L)`` (``L``
+    its longer side) with nearest-neighbour sampling, so pixels stay sharp and labels
+    exact; returns the picture and ``f``. A point ``(x, y)`` of the pixel-centre
+    convention (pixel ``c`` covers ``[c, c + 1)``) is ``(f x, f y)`` on the result.
+
+    Examples
+    --------
+    >>> big, f = enlarge_picture(np.arange(4, dtype=np.uint8).reshape(2, 2), 5)
+    >>> f, big.shape, big[:, :2].tolist()
+    (2, (4, 4), [[0, 0], [0, 0], [2, 2], [2, 2]])
+    """
+    f = max(1, int(min_side) // max(img.shape[:2]))
+    if f > 1:
+        img = np.repeat(np.repeat(img, f, axis=0), f, axis=1)
+    return img, f
 
 
 def to_rgb8(image: np.ndarray) -> np.ndarray:

@@ -22,19 +22,12 @@ from scipy import ndimage
 from robopercept._checks import check_int, check_ndim, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.viz.colormap import label_colors, voc_palette
-from robopercept.viz.draw import check_picture_size, draw_text, to_rgb8
+from robopercept.viz.draw import check_picture_size, draw_text, enlarge_picture, to_rgb8
 
 __all__ = ["class_overlay", "instance_overlay", "panels_picture"]
 
 #: the longer side a small picture is enlarged to (integer factors, nearest neighbour)
 MIN_SIDE = 512
-
-
-def _enlarge(img: np.ndarray, min_side: int) -> tuple[np.ndarray, int]:
-    f = max(1, min_side // max(img.shape[:2]))
-    if f > 1:
-        img = np.repeat(np.repeat(img, f, axis=0), f, axis=1)
-    return img, f
 
 
 def _font(img: np.ndarray) -> int:
@@ -122,7 +115,7 @@ def class_overlay(
     col = pal[np.clip(lab, 0, 255)].astype(np.float64)
     out[fg] = (1 - a) * out[fg] + a * col[fg]
     out[void] = pal[255]
-    pic, _ = _enlarge(np.round(out).astype(np.uint8), side)
+    pic, _ = enlarge_picture(np.round(out).astype(np.uint8), side)
     present = [k for k in range(1, len(names) + 1) if (lab == k).any()]
     return _with_legend(pic, [(names[k - 1], tuple(pal[k])) for k in present])
 
@@ -230,7 +223,7 @@ def instance_overlay(
         raise InputError(f"classes must be a list of names (str); got {plain_repr(classes)}")
     a = check_real(alpha, "alpha", 0.0, 1.0)
     side = check_int(min_side, "min_side", 1)
-    big, f = _enlarge(img, side)
+    big, f = enlarge_picture(img, side)
     out = big.astype(np.float64)
     colors = label_colors(np.arange(1, n + 1)).astype(np.float64)
     size = _font(big)

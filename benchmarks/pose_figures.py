@@ -1,0 +1,356 @@
+"""Issue 28's accuracy figures for 2-D and 3-D pose, trained here on the CPU (run
+``python -m benchmarks.pose_figures --only PART --seeds 0 1 2``; each run is merged
+into ``benchmarks/results/pose_figures.json`` and the table printed).
+
+Every run draws its weights from ``torch.manual_seed(seed)`` and trains with the
+seed's data order; the epoch is picked on the validation split, nothing on the test
+split.
+
+Parts (single-person parts on :func:`~robopercept.nn.pose_data.pose_sets` ``"figures"``,
+128 x 128, training seed ``seed``, validation ``1000 + seed``, test ``99``):
+
+- ``hrnet``, ``heatmap``: the HRNet-style network and the SimpleBaseline network,
+  Gaussian heatmaps (sigma 2 cells at stride 4), flip test, quadratic decoding.
+- ``deeppose``: DeepPose's regression network, then one cascade stage trained on its
+  estimates; PCK reported without (``PCK@0.1_stage1``) and with the stage.
+- ``pictorial``: pictorial structures (HOG-like cell descriptors, a logistic
+  appearance model per joint, Gaussian springs, exact inference by the generalized
+  distance transform): the pre-deep-learning baseline.
+- ``keypointrcnn``: Keypoint R-CNN on :func:`~robopercept.nn.pose_data.procedural_pose_scenes`
+  (1-3 figures per 192 x 160 image): COCO keypoint AP with MPII's sigmas.
+- ``lift3d``: 3-D pose from the *true* 2-D joints of the test figures, by matching
+  against a library of projected 3-D poses, and by the lifting MLP: PA-MPJPE (mm).
+
+PCK@alpha counts a joint found within alpha times the person's box diagonal (mmpose's
+mean over joints); OKS AP is our COCO keypoint evaluation (equal to pycocotools) with
+MPII's sigmas, one detection per test image scored by its mean joint score.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from benchmarks._harness import figures_main, timing_row
+from robopercept.nn import pose as P
+from robopercept.nn.pose_data import pose_sets, procedural_pose_scenes
+from robopercept.nn.training import TrainConfig
+
+NAME = "pose_figures"
+SIZE = (128, 128)
+#: single-person budget: training images, epochs, batch size, AdamW learning rate
+TRAIN = {"images": 3000, "epochs": 12, "batch_size": 32, "lr": 3e-3}
+#: the networks' settings
+MODELS = {
+    "hrnet": {"width": 16, "blocks": 2},
+    "heatmap": {"width": 16},
+    "deeppose": {"width": 16, "image_size": list(SIZE)},
+}
+#: test figures (seed 99) and validation figures (seed 1000 + seed)
+N_TEST, N_VAL = 500, 200
+
+
+def _sets(seed: int, images: int | None = None) -> Any:
+    return pose_sets(
+        "figures", images or TRAIN["images"], SIZE, seed, val_images=N_VAL, test_images=N_TEST
+    )
+
+
+def _cfg(seed: int, epochs: int | None = None) -> TrainConfig:
+    return TrainConfig(
+        epochs=epochs or TRAIN["epochs"],
+        batch_size=TRAIN["batch_size"],
+        lr=TRAIN["lr"],
+        device="cpu",
+        seed=seed,
+    )
+
+
+def _flops(model: torch.nn.Module, shape: tuple[int, ...]) -> int:
+    from torch.utils.flop_counter import FlopCounterMode
+
+    model.eval()
+    with torch.no_grad(), FlopCounterMode(display=False) as counter:
+        model(torch.zeros(shape))
+    return int(counter.get_total_flops())
+
+
+def _latency_ms(fn: Callable[[], object], repeats: int = 20) -> float:
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with torch.no_grad():
+            fn()
+            times = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                fn()
+                times.append(time.perf_counter() - t0)
+    finally:
+        torch.set_num_threads(threads)
+    return 1000 * statistics.median(times)
+
+
+def _scores(ev: P.PoseEvaluation) -> dict[str, float]:
+    return {
+        "PCK@0.05": round(ev.pck[0.05], 4),
+        "PCK@0.1": round(ev.pck[0.1], 4),
+        "PCK@0.2": round(ev.pck[0.2], 4),
+        "OKS_AP": round(float(ev.oks.stats[0]), 4),
+        "OKS_AP50": round(float(ev.oks.stats[1]), 4),
+    }
+
+
+def network(part: str, seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
+    """A single-person network (``hrnet``, ``heatmap`` or ``deeppose`` with one cascade
+    stage) trained on the figures and scored on the test figures."""
+    sets = _sets(seed)
+    sk = sets.train.skeleton
+    settings = MODELS[part]
+    torch.manual_seed(seed)
+    net = P.build_pose_model(part, sk.num_joints, **settings)
+    t0 = time.perf_counter()
+    hist = P.train_pose(net, sets.train, _cfg(seed), val=sets.val, skeleton=sk, progress=progress)
+    refiners: list[P.DeepPoseRefiner] = []
+    row: dict[str, Any] = {}
+    if part == "deeppose":
+        first = P.evaluate_pose(net, sets.test)
+        row["stage1"] = _scores(first)
+        est, _ = P.predict_keypoints(net, sets.train.images)
+        vest, _ = P.predict_keypoints(net, sets.val.images)
+        stage = P.DeepPoseRefiner(sk.num_joints, crop=32.0, width=16)
+        h2 = P.train_refiner(
+            stage, sets.train, est, _cfg(seed), val=sets.val, val_estimates=vest, progress=progress
+        )
+        refiners.append(stage)
+        row["stage2_val"] = h2.val
+    wall = time.perf_counter() - t0
+    ev = P.evaluate_pose(net, sets.test, refiners=refiners)
+    no_flip = P.evaluate_pose(net, sets.test, refiners=refiners, flip=False)
+    x = torch.rand((1, 3, *SIZE[::-1]), generator=torch.Generator().manual_seed(0))
+    if save is not None:
+        P.save_pose_model(
+            save / f"pose_{part}_figures.pt",
+            net,
+            part,
+            settings,
+            sk,
+            refiners=refiners,
+            seed=seed,
+            built_by=f"python -m benchmarks.pose_figures --only {part} --seeds {seed} --save DIR",
+            test=_scores(ev),
+        )
+    return {
+        "model": part,
+        "settings": settings,
+        "train": TRAIN,
+        "images": {"train": len(sets.train), "val": len(sets.val), "test": len(sets.test)},
+        "parameters": sum(p.numel() for p in net.parameters())
+        + sum(p.numel() for r in refiners for p in r.parameters()),
+        "flops_128": _flops(net, (1, 3, *SIZE[::-1])),
+        "latency_ms_128": round(
+            _latency_ms(lambda: P.predict_keypoints(net, x, flip_permutation=None)), 2
+        ),
+        "train_seconds": round(wall, 1),
+        "val": hist.val,
+        "best_epoch": hist.best_epoch,
+        "test": {**_scores(ev), "PCK@0.1_no_flip": round(no_flip.pck[0.1], 4)},
+        **row,
+    }
+
+
+def pictorial(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
+    """Pictorial structures fitted on 1,000 training figures, scored on the test set."""
+    from robopercept.nn.pictorial import PictorialStructures
+    from robopercept.nn.pose_eval import bbox_diagonal, pck
+
+    del progress, save
+    sets = _sets(seed, images=1000)
+    sk = sets.train.skeleton
+    model = PictorialStructures(sk, cell=4, random_state=seed)
+    t0 = time.perf_counter()
+    model.fit(sets.train.images, sets.train.keypoints)
+    wall = time.perf_counter() - t0
+    pred = model.predict(sets.test.images)
+    diag = bbox_diagonal(sets.test.boxes, "xyxy")
+    truth = sets.test.keypoints
+    t1 = time.perf_counter()
+    model.predict(sets.test.images[:20])
+    per_image = (time.perf_counter() - t1) / 20
+    return {
+        "model": "pictorial",
+        "images": {"train": len(sets.train), "test": len(sets.test)},
+        "train_seconds": round(wall, 1),
+        "latency_ms_128": round(1000 * per_image, 2),
+        "test": {
+            f"PCK@{a:g}": round(float(pck(pred, truth, None, a, diag).mean), 4)
+            for a in (0.05, 0.1, 0.2)
+        },
+    }
+
+
+#: the multi-person detector: settings and budget
+KEYPOINT_RCNN = {
+    "width": 16,
+    "anchor_sizes": (24.0, 48.0, 96.0),
+    "aspect_ratios": (1.0, 2.0, 3.0),
+    "keypoint_channels": 64,
+    "keypoint_convs": 4,
+}
+KEYPOINT_RCNN_TRAIN = {"images": 1200, "epochs": 12, "batch_size": 4, "lr": 1e-3}
+
+
+def keypointrcnn(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
+    """Keypoint R-CNN on multi-person procedural scenes: keypoint AP (OKS, MPII sigmas)."""
+    from robopercept.nn.detection import build_detector, evaluate_detector, train_detector
+    from robopercept.nn.skeleton import MPII_16
+
+    del save
+    b = KEYPOINT_RCNN_TRAIN
+    train = procedural_pose_scenes(b["images"], (192, 160), seed)
+    val = procedural_pose_scenes(100, (192, 160), 1000 + seed)
+    test = procedural_pose_scenes(200, (192, 160), 99)
+    model = build_detector(
+        "keypointrcnn", 1, seed=seed, num_keypoints=MPII_16.num_joints, **KEYPOINT_RCNN
+    )
+    cfg = TrainConfig(
+        epochs=b["epochs"], batch_size=b["batch_size"], lr=b["lr"], device="cpu", seed=seed
+    )
+    t0 = time.perf_counter()
+    hist = train_detector(
+        model,
+        train,
+        cfg,
+        progress=progress,
+        val=val,
+        val_every=max(1, b["epochs"] // 6),
+        val_iou_type="keypoints",
+        val_sigmas=MPII_16.sigmas,
+    )
+    wall = time.perf_counter() - t0
+    kp = evaluate_detector(model, test, iou_type="keypoints", sigmas=MPII_16.sigmas)
+    box = evaluate_detector(model, test)
+    return {
+        "model": "keypointrcnn",
+        "settings": KEYPOINT_RCNN,
+        "train": b,
+        "people": {"train": train.n_boxes, "test": test.n_boxes},
+        "parameters": sum(p.numel() for p in model.parameters()),
+        "train_seconds": round(wall, 1),
+        "val": hist.val,
+        "best_epoch": hist.best_epoch,
+        "test": {
+            "OKS_AP": round(float(kp.stats[0]), 4),
+            "OKS_AP50": round(float(kp.stats[1]), 4),
+            "box_AP50": round(float(box.stats[1]), 4),
+        },
+    }
+
+
+def lift3d(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
+    """3-D from the test figures' true 2-D joints: matching vs the lifting MLP."""
+    from robopercept.nn import pose3d
+
+    del progress, save
+    test = _sets(seed, images=10).test
+    truth = test.joints3d - test.joints3d[:, 6:7]  # root (pelvis) relative, camera frame
+    kp2d = test.keypoints[..., :2]
+    t0 = time.perf_counter()
+    library = pose3d.default_pose_library(test.skeleton, rng=seed)
+    t_lib = time.perf_counter() - t0
+    matched = library.lift(kp2d)
+    t0 = time.perf_counter()
+    mlp = pose3d.default_lifter(rng=seed)
+    t_mlp = time.perf_counter() - t0
+    lifted = mlp.lift(kp2d)
+    mean_pose = np.broadcast_to(library.poses3d.mean(0), truth.shape)
+    return {
+        "model": "lift3d",
+        "library_poses": int(library.poses3d.shape[0]),
+        "build_seconds": {"library": round(t_lib, 1), "mlp": round(t_mlp, 1)},
+        "test": {
+            "PA-MPJPE_mm_matching": round(1000 * float(pose3d.pa_mpjpe(matched, truth)), 1),
+            "PA-MPJPE_mm_mlp": round(1000 * float(pose3d.pa_mpjpe(lifted, truth)), 1),
+            "PA-MPJPE_mm_mean_pose": round(1000 * float(pose3d.pa_mpjpe(mean_pose, truth)), 1),
+            "MPJPE_mm_matching": round(1000 * float(pose3d.mpjpe(matched, truth)), 1),
+            "MPJPE_mm_mlp": round(1000 * float(pose3d.mpjpe(lifted, truth)), 1),
+        },
+    }
+
+
+def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
+    """The training time of a single-person network, measured on ``epochs`` epochs of
+    its seed-0 run plus one validation pass, extrapolated (run alone on the machine)."""
+    if part not in MODELS:
+        raise SystemExit(f"--time-epochs: times hrnet, heatmap and deeppose; got {part}")
+    sets = _sets(0)
+    sk = sets.train.skeleton
+    torch.manual_seed(0)
+    net = P.build_pose_model(part, sk.num_joints, **MODELS[part])
+    t0 = time.perf_counter()
+    P.train_pose(net, sets.train, _cfg(0, epochs), skeleton=sk, progress=False)
+    per_epoch = (time.perf_counter() - t0) / epochs
+    t0 = time.perf_counter()
+    P.predict_keypoints(net, sets.val.images)
+    per_val = time.perf_counter() - t0
+    full = TRAIN["epochs"] * (2 if part == "deeppose" else 1)
+    return timing_row(part, threads, epochs, per_epoch, per_val, full, 1)
+
+
+PARTS: dict[str, Callable[..., dict[str, Any]]] = {
+    "hrnet": lambda seed, progress, save: network("hrnet", seed, progress, save),
+    "heatmap": lambda seed, progress, save: network("heatmap", seed, progress, save),
+    "deeppose": lambda seed, progress, save: network("deeppose", seed, progress, save),
+    "pictorial": pictorial,
+    "keypointrcnn": keypointrcnn,
+    "lift3d": lift3d,
+}
+
+
+def table(results: dict[str, Any]) -> str:
+    """Mean +- std over the seeds run, per part and figure."""
+    by: dict[str, list[dict[str, Any]]] = {}
+    for row in results["runs"].values():
+        by.setdefault(row["part"], []).append(row)
+    lines = ["| part | seeds | figure | mean ± std | train s |", "|---|---|---|---:|---:|"]
+    for part, rows in sorted(by.items()):
+        seeds = ",".join(str(r["seed"]) for r in sorted(rows, key=lambda r: r["seed"]))
+        t = np.mean([r.get("train_seconds", 0.0) for r in rows])
+        for key, v in rows[0]["test"].items():
+            if not isinstance(v, float):
+                continue
+            vals = [r["test"][key] for r in rows]
+            lines.append(
+                f"| {part} | {seeds} | {key} | {np.mean(vals):.3f} ± {np.std(vals):.3f} | {t:.0f} |"
+            )
+    return "\n".join(lines)
+
+
+def _run(part: str, seed: int, progress: bool, save: Path | None) -> dict[str, Any]:
+    row = {"part": part, "seed": seed, "threads": torch.get_num_threads()}
+    row.update(PARTS[part](seed, progress, save))
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    return figures_main(
+        argv,
+        name=NAME,
+        description=__doc__.splitlines()[0],
+        parts=list(PARTS),
+        run=_run,
+        time_part=time_part,
+        table=table,
+        save_help="write the networks to DIR/pose_PART_figures.pt (the shipped ones: "
+        "--only hrnet --seeds 0 --save src/robopercept/data)",
+    )
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,353 @@
+"""``robopercept nn pose``: train, evaluate and run 2-D pose networks (extra ``deep``).
+
+Three forms, chosen by the first word after ``pose``::
+
+    robopercept nn pose train --model deeppose|heatmap|hrnet --data figures -o run/
+    robopercept nn pose eval RUN_OR_MODEL --data figures [-o DIR]
+    robopercept nn pose IMAGE... [--model PATH|hrnet|heatmap|deeppose] -o out/ [--json]
+                                 [--lift3d] [--heatmaps]
+
+``train`` keeps the weights of the epoch with the best validation PCK@0.1 and writes
+``run/model.pt``, ``history.json``, ``metrics.json`` (PCK and COCO keypoint AP on the
+validation split) and ``samples.png`` (predicted skeletons). ``--model deeppose`` also
+trains ``--stages`` cascade stages on the first stage's estimates. ``eval`` scores a
+model on the validation split of the same data (same ``--images``, ``--size`` and
+``--seed``). ``IMAGE...`` treats each image as one person (top-down): it is letterboxed
+into the network's input, and ``out/NAME.png`` shows the skeleton with per-joint
+confidence; ``--heatmaps`` adds ``out/NAME_heatmaps.png``; ``--lift3d`` lifts the 2-D
+pose to 3-D by matching against a library of projected 3-D poses (the course's
+recipe, :class:`~robopercept.nn.pose3d.PoseLibrary`) and writes ``out/NAME_3d.png``
+(two views). ``--json`` prints, per image, the keypoints (pixels), their scores and
+(with ``--lift3d``) the root-relative 3-D joints in metres.
+
+Without ``--model`` the ``IMAGE`` form uses the shipped HRNet, trained on the
+procedural figures and rebuilt, from a checkout, by ``python -m
+benchmarks.pose_figures --only hrnet --seeds 0 --save src/robopercept/data``.
+
+The work is done by :mod:`robopercept.nn.pose`, :mod:`robopercept.nn.pose_data`,
+:mod:`robopercept.nn.pose3d` and :mod:`robopercept.viz.pose`; this module parses and
+prints. Exit 2 for bad arguments (the message names the flag), 1 when the work fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from robopercept.cli._args import (
+    UsageError,
+    built_in_data_args,
+    images_form_inputs,
+    positive_int,
+    register_forms,
+    run_or_model_path,
+)
+
+__all__ = ["POSE_CLI_MODELS", "SHIPPED_POSE_MODELS", "register"]
+
+#: ``--model`` of ``train``
+POSE_CLI_MODELS = ("hrnet", "heatmap", "deeppose")
+#: the shipped models, relative to the ``robopercept`` package
+SHIPPED_POSE_MODELS = {
+    "hrnet": "data/pose_hrnet_figures.pt",
+    "heatmap": "data/pose_heatmap_figures.pt",
+    "deeppose": "data/pose_deeppose_figures.pt",
+}
+_BUILD_SHIPPED = (
+    "python -m benchmarks.pose_figures --only hrnet heatmap deeppose --seeds 0 "
+    "--save src/robopercept/data"
+)
+
+
+def _data_args(p: argparse.ArgumentParser) -> None:
+    built_in_data_args(
+        p,
+        "procedural articulated figures over real photos (MPII's 16 joints)",
+        "",
+        ("figures",),
+        images=2000,
+        generated="figures",
+    )
+
+
+def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentParser]:
+    t = cls(
+        prog="robopercept nn pose train",
+        description="Train a pose network; writes OUT/model.pt, history.json, metrics.json "
+        "(validation split) and samples.png.",
+    )
+    _data_args(t)
+    t.add_argument("--model", choices=POSE_CLI_MODELS, default="hrnet", help="default hrnet")
+    t.add_argument("--epochs", type=positive_int, default=20, help="default 20")
+    t.add_argument("--batch-size", type=positive_int, default=32, help="default 32")
+    t.add_argument("--lr", type=float, default=3e-3, help="AdamW learning rate (default 3e-3)")
+    t.add_argument("--width", type=positive_int, default=16, help="network width (default 16)")
+    t.add_argument(
+        "--stages",
+        type=int,
+        default=1,
+        help="deeppose: cascade refinement stages after the first (default 1; 0 for none)",
+    )
+    t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
+    e = cls(
+        prog="robopercept nn pose eval",
+        description="PCK and COCO keypoint AP of a trained pose network (RUN folder or "
+        "model.pt) on the validation split of a built-in set.",
+    )
+    e.add_argument("model", metavar="RUN_OR_MODEL")
+    _data_args(e)
+    e.add_argument("--no-flip", action="store_true", help="without the flip test")
+    e.add_argument("-o", "--out", help="folder for metrics.json")
+    r = cls(
+        prog="robopercept nn pose",
+        description="Find one person's joints in each IMAGE and write OUT/NAME.png.",
+    )
+    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument(
+        "--model",
+        help="a model.pt or run folder, or a shipped model: hrnet (default), heatmap, deeppose",
+    )
+    r.add_argument("-o", "--out", help="folder for the pictures")
+    r.add_argument("--lift3d", action="store_true", help="also the 3-D pose (by matching)")
+    r.add_argument("--heatmaps", action="store_true", help="also OUT/NAME_heatmaps.png")
+    r.add_argument("--no-flip", action="store_true", help="without the flip test")
+    r.add_argument("--device", help="cpu, cuda, ...")
+    r.add_argument("--json", action="store_true", help="print keypoints (and 3-D) as JSON")
+    r.add_argument("--quiet", action="store_true")
+    return {"train": t, "eval": e, "images": r}
+
+
+def register(ns: argparse._SubParsersAction, parser_class: type[argparse.ArgumentParser]) -> None:
+    """Add ``pose`` to the ``nn`` task parsers ``ns``."""
+    register_forms(
+        ns,
+        "pose",
+        "pose networks: train, eval, or find a person's joints in images (needs torch)",
+        lambda: _parsers(parser_class),
+        {"train": _train, "eval": _eval, "images": _images},
+    )
+
+
+def _sets(args: argparse.Namespace) -> Any:
+    from robopercept.nn.pose_data import pose_sets
+
+    if args.images < 2:
+        raise UsageError("--images: give at least 2")
+    return pose_sets(args.data, args.images, args.size, args.seed, test_images=1)
+
+
+def _samples(model: Any, refiners: list[Any], val: Any, path: Path, count: int = 6) -> Path:
+    from robopercept.imaging import write_image
+    from robopercept.nn.pose import pose_arrays
+    from robopercept.viz.pose import draw_skeleton
+    from robopercept.viz.segmentation import panels_picture
+
+    sk = val.skeleton
+    n = min(count, len(val))
+    res = pose_arrays(
+        model,
+        list(val.images[:n]),
+        flip_permutation=sk.flip_permutation(),
+        refiners=refiners,
+    )
+    pics = [
+        draw_skeleton(val.images[i], r.keypoints, sk.links, flip_pairs=sk.flip_pairs, min_side=384)
+        for i, r in enumerate(res)
+    ]
+    return write_image(path, panels_picture(pics, [f"validation {i + 1}" for i in range(n)]))
+
+
+def _train(args: argparse.Namespace) -> int:
+    from robopercept.nn.pose import (
+        DeepPoseRefiner,
+        build_pose_model,
+        evaluate_pose,
+        predict_keypoints,
+        refine_keypoints,
+        save_pose_model,
+        train_pose,
+        train_refiner,
+    )
+    from robopercept.nn.training import TrainConfig
+
+    if not args.lr > 0:
+        raise UsageError(f"--lr: must be > 0; got {args.lr}")
+    if args.stages < 0 or args.stages > 4:
+        raise UsageError(f"--stages: 0 to 4 cascade stages; got {args.stages}")
+    if args.size[0] % 16 or args.size[1] % 16:
+        raise UsageError(f"--size: width and height must be multiples of 16; got {args.size}")
+    sets = _sets(args)
+    train, val = sets.train, sets.val
+    sk = train.skeleton
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = TrainConfig(
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        seed=args.seed,
+        device=args.device,
+    )
+    quiet = args.quiet or args.json
+    if not quiet:
+        print(
+            f"nn pose train: {args.model} on {args.data} ({len(train)} training, "
+            f"{len(val)} validation images)",
+            file=sys.stderr,
+        )
+    settings: dict[str, Any] = {"width": args.width}
+    if args.model == "deeppose":
+        settings["image_size"] = list(args.size)
+    model = build_pose_model(args.model, sk.num_joints, seed=args.seed, **settings)
+    hist = train_pose(model, train, cfg, val=val, skeleton=sk, progress=not quiet)
+    history: dict[str, Any] = {"network": hist.to_dict(), "stages": []}
+    refiners: list[Any] = []
+    if args.model == "deeppose":
+        for _ in range(args.stages):
+            est, _ = predict_keypoints(model, train.images)
+            vest, _ = predict_keypoints(model, val.images)
+            if refiners:
+                est = refine_keypoints(train.images, est, refiners)
+                vest = refine_keypoints(val.images, vest, refiners)
+            stage = DeepPoseRefiner(sk.num_joints, crop=0.25 * min(args.size), width=args.width)
+            h = train_refiner(
+                stage, train, est, cfg, val=val, val_estimates=vest, progress=not quiet
+            )
+            refiners.append(stage)
+            history["stages"].append(h.to_dict())
+    extra = {"data": args.data, "images": args.images, "size": list(args.size), "seed": args.seed}
+    save_pose_model(out / "model.pt", model, args.model, settings, sk, refiners=refiners, **extra)
+    (out / "history.json").write_text(json.dumps(history, indent=1))
+    ev = evaluate_pose(model, val, refiners=refiners)
+    metrics = {
+        "model": args.model,
+        "data": args.data,
+        "split": "validation",
+        "best_epoch": hist.best_epoch,
+        "metrics": ev.summary(),
+    }
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=1))
+    _samples(model, refiners, val, out / "samples.png")
+    files = {n: str(out / n) for n in ("model.pt", "history.json", "metrics.json", "samples.png")}
+    if args.json:
+        print(json.dumps({**metrics, "files": files}))
+        return 0
+    print(
+        f"nn pose train: {args.model} on {args.data}, kept epoch {hist.best_epoch}; "
+        f"validation PCK@0.1 {ev.pck[0.1]:.4f}, OKS AP {ev.oks.stats[0]:.4f}"
+    )
+    for name, path in files.items():
+        print(f"  {name:<13} {path}")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from robopercept.nn.pose import evaluate_pose, load_pose_model
+
+    path = run_or_model_path(args.model)
+    if not path.is_file():
+        raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
+    model, info = load_pose_model(path)
+    if args.device:
+        from robopercept.nn.training import resolve_device
+
+        model.to(resolve_device(args.device))
+    sets = _sets(args)
+    ev = evaluate_pose(model, sets.val, refiners=info["refiners"], flip=not args.no_flip)
+    metrics = {
+        "model": str(args.model),
+        "data": args.data,
+        "images": len(sets.val),
+        "flip_test": not args.no_flip,
+        "metrics": ev.summary(),
+        "pck_per_joint": dict(
+            zip(sets.val.skeleton.joints, [float(v) for v in ev.per_joint], strict=True)
+        ),
+    }
+    if args.out:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "metrics.json").write_text(json.dumps(metrics, indent=1))
+    if args.json:
+        print(json.dumps(metrics))
+        return 0
+    print(f"nn pose eval: {args.model} on {args.data} ({len(sets.val)} images)")
+    for name, v in metrics["metrics"].items():
+        print(f"  {name:<40} {v:7.4f}")
+    return 0
+
+
+def _images(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from robopercept.imaging import read_image, write_image
+    from robopercept.nn.pose import load_pose_model, pose_arrays
+    from robopercept.nn.training import resolve_device
+    from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
+
+    def outputs(stem: str) -> list[str]:
+        names = [f"{stem}.png"]
+        if args.heatmaps:
+            names.append(f"{stem}_heatmaps.png")
+        if args.lift3d:
+            names.append(f"{stem}_3d.png")
+        return names
+
+    model_path = images_form_inputs(
+        args, SHIPPED_POSE_MODELS, SHIPPED_POSE_MODELS["hrnet"], _BUILD_SHIPPED, outputs
+    )
+    model, info = load_pose_model(model_path)
+    model.to(resolve_device(args.device))
+    sk = info["skeleton"]
+    library = None
+    if args.lift3d:
+        from robopercept.nn.pose3d import default_pose_library
+
+        library = default_pose_library(sk)
+    out = Path(args.out) if args.out else None
+    results = []
+    for name in args.images:
+        image = read_image(name, mode="rgb")
+        res = pose_arrays(
+            model,
+            [image],
+            flip_permutation=None if args.no_flip else sk.flip_permutation(),
+            refiners=info["refiners"],
+        )[0]
+        row: dict[str, Any] = {
+            "image": name,
+            "joints": list(sk.joints),
+            "keypoints": np.round(res.keypoints, 2).tolist(),
+            "scores": np.round(res.scores, 4).tolist(),
+        }
+        joints3d = None
+        if library is not None:
+            joints3d = library.lift(res.keypoints[None])[0]
+            row["joints3d_m"] = np.round(joints3d, 4).tolist()
+        results.append(row)
+        if out is not None:
+            stem = Path(name).stem
+            pic = draw_skeleton(
+                image,
+                res.keypoints,
+                sk.links,
+                confidence=res.scores,
+                flip_pairs=sk.flip_pairs,
+                min_side=512,
+            )
+            written = [write_image(out / f"{stem}.png", pic)]
+            if args.heatmaps and res.heatmaps is not None:
+                grid = heatmap_grid(image, res.heatmaps, list(sk.joints))
+                written.append(write_image(out / f"{stem}_heatmaps.png", grid))
+            if joints3d is not None:
+                written.append(
+                    write_image(out / f"{stem}_3d.png", skeleton_3d_picture(joints3d, sk.links))
+                )
+            if not (args.quiet or args.json):
+                mean = float(np.mean(res.scores))
+                print(f"{name}: mean joint score {mean:.3f} -> {', '.join(map(str, written))}")
+    if args.json:
+        print(json.dumps(results))
+    return 0
