@@ -200,3 +200,26 @@ def figures_main(
             store_run(name, f"{part}/{seed}", row)
     print(table(load_runs(name)))
     return 0
+
+
+def seeds_table(results: dict[str, Any]) -> str:
+    """The table of a figures script (``segmentation_figures``, ``pose_figures``): per
+    part and numeric ``test`` figure, the mean +- std over the seeds run, and the mean
+    training seconds (0 where a part records none)."""
+    import numpy as np
+
+    by: dict[str, list[dict[str, Any]]] = {}
+    for row in results["runs"].values():
+        by.setdefault(row["part"], []).append(row)
+    lines = ["| part | seeds | figure | mean ± std | train s |", "|---|---|---|---:|---:|"]
+    for part, rows in sorted(by.items()):
+        seeds = ",".join(str(r["seed"]) for r in sorted(rows, key=lambda r: r["seed"]))
+        t = np.mean([r.get("train_seconds", 0.0) for r in rows])
+        for key, v in rows[0]["test"].items():
+            if not isinstance(v, float):
+                continue
+            vals = [r["test"][key] for r in rows]
+            lines.append(
+                f"| {part} | {seeds} | {key} | {np.mean(vals):.3f} ± {np.std(vals):.3f} | {t:.0f} |"
+            )
+    return "\n".join(lines)

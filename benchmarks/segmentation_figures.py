@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from benchmarks._harness import figures_main, timing_row
+from benchmarks._harness import figures_main, seeds_table, timing_row
 from benchmarks.detection_figures import chunked
 from robopercept.imaging import label_components
 from robopercept.nn import detection_data as dd
@@ -423,25 +423,6 @@ PARTS: dict[str, Callable[..., dict[str, Any]]] = {
 }
 
 
-def table(results: dict[str, Any]) -> str:
-    """Mean +- std over the seeds run, per part and figure."""
-    by: dict[str, list[dict[str, Any]]] = {}
-    for row in results["runs"].values():
-        by.setdefault(row["part"], []).append(row)
-    lines = ["| part | seeds | figure | mean ± std | train s |", "|---|---|---|---:|---:|"]
-    for part, rows in sorted(by.items()):
-        seeds = ",".join(str(r["seed"]) for r in sorted(rows, key=lambda r: r["seed"]))
-        t = np.mean([r["train_seconds"] for r in rows])
-        for key, v in rows[0]["test"].items():
-            if not isinstance(v, float):
-                continue
-            vals = [r["test"][key] for r in rows]
-            lines.append(
-                f"| {part} | {seeds} | {key} | {np.mean(vals):.3f} ± {np.std(vals):.3f} | {t:.0f} |"
-            )
-    return "\n".join(lines)
-
-
 def _run(part: str, seed: int, progress: bool, save: Path | None) -> dict[str, Any]:
     row = {"part": part, "seed": seed, "threads": torch.get_num_threads()}
     row.update(PARTS[part](seed, progress, save))
@@ -456,7 +437,7 @@ def main(argv: list[str] | None = None) -> int:
         parts=list(PARTS),
         run=_run,
         time_part=time_part,
-        table=table,
+        table=seeds_table,
         save_help="write the shapes models to DIR/segmenter_NAME_shapes.pt (the shipped "
         "ones: --only shapes-unet shapes-maskrcnn --seeds 0 --save src/robopercept/data)",
     )

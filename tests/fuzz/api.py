@@ -859,6 +859,7 @@ VALID: dict[str, dict[str, Any]] = {
         "tiles": np.random.default_rng(0).uniform(0, 1, (4, 8, 8)),
         "tile_px": 16,
     },
+    "viz.enlarge_picture": {"img": IMG_RGB, "min_side": 200},
     # viz.pose (issue 28): a 4-joint pose, its heatmaps, a 3-D pose
     "viz.draw_skeleton": {
         "image": IMG_RGB,

@@ -19,8 +19,11 @@ from robopercept.nn.pose import (
     crop_patches,
     decode_heatmaps,
     gaussian_heatmaps,
+    heatmap_loss,
+    pose_arrays,
     predict_keypoints,
     refine_keypoints,
+    train_cascade,
     train_pose,
     train_refiner,
 )
@@ -235,6 +238,9 @@ def test_deeppose_and_a_cascade_stage_train_and_refine(tiny):
     assert out.shape == vest.shape and np.isfinite(out).all()
     with pytest.raises(InputError, match="val_estimates"):
         train_refiner(stage, train, est, cfg, val=val, progress=False)
+    assert train_cascade(net, train, 0) == ([], [])
+    with pytest.raises(InputError, match="0 to 8"):
+        train_cascade(net, train, 9)
     with pytest.raises(InputError, match=r"estimates must be \(N, J, 2\)"):
         train_refiner(stage, train, est[:, :3], cfg, progress=False)
 
@@ -247,3 +253,47 @@ def test_training_refusals(tiny):
         train_pose(torch.nn.Linear(2, 2), train, progress=False)
     with pytest.raises(InputError, match="PoseDataset"):
         train_pose(HRNet(16, width=2, blocks=1), np.zeros((2, 64, 64, 3)), progress=False)
+
+
+def test_pose_arrays_maps_keypoints_back_through_the_letterbox():
+    # a 100 x 60 image with a bright blob at (70.5, 20.5): letterboxed into 64 x 64 (scale
+    # 0.64, 19 px bars above and below) and mapped back, the stand-in finds the blob there
+    image = np.zeros((60, 100, 3))
+    yy, xx = np.mgrid[0:60, 0:100] + 0.5
+    image[..., 0] = np.exp(-((xx - 70.5) ** 2 + (yy - 20.5) ** 2) / (2 * 6.0**2))
+    (res,) = pose_arrays(_Blob(1), [image], input_size=(64, 64))
+    np.testing.assert_allclose(res.keypoints[0], [70.5, 20.5], atol=1.5)
+    # the heatmap is cut to the image's part of the letterbox: 16 cells wide, 10 high
+    assert res.heatmaps is not None and res.heatmaps.shape == (1, 10, 16)
+    with pytest.raises(InputError, match="at least 8 x 8"):
+        pose_arrays(_Blob(1), [np.zeros((5, 40, 3))])
+    with pytest.raises(InputError, match=r"\(H, W\) or \(H, W, 3\)"):
+        pose_arrays(_Blob(1), [np.zeros((3, 40, 40))])
+
+
+def test_no_labelled_joint_gives_a_zero_loss_and_no_pck():
+    from robopercept.nn.pose_eval import pck
+
+    kp = np.zeros((2, 3, 3))  # every joint unlabelled (v = 0)
+    target, weight = gaussian_heatmaps(kp, (16, 16), 4)
+    out = torch.randn(2, 3, 4, 4, requires_grad=True)
+    for kind in ("softmax", "mse"):
+        loss = heatmap_loss(out, target, weight, kind)
+        assert float(loss.detach()) == 0.0 and torch.isfinite(loss)
+        loss.backward()  # a graph, zero gradients: a batch of such images is harmless
+    scores = pck(np.ones((2, 3, 2)), kp, None, 0.1, np.ones(2))
+    # nothing counts: NaN, documented (mmpose writes -1), not 0 or 1
+    assert np.isnan(scores.mean) and np.isnan(scores.per_joint).all()
+
+
+def test_heatmap_losses_by_hand():
+    target, weight = gaussian_heatmaps([[[6.0, 6.0, 2], [1.0, 1.0, 0]]], (16, 16), 4, 1.0)
+    flat = torch.zeros(1, 2, 4, 4)
+    # a flat map is the uniform distribution over 16 cells: cross entropy log 16 for the
+    # one labelled joint, whatever the target's shape
+    assert float(heatmap_loss(flat, target, weight, "softmax")) == pytest.approx(np.log(16))
+    # MSE: the mean over cells of the target squared, averaged over the N J = 2 maps
+    expected = float((target[0, 0] ** 2).mean()) / 2
+    assert float(heatmap_loss(flat, target, weight, "mse")) == pytest.approx(expected)
+    with pytest.raises(InputError, match=r"\(N, J, h, w\)"):
+        heatmap_loss(flat, target[:, :1], weight)

@@ -162,21 +162,18 @@ def _samples(model: Any, refiners: list[Any], val: Any, path: Path, count: int =
 
 def _train(args: argparse.Namespace) -> int:
     from robopercept.nn.pose import (
-        DeepPoseRefiner,
         build_pose_model,
         evaluate_pose,
-        predict_keypoints,
-        refine_keypoints,
         save_pose_model,
+        train_cascade,
         train_pose,
-        train_refiner,
     )
     from robopercept.nn.training import TrainConfig
 
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
-    if args.stages < 0 or args.stages > 4:
-        raise UsageError(f"--stages: 0 to 4 cascade stages; got {args.stages}")
+    if args.stages < 0 or args.stages > 8:
+        raise UsageError(f"--stages: 0 to 8 cascade stages; got {args.stages}")
     if args.size[0] % 16 or args.size[1] % 16:
         raise UsageError(f"--size: width and height must be multiples of 16; got {args.size}")
     sets = _sets(args)
@@ -205,19 +202,11 @@ def _train(args: argparse.Namespace) -> int:
     hist = train_pose(model, train, cfg, val=val, skeleton=sk, progress=not quiet)
     history: dict[str, Any] = {"network": hist.to_dict(), "stages": []}
     refiners: list[Any] = []
-    if args.model == "deeppose":
-        for _ in range(args.stages):
-            est, _ = predict_keypoints(model, train.images)
-            vest, _ = predict_keypoints(model, val.images)
-            if refiners:
-                est = refine_keypoints(train.images, est, refiners)
-                vest = refine_keypoints(val.images, vest, refiners)
-            stage = DeepPoseRefiner(sk.num_joints, crop=0.25 * min(args.size), width=args.width)
-            h = train_refiner(
-                stage, train, est, cfg, val=val, val_estimates=vest, progress=not quiet
-            )
-            refiners.append(stage)
-            history["stages"].append(h.to_dict())
+    if args.model == "deeppose" and args.stages:
+        refiners, stage_hist = train_cascade(
+            model, train, args.stages, cfg, val=val, width=args.width, progress=not quiet
+        )
+        history["stages"] = [h.to_dict() for h in stage_hist]
     extra = {"data": args.data, "images": args.images, "size": list(args.size), "seed": args.seed}
     save_pose_model(out / "model.pt", model, args.model, settings, sk, refiners=refiners, **extra)
     (out / "history.json").write_text(json.dumps(history, indent=1))

@@ -96,6 +96,7 @@ __all__ = [
     "predict_keypoints",
     "refine_keypoints",
     "save_pose_model",
+    "train_cascade",
     "train_pose",
     "train_refiner",
 ]
@@ -982,12 +983,8 @@ def train_pose(
     """
     from robopercept.nn.training import (
         TrainConfig,
-        deterministic_algorithms,
-        optimizer_step,
         resolve_device,
-        step_optimizer,
     )
-    from robopercept.progress import progress_bar
 
     if not isinstance(model, nn.Module) or getattr(model, "output", None) not in (
         "heatmaps",
@@ -1015,16 +1012,64 @@ def train_pose(
     model.to(dev)
     gen = torch.Generator().manual_seed(cfg.seed)
     n, _, h, w = x.shape
+    stride = int(getattr(model, "stride", 4))
+
+    def batch(idx: torch.Tensor) -> torch.Tensor:
+        xb, kb = x[idx], kp[idx]
+        if augment:
+            xb, kb = augment_pose_batch(xb, kb, perm, gen)
+        out = model(xb.to(dev))
+        if model.output == "heatmaps":
+            target, weight = gaussian_heatmaps(kb, (w, h), stride, sigma)
+            kind = getattr(model, "heatmap", "mse")
+            return heatmap_loss(out, target.to(dev), weight.to(dev), kind)
+        size = torch.tensor([w, h], dtype=torch.float32)
+        y = kb[..., :2] / size - 0.5
+        lab = (kb[..., 2] > 0).float().to(dev)
+        err = ((out - y.to(dev)) ** 2).sum(-1)
+        return (err * lab).sum() / lab.sum().clamp_min(1.0)
+
+    def validate() -> float:
+        pred, _ = predict_keypoints(model, vx)
+        return _pck(pred, vkp.numpy(), vboxes, pck_alpha)
+
+    return _epochs(
+        model,
+        n,
+        cfg,
+        gen,
+        batch,
+        validate if val is not None else None,
+        "training pose network",
+        progress,
+    )
+
+
+def _epochs(
+    model: nn.Module,
+    n: int,
+    cfg: Any,
+    gen: torch.Generator,
+    batch: Any,
+    validate: Any,
+    desc: str,
+    progress: bool,
+) -> PoseHistory:
+    """The loop of :func:`train_pose` and :func:`train_refiner`: per epoch a seeded
+    shuffle of the ``n`` samples in batches of ``cfg.batch_size``, ``batch(indices)``
+    giving each loss, one optimizer step per batch
+    (:func:`~robopercept.nn.training.step_optimizer`'s schedule), then ``validate()``
+    (higher is better) and the best epoch's weights kept."""
+    from robopercept.nn.training import deterministic_algorithms, optimizer_step, step_optimizer
+    from robopercept.progress import progress_bar
+
     steps = -(-n // cfg.batch_size)
     params = [p for p in model.parameters() if p.requires_grad]
     opt, sched = step_optimizer(params, cfg, steps)
-    stride = int(getattr(model, "stride", 4))
     hist = PoseHistory()
     best: dict[str, torch.Tensor] | None = None
     best_value = -math.inf
-    bar = progress_bar(
-        total=cfg.epochs, desc="training pose network", unit="epoch", disable=not progress
-    )
+    bar = progress_bar(total=cfg.epochs, desc=desc, unit="epoch", disable=not progress)
     try:
         with deterministic_algorithms():
             for epoch in range(cfg.epochs):
@@ -1033,29 +1078,13 @@ def train_pose(
                 order = torch.randperm(n, generator=gen)
                 total = 0.0
                 for b in range(steps):
-                    idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
-                    xb, kb = x[idx], kp[idx]
-                    if augment:
-                        xb, kb = augment_pose_batch(xb, kb, perm, gen)
-                    out = model(xb.to(dev))
-                    if model.output == "heatmaps":
-                        target, weight = gaussian_heatmaps(kb, (w, h), stride, sigma)
-                        value = heatmap_loss(
-                            out, target.to(dev), weight.to(dev), getattr(model, "heatmap", "mse")
-                        )
-                    else:
-                        size = torch.tensor([w, h], dtype=torch.float32)
-                        y = kb[..., :2] / size - 0.5
-                        weight = (kb[..., 2] > 0).float()
-                        err = ((out - y.to(dev)) ** 2).sum(-1)
-                        value = (err * weight.to(dev)).sum() / weight.sum().clamp_min(1.0)
+                    value = batch(order[b * cfg.batch_size : (b + 1) * cfg.batch_size])
                     optimizer_step(value, opt, sched, params, cfg, f"epoch {epoch + 1}")
                     total += float(value.detach())
                 hist.losses.append(total / steps)
                 hist.seconds.append(time.perf_counter() - t0)
-                if val is not None:
-                    pred, _ = predict_keypoints(model, vx)
-                    score = _pck(pred, vkp.numpy(), vboxes, pck_alpha)
+                if validate is not None:
+                    score = validate()
                     hist.val[epoch + 1] = score
                     if best is None or score > best_value:
                         best_value, hist.best_epoch = score, epoch + 1
@@ -1113,12 +1142,8 @@ def train_refiner(
     """
     from robopercept.nn.training import (
         TrainConfig,
-        deterministic_algorithms,
-        optimizer_step,
         resolve_device,
-        step_optimizer,
     )
-    from robopercept.progress import progress_bar
 
     if not isinstance(refiner, DeepPoseRefiner):
         raise InputError(f"refiner must be a DeepPoseRefiner; got {plain_repr(refiner)}")
@@ -1149,61 +1174,36 @@ def train_refiner(
     refiner.to(dev)
     gen = torch.Generator().manual_seed(cfg.seed)
     n, j = kp.shape[:2]
-    steps = -(-n // cfg.batch_size)
-    params = [p for p in refiner.parameters() if p.requires_grad]
-    opt, sched = step_optimizer(params, cfg, steps)
-    hist = PoseHistory()
-    best: dict[str, torch.Tensor] | None = None
-    best_value = -math.inf
-    bar = progress_bar(
-        total=cfg.epochs, desc="training DeepPose stage", unit="epoch", disable=not progress
+
+    def batch(idx: torch.Tensor) -> torch.Tensor:
+        m = len(idx)
+        truth = kp[idx, :, :2].double()
+        z = torch.randn((m, j, 2), generator=gen, dtype=torch.float64)
+        sim = truth - mu - torch.einsum("jab,mjb->mja", chol, z)
+        use_est = torch.rand((m, 1, 1), generator=gen) < 0.5
+        centres = torch.where(use_est, est[idx].double(), sim).float()
+        patches = crop_patches(x[idx], centres, refiner.crop, refiner.patch)
+        joints = torch.arange(j).repeat(m)
+        target = ((truth.float() - centres) / refiner.crop).reshape(-1, 2)
+        weight = lab[idx].reshape(-1).float().to(dev)
+        out = refiner(patches.to(dev), joints.to(dev))
+        err = ((out - target.to(dev)) ** 2).sum(-1)
+        return (err * weight).sum() / weight.sum().clamp_min(1.0)
+
+    def validate() -> float:
+        pred = refine_keypoints(vx, vest, [refiner])
+        return _pck(pred, vkp.numpy(), vboxes, pck_alpha)
+
+    return _epochs(
+        refiner,
+        n,
+        cfg,
+        gen,
+        batch,
+        validate if val is not None else None,
+        "training DeepPose stage",
+        progress,
     )
-    try:
-        with deterministic_algorithms():
-            for epoch in range(cfg.epochs):
-                t0 = time.perf_counter()
-                refiner.train()
-                order = torch.randperm(n, generator=gen)
-                total = 0.0
-                for b in range(steps):
-                    idx = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
-                    m = len(idx)
-                    truth = kp[idx, :, :2].double()
-                    z = torch.randn((m, j, 2), generator=gen, dtype=torch.float64)
-                    sim = truth - mu - torch.einsum("jab,mjb->mja", chol, z)
-                    use_est = torch.rand((m, 1, 1), generator=gen) < 0.5
-                    centres = torch.where(use_est, est[idx].double(), sim).float()
-                    patches = crop_patches(x[idx], centres, refiner.crop, refiner.patch)
-                    joints = torch.arange(j).repeat(m)
-                    target = ((truth.float() - centres) / refiner.crop).reshape(-1, 2)
-                    weight = lab[idx].reshape(-1).float()
-                    out = refiner(patches.to(dev), joints.to(dev))
-                    err = ((out - target.to(dev)) ** 2).sum(-1)
-                    value = (err * weight.to(dev)).sum() / weight.sum().clamp_min(1.0)
-                    optimizer_step(value, opt, sched, params, cfg, f"epoch {epoch + 1}")
-                    total += float(value.detach())
-                hist.losses.append(total / steps)
-                hist.seconds.append(time.perf_counter() - t0)
-                if val is not None:
-                    pred = refine_keypoints(vx, vest, [refiner])
-                    score = _pck(pred, vkp.numpy(), vboxes, pck_alpha)
-                    hist.val[epoch + 1] = score
-                    if best is None or score > best_value:
-                        best_value, hist.best_epoch = score, epoch + 1
-                        best = copy.deepcopy(refiner.state_dict())
-                else:
-                    hist.best_epoch = epoch + 1
-                bar.update(1)
-                post = {"loss": f"{hist.losses[-1]:.4g}"}
-                if hist.val:
-                    post["val PCK"] = f"{hist.val[epoch + 1]:.3f}"
-                bar.set_postfix(**post)
-    finally:
-        bar.close()
-    if best is not None:
-        refiner.load_state_dict(best)
-    refiner.eval()
-    return hist
 
 
 # ----------------------------------------------------------------------------- checkpoints
@@ -1485,3 +1485,55 @@ def evaluate_pose(
     ]
     oks = evaluate_detections(data.to_coco(), results, "keypoints", sigmas=sk.sigmas)
     return PoseEvaluation(values, np.asarray(per_joint), oks, pred)
+
+
+def train_cascade(
+    model: nn.Module,
+    train: Any,
+    stages: int,
+    config: Any = None,
+    *,
+    val: Any = None,
+    crop: float | None = None,
+    width: int = 16,
+    progress: bool = True,
+) -> tuple[list[DeepPoseRefiner], list[PoseHistory]]:
+    """DeepPose's cascade: ``stages`` :class:`DeepPoseRefiner` stages, each trained by
+    :func:`train_refiner` on the estimates of the network and the stages before it
+    (on ``train``, and on ``val`` for picking each stage's epoch).
+
+    Parameters
+    ----------
+    model : nn.Module
+        The trained first stage (a :class:`DeepPose`, or any pose network).
+    train, val : PoseDataset
+    stages : int
+        0 to 8.
+    config : TrainConfig, optional
+    crop : float, optional
+        The window side in pixels (default a quarter of the shorter image side).
+    width : int
+
+    Returns
+    -------
+    refiners : list of DeepPoseRefiner
+    histories : list of PoseHistory
+    """
+    stages = check_int(stages, "stages", 0)
+    if stages > 8:
+        raise InputError(f"stages must be 0 to 8 cascade stages; got {stages}")
+    x, kp, _ = _data_arrays(train, "train")
+    side = crop if crop is not None else 0.25 * min(x.shape[-2:])
+    est, _ = predict_keypoints(model, x)
+    vest = predict_keypoints(model, val.images)[0] if val is not None else None
+    refiners: list[DeepPoseRefiner] = []
+    histories: list[PoseHistory] = []
+    for _ in range(stages):
+        stage = DeepPoseRefiner(int(kp.shape[1]), crop=side, width=width)
+        h = train_refiner(stage, train, est, config, val=val, val_estimates=vest, progress=progress)
+        refiners.append(stage)
+        histories.append(h)
+        est = refine_keypoints(x, est, [stage])
+        if vest is not None:
+            vest = refine_keypoints(val.images, vest, [stage])
+    return refiners, histories

@@ -14,6 +14,7 @@ from robopercept.viz.draw import (
     draw_mask,
     draw_points,
     draw_text,
+    enlarge_picture,
 )
 from robopercept.viz.features import draw_matches, hog_picture
 from robopercept.viz.flow import (
@@ -49,6 +50,7 @@ __all__ = [
     "draw_skeleton",
     "draw_text",
     "draw_trails",
+    "enlarge_picture",
     "flow_to_color",
     "flow_wheel",
     "heatmap_grid",
