@@ -4,7 +4,7 @@ Three forms, chosen by the first word after ``pose``::
 
     robopercept nn pose train --model deeppose|heatmap|hrnet --data figures -o run/
     robopercept nn pose eval RUN_OR_MODEL --data figures [-o DIR]
-    robopercept nn pose IMAGE... [--model PATH|hrnet|heatmap|deeppose] -o out/ [--json]
+    robopercept nn pose IMAGE... [--model PATH|hrnet|deeppose] -o out/ [--json]
                                  [--lift3d] [--heatmaps]
 
 ``train`` keeps the weights of the epoch with the best validation PCK@0.1 and writes
@@ -20,9 +20,10 @@ recipe, :class:`~robopercept.nn.pose3d.PoseLibrary`) and writes ``out/NAME_3d.pn
 (two views). ``--json`` prints, per image, the keypoints (pixels), their scores and
 (with ``--lift3d``) the root-relative 3-D joints in metres.
 
-Without ``--model`` the ``IMAGE`` form uses the shipped HRNet, trained on the
-procedural figures and rebuilt, from a checkout, by ``python -m
-benchmarks.pose_figures --only hrnet --seeds 0 --save src/robopercept/data``.
+Without ``--model`` the ``IMAGE`` form uses the shipped HRNet; ``--model deeppose`` the
+shipped DeepPose with its cascade stage. Both were trained on the procedural figures
+and are rebuilt, from a checkout, by ``python -m benchmarks.pose_figures --only hrnet
+deeppose --seeds 0 --save src/robopercept/data``.
 
 The work is done by :mod:`robopercept.nn.pose`, :mod:`robopercept.nn.pose_data`,
 :mod:`robopercept.nn.pose3d` and :mod:`robopercept.viz.pose`; this module parses and
@@ -53,12 +54,10 @@ POSE_CLI_MODELS = ("hrnet", "heatmap", "deeppose")
 #: the shipped models, relative to the ``robopercept`` package
 SHIPPED_POSE_MODELS = {
     "hrnet": "data/pose_hrnet_figures.pt",
-    "heatmap": "data/pose_heatmap_figures.pt",
     "deeppose": "data/pose_deeppose_figures.pt",
 }
 _BUILD_SHIPPED = (
-    "python -m benchmarks.pose_figures --only hrnet heatmap deeppose --seeds 0 "
-    "--save src/robopercept/data"
+    "python -m benchmarks.pose_figures --only hrnet deeppose --seeds 0 --save src/robopercept/data"
 )
 
 
@@ -108,7 +107,8 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("images", nargs="+", metavar="IMAGE")
     r.add_argument(
         "--model",
-        help="a model.pt or run folder, or a shipped model: hrnet (default), heatmap, deeppose",
+        help="a model.pt or run folder, or a shipped model: hrnet (default) or deeppose "
+        "(with its cascade stage)",
     )
     r.add_argument("-o", "--out", help="folder for the pictures")
     r.add_argument("--lift3d", action="store_true", help="also the 3-D pose (by matching)")
