@@ -160,11 +160,13 @@ def heatmaps_and_3d(models: Path) -> list[Path]:
     truth = test.joints3d[i] - test.joints3d[i][SK.index("pelvis")]
     aligned = procrustes_align(lifted, truth)
     assert isinstance(aligned, np.ndarray)
+    # shown with up as up: the camera frame (x right, y down, z forward) as (x, z, -y)
+    up = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
     pic = skeleton_3d_picture(
-        aligned,
+        aligned @ up.T,
         SK.links,
-        titles=("front", "side"),
-        reference=truth,
+        titles=("oblique", "from the camera"),
+        reference=truth @ up.T,
         legend=("matched 3-D pose (aligned)", "ground truth"),
     )
     out.append(write_image(OUT / "pose_3d.png", pic))
@@ -190,7 +192,7 @@ def keypointrcnn_picture(models: Path) -> Path | None:
             SK.links,
             visible=np.full(kp.shape[:2], 2),
             flip_pairs=SK.flip_pairs,
-            min_side=320,
+            min_side=384,
         )
         f = pic.shape[0] // im.shape[0]
         pics.append(draw_boxes(pic, _xywh(d["boxes"][keep] * f), color=(255, 255, 255)))

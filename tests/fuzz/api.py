@@ -2744,6 +2744,15 @@ VALID.update(
             "config": TRAIN_CFG,
             "progress": False,
         },
+        "nn.pose.train_cascade": {
+            "model": _POSE_NET,
+            "train": _POSE_DS,
+            "stages": 1,
+            "config": TRAIN_CFG,
+            "crop": 8.0,
+            "width": 2,
+            "progress": False,
+        },
         "nn.pose.save_pose_model": {
             "path": _out("pose.pt"),
             "model": _POSE_NET,

@@ -110,7 +110,7 @@ def test_procedural_scenes_have_one_keypoint_set_per_person():
             c, r = kp[seen, 0].astype(int), kp[seen, 1].astype(int)
             assert ds.masks[i][p][r, c].mean() > 0.95
     assert sum(len(b) for b in ds.boxes) >= 10
-    image, target = ds[0]
+    _image, target = ds[0]
     assert target["keypoints"].shape == (len(ds.boxes[0]), 16, 3)
     coco = ds.to_coco(masks=False)
     assert coco.keypoints.shape == (ds.n_boxes, 16, 3)

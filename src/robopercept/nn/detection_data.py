@@ -931,6 +931,16 @@ def _photo(name: str) -> np.ndarray:
     return im
 
 
+def _check_gen_size(gen: Any, w: Any, h: Any) -> tuple[np.random.Generator, int, int]:
+    if not isinstance(gen, np.random.Generator):
+        raise InputError(
+            f"gen must be a numpy.random.Generator (np.random.default_rng(seed)); got "
+            f"{plain_repr(gen)}"
+        )
+    size = check_size((w, h), "(w, h)", 1, 8192, max_pixels=1 << 26)
+    return gen, size[0], size[1]
+
+
 def photo_background(gen: np.random.Generator, w: int, h: int) -> tuple[np.ndarray, dict[str, Any]]:
     """A random crop of a random bundled photo (:data:`BACKGROUNDS`): aspect ``w / h``,
     30-100 % of the largest such crop, resized (bilinear, antialiased) to ``(h, w)``, its
@@ -956,6 +966,7 @@ def photo_background(gen: np.random.Generator, w: int, h: int) -> tuple[np.ndarr
     >>> tile.shape, bool(tile.min() >= 0.2 and tile.max() <= 0.8), info["photo"] in BACKGROUNDS
     ((24, 32, 3), True, True)
     """
+    gen, w, h = _check_gen_size(gen, w, h)
     name = BACKGROUNDS[int(gen.integers(len(BACKGROUNDS)))]
     photo = _photo(name)
     ph, pw = photo.shape[:2]
@@ -981,6 +992,7 @@ def random_texture(gen: np.random.Generator, w: int, h: int) -> np.ndarray:
     >>> t.shape, bool(t.min() >= 0 and t.max() <= 1)
     ((6, 8, 3), True)
     """
+    gen, w, h = _check_gen_size(gen, w, h)
     colour = gen.uniform(0.25, 1.0, 3)
     colour[int(gen.integers(3))] = gen.uniform(0.0, 0.3)  # a saturated hue
     kind = int(gen.integers(4))

@@ -300,6 +300,9 @@ def heatmap_loss(
     0.0
     """
     check_choice(kind, "kind", HEATMAP_LOSSES)
+    _tensor(output, "output", 4, "(N, J, h, w)")
+    _tensor(target, "target", 4, "(N, J, h, w)")
+    _tensor(weight, "weight", 2, "(N, J)")
     if output.shape != target.shape or weight.shape != output.shape[:2]:
         raise InputError(
             f"output {tuple(output.shape)}, target {tuple(target.shape)} and weight "
@@ -660,7 +663,18 @@ def crop_patches(
     >>> crop_patches(im, torch.tensor([[[2.0, 2.0]]]), 2.0, 2)[0, 0].tolist()
     [[5.0, 6.0], [9.0, 10.0]]
     """
+    _tensor(images, "images", 4, "(N, C, H, W)")
+    _tensor(centres, "centres", 3, "(N, K, 2) of (x, y)")
     n, _c, h, w = images.shape
+    if centres.shape[0] != n or centres.shape[2] != 2:
+        raise InputError(
+            f"centres must be ({n}, K, 2), (x, y) per window of each image; got "
+            f"{tuple(centres.shape)}"
+        )
+    crop = check_real(crop, "crop", 0.0, 1e6, low_inclusive=False)
+    patch = check_int(patch, "patch", 1)
+    if patch > 1024:
+        raise InputError(f"patch must be at most 1024 pixels; got {patch}")
     k = centres.shape[1]
     t = (torch.arange(patch, dtype=images.dtype) + 0.5) / patch - 0.5
     ox = centres[..., 0:1] + crop * t  # (N, K, p)
@@ -703,6 +717,24 @@ def augment_pose_batch(
     images : (N, C, H, W) tensor
     keypoints : (N, J, 3) tensor
     """
+    _tensor(images, "images", 4, "(N, C, H, W)")
+    _tensor(keypoints, "keypoints", 3, "(N, J, 3) of (x, y, v)")
+    if keypoints.shape[0] != images.shape[0] or keypoints.shape[2] != 3:
+        raise InputError(
+            f"keypoints must be ({images.shape[0]}, J, 3) for the images; got "
+            f"{tuple(keypoints.shape)}"
+        )
+    if not isinstance(generator, torch.Generator):
+        raise InputError(f"generator must be a torch.Generator; got {plain_repr(generator)}")
+    rotation = check_real(rotation, "rotation", 0.0, 180.0)
+    shift = check_real(shift, "shift", 0.0, 1.0)
+    try:
+        s_lo, s_hi = (check_real(v, "scale", 0.01, 100.0) for v in scale)
+    except (TypeError, ValueError):
+        raise InputError(f"scale must be (low, high); got {plain_repr(scale)}") from None
+    if s_lo > s_hi:
+        raise InputError(f"scale must be (low, high) with low <= high; got {(s_lo, s_hi)}")
+    scale = (s_lo, s_hi)
     n, _c, h, w = images.shape
     dt = images.dtype
     u = torch.rand((n, 5), generator=generator, dtype=torch.float64)
@@ -722,7 +754,7 @@ def augment_pose_batch(
     a2 = s * (sin * x0 + cos * (-cy)) + cy + ty
     kp = keypoints.clone().to(torch.float64)
     if flip_permutation is not None:
-        perm = torch.as_tensor(np.asarray(flip_permutation, dtype=np.int64))
+        perm = torch.as_tensor(_permutation(flip_permutation, int(kp.shape[1])))
         kp[flip] = kp[flip][:, perm]
     x, y = kp[..., 0], kp[..., 1]
     nx = a11[:, None] * x + a12[:, None] * y + a1[:, None]
@@ -747,11 +779,20 @@ def augment_pose_batch(
 
 
 # ----------------------------------------------------------------------------- inference
+def _tensor(value: Any, name: str, ndim: int, what: str) -> torch.Tensor:
+    """A float tensor of ``ndim`` dimensions (``what`` says their meaning), or InputError."""
+    if not torch.is_tensor(value) or not value.is_floating_point() or value.ndim != ndim:
+        raise InputError(f"{name} must be a float torch.Tensor {what}; got {plain_repr(value)}")
+    return value
+
+
 def _images(images: Any, what: str = "images") -> torch.Tensor:
     if torch.is_tensor(images):
         x = images.to(torch.float32)
     else:
-        a = np.asarray(images)
+        from robopercept._checks import check_numeric
+
+        a = check_numeric(images, what)
         if a.ndim != 4 or a.shape[-1] not in (1, 3):
             raise InputError(
                 f"{what} must be (N, H, W, 3) float in [0, 1]; got {plain_repr(images)}"
@@ -760,6 +801,20 @@ def _images(images: Any, what: str = "images") -> torch.Tensor:
     if x.ndim != 4:
         raise InputError(f"{what} must be a batch (N, C, H, W); got shape {tuple(x.shape)}")
     return x
+
+
+def _permutation(value: Any, j: int) -> np.ndarray:
+    """A permutation of ``0..j-1`` (a skeleton's flip permutation), or InputError."""
+    try:
+        perm = np.asarray(value, dtype=np.int64).reshape(-1)
+    except (TypeError, ValueError):
+        perm = np.zeros(0, np.int64)
+    if perm.shape != (j,) or sorted(perm.tolist()) != list(range(j)):
+        raise InputError(
+            f"flip_permutation must be a permutation of the {j} joints (e.g. "
+            f"skeleton.flip_permutation()); got {plain_repr(value)}"
+        )
+    return perm
 
 
 def _check_input_size(model: nn.Module, x: torch.Tensor) -> None:
@@ -833,6 +888,9 @@ def predict_heatmaps(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """:func:`predict_keypoints` and the (flip-averaged) heatmaps ``(N, J, h, w)``
     float32 they were decoded from (None for DeepPose)."""
+    from robopercept.nn._guards import check_module
+
+    model = check_module(model)
     x = _images(images)
     _check_input_size(model, x)
     check_choice(method, "method", DECODERS)
@@ -840,7 +898,10 @@ def predict_heatmaps(
     model.eval()
     dev = next(model.parameters()).device
     kps, scores, hms = [], [], []
-    perm = None if flip_permutation is None else torch.as_tensor(np.asarray(flip_permutation))
+    j = int(getattr(model, "num_joints", 0))
+    perm = None
+    if flip_permutation is not None:
+        perm = torch.as_tensor(_permutation(flip_permutation, j or len(flip_permutation)))
     regression = getattr(model, "output", "heatmaps") == "coordinates"
     for i in range(0, len(x), batch_size):
         xb = x[i : i + batch_size].to(dev)
@@ -896,6 +957,8 @@ def refine_keypoints(
     if kp.ndim != 3 or kp.shape[0] != len(x) or kp.shape[-1] != 2:
         raise InputError(f"keypoints must be (N, J, 2) for the N images; got {tuple(kp.shape)}")
     for stage in refiners:
+        if not isinstance(stage, DeepPoseRefiner):
+            raise InputError(f"refiners must be DeepPoseRefiner stages; got {plain_repr(stage)}")
         stage.eval()
         if stage.num_joints != kp.shape[1]:
             raise InputError(
@@ -1523,9 +1586,10 @@ def train_cascade(
     if stages > 8:
         raise InputError(f"stages must be 0 to 8 cascade stages; got {stages}")
     x, kp, _ = _data_arrays(train, "train")
+    vx = _data_arrays(val, "val")[0] if val is not None else None
     side = crop if crop is not None else 0.25 * min(x.shape[-2:])
     est, _ = predict_keypoints(model, x)
-    vest = predict_keypoints(model, val.images)[0] if val is not None else None
+    vest = predict_keypoints(model, vx)[0] if vx is not None else None
     refiners: list[DeepPoseRefiner] = []
     histories: list[PoseHistory] = []
     for _ in range(stages):
@@ -1534,6 +1598,6 @@ def train_cascade(
         refiners.append(stage)
         histories.append(h)
         est = refine_keypoints(x, est, [stage])
-        if vest is not None:
-            vest = refine_keypoints(val.images, vest, [stage])
+        if vx is not None:
+            vest = refine_keypoints(vx, vest, [stage])
     return refiners, histories

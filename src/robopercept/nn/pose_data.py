@@ -226,8 +226,10 @@ def project_points(points: npt.ArrayLike, camera_matrix: npt.ArrayLike) -> np.nd
     >>> project_points([[0.1, -0.2, 2.0]], [[100, 0, 32], [0, 100, 24], [0, 0, 1]]).tolist()
     [[37.0, 14.0]]
     """
-    p = np.asarray(points, dtype=np.float64)
-    k = np.asarray(camera_matrix, dtype=np.float64)
+    from robopercept._checks import check_numeric
+
+    p = check_numeric(points, "points")
+    k = check_numeric(camera_matrix, "camera_matrix")
     if p.ndim < 1 or p.shape[-1] != 3:
         raise InputError(f"points must be (..., 3) camera-frame points; got shape {p.shape}")
     if k.shape[-2:] != (3, 3):
@@ -405,6 +407,14 @@ def _visibility(fig: _Figure, k: np.ndarray, zbuf: np.ndarray, w: int, h: int) -
     return np.concatenate([j2, v[:, None]], 1)
 
 
+def _index(i: Any, n: int) -> int:
+    if isinstance(i, bool) or not isinstance(i, (int, np.integer)):
+        raise InputError(f"index must be an integer; got {plain_repr(i)}")
+    if not -n <= int(i) < n:
+        raise InputError(f"index {int(i)} is out of range for {n} images")
+    return int(i) % n
+
+
 @dataclass(frozen=True, eq=False)
 class PoseDataset:
     """Single-person pose data: images with their 2-D joints (top-down crops).
@@ -439,9 +449,23 @@ class PoseDataset:
     masks: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        n = len(self.images)
-        if self.images.ndim != 4 or self.images.shape[-1] != 3:
-            raise InputError(f"images must be (N, H, W, 3); got shape {self.images.shape}")
+        from robopercept._checks import check_numeric
+
+        if not isinstance(self.skeleton, Skeleton):
+            raise InputError(f"skeleton must be a Skeleton; got {plain_repr(self.skeleton)}")
+        images = check_numeric(self.images, "images").astype(np.float32)
+        if images.ndim != 4 or images.shape[-1] != 3:
+            raise InputError(f"images must be (N, H, W, 3); got shape {images.shape}")
+        object.__setattr__(self, "images", images)
+        for name in ("keypoints", "boxes", "joints3d", "cameras"):
+            object.__setattr__(self, name, check_numeric(getattr(self, name), name))
+        if self.masks is not None:
+            masks = np.asarray(self.masks)
+            if masks.dtype != np.bool_ or masks.shape != images.shape[:3]:
+                raise InputError(
+                    f"masks must be (N, H, W) bool like the images; got {plain_repr(self.masks)}"
+                )
+        n = len(images)
         j = self.skeleton.num_joints
         for name, arr, shape in (
             ("keypoints", self.keypoints, (n, j, 3)),
@@ -456,6 +480,7 @@ class PoseDataset:
         return len(self.images)
 
     def __getitem__(self, i: int) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        i = _index(i, len(self))
         image = torch.from_numpy(np.ascontiguousarray(self.images[i].transpose(2, 0, 1)))
         return image, {
             "keypoints": torch.from_numpy(self.keypoints[i].astype(np.float32)),
@@ -470,7 +495,12 @@ class PoseDataset:
 
     def subset(self, indices: npt.ArrayLike) -> PoseDataset:
         """The items at ``indices`` (a new data set sharing nothing mutable)."""
-        idx = np.asarray(indices, dtype=np.int64).ravel()
+        from robopercept._checks import check_numeric
+
+        raw = check_numeric(indices, "indices").ravel()
+        if not np.all(np.isfinite(raw)) or np.any(raw != np.round(raw)):
+            raise InputError(f"indices must be whole numbers; got {plain_repr(indices)}")
+        idx = raw.astype(np.int64)
         if idx.size and (idx.min() < -len(self) or idx.max() >= len(self)):
             raise InputError(f"indices must lie in [0, {len(self)}); got {idx.tolist()[:8]}")
         return PoseDataset(

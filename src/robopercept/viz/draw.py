@@ -69,7 +69,14 @@ def enlarge_picture(img: np.ndarray, min_side: int) -> tuple[np.ndarray, int]:
     >>> f, big.shape, big[:, :2].tolist()
     (2, (4, 4), [[0, 0], [0, 0], [2, 2], [2, 2]])
     """
-    f = max(1, int(min_side) // max(img.shape[:2]))
+    if not isinstance(img, np.ndarray) or img.ndim not in (2, 3) or min(img.shape[:2]) < 1:
+        raise InputError(
+            f"img must be a non-empty (H, W) or (H, W, 3) array; got {plain_repr(img)}"
+        )
+    side = check_int(min_side, "min_side", 1)
+    if side > 1 << 15:
+        raise InputError(f"min_side must be at most {1 << 15} pixels; got {side}")
+    f = max(1, side // max(img.shape[:2]))
     if f > 1:
         img = np.repeat(np.repeat(img, f, axis=0), f, axis=1)
     return img, f
