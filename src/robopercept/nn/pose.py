@@ -901,7 +901,8 @@ def predict_heatmaps(
     j = int(getattr(model, "num_joints", 0))
     perm = None
     if flip_permutation is not None:
-        perm = torch.as_tensor(_permutation(flip_permutation, j or len(flip_permutation)))
+        size = j or int(np.asarray(flip_permutation).size)
+        perm = torch.as_tensor(_permutation(flip_permutation, size))
     regression = getattr(model, "output", "heatmaps") == "coordinates"
     for i in range(0, len(x), batch_size):
         xb = x[i : i + batch_size].to(dev)
@@ -1598,6 +1599,6 @@ def train_cascade(
         refiners.append(stage)
         histories.append(h)
         est = refine_keypoints(x, est, [stage])
-        if vx is not None:
+        if vx is not None and vest is not None:
             vest = refine_keypoints(vx, vest, [stage])
     return refiners, histories
