@@ -572,7 +572,9 @@ def test_validation_keeps_the_best_evaluated_epoch(monkeypatch):
         def __init__(self) -> None:
             self.stats = np.full(12, next(scripted))
 
-    monkeypatch.setattr(det, "evaluate_detector", lambda model, dataset, iou_type: Fake())
+    monkeypatch.setattr(
+        det, "evaluate_detector", lambda model, dataset, iou_type, sigmas=None: Fake()
+    )
     m = build("fcos")
     hist = train_detector(m, ds, cfg, progress=False, val=ds, val_every=2)
     assert hist.val == {2: 0.4, 4: 0.9, 6: 0.2} and hist.best_epoch == 4
