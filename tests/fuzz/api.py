@@ -2763,6 +2763,7 @@ VALID.update(
         "nn.pose.load_pose_model": {"path": Fixture("pose.pt")},
         "nn.pose.pose_arrays": {"model": _POSE_NET, "images": [IMG_RGB, IMG]},
         "nn.pose.evaluate_pose": {"model": _POSE_NET, "data": _POSE_DS},
+        "nn.pose.samples_picture": {"model": _POSE_NET, "data": _POSE_DS, "count": 2},
     }
 )
 METHODS["nn.skeleton.Skeleton"] = ("index", "flip_permutation", "parents", "to_dict", "from_dict")

@@ -139,31 +139,12 @@ def _sets(args: argparse.Namespace) -> Any:
     return pose_sets(args.data, args.images, args.size, args.seed, test_images=1)
 
 
-def _samples(model: Any, refiners: list[Any], val: Any, path: Path, count: int = 6) -> Path:
-    from robopercept.imaging import write_image
-    from robopercept.nn.pose import pose_arrays
-    from robopercept.viz.pose import draw_skeleton
-    from robopercept.viz.segmentation import panels_picture
-
-    sk = val.skeleton
-    n = min(count, len(val))
-    res = pose_arrays(
-        model,
-        list(val.images[:n]),
-        flip_permutation=sk.flip_permutation(),
-        refiners=refiners,
-    )
-    pics = [
-        draw_skeleton(val.images[i], r.keypoints, sk.links, flip_pairs=sk.flip_pairs, min_side=384)
-        for i, r in enumerate(res)
-    ]
-    return write_image(path, panels_picture(pics, [f"validation {i + 1}" for i in range(n)]))
-
-
 def _train(args: argparse.Namespace) -> int:
+    from robopercept.imaging import write_image
     from robopercept.nn.pose import (
         build_pose_model,
         evaluate_pose,
+        samples_picture,
         save_pose_model,
         train_cascade,
         train_pose,
@@ -219,7 +200,7 @@ def _train(args: argparse.Namespace) -> int:
         "metrics": ev.summary(),
     }
     (out / "metrics.json").write_text(json.dumps(metrics, indent=1))
-    _samples(model, refiners, val, out / "samples.png")
+    write_image(out / "samples.png", samples_picture(model, val, refiners=refiners))
     files = {n: str(out / n) for n in ("model.pt", "history.json", "metrics.json", "samples.png")}
     if args.json:
         print(json.dumps({**metrics, "files": files}))

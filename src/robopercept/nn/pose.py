@@ -95,6 +95,7 @@ __all__ = [
     "predict_heatmaps",
     "predict_keypoints",
     "refine_keypoints",
+    "samples_picture",
     "save_pose_model",
     "train_cascade",
     "train_pose",
@@ -1602,3 +1603,34 @@ def train_cascade(
         if vx is not None and vest is not None:
             vest = refine_keypoints(vx, vest, [stage])
     return refiners, histories
+
+
+def samples_picture(
+    model: nn.Module,
+    data: Any,
+    *,
+    refiners: Sequence[DeepPoseRefiner] = (),
+    count: int = 6,
+) -> np.ndarray:
+    """The first ``count`` images of a pose data set with the network's skeletons
+    (flip test, ``refiners`` applied), side by side and enlarged to read at 1080p: the
+    ``samples.png`` of ``robopercept nn pose train``.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+    """
+    from robopercept.viz.pose import draw_skeleton
+    from robopercept.viz.segmentation import panels_picture
+
+    sk = getattr(data, "skeleton", None)
+    if not isinstance(sk, Skeleton):
+        raise InputError(f"data must be a PoseDataset; got {plain_repr(data)}")
+    n = min(check_int(count, "count", 1), len(data))
+    images = list(data.images[:n])
+    res = pose_arrays(model, images, flip_permutation=sk.flip_permutation(), refiners=refiners)
+    pics = [
+        draw_skeleton(im, r.keypoints, sk.links, flip_pairs=sk.flip_pairs, min_side=384)
+        for im, r in zip(images, res, strict=True)
+    ]
+    return panels_picture(pics, [f"image {i + 1}" for i in range(n)])
