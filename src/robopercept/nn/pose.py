@@ -54,11 +54,8 @@ Networks
 
 from __future__ import annotations
 
-import copy
-import math
-import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
@@ -71,6 +68,7 @@ from robopercept._checks import check_bool, check_choice, check_int, check_real,
 from robopercept.errors import InputError
 from robopercept.nn.blocks import ConvBNAct, ResidualBlock
 from robopercept.nn.skeleton import Skeleton
+from robopercept.nn.training import EpochHistory, epoch_loop
 
 __all__ = [
     "DECODERS",
@@ -979,24 +977,11 @@ def refine_keypoints(
 
 
 # ----------------------------------------------------------------------------- training
-@dataclass
-class PoseHistory:
+class PoseHistory(EpochHistory):
     """What :func:`train_pose` and :func:`train_refiner` measured: mean training loss
     and seconds per epoch, the validation PCK by epoch, the epoch kept."""
 
-    losses: list[float] = field(default_factory=list)
-    seconds: list[float] = field(default_factory=list)
-    val: dict[int, float] = field(default_factory=dict)
-    best_epoch: int = 0
-
-    def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready dict."""
-        return {
-            "losses": self.losses,
-            "seconds": self.seconds,
-            "val_pck": {str(k): v for k, v in self.val.items()},
-            "best_epoch": self.best_epoch,
-        }
+    val_name = "val_pck"
 
 
 def _pck(pred: np.ndarray, keypoints: np.ndarray, boxes: np.ndarray, alpha: float) -> float:
@@ -1098,75 +1083,17 @@ def train_pose(
         pred, _ = predict_keypoints(model, vx)
         return _pck(pred, vkp.numpy(), vboxes, pck_alpha)
 
-    return _epochs(
+    return epoch_loop(
         model,
         n,
         cfg,
         gen,
         batch,
         validate if val is not None else None,
-        "training pose network",
-        progress,
+        desc="training pose network",
+        progress=progress,
+        history=PoseHistory(),
     )
-
-
-def _epochs(
-    model: nn.Module,
-    n: int,
-    cfg: Any,
-    gen: torch.Generator,
-    batch: Any,
-    validate: Any,
-    desc: str,
-    progress: bool,
-) -> PoseHistory:
-    """The loop of :func:`train_pose` and :func:`train_refiner`: per epoch a seeded
-    shuffle of the ``n`` samples in batches of ``cfg.batch_size``, ``batch(indices)``
-    giving each loss, one optimizer step per batch
-    (:func:`~robopercept.nn.training.step_optimizer`'s schedule), then ``validate()``
-    (higher is better) and the best epoch's weights kept."""
-    from robopercept.nn.training import deterministic_algorithms, optimizer_step, step_optimizer
-    from robopercept.progress import progress_bar
-
-    steps = -(-n // cfg.batch_size)
-    params = [p for p in model.parameters() if p.requires_grad]
-    opt, sched = step_optimizer(params, cfg, steps)
-    hist = PoseHistory()
-    best: dict[str, torch.Tensor] | None = None
-    best_value = -math.inf
-    bar = progress_bar(total=cfg.epochs, desc=desc, unit="epoch", disable=not progress)
-    try:
-        with deterministic_algorithms():
-            for epoch in range(cfg.epochs):
-                t0 = time.perf_counter()
-                model.train()
-                order = torch.randperm(n, generator=gen)
-                total = 0.0
-                for b in range(steps):
-                    value = batch(order[b * cfg.batch_size : (b + 1) * cfg.batch_size])
-                    optimizer_step(value, opt, sched, params, cfg, f"epoch {epoch + 1}")
-                    total += float(value.detach())
-                hist.losses.append(total / steps)
-                hist.seconds.append(time.perf_counter() - t0)
-                if validate is not None:
-                    score = validate()
-                    hist.val[epoch + 1] = score
-                    if best is None or score > best_value:
-                        best_value, hist.best_epoch = score, epoch + 1
-                        best = copy.deepcopy(model.state_dict())
-                else:
-                    hist.best_epoch = epoch + 1
-                bar.update(1)
-                post = {"loss": f"{hist.losses[-1]:.4g}"}
-                if hist.val:
-                    post["val PCK"] = f"{hist.val[epoch + 1]:.3f}"
-                bar.set_postfix(**post)
-    finally:
-        bar.close()
-    if best is not None:
-        model.load_state_dict(best)
-    model.eval()
-    return hist
 
 
 def train_refiner(
@@ -1259,15 +1186,16 @@ def train_refiner(
         pred = refine_keypoints(vx, vest, [refiner])
         return _pck(pred, vkp.numpy(), vboxes, pck_alpha)
 
-    return _epochs(
+    return epoch_loop(
         refiner,
         n,
         cfg,
         gen,
         batch,
         validate if val is not None else None,
-        "training DeepPose stage",
-        progress,
+        desc="training DeepPose stage",
+        progress=progress,
+        history=PoseHistory(),
     )
 
 

@@ -58,11 +58,13 @@ from robopercept.nn._guards import (
 )
 
 __all__ = [
+    "EpochHistory",
     "Evaluation",
     "History",
     "Normalize",
     "TrainConfig",
     "deterministic_algorithms",
+    "epoch_loop",
     "evaluate",
     "fit",
     "load_built_model",
@@ -616,6 +618,123 @@ def optimizer_step(
         nn.utils.clip_grad_norm_(params, cfg.clip_grad_norm)
     opt.step()
     sched.step()
+
+
+@dataclass
+class EpochHistory:
+    """What :func:`epoch_loop` measured: the mean training loss and the seconds of each
+    epoch, the validation score by (1-based) epoch, and the epoch whose weights were kept."""
+
+    losses: list[float] = field(default_factory=list)
+    seconds: list[float] = field(default_factory=list)
+    val: dict[int, float] = field(default_factory=dict)
+    best_epoch: int = 0
+
+    #: the name of the validation score in :meth:`to_dict` and on the progress bar
+    val_name = "val"
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (the validation scores under :attr:`val_name`)."""
+        return {
+            "losses": self.losses,
+            "seconds": self.seconds,
+            self.val_name: {str(k): v for k, v in self.val.items()},
+            "best_epoch": self.best_epoch,
+        }
+
+
+def epoch_loop(
+    model: nn.Module,
+    n: int,
+    cfg: TrainConfig,
+    generator: torch.Generator,
+    batch: Callable[[torch.Tensor], torch.Tensor],
+    validate: Callable[[], float] | None,
+    *,
+    desc: str,
+    progress: bool = True,
+    history: EpochHistory | None = None,
+) -> EpochHistory:
+    """The per-batch training loop of the task trainers (pose networks, point-cloud
+    networks): per epoch a shuffle of the ``n`` samples by ``generator`` in batches of
+    ``cfg.batch_size``, ``batch(indices)`` giving each batch's loss, one optimizer step
+    per batch (:func:`step_optimizer`'s optimizer and per-step schedule,
+    :func:`optimizer_step`'s checks), then ``validate()`` (higher is better) and the
+    best epoch's weights kept (the last epoch's without ``validate``). Runs under
+    :func:`deterministic_algorithms`; the model is left in eval mode.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        Its trainable parameters are optimized in place.
+    n : int
+        The number of training samples (indices ``0 .. n-1`` go to ``batch``).
+    cfg : TrainConfig
+        ``epochs``, ``batch_size``, the optimizer and schedule.
+    generator : torch.Generator
+        Draws the shuffles (seeded by the caller).
+    batch : callable
+        ``batch(indices: LongTensor) -> loss`` (a scalar tensor attached to the graph).
+    validate : callable or None
+        ``validate() -> float`` after each epoch, higher better.
+    desc : str
+        The progress bar's label.
+    progress : bool
+        Show a bar per run (one step per epoch) on stderr.
+    history : EpochHistory, optional
+        Filled in and returned (a subclass names its score, e.g. the pose PCK).
+
+    Returns
+    -------
+    EpochHistory
+
+    Raises
+    ------
+    InputError
+        A loss became NaN or infinite (lower the learning rate).
+    """
+    from robopercept.progress import progress_bar
+
+    n = check_count(n, "n (training samples)", 1, 1 << 40)
+    steps = -(-n // cfg.batch_size)
+    params = [p for p in model.parameters() if p.requires_grad]
+    opt, sched = step_optimizer(params, cfg, steps)
+    hist = EpochHistory() if history is None else history
+    best: dict[str, torch.Tensor] | None = None
+    best_value = -math.inf
+    bar = progress_bar(total=cfg.epochs, desc=desc, unit="epoch", disable=not progress)
+    try:
+        with deterministic_algorithms():
+            for epoch in range(cfg.epochs):
+                t0 = time.perf_counter()
+                model.train()
+                order = torch.randperm(n, generator=generator)
+                total = 0.0
+                for b in range(steps):
+                    value = batch(order[b * cfg.batch_size : (b + 1) * cfg.batch_size])
+                    optimizer_step(value, opt, sched, params, cfg, f"epoch {epoch + 1}")
+                    total += float(value.detach())
+                hist.losses.append(total / steps)
+                hist.seconds.append(time.perf_counter() - t0)
+                if validate is not None:
+                    score = float(validate())
+                    hist.val[epoch + 1] = score
+                    if best is None or score > best_value:
+                        best_value, hist.best_epoch = score, epoch + 1
+                        best = copy.deepcopy(model.state_dict())
+                else:
+                    hist.best_epoch = epoch + 1
+                bar.update(1)
+                post = {"loss": f"{hist.losses[-1]:.4g}"}
+                if hist.val:
+                    post[hist.val_name] = f"{hist.val[epoch + 1]:.3f}"
+                bar.set_postfix(**post)
+    finally:
+        bar.close()
+    if best is not None:
+        model.load_state_dict(best)
+    model.eval()
+    return hist
 
 
 def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path:
