@@ -1,4 +1,5 @@
-"""Point clouds: the container, file I/O, filters, normals, clustering, plane segmentation."""
+"""Point clouds: the container, file I/O, filters, normals, clustering, plane segmentation,
+and triangle meshes (reading, surface sampling, farthest point sampling)."""
 
 from robopercept.pointcloud.cloud import PointCloud
 from robopercept.pointcloud.clustering import euclidean_clusters
@@ -15,6 +16,14 @@ from robopercept.pointcloud.io import (
     read_point_cloud,
     write_point_cloud,
 )
+from robopercept.pointcloud.mesh import (
+    TriangleMesh,
+    chamfer_distance,
+    farthest_point_sampling,
+    normalize_unit_sphere,
+    read_mesh,
+    sample_surface,
+)
 from robopercept.pointcloud.normals import estimate_normals
 from robopercept.pointcloud.segmentation import PlaneSegment, segment_plane, segment_planes
 
@@ -22,13 +31,19 @@ __all__ = [
     "PcdData",
     "PlaneSegment",
     "PointCloud",
+    "TriangleMesh",
+    "chamfer_distance",
     "check_cloud_path",
     "estimate_normals",
     "euclidean_clusters",
+    "farthest_point_sampling",
+    "normalize_unit_sphere",
     "pass_through",
     "radius_outlier_removal",
+    "read_mesh",
     "read_pcd",
     "read_point_cloud",
+    "sample_surface",
     "segment_plane",
     "segment_planes",
     "statistical_outlier_removal",
