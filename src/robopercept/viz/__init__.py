@@ -1,6 +1,12 @@
 """Drawing on images and colour maps for scalar fields."""
 
 from robopercept.viz.cloud import render_points
+from robopercept.viz.cloud_dl import (
+    cloud_picture,
+    clouds_grid,
+    critical_points_picture,
+    feature_neighbours_picture,
+)
 from robopercept.viz.colormap import (
     colorize_depth,
     colorize_signed,
@@ -35,9 +41,12 @@ from robopercept.viz.segmentation import class_overlay, instance_overlay, panels
 
 __all__ = [
     "class_overlay",
+    "cloud_picture",
+    "clouds_grid",
     "colorize_depth",
     "colorize_signed",
     "confusion_picture",
+    "critical_points_picture",
     "curves_picture",
     "dense_flow_picture",
     "draw_boxes",
@@ -51,6 +60,7 @@ __all__ = [
     "draw_text",
     "draw_trails",
     "enlarge_picture",
+    "feature_neighbours_picture",
     "flow_to_color",
     "flow_wheel",
     "heatmap_grid",

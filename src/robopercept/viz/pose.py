@@ -54,6 +54,7 @@ from robopercept.viz.draw import (
     pil_canvas,
     to_rgb8,
 )
+from robopercept.viz.figure import agg_figure, figure_to_rgb
 
 __all__ = [
     "DEFAULT_VIEWS",
@@ -641,14 +642,8 @@ def skeleton_3d_picture(
     width, height = check_size(size, "size", 150, 4000, 12_000_000)
     if width < 200:
         raise InputError(f"size must be at least 200 pixels wide; got {width}")
-    try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-        from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers "3d")
-    except ImportError as exc:
-        raise InputError(
-            f"skeleton_3d_picture needs matplotlib: pip install matplotlib ({exc})"
-        ) from exc
+    fig = agg_figure(width, height, what="skeleton_3d_picture")
+    from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers "3d")
 
     poses = [p for p in (ref, pose) if p is not None]
     pts = np.concatenate(poses)
@@ -658,9 +653,6 @@ def skeleton_3d_picture(
         mid, half = (lo + hi) / 2, max(float((hi - lo).max()) / 2 * 1.1, 1e-3)
     else:
         mid, half = np.zeros(3), 1.0
-    dpi = 100
-    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
-    canvas = FigureCanvasAgg(fig)
     fig.subplots_adjust(left=0.02, right=0.95, bottom=0.1, top=0.92, wspace=0.15)
     styles = [("#1f77b4", names[0], pose)]
     if ref is not None:
@@ -685,6 +677,4 @@ def skeleton_3d_picture(
     if ref is not None:
         handles, texts = fig.axes[0].get_legend_handles_labels()
         fig.legend(handles[::-1], texts[::-1], loc="lower center", ncol=2)
-    canvas.draw()
-    rgba = np.asarray(canvas.buffer_rgba())
-    return np.ascontiguousarray(rgba[..., :3])
+    return figure_to_rgb(fig)
