@@ -2807,3 +2807,218 @@ VALID.update(
 )
 METHODS["nn.pose3d.PoseLibrary"] = ("lift",)
 METHODS["nn.pose3d.LiftingMLP"] = ("lift", "forward")
+
+
+# viz.cloud_dl (issue 29): a 60-point cloud, its labels, two 4-neighbour graphs
+_CDL_LABELS = (np.arange(60) % 3).astype(np.int64)
+_CDL_NEAR = np.argsort(((PTS3[:, None] - PTS3[None]) ** 2).sum(-1), axis=1)[:, :4]
+VALID.update(
+    {
+        "viz.cloud_picture": {
+            "points": PTS3,
+            "labels": _CDL_LABELS,
+            "names": ["a", "b", "c"],
+            "size": (300, 200),
+        },
+        "viz.clouds_grid": {
+            "clouds": [PTS3, PTS3[:20]],
+            "titles": ["a", "b / c"],
+            "labels": [_CDL_LABELS, None],
+            "title_colors": [None, "red"],
+            "size": (300, 200),
+        },
+        "viz.critical_points_picture": {"points": PTS3, "critical": [0, 5, 5], "size": (300, 200)},
+        "viz.feature_neighbours_picture": {
+            "points": PTS3,
+            "graphs": [_CDL_NEAR, _CDL_NEAR[::-1]],
+            "queries": [0, 7],
+            "size": (300, 200),
+        },
+    }
+)
+
+
+# nn.training.epoch_loop (issue 29: the loop shared by the pose and point-cloud trainers)
+def loop_batch() -> Any:
+    """A valid epoch_loop ``batch``: indices -> a scalar loss with a graph."""
+    import torch
+
+    w = torch.nn.Parameter(torch.ones(2))
+    return lambda idx: (w * w).sum() * float(len(idx))
+
+
+VALID["nn.training.epoch_loop"] = {
+    "model": TINY_NET,
+    "n": 4,
+    "cfg": TRAIN_CFG,
+    "generator": _b("torch:Generator"),
+    "batch": _b("tests.fuzz.api:loop_batch"),
+    "validate": None,
+    "desc": "fuzz",
+    "progress": False,
+}
+METHODS["nn.training.EpochHistory"] = ("to_dict",)
+
+
+# nn.pointnet and nn.dgcnn (issue 29): tiny PointNet / DGCNN, two clouds of 16 points
+_CLOUDS = _b("tests.fuzz.api:torch_image", 2, 16, 3)
+_CLOUD_MASK = _b("tests.fuzz.api:torch_tensor", [[True] * 12 + [False] * 4, [True] * 16], "bool")
+_CLOUD_CATS = _b("tests.fuzz.api:torch_tensor", [0, 1], "int64")
+_TINY_POINTNET = _b("robopercept.nn.pointnet:PointNet", 3, width=0.125)
+_CLOUD_GRAPH = _b("robopercept.nn.dgcnn:knn_graph", _CLOUDS, 4)
+VALID.update(
+    {
+        "nn.pointnet.check_cloud_batch": {
+            "x": _CLOUDS,
+            "in_channels": 3,
+            "mask": _CLOUD_MASK,
+            "category": _CLOUD_CATS,
+            "num_categories": 2,
+        },
+        "nn.pointnet.masked_max_pool": {
+            "features": _b("tests.fuzz.api:torch_image", 2, 16, 5),
+            "mask": _CLOUD_MASK,
+        },
+        "nn.pointnet.MaskedBatchNorm": {"num_features": 4},
+        "nn.pointnet.MaskedBatchNorm.forward": {
+            "x": _b("tests.fuzz.api:torch_image", 2, 16, 4),
+            "mask": _CLOUD_MASK,
+        },
+        "nn.pointnet.SharedMLP": {"channels": [3, 8, 4]},
+        "nn.pointnet.SharedMLP.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.pointnet.TNet": {"k": 3, "width": 0.125},
+        "nn.pointnet.TNet.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.pointnet.transform_regularizer": {
+            "transform": _b("tests.fuzz.api:torch_image", 2, 3, 3)
+        },
+        "nn.pointnet.PointNet": {"num_outputs": 3, "width": 0.125},
+        "nn.pointnet.PointNet.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.pointnet.PointNet.forward_aux": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.pointnet.critical_points": {
+            "model": _TINY_POINTNET,
+            "points": np.random.default_rng(29).uniform(-1, 1, (32, 3)),
+        },
+        "nn.dgcnn.knn_graph": {"x": _CLOUDS, "k": 4, "mask": _CLOUD_MASK, "chunk_size": 5},
+        "nn.dgcnn.edge_features": {"x": _CLOUDS, "idx": _CLOUD_GRAPH},
+        "nn.dgcnn.EdgeConv": {"in_channels": 3, "out_channels": 8, "k": 4},
+        "nn.dgcnn.EdgeConv.forward": {"x": _CLOUDS, "idx": _CLOUD_GRAPH, "mask": _CLOUD_MASK},
+        "nn.dgcnn.DGCNN": {"num_outputs": 3, "k": 4, "widths": (8, 8), "embedding": 16},
+        "nn.dgcnn.DGCNN.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.dgcnn.DGCNN.forward_aux": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+    }
+)
+METHODS["nn.pointnet.MaskedBatchNorm"] = ("forward",)
+METHODS["nn.pointnet.SharedMLP"] = ("forward",)
+METHODS["nn.pointnet.TNet"] = ("forward",)
+METHODS["nn.pointnet.PointNet"] = ("forward", "forward_aux")
+METHODS["nn.dgcnn.EdgeConv"] = ("forward",)
+METHODS["nn.dgcnn.DGCNN"] = ("forward", "forward_aux")
+
+
+# pointcloud.mesh and nn.cloud_data (issue 29): a tetrahedron, a mesh file, a class folder
+_TETRA_V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+_TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+_TETRA = _b("robopercept.pointcloud:TriangleMesh", _TETRA_V, _TETRA_F)
+_TETRA_OFF = (
+    "OFF\n4 4 0\n"
+    + "".join(f"{x:g} {y:g} {z:g}\n" for x, y, z in _TETRA_V)
+    + "".join(f"3 {a} {b} {c}\n" for a, b, c in _TETRA_F)
+)
+
+
+def _write_cloud_folder(path: Path) -> None:
+    """Two classes: ``a`` with a tetrahedron (OFF), ``b`` with a 60-point cloud (PCD)."""
+    from robopercept.pointcloud import PointCloud, write_point_cloud
+
+    (path / "a").mkdir(parents=True, exist_ok=True)
+    (path / "a" / "tetra.off").write_text(_TETRA_OFF)
+    write_point_cloud(path / "b" / "cloud.pcd", PointCloud(PTS3))
+
+
+FIXTURES["mesh.off"] = lambda p: p.write_text(_TETRA_OFF)
+FIXTURES["clouds"] = _write_cloud_folder
+_CLOUD_DS_ARGS = {
+    "points": np.random.default_rng(29).uniform(-1, 1, (4, 8, 3)).astype(np.float32),
+    "labels": [0, 1, 0, 1],
+    "class_names": ("a", "b"),
+    "parts": np.tile([0, 1, 2, 2, 0, 1, 2, 2], (4, 1)),
+    "part_names": ("a/x", "b/y", "b/z"),
+    "part_classes": np.array([0, 1, 1]),
+}
+VALID.update(
+    {
+        "pointcloud.TriangleMesh": {"vertices": _TETRA_V, "faces": _TETRA_F},
+        "pointcloud.read_mesh": {"path": Fixture("mesh.off")},
+        "pointcloud.sample_surface": {"mesh": _TETRA, "n": 16, "rng": 0},
+        "pointcloud.farthest_point_sampling": {"points": PTS3, "n": 8},
+        "pointcloud.chamfer_distance": {"a": PTS3[:30], "b": PTS3[30:]},
+        "nn.cloud_data.CloudDataset": _CLOUD_DS_ARGS,
+        "nn.cloud_data.CloudDataset.subset": {"indices": [1, 0]},
+        "nn.cloud_data.CloudDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
+        "nn.cloud_data.shape_mesh": {"name": "mug", "rng": 0},
+        "nn.cloud_data.procedural_shapes": {
+            "n_per_class": 1,
+            "n_points": 16,
+            "classes": ("sphere", "torus"),
+            "rng": 0,
+        },
+        "nn.cloud_data.augment_clouds": {
+            "points": _b("tests.fuzz.api:torch_image", 2, 16, 3),
+            "generator": 0,
+            "dropout": 0.2,
+        },
+        "nn.cloud_data.read_cloud_file": {"path": Fixture("mesh.off"), "n_points": 16},
+        "nn.cloud_data.read_cloud_folder": {"root": Fixture("clouds"), "n_points": 16},
+    }
+)
+METHODS["nn.cloud_data.CloudDataset"] = ("subset", "split")
+
+
+# nn.cloud (issue 29): training, scoring, files and prediction of the point-cloud networks
+_CLOUD_NET = _b("robopercept.nn.cloud:build_cloud_model", "pointnet", 2, width=0.125, seed=0)
+_CLOUD_DS = _b("robopercept.nn.cloud_data:CloudDataset", **_CLOUD_DS_ARGS)
+
+
+def _write_cloud_model(path: Path) -> None:
+    """A tiny PointNet classifier of the classes ("a", "b") saved by save_cloud_model."""
+    from robopercept.nn.cloud import build_cloud_model, save_cloud_model
+
+    save_cloud_model(path, build_cloud_model("pointnet", 2, width=0.125, seed=0), ["a", "b"])
+
+
+FIXTURES["cloud_model.pt"] = _write_cloud_model
+VALID.update(
+    {
+        "nn.cloud.build_cloud_model": {"name": "dgcnn", "num_outputs": 2, "k": 4, "widths": [8]},
+        "nn.cloud.train_cloud_model": {
+            "model": _CLOUD_NET,
+            "train": _CLOUD_DS,
+            "config": TRAIN_CFG,
+            "val": _CLOUD_DS,
+            "progress": False,
+        },
+        "nn.cloud.predict_clouds": {"model": _CLOUD_NET, "points": _CLOUD_DS_ARGS["points"]},
+        "nn.cloud.evaluate_cloud_model": {"model": _CLOUD_NET, "data": _CLOUD_DS},
+        "nn.cloud.part_ious": {
+            "pred": _CLOUD_DS_ARGS["parts"],
+            "parts": _CLOUD_DS_ARGS["parts"],
+            "labels": _CLOUD_DS_ARGS["labels"],
+            "part_classes": _CLOUD_DS_ARGS["part_classes"],
+        },
+        "nn.cloud.cloud_sets": {"data": "shapes", "shapes": 1, "n_points": 8},
+        "nn.cloud.save_cloud_model": {
+            "path": _out("cloud.pt"),
+            "model": _CLOUD_NET,
+            "class_names": ["a", "b"],
+        },
+        "nn.cloud.load_cloud_model": {"path": Fixture("cloud_model.pt")},
+        "nn.cloud.shipped_cloud_model": {"name": "pointnet"},
+        "nn.cloud.classify_cloud_file": {
+            "path": Fixture("mesh.off"),
+            "model": _CLOUD_NET,
+            "info": {"class_names": ["a", "b"], "n_points": 16},
+        },
+    }
+)
+METHODS["nn.cloud.CloudEvaluation"] = ("summary",)
+METHODS["nn.cloud.CloudPrediction"] = ("to_dict",)

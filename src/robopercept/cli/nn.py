@@ -140,11 +140,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--json", action="store_true", help="print the table as JSON")
     s.set_defaults(func=run_summary)
 
-    from robopercept.cli import detect, pose, segment
+    from robopercept.cli import detect, nn_cloud, pose, segment
 
     detect.register(ns, type(p))
     segment.register(ns, type(p))
     pose.register(ns, type(p))
+    nn_cloud.register(ns, type(p))
 
 
 def _split(text: str) -> tuple[float, float, float]:

@@ -38,6 +38,10 @@ _SUBMODULES = (
     "pose3d",
     "pose_data",
     "pose",
+    "pointnet",
+    "dgcnn",
+    "cloud_data",
+    "cloud",
 )
 
 __all__ = list(_SUBMODULES)

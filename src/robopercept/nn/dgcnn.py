@@ -57,7 +57,7 @@ shared MLP 256, 256, 128 (dropout after the first two) to ``K`` per point.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import torch
 import torch.nn.functional as F
@@ -369,7 +369,7 @@ class EdgeConv(nn.Module):
             # monotone in floating point too, so the max over j commutes with them: the
             # max of u_i + v_j is u_i + max_j v_j (min_j where the BN scale is negative)
             lo, hi = torch.aminmax(vj, dim=2)
-            scale = self.bn.weight * torch.rsqrt(self.bn.running_var + self.bn.eps)  # type: ignore[operator]
+            scale = self.bn.weight * torch.rsqrt(self.bn.running_var + self.bn.eps)  # type: ignore[operator,arg-type]
             best = torch.where(scale >= 0, hi, lo)
             return F.leaky_relu(self.bn._normalize(u + best, None), self.negative_slope)
         e = u[:, :, None, :] + vj
@@ -487,6 +487,7 @@ class DGCNN(nn.Module):
         self.convs = nn.ModuleList(EdgeConv(a, b, k=self.k) for a, b in zip(ins, ws, strict=True))
         self.embed = SharedMLP([total, emb], negative_slope=0.2)
         self.feature_channels = 2 * emb
+        self.head: nn.Module
         if self.task == "classify":
             self.head = SharedMLP([2 * emb, 512, 256], negative_slope=0.2, dropout=p)
             self.out = nn.Linear(256, self.num_outputs)
@@ -550,7 +551,7 @@ class DGCNN(nn.Module):
                 onehot = F.one_hot(category, self.num_categories).to(pooled.dtype)
                 glob = torch.cat([pooled, onehot], 1)
             z = torch.cat([point, glob[:, None, :].expand(-1, n, -1)], -1)
-            for mlp in self.head:  # type: ignore[union-attr]
+            for mlp in cast("list[SharedMLP]", self.head):
                 z = mlp._run(z, mask)
             logits = self.out(z)
         return CloudOutput(logits, pooled, index, [], graphs)

@@ -424,7 +424,7 @@ class MaskedBatchNorm(nn.BatchNorm1d):
             m = self.momentum
             if self.training:
                 with torch.no_grad():
-                    self.num_batches_tracked += 1  # type: ignore[operator]
+                    self.num_batches_tracked += 1  # type: ignore[operator,assignment]
                 if m is None:  # cumulative average, as torch's BatchNorm
                     m = 1.0 / float(self.num_batches_tracked)  # type: ignore[arg-type]
             rows = F.batch_norm(
@@ -449,7 +449,7 @@ class MaskedBatchNorm(nn.BatchNorm1d):
                 )
             var, mean = torch.var_mean(rows, dim=0, correction=0)
             with torch.no_grad():
-                self.num_batches_tracked += 1  # type: ignore[operator]
+                self.num_batches_tracked += 1  # type: ignore[operator,assignment]
                 m = self.momentum
                 if m is None:  # cumulative average, as torch's BatchNorm
                     m = 1.0 / float(self.num_batches_tracked)  # type: ignore[arg-type]

@@ -1083,7 +1083,8 @@ def train_pose(
         pred, _ = predict_keypoints(model, vx)
         return _pck(pred, vkp.numpy(), vboxes, pck_alpha)
 
-    return epoch_loop(
+    hist = PoseHistory()
+    epoch_loop(
         model,
         n,
         cfg,
@@ -1092,8 +1093,9 @@ def train_pose(
         validate if val is not None else None,
         desc="training pose network",
         progress=progress,
-        history=PoseHistory(),
+        history=hist,
     )
+    return hist
 
 
 def train_refiner(
@@ -1186,7 +1188,8 @@ def train_refiner(
         pred = refine_keypoints(vx, vest, [refiner])
         return _pck(pred, vkp.numpy(), vboxes, pck_alpha)
 
-    return epoch_loop(
+    hist = PoseHistory()
+    epoch_loop(
         refiner,
         n,
         cfg,
@@ -1195,8 +1198,9 @@ def train_refiner(
         validate if val is not None else None,
         desc="training DeepPose stage",
         progress=progress,
-        history=PoseHistory(),
+        history=hist,
     )
+    return hist
 
 
 # ----------------------------------------------------------------------------- checkpoints

@@ -1,0 +1,130 @@
+"""``robopercept nn cloud train|eval|CLOUD...`` (issue 29, item 4): a tiny run (a few
+64-point procedural shapes, one epoch) so the file stays fast; the printed figures
+equal the library's on the same split, the cloud form's prediction equals
+:func:`~robopercept.nn.cloud.classify_cloud_file`'s, and bad arguments name their flag."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from robopercept.cli.main import main  # noqa: E402
+from robopercept.nn.cloud import (  # noqa: E402
+    classify_cloud_file,
+    cloud_sets,
+    evaluate_cloud_model,
+    load_cloud_model,
+)
+from robopercept.pointcloud import read_point_cloud  # noqa: E402
+from tests.conftest import data_path  # noqa: E402
+
+DATA = ["--data", "shapes", "--shapes", "3", "--points", "64", "--seed", "0"]
+FILES = {"model.pt", "history.json", "metrics.json", "confusion.png"}
+
+pytestmark = pytest.mark.usefixtures("torch_one_thread")
+
+
+def _run(args: list[str]) -> tuple[int, str]:
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = main(args)
+    return rc, buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("cloud") / "run"
+    args = ["--width", "0.125", "--epochs", "1", "--batch-size", "8", "--json", "-o", str(out)]
+    rc, text = _run(["nn", "cloud", "train", *DATA, *args])
+    assert rc == 0
+    return out, json.loads(text)
+
+
+def test_train_writes_the_run_and_its_figures_are_the_librarys(run):
+    out, printed = run
+    assert {p.name for p in out.iterdir()} >= FILES
+    assert set(printed["files"]) == FILES and printed["split"] == "test"
+    model, info = load_cloud_model(out / "model.pt")
+    assert info["n_points"] == 64 and len(info["class_names"]) == 12
+    test = cloud_sets("shapes", shapes=3, n_points=64, seed=0).test
+    ev = evaluate_cloud_model(model, test)
+    assert printed["metrics"]["accuracy"] == pytest.approx(ev.accuracy, abs=1e-12)
+    rc, text = _run(["nn", "cloud", "eval", str(out), *DATA, "--json"])
+    assert rc == 0 and json.loads(text)["metrics"] == printed["metrics"]
+
+
+def test_segment_training_reports_miou(tmp_path):
+    out = tmp_path / "seg"
+    args = ["--task", "segment", "--model", "dgcnn", "--k", "4", "--epochs", "1", "--json"]
+    rc, text = _run(["nn", "cloud", "train", *DATA, *args, "-o", str(out)])
+    printed = json.loads(text)
+    assert rc == 0 and 0.0 <= printed["metrics"]["instance_miou"] <= 1.0
+    model, info = load_cloud_model(out / "model.pt")
+    assert model.task == "segment" and len(info["part_names"]) == model.num_outputs
+
+
+@pytest.mark.realdata
+def test_cloud_form_on_real_modelnet_meshes(run, tmp_path):
+    out, _ = run
+    meshes = sorted(data_path("pointcloud_cls", "ModelNet10").rglob("*.off"))[:2]
+    rc, text = _run(["nn", "cloud", *map(str, meshes), "--model", str(out), "--json"])
+    rows = json.loads(text)
+    assert rc == 0 and len(rows) == 2
+    model, info = load_cloud_model(out / "model.pt")
+    for mesh, row in zip(meshes, rows, strict=True):
+        ref = classify_cloud_file(mesh, model, info)
+        assert row["class"] == ref.label and row["points"] == 64
+        assert row["probabilities"] == pytest.approx(ref.probabilities, abs=1e-6)
+
+
+def test_segment_form_writes_a_coloured_ply(run, tmp_path):
+    out, _ = run
+    seg_run = tmp_path / "seg"
+    args = ["--task", "segment", "--width", "0.125", "--epochs", "1", "--quiet"]
+    assert _run(["nn", "cloud", "train", *DATA, *args, "-o", str(seg_run)])[0] == 0
+    sets = cloud_sets("shapes", shapes=3, n_points=64, seed=0)
+    from robopercept.pointcloud import PointCloud, write_point_cloud
+
+    src = write_point_cloud(tmp_path / "shape.pcd", PointCloud(sets.test.points[0].astype(float)))
+    pics = tmp_path / "pics"
+    rc, text = _run(
+        ["nn", "cloud", str(src), "--model", str(out), "--segment", str(seg_run), "-o", str(pics)]
+    )
+    assert rc == 0 and "shape.pcd:" in text
+    cloud = read_point_cloud(pics / "shape_parts.ply")
+    assert len(cloud.points) == 64 and cloud.colors is not None
+    # one colour per predicted part, and the picture
+    assert 1 <= len(np.unique(cloud.colors, axis=0)) <= 4
+    assert (pics / "shape.png").is_file()
+
+
+@pytest.mark.parametrize(
+    ("args", "flag"),
+    [
+        (["train", "--data", "nowhere/"], "--data"),
+        (["train", *DATA, "--model", "dgcnn", "--k", "65"], "--k"),
+        (["train", *DATA, "--lr", "0"], "--lr"),
+        (["eval", "missing_run", *DATA], "RUN_OR_MODEL"),
+        (["missing.ply", "--json"], "CLOUD"),
+    ],
+)
+def test_bad_arguments_name_their_flag(args, flag, capsys):
+    assert main(["nn", "cloud", *args]) == 2
+    assert flag in capsys.readouterr().err
+
+
+def test_segment_needs_an_output_folder(run, tmp_path, capsys):
+    out, _ = run
+    src = tmp_path / "c.pcd"
+    from robopercept.pointcloud import PointCloud, write_point_cloud
+
+    write_point_cloud(src, PointCloud(np.random.default_rng(0).random((30, 3))))
+    assert main(["nn", "cloud", str(src), "--model", str(out), "--segment", str(out)]) == 2
+    assert "--segment" in capsys.readouterr().err
