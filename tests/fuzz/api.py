@@ -3020,5 +3020,17 @@ VALID.update(
         },
     }
 )
+VALID["nn.cloud.CloudEvaluation"] = {
+    "accuracy": 0.5,
+    "mean_class_accuracy": 0.5,
+    "confusion": np.array([[1, 1], [0, 0]]),
+    "predictions": np.array([0, 1]),
+}
+VALID["nn.cloud.CloudPrediction"] = {
+    "path": "a.ply",
+    "label": "a",
+    "probabilities": {"a": 0.75, "b": 0.25},
+    "points": PTS3,
+}
 METHODS["nn.cloud.CloudEvaluation"] = ("summary",)
 METHODS["nn.cloud.CloudPrediction"] = ("to_dict",)

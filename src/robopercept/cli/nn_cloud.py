@@ -21,7 +21,7 @@ class and writes ``OUT/NAME_parts.ply`` coloured by part, and ``-o`` writes
 Without ``--model`` the shipped PointNet (trained on the procedural shapes) is used;
 ``--model dgcnn`` the shipped DGCNN; ``--segment`` the shipped PointNet part
 segmenter. They are rebuilt from a checkout by ``python -m benchmarks.cloud_figures
---only ship --seeds 0 --save src/robopercept/data``.
+--only pointnet dgcnn pointnet-parts --seeds 0 --save src/robopercept/data``.
 
 The work is done by :mod:`robopercept.nn.cloud`, :mod:`robopercept.nn.cloud_data` and
 :mod:`robopercept.viz.cloud_dl`; this module parses and prints. Exit 2 for bad

@@ -72,7 +72,8 @@ SHIPPED_CLOUD_MODELS = {
 }
 #: the command that rebuilds the shipped models from a checkout
 BUILD_SHIPPED_CLOUD = (
-    "python -m benchmarks.cloud_figures --only ship --seeds 0 --save src/robopercept/data"
+    "python -m benchmarks.cloud_figures --only pointnet dgcnn pointnet-parts --seeds 0 "
+    "--save src/robopercept/data"
 )
 
 

@@ -951,7 +951,10 @@ def _file_cloud(path: Path, n: int, fps: bool, gen: np.random.Generator) -> np.n
         )
     if suffix == ".off" or (suffix == ".ply" and _ply_has_faces(path)):
         mesh = read_mesh(path)
-        pts, _ = sample_surface(mesh, 4 * n if fps else n, gen)
+        try:
+            pts, _ = sample_surface(mesh, 4 * n if fps else n, gen)
+        except DegenerateError as exc:
+            raise DegenerateError(f"{path}: {exc}") from None
         if fps:
             pts = pts[farthest_point_sampling(pts, n, start=None, rng=gen)]
     else:

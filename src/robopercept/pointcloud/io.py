@@ -25,7 +25,14 @@ from robopercept._checks import check_bool, check_extension, check_file
 from robopercept.errors import FileFormatError
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
-__all__ = ["PcdData", "check_cloud_path", "read_pcd", "read_point_cloud", "write_point_cloud"]
+__all__ = [
+    "PcdData",
+    "check_cloud_path",
+    "ply_element_counts",
+    "read_pcd",
+    "read_point_cloud",
+    "write_point_cloud",
+]
 
 _MAX_HEADER = 1 << 16
 _PCD_TYPES = {
@@ -346,20 +353,51 @@ def _cloud_from_pcd(pcd: PcdData, path: Path) -> PointCloud:
 
 
 # --------------------------------------------------------------------------- PLY
-def _check_ply_header(raw_head: bytes, size: int, path: Path) -> None:
-    """Refuse element counts the file cannot hold before plyfile allocates them."""
+_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2}
+_PLY_SIZES.update({"int16": 2, "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4})
+_PLY_SIZES.update({"float": 4, "float32": 4, "double": 8, "float64": 8})
+
+
+def ply_element_counts(raw_head: bytes, size: int, path: Path) -> dict[str, int]:
+    """The element counts of a PLY header (``{"vertex": 8, "face": 12}``), after checking
+    that a file of ``size`` bytes can hold them (each element's rows at their smallest:
+    2 bytes per ascii property, the type's size per binary one), so a hostile header is
+    refused before plyfile allocates anything.
+
+    Parameters
+    ----------
+    raw_head : bytes
+        The first bytes of the file (the header, at most 64 KiB).
+    size : int
+        The file's size in bytes.
+    path : Path
+        Named in the error.
+
+    Returns
+    -------
+    dict of str to int
+
+    Raises
+    ------
+    FileFormatError
+        No ``ply`` magic or ``end_header``, a bad or negative element count, or counts
+        the file cannot hold.
+
+    Examples
+    --------
+    >>> head = b"ply\\nformat ascii 1.0\\nelement vertex 2\\nproperty float x\\nend_header\\n"
+    >>> ply_element_counts(head, 60, Path("a.ply"))
+    {'vertex': 2}
+    """
     text = raw_head.decode("ascii", errors="replace")
     end = text.find("end_header")
     if not text.startswith("ply") or end < 0:
         raise _fail(path, "not a PLY file (no 'ply' magic or no end_header in 64 KiB)")
     lines = text[:end].splitlines()
-    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format ")), "ascii")
-    sizes = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2}
-    sizes.update({"int16": 2, "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4})
-    sizes.update({"float": 4, "float32": 4, "double": 8, "float64": 8})
+    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format ") and ln.split()[1:]), "")
+    counts: dict[str, int] = {}
     min_bytes = 0
-    count = 0
-    row = 0
+    count = row = 0
     for ln in [*lines, "element end 0"]:
         parts = ln.split()
         if not parts:
@@ -372,19 +410,21 @@ def _check_ply_header(raw_head: bytes, size: int, path: Path) -> None:
                 raise _fail(path, f"bad element line {ln!r}") from None
             if count < 0:
                 raise _fail(path, f"negative element count in {ln!r}")
+            counts[parts[1]] = count
             row = 0
         elif parts[0] == "property":
             if fmt == "ascii":
                 row += 2  # a digit and a separator at least
-            elif parts[1] == "list" and len(parts) > 2:
-                row += sizes.get(parts[2], 1)
+            elif parts[1:2] == ["list"] and len(parts) > 2:
+                row += _PLY_SIZES.get(parts[2], 1)
             elif len(parts) > 1:
-                row += sizes.get(parts[1], 1)
+                row += _PLY_SIZES.get(parts[1], 1)
+    counts.pop("end", None)
     if min_bytes > size:
         raise _fail(
-            path,
-            f"header claims elements needing at least {min_bytes} bytes; the file has {size}",
+            path, f"header claims elements needing at least {min_bytes} bytes; the file has {size}"
         )
+    return counts
 
 
 def _read_ply(path: Path) -> PointCloud:
@@ -395,7 +435,7 @@ def _read_ply(path: Path) -> PointCloud:
     try:
         size = path.stat().st_size
         with path.open("rb") as fh:
-            _check_ply_header(fh.read(_MAX_HEADER), size, path)
+            ply_element_counts(fh.read(_MAX_HEADER), size, path)
         ply = PlyData.read(str(path))
     except FileFormatError:
         raise

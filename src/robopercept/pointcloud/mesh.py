@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from robopercept._checks import as_rng, check_file, check_int, check_points, plain_repr
 from robopercept.errors import DegenerateError, FileFormatError, InputError
+from robopercept.pointcloud.io import ply_element_counts
 
 __all__ = [
     "TriangleMesh",
@@ -318,49 +319,6 @@ def _checked_fan(
 
 
 # --------------------------------------------------------------------------- PLY
-_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2}
-_PLY_SIZES.update({"int16": 2, "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4})
-_PLY_SIZES.update({"float": 4, "float32": 4, "double": 8, "float64": 8})
-
-
-def _ply_header_counts(raw_head: bytes, size: int, path: Path) -> dict[str, int]:
-    """Element counts of a PLY header, after checking that the file can hold them."""
-    text = raw_head.decode("ascii", errors="replace")
-    end = text.find("end_header")
-    if not text.startswith("ply") or end < 0:
-        raise _fail(path, "not a PLY file (no 'ply' magic or no end_header in 64 KiB)")
-    lines = text[:end].splitlines()
-    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format ") and ln.split()[1:]), "")
-    counts: dict[str, int] = {}
-    min_bytes = 0
-    count = row = 0
-    for ln in [*lines, "element end 0"]:
-        parts = ln.split()
-        if not parts:
-            continue
-        if parts[0] == "element":
-            min_bytes += count * max(row, 1)
-            try:
-                count = int(parts[2])
-            except (IndexError, ValueError):
-                raise _fail(path, f"bad element line {ln!r}") from None
-            if count < 0:
-                raise _fail(path, f"negative element count in {ln!r}")
-            counts[parts[1]] = count
-            row = 0
-        elif parts[0] == "property":
-            if fmt == "ascii":
-                row += 2  # a digit and a separator at least
-            elif parts[1:2] == ["list"] and len(parts) > 2:
-                row += _PLY_SIZES.get(parts[2], 1)
-            elif len(parts) > 1:
-                row += _PLY_SIZES.get(parts[1], 1)
-    counts.pop("end", None)
-    if min_bytes > size:
-        raise _fail(
-            path, f"header claims elements needing at least {min_bytes} bytes; the file has {size}"
-        )
-    return counts
 
 
 def _read_ply_mesh(path: Path) -> TriangleMesh:
@@ -369,7 +327,7 @@ def _read_ply_mesh(path: Path) -> TriangleMesh:
     try:
         size = path.stat().st_size
         with path.open("rb") as fh:
-            counts = _ply_header_counts(fh.read(_MAX_HEADER), size, path)
+            counts = ply_element_counts(fh.read(_MAX_HEADER), size, path)
         if counts.get("face", 0) == 0:
             raise _fail(
                 path,
