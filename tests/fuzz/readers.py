@@ -594,6 +594,16 @@ def _ply_seeds(work: Path) -> list[Path]:
     return seeds
 
 
+def _mesh_seeds(work: Path) -> list[Path]:
+    """Real ModelNet meshes: OFF (with its "OFF490 518 0" first line) and a PLY mesh."""
+    del work
+    return _real(
+        "pointcloud_cls/ModelNet10/sofa/test/sofa_0681.off",
+        "pointcloud_cls/ModelNet_samples_zeaggler/bed/bed_0001.off",
+        "pointcloud_cls/ModelNet_samples_zeaggler/bathtub/bathtub_0154_open3d.ply",
+    )
+
+
 def _image_seeds(work: Path) -> list[Path]:
     from robopercept.imaging import read_image, write_image
 
@@ -721,6 +731,7 @@ def _hog_seeds(work: Path) -> list[Path]:
 READERS: tuple[Reader, ...] = (
     Reader("pcd", "robopercept.pointcloud.io:read_point_cloud", "pcd", _pcd_seeds, TEXT),
     Reader("ply", "robopercept.pointcloud.io:read_point_cloud", "ply", _ply_seeds, TEXT),
+    Reader("mesh", "robopercept.pointcloud.mesh:read_mesh", "text", _mesh_seeds, TEXT),
     Reader(
         "image",
         "robopercept.imaging.io:read_image",

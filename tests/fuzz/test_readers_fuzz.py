@@ -25,6 +25,7 @@ SEED = 25
 COUNTS = {
     "pcd": 40,
     "ply": 40,
+    "mesh": 40,
     "image": 48,
     "mot": 40,
     "tum": 40,
