@@ -29,7 +29,6 @@ from robopercept.nn.cloud_data import (  # noqa: E402
     shape_mesh,
 )
 from robopercept.pointcloud import normalize_unit_sphere, sample_surface  # noqa: E402
-
 from tests.conftest import data_path  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
