@@ -744,6 +744,21 @@ def classify_cloud_file(
     """
     from robopercept.nn.cloud_data import read_cloud_file
 
+    _spec(model)
+    if not isinstance(info, dict) or not isinstance(info.get("class_names"), (list, tuple)):
+        raise InputError(
+            f"info must be load_cloud_model's dict (with class_names); got {plain_repr(info)}"
+        )
+    if segmenter is not None and not (
+        isinstance(segmenter, tuple)
+        and len(segmenter) == 2
+        and isinstance(segmenter[1], dict)
+        and _spec(segmenter[0]).task == "segment"
+    ):
+        raise InputError(
+            "segmenter must be a (model, info) pair of a segmentation network, as "
+            f"load_cloud_model returns; got {plain_repr(segmenter)}"
+        )
     n = int(info.get("n_points", 1024)) if n_points is None else check_int(n_points, "n_points", 1)
     pts = read_cloud_file(path, n, rng=rng)
     prob = predict_clouds(model, pts)

@@ -695,7 +695,22 @@ def epoch_loop(
     """
     from robopercept.progress import progress_bar
 
+    model = check_module(model)
     n = check_count(n, "n (training samples)", 1, 1 << 40)
+    if not isinstance(cfg, TrainConfig):
+        raise InputError(f"cfg must be a TrainConfig; got {plain_repr(cfg)}")
+    if not isinstance(generator, torch.Generator):
+        raise InputError(
+            f"generator must be a torch.Generator (torch.Generator().manual_seed(0)); got "
+            f"{plain_repr(generator)}"
+        )
+    if not callable(batch) or (validate is not None and not callable(validate)):
+        raise InputError(
+            "batch must be a callable (indices -> loss) and validate a callable (-> score) "
+            f"or None; got {plain_repr(batch)} and {plain_repr(validate)}"
+        )
+    if not isinstance(desc, str) or not isinstance(history, (EpochHistory, type(None))):
+        raise InputError("desc must be a str and history an EpochHistory or None")
     steps = -(-n // cfg.batch_size)
     params = [p for p in model.parameters() if p.requires_grad]
     opt, sched = step_optimizer(params, cfg, steps)
