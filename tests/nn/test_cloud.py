@@ -39,7 +39,7 @@ DG = {"k": 4, "widths": [8, 8], "embedding": 16}
 @pytest.fixture(scope="module")
 def shapes() -> tuple[CloudDataset, CloudDataset]:
     train = procedural_shapes(12, 64, classes=CLASSES, rng=0)
-    test = procedural_shapes(6, 64, classes=CLASSES, rng=1)
+    test = procedural_shapes(10, 64, classes=CLASSES, rng=1)
     return train, test
 
 
@@ -49,15 +49,23 @@ def _cfg(epochs: int = 12, seed: int = 0) -> TrainConfig:
 
 @pytest.fixture(scope="module")
 def trained(shapes) -> torch.nn.Module:
-    train, test = shapes
-    net = build_cloud_model("pointnet", 3, seed=0, **TINY)
-    train_cloud_model(net, train, _cfg(), val=test, progress=False)
+    # one thread, set here: a module fixture runs before the per-test torch_one_thread,
+    # and float sums (hence the trained weights) depend on the thread count
+    train, _ = shapes
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        net = build_cloud_model("pointnet", 3, seed=0, **TINY)
+        train_cloud_model(net, train, _cfg(16), progress=False)
+    finally:
+        torch.set_num_threads(before)
     return net
 
 
 def test_training_learns_three_distinct_shapes(trained, shapes):
     # sphere, flat slab and L-prism differ at every scale: a tiny PointNet separates
-    # them on held-out shapes within 12 epochs of 36 clouds
+    # them on 30 held-out shapes after 16 epochs of 36 clouds (the last epoch kept: no
+    # selection on the test shapes)
     ev = evaluate_cloud_model(trained, shapes[1])
     assert ev.accuracy >= 0.9
     assert ev.confusion.sum() == len(shapes[1]) and ev.confusion.shape == (3, 3)
