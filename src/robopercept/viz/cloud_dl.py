@@ -53,7 +53,7 @@ from robopercept._checks import (
 from robopercept.errors import InputError
 from robopercept.viz.colormap import label_colors
 from robopercept.viz.draw import check_picture_size
-from robopercept.viz.figure import agg_figure, figure_to_rgb
+from robopercept.viz.figure import agg_figure, check_views, figure_to_rgb
 
 __all__ = [
     "DEFAULT_AZIM",
@@ -370,15 +370,7 @@ def cloud_picture(
                 "names came"
             )
         label_names = [check_text(t, f"names[{i}]") for i, t in enumerate(names)]
-    if isinstance(views, (str, bytes)) or not isinstance(views, (Sequence, np.ndarray)):
-        raise InputError(f"views must be a sequence of (elevation, azimuth); got {views!r}")
-    if not 1 <= len(views) <= 6:
-        raise InputError(f"views must hold 1 to 6 (elevation, azimuth) pairs; got {len(views)}")
-    angles = []
-    for i, v in enumerate(views):
-        if not isinstance(v, (Sequence, np.ndarray)) or isinstance(v, str) or len(v) != 2:
-            raise InputError(f"views[{i}] must be (elevation, azimuth) in radians; got {v!r}")
-        angles.append(_angles(v[0], v[1], f"views[{i}] "))
+    angles = check_views(views)
     width, height = _size(size)
 
     fig = _figure((width, height), 1600, "cloud_picture")

@@ -15,18 +15,20 @@ layout) of its reference size, and every font, marker and line scales with the p
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from robopercept._checks import check_int, check_text, plain_repr
+from robopercept._checks import check_int, check_real, check_text, plain_repr
 from robopercept.errors import InputError
 from robopercept.viz.draw import check_picture_size
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["agg_figure", "figure_to_rgb"]
+__all__ = ["agg_figure", "check_views", "figure_to_rgb"]
 
 
 def agg_figure(
@@ -126,3 +128,32 @@ def figure_to_rgb(fig: Figure) -> np.ndarray:
     canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())
     return np.ascontiguousarray(rgba[..., :3])
+
+
+def check_views(views: Any) -> list[tuple[float, float]]:
+    """The 3-D viewpoints of a multi-view picture: 1 to 6 ``(elevation, azimuth)`` pairs
+    in radians (elevation in [-pi, pi], azimuth in [-2 pi, 2 pi]), returned in degrees
+    for matplotlib's ``view_init``.
+
+    Raises
+    ------
+    InputError
+        Not a sequence of pairs, too few or too many, or an angle out of range.
+
+    Examples
+    --------
+    >>> check_views([(0.0, math.pi / 2)])
+    [(0.0, 90.0)]
+    """
+    if isinstance(views, (str, bytes)) or not isinstance(views, (Sequence, np.ndarray)):
+        raise InputError(f"views must be a sequence of (elevation, azimuth); got {views!r}")
+    if not 1 <= len(views) <= 6:
+        raise InputError(f"views must hold 1 to 6 (elevation, azimuth) pairs; got {len(views)}")
+    angles = []
+    for i, v in enumerate(views):
+        if not isinstance(v, (Sequence, np.ndarray)) or isinstance(v, str) or len(v) != 2:
+            raise InputError(f"views[{i}] must be (elevation, azimuth) in radians; got {v!r}")
+        elev = check_real(v[0], f"views[{i}] elevation", -math.pi, math.pi)
+        azim = check_real(v[1], f"views[{i}] azimuth", -2 * math.pi, 2 * math.pi)
+        angles.append((math.degrees(elev), math.degrees(azim)))
+    return angles

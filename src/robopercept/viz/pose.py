@@ -54,7 +54,7 @@ from robopercept.viz.draw import (
     pil_canvas,
     to_rgb8,
 )
-from robopercept.viz.figure import agg_figure, figure_to_rgb
+from robopercept.viz.figure import agg_figure, check_views, figure_to_rgb
 
 __all__ = [
     "DEFAULT_VIEWS",
@@ -621,17 +621,7 @@ def skeleton_3d_picture(
     joints = pose.shape[0]
     link = _check_links(links, max(joints, 1))
     ref = None if reference is None else _check_pose3d(reference, "reference", joints)
-    if isinstance(views, (str, bytes)) or not isinstance(views, (Sequence, np.ndarray)):
-        raise InputError(f"views must be a sequence of (elevation, azimuth); got {views!r}")
-    if not 1 <= len(views) <= 6:
-        raise InputError(f"views must hold 1 to 6 (elevation, azimuth) pairs; got {len(views)}")
-    angles = []
-    for i, v in enumerate(views):
-        if not isinstance(v, (Sequence, np.ndarray)) or isinstance(v, str) or len(v) != 2:
-            raise InputError(f"views[{i}] must be (elevation, azimuth) in radians; got {v!r}")
-        elev = check_real(v[0], f"views[{i}] elevation", -math.pi, math.pi)
-        azim = check_real(v[1], f"views[{i}] azimuth", -2 * math.pi, 2 * math.pi)
-        angles.append((math.degrees(elev), math.degrees(azim)))
+    angles = check_views(views)
     if titles is None:
         heads = [f"elevation {e:.0f}°, azimuth {a:.0f}°" for e, a in angles]
     else:
