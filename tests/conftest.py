@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import multiprocessing
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -78,12 +80,42 @@ def torch_one_thread():
     torch.set_num_threads(before)
 
 
+class LibrealsenseWorker:
+    """One spawned worker process for librealsense work, respawned when a call crashed
+    it: librealsense itself can corrupt its heap and abort (CI once printed
+    ``malloc_consolidate(): invalid chunk size`` from a pipeline on the real bag), and the
+    test that made the call fails, but the tests after it get a fresh worker instead of
+    all failing with ``BrokenProcessPool``."""
+
+    def __init__(self) -> None:
+        self._pool = self._spawn()
+
+    @staticmethod
+    def _spawn() -> ProcessPoolExecutor:
+        return ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        """``fn(*args, **kwargs)`` in the worker (a new one if the last call crashed it)."""
+        try:
+            return self._pool.submit(fn, *args, **kwargs)
+        except BrokenProcessPool:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = self._spawn()
+            return self._pool.submit(fn, *args, **kwargs)
+
+    def shutdown(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
 @pytest.fixture(scope="module")
-def librealsense() -> Iterator[ProcessPoolExecutor]:
+def librealsense() -> Iterator[LibrealsenseWorker]:
     """A spawned worker process for tests' direct librealsense work (software devices,
     recorders, pipelines): their threads never run in the test process, where their
     teardown can abort it later (CI died so while a RealSense recording was written in
     the test process). ``librealsense.submit(fn, *args).result(timeout=...)``; ``fn``
     must be importable (a module-level function of a test module)."""
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        yield pool
+    worker = LibrealsenseWorker()
+    try:
+        yield worker
+    finally:
+        worker.shutdown()

@@ -92,17 +92,19 @@ def _record(pool, path, *args, **kwargs) -> None:
 
 
 def _bag_calibration(path: str):
-    """Depth intrinsics and depth-to-colour transform of a recording, as pyrealsense2's
-    pipeline reports them (in the librealsense worker process)."""
-    pipe, cfg = rs.pipeline(), rs.config()
-    cfg.enable_device_from_file(path, repeat_playback=False)
-    prof = pipe.start(cfg)
-    try:
-        d = prof.get_stream(rs.stream.depth).as_video_stream_profile()
-        c = prof.get_stream(rs.stream.color).as_video_stream_profile()
-        return intrinsics_from_rs(d.get_intrinsics()), transform_from_rs(d.get_extrinsics_to(c))
-    finally:
-        pipe.stop()
+    """Depth intrinsics and depth-to-colour transform of a recording, as librealsense's
+    playback device reports them (in the librealsense worker process). The profiles are
+    read without streaming: a pipeline started on the real bag here once aborted the
+    worker inside librealsense (``malloc_consolidate(): invalid chunk size``), and no
+    stream threads means nothing of that kind can run (same values as the pipeline's)."""
+    dev = rs.context().load_device(path)
+    dev.as_playback().set_real_time(False)
+    profiles = {}
+    for sensor in dev.query_sensors():
+        for p in sensor.get_stream_profiles():
+            profiles.setdefault(p.stream_type(), p.as_video_stream_profile())
+    d, c = profiles[rs.stream.depth], profiles[rs.stream.color]
+    return intrinsics_from_rs(d.get_intrinsics()), transform_from_rs(d.get_extrinsics_to(c))
 
 
 @pytest.mark.realdata
