@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -200,6 +201,32 @@ def summary_table(summary: PlaneTrackSummary) -> str:
     return "\n".join(lines)
 
 
+def _scene_dict(args: argparse.Namespace) -> dict[str, Any]:
+    """The synthetic scene's flags (the settings of :class:`SyntheticRGBDScene`)."""
+    return {
+        "frames": args.frames,
+        "seed": args.seed,
+        "motion": args.motion,
+        "occluder": args.occluder,
+        "distractor": args.distractor,
+    }
+
+
+def _report(args: argparse.Namespace, config: Any, summary: PlaneTrackSummary) -> dict[str, Any]:
+    """What ``demo --json`` and ``plane-track --json`` print: the inputs and settings,
+    and ``summary``, the object written to ``summary.json`` (unchanged)."""
+    source = getattr(args, "source", "synthetic")
+    return {
+        "source": source,
+        "out_dir": str(args.out),
+        "max_frames": getattr(args, "max_frames", None),
+        "video": not args.no_video,
+        "scene": _scene_dict(args) if source == "synthetic" else None,
+        "config": dataclasses.asdict(config),
+        "summary": summary.to_dict(),
+    }
+
+
 def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
     from robopercept.fileio import WriteError
     from robopercept.pipelines.plane_outputs import run_plane_tracking
@@ -215,7 +242,7 @@ def _run(args: argparse.Namespace, source: Any, config: Any) -> int:
         progress=not args.quiet,
     )
     if args.json:
-        print(json.dumps(summary.to_dict(), indent=2, default=float))
+        print(json.dumps(_report(args, config, summary), indent=2, default=float))
     else:
         print(summary_table(summary))
     stopped = summary.stopped or ""
@@ -294,7 +321,13 @@ def _synth(args: argparse.Namespace) -> int:
     frames = progress_bar(scene, unit="frame", desc="rendering", disable=args.quiet)
     out = write_tum_folder(args.out_dir, frames)
     if args.json:
-        print(json.dumps({"out_dir": str(out), "frames": len(scene), "motion": args.motion}))
+        names = ("rgb", "depth", "rgb.txt", "depth.txt", "camera.json", "planes.csv")
+        report = {
+            "out_dir": str(out),
+            **_scene_dict(args),
+            "files": [n for n in names if (out / n).exists()],
+        }
+        print(json.dumps(report, indent=2))
     else:
         print(f"wrote {len(scene)} frames to {out}/ (camera.json, planes.csv)")
     return 0

@@ -60,21 +60,24 @@ def run_proposals(args: argparse.Namespace) -> int:
     boxes = selective_search(
         image, args.mode, rng=args.seed, max_proposals=args.max, progress=not args.quiet
     )
+    written = None
     if args.output:
         h, w = image.shape[:2]
         width = max(1, round(max(h, w) / 600))  # 2-3 px on a 1080p picture
         pic = to_rgb8(image)
         for c, color in enumerate(_PALETTE):
             pic = draw_boxes(pic, boxes[c :: len(_PALETTE)], color=color, width=width)
-        write_image(args.output, pic)
+        written = write_image(args.output, pic)
     if args.json:
         json.dump(
             {
                 "image": str(args.image),
                 "mode": args.mode,
+                "max": args.max,
                 "seed": args.seed,
+                "count": len(boxes),
                 "boxes_xywh": boxes.tolist(),
-                **({"picture": str(args.output)} if args.output else {}),
+                "picture": None if written is None else str(written),
             },
             sys.stdout,
         )

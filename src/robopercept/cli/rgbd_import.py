@@ -93,7 +93,17 @@ def run_rgbd_import(args: argparse.Namespace) -> int:
         progress=not (args.quiet or args.json),
     )
     if args.json:
-        json.dump(res.to_dict(), sys.stdout, indent=2)
+        report = {
+            "src_dir": str(args.src_dir),
+            "preset": args.preset,
+            "intrinsics": None if args.intrinsics is None else list(args.intrinsics),
+            "depth_units_per_m": args.depth_scale,
+            "depth_encoding": args.depth_encoding,
+            "match": args.match,
+            "fps": args.fps,
+            **res.to_dict(),
+        }
+        json.dump(report, sys.stdout, indent=2)
         print()
         return 0
     k = res.camera
