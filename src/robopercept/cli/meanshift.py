@@ -1,15 +1,29 @@
 """``robopercept meanshift``: follow a colour region through a video or a folder of
-images by mean shift (or CamShift), writing the boxes as CSV."""
+images by mean shift (or CamShift), writing the boxes as CSV; with ``--truth`` (a VOT
+``groundtruth.txt``) the mean IoU, success rate and success curve
+(:func:`~robopercept.tracking.metrics.evaluate_single_object`), ``--plot`` draws the
+curve; ``--json`` prints one JSON object (schema in docs/tracking.md)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
+import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import box_xywh, file_output, flag_errors, positive_int
+from robopercept.cli._args import (
+    UsageError,
+    box_xywh,
+    file_output,
+    flag_errors,
+    image_output,
+    positive_int,
+)
 from robopercept.cli._video import (
     add_video_arguments,
     finish,
@@ -30,7 +44,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "window to the centre of mass of the back-projected likelihood in every frame.",
     )
     p.add_argument("video", help="video file or folder of images")
-    p.add_argument("--box", type=box_xywh, required=True, metavar="X,Y,W,H", help="target, frame 0")
+    p.add_argument(
+        "--box",
+        type=box_xywh,
+        default=None,
+        metavar="X,Y,W,H",
+        help="target in frame 0 (default with --truth: its first box)",
+    )
     p.add_argument("--feature", choices=("hue", "rgb"), default="hue")
     p.add_argument("--bins", type=positive_int, default=None, help="16 (hue) or 8 (rgb)")
     p.add_argument(
@@ -54,6 +74,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--results", type=file_output, default=None, help="CSV of frame,x,y,w,h,similarity"
     )
+    p.add_argument(
+        "--truth",
+        default=None,
+        metavar="GROUNDTRUTH.txt",
+        help="VOT ground truth (x,y,w,h or x1,y1,...,x4,y4 per frame): mean IoU, success "
+        "rate at IoU 0.5, success curve and its AUC",
+    )
+    p.add_argument(
+        "--plot", type=image_output, default=None, help="with --truth: the success curve, PNG"
+    )
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_video_arguments(p, "meanshift.mp4")
     p.set_defaults(func=run_meanshift)
 
@@ -64,9 +95,35 @@ def register(sub: argparse._SubParsersAction) -> None:
     bins="--bins",
     min_saturation="--min-saturation",
     min_value="--min-value",
+    truth="--truth",
 )
 def run_meanshift(args: argparse.Namespace) -> int:
     """Run ``robopercept meanshift`` with the parsed ``args``; returns the exit status."""
+    from robopercept.tracking.metrics import read_vot_groundtruth
+
+    if args.plot and not args.truth:
+        raise UsageError("--plot: the success curve needs --truth GROUNDTRUTH.txt")
+    truth = read_vot_groundtruth(args.truth) if args.truth else None
+    if args.box is None:
+        if truth is None:
+            raise UsageError("--box: give the target in frame 0 as X,Y,W,H (or --truth)")
+        if np.isnan(truth[0]).any():
+            raise UsageError(f"--box: {args.truth} has no target in frame 0; give --box")
+        args.box = tuple(float(v) for v in truth[0])
+    # --json: stdout holds the JSON object only; the human summary goes to stderr
+    with contextlib.redirect_stdout(sys.stderr) if args.json else contextlib.nullcontext():
+        summary = _track(args)
+    if truth is not None:
+        summary["evaluation"] = _evaluate(args, summary.pop("_boxes"), truth)
+    summary.pop("_boxes", None)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _track(args: argparse.Namespace) -> dict[str, Any]:
+    """Track through the video, write the outputs, print the human summary (stdout);
+    returns the JSON summary, with the frame indices and boxes under ``_boxes``."""
     from robopercept.imaging import SnapshotVideoWriter
     from robopercept.tracking import MeanShiftTracker
     from robopercept.viz import draw_boxes, draw_text
@@ -110,10 +167,49 @@ def run_meanshift(args: argparse.Namespace) -> int:
                 _write_boxes_csv(Path(args.results), rows)
                 out.written.append(args.results)
     seconds = time.perf_counter() - t0
-    if len(rows) > 1:
-        sims = np.array([s for _, _, s in rows[1:]])
+    sims = np.array([s for _, _, s in rows[1:]])
+    if sims.size:
         print(f"similarity        mean {sims.mean():.3f}, min {sims.min():.3f}")
-    return finish(source, out.written, frames, seconds)
+    finish(source, out.written, frames, seconds)
+    return {
+        "command": "meanshift",
+        "frames": frames,
+        "skipped": len(source.skipped),
+        "fps": frames / seconds if seconds > 0 else None,
+        "box": [float(v) for v in args.box],
+        "similarity_mean": float(sims.mean()) if sims.size else None,
+        "similarity_min": float(sims.min()) if sims.size else None,
+        "outputs": list(out.written),
+        "evaluation": None,
+        "_boxes": ([i for i, _, _ in rows], np.array([b for _, b, _ in rows]).reshape(-1, 4)),
+    }
+
+
+def _evaluate(
+    args: argparse.Namespace, boxes: tuple[list[int], np.ndarray], truth: np.ndarray
+) -> dict[str, Any]:
+    """``--truth``: the scores of the boxes of frames ``boxes[0]`` (printed unless
+    ``--json``), and ``--plot``."""
+    from robopercept.imaging import write_image
+    from robopercept.tracking.metrics import evaluate_single_object, success_plot
+
+    frames, predicted = boxes
+    with flag_errors(truth="--truth"):
+        scores = evaluate_single_object(predicted, truth, frames=frames)
+    result: dict[str, Any] = {"truth": str(args.truth), **scores.to_dict()}
+    if args.plot:
+        name = "CamShift" if args.camshift else "mean shift"
+        write_image(args.plot, success_plot(scores, f"{name} ({args.feature})", size=(1280, 720)))
+        result["plot"] = str(args.plot)
+    if not args.json:
+        print(
+            f"vs truth          mean IoU {scores.mean_iou:.3f}, success (IoU > 0.5) "
+            f"{scores.success_50:.3f}, AUC {scores.auc:.3f} over {scores.frames} frames"
+            + (f" ({scores.absent} without target)" if scores.absent else "")
+        )
+        if args.plot:
+            print(f"wrote             {args.plot}")
+    return result
 
 
 def _write_boxes_csv(path: Path, rows: list[tuple[int, np.ndarray, float]]) -> None:

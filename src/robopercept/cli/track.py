@@ -1,15 +1,28 @@
 """``robopercept track``: multi-object tracking through a video or a folder of images
 (:func:`~robopercept.pipelines.track_objects`: a Kalman filter per track, Hungarian
-association), drawn, and written as a MOTChallenge results file."""
+association), drawn, and written as a MOTChallenge results file; with ``--gt`` (a
+MOTChallenge ``gt.txt``) the results are scored: MOTA, MOTP, IDF1, IDP, IDR, identity
+switches, FP, FN (:func:`~robopercept.tracking.metrics.evaluate_mot`); ``--json`` prints
+one JSON object (schema in docs/tracking.md)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
+import sys
 import time
+from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import file_output, flag_errors, positive_int
+from robopercept.cli._args import (
+    UsageError,
+    file_output,
+    flag_errors,
+    positive_int,
+    unit_interval,
+)
 from robopercept.cli._video import (
     add_video_arguments,
     finish,
@@ -43,6 +56,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-age", type=int, default=5)
     p.add_argument("--min-area", type=positive_int, default=100, help="no det.txt: blob size")
     p.add_argument("--no-detections", action="store_true", help="do not draw the detections")
+    p.add_argument(
+        "--gt",
+        default=None,
+        metavar="GT.txt",
+        help="MOTChallenge ground truth: score the results (MOTA, MOTP, IDF1, switches) "
+        "over the frames read; flag-0 rows are left out, and in 9-column files classes "
+        "other than --gt-classes",
+    )
+    p.add_argument(
+        "--gt-classes",
+        default="1",
+        metavar="C[,C...]",
+        help="classes of a MOT16/17 gt.txt that count (default 1: pedestrians); 'all'",
+    )
+    p.add_argument(
+        "--iou",
+        type=unit_interval,
+        default=0.5,
+        help="--gt: least IoU of a match (default 0.5, MOTChallenge)",
+    )
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_video_arguments(p, "tracks.mp4")
     p.set_defaults(func=run_track)
 
@@ -54,9 +88,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     max_age="--max-age",
     min_score="--min-score",
     min_area="--min-area",
+    iou_threshold="--iou",
+    classes="--gt-classes",
 )
 def run_track(args: argparse.Namespace) -> int:
     """Run ``robopercept track`` with the parsed ``args``; returns the exit status."""
+    from robopercept.tracking import read_mot
+    from robopercept.tracking.metrics import select_ground_truth
+
+    classes = _classes(args.gt_classes)
+    gt = select_ground_truth(read_mot(args.gt), classes) if args.gt else None
+    # --json: stdout holds the JSON object only; the human summary goes to stderr
+    with contextlib.redirect_stdout(sys.stderr) if args.json else contextlib.nullcontext():
+        summary = _track(args)
+    numbers = summary.pop("_numbers")
+    if gt is not None:
+        summary["evaluation"] = _evaluate(args, gt, numbers)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _classes(text: str) -> list[int] | None:
+    """``--gt-classes``: ``1,2`` -> [1, 2]; ``all`` -> None."""
+    if text.strip().lower() == "all":
+        return None
+    try:
+        return [int(v) for v in text.replace(" ", "").split(",")]
+    except ValueError:
+        raise UsageError(
+            f"--gt-classes: expects class numbers such as 1 or 1,2,7 (or all); got {text!r}"
+        ) from None
+
+
+def _track(args: argparse.Namespace) -> dict[str, Any]:
+    """Track through the video, write the outputs, print the human summary (stdout);
+    returns the JSON summary, with the frame numbers read under ``_numbers``."""
     from robopercept.imaging import SnapshotVideoWriter
     from robopercept.pipelines import track_objects
     from robopercept.tracking import MultiObjectTracker, read_mot, write_mot
@@ -70,6 +137,7 @@ def run_track(args: argparse.Namespace) -> int:
     results: list[tuple[int, int, np.ndarray, float]] = []
     ids: set[int] = set()
     n_det = frames = 0
+    numbers: list[int] = []
     t0 = time.perf_counter()
     with (
         SnapshotVideoWriter(args.output, source.fps, args.snapshot) as out,
@@ -98,6 +166,7 @@ def run_track(args: argparse.Namespace) -> int:
                     size=text_size(frame),
                 )
                 out.add(step.index, picture)
+                numbers.append(int(step.number))
                 frames += 1
                 bar.update(1)
         finally:  # results so far are kept, also on an error or Ctrl-C
@@ -107,4 +176,43 @@ def run_track(args: argparse.Namespace) -> int:
     seconds = time.perf_counter() - t0
     print(f"detections        {n_det} ({n_det / max(frames, 1):.1f} per frame)")
     print(f"tracks            {len(ids)} identities, {len(results)} result rows")
-    return finish(source, out.written, frames, seconds)
+    finish(source, out.written, frames, seconds)
+    return {
+        "command": "track",
+        "frames": frames,
+        "skipped": len(source.skipped),
+        "fps": frames / seconds if seconds > 0 else None,
+        "detections": n_det,
+        "identities": len(ids),
+        "result_rows": len(results),
+        "results": str(args.results),
+        "outputs": list(out.written),
+        "evaluation": None,
+        "_numbers": numbers,
+    }
+
+
+def _evaluate(args: argparse.Namespace, gt: Any, numbers: list[int]) -> dict[str, Any]:
+    """``--gt``: score the results file over the frame ``numbers`` read (printed unless
+    ``--json``)."""
+    from robopercept.tracking import read_mot
+    from robopercept.tracking.metrics import evaluate_mot
+
+    with flag_errors(ground_truth="--gt", hypotheses="--results"):
+        m = evaluate_mot(gt, read_mot(args.results), iou_threshold=args.iou, frames=numbers)
+    result: dict[str, Any] = {"gt": str(args.gt), "iou_threshold": args.iou, **m.to_dict()}
+    if not args.json:
+
+        def f(v: float) -> str:
+            return "n/a" if not np.isfinite(v) else f"{v:.3f}"
+
+        print(
+            f"vs ground truth   MOTA {f(m.mota)}, IDF1 {f(m.idf1)} (IDP {f(m.idp)}, "
+            f"IDR {f(m.idr)}), MOTP {f(m.motp)} (mean 1 - IoU)"
+        )
+        print(
+            f"                  {m.num_switches} ID switches, {m.num_false_positives} FP, "
+            f"{m.num_misses} FN, {m.num_matches} matches; {m.num_objects} true boxes in "
+            f"{m.num_frames} frames"
+        )
+    return result

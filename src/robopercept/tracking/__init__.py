@@ -19,10 +19,25 @@ from robopercept.tracking.kalman import (
     kf_update,
 )
 from robopercept.tracking.meanshift import MeanShiftResult, MeanShiftTracker
+from robopercept.tracking.metrics import (
+    OTB_THRESHOLDS,
+    MotAccumulator,
+    MotEvents,
+    MotMetrics,
+    SuccessScores,
+    evaluate_mot,
+    evaluate_single_object,
+    paired_iou,
+    polygons_to_boxes,
+    read_vot_groundtruth,
+    select_ground_truth,
+    success_plot,
+)
 from robopercept.tracking.mot_io import MotRows, read_mot, write_mot
 from robopercept.tracking.multi_object import MultiObjectTracker, Track
 
 __all__ = [
+    "OTB_THRESHOLDS",
     "ExtendedKalmanFilter",
     "GatedTrack",
     "GatedTrackConfig",
@@ -30,8 +45,12 @@ __all__ = [
     "KalmanFilter",
     "MeanShiftResult",
     "MeanShiftTracker",
+    "MotAccumulator",
+    "MotEvents",
+    "MotMetrics",
     "MotRows",
     "MultiObjectTracker",
+    "SuccessScores",
     "Track",
     "TrackStatus",
     "TrackStep",
@@ -39,9 +58,16 @@ __all__ = [
     "constant_acceleration",
     "constant_position",
     "constant_velocity",
+    "evaluate_mot",
+    "evaluate_single_object",
     "kf_predict",
     "kf_update",
     "lagged_model",
+    "paired_iou",
+    "polygons_to_boxes",
     "read_mot",
+    "read_vot_groundtruth",
+    "select_ground_truth",
+    "success_plot",
     "write_mot",
 ]
