@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from robopercept.cli.main import main
 from robopercept.features import harris_corners
@@ -117,3 +118,102 @@ def test_stitch_writes_panorama(tmp_path, capsys):
     flat = write_image(tmp_path / "flat.png", np.full((100, 100, 3), 80, np.uint8))
     assert main(["stitch", str(a), str(flat), "-o", str(out)]) == 1
     assert "homography needs 4" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- issue 30
+
+
+def test_match_draws_the_best_n_and_the_outline(tmp_path, capsys):
+    from robopercept.viz.features import OUTLINE_COLOR
+
+    a, b = _crops(tmp_path)
+    out = tmp_path / "m.png"
+    assert main(["match", str(a), str(b), "-o", str(out), "--json", "--max-matches", "10"]) == 0
+    report = json.loads(capsys.readouterr().out)  # one JSON object, nothing else
+    assert report["drawn"] == 10 == report["drawn_inliers"] + report["drawn_outliers"]
+    assert report["matches"] > 10 and report["max_matches"] == 10
+    assert report["outliers"] == report["matches"] - report["inliers"]
+    # A (320x330) shifted by (-150, -40): its border's pixel edges on B
+    np.testing.assert_allclose(
+        report["outline"],
+        [[-150.5, -40.5], [179.5 - 0, -40.5], [179.5, 279.5], [-150.5, 279.5]],
+        atol=0.5,
+    )
+    pic = read_image(out)
+    ring = (pic == OUTLINE_COLOR).all(axis=2)
+    assert ring[:, 330 + 175 : 330 + 185].any() and not ring[:, :330].any()
+    assert main(["match", str(a), str(b), "-o", str(out), "--json", "--max-matches", "0"]) == 0
+    every = json.loads(capsys.readouterr().out)
+    assert every["drawn"] == every["matches"]
+    assert main(["match", str(a), str(b), "-o", str(out), "--hide-outliers", "--json"]) == 0
+    inliers_only = json.loads(capsys.readouterr().out)
+    assert inliers_only["drawn_outliers"] == 0
+    assert not (read_image(out) == (255, 0, 255)).all(axis=2).any()
+
+
+def test_match_bad_max_matches(tmp_path, capsys):
+    a, b = _crops(tmp_path)
+    assert (
+        main(["match", str(a), str(b), "--max-matches", "-1", "-o", str(tmp_path / "m.png")]) == 2
+    )
+    assert "--max-matches must be >= 0" in capsys.readouterr().err
+
+
+@pytest.mark.realdata
+def test_match_on_graf_draws_100_of_677(tmp_path, capsys):
+    """Oxford graf 1 -> 3 (viewpoint change): all 677 ratio-test matches were drawn before
+    issue 30; now the best 100, with the inlier share of all, and the outline of img1
+    lands where the ground-truth homography puts it."""
+    import re
+
+    from tests.conftest import data_path
+
+    graf = data_path("features", "oxford_affine", "graf")
+    out = tmp_path / "graf.png"
+    args = ["match", str(graf / "img1.png"), str(graf / "img3.png"), "-o", str(out), "--json"]
+    assert main(args) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["drawn"] == 100 and report["matches"] > 500
+    share = report["inliers"] / report["matches"]
+    assert abs(report["drawn_inliers"] / 100 - share) <= 0.01
+    text = (graf / "H1to3p.xml").read_text()
+    truth = np.array(re.search(r"<data>(.*?)</data>", text, re.S).group(1).split(), float)
+    corners = np.array([[-0.5, -0.5], [799.5, -0.5], [799.5, 639.5], [-0.5, 639.5]])
+    p = np.c_[corners, np.ones(4)] @ truth.reshape(3, 3).T
+    # the fitted H against the ground truth at the image corners (extrapolated: the
+    # matches cover the middle): within 15 px on an 800x640 image
+    np.testing.assert_allclose(report["outline"], p[:, :2] / p[:, 2:], atol=15)
+    assert read_image(out).shape == (640, 1600, 3)
+
+
+def test_stitch_json(tmp_path, capsys):
+    a, b = _crops(tmp_path)
+    out = tmp_path / "p.png"
+    assert main(["stitch", str(a), str(b), "-o", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["size"] == [480, 360] and report["picture"] == str(out)
+    assert report["inliers"] <= report["matches"] and len(report["H"]) == 3
+
+
+def test_blobs_ids_are_1_to_n(tmp_path, capsys):
+    """Blobs under --min-area used to leave gaps in the printed ids (1, 2, 5, 10, ... on
+    the bundled sample); they are numbered 1..N in raster order, as drawn."""
+    mask = np.zeros((60, 90), np.uint8)
+    for k, x in enumerate(range(2, 88, 6)):  # alternating big (4x20) and tiny (1x1) blobs
+        if k % 2:
+            mask[5, x] = 255
+        else:
+            mask[10:30, x : x + 4] = 255
+    src = write_image(tmp_path / "m.png", mask)
+    overlay = tmp_path / "o.png"
+    assert main(["blobs", str(src), "--json", "--min-area", "5", "-o", str(overlay)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    ids = [b["label"] for b in data["blobs"]]
+    assert ids == list(range(1, 9)) and data["count"] == 8
+    assert [b["bbox"][0] for b in data["blobs"]] == list(range(2, 88, 12))  # raster order
+    assert main(["blobs", "--json"]) == 0  # the bundled sample
+    sample = json.loads(capsys.readouterr().out)
+    assert [b["label"] for b in sample["blobs"]] == list(range(1, sample["count"] + 1))
+    assert main(["blobs", str(src), "--min-area", "5"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()[2:]]
+    assert [int(r[0]) for r in rows] == list(range(1, 9))

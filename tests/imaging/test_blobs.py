@@ -217,3 +217,28 @@ def test_issue25_sparse_label_values_do_not_allocate_by_the_largest():
     full = np.full((3, 3), 2**40, np.int64)  # no background at all
     assert blob_features(full).labels.tolist() == [2**40]
     assert blob_features(full).area.tolist() == [9]
+
+
+def test_min_area_drops_small_blobs_and_numbers_the_rest_1_to_n():
+    """Issue 30: ``blobs`` printed raw ids with gaps (1, 2, 5, 10, ...) after dropping
+    small blobs; ``min_area`` drops them in the library and numbers the rest 1..n in the
+    same order, as skimage's remove_small_objects then relabel_sequential."""
+    from skimage.morphology import remove_small_objects
+    from skimage.segmentation import relabel_sequential
+
+    rng = np.random.default_rng(30)
+    mask = rng.random((80, 90)) > 0.62
+    for conn in (4, 8):
+        raw, n_raw = label_components(mask, conn)
+        labels, n = label_components(mask, conn, min_area=5)
+        areas = np.bincount(raw.ravel())[1:]
+        assert n == (areas >= 5).sum() < n_raw  # some dropped, hand-counted
+        assert np.array_equal(np.unique(labels), np.arange(n + 1))  # 0..n, no gaps
+        # skimage >= 0.26 removes objects of at most max_size pixels: those below 5
+        kept = remove_small_objects(raw, max_size=4)
+        ref, _, _ = relabel_sequential(kept)
+        np.testing.assert_array_equal(labels, ref)  # same pixels, same (raster) order
+    same, k = label_components(mask, 8, min_area=1)
+    assert np.array_equal(same, label_components(mask, 8)[0]) and k == label_components(mask)[1]
+    with pytest.raises(InputError, match="min_area must be"):
+        label_components(mask, 8, min_area=-1)

@@ -65,8 +65,11 @@ def open_source(path: str, args: argparse.Namespace) -> Any:
 
 
 def text_size(image: np.ndarray) -> int:
-    """Caption height in pixels: readable on small frames, and on 1080p ones."""
-    return max(12, round(image.shape[0] / 36))
+    """Caption height in pixels: readable on small frames, and on 1080p ones (the one
+    rule for text on pictures, :func:`robopercept.viz.draw.label_size_for`)."""
+    from robopercept.viz.draw import label_size_for
+
+    return label_size_for(image.shape[0])
 
 
 def progress(source: Any, desc: str, quiet: bool) -> Any:

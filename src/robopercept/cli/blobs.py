@@ -6,8 +6,6 @@ import argparse
 import json
 import sys
 
-import numpy as np
-
 from robopercept.cli._args import UsageError, image_output, load_gray
 
 __all__ = ["register"]
@@ -19,7 +17,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "blobs",
         help="connected components of a thresholded image and their features",
         description="Threshold IMAGE (Otsu unless --threshold), label the "
-        "8-connected blobs and print their features.",
+        "8-connected blobs, drop those under --min-area and print the features of the "
+        "rest, numbered 1..N in raster order of their first pixel (the ids drawn on the "
+        "-o overlay).",
     )
     b.add_argument("image", nargs="?", help="input image (default: the bundled sample)")
     b.add_argument(
@@ -54,20 +54,20 @@ def run_blobs(args: argparse.Namespace) -> int:
     src, gray = load_gray(args.image)
     thr = otsu_threshold(gray) if args.threshold is None else args.threshold
     mask = gray <= thr if args.invert else gray > thr
-    labels, _ = label_components(mask, args.connectivity)
+    # blobs under --min-area are dropped in the library and the rest numbered 1..N
+    labels, _ = label_components(mask, args.connectivity, min_area=args.min_area)
     feats = blob_features(labels)
-    keep = feats.area >= args.min_area
-    records = [r for r, k in zip(feats.to_records(), keep, strict=True) if k]
+    records = feats.to_records()
     if args.output:
         colors = label_colors(labels)
-        kept = np.isin(labels, feats.labels[keep])
+        kept = labels > 0
         overlay = to_rgb8(gray)
         overlay[kept] = colors[kept]
         overlay = draw_boxes(
             overlay,
-            feats.bbox[keep],
+            feats.bbox,
             color=(255, 255, 0),
-            width=1,
+            width=max(1, round(gray.shape[0] / 540)),
             labels=[str(r["label"]) for r in records],
         )
         write_image(args.output, overlay)
@@ -77,6 +77,9 @@ def run_blobs(args: argparse.Namespace) -> int:
                 "image": str(src),
                 "threshold": thr,
                 "connectivity": args.connectivity,
+                "invert": bool(args.invert),
+                "min_area": args.min_area,
+                "count": len(records),
                 "blobs": records,
                 **({"overlay": str(args.output)} if args.output else {}),
             },

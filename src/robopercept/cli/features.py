@@ -79,11 +79,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     m = sub.add_parser(
         "match",
         help="match SIFT features of two images and fit a homography",
-        description="SIFT in A and B, Lowe's ratio test, RANSAC homography A -> B; writes "
-        "the two images side by side with inlier matches in green and outliers in red, and "
-        "prints the match and inlier counts and H.",
+        description="SIFT in A and B, Lowe's ratio test, RANSAC homography A -> B (fitted "
+        "on every match); writes the two images side by side with the best --max-matches "
+        "matches (smallest descriptor distance) drawn, inliers in green, outliers in "
+        "magenta, and A's border mapped through H onto B (light blue); prints the match "
+        "and inlier counts and H.",
     )
     _pair_arguments(m, "matches.png")
+    m.add_argument(
+        "--max-matches",
+        type=int,
+        default=100,
+        help="draw at most this many matches, the best first; 0 draws all "
+        "(default: %(default)s; all matches are used for the fit and counted)",
+    )
+    m.add_argument("--hide-outliers", action="store_true", help="draw inlier matches only")
     m.add_argument("--json", action="store_true", help="print counts and H as JSON")
     m.set_defaults(func=run_match)
 
@@ -94,6 +104,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     _pair_arguments(st, "panorama.png")
     st.add_argument("--blend", choices=("feather", "average", "none"), default="feather")
+    st.add_argument("--json", action="store_true", help="print counts, H and size as JSON")
     st.set_defaults(func=run_stitch)
 
 
@@ -224,25 +235,53 @@ def _load_pair(args: argparse.Namespace):
     return read_image(args.image_a, mode="rgb"), read_image(args.image_b, mode="rgb")
 
 
-@flag_errors(ratio="--ratio", threshold="--threshold")
+@flag_errors(ratio="--ratio", threshold="--threshold", max_matches="--max-matches")
 def run_match(args: argparse.Namespace) -> int:
     """Run ``robopercept match`` with the parsed ``args``; returns the exit status."""
     from robopercept.features import match_images
     from robopercept.imaging import write_image
-    from robopercept.viz import draw_matches
+    from robopercept.viz.features import matches_picture
 
+    if args.max_matches < 0:
+        raise UsageError(f"--max-matches must be >= 0 (0 draws all); got {args.max_matches}")
     a, b = _load_pair(args)
     t0 = time.perf_counter()
     m = match_images(a, b, ratio=args.ratio, threshold=args.threshold)
     ms = (time.perf_counter() - t0) * 1e3
-    pic = draw_matches(a, m.xy_a, b, m.xy_b, inliers=m.fit.inliers)
-    written = write_image(args.output, pic)
+    n = len(m.matches.query_idx)
+    inl = np.asarray(m.fit.inliers, bool)
+    limit = args.max_matches or None
+    shown = n if limit is None else min(limit, n if not args.hide_outliers else int(inl.sum()))
+    what = "inliers" if args.hide_outliers else "matches"
+    caption = f"{int(inl.sum())} inliers of {n} matches; best {shown} {what} drawn"
+    pic = matches_picture(
+        a,
+        m.xy_a,
+        b,
+        m.xy_b,
+        inliers=inl,
+        distance=m.matches.distance,
+        homography=m.fit.H,
+        max_matches=limit,
+        show_outliers=not args.hide_outliers,
+        caption=caption,
+    )
+    written = write_image(args.output, pic.image)
+    drawn_in = int(inl[pic.drawn].sum())
     report = {
+        "image_a": str(args.image_a),
+        "image_b": str(args.image_b),
         "keypoints": [len(m.features_a), len(m.features_b)],
-        "matches": len(m.matches.query_idx),
+        "matches": n,
         "inliers": m.fit.n_inliers,
+        "outliers": n - m.fit.n_inliers,
         "rms_px": round(m.fit.rms, 4),
         "H": np.round(m.fit.H, 8).tolist(),
+        "drawn": int(pic.drawn.size),
+        "drawn_inliers": drawn_in,
+        "drawn_outliers": int(pic.drawn.size) - drawn_in,
+        "max_matches": args.max_matches,
+        "outline": None if pic.outline is None else np.round(pic.outline, 3).tolist(),
         "ms": round(ms, 1),
         "picture": str(written),
     }
@@ -251,8 +290,12 @@ def run_match(args: argparse.Namespace) -> int:
     else:
         print(
             f"match: {report['keypoints'][0]} / {report['keypoints'][1]} SIFT keypoints, "
-            f"{report['matches']} matches, {report['inliers']} inliers "
-            f"(rms {m.fit.rms:.2f} px), {ms:.0f} ms -> {written}"
+            f"{n} matches, {report['inliers']} inliers (rms {m.fit.rms:.2f} px), "
+            f"{ms:.0f} ms"
+        )
+        print(
+            f"drawn: {report['drawn']} best matches ({drawn_in} inliers, "
+            f"{report['drawn_outliers']} outliers), A's outline on B -> {written}"
         )
         print("H (A -> B) =")
         for row in m.fit.H:
@@ -271,6 +314,21 @@ def run_stitch(args: argparse.Namespace) -> int:
     p = stitch(a, b, blend=args.blend, ratio=args.ratio, threshold=args.threshold)
     ms = (time.perf_counter() - t0) * 1e3
     written = write_image(args.output, p.image)
+    if args.json:
+        report = {
+            "image_a": str(args.image_a),
+            "image_b": str(args.image_b),
+            "matches": len(p.match.matches.query_idx),
+            "inliers": p.match.fit.n_inliers,
+            "rms_px": round(p.match.fit.rms, 4),
+            "H": np.round(p.match.fit.H, 8).tolist(),
+            "size": [int(p.image.shape[1]), int(p.image.shape[0])],
+            "blend": args.blend,
+            "ms": round(ms, 1),
+            "picture": str(written),
+        }
+        print(json.dumps(report))
+        return 0
     print(
         f"stitch: {p.match.fit.n_inliers} inliers of {len(p.match.matches.query_idx)} "
         f"matches, panorama {p.image.shape[1]}x{p.image.shape[0]}, {ms:.0f} ms -> {written}"

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_ndim
+from robopercept._checks import check_int, check_ndim
 from robopercept.errors import InputError
 
 __all__ = [
@@ -264,7 +264,9 @@ def _label_kernel(mask, mask64, eight, labels):  # pragma: no cover - compiled
     return count
 
 
-def label_components(mask: np.ndarray, connectivity: int = 8) -> tuple[np.ndarray, int]:
+def label_components(
+    mask: np.ndarray, connectivity: int = 8, *, min_area: int = 0
+) -> tuple[np.ndarray, int]:
     """Label the connected components of a binary mask.
 
     Parameters
@@ -273,6 +275,10 @@ def label_components(mask: np.ndarray, connectivity: int = 8) -> tuple[np.ndarra
         Nonzero pixels are foreground.
     connectivity : {4, 8}
         8 joins diagonal neighbours too (OpenCV's default).
+    min_area : int
+        Components of fewer pixels become background and the others are numbered
+        again ``1..n`` in the same order (``skimage.morphology.remove_small_objects``
+        then ``skimage.segmentation.relabel_sequential``), so ids stay consecutive.
 
     Returns
     -------
@@ -282,12 +288,19 @@ def label_components(mask: np.ndarray, connectivity: int = 8) -> tuple[np.ndarra
         (its numbering follows OpenCV's 2x2-block scan instead).
     n : int
         Number of components (background not counted).
+
+    Examples
+    --------
+    >>> mask = np.array([[1, 0, 1, 1, 0, 1]], bool)
+    >>> label_components(mask)[0].tolist(), label_components(mask, min_area=2)[0].tolist()
+    ([[1, 0, 2, 2, 0, 3]], [[0, 0, 1, 1, 0, 0]])
     """
     mask = check_ndim(mask, "mask", (2,))
     if mask.dtype.kind not in "biuf":
         raise InputError(f"mask must be bool or numeric; got dtype {mask.dtype}")
     if connectivity not in (4, 8):
         raise InputError(f"connectivity must be 4 or 8; got {connectivity!r}")
+    min_area = check_int(min_area, "min_area", 0)
     labels = np.empty(mask.shape, dtype=np.int32)
     if mask.size == 0:
         return labels, 0
@@ -297,8 +310,14 @@ def label_components(mask: np.ndarray, connectivity: int = 8) -> tuple[np.ndarra
     else:  # a 0/1 byte copy, its rows padded with background to whole 8-byte words
         fg = np.zeros((h, -(-w // 8) * 8), dtype=np.uint8)
         np.not_equal(mask, 0, out=fg[:, :w], casting="unsafe")
-    n = _label_kernel(fg, fg.view(np.uint64), connectivity == 8, labels)
-    return labels, int(n)
+    n = int(_label_kernel(fg, fg.view(np.uint64), connectivity == 8, labels))
+    if min_area > 1 and n:
+        keep = np.bincount(labels.ravel(), minlength=n + 1) >= min_area
+        keep[0] = False
+        new_id = (np.cumsum(keep) * keep).astype(np.int32)  # (0 for dropped ones)
+        labels = new_id[labels]
+        n = int(keep.sum())
+    return labels, n
 
 
 @dataclass(frozen=True)

@@ -16,13 +16,23 @@ from robopercept.viz.colormap import (
 from robopercept.viz.draw import (
     draw_boxes,
     draw_chessboard,
+    draw_label,
     draw_lines,
     draw_mask,
     draw_points,
     draw_text,
     enlarge_picture,
+    label_font,
+    label_size_for,
 )
-from robopercept.viz.features import draw_matches, hog_picture
+from robopercept.viz.features import (
+    MatchPicture,
+    draw_matches,
+    hog_picture,
+    matches_picture,
+    project_outline,
+    select_matches,
+)
 from robopercept.viz.flow import (
     dense_flow_picture,
     draw_flow,
@@ -40,6 +50,7 @@ from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_pictur
 from robopercept.viz.segmentation import class_overlay, instance_overlay, panels_picture
 
 __all__ = [
+    "MatchPicture",
     "class_overlay",
     "cloud_picture",
     "clouds_grid",
@@ -52,6 +63,7 @@ __all__ = [
     "draw_boxes",
     "draw_chessboard",
     "draw_flow",
+    "draw_label",
     "draw_lines",
     "draw_mask",
     "draw_matches",
@@ -67,9 +79,14 @@ __all__ = [
     "hog_picture",
     "instance_overlay",
     "label_colors",
+    "label_font",
+    "label_size_for",
+    "matches_picture",
     "panels_picture",
+    "project_outline",
     "render_points",
     "scatter_picture",
+    "select_matches",
     "skeleton_3d_picture",
     "tiles_picture",
     "voc_palette",

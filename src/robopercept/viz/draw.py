@@ -2,12 +2,22 @@
 
 Every function returns a new RGB uint8 image (a gray input is expanded to RGB) and
 leaves its input unchanged. Rasterization is Pillow's, which is not a perception method.
+
+Text is set in DejaVu Sans, the TrueType font matplotlib ships (found at run time in
+``matplotlib.get_data_path()``, nothing downloaded), or Pillow's built-in scalable font
+where that file is missing; its size follows the picture's height
+(:func:`label_size_for`: 24 px on a 1080p frame), so captions stay readable at any
+resolution. :func:`draw_label` is the one way labels (track ids, detection scores, blob
+ids) are written on images: on a filled box of the label's colour, in black or white,
+whichever contrasts more, kept inside the picture.
 """
 
 from __future__ import annotations
 
 import colorsys
+import functools
 from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,7 +35,7 @@ from robopercept._checks import (
 )
 
 if TYPE_CHECKING:
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw, ImageFont
 from robopercept.errors import InputError
 
 __all__ = [
@@ -38,11 +48,14 @@ __all__ = [
     "clip_segments",
     "draw_boxes",
     "draw_chessboard",
+    "draw_label",
     "draw_lines",
     "draw_mask",
     "draw_points",
     "draw_text",
     "enlarge_picture",
+    "label_font",
+    "label_size_for",
     "pil_canvas",
     "to_rgb8",
 ]
@@ -326,6 +339,213 @@ def pil_canvas(image: np.ndarray) -> tuple[Image.Image, ImageDraw.ImageDraw]:
     return pil, ImageDraw.Draw(pil)
 
 
+#: the font file text is set in: DejaVu Sans as matplotlib ships it
+_FONT_FILE = ("fonts", "ttf", "DejaVuSans.ttf")
+#: the text whose ink spans a label's height: cap height above the baseline, descender below
+_HEIGHT_PROBE = "Ag"
+#: anchors of :func:`draw_label`: horizontal (left, middle, right) x vertical (top,
+#: middle, bottom) of the label's box
+_ANCHORS = tuple(h + v for h in "lmr" for v in "tmb")
+
+
+def label_size_for(height: int) -> int:
+    """The font size in pixels for text on a picture ``height`` pixels tall:
+    ``max(12, round(height / 45))`` (12 px up to 562 rows, 16 px at 720p, 24 px at 1080p,
+    48 px at 4K), so that a label keeps the same share of the picture at any resolution
+    and never falls below a readable 12 px.
+
+    Parameters
+    ----------
+    height : int
+        Picture height in pixels (>= 1).
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> label_size_for(480), label_size_for(720), label_size_for(1080)
+    (12, 16, 24)
+    """
+    h = check_int(height, "height", 1)
+    return int(min(max(12, round(h / 45)), MAX_STROKE))
+
+
+@functools.lru_cache(maxsize=1)
+def _font_file() -> str | None:
+    """DejaVuSans.ttf from matplotlib's data folder, or None when it is not there."""
+    try:
+        import matplotlib
+    except ImportError:  # pragma: no cover - matplotlib is a dependency
+        return None
+    path = Path(matplotlib.get_data_path()).joinpath(*_FONT_FILE)
+    return str(path) if path.is_file() else None
+
+
+@functools.lru_cache(maxsize=64)
+def _load_font(size: int) -> Any:
+    from PIL import ImageFont
+
+    path = _font_file()
+    if path is not None:
+        try:
+            return ImageFont.truetype(path, size=size)
+        except OSError:  # (an unreadable file, or Pillow without FreeType)
+            pass
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # pragma: no cover - Pillow < 10.1: the fixed bitmap font
+        return ImageFont.load_default()
+
+
+def label_font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
+    """The font text on images is set in, at ``size`` pixels (the em size).
+
+    DejaVu Sans from matplotlib's data folder (``matplotlib.get_data_path()``, the file
+    ``fonts/ttf/DejaVuSans.ttf``: no download, no system font needed); Pillow's built-in
+    scalable font (``ImageFont.load_default(size=...)``) where that file is missing.
+    Fonts are cached per size.
+
+    Parameters
+    ----------
+    size : int
+        In ``[1, MAX_STROKE]`` pixels.
+
+    Returns
+    -------
+    PIL.ImageFont.FreeTypeFont
+        (or Pillow's bitmap font on a Pillow built without FreeType).
+
+    Examples
+    --------
+    >>> font = label_font(24)
+    >>> left, top, right, bottom = font.getbbox("Ag", anchor="ls")
+    >>> 18 <= bottom - top <= 30
+    True
+    """
+    return _load_font(int(check_stroke(size, "size")))
+
+
+def _contrast(color: Color) -> Color:
+    """Black or white, whichever contrasts more with ``color`` (its luma
+    ``0.299 R + 0.587 G + 0.114 B`` above or below 150)."""
+    luma = 0.299 * color[0] + 0.587 * color[1] + 0.114 * color[2]
+    return (0, 0, 0) if luma > 150 else (255, 255, 255)
+
+
+def _label_box(
+    text: str, font: Any, xy: tuple[float, float], anchor: str, canvas: tuple[int, int]
+) -> tuple[int, int, int, int, int, int]:
+    """Where a label goes: its box ``x0, y0, width, height`` (whole pixels, inside the
+    ``canvas`` = (width, height) where it fits) and the baseline origin of its text."""
+    left, _, right, _ = font.getbbox(text, anchor="ls")
+    _, top, _, bottom = font.getbbox(_HEIGHT_PROBE, anchor="ls")
+    size = max(1, int(getattr(font, "size", bottom - top)))
+    pad = max(2, round(size / 8))
+    left = min(left, 0)
+    bw = int(right - left) + 2 * pad
+    bh = int(bottom - top) + 2 * pad
+    x0 = xy[0] - {"l": 0.0, "m": bw / 2, "r": float(bw)}[anchor[0]]
+    y0 = xy[1] - {"t": 0.0, "m": bh / 2, "b": float(bh)}[anchor[1]]
+    w, h = canvas
+    x = round(min(max(x0, 0.0), float(max(w - bw, 0))))
+    y = round(min(max(y0, 0.0), float(max(h - bh, 0))))
+    return x, y, bw, bh, x + pad - int(left), y + pad - int(top)
+
+
+def _put_label(
+    draw: ImageDraw.ImageDraw,
+    canvas: tuple[int, int],
+    text: str,
+    xy: tuple[float, float],
+    font: Any,
+    color: Color,
+    text_color: Color | None,
+    anchor: str,
+) -> tuple[int, int, int, int]:
+    """Draw one label on ``draw``; returns its box ``x0, y0, x1, y1`` (inclusive)."""
+    x, y, bw, bh, tx, ty = _label_box(text, font, xy, anchor, canvas)
+    draw.rectangle([x, y, x + bw - 1, y + bh - 1], fill=color)
+    fill = _contrast(color) if text_color is None else text_color
+    draw.text((tx, ty), text, fill=fill, font=font, anchor="ls")
+    return x, y, x + bw - 1, y + bh - 1
+
+
+def draw_label(
+    image: np.ndarray,
+    text: str,
+    xy: tuple[float, float],
+    *,
+    color: Sequence[int] = (255, 255, 0),
+    size: int | None = None,
+    anchor: str = "lb",
+    text_color: Sequence[int] | None = None,
+) -> np.ndarray:
+    """Write a one-line label on a filled box: a track id, a detection score, a blob id.
+
+    The box is filled with ``color`` and the text written in black or white, whichever
+    contrasts more (luma ``0.299 R + 0.587 G + 0.114 B`` above 150: black), as
+    OpenCV-based and Ultralytics overlays caption boxes. Its height is the font's ink
+    height from cap top to descender (about ``0.96 size``) plus a padding of
+    ``max(2, size / 8)`` pixels above and below, whatever the text; the label is moved
+    inside the picture where ``xy`` would put it (partly) outside.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    text : str
+        One line.
+    xy : (float, float)
+        The point ``(x, y)`` the label's box is anchored at.
+    color : (3,) ints
+        The box's fill (the colour of the thing labelled).
+    size : int, optional
+        Font size in pixels (default :func:`label_size_for` of the picture's height:
+        24 px at 1080p).
+    anchor : str
+        Which point of the box sits at ``xy``: a horizontal letter (``l`` left, ``m``
+        middle, ``r`` right) then a vertical one (``t`` top, ``m`` middle, ``b``
+        bottom). ``"lb"`` (default) puts the label above ``xy``, as a caption on a box's
+        top-left corner; ``"mm"`` centres it on ``xy``.
+    text_color : (3,) ints, optional
+        Overrides the contrasting black or white.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+
+    Raises
+    ------
+    InputError
+        ``text`` not a one-line string, a bad colour, anchor, size or ``xy``.
+
+    Examples
+    --------
+    >>> out = draw_label(np.zeros((1080, 1920), np.uint8), "ID 7", (100, 100))
+    >>> rows = np.flatnonzero(out.any(axis=(1, 2)))
+    >>> int(rows.min()), int(rows.max())  # a 29 px box above y = 100
+    (71, 99)
+    >>> out[80, 100].tolist()  # the yellow box (text in black)
+    [255, 255, 0]
+    """
+    text = check_text(text, "text")
+    if "\n" in text or "\r" in text:
+        raise InputError(f"text must be one line; got {plain_repr(text)}: draw one label per line")
+    x, y = check_reals(xy, "xy", 2)
+    col = check_color(color)
+    tcol = None if text_color is None else check_color(text_color, "text_color")
+    if not isinstance(anchor, str) or anchor not in _ANCHORS:
+        raise InputError(
+            f"anchor must be one of {', '.join(_ANCHORS)} (horizontal l/m/r then vertical "
+            f"t/m/b); got {plain_repr(anchor)}"
+        )
+    pil, draw = pil_canvas(image)
+    font = label_font(label_size_for(pil.height) if size is None else size)
+    _put_label(draw, (pil.width, pil.height), text, (float(x), float(y)), font, col, tcol, anchor)
+    return np.asarray(pil)
+
+
 def draw_points(
     image: np.ndarray,
     points: np.ndarray,
@@ -395,8 +615,13 @@ def draw_boxes(
     color: Sequence[int] = (255, 255, 0),
     width: int = 2,
     labels: Sequence[str] | None = None,
+    label_size: int | None = None,
 ) -> np.ndarray:
     """Draw axis-aligned boxes ``(x, y, w, h)``, optionally captioned.
+
+    Captions are :func:`draw_label` labels in the box's colour on its top-left corner:
+    above the box, or just inside it where there is no room above; they are drawn after
+    all the boxes, so no outline crosses them.
 
     Parameters
     ----------
@@ -408,10 +633,19 @@ def draw_boxes(
         Outline width in ``[1, MAX_STROKE]`` pixels.
     labels : sequence of str, optional
         One caption per box, drawn above its top-left corner.
+    label_size : int, optional
+        Caption font size in pixels (default :func:`label_size_for` of the picture's
+        height: 24 px at 1080p).
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
+
+    Examples
+    --------
+    >>> out = draw_boxes(np.zeros((1080, 1920)), [[100, 200, 50, 40]], labels=["7"])
+    >>> bool(out[199, 100:150].any()), bool(out[170:199, 100:110].any())  # box, caption
+    (True, True)
     """
     b = check_xy(boxes, "boxes", 4)
     if labels is not None:
@@ -423,8 +657,11 @@ def draw_boxes(
             raise InputError(f"labels must have one entry per box ({len(b)}); got {len(labels)}")
     col = check_color(color)
     width = int(check_stroke(width, "width"))
+    if label_size is not None:
+        label_size = int(check_stroke(label_size, "label_size"))
     pil, draw = pil_canvas(image)
     m = width + 2.0  # corners beyond the canvas by more than this are moved onto its margin
+    captions: list[tuple[str, float, float]] = []
     for i, (x, y, w, h) in enumerate(b):
         x0, y0 = x, y
         x1, y1 = x + (w - 1), y + (h - 1)
@@ -436,7 +673,15 @@ def draw_boxes(
         ys = np.clip([y0, y1], -m, pil.height + m)
         draw.rectangle([xs[0], ys[0], xs[1], ys[1]], outline=col, width=width)
         if labels is not None:
-            draw.text((xs[0] + 2, max(0.0, ys[0] - 12)), str(labels[i]), fill=col)
+            captions.append((str(labels[i]), float(xs[0]), float(ys[0])))
+    if captions:
+        font = label_font(label_size_for(pil.height) if label_size is None else label_size)
+        canvas = (pil.width, pil.height)
+        for text, x0, y0 in captions:
+            text = " ".join(text.split())  # (one line)
+            room = y0 >= _label_box(text, font, (x0, y0), "lb", canvas)[3]
+            anchor = "lb" if room else "lt"  # above the box, or inside below its top
+            _put_label(draw, canvas, text, (x0, y0), font, col, None, anchor)
     return np.asarray(pil)
 
 
@@ -446,13 +691,15 @@ def draw_text(
     origin: tuple[float, float] = (5, 5),
     *,
     color: Sequence[int] = (255, 255, 255),
-    size: int = 14,
+    size: int | None = None,
     background: Sequence[int] | None = (0, 0, 0),
 ) -> np.ndarray:
-    """Write ``text`` with its top-left corner at ``origin`` = (x, y).
+    """Write ``text`` (one or more lines) with its top-left corner at ``origin`` = (x, y).
 
-    Uses Pillow's built-in font at ``size`` pixels, on a filled background box unless
-    ``background`` is None, so it stays readable on any image.
+    Set in :func:`label_font` (DejaVu Sans) at ``size`` pixels, on a filled background
+    box unless ``background`` is None, so it stays readable on any image. Unlike
+    :func:`draw_label`, the text stays where it is put (a title, a legend entry):
+    text wholly outside the picture is not drawn.
 
     Parameters
     ----------
@@ -461,35 +708,40 @@ def draw_text(
     origin : (float, float)
         ``(x, y)`` of the top-left corner; text wholly outside the image is not drawn.
     color : (3,) ints
-    size : int
-        Font size in ``[1, MAX_STROKE]`` pixels.
+    size : int, optional
+        Font size in ``[1, MAX_STROKE]`` pixels (default :func:`label_size_for` of the
+        picture's height: 24 px at 1080p).
     background : (3,) ints or None
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
-    """
-    from PIL import ImageFont
 
+    Examples
+    --------
+    >>> out = draw_text(np.zeros((1080, 1920)), "frame 12", (5, 5))
+    >>> rows = np.flatnonzero(out[..., 0].max(axis=1) == 255)  # the white ink
+    >>> 15 <= int(rows.max() - rows.min()) + 1 <= 24
+    True
+    """
     text = check_text(text, "text")
     ox, oy = check_reals(origin, "origin", 2)
     col = check_color(color)
     bg = None if background is None else check_color(background, "background")
-    size = int(check_stroke(size, "size"))
+    if size is not None:
+        size = int(check_stroke(size, "size"))
     pil, draw = pil_canvas(image)
-    try:
-        font = ImageFont.load_default(size=size)
-    except TypeError:  # Pillow < 10.1
-        font = ImageFont.load_default()
-    left, top, right, bottom = draw.textbbox((0, 0), text, font=font)
-    if ox + right + 2 < 0 or oy + bottom + 2 < 0 or ox + left - 2 > pil.width:
+    font = label_font(label_size_for(pil.height) if size is None else size)
+    pad = max(2, round(font.size / 8)) if hasattr(font, "size") else 2
+    left, top, right, bottom = draw.multiline_textbbox((0, 0), text, font=font)
+    if ox + right + pad < 0 or oy + bottom + pad < 0 or ox + left - pad > pil.width:
         return np.asarray(pil)  # wholly outside (and far coordinates overflow Pillow)
-    if oy + top - 2 > pil.height:
+    if oy + top - pad > pil.height:
         return np.asarray(pil)
     if bg is not None:
-        box = (ox + left, oy + top, ox + right, oy + bottom)
-        draw.rectangle([box[0] - 2, box[1] - 2, box[2] + 2, box[3] + 2], fill=bg)
-    draw.text((ox, oy), text, fill=col, font=font)
+        box = (ox + left - pad, oy + top - pad, ox + right + pad - 1, oy + bottom + pad - 1)
+        draw.rectangle(box, fill=bg)
+    draw.multiline_text((ox, oy), text, fill=col, font=font)
     return np.asarray(pil)
 
 

@@ -51,6 +51,7 @@ from robopercept.viz.draw import (
     check_stroke,
     clip_segments,
     enlarge_picture,
+    label_font,
     pil_canvas,
     to_rgb8,
 )
@@ -89,12 +90,8 @@ def _sizes(width: int, height: int) -> tuple[float, int]:
 
 
 def _font(size: int) -> Any:
-    from PIL import ImageFont
-
-    try:
-        return ImageFont.load_default(size=size)
-    except TypeError:  # Pillow < 10.1
-        return ImageFont.load_default()
+    """The house font (:func:`~robopercept.viz.draw.label_font`: DejaVu Sans)."""
+    return label_font(size)
 
 
 def _check_links(links: Any, joints: int) -> np.ndarray:
