@@ -266,9 +266,13 @@ class History:
             return out
 
         panels = [
-            Panel("loss (cross-entropy)", curves("loss")),
-            Panel("accuracy", curves("accuracy")),
-            Panel("learning rate", [Series(x, np.asarray(self.lr, float), "lr", green)]),
+            Panel("loss (cross-entropy)", curves("loss"), "loss"),
+            Panel("accuracy", curves("accuracy"), "accuracy [0-1]"),
+            Panel(
+                "learning rate",
+                [Series(x, np.asarray(self.lr, float), "lr", green)],
+                "learning rate",
+            ),
         ]
         return plot_series(panels, width=1200, panel_height=260, xlabel="epoch")
 

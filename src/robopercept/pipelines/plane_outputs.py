@@ -15,7 +15,8 @@ frame source and writes, into one folder:
   outline and normal, and a status line (optional);
 * ``summary.json``: :func:`~robopercept.pipelines.summarize`'s figures
   (:class:`~robopercept.pipelines.PlaneTrackSummary`), with the count of each status;
-* ``plane.png``: raw, tracked and (when known) true plane parameters over time.
+* ``plane.png``: measured, tracked and (when known) true plane parameters against the
+  frame (:func:`plane_parameters_figure`).
 
 The run stops cleanly on Ctrl-C, on SIGTERM (``docker stop``, systemd), when the
 source fails (a camera unplugged) or when an output cannot be written (a full disk):
@@ -44,10 +45,11 @@ import warnings
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from robopercept._checks import plain_repr
 from robopercept.errors import InputError, RoboperceptError
 from robopercept.fileio import WriteError, atomic_path, atomic_write, write_error
 from robopercept.geometry import apply, project
@@ -61,13 +63,18 @@ from robopercept.pipelines.plane_tracking import (
 from robopercept.progress import progress_bar
 from robopercept.sources.frames import RGBDFrame
 from robopercept.viz import draw_lines, draw_text
-from robopercept.viz.plot import Panel, Series, plot_series
+from robopercept.viz.figure import figure_to_rgb
+from robopercept.viz.plot import Panel, Series, series_figure
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "CSV_COLUMNS",
     "PlaneTrackOutputs",
     "StopSignals",
     "annotate_frame",
+    "plane_parameters_figure",
     "run_plane_tracking",
 ]
 
@@ -442,6 +449,7 @@ class PlaneTrackOutputs:
         return summary
 
     def _plot(self) -> np.ndarray:
+        """``plane.png``: :func:`plane_parameters_figure` of the run, rasterized."""
         res = self.results
         t = np.array([r.index for r in res], dtype=np.float64)
         raw = np.array([np.append(r.normal, r.d) if r.measured else [np.nan] * 4 for r in res])
@@ -449,15 +457,94 @@ class PlaneTrackOutputs:
         truth = np.array(
             [np.append(*tr["plane"]) if "plane" in tr else [np.nan] * 4 for _, tr in self._rows]
         )
-        panels = []
-        for k, name in enumerate(("n_x", "n_y", "n_z", "d [m]")):
-            series = []
-            if np.isfinite(truth[:, k]).any():
-                series.append(Series(t, truth[:, k], "truth", (0, 0, 0)))
-            series.append(Series(t, raw[:, k], "raw", (214, 39, 40), "dots"))
-            series.append(Series(t, trk[:, k], "tracked", (31, 119, 180)))
-            panels.append(Panel(name, series))
-        return plot_series(panels, xlabel="frame")
+        return figure_to_rgb(plane_parameters_figure(t, raw, trk, truth), quiet_layout=True)
+
+
+def plane_parameters_figure(
+    frames: np.ndarray,
+    measured: np.ndarray,
+    tracked: np.ndarray,
+    truth: np.ndarray | None = None,
+) -> Figure:
+    """The figure of ``plane.png``: the measured, tracked and (when known) true plane
+    ``(n_x, n_y, n_z, d)`` against the frame index, ``n . x = d`` with ``n`` the unit
+    normal and ``d`` the distance in metres (depth camera frame).
+
+    A 2 x 2 grid of panels, 1600 x 900 pixels at 100 dpi (12 pt text, readable at
+    1080p), one legend above the panels (the measured entry counts the frames with a
+    plane), integer frame ticks, and in each panel the note "no board detected in N
+    frames" when nothing was measured or tracked (:func:`robopercept.viz.plot_series`'s
+    rules).
+
+    Parameters
+    ----------
+    frames : (N,) array_like
+        Frame indices.
+    measured, tracked : (N, 4) array_like
+        ``(n_x, n_y, n_z, d)`` per frame; NaN rows where there is none.
+    truth : (N, 4) array_like, optional
+        The ground truth (a synthetic scene's), NaN where unknown.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    InputError
+        Arrays of the wrong shapes or not real numbers.
+
+    Examples
+    --------
+    >>> rows = np.tile([0.0, 0.0, 1.0, 0.8], (3, 1))
+    >>> fig = plane_parameters_figure(np.arange(3), rows, rows)
+    >>> [ax.get_ylabel() for ax in fig.axes][-1], fig.get_size_inches().tolist()
+    ('d [m]', [16.0, 9.0])
+    """
+    t = np.asarray(frames)
+    if t.ndim != 1 or t.dtype.kind not in "biuf":
+        raise InputError(f"frames must be a 1-D array of frame indices; got {plain_repr(frames)}")
+    t = t.astype(np.float64)
+    n = len(t)
+    arrays = {}
+    for name, value in (("measured", measured), ("tracked", tracked), ("truth", truth)):
+        if value is None:
+            arrays[name] = np.full((n, 4), np.nan)
+            continue
+        v = np.asarray(value)
+        if v.shape != (n, 4) or v.dtype.kind not in "biuf":
+            raise InputError(
+                f"{name} must be ({n}, 4) real numbers (n_x, n_y, n_z, d per frame); got "
+                f"shape {v.shape} dtype {v.dtype}"
+            )
+        arrays[name] = v.astype(np.float64)
+    raw, trk, true = arrays["measured"], arrays["tracked"], arrays["truth"]
+    detected = int(np.isfinite(raw).all(axis=1).sum())
+    raw_label = f"measured ({detected} of {n} frames)"
+    panels = []
+    quantities = (
+        ("normal x", "n_x [unit normal]"),
+        ("normal y", "n_y [unit normal]"),
+        ("normal z", "n_z [unit normal]"),
+        ("distance to the plane", "d [m]"),
+    )
+    for k, (title, ylabel) in enumerate(quantities):
+        series = []
+        if np.isfinite(true).any():
+            series.append(Series(t, true[:, k], "truth", (0, 0, 0)))
+        series.append(Series(t, raw[:, k], raw_label, (214, 39, 40), "dots"))
+        series.append(Series(t, trk[:, k], "tracked", (31, 119, 180)))
+        panels.append(Panel(title, series, ylabel))
+    return series_figure(
+        panels,
+        width=1600,
+        panel_height=435,
+        columns=2,
+        xlabel="frame",
+        integer_x=True,
+        legend="figure",
+        empty_note=f"no board detected in {'1 frame' if n == 1 else f'{n} frames'}",
+    )
 
 
 def run_plane_tracking(

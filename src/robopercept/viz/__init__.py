@@ -33,7 +33,9 @@ from robopercept.viz.features import (
     project_outline,
     select_matches,
 )
+from robopercept.viz.figure import readable_dpi
 from robopercept.viz.flow import (
+    arrow_scale,
     dense_flow_picture,
     draw_flow,
     draw_trails,
@@ -41,23 +43,39 @@ from robopercept.viz.flow import (
     flow_wheel,
 )
 from robopercept.viz.learning import (
+    confusion_figure,
     confusion_picture,
+    curves_figure,
     curves_picture,
+    scatter_figure,
     scatter_picture,
     tiles_picture,
+)
+from robopercept.viz.plot import (
+    Panel,
+    Series,
+    plot_series,
+    scalar_map_figure,
+    scalar_map_picture,
+    series_figure,
 )
 from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
 from robopercept.viz.segmentation import class_overlay, instance_overlay, panels_picture
 
 __all__ = [
     "MatchPicture",
+    "Panel",
+    "Series",
+    "arrow_scale",
     "class_overlay",
     "cloud_picture",
     "clouds_grid",
     "colorize_depth",
     "colorize_signed",
+    "confusion_figure",
     "confusion_picture",
     "critical_points_picture",
+    "curves_figure",
     "curves_picture",
     "dense_flow_picture",
     "draw_boxes",
@@ -83,10 +101,16 @@ __all__ = [
     "label_size_for",
     "matches_picture",
     "panels_picture",
+    "plot_series",
     "project_outline",
+    "readable_dpi",
     "render_points",
+    "scalar_map_figure",
+    "scalar_map_picture",
+    "scatter_figure",
     "scatter_picture",
     "select_matches",
+    "series_figure",
     "skeleton_3d_picture",
     "tiles_picture",
     "voc_palette",

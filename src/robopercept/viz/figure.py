@@ -11,24 +11,33 @@ pixels high. :func:`agg_figure` with ``reference_width`` picks
 ``dpi = 100 * width / reference_width``: the figure then keeps the inches (and so the
 layout) of its reference size, and every font, marker and line scales with the picture
 (at the reference width, 12 pt is 16.7 pixels: readable on a 1920 x 1080 screen).
+
+:func:`readable_dpi` picks the resolution of a plot from its size alone: 100 dpi (12 pt
+text 16.7 pixels high) for any picture that fits a 1920 x 1080 screen, more for a larger
+picture (so its text reads the same once the picture is fitted to the screen), less for a
+picture smaller than the plot's comfortable size (so its layout still fits).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from robopercept._checks import check_int, check_real, check_text, plain_repr
+from robopercept._checks import check_bool, check_int, check_real, check_text, plain_repr
 from robopercept.errors import InputError
 from robopercept.viz.draw import check_picture_size
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["agg_figure", "check_views", "figure_to_rgb"]
+__all__ = ["SCREEN_SIZE", "agg_figure", "check_views", "figure_to_rgb", "readable_dpi"]
+
+#: the screen a picture must read well on, ``(width, height)`` in pixels
+SCREEN_SIZE = (1920, 1080)
 
 
 def agg_figure(
@@ -38,6 +47,7 @@ def agg_figure(
     reference_width: int | None = None,
     layout: Literal["constrained", "tight"] | None = None,
     what: str = "picture",
+    dpi: float | None = None,
 ) -> Figure:
     """A matplotlib figure of ``width`` x ``height`` pixels on an Agg canvas.
 
@@ -54,6 +64,9 @@ def agg_figure(
         colour bars inside the picture).
     what : str
         The caller's name, in the message when matplotlib is missing.
+    dpi : float, optional
+        The resolution itself (e.g. :func:`readable_dpi`), in (0, 10000]; not with
+        ``reference_width``.
 
     Returns
     -------
@@ -71,9 +84,15 @@ def agg_figure(
     >>> fig = agg_figure(320, 200)
     >>> figure_to_rgb(fig).shape
     (200, 320, 3)
+    >>> agg_figure(320, 200, dpi=50.0).get_size_inches().tolist()
+    [6.4, 4.0]
     """
     w, h = check_picture_size(width, height, check_text(what, "what"))
     ref = None if reference_width is None else check_int(reference_width, "reference_width", 1)
+    if dpi is not None:
+        if ref is not None:
+            raise InputError("give dpi or reference_width, not both")
+        dpi = check_real(dpi, "dpi", 0.0, 1e4, low_inclusive=False)
     if not (layout is None or (isinstance(layout, str) and layout in ("constrained", "tight"))):
         raise InputError(
             f"layout must be one of None, 'constrained', 'tight'; got {plain_repr(layout)}"
@@ -83,19 +102,24 @@ def agg_figure(
         from matplotlib.figure import Figure
     except ImportError as exc:
         raise InputError(f"{what} needs matplotlib: pip install matplotlib ({exc})") from exc
-    dpi = 100.0 if ref is None else 100.0 * w / ref
+    if dpi is None:
+        dpi = 100.0 if ref is None else 100.0 * w / ref
     fig = Figure(figsize=(w / dpi, h / dpi), dpi=dpi, layout=layout)
     FigureCanvasAgg(fig)
     return fig
 
 
-def figure_to_rgb(fig: Figure) -> np.ndarray:
+def figure_to_rgb(fig: Figure, *, quiet_layout: bool = False) -> np.ndarray:
     """Draw a matplotlib figure and return its pixels.
 
     Parameters
     ----------
     fig : matplotlib.figure.Figure
         Any figure (one without an Agg canvas gets one).
+    quiet_layout : bool
+        Silence the layout engine's warnings that a very small or very flat picture
+        leaves no room ("constrained layout not applied", "axes sizes collapsed"): the
+        picture is drawn as it falls.
 
     Returns
     -------
@@ -122,12 +146,62 @@ def figure_to_rgb(fig: Figure) -> np.ndarray:
         raise InputError(f"figure_to_rgb needs matplotlib: pip install matplotlib ({exc})") from exc
     if not isinstance(fig, Figure):
         raise InputError(f"fig must be a matplotlib Figure; got {plain_repr(fig)}")
+    quiet_layout = check_bool(quiet_layout, "quiet_layout")
     canvas: Any = fig.canvas
     if not isinstance(canvas, FigureCanvasAgg):
         canvas = FigureCanvasAgg(fig)
-    canvas.draw()
+    with warnings.catch_warnings():
+        if quiet_layout:
+            warnings.filterwarnings("ignore", message=".*[Ll]ayout not applied.*")
+            warnings.filterwarnings("ignore", message=".*axes sizes collapsed.*")
+        canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())
     return np.ascontiguousarray(rgba[..., :3])
+
+
+def readable_dpi(
+    width: int, height: int, *, comfortable: tuple[int, int] = (640, 400), floor: float = 0.3
+) -> float:
+    r"""The resolution at which a plot of ``width`` x ``height`` pixels reads well on a
+    1920 x 1080 screen (:data:`SCREEN_SIZE`).
+
+    .. math::
+
+        \mathrm{dpi} = 100 \max\Big(f, \min\big(\max(1, W / 1920, H / 1080),
+        W / W_c, H / H_c\big)\Big)
+
+    with ``(W_c, H_c) = comfortable`` and ``f = floor``. At 100 dpi a 12 pt font is
+    16.7 pixels high. A picture larger than the screen is shown shrunk by
+    ``max(W / 1920, H / 1080)``, so its text grows by that factor; a picture smaller than
+    the plot's comfortable size (where its labels, legend and title fit at 100 dpi)
+    shrinks its text instead, down to ``floor`` times.
+
+    Parameters
+    ----------
+    width, height : int
+        The picture's size in pixels.
+    comfortable : (int, int)
+        The smallest ``(width, height)`` at which the plot's layout fits at 100 dpi.
+    floor : float
+        The smallest scale, in (0, 1].
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> readable_dpi(1600, 900), readable_dpi(3840, 2160), readable_dpi(320, 400)
+    (100.0, 200.0, 50.0)
+    """
+    w, h = check_picture_size(width, height)
+    if not (isinstance(comfortable, (tuple, list)) and len(comfortable) == 2):
+        raise InputError(f"comfortable must be (width, height); got {plain_repr(comfortable)}")
+    cw = check_int(comfortable[0], "comfortable width", 1)
+    ch = check_int(comfortable[1], "comfortable height", 1)
+    floor = check_real(floor, "floor", 0.0, 1.0, low_inclusive=False)
+    grow = max(1.0, w / SCREEN_SIZE[0], h / SCREEN_SIZE[1])
+    return 100.0 * max(floor, min(grow, w / cw, h / ch))
 
 
 def check_views(views: Any) -> list[tuple[float, float]]:
