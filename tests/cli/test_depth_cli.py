@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from robopercept.cli.main import main
 from robopercept.depth import semi_global_matching
@@ -35,12 +36,17 @@ def test_stereo_json_truth_npy_and_ply(tmp_path, capsys):
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     disp = np.load(tmp_path / "d.npy")
-    expected = semi_global_matching(read_image(left), read_image(right), 15)
+    # the left-right check (1 px) is on by default
+    expected = semi_global_matching(read_image(left), read_image(right), 15, lr_check=1.0)
     assert np.array_equal(disp, expected, equal_nan=True)
+    assert summary["lr_check_px"] == 1.0
+    assert summary["valid_percent"] == pytest.approx(100 * np.isfinite(disp).mean())
     assert summary["bad_2_percent"] < 15  # the left band (x < 6) and borders only
-    assert read_image(out).shape == (60, 120, 3)
+    assert summary["bad_2_valid_percent"] < 2
+    assert read_image(out).shape[2] == 3 and read_image(out).shape[1] == 1280  # colour bar
     cloud = read_point_cloud(tmp_path / "p.ply")
     assert len(cloud) == summary["points"] > 5000
+    assert summary["max_depth"] == pytest.approx(cloud.points[:, 2].max(), rel=1e-6)
     inner = np.abs(cloud.points[:, 2] - 500 * 0.1 / 6) < 0.5
     assert inner.mean() > 0.8  # z = f B / d = 8.33 m
 

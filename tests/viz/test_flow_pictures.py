@@ -154,3 +154,31 @@ def test_issue25_far_flow_and_trails_draw_the_visible_part():
     assert (out[10, 10:, 1] == 255).all() and out[:, :, 1].sum() == 255 * 38
     trails = draw_trails(_RGB, [np.array([[0.0, 16.0], [-1e300, 16.0], [1e300, 16.0]])])
     assert (trails[16, :, 1] == 255).all()
+
+
+# issue 30: arrows scaled automatically so that small motions are visible
+def test_arrow_scale_makes_the_median_arrow_visible():
+    """Property: for any motion size, the median arrow is drawn at least 2 % of the
+    diagonal (unless capped) and the factor is a round number >= 1; long motions are
+    never shortened; nothing tracked or nothing moving gives 1."""
+    from robopercept.viz.flow import MAX_ARROW_SCALE, arrow_scale
+
+    rng = np.random.default_rng(0)
+    size = (584, 388)
+    diag = np.hypot(*size)
+    for m in (0.05, 0.3, 1.0, 1.28, 3.0, 7.0, 14.1, 50.0):
+        flow = rng.normal(0, 1, (200, 2))
+        flow *= m / np.median(np.hypot(*flow.T))
+        s = arrow_scale(flow, size)
+        mantissa = s / 10 ** np.floor(np.log10(s))
+        assert s >= 1 and (s == MAX_ARROW_SCALE or round(mantissa, 9) in (1, 2, 2.5, 5))
+        assert s * m >= 0.02 * diag - 1e-9 or s == MAX_ARROW_SCALE
+        assert s * m < 2.0 * 0.02 * diag or s == 1.0  # rounding up at most doubles
+    assert arrow_scale(np.full((3, 2), np.nan), size) == 1.0
+    assert arrow_scale(np.zeros((3, 2)), size) == 1.0
+    assert arrow_scale(np.array([[0.01, 0.0]]), size) == MAX_ARROW_SCALE
+    assert arrow_scale(np.array([[1.0, 0.0]]), size, fraction=0.1, max_scale=1000) == 100.0
+    with pytest.raises(InputError, match="fraction"):
+        arrow_scale(np.ones((2, 2)), size, fraction=0.0)
+    with pytest.raises(InputError, match="max_scale"):
+        arrow_scale(np.ones((2, 2)), size, max_scale=0.5)

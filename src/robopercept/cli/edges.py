@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 import time
 
 import numpy as np
@@ -20,7 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "edges",
         help="edge map of an image (Canny, Sobel magnitude or LoG)",
-        description="Write an edge map of IMAGE as a PNG.",
+        description="Write an edge map of IMAGE as a PNG: Canny edges, the Sobel gradient "
+        "magnitude, or the zero crossings of the Laplacian of Gaussian (Marr-Hildreth) kept "
+        "by a hysteresis threshold on their slope.",
     )
     p.add_argument("image", nargs="?", help="input image (default: the bundled sample)")
     p.add_argument(
@@ -36,13 +40,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=None,
         help="Canny low threshold in the image's grey levels (0..255 for 8-bit, 0..65535 "
-        "for 16-bit images; default 50, times 257 for 16-bit images)",
+        "for 16-bit images; default 50, times 257 for 16-bit images). LoG: the low "
+        "hysteresis threshold on a zero crossing's slope, in multiples of the mean "
+        "absolute LoG response (default 1.5; --low 0 --high 0 keeps every crossing)",
     )
     p.add_argument(
         "--high",
         type=float,
         default=None,
-        help="Canny high threshold, as --low (default 150, times 257 for 16-bit images)",
+        help="Canny high threshold, as --low (default 150, times 257 for 16-bit images); "
+        "LoG: the high slope threshold (default 4)",
     )
     p.add_argument(
         "--sigma",
@@ -51,6 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="Gaussian sigma before differentiation (0: none; LoG scale)",
     )
     p.add_argument("--overlay", action="store_true", help="draw edges in red over the image")
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
     p.set_defaults(func=run_edges)
 
 
@@ -66,10 +74,12 @@ def run_edges(args: argparse.Namespace) -> int:
         log_zero_crossings,
         write_image,
     )
-    from robopercept.imaging.edges import grey_level_scale
+    from robopercept.imaging.edges import LOG_HIGH, LOG_LOW, grey_level_scale
     from robopercept.viz import draw_mask
 
     src, gray = load_gray(args.image)
+    note = sys.stderr if args.json else sys.stdout
+    params: dict = {"sigma": args.sigma}
     t0 = time.perf_counter()
     if args.method == "canny":
         low, high = args.low, args.high
@@ -86,30 +96,52 @@ def run_edges(args: argparse.Namespace) -> int:
                 print(
                     f"{gray.dtype} image: default Canny thresholds {DEFAULT_LOW:g} and "
                     f"{DEFAULT_HIGH:g} (8-bit grey levels) scaled by {scale:.6g} to its grey "
-                    f"levels: --low {low:.6g} --high {high:.6g}"
+                    f"levels: --low {low:.6g} --high {high:.6g}",
+                    file=note,
                 )
         edges = canny(gray, low, high, sigma=args.sigma)
         out = edges.astype(np.uint8) * 255
-        n = int(edges.sum())
-        detail = f"{n} edge pixels ({100.0 * n / edges.size:.1f}%)"
+        params.update(low=low, high=high, units="grey levels")
+        what = "edge pixels"
     elif args.method == "sobel":
         work = gaussian_blur(gray.astype(np.float32), args.sigma) if args.sigma > 0 else gray
         mag, _ = gradient(work)
         peak = float(mag.max()) or 1.0
         out = np.round(mag / peak * 255.0).astype(np.uint8)
         edges = mag > 0.25 * peak
-        detail = f"max gradient {peak:.1f}"
+        params.update(max_gradient=peak, edge_threshold="0.25 x max gradient")
+        what = "pixels above a quarter of the largest gradient"
     else:
         if args.sigma <= 0:
             raise UsageError("--sigma must be > 0 for the LoG method")
+        low = LOG_LOW if args.low is None else args.low
+        high = LOG_HIGH if args.high is None else args.high
         log = laplacian_of_gaussian(gray, args.sigma, normalized=True)
-        edges = log_zero_crossings(log, 0.05)
+        edges = log_zero_crossings(log, low, high)
         out = edges.astype(np.uint8) * 255
-        detail = f"{int(edges.sum())} zero-crossing pixels"
+        params.update(low=low, high=high, units="x mean |LoG|")
+        what = "zero-crossing pixels"
     ms = (time.perf_counter() - t0) * 1e3
     if args.overlay:
         out = draw_mask(gray, edges, color=(255, 0, 0), alpha=1.0)
     written = write_image(args.output, out)
+    n = int(edges.sum())
+    if args.json:
+        summary = {
+            "image": str(src),
+            "size": [int(gray.shape[1]), int(gray.shape[0])],
+            "method": args.method,
+            "parameters": params,
+            "edge_pixels": n,
+            "edge_fraction": n / edges.size,
+            "ms": ms,
+            "outputs": [str(written)],
+        }
+        print(json.dumps(summary, indent=2))
+        return 0
+    detail = f"{n} {what} ({100.0 * n / edges.size:.1f}%)"
+    if args.method == "sobel":
+        detail += f", max gradient {params['max_gradient']:.1f}"
     print(
         f"{args.method} edges of {src.name} ({gray.shape[1]}x{gray.shape[0]}): {detail}, "
         f"{ms:.1f} ms -> {written}"

@@ -28,9 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         "stereo",
         help="disparity map of a rectified stereo pair (block matching or SGM)",
         description="Match LEFT against RIGHT (rectified: corresponding points share a row) "
-        "and write the disparity coloured with Turbo (near red, far blue, rejected black). "
-        "--truth evaluates against a ground-truth disparity image; --ply writes the 3-D "
-        "points z = f B / d with the left image's colours.",
+        "and write the disparity coloured with Turbo (near red, far blue) with a colour bar; "
+        "pixels that fail the left-right consistency check (on by default) are NaN and "
+        "drawn apart. --truth evaluates against a ground-truth disparity image; --ply "
+        "writes the 3-D points z = f B / d with the left image's colours (disparities of "
+        "1 px or less, whose depth is unknown to a factor of two, give no point).",
     )
     p.add_argument("left")
     p.add_argument("right")
@@ -44,9 +46,32 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--P1", type=float, default=None, help="sgm: small-jump penalty")
     p.add_argument("--P2", type=float, default=None, help="sgm: large-jump penalty")
     p.add_argument("--uniqueness", type=float, default=0.0, help="reject ambiguous (0-1)")
-    p.add_argument("--lr-check", type=float, default=None, help="left-right check (px)")
+    lr = p.add_mutually_exclusive_group()
+    lr.add_argument(
+        "--lr-check",
+        type=float,
+        default=1.0,
+        help="left-right consistency check: reject (NaN) a pixel whose match in the right "
+        "image does not map back within this many pixels (default 1, as OpenCV's SGBM)",
+    )
+    lr.add_argument(
+        "--no-lr-check",
+        dest="lr_check",
+        action="store_const",
+        const=None,
+        help="keep every pixel's best match (dense, occlusions filled with wrong matches)",
+    )
     p.add_argument(
-        "-o", "--output", type=image_output, default="disparity.png", help="coloured disparity"
+        "-o",
+        "--output",
+        type=image_output,
+        default="disparity.png",
+        help="the disparity picture with its colour bar (default disparity.png)",
+    )
+    p.add_argument(
+        "--no-colorbar",
+        action="store_true",
+        help="-o is the bare coloured map, pixel for pixel with LEFT (rejected black)",
     )
     p.add_argument(
         "--npy",
@@ -90,7 +115,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_stereo(args: argparse.Namespace) -> int:
     """Run ``robopercept stereo`` with the parsed ``args``; returns the exit status."""
     from robopercept.depth import bad_pixel_rate, block_matching, semi_global_matching
-    from robopercept.errors import InputError
+    from robopercept.errors import DegenerateError, InputError
     from robopercept.imaging import read_image, write_image
     from robopercept.viz import colorize_depth
 
@@ -123,40 +148,87 @@ def run_stereo(args: argparse.Namespace) -> int:
             lr_check=args.lr_check,
         )  # fmt: skip
     ms = 1000 * (time.perf_counter() - t0)
-    shown = np.nan_to_num(disp, nan=0.0)
-    write_image(args.output, colorize_depth(shown, 1e-6, float(args.max_disparity)))
-    written = [args.output]
+    if args.no_colorbar:
+        shown = np.nan_to_num(disp, nan=0.0)
+        picture = colorize_depth(shown, 1e-6, float(args.max_disparity))
+    else:
+        picture = _disparity_picture(disp, args, left.shape)
+    write_image(args.output, picture)
+    written = [str(args.output)]
     if args.npy:
         np.save(args.npy, disp)
-        written.append(args.npy)
-    summary = {
+        written.append(str(args.npy))
+    finite = np.isfinite(disp)
+    summary: dict = {
         "method": args.method,
         "size": [int(disp.shape[1]), int(disp.shape[0])],
-        "valid_percent": 100.0 * float(np.isfinite(disp).mean()),
-        "median_disparity": float(np.nanmedian(disp)) if np.isfinite(disp).any() else None,
+        "disparity_range": [int(args.min_disparity), int(args.max_disparity)],
+        "lr_check_px": args.lr_check,
+        "uniqueness": args.uniqueness,
+        "valid_percent": 100.0 * float(finite.mean()),
+        "median_disparity": float(np.nanmedian(disp)) if finite.any() else None,
         "ms": ms,
     }
     if truth is not None:
-        summary["bad_1_percent"] = 100 * bad_pixel_rate(disp, truth, 1.0)
-        summary["bad_2_percent"] = 100 * bad_pixel_rate(disp, truth, 2.0)
+        known = truth > 0
+        summary["truth_known_percent"] = 100.0 * float(known.mean())
+        summary["density_percent"] = 100.0 * float((finite & known).sum() / max(known.sum(), 1))
+        for t in (1.0, 2.0):
+            key = f"bad_{t:g}"
+            summary[f"{key}_percent"] = 100 * bad_pixel_rate(disp, truth, t)
+            try:
+                rate = bad_pixel_rate(disp, truth, t, invalid="ignore")
+                summary[f"{key}_valid_percent"] = 100 * rate
+            except DegenerateError:
+                summary[f"{key}_valid_percent"] = None
     if args.ply:
-        summary["points"] = _write_ply(Path(args.ply), disp, left, args.focal, args.baseline, Q)
-        written.append(args.ply)
+        npts, zmax = _write_ply(
+            Path(args.ply), disp, left, args.focal, args.baseline, Q, args.min_disparity
+        )
+        summary["points"] = npts
+        summary["max_depth"] = zmax
+        written.append(str(args.ply))
     summary["outputs"] = written
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
-    print(f"method            {args.method} ({ms:.0f} ms)")
-    print(f"valid             {summary['valid_percent']:.1f}% of pixels")
+    check = "off" if args.lr_check is None else f"{args.lr_check:g} px"
+    print(f"method            {args.method} ({ms:.0f} ms), left-right check {check}")
+    print(f"valid             {summary['valid_percent']:.1f}% of pixels (the rest NaN: rejected)")
     if truth is not None:
-        print(
-            f"vs truth          bad-1.0 {summary['bad_1_percent']:.2f}%, bad-2.0 "
-            f"{summary['bad_2_percent']:.2f}% (rejected pixels count as bad)"
-        )
+        for k in ("1", "2"):
+            valid = summary[f"bad_{k}_valid_percent"]
+            print(
+                f"vs truth          bad-{k}.0 {summary[f'bad_{k}_percent']:.2f}% of known "
+                "pixels (rejected count as bad), "
+                + ("no valid pixel" if valid is None else f"{valid:.2f}% of the valid ones")
+            )
+        print(f"density           {summary['density_percent']:.1f}% of the known pixels valid")
     if args.ply:
-        print(f"points            {summary['points']}")
+        far = "" if summary["max_depth"] is None else f", farthest z {summary['max_depth']:.3g}"
+        print(f"points            {summary['points']}{far}")
     print(f"wrote             {', '.join(written)}")
     return 0
+
+
+def _disparity_picture(disp: np.ndarray, args: argparse.Namespace, shape: tuple) -> np.ndarray:
+    """The disparity with its colour bar (viz.plot's scalar map), sized for the screen."""
+    from robopercept.viz.plot import scalar_map_picture
+
+    h, w = shape[:2]
+    width = 1280
+    height = int(np.clip(0.82 * width * h / w + 90, 360, 1080))
+    check = "off" if args.lr_check is None else f"{args.lr_check:g} px"
+    return scalar_map_picture(
+        disp,
+        cmap="turbo",
+        label="disparity [px] (near: high)",
+        title=f"{args.method} disparity, left-right check {check}",
+        vmin=float(args.min_disparity),
+        vmax=float(args.max_disparity),
+        width=width,
+        height=height,
+    )
 
 
 def _rectify(path: str, left: np.ndarray, right: np.ndarray) -> tuple:
@@ -173,15 +245,20 @@ def _write_ply(
     focal: float | None,
     baseline: float | None,
     Q: np.ndarray | None = None,
-) -> int:
+    min_disparity: int = 0,
+) -> tuple[int, float | None]:
+    """``--ply``: the points of the disparities above max(1 px, --min-disparity) (a
+    disparity at the search's lower end is a boundary winner, one at 1 px or less has
+    an unknown depth: :func:`~robopercept.depth.disparity_to_points`); returns the
+    number of points and the largest z."""
     from robopercept.depth import disparity_to_points, reprojection_matrix
     from robopercept.pointcloud import PointCloud, write_point_cloud
 
     if Q is None:
         assert focal is not None and baseline is not None  # checked with the flags
         Q = reprojection_matrix(focal, baseline, (disp.shape[1], disp.shape[0]))
-    pts = disparity_to_points(disp, Q)
+    pts = disparity_to_points(disp, Q, min_disparity=max(1.0, float(min_disparity)))
     ok = np.isfinite(pts).all(axis=2)
     cloud = PointCloud(pts[ok], colors=rgb[ok].astype(np.float64) / 255.0)
     write_point_cloud(path, cloud)
-    return int(ok.sum())
+    return int(ok.sum()), (float(pts[ok][:, 2].max()) if ok.any() else None)

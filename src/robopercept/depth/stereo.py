@@ -36,8 +36,14 @@ Both refine the winner by a parabola through its neighbours,
 ambiguous pixels (``uniqueness``: the best must beat every disparity more than one
 step away by that fraction) and inconsistent ones (``lr_check``: the right image's
 own winner must agree within that many pixels), and return NaN for rejected pixels.
-Columns left of the search range take only the disparities that stay inside the
-right image (OpenCV marks the first ``numDisparities`` columns invalid instead).
+The right image's winners come from the same cost volume (along its diagonals, as
+Hirschmüller's :math:`D_m` and OpenCV's SGBM); near the left border, where the left
+pixels see only part of the range, they lean to small disparities, so the check also
+rejects winners at the lowest disparity searched: their cost minimum is not
+bracketed, and the match may lie below the range (a pixel whose match left the right
+image, or a background beyond the range). Columns left of the search range take only
+the disparities that stay inside the right image (OpenCV marks the first
+``numDisparities`` columns invalid instead).
 """
 
 from __future__ import annotations
@@ -56,7 +62,7 @@ from robopercept._checks import (
     check_real,
     check_size,
 )
-from robopercept.errors import InputError
+from robopercept.errors import DegenerateError, InputError
 from robopercept.imaging.color import gray_255
 
 __all__ = [
@@ -535,9 +541,10 @@ def _median3(pad, out):  # pragma: no cover - compiled
             out[y, x] = buf[n // 2] if n % 2 == 1 else 0.5 * (buf[n // 2 - 1] + buf[n // 2])
 
 
-def _post(disp: np.ndarray, right: np.ndarray, lr_check: float | None, median: bool):
+def _post(disp: np.ndarray, right: np.ndarray, lr_check: float | None, median: bool, dmin: int):
     if lr_check is not None:
         _lr_check(disp, right, float(lr_check))
+        disp[disp <= dmin] = np.nan  # a winner at the range's end: not bracketed
     if median:
         out = np.empty_like(disp)
         _median3(np.pad(disp, 1, mode="edge"), out)
@@ -608,7 +615,11 @@ def semi_global_matching(
         Odd side of the block over which pixel costs are summed (1: none).
     uniqueness, lr_check, subpixel, median
         Rejection and refinement (see the module docstring); ``median`` is a 3x3
-        median of the valid disparities.
+        median of the valid disparities. ``lr_check`` (pixels; None: off, the dense
+        map) rejects occluded and mismatched pixels as NaN: 1 is OpenCV SGBM's
+        tolerance, which its matcher always applies, and ``robopercept stereo``'s
+        default (on Middlebury cones it keeps 88 % of the pixels, 4.1 % of them off
+        by more than 2 px, against 13.0 % of all of them without the check).
 
     Returns
     -------
@@ -655,7 +666,7 @@ def semi_global_matching(
     right_winners = np.empty((h, w), dtype=np.int32)
     _sgm_wta(s, int(min_disparity), float(uniqueness), bool(subpixel), lr_check is not None,
              disp, right_winners)  # fmt: skip
-    return _post(disp, right_winners, lr_check, median)
+    return _post(disp, right_winners, lr_check, median, int(min_disparity))
 
 
 def disparity_to_depth(disparity: np.ndarray, focal: float, baseline: float) -> np.ndarray:
@@ -700,10 +711,41 @@ def depth_resolution(
         return z * z * (step / fb)
 
 
-def disparity_to_points(disparity: np.ndarray, Q: npt.ArrayLike) -> np.ndarray:
+def disparity_to_points(
+    disparity: np.ndarray, Q: npt.ArrayLike, *, min_disparity: float = 0.0
+) -> np.ndarray:
     r"""3-D points ``(H, W, 3)`` from a disparity map and the rectification's
     :math:`Q` (``cv2.reprojectImageTo3D``): :math:`(X, Y, Z, W)^T = Q (x, y, d, 1)^T`,
-    point :math:`(X, Y, Z) / W`; NaN where the disparity is NaN or not positive."""
+    point :math:`(X, Y, Z) / W`; NaN where the disparity is NaN or not above
+    ``min_disparity``.
+
+    A disparity :math:`d` has the relative depth error :math:`\Delta z / z = \Delta d / d`
+    (:func:`depth_resolution`): at :math:`d \le 1` px one disparity step is an error of
+    100 % or more, and a wrong match there lands far beyond the scene (a 0.1 px
+    disparity of a 700 px, 0.16 m rig is 1.1 km away). ``min_disparity=1`` keeps only
+    points whose depth is known to better than a factor of two (``robopercept stereo``
+    uses it, and the matcher's own lower bound when that is larger).
+
+    Parameters
+    ----------
+    disparity : (H, W) array_like
+        Pixels; NaN where rejected.
+    Q : (4, 4) array_like
+        The reprojection matrix (:func:`reprojection_matrix`, ``cv2.stereoRectify``).
+    min_disparity : float
+        Disparities at or below it give NaN points (default 0: only non-positive ones).
+
+    Returns
+    -------
+    (H, W, 3) float64 ndarray
+
+    Examples
+    --------
+    >>> Q = reprojection_matrix(500.0, 0.1, (3, 1))
+    >>> pts = disparity_to_points(np.array([[25.0, 0.5, np.nan]]), Q, min_disparity=1.0)
+    >>> pts[0, 0].tolist(), bool(np.isnan(pts[0, 1:]).all())
+    ([-0.004, 0.0, 2.0], True)
+    """
     d = check_numeric(disparity, "disparity")
     if d.ndim != 2:
         raise InputError(f"disparity must be (H, W); got shape {d.shape}")
@@ -711,12 +753,13 @@ def disparity_to_points(disparity: np.ndarray, Q: npt.ArrayLike) -> np.ndarray:
     if q.shape != (4, 4):
         raise InputError(f"Q must be 4x4; got shape {q.shape}")
     check_finite(q, "Q")
+    floor = check_real(min_disparity, "min_disparity (pixels)", 0.0)
     h, w = d.shape
     ys, xs = np.mgrid[:h, :w].astype(np.float64)
     hom = np.stack([xs, ys, d, np.ones_like(d)], axis=-1) @ q.T
     with np.errstate(divide="ignore", invalid="ignore"):
         pts = hom[..., :3] / hom[..., 3:]
-    pts[~(d > 0)] = np.nan
+    pts[~(d > floor)] = np.nan
     return pts
 
 
@@ -764,17 +807,63 @@ def reprojection_matrix(focal: float, baseline: float, size: tuple[int, int]) ->
     )
 
 
-def bad_pixel_rate(disparity: np.ndarray, truth: np.ndarray, threshold: float = 2.0) -> float:
+def bad_pixel_rate(
+    disparity: np.ndarray,
+    truth: np.ndarray,
+    threshold: float = 2.0,
+    *,
+    invalid: str = "bad",
+) -> float:
     """Middlebury's bad-pixel rate: the share of pixels with known truth (``truth > 0``)
-    whose disparity is off by more than ``threshold`` pixels; invalid (NaN) disparities
-    count as bad."""
+    whose disparity is off by more than ``threshold`` pixels.
+
+    Parameters
+    ----------
+    disparity, truth : (H, W) array_like
+        Estimate (NaN where rejected) and ground truth (0 where unknown), in pixels.
+    threshold : float
+        Pixels of error allowed (Middlebury's bad-1.0, bad-2.0 ...).
+    invalid : {"bad", "ignore"}
+        ``"bad"``: rejected (NaN) disparities count as bad, out of every pixel with
+        known truth (Middlebury's figure for a map with holes, and OpenCV's tests');
+        ``"ignore"``: the rate among the pixels that have both a disparity and a known
+        truth (the accuracy of what was kept; report it with the density).
+
+    Returns
+    -------
+    float
+        A fraction in [0, 1].
+
+    Raises
+    ------
+    InputError
+        Shapes differ, no known truth, or a bad ``threshold`` / ``invalid``.
+    DegenerateError
+        ``invalid="ignore"`` and no pixel with known truth has a disparity.
+
+    Examples
+    --------
+    >>> d = np.array([[10.0, 12.5, np.nan, 3.0]])
+    >>> t = np.array([[10.0, 10.0, 10.0, 0.0]])  # the last pixel's truth unknown
+    >>> bad_pixel_rate(d, t, 2.0), bad_pixel_rate(d, t, 2.0, invalid="ignore")
+    (0.6666666666666666, 0.5)
+    """
     d, t = check_numeric(disparity, "disparity"), check_numeric(truth, "truth")
     threshold = check_real(threshold, "threshold (pixels)", 0.0)
+    if not isinstance(invalid, str):
+        raise InputError(f"invalid must be 'bad' or 'ignore'; got {invalid!r}")
+    check_choice(invalid, "invalid", ("bad", "ignore"))
     if d.shape != t.shape:
         raise InputError(f"disparity and truth must have the same shape; got {d.shape}, {t.shape}")
     known = t > 0
     if not known.any():
         raise InputError("truth has no known pixel (all <= 0)")
+    if invalid == "ignore":
+        known &= np.isfinite(d)
+        if not known.any():
+            raise DegenerateError(
+                "no pixel with known truth has a disparity (all rejected): nothing to score"
+            )
     with np.errstate(invalid="ignore"):
         bad = ~(np.abs(d - t) <= threshold)
     return float((bad & known).sum() / known.sum())
@@ -959,4 +1048,4 @@ def block_matching(
     _bm_kernel(Li, Rr, int(min_disparity), r, mode, cols, costs, cints, sl, srr, vl, vrr,
                float(uniqueness), bool(subpixel), lr_check is not None, disp,
                right_winners)  # fmt: skip
-    return _post(disp, right_winners, lr_check, median)
+    return _post(disp, right_winners, lr_check, median, int(min_disparity))

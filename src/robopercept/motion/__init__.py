@@ -8,7 +8,7 @@ from robopercept.motion.background import (
     clean_mask,
 )
 from robopercept.motion.detections import MaskDetections, detections_from_mask, moving_blobs
-from robopercept.motion.differencing import FrameDifference, ThreeFrameDifference
+from robopercept.motion.differencing import FrameDifference, ThreeFrameDifference, fill_holes
 from robopercept.motion.flow import (
     FlowStatus,
     MotionClass,
@@ -18,10 +18,18 @@ from robopercept.motion.flow import (
     good_features_to_track,
     lucas_kanade,
 )
+from robopercept.motion.flow_truth import (
+    EndpointError,
+    endpoint_error,
+    known_flow,
+    read_flo,
+    write_flo,
+)
 from robopercept.motion.klt import KLTTracker, PointTracks
 
 __all__ = [
     "AveragedBackground",
+    "EndpointError",
     "FlowStatus",
     "FrameDifference",
     "GaussianBackground",
@@ -36,7 +44,12 @@ __all__ = [
     "clean_mask",
     "dense_flow",
     "detections_from_mask",
+    "endpoint_error",
+    "fill_holes",
     "good_features_to_track",
+    "known_flow",
     "lucas_kanade",
     "moving_blobs",
+    "read_flo",
+    "write_flo",
 ]

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from robopercept._checks import check_int, check_ndim, check_real, plain_repr
+from robopercept._checks import check_int, check_ndim, check_real, check_size, plain_repr
 from robopercept.errors import InputError
 from robopercept.viz.draw import (
     check_color,
@@ -34,7 +34,10 @@ from robopercept.viz.draw import (
 )
 
 __all__ = [
+    "ARROW_FRACTION",
+    "MAX_ARROW_SCALE",
     "MAX_WHEEL_SIZE",
+    "arrow_scale",
     "dense_flow_picture",
     "draw_flow",
     "draw_trails",
@@ -44,6 +47,79 @@ __all__ = [
 
 #: the largest :func:`flow_wheel` (a legend; 2049 px is 4 Mpx)
 MAX_WHEEL_SIZE = 2049
+#: :func:`arrow_scale`'s default: the median arrow at least this share of the diagonal
+ARROW_FRACTION = 0.02
+#: :func:`arrow_scale`'s default cap (beyond it, sub-pixel noise would fill the picture)
+MAX_ARROW_SCALE = 100.0
+
+
+def arrow_scale(
+    flow: np.ndarray,
+    size: tuple[int, int],
+    *,
+    fraction: float = ARROW_FRACTION,
+    max_scale: float = MAX_ARROW_SCALE,
+) -> float:
+    r"""The arrow lengthening that makes flow arrows visible: :func:`draw_flow`'s
+    ``scale``.
+
+    With :math:`m` the median length of the finite vectors and :math:`D` the diagonal
+    of the picture, the arrows need the factor :math:`s^* = f D / m` for the median
+    arrow to be :math:`f D` pixels long (``fraction`` :math:`f`, 2 % of the diagonal by
+    default: 14 px on a 584 x 388 image, 44 px at 1920 x 1080). The result is
+    :math:`s^*` rounded up to 1, 2, 2.5 or 5 times a power of ten (a factor a reader
+    can say: "arrows x 5"), at least 1 (long arrows are never shortened) and at most
+    ``max_scale``. No finite vector, or a median of 0 (nothing moves), gives 1.
+
+    Parameters
+    ----------
+    flow : (N, 2) array_like
+        Displacements ``(u, v)`` in pixels; NaN rows (failed tracks) are ignored.
+    size : (width, height)
+        The picture's size in pixels.
+    fraction : float
+        Wanted median arrow length as a share of the diagonal, in (0, 1].
+    max_scale : float
+        Largest factor returned, >= 1.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        ``flow`` not ``(N, 2)`` real numbers, a bad size, fraction or cap.
+
+    Examples
+    --------
+    Motions of about 1 px on a 584 x 388 image (diagonal 701 px): arrows need
+    14 / 1.0 = 14x, rounded up to 20.
+
+    >>> arrow_scale(np.array([[1.0, 0.0], [0.0, 1.0], [0.6, 0.8]]), (584, 388))
+    20.0
+    >>> arrow_scale(np.array([[30.0, 40.0]]), (584, 388))  # already long enough
+    1.0
+    """
+    f = check_xy(flow, "flow")
+    w, h = check_size(size, "size")
+    fraction = check_real(fraction, "fraction", 0.0, 1.0, low_inclusive=False)
+    max_scale = check_real(max_scale, "max_scale", 1.0)
+    ok = np.isfinite(f).all(axis=1)
+    if not ok.any():
+        return 1.0
+    with np.errstate(over="ignore"):
+        m = float(np.median(np.hypot(f[ok, 0], f[ok, 1])))
+    if not m > 0:
+        return 1.0
+    need = fraction * float(np.hypot(w, h)) / m
+    if need <= 1.0:
+        return 1.0
+    if need >= max_scale:
+        return float(max_scale)
+    power = 10.0 ** np.floor(np.log10(need))
+    nice = next(k * power for k in (1.0, 2.0, 2.5, 5.0, 10.0) if k * power >= need * (1 - 1e-12))
+    return float(min(nice, max_scale))
 
 
 def flow_to_color(flow: np.ndarray, max_magnitude: float | None = None) -> np.ndarray:
