@@ -233,3 +233,136 @@ def test_handeye_eye_to_hand_images_with_an_opencv_camera_file(tmp_path, capsys,
     data = json.loads(out.read_text())
     assert data["setup"] == "eye_to_hand" and data["stations"] == 5
     np.testing.assert_allclose(data["X"], ref.X, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- issue 30
+
+
+@pytest.mark.realdata
+def test_stereo_calibrate_writes_what_stereo_calib_reads(tmp_path, capsys):
+    """The OpenCV pairs (a folder and a glob): --json equals the library on the same
+    pairs (1e-9: the same code), the OpenCV YAML it writes is read by cv2.FileStorage and
+    by `stereo --calib`, and --format ros writes one camera_info per camera."""
+    cv2 = pytest.importorskip("cv2")
+    from robopercept.calibration import chessboard_points, find_board_pairs, stereo_calibrate
+
+    folder = data_path("calibration", "opencv_chessboard_stereo")
+    out = tmp_path / "stereo.yml"
+    code = main(["stereo-calibrate", "--left", str(folder / "left*.jpg"),
+                 "--right", str(folder / "right*.jpg"), "--board", "9x6",
+                 "--square", "0.025", "-o", str(out), "--json"])  # fmt: skip
+    assert code == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["format"] == "opencv" and data["outputs"] == [str(out)]
+    assert len(data["left_images"]) == 13 and data["skipped"] == []
+    left = sorted(str(p) for p in folder.glob("left*.jpg"))
+    right = sorted(str(p) for p in folder.glob("right*.jpg"))
+    pairs = find_board_pairs(left, right, (9, 6))
+    ref = stereo_calibrate(chessboard_points((9, 6), 0.025), pairs.corners1, pairs.corners2,
+                           pairs.image_size)  # fmt: skip
+    np.testing.assert_allclose(data["T"], ref.T, atol=1e-9)
+    assert data["baseline"] == pytest.approx(np.linalg.norm(ref.T))
+    assert 0.07 < data["baseline"] < 0.1  # OpenCV's sample rig: about 8.3 cm (square 25 mm)
+    fs = cv2.FileStorage(str(out), cv2.FILE_STORAGE_READ)
+    np.testing.assert_array_equal(fs.getNode("M1").mat(), ref.K1)
+    np.testing.assert_array_equal(fs.getNode("T").mat().ravel(), ref.T)
+    fs.release()
+    code = main(["stereo", str(folder / "left01.jpg"), str(folder / "right01.jpg"),
+                 "--calib", str(out), "--max-disparity", "32", "--method", "bm",
+                 "-o", str(tmp_path / "d.png"), "--json"])  # fmt: skip
+    assert code == 0 and json.loads(capsys.readouterr().out)["size"] == [640, 480]
+    code = main(["stereo-calibrate", "--left", str(folder / "left0*.jpg"),
+                 "--right", str(folder / "right0*.jpg"), "--board", "9x6",
+                 "-o", str(tmp_path / "rig.yaml"), "--format", "ros", "--quiet"])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "rig_left.yaml" in text and "rig_right.yaml" in text
+    assert "camera_name: stereo/right" in (tmp_path / "rig_right.yaml").read_text()
+
+
+def test_stereo_calibrate_usage_errors(tmp_path, capsys):
+    from robopercept.imaging import write_image
+
+    for name in ("l1.png", "l2.png", "r1.png"):
+        write_image(tmp_path / name, np.full((40, 60), 128, np.uint8))
+    base = ["stereo-calibrate", "--board", "9x6"]
+    code = main([*base, "--left", str(tmp_path / "l*.png"), "--right", str(tmp_path / "r*.png")])
+    assert code == 2 and "--left gives 2 images but --right 1" in capsys.readouterr().err
+    code = main([*base, "--left", str(tmp_path / "q*.png"), "--right", str(tmp_path / "r1.png")])
+    assert code == 2 and "--left: no file matches" in capsys.readouterr().err
+    code = main([*base, "--left", str(tmp_path / "l1.png"), "--right", str(tmp_path / "r1.png"),
+                 "-o", str(tmp_path / "s.json"), "--format", "ros"])  # fmt: skip
+    assert code == 2 and "format 'ros' writes .yaml or .yml files" in capsys.readouterr().err
+    code = main([*base, "--left", str(tmp_path / "l1.png"), "--right", str(tmp_path / "r1.png"),
+                 "-o", str(tmp_path / "s.json"), "--quiet"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 1 and "found in both images of 0 of 1 pairs" in err
+
+
+@pytest.mark.realdata
+def test_calibrate_writes_opencv_yaml_that_cv2_reads(tmp_path, capsys):
+    """-o cam.yml: an OpenCV FileStorage file with the calibration sample's names, equal
+    to the --json summary; a JSON name with --format opencv is a usage error."""
+    cv2 = pytest.importorskip("cv2")
+    folder = data_path("calibration", "opencv_chessboard_stereo")
+    images = [str(folder / f"left{i:02d}.jpg") for i in (1, 3, 4, 6, 11, 14)]
+    out = tmp_path / "cam.yml"
+    code = main(["calibrate", *images, "--board", "9x6", "--square", "0.025", "-o", str(out),
+                 "--quiet", "--json"])  # fmt: skip
+    assert code == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["format"] == "opencv" and data["images"] == images
+    fs = cv2.FileStorage(str(out), cv2.FILE_STORAGE_READ)
+    np.testing.assert_array_equal(fs.getNode("camera_matrix").mat(), np.array(data["K"]))
+    np.testing.assert_array_equal(
+        fs.getNode("distortion_coefficients").mat().ravel(), np.array(data["dist"])
+    )
+    assert fs.getNode("image_width").real() == 640
+    assert fs.getNode("avg_reprojection_error").real() == data["rms"]
+    assert fs.getNode("board").at(0).real() == 9
+    fs.release()
+    code = main(["calibrate", *images, "--board", "9x6", "-o", str(tmp_path / "c.json"),
+                 "--format", "opencv"])  # fmt: skip
+    assert code == 2 and "format 'opencv' writes .yaml or .yml" in capsys.readouterr().err
+
+
+def test_handeye_quaternion_and_ros_transform(tmp_path, capsys):
+    """--json holds X's quaternion (x, y, z, w) and the ROS transform in metres
+    (--metres-per-unit 0.001 for millimetre poses); -o .yaml writes the transform that
+    read_transform reads back with the frames given."""
+    from robopercept.calibration import pose_from_xyz_rpy, quaternion_from_rotation, read_transform
+    from robopercept.geometry import invert, rotation_from_rotvec, se3
+
+    rng = np.random.default_rng(5)
+    X = se3(rotation_from_rotvec([0.1, -0.2, 1.5]), [30.0, -10.0, 80.0])
+    Y = se3(rotation_from_rotvec([3.0, 0.1, 0.0]), [600.0, 50.0, 0.0])
+    robots, targets = [], []
+    for i in range(5):
+        xyz = rng.normal(0, 100, 3) + np.array([500.0, 0, 400])
+        g = pose_from_xyz_rpy(xyz, rng.normal(0, 20, 3) + np.array([180.0, 0, 0]))
+        _write_matrix(tmp_path / f"g{i}.txt", g)
+        _write_matrix(tmp_path / f"c{i}.txt", invert(g @ X) @ Y)
+        robots.append(str(tmp_path / f"g{i}.txt"))
+        targets.append(str(tmp_path / f"c{i}.txt"))
+    args = ["handeye", "--robot-poses", *robots, "--pose-format", "matrix",
+            "--target-poses", *targets, "--setup", "eye-in-hand",
+            "--metres-per-unit", "0.001"]  # fmt: skip
+    assert main([*args, "-o", str(tmp_path / "he.json"), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(
+        data["quaternion_xyzw"], quaternion_from_rotation(X[:3, :3]), atol=1e-7
+    )
+    tr = data["transform"]["transform"]["translation"]
+    assert [tr["x"], tr["y"], tr["z"]] == pytest.approx([0.03, -0.01, 0.08], abs=1e-8)
+    assert data["parent_frame"] == "tool0" and data["child_frame"] == "camera_optical_frame"
+    out = tmp_path / "he.yaml"
+    assert main([*args, "-o", str(out), "--parent-frame", "flange", "--child-frame", "cam"]) == 0
+    assert "static_transform_publisher" in capsys.readouterr().out
+    T, parent, child = read_transform(out)
+    np.testing.assert_allclose(T[:3, :3], X[:3, :3], atol=1e-7)
+    np.testing.assert_allclose(T[:3, 3], X[:3, 3] / 1000, atol=1e-9)
+    assert (parent, child) == ("flange", "cam")
+    assert main([*args, "-o", str(tmp_path / "he.txt")]) == 2
+    assert "hand-eye files are .json" in capsys.readouterr().err
+    assert main([*args[:-1], "0", "-o", str(tmp_path / "h.json")]) == 1
+    assert "--metres-per-unit must be" in capsys.readouterr().err

@@ -325,3 +325,97 @@ def test_bad_organized_shape(shape, words):
     with pytest.raises(InputError, match=words):
         PointCloud(np.zeros((2, 3)), shape=shape)
     assert PointCloud(np.zeros((2, 3)), shape=(np.int64(2), 1)).shape == (2, 1)
+
+
+# --------------------------------------------------------------------------- labels
+
+
+def _labelled(n=40, seed=0, low=-1):
+    rng = np.random.default_rng(seed)
+    return PointCloud(
+        rng.normal(size=(n, 3)),
+        colors=rng.random((n, 3)),
+        normals=rng.normal(size=(n, 3)),
+        labels=rng.integers(low, 6, n),
+    )
+
+
+@pytest.mark.parametrize("ext", [".ply", ".pcd"])
+@pytest.mark.parametrize("binary", [True, False])
+def test_labels_round_trip_and_open3d_reads_them(tmp_path, ext, binary):
+    """The label field comes back exactly from our reader, from Open3D's tensor reader
+    (which keeps every per-point attribute) and, for PLY, from plyfile as int32."""
+    cloud = _labelled(low=-1 if ext == ".ply" else 0)
+    out = write_point_cloud(tmp_path / f"seg{ext}", cloud, binary=binary)
+    back = read_point_cloud(out)
+    assert back.labels.dtype == np.int64
+    np.testing.assert_array_equal(back.labels, cloud.labels)
+    np.testing.assert_allclose(back.points, cloud.points, rtol=1e-6, atol=1e-6)
+    t = o3d.t.io.read_point_cloud(str(out))
+    np.testing.assert_array_equal(t.point["label"].numpy().ravel(), cloud.labels)
+    if ext == ".ply":
+        plyfile = pytest.importorskip("plyfile")
+        v = plyfile.PlyData.read(str(out))["vertex"].data
+        assert v.dtype["label"] == np.dtype("<i4") and v.dtype.names[-1] == "label"
+        np.testing.assert_array_equal(v["label"], cloud.labels)
+    else:
+        head = out.read_bytes()[:400].decode("ascii", "replace")
+        # PCL's PointXYZRGBL: x y z (normals) rgb label, label an unsigned 4-byte field
+        assert "FIELDS x y z normal_x normal_y normal_z rgb label" in head
+        assert "TYPE F F F F F F U U" in head
+
+
+def test_labels_hand_case_and_what_keeps_them():
+    """Hand-written 3-point case: select, finite and concatenate carry the labels;
+    concatenate drops them when one cloud has none; floats holding whole numbers are
+    taken, anything else refused."""
+    c = PointCloud(np.array([[0, 0, 1], [np.nan, 0, 0], [1, 1, 1]]), labels=[5, 6, 7])
+    assert c.labels.tolist() == [5, 6, 7]
+    assert c.finite().labels.tolist() == [5, 7]
+    assert c.select([2, 0]).labels.tolist() == [7, 5]
+    assert c.select(np.array([True, False, False]), invert=True).labels.tolist() == [6, 7]
+    assert PointCloud.concatenate([c, c]).labels.tolist() == [5, 6, 7] * 2
+    assert PointCloud.concatenate([c, c.with_labels(None)]).labels is None
+    assert PointCloud(np.zeros((2, 3)), labels=np.array([1.0, 2.0])).labels.dtype == np.int64
+    with pytest.raises(InputError, match="labels must be whole numbers"):
+        PointCloud(np.zeros((2, 3)), labels=[1.5, 2])
+    with pytest.raises(InputError, match=r"labels must have shape \(2,\)"):
+        PointCloud(np.zeros((2, 3)), labels=[1, 2, 3])
+    with pytest.raises(InputError, match="labels must be integers"):
+        PointCloud(np.zeros((2, 3)), labels=["a", "b"])
+
+
+def test_labels_outside_the_field_are_refused(tmp_path):
+    """PCL's label is uint32: -1 (noise) is refused for PCD with the fix; PLY's int32
+    takes it but not 2^31."""
+    noisy = PointCloud(np.zeros((2, 3)), labels=[-1, 3])
+    with pytest.raises(InputError, match=r"PCL's label is unsigned: shift noise"):
+        write_point_cloud(tmp_path / "a.pcd", noisy)
+    write_point_cloud(tmp_path / "a.ply", noisy)
+    assert read_point_cloud(tmp_path / "a.ply").labels.tolist() == [-1, 3]
+    with pytest.raises(InputError, match=r"int32, -2147483648..2147483647\); got 2147483648"):
+        write_point_cloud(tmp_path / "b.ply", noisy.with_labels([0, 2**31]))
+
+
+def test_float_and_fractional_label_fields(tmp_path):
+    """A float label holding whole numbers (CloudCompare's scalar fields) is read as
+    integers; a fractional one is refused with the value."""
+    head = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+    head += "property float z\nproperty float label\nend_header\n"
+    (tmp_path / "f.ply").write_text(head + "0 0 0 3\n1 1 1 4\n")
+    assert read_point_cloud(tmp_path / "f.ply").labels.tolist() == [3, 4]
+    (tmp_path / "g.ply").write_text(head + "0 0 0 3.5\n1 1 1 4\n")
+    with pytest.raises(FileFormatError, match=r"field 'label' holds 3.5"):
+        read_point_cloud(tmp_path / "g.ply")
+
+
+@pytest.mark.realdata
+def test_mosd_ground_truth_labels_come_with_the_cloud():
+    """The mOSD scene's ground-truth segments (PCL's label field, first in the file)
+    are the cloud's labels, as read_pcd and Open3D's tensor reader see them."""
+    path = data_path("pointcloud", "pcl_mOSD", "test0.pcd")
+    cloud = read_point_cloud(path)
+    np.testing.assert_array_equal(cloud.labels, read_pcd(path).fields["label"])
+    ref = o3d.t.io.read_point_cloud(str(path)).point["label"].numpy().ravel()
+    np.testing.assert_array_equal(cloud.labels, ref)
+    assert cloud.shape == (480, 640) and cloud.finite().labels.size == len(cloud.finite())

@@ -17,6 +17,10 @@ double quotes. :func:`read_opencv_storage` reads both, and plain YAML of the sam
 - mappings become dicts, sequences lists, numbers int or float (``.Inf``, ``.Nan``
   included), anything else a string.
 
+:func:`write_opencv_storage` writes the YAML form (``%YAML:1.0``, ``!!opencv-matrix``
+nodes), which ``cv2.FileStorage(path, cv2.FILE_STORAGE_READ)`` and
+:func:`read_opencv_storage` read back.
+
 The YAML reader covers what ``cv2.FileStorage`` writes and common hand-written YAML:
 block mappings and sequences by indentation (``- key: value`` items included), flow
 ``[...]`` and ``{...}`` collections over several lines, quoted and plain scalars, ``#``
@@ -29,15 +33,16 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from robopercept._checks import check_file
-from robopercept.errors import FileFormatError
+from robopercept._checks import as_path, check_file, plain_repr
+from robopercept.errors import FileFormatError, InputError
 
-__all__ = ["read_opencv_storage"]
+__all__ = ["read_opencv_storage", "write_opencv_storage"]
 
 _DTYPES = {"u": np.uint8, "c": np.int8, "w": np.uint16, "s": np.int16, "i": np.int32,
            "f": np.float32, "d": np.float64, "h": np.float16}  # fmt: skip
@@ -532,3 +537,193 @@ def _xml_node(e: Any, name: str) -> Any:
     if len(whole) >= 2 and whole[0] == whole[-1] == '"':
         return whole[1:-1]
     raise FileFormatError(f"{where}: unbalanced quotes in {whole!r}")
+
+
+# --------------------------------------------------------------------------- writing
+
+_DT_OF = {np.dtype(v): k for k, v in _DTYPES.items()}
+_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*\Z")
+_INDENT = "   "  # cv2.FileStorage indents by three spaces
+
+
+def write_opencv_storage(path: str | Path, data: Mapping[str, Any]) -> Path:
+    """Write ``data`` as an OpenCV ``FileStorage`` YAML file (what ``cv2.FileStorage``
+    writes with ``FILE_STORAGE_WRITE``), read back by ``cv2.FileStorage`` and
+    :func:`read_opencv_storage`.
+
+    The file starts with ``%YAML:1.0`` and ``---``; then one entry per key, in order:
+
+    - an ndarray is an ``!!opencv-matrix`` with ``rows``, ``cols``, ``dt`` and the
+      row-major ``data``: a ``(rows, cols)`` array as it is, a ``(n,)`` vector as an
+      ``n x 1`` column (as ``cv::Mat`` stores a ``std::vector``), ``(rows, cols, c)`` with
+      ``c`` channels (``dt`` ``"3d"``...). ``dt`` follows the dtype: ``u`` uint8, ``c``
+      int8, ``w`` uint16, ``s`` int16, ``i`` int32, ``f`` float32, ``d`` float64, ``h``
+      float16; booleans are written as ``u``, other integers as ``i`` when they fit
+      int32, else ``d`` (exact up to :math:`2^{53}`);
+    - int, float (``.Inf``, ``.Nan``), bool (as 0 / 1) and str (double-quoted, with
+      backslash escapes) are scalars; floats are written in their shortest exact form
+      (``repr``; NumPy's for float32), so they read back bit for bit;
+    - a list or tuple of scalars is a flow sequence ``[ 1, 2 ]``; a list of mappings a
+      block sequence of flow mappings; a mapping a nested block mapping.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (``.yml`` or ``.yaml``; replaced if it exists).
+    data : mapping of str to value
+        Keys are FileStorage names: a letter or ``_``, then letters, digits, ``_`` or
+        ``-``.
+
+    Returns
+    -------
+    Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        ``data`` not a mapping, a key that is not a FileStorage name, a value of another
+        type (None, an object array, an integer beyond :math:`2^{53}`), ``path`` that is
+        not a usable file path or a folder.
+    FileFormatError
+        The file cannot be written (no such folder, no permission).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     p = write_opencv_storage(pathlib.Path(d) / "cam.yml",
+    ...                              {"image_width": 640, "camera_matrix": K})
+    ...     text = p.read_text()
+    ...     back = read_opencv_storage(p)
+    >>> print(text.splitlines()[0], text.splitlines()[3])
+    %YAML:1.0 camera_matrix: !!opencv-matrix
+    >>> bool((back["camera_matrix"] == K).all()), back["image_width"]
+    (True, 640)
+    """
+    if not isinstance(data, Mapping):
+        raise InputError(f"data must be a mapping of names to values; got {type(data).__name__}")
+    p = as_path(path, "path")
+    if p.is_dir():
+        raise InputError(f"path {p} is a folder; give a file name such as {p / 'camera.yml'}")
+    lines = ["%YAML:1.0", "---"]
+    _write_mapping(lines, data, 0, "data")
+    try:
+        p.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot write ({exc.strerror or exc})") from exc
+    return p
+
+
+def _key(key: Any, where: str) -> str:
+    if not (isinstance(key, str) and _KEY.match(key)):
+        raise InputError(
+            f"{where}: FileStorage names start with a letter or '_' and hold letters, "
+            f"digits, '_' and '-'; got {plain_repr(key)}"
+        )
+    return key
+
+
+def _write_mapping(lines: list[str], data: Mapping[str, Any], depth: int, where: str) -> None:
+    pad = _INDENT * depth
+    for key, value in data.items():
+        name = _key(key, where)
+        at = f"{where}[{name!r}]"
+        if isinstance(value, np.ndarray) and value.ndim > 0:
+            lines.append(f"{pad}{name}: !!opencv-matrix")
+            _write_matrix(lines, value, depth + 1, at)
+        elif isinstance(value, Mapping):
+            if not value:
+                lines.append(f"{pad}{name}: {{}}")
+            else:
+                lines.append(f"{pad}{name}:")
+                _write_mapping(lines, value, depth + 1, at)
+        elif (
+            isinstance(value, (list, tuple))
+            and value
+            and all(isinstance(v, Mapping) for v in value)
+        ):
+            lines.append(f"{pad}{name}:")
+            for i, item in enumerate(value):
+                body = ", ".join(
+                    f"{_key(k, f'{at}[{i}]')}: {_scalar_text(v, f'{at}[{i}][{k!r}]')}"
+                    for k, v in item.items()
+                )
+                lines.append(f"{pad}{_INDENT}- {{ {body} }}")
+        elif isinstance(value, (list, tuple)):
+            items = [_scalar_text(v, f"{at}[{i}]") for i, v in enumerate(value)]
+            lines.append(f"{pad}{name}: [ {', '.join(items)} ]" if items else f"{pad}{name}: []")
+        else:
+            lines.append(f"{pad}{name}: {_scalar_text(value, at)}")
+
+
+def _scalar_text(value: Any, where: str) -> str:
+    """One scalar as FileStorage YAML writes it."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value.item()
+    if isinstance(value, (bool, np.bool_)):
+        return str(int(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return _float_text(float(value))
+    if isinstance(value, str):
+        body = value.replace("\\", "\\\\").replace('"', '\\"')
+        body = body.replace("\n", "\\n").replace("\t", "\\t").replace("\r", "\\r")
+        return f'"{body}"'
+    raise InputError(
+        f"{where}: FileStorage holds numbers, strings, arrays, lists and mappings; got "
+        f"{type(value).__name__} {plain_repr(value)[:60]}"
+    )
+
+
+def _float_text(v: float | np.floating) -> str:
+    """The shortest text that reads back to the same value of its type (``repr`` of a
+    float64, NumPy's shortest form of a float32 / float16)."""
+    if math.isnan(v):
+        return ".Nan"
+    if math.isinf(v):
+        return ".Inf" if v > 0 else "-.Inf"
+    return repr(float(v)) if isinstance(v, (float, np.float64)) else str(v)
+
+
+def _write_matrix(lines: list[str], value: np.ndarray, depth: int, where: str) -> None:
+    a = value
+    if a.dtype.kind not in "biuf":
+        raise InputError(f"{where}: a matrix holds numbers; got dtype {a.dtype}")
+    if a.ndim > 3:
+        raise InputError(f"{where}: a matrix is (rows, cols[, channels]); got shape {a.shape}")
+    if a.ndim == 1:
+        a = a.reshape(-1, 1)
+    channels = a.shape[2] if a.ndim == 3 else 1
+    if not 1 <= channels <= _MAX_CHANNELS:
+        raise InputError(f"{where}: 1 to {_MAX_CHANNELS} channels; got {channels}")
+    if a.dtype.kind == "b":
+        a = a.astype(np.uint8)
+    if a.dtype.newbyteorder("=") in _DT_OF:
+        a = a.astype(a.dtype.newbyteorder("="))
+    elif a.dtype.kind in "iu":
+        fits32 = a.size == 0 or (a.min() >= -(2**31) and a.max() < 2**31)
+        if not fits32 and a.size and np.abs(a.astype(np.float64)).max() > 2**53:
+            raise InputError(
+                f"{where}: integers beyond 2^53 cannot be stored exactly (FileStorage "
+                "holds int32 or float64)"
+            )
+        a = a.astype(np.int32 if fits32 else np.float64)
+    else:  # float128 and the like
+        a = a.astype(np.float64)
+    dt = _DT_OF[a.dtype]
+    pad = _INDENT * depth
+    lines += [f"{pad}rows: {a.shape[0]}", f"{pad}cols: {a.shape[1]}"]
+    lines.append(f'{pad}dt: "{channels}{dt}"' if channels > 1 else f"{pad}dt: {dt}")
+    flat = a.ravel()
+    if a.dtype.kind == "f":
+        items = [_float_text(v) for v in flat]
+    else:
+        items = [str(v) for v in flat.tolist()]
+    if not items:
+        lines.append(f"{pad}data: []")
+        return
+    rows = [", ".join(items[k : k + 4]) for k in range(0, len(items), 4)]
+    lines.append(f"{pad}data: [ " + f",\n{pad}    ".join(rows) + " ]")

@@ -41,7 +41,8 @@ ROS/URDF and ``scipy`` ``"xyz"`` convention).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -50,11 +51,18 @@ import numpy as np
 import numpy.typing as npt
 
 from robopercept._checks import (
+    as_path,
     check_bool,
     check_choice,
     check_file,
     check_magnitude,
     check_numeric,
+    check_real,
+)
+from robopercept.calibration.ros import (
+    quaternion_from_rotation,
+    transform_stamped,
+    write_ros_yaml,
 )
 from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.geometry.epipolar import skew
@@ -67,11 +75,15 @@ from robopercept.geometry.transforms import (
 )
 
 __all__ = [
+    "DEFAULT_FRAMES",
     "HandEyeResult",
     "calibrate_hand_eye",
+    "hand_eye_format",
+    "hand_eye_report",
     "hand_eye_residuals",
     "pose_from_xyz_rpy",
     "read_xyz_rpy",
+    "save_hand_eye",
     "xyz_rpy_from_pose",
 ]
 
@@ -128,6 +140,196 @@ class HandEyeResult:
             "rotation_residuals_deg": self.rotation_residuals.tolist(),
             "translation_residuals": self.translation_residuals.tolist(),
         }
+
+
+#: ROS frame names of X by default: (parent, child) per setup. X maps the OpenCV camera
+#: frame (z forward), which ROS calls an optical frame, into the gripper (ROS-Industrial's
+#: ``tool0``) or the robot base (``base_link``)
+DEFAULT_FRAMES: dict[str, tuple[str, str]] = {
+    "eye_in_hand": ("tool0", "camera_optical_frame"),
+    "eye_to_hand": ("base_link", "camera_optical_frame"),
+}
+
+
+def hand_eye_report(
+    result: HandEyeResult,
+    parent_frame: str | None = None,
+    child_frame: str | None = None,
+    *,
+    metres_per_unit: float = 1.0,
+) -> dict[str, Any]:
+    r"""Everything a user needs of :math:`X`: the 4x4, position and quaternion, roll
+    pitch yaw, and the ROS transform, JSON-ready.
+
+    Parameters
+    ----------
+    result : HandEyeResult
+    parent_frame, child_frame : str, optional
+        The ROS frames of :math:`X = T_{parent,child}`; default
+        :data:`DEFAULT_FRAMES` of the setup (``tool0`` or ``base_link``, and
+        ``camera_optical_frame``).
+    metres_per_unit : float
+        Scale of the input translations to metres, applied to the ROS transform only
+        (ROS lengths are metres): 0.001 when the robot poses were in millimetres.
+
+    Returns
+    -------
+    dict
+        :meth:`HandEyeResult.to_dict` plus ``xyz`` (input units), ``quaternion_xyzw``
+        (ROS order, :math:`w \ge 0`), ``rpy_deg`` (:func:`xyz_rpy_from_pose`),
+        ``parent_frame``, ``child_frame``, ``transform`` (the
+        ``geometry_msgs/TransformStamped`` fields of
+        :func:`~robopercept.calibration.transform_stamped`, metres) and
+        ``static_transform_publisher``: the ROS 2 command that publishes it.
+
+    Raises
+    ------
+    InputError
+        ``result`` not a HandEyeResult, an empty frame name, or ``metres_per_unit``
+        not a positive finite number.
+
+    Examples
+    --------
+    >>> res = HandEyeResult(np.eye(4), np.eye(4), "eye_in_hand", "tsai", np.zeros(1),
+    ...                     np.zeros(1))
+    >>> rep = hand_eye_report(res)
+    >>> rep["quaternion_xyzw"], rep["transform"]["header"]["frame_id"]
+    ([0.0, 0.0, 0.0, 1.0], 'tool0')
+    """
+    if not isinstance(result, HandEyeResult):
+        raise InputError(
+            f"result must be a HandEyeResult (calibrate_hand_eye); got {type(result).__name__}"
+        )
+    scale = check_real(metres_per_unit, "metres_per_unit", 0.0, low_inclusive=False)
+    default = DEFAULT_FRAMES.get(result.setup, ("base_link", "camera_optical_frame"))
+    parent = default[0] if parent_frame is None else parent_frame
+    child = default[1] if child_frame is None else child_frame
+    xyz, rpy = xyz_rpy_from_pose(result.X)
+    q = quaternion_from_rotation(result.X[:3, :3])
+    scaled = result.X.copy()
+    scaled[:3, 3] *= scale
+    msg = transform_stamped(scaled, parent, child)
+    t, r = msg["transform"]["translation"], msg["transform"]["rotation"]
+    command = (
+        "ros2 run tf2_ros static_transform_publisher "
+        + " ".join(f"--{k} {t[k]!r}" for k in "xyz")
+        + " "
+        + " ".join(f"--q{k} {r[k]!r}" for k in "xyzw")
+        + f" --frame-id {parent} --child-frame-id {child}"
+    )
+    out = result.to_dict()
+    out.update(
+        xyz=xyz.tolist(),
+        quaternion_xyzw=q.tolist(),
+        rpy_deg=rpy.tolist(),
+        parent_frame=parent,
+        child_frame=child,
+        transform=msg,
+        static_transform_publisher=command,
+    )
+    return out
+
+
+def hand_eye_format(path: str | Path, format: str | None = None) -> str:
+    """The format :func:`save_hand_eye` writes to ``path``: ``format`` if given (checked
+    against the extension), else ``"json"`` for ``.json`` and ``"ros"`` for ``.yaml`` /
+    ``.yml``.
+
+    Raises
+    ------
+    InputError
+        Another extension, another format, or one whose files have another extension.
+
+    Examples
+    --------
+    >>> hand_eye_format("tf.yaml")
+    'ros'
+    """
+    p = as_path(path, "path")
+    by_ext = {".json": "json", ".yaml": "ros", ".yml": "ros"}.get(p.suffix.lower())
+    fmt = by_ext if format is None else check_choice(format, "format", ("json", "ros"))
+    if fmt is None or by_ext != fmt:
+        raise InputError(
+            f"hand-eye files are .json (format 'json') or .yaml / .yml (format 'ros'); "
+            f"got {p.name!r}" + (f" with format {format!r}" if format is not None else "")
+        )
+    return fmt
+
+
+def save_hand_eye(
+    path: str | Path,
+    result: HandEyeResult,
+    format: str | None = None,
+    *,
+    parent_frame: str | None = None,
+    child_frame: str | None = None,
+    metres_per_unit: float = 1.0,
+    extra: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Write a hand-eye result as JSON (:func:`hand_eye_report`) or as a ROS transform
+    YAML (``geometry_msgs/TransformStamped`` fields, read back by
+    :func:`~robopercept.calibration.read_transform`).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.json`` or ``.yaml`` / ``.yml`` (replaced if it exists).
+    result : HandEyeResult
+    format : {"json", "ros"}, optional
+        Default by the extension: ``.json`` JSON, ``.yaml`` / ``.yml`` ROS.
+    parent_frame, child_frame, metres_per_unit
+        As :func:`hand_eye_report`.
+    extra : mapping, optional
+        More JSON entries (ignored by the ROS file).
+
+    Returns
+    -------
+    dict
+        The report (:func:`hand_eye_report` plus ``extra``), whichever format was
+        written.
+
+    Raises
+    ------
+    InputError
+        As :func:`hand_eye_report`, an unknown format or one that does not match the
+        extension, ``extra`` naming a report entry, or an unusable path.
+    FileFormatError
+        The file cannot be written.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> from robopercept.calibration.ros import read_transform
+    >>> res = HandEyeResult(np.eye(4), np.eye(4), "eye_to_hand", "tsai", np.zeros(1),
+    ...                     np.zeros(1))
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = save_hand_eye(pathlib.Path(d) / "x.yaml", res)
+    ...     read_transform(pathlib.Path(d) / "x.yaml")[1:]
+    ('base_link', 'camera_optical_frame')
+    """
+    p = as_path(path, "path")
+    if p.is_dir():
+        raise InputError(f"path {p} is a folder; give a file name such as {p / 'handeye.json'}")
+    fmt = hand_eye_format(p, format)
+    report = hand_eye_report(result, parent_frame, child_frame, metres_per_unit=metres_per_unit)
+    if extra is not None and not isinstance(extra, Mapping):
+        raise InputError(f"extra must be a mapping; got {type(extra).__name__}")
+    clash = sorted(set(extra or {}) & set(report))
+    if clash:
+        raise InputError(f"extra names entries of the report itself: {', '.join(clash)}")
+    report.update(extra or {})
+    if fmt == "ros":
+        write_ros_yaml(p, report["transform"])
+        return report
+    try:
+        text = json.dumps(report, indent=2, allow_nan=False) + "\n"
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"extra holds a value JSON cannot store ({exc})") from exc
+    try:
+        p.write_text(text)
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot write ({exc.strerror or exc})") from exc
+    return report
 
 
 # --------------------------------------------------------------------------- poses

@@ -50,6 +50,7 @@ import numpy.typing as npt
 from robopercept._checks import (
     as_path,
     check_bool,
+    check_choice,
     check_file,
     check_image,
     check_int,
@@ -57,7 +58,8 @@ from robopercept._checks import (
     check_numeric,
     plain_repr,
 )
-from robopercept.calibration.filestorage import read_opencv_storage
+from robopercept.calibration.filestorage import read_opencv_storage, write_opencv_storage
+from robopercept.calibration.ros import camera_info, write_ros_yaml
 from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.estimation.models import homography_dlt
 from robopercept.geometry.camera import (
@@ -78,10 +80,12 @@ from robopercept.imaging.warp import remap
 
 __all__ = [
     "CALIBRATION_ALIASES",
+    "CALIBRATION_FORMATS",
     "CalibrationResult",
     "StereoCalibration",
     "board_pose",
     "calibrate_camera",
+    "calibration_format",
     "load_calibration",
     "rectify_pair",
     "reprojection_errors",
@@ -832,22 +836,160 @@ def rectify_pair(
 # --------------------------------------------------------------------------- files
 
 
-def save_calibration(path: str | Path, result: CalibrationResult | StereoCalibration) -> None:
-    """Write a calibration as JSON (see :func:`load_calibration`).
+#: the calibration file formats of :func:`save_calibration`
+CALIBRATION_FORMATS = ("json", "opencv", "ros")
+_FORMAT_OF_SUFFIX = {".json": "json", ".yml": "opencv", ".yaml": "opencv"}
+
+
+def calibration_format(path: str | Path, format: str | None = None) -> str:
+    """The format :func:`save_calibration` writes to ``path``: ``format`` if given
+    (checked against the extension), else told by the extension: ``.json`` JSON,
+    ``.yml`` / ``.yaml`` OpenCV FileStorage YAML (give ``format="ros"`` for a ROS
+    ``camera_info`` YAML).
 
     Parameters
     ----------
     path : str or Path
-        The JSON file to write (replaced if it exists; its folder must exist).
-    result : CalibrationResult or StereoCalibration
+    format : {"json", "opencv", "ros"}, optional
+
+    Returns
+    -------
+    str
 
     Raises
     ------
     InputError
-        ``result`` of another type, or ``path`` that is not a usable file path (None,
-        empty, a NUL byte, a name too long, a folder).
+        Another extension (``.xml`` is read but not written), another format, or a
+        format whose files have another extension (JSON in ``.yaml``).
+
+    Examples
+    --------
+    >>> calibration_format("cam.yaml"), calibration_format("cam.yaml", "ros")
+    ('opencv', 'ros')
+    """
+    p = as_path(path, "path")
+    suffix = p.suffix.lower()
+    by_ext = _FORMAT_OF_SUFFIX.get(suffix)
+    if format is None:
+        if by_ext is None:
+            raise InputError(
+                f"a calibration file is .json (robopercept), .yml or .yaml (OpenCV "
+                f"FileStorage, or ROS camera_info with format='ros'); got {p.name!r}"
+            )
+        return by_ext
+    fmt = check_choice(format, "format", CALIBRATION_FORMATS)
+    if by_ext is None or (fmt == "json") != (by_ext == "json"):
+        want = ".json" if fmt == "json" else ".yaml or .yml"
+        raise InputError(f"format {fmt!r} writes {want} files; got {p.name!r}: rename the output")
+    return fmt
+
+
+def _opencv_fields(result: CalibrationResult | StereoCalibration) -> dict[str, Any]:
+    """The entries OpenCV's ``calibration`` and ``stereo_calib`` samples write."""
+    w, h = result.image_size
+    if isinstance(result, CalibrationResult):
+        return {
+            "image_width": w,
+            "image_height": h,
+            "camera_matrix": result.K,
+            "distortion_coefficients": result.dist.reshape(5, 1),
+            "avg_reprojection_error": float(result.rms),
+            "per_view_reprojection_errors": result.per_view_errors.reshape(-1, 1),
+            "extrinsic_parameters": np.c_[result.rvecs, result.tvecs].reshape(-1, 6),
+        }
+    r = rectify_stereo(result.K1, result.dist1, result.K2, result.dist2, result.R, result.T, (w, h))
+    return {
+        "image_width": w,
+        "image_height": h,
+        "M1": result.K1,
+        "D1": result.dist1.reshape(1, 5),
+        "M2": result.K2,
+        "D2": result.dist2.reshape(1, 5),
+        "R": result.R,
+        "T": result.T.reshape(3, 1),
+        "E": result.E,
+        "F": result.F,
+        "R1": r.R1,
+        "R2": r.R2,
+        "P1": r.P1,
+        "P2": r.P2,
+        "Q": r.Q,
+        "rms": float(result.rms),
+        "per_view_reprojection_errors": result.per_view_errors.reshape(-1, 2),
+    }
+
+
+def save_calibration(
+    path: str | Path,
+    result: CalibrationResult | StereoCalibration,
+    format: str | None = None,
+    *,
+    extra: Mapping[str, Any] | None = None,
+    camera_name: str = "camera",
+) -> list[Path]:
+    """Write a calibration as JSON, OpenCV FileStorage YAML or ROS ``camera_info`` YAML;
+    :func:`load_calibration` reads all three back.
+
+    - ``"json"``: :meth:`CalibrationResult.to_dict` / :meth:`StereoCalibration.to_dict`
+      (``K``, ``dist``, ``image_size``, ...).
+    - ``"opencv"``: ``%YAML:1.0`` with ``!!opencv-matrix`` entries, as OpenCV's
+      ``calibration`` sample writes them: ``image_width``, ``image_height``,
+      ``camera_matrix``, ``distortion_coefficients`` (5x1),
+      ``avg_reprojection_error``, ``per_view_reprojection_errors`` (Vx1) and
+      ``extrinsic_parameters`` (Vx6: rotation vector, translation per view); a stereo
+      pair as the ``stereo_calib`` sample: ``M1, D1, M2, D2, R, T, E, F`` plus
+      Bouguet's rectification ``R1, R2, P1, P2, Q``
+      (:func:`~robopercept.geometry.rectify_stereo`, as ``cv2.stereoRectify``),
+      ``rms`` and ``per_view_reprojection_errors`` (Vx2). ``cv2.FileStorage`` reads
+      it: ``fs.getNode("camera_matrix").mat()``.
+    - ``"ros"``: :func:`~robopercept.calibration.ros.camera_info` (``plumb_bob``;
+      rectification I and projection ``[K | 0]`` for one camera). A stereo pair gives
+      two files, ``<stem>_left<suffix>`` and ``<stem>_right<suffix>``, with the
+      rectification ``R1, P1`` and ``R2, P2`` as the ROS ``camera_calibration`` node
+      writes them (the right projection holds :math:`T_x = -f' B`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced if it exists; its folder must exist).
+    result : CalibrationResult or StereoCalibration
+    format : {"json", "opencv", "ros"}, optional
+        Default by the extension (:func:`calibration_format`): ``.json`` JSON, ``.yml``
+        / ``.yaml`` OpenCV.
+    extra : mapping, optional
+        More entries for JSON and OpenCV files (numbers, strings, lists of them, lists
+        of mappings: the images used, the board); not written to ROS files, whose
+        fields are the message's.
+    camera_name : str
+        ``camera_name`` of a ROS file (``<name>/left`` and ``<name>/right`` for a pair).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    InputError
+        ``result`` of another type, an unknown format or one that does not match the
+        extension, ``extra`` that is not a mapping, names an entry of the calibration,
+        or holds a value the format cannot store, or ``path`` that is not a usable
+        file path (None, empty, a NUL byte, a name too long, a folder).
     FileFormatError
         The file cannot be written (no such folder, no permission).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    >>> res = CalibrationResult(K, np.zeros(5), np.zeros((3, 3)), np.ones((3, 3)), 0.2,
+    ...                         np.full(3, 0.2), (640, 480))
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     [p] = save_calibration(pathlib.Path(d) / "cam.yaml", res, "ros")
+    ...     print(p.read_text().splitlines()[3:6])
+    ...     load_calibration(p)["K"][0]
+    ['camera_matrix:', '  rows: 3', '  cols: 3']
+    array([500.,   0., 320.])
     """
     if not isinstance(result, (CalibrationResult, StereoCalibration)):
         raise InputError(
@@ -857,11 +999,44 @@ def save_calibration(path: str | Path, result: CalibrationResult | StereoCalibra
     p = as_path(path, "path")
     if p.is_dir():
         raise InputError(f"path {p} is a folder; give a file name such as {p / 'camera.json'}")
-    text = json.dumps(result.to_dict(), indent=2) + "\n"
+    fmt = calibration_format(p, format)
+    if extra is not None and not isinstance(extra, Mapping):
+        raise InputError(f"extra must be a mapping of names to values; got {type(extra).__name__}")
+    more = dict(extra or {})
+    if fmt == "ros":
+        if isinstance(result, CalibrationResult):
+            info = camera_info(result.K, result.dist, result.image_size, camera_name=camera_name)
+            return [write_ros_yaml(p, info)]
+        r = rectify_stereo(
+            result.K1, result.dist1, result.K2, result.dist2, result.R, result.T,
+            result.image_size,
+        )  # fmt: skip
+        out = []
+        for side, K, d, R, P in (
+            ("left", result.K1, result.dist1, r.R1, r.P1),
+            ("right", result.K2, result.dist2, r.R2, r.P2),
+        ):
+            info = camera_info(
+                K, d, result.image_size, camera_name=f"{camera_name}/{side}", R=R, P=P
+            )
+            out.append(write_ros_yaml(p.with_name(f"{p.stem}_{side}{p.suffix}"), info))
+        return out
+    fields = result.to_dict() if fmt == "json" else _opencv_fields(result)
+    clash = sorted(set(more) & set(fields))
+    if clash:
+        raise InputError(f"extra names entries of the calibration itself: {', '.join(clash)}")
+    fields.update(more)
+    if fmt == "opencv":
+        return [write_opencv_storage(p, fields)]
+    try:
+        text = json.dumps(fields, indent=2, allow_nan=False) + "\n"
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"extra holds a value JSON cannot store ({exc})") from exc
     try:
         p.write_text(text)
     except OSError as exc:
         raise FileFormatError(f"{p}: cannot write the calibration ({exc.strerror or exc})") from exc
+    return [p]
 
 
 #: other names of the fields, as OpenCV's samples, cv2.FileStorage users and ROS write them

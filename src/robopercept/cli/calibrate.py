@@ -1,9 +1,11 @@
-"""``robopercept calibrate`` (camera intrinsics from chessboard photos) and
+"""``robopercept calibrate`` (camera intrinsics from chessboard photos),
+``robopercept stereo-calibrate`` (a stereo rig from chessboard pairs) and
 ``robopercept handeye`` (camera-robot transform from robot and target poses)."""
 
 from __future__ import annotations
 
 import argparse
+import glob
 import json
 import sys
 from pathlib import Path
@@ -11,29 +13,74 @@ from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, board_size, file_output
+from robopercept.cli._args import UsageError, board_size, file_output, flag_errors
 
 __all__ = ["register"]
 
+_FORMAT_HELP = (
+    "output format: json (robopercept), opencv (cv2.FileStorage YAML: camera_matrix, "
+    "distortion_coefficients, ...) or ros (camera_info YAML); default by the extension of "
+    "-o: .json json, .yml/.yaml opencv"
+)
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add the ``calibrate`` and ``handeye`` commands to the subcommand parsers ``sub``."""
+    """Add the ``calibrate``, ``stereo-calibrate`` and ``handeye`` commands to the
+    subcommand parsers ``sub``."""
     p = sub.add_parser(
         "calibrate",
         help="camera intrinsics and distortion from chessboard photos (Zhang)",
         description="Find the chessboard in every image (images without the whole board are "
         "reported and skipped), calibrate with Zhang's method and Levenberg-Marquardt, "
-        "print the per-view reprojection errors and write the camera as JSON.",
+        "print the per-view reprojection errors and write the camera as JSON, OpenCV "
+        "FileStorage YAML or ROS camera_info YAML (--format, or the extension of -o).",
     )
     p.add_argument("images", nargs="+")
     p.add_argument("--board", type=board_size, required=True, help="inner corners, e.g. 9x6")
     p.add_argument("--square", type=float, default=1.0, help="square side (sets the unit)")
     p.add_argument("-o", "--output", type=file_output, default="camera.json")
+    p.add_argument("--format", choices=("json", "opencv", "ros"), default=None, help=_FORMAT_HELP)
+    p.add_argument("--camera-name", default="camera", help="camera_name of a ROS file")
     p.add_argument("--overlays", default=None, help="folder for detection overlays")
     p.add_argument("--undistorted", default=None, help="folder for undistorted previews")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_calibrate)
+
+    r = sub.add_parser(
+        "stereo-calibrate",
+        help="stereo rig (both cameras, R, T) from chessboard image pairs",
+        description="Find the chessboard in each left/right pair (pairs without the whole "
+        "board in both images are reported and skipped), calibrate each camera (Zhang), "
+        "then the pose of the right camera relative to the left (X_right = R X_left + T) by "
+        "Levenberg-Marquardt over both cameras' reprojection errors (cv2.stereoCalibrate). "
+        "Writes the file that `robopercept stereo --calib` reads.",
+    )
+    r.add_argument(
+        "--left", nargs="+", required=True, help="left images: files, a folder or a glob"
+    )
+    r.add_argument(
+        "--right", nargs="+", required=True, help="right images, paired with --left in order"
+    )
+    r.add_argument("--board", type=board_size, required=True, help="inner corners, e.g. 9x6")
+    r.add_argument("--square", type=float, default=1.0, help="square side (sets T's unit)")
+    r.add_argument("-o", "--output", type=file_output, default="stereo.json")
+    r.add_argument(
+        "--format",
+        choices=("json", "opencv", "ros"),
+        default=None,
+        help=_FORMAT_HELP + " (ros writes NAME_left.yaml and NAME_right.yaml)",
+    )
+    r.add_argument("--camera-name", default="stereo", help="ROS camera_name prefix")
+    r.add_argument(
+        "--free-intrinsics",
+        action="store_true",
+        help="refine both cameras' intrinsics in the joint step too (default: fixed, "
+        "cv2.CALIB_FIX_INTRINSIC)",
+    )
+    r.add_argument("--json", action="store_true", help="print the result as JSON")
+    r.add_argument("--quiet", action="store_true", help="no per-pair messages on stderr")
+    r.set_defaults(func=run_stereo_calibrate)
 
     q = sub.add_parser(
         "handeye",
@@ -94,6 +141,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     q.add_argument("--method", choices=("tsai", "park", "daniilidis"), default="tsai")
     q.add_argument("-o", "--output", type=file_output, default="handeye.json")
+    q.add_argument(
+        "--format",
+        choices=("json", "ros"),
+        default=None,
+        help="json (X as 4x4, xyz + quaternion, residuals) or ros (a TransformStamped "
+        "YAML); default by the extension of -o: .json json, .yml/.yaml ros",
+    )
+    q.add_argument(
+        "--parent-frame",
+        default=None,
+        help="ROS parent frame of X (default tool0 eye-in-hand, base_link eye-to-hand)",
+    )
+    q.add_argument(
+        "--child-frame", default=None, help="ROS child frame of X (default camera_optical_frame)"
+    )
+    q.add_argument(
+        "--metres-per-unit",
+        type=float,
+        default=1.0,
+        help="scale of the robot units to metres for the ROS transform (0.001 for mm)",
+    )
     q.add_argument("--json", action="store_true", help="print the result as JSON")
     q.set_defaults(func=run_handeye)
 
@@ -117,6 +185,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
     if not (np.isfinite(args.square) and args.square > 0):
         raise UsageError(f"--square must be a positive length; got {args.square}")
+    fmt = _calibration_format(args.output, args.format)
     folders = [p for p in args.images if Path(p).is_dir()]
     if folders:  # not an unreadable photo to skip: the images were meant
         raise FileFormatError(
@@ -158,11 +227,16 @@ def run_calibrate(args: argparse.Namespace) -> int:
         )
     assert size is not None  # set by the first readable image
     res = calibrate_camera(chessboard_points(args.board, args.square), corners, size)
-    save_calibration(args.output, res)
-    data = json.loads(Path(args.output).read_text())
-    data.update(images=names, board=list(args.board), square=args.square)
-    data["skipped"] = [{"image": p, "reason": w} for p, w in skipped]
-    Path(args.output).write_text(json.dumps(data, indent=2) + "\n")
+    extra = {
+        "images": names,
+        "board": list(args.board),
+        "square": args.square,
+        "skipped": [{"image": p, "reason": w} for p, w in skipped],
+    }
+    with flag_errors(camera_name="--camera-name"):
+        written = save_calibration(args.output, res, fmt, extra=extra, camera_name=args.camera_name)
+    data: dict[str, Any] = res.to_dict()
+    data.update(extra, format=fmt, outputs=[str(w) for w in written])
     if args.undistorted:
         out = Path(args.undistorted)
         out.mkdir(parents=True, exist_ok=True)
@@ -182,7 +256,125 @@ def run_calibrate(args: argparse.Namespace) -> int:
     fx, fy, cx, cy = res.K[0, 0], res.K[1, 1], res.K[0, 2], res.K[1, 2]
     print(f"fx fy cx cy  {fx:.2f} {fy:.2f} {cx:.2f} {cy:.2f}")
     print("k1 k2 p1 p2 k3  " + " ".join(f"{v:.5f}" for v in res.dist))
-    print(f"wrote {args.output}")
+    print(f"wrote {', '.join(data['outputs'])} ({fmt})")
+    return 0
+
+
+def _calibration_format(output: str, format: str | None) -> str:
+    """``--format`` or the one told by ``-o``'s extension; a misfit is a usage error."""
+    from robopercept.calibration import calibration_format
+    from robopercept.errors import InputError
+
+    try:
+        return calibration_format(output, format)
+    except InputError as exc:
+        raise UsageError(f"-o/--output, --format: {exc}") from None
+
+
+# --------------------------------------------------------------------------- stereo
+
+
+def _image_list(specs: list[str], flag: str) -> list[str]:
+    """Files of ``specs``: a folder gives its images (sorted), a pattern with ``*``,
+    ``?`` or ``[`` that names no file its matches (sorted), a file itself."""
+    from robopercept.sources import IMAGE_EXTENSIONS
+
+    out: list[str] = []
+    for spec in specs:
+        p = Path(spec)
+        if p.is_dir():
+            found = sorted(str(f) for f in p.iterdir() if f.suffix.lower() in IMAGE_EXTENSIONS)
+            if not found:
+                raise UsageError(f"{flag}: the folder {spec} holds no images")
+            out += found
+        elif not p.exists() and glob.has_magic(spec):
+            found = sorted(glob.glob(spec))
+            if not found:
+                raise UsageError(f"{flag}: no file matches {spec}")
+            out += found
+        else:
+            out.append(spec)
+    return out
+
+
+def run_stereo_calibrate(args: argparse.Namespace) -> int:
+    """Run ``robopercept stereo-calibrate`` with the parsed ``args``; returns the exit
+    status."""
+    from robopercept.calibration import (
+        chessboard_points,
+        find_board_pairs,
+        save_calibration,
+        stereo_calibrate,
+    )
+    from robopercept.errors import InputError
+
+    if not (np.isfinite(args.square) and args.square > 0):
+        raise UsageError(f"--square must be a positive length; got {args.square}")
+    fmt = _calibration_format(args.output, args.format)
+    left = _image_list(args.left, "--left")
+    right = _image_list(args.right, "--right")
+    if len(left) != len(right):
+        raise UsageError(
+            f"--left gives {len(left)} images but --right {len(right)}: one right image per "
+            "left image, in the same (sorted) order"
+        )
+    with flag_errors(left="--left", right="--right", pattern_size="--board"):
+        pairs = find_board_pairs(left, right, args.board)
+    if not args.quiet:
+        for i, why in pairs.skipped:
+            print(f"skipped pair {left[i]} / {right[i]}: {why}", file=sys.stderr)
+    if len(pairs.used) < 3:
+        raise InputError(
+            f"the board was found in both images of {len(pairs.used)} of {len(left)} pairs; "
+            "stereo calibration needs at least 3 (check --board: inner corners, not squares)"
+        )
+    assert pairs.image_size is not None  # set by the first readable image
+    cal = stereo_calibrate(
+        chessboard_points(args.board, args.square),
+        pairs.corners1,
+        pairs.corners2,
+        pairs.image_size,
+        fix_intrinsics=not args.free_intrinsics,
+    )
+    extra = {
+        "left_images": [left[i] for i in pairs.used],
+        "right_images": [right[i] for i in pairs.used],
+        "board": list(args.board),
+        "square": args.square,
+        "skipped": [{"left": left[i], "right": right[i], "reason": w} for i, w in pairs.skipped],
+    }
+    with flag_errors(camera_name="--camera-name"):
+        written = save_calibration(args.output, cal, fmt, extra=extra, camera_name=args.camera_name)
+    data: dict[str, Any] = cal.to_dict()
+    data.update(
+        extra,
+        baseline=float(np.linalg.norm(cal.T)),
+        flipped=[left[i] for i in pairs.flipped],
+        format=fmt,
+        outputs=[str(w) for w in written],
+    )
+    if args.json:
+        print(json.dumps(data, indent=2))
+        return 0
+    width = max(len(Path(n).name) for n in data["left_images"])
+    print(f"{'left':<{width}}  {'right':<{width}}  error left / right (px)")
+    for a, b, (e1, e2) in zip(
+        data["left_images"], data["right_images"], cal.per_view_errors, strict=True
+    ):
+        print(f"{Path(a).name:<{width}}  {Path(b).name:<{width}}  {e1:.3f} / {e2:.3f}")
+    print(
+        f"RMS reprojection error  {cal.rms:.3f} px over {len(pairs.used)} pairs "
+        f"({len(pairs.skipped)} skipped)"
+    )
+    for name, K, d in (("left ", cal.K1, cal.dist1), ("right", cal.K2, cal.dist2)):
+        print(
+            f"{name} fx fy cx cy  {K[0, 0]:.2f} {K[1, 1]:.2f} {K[0, 2]:.2f} {K[1, 2]:.2f}"
+            "   k1 k2 p1 p2 k3  " + " ".join(f"{v:.5f}" for v in d)
+        )
+    print("T (right from left)  " + " ".join(f"{v:.5f}" for v in cal.T)
+          + f"   baseline {data['baseline']:.5f}")  # fmt: skip
+    note = "" if fmt == "ros" else "; `robopercept stereo --calib` reads it"
+    print(f"wrote {', '.join(data['outputs'])} ({fmt}{note})")
     return 0
 
 
@@ -254,8 +446,13 @@ def _target_poses(args: argparse.Namespace) -> tuple[list[np.ndarray], list[int]
 def run_handeye(args: argparse.Namespace) -> int:
     """Run ``robopercept handeye`` with the parsed ``args``; returns the exit status."""
     from robopercept.calibration import calibrate_hand_eye, read_xyz_rpy
-    from robopercept.calibration.handeye import xyz_rpy_from_pose
+    from robopercept.calibration.handeye import hand_eye_format, save_hand_eye
+    from robopercept.errors import InputError
 
+    try:
+        fmt = hand_eye_format(args.output, args.format)
+    except InputError as exc:
+        raise UsageError(f"-o/--output, --format: {exc}") from None
     if args.setup is None:  # no default: the wrong setup gives a wrong X without a sign
         raise UsageError(
             "--setup is required: eye-in-hand (camera on the gripper, target fixed) or "
@@ -274,10 +471,22 @@ def run_handeye(args: argparse.Namespace) -> int:
     targets, stations = _target_poses(args)
     setup = args.setup.replace("-", "_")
     res = calibrate_hand_eye([robot[i] for i in stations], targets, setup, args.method)
-    xyz, rpy = xyz_rpy_from_pose(res.X)
-    data: dict[str, Any] = res.to_dict()
-    data.update(xyz=xyz.tolist(), rpy_deg=rpy.tolist(), stations=len(stations))
-    Path(args.output).write_text(json.dumps(data, indent=2) + "\n")
+    with flag_errors(
+        parent_frame="--parent-frame",
+        child_frame="--child-frame",
+        metres_per_unit="--metres-per-unit",
+    ):
+        data = save_hand_eye(
+            args.output,
+            res,
+            args.format,
+            parent_frame=args.parent_frame,
+            child_frame=args.child_frame,
+            metres_per_unit=args.metres_per_unit,
+            extra={"stations": len(stations)},
+        )
+    data.update(format=fmt, output=str(args.output))
+    xyz, rpy, q = data["xyz"], data["rpy_deg"], data["quaternion_xyzw"]
     if args.json:
         print(json.dumps(data, indent=2))
         return 0
@@ -287,6 +496,8 @@ def run_handeye(args: argparse.Namespace) -> int:
         print("  " + " ".join(f"{v:12.6f}" for v in row))
     print("xyz      " + " ".join(f"{v:.3f}" for v in xyz))
     print("rpy deg  " + " ".join(f"{v:.3f}" for v in rpy))
+    print("quaternion x y z w  " + " ".join(f"{v:.6f}" for v in q))
+    print(f"ROS: {data['static_transform_publisher']}")
     print(
         f"AX = XB residuals over {len(res.rotation_residuals)} pairs: rotation RMS "
         f"{res.rotation_rms:.4f} deg, translation RMS {res.translation_rms:.4f}"

@@ -23,8 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="filter, segment planes and cluster a point cloud (PLY/PCD)",
         description="Run the steps given, in this order: pass-through, voxel grid, "
         "statistical outlier removal, plane extraction, Euclidean clustering. Prints a "
-        "summary and writes a PLY coloured by segment (planes, then clusters; grey: "
-        "unassigned).",
+        "summary and writes a PLY or PCD coloured by segment (planes, then clusters; grey: "
+        "unassigned) with each point's segment in a 'label' field (0 unassigned, 1..P the "
+        "planes, P+1.. the clusters; PCL's PointXYZRGBL layout in PCD).",
     )
     p.add_argument("input", help="input .ply or .pcd")
     p.add_argument("-o", "--output", default="segments.ply", help="output .ply or .pcd")
@@ -111,15 +112,25 @@ def run_cloud(args: argparse.Namespace) -> int:
     res.steps[0]["ms"] = round(res.steps[0]["ms"] + read_ms, 2)  # the read step reads too
     cloud = res.cloud
     colors = label_colors(res.segment, background=(128, 128, 128)).astype(np.float64) / 255.0
-    if args.planes is None and args.clusters is None and cloud.colors is not None:
+    segmented = args.planes is not None or args.clusters is not None
+    if not segmented and cloud.colors is not None:
         colors = cloud.colors
-    write_point_cloud(out, cloud.with_colors(colors))
+    labels = res.segment if segmented else cloud.labels
+    write_point_cloud(out, cloud.with_colors(colors).with_labels(labels))
     if args.image:
         from robopercept.imaging import write_image
         from robopercept.viz import render_points
 
         write_image(args.image, render_points(cloud.points, colors))
     summary: dict[str, Any] = {"input": str(args.input), "output": str(out), "steps": res.steps}
+    summary["label_field"] = labels is not None
+    if segmented:
+        n_planes = len(res.planes)
+        summary["labels"] = {
+            "0": "unassigned",
+            **{str(i + 1): f"plane {i + 1}" for i in range(n_planes)},
+            **{str(n_planes + j + 1): f"cluster {j + 1}" for j in range(len(res.cluster_sizes))},
+        }
     if args.image:
         summary["image"] = str(args.image)
     if args.json:
@@ -136,5 +147,8 @@ def run_cloud(args: argparse.Namespace) -> int:
         )
     if res.cluster_sizes:
         print(f"clusters: {len(res.cluster_sizes)}, sizes {res.cluster_sizes}")
+    if segmented:
+        names = ", ".join(f"{k} {v}" for k, v in summary["labels"].items())
+        print(f"label field: {names}")
     print(f"wrote {out}" + (f" and {args.image}" if args.image else ""))
     return 0

@@ -92,7 +92,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--calib",
         default=None,
-        help="stereo calibration JSON (K1 dist1 K2 dist2 R T, as StereoCalibration writes): "
+        help="stereo calibration, JSON or OpenCV YAML, as robopercept stereo-calibrate writes it "
+        "(K1 dist1 K2 dist2 R T): "
         "the pair is rectified first and --ply needs no --focal/--baseline",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")

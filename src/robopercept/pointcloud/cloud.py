@@ -24,9 +24,37 @@ def _optional(value: npt.ArrayLike | None, name: str, n: int) -> np.ndarray | No
     return arr
 
 
+_LABEL_RANGE = 2**63 - 1
+
+
+def _labels(value: npt.ArrayLike | None, n: int) -> np.ndarray | None:
+    """``(N,)`` int64 labels from integers (or floats holding whole numbers)."""
+    if value is None:
+        return None
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iuf":
+        raise InputError(
+            f"labels must be integers, one per point; got dtype {arr.dtype}: "
+            "give an (N,) integer array such as segment ids"
+        )
+    arr = arr.reshape(-1) if arr.ndim == 2 and 1 in arr.shape else arr
+    if arr.shape != (n,):
+        raise InputError(f"labels must have shape ({n},), one per point; got {arr.shape}")
+    if arr.dtype.kind == "f":
+        ok = np.isfinite(arr) & (arr == np.round(arr)) & (np.abs(arr) <= 2**53)
+        if not ok.all():
+            raise InputError(
+                f"labels must be whole numbers; got {arr[~ok][0]!r}: round them or "
+                "give an integer array"
+            )
+    elif arr.dtype == np.uint64 and arr.size and arr.max() > _LABEL_RANGE:
+        raise InputError(f"labels must fit int64; got {int(arr.max())}")
+    return arr.astype(np.int64)
+
+
 @dataclass(frozen=True)
 class PointCloud:
-    """A set of 3-D points with optional per-point colours and normals.
+    """A set of 3-D points with optional per-point colours, normals and labels.
 
     Attributes
     ----------
@@ -40,17 +68,27 @@ class PointCloud:
         For an organized cloud (one point per pixel of a depth image, NaN where there is
         no measurement), the image shape; ``N == H * W`` in row-major order. Any
         selection drops it.
+    labels : (N,) int64 ndarray or None
+        An integer per point (a segment, cluster or class id; PCL's ``label`` field,
+        written and read as ``label`` in PLY and PCD by
+        :func:`~robopercept.pointcloud.write_point_cloud`). :meth:`select`,
+        :meth:`finite` and :meth:`concatenate` keep them; filters that merge points
+        (the voxel grid) drop them.
 
     Examples
     --------
     >>> cloud = PointCloud(np.random.rand(100, 3))
     >>> near = cloud.select(cloud.points[:, 2] < 0.5)
+    >>> tagged = PointCloud(np.zeros((3, 3)), labels=[0, 1, 1])
+    >>> tagged.select([2, 0]).labels
+    array([1, 0])
     """
 
     points: np.ndarray
     colors: np.ndarray | None = None
     normals: np.ndarray | None = None
     shape: tuple[int, int] | None = field(default=None)
+    labels: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         pts = check_points(self.points, "points", 3)
@@ -58,6 +96,7 @@ class PointCloud:
         n = pts.shape[0]
         object.__setattr__(self, "colors", _optional(self.colors, "colors", n))
         object.__setattr__(self, "normals", _optional(self.normals, "normals", n))
+        object.__setattr__(self, "labels", _labels(self.labels, n))
         if self.shape is not None:
             if not (isinstance(self.shape, (tuple, list)) and len(self.shape) == 2):
                 raise InputError(
@@ -112,6 +151,7 @@ class PointCloud:
             self.points[idx],
             None if self.colors is None else self.colors[idx],
             None if self.normals is None else self.normals[idx],
+            labels=None if self.labels is None else self.labels[idx],
         )
 
     def finite(self) -> PointCloud:
@@ -141,11 +181,21 @@ class PointCloud:
         """A copy with ``normals`` replaced."""
         return replace(self, normals=normals)
 
+    def with_labels(self, labels: npt.ArrayLike | None) -> PointCloud:
+        """A copy with ``labels`` replaced (``(N,)`` integers, or None to drop them).
+
+        Examples
+        --------
+        >>> PointCloud(np.zeros((2, 3))).with_labels([3, 4]).labels
+        array([3, 4])
+        """
+        return replace(self, labels=labels)
+
     @staticmethod
     def concatenate(clouds: Sequence[PointCloud]) -> PointCloud:
         """One cloud with the points of ``clouds`` in order.
 
-        Colours (normals) are kept only if every cloud has them.
+        Colours (normals, labels) are kept only if every cloud has them.
         """
         clouds = list(clouds)
         if not clouds:
@@ -157,7 +207,10 @@ class PointCloud:
         nrm = None
         if all(c.normals is not None for c in clouds):
             nrm = np.concatenate([c.normals for c in clouds])  # type: ignore[misc]
-        return PointCloud(pts, cols, nrm)
+        lab = None
+        if all(c.labels is not None for c in clouds):
+            lab = np.concatenate([c.labels for c in clouds])  # type: ignore[misc]
+        return PointCloud(pts, cols, nrm, labels=lab)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(3,) minimum and (3,) maximum of the finite points (NaN if there are none)."""

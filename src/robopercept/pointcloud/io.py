@@ -6,6 +6,14 @@ records (one packed record per point), or ``binary_compressed``: two uint32 size
 LZF stream that expands to the fields one after another (all x, then all y, ...).
 Colours are PCL's packed ``rgb``/``rgba`` (``0x00RRGGBB`` in a float or uint32).
 
+Per-point labels (:attr:`PointCloud.labels`: segment, cluster or class ids) are the
+``label`` field: in PCD an unsigned 32-bit ``label`` after the colour, as PCL's
+``PointXYZRGBL`` / ``PointXYZL`` store it (so ``pcl::io::loadPCDFile`` fills
+``label``); in PLY a signed 32-bit ``property int label`` of the vertex element (Open3D's
+tensor ``read_point_cloud``, plyfile and CloudCompare read it as a per-point scalar; -1
+for noise, as Open3D's DBSCAN labels, fits). Both readers read ``label`` of any integer
+type, or of a float type holding whole numbers.
+
 Every size a header claims is checked against the bytes actually in the file before
 anything is allocated, so a corrupt or hostile header (say ``POINTS 1000000000000``) is
 refused with :class:`FileFormatError` instead of exhausting memory.
@@ -22,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from robopercept._checks import check_bool, check_extension, check_file
-from robopercept.errors import FileFormatError
+from robopercept.errors import FileFormatError, InputError
 from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = [
@@ -332,11 +340,24 @@ def _unpack_rgb(values: np.ndarray) -> np.ndarray:
     return rgb.astype(np.float64) / 255.0
 
 
+def _file_labels(values: np.ndarray, path: Path) -> np.ndarray:
+    """A file's ``label`` column as int64; whole numbers only."""
+    v = np.asarray(values)
+    if v.dtype.kind in "iu":
+        return v.astype(np.int64)
+    if v.dtype.kind == "f":
+        ok = np.isfinite(v) & (v == np.round(v)) & (np.abs(v) <= 2**53)
+        if ok.all():
+            return v.astype(np.int64)
+        raise _fail(path, f"field 'label' holds {float(v[~ok][0])!r}; labels are whole numbers")
+    raise _fail(path, f"field 'label' has type {v.dtype}; labels are integers")
+
+
 def _cloud_from_pcd(pcd: PcdData, path: Path) -> PointCloud:
     f = pcd.fields
     if not {"x", "y", "z"} <= f.keys():
         raise _fail(path, f"no x, y, z fields (fields: {', '.join(f)})")
-    for key in ("x", "y", "z", "normal_x", "normal_y", "normal_z"):
+    for key in ("x", "y", "z", "normal_x", "normal_y", "normal_z", "label"):
         if key in f and f[key].ndim != 1:
             raise _fail(path, f"field {key!r} has COUNT {f[key].shape[1]}; it must be 1")
     pts = np.column_stack([f["x"], f["y"], f["z"]]).astype(np.float64)
@@ -349,7 +370,8 @@ def _cloud_from_pcd(pcd: PcdData, path: Path) -> PointCloud:
     if {"normal_x", "normal_y", "normal_z"} <= f.keys():
         normals = np.column_stack([f["normal_x"], f["normal_y"], f["normal_z"]]).astype(np.float64)
     shape = (pcd.height, pcd.width) if pcd.height > 1 else None
-    return PointCloud(pts, colors, normals, shape)
+    labels = _file_labels(f["label"], path) if "label" in f else None
+    return PointCloud(pts, colors, normals, shape, labels)
 
 
 # --------------------------------------------------------------------------- PLY
@@ -450,7 +472,7 @@ def _read_ply(path: Path) -> PointCloud:
     if not {"x", "y", "z"} <= set(names):
         raise _fail(path, f"vertex element has no x, y, z (properties: {', '.join(names)})")
     # issue 25: a list property (dtype object) used to escape np.column_stack as ValueError
-    used = {"x", "y", "z", "red", "green", "blue", "r", "g", "b", "nx", "ny", "nz"}
+    used = {"x", "y", "z", "red", "green", "blue", "r", "g", "b", "nx", "ny", "nz", "label"}
     lists = [k for k in names if k in used and v.dtype[k].kind not in "biuf"]
     if lists:
         raise _fail(
@@ -468,17 +490,38 @@ def _read_ply(path: Path) -> PointCloud:
     normals = None
     if {"nx", "ny", "nz"} <= set(names):
         normals = np.column_stack([v["nx"], v["ny"], v["nz"]]).astype(np.float64)
-    return PointCloud(pts, colors, normals)
+    labels = _file_labels(v["label"], path) if "label" in names else None
+    return PointCloud(pts, colors, normals, labels=labels)
 
 
-def _records(cloud: PointCloud, normal_names: tuple[str, ...], color_cols: list) -> np.ndarray:
-    """float32 x, y, z (and normals under ``normal_names``) plus empty colour columns."""
+def _records(
+    cloud: PointCloud, normal_names: tuple[str, ...], color_cols: list, label_type: str
+) -> np.ndarray:
+    """float32 x, y, z (and normals under ``normal_names``) plus empty colour columns,
+    then the labels as ``label`` of ``label_type``."""
     cols = [(k, "<f4") for k in ("x", "y", "z")]
     if cloud.normals is not None:
         cols += [(k, "<f4") for k in normal_names]
     if cloud.colors is not None:
         cols += color_cols
+    if cloud.labels is not None:
+        info = np.iinfo(label_type)
+        lab = cloud.labels
+        if lab.size and (lab.min() < info.min or lab.max() > info.max):
+            bad = int(lab.min() if lab.min() < info.min else lab.max())
+            fix = (
+                "PCL's label is unsigned: shift noise (-1) to 0 with labels + 1, or write .ply"
+                if info.min == 0
+                else "renumber the labels (np.unique(labels, return_inverse=True)[1])"
+            )
+            raise InputError(
+                f"labels must fit the file's label field ({np.dtype(label_type).name}, "
+                f"{info.min}..{info.max}); got {bad}: {fix}"
+            )
+        cols.append(("label", label_type))
     rec = np.empty(len(cloud), dtype=cols)
+    if cloud.labels is not None:
+        rec["label"] = cloud.labels
     for i, k in enumerate("xyz"):
         rec[k] = cloud.points[:, i]
     if cloud.normals is not None:
@@ -495,7 +538,7 @@ def _write_ply(path: Path, cloud: PointCloud, binary: bool) -> None:
     from plyfile import PlyData, PlyElement
 
     rgb = ("red", "green", "blue")
-    rec = _records(cloud, ("nx", "ny", "nz"), [(k, "u1") for k in rgb])
+    rec = _records(cloud, ("nx", "ny", "nz"), [(k, "u1") for k in rgb], "<i4")
     if cloud.colors is not None:
         c8 = _colors8(cloud)
         for i, k in enumerate(rgb):
@@ -505,13 +548,13 @@ def _write_ply(path: Path, cloud: PointCloud, binary: bool) -> None:
 
 def _write_pcd(path: Path, cloud: PointCloud, binary: bool) -> None:
     normal_names = ("normal_x", "normal_y", "normal_z")
-    rec = _records(cloud, normal_names, [("rgb", "<u4")])
+    rec = _records(cloud, normal_names, [("rgb", "<u4")], "<u4")
     names = list(rec.dtype.names)  # type: ignore[arg-type]
     if cloud.colors is not None:
         c8 = _colors8(cloud)
         rec["rgb"] = (c8[:, 0] << 16) | (c8[:, 1] << 8) | c8[:, 2]
     h, w = cloud.shape if cloud.shape is not None else (1, len(cloud))
-    types = ["U" if k == "rgb" else "F" for k in names]
+    types = ["U" if k in ("rgb", "label") else "F" for k in names]
     head = (
         "# .PCD v0.7 - Point Cloud Data file format (robopercept)\nVERSION 0.7\n"
         f"FIELDS {' '.join(names)}\nSIZE {' '.join('4' for _ in names)}\n"
@@ -524,9 +567,7 @@ def _write_pcd(path: Path, cloud: PointCloud, binary: bool) -> None:
         if binary:
             fh.write(rec.tobytes())
         else:
-            fmt = ["%.9g"] * len(names)
-            if cloud.colors is not None:
-                fmt[-1] = "%d"
+            fmt = ["%d" if k in ("rgb", "label") else "%.9g" for k in names]
             rows = np.column_stack([rec[k].astype(np.float64) for k in names])
             np.savetxt(fh, rows, fmt=fmt)
 
@@ -549,7 +590,8 @@ def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:
     -------
     PointCloud
         Colours in [0, 1] when the file has them (PLY ``red green blue``, PCD
-        ``rgb``/``rgba``), normals when it has ``nx ny nz`` / ``normal_x ...``.
+        ``rgb``/``rgba``), normals when it has ``nx ny nz`` / ``normal_x ...``, labels
+        (int64) when it has a ``label`` field.
 
     Raises
     ------
@@ -592,7 +634,13 @@ def check_cloud_path(path: str | os.PathLike[str]) -> Path:
 
 
 def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: bool = True) -> Path:
-    """Write ``cloud`` as ``.ply`` or ``.pcd`` (float32 coordinates, 8-bit colours).
+    """Write ``cloud`` as ``.ply`` or ``.pcd`` (float32 coordinates, 8-bit colours,
+    labels as a ``label`` field).
+
+    Fields in order: ``x y z``, the normals (PLY ``nx ny nz``, PCD ``normal_x normal_y
+    normal_z``), the colours (PLY ``red green blue`` uchar, PCD packed ``rgb`` uint32),
+    and :attr:`PointCloud.labels` as ``label`` (PLY ``int``, PCD ``U 4``, PCL's
+    ``PointXYZRGBL`` layout).
 
     Parameters
     ----------
@@ -606,6 +654,23 @@ def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: b
     -------
     Path
         The path written.
+
+    Raises
+    ------
+    InputError
+        ``cloud`` not a PointCloud, another extension, or labels outside the file's
+        field: int32 for PLY, 0 .. 2^32 - 1 for PCD (PCL's unsigned label).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> cloud = PointCloud(np.eye(3), labels=[0, 2, 2])
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     path = write_point_cloud(pathlib.Path(d) / "seg.pcd", cloud, binary=False)
+    ...     print(path.read_text().splitlines()[2])
+    ...     read_point_cloud(path).labels
+    FIELDS x y z label
+    array([0, 2, 2])
     """
     check_cloud(cloud)
     p = check_cloud_path(path)
