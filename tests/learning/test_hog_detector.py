@@ -44,11 +44,15 @@ def test_hog_svm_cross_validated_accuracy_on_lfw_subset():
 ASTRONAUT_FACE = np.array([165, 70, 100, 120.0])  # x, y, w, h, read off the picture
 
 
-def test_shipped_face_model_best_box_is_the_astronauts_face(astronaut):
-    """The acceptance item: the best box on skimage's astronaut overlaps her face."""
-    found = default_face_detector().detect(astronaut, threshold=0.0)
-    assert len(found) >= 1
-    assert box_iou(ASTRONAUT_FACE, found.boxes[:1])[0] > 0.5, found.boxes[:3]
+def test_shipped_face_model_finds_the_astronauts_face_with_few_false_boxes(astronaut):
+    """The acceptance items (issue 30): at the model's default threshold (chosen on the
+    held-out PR curve) the face is found and at most 2 boxes are not the face (18 at
+    the old threshold 0). Measured: 3 boxes, the face 2nd (score 1.25) after the
+    mission patch on her sleeve (1.47)."""
+    found = default_face_detector().detect(astronaut)
+    assert 1 <= len(found) <= 3, found.scores
+    face = box_iou(ASTRONAUT_FACE, found.boxes) > 0.5
+    assert face.any() and (~face).sum() <= 2, (found.boxes, found.scores)
 
 
 def test_training_reproduces_the_shipped_model():
@@ -229,3 +233,131 @@ def test_huge_stated_member_sizes_cost_no_memory(tmp_path, word):
     finally:
         tracemalloc.stop()
     assert peak < 8 * 2**20, peak
+
+
+# issue 30: the default threshold comes from a held-out precision/recall curve and is
+# stored with the model
+
+
+def test_choose_threshold_on_a_hand_made_score_list():
+    """Five faces, five non-faces. By hand: at score >= 0.6 all 5 faces and the
+    non-face at 0.7 are in: P = 5/6, R = 1, F1 = 10/11 = 0.909, the best F1 (>= 0.8:
+    P = 4/5, R = 4/5, F1 0.8; >= 1.0: 3/4 ... no: P = 1, R = 0.6, F1 0.75). The
+    threshold is the midpoint to the next lower score, (0.6 + 0.3) / 2. Precision
+    >= 0.95 first holds at >= 0.8 (P = 1, R = 0.8): threshold (0.8 + 0.7) / 2."""
+    from robopercept.errors import DegenerateError
+    from robopercept.learning.hog_detector import choose_threshold
+    from robopercept.learning.metrics import precision_recall_curve
+
+    labels = [1, 1, 1, 1, 1, 0, 0, 0, 0, 0]
+    scores = [2.0, 1.5, 1.0, 0.8, 0.6, 0.7, 0.3, 0.1, -0.5, -1.0]
+    c = choose_threshold(labels, scores)
+    assert c.rule == "f1" and c.score == 0.6 and c.threshold == pytest.approx(0.45)
+    assert c.precision == pytest.approx(5 / 6) and c.recall == 1.0
+    assert c.f1 == pytest.approx(10 / 11)
+    assert (c.n_positive, c.n_negative) == (5, 5)
+    p, r, t = precision_recall_curve(labels, scores)
+    np.testing.assert_array_equal(c.curve_thresholds, t)
+    np.testing.assert_array_equal(c.curve_precision, p)
+    np.testing.assert_array_equal(c.curve_recall, r)
+    # "score > threshold" keeps exactly the examples the chosen point counts as positive
+    s = np.asarray(scores)
+    assert np.array_equal(s > c.threshold, s >= c.score)
+    c = choose_threshold(labels, scores, rule="precision", min_precision=0.95)
+    assert c.score == 0.8 and c.threshold == pytest.approx(0.75)
+    assert (c.precision, c.recall) == (1.0, 0.8)
+    c = choose_threshold(labels, scores, rule="precision", min_precision=0.8)
+    assert c.score == 0.6 and c.recall == 1.0  # P = 0.833 >= 0.8 at the lowest score
+    # the lowest score chosen: just below it
+    c = choose_threshold([1, 1, 0], [0.5, 0.2, 0.9], rule="precision", min_precision=0.6)
+    assert c.score == 0.2 and c.threshold < 0.2 and c.threshold > 0.2 - 1e-9
+    with pytest.raises(DegenerateError, match=r"no threshold reaches precision 1\.0"):
+        choose_threshold([1, 0], [0.0, 1.0], rule="precision", min_precision=1.0)
+    with pytest.raises(InputError, match="both classes"):
+        choose_threshold([1, 1], [0.0, 1.0])
+    with pytest.raises(InputError, match="0 \\(background\\) or 1"):
+        choose_threshold([2, 0], [0.0, 1.0])
+    with pytest.raises(InputError, match="finite"):
+        choose_threshold([1, 0], [np.nan, 1.0])
+    with pytest.raises(InputError, match="one length"):
+        choose_threshold([1, 0, 1], [0.0, 1.0])
+    with pytest.raises(InputError, match="rule"):
+        choose_threshold([1, 0], [0.0, 1.0], rule="auc")
+    with pytest.raises(InputError, match="min_precision"):
+        choose_threshold([1, 0], [0.0, 1.0], rule="precision", min_precision=0.0)
+
+
+def test_threshold_is_saved_read_and_used_by_default(tmp_path):
+    """detect() without a threshold uses the model's; save/load keeps it; a model file
+    written before issue 30 (no threshold in its header) reads as threshold 0."""
+    import json
+
+    shipped = default_face_detector()
+    assert shipped.threshold > 0  # chosen on the held-out PR curve, not the old 0
+    gen = np.random.default_rng(0)
+    image = gen.random((60, 80))
+    shipped.threshold = -0.25
+    path = tmp_path / "m.npz"
+    shipped.save(path)
+    again = HogDetector.load(path)
+    assert again.threshold == -0.25
+    by_default = again.detect(image)
+    explicit = again.detect(image, threshold=-0.25)
+    np.testing.assert_array_equal(by_default.scores, explicit.scores)
+    assert (by_default.scores > -0.25).all()
+    meta = {"kind": "robopercept.HogDetector", "window": [24, 24], "cell_size": 6,
+            "block_size": 2, "orientations": 18, "signed": True, "C": 1.0,
+            "intercept": 0.5}  # fmt: skip
+    _save_model(tmp_path / "old.npz", shipped.coef_, meta)
+    assert HogDetector.load(tmp_path / "old.npz").threshold == 0.0
+    _save_model(tmp_path / "nan.npz", shipped.coef_, {**meta, "threshold": float("nan")})
+    with pytest.raises(FileFormatError, match="threshold is nan"):
+        HogDetector.load(tmp_path / "nan.npz")
+    with pytest.raises(InputError, match="threshold"):
+        again.detect(image, threshold="high")
+    assert json.loads(str(np.load(path)["meta"]))["threshold"] == -0.25
+
+
+def test_train_detector_from_folders(tmp_path):
+    """Bright discs against noise pictures: the held-out discs are split off (2 of 8),
+    the threshold is chosen on them, the report counts the unreadable files, and the
+    bad folders are refused by name."""
+    from robopercept.imaging import write_image
+    from robopercept.learning.hog_detector import train_detector_from_folders
+
+    gen = np.random.default_rng(1)
+    yy, xx = np.mgrid[:30, :30]
+    disc = ((yy - 14.5) ** 2 + (xx - 14.5) ** 2 < 100).astype(float)
+    pos, neg = tmp_path / "pos", tmp_path / "neg"
+    pos.mkdir()
+    neg.mkdir()
+    for i in range(8):
+        img = np.clip(0.2 + 0.6 * disc + gen.normal(0, 0.05, disc.shape), 0, 1)
+        write_image(pos / f"{i}.png", (255 * img).astype(np.uint8))
+        write_image(neg / f"{i}.png", (255 * gen.random((60, 90))).astype(np.uint8))
+    (neg / "bad.png").write_bytes(b"\x89PNG broken")
+    det, report = train_detector_from_folders(pos, neg, mining_rounds=1, random_state=0)
+    assert report["positives"] == 8 and report["negatives"] == 8
+    assert len(report["skipped"]) == 1 and report["skipped"][0].startswith("neg/bad.png: ")
+    assert report["choice"].n_positive == 4  # 2 held-out discs and their mirrors
+    assert det.threshold == report["threshold"] == report["choice"].threshold
+    assert report["heldout_recall"] == 1.0 and report["heldout_precision"] == 1.0
+    again, _ = train_detector_from_folders(pos, neg, mining_rounds=1, random_state=0)
+    np.testing.assert_array_equal(again.coef_, det.coef_)  # seeded
+    det0, r0 = train_detector_from_folders(pos, neg, mining_rounds=0, holdout=0)
+    assert r0["choice"] is None and det0.threshold == 0.0
+    with pytest.raises(InputError, match=r"positives folder .* does not exist"):
+        train_detector_from_folders(tmp_path / "absent", neg)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(InputError, match=r"negatives folder .* holds no readable image"):
+        train_detector_from_folders(pos, empty)
+    one = tmp_path / "one"
+    one.mkdir()
+    write_image(one / "a.png", (255 * disc).astype(np.uint8))
+    with pytest.raises(InputError, match="at least 2 positives"):
+        train_detector_from_folders(one, neg)
+    with pytest.raises(InputError, match="whole cells"):
+        train_detector_from_folders(pos, neg, window=(25, 24))
+    with pytest.raises(InputError, match="holdout"):
+        train_detector_from_folders(pos, neg, holdout=0.75)

@@ -132,7 +132,8 @@ def test_three_frame_differencing_removes_the_ghost():
     ghost); three-frame differencing marks only where it is."""
     frames, truth = _moving_square()
     two = FrameDifference(n=1, noise=None)
-    three = ThreeFrameDifference(noise=None)
+    # gap 1 and no closing/filling: the plain three-frame AND of the textbook
+    three = ThreeFrameDifference(25.0, gap=1, noise=None, closing=1, fill=False)
     masks2 = [two.apply(f) for f in frames]
     masks3 = [three.apply(f) for f in frames]
     assert not masks2[0].any() and not masks3[0].any() and not masks3[1].any()

@@ -10,10 +10,20 @@ original image. Overlapping candidates of one object are then reduced by greedy
 non-maximum suppression: the best box is kept and every box overlapping it by more
 than ``nms_iou`` (intersection over union) is dropped, repeatedly.
 
-The model (HOG settings, :math:`w`, :math:`b`) is saved as an ``.npz`` of plain arrays
-and a JSON string; loading never unpickles. :func:`train_face_detector` trains a face
-model on scikit-image's ``lfw_subset`` (100 faces, 100 non-faces, 25 x 25 pixels) with
-random and hard negatives from face-free scikit-image pictures.
+The default ``threshold`` is part of the model: :func:`choose_threshold` picks it on
+the precision/recall curve of the SVM score over *held-out* examples, never used in
+training (the rule: the highest F1, :math:`F_1 = 2PR / (P + R)`, or the best recall
+with precision at least ``min_precision``). The threshold is the midpoint between the
+chosen score and the next lower one, since :meth:`HogDetector.detect` keeps scores
+strictly above it.
+
+The model (HOG settings, :math:`w`, :math:`b`, the threshold) is saved as an ``.npz``
+of plain arrays and a JSON string; loading never unpickles. :func:`train_face_detector`
+trains a face model on scikit-image's ``lfw_subset`` (100 faces, 100 non-faces, 25 x 25
+pixels) with random and hard negatives from face-free scikit-image pictures, holding
+out a quarter of the faces, non-faces and pictures for the threshold;
+:func:`train_detector_from_folders` trains one on a folder of object crops and a
+folder of pictures without the object.
 """
 
 from __future__ import annotations
@@ -29,7 +39,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_file, check_positive, check_range
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_file,
+    check_int,
+    check_positive,
+    check_range,
+    check_real,
+)
 from robopercept.errors import FileFormatError, InputError, RoboperceptError
 from robopercept.features.hog import hog, hog_windows
 from robopercept.geometry.boxes import box_iou_matrix
@@ -39,13 +57,20 @@ from robopercept.learning.svm import LinearSVC
 from robopercept.progress import progress_bar
 
 __all__ = [
+    "IMAGE_SUFFIXES",
     "Detections",
     "HogDetector",
+    "ThresholdChoice",
+    "choose_threshold",
     "default_face_detector",
     "face_training_data",
     "non_max_suppression",
+    "train_detector_from_folders",
     "train_face_detector",
 ]
+
+#: image files :func:`train_detector_from_folders` reads (other files are ignored)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm")
 
 # scikit-image pictures without a human face: hard negatives for the face model
 NEGATIVE_PICTURES = ("coffee", "rocket", "coins", "moon", "page", "text", "brick", "grass",
@@ -127,6 +152,9 @@ class HogDetector:
         HOG settings (OpenCV convention, block stride one cell).
     C : float
         SVM box constraint.
+    threshold : float
+        Default lowest score of :meth:`detect` (saved with the model; trainers set it
+        from a held-out precision/recall curve, :func:`choose_threshold`).
     """
 
     window: tuple[int, int] = (24, 24)
@@ -135,6 +163,7 @@ class HogDetector:
     orientations: int = 9
     signed: bool = False
     C: float = 0.1
+    threshold: float = 0.0
     coef_: np.ndarray | None = field(default=None, repr=False)
     intercept_: float = 0.0
 
@@ -205,7 +234,7 @@ class HogDetector:
         self,
         image: np.ndarray,
         *,
-        threshold: float = 0.0,
+        threshold: float | None = None,
         stride: int | None = None,
         scale_step: float = 1.15,
         min_size: int | None = None,
@@ -218,8 +247,9 @@ class HogDetector:
         Parameters
         ----------
         image : (H, W) or (H, W, 3) ndarray
-        threshold : float
-            Lowest SVM score kept.
+        threshold : float, optional
+            Lowest SVM score kept (strictly above); default the model's
+            :attr:`threshold`.
         stride : int
             Window step in pixels at each level: a multiple of the cell size, or a
             divisor of it (then the level is scanned at each sub-cell shift); default
@@ -234,6 +264,7 @@ class HogDetector:
             Overlap above which the weaker of two boxes is dropped.
         """
         self._need_model()
+        threshold = self.threshold if threshold is None else check_real(threshold, "threshold")
         gray = _to_gray(image)
         if scale_step <= 1.0:
             raise InputError(f"scale_step must be > 1; got {scale_step}")
@@ -295,6 +326,7 @@ class HogDetector:
             "signed": self.signed,
             "C": self.C,
             "intercept": self.intercept_,
+            "threshold": self.threshold,
         }
         np.savez(path, coef=self.coef_, meta=np.array(json.dumps(meta)))
 
@@ -323,8 +355,8 @@ class HogDetector:
             archive (whatever zipfile, zlib or NumPy's header parser raise), an NPY
             header whose shape does not match its bytes, object arrays (pickles),
             settings out of range (window sides and cells 1 to 2048 px, 1 to 360
-            orientations, ``C > 0``), or weights that are not finite or do not fit
-            the settings. The message names the file.
+            orientations, ``C > 0``, a finite threshold), or weights that are not
+            finite or do not fit the settings. The message names the file.
         """
         p = check_file(path, "a model file (.npz written by `robopercept train-hog`)")
         not_model = (
@@ -358,6 +390,8 @@ class HogDetector:
         if not isinstance(det.signed, bool):
             raise FileFormatError(f"{p}: signed is {det.signed!r}; expected true or false")
         det.intercept_ = _real(meta.get("intercept"), "intercept", p, positive=False)
+        # models written before issue 30 have no threshold: 0, their old default
+        det.threshold = _real(meta.get("threshold", 0.0), "threshold", p, positive=False)
         if coef.dtype.kind not in "iuf" or not np.isfinite(coef).all():
             raise FileFormatError(f"{p}: the weights (coef) must be finite real numbers")
         det.coef_ = coef.astype(np.float64)
@@ -515,11 +549,12 @@ def _lfw_subset() -> np.ndarray:
     return data.lfw_subset()
 
 
-def _negative_pictures() -> list[np.ndarray]:
+def _negative_pictures(names: tuple[str, ...] | list[str] = NEGATIVE_PICTURES) -> list[np.ndarray]:
+    """The gray scikit-image pictures ``names`` (both views of the stereo pair)."""
     from skimage import data
 
     pictures = []
-    for name in NEGATIVE_PICTURES:
+    for name in names:
         picture = getattr(data, name)()
         if isinstance(picture, np.ndarray) and picture.dtype == np.bool_:  # the horse
             picture = picture.astype(np.float64)
@@ -547,6 +582,267 @@ def _jitter_faces(faces: np.ndarray) -> np.ndarray:
     return np.stack(out)
 
 
+@dataclass(frozen=True)
+class ThresholdChoice:
+    """A threshold picked on a precision/recall curve (:func:`choose_threshold`).
+
+    Attributes
+    ----------
+    threshold : float
+        Keep scores strictly above this: the midpoint between the chosen score and the
+        next lower score of the examples.
+    score : float
+        The chosen point's score (scores ``>= score`` are positive there).
+    precision, recall, f1 : float
+        At that point.
+    rule : str
+        ``"f1"`` or ``"precision"``.
+    min_precision : float
+        The precision floor of rule ``"precision"``.
+    curve_precision, curve_recall : (K + 1,) ndarray
+        The whole curve (:func:`robopercept.learning.metrics.precision_recall_curve`).
+    curve_thresholds : (K,) ndarray
+        Its scores, ascending.
+    n_positive, n_negative : int
+        Examples of each class.
+    """
+
+    threshold: float
+    score: float
+    precision: float
+    recall: float
+    f1: float
+    rule: str
+    min_precision: float
+    curve_precision: np.ndarray = field(repr=False)
+    curve_recall: np.ndarray = field(repr=False)
+    curve_thresholds: np.ndarray = field(repr=False)
+    n_positive: int = 0
+    n_negative: int = 0
+
+
+THRESHOLD_RULES = ("f1", "precision")
+
+
+def choose_threshold(
+    labels: npt.ArrayLike,
+    scores: npt.ArrayLike,
+    *,
+    rule: str = "f1",
+    min_precision: float = 0.95,
+) -> ThresholdChoice:
+    r"""Pick a score threshold on the precision/recall curve of held-out examples.
+
+    At each distinct score :math:`t` (ascending) the examples with score
+    :math:`\ge t` are called positive: precision :math:`P(t) = TP / (TP + FP)`, recall
+    :math:`R(t) = TP / (TP + FN)` (scikit-learn's ``precision_recall_curve``).
+    Rule ``"f1"`` takes the point of highest :math:`F_1 = 2PR / (P + R)` (on a tie, the
+    lower score: more recall); rule ``"precision"`` takes the point of highest recall
+    among those with :math:`P \ge` ``min_precision`` (the lowest such score, since
+    recall only falls as :math:`t` grows). The returned ``threshold`` is the midpoint
+    between that score and the next lower one, so that "score > threshold" (as
+    :meth:`HogDetector.detect` keeps boxes) selects exactly the same examples, with a
+    margin on both sides.
+
+    Parameters
+    ----------
+    labels : (N,) array_like
+        1 (or True) for the object, 0 for background; both must occur.
+    scores : (N,) array_like
+        Finite scores, higher meaning more likely the object.
+    rule : {"f1", "precision"}
+    min_precision : float
+        In (0, 1]; used by rule ``"precision"``.
+
+    Returns
+    -------
+    ThresholdChoice
+
+    Raises
+    ------
+    InputError
+        Lengths differ, labels not 0/1, a class absent, non-finite scores, a bad rule or
+        ``min_precision``.
+    DegenerateError
+        Rule ``"precision"`` and no point of the curve reaches ``min_precision``.
+
+    Examples
+    --------
+    Five faces and five non-faces; the best F1 (0.909) keeps the scores >= 0.6 (all
+    five faces and the non-face at 0.7); precision >= 0.95 needs scores >= 0.8 (four
+    faces, none of the non-faces):
+
+    >>> labels = [1, 1, 1, 1, 1, 0, 0, 0, 0, 0]
+    >>> scores = [2.0, 1.5, 1.0, 0.8, 0.6, 0.7, 0.3, 0.1, -0.5, -1.0]
+    >>> c = choose_threshold(labels, scores)
+    >>> round(c.threshold, 3), round(c.precision, 3), c.recall, round(c.f1, 3)
+    (0.45, 0.833, 1.0, 0.909)
+    >>> c = choose_threshold(labels, scores, rule="precision", min_precision=0.95)
+    >>> round(c.threshold, 3), c.precision, c.recall
+    (0.75, 1.0, 0.8)
+    """
+    from robopercept.errors import DegenerateError
+    from robopercept.learning.metrics import precision_recall_curve
+
+    rule = check_choice(rule, "rule", THRESHOLD_RULES)
+    min_precision = check_real(min_precision, "min_precision", 0.0, 1.0, low_inclusive=False)
+    y = np.asarray(labels)
+    s = np.asarray(scores)
+    if y.ndim != 1 or s.ndim != 1 or y.size != s.size:
+        raise InputError(
+            f"labels and scores must be 1-D of one length; got shapes {y.shape} and {s.shape}"
+        )
+    if y.dtype.kind not in "biuf" or not np.isin(y, (0, 1)).all():
+        raise InputError("labels must be 0 (background) or 1 (object)")
+    if s.dtype.kind not in "iuf" or not np.isfinite(s).all():
+        raise InputError("scores must be finite real numbers")
+    y = y.astype(np.int64)
+    if y.min(initial=1) != 0 or y.max(initial=0) != 1:
+        raise InputError(
+            f"labels must hold both classes (held-out objects and background); got "
+            f"{int(y.sum())} positive(s) of {y.size}"
+        )
+    s = s.astype(np.float64)
+    precision, recall, thresholds = precision_recall_curve(y, s)
+    p, r = precision[:-1], recall[:-1]
+    f1 = np.where(p + r > 0, 2 * p * r / np.maximum(p + r, 1e-300), 0.0)
+    if rule == "f1":
+        k = int(np.argmax(f1))
+    else:
+        ok = np.flatnonzero(p >= min_precision)
+        if ok.size == 0:
+            raise DegenerateError(
+                f"no threshold reaches precision {min_precision} on these examples (best "
+                f"{p.max():.3f}): lower min_precision, or use rule='f1'"
+            )
+        k = int(ok[0])
+    chosen = float(thresholds[k])
+    lower = s[s < chosen]
+    threshold = 0.5 * (chosen + float(lower.max())) if lower.size else np.nextafter(chosen, -np.inf)
+    return ThresholdChoice(
+        threshold=float(threshold),
+        score=chosen,
+        precision=float(p[k]),
+        recall=float(r[k]),
+        f1=float(f1[k]),
+        rule=rule,
+        min_precision=min_precision,
+        curve_precision=precision,
+        curve_recall=recall,
+        curve_thresholds=thresholds,
+        n_positive=int(y.sum()),
+        n_negative=int(y.size - y.sum()),
+    )
+
+
+def _resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``image`` (2-D float) resized to ``size`` = (width, height): Gaussian
+    anti-aliasing along each axis that shrinks, then bilinear."""
+    from robopercept.imaging.filters import gaussian_kernel, separable_filter_unchecked
+    from robopercept.imaging.warp import warp_perspective
+
+    h, w = image.shape
+    sx, sy = size[0] / w, size[1] / h
+    kx, ky = (
+        gaussian_kernel(sig, 2 * int(np.ceil(3.0 * sig)) + 1) if sig > 0.1 else np.ones(1)
+        for sig in (0.5 * (1.0 / sx - 1.0), 0.5 * (1.0 / sy - 1.0))
+    )
+    src = (
+        image
+        if kx.size == ky.size == 1
+        else separable_filter_unchecked(image, kx, ky, "reflect101")
+    )
+    H = np.array([[sx, 0, 0.5 * sx - 0.5], [0, sy, 0.5 * sy - 0.5], [0, 0, 1]])
+    return warp_perspective(src, H, size)
+
+
+def _random_windows(
+    pictures: list[np.ndarray], window: tuple[int, int], per_picture: int, gen: np.random.Generator
+) -> list[np.ndarray]:
+    """``per_picture`` random windows of random sizes (from the window to half the
+    picture) of each picture, resized to ``window``."""
+    ww, wh = window
+    out = []
+    for pic in pictures:
+        top = min(pic.shape[1] / ww, pic.shape[0] / wh) / 2  # largest zoom: half the picture
+        if top <= 1.0:
+            if pic.shape[1] >= ww and pic.shape[0] >= wh:
+                out.append(pic[:wh, :ww])
+            continue
+        for _ in range(per_picture):
+            z = float(gen.uniform(1.0, top))
+            cw, ch = round(ww * z), round(wh * z)
+            y0 = int(gen.integers(0, pic.shape[0] - ch + 1))
+            x0 = int(gen.integers(0, pic.shape[1] - cw + 1))
+            out.append(_resize(pic[y0 : y0 + ch, x0 : x0 + cw], window))
+    return out
+
+
+def _fit_and_mine(
+    det: HogDetector,
+    pos: np.ndarray,
+    neg: np.ndarray,
+    pictures: list[np.ndarray],
+    *,
+    rounds: int,
+    hard_per_picture: int,
+    max_hard: int,
+    seed: Any,
+    progress: bool,
+) -> HogDetector:
+    """Fit on ``pos`` and ``neg``, then ``rounds`` of hard-negative mining on
+    ``pictures`` (the best windows above -0.5 of each, at most ``max_hard`` a round)."""
+    ww, wh = det.window
+    det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], random_state=seed)
+    for _ in progress_bar(range(rounds), desc="hard negatives", disable=not progress):
+        hard = []
+        for pic in pictures:
+            found = det.detect(pic, threshold=-0.5, stride=det.cell_size, nms_iou=0.5, max_size=200)
+            for x, y, w, h in found.boxes[:hard_per_picture]:
+                x0, y0, x1, y1 = int(x), int(y), round(float(x + w)), round(float(y + h))
+                crop = pic[y0:y1, x0:x1]
+                if min(crop.shape) < 8:
+                    continue
+                hard.append(_rescale(crop, ww / crop.shape[1])[:wh, :ww])
+        hard = [h for h in hard if h.shape == (wh, ww)][:max_hard]
+        if not hard:
+            break
+        neg = np.r_[neg, np.stack(hard)]
+        det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], random_state=seed)
+    return det
+
+
+#: held-out background windows per picture: the best boxes ``detect`` reports above -1
+HELDOUT_PER_PICTURE = 60
+
+
+def _heldout_scores(
+    det: HogDetector, pos: np.ndarray, neg: np.ndarray, pictures: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Labels and scores of the held-out examples: the object patches ``pos``, the
+    background patches ``neg``, and the boxes ``detect`` reports on the held-out
+    background ``pictures`` (default stride and NMS, scores above -1, the best
+    :data:`HELDOUT_PER_PICTURE` of each): the false positives it would show."""
+    parts = [det.score_patches(pos)] if len(pos) else []
+    labels = [np.ones(len(pos))]
+    if len(neg):
+        parts.append(det.score_patches(neg))
+        labels.append(np.zeros(len(neg)))
+    for pic in pictures:
+        found = det.detect(pic, threshold=-1.0, max_size=200)
+        parts.append(found.scores[:HELDOUT_PER_PICTURE])
+        labels.append(np.zeros(len(parts[-1])))
+    return np.concatenate(labels), np.concatenate(parts)
+
+
+def _split(n: int, holdout: float, gen: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(train, held-out) index arrays of ``n`` items: ``round(holdout * n)`` held out
+    (at least one when ``holdout > 0``), chosen by ``gen``."""
+    k = 0 if holdout == 0 else min(n - 1, max(1, round(holdout * n)))
+    order = gen.permutation(n)
+    return np.sort(order[k:]), np.sort(order[:k])
+
+
 def train_face_detector(
     *,
     mining_rounds: int = 4,
@@ -557,18 +853,30 @@ def train_face_detector(
     hard_per_picture: int = 60,
     max_hard: int = 600,
     augment: bool = True,
+    holdout: float = 0.25,
+    rule: str = "f1",
+    min_precision: float = 0.95,
     random_state: RandomStateLike = 0,
     progress: bool = False,
     rng: int | np.random.Generator | None = None,
-) -> tuple[HogDetector, dict[str, float]]:
-    """Train the face model: ``lfw_subset`` faces (jittered, mirrored) plus hard negatives.
+) -> tuple[HogDetector, dict[str, Any]]:
+    """Train the face model: ``lfw_subset`` faces (jittered, mirrored) plus hard negatives,
+    with its default threshold from a held-out precision/recall curve.
 
-    Positives: the four 24 x 24 crops of each 25 x 25 face, with ``augment`` also the
-    face zoomed and turned by +-8 degrees, all mirrored too. Negatives: the 100
-    non-faces (mirrored) and random windows of the face-free scikit-image pictures
-    (:data:`NEGATIVE_PICTURES`). Each of ``mining_rounds`` then runs the detector over
-    those pictures and adds the ``hard_per_picture`` best windows scoring above -0.5 of
-    each (at most ``max_hard`` a round) to the non-faces, and retrains.
+    Held out first (``holdout`` of each, drawn by ``random_state``, never used in
+    training): lfw faces, lfw non-faces and face-free pictures
+    (:data:`NEGATIVE_PICTURES`; the stereo pair counts as one). Positives: the four
+    24 x 24 crops of each training face, with ``augment`` also the face zoomed and
+    turned by +-8 degrees, all mirrored too. Negatives: the training non-faces
+    (mirrored) and 40 random windows of each training picture. Each of
+    ``mining_rounds`` then runs the detector over the training pictures, adds the
+    ``hard_per_picture`` best windows scoring above -0.5 of each (at most ``max_hard`` a
+    round) to the non-faces, and retrains.
+
+    The threshold (:attr:`HogDetector.threshold`) is then :func:`choose_threshold` with
+    ``rule`` over the held-out examples: the four crops of each held-out face and their
+    mirror images (positives); the held-out non-faces likewise, and the boxes the
+    detector reports on the held-out pictures (negatives: see ``_heldout_scores``).
 
     The defaults are the shipped model's (:func:`default_face_detector`). Signed
     gradients (18 bins over 360 degrees) tell a face, darker eyes and mouth on lighter
@@ -576,66 +884,267 @@ def train_face_detector(
     HOG a mission patch on ``astronaut`` outscored the face.
 
     ``random_state`` (scikit-learn's name; ``rng=`` is its deprecated alias for one
-    release) seeds the folds, the random negative windows and the SVM.
+    release) seeds the split, the folds, the random negative windows and the SVM.
 
     Returns
     -------
     HogDetector, dict
-        The detector and the 5-fold cross-validated accuracy, precision and recall of
-        the SVM on ``lfw_subset`` alone (before mining).
+        The detector, and a report: ``accuracy``, ``precision``, ``recall`` (5-fold
+        cross-validated, of the SVM on the training part of ``lfw_subset`` alone, before
+        mining), ``threshold``, ``heldout_precision``, ``heldout_recall``,
+        ``heldout_f1``, ``heldout_positives``, ``heldout_negatives`` and ``choice`` (the
+        :class:`ThresholdChoice`, with the curve), or ``choice`` None and the threshold
+        0 when ``holdout`` is 0.
     """
     seed = renamed_rng("train_face_detector", random_state, rng, default=0)
     from robopercept.learning.metrics import precision_score, recall_score
     from robopercept.learning.model_selection import StratifiedKFold
 
+    holdout = check_real(holdout, "holdout", 0.0, 0.5)
+    rule = check_choice(rule, "rule", THRESHOLD_RULES)
+    gen = random_generator(seed)
     full = _lfw_subset()
-    patches = full[:, :24, :24]
-    labels = np.r_[np.ones(100, dtype=int), np.zeros(100, dtype=int)]
+    face_train, face_held = _split(100, holdout, gen)
+    other_train, other_held = _split(100, holdout, gen)
+    names = list(NEGATIVE_PICTURES)
+    pic_train, pic_held = _split(len(names), holdout, gen)
+    train_idx = np.r_[face_train, 100 + other_train]
+    patches = full[train_idx, :24, :24]
+    labels = np.r_[np.ones(face_train.size, dtype=int), np.zeros(other_train.size, dtype=int)]
     det = HogDetector(C=C, cell_size=cell_size, orientations=orientations, signed=signed)
     X = det.describe(patches)
     preds = np.empty_like(labels)
     for train, test in StratifiedKFold(5, shuffle=True, random_state=seed).split(X, labels):
         svm = LinearSVC(C=det.C, random_state=seed).fit(X[train], labels[train])
         preds[test] = svm.predict(X[test])
-    cv = {
+    report: dict[str, Any] = {
         "accuracy": float(np.mean(preds == labels)),
         "precision": float(precision_score(labels, preds)),
         "recall": float(recall_score(labels, preds)),
     }
-    # positives: the four 24 x 24 crops of each 25 x 25 face, and their mirror images
-    faces = np.concatenate(
-        [full[:100, dy : dy + 24, dx : dx + 24] for dy in (0, 1) for dx in (0, 1)]
-    )
+    faces_full = full[face_train]
+    faces = _four_crops(faces_full)
     if augment:
-        faces = np.r_[faces, _jitter_faces(full[:100])]
+        faces = np.r_[faces, _jitter_faces(faces_full)]
     pos = np.r_[faces, faces[:, :, ::-1]]
-    neg = np.r_[patches[labels == 0], patches[labels == 0][:, :, ::-1]]
+    others = full[100 + other_train, :24, :24]
+    neg = np.r_[others, others[:, :, ::-1]]
+    pictures = _negative_pictures([names[i] for i in pic_train])
+    neg = np.r_[neg, np.stack(_random_windows(pictures, (24, 24), 40, gen))]
+    _fit_and_mine(
+        det, pos, neg, pictures, rounds=mining_rounds, hard_per_picture=hard_per_picture,
+        max_hard=max_hard, seed=seed, progress=progress,
+    )  # fmt: skip
+    if face_held.size == 0:
+        report.update(threshold=det.threshold, choice=None)
+        return det, report
+    held_pos = _four_crops(full[face_held])
+    held_neg = _four_crops(full[100 + other_held])
+    y, scores = _heldout_scores(
+        det,
+        np.r_[held_pos, held_pos[:, :, ::-1]],
+        np.r_[held_neg, held_neg[:, :, ::-1]],
+        _negative_pictures([names[i] for i in pic_held]),
+    )
+    choice = choose_threshold(y, scores, rule=rule, min_precision=min_precision)
+    det.threshold = choice.threshold
+    report.update(_choice_report(choice))
+    return det, report
+
+
+def _choice_report(choice: ThresholdChoice) -> dict[str, Any]:
+    return {
+        "threshold": choice.threshold,
+        "heldout_precision": choice.precision,
+        "heldout_recall": choice.recall,
+        "heldout_f1": choice.f1,
+        "heldout_positives": choice.n_positive,
+        "heldout_negatives": choice.n_negative,
+        "choice": choice,
+    }
+
+
+def _four_crops(images: np.ndarray) -> np.ndarray:
+    """The four 24 x 24 crops of each 25 x 25 image."""
+    return np.concatenate([images[:, dy : dy + 24, dx : dx + 24] for dy in (0, 1) for dx in (0, 1)])
+
+
+def _read_folder(folder: str | Path, what: str) -> tuple[list[np.ndarray], list[str], Path]:
+    """The gray float images of ``folder`` (sorted by name; hidden files and
+    sub-folders ignored) and the ``"name: reason"`` of each file that could not be read."""
+    p = Path(folder)
+    if not p.is_dir():
+        raise InputError(
+            f"{what} folder {p} does not exist or is not a folder: give a folder of images"
+        )
+    images, skipped = [], []
+    for f in sorted(q for q in p.iterdir() if q.is_file() and not q.name.startswith(".")):
+        try:
+            from robopercept.imaging import read_image
+
+            image = read_image(f, mode="gray")
+        except (RoboperceptError, OSError, ValueError) as exc:
+            why = (str(exc).splitlines() or [type(exc).__name__])[0].replace(f"{f}: ", "")
+            skipped.append(f"{f.name}: {why}")
+            continue
+        images.append(image.astype(np.float64) / (65535.0 if image.dtype == np.uint16 else 255.0))
+    if not images:
+        extra = f" ({len(skipped)} unreadable, first {skipped[0]})" if skipped else ""
+        raise InputError(f"{what} folder {p} holds no readable image{extra}: add images to it")
+    return images, skipped, p
+
+
+def train_detector_from_folders(
+    positives: str | Path,
+    negatives: str | Path,
+    *,
+    window: tuple[int, int] = (24, 24),
+    cell_size: int = 6,
+    orientations: int = 18,
+    signed: bool = True,
+    C: float = 1.0,
+    mirror: bool = True,
+    windows_per_picture: int = 40,
+    mining_rounds: int = 2,
+    hard_per_picture: int = 60,
+    max_hard: int = 600,
+    holdout: float = 0.25,
+    rule: str = "f1",
+    min_precision: float = 0.95,
+    random_state: RandomStateLike = 0,
+    progress: bool = False,
+) -> tuple[HogDetector, dict[str, Any]]:
+    """Train a HOG + linear SVM detector on a folder of object crops and a folder of
+    pictures without the object (``robopercept train-hog --positives --negatives``).
+
+    Every readable image of ``positives`` is one example, resized to ``window`` (as a
+    whole: crop them to the object first) and, with ``mirror``, flipped left-right too.
+    From each picture of ``negatives`` (any size; it must not show the object)
+    ``windows_per_picture`` random windows are cut (sizes from the window to half the
+    picture, resized to the window), then ``mining_rounds`` of hard-negative mining
+    add the windows the detector wrongly scores above -0.5. Files that cannot be read
+    are skipped and listed in the report. ``holdout`` of the positives and of the
+    negative pictures (at least one of each) are set aside, never trained on, and the
+    default threshold is :func:`choose_threshold` with ``rule`` on them (the held-out
+    crops and their mirrors against random windows of the held-out pictures and the
+    boxes the detector reports on them).
+
+    Parameters
+    ----------
+    positives, negatives : str or Path
+        Folders of images (PNG, JPEG, TIFF, BMP, PNM; colour read as gray).
+    window : (width, height)
+        Detection window in pixels (multiples of ``cell_size``).
+    cell_size, orientations, signed, C
+        HOG and SVM settings (:class:`HogDetector`).
+    mirror : bool
+        Also train on the positives flipped left-right.
+    windows_per_picture, mining_rounds, hard_per_picture, max_hard : int
+        Negative sampling and mining (as :func:`train_face_detector`).
+    holdout : float
+        Share held out for the threshold, in [0, 0.5]; 0 trains on everything and
+        leaves the threshold at 0.
+    rule, min_precision
+        :func:`choose_threshold`'s.
+    random_state : int, Generator, RandomState or None
+        Seeds the split, the windows and the SVM.
+    progress : bool
+        Show progress on stderr.
+
+    Returns
+    -------
+    HogDetector, dict
+        The detector (threshold set) and a report: ``positives``, ``negatives``
+        (images read), ``skipped`` (``"folder/name: reason"`` of each unreadable
+        file), ``train_positives``, ``train_negatives`` (examples of the last fit),
+        ``threshold``, ``heldout_precision``, ``heldout_recall``, ``heldout_f1``,
+        ``heldout_positives``, ``heldout_negatives`` and ``choice``
+        (:class:`ThresholdChoice`; None when ``holdout`` is 0).
+
+    Raises
+    ------
+    InputError
+        A folder missing or without a readable image; too few images to hold one of
+        each out (2 positives and 2 negative pictures); a bad setting.
+
+    Examples
+    --------
+    >>> import tempfile, numpy as np
+    >>> from robopercept.imaging import write_image
+    >>> gen = np.random.default_rng(0)
+    >>> yy, xx = np.mgrid[:24, :24]
+    >>> disc = ((yy - 11.5) ** 2 + (xx - 11.5) ** 2 < 64).astype(float)
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     pos, neg = Path(d, "pos"), Path(d, "neg")
+    ...     pos.mkdir(); neg.mkdir()
+    ...     for i in range(8):
+    ...         img = np.clip(0.2 + 0.6 * disc + gen.normal(0, 0.05, (24, 24)), 0, 1)
+    ...         _ = write_image(pos / f"{i}.png", (255 * img).astype(np.uint8))
+    ...         _ = write_image(neg / f"{i}.png", gen.integers(0, 255, (60, 80), np.uint8))
+    ...     det, report = train_detector_from_folders(pos, neg, mining_rounds=0)
+    >>> report["positives"], report["negatives"], report["skipped"]
+    (8, 8, [])
+    """
+    seed = random_state
+    window = (check_int(window[0], "window width", 1), check_int(window[1], "window height", 1))
+    cell_size = check_int(cell_size, "cell_size", 1)
+    if window[0] % cell_size or window[1] % cell_size:
+        raise InputError(f"window {window} must be whole cells of {cell_size} px")
+    holdout = check_real(holdout, "holdout", 0.0, 0.5)
+    rule = check_choice(rule, "rule", THRESHOLD_RULES)
+    mirror = check_bool(mirror, "mirror")
+    windows_per_picture = check_int(windows_per_picture, "windows_per_picture", 1)
+    mining_rounds = check_int(mining_rounds, "mining_rounds", 0)
+    pos_images, pos_skipped, pos_dir = _read_folder(positives, "positives")
+    neg_images, neg_skipped, neg_dir = _read_folder(negatives, "negatives")
+    if holdout > 0 and (len(pos_images) < 2 or len(neg_images) < 2):
+        raise InputError(
+            f"holding out a share for the threshold needs at least 2 positives and 2 "
+            f"negative pictures; got {len(pos_images)} and {len(neg_images)}: add images, "
+            "or pass holdout=0 (--holdout 0: no threshold is chosen)"
+        )
     gen = random_generator(seed)
-    pictures = _negative_pictures()
-    randoms = []
-    for pic in pictures:  # random windows of random sizes
-        for _ in range(40):
-            size = int(gen.integers(24, min(pic.shape) // 2))
-            y0 = int(gen.integers(0, pic.shape[0] - size))
-            x0 = int(gen.integers(0, pic.shape[1] - size))
-            crop = _rescale(pic[y0 : y0 + size, x0 : x0 + size], 24 / size)
-            if crop.shape == (24, 24):
-                randoms.append(crop)
-    neg = np.r_[neg, np.stack(randoms)]
-    det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], random_state=seed)
-    for _ in progress_bar(range(mining_rounds), desc="hard negatives", disable=not progress):
-        hard = []
-        for pic in pictures:
-            found = det.detect(pic, threshold=-0.5, stride=det.cell_size, nms_iou=0.5, max_size=200)
-            for x, y, w, h in found.boxes[:hard_per_picture]:
-                x0, y0, x1, y1 = int(x), int(y), round(float(x + w)), round(float(y + h))
-                crop = pic[y0:y1, x0:x1]
-                if min(crop.shape) < 8:
-                    continue
-                hard.append(_rescale(crop, 24 / crop.shape[1])[:24, :24])
-        hard = [h for h in hard if h.shape == (24, 24)][:max_hard]
-        if not hard:
-            break
-        neg = np.r_[neg, np.stack(hard)]
-        det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], random_state=seed)
-    return det, cv
+    det = HogDetector(
+        window=window, cell_size=cell_size, orientations=orientations, signed=signed, C=C
+    )
+    det.describe(np.zeros((1, window[1], window[0])))  # checks the HOG settings early
+    crops = np.stack([_resize(im, window) for im in pos_images])
+    p_train, p_held = _split(len(crops), holdout, gen)
+    n_train, n_held = _split(len(neg_images), holdout, gen)
+    pos = crops[p_train]
+    if mirror:
+        pos = np.r_[pos, pos[:, :, ::-1]]
+    pictures = [neg_images[i] for i in n_train]
+    randoms = _random_windows(pictures, window, windows_per_picture, gen)
+    if not randoms:
+        raise InputError(
+            f"the negative pictures in {neg_dir} are all smaller than the window "
+            f"{window[0]}x{window[1]}: give larger pictures"
+        )
+    neg = np.stack(randoms)
+    _fit_and_mine(
+        det, pos, neg, pictures, rounds=mining_rounds, hard_per_picture=hard_per_picture,
+        max_hard=max_hard, seed=seed, progress=progress,
+    )  # fmt: skip
+    report: dict[str, Any] = {
+        "positives": len(pos_images),
+        "negatives": len(neg_images),
+        "skipped": [f"{pos_dir.name}/{s}" for s in pos_skipped]
+        + [f"{neg_dir.name}/{s}" for s in neg_skipped],
+        "train_positives": len(pos),
+        "train_negatives": len(neg),
+    }
+    if p_held.size == 0:
+        report.update(threshold=det.threshold, choice=None)
+        return det, report
+    held = crops[p_held]
+    if mirror:
+        held = np.r_[held, held[:, :, ::-1]]
+    held_pictures = [neg_images[i] for i in n_held]
+    held_windows = _random_windows(held_pictures, window, windows_per_picture, gen)
+    held_neg = np.stack(held_windows) if held_windows else np.zeros((0, *held.shape[1:]))
+    y, scores = _heldout_scores(det, held, held_neg, held_pictures)
+    choice = choose_threshold(y, scores, rule=rule, min_precision=min_precision)
+    det.threshold = choice.threshold
+    report.update(_choice_report(choice))
+    return det, report
