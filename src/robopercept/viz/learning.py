@@ -4,9 +4,10 @@ and grids of small images (filters, feature maps).
 
 Each plot has a ``*_figure`` function returning the :class:`matplotlib.figure.Figure` (to
 inspect or save as a vector file) and a ``*_picture`` function returning its ``(H, W, 3)``
-uint8 pixels. Class ``k`` (the k-th of the sorted distinct labels, or the k-th curve)
-takes the colour ``label_colors(k + 1)`` (:func:`~robopercept.viz.colormap.label_colors`,
-golden-ratio hues), as in :mod:`robopercept.viz.cloud_dl`; noise (label -1) is grey.
+uint8 pixels. Class ``k`` (the k-th of the sorted distinct labels) takes the colour
+``label_colors(k + 1)`` (:func:`~robopercept.viz.colormap.label_colors`,
+golden-ratio hues), as in :mod:`robopercept.viz.cloud_dl`; noise (label -1) is grey;
+curve ``k`` takes matplotlib's ``tab10`` colour ``k mod 10``.
 Legends list the classes in their order, outside the data, all entries inside the
 picture (:func:`~robopercept.viz.plot.outside_legend`).
 """
@@ -65,12 +66,13 @@ def _colors(n: int) -> list[tuple[float, float, float]]:
 
 
 def _line_colors(n: int) -> list[tuple[float, float, float]]:
-    """:func:`_colors` darkened to a relative luminance of at most 0.5, so thin lines
-    (pale yellow, cyan) stand out on white."""
-    rgb = np.array(_colors(n)).reshape(-1, 3)
-    lum = rgb @ np.array([0.2126, 0.7152, 0.0722])
-    rgb = rgb * np.minimum(1.0, 0.5 / np.maximum(lum, 1e-9))[:, None]
-    return [tuple(float(v) for v in c) for c in rgb]  # type: ignore[misc]
+    """Colours of ``n`` curves: matplotlib's ``tab10`` cycled (ten colours that stay apart
+    as thin lines on white; darkened golden-ratio hues made classes 1 and 9 the same olive
+    in a 10-class ROC); from the 11th curve on the line style tells them apart."""
+    from matplotlib import colormaps
+
+    tab = colormaps["tab10"].colors
+    return [tuple(float(v) for v in tab[k % len(tab)][:3]) for k in range(n)]  # type: ignore[misc]
 
 
 def _plot_size(width: Any, height: Any) -> tuple[int, int]:
@@ -323,8 +325,7 @@ def curves_picture(
     """Curves ``(x, y, label)`` in one panel (ROC: FPR vs TPR; PR: recall vs precision),
     with a legend right of the plot in the order of ``curves``.
 
-    Curve ``k`` has the hue of ``label_colors(k + 1)`` (darkened to a relative luminance
-    of at most 0.5, to stand out on white) and, from the 11th curve on, a
+    Curve ``k`` has matplotlib's ``tab10`` colour ``k mod 10`` and, from the 11th curve on, a
     dashed (then dash-dotted, dotted) line. When every value lies in [0, 1] (rates) the
     axes show the whole unit square. With many curves the legend takes several columns
     and smaller type so every entry stays inside the picture
