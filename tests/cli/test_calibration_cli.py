@@ -366,3 +366,22 @@ def test_handeye_quaternion_and_ros_transform(tmp_path, capsys):
     assert "hand-eye files are .json" in capsys.readouterr().err
     assert main([*args[:-1], "0", "-o", str(tmp_path / "h.json")]) == 1
     assert "--metres-per-unit must be" in capsys.readouterr().err
+
+
+@pytest.mark.realdata
+def test_calibrate_expands_a_quoted_pattern_as_the_shell_would(tmp_path, capsys):
+    # 'left0*.jpg' reached calibrate unexpanded (quoted, or from a script) and was read as
+    # one missing file: "board found in 0 of 1 images"; it now means its matches
+    folder = data_path("calibration", "opencv_chessboard_stereo")
+    files = sorted(str(f) for f in folder.glob("left0*.jpg"))
+    out_a, out_b = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["calibrate", str(folder / "left0*.jpg"), "--board", "9x6", "-o", str(out_a),
+                 "--quiet", "--json"]) == 0  # fmt: skip
+    by_pattern = json.loads(capsys.readouterr().out)
+    assert main(["calibrate", *files, "--board", "9x6", "-o", str(out_b), "--quiet", "--json"]) == 0
+    by_files = json.loads(capsys.readouterr().out)
+    assert len(files) >= 5 and by_pattern["images"] == by_files["images"]
+    assert by_pattern["K"] == by_files["K"]
+    assert main(["calibrate", str(folder / "nothing*.jpg"), "--board", "9x6", "-o",
+                 str(out_a)]) == 2  # fmt: skip
+    assert "no file matches" in capsys.readouterr().err

@@ -191,6 +191,12 @@ def run_calibrate(args: argparse.Namespace) -> int:
         raise FileFormatError(
             f"{folders[0]} is a folder; give the image files in it (e.g. {Path(folders[0])}/*.png)"
         )
+    # a quoted pattern ('left*.jpg') is expanded as stereo-calibrate expands it
+    args.images = [
+        f
+        for spec in args.images
+        for f in (_image_list([spec], "IMAGES") if glob.has_magic(spec) else [spec])
+    ]
     size, names, corners, skipped = None, [], [], []
     for path in progress_bar(args.images, unit="image", desc="chessboard", disable=args.quiet):
         try:
