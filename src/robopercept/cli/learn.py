@@ -1,5 +1,5 @@
-"""``robopercept learn cluster|classify|reduce`` (CSV tables in, tables and pictures
-out), ``robopercept detect-hog`` (the HOG + linear SVM face detector) and
+"""``robopercept learn cluster|classify|predict|reduce`` (CSV tables in, tables, models
+and pictures out), ``robopercept detect-hog`` (the HOG + linear SVM face detector) and
 ``robopercept train-hog`` (rebuild its model)."""
 
 from __future__ import annotations
@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -14,7 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from robopercept.cli._args import UsageError, file_output, flag_errors, image_output
+from robopercept.cli._args import (
+    UsageError,
+    file_output,
+    flag_errors,
+    image_output,
+    image_size,
+)
 from robopercept.errors import InputError
 
 __all__ = ["register"]
@@ -31,14 +38,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="find faces with the HOG + linear SVM sliding-window detector",
         description="Scan IMAGE with the HOG + linear SVM detector (an image pyramid, "
         "non-maximum suppression) and write it with the boxes drawn. The bundled model "
-        "finds faces; --model loads one written by `robopercept train-hog`.",
+        "finds faces; --model loads one written by `robopercept train-hog`. The default "
+        "threshold is the model's own, chosen on a held-out precision/recall curve.",
     )
     d.add_argument("image")
     d.add_argument(
         "-o", "--output", type=image_output, default="detections.png", help="output image"
     )
     d.add_argument("--model", help="model .npz (default: the bundled face model)")
-    d.add_argument("--threshold", type=float, default=0.0, help="lowest SVM score (default 0)")
+    d.add_argument(
+        "--threshold",
+        type=float,
+        default=None,
+        help="lowest SVM score (default: the model's, from its held-out PR curve)",
+    )
     d.add_argument("--min-size", type=int, help="smallest object in pixels (default: window)")
     d.add_argument("--max-size", type=int, help="largest object in pixels (default: image)")
     d.add_argument("--max", type=int, default=10, help="draw at most this many boxes")
@@ -47,19 +60,41 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     t = sub.add_parser(
         "train-hog",
-        help="train the HOG + linear SVM face model (needs scikit-image)",
-        description="Train the face model on scikit-image's lfw_subset with hard negatives "
-        "mined from face-free scikit-image pictures; prints its 5-fold cross-validated "
-        "accuracy, precision and recall. The defaults rebuild the bundled model exactly.",
+        help="train a HOG + linear SVM detector (the face model, or your own images)",
+        description="Without --positives/--negatives: train the face model on "
+        "scikit-image's lfw_subset with hard negatives mined from face-free scikit-image "
+        "pictures (needs scikit-image; the defaults rebuild the bundled model exactly). "
+        "With --positives DIR --negatives DIR: train on your own images (positives: crops "
+        "of the object, each resized to --window; negatives: pictures without it, from "
+        "which random windows are cut). A share of the data (--holdout) is never trained "
+        "on; the model's default threshold is chosen on its precision/recall curve.",
     )
-    t.add_argument("-o", "--output", default="face_hog_svm.npz", help="model file (.npz)")
-    t.add_argument("--rounds", type=int, default=4, help="hard-negative mining rounds")
+    t.add_argument("-o", "--output", type=model_output, default="face_hog_svm.npz",
+                   help="model file (.npz)")  # fmt: skip
+    t.add_argument("--positives", metavar="DIR", help="folder of object crops")
+    t.add_argument("--negatives", metavar="DIR", help="folder of pictures without the object")
+    t.add_argument(
+        "--window",
+        type=image_size,
+        default=None,
+        help="WxH detection window for --positives (default 24x24; whole --cell cells)",
+    )
+    t.add_argument("--cell", type=int, default=6, help="HOG cell size in pixels (default 6)")
+    t.add_argument("--rounds", type=int, default=None,
+                   help="hard-negative mining rounds (default 4, with --positives 2)")  # fmt: skip
+    t.add_argument("--holdout", type=float, default=0.25,
+                   help="share held out for the threshold, 0 to 0.5 (default 0.25)")  # fmt: skip
+    t.add_argument("--rule", choices=("f1", "precision"), default="f1",
+                   help="threshold: highest F1, or best recall at --min-precision")  # fmt: skip
+    t.add_argument("--min-precision", type=float, default=0.95,
+                   help="--rule precision: the precision floor (default 0.95)")  # fmt: skip
     t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--json", action="store_true", help="print the summary as JSON")
     t.set_defaults(func=run_train_hog)
 
     learn = sub.add_parser(
         "learn",
-        help="cluster, classify or reduce a CSV table",
+        help="cluster, classify, predict or reduce a CSV table",
         description="Classical machine learning on a CSV table with a header row: every "
         "column is a feature except the one named by --label.",
     )
@@ -110,8 +145,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument("--standardize", action="store_true", help="scale features (fit on train)")
     k.add_argument("--seed", type=int, default=0)
     k.add_argument("-o", "--output", default="classify_out", help="output folder")
+    k.add_argument(
+        "--save",
+        metavar="MODEL",
+        type=model_output,
+        help="write the trained model (.npz: arrays and JSON, no pickle) for `learn predict`",
+    )
     k.add_argument("--json", action="store_true", help="print the report as JSON")
     k.set_defaults(func=run_classify)
+
+    pr = ls.add_parser(
+        "predict",
+        help="predict the rows of a CSV table with a model saved by `learn classify --save`",
+        description="Load MODEL (written by `learn classify --save`; never unpickled) and "
+        "predict every row of DATA, whose columns are taken by name (other columns are "
+        "ignored). When DATA has the label column (the training one, or --label), the "
+        "accuracy is reported too. Writes one prediction per row to --output.",
+    )
+    pr.add_argument("model", help="model file (.npz)")
+    pr.add_argument("data", help="CSV table with a header row")
+    pr.add_argument(
+        "--label", help="the column of true classes (default: the model's training label)"
+    )
+    pr.add_argument(
+        "-o", "--output", type=file_output, default="predictions.csv", help="predictions CSV"
+    )
+    pr.add_argument("--json", action="store_true", help="print the predictions as JSON")
+    pr.set_defaults(func=run_predict)
 
     r = ls.add_parser(
         "reduce",
@@ -128,6 +188,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--transformed", type=file_output, help="write the 2-D coordinates to this CSV")
     r.add_argument("--json", action="store_true", help="print the summary as JSON")
     r.set_defaults(func=run_reduce)
+
+
+def model_output(text: str) -> str:
+    """An output model file: ``.npz``, not a folder (argparse type)."""
+    from robopercept._checks import check_extension
+
+    if Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; give a file name ending in .npz")
+    try:
+        check_extension(text, {".npz"}, "a model file")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
 
 
 # -- pictures -------------------------------------------------------------------------
@@ -147,10 +220,11 @@ def run_detect_hog(args: argparse.Namespace) -> int:
 
     image = read_image(args.image, mode="rgb")
     det = HogDetector.load(args.model) if args.model else default_face_detector()
+    threshold = det.threshold if args.threshold is None else args.threshold
     t0 = time.perf_counter()
     found = det.detect(
         image,
-        threshold=args.threshold,
+        threshold=threshold,
         min_size=args.min_size,
         max_size=args.max_size,
         progress=not args.json,
@@ -166,9 +240,24 @@ def run_detect_hog(args: argparse.Namespace) -> int:
         for b, s in zip(boxes, scores.tolist(), strict=True)
     ]
     if args.json:
-        print(json.dumps({"image": args.image, "ms": round(ms, 1), "detections": rows}))
+        report = {
+            "command": "detect-hog",
+            "image": args.image,
+            "model": args.model or "bundled",
+            "threshold": round(float(threshold), 6),
+            "threshold_source": "model" if args.threshold is None else "--threshold",
+            "found": len(found),
+            "ms": round(ms, 1),
+            "detections": [
+                {**r, "w": round(float(b[2]), 1), "h": round(float(b[3]), 1)}
+                for r, b in zip(rows, boxes, strict=True)
+            ],
+            "output": str(written),
+        }
+        print(json.dumps(report))
     else:
-        print(f"detect-hog: {len(found)} boxes above {args.threshold} in {ms:.0f} ms")
+        source = "the model's" if args.threshold is None else "--threshold"
+        print(f"detect-hog: {len(found)} boxes above {threshold:.3f} ({source}) in {ms:.0f} ms")
         for r in rows:
             print(
                 f"  x {r['x']:7.1f}  y {r['y']:7.1f}  size {r['size']:6.1f}  score {r['score']:.3f}"
@@ -177,32 +266,115 @@ def run_detect_hog(args: argparse.Namespace) -> int:
     return 0
 
 
+@flag_errors(
+    holdout="--holdout",
+    min_precision="--min-precision",
+    cell_size="--cell",
+    window="--window",
+    mining_rounds="--rounds",
+)
 def run_train_hog(args: argparse.Namespace) -> int:
     """Run ``robopercept train-hog`` with the parsed ``args``; returns the exit status."""
-    from robopercept.learning.hog_detector import train_face_detector
-
-    if args.rounds < 0:
-        raise UsageError(f"--rounds must be >= 0; got {args.rounds}")
-    t0 = time.perf_counter()
-    det, cv = train_face_detector(mining_rounds=args.rounds, random_state=args.seed, progress=True)
-    det.save(args.output)
-    print(
-        f"train-hog: lfw_subset 5-fold CV accuracy {cv['accuracy']:.3f}, precision "
-        f"{cv['precision']:.3f}, recall {cv['recall']:.3f}; {det.coef_.size} weights, "
-        f"{time.perf_counter() - t0:.1f} s -> {args.output}"
+    from robopercept.learning.hog_detector import (
+        train_detector_from_folders,
+        train_face_detector,
     )
+
+    if (args.positives is None) != (args.negatives is None):
+        raise UsageError("--positives and --negatives go together: give both folders")
+    own = args.positives is not None
+    rounds = (2 if own else 4) if args.rounds is None else args.rounds
+    if rounds < 0:
+        raise UsageError(f"--rounds must be >= 0; got {rounds}")
+    if not 0.0 <= args.holdout <= 0.5:
+        raise UsageError(f"--holdout must be in [0, 0.5]; got {args.holdout}")
+    if not 0.0 < args.min_precision <= 1.0:
+        raise UsageError(f"--min-precision must be in (0, 1]; got {args.min_precision}")
+    if not own and (args.window is not None or args.cell != 6):
+        raise UsageError("--window and --cell apply to --positives/--negatives training")
+    common = {"holdout": args.holdout, "rule": args.rule, "min_precision": args.min_precision,
+              "random_state": args.seed, "progress": not args.json}  # fmt: skip
+    t0 = time.perf_counter()
+    if own:
+        det, report = train_detector_from_folders(
+            args.positives, args.negatives, window=args.window or (24, 24),
+            cell_size=args.cell, mining_rounds=rounds, **common,
+        )  # fmt: skip
+        data = {"positives": args.positives, "negatives": args.negatives}
+    else:
+        det, report = train_face_detector(mining_rounds=rounds, **common)
+        data = {"positives": "skimage lfw_subset", "negatives": "skimage pictures"}
+    det.save(args.output)
+    seconds = time.perf_counter() - t0
+    choice = report.get("choice")
+    held = (
+        {
+            "precision": round(choice.precision, 4),
+            "recall": round(choice.recall, 4),
+            "f1": round(choice.f1, 4),
+            "positives": choice.n_positive,
+            "negatives": choice.n_negative,
+        }
+        if choice is not None
+        else None
+    )
+    if args.json:
+        out = {
+            "command": "train-hog",
+            "output": args.output,
+            **data,
+            "rounds": rounds,
+            "seed": args.seed,
+            "window": list(det.window),
+            "weights": int(det.coef_.size),
+            "threshold": round(det.threshold, 6),
+            "rule": args.rule,
+            "min_precision": args.min_precision if args.rule == "precision" else None,
+            "holdout": args.holdout,
+            "heldout": held,
+            "seconds": round(seconds, 2),
+        }
+        if own:
+            out["images"] = {"positives": report["positives"], "negatives": report["negatives"]}
+            out["skipped"] = report["skipped"]
+        else:
+            out["cv"] = {k: round(float(report[k]), 4) for k in ("accuracy", "precision", "recall")}
+        print(json.dumps(out))
+        return 0
+    if own:
+        print(
+            f"train-hog: {report['positives']} positives, {report['negatives']} negative "
+            f"pictures ({len(report['skipped'])} unreadable files skipped)"
+        )
+        for line in report["skipped"][:5]:
+            print(f"  skipped {line}", file=sys.stderr)
+    else:
+        print(
+            f"train-hog: lfw_subset 5-fold CV accuracy {report['accuracy']:.3f}, precision "
+            f"{report['precision']:.3f}, recall {report['recall']:.3f}"
+        )
+    if held is None:
+        print("threshold 0 (--holdout 0: nothing held out to choose it on)")
+    else:
+        print(
+            f"threshold {det.threshold:.3f} ({args.rule} on {held['positives']} held-out "
+            f"positives, {held['negatives']} negatives): precision {held['precision']:.3f}, "
+            f"recall {held['recall']:.3f}, F1 {held['f1']:.3f}"
+        )
+    print(f"{det.coef_.size} weights, {seconds:.1f} s -> {args.output}")
     return 0
 
 
 # -- learn cluster --------------------------------------------------------------------
-def _to_2d(X: np.ndarray) -> tuple[np.ndarray, str]:
+def _to_2d(X: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, str, tuple[str, str]]:
+    """The points drawn for ``X``, what they are, and the two axis labels."""
     from robopercept.learning import PCA
 
     if X.shape[1] == 1:
-        return np.c_[X[:, 0], np.zeros(len(X))], "feature"
+        return np.c_[X[:, 0], np.zeros(len(X))], "feature", (str(names[0]), "")
     if X.shape[1] == 2:
-        return X, "the two features"
-    return PCA(2).fit_transform(X), "first two principal components"
+        return X, "the two features", (str(names[0]), str(names[1]))
+    return PCA(2).fit_transform(X), "first two principal components", ("PC1", "PC2")
 
 
 @flag_errors(
@@ -251,10 +423,10 @@ def run_cluster(args: argparse.Namespace) -> int:
         report["bandwidth"] = float(model.bandwidth_)
     if y is not None:
         report["adjusted_rand_index"] = adjusted_rand_score(y, labels)
-    pts, how = _to_2d(X)
+    pts, how, axes = _to_2d(X, names)
     pic = _write(
         args.output,
-        _scatter(pts, labels, f"{args.method}: {ids.size} clusters ({how})"),
+        _scatter(pts, labels, f"{args.method}: {ids.size} clusters ({how})", axes=axes),
     )
     report["picture"] = str(pic)
     if args.labels_out:
@@ -280,11 +452,15 @@ def run_cluster(args: argparse.Namespace) -> int:
 
 
 def _scatter(
-    pts: np.ndarray, labels: np.ndarray, title: str, names: Sequence[str] | np.ndarray | None = None
+    pts: np.ndarray,
+    labels: np.ndarray,
+    title: str,
+    names: Sequence[str] | np.ndarray | None = None,
+    axes: tuple[str, str] = ("PC1", "PC2"),
 ) -> np.ndarray:
     from robopercept.viz import scatter_picture
 
-    return scatter_picture(pts, labels, title=title, names=names)
+    return scatter_picture(pts, labels, title=title, names=names, xlabel=axes[0], ylabel=axes[1])
 
 
 # -- learn classify -------------------------------------------------------------------
@@ -312,12 +488,14 @@ def _model(args: argparse.Namespace) -> Any:
 def run_classify(args: argparse.Namespace) -> int:
     """Run ``robopercept classify`` with the parsed ``args``; returns the exit status."""
     from robopercept.learning import (
+        SavedModel,
         confusion_table,
         cross_val_score,
         evaluate_classifier,
         label_codes,
         read_table,
-        standardize,
+        save_model,
+        standard_scaling,
         train_test_split,
     )
     from robopercept.viz import confusion_picture, curves_picture
@@ -340,8 +518,10 @@ def run_classify(args: argparse.Namespace) -> int:
         raise UsageError(f"--cv must be >= 2; got {args.cv}")
     codes, classes = label_codes(np.r_[ytr, yt])
     ctr, cte = codes[: len(ytr)], codes[len(ytr) :]
+    mean = scale = None
     if args.standardize:
-        Xtr, Xt = standardize(Xtr, Xt)
+        mean, scale = standard_scaling(Xtr)
+        Xtr, Xt = (Xtr - mean) / scale, (Xt - mean) / scale
     model = _model(args)
     t0 = time.perf_counter()
     model.fit(Xtr, ctr)
@@ -361,7 +541,7 @@ def run_classify(args: argparse.Namespace) -> int:
             for n, c in ev.curves.items()
         ]
         pics = (
-            ("roc", roc, "ROC", "false positive rate", "TPR"),
+            ("roc", roc, "ROC", "false positive rate", "true positive rate"),
             ("pr", pr, "precision-recall", "recall", "precision"),
         )
         for key, curves, what, xlabel, ylabel in pics:
@@ -382,6 +562,18 @@ def run_classify(args: argparse.Namespace) -> int:
     if args.cv:
         cv = cross_val_score(_model(args), Xtr, ctr, cv=args.cv)
         report["cv_accuracy"] = {"mean": float(cv.mean()), "std": float(cv.std())}
+    report["model_file"] = None
+    if args.save:
+        saved = SavedModel(
+            model,
+            feature_names=names,
+            class_names=[str(v) for v in classes[model.classes_]],
+            label_column=args.label,
+            mean=mean,
+            scale=scale,
+            info={"train": args.train, "model": args.model, "test_accuracy": rep.accuracy},
+        )
+        report["model_file"] = str(save_model(saved, args.save))
     (out / "report.json").write_text(json.dumps(report, indent=2))
     if args.json:
         print(json.dumps(report))
@@ -397,6 +589,46 @@ def run_classify(args: argparse.Namespace) -> int:
         print(f"  {args.cv}-fold CV accuracy on train: {cvr['mean']:.4f} +- {cvr['std']:.4f}")
     files = [Path(v).name for v in written.values()] + ["report.json"]
     print(f"-> {out}/ ({', '.join(files)})")
+    if report["model_file"]:
+        print(f"-> {report['model_file']} (robopercept learn predict MODEL DATA.csv)")
+    return 0
+
+
+# -- learn predict --------------------------------------------------------------------
+def run_predict(args: argparse.Namespace) -> int:
+    """Run ``robopercept learn predict`` with the parsed ``args``; returns the exit status."""
+    from robopercept.learning import load_model, predict_table
+
+    saved = load_model(args.model)
+    t0 = time.perf_counter()
+    result = predict_table(saved, args.data, label=args.label)
+    ms = (time.perf_counter() - t0) * 1e3
+    written = result.write_csv(args.output)
+    labels = saved.labels
+    report: dict[str, Any] = {
+        "model": args.model,
+        "kind": type(saved.model).__name__,
+        "data": args.data,
+        "features": list(saved.feature_names) if saved.feature_names else None,
+        "classes": None if labels is None else [str(v) for v in labels.tolist()],
+        **result.to_dict(),
+        "output": str(written),
+        "ms": round(ms, 1),
+    }
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"predict: {report['rows']} rows of {args.data} with {report['kind']} ({args.model})")
+    for name, n in report["counts"].items():
+        print(f"  {name}: {n} rows")
+    if result.accuracy is not None:
+        print(
+            f"  accuracy against column {result.label!r}: {result.accuracy:.4f} "
+            f"({result.correct}/{report['rows']})"
+        )
+        if result.unknown:
+            print(f"  {result.unknown} rows have a class the model never saw")
+    print(f"-> {written}")
     return 0
 
 
@@ -428,7 +660,9 @@ def run_reduce(args: argparse.Namespace) -> int:
     ratio = [float(v) for v in model.explained_variance_ratio_[:2]]
     what = "variance" if args.method == "pca" else "between-class variance"
     title = f"{args.method.upper()}: axis 1 {ratio[0]:.1%}, axis 2 {ratio[1]:.1%} of the {what}"
-    pic = _write(args.output, _scatter(Z, codes, title, classes))
+    a = "PC" if args.method == "pca" else "LD"
+    axes = (f"{a}1 ({ratio[0]:.1%})", f"{a}2 ({ratio[1]:.1%})")
+    pic = _write(args.output, _scatter(Z, codes, title, classes, axes=axes))
     report = {
         "data": args.data,
         "rows": len(X),

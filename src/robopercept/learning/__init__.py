@@ -35,6 +35,14 @@ from robopercept.learning.model_selection import (
     train_test_split,
 )
 from robopercept.learning.pca import PCA
+from robopercept.learning.persist import (
+    SavedModel,
+    TablePrediction,
+    load_model,
+    predict_table,
+    read_npz,
+    save_model,
+)
 from robopercept.learning.report import (
     ClassCurves,
     ClassifierEvaluation,
@@ -42,7 +50,9 @@ from robopercept.learning.report import (
     confusion_table,
     evaluate_classifier,
     label_codes,
+    read_features,
     read_table,
+    standard_scaling,
     standardize,
 )
 from robopercept.learning.svm import SVC, LinearSVC
@@ -65,7 +75,9 @@ __all__ = [
     "MeanShift",
     "RandomForestClassifier",
     "RandomForestRegressor",
+    "SavedModel",
     "StratifiedKFold",
+    "TablePrediction",
     "accuracy_score",
     "adjusted_rand_score",
     "auc",
@@ -81,12 +93,18 @@ __all__ = [
     "f1_score",
     "kmeans_plusplus",
     "label_codes",
+    "load_model",
     "precision_recall_curve",
     "precision_score",
+    "predict_table",
+    "read_features",
+    "read_npz",
     "read_table",
     "recall_score",
     "roc_auc_score",
     "roc_curve",
+    "save_model",
+    "standard_scaling",
     "standardize",
     "train_test_split",
 ]

@@ -55,6 +55,8 @@ class LDA(ClassifierMixin, TransformerMixin, Estimator):
     ----------
     scalings_ : (d, d') ndarray
         Discriminant directions as columns, by decreasing eigenvalue.
+    n_components_ : int
+        Directions ``transform`` keeps (``n_components`` resolved).
     explained_variance_ratio_ : (c - 1,) ndarray
         Each direction's share of the between-class variance.
     means_ : (c, d) ndarray
@@ -114,7 +116,7 @@ class LDA(ClassifierMixin, TransformerMixin, Estimator):
         self.explained_variance_ratio_ = pos / pos.sum() if pos.sum() > 0 else pos
         self.coef_ = (means @ evecs) @ evecs.T
         self.intercept_ = -0.5 * np.sum(self.coef_ * means, axis=1) + np.log(self.priors_)
-        self._k = k
+        self.n_components_ = k
         return self
 
     def _shrinkage(self, Sw: np.ndarray) -> float:
@@ -130,7 +132,7 @@ class LDA(ClassifierMixin, TransformerMixin, Estimator):
         """Project ``(X - mean)`` onto the first ``n_components`` directions."""
         self._check_fitted("scalings_")
         X = self._check_X(X)
-        return (X - self.xbar_) @ self.scalings_[:, : self._k]
+        return (X - self.xbar_) @ self.scalings_[:, : self.n_components_]
 
     def decision_function(self, X: npt.ArrayLike) -> np.ndarray:
         """:math:`\\delta_i(x)` for every class, ``(N, c)`` (``(N,)`` for two classes)."""

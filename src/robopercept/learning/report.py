@@ -21,6 +21,7 @@ import csv
 import dataclasses
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,7 +53,9 @@ __all__ = [
     "confusion_table",
     "evaluate_classifier",
     "label_codes",
+    "read_features",
     "read_table",
+    "standard_scaling",
     "standardize",
 ]
 
@@ -99,11 +102,29 @@ def read_table(
     path = check_file(path, "a CSV file")
     if label is not None:
         label = check_text(label, "label (the --label column)")
+    header, body = _read_csv(path)
+    if label is not None and label not in header:
+        raise InputError(f"{path}: no column {label!r}; columns are {', '.join(header)}")
+    y = None
+    if label is not None:
+        j = header.index(label)
+        y = np.array([row[j].strip() for row in body])
+    names = [h for h in header if h != label]
+    if not names:
+        raise InputError(f"{path}: no feature columns besides the label")
+    return _numeric_columns(path, header, body, names), y, names
+
+
+def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
+    """The header (stripped names) and the data rows of a CSV file, every row with as
+    many fields as the header."""
     try:
         with path.open(newline="") as fh:
             rows = [row for row in csv.reader(fh) if row]
     except UnicodeDecodeError:
         raise FileFormatError(f"{path}: not a text CSV file") from None
+    except csv.Error as exc:
+        raise FileFormatError(f"{path}: not a CSV file ({exc})") from None
     if len(rows) < 2:
         raise FileFormatError(f"{path}: needs a header row and at least one data row")
     header = [h.strip() for h in rows[0]]
@@ -113,18 +134,16 @@ def read_table(
             raise FileFormatError(
                 f"{path}: line {i} has {len(row)} fields, the header {len(header)}"
             )
-    if label is not None and label not in header:
-        raise InputError(f"{path}: no column {label!r}; columns are {', '.join(header)}")
-    y = None
-    if label is not None:
-        j = header.index(label)
-        y = np.array([row[j].strip() for row in body])
-    names = [h for h in header if h != label]
-    cols = [header.index(n) for n in names]
-    if not cols:
-        raise InputError(f"{path}: no feature columns besides the label")
-    X = np.empty((len(body), len(cols)))
-    for c, (j, name) in enumerate(zip(cols, names, strict=True)):
+    return header, body
+
+
+def _numeric_columns(
+    path: Path, header: list[str], body: list[list[str]], names: list[str]
+) -> np.ndarray:
+    """The columns ``names`` (present in ``header``) as float64; empty cells NaN."""
+    X = np.empty((len(body), len(names)))
+    for c, name in enumerate(names):
+        j = header.index(name)
         try:
             X[:, c] = [float(row[j]) if row[j].strip() else np.nan for row in body]
         except ValueError:
@@ -132,7 +151,69 @@ def read_table(
                 f"{path}: column {name!r} is not numeric; name it with --label if it "
                 "holds the classes, or drop it"
             ) from None
-    return X, y, names
+    return X
+
+
+def read_features(
+    path: str | os.PathLike[str], names: list[str] | tuple[str, ...], label: str | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The columns ``names`` of a CSV file with a header row, by name, and the ``label``
+    column when the file has one.
+
+    Other columns are ignored (they may hold text: row ids, notes), so a table written
+    for one model can be fed to another that uses some of its columns.
+
+    Parameters
+    ----------
+    path : path-like
+    names : sequence of str
+        The feature columns, in the order the model takes them.
+    label : str, optional
+        The column of true classes; read when present, else ``y`` is None.
+
+    Returns
+    -------
+    X : (N, len(names)) float64 ndarray
+        Empty cells are NaN (the estimators refuse them, naming the rows).
+    y : (N,) str ndarray or None
+
+    Raises
+    ------
+    FileFormatError
+        As :func:`read_table`.
+    InputError
+        A column of ``names`` missing from the file (the message names it and lists the
+        file's columns), or not numeric.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.csv"
+    >>> _ = p.write_text("id,b,a\\nr1,2,1\\nr2,4,3\\n")
+    >>> X, y = read_features(p, ["a", "b"], label="kind")
+    >>> X.tolist(), y
+    ([[1.0, 2.0], [3.0, 4.0]], None)
+    """
+    path = check_file(path, "a CSV file")
+    if not isinstance(names, (list, tuple)) or not names:
+        raise InputError(f"names must be a non-empty list of column names; got {plain_repr(names)}")
+    names = [check_text(n, "names[i] (a column name)") for n in names]
+    if label is not None:
+        label = check_text(label, "label (the --label column)")
+    header, body = _read_csv(path)
+    missing = [n for n in names if n not in header]
+    if missing:
+        raise InputError(
+            f"{path}: no column {missing[0]!r}"
+            + (f" (nor {', '.join(map(repr, missing[1:]))})" if len(missing) > 1 else "")
+            + f", which the model was trained on; the file's columns are {', '.join(header)}:"
+            " give a table with the training table's feature columns"
+        )
+    y = None
+    if label is not None and label in header:
+        j = header.index(label)
+        y = np.array([row[j].strip() for row in body])
+    return _numeric_columns(path, header, body, names), y
 
 
 def standardize(train: np.ndarray, *others: np.ndarray) -> list[np.ndarray]:
@@ -167,11 +248,41 @@ def standardize(train: np.ndarray, *others: np.ndarray) -> list[np.ndarray]:
                 f"others[{i}] has {tables[-1].shape[1]} columns, train "
                 f"{tables[0].shape[1]}: every table needs train's features"
             )
-    # squared in the standard deviation: beyond 1e150 it overflows
-    check_magnitude(tables[0], "train", 1e150)
-    mean, std = tables[0].mean(axis=0), tables[0].std(axis=0)
-    std = np.where(std > 0, std, 1.0)
+    mean, std = _scaling(tables[0])
     return [(a - mean) / std for a in tables]
+
+
+def _scaling(train: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    # squared in the standard deviation: beyond 1e150 it overflows
+    check_magnitude(train, "train", 1e150)
+    mean, std = train.mean(axis=0), train.std(axis=0)
+    return mean, np.where(std > 0, std, 1.0)
+
+
+def standard_scaling(train: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""The column means and standard deviations :func:`standardize` scales with.
+
+    :math:`\mu_j = \frac1N \sum_i x_{ij}`,
+    :math:`\sigma_j = \sqrt{\frac1N \sum_i (x_{ij} - \mu_j)^2}`, and
+    :math:`\sigma_j = 1` for a constant column, so that ``(X - mean) / scale`` is
+    exactly ``standardize(train, X)[1]`` (scikit-learn's ``StandardScaler().fit(train)``
+    ``mean_`` and ``scale_``). Keep them with a model to scale new rows the same way.
+
+    Parameters
+    ----------
+    train : (N, d) ndarray
+
+    Returns
+    -------
+    mean, scale : (d,) float64 ndarray
+
+    Examples
+    --------
+    >>> mean, scale = standard_scaling(np.array([[0.0, 5.0], [2.0, 5.0]]))
+    >>> mean.tolist(), scale.tolist()
+    ([1.0, 5.0], [1.0, 1.0])
+    """
+    return _scaling(check_matrix(train, "train"))
 
 
 def label_codes(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

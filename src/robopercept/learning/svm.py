@@ -250,7 +250,12 @@ class SVC(ClassifierMixin, Estimator):
     support_vectors_ : (S, d) ndarray
     n_support_ : (c,) ndarray
     dual_coef_ : list of (machine pairs) -> arrays of :math:`\\alpha_i y_i`
+    machine_support_ : list of (machine pairs) -> int arrays
+        Rows of ``support_vectors_`` that each one-vs-one machine's ``dual_coef_``
+        weighs (pairs in ``itertools.combinations`` order of the classes).
     intercept_ : (c (c - 1) / 2,) ndarray
+    gamma_ : float
+        The kernel's :math:`\\gamma` as used (``"scale"``, ``"auto"`` resolved).
     coef_ : (c (c - 1) / 2, d) ndarray, linear kernel only
     classes_ : (c,) ndarray
     """
@@ -276,7 +281,7 @@ class SVC(ClassifierMixin, Estimator):
         self.decision_function_shape = decision_function_shape
 
     def _kernel(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        return kernel_matrix(A, B, self.kernel, self._gamma, int(self.degree), float(self.coef0))
+        return kernel_matrix(A, B, self.kernel, self.gamma_, int(self.degree), float(self.coef0))
 
     def fit(self, X: npt.ArrayLike, y: npt.ArrayLike) -> SVC:
         """Train one machine per pair of classes on ``X`` (N, d), ``y`` (N,)."""
@@ -291,7 +296,7 @@ class SVC(ClassifierMixin, Estimator):
         n = X.shape[0]
         max_iter = max(10_000_000, 100 * n) if self.max_iter is None else self.max_iter
         max_iter = check_max_iter(max_iter)
-        self._gamma = _gamma(self.gamma, X)
+        self.gamma_ = _gamma(self.gamma, X)
         with np.errstate(over="ignore", invalid="ignore"):  # refused just below
             K = self._kernel(X, X)
         if not np.isfinite(K).all():
@@ -323,12 +328,15 @@ class SVC(ClassifierMixin, Estimator):
         self.n_support_ = np.bincount(codes[self.support_], minlength=c)
         position = np.full(n, -1, dtype=np.int64)
         position[self.support_] = np.arange(self.support_.size)
-        self._machines = [(position[i], coef, b) for i, coef, b in machines]
-        self.dual_coef_ = [coef for _, coef, _ in self._machines]
-        self.intercept_ = np.array([b for _, _, b in self._machines])
+        self.machine_support_ = [position[i] for i, _, _ in machines]
+        self.dual_coef_ = [coef for _, coef, _ in machines]
+        self.intercept_ = np.array([b for _, _, b in machines])
         if self.kernel == "linear":
             self.coef_ = np.array(
-                [coef @ self.support_vectors_[i] for i, coef, _ in self._machines]
+                [
+                    coef @ self.support_vectors_[i]
+                    for i, coef in zip(self.machine_support_, self.dual_coef_, strict=True)
+                ]
             )
         return self
 
@@ -336,7 +344,8 @@ class SVC(ClassifierMixin, Estimator):
         self._check_fitted("support_vectors_")
         X = check_magnitude(self._check_X(X), "X", 1e150)
         Ks = self._kernel(X, self.support_vectors_)
-        return np.stack([Ks[:, i] @ coef + b for i, coef, b in self._machines], axis=1)
+        machines = zip(self.machine_support_, self.dual_coef_, self.intercept_, strict=True)
+        return np.stack([Ks[:, i] @ coef + b for i, coef, b in machines], axis=1)
 
     def decision_function(self, X: npt.ArrayLike) -> np.ndarray:
         """:math:`f(x)`: ``(N,)`` for two classes (positive: ``classes_[1]``); for more,
