@@ -3034,3 +3034,228 @@ VALID["nn.cloud.CloudPrediction"] = {
 }
 METHODS["nn.cloud.CloudEvaluation"] = ("summary",)
 METHODS["nn.cloud.CloudPrediction"] = ("to_dict",)
+
+# ---- issue 30: text on images (viz.draw) and match pictures (viz.features); the names
+# take effect once robopercept.viz exports them (draw_label, label_font, label_size_for,
+# matches_picture, select_matches, project_outline)
+VALID.update(
+    {
+        "viz.draw_label": {"image": IMG_RGB, "text": "ID 7", "xy": (10.0, 20.0)},
+        "viz.label_font": {"size": 24},
+        "viz.label_size_for": {"height": 1080},
+        "viz.matches_picture": {
+            "image_a": IMG_RGB,
+            "xy_a": PTS2[:5],
+            "image_b": IMG_RGB,
+            "xy_b": PTS2[5:10],
+            "inliers": np.array([True, False, True, True, False]),
+            "distance": np.linspace(0.1, 0.5, 5),
+            "homography": np.array([[1.0, 0.1, 2.0], [0.0, 1.0, -3.0], [1e-4, 0.0, 1.0]]),
+            "max_matches": 3,
+        },
+        "viz.select_matches": {
+            "n": 5,
+            "distance": np.linspace(0.1, 0.5, 5),
+            "inliers": np.array([True, False, True, True, False]),
+            "max_matches": 3,
+        },
+        "viz.project_outline": {"homography": np.eye(3), "size": (64, 48)},
+    }
+)
+
+
+# tracking.metrics (issue 30): VOT ground truth and the success curve, CLEAR-MOT / IDF1.
+# The names are planned once robopercept.tracking exports them (its __init__ lists them).
+_VOT_POLY = "10,20,40,20,40,60,10,60\n12,20,42,20,42,60,12,60\nnan,nan,nan,nan\n"
+FIXTURES["vot_groundtruth.txt"] = lambda p: p.write_text(_VOT_POLY)
+_MOT_ROWS = _b("robopercept.tracking:read_mot", Fixture("mot.txt"))
+_SUCCESS = _b("robopercept.tracking.metrics:evaluate_single_object", BOXES, BOXES)
+VALID.update(
+    {
+        "tracking.polygons_to_boxes": {"polygons": np.array([[10.0, 20, 40, 20, 40, 60, 10, 60]])},
+        "tracking.read_vot_groundtruth": {"path": Fixture("vot_groundtruth.txt")},
+        "tracking.paired_iou": {"a": BOXES, "b": BOXES[::-1].copy()},
+        "tracking.evaluate_single_object": {
+            "predicted": BOXES,
+            "truth": BOXES,
+            "frames": np.array([0, 1]),
+            "thresholds": np.linspace(0.0, 1.0, 5),
+        },
+        "tracking.success_plot": {"scores": _SUCCESS, "labels": "run", "size": (320, 240)},
+        "tracking.MotAccumulator": {"iou_threshold": 0.5},
+        "tracking.MotAccumulator.update": {
+            "gt_ids": np.array([1, 2]),
+            "gt_boxes": BOXES,
+            "hyp_ids": np.array([7, 8]),
+            "hyp_boxes": BOXES,
+        },
+        "tracking.MotAccumulator.metrics": {},
+        "tracking.select_ground_truth": {"rows": _MOT_ROWS, "classes": (1,)},
+        "tracking.evaluate_mot": {
+            "ground_truth": _MOT_ROWS,
+            "hypotheses": _MOT_ROWS,
+            "iou_threshold": 0.5,
+            "frames": np.array([1, 2]),
+        },
+    }
+)
+METHODS["tracking.MotAccumulator"] = ("update", "metrics")
+
+
+# calibration files and point-cloud labels (issue 30): OpenCV FileStorage and ROS YAML
+# writers, quaternions and transforms, hand-eye reports, stereo image pairs
+def _write_transform(path: Path) -> None:
+    """A ROS transform YAML (header.frame_id, child_frame_id, translation, rotation)."""
+    from robopercept.calibration import transform_stamped, write_ros_yaml
+
+    write_ros_yaml(path, transform_stamped(np.eye(4), "base_link", "camera"))
+
+
+FIXTURES["transform.yaml"] = _write_transform
+_HAND_EYE = _b(
+    "robopercept.calibration:HandEyeResult",
+    T4,
+    T4,
+    "eye_in_hand",
+    "tsai",
+    np.zeros(1),
+    np.zeros(1),
+)
+VALID.update(
+    {
+        "calibration.calibration_format": {"path": "camera.yaml", "format": "ros"},
+        "calibration.camera_info": {"K": K, "dist": np.zeros(5), "image_size": (64, 48)},
+        "calibration.find_board_pairs": {"left": [IMG], "right": [IMG2], "pattern_size": (5, 3)},
+        "calibration.hand_eye_format": {"path": "handeye.yaml"},
+        "calibration.hand_eye_report": {"result": _HAND_EYE, "metres_per_unit": 0.001},
+        "calibration.quaternion_from_rotation": {"R": np.eye(3)},
+        "calibration.read_transform": {"path": Fixture("transform.yaml")},
+        "calibration.rotation_from_quaternion": {"q": np.array([0.0, 0.0, 0.0, 1.0])},
+        "calibration.save_hand_eye": {"path": _out("handeye.json"), "result": _HAND_EYE},
+        "calibration.transform_stamped": {
+            "T": T4,
+            "parent_frame": "base_link",
+            "child_frame": "camera",
+        },
+        "calibration.write_opencv_storage": {
+            "path": _out("storage.yml"),
+            "data": {"camera_matrix": K, "image_width": 64},
+        },
+        "calibration.write_ros_yaml": {
+            "path": _out("info.yaml"),
+            "data": {"rows": 1, "data": [1.0, 2.0]},
+        },
+        "pointcloud.PointCloud.with_labels": {"labels": np.arange(60)},
+    }
+)
+METHODS["pointcloud.PointCloud"] = ("select", "with_colors", "with_labels")
+
+
+# motion.flow_truth, viz.flow.arrow_scale (issue 30): Middlebury .flo files, endpoint
+# error, the automatic arrow scale of flow pictures
+def _write_flo_fixture(path: Path) -> None:
+    from robopercept.motion import write_flo
+
+    write_flo(path, FLOW)
+
+
+FIXTURES["flow.flo"] = _write_flo_fixture
+VALID.update(
+    {
+        "motion.read_flo": {"path": Fixture("flow.flo")},
+        "motion.write_flo": {"path": _out("flow.flo"), "flow": FLOW},
+        "motion.known_flow": {"flow": FLOW},
+        "motion.endpoint_error": {"flow": FLOW + 0.25, "truth": FLOW},
+        "viz.arrow_scale": {"flow": np.tile([1.5, -0.5], (40, 1)), "size": (64, 48)},
+    }
+)
+
+
+# learning.persist (issue 30): model files (save_model / load_model, never pickle) and
+# predicting a CSV table with a saved model
+def _write_learn_model(path: Path) -> None:
+    """An LDA on the three-blob data with feature and class names and standardization,
+    written by save_model."""
+    from robopercept.learning import LDA, SavedModel, save_model
+
+    lda = LDA().fit(XB, YB)
+    names, classes = ["a", "b", "c", "d"], ["x", "y", "z"]
+    save_model(SavedModel(lda, names, classes, "label", XB.mean(0), XB.std(0)), path)
+
+
+FIXTURES["model.npz"] = _write_learn_model
+_BLOB_ROWS = [
+    f"r{i},{','.join(map(str, x))},{'xyz'[c]}\n"
+    for i, (x, c) in enumerate(zip(XB, YB, strict=True))
+]
+FIXTURES["blobs.csv"] = lambda p: p.write_text("id,a,b,c,d,label\n" + "".join(_BLOB_ROWS))
+VALID.update(
+    {
+        "learning.SavedModel": {
+            "model": "fitted:SVC",
+            "feature_names": ["a", "b", "c", "d"],
+            "class_names": ["x", "y", "z"],
+            "label_column": "label",
+            "mean": XB.mean(0),
+            "scale": XB.std(0),
+            "info": {"note": "fuzz"},
+        },
+        "learning.SavedModel.predict": {"X": XB},
+        "learning.SavedModel.transform": {"X": XB},
+        "learning.save_model": {"model": "fitted:SVC", "path": _out("model.npz")},
+        "learning.load_model": {"path": Fixture("model.npz")},
+        "learning.predict_table": {
+            "model": _b("robopercept.learning:load_model", Fixture("model.npz")),
+            "path": Fixture("blobs.csv"),
+            "label": "label",
+        },
+        "learning.read_npz": {"path": Fixture("model.npz")},
+        "learning.read_features": {"path": Fixture("table.csv"), "names": ["b", "a"]},
+        "learning.standard_scaling": {"train": XB},
+    }
+)
+METHODS["learning.SavedModel"] = ("predict", "transform")
+
+
+# viz.plot / viz.learning (issue 30): matplotlib plots, their figures and scalar maps
+def plot_panels() -> Any:
+    """Two panels of the plot_series kind: a line with a gap and dots (valid panels)."""
+    from robopercept.viz.plot import Panel, Series
+
+    t = np.arange(12.0)
+    y = np.sin(t)
+    y[4:6] = np.nan
+    return [
+        Panel("a", [Series(t, y, "line"), Series(t, y * 0.5, "dots", (214, 39, 40), "dots")], "y"),
+        Panel("b", [Series(t, t**0.5, "sqrt")], "d [m]"),
+    ]
+
+
+_PLOT_PANELS = _b("tests.fuzz.api:plot_panels")
+_MAP = np.tile(np.arange(16.0), (12, 1))
+_MAP[2:4, 3:6] = np.nan
+_CURVES = [(np.linspace(0, 1, 5), np.linspace(0, 1, 5) ** 2, "a")]
+VALID.update(
+    {
+        "viz.Panel": {"title": "p", "series": [], "ylabel": "y [m]"},
+        "viz.Series": {"x": np.arange(5.0), "y": np.arange(5.0), "label": "s"},
+        "viz.plot_series": {"panels": _PLOT_PANELS, "width": 300, "panel_height": 120},
+        "viz.series_figure": {"panels": _PLOT_PANELS, "width": 300, "panel_height": 120},
+        "viz.scalar_map_picture": {"values": _MAP, "width": 300, "height": 200},
+        "viz.scalar_map_figure": {"values": _MAP, "width": 300, "height": 200},
+        "viz.curves_figure": {
+            "curves": _CURVES,
+            "title": "t",
+            "xlabel": "x",
+            "ylabel": "y",
+            "width": 200,
+            "height": 160,
+        },
+        "viz.scatter_figure": {"points": PTS2, "labels": Y2, "width": 200, "height": 160},
+        "viz.confusion_figure": {"matrix": np.array([[5, 1], [2, 7]]), "names": ["a", "b"]},
+        "viz.readable_dpi": {"width": 640, "height": 480},
+    }
+)
+
+# motion.differencing (issue 30): the three-frame difference fills the holes of its mask
+VALID.update({"motion.fill_holes": {"mask": MASK}})

@@ -388,6 +388,67 @@ def npz_content(data: bytes, rng: np.random.Generator, fmt: str) -> tuple[bytes,
     return buf.getvalue(), desc
 
 
+def model_content(data: bytes, rng: np.random.Generator, fmt: str) -> tuple[bytes, str]:
+    """Rewrite a classifier model ``.npz`` (:func:`robopercept.learning.save_model`) with
+    a hostile header (a value of the wrong type, a number made special) or one hostile
+    array: another shape or
+    dtype, a NaN, an index made -5, 0, 2**31 or 2**62 (a tree child pointing back, a
+    split feature out of range), or the array removed."""
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as f:
+            arrays = {k: f[k] for k in f.files}
+        names = sorted(k for k in arrays if k != "meta")
+    except Exception:  # a stacked mutation broke the archive: mutate bytes instead
+        return flip_bits(data, rng, fmt)
+    if not names or rng.random() < 0.3:  # the JSON header
+        try:
+            meta = json.loads(str(arrays["meta"]))
+        except Exception:
+            meta = None
+        if isinstance(meta, dict) and meta and rng.random() < 0.7:
+            key = sorted(meta)[int(rng.integers(len(meta)))]
+            bad = [None, "x", [], {}, [1, 2, 3], -1, 0, 2**62, 1e308, True, "SVC"]
+            meta[key] = bad[int(rng.integers(len(bad)))]
+            text, desc = json.dumps(meta), f"meta[{key!r}] = {meta[key]!r}"
+        else:
+            raw = str(arrays.get("meta", "{}")).encode()
+            out, desc = numeric_token(raw, rng, "json")
+            text = out.decode(errors="replace")
+        arrays["meta"] = np.array(text)
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        return buf.getvalue(), desc
+    name = names[int(rng.integers(len(names)))]
+    a = arrays[name]
+    choice = int(rng.integers(5))
+    if choice == 0 or a.size == 0:
+        shape = [(0,), (1,), (2, 3), (10**5,), (), (*a.shape, 2)][int(rng.integers(6))]
+        arrays[name], desc = np.ones(shape, a.dtype), f"{name} of shape {shape}"
+    elif choice == 1:
+        dtype = ["U3", "complex128", "bool", "int8", "float32", "S2", "uint64"]
+        dt = dtype[int(rng.integers(len(dtype)))]
+        arrays[name], desc = np.zeros(a.shape, dt), f"{name} as {dt}"
+    elif choice == 2:
+        special = [-5, 0, 2**31, 2**62, -(2**62)] if a.dtype.kind in "iu" else [np.nan, np.inf]
+        value = special[int(rng.integers(len(special)))]
+        b = a.copy()
+        try:
+            b.flat[int(rng.integers(b.size))] = value
+        except (OverflowError, ValueError):
+            return flip_bits(data, rng, fmt)
+        arrays[name], desc = b, f"{name}[one] = {value}"
+    elif choice == 3:
+        b = a.copy()
+        rng.shuffle(b.reshape(-1))
+        arrays[name], desc = b, f"{name} shuffled"
+    else:
+        del arrays[name]
+        desc = f"{name} removed"
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return buf.getvalue(), desc
+
+
 BINARY: tuple[Mutation, ...] = (
     flip_bits,
     random_bytes,
@@ -399,6 +460,7 @@ BINARY: tuple[Mutation, ...] = (
 TEXT: tuple[Mutation, ...] = (numeric_token, line_remove, line_duplicate, non_utf8, *BINARY)
 PNG: tuple[Mutation, ...] = (png_ihdr, png_chunk_len, *BINARY)
 NPZ: tuple[Mutation, ...] = (npz_content, npz_content, *BINARY)
+MODEL: tuple[Mutation, ...] = (model_content, model_content, model_content, *BINARY)
 
 # ------------------------------------------------------------------------- ROS bag
 
@@ -728,6 +790,78 @@ def _hog_seeds(work: Path) -> list[Path]:
     return [p] if p.is_file() else []
 
 
+def load_model_and_predict(path: str) -> Any:
+    """:func:`robopercept.learning.load_model`, then predict three rows of zeros: a
+    loaded model must predict without crashing (tree indices, SVC machines checked)."""
+    from robopercept.learning import load_model
+
+    saved = load_model(path)
+    X = np.zeros((3, saved.n_features))
+    out = [saved.predict(X)]
+    for method in ("predict_proba", "decision_function"):
+        if hasattr(saved.model, method):
+            out.append(getattr(saved.model, method)(saved.transform(X)))
+    return out
+
+
+def _model_seeds(work: Path) -> list[Path]:
+    """Classifier model files written by :func:`save_model` from models trained on real
+    data (the iris measurements shipped with scikit-learn): a tree, a 5-tree forest,
+    an RBF SVC with feature and class names and standardization, an LDA."""
+    from sklearn.datasets import load_iris
+
+    from robopercept.learning import (
+        LDA,
+        SVC,
+        DecisionTreeClassifier,
+        RandomForestClassifier,
+        SavedModel,
+        save_model,
+        standard_scaling,
+    )
+
+    X, y = load_iris(return_X_y=True)
+    mean, scale = standard_scaling(X)
+    svc = SVC().fit((X - mean) / scale, y)
+    names = ["sepal length", "sepal width", "petal length", "petal width"]
+    models = {
+        "tree.npz": DecisionTreeClassifier(max_depth=4, random_state=0).fit(X, y),
+        "forest.npz": RandomForestClassifier(5, random_state=0).fit(X, y),
+        "svc.npz": SavedModel(
+            svc, names, ["setosa", "versicolor", "virginica"], "species", mean, scale
+        ),
+        "lda.npz": LDA().fit(X, y),
+    }
+    return [save_model(m, work / name) for name, m in models.items()]
+
+
+def _vot_seeds(work: Path) -> list[Path]:
+    """VOT "bag"'s polygon ground truth, and the same boxes written as ``x,y,w,h``
+    rectangles (with a NaN frame) by the project's own conversion."""
+    seeds = _real("video/vot_bag/groundtruth.txt")
+    if seeds:
+        from robopercept.tracking.metrics import read_vot_groundtruth
+
+        boxes = read_vot_groundtruth(seeds[0])[:60]
+        boxes[10] = np.nan
+        lines = [",".join(f"{v:.2f}" for v in b) for b in boxes]
+        (work / "vot_rect.txt").write_text("\n".join(lines) + "\n")
+        seeds.append(work / "vot_rect.txt")
+    return seeds
+
+
+def _flo_seeds(work: Path) -> list[Path]:
+    """Middlebury's RubberWhale ground truth (584 x 388, with unknown pixels) and a
+    40 x 30 crop of it written by :func:`write_flo` (small: mutants reach the data)."""
+    from robopercept.motion import read_flo, write_flo
+
+    seeds = _real("flow/middlebury_rubberwhale/RubberWhale.flo")
+    if seeds:
+        crop = read_flo(seeds[0])[180:210, 260:300]
+        seeds.append(write_flo(work / "rubberwhale_crop.flo", crop))
+    return seeds
+
+
 READERS: tuple[Reader, ...] = (
     Reader("pcd", "robopercept.pointcloud.io:read_point_cloud", "pcd", _pcd_seeds, TEXT),
     Reader("ply", "robopercept.pointcloud.io:read_point_cloud", "ply", _ply_seeds, TEXT),
@@ -741,6 +875,7 @@ READERS: tuple[Reader, ...] = (
         ({}, {"mode": "rgb"}, {"mode": "gray"}),
     ),
     Reader("mot", read_mot_checked, "mot", _mot_seeds, TEXT),
+    Reader("vot", "robopercept.tracking.metrics:read_vot_groundtruth", "text", _vot_seeds, TEXT),
     Reader("tum", read_tum, "tum", _tum_seeds),
     Reader(
         "calibration-json",
@@ -759,8 +894,10 @@ READERS: tuple[Reader, ...] = (
     Reader(
         "hog-model", "robopercept.learning.hog_detector:HogDetector.load", "npz", _hog_seeds, NPZ
     ),
+    Reader("learn-model", load_model_and_predict, "npz", _model_seeds, MODEL),
     Reader("realsense-bag", read_realsense, "bag", _bag_seeds, timeout=15.0),
     Reader("realsense-db3", read_realsense, "db3", lambda work: [], BINARY, timeout=15.0),
+    Reader("flo", "robopercept.motion.flow_truth:read_flo", "flo", _flo_seeds, BINARY),
 )
 
 

@@ -28,12 +28,15 @@ COUNTS = {
     "mesh": 40,
     "image": 48,
     "mot": 40,
+    "vot": 40,
     "tum": 40,
     "calibration-json": 40,
     "calibration-yaml": 40,
     "hog-model": 40,
+    "learn-model": 40,
     "realsense-bag": 30,
     "realsense-db3": 24,
+    "flo": 32,
 }
 #: readers whose untyped errors are still being fixed (strict: an xpass fails, so the
 #: mark must go when the reader is fixed)
