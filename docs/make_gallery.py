@@ -304,7 +304,8 @@ ENTRIES: tuple[Entry, ...] = (
     ),
     Entry(
         "track",
-        f"track {INPUTS}/discs --min-area 150 --snapshot 80 -o {OUT}/track.mp4 --quiet",
+        f"track {INPUTS}/discs --min-area 150 --snapshot 80 -o {OUT}/track.mp4 "
+        f"--results {OUT}/tracks.txt --quiet",
         f"{OUT}/track_000080.png",
         "Frame 80 (0-based) of discs crossing a textured background: detections from background "
         "subtraction and one Kalman track per disc with its ID.",
