@@ -188,6 +188,23 @@ def test_foreign_and_wrong_kind_files_are_refused(forest_file, tmp_path):
         np.savez_compressed(compressed, **{k: f[k] for k in f.files})
     with pytest.raises(FileFormatError, match="compressed"):
         load_model(compressed)
+    # read_npz(compressed=True) (what the HOG detector's loader uses) reads it, the same
+    # arrays; members stating more than 256 MiB unpacked in all are refused unread
+    with np.load(forest_file, allow_pickle=False) as f:
+        want = {k: f[k] for k in f.files}
+    got = read_npz(compressed, compressed=True)
+    assert list(got) == list(want) and all(np.array_equal(got[k], want[k]) for k in want)
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(bomb, "w", zipfile.ZIP_DEFLATED) as z:
+        for k in ("a", "b"):  # 2 x 160 MiB of zeros in about 300 kB
+            with z.open(f"{k}.npy", "w", force_zip64=True) as m:
+                np.lib.format.write_array_header_1_0(
+                    m, {"descr": "|u1", "fortran_order": False, "shape": (160 << 20,)}
+                )
+                for _ in range(160):
+                    m.write(bytes(1 << 20))
+    with pytest.raises(FileFormatError, match=r"bomb\.npz.*member 'b' claims 1677"):
+        read_npz(bomb, compressed=True)
 
 
 def test_damaged_arrays_are_refused_before_any_prediction(forest_file, tmp_path):

@@ -28,10 +28,8 @@ folder of pictures without the object.
 
 from __future__ import annotations
 
-import io
 import json
 import math
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -53,6 +51,7 @@ from robopercept.features.hog import hog, hog_windows
 from robopercept.geometry.boxes import box_iou_matrix
 from robopercept.imaging.color import rgb_to_gray
 from robopercept.learning._base import RandomStateLike, random_generator, renamed_rng
+from robopercept.learning.persist import read_npz
 from robopercept.learning.svm import LinearSVC
 from robopercept.progress import progress_bar
 
@@ -334,9 +333,10 @@ class HogDetector:
     def load(cls, path: str | Path) -> HogDetector:
         """Read a model written by :meth:`save`.
 
-        The file is read with ``allow_pickle=False``: nothing in it is executed. Any
-        other file (a CSV, a ``.npy`` array, an archive without the model's arrays) is
-        refused as not a model, without NumPy's advice to load pickles unsafely.
+        The file is read by :func:`robopercept.learning.persist.read_npz` (compressed
+        members accepted): nothing in it is executed. Any other file (a CSV, a ``.npy``
+        array, an archive without the model's arrays) is refused as not a model, without
+        NumPy's advice to load pickles unsafely.
 
         Parameters
         ----------
@@ -352,17 +352,20 @@ class HogDetector:
         ------
         FileFormatError
             Missing file, a folder, or not a robopercept HOG model file: a damaged
-            archive (whatever zipfile, zlib or NumPy's header parser raise), an NPY
-            header whose shape does not match its bytes, object arrays (pickles),
+            archive (whatever zipfile, zlib or NumPy's header parser raise), members
+            other than ``.npy`` arrays, no ``coef`` or ``meta`` array, an NPY header
+            whose shape does not match its bytes, object arrays (pickles),
             settings out of range (window sides and cells 1 to 2048 px, 1 to 360
             orientations, ``C > 0``, a finite threshold), or weights that are not
             finite or do not fit the settings. The message names the file.
         """
         p = check_file(path, "a model file (.npz written by `robopercept train-hog`)")
-        not_model = (
-            f"{p} is not a robopercept HOG model file (.npz written by `robopercept train-hog`)"
-        )
-        arrays = _read_npz(p, ("coef", "meta"), not_model)
+        what = "a robopercept HOG model file (.npz written by `robopercept train-hog`)"
+        not_model = f"{p} is not {what}"
+        arrays = read_npz(p, what, compressed=True)
+        for name in ("coef", "meta"):
+            if name not in arrays:
+                raise FileFormatError(f"{not_model}: it has no {name!r} array")
         coef, meta_array = arrays["coef"], arrays["meta"]
         if meta_array.ndim != 0 or meta_array.dtype.kind != "U":
             raise FileFormatError(f"{not_model}: its meta array is not a JSON string")
@@ -405,7 +408,6 @@ class HogDetector:
 
 
 _MAX_WINDOW = 2048  # window sides and HOG cells in a model file, in pixels
-_MAX_MEMBER = 256 * 2**20  # bytes an array of a model file may unpack to
 
 
 def _whole(value: Any, name: str, lo: int, hi: int, p: Path) -> int:
@@ -432,91 +434,6 @@ def _real(value: Any, name: str, p: Path, positive: bool) -> float:
             "(retrain the model with `robopercept train-hog`)"
         )
     return float(value)
-
-
-def _read_npz(p: Path, names: tuple[str, ...], not_model: str) -> dict[str, np.ndarray]:
-    """The arrays ``names`` of the ``.npz`` archive ``p``, read without pickles and
-    without trusting a length or shape the file states.
-
-    Each member ``name.npy`` is unpacked (at most :data:`_MAX_MEMBER` bytes; the zip
-    CRC is checked), its NPY header parsed, and the array built with
-    ``np.frombuffer`` only when ``prod(shape) * itemsize`` equals the bytes that follow
-    the header; object dtypes (pickles) are refused. This is ``np.load(p,
-    allow_pickle=False)[name]`` for a sound file, and a :class:`FileFormatError` for
-    any damaged one.
-    """
-    try:
-        with p.open("rb") as f:
-            head = f.read(6)
-    except OSError as exc:
-        raise FileFormatError(f"{p}: cannot read the model file ({exc})") from None
-    if head == b"\x93NUMPY":
-        raise FileFormatError(f"{not_model}: it holds one array, not an archive")
-    arrays: dict[str, np.ndarray] = {}
-    try:
-        size = p.stat().st_size
-        with zipfile.ZipFile(p) as z:
-            members = {i.filename: i for i in z.infolist()}
-            for name in names:
-                info = members.get(f"{name}.npy")
-                if info is None:
-                    raise FileFormatError(f"{not_model}: it has no {name!r} array")
-                if info.file_size > _MAX_MEMBER or info.compress_size > size:
-                    raise FileFormatError(
-                        f"{not_model}: its {name!r} array claims {info.file_size} bytes "
-                        f"({info.compress_size} stored) in a {size}-byte file"
-                    )
-                arrays[name] = _npy_from_bytes(_read_member(z, info), name, not_model)
-    except FileFormatError:
-        raise
-    except Exception as exc:
-        # untrusted bytes through zipfile, zlib/bz2/lzma and NumPy's header parser,
-        # which raise BadZipFile, zlib.error, EOFError, NotImplementedError (an unknown
-        # compression), RuntimeError (encryption), tokenize.TokenError, ValueError,
-        # MemoryError...: every one of them means a damaged or foreign file
-        raise FileFormatError(f"{not_model} ({type(exc).__name__}: {exc})") from None
-    return arrays
-
-
-def _read_member(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> bytes:
-    """The unpacked bytes of ``info``, read in 1 MiB pieces: ``ZipFile.read`` asks the
-    file for the whole stated compressed size at once, and Python allocates that much
-    before the read comes back short (a 2 GiB length word cost 1 GiB on a 6 kB file)."""
-    out = bytearray()
-    with z.open(info) as f:
-        while piece := f.read(1 << 20):
-            out += piece
-            if len(out) > info.file_size:
-                break  # zipfile's CRC/size check raises at the end of a sound stream
-    return bytes(out)
-
-
-def _npy_from_bytes(raw: bytes, name: str, not_model: str) -> np.ndarray:
-    """An array from the bytes of an ``.npy`` file (format 1.0 or 2.0), checked
-    against its header; object dtypes (pickles) are refused, never loaded."""
-    from numpy.lib import format as npy
-
-    f = io.BytesIO(raw)
-    version = npy.read_magic(f)
-    if version == (1, 0):
-        shape, fortran, dtype = npy.read_array_header_1_0(f)
-    elif version == (2, 0):
-        shape, fortran, dtype = npy.read_array_header_2_0(f)
-    else:
-        raise FileFormatError(f"{not_model}: its {name!r} array has NPY version {version}")
-    if dtype.hasobject:
-        raise FileFormatError(
-            f"{not_model}: its {name!r} array holds Python objects (pickles), which are "
-            "never loaded"
-        )
-    count = math.prod(shape)
-    if count * dtype.itemsize != len(raw) - f.tell():
-        raise FileFormatError(
-            f"{not_model}: its {name!r} array header says {count} x {dtype.itemsize} "
-            f"bytes; {len(raw) - f.tell()} follow"
-        )
-    data = np.frombuffer(raw, dtype=dtype, count=count, offset=f.tell())
-    return data.reshape(shape, order="F" if fortran else "C").copy()
 
 
 FACE_MODEL = "face_hog_svm.npz"

@@ -101,6 +101,8 @@ _FORMAT = "robopercept-model"
 #: most members of an archive, and bytes one member may hold
 _MAX_MEMBERS = 64
 _MAX_MEMBER = 1 << 30
+#: most bytes the members of a compressed archive may unpack to, all together
+_MAX_UNPACKED = 256 << 20
 #: most feature columns a model file may state
 _MAX_FEATURES = 10_000_000
 _TREE_FIELDS = ("feature", "threshold", "left", "right", "value", "impurity", "n_node_samples")
@@ -108,21 +110,28 @@ _JSON_SCALARS = (type(None), bool, int, float, str)
 
 
 # ----------------------------------------------------------------------- safe reading
-def read_npz(path: str | os.PathLike[str], what: str = "an .npz archive") -> dict[str, np.ndarray]:
-    """Every array of an uncompressed ``.npz`` archive, read without pickles and without
-    trusting a length or shape the file states.
+def read_npz(
+    path: str | os.PathLike[str], what: str = "an .npz archive", *, compressed: bool = False
+) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` archive, read without pickles and without trusting a
+    length or shape the file states.
 
     Each member ``name.npy`` must be stored uncompressed (what ``np.savez`` writes), so
-    nothing unpacks to more than the file's size; its NPY header (format 1.0 or 2.0) is
-    parsed and the array built only when ``prod(shape) * itemsize`` equals the bytes
-    after the header; object dtypes (pickles) are refused, never read. For a sound file
-    this is ``dict(np.load(path, allow_pickle=False))``.
+    nothing unpacks to more than the file's size; with ``compressed=True`` compressed
+    members (``np.savez_compressed``) are read too, and all of them together may unpack
+    to at most 256 MiB. Each NPY header (format 1.0 or 2.0) is parsed and the array
+    built only when ``prod(shape) * itemsize`` equals the bytes after the header; object
+    dtypes (pickles) are refused, never read. For a sound file this is
+    ``dict(np.load(path, allow_pickle=False))``. Used by :func:`load_model` and
+    :meth:`robopercept.learning.hog_detector.HogDetector.load`.
 
     Parameters
     ----------
     path : path-like
     what : str
         What the file should be, with its article, for messages.
+    compressed : bool
+        Accept compressed members (bounded as above).
 
     Returns
     -------
@@ -155,6 +164,8 @@ def read_npz(path: str | os.PathLike[str], what: str = "an .npz archive") -> dic
     if head == b"\x93NUMPY":
         raise FileFormatError(f"{bad}: it holds one .npy array, not an archive")
     arrays: dict[str, np.ndarray] = {}
+    # what the members may still unpack to: the file's size when they are stored
+    budget = _MAX_UNPACKED if compressed else size
     try:
         with zipfile.ZipFile(p) as z:
             infos = z.infolist()
@@ -166,30 +177,36 @@ def read_npz(path: str | os.PathLike[str], what: str = "an .npz archive") -> dic
                     raise FileFormatError(
                         f"{bad}: member {info.filename[:80]!r} is not a (single) .npy array"
                     )
-                if info.compress_type != zipfile.ZIP_STORED:
+                if info.compress_type != zipfile.ZIP_STORED and not compressed:
                     raise FileFormatError(
                         f"{bad}: member {name[:80]!r} is compressed (save_model stores "
                         "arrays uncompressed)"
                     )
-                if info.file_size > min(size, _MAX_MEMBER) or info.compress_size > size:
+                if info.file_size > min(budget, _MAX_MEMBER) or info.compress_size > size:
                     raise FileFormatError(
-                        f"{bad}: member {name[:80]!r} claims {info.file_size} bytes in a "
-                        f"{size}-byte file"
+                        f"{bad}: member {name[:80]!r} claims {info.file_size} bytes "
+                        f"({info.compress_size} stored) in a {size}-byte file"
                     )
+                if compressed:
+                    budget -= info.file_size
                 arrays[name] = _npy(_member_bytes(z, info), name, bad)
     except FileFormatError:
         raise
     except Exception as exc:
-        # untrusted bytes through zipfile and NumPy's header parser, which raise
-        # BadZipFile, EOFError, NotImplementedError, RuntimeError (encryption),
-        # ValueError, SyntaxError, MemoryError...: each one means a damaged or foreign file
+        # untrusted bytes through zipfile, zlib/bz2/lzma and NumPy's header parser, which
+        # raise BadZipFile, zlib.error, EOFError, NotImplementedError (an unknown
+        # compression), RuntimeError (encryption), tokenize.TokenError, ValueError,
+        # SyntaxError, MemoryError...: each one means a damaged or foreign file
         raise FileFormatError(f"{bad} ({type(exc).__name__}: {str(exc)[:200]})") from None
     return arrays
 
 
 def _member_bytes(z: zipfile.ZipFile, info: zipfile.ZipInfo) -> bytes:
-    """The bytes of a stored member, read in 1 MiB pieces (never more than it states:
-    zipfile's CRC check at the end of the member catches a short or altered one)."""
+    """The unpacked bytes of a member, read in 1 MiB pieces, never more than it states
+    (zipfile's CRC check at the end of the member catches a short or altered one).
+    ``ZipFile.read`` would ask the file for the whole stated compressed size at once, and
+    Python allocates that much before the read comes back short (a 2 GiB length word cost
+    1 GiB on a 6 kB file)."""
     out = bytearray()
     with z.open(info) as f:
         while piece := f.read(1 << 20):
@@ -213,8 +230,8 @@ def _npy(raw: bytes, name: str, bad: str) -> np.ndarray:
         raise FileFormatError(f"{bad}: its {name!r} array has NPY version {version}")
     if dtype.hasobject:
         raise FileFormatError(
-            f"{bad}: its {name!r} array holds Python objects (a pickle), which are never "
-            "loaded: save the model again with robopercept.learning.save_model"
+            f"{bad}: its {name!r} array holds Python objects (pickles), which are never "
+            "loaded: save the file again from number or string arrays"
         )
     count = math.prod(shape)
     left = len(raw) - f.tell()
