@@ -306,6 +306,7 @@ def run_train_hog(args: argparse.Namespace) -> int:
         data = {"positives": "skimage lfw_subset", "negatives": "skimage pictures"}
     det.save(args.output)
     seconds = time.perf_counter() - t0
+    weights = 0 if det.coef_ is None else int(det.coef_.size)
     choice = report.get("choice")
     held = (
         {
@@ -326,7 +327,7 @@ def run_train_hog(args: argparse.Namespace) -> int:
             "rounds": rounds,
             "seed": args.seed,
             "window": list(det.window),
-            "weights": int(det.coef_.size),
+            "weights": weights,
             "threshold": round(det.threshold, 6),
             "rule": args.rule,
             "min_precision": args.min_precision if args.rule == "precision" else None,
@@ -361,7 +362,7 @@ def run_train_hog(args: argparse.Namespace) -> int:
             f"positives, {held['negatives']} negatives): precision {held['precision']:.3f}, "
             f"recall {held['recall']:.3f}, F1 {held['f1']:.3f}"
         )
-    print(f"{det.coef_.size} weights, {seconds:.1f} s -> {args.output}")
+    print(f"{weights} weights, {seconds:.1f} s -> {args.output}")
     return 0
 
 
@@ -566,8 +567,8 @@ def run_classify(args: argparse.Namespace) -> int:
     if args.save:
         saved = SavedModel(
             model,
-            feature_names=names,
-            class_names=[str(v) for v in classes[model.classes_]],
+            feature_names=tuple(names),
+            class_names=tuple(str(v) for v in classes[model.classes_]),
             label_column=args.label,
             mean=mean,
             scale=scale,

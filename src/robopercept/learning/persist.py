@@ -459,8 +459,9 @@ def _attr(a: _Arrays, attrs: dict[str, Any], name: str, kind: type) -> Any:
     value = attrs.get(name)
     ok = isinstance(value, kind) and not isinstance(value, bool)
     if kind is float:
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        ok = ok and math.isfinite(value)
+        ok = (
+            isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        )
     if not ok:
         raise a.fail(f"its attribute {name} is {plain_repr(value)[:40]}; expected {kind.__name__}")
     return kind(value)
@@ -593,7 +594,7 @@ class SavedModel:
             check_text(self.label_column, "label_column")
         if (self.mean is None) != (self.scale is None):
             raise InputError("give both mean and scale (the standardization), or neither")
-        if self.mean is not None:
+        if self.mean is not None and self.scale is not None:
             mean = check_matrix(np.reshape(self.mean, (1, -1)), "mean")[0]
             scale = check_matrix(np.reshape(self.scale, (1, -1)), "scale")[0]
             if mean.size != d or scale.size != d or not np.all(scale > 0):
@@ -728,7 +729,7 @@ def save_model(model: Any, path: str | os.PathLike[str]) -> Path:
     meta = np.array(json.dumps(header, allow_nan=False))
     try:
         with p.open("wb") as fh:
-            np.savez(fh, meta=meta, **arrays)
+            np.savez(fh, meta=meta, **arrays)  # type: ignore[arg-type]  # names are array keys
     except OSError as exc:
         raise FileFormatError(
             f"{p}: cannot write ({exc.strerror or exc}): check that its folder exists"
@@ -792,7 +793,7 @@ def load_model(path: str | os.PathLike[str]) -> SavedModel:
         )
     kind = header.get("kind")
     cls = _KINDS.get(kind) if isinstance(kind, str) else None
-    if cls is None:
+    if cls is None or not isinstance(kind, str):
         raise a.fail(
             f"its kind is {plain_repr(kind)[:40]}; expected one of {', '.join(MODEL_KINDS)}"
         )
@@ -819,12 +820,12 @@ def load_model(path: str | os.PathLike[str]) -> SavedModel:
     info = header.get("info", {})
     if not isinstance(info, dict):
         raise a.fail("its info is not a JSON object")
-    names = {}
+    names: dict[str, tuple[str, ...] | None] = {}
     for key in ("feature_names", "class_names"):
         value = header.get(key)
         if value is not None and not isinstance(value, list):
             raise a.fail(f"{key} is {plain_repr(value)[:40]}; expected a list of names")
-        names[key] = value
+        names[key] = None if value is None else tuple(value)
     try:
         return SavedModel(model, label_column=label, mean=mean, scale=scale, info=info,
                           header=header, **names)  # fmt: skip

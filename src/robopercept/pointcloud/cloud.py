@@ -189,7 +189,7 @@ class PointCloud:
         >>> PointCloud(np.zeros((2, 3))).with_labels([3, 4]).labels
         array([3, 4])
         """
-        return replace(self, labels=labels)
+        return replace(self, labels=None if labels is None else np.asarray(labels))
 
     @staticmethod
     def concatenate(clouds: Sequence[PointCloud]) -> PointCloud:

@@ -71,7 +71,7 @@ def _line_colors(n: int) -> list[tuple[float, float, float]]:
     in a 10-class ROC); from the 11th curve on the line style tells them apart."""
     from matplotlib import colormaps
 
-    tab = colormaps["tab10"].colors
+    tab = colormaps["tab10"].colors  # type: ignore[attr-defined]  # a ListedColormap
     return [tuple(float(v) for v in tab[k % len(tab)][:3]) for k in range(n)]  # type: ignore[misc]
 
 
@@ -430,7 +430,7 @@ def confusion_figure(
     # measure the labels first (at 100 dpi, 1 pt = 100 / 72 px), then place the
     # matrix in whole pixels: a margin for the names and axis labels, the colour bar right
     probe = agg_figure(100, 100, what="confusion_picture")
-    renderer = probe.canvas.get_renderer()
+    renderer = probe.canvas.get_renderer()  # type: ignore[attr-defined]  # Agg canvas
     name_w = _text_width(probe, renderer, names, tick)
     title_w = _text_width(probe, renderer, [title], FONT_PT["title"]) if title else 0.0
     line = 1.4 * FONT_PT["label"] * 100 / 72  # the height of an axis label, px

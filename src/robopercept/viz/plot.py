@@ -203,7 +203,7 @@ def outside_legend(
     fig = host
     while not isinstance(fig, Figure):  # an Axes or SubFigure: up to the root figure
         fig = fig.figure
-    renderer = fig.canvas.get_renderer()
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]  # Agg canvas
     fig_w, fig_h = fig.bbox.width, fig.bbox.height
     if isinstance(host, Axes):
         kw: dict[str, Any] = (
