@@ -15,10 +15,12 @@ outputs of ``pipelines.plane_outputs``).
 from __future__ import annotations
 
 import errno
+import math
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from robopercept.errors import RoboperceptError
 
@@ -28,6 +30,7 @@ __all__ = [
     "atomic_path",
     "atomic_write",
     "describe_write_error",
+    "strict_json",
     "write_error",
 ]
 
@@ -193,3 +196,34 @@ def atomic_write(path: str | os.PathLike[str], data: bytes | str) -> Path:
     with atomic_path(p) as tmp, open(tmp, "wb") as fh:
         fh.write(raw)
     return p
+
+
+def strict_json(value: Any) -> Any:
+    """``value`` made strict JSON: NaN and infinities become None (``null``), in nested
+    dicts, lists and tuples too (tuples become lists, keys strings).
+
+    ``json.dumps`` writes ``NaN``, which ``jq``, JavaScript and most JSON parsers refuse;
+    a figure that cannot be computed is ``null`` in robopercept's JSON
+    (docs/cli_json.md).
+
+    Parameters
+    ----------
+    value : any JSON-able value
+
+    Returns
+    -------
+    any
+        The same structure with every non-finite float replaced by None.
+
+    Examples
+    --------
+    >>> strict_json({"a": float("nan"), "b": [1.0, float("inf")], "c": (2,)})
+    {'a': None, 'b': [1.0, None], 'c': [2]}
+    """
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {str(k): strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [strict_json(v) for v in value]
+    return value

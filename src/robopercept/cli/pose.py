@@ -46,6 +46,7 @@ from robopercept.cli._args import (
     register_forms,
     run_or_model_path,
 )
+from robopercept.fileio import strict_json
 
 __all__ = ["POSE_CLI_MODELS", "SHIPPED_POSE_MODELS", "register"]
 
@@ -239,9 +240,9 @@ def _eval(args: argparse.Namespace) -> int:
     }
     if args.out:
         Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / "metrics.json").write_text(json.dumps(metrics, indent=1))
-    if args.json:
-        print(json.dumps(metrics))
+        (Path(args.out) / "metrics.json").write_text(json.dumps(strict_json(metrics), indent=1))
+    if args.json:  # a joint no validation sample counts has PCK NaN: null
+        print(json.dumps(strict_json(metrics)))
         return 0
     print(f"nn pose eval: {args.model} on {args.data} ({len(sets.val)} images)")
     for name, v in metrics["metrics"].items():

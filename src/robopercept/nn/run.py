@@ -27,7 +27,6 @@ model from the checkpoint alone.
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from collections.abc import Sequence
@@ -43,6 +42,7 @@ from torch.utils.data import Dataset
 
 from robopercept._checks import as_path, check_choice, check_int
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import strict_json
 from robopercept.nn._guards import check_device
 from robopercept.nn.data import (
     ArrayDataset,
@@ -481,19 +481,8 @@ def train_run(
         "classes": list(arch.classes),
         "architecture": asdict(arch),
     }
-    files["metrics"].write_text(json.dumps(_finite(metrics), indent=2) + "\n")
+    files["metrics"].write_text(json.dumps(strict_json(metrics), indent=2) + "\n")
     return TrainResult(out, files, arch, hist, test_ev, _parameters(net), seconds, metrics)
-
-
-def _finite(value: Any) -> Any:
-    """``value`` with NaN and infinities as None (strict JSON)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {str(k): _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
 
 
 def _write_run(out: Path, hist: History, test_ev: RunEvaluation) -> dict[str, Path]:
