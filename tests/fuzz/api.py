@@ -3259,3 +3259,12 @@ VALID.update(
 
 # motion.differencing (issue 30): the three-frame difference fills the holes of its mask
 VALID.update({"motion.fill_holes": {"mask": MASK}})
+
+# -- geometry.min_area_rectangle (the plane tracker's board outline) --------------------
+VALID.update(
+    {
+        "geometry.min_area_rectangle": {
+            "points": np.array([[0.0, 1.0], [1.0, 0.0], [2.0, 1.0], [1.0, 2.0]])
+        }
+    }
+)

@@ -1,6 +1,11 @@
 """Camera models, rigid transforms, boxes, two-view geometry and triangulation."""
 
-from robopercept.geometry.boxes import BOX_FORMATS, box_convert, box_iou_matrix
+from robopercept.geometry.boxes import (
+    BOX_FORMATS,
+    box_convert,
+    box_iou_matrix,
+    min_area_rectangle,
+)
 from robopercept.geometry.camera import (
     MODELS,
     CameraIntrinsics,
@@ -67,6 +72,7 @@ __all__ = [
     "find_fundamental",
     "fundamental_from_essential",
     "invert",
+    "min_area_rectangle",
     "nearest_rotation",
     "project",
     "rectify_stereo",

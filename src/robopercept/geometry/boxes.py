@@ -1,6 +1,7 @@
 """Axis-aligned boxes in pixels: ``(x, y, w, h)`` for the IoU matrix, and conversions
 between the formats ``"xyxy"``, ``"xywh"`` and ``"cxcywh"`` (NumPy; the torch versions
-used by the detectors are in :mod:`robopercept.nn.boxes`)."""
+used by the detectors are in :mod:`robopercept.nn.boxes`); the smallest rotated
+rectangle around 2-D points (:func:`min_area_rectangle`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import numpy.typing as npt
 from robopercept._checks import check_choice, check_finite, check_magnitude, check_numeric
 from robopercept.errors import InputError
 
-__all__ = ["BOX_FORMATS", "box_convert", "box_iou_matrix"]
+__all__ = ["BOX_FORMATS", "box_convert", "box_iou_matrix", "min_area_rectangle"]
 
 #: the box formats of :func:`box_convert`
 BOX_FORMATS = ("xyxy", "xywh", "cxcywh")
@@ -102,3 +103,66 @@ def box_convert(boxes: npt.ArrayLike, in_fmt: str, out_fmt: str) -> np.ndarray:
     elif out_fmt == "cxcywh":
         b = np.concatenate([(b[:, :2] + b[:, 2:]) / 2, b[:, 2:] - b[:, :2]], axis=1)
     return b
+
+
+def min_area_rectangle(points: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, float]:
+    r"""The smallest-area rectangle enclosing 2-D points, at any rotation.
+
+    One side of the optimal rectangle lies along an edge of the points' convex hull
+    (Freeman and Shapira 1975), so each hull edge direction :math:`\theta` is tried:
+    the points are rotated by :math:`-\theta`, their axis-aligned bounds taken, and the
+    smallest area kept (rotating calipers, :math:`O(h^2)` for :math:`h` hull vertices).
+    The area equals that of ``cv2.minAreaRect``; the sides may be named the other way
+    round (OpenCV's angle convention differs).
+
+    Parameters
+    ----------
+    points : (N, 2) array_like
+        Finite points, ``N >= 1``. Collinear points give a rectangle of width 0, one
+        point (or repeats of it) a rectangle of size 0.
+
+    Returns
+    -------
+    center : (2,) ndarray
+    half_sizes : (2,) ndarray
+        Half the side lengths, along ``(cos t, sin t)`` then ``(-sin t, cos t)``.
+    angle : float
+        ``t`` in radians, in ``[0, pi/2)``.
+
+    Raises
+    ------
+    InputError
+        Not finite ``(N, 2)`` points with ``N >= 1``.
+
+    Examples
+    --------
+    >>> square = [[0, 1], [1, 0], [2, 1], [1, 2]]  # a square turned by 45 degrees
+    >>> c, h, t = min_area_rectangle(square)
+    >>> c.round(6).tolist(), h.round(6).tolist(), round(float(np.degrees(t)), 6)
+    ([1.0, 1.0], [0.707107, 0.707107], 45.0)
+    """
+    pts = check_numeric(points, "points")
+    if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 1:
+        raise InputError(f"points must be (N, 2) with N >= 1; got shape {pts.shape}")
+    pts = check_magnitude(check_finite(pts.astype(np.float64), "points"), "points", 1e150)
+    hull = pts
+    if len(np.unique(pts, axis=0)) >= 3:
+        from scipy.spatial import ConvexHull, QhullError
+
+        try:
+            hull = pts[ConvexHull(pts).vertices]
+        except QhullError:  # collinear: every point is a vertex of the flat "hull"
+            hull = pts
+    edges = np.roll(hull, -1, axis=0) - hull
+    angles = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
+    angles = np.unique(np.concatenate([[0.0], angles]))
+    cos, sin = np.cos(angles), np.sin(angles)
+    u = hull @ np.stack([cos, sin])  # (h, k): coordinates along each candidate side
+    v = hull @ np.stack([-sin, cos])
+    area = np.ptp(u, axis=0) * np.ptp(v, axis=0)
+    k = int(np.argmin(area))
+    lo_u, hi_u, lo_v, hi_v = u[:, k].min(), u[:, k].max(), v[:, k].min(), v[:, k].max()
+    cu, cv = (lo_u + hi_u) / 2, (lo_v + hi_v) / 2
+    center = cu * np.array([cos[k], sin[k]]) + cv * np.array([-sin[k], cos[k]])
+    half = np.array([(hi_u - lo_u) / 2, (hi_v - lo_v) / 2])
+    return center, half, float(angles[k])

@@ -121,9 +121,11 @@ def annotate_frame(
     ----------
     frame : RGBDFrame
     result : PlaneTrackResult
-    extent : (4,) ndarray, optional
-        ``(c1, c2, h1, h2)``: centre and half sizes of the board in the tracked plane's
-        basis, for the outline (from the inliers when None).
+    extent : (4,) or (5,) ndarray, optional
+        ``(c1, c2, h1, h2[, t])``: centre of the board in the tracked plane's basis
+        ``(e1, e2)`` and half sizes of its rectangle along ``cos t e1 + sin t e2`` and
+        ``-sin t e1 + cos t e2`` (``t`` = 0 when left out), for the outline; no outline
+        when None.
 
     Returns
     -------
@@ -144,13 +146,12 @@ def annotate_frame(
     n, d = result.track_normal, result.track_d
     if np.isfinite(d) and extent is not None:
         e1, e2 = _plane_basis(n)
-        c1, c2, h1, h2 = extent
+        c1, c2, h1, h2 = extent[:4]
+        t = float(extent[4]) if len(extent) > 4 else 0.0
+        u, v = np.cos(t) * e1 + np.sin(t) * e2, -np.sin(t) * e1 + np.cos(t) * e2
         center = d * n + c1 * e1 + c2 * e2
         corners = np.array(
-            [
-                center + s1 * h1 * e1 + s2 * h2 * e2
-                for s1, s2 in ((-1, -1), (1, -1), (1, 1), (-1, 1))
-            ]
+            [center + s1 * h1 * u + s2 * h2 * v for s1, s2 in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
         )
         cp = project(apply(T, corners), kc)
         seg = np.column_stack([cp, np.roll(cp, -1, axis=0)])
@@ -308,13 +309,15 @@ class PlaneTrackOutputs:
         n, d = result.track_normal, result.track_d
         if pts.shape[0] < 3 or not np.isfinite(d):
             return
+        from robopercept.geometry import min_area_rectangle
+
         e1, e2 = _plane_basis(n)
-        a, b = pts @ e1, pts @ e2
-        lo1, hi1 = np.percentile(a, [1, 99])
-        lo2, hi2 = np.percentile(b, [1, 99])
-        self._extent = np.array(
-            [(lo1 + hi1) / 2, (lo2 + hi2) / 2, (hi1 - lo1) / 2, (hi2 - lo2) / 2]
-        )
+        xy = np.column_stack([pts @ e1, pts @ e2])
+        # the board's own rectangle (its sides, not the basis axes), without the 1 % of
+        # inliers farthest from the median (stray board-coloured points on the plane)
+        r = np.linalg.norm(xy - np.median(xy, axis=0), axis=1)
+        center, half, angle = min_area_rectangle(xy[r <= np.percentile(r, 99)])
+        self._extent = np.array([center[0], center[1], half[0], half[1], angle])
 
     def _csv_row(self, row: Iterable[object]) -> None:
         buf = io.StringIO()
