@@ -343,6 +343,8 @@ NO_PICTURE: dict[str, str] = {
     "`stereo --calib` reads; no picture.",
     "handeye": "writes a transform (JSON or ROS YAML) and prints residuals; no picture.",
     "warmup": "compiles the numba kernels once per install; no output.",
+    "batch": "runs another command's job over many inputs on a Dask cluster; its items "
+    "are the pictures of `cloud`, `edges`, `features` and `plane-track` above.",
     "learn predict": "writes one prediction per row (CSV) with a model saved by "
     "`learn classify --save`.",
     "nn train": "trains a classifier for minutes; its curves and confusion matrix are in "

@@ -498,6 +498,7 @@ def _argvs(p: dict[str, Path], out: Path) -> dict[str, list[str]]:
         "handeye (ros)": [*handeye, "-o", f"{o}/he.yaml", "--child-frame", "cam"],
         "warmup": ["warmup", "--only", "edges sobel", "--jobs", "1"],
         "warmup --list": ["warmup", "--list"],
+        "batch": ["batch", "edges", s["image"], "-o", f"{o}/batch", "--workers", "1"],
     }  # fmt: skip
 
 

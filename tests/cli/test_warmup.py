@@ -20,6 +20,7 @@ _INPUT_NAMES += ("board0", "board1", "board2")
 NO_WORKLOAD = {"info", "warmup", "plane-track", "synth-rgbd", "rgbd-import", "train-hog", "handeye"}
 NO_WORKLOAD |= {"nn"}  # torch networks: no numba kernel to compile (issue 23)
 NO_WORKLOAD |= {"stereo-calibrate"}  # the calibrate workload compiles its kernels
+NO_WORKLOAD |= {"batch"}  # runs the other commands' jobs: their workloads compile them
 
 
 def _commands() -> set[str]:

@@ -16,6 +16,7 @@ __all__ = ["packages", "register", "report", "report_dict"]
 # (module, pip name, extra that brings it, what it is for)
 _OPTIONAL = (
     ("torch", "torch", "deep", "CNNs, PointNet, DGCNN"),
+    ("distributed", "dask[distributed]", "scale", "robopercept batch on a Dask cluster"),
     ("pyrealsense2", "pyrealsense2", "realsense", "RealSense cameras and .bag recordings"),
     ("cv2", "opencv-contrib-python-headless", "dev", "reference for tests and benchmarks"),
     ("skimage", "scikit-image", "dev", "reference for tests"),

@@ -123,6 +123,7 @@ def _one_line_warning(
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every command (each command module's ``register``)."""
     from robopercept.cli import (
+        batch,
         bgsub,
         blobs,
         calibrate,
@@ -173,6 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
         stereo,
         calibrate,
         warmup,
+        batch,
     ):
         module.register(sub)
     return parser

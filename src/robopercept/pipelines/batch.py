@@ -1,0 +1,665 @@
+"""Batch jobs: one robopercept job over many inputs, on a Dask distributed cluster.
+
+:func:`run_batch` runs a job (``cloud``, ``edges``, ``features``, ``plane-track``)
+on every input, each as one Dask task that calls :func:`run_item`: the same library
+code a single-process run uses, writing the item's files into ``OUT/<item>/``. The
+scheduler is a :class:`distributed.LocalCluster` (``scheduler="local"``: ``workers``
+processes of one thread each) or an existing cluster (``scheduler="tcp://HOST:PORT"``,
+whose workers must see the inputs and ``OUT`` at the same paths: a shared file system).
+
+Tasks are submitted with ``retries`` (an item that raised runs again, up to
+``retries`` more times) and ``pure=False``; an item whose worker dies is rescheduled
+on another worker by Dask itself. Results are gathered as they finish
+(:func:`distributed.as_completed`), and after each one the manifest ``OUT/batch.json``
+is rewritten atomically (:func:`~robopercept.fileio.atomic_write`): one record per
+item with its ``status`` (``pending``, ``ok``, ``failed``, ``skipped``: done by an
+earlier run and resumed, ``cancelled``: pending when the batch was interrupted), its
+``seconds`` (the worker's time on it), ``error`` and ``outputs`` (paths relative to
+``OUT``). A failed item does not stop the batch. Inputs are only read.
+
+Wall time of a batch of :math:`n` items on :math:`w` workers, each item taking
+:math:`t` seconds, is about
+
+.. math::  T(n, w) \\approx T_0 + \\lceil n / w \\rceil \\, t + n \\, c
+
+with :math:`T_0` the cluster start-up (and the import of robopercept in each worker)
+and :math:`c` the per-item scheduling overhead (``docs/scale.md`` has measured values).
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import shutil
+import time
+import warnings
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from robopercept.errors import InputError
+from robopercept.fileio import atomic_write
+
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "JOBS",
+    "MANIFEST",
+    "BatchResult",
+    "find_inputs",
+    "item_names",
+    "read_manifest",
+    "run_batch",
+    "run_item",
+]
+
+#: the jobs :func:`run_batch` runs
+JOBS = ("cloud", "edges", "features", "plane-track")
+#: the manifest's file name inside ``OUT``
+MANIFEST = "batch.json"
+#: files an image job takes from a folder
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
+_CLOUD_SUFFIXES = (".pcd", ".ply")
+_OPTIONS: dict[str, tuple[str, ...]] = {
+    "cloud": ("voxel", "planes", "seed"),
+    "edges": ("method", "sigma"),
+    "features": ("detector", "max"),
+    "plane-track": ("max_frames",),
+}
+_DEFAULTS: dict[str, Any] = {
+    "voxel": None,
+    "planes": None,
+    "seed": 0,
+    "method": "canny",
+    "sigma": 1.0,
+    "detector": "harris",
+    "max": 500,
+    "max_frames": None,
+}
+
+
+def _check_job(job: str) -> str:
+    if job not in JOBS:
+        raise InputError(f"job must be one of {', '.join(JOBS)}; got {job!r}")
+    return job
+
+
+def _is_recording(path: Path) -> bool:
+    """A TUM-style recording folder (``rgb.txt`` and ``depth.txt``, as synth-rgbd
+    writes)."""
+    return (path / "rgb.txt").is_file() and (path / "depth.txt").is_file()
+
+
+def _matches(job: str, path: Path) -> bool:
+    if job == "plane-track":
+        return path.is_dir() and _is_recording(path)
+    suffixes = _CLOUD_SUFFIXES if job == "cloud" else IMAGE_SUFFIXES
+    return path.is_file() and path.suffix.lower() in suffixes
+
+
+def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path]:
+    """The inputs of ``job`` named by files, folders and glob patterns.
+
+    A file is taken as given; a folder gives its matching files (sorted, not
+    recursive): ``.pcd``/``.ply`` for ``cloud``, images (:data:`IMAGE_SUFFIXES`) for
+    ``edges`` and ``features``; for ``plane-track`` a recording folder (``rgb.txt``
+    and ``depth.txt``) is one input, and another folder gives its recording
+    sub-folders. A pattern with ``*``, ``?`` or ``[`` is expanded (sorted) and each
+    match treated as above. Duplicates are dropped, the first kept.
+
+    Parameters
+    ----------
+    job : str
+        One of :data:`JOBS`.
+    inputs : iterable of path or str
+
+    Returns
+    -------
+    list of Path
+
+    Raises
+    ------
+    InputError
+        An unknown job, an input that does not exist or matches nothing, or no input.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> for n in ("b.pcd", "a.ply", "notes.txt"):
+    ...     _ = (d / n).write_text("")
+    >>> [p.name for p in find_inputs("cloud", [d])]
+    ['a.ply', 'b.pcd']
+    """
+    _check_job(job)
+    found: list[Path] = []
+    for raw in inputs:
+        text = os.fspath(raw)
+        if any(c in text for c in "*?["):
+            paths = [Path(p) for p in sorted(glob.glob(text))]
+            if not paths:
+                raise InputError(f"{text}: the pattern matches no file: check the input")
+        else:
+            paths = [Path(text)]
+        for path in paths:
+            if not path.exists():
+                raise InputError(f"{path}: no such file or folder: check the input")
+            if path.is_dir() and not (job == "plane-track" and _is_recording(path)):
+                found += [p for p in sorted(path.iterdir()) if _matches(job, p)]
+            elif _matches(job, path) or (path.is_file() and job != "plane-track"):
+                found.append(path)  # a file named explicitly: the job judges it
+            else:
+                raise InputError(
+                    f"{path}: not a recording folder (rgb.txt and depth.txt) for "
+                    "plane-track: give recording folders or folders holding them"
+                )
+    unique = list(dict.fromkeys(found))
+    if not unique:
+        what = {"cloud": ".pcd/.ply files", "plane-track": "recording folders"}
+        raise InputError(
+            f"no input for {job}: expected {what.get(job, 'image files')}; got "
+            f"{', '.join(os.fspath(i) for i in inputs) or 'nothing'}"
+        )
+    return unique
+
+
+def item_names(paths: Sequence[str | os.PathLike[str]]) -> list[str]:
+    """One folder name per input: its file name without the suffix (a folder's name),
+    made unique with ``_2``, ``_3``, ... in the order given.
+
+    Parameters
+    ----------
+    paths : sequence of path or str
+
+    Returns
+    -------
+    list of str
+
+    Examples
+    --------
+    >>> item_names(["a/bun0.pcd", "b/bun0.pcd", "c/milk.ply", "rec/seq1"])
+    ['bun0', 'bun0_2', 'milk', 'seq1']
+    """
+    names: list[str] = []
+    taken: set[str] = set()
+    for p in paths:
+        path = Path(p)
+        base = (path.stem if path.suffix else path.name) or "item"
+        base = base.replace(os.sep, "_").lstrip(".") or "item"
+        name, k = base, 1
+        while name in taken or name == MANIFEST:
+            k += 1
+            name = f"{base}_{k}"
+        taken.add(name)
+        names.append(name)
+    return names
+
+
+def _options(job: str, options: Mapping[str, Any] | None) -> dict[str, Any]:
+    allowed = _OPTIONS[job]
+    opts = dict(options or {})
+    unknown = sorted(set(opts) - set(allowed))
+    if unknown:
+        raise InputError(
+            f"options {unknown} do not apply to {job}; it takes {', '.join(allowed) or 'none'}"
+        )
+    return {k: opts.get(k, _DEFAULTS[k]) for k in allowed}
+
+
+def _files(folder: Path, root: Path) -> list[str]:
+    return sorted(str(p.relative_to(root)) for p in folder.rglob("*") if p.is_file())
+
+
+def run_item(
+    job: str,
+    source: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    options: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Run ``job`` on one input, writing its files into ``out_dir`` (emptied first).
+
+    ``cloud``: :func:`~robopercept.pipelines.process_cloud` (options ``voxel``,
+    ``planes`` as ``(n, threshold)``, ``seed``), ``segments.ply`` (coloured by segment
+    with a ``label`` field when ``planes`` is given) and ``summary.json`` (the steps).
+    ``edges``: ``edges.png``, Canny (default thresholds 50 and 150 grey levels, scaled
+    for 16-bit images) or the Sobel magnitude (``method``, ``sigma``). ``features``:
+    :func:`~robopercept.features.harris_corners` (``detector`` ``harris`` or
+    ``shi-tomasi``, at most ``max``) into ``keypoints.json``. ``plane-track``:
+    :func:`~robopercept.pipelines.plane_outputs.run_plane_tracking` of the recording
+    (no video; ``max_frames``), its outputs and ``summary.json``.
+
+    Parameters
+    ----------
+    job : str
+        One of :data:`JOBS`.
+    source : path
+        The input file (a recording folder for ``plane-track``); only read.
+    out_dir : path
+        The item's folder; created, and emptied when it exists.
+    options : mapping, optional
+        The job's options named above.
+
+    Returns
+    -------
+    dict
+        ``outputs`` (file names in ``out_dir``, sorted) and ``summary`` (a small
+        JSON-able dict of the result).
+
+    Raises
+    ------
+    InputError
+        An unknown job or option.
+    FileFormatError, DegenerateError
+        From the job, for a file it cannot read or data it refuses.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from robopercept.imaging import sample_image_path
+    >>> out = Path(tempfile.mkdtemp()) / "sample"
+    >>> run_item("edges", sample_image_path(), out)["outputs"]
+    ['edges.png']
+    """
+    opts = _options(_check_job(job), options)
+    src, out = Path(source), Path(out_dir)
+    if out.exists():
+        shutil.rmtree(out)  # a rerun (a retry, a worker that died) starts clean
+    out.mkdir(parents=True)
+    summary = _RUNNERS[job](src, out, opts)
+    return {"outputs": _files(out, out), "summary": summary}
+
+
+def _run_cloud(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
+    import numpy as np
+
+    from robopercept.pipelines.cloud import process_cloud
+    from robopercept.pointcloud import read_point_cloud, write_point_cloud
+    from robopercept.viz.colormap import label_colors
+
+    res = process_cloud(
+        read_point_cloud(src), voxel=opts["voxel"], planes=opts["planes"], rng=opts["seed"]
+    )
+    cloud = res.cloud
+    if opts["planes"] is not None:  # as robopercept cloud: coloured by segment
+        colors = label_colors(res.segment, background=(128, 128, 128)) / 255.0
+        cloud = cloud.with_colors(colors.astype(np.float64)).with_labels(res.segment)
+    write_point_cloud(out / "segments.ply", cloud)
+    summary = {"points": len(cloud.points), "planes": [p["inliers"] for p in res.planes]}
+    atomic_write(out / "summary.json", json.dumps({**summary, "steps": res.steps}, indent=2))
+    return summary
+
+
+def _run_edges(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
+    import numpy as np
+
+    from robopercept.imaging import canny, gaussian_blur, gradient, read_image, write_image
+    from robopercept.imaging.edges import grey_level_scale
+
+    gray = read_image(src, mode="gray")
+    if opts["method"] == "canny":
+        scale = grey_level_scale(gray.dtype)
+        edges = canny(gray, 50.0 * scale, 150.0 * scale, sigma=opts["sigma"])
+        pic = edges.astype(np.uint8) * 255
+    elif opts["method"] == "sobel":
+        work = gaussian_blur(gray.astype(np.float32), opts["sigma"]) if opts["sigma"] else gray
+        mag, _ = gradient(work)
+        pic = np.round(mag / (float(mag.max()) or 1.0) * 255.0).astype(np.uint8)
+        edges = pic > 63
+    else:
+        raise InputError(f"method must be canny or sobel; got {opts['method']!r}")
+    write_image(out / "edges.png", pic)
+    return {"edge_pixels": int(edges.sum())}
+
+
+def _run_features(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
+    from robopercept.features import harris_corners
+    from robopercept.imaging import read_image
+
+    kp = harris_corners(
+        read_image(src, mode="gray"), method=opts["detector"], max_corners=opts["max"]
+    )
+    rows = [
+        {"x": float(x), "y": float(y), "response": float(r)}
+        for (x, y), r in zip(kp.xy, kp.response, strict=True)
+    ]
+    atomic_write(out / "keypoints.json", json.dumps(rows))
+    return {"keypoints": len(rows)}
+
+
+def _run_plane_track(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
+    from robopercept.pipelines.plane_outputs import run_plane_tracking
+    from robopercept.sources import TUMFolderSource
+
+    summary = run_plane_tracking(
+        TUMFolderSource(src), out, max_frames=opts["max_frames"], video=False, progress=False
+    )
+    if summary.frames == 0:
+        raise InputError(f"{src}: no frame was tracked ({summary.stopped or 'no readable frame'})")
+    return {"frames": summary.frames, "stopped": summary.stopped}
+
+
+_RUNNERS: dict[str, Callable[[Path, Path, dict[str, Any]], dict[str, Any]]] = {
+    "cloud": _run_cloud,
+    "edges": _run_edges,
+    "features": _run_features,
+    "plane-track": _run_plane_track,
+}
+
+
+def _task(
+    job: str, source: str, out_dir: str, options: dict[str, Any], delay: float
+) -> dict[str, Any]:
+    """What a worker runs for one item: :func:`run_item`, timed."""
+    t0 = time.perf_counter()
+    if delay > 0:
+        time.sleep(delay)
+    result = run_item(job, source, out_dir, options)
+    result["seconds"] = round(time.perf_counter() - t0, 4)
+    return result
+
+
+@dataclass
+class BatchResult:
+    """What :func:`run_batch` did.
+
+    Attributes
+    ----------
+    job : str
+    out : Path
+        The output folder; the manifest is ``out / "batch.json"``.
+    scheduler : str
+        ``"local"`` or the cluster's address.
+    workers : int
+        Workers the batch ran on.
+    seconds : float
+        Wall time, cluster start-up included.
+    items : list of dict
+        The manifest's records (``item``, ``input``, ``status``, ``seconds``,
+        ``error``, ``outputs``), in input order.
+    """
+
+    job: str
+    out: Path
+    scheduler: str
+    workers: int
+    seconds: float
+    items: list[dict[str, Any]] = field(default_factory=list)
+
+    def count(self, status: str) -> int:
+        """Items of ``status`` (``ok``, ``failed``, ``skipped``, ``cancelled``)."""
+        return sum(r["status"] == status for r in self.items)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON summary: the fields, counts per status and items per second."""
+        n = len(self.items)
+        return {
+            "job": self.job,
+            "out": str(self.out),
+            "manifest": str(self.out / MANIFEST),
+            "scheduler": self.scheduler,
+            "workers": self.workers,
+            "items": n,
+            **{s: self.count(s) for s in ("ok", "failed", "skipped", "cancelled")},
+            "seconds": round(self.seconds, 3),
+            "items_per_second": round(n / self.seconds, 4) if self.seconds > 0 else 0.0,
+            "results": self.items,
+        }
+
+
+def read_manifest(out: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The manifest ``OUT/batch.json`` of an earlier batch, or None when absent or
+    unreadable.
+
+    Parameters
+    ----------
+    out : path
+        The batch's output folder.
+
+    Returns
+    -------
+    dict or None
+        ``job``, ``options`` and ``items`` (one record per item).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> read_manifest(tempfile.mkdtemp()) is None
+    True
+    """
+    path = Path(out) / MANIFEST
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) and isinstance(data.get("items"), list) else None
+
+
+def _done(record: Mapping[str, Any], out: Path) -> bool:
+    """Finished in an earlier run, its outputs still there."""
+    if record.get("status") not in ("ok", "skipped"):
+        return False
+    outputs = record.get("outputs") or []
+    return bool(outputs) and all((out / o).is_file() for o in outputs)
+
+
+def _connect(scheduler: str, workers: int, connect_timeout: float) -> tuple[Any, Any]:
+    """``(client, cluster)``: a new LocalCluster (cluster not None) or a client of the
+    cluster at ``scheduler``."""
+    from distributed import Client, LocalCluster
+
+    if scheduler == "local":
+        with warnings.catch_warnings():  # its health-check HTTP server tries port 8787 first
+            warnings.filterwarnings("ignore", "Port .* is already in use", UserWarning)
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=40,  # logging.ERROR: the worker chatter stays off stderr
+            )
+        try:
+            return Client(cluster), cluster
+        except BaseException:
+            cluster.close()
+            raise
+    try:
+        return Client(scheduler, timeout=connect_timeout), None
+    except (OSError, TimeoutError) as exc:
+        raise InputError(
+            f"--scheduler {scheduler}: no Dask scheduler answered within {connect_timeout:g} s "
+            f"({type(exc).__name__}): start one (dask scheduler) and check the address, or "
+            "use --scheduler local"
+        ) from None
+
+
+def _error_text(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0]}" if text else type(exc).__name__
+
+
+def run_batch(
+    job: str,
+    inputs: Iterable[str | os.PathLike[str]],
+    out: str | os.PathLike[str],
+    *,
+    scheduler: str = "local",
+    workers: int = 2,
+    retries: int = 1,
+    resume: bool = False,
+    overwrite: bool = False,
+    connect_timeout: float = 10.0,
+    options: Mapping[str, Any] | None = None,
+    progress: bool = True,
+    delay: float = 0.0,
+) -> BatchResult:
+    """Run ``job`` on every input on a Dask cluster, each item's files in ``OUT/<item>/``.
+
+    Parameters
+    ----------
+    job : str
+        One of :data:`JOBS` (:func:`run_item` says what each writes).
+    inputs : iterable of path or str
+        Files, folders and glob patterns (:func:`find_inputs`); only read.
+    out : path
+        The output folder. One that exists and is not empty is refused unless
+        ``resume`` or ``overwrite``.
+    scheduler : str
+        ``"local"``: a :class:`distributed.LocalCluster` of ``workers`` processes with
+        one thread each, closed at the end; or the address of a running scheduler
+        (``tcp://HOST:PORT``), whose workers share the file system.
+    workers : int
+        Workers of the local cluster (ignored for an address).
+    retries : int
+        More runs of an item that raised (``client.submit(..., retries=)``).
+    resume : bool
+        Skip the items the manifest in ``out`` records as done whose outputs all
+        exist (their status becomes ``skipped``); run the others.
+    overwrite : bool
+        Run every item again (each item's folder is emptied before it runs).
+    connect_timeout : float
+        Seconds to wait for the scheduler at an address.
+    options : mapping, optional
+        The job's options (:func:`run_item`).
+    progress : bool
+        A progress bar on stderr with items per second.
+    delay : float
+        Seconds each item sleeps on its worker before it runs (to watch a batch, or to
+        test fault tolerance); 0 by default.
+
+    Returns
+    -------
+    BatchResult
+        Also in ``OUT/batch.json``, rewritten atomically after each finished item.
+
+    Raises
+    ------
+    InputError
+        A bad argument, no input, an ``out`` that exists (refused), or a scheduler
+        address that does not answer within ``connect_timeout``.
+    KeyboardInterrupt
+        Re-raised after the pending items are cancelled, the cluster closed and the
+        manifest written (the pending items ``cancelled``).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from robopercept.imaging import sample_image_path
+    >>> out = Path(tempfile.mkdtemp()) / "batch"
+    >>> res = run_batch("edges", [sample_image_path()], out, workers=1, progress=False)
+    >>> res.count("ok"), res.items[0]["outputs"]
+    (1, ['box/edges.png'])
+    """
+    from robopercept._checks import check_bool, check_int, check_real
+
+    _check_job(job)
+    workers = check_int(workers, "workers", 1)
+    retries = check_int(retries, "retries", 0)
+    connect_timeout = check_real(connect_timeout, "connect_timeout", 0.0)
+    delay = check_real(delay, "delay", 0.0)
+    resume = check_bool(resume, "resume")
+    overwrite = check_bool(overwrite, "overwrite")
+    if resume and overwrite:
+        raise InputError("resume and overwrite exclude each other: give one")
+    if not isinstance(scheduler, str) or not (scheduler == "local" or "://" in scheduler):
+        raise InputError(
+            f"scheduler must be 'local' or an address like tcp://HOST:PORT; got {scheduler!r}"
+        )
+    opts = _options(job, options)
+    paths = find_inputs(job, inputs)
+    out_path = Path(out)
+    if out_path.exists() and not out_path.is_dir():
+        raise InputError(f"{out_path}: exists and is not a folder: choose another output")
+    if out_path.is_dir() and any(out_path.iterdir()) and not (resume or overwrite):
+        raise InputError(
+            f"{out_path}: exists and is not empty: pass --resume to finish its batch or "
+            "--overwrite to run every item again (or choose another output)"
+        )
+    resolved_out = out_path.resolve()
+    for p in paths:
+        if p.resolve() == resolved_out or resolved_out in p.resolve().parents:
+            raise InputError(f"{p}: an input inside the output folder {out_path}: move one")
+    out_path.mkdir(parents=True, exist_ok=True)
+    previous = read_manifest(out_path) if resume else None
+    earlier = {
+        (r.get("item"), r.get("input")): r
+        for r in (previous or {}).get("items", [])
+        if previous and previous.get("job") == job and isinstance(r, dict)
+    }
+    records: list[dict[str, Any]] = []
+    for name, p in zip(item_names(paths), paths, strict=True):
+        old = earlier.get((name, str(p)))
+        if old is not None and _done(old, out_path):
+            records.append({**old, "status": "skipped"})
+        else:
+            records.append(
+                {
+                    "item": name,
+                    "input": str(p),
+                    "status": "pending",
+                    "seconds": None,
+                    "error": "",
+                    "outputs": [],
+                }
+            )
+    t0 = time.perf_counter()
+    result = BatchResult(job, out_path, scheduler, 0, 0.0, records)
+
+    def save() -> None:
+        result.seconds = time.perf_counter() - t0
+        doc = {"job": job, "options": opts, **result.to_dict()}
+        doc.pop("results")
+        doc["items"] = records
+        atomic_write(out_path / MANIFEST, json.dumps(doc, indent=2, default=str) + "\n")
+
+    todo = [i for i, r in enumerate(records) if r["status"] == "pending"]
+    save()
+    if not todo:
+        return result
+    from distributed import as_completed
+
+    from robopercept.progress import progress_bar
+
+    client, cluster = _connect(scheduler, workers, connect_timeout)
+    futures: dict[Any, int] = {}
+    bar = progress_bar(total=len(todo), unit="item", desc=f"batch {job}", disable=not progress)
+    try:
+        result.workers = len(client.scheduler_info().get("workers", {})) or workers
+        for i in todo:
+            r = records[i]
+            fut = client.submit(
+                _task, job, r["input"], str(out_path / r["item"]), opts, delay,
+                key=f"robopercept-{job}-{r['item']}-{os.urandom(4).hex()}",
+                retries=retries, pure=False,
+            )  # fmt: skip
+            futures[fut] = i
+        for fut in as_completed(list(futures)):
+            r = records[futures[fut]]
+            if fut.status == "finished":
+                value = fut.result()
+                r.update(status="ok", seconds=value["seconds"], error="")
+                r["outputs"] = [f"{r['item']}/{o}" for o in value["outputs"]]
+                r["summary"] = value["summary"]
+            else:
+                exc = fut.exception()
+                r.update(status="failed", error=_error_text(exc), outputs=[])
+            save()
+            bar.update(1)
+            bar.set_postfix(failed=result.count("failed"))
+    except BaseException:
+        for fut, i in futures.items():
+            if records[i]["status"] == "pending":
+                fut.cancel()
+                records[i]["status"] = "cancelled"
+        for r in records:
+            if r["status"] == "pending":
+                r["status"] = "cancelled"
+        save()
+        raise
+    finally:
+        bar.close()
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    save()
+    return result

@@ -1,0 +1,264 @@
+"""``pipelines.batch``: batch jobs on a real Dask cluster (a ``dask scheduler`` and
+``dask worker`` processes on 127.0.0.1) and on a LocalCluster, on real point clouds
+and images from ../shared/data."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from robopercept.errors import InputError
+from robopercept.pipelines.batch import find_inputs, item_names, read_manifest, run_batch, run_item
+from tests.conftest import data_path
+
+pytest.importorskip("distributed")
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+BIN = Path(sys.executable).parent
+CLOUDS = ("bun0.pcd", "bun4.pcd", "milk.pcd")
+IMAGES = ("box.png", "box_in_scene.png")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Cluster:
+    """A scheduler and ``n`` workers as subprocesses, each in its own process group."""
+
+    def __init__(self, n: int) -> None:
+        self.address = f"tcp://127.0.0.1:{_free_port()}"
+        env = {**os.environ, "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+        common = {"env": env, "start_new_session": True, "stdout": subprocess.DEVNULL,
+                  "stderr": subprocess.DEVNULL}  # fmt: skip
+        port = self.address.rsplit(":", 1)[1]
+        dask = str(BIN / "dask")
+        scheduler = [dask, "scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"]
+        worker = [dask, "worker", self.address, "--nthreads", "1", "--nworkers", "1",
+                  "--no-dashboard", "--host", "127.0.0.1"]  # fmt: skip
+        self.procs: list[subprocess.Popen] = []
+        self.workers: list[subprocess.Popen] = []
+        try:
+            self.procs.append(subprocess.Popen(scheduler, **common))
+            for _ in range(n):
+                self.workers.append(subprocess.Popen(worker, **common))
+                self.procs.append(self.workers[-1])
+            from distributed import Client
+
+            with Client(self.address, timeout=120) as client:  # generous: a loaded machine
+                client.wait_for_workers(n, timeout=180)
+        except BaseException:
+            self.close()
+            raise
+
+    def kill(self, proc: subprocess.Popen) -> None:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)  # the nanny and its worker
+        proc.wait(timeout=30)
+
+    def close(self) -> None:
+        for p in reversed(self.procs):
+            try:
+                self.kill(p)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                pass
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[Cluster]:
+    c = None
+    try:
+        c = Cluster(2)
+        yield c
+    finally:
+        if c is not None:
+            c.close()
+
+
+def _clouds() -> list[Path]:
+    return [data_path("pointcloud", "pcl", n) for n in CLOUDS]
+
+
+def _images() -> list[Path]:
+    return [data_path("features", "opencv_box", n) for n in IMAGES]
+
+
+def _same_outputs(job: str, res, inputs, options, tmp: Path) -> None:
+    """Each item's files equal those of run_item in this process, byte for byte
+    (``summary.json`` holds timings: its numbers but the ``ms`` are compared)."""
+    for rec, src in zip(res.items, inputs, strict=True):
+        assert rec["status"] == "ok", rec
+        ref = run_item(job, src, tmp / "ref" / rec["item"], options)
+        assert rec["outputs"] == [f"{rec['item']}/{o}" for o in ref["outputs"]]
+        for name in ref["outputs"]:
+            got = (res.out / rec["item"] / name).read_bytes()
+            want = (tmp / "ref" / rec["item"] / name).read_bytes()
+            if name == "summary.json":
+                got_d, want_d = json.loads(got), json.loads(want)
+                assert got_d["points"] == want_d["points"] and got_d["planes"] == want_d["planes"]
+            else:
+                assert got == want, name
+
+
+@pytest.mark.realdata
+def test_cluster_by_address_equals_single_process(cluster, tmp_path) -> None:
+    clouds, images = _clouds(), _images()
+    opts = {"voxel": 0.005, "planes": (1, 0.01)}
+    res = run_batch("cloud", clouds, tmp_path / "c", scheduler=cluster.address, options=opts,
+                    progress=False)  # fmt: skip
+    assert res.workers == 2 and res.count("ok") == len(CLOUDS)
+    _same_outputs("cloud", res, clouds, opts, tmp_path / "rc")
+    for job in ("edges", "features"):
+        res = run_batch(job, images, tmp_path / job, scheduler=cluster.address, progress=False)
+        _same_outputs(job, res, images, {}, tmp_path / f"r{job}")
+    manifest = read_manifest(tmp_path / "features")
+    assert [r["item"] for r in manifest["items"]] == ["box", "box_in_scene"]
+    assert all(r["seconds"] >= 0 and r["error"] == "" for r in manifest["items"])
+
+
+@pytest.mark.realdata
+def test_failed_item_is_recorded_and_the_batch_goes_on(cluster, tmp_path) -> None:
+    bad = tmp_path / "in" / "broken.pcd"
+    bad.parent.mkdir()
+    bad.write_bytes(b"# .PCD v0.7\nFIELDS x y z\nSIZE 4 4\nnonsense\n")
+    good = _clouds()[1]
+    res = run_batch("cloud", [bad, good], tmp_path / "o", scheduler=cluster.address,
+                    retries=1, progress=False)  # fmt: skip
+    by = {r["item"]: r for r in res.items}
+    assert by["broken"]["status"] == "failed" and by["bun4"]["status"] == "ok"
+    assert "FileFormatError" in by["broken"]["error"] and by["broken"]["outputs"] == []
+    assert read_manifest(tmp_path / "o")["items"] == res.items
+    assert bad.read_bytes().endswith(b"nonsense\n")  # inputs untouched
+
+
+@pytest.mark.realdata
+def test_existing_output_refused_then_resumed(cluster, tmp_path) -> None:
+    images, out = _images(), tmp_path / "o"
+    first = run_batch("edges", images, out, scheduler=cluster.address, progress=False)
+    assert first.count("ok") == 2
+    with pytest.raises(InputError, match=r"--resume.*--overwrite"):
+        run_batch("edges", images, out, scheduler=cluster.address, progress=False)
+    again = run_batch("edges", images, out, scheduler=cluster.address, resume=True,
+                      progress=False)  # fmt: skip
+    assert [r["status"] for r in again.items] == ["skipped", "skipped"]
+    (out / "box" / "edges.png").unlink()  # an item whose output went missing runs again
+    again = run_batch("edges", images, out, scheduler=cluster.address, resume=True,
+                      progress=False)  # fmt: skip
+    assert [r["status"] for r in again.items] == ["ok", "skipped"]
+    assert (out / "box" / "edges.png").is_file()
+    redo = run_batch("edges", images, out, scheduler=cluster.address, overwrite=True,
+                     progress=False)  # fmt: skip
+    assert redo.count("ok") == 2
+
+
+def test_unreachable_scheduler_is_a_clear_error(tmp_path) -> None:
+    img = tmp_path / "a.png"
+    from robopercept.imaging import sample_image_path
+
+    shutil.copy(sample_image_path(), img)
+    address = f"tcp://127.0.0.1:{_free_port()}"  # nobody listens there
+    with pytest.raises(InputError, match=rf"--scheduler {address}: no Dask scheduler.*1 s"):
+        run_batch("edges", [img], tmp_path / "o", scheduler=address, connect_timeout=1.0,
+                  progress=False)  # fmt: skip
+
+
+@pytest.mark.realdata
+def test_killed_worker_items_are_rescheduled(tmp_path) -> None:
+    src = _images()[0]
+    inputs = []
+    for i in range(6):
+        inputs.append(tmp_path / "in" / f"img{i}.png")
+        inputs[-1].parent.mkdir(exist_ok=True)
+        shutil.copy(src, inputs[-1])
+    out = tmp_path / "o"
+    c = None
+    try:
+        c = Cluster(2)
+        box: dict[str, object] = {}
+
+        def work() -> None:
+            try:
+                box["res"] = run_batch("edges", inputs, out, scheduler=c.address, retries=0,
+                                       delay=1.5, progress=False)  # fmt: skip
+            except BaseException as exc:  # reported below
+                box["exc"] = exc
+
+        t = threading.Thread(target=work)
+        t.start()
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # both workers busy: the items are running
+            m = read_manifest(out)
+            if m and any(r["status"] == "ok" for r in m["items"]):
+                break
+            time.sleep(0.1)
+        c.kill(c.workers[0])  # SIGKILL mid-batch: its running item moves to the other
+        t.join(timeout=240)
+        assert not t.is_alive() and "exc" not in box, box.get("exc")
+        res = box["res"]
+        assert [r["status"] for r in res.items] == ["ok"] * 6
+        manifest = read_manifest(out)
+        assert len(manifest["items"]) == 6 and manifest["ok"] == 6
+        assert all((out / f"img{i}" / "edges.png").is_file() for i in range(6))
+    finally:
+        if c is not None:
+            c.close()
+
+
+@pytest.mark.realdata
+def test_local_cluster_two_workers(tmp_path) -> None:
+    clouds = _clouds()[:2]
+    res = run_batch("cloud", clouds, tmp_path / "o", workers=2, options={"voxel": 0.01},
+                    progress=False)  # fmt: skip
+    assert res.scheduler == "local" and res.workers == 2 and res.count("ok") == 2
+    _same_outputs("cloud", res, clouds, {"voxel": 0.01}, tmp_path)
+
+
+def test_inputs_and_names(tmp_path) -> None:
+    for n in ("a.pcd", "b.PLY", "c.txt"):
+        (tmp_path / n).write_text("")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "a.pcd").write_text("")
+    found = find_inputs("cloud", [tmp_path, str(tmp_path / "sub" / "*.pcd"), tmp_path / "a.pcd"])
+    assert [p.name for p in found] == ["a.pcd", "b.PLY", "a.pcd"]
+    assert item_names(found) == ["a", "b", "a_2"]
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="no input for cloud"):
+        find_inputs("cloud", [tmp_path / "empty"])
+    with pytest.raises(InputError, match="matches no file"):
+        find_inputs("cloud", [str(tmp_path / "nothing*.pcd")])
+    with pytest.raises(InputError, match="no such file"):
+        find_inputs("edges", [tmp_path / "missing.png"])
+    with pytest.raises(InputError, match="job must be one of"):
+        find_inputs("stereo", [tmp_path])
+    with pytest.raises(InputError, match="not a recording folder"):
+        find_inputs("plane-track", [tmp_path / "a.pcd"])
+    with pytest.raises(InputError, match="do not apply to edges"):
+        run_batch("edges", [tmp_path / "a.pcd"], tmp_path / "o", options={"voxel": 0.1})
+    with pytest.raises(InputError, match="scheduler must be 'local'"):
+        run_batch("cloud", [tmp_path / "a.pcd"], tmp_path / "o", scheduler="127.0.0.1:8786")
+
+
+def test_plane_track_item_equals_run_plane_tracking(tmp_path) -> None:
+    from robopercept.pipelines.plane_outputs import run_plane_tracking
+    from robopercept.sources import SyntheticRGBDScene, TUMFolderSource, write_tum_folder
+
+    rec = write_tum_folder(tmp_path / "rec1", SyntheticRGBDScene(n_frames=3, seed=1))
+    assert find_inputs("plane-track", [tmp_path]) == [rec]
+    got = run_item("plane-track", rec, tmp_path / "o" / "rec1")
+    want = run_plane_tracking(TUMFolderSource(rec), tmp_path / "ref", video=False,
+                              progress=False)  # fmt: skip
+    assert got["summary"]["frames"] == want.frames == 3
+    assert got["outputs"] == sorted(want.outputs) or set(want.outputs) <= set(got["outputs"])
