@@ -3268,3 +3268,20 @@ VALID.update(
         }
     }
 )
+
+# -- nn.distributed (issue 31): DDP training on several processes ----------------------
+VALID.update(
+    {
+        "nn.distributed.free_port": {"host": "127.0.0.1"},
+        "nn.distributed.torchrun_env": {"environ": {}},
+    }
+)
+SKIP.update(
+    {
+        "nn.distributed.run_ranks": "starts processes joined in a process group (seconds "
+        "per call); its argument checks and a failing rank are tested in "
+        "tests/nn/test_distributed.py",
+        "nn.distributed.train_ddp": "trains a network on several processes (tens of seconds "
+        "per call); its checks are tested in tests/nn/test_distributed.py",
+    }
+)

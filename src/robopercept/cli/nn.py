@@ -95,6 +95,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="train,validation,test shares (default 0.7,0.15,0.15)",
     )
     t.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")
+    t.add_argument(
+        "--nproc",
+        type=positive_int,
+        default=1,
+        help="processes (DistributedDataParallel; --batch-size is the global batch, "
+        "a multiple of N; default 1)",
+    )
     t.add_argument("--resume", action="store_true", help="continue the run in --out")
     t.add_argument("--overwrite", action="store_true", help="replace a run already in --out")
     t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
@@ -169,6 +176,11 @@ def run_train(args: argparse.Namespace) -> int:
 
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
+    if args.batch_size % args.nproc:
+        raise UsageError(
+            f"--batch-size {args.batch_size} (the global batch) must be a multiple of "
+            f"--nproc {args.nproc}"
+        )
     cfg = TrainConfig(
         epochs=args.epochs,
         batch_size=args.batch_size,
@@ -179,19 +191,27 @@ def run_train(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device,
     )
-    res = train_run(
-        args.data,
-        args.model,
-        args.out,
-        config=cfg,
-        mode="gray" if args.gray else "rgb",
-        size=args.size,
-        fractions=args.split,
-        augment=args.augment,
-        resume=args.resume,
-        overwrite=args.overwrite,
-        progress=not (args.quiet or args.json),
-    )
+    kwargs: dict[str, Any] = {
+        "config": cfg,
+        "mode": "gray" if args.gray else "rgb",
+        "size": args.size,
+        "fractions": args.split,
+        "augment": args.augment,
+        "resume": args.resume,
+        "overwrite": args.overwrite,
+        "progress": not (args.quiet or args.json),
+    }
+    rank = 0
+    if args.nproc > 1 or _torchrun_rank() is not None:  # DDP (nn.distributed)
+        from robopercept.nn.distributed import torchrun_env, train_ddp
+
+        env = torchrun_env()
+        rank = 0 if env is None else env[0]
+        res = train_ddp(args.data, args.model, args.out, nproc=args.nproc, **kwargs)
+    else:
+        res = train_run(args.data, args.model, args.out, **kwargs)
+    if rank != 0:  # under torchrun: rank 0 prints
+        return 0
     if args.json:
         print(json.dumps(json.loads(res.files["metrics"].read_text())))
         return 0
@@ -206,6 +226,14 @@ def run_train(args: argparse.Namespace) -> int:
     for name, path in res.files.items():
         print(f"  {name:<10} {path}")
     return 0
+
+
+def _torchrun_rank() -> str | None:
+    """``RANK`` when torchrun started this process (its variables set), else None."""
+    import os
+
+    names = ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")
+    return os.environ["RANK"] if all(n in os.environ for n in names) else None
 
 
 def run_eval(args: argparse.Namespace) -> int:

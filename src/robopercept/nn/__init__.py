@@ -42,6 +42,7 @@ _SUBMODULES = (
     "dgcnn",
     "cloud_data",
     "cloud",
+    "distributed",
 )
 
 __all__ = list(_SUBMODULES)

@@ -354,6 +354,7 @@ def train_run(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool = True,
+    distributed: bool = False,
 ) -> TrainResult:
     """Train ``model`` on ``data`` and write the run folder ``out_dir`` (module docstring).
 
@@ -392,6 +393,12 @@ def train_run(
         Start afresh in a folder that already holds a run (refused otherwise).
     progress : bool
         A progress bar on stderr.
+    distributed : bool
+        This process is one rank of a DistributedDataParallel run (an initialized
+        ``torch.distributed`` process group; :func:`robopercept.nn.distributed.train_ddp`
+        sets it up): :func:`fit` trains with ``distributed=True``; rank 0 alone evaluates
+        the test split and writes the run folder, then sends the result to the other
+        ranks, which wait for it (every rank returns the same :class:`TrainResult`).
 
     Returns
     -------
@@ -457,12 +464,62 @@ def train_run(
             resume=resume,
             architecture=arch.to_json(),
             progress=progress,
+            distributed=distributed,
         )
     except KeyboardInterrupt:  # keep what the last complete epoch left: history.csv too
-        if ckpt.exists():
+        if ckpt.exists() and _rank(distributed) == 0:
             History.from_dict(load_checkpoint(ckpt)["history"]).write_csv(out / "history.csv")
         raise
     seconds = time.perf_counter() - t0
+    if distributed:  # rank 0 evaluates and writes; the others receive its result
+        import torch.distributed as dist
+
+        box: list[Any] = [None]
+        if dist.get_rank() == 0:
+            box[0] = _finish_run(
+                net,
+                hist,
+                test,
+                seconds,
+                out,
+                arch,
+                data,
+                cfg,
+                mean,
+                std,
+                augment,
+                (len(train), len(val)),
+            )
+        dist.broadcast_object_list(box, src=0)
+        return cast(TrainResult, box[0])
+    return _finish_run(
+        net, hist, test, seconds, out, arch, data, cfg, mean, std, augment, (len(train), len(val))
+    )
+
+
+def _rank(distributed: bool) -> int:
+    if not distributed:
+        return 0
+    import torch.distributed as dist
+
+    return dist.get_rank()
+
+
+def _finish_run(
+    net: nn.Module,
+    hist: History,
+    test: ArrayDataset,
+    seconds: float,
+    out: Path,
+    arch: Architecture,
+    data: str | os.PathLike[str],
+    cfg: TrainConfig,
+    mean: np.ndarray,
+    std: np.ndarray,
+    augment: bool,
+    sizes: tuple[int, int],
+) -> TrainResult:
+    """Evaluate the best weights on the test split and write the run folder."""
     test_ev = _run_evaluation(net, test, cfg.device)
     files = _write_run(out, hist, test_ev)
     metrics = {
@@ -474,7 +531,7 @@ def train_run(
         "best_epoch": hist.best_epoch,
         "epochs_run": len(hist.epoch),
         "stopped": hist.stopped,
-        "split": {"train": len(train), "validation": len(val), "test": len(test)},
+        "split": {"train": sizes[0], "validation": sizes[1], "test": len(test)},
         "normalization": {"mean": np.asarray(mean).tolist(), "std": np.asarray(std).tolist()},
         "augment": augment,
         "config": asdict(cfg),

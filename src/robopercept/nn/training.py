@@ -902,6 +902,46 @@ def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None
     return state
 
 
+def _ranks(cfg: TrainConfig) -> tuple[int, int]:
+    """(rank, world size) of the initialized process group; the batch size checked."""
+    import torch.distributed as dist
+
+    if not (dist.is_available() and dist.is_initialized()):
+        raise InputError(
+            "distributed=True needs an initialized torch.distributed process group: run "
+            "through robopercept.nn.distributed (nn train --nproc N, or torchrun)"
+        )
+    rank, world = dist.get_rank(), dist.get_world_size()
+    if cfg.unfreeze_at:
+        raise InputError(
+            "unfreeze_at is not supported with distributed=True (DistributedDataParallel "
+            "fixes the trainable parameters when it wraps the model): train on one process"
+        )
+    if cfg.batch_size % world:
+        raise InputError(
+            f"--batch-size {cfg.batch_size} is the global batch; it must be a multiple of the "
+            f"{world} processes (--nproc): choose e.g. --batch-size "
+            f"{max(world, cfg.batch_size - cfg.batch_size % world)}"
+        )
+    return rank, world
+
+
+def _sum_over_ranks(values: list[float], dev: torch.device) -> list[float]:
+    import torch.distributed as dist
+
+    t = torch.tensor(values, dtype=torch.float64, device=dev)
+    dist.all_reduce(t)
+    return [float(v) for v in t.cpu()]
+
+
+def _from_rank0(values: list[float], dev: torch.device) -> list[float]:
+    import torch.distributed as dist
+
+    t = torch.tensor(values, dtype=torch.float64, device=dev)
+    dist.broadcast(t, 0)
+    return [float(v) for v in t.cpu()]
+
+
 def fit(
     model: nn.Module,
     train: Dataset[Any],
@@ -912,6 +952,7 @@ def fit(
     resume: bool = False,
     architecture: str = "",
     progress: bool = True,
+    distributed: bool = False,
 ) -> History:
     """Train ``model`` on ``train`` (items ``(image (C, H, W), label)``), validating on
     ``val`` after each epoch; return the :class:`History`.
@@ -933,6 +974,17 @@ def fit(
         Recorded in the checkpoint (named when loading into the wrong model).
     progress : bool
         A bar per epoch on stderr (:func:`robopercept.progress.progress_bar`).
+    distributed : bool
+        This process is one rank of a data-parallel run (a ``torch.distributed`` process
+        group is initialized; :mod:`robopercept.nn.distributed` sets it up): the model is
+        wrapped in :class:`~torch.nn.parallel.DistributedDataParallel` (gradients
+        averaged over the ranks), each rank draws its shard of the training set through
+        a :class:`~torch.utils.data.DistributedSampler` (shuffled with ``config.seed``,
+        ``set_epoch`` every epoch) in batches of ``batch_size / world_size``, so the
+        global batch and the learning rate are those of one process; the training
+        figures are summed over the ranks, rank 0 validates and sends its figures to the
+        others (one early-stopping decision), and only rank 0 writes checkpoints and
+        shows the progress bar. False (the default): the single-process loop, unchanged.
 
     Returns
     -------
@@ -942,7 +994,8 @@ def fit(
     ------
     InputError
         Empty dataset, images not (C, H, W), labels out of range, or a loss that became
-        NaN or infinite (lower the learning rate).
+        NaN or infinite (lower the learning rate); ``distributed`` without a process
+        group, or a batch size that the number of processes does not divide.
     """
     from robopercept.progress import progress_bar
 
@@ -962,8 +1015,11 @@ def fit(
         raise InputError(f"architecture must be a str; got {architecture!r}")
     if resume and checkpoint is None:
         raise InputError("resume needs the checkpoint to resume from")
+    distributed = check_bool(distributed, "distributed")
+    rank, world = _ranks(cfg) if distributed else (0, 1)
     dev = resolve_device(cfg.device)
-    torch.manual_seed(cfg.seed)
+    # one process and rank 0 draw as before; the other ranks' dropout differs from rank 0's
+    torch.manual_seed(cfg.seed if rank == 0 else (cfg.seed + rank) % 2**64)
     model.to(dev)
     x0, _ = train[0]
     if torch.as_tensor(x0).ndim != 3:
@@ -973,7 +1029,22 @@ def fit(
         )
     n_classes = _n_outputs(model, torch.as_tensor(x0)[None].float(), dev)
     shuffle = torch.Generator().manual_seed(cfg.seed)
-    loader = DataLoader(train, batch_size=cfg.batch_size, shuffle=True, generator=shuffle)
+    sampler: Any = None
+    net: nn.Module = model  # what runs forward and backward: the model or its DDP wrapper
+    if distributed:
+        from torch.nn.parallel import DistributedDataParallel
+        from torch.utils.data import DistributedSampler
+
+        sampler = DistributedSampler(
+            train, num_replicas=world, rank=rank, shuffle=True, seed=cfg.seed
+        )
+        loader = DataLoader(train, batch_size=cfg.batch_size // world, sampler=sampler)
+        net = DistributedDataParallel(
+            model, device_ids=[dev.index] if dev.type == "cuda" and dev.index is not None else None
+        )
+        progress = progress and rank == 0
+    else:
+        loader = DataLoader(train, batch_size=cfg.batch_size, shuffle=True, generator=shuffle)
     opt = _optimizer(model, cfg)
     sched = _scheduler(opt, cfg, len(loader))
     hist = History()
@@ -1011,13 +1082,15 @@ def fit(
                         if name.startswith(prefix):
                             param.requires_grad_(True)
                 model.train()
+                if sampler is not None:
+                    sampler.set_epoch(epoch)
                 lr = float(opt.param_groups[0]["lr"])
                 total, correct, count = 0.0, 0, 0
                 for b, (x, y) in enumerate(loader):
                     x, y = x.to(dev, torch.float32), y.to(dev, torch.long)
                     _check_batch(x, y, n_classes)
                     with _autocast(dev, cfg.amp):
-                        logits = model(x)
+                        logits = net(x)
                         loss = nn.functional.cross_entropy(logits.float(), y)
                     if not torch.isfinite(loss):
                         raise InputError(
@@ -1036,10 +1109,24 @@ def fit(
                     count += len(y)
                 if cfg.schedule != "onecycle":
                     sched.step()
+                if distributed:
+                    summed = _sum_over_ranks([total, correct, count], dev)
+                    total, correct, count = summed[0], round(summed[1]), round(summed[2])
                 hist.epoch.append(epoch + 1)
                 hist.train_loss.append(total / count)
                 hist.train_accuracy.append(correct / count)
-                if val is not None:
+                if val is not None and distributed:
+                    figures = [math.nan, math.nan]
+                    if rank == 0:
+                        ev = evaluate(
+                            model, val, batch_size=max(cfg.batch_size, 256), device=str(dev)
+                        )
+                        figures = [ev.loss, ev.accuracy]
+                    val_loss, val_acc = _from_rank0(figures, dev)
+                    hist.val_loss.append(val_loss)
+                    hist.val_accuracy.append(val_acc)
+                    value = sign * (val_acc if sign < 0 else val_loss)
+                elif val is not None:
                     ev = evaluate(model, val, batch_size=max(cfg.batch_size, 256), device=str(dev))
                     hist.val_loss.append(ev.loss)
                     hist.val_accuracy.append(ev.accuracy)
@@ -1054,11 +1141,11 @@ def fit(
                     best_value = value
                     hist.best_epoch = epoch + 1
                     best_state = copy.deepcopy(model.state_dict())
-                    if best_path is not None:
+                    if best_path is not None and rank == 0:
                         save_checkpoint(
                             best_path, {"model": best_state, "architecture": architecture}
                         )
-                if ckpt is not None:
+                if ckpt is not None and rank == 0:
                     save_checkpoint(
                         ckpt,
                         {
