@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
 import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +18,19 @@ from robopercept.cli.main import main
 from robopercept.imaging import sample_image_path
 
 pytest.importorskip("distributed")
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+# The CLI has no per-item delay flag: this runs `robopercept batch` (main) with
+# run_batch's ``delay`` set, so the batch is slow enough to be interrupted mid-way
+# (the guard: Dask's worker processes are spawned and import this script again).
+_SLOW_CLI = """
+import functools, sys
+if __name__ == "__main__":
+    import robopercept.pipelines.batch as b
+    b.run_batch = functools.partial(b.run_batch, delay=float(sys.argv[1]))
+    from robopercept.cli.main import main
+    sys.exit(main(sys.argv[2:]))
+"""
 
 
 def _images(tmp_path):
@@ -51,6 +70,9 @@ def test_every_item_failed_exits_1(tmp_path, capsys) -> None:
         (["--scheduler", "somewhere:8786"], "--scheduler must be 'local' or tcp://"),
         (["--voxel", "0.1"], "--voxel does not apply to the edges job"),
         (["--retries", "-1"], "--retries must be >= 0"),
+        (["--model", "nowhere.pt"], "--model must be pointnet or dgcnn or a model.pt file"),
+        (["--points", "0"], "argument --points: must be >= 1"),
+        (["--points", "64"], "--points does not apply to the edges job"),
         (["--resume", "--overwrite"], "not allowed with argument"),
     ],
 )
@@ -58,6 +80,25 @@ def test_bad_flags(tmp_path, capsys, extra, message) -> None:
     argv = ["batch", "edges", str(sample_image_path()), "-o", str(tmp_path / "o"), *extra]
     assert main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+def test_nn_cloud_flags_reach_run_batch(tmp_path, monkeypatch, capsys) -> None:
+    import robopercept.pipelines.batch as batch
+
+    seen: dict[str, object] = {}
+
+    def fake(job, inputs, out, **kw):
+        seen.update(job=job, **kw)
+        return batch.BatchResult(job, Path(out), "local", 1, 1.0, [])
+
+    monkeypatch.setattr(batch, "run_batch", fake)
+    cloud = tmp_path / "a.off"
+    cloud.write_text("OFF\n")
+    argv = ["batch", "nn-cloud", str(cloud), "-o", str(tmp_path / "o"), "--model", "dgcnn",
+            "--points", "256", "--json"]  # fmt: skip
+    assert main(argv) == 0
+    assert seen["job"] == "nn-cloud" and seen["options"] == {"model": "dgcnn", "points": 256}
+    assert json.loads(capsys.readouterr().out)["job"] == "nn-cloud"
 
 
 def test_unreachable_scheduler(tmp_path, capsys) -> None:
@@ -70,3 +111,69 @@ def test_unreachable_scheduler(tmp_path, capsys) -> None:
     assert f"--scheduler tcp://127.0.0.1:{port}: no Dask scheduler answered" in (
         capsys.readouterr().err
     )
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - a reused id of someone else's group
+        return True
+    return True
+
+
+def test_ctrl_c_cancels_then_resume_finishes(tmp_path, capsys) -> None:
+    d, out = tmp_path / "in", tmp_path / "out"
+    d.mkdir()
+    names = [f"img{i}" for i in range(6)]
+    for n in names:
+        shutil.copy(sample_image_path(), d / f"{n}.png")
+    script = tmp_path / "slow_cli.py"
+    script.write_text(_SLOW_CLI)
+    env = {**os.environ, "PYTHONPATH": f"{SRC}{os.pathsep}{os.environ.get('PYTHONPATH', '')}",
+           "OMP_NUM_THREADS": "1"}  # fmt: skip
+    argv = ["batch", "edges", str(d), "-o", str(out), "--workers", "1", "--quiet"]
+    child = subprocess.Popen(
+        [sys.executable, str(script), "2.0", *argv], env=env, start_new_session=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 180  # generous: a loaded machine starts dask slowly
+        manifest = None
+        while time.monotonic() < deadline and child.poll() is None:
+            manifest = json.loads((out / "batch.json").read_text()) if (
+                out / "batch.json").is_file() else None  # fmt: skip
+            if manifest and any(r["status"] == "ok" for r in manifest["items"]):
+                break
+            time.sleep(0.1)
+        assert child.poll() is None, child.communicate()
+        assert manifest and manifest["ok"] >= 1, "no item finished in time"
+        child.send_signal(signal.SIGINT)  # Ctrl-C to the command (not to its workers)
+        _, err = child.communicate(timeout=120)
+        assert child.returncode == 130, err
+        assert "robopercept: interrupted" in err
+        deadline = time.monotonic() + 60  # the LocalCluster's workers go with it
+        while _group_alive(child.pid) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not _group_alive(child.pid), "processes of the batch were left behind"
+    finally:
+        if child.poll() is None or _group_alive(child.pid):
+            try:
+                os.killpg(child.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        child.wait(timeout=30)
+    got = json.loads((out / "batch.json").read_text())  # valid JSON, every item in it
+    assert [r["item"] for r in got["items"]] == names
+    statuses = [r["status"] for r in got["items"]]
+    assert set(statuses) <= {"ok", "cancelled"} and "cancelled" in statuses, statuses
+    for r in got["items"]:
+        if r["status"] == "ok":
+            assert (out / r["outputs"][0]).is_file()
+    assert got["ok"] == statuses.count("ok") and got["cancelled"] == statuses.count("cancelled")
+    assert main([*argv, "--resume", "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["ok"] == statuses.count("cancelled")
+    assert again["skipped"] == statuses.count("ok")
+    assert all((out / n / "edges.png").is_file() for n in names)

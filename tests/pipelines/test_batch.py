@@ -262,3 +262,29 @@ def test_plane_track_item_equals_run_plane_tracking(tmp_path) -> None:
                               progress=False)  # fmt: skip
     assert got["summary"]["frames"] == want.frames == 3
     assert got["outputs"] == sorted(want.outputs) or set(want.outputs) <= set(got["outputs"])
+
+
+@pytest.mark.realdata
+def test_nn_cloud_equals_classify_cloud_file(tmp_path) -> None:
+    pytest.importorskip("torch")
+    from robopercept.nn.cloud import classify_cloud_file, load_cloud_model, shipped_cloud_model
+
+    clouds = [
+        data_path("pointcloud_cls", "ModelNet40", "monitor", "test", "monitor_0466.off"),
+        data_path("pointcloud_cls", "ModelNet10", "sofa", "test", "sofa_0681.off"),
+    ]
+    res = run_batch("nn-cloud", clouds, tmp_path / "o", workers=1, progress=False)
+    assert [r["status"] for r in res.items] == ["ok", "ok"], res.items
+    model, info = load_cloud_model(shipped_cloud_model("pointnet"))
+    for rec, src in zip(res.items, clouds, strict=True):
+        assert rec["outputs"] == [f"{rec['item']}/prediction.json"]
+        got = json.loads((res.out / rec["outputs"][0]).read_text())
+        want = classify_cloud_file(src, model, info).to_dict()
+        assert got["class"] == want["class"] == rec["summary"]["class"]
+        assert list(got["probabilities"]) == list(want["probabilities"])
+        assert got["points"] == want["points"] and got["file"] == want["file"]
+        # the same points (seed 0) and weights; another process may sum in another order
+        # (thread count), so the probabilities (rounded to 1e-6) agree to 1e-5
+        for k, v in want["probabilities"].items():
+            assert got["probabilities"][k] == pytest.approx(v, abs=1e-5)
+    assert find_inputs("nn-cloud", [clouds[0].parent]) == sorted(clouds[0].parent.glob("*.off"))

@@ -12,7 +12,8 @@ from robopercept.cli._args import UsageError, flag_errors, numbers, positive_int
 
 __all__ = ["register"]
 
-_JOBS = ("cloud", "edges", "features", "plane-track")
+_JOBS = ("cloud", "edges", "features", "plane-track", "nn-cloud")
+_CLOUD_CLASSIFIERS = ("pointnet", "dgcnn")  # the shipped classifiers nn-cloud may name
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "OUT/<item>/ and the manifest OUT/batch.json (rewritten as items finish). A failed "
         "item is recorded and the batch goes on; exit 1 when every item failed. Jobs: "
         "cloud (PCD/PLY -> segments.ply), edges (image -> edges.png), features (image -> "
-        "keypoints.json), plane-track (recording folder -> its outputs).",
+        "keypoints.json), plane-track (recording folder -> its outputs), nn-cloud (PLY/PCD/OFF "
+        "-> prediction.json: the class and probabilities of `robopercept nn cloud`).",
     )
     p.add_argument("job", choices=_JOBS, help="the job run on each input")
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="files, folders or globs")
@@ -72,6 +74,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--max-frames", type=positive_int, default=None, help="plane-track: frames per item"
     )
+    p.add_argument(
+        "--model",
+        default=None,
+        metavar="MODEL",
+        help="nn-cloud: pointnet (default), dgcnn or a model.pt file",
+    )
+    p.add_argument(
+        "--points",
+        type=positive_int,
+        default=None,
+        help="nn-cloud: points sampled per cloud (default: the model's)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run_batch_command)
@@ -82,9 +96,10 @@ _JOB_FLAGS = {
     "edges": {"method": "--method"},
     "features": {"detector": "--detector"},
     "plane-track": {"max_frames": "--max-frames"},
+    "nn-cloud": {"model": "--model", "points": "--points"},
 }
 _DEFAULTS = {"voxel": None, "planes": None, "method": "canny", "detector": "harris",
-             "max_frames": None}  # fmt: skip
+             "max_frames": None, "model": None, "points": None}  # fmt: skip
 
 
 @flag_errors(
@@ -110,6 +125,13 @@ def run_batch_command(args: argparse.Namespace) -> int:
         raise UsageError(
             f"-o {out}: exists and is not empty: pass --resume to finish its batch or "
             "--overwrite to run every item again"
+        )
+    if args.model is not None and not (
+        args.model in _CLOUD_CLASSIFIERS or Path(args.model).is_file()
+    ):
+        raise UsageError(
+            f"--model must be {' or '.join(_CLOUD_CLASSIFIERS)} or a model.pt file; got "
+            f"{args.model} (no such file)"
         )
     options: dict[str, Any] = {}
     for name, flag in (f for job, fl in _JOB_FLAGS.items() for f in fl.items()):

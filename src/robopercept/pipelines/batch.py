@@ -1,7 +1,7 @@
 """Batch jobs: one robopercept job over many inputs, on a Dask distributed cluster.
 
-:func:`run_batch` runs a job (``cloud``, ``edges``, ``features``, ``plane-track``)
-on every input, each as one Dask task that calls :func:`run_item`: the same library
+:func:`run_batch` runs a job (``cloud``, ``edges``, ``features``, ``plane-track``,
+``nn-cloud``) on every input, each as one Dask task that calls :func:`run_item`: the same library
 code a single-process run uses, writing the item's files into ``OUT/<item>/``. The
 scheduler is a :class:`distributed.LocalCluster` (``scheduler="local"``: ``workers``
 processes of one thread each) or an existing cluster (``scheduler="tcp://HOST:PORT"``,
@@ -55,17 +55,19 @@ __all__ = [
 ]
 
 #: the jobs :func:`run_batch` runs
-JOBS = ("cloud", "edges", "features", "plane-track")
+JOBS = ("cloud", "edges", "features", "plane-track", "nn-cloud")
 #: the manifest's file name inside ``OUT``
 MANIFEST = "batch.json"
 #: files an image job takes from a folder
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 _CLOUD_SUFFIXES = (".pcd", ".ply")
+_NN_CLOUD_SUFFIXES = (".pcd", ".ply", ".off")
 _OPTIONS: dict[str, tuple[str, ...]] = {
     "cloud": ("voxel", "planes", "seed"),
     "edges": ("method", "sigma"),
     "features": ("detector", "max"),
     "plane-track": ("max_frames",),
+    "nn-cloud": ("model", "points", "seed"),
 }
 _DEFAULTS: dict[str, Any] = {
     "voxel": None,
@@ -76,6 +78,8 @@ _DEFAULTS: dict[str, Any] = {
     "detector": "harris",
     "max": 500,
     "max_frames": None,
+    "model": "pointnet",
+    "points": None,
 }
 
 
@@ -94,7 +98,7 @@ def _is_recording(path: Path) -> bool:
 def _matches(job: str, path: Path) -> bool:
     if job == "plane-track":
         return path.is_dir() and _is_recording(path)
-    suffixes = _CLOUD_SUFFIXES if job == "cloud" else IMAGE_SUFFIXES
+    suffixes = {"cloud": _CLOUD_SUFFIXES, "nn-cloud": _NN_CLOUD_SUFFIXES}.get(job, IMAGE_SUFFIXES)
     return path.is_file() and path.suffix.lower() in suffixes
 
 
@@ -102,11 +106,12 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
     """The inputs of ``job`` named by files, folders and glob patterns.
 
     A file is taken as given; a folder gives its matching files (sorted, not
-    recursive): ``.pcd``/``.ply`` for ``cloud``, images (:data:`IMAGE_SUFFIXES`) for
-    ``edges`` and ``features``; for ``plane-track`` a recording folder (``rgb.txt``
-    and ``depth.txt``) is one input, and another folder gives its recording
-    sub-folders. A pattern with ``*``, ``?`` or ``[`` is expanded (sorted) and each
-    match treated as above. Duplicates are dropped, the first kept.
+    recursive): ``.pcd``/``.ply`` for ``cloud``, ``.pcd``/``.ply``/``.off`` for
+    ``nn-cloud``, images (:data:`IMAGE_SUFFIXES`) for ``edges`` and ``features``;
+    for ``plane-track`` a recording folder (``rgb.txt`` and ``depth.txt``) is one
+    input, and another folder gives its recording sub-folders. A pattern with ``*``,
+    ``?`` or ``[`` is expanded (sorted) and each match treated as above. Duplicates
+    are dropped, the first kept.
 
     Parameters
     ----------
@@ -156,7 +161,11 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
                 )
     unique = list(dict.fromkeys(found))
     if not unique:
-        what = {"cloud": ".pcd/.ply files", "plane-track": "recording folders"}
+        what = {
+            "cloud": ".pcd/.ply files",
+            "nn-cloud": ".pcd/.ply/.off files",
+            "plane-track": "recording folders",
+        }
         raise InputError(
             f"no input for {job}: expected {what.get(job, 'image files')}; got "
             f"{', '.join(os.fspath(i) for i in inputs) or 'nothing'}"
@@ -227,7 +236,14 @@ def run_item(
     :func:`~robopercept.features.harris_corners` (``detector`` ``harris`` or
     ``shi-tomasi``, at most ``max``) into ``keypoints.json``. ``plane-track``:
     :func:`~robopercept.pipelines.plane_outputs.run_plane_tracking` of the recording
-    (no video; ``max_frames``), its outputs and ``summary.json``.
+    (no video; ``max_frames``), its outputs and ``summary.json``. ``nn-cloud``:
+    :func:`~robopercept.nn.cloud.classify_cloud_file` (what ``robopercept nn cloud``
+    runs) with the classifier ``model`` (a shipped name of
+    :data:`~robopercept.nn.cloud.SHIPPED_CLOUD_MODELS`, default ``pointnet``, or a
+    ``model.pt`` file; loaded once per worker process), ``points`` sampled (default:
+    the model's) with ``seed``, into ``prediction.json`` (``class``,
+    ``probabilities``, most probable first, ``points``, ``file``); torch is imported
+    only here, on the worker.
 
     Parameters
     ----------
@@ -339,11 +355,45 @@ def _run_plane_track(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, An
     return {"frames": summary.frames, "stopped": summary.stopped}
 
 
+_CLOUD_MODELS: dict[str, tuple[Any, dict[str, Any]]] = {}  # per worker process
+
+
+def _run_nn_cloud(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
+    from robopercept.nn.cloud import (
+        SHIPPED_CLOUD_MODELS,
+        classify_cloud_file,
+        load_cloud_model,
+        shipped_cloud_model,
+    )
+
+    name = opts["model"]
+    if not isinstance(name, (str, os.PathLike)):
+        raise InputError(f"model must be a shipped model name or a model.pt path; got {name!r}")
+    if isinstance(name, str) and name in SHIPPED_CLOUD_MODELS:
+        path = shipped_cloud_model(name)
+    else:
+        path = Path(name)
+        if not path.is_file():
+            raise InputError(
+                f"model {name}: no such file: give a model.pt or a shipped model "
+                f"({', '.join(SHIPPED_CLOUD_MODELS)})"
+            )
+    key = str(path.resolve())
+    if key not in _CLOUD_MODELS:
+        _CLOUD_MODELS[key] = load_cloud_model(path)
+    model, info = _CLOUD_MODELS[key]
+    res = classify_cloud_file(src, model, info, n_points=opts["points"], rng=opts["seed"])
+    prediction = res.to_dict()
+    atomic_write(out / "prediction.json", json.dumps(prediction, indent=2))
+    return {"class": res.label, "probability": prediction["probabilities"][res.label]}
+
+
 _RUNNERS: dict[str, Callable[[Path, Path, dict[str, Any]], dict[str, Any]]] = {
     "cloud": _run_cloud,
     "edges": _run_edges,
     "features": _run_features,
     "plane-track": _run_plane_track,
+    "nn-cloud": _run_nn_cloud,
 }
 
 
