@@ -5,15 +5,17 @@ cost model ``wall ~ T0 + ceil(n / w) * t + n * c``.
 
 Run from the repository root (standalone, not a ``python -m benchmarks`` entry)::
 
-    PYTHONPATH=src .venv/bin/python benchmarks/batch_speed.py
+    PYTHONPATH=src .venv/bin/python benchmarks/batch_speed.py [--clouds 8] [--recordings 4]
 
-Inputs: the 8 smallest PCD files of ../shared/data/pointcloud (``cloud`` with
-``voxel=0.005, planes=(1, 0.01)``) and 4 synthetic recordings of 20 frames written by
-``SyntheticRGBDScene`` (``plane-track``). Writes benchmarks/results/batch_speed.json.
+Inputs: the ``--clouds`` smallest PCD files of ../shared/data/pointcloud (``cloud`` with
+``voxel=0.005, planes=(1, 0.01)``) and ``--recordings`` synthetic recordings of 20 frames
+written by ``SyntheticRGBDScene`` (``plane-track``). Writes
+benchmarks/results/batch_speed.json.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -41,14 +43,18 @@ def _startup(workers: int) -> float:
     return seconds
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     from robopercept.pipelines.batch import run_batch, run_item
     from robopercept.sources import SyntheticRGBDScene, write_tum_folder
 
-    clouds = sorted(DATA.glob("*/*.pcd"), key=lambda p: p.stat().st_size)[:8]
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--clouds", type=int, default=8, help="PCD files (smallest first)")
+    parser.add_argument("--recordings", type=int, default=4, help="20-frame recordings")
+    args = parser.parse_args(argv)
+    clouds = sorted(DATA.glob("*/*.pcd"), key=lambda p: p.stat().st_size)[: args.clouds]
     tmp = Path(tempfile.mkdtemp(prefix="batch_speed_"))
     recs = [write_tum_folder(tmp / "rec" / f"seq{i}", SyntheticRGBDScene(n_frames=20, seed=i))
-            for i in range(4)]  # fmt: skip
+            for i in range(args.recordings)]  # fmt: skip
     jobs = {"cloud": (clouds, {"voxel": 0.005, "planes": (1, 0.01)}), "plane-track": (recs, {})}
     run_item("cloud", clouds[0], tmp / "warm", jobs["cloud"][1])  # compile numba kernels once
     rows = []
