@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import multiprocessing
+import signal
+import threading
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -119,3 +121,21 @@ def librealsense() -> Iterator[LibrealsenseWorker]:
         yield worker
     finally:
         worker.shutdown()
+
+
+@pytest.fixture(autouse=True)
+def python_sigint_handler():
+    """Python's own SIGINT handler for each test, whatever pytest inherited: a shell
+    starts background jobs with SIGINT ignored (``cmd &`` without job control), and
+    StopSignals rightly leaves an ignored signal alone, as do children (plane-track,
+    batch), which inherit SIG_IGN through exec: the Ctrl-C tests failed when the suite
+    ran in the background. A Python handler is not inherited through exec: children
+    start with SIGINT at its default and install their own."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)

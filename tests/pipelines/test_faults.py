@@ -39,24 +39,6 @@ from robopercept.sources import SyntheticRGBDScene, TUMFolderSource, write_tum_f
 TINY = {"depth_size": (212, 120), "color_size": (320, 180)}
 
 
-@pytest.fixture(autouse=True)
-def python_sigint_handler():
-    """Python's own SIGINT handler for each test, whatever pytest inherited: a shell
-    starts background jobs with SIGINT ignored (``cmd &`` without job control), and
-    StopSignals rightly leaves an ignored signal alone (as do the plane-track children,
-    which inherit SIG_IGN through exec), so these tests failed when the suite was run
-    in the background. A Python handler is not inherited through exec: children start
-    with SIGINT at its default and install their own."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    before = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, before)
-
-
 def _rows(path: Path) -> list[dict[str, str]]:
     text = path.read_text()
     assert text.endswith("\n")  # no row cut short
