@@ -154,7 +154,11 @@ def read_coco_results_list(rows, tmp_path):
 
 
 def test_default_model_missing_names_the_build_command(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(cli_detect, "DEFAULT_MODEL", "data/no_such_model.pt")
+    from robopercept.nn import shipped
+
+    monkeypatch.setitem(
+        shipped.SHIPPED_DETECTORS, shipped.DEFAULT_SHIPPED["detect"], "data/no_such_model.pt"
+    )
     img = tmp_path / "a.png"
     write_image(img, np.zeros((32, 32, 3), np.uint8))
     assert main(["nn", "detect", str(img), "-o", str(tmp_path / "out")]) == 1

@@ -3285,3 +3285,45 @@ SKIP.update(
         "per call); its checks are tested in tests/nn/test_distributed.py",
     }
 )
+
+# -- nn.shipped and nn.image_predict (issue 31): the shipped models, one image-predict path
+_IP_VALUES = {
+    "boxes": np.array([[2.0, 3.0, 20.0, 30.0]]),
+    "labels": np.array([1]),
+    "scores": np.array([0.75]),
+}
+VALID.update(
+    {
+        "nn.shipped.shipped_model_path": {"kind": "detect", "name": "fcos"},
+        "nn.shipped.resolve_model": {"kind": "segment", "model": "unet"},
+        "nn.image_predict.load_image_predictor": {
+            "kind": "detect",
+            "model": Fixture("detector.pt"),
+            "device": "cpu",
+            "score_thresh": 0.5,
+        },
+        "nn.image_predict.load_segment_model": {"path": Fixture("segmenter.pt")},
+        "nn.image_predict.ImagePrediction": {
+            "kind": "detect",
+            "image": IMG_RGB,
+            "classes": ["a", "b"],
+            "values": _IP_VALUES,
+        },
+        "nn.image_predict.ImagePrediction.coco_results": {"image_id": 1},
+        "nn.image_predict.ImagePrediction.pictures": {"stem": "ip"},
+        "nn.image_predict.ImagePrediction.write": {"out_dir": _out("image_predict"), "stem": "ip"},
+        "nn.image_predict.ImagePredictor": {
+            "kind": "detect",
+            "path": None,
+            "model": _b("robopercept.nn.detection:build_detector", "fcos", 2, width=4),
+            "info": {"classes": ["a", "b"]},
+        },
+        "nn.image_predict.ImagePredictor.predict": {"image": IMG_RGB},
+        "nn.image_predict.ImagePredictor.predict_file": {"path": Fixture("image.png")},
+    }
+)
+METHODS["nn.image_predict.ImagePrediction"] = ("record", "coco_results", "pictures", "write")
+METHODS["nn.image_predict.ImagePredictor"] = ("predict", "predict_file")
+
+# viz.plot.disparity_picture (issue 31: robopercept stereo and batch stereo)
+VALID.update({"viz.disparity_picture": {"disparity": _MAP, "max_disparity": 8}})

@@ -13,11 +13,11 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from robopercept.cli.detect import SHIPPED_MODELS  # noqa: E402
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import write_image  # noqa: E402
 from robopercept.nn.detection import evaluate_detector, load_detector  # noqa: E402
 from robopercept.nn.detection_data import procedural_detection_set  # noqa: E402
+from robopercept.nn.shipped import SHIPPED_DETECTORS as SHIPPED_MODELS  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 

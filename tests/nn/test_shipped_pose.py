@@ -14,10 +14,10 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
-from robopercept.cli.pose import SHIPPED_POSE_MODELS  # noqa: E402
 from robopercept.imaging import write_image  # noqa: E402
 from robopercept.nn.pose import evaluate_pose, load_pose_model  # noqa: E402
 from robopercept.nn.pose_data import procedural_pose_set  # noqa: E402
+from robopercept.nn.shipped import SHIPPED_POSE_MODELS  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 

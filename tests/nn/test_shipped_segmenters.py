@@ -14,7 +14,6 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
-from robopercept.cli.segment import SHIPPED_SEGMENTERS  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
 from robopercept.nn.detection import evaluate_detector, load_detector  # noqa: E402
 from robopercept.nn.detection_data import procedural_detection_set  # noqa: E402
@@ -23,6 +22,7 @@ from robopercept.nn.segmentation_eval import (  # noqa: E402
     segmentation_confusion,
     segmentation_scores,
 )
+from robopercept.nn.shipped import SHIPPED_SEGMENTERS  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 CLASSES = ["circle", "square", "triangle", "cross"]

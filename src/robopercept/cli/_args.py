@@ -40,8 +40,10 @@ __all__ = [
     "in_flags",
     "load_gray",
     "noise_filter",
+    "non_negative_int",
     "numbers",
     "pass_through",
+    "positive_float",
     "positive_int",
     "register_forms",
     "run_or_model_path",
@@ -56,12 +58,32 @@ class UsageError(Exception):
 
 def positive_int(text: str) -> int:
     """An integer >= 1 (argparse type)."""
+    return _int_at_least(text, 1)
+
+
+def non_negative_int(text: str) -> int:
+    """An integer >= 0 (argparse type)."""
+    return _int_at_least(text, 0)
+
+
+def _int_at_least(text: str, low: int) -> int:
     try:
         v = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expects an integer; got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1; got {v}")
+    if v < low:
+        raise argparse.ArgumentTypeError(f"must be >= {low}; got {v}")
+    return v
+
+
+def positive_float(text: str) -> float:
+    """A number > 0 (argparse type)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expects a number; got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0; got {text!r}")
     return v
 
 
@@ -363,26 +385,26 @@ def run_or_model_path(text: str) -> Path:
 
 def images_form_inputs(
     args: argparse.Namespace,
-    shipped: Mapping[str, str],
-    default: str,
-    build: str,
+    kind: str,
     outputs: Callable[[str], list[str]],
 ) -> Path:
-    """Check the images form of ``nn detect`` / ``nn segment`` and return the model's
-    path: ``--model`` a run folder, a ``model.pt`` or a key of ``shipped`` (paths in
-    the ``robopercept`` package; ``default`` the path without ``--model``; ``build`` the
-    command that makes them from a checkout), ``-o/--out`` or ``--json`` given, every
-    IMAGE present, and no output (``outputs(stem)``, names in OUT) over an input."""
-    if args.model is None or args.model in shipped:
-        from importlib.resources import files
+    """Check the images form of ``nn detect`` / ``nn segment`` / ``nn pose`` and return
+    the model's path: ``--model`` a run folder, a ``model.pt`` or a shipped name of
+    ``kind`` (:func:`robopercept.nn.shipped.resolve_model`; without ``--model`` the
+    kind's default), ``-o/--out`` or ``--json`` given, every IMAGE present, and no
+    output (``outputs(stem)``, names in OUT) over an input."""
+    from robopercept.nn.shipped import BUILD_SHIPPED, DEFAULT_SHIPPED, SHIPPED, resolve_model
 
-        rel = shipped[args.model] if args.model else default
-        model_path = Path(str(files("robopercept"))) / rel
-        if not model_path.is_file():
+    shipped = SHIPPED[kind]
+    if args.model is None or args.model in shipped:
+        rel = shipped[args.model or DEFAULT_SHIPPED[kind]]
+        try:
+            model_path = resolve_model(kind, args.model)
+        except InputError:
             raise InputError(
                 f"the shipped model {rel} is not installed: give --model PATH (a run folder "
-                f"or model.pt), or build it from a checkout with: {build}"
-            )
+                f"or model.pt), or build it from a checkout with: {BUILD_SHIPPED[kind]}"
+            ) from None
     else:
         model_path = run_or_model_path(args.model)
         if not model_path.is_file():

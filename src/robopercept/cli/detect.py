@@ -50,24 +50,12 @@ from robopercept.cli._args import (
 )
 from robopercept.errors import InputError
 
-__all__ = ["BUILTIN_DATA", "DEFAULT_MODEL", "DETECTOR_NAMES", "SHIPPED_MODELS", "register"]
+__all__ = ["BUILTIN_DATA", "DETECTOR_NAMES", "register"]
 
 #: the names of :data:`robopercept.nn.detection.DETECTORS` (the parser needs no torch)
 DETECTOR_NAMES = ("fcos", "faster", "fast", "rcnn", "localizer")
 #: the built-in data sets of ``--data`` (anything else must be a COCO JSON file)
 BUILTIN_DATA = ("shapes", "digits", "trees")
-#: the shipped models (trained on the procedural shapes set), by the name ``--model``
-#: takes, relative to the ``robopercept`` package
-SHIPPED_MODELS = {
-    "fcos": "data/detector_fcos_shapes.pt",
-    "faster": "data/detector_faster_shapes.pt",
-}
-#: the model of ``robopercept nn detect IMAGE`` without ``--model``
-DEFAULT_MODEL = SHIPPED_MODELS["fcos"]
-_BUILD_SHIPPED = (
-    "python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster --seeds 0 "
-    "--save src/robopercept/data"
-)
 _VAL_FRACTION = 0.2
 
 
@@ -406,42 +394,21 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _images(args: argparse.Namespace) -> int:
-    from robopercept.imaging import read_image, write_image
-    from robopercept.nn.detection import TestTimeAugmentation, detect_arrays, load_detector
-    from robopercept.nn.detection_data import draw_detections
-    from robopercept.nn.training import resolve_device
+    from robopercept.nn.image_predict import load_image_predictor
 
-    model_path = images_form_inputs(
-        args, SHIPPED_MODELS, DEFAULT_MODEL, _BUILD_SHIPPED, lambda stem: [f"{stem}.png"]
+    model_path = images_form_inputs(args, "detect", lambda stem: [f"{stem}.png"])
+    predictor = load_image_predictor(
+        "detect", model_path, device=args.device, score_thresh=args.score_thresh, tta=args.tta
     )
-    model: Any
-    model, info = load_detector(model_path)
-    dev = resolve_device(args.device)
-    model.to(dev)
-    if args.tta:
-        model = TestTimeAugmentation(model, args.tta)
-    classes = info["classes"]
     results: list[dict[str, Any]] = []
     out = Path(args.out) if args.out else None
     for k, name in enumerate(args.images, 1):
-        image = read_image(name, mode="rgb")
-        d = detect_arrays(model, [image])[0]
-        keep = d["scores"] >= args.score_thresh
-        boxes, labels, scores = d["boxes"][keep], d["labels"][keep], d["scores"][keep]
-        for b, lab, s in zip(boxes, labels, scores, strict=True):
-            results.append(
-                {
-                    "image_id": k,
-                    "category_id": int(lab),
-                    "bbox": [float(b[0]), float(b[1]), float(b[2] - b[0]), float(b[3] - b[1])],
-                    "score": float(s),
-                }
-            )
+        pred = predictor.predict_file(name)
+        results += pred.coco_results(k)
         if out is not None:
-            pic = draw_detections(image, boxes, labels, classes, scores=scores)
-            written = write_image(out / f"{Path(name).stem}.png", pic)
+            (written,) = pred.write(out, Path(name).stem)
             if not (args.quiet or args.json):
-                print(f"{name}: {len(boxes)} detections -> {written}")
+                print(f"{name}: {len(pred.values['boxes'])} detections -> {written}")
     if args.json:
         print(json.dumps(results))
     return 0

@@ -278,10 +278,10 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _model(name: str | None, default: str) -> Path:
-    from robopercept.nn.cloud import SHIPPED_CLOUD_MODELS, shipped_cloud_model
+    from robopercept.nn.shipped import SHIPPED_CLOUD_MODELS, shipped_model_path
 
     if name is None or name in SHIPPED_CLOUD_MODELS:
-        return shipped_cloud_model(name or default)
+        return shipped_model_path("cloud", name or default)
     path = run_or_model_path(name)
     if not path.is_file():
         raise UsageError(f"--model: {path} does not exist (a run folder or model.pt)")

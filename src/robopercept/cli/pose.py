@@ -48,18 +48,10 @@ from robopercept.cli._args import (
 )
 from robopercept.fileio import strict_json
 
-__all__ = ["POSE_CLI_MODELS", "SHIPPED_POSE_MODELS", "register"]
+__all__ = ["POSE_CLI_MODELS", "register"]
 
 #: ``--model`` of ``train``
 POSE_CLI_MODELS = ("hrnet", "heatmap", "deeppose")
-#: the shipped models, relative to the ``robopercept`` package
-SHIPPED_POSE_MODELS = {
-    "hrnet": "data/pose_hrnet_figures.pt",
-    "deeppose": "data/pose_deeppose_figures.pt",
-}
-_BUILD_SHIPPED = (
-    "python -m benchmarks.pose_figures --only hrnet deeppose --seeds 0 --save src/robopercept/data"
-)
 
 
 def _data_args(p: argparse.ArgumentParser) -> None:
@@ -253,10 +245,7 @@ def _eval(args: argparse.Namespace) -> int:
 def _images(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from robopercept.imaging import read_image, write_image
-    from robopercept.nn.pose import load_pose_model, pose_arrays
-    from robopercept.nn.training import resolve_device
-    from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
+    from robopercept.nn.image_predict import load_image_predictor
 
     def outputs(stem: str) -> list[str]:
         names = [f"{stem}.png"]
@@ -266,58 +255,24 @@ def _images(args: argparse.Namespace) -> int:
             names.append(f"{stem}_3d.png")
         return names
 
-    model_path = images_form_inputs(
-        args, SHIPPED_POSE_MODELS, SHIPPED_POSE_MODELS["hrnet"], _BUILD_SHIPPED, outputs
+    model_path = images_form_inputs(args, "pose", outputs)
+    predictor = load_image_predictor(
+        "pose",
+        model_path,
+        device=args.device,
+        flip=not args.no_flip,
+        heatmaps=args.heatmaps,
+        lift3d=args.lift3d,
     )
-    model, info = load_pose_model(model_path)
-    model.to(resolve_device(args.device))
-    sk = info["skeleton"]
-    library = None
-    if args.lift3d:
-        from robopercept.nn.pose3d import default_pose_library
-
-        library = default_pose_library(sk)
     out = Path(args.out) if args.out else None
     results = []
     for name in args.images:
-        image = read_image(name, mode="rgb")
-        res = pose_arrays(
-            model,
-            [image],
-            flip_permutation=None if args.no_flip else sk.flip_permutation(),
-            refiners=info["refiners"],
-        )[0]
-        row: dict[str, Any] = {
-            "image": name,
-            "joints": list(sk.joints),
-            "keypoints": np.round(res.keypoints, 2).tolist(),
-            "scores": np.round(res.scores, 4).tolist(),
-        }
-        joints3d = None
-        if library is not None:
-            joints3d = library.lift(res.keypoints[None])[0]
-            row["joints3d_m"] = np.round(joints3d, 4).tolist()
-        results.append(row)
+        pred = predictor.predict_file(name)
+        results.append({"image": name, **pred.record()})
         if out is not None:
-            stem = Path(name).stem
-            pic = draw_skeleton(
-                image,
-                res.keypoints,
-                sk.links,
-                confidence=res.scores,
-                flip_pairs=sk.flip_pairs,
-                min_side=512,
-            )
-            written = [write_image(out / f"{stem}.png", pic)]
-            if args.heatmaps and res.heatmaps is not None:
-                grid = heatmap_grid(image, res.heatmaps, list(sk.joints))
-                written.append(write_image(out / f"{stem}_heatmaps.png", grid))
-            if joints3d is not None:
-                written.append(
-                    write_image(out / f"{stem}_3d.png", skeleton_3d_picture(joints3d, sk.links))
-                )
+            written = pred.write(out, Path(name).stem)
             if not (args.quiet or args.json):
-                mean = float(np.mean(res.scores))
+                mean = float(np.mean(pred.values["scores"]))
                 print(f"{name}: mean joint score {mean:.3f} -> {', '.join(map(str, written))}")
     if args.json:
         print(json.dumps(results))

@@ -48,19 +48,10 @@ from robopercept.cli._args import (
 )
 from robopercept.errors import InputError
 
-__all__ = ["SEGMENT_MODELS", "SHIPPED_SEGMENTERS", "register"]
+__all__ = ["SEGMENT_MODELS", "register"]
 
 #: ``--model`` of ``train``: the semantic networks, then the instance one
 SEGMENT_MODELS = ("unet", "fcn8s", "fcn16s", "fcn32s", "naive", "maskrcnn")
-#: the shipped models, relative to the ``robopercept`` package
-SHIPPED_SEGMENTERS = {
-    "unet": "data/segmenter_unet_shapes.pt",
-    "maskrcnn": "data/segmenter_maskrcnn_shapes.pt",
-}
-_BUILD_SHIPPED = (
-    "python -m benchmarks.segmentation_figures --only shapes-unet shapes-maskrcnn --seeds 0 "
-    "--save src/robopercept/data"
-)
 
 
 def _data_args(p: argparse.ArgumentParser) -> None:
@@ -138,21 +129,6 @@ def _sets(args: argparse.Namespace) -> Any:
     return segmentation_sets(args.data, args.images, args.size, args.seed, args.images_dir)
 
 
-def _load_any(path: Path) -> tuple[Any, dict[str, Any], bool]:
-    """(model, info, is_instance) of a segmenter or Mask R-CNN checkpoint."""
-    from robopercept.nn.detection import load_detector
-    from robopercept.nn.training import load_checkpoint
-
-    kind = load_checkpoint(path).get("kind")
-    if kind == "maskrcnn":
-        model, info = load_detector(path)
-        return model, info, True
-    from robopercept.nn.segmentation import load_segmenter
-
-    model, info = load_segmenter(path)
-    return model, info, False
-
-
 def _scores(model: Any, val: Any, instance: bool, device: str | None) -> dict[str, Any]:
     import numpy as np
 
@@ -182,43 +158,13 @@ def _scores(model: Any, val: Any, instance: bool, device: str | None) -> dict[st
     }
 
 
-def _predict(model: Any, image: Any, instance: bool, score_thresh: float) -> dict[str, Any]:
-    from robopercept.nn.detection import detect_arrays
-    from robopercept.nn.segmentation import segment_arrays
-
-    if instance:
-        d = detect_arrays(model, [image])[0]
-        keep = d["scores"] >= score_thresh
-        return {k: v[keep] for k, v in d.items()}
-    return {"labels": segment_arrays(model, [image])[0]}
-
-
-def _picture(image: Any, pred: dict[str, Any], classes: list[str]) -> Any:
-    from robopercept.viz.segmentation import class_overlay, instance_overlay
-
-    if "masks" in pred:
-        return instance_overlay(
-            image, pred["masks"], labels=pred["labels"], classes=classes, scores=pred.get("scores")
-        )
-    return class_overlay(image, pred["labels"], classes)
-
-
-def _label_png(pred: dict[str, Any]) -> Any:
-    """Class labels, or instance ids 1..N in score order, as one uint8 image."""
-    import numpy as np
-
-    if "masks" not in pred:
-        return np.clip(pred["labels"], 0, 255).astype(np.uint8)
-    out = np.zeros(pred["masks"].shape[1:], np.uint8)
-    for i in range(len(pred["masks"]) - 1, -1, -1):  # the best instance on top
-        out[pred["masks"][i]] = min(i + 1, 255)
-    return out
-
-
 def _samples(model: Any, val: Any, instance: bool, path: Path, count: int = 3) -> Path:
     from robopercept.imaging import write_image
+    from robopercept.nn.image_predict import ImagePrediction, ImagePredictor
     from robopercept.viz.segmentation import panels_picture
 
+    classes = list(val.classes)
+    predictor = ImagePredictor("segment", None, model, {"classes": classes}, instance=instance)
     pics, titles = [], []
     for i in range(min(count, len(val))):
         im = val.images[i]
@@ -227,8 +173,8 @@ def _samples(model: Any, val: Any, instance: bool, path: Path, count: int = 3) -
             if instance
             else {"labels": val.class_maps()[i]}
         )
-        pics += [_picture(im, _predict(model, im, instance, 0.5), list(val.classes))]
-        pics += [_picture(im, truth, list(val.classes))]
+        pics += [predictor.predict(im).pictures("p")["p.png"]]
+        pics += [ImagePrediction("segment", im, classes, truth).pictures("t")["t.png"]]
         titles += [f"prediction {i + 1}", f"ground truth {i + 1}"]
     return write_image(path, panels_picture(pics, titles))
 
@@ -328,7 +274,9 @@ def _eval(args: argparse.Namespace) -> int:
     path = run_or_model_path(args.model)
     if not path.is_file():
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
-    model, info, instance = _load_any(path)
+    from robopercept.nn.image_predict import load_segment_model
+
+    model, info, instance = load_segment_model(path)
     sets = _sets(args)
     if list(sets.classes) != list(info["classes"]):
         raise InputError(
@@ -354,36 +302,25 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _images(args: argparse.Namespace) -> int:
-    from robopercept.imaging import read_image, write_image
-    from robopercept.nn.segmentation import coco_segmentation_results
-    from robopercept.nn.training import resolve_device
-    from robopercept.viz import voc_palette
+    from robopercept.nn.image_predict import load_image_predictor
 
     model_path = images_form_inputs(
-        args,
-        SHIPPED_SEGMENTERS,
-        SHIPPED_SEGMENTERS["unet"],
-        _BUILD_SHIPPED,
-        lambda stem: [f"{stem}.png", f"{stem}_labels.png"],
+        args, "segment", lambda stem: [f"{stem}.png", f"{stem}_labels.png"]
     )
-    model, info, instance = _load_any(model_path)
-    model.to(resolve_device(args.device))
-    classes = list(info["classes"])
+    predictor = load_image_predictor(
+        "segment", model_path, device=args.device, score_thresh=args.score_thresh
+    )
+    instance = predictor.instance
     out = Path(args.out) if args.out else None
     results: list[dict[str, Any]] = []
     for k, name in enumerate(args.images, 1):
-        image = read_image(name, mode="rgb")
-        pred = _predict(model, image, instance, args.score_thresh)
-        if instance:
-            results += coco_segmentation_results(k, detections=pred)
-        else:
-            results += coco_segmentation_results(k, labels=pred["labels"])
+        pred = predictor.predict_file(name)
+        results += pred.coco_results(k)
         if out is not None:
-            stem = Path(name).stem
-            pic = write_image(out / f"{stem}.png", _picture(image, pred, classes))
-            lab = write_image(out / f"{stem}_labels.png", _label_png(pred), palette=voc_palette())
+            pic, lab = pred.write(out, Path(name).stem)
             if not (args.quiet or args.json):
-                n = len(pred["masks"]) if instance else len({int(v) for v in pred["labels"].flat})
+                v = pred.values
+                n = len(v["masks"]) if instance else len({int(x) for x in v["labels"].flat})
                 what = "instances" if instance else "labels"
                 print(f"{name}: {n} {what} -> {pic}, {lab}")
     if args.json:

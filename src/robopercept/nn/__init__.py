@@ -43,6 +43,8 @@ _SUBMODULES = (
     "cloud_data",
     "cloud",
     "distributed",
+    "shipped",
+    "image_predict",
 )
 
 __all__ = list(_SUBMODULES)

@@ -41,6 +41,7 @@ from torch import nn
 from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count
+from robopercept.nn.shipped import BUILD_SHIPPED, SHIPPED_CLOUD_MODELS, shipped_model_path
 from robopercept.nn.training import EpochHistory, TrainConfig, epoch_loop
 
 __all__ = [
@@ -64,17 +65,9 @@ __all__ = [
 #: ``"dgcnn"`` (:class:`~robopercept.nn.dgcnn.DGCNN`)
 CLOUD_MODELS = ("pointnet", "dgcnn")
 
-#: the shipped models (trained on the procedural shapes), relative to the package
-SHIPPED_CLOUD_MODELS = {
-    "pointnet": "data/cloud_pointnet_shapes.pt",
-    "dgcnn": "data/cloud_dgcnn_shapes.pt",
-    "pointnet-parts": "data/cloud_pointnet_parts.pt",
-}
-#: the command that rebuilds the shipped models from a checkout
-BUILD_SHIPPED_CLOUD = (
-    "python -m benchmarks.cloud_figures --only pointnet dgcnn pointnet-parts --seeds 0 "
-    "--save src/robopercept/data"
-)
+#: the command that rebuilds the shipped models from a checkout (the models,
+#: :data:`~robopercept.nn.shipped.SHIPPED_CLOUD_MODELS`, are re-exported here)
+BUILD_SHIPPED_CLOUD = BUILD_SHIPPED["cloud"]
 
 
 def build_cloud_model(
@@ -668,16 +661,8 @@ def shipped_cloud_model(name: str = "pointnet") -> Path:
         Unknown name, or the file is not installed (the message gives the command that
         builds it).
     """
-    from importlib.resources import files
-
     check_choice(name, "name", tuple(SHIPPED_CLOUD_MODELS))
-    path = Path(str(files("robopercept"))) / SHIPPED_CLOUD_MODELS[name]
-    if not path.is_file():
-        raise InputError(
-            f"the shipped model {SHIPPED_CLOUD_MODELS[name]} is not installed: build it from a "
-            f"checkout with: {BUILD_SHIPPED_CLOUD}"
-        )
-    return path
+    return shipped_model_path("cloud", name)
 
 
 @dataclass(frozen=True)
