@@ -49,7 +49,7 @@ def test_local_run_json_then_refused_then_resumed(tmp_path, capsys) -> None:
     assert got["ok"] == 2 and got["items"] == 2 and got["workers"] == 1
     assert [r["outputs"] for r in got["results"]] == [["a/edges.png"], ["b/edges.png"]]
     assert json.loads((out / "batch.json").read_text())["ok"] == 2
-    assert main(argv) == 2  # the output exists
+    assert main(argv) == 1  # the output exists
     err = capsys.readouterr().err
     assert "--resume" in err and "--overwrite" in err
     assert main([*argv, "--resume"]) == 0
@@ -67,12 +67,13 @@ def test_every_item_failed_exits_1(tmp_path, capsys) -> None:
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
-        (["--scheduler", "somewhere:8786"], "--scheduler must be 'local' or tcp://"),
         (["--voxel", "0.1"], "--voxel does not apply to the edges job"),
-        (["--retries", "-1"], "--retries must be >= 0"),
-        (["--model", "nowhere.pt"], "--model must be pointnet or dgcnn or a model.pt file"),
+        (["--retries", "-1"], "argument --retries: must be >= 0"),
+        (["--connect-timeout", "0"], "argument --connect-timeout: must be > 0"),
         (["--points", "0"], "argument --points: must be >= 1"),
         (["--points", "64"], "--points does not apply to the edges job"),
+        (["--max-disparity", "64"], "--max-disparity does not apply to the edges job"),
+        (["--no-lr-check"], "--lr-check does not apply to the edges job"),
         (["--resume", "--overwrite"], "not allowed with argument"),
     ],
 )
@@ -80,6 +81,27 @@ def test_bad_flags(tmp_path, capsys, extra, message) -> None:
     argv = ["batch", "edges", str(sample_image_path()), "-o", str(tmp_path / "o"), *extra]
     assert main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["edges", "--scheduler", "somewhere:8786"], "scheduler must be 'local' or an address like tcp://HOST:PORT"),
+        (["nn-cloud", "--model", "nowhere.pt"], "--model nowhere.pt: no such file or folder"),
+        (["stereo"], "the stereo job needs --max-disparity"),
+        (["stereo", "--max-disparity", "8", "--method", "sobel"], "--method must be one of"),
+        (["nn-predict"], "the nn-predict job needs --model"),
+    ],
+)
+def test_library_refusals_name_the_flags(tmp_path, capsys, argv, message) -> None:
+    pair = tmp_path / "pair"
+    pair.mkdir()
+    for n in ("left.png", "right.png"):
+        shutil.copy(sample_image_path(), pair / n)
+    src = {"stereo": pair, "nn-cloud": tmp_path / "a.off"}.get(argv[0], sample_image_path())
+    assert main(["batch", argv[0], str(src), "-o", str(tmp_path / "o"), *argv[1:]]) == 1
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_nn_cloud_flags_reach_run_batch(tmp_path, monkeypatch, capsys) -> None:
@@ -99,6 +121,14 @@ def test_nn_cloud_flags_reach_run_batch(tmp_path, monkeypatch, capsys) -> None:
     assert main(argv) == 0
     assert seen["job"] == "nn-cloud" and seen["options"] == {"model": "dgcnn", "points": 256}
     assert json.loads(capsys.readouterr().out)["job"] == "nn-cloud"
+    argv = ["batch", "stereo", str(tmp_path), "-o", str(tmp_path / "o"), "--max-disparity", "64",
+            "--method", "bm", "--no-lr-check"]  # fmt: skip
+    assert main(argv) == 0
+    assert seen["options"] == {"method": "bm", "max_disparity": 64, "lr_check": None}
+    argv = ["batch", "nn-detect", str(tmp_path), "-o", str(tmp_path / "o"), "--model", "faster",
+            "--score-thresh", "0.3", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    assert seen["options"] == {"model": "faster", "score_thresh": 0.3}
 
 
 def test_unreachable_scheduler(tmp_path, capsys) -> None:

@@ -19,7 +19,14 @@ from pathlib import Path
 import pytest
 
 from robopercept.errors import InputError
-from robopercept.pipelines.batch import find_inputs, item_names, read_manifest, run_batch, run_item
+from robopercept.pipelines.batch import (
+    find_inputs,
+    item_names,
+    read_manifest,
+    run_batch,
+    run_item,
+    stereo_pair,
+)
 from tests.conftest import data_path
 
 pytest.importorskip("distributed")
@@ -28,6 +35,7 @@ SRC = Path(__file__).resolve().parents[2] / "src"
 BIN = Path(sys.executable).parent
 CLOUDS = ("bun0.pcd", "bun4.pcd", "milk.pcd")
 IMAGES = ("box.png", "box_in_scene.png")
+PAIRS = ("tsukuba", "venus")  # Middlebury 2001: im2 left, im6 right
 
 
 def _free_port() -> int:
@@ -96,6 +104,10 @@ def _images() -> list[Path]:
     return [data_path("features", "opencv_box", n) for n in IMAGES]
 
 
+def _pairs() -> list[Path]:
+    return [data_path("stereo", "middlebury_opencv_extra", n) for n in PAIRS]
+
+
 def _same_outputs(job: str, res, inputs, options, tmp: Path) -> None:
     """Each item's files equal those of run_item in this process, byte for byte
     (``summary.json`` holds timings: its numbers but the ``ms`` are compared)."""
@@ -127,6 +139,29 @@ def test_cluster_by_address_equals_single_process(cluster, tmp_path) -> None:
     manifest = read_manifest(tmp_path / "features")
     assert [r["item"] for r in manifest["items"]] == ["box", "box_in_scene"]
     assert all(r["seconds"] >= 0 and r["error"] == "" for r in manifest["items"])
+    assert all(r["attempts"] == 1 and r["worker"].startswith("tcp://127.0.0.1:")
+               for r in manifest["items"])  # fmt: skip
+
+
+@pytest.mark.realdata
+def test_stereo_batch_equals_single_process_matching(cluster, tmp_path) -> None:
+    import numpy as np
+
+    from robopercept.depth import semi_global_matching
+    from robopercept.imaging import read_image
+
+    pairs, opts = _pairs(), {"max_disparity": 32}
+    res = run_batch("stereo", pairs, tmp_path / "s", scheduler=cluster.address, options=opts,
+                    progress=False)  # fmt: skip
+    assert [r["item"] for r in res.items] == list(PAIRS)
+    _same_outputs("stereo", res, pairs, opts, tmp_path / "rs")
+    left, right = (read_image(p, mode="rgb") for p in stereo_pair(pairs[0]))
+    want = semi_global_matching(left, right, 32, lr_check=1.0)  # robopercept stereo's defaults
+    got = np.load(res.out / "tsukuba" / "disparity.npy")
+    np.testing.assert_array_equal(got, want.astype(np.float32))
+    assert res.items[0]["summary"]["valid_percent"] == pytest.approx(
+        100 * np.isfinite(want).mean(), abs=1e-3
+    )
 
 
 @pytest.mark.realdata
@@ -140,6 +175,7 @@ def test_failed_item_is_recorded_and_the_batch_goes_on(cluster, tmp_path) -> Non
     by = {r["item"]: r for r in res.items}
     assert by["broken"]["status"] == "failed" and by["bun4"]["status"] == "ok"
     assert "FileFormatError" in by["broken"]["error"] and by["broken"]["outputs"] == []
+    assert by["broken"]["attempts"] == 2 and by["bun4"]["attempts"] == 1  # retried once
     assert read_manifest(tmp_path / "o")["items"] == res.items
     assert bad.read_bytes().endswith(b"nonsense\n")  # inputs untouched
 
@@ -149,7 +185,7 @@ def test_existing_output_refused_then_resumed(cluster, tmp_path) -> None:
     images, out = _images(), tmp_path / "o"
     first = run_batch("edges", images, out, scheduler=cluster.address, progress=False)
     assert first.count("ok") == 2
-    with pytest.raises(InputError, match=r"--resume.*--overwrite"):
+    with pytest.raises(InputError, match=r"give resume .* or overwrite"):
         run_batch("edges", images, out, scheduler=cluster.address, progress=False)
     again = run_batch("edges", images, out, scheduler=cluster.address, resume=True,
                       progress=False)  # fmt: skip
@@ -242,7 +278,9 @@ def test_inputs_and_names(tmp_path) -> None:
     with pytest.raises(InputError, match="no such file"):
         find_inputs("edges", [tmp_path / "missing.png"])
     with pytest.raises(InputError, match="job must be one of"):
-        find_inputs("stereo", [tmp_path])
+        find_inputs("nope", [tmp_path])
+    with pytest.raises(InputError, match="not a stereo pair folder"):
+        find_inputs("stereo", [tmp_path / "a.pcd"])
     with pytest.raises(InputError, match="not a recording folder"):
         find_inputs("plane-track", [tmp_path / "a.pcd"])
     with pytest.raises(InputError, match="do not apply to edges"):
@@ -288,3 +326,105 @@ def test_nn_cloud_equals_classify_cloud_file(tmp_path) -> None:
         for k, v in want["probabilities"].items():
             assert got["probabilities"][k] == pytest.approx(v, abs=1e-5)
     assert find_inputs("nn-cloud", [clouds[0].parent]) == sorted(clouds[0].parent.glob("*.off"))
+
+
+def test_stereo_pairs_and_options(tmp_path) -> None:
+    for folder, names in {"p1": ("im2.png", "im6.png", "disp2.png"),
+                          "p2": ("left.JPG", "right.jpg", "im0.png", "im1.png"),
+                          "p3": ("im0.png", "view5.png")}.items():  # fmt: skip
+        (tmp_path / folder).mkdir()
+        for n in names:
+            (tmp_path / folder / n).write_bytes(b"")
+    assert [p.name for p in stereo_pair(tmp_path / "p1")] == ["im2.png", "im6.png"]
+    assert [p.name for p in stereo_pair(tmp_path / "p2")] == ["left.JPG", "right.jpg"]
+    assert stereo_pair(tmp_path / "p3") is None and stereo_pair(tmp_path / "p1" / "x") is None
+    assert find_inputs("stereo", [tmp_path]) == [tmp_path / "p1", tmp_path / "p2"]
+    assert find_inputs("stereo", [tmp_path / "p2"]) == [tmp_path / "p2"]
+    bad = {
+        "needs max_disparity": {},
+        "must be below max_disparity": {"max_disparity": 8, "min_disparity": 8},
+        "method must be one of": {"max_disparity": 8, "method": "canny"},
+        "lr_check must be": {"max_disparity": 8, "lr_check": -1.0},
+    }
+    for message, opts in bad.items():
+        with pytest.raises(InputError, match=message):
+            run_batch("stereo", [tmp_path / "p1"], tmp_path / "o", options=opts)
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_nn_options_are_checked_before_the_cluster_starts(tmp_path) -> None:
+    img = tmp_path / "a.png"
+    img.write_bytes(b"")
+    with pytest.raises(InputError, match="the nn-predict job needs model"):
+        run_batch("nn-predict", [img], tmp_path / "o")
+    with pytest.raises(InputError, match=r"model nowhere\.pt: no such file.*fcos"):
+        run_batch("nn-detect", [img], tmp_path / "o", options={"model": "nowhere.pt"})
+    with pytest.raises(InputError, match="top_k must be >= 1"):
+        run_batch("nn-predict", [img], tmp_path / "o", options={"model": img, "top_k": 0})
+    with pytest.raises(InputError, match="do not apply to nn-pose"):
+        run_batch("nn-pose", [img], tmp_path / "o", options={"score_thresh": 0.5})
+    assert not (tmp_path / "o").exists()
+
+
+def test_nn_image_jobs_equal_the_library_predictor(tmp_path) -> None:
+    """nn-detect, nn-segment (U-Net and Mask R-CNN), nn-pose on one LocalCluster worker
+    write what :func:`~robopercept.nn.image_predict.load_image_predictor` gives in this
+    process: the same record (JSON) and byte-equal pictures."""
+    pytest.importorskip("torch")
+    import numpy as np
+
+    from robopercept.imaging import write_image
+    from robopercept.nn.detection_data import procedural_detection_set
+    from robopercept.nn.image_predict import load_image_predictor
+    from robopercept.nn.pose_data import procedural_pose_set
+
+    def png(name: str, image: np.ndarray) -> Path:
+        return write_image(tmp_path / "in" / name, np.round(image * 255).astype(np.uint8))
+
+    (tmp_path / "in").mkdir()
+    shapes = [png(f"shapes{i}.png", im) for i, im in
+              enumerate(procedural_detection_set(2, (96, 96), rng=5).images)]  # fmt: skip
+    figure = [png("figure.png", procedural_pose_set(1, (128, 128), rng=5).images[0])]
+    runs = [("nn-detect", None, shapes), ("nn-segment", None, shapes[:1]),
+            ("nn-segment", "maskrcnn", shapes[:1]), ("nn-pose", None, figure)]  # fmt: skip
+    for k, (job, model, inputs) in enumerate(runs):
+        opts = {} if model is None else {"model": model}
+        res = run_batch(job, inputs, tmp_path / f"o{k}", workers=1, options=opts,
+                        progress=False)  # fmt: skip
+        assert res.count("ok") == len(inputs), res.items
+        predictor = load_image_predictor(job.removeprefix("nn-"), model)
+        for rec, src in zip(res.items, inputs, strict=True):
+            pred = predictor.predict_file(src)
+            got = json.loads((res.out / rec["item"] / "prediction.json").read_text())
+            assert got == json.loads(json.dumps({"file": str(src), **pred.record()}))
+            want = pred.pictures("prediction")
+            assert rec["outputs"] == [f"{rec['item']}/{n}" for n in
+                                      sorted(["prediction.json", *want])]  # fmt: skip
+            ref = pred.write(tmp_path / "ref" / f"{k}{rec['item']}", "prediction")
+            for path in ref:
+                assert (res.out / rec["item"] / path.name).read_bytes() == path.read_bytes()
+
+
+def test_nn_predict_job_equals_nn_predict(tmp_path) -> None:
+    pytest.importorskip("torch")
+    from robopercept.imaging import write_image
+    from robopercept.nn.data import load_digits
+    from robopercept.nn.run import predict, train_run
+    from robopercept.nn.training import TrainConfig
+
+    run = tmp_path / "run"
+    train_run("digits", "vgg_small", run, config=TrainConfig(epochs=1, seed=0), progress=False)
+    x = load_digits().images
+    inputs = [write_image(tmp_path / "in" / f"d{i}.png", (x[i, 0] * 255).round().astype("uint8"))
+              for i in range(3)]  # fmt: skip
+    out = tmp_path / "o"
+    res = run_batch("nn-predict", inputs, out, workers=1, options={"model": run, "top_k": 2},
+                    progress=False)  # fmt: skip
+    assert res.count("ok") == 3, res.items
+    for rec, want in zip(res.items, predict(run, inputs, top_k=2), strict=True):
+        got = json.loads((out / rec["item"] / "prediction.json").read_text())
+        assert got["file"] == str(want.path)
+        assert [t["class"] for t in got["top"]] == [c for c, _ in want.top]
+        # another process, the same weights and input: the probabilities agree closely
+        for t, (_, p) in zip(got["top"], want.top, strict=True):
+            assert t["probability"] == pytest.approx(p, abs=1e-6)

@@ -8,12 +8,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from robopercept.cli._args import UsageError, flag_errors, numbers, positive_int
+from robopercept.cli._args import (
+    UsageError,
+    flag_errors,
+    non_negative_int,
+    numbers,
+    positive_float,
+    positive_int,
+)
+from robopercept.pipelines.batch import JOB_OPTIONS, JOBS
 
 __all__ = ["register"]
-
-_JOBS = ("cloud", "edges", "features", "plane-track", "nn-cloud")
-_CLOUD_CLASSIFIERS = ("pointnet", "dgcnn")  # the shipped classifiers nn-cloud may name
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,10 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "OUT/<item>/ and the manifest OUT/batch.json (rewritten as items finish). A failed "
         "item is recorded and the batch goes on; exit 1 when every item failed. Jobs: "
         "cloud (PCD/PLY -> segments.ply), edges (image -> edges.png), features (image -> "
-        "keypoints.json), plane-track (recording folder -> its outputs), nn-cloud (PLY/PCD/OFF "
-        "-> prediction.json: the class and probabilities of `robopercept nn cloud`).",
+        "keypoints.json), stereo (pair folder: left/right, im0/im1, im2/im6 or view1/view5 -> "
+        "disparity.npy and disparity.png), plane-track (recording folder -> its outputs), "
+        "nn-predict, nn-detect, nn-segment, nn-pose (image -> prediction.json and the pictures "
+        "of `robopercept nn predict|detect|segment|pose`), nn-cloud (PLY/PCD/OFF -> "
+        "prediction.json: the class and probabilities of `robopercept nn cloud`).",
     )
-    p.add_argument("job", choices=_JOBS, help="the job run on each input")
+    p.add_argument("job", choices=JOBS, help="the job run on each input")
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="files, folders or globs")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output folder")
     p.add_argument(
@@ -43,13 +51,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--retries",
-        type=int,
+        type=non_negative_int,
         default=1,
         help="reruns of an item that failed (default: %(default)s)",
     )
     p.add_argument(
         "--connect-timeout",
-        type=float,
+        type=positive_float,
         default=10.0,
         metavar="SECONDS",
         help="wait this long for --scheduler ADDRESS (default: %(default)s)",
@@ -67,9 +75,32 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N:THRESHOLD",
         help="cloud: extract up to N planes (RANSAC threshold in metres)",
     )
-    p.add_argument("--method", choices=("canny", "sobel"), default="canny", help="edges")
     p.add_argument(
-        "--detector", choices=("harris", "shi-tomasi"), default="harris", help="features"
+        "--method",
+        choices=("canny", "sobel", "sgm", "bm"),
+        default=None,
+        help="edges: canny (default) or sobel; stereo: sgm (default) or bm",
+    )
+    p.add_argument(
+        "--detector",
+        choices=("harris", "shi-tomasi"),
+        default=None,
+        help="features: harris (default) or shi-tomasi",
+    )
+    p.add_argument(
+        "--max-disparity", type=positive_int, default=None, help="stereo (required): largest d"
+    )
+    p.add_argument("--min-disparity", type=int, default=None, help="stereo: smallest d (0)")
+    lr = p.add_mutually_exclusive_group()
+    lr.add_argument(
+        "--lr-check",
+        type=float,
+        default=None,
+        metavar="PX",
+        help="stereo: left-right consistency tolerance in pixels (default 1)",
+    )
+    lr.add_argument(
+        "--no-lr-check", action="store_true", help="stereo: keep every pixel's best match"
     )
     p.add_argument(
         "--max-frames", type=positive_int, default=None, help="plane-track: frames per item"
@@ -78,7 +109,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--model",
         default=None,
         metavar="MODEL",
-        help="nn-cloud: pointnet (default), dgcnn or a model.pt file",
+        help="nn-*: a run folder or model file (nn-predict: required), or a shipped model: "
+        "nn-detect fcos (default) or faster, nn-segment unet (default) or maskrcnn, nn-pose "
+        "hrnet (default) or deeppose, nn-cloud pointnet (default) or dgcnn",
+    )
+    p.add_argument(
+        "--top-k", type=positive_int, default=None, help="nn-predict: classes per image (3)"
+    )
+    p.add_argument(
+        "--score-thresh",
+        type=float,
+        default=None,
+        help="nn-detect, nn-segment: smallest score kept (default: the command's)",
     )
     p.add_argument(
         "--points",
@@ -91,55 +133,49 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_batch_command)
 
 
-_JOB_FLAGS = {
-    "cloud": {"voxel": "--voxel", "planes": "--planes"},
-    "edges": {"method": "--method"},
-    "features": {"detector": "--detector"},
-    "plane-track": {"max_frames": "--max-frames"},
-    "nn-cloud": {"model": "--model", "points": "--points"},
+#: each option's flag (an option is given when its flag was)
+_FLAGS = {
+    "voxel": "--voxel",
+    "planes": "--planes",
+    "method": "--method",
+    "detector": "--detector",
+    "max_disparity": "--max-disparity",
+    "min_disparity": "--min-disparity",
+    "lr_check": "--lr-check",
+    "max_frames": "--max-frames",
+    "model": "--model",
+    "top_k": "--top-k",
+    "score_thresh": "--score-thresh",
+    "points": "--points",
 }
-_DEFAULTS = {"voxel": None, "planes": None, "method": "canny", "detector": "harris",
-             "max_frames": None, "model": None, "points": None}  # fmt: skip
 
 
 @flag_errors(
     workers="--workers",
     retries="--retries",
     connect_timeout="--connect-timeout",
+    resume="--resume",
+    overwrite="--overwrite",
     voxel_size="--voxel",
     max_planes="--planes N",
     threshold="--planes THRESHOLD",
+    **_FLAGS,
 )
 def run_batch_command(args: argparse.Namespace) -> int:
     """Run ``robopercept batch`` with the parsed ``args``; returns the exit status."""
     from robopercept.pipelines.batch import run_batch
 
-    if args.retries < 0:
-        raise UsageError(f"--retries must be >= 0; got {args.retries}")
-    if args.connect_timeout <= 0:
-        raise UsageError(f"--connect-timeout must be > 0; got {args.connect_timeout:g}")
-    if args.scheduler != "local" and "://" not in args.scheduler:
-        raise UsageError(f"--scheduler must be 'local' or tcp://HOST:PORT; got {args.scheduler}")
-    out = Path(args.output)
-    if out.is_dir() and any(out.iterdir()) and not (args.resume or args.overwrite):
-        raise UsageError(
-            f"-o {out}: exists and is not empty: pass --resume to finish its batch or "
-            "--overwrite to run every item again"
-        )
-    if args.model is not None and not (
-        args.model in _CLOUD_CLASSIFIERS or Path(args.model).is_file()
-    ):
-        raise UsageError(
-            f"--model must be {' or '.join(_CLOUD_CLASSIFIERS)} or a model.pt file; got "
-            f"{args.model} (no such file)"
-        )
     options: dict[str, Any] = {}
-    for name, flag in (f for job, fl in _JOB_FLAGS.items() for f in fl.items()):
+    if args.no_lr_check:
+        args.lr_check = "off"
+    for name, flag in _FLAGS.items():
         given = getattr(args, name)
-        if given != _DEFAULTS[name]:
-            if name not in _JOB_FLAGS[args.job]:
-                raise UsageError(f"{flag} does not apply to the {args.job} job")
-            options[name] = given
+        if given is None:
+            continue
+        if name not in JOB_OPTIONS[args.job]:
+            raise UsageError(f"{flag} does not apply to the {args.job} job")
+        options[name] = None if given == "off" else given
+    out = Path(args.output)
     result = run_batch(
         args.job,
         args.inputs,

@@ -13,7 +13,7 @@ import importlib.util
 import json
 from typing import Any
 
-from robopercept.cli._args import UsageError, image_output, numbers, positive_int
+from robopercept.cli._args import UsageError, image_output, numbers, positive_float, positive_int
 from robopercept.errors import InputError
 
 __all__ = ["MODEL_NAMES", "register"]
@@ -40,17 +40,6 @@ _chw = numbers((positive_int,) * 3, "C,H,W, three positive integers, e.g. 1,8,8"
 _chw.__doc__ = "``C,H,W`` -> three integers >= 1 (argparse type)."
 
 
-def _positive_float(text: str) -> float:
-    """A float > 0 (argparse type)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expects a number; got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0; got {text!r}")
-    return v
-
-
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``nn`` and its subcommands ``train``, ``eval``, ``predict`` and ``summary`` to
     the subcommand parsers ``sub``."""
@@ -75,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     t.add_argument("--model", choices=MODEL_NAMES, default="resnet_small")
     t.add_argument("--epochs", type=positive_int, default=30, help="most epochs (default 30)")
-    t.add_argument("--lr", type=_positive_float, default=1e-3, help="learning rate (default 1e-3)")
+    t.add_argument("--lr", type=positive_float, default=1e-3, help="learning rate (default 1e-3)")
     t.add_argument("--batch-size", type=positive_int, default=64, help="default 64")
     t.add_argument("--optimizer", choices=("adamw", "sgd"), default="adamw")
     t.add_argument(

@@ -118,7 +118,7 @@ def run_stereo(args: argparse.Namespace) -> int:
     from robopercept.depth import bad_pixel_rate, block_matching, semi_global_matching
     from robopercept.errors import DegenerateError, InputError
     from robopercept.imaging import read_image, write_image
-    from robopercept.viz import colorize_depth
+    from robopercept.viz import colorize_depth, disparity_picture
 
     if args.ply and not args.calib and (args.focal is None or args.baseline is None):
         raise UsageError("--ply needs --calib, or --focal (pixels) and --baseline (metres)")
@@ -153,7 +153,13 @@ def run_stereo(args: argparse.Namespace) -> int:
         shown = np.nan_to_num(disp, nan=0.0)
         picture = colorize_depth(shown, 1e-6, float(args.max_disparity))
     else:
-        picture = _disparity_picture(disp, args, left.shape)
+        picture = disparity_picture(
+            disp,
+            method=args.method,
+            min_disparity=args.min_disparity,
+            max_disparity=args.max_disparity,
+            lr_check=args.lr_check,
+        )
     write_image(args.output, picture)
     written = [str(args.output)]
     if args.npy:
@@ -210,26 +216,6 @@ def run_stereo(args: argparse.Namespace) -> int:
         print(f"points            {summary['points']}{far}")
     print(f"wrote             {', '.join(written)}")
     return 0
-
-
-def _disparity_picture(disp: np.ndarray, args: argparse.Namespace, shape: tuple) -> np.ndarray:
-    """The disparity with its colour bar (viz.plot's scalar map), sized for the screen."""
-    from robopercept.viz.plot import scalar_map_picture
-
-    h, w = shape[:2]
-    width = 1280
-    height = int(np.clip(0.82 * width * h / w + 90, 360, 1080))
-    check = "off" if args.lr_check is None else f"{args.lr_check:g} px"
-    return scalar_map_picture(
-        disp,
-        cmap="turbo",
-        label="disparity [px] (near: high)",
-        title=f"{args.method} disparity, left-right check {check}",
-        vmin=float(args.min_disparity),
-        vmax=float(args.max_disparity),
-        width=width,
-        height=height,
-    )
 
 
 def _rectify(path: str, left: np.ndarray, right: np.ndarray) -> tuple:

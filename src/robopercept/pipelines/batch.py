@@ -1,21 +1,26 @@
 """Batch jobs: one robopercept job over many inputs, on a Dask distributed cluster.
 
-:func:`run_batch` runs a job (``cloud``, ``edges``, ``features``, ``plane-track``,
-``nn-cloud``) on every input, each as one Dask task that calls :func:`run_item`: the same library
-code a single-process run uses, writing the item's files into ``OUT/<item>/``. The
-scheduler is a :class:`distributed.LocalCluster` (``scheduler="local"``: ``workers``
-processes of one thread each) or an existing cluster (``scheduler="tcp://HOST:PORT"``,
-whose workers must see the inputs and ``OUT`` at the same paths: a shared file system).
+:func:`run_batch` runs a job (:data:`JOBS`: ``cloud``, ``edges``, ``features``,
+``stereo``, ``plane-track`` and the network predictions ``nn-predict``, ``nn-detect``,
+``nn-segment``, ``nn-pose``, ``nn-cloud``) on every input, each as one Dask task that
+calls :func:`run_item`: the same library code a single-process run uses, writing the
+item's files into ``OUT/<item>/``. The scheduler is a :class:`distributed.LocalCluster`
+(``scheduler="local"``: ``workers`` processes of one thread each) or an existing
+cluster (``scheduler="tcp://HOST:PORT"``, whose workers must see the inputs and ``OUT``
+at the same paths: a shared file system).
 
-Tasks are submitted with ``retries`` (an item that raised runs again, up to
-``retries`` more times) and ``pure=False``; an item whose worker dies is rescheduled
-on another worker by Dask itself. Results are gathered as they finish
-(:func:`distributed.as_completed`), and after each one the manifest ``OUT/batch.json``
+Tasks are submitted with ``pure=False``. An item that raised is submitted again, up
+to ``retries`` more times (its ``attempts`` count them); an item whose worker died is
+rescheduled on another worker by Dask itself within the same attempt (up to
+``distributed.scheduler.allowed-failures`` times, then it fails with
+``KilledWorker`` and counts as a failed attempt). Results are gathered as they finish
+(:class:`distributed.as_completed`), and after each one the manifest ``OUT/batch.json``
 is rewritten atomically (:func:`~robopercept.fileio.atomic_write`): one record per
 item with its ``status`` (``pending``, ``ok``, ``failed``, ``skipped``: done by an
 earlier run and resumed, ``cancelled``: pending when the batch was interrupted), its
-``seconds`` (the worker's time on it), ``error`` and ``outputs`` (paths relative to
-``OUT``). A failed item does not stop the batch. Inputs are only read.
+``attempts``, ``seconds`` (the worker's time on the last attempt), ``worker`` (its
+address), ``error`` (the last one) and ``outputs`` (paths relative to ``OUT``). A
+failed item does not stop the batch. Inputs are only read.
 
 Wall time of a batch of :math:`n` items on :math:`w` workers, each item taking
 :math:`t` seconds, is about
@@ -28,6 +33,7 @@ and :math:`c` the per-item scheduling overhead (``docs/scale.md`` has measured v
 
 from __future__ import annotations
 
+import functools
 import glob
 import json
 import os
@@ -45,42 +51,49 @@ from robopercept.fileio import atomic_write
 __all__ = [
     "IMAGE_SUFFIXES",
     "JOBS",
+    "JOB_OPTIONS",
     "MANIFEST",
+    "REQUIRED",
+    "STEREO_PAIRS",
     "BatchResult",
     "find_inputs",
     "item_names",
     "read_manifest",
     "run_batch",
     "run_item",
+    "stereo_pair",
 ]
 
+#: each job's options (:func:`run_item` says what they mean) with their defaults; an
+#: option whose default is None and that :data:`REQUIRED` names must be given
+JOB_OPTIONS: dict[str, dict[str, Any]] = {
+    "cloud": {"voxel": None, "planes": None, "seed": 0},
+    "edges": {"method": "canny", "sigma": 1.0},
+    "features": {"detector": "harris", "max": 500},
+    "stereo": {"method": "sgm", "max_disparity": None, "min_disparity": 0, "lr_check": 1.0},
+    "plane-track": {"max_frames": None},
+    "nn-predict": {"model": None, "top_k": 3},
+    "nn-detect": {"model": None, "score_thresh": None},
+    "nn-segment": {"model": None, "score_thresh": None},
+    "nn-pose": {"model": None},
+    "nn-cloud": {"model": "pointnet", "points": None, "seed": 0},
+}
 #: the jobs :func:`run_batch` runs
-JOBS = ("cloud", "edges", "features", "plane-track", "nn-cloud")
+JOBS = tuple(JOB_OPTIONS)
+#: the options a job cannot run without
+REQUIRED = {"stereo": ("max_disparity",), "nn-predict": ("model",)}
 #: the manifest's file name inside ``OUT``
 MANIFEST = "batch.json"
 #: files an image job takes from a folder
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
+#: the file stems of a stereo pair folder's left and right images, the first pair
+#: present wins: ``left``/``right``, Middlebury 2014 ``im0``/``im1``, Middlebury
+#: 2001/2003 ``im2``/``im6``, Middlebury 2005/2006 ``view1``/``view5``
+STEREO_PAIRS = (("left", "right"), ("im0", "im1"), ("im2", "im6"), ("view1", "view5"))
 _CLOUD_SUFFIXES = (".pcd", ".ply")
 _NN_CLOUD_SUFFIXES = (".pcd", ".ply", ".off")
-_OPTIONS: dict[str, tuple[str, ...]] = {
-    "cloud": ("voxel", "planes", "seed"),
-    "edges": ("method", "sigma"),
-    "features": ("detector", "max"),
-    "plane-track": ("max_frames",),
-    "nn-cloud": ("model", "points", "seed"),
-}
-_DEFAULTS: dict[str, Any] = {
-    "voxel": None,
-    "planes": None,
-    "seed": 0,
-    "method": "canny",
-    "sigma": 1.0,
-    "detector": "harris",
-    "max": 500,
-    "max_frames": None,
-    "model": "pointnet",
-    "points": None,
-}
+#: the shipped point-cloud classifiers nn-cloud takes by name
+_CLOUD_CLASSIFIERS = ("pointnet", "dgcnn")
 
 
 def _check_job(job: str) -> str:
@@ -95,9 +108,56 @@ def _is_recording(path: Path) -> bool:
     return (path / "rgb.txt").is_file() and (path / "depth.txt").is_file()
 
 
+def stereo_pair(folder: str | os.PathLike[str]) -> tuple[Path, Path] | None:
+    """The left and right images of a stereo pair folder, or None when it holds no pair.
+
+    The first of :data:`STEREO_PAIRS` whose two stems both name an image in the folder
+    (any of :data:`IMAGE_SUFFIXES`, case-insensitive) is the pair.
+
+    Parameters
+    ----------
+    folder : path
+
+    Returns
+    -------
+    (Path, Path) or None
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> for n in ("im2.png", "im6.png", "disp2.png"):
+    ...     _ = (d / n).write_bytes(b"")
+    >>> [p.name for p in stereo_pair(d)]
+    ['im2.png', 'im6.png']
+    """
+    path = Path(folder)
+    if not path.is_dir():
+        return None
+    images: dict[str, Path] = {}
+    for p in sorted(path.iterdir()):
+        if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES:
+            images.setdefault(p.stem.lower(), p)
+    for left, right in STEREO_PAIRS:
+        if left in images and right in images:
+            return images[left], images[right]
+    return None
+
+
+#: the jobs whose inputs are folders, and the test a folder must pass to be one
+_FOLDER_JOBS: dict[str, Callable[[Path], bool]] = {
+    "plane-track": _is_recording,
+    "stereo": lambda p: stereo_pair(p) is not None,
+}
+_FOLDER_WHAT = {
+    "plane-track": "a recording folder (rgb.txt and depth.txt)",
+    "stereo": "a stereo pair folder (" + ", ".join(f"{a}/{b}" for a, b in STEREO_PAIRS) + ")",
+}
+
+
 def _matches(job: str, path: Path) -> bool:
-    if job == "plane-track":
-        return path.is_dir() and _is_recording(path)
+    if job in _FOLDER_JOBS:
+        return path.is_dir() and _FOLDER_JOBS[job](path)
     suffixes = {"cloud": _CLOUD_SUFFIXES, "nn-cloud": _NN_CLOUD_SUFFIXES}.get(job, IMAGE_SUFFIXES)
     return path.is_file() and path.suffix.lower() in suffixes
 
@@ -107,11 +167,12 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
 
     A file is taken as given; a folder gives its matching files (sorted, not
     recursive): ``.pcd``/``.ply`` for ``cloud``, ``.pcd``/``.ply``/``.off`` for
-    ``nn-cloud``, images (:data:`IMAGE_SUFFIXES`) for ``edges`` and ``features``;
-    for ``plane-track`` a recording folder (``rgb.txt`` and ``depth.txt``) is one
-    input, and another folder gives its recording sub-folders. A pattern with ``*``,
-    ``?`` or ``[`` is expanded (sorted) and each match treated as above. Duplicates
-    are dropped, the first kept.
+    ``nn-cloud``, images (:data:`IMAGE_SUFFIXES`) for ``edges``, ``features`` and the
+    image ``nn-*`` jobs. For ``plane-track`` a recording folder (``rgb.txt`` and
+    ``depth.txt``), for ``stereo`` a pair folder (:func:`stereo_pair`), is one input,
+    and another folder gives its such sub-folders. A pattern with ``*``, ``?`` or
+    ``[`` is expanded (sorted) and each match treated as above. Duplicates are
+    dropped, the first kept.
 
     Parameters
     ----------
@@ -138,6 +199,7 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
     ['a.ply', 'b.pcd']
     """
     _check_job(job)
+    inputs = list(inputs)
     found: list[Path] = []
     for raw in inputs:
         text = os.fspath(raw)
@@ -150,14 +212,15 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
         for path in paths:
             if not path.exists():
                 raise InputError(f"{path}: no such file or folder: check the input")
-            if path.is_dir() and not (job == "plane-track" and _is_recording(path)):
+            folder_job = job in _FOLDER_JOBS
+            if path.is_dir() and not (folder_job and _FOLDER_JOBS[job](path)):
                 found += [p for p in sorted(path.iterdir()) if _matches(job, p)]
-            elif _matches(job, path) or (path.is_file() and job != "plane-track"):
+            elif _matches(job, path) or (path.is_file() and not folder_job):
                 found.append(path)  # a file named explicitly: the job judges it
             else:
                 raise InputError(
-                    f"{path}: not a recording folder (rgb.txt and depth.txt) for "
-                    "plane-track: give recording folders or folders holding them"
+                    f"{path}: not {_FOLDER_WHAT[job]} for {job}: give such folders or "
+                    "folders holding them"
                 )
     unique = list(dict.fromkeys(found))
     if not unique:
@@ -165,6 +228,7 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
             "cloud": ".pcd/.ply files",
             "nn-cloud": ".pcd/.ply/.off files",
             "plane-track": "recording folders",
+            "stereo": "stereo pair folders",
         }
         raise InputError(
             f"no input for {job}: expected {what.get(job, 'image files')}; got "
@@ -206,14 +270,58 @@ def item_names(paths: Sequence[str | os.PathLike[str]]) -> list[str]:
 
 
 def _options(job: str, options: Mapping[str, Any] | None) -> dict[str, Any]:
-    allowed = _OPTIONS[job]
+    """The job's options, defaults filled in, checked before any item runs."""
+    from robopercept._checks import check_choice, check_int, check_real
+
+    defaults = JOB_OPTIONS[job]
     opts = dict(options or {})
-    unknown = sorted(set(opts) - set(allowed))
+    unknown = sorted(set(opts) - set(defaults))
     if unknown:
         raise InputError(
-            f"options {unknown} do not apply to {job}; it takes {', '.join(allowed) or 'none'}"
+            f"options {unknown} do not apply to {job}; it takes {', '.join(defaults) or 'none'}"
         )
-    return {k: opts.get(k, _DEFAULTS[k]) for k in allowed}
+    opts = {k: opts.get(k, v) for k, v in defaults.items()}
+    for name in REQUIRED.get(job, ()):
+        if opts[name] is None:
+            raise InputError(f"the {job} job needs {name}")
+    if job == "edges":
+        check_choice(opts["method"], "method", ("canny", "sobel"))
+    elif job == "stereo":
+        check_choice(opts["method"], "method", ("sgm", "bm"))
+        opts["max_disparity"] = check_int(opts["max_disparity"], "max_disparity", 1)
+        opts["min_disparity"] = check_int(opts["min_disparity"], "min_disparity")
+        if opts["min_disparity"] >= opts["max_disparity"]:
+            raise InputError(
+                f"min_disparity {opts['min_disparity']} must be below max_disparity "
+                f"{opts['max_disparity']}"
+            )
+        if opts["lr_check"] is not None:
+            opts["lr_check"] = check_real(opts["lr_check"], "lr_check", 0.0)
+    elif job == "nn-predict":
+        opts["top_k"] = check_int(opts["top_k"], "top_k", 1)
+    if job.startswith("nn-"):
+        opts["model"] = _model_option(job, opts["model"])
+    return opts
+
+
+def _model_option(job: str, model: Any) -> str | None:
+    """``model`` of an nn job, checked on this machine: a shipped name, or an existing
+    run folder or model file (as a string)."""
+    from robopercept.nn.shipped import SHIPPED
+
+    kind = job.removeprefix("nn-")
+    names = _CLOUD_CLASSIFIERS if kind == "cloud" else tuple(SHIPPED.get(kind, {}))
+    if model is None or (isinstance(model, str) and model in names):
+        return model
+    if not isinstance(model, (str, os.PathLike)):
+        raise InputError(f"model must be a path or a shipped name; got {model!r}")
+    if not Path(model).exists():
+        shipped = f"one of {', '.join(names)}, " if names else ""
+        raise InputError(
+            f"model {os.fspath(model)}: no such file or folder: give {shipped}a run folder "
+            "or a model file"
+        )
+    return os.fspath(model)
 
 
 def _files(folder: Path, root: Path) -> list[str]:
@@ -234,16 +342,33 @@ def run_item(
     ``edges``: ``edges.png``, Canny (default thresholds 50 and 150 grey levels, scaled
     for 16-bit images) or the Sobel magnitude (``method``, ``sigma``). ``features``:
     :func:`~robopercept.features.harris_corners` (``detector`` ``harris`` or
-    ``shi-tomasi``, at most ``max``) into ``keypoints.json``. ``plane-track``:
+    ``shi-tomasi``, at most ``max``) into ``keypoints.json``. ``stereo``: the pair of
+    a folder (:func:`stereo_pair`) matched by
+    :func:`~robopercept.depth.semi_global_matching` or
+    :func:`~robopercept.depth.block_matching` (``method`` ``sgm``/``bm`` with the
+    defaults of ``robopercept stereo``, ``max_disparity`` (required),
+    ``min_disparity``, ``lr_check`` in pixels or None), ``disparity.npy`` (float32,
+    NaN rejected) and ``disparity.png``
+    (:func:`~robopercept.viz.plot.disparity_picture`). ``plane-track``:
     :func:`~robopercept.pipelines.plane_outputs.run_plane_tracking` of the recording
-    (no video; ``max_frames``), its outputs and ``summary.json``. ``nn-cloud``:
+    (no video; ``max_frames``), its outputs and ``summary.json``.
+
+    The ``nn-*`` jobs import torch only on the worker, and load their model once per
+    worker process. ``nn-predict``: :func:`~robopercept.nn.run.predict` (what
+    ``robopercept nn predict`` runs) with the run folder or checkpoint ``model``
+    (required) into ``prediction.json`` (``file`` and the ``top_k`` most probable
+    classes). ``nn-detect``, ``nn-segment``, ``nn-pose``: the images form of
+    ``robopercept nn detect|segment|pose`` (:func:`~robopercept.nn.image_predict.\
+load_image_predictor`; ``model`` a shipped name of :data:`~robopercept.nn.shipped.\
+SHIPPED`, default the command's, or a run folder or model file; ``score_thresh`` for
+    detect and segment, default the command's) into ``prediction.json`` (``file`` and
+    :meth:`~robopercept.nn.image_predict.ImagePrediction.record`) and the command's
+    pictures named ``prediction*.png``. ``nn-cloud``:
     :func:`~robopercept.nn.cloud.classify_cloud_file` (what ``robopercept nn cloud``
-    runs) with the classifier ``model`` (a shipped name of
-    :data:`~robopercept.nn.cloud.SHIPPED_CLOUD_MODELS`, default ``pointnet``, or a
-    ``model.pt`` file; loaded once per worker process), ``points`` sampled (default:
-    the model's) with ``seed``, into ``prediction.json`` (``class``,
-    ``probabilities``, most probable first, ``points``, ``file``); torch is imported
-    only here, on the worker.
+    runs) with the classifier ``model`` (``pointnet``, the default, ``dgcnn`` or a
+    ``model.pt`` file), ``points`` sampled (default: the model's) with ``seed``, into
+    ``prediction.json`` (``class``, ``probabilities``, most probable first,
+    ``points``, ``file``).
 
     Parameters
     ----------
@@ -355,33 +480,87 @@ def _run_plane_track(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, An
     return {"frames": summary.frames, "stopped": summary.stopped}
 
 
-_CLOUD_MODELS: dict[str, tuple[Any, dict[str, Any]]] = {}  # per worker process
+def _run_stereo(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
+    import numpy as np
+
+    from robopercept.depth import block_matching, semi_global_matching
+    from robopercept.imaging import read_image, write_image
+    from robopercept.viz.plot import disparity_picture
+
+    pair = stereo_pair(src)
+    if pair is None:
+        raise InputError(f"{src}: {_FOLDER_WHAT['stereo']} was expected")
+    left, right = (read_image(p, mode="rgb") for p in pair)
+    if left.shape != right.shape:
+        raise InputError(
+            f"{src}: the left image is {left.shape[1]}x{left.shape[0]}, the right "
+            f"{right.shape[1]}x{right.shape[0]}: a rectified pair has one size"
+        )
+    match = semi_global_matching if opts["method"] == "sgm" else block_matching
+    disp = match(
+        left,
+        right,
+        opts["max_disparity"],
+        min_disparity=opts["min_disparity"],
+        lr_check=opts["lr_check"],
+    )
+    np.save(out / "disparity.npy", disp.astype(np.float32))
+    picture = disparity_picture(
+        disp,
+        method=opts["method"],
+        min_disparity=opts["min_disparity"],
+        max_disparity=opts["max_disparity"],
+        lr_check=opts["lr_check"],
+    )
+    write_image(out / "disparity.png", picture)
+    finite = np.isfinite(disp)
+    return {
+        "left": pair[0].name,
+        "right": pair[1].name,
+        "valid_percent": round(100.0 * float(finite.mean()), 3),
+        "median_disparity": float(np.nanmedian(disp)) if finite.any() else None,
+    }
+
+
+_MODELS: dict[tuple[Any, ...], Any] = {}  # loaded models, per worker process
+
+
+def _loaded(key: tuple[Any, ...], load: Callable[[], Any]) -> Any:
+    """``load()`` once per worker process and ``key``."""
+    if key not in _MODELS:
+        _MODELS[key] = load()
+    return _MODELS[key]
+
+
+def _run_nn_predict(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
+    from robopercept.nn.run import predict
+
+    pred = predict(opts["model"], [src], top_k=opts["top_k"])[0]
+    top = [{"class": c, "probability": float(p)} for c, p in pred.top]
+    atomic_write(out / "prediction.json", json.dumps({"file": str(src), "top": top}, indent=2))
+    return {"class": top[0]["class"], "probability": top[0]["probability"]}
+
+
+def _run_nn_image(src: Path, out: Path, opts: dict[str, Any], kind: str) -> dict[str, Any]:
+    from robopercept.nn.image_predict import load_image_predictor
+
+    settings: dict[str, Any] = {"score_thresh": opts["score_thresh"]} if kind != "pose" else {}
+    key = (kind, opts["model"], *settings.items())
+    predictor = _loaded(key, lambda: load_image_predictor(kind, opts["model"], **settings))
+    pred = predictor.predict_file(src)
+    record = {"file": str(src), **pred.record()}
+    atomic_write(out / "prediction.json", json.dumps(record, indent=2, allow_nan=False))
+    pred.write(out, "prediction")
+    counts = {k: len(v) for k, v in record.items() if isinstance(v, list) and k != "file"}
+    return {k: counts[k] for k in ("detections", "instances", "keypoints") if k in counts}
 
 
 def _run_nn_cloud(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.cloud import (
-        SHIPPED_CLOUD_MODELS,
-        classify_cloud_file,
-        load_cloud_model,
-        shipped_cloud_model,
-    )
+    from robopercept.nn.cloud import classify_cloud_file, load_cloud_model, shipped_cloud_model
 
     name = opts["model"]
-    if not isinstance(name, (str, os.PathLike)):
-        raise InputError(f"model must be a shipped model name or a model.pt path; got {name!r}")
-    if isinstance(name, str) and name in SHIPPED_CLOUD_MODELS:
-        path = shipped_cloud_model(name)
-    else:
-        path = Path(name)
-        if not path.is_file():
-            raise InputError(
-                f"model {name}: no such file: give a model.pt or a shipped model "
-                f"({', '.join(SHIPPED_CLOUD_MODELS)})"
-            )
-    key = str(path.resolve())
-    if key not in _CLOUD_MODELS:
-        _CLOUD_MODELS[key] = load_cloud_model(path)
-    model, info = _CLOUD_MODELS[key]
+    path = shipped_cloud_model(name) if name in _CLOUD_CLASSIFIERS else Path(name)
+    model, info = _loaded(("cloud", str(path.resolve())), lambda: load_cloud_model(path))
     res = classify_cloud_file(src, model, info, n_points=opts["points"], rng=opts["seed"])
     prediction = res.to_dict()
     atomic_write(out / "prediction.json", json.dumps(prediction, indent=2))
@@ -392,7 +571,12 @@ _RUNNERS: dict[str, Callable[[Path, Path, dict[str, Any]], dict[str, Any]]] = {
     "cloud": _run_cloud,
     "edges": _run_edges,
     "features": _run_features,
+    "stereo": _run_stereo,
     "plane-track": _run_plane_track,
+    "nn-predict": _run_nn_predict,
+    "nn-detect": functools.partial(_run_nn_image, kind="detect"),
+    "nn-segment": functools.partial(_run_nn_image, kind="segment"),
+    "nn-pose": functools.partial(_run_nn_image, kind="pose"),
     "nn-cloud": _run_nn_cloud,
 }
 
@@ -400,12 +584,19 @@ _RUNNERS: dict[str, Callable[[Path, Path, dict[str, Any]], dict[str, Any]]] = {
 def _task(
     job: str, source: str, out_dir: str, options: dict[str, Any], delay: float
 ) -> dict[str, Any]:
-    """What a worker runs for one item: :func:`run_item`, timed."""
+    """What a worker runs for one item: :func:`run_item`, timed, with the worker's
+    address."""
+    from distributed import get_worker
+
     t0 = time.perf_counter()
     if delay > 0:
         time.sleep(delay)
     result = run_item(job, source, out_dir, options)
     result["seconds"] = round(time.perf_counter() - t0, 4)
+    try:
+        result["worker"] = get_worker().address
+    except ValueError:  # run outside a worker
+        result["worker"] = ""
     return result
 
 
@@ -561,7 +752,8 @@ def run_batch(
     workers : int
         Workers of the local cluster (ignored for an address).
     retries : int
-        More runs of an item that raised (``client.submit(..., retries=)``).
+        More attempts at an item that raised (each resubmitted as a new task, which
+        Dask may place on another worker); the record's ``attempts`` counts them.
     resume : bool
         Skip the items the manifest in ``out`` records as done whose outputs all
         exist (their status becomes ``skipped``); run the others.
@@ -570,7 +762,8 @@ def run_batch(
     connect_timeout : float
         Seconds to wait for the scheduler at an address.
     options : mapping, optional
-        The job's options (:func:`run_item`).
+        The job's options (:data:`JOB_OPTIONS`, :func:`run_item`), checked before the
+        cluster starts (a model path, for instance, must exist here).
     progress : bool
         A progress bar on stderr with items per second.
     delay : float
@@ -605,7 +798,7 @@ def run_batch(
     _check_job(job)
     workers = check_int(workers, "workers", 1)
     retries = check_int(retries, "retries", 0)
-    connect_timeout = check_real(connect_timeout, "connect_timeout", 0.0)
+    connect_timeout = check_real(connect_timeout, "connect_timeout", 0.0, low_inclusive=False)
     delay = check_real(delay, "delay", 0.0)
     resume = check_bool(resume, "resume")
     overwrite = check_bool(overwrite, "overwrite")
@@ -622,8 +815,8 @@ def run_batch(
         raise InputError(f"{out_path}: exists and is not a folder: choose another output")
     if out_path.is_dir() and any(out_path.iterdir()) and not (resume or overwrite):
         raise InputError(
-            f"{out_path}: exists and is not empty: pass --resume to finish its batch or "
-            "--overwrite to run every item again (or choose another output)"
+            f"{out_path}: exists and is not empty: give resume to finish its batch or "
+            "overwrite to run every item again, or choose another output folder"
         )
     resolved_out = out_path.resolve()
     for p in paths:
@@ -647,7 +840,9 @@ def run_batch(
                     "item": name,
                     "input": str(p),
                     "status": "pending",
+                    "attempts": 0,
                     "seconds": None,
+                    "worker": "",
                     "error": "",
                     "outputs": [],
                 }
@@ -672,35 +867,46 @@ def run_batch(
 
     client, cluster = _connect(scheduler, workers, connect_timeout)
     futures: dict[Any, int] = {}
+    finished = as_completed()
     bar = progress_bar(total=len(todo), unit="item", desc=f"batch {job}", disable=not progress)
+
+    def submit(i: int) -> None:
+        r = records[i]
+        r["attempts"] += 1
+        fut = client.submit(
+            _task, job, r["input"], str(out_path / r["item"]), opts, delay,
+            key=f"robopercept-{job}-{r['item']}-{r['attempts']}-{os.urandom(4).hex()}",
+            pure=False,
+        )  # fmt: skip
+        futures[fut] = i
+        finished.add(fut)
+
     try:
         result.workers = len(client.scheduler_info().get("workers", {})) or workers
         for i in todo:
+            submit(i)
+        for fut in finished:
+            i = futures.pop(fut)
             r = records[i]
-            fut = client.submit(
-                _task, job, r["input"], str(out_path / r["item"]), opts, delay,
-                key=f"robopercept-{job}-{r['item']}-{os.urandom(4).hex()}",
-                retries=retries, pure=False,
-            )  # fmt: skip
-            futures[fut] = i
-        for fut in as_completed(list(futures)):
-            r = records[futures[fut]]
             if fut.status == "finished":
                 value = fut.result()
-                r.update(status="ok", seconds=value["seconds"], error="")
+                r.update(status="ok", seconds=value["seconds"], worker=value["worker"], error="")
                 r["outputs"] = [f"{r['item']}/{o}" for o in value["outputs"]]
                 r["summary"] = value["summary"]
             else:
-                exc = fut.exception()
-                r.update(status="failed", error=_error_text(exc), outputs=[])
+                r["error"] = _error_text(fut.exception())
+                if r["attempts"] <= retries:
+                    save()
+                    submit(i)  # the record stays pending; the bar waits for it
+                    continue
+                r.update(status="failed", outputs=[])
             save()
             bar.update(1)
             bar.set_postfix(failed=result.count("failed"))
     except BaseException:
         for fut, i in futures.items():
-            if records[i]["status"] == "pending":
-                fut.cancel()
-                records[i]["status"] = "cancelled"
+            fut.cancel()
+            records[i]["status"] = "cancelled"
         for r in records:
             if r["status"] == "pending":
                 r["status"] = "cancelled"

@@ -54,6 +54,7 @@ from robopercept.viz.learning import (
 from robopercept.viz.plot import (
     Panel,
     Series,
+    disparity_picture,
     plot_series,
     scalar_map_figure,
     scalar_map_picture,
@@ -78,6 +79,7 @@ __all__ = [
     "curves_figure",
     "curves_picture",
     "dense_flow_picture",
+    "disparity_picture",
     "draw_boxes",
     "draw_chessboard",
     "draw_flow",

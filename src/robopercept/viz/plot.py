@@ -60,6 +60,7 @@ __all__ = [
     "Panel",
     "Series",
     "add_note",
+    "disparity_picture",
     "outside_legend",
     "plot_series",
     "scalar_map_figure",
@@ -684,3 +685,67 @@ def scalar_map_picture(
         height=height,
     )
     return figure_to_rgb(fig, quiet_layout=True)
+
+
+def disparity_picture(
+    disparity: np.ndarray,
+    *,
+    method: str = "sgm",
+    min_disparity: float = 0.0,
+    max_disparity: float | None = None,
+    lr_check: float | None = 1.0,
+) -> np.ndarray:
+    """A disparity map coloured with Turbo (near: red, far: blue) with its colour bar,
+    as ``robopercept stereo`` and ``robopercept batch stereo`` write it.
+
+    :func:`scalar_map_picture` of the map on the scale ``[min_disparity,
+    max_disparity]`` (the search range), 1280 pixels wide and ``clip(0.82 * 1280 H / W
+    + 90, 360, 1080)`` high; pixels rejected by the left-right check (NaN) are drawn
+    apart, their share under the map. The title names the method and the check.
+
+    Parameters
+    ----------
+    disparity : (H, W) float ndarray
+        Disparities in pixels; NaN where rejected.
+    method : str
+        The matcher's name for the title (``"sgm"``, ``"bm"``).
+    min_disparity, max_disparity : float
+        The search range (the colour scale); ``max_disparity`` defaults to the largest
+        finite disparity.
+    lr_check : float or None
+        The left-right check's tolerance in pixels, for the title (None: off).
+
+    Returns
+    -------
+    (height, 1280, 3) uint8 ndarray
+
+    Raises
+    ------
+    InputError
+        From :func:`scalar_map_picture`: not a 2-D real map, ``min_disparity >
+        max_disparity``.
+
+    Examples
+    --------
+    >>> d = np.tile(np.linspace(0.0, 16.0, 40), (30, 1))
+    >>> d[:, :3] = np.nan  # no match: left-right check
+    >>> disparity_picture(d, max_disparity=16).shape
+    (877, 1280, 3)
+    """
+    arr = np.asarray(disparity)
+    if arr.ndim != 2:
+        raise InputError(f"disparity must be an (H, W) map; got shape {arr.shape}")
+    h, w = arr.shape
+    width = 1280
+    height = int(np.clip(0.82 * width * h / max(w, 1) + 90, 360, 1080))
+    check = "off" if lr_check is None else f"{lr_check:g} px"
+    return scalar_map_picture(
+        arr,
+        cmap="turbo",
+        label="disparity [px] (near: high)",
+        title=f"{method} disparity, left-right check {check}",
+        vmin=float(min_disparity),
+        vmax=None if max_disparity is None else float(max_disparity),
+        width=width,
+        height=height,
+    )
