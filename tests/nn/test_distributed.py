@@ -166,3 +166,39 @@ def test_torchrun_env_and_free_port() -> None:
         torchrun_env({**env, "MASTER_PORT": "1"})
     port = free_port()
     assert 1024 <= port < 65536
+
+
+def test_torchrun_two_nodes_equal_two_local_processes(tmp_path) -> None:
+    """Two torchrun agents, each a "machine" of one process, meeting through the c10d
+    rendezvous on 127.0.0.1 (what ``docs/scale.md`` runs across machines), train the
+    same weights as ``--nproc 2`` on one machine: the same two shards, seeds and
+    all-reduce."""
+    args = ["nn", "train", "--data", "digits", "--model", "vgg_small", "--epochs", "1",
+            "--batch-size", "64", "--json"]  # fmt: skip
+    local = _cli([*args[2:], "--nproc", "2", "-o", str(tmp_path / "local")])
+    assert local.returncode == 0, local.stderr[-2000:]
+    env = {**os.environ, "PYTHONPATH": SRC, "OMP_NUM_THREADS": "1"}
+    for k in ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT"):
+        env.pop(k, None)
+    launch = [sys.executable, "-m", "torch.distributed.run", "--nnodes", "2",
+              "--nproc-per-node", "1", "--rdzv-backend", "c10d", "--rdzv-id", "robopercept",
+              "--rdzv-endpoint", f"127.0.0.1:{free_port()}",
+              "-m", "robopercept.cli.main", *args, "-o", str(tmp_path / "torchrun")]  # fmt: skip
+    nodes = [subprocess.Popen(launch, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              env=env, start_new_session=True) for _ in range(2)]  # fmt: skip
+    try:
+        outs = [p.communicate(timeout=300) for p in nodes]
+    finally:
+        for p in nodes:
+            if p.poll() is None:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+    assert [p.returncode for p in nodes] == [0, 0], [e[-2000:] for _, e in outs]
+    printed = [json.loads(o) for o, _ in outs if o.strip()]
+    assert len(printed) == 1  # rank 0 alone prints (and writes the run folder)
+    assert printed[0]["test_accuracy"] == json.loads(local.stdout)["test_accuracy"]
+    got = torch.load(tmp_path / "torchrun" / "checkpoint.pt", weights_only=False)["model"]
+    want = torch.load(tmp_path / "local" / "checkpoint.pt", weights_only=False)["model"]
+    assert list(got) == list(want)
+    for k in want:  # the same arithmetic in the same order: bit for bit
+        assert torch.equal(got[k], want[k]), k
