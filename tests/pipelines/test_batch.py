@@ -20,6 +20,7 @@ import pytest
 
 from robopercept.errors import InputError
 from robopercept.pipelines.batch import (
+    BatchResult,
     find_inputs,
     item_names,
     read_manifest,
@@ -141,6 +142,21 @@ def test_cluster_by_address_equals_single_process(cluster, tmp_path) -> None:
     assert all(r["seconds"] >= 0 and r["error"] == "" for r in manifest["items"])
     assert all(r["attempts"] == 1 and r["worker"].startswith("tcp://127.0.0.1:")
                for r in manifest["items"])  # fmt: skip
+
+
+@pytest.mark.realdata
+def test_command_through_the_address_equals_single_process(cluster, tmp_path, capsys) -> None:
+    from robopercept.cli.main import main
+
+    clouds, out = _clouds(), tmp_path / "cli"
+    argv = ["batch", "cloud", *map(str, clouds), "-o", str(out), "--scheduler", cluster.address,
+            "--voxel", "0.005", "--quiet", "--json"]  # fmt: skip
+    assert main(argv) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["scheduler"] == cluster.address and got["ok"] == len(CLOUDS)
+    items = read_manifest(out)["items"]
+    res = BatchResult("cloud", out, cluster.address, 2, got["seconds"], items)
+    _same_outputs("cloud", res, clouds, {"voxel": 0.005}, tmp_path / "ref")
 
 
 @pytest.mark.realdata
