@@ -86,7 +86,10 @@ def test_bad_flags(tmp_path, capsys, extra, message) -> None:
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["edges", "--scheduler", "somewhere:8786"], "scheduler must be 'local' or an address like tcp://HOST:PORT"),
+        (
+            ["edges", "--scheduler", "somewhere:8786"],
+            "scheduler must be 'local' or an address like tcp://HOST:PORT",
+        ),
         (["nn-cloud", "--model", "nowhere.pt"], "--model nowhere.pt: no such file or folder"),
         (["stereo"], "the stereo job needs --max-disparity"),
         (["stereo", "--max-disparity", "8", "--method", "sobel"], "--method must be one of"),
