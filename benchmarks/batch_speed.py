@@ -30,12 +30,14 @@ DATA = HERE.parents[0].parent / "shared" / "data" / "pointcloud"
 
 
 def _startup(workers: int) -> float:
-    """Seconds to start a LocalCluster of ``workers`` and connect (then close it)."""
-    from distributed import Client, LocalCluster
+    """Seconds to start the LocalCluster of ``run_batch`` (``workers``) and connect (then
+    close it)."""
+    from distributed import Client
+
+    from robopercept.pipelines.batch import local_cluster
 
     t0 = time.perf_counter()
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=40)  # fmt: skip
+    cluster = local_cluster(workers)
     client = Client(cluster)
     seconds = time.perf_counter() - t0
     client.close()

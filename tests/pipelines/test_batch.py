@@ -23,6 +23,7 @@ from robopercept.pipelines.batch import (
     BatchResult,
     find_inputs,
     item_names,
+    local_cluster,
     read_manifest,
     run_batch,
     run_item,
@@ -276,6 +277,25 @@ def test_local_cluster_two_workers(tmp_path) -> None:
                     progress=False)  # fmt: skip
     assert res.scheduler == "local" and res.workers == 2 and res.count("ok") == 2
     _same_outputs("cloud", res, clouds, {"voxel": 0.01}, tmp_path)
+
+
+def test_local_workers_get_the_worker_config() -> None:
+    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ (plane-track 1.85x slower per item) and
+    numba would start a thread per core in each worker: local_cluster's workers get
+    neither (docs/scale.md has the measurements)."""
+    from distributed import Client
+
+    def env() -> tuple[str | None, str | None, int]:
+        import numba
+
+        got = (os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("NUMBA_NUM_THREADS"))
+        return (*got, numba.config.NUMBA_NUM_THREADS)
+
+    with local_cluster(1) as cluster, Client(cluster) as client:
+        assert list(client.run(env).values()) == [(None, "1", 1)]
+        assert len(client.scheduler_info()["workers"]) == 1
+    with pytest.raises(InputError, match="workers must be >= 1"):
+        local_cluster(0)
 
 
 def test_inputs_and_names(tmp_path) -> None:

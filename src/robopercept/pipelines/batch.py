@@ -55,9 +55,11 @@ __all__ = [
     "MANIFEST",
     "REQUIRED",
     "STEREO_PAIRS",
+    "WORKER_CONFIG",
     "BatchResult",
     "find_inputs",
     "item_names",
+    "local_cluster",
     "read_manifest",
     "run_batch",
     "run_item",
@@ -92,6 +94,24 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pg
 STEREO_PAIRS = (("left", "right"), ("im0", "im1"), ("im2", "im6"), ("view1", "view5"))
 _CLOUD_SUFFIXES = (".pcd", ".ply")
 _NN_CLOUD_SUFFIXES = (".pcd", ".ply", ".off")
+#: Dask configuration the local workers start with (their environment, set by the
+#: nanny before it starts the worker process):
+#:
+#: - ``MALLOC_TRIM_THRESHOLD_`` unset. Dask's nanny sets it to 65536 (to hand freed
+#:   memory back to the system); any such variable turns off glibc's dynamic mmap
+#:   threshold, so every large array is a fresh ``mmap`` whose pages fault in again:
+#:   ``plane-track`` ran 1.85x slower per item with it (1.84 s against 1.00 s on a
+#:   20-frame recording).
+#: - ``NUMBA_NUM_THREADS=1``: one thread per worker, as Dask's own
+#:   ``OMP_NUM_THREADS=1``; the ``parallel=True`` kernels (colour selection, stereo)
+#:   would otherwise start one thread per core in every worker and oversubscribe the
+#:   machine.
+#:
+#: ``docs/scale.md`` says how to give a cluster's workers the same settings.
+WORKER_CONFIG = {
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+    "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1,
+}
 #: the shipped point-cloud classifiers nn-cloud takes by name
 _CLOUD_CLASSIFIERS = ("pointnet", "dgcnn")
 
@@ -684,21 +704,60 @@ def _done(record: Mapping[str, Any], out: Path) -> bool:
     return bool(outputs) and all((out / o).is_file() for o in outputs)
 
 
+def local_cluster(workers: int = 2) -> Any:
+    """A :class:`distributed.LocalCluster` as ``run_batch(scheduler="local")`` starts it.
+
+    ``workers`` processes of one thread each, no dashboard, worker logs at ERROR only,
+    and the worker environment of :data:`WORKER_CONFIG` (``MALLOC_TRIM_THRESHOLD_``
+    unset, ``NUMBA_NUM_THREADS=1``). Close it (``close()`` or a ``with`` block) when
+    done.
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes, >= 1.
+
+    Returns
+    -------
+    distributed.LocalCluster
+
+    Raises
+    ------
+    InputError
+        ``workers`` not an integer >= 1.
+
+    Examples
+    --------
+    >>> from distributed import Client  # doctest: +SKIP
+    >>> with local_cluster(1) as cluster, Client(cluster) as client:  # doctest: +SKIP
+    ...     client.run(lambda: os.environ.get("NUMBA_NUM_THREADS"))
+    {'tcp://127.0.0.1:40341': '1'}
+    """
+    import dask
+    from distributed import LocalCluster
+
+    from robopercept._checks import check_int
+
+    workers = check_int(workers, "workers", 1)
+    with warnings.catch_warnings(), dask.config.set(WORKER_CONFIG):
+        # its health-check HTTP server tries port 8787 first
+        warnings.filterwarnings("ignore", "Port .* is already in use", UserWarning)
+        return LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=40,  # logging.ERROR: the worker chatter stays off stderr
+        )
+
+
 def _connect(scheduler: str, workers: int, connect_timeout: float) -> tuple[Any, Any]:
-    """``(client, cluster)``: a new LocalCluster (cluster not None) or a client of the
-    cluster at ``scheduler``."""
-    from distributed import Client, LocalCluster
+    """``(client, cluster)``: a new :func:`local_cluster` (cluster not None) or a client
+    of the cluster at ``scheduler``."""
+    from distributed import Client
 
     if scheduler == "local":
-        with warnings.catch_warnings():  # its health-check HTTP server tries port 8787 first
-            warnings.filterwarnings("ignore", "Port .* is already in use", UserWarning)
-            cluster = LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                silence_logs=40,  # logging.ERROR: the worker chatter stays off stderr
-            )
+        cluster = local_cluster(workers)
         try:
             return Client(cluster), cluster
         except BaseException:
