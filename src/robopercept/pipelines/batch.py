@@ -751,6 +751,26 @@ def local_cluster(workers: int = 2) -> Any:
         )
 
 
+def _worker_env() -> tuple[str | None, str | None]:
+    """On a worker: its ``MALLOC_TRIM_THRESHOLD_`` and ``NUMBA_NUM_THREADS``."""
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("NUMBA_NUM_THREADS")
+
+
+def _check_worker_env(client: Any) -> None:
+    """Warn when a cluster's workers lack :data:`WORKER_CONFIG`'s settings."""
+    envs = client.run(_worker_env)
+    slow = [a for a, (trim, numba) in envs.items() if trim is not None or numba != "1"]
+    if slow:
+        warnings.warn(
+            f"{len(slow)} of {len(envs)} workers run with MALLOC_TRIM_THRESHOLD_ set (Dask's "
+            "default) or without NUMBA_NUM_THREADS=1, which made robopercept's jobs up to "
+            "1.9x slower here: start them with the Dask configuration in docs/scale.md "
+            "(pipelines.batch.WORKER_CONFIG)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+
+
 def _connect(scheduler: str, workers: int, connect_timeout: float) -> tuple[Any, Any]:
     """``(client, cluster)``: a new :func:`local_cluster` (cluster not None) or a client
     of the cluster at ``scheduler``."""
@@ -942,6 +962,8 @@ def run_batch(
 
     try:
         result.workers = len(client.scheduler_info().get("workers", {})) or workers
+        if cluster is None:
+            _check_worker_env(client)
         for i in todo:
             submit(i)
         for fut in finished:
