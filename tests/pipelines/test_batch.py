@@ -11,6 +11,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -284,7 +285,9 @@ def test_local_cluster_two_workers(tmp_path) -> None:
 def test_local_workers_get_the_worker_config() -> None:
     """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ (plane-track 1.85x slower per item) and
     numba would start a thread per core in each worker: local_cluster's workers get
-    neither (docs/scale.md has the measurements)."""
+    neither (docs/scale.md has the measurements), and this process's environment is
+    left alone (a NUMBA_NUM_THREADS changed here after numba started its threads makes
+    every later parallel kernel here fail)."""
     from distributed import Client
 
     def env() -> tuple[str | None, str | None, int]:
@@ -293,11 +296,22 @@ def test_local_workers_get_the_worker_config() -> None:
         got = (os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("NUMBA_NUM_THREADS"))
         return (*got, numba.config.NUMBA_NUM_THREADS)
 
+    before = dict(os.environ)
     with local_cluster(1) as cluster, Client(cluster) as client:
         assert list(client.run(env).values()) == [(None, "1", 1)]
         assert len(client.scheduler_info()["workers"]) == 1
+    changed = {k for k in set(before) | set(os.environ) if before.get(k) != os.environ.get(k)}
+    assert not changed & {"MALLOC_TRIM_THRESHOLD_", "NUMBA_NUM_THREADS"}, changed
     with pytest.raises(InputError, match="workers must be >= 1"):
         local_cluster(0)
+    # a whole batch leaves this process's environment as it found it (Dask's nannies
+    # write OMP_NUM_THREADS=1 and the like into it)
+    from robopercept.imaging import sample_image_path
+
+    before = dict(os.environ)
+    res = run_batch("edges", [sample_image_path()], Path(tempfile.mkdtemp()) / "o", workers=1,
+                    progress=False)  # fmt: skip
+    assert res.count("ok") == 1 and dict(os.environ) == before
 
 
 def test_inputs_and_names(tmp_path) -> None:

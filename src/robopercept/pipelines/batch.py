@@ -94,23 +94,23 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pg
 STEREO_PAIRS = (("left", "right"), ("im0", "im1"), ("im2", "im6"), ("view1", "view5"))
 _CLOUD_SUFFIXES = (".pcd", ".ply")
 _NN_CLOUD_SUFFIXES = (".pcd", ".ply", ".off")
-#: Dask configuration the local workers start with (their environment, set by the
-#: nanny before it starts the worker process):
+#: Dask configuration the local workers start with (``docs/scale.md`` gives it as a
+#: YAML file for the workers of a cluster):
 #:
-#: - ``MALLOC_TRIM_THRESHOLD_`` unset. Dask's nanny sets it to 65536 (to hand freed
-#:   memory back to the system); any such variable turns off glibc's dynamic mmap
-#:   threshold, so every large array is a fresh ``mmap`` whose pages fault in again:
-#:   ``plane-track`` ran 1.85x slower per item with it (1.84 s against 1.00 s on a
-#:   20-frame recording).
-#: - ``NUMBA_NUM_THREADS=1``: one thread per worker, as Dask's own
-#:   ``OMP_NUM_THREADS=1``; the ``parallel=True`` kernels (colour selection, stereo)
-#:   would otherwise start one thread per core in every worker and oversubscribe the
-#:   machine.
-#:
-#: ``docs/scale.md`` says how to give a cluster's workers the same settings.
+#: - ``MALLOC_TRIM_THRESHOLD_`` unset (``pre-spawn-environ``). Dask's nanny sets it to
+#:   65536 (to hand freed memory back to the system) before it starts each worker; any
+#:   such variable turns off glibc's dynamic mmap threshold, so every large array is a
+#:   fresh ``mmap`` whose pages fault in again: ``plane-track`` ran 1.85x slower per
+#:   item with it (1.84 s against 1.00 s on a 20-frame recording).
+#: - ``NUMBA_NUM_THREADS=1`` in the worker process (``environ``; never in this
+#:   process, whose numba may have started its threads: a changed value makes every
+#:   later compilation here fail), one thread per worker as Dask's own
+#:   ``OMP_NUM_THREADS=1``. The ``parallel=True`` kernels (colour selection, stereo)
+#:   would otherwise start a thread per core in every worker: two workers on two cores
+#:   took 2.50 s per ``plane-track`` item instead of 1.31 s.
 WORKER_CONFIG = {
     "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
-    "distributed.nanny.pre-spawn-environ.NUMBA_NUM_THREADS": 1,
+    "distributed.nanny.environ.NUMBA_NUM_THREADS": 1,
 }
 #: the shipped point-cloud classifiers nn-cloud takes by name
 _CLOUD_CLASSIFIERS = ("pointnet", "dgcnn")
@@ -708,9 +708,9 @@ def local_cluster(workers: int = 2) -> Any:
     """A :class:`distributed.LocalCluster` as ``run_batch(scheduler="local")`` starts it.
 
     ``workers`` processes of one thread each, no dashboard, worker logs at ERROR only,
-    and the worker environment of :data:`WORKER_CONFIG` (``MALLOC_TRIM_THRESHOLD_``
-    unset, ``NUMBA_NUM_THREADS=1``). Close it (``close()`` or a ``with`` block) when
-    done.
+    started with :data:`WORKER_CONFIG` (``MALLOC_TRIM_THRESHOLD_`` unset,
+    ``NUMBA_NUM_THREADS=1`` in the workers; this process's environment is left as it
+    was). Close it (``close()`` or a ``with`` block) when done.
 
     Parameters
     ----------
@@ -751,21 +751,20 @@ def local_cluster(workers: int = 2) -> Any:
         )
 
 
-def _worker_env() -> tuple[str | None, str | None]:
-    """On a worker: its ``MALLOC_TRIM_THRESHOLD_`` and ``NUMBA_NUM_THREADS``."""
-    return os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("NUMBA_NUM_THREADS")
+def _worker_env() -> str | None:
+    """On a worker: its ``MALLOC_TRIM_THRESHOLD_``."""
+    return os.environ.get("MALLOC_TRIM_THRESHOLD_")
 
 
 def _check_worker_env(client: Any) -> None:
-    """Warn when a cluster's workers lack :data:`WORKER_CONFIG`'s settings."""
+    """Warn when a cluster's workers run with ``MALLOC_TRIM_THRESHOLD_`` set."""
     envs = client.run(_worker_env)
-    slow = [a for a, (trim, numba) in envs.items() if trim is not None or numba != "1"]
+    slow = [a for a, trim in envs.items() if trim is not None]
     if slow:
         warnings.warn(
             f"{len(slow)} of {len(envs)} workers run with MALLOC_TRIM_THRESHOLD_ set (Dask's "
-            "default) or without NUMBA_NUM_THREADS=1, which made robopercept's jobs up to "
-            "1.9x slower here: start them with the Dask configuration in docs/scale.md "
-            "(pipelines.batch.WORKER_CONFIG)",
+            "default), which made robopercept's jobs up to 1.9x slower here: start them "
+            "with the Dask configuration in docs/scale.md (pipelines.batch.WORKER_CONFIG)",
             RuntimeWarning,
             stacklevel=3,
         )
@@ -940,11 +939,20 @@ def run_batch(
     save()
     if not todo:
         return result
+    import dask
     from distributed import as_completed
 
     from robopercept.progress import progress_bar
 
-    client, cluster = _connect(scheduler, workers, connect_timeout)
+    # Dask's nannies write their pre-spawn variables (OMP_NUM_THREADS=1, ...) into this
+    # process's environment: put back what was there when the batch ends
+    spawn_keys = set(dask.config.get("distributed.nanny.pre-spawn-environ"))
+    env_before = {k: os.environ.get(k) for k in spawn_keys}
+    try:
+        client, cluster = _connect(scheduler, workers, connect_timeout)
+    except BaseException:
+        _restore_env(env_before)
+        raise
     futures: dict[Any, int] = {}
     finished = as_completed()
     bar = progress_bar(total=len(todo), unit="item", desc=f"batch {job}", disable=not progress)
@@ -998,5 +1006,15 @@ def run_batch(
         client.close()
         if cluster is not None:
             cluster.close()
+        _restore_env(env_before)
     save()
     return result
+
+
+def _restore_env(saved: Mapping[str, str | None]) -> None:
+    """Set the variables of ``saved`` back (None: unset)."""
+    for k, v in saved.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
