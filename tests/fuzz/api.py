@@ -3327,3 +3327,24 @@ METHODS["nn.image_predict.ImagePredictor"] = ("predict", "predict_file")
 
 # viz.plot.disparity_picture (issue 31: robopercept stereo and batch stereo)
 VALID.update({"viz.disparity_picture": {"disparity": _MAP, "max_disparity": 8}})
+
+
+# nn.run.predict_loaded (issue 31: batch nn-predict loads a run once per worker)
+def loaded_run(part: int) -> Any:
+    """``load_run``'s model (0) or architecture (1) of a tiny digits run."""
+    from robopercept.nn.run import load_run
+
+    run = Path(tempfile.mkdtemp()) / "run"
+    _write_run(run)
+    return load_run(run / "checkpoint.pt", device="cpu")[part]
+
+
+VALID.update(
+    {
+        "nn.run.predict_loaded": {
+            "model": _b("tests.fuzz.api:loaded_run", 0),
+            "arch": _b("tests.fuzz.api:loaded_run", 1),
+            "image_paths": [Fixture("image.png")],
+        }
+    }
+)

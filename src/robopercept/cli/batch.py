@@ -190,8 +190,6 @@ def run_batch_command(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     summary = result.to_dict()
-    ran = [r for r in result.items if r["status"] in ("ok", "failed")]
-    all_failed = bool(ran) and all(r["status"] == "failed" for r in ran)
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
     else:
@@ -204,8 +202,8 @@ def run_batch_command(args: argparse.Namespace) -> int:
         for r in result.items:
             if r["status"] == "failed":
                 print(f"  {r['item']} ({r['input']}): {r['error']}")
-    if all_failed:
-        first = ran[0]
+    first = result.first_failure()
+    if first is not None:
         print(
             f"robopercept: error: every item failed (first: {first['item']}: {first['error']})",
             file=sys.stderr,

@@ -190,12 +190,11 @@ def run_train(args: argparse.Namespace) -> int:
         "overwrite": args.overwrite,
         "progress": not (args.quiet or args.json),
     }
-    rank = 0
-    if args.nproc > 1 or _torchrun_rank() is not None:  # DDP (nn.distributed)
-        from robopercept.nn.distributed import torchrun_env, train_ddp
+    from robopercept.nn.distributed import torchrun_env, train_ddp
 
-        env = torchrun_env()
-        rank = 0 if env is None else env[0]
+    env = torchrun_env()
+    rank = 0 if env is None else env[0]
+    if args.nproc > 1 or env is not None:  # DDP (nn.distributed)
         res = train_ddp(args.data, args.model, args.out, nproc=args.nproc, **kwargs)
     else:
         res = train_run(args.data, args.model, args.out, **kwargs)
@@ -215,14 +214,6 @@ def run_train(args: argparse.Namespace) -> int:
     for name, path in res.files.items():
         print(f"  {name:<10} {path}")
     return 0
-
-
-def _torchrun_rank() -> str | None:
-    """``RANK`` when torchrun started this process (its variables set), else None."""
-    import os
-
-    names = ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")
-    return os.environ["RANK"] if all(n in os.environ for n in names) else None
 
 
 def run_eval(args: argparse.Namespace) -> int:

@@ -40,7 +40,7 @@ import torch.nn.functional as F
 from torch import nn
 from torch.utils.data import Dataset
 
-from robopercept._checks import as_path, check_choice, check_int
+from robopercept._checks import as_path, check_choice, check_int, plain_repr
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import strict_json
 from robopercept.nn._guards import check_device
@@ -76,6 +76,7 @@ __all__ = [
     "load_data",
     "load_run",
     "predict",
+    "predict_loaded",
     "train_run",
 ]
 
@@ -690,8 +691,15 @@ def predict(
     FileFormatError
         A missing or unreadable image or checkpoint.
     """
-    from robopercept.imaging import read_image
+    image_paths, top_k = _predict_inputs(image_paths, top_k)
+    model, arch = load_run(checkpoint, device=device)
+    return predict_loaded(model, arch, image_paths, top_k=top_k)
 
+
+def _predict_inputs(
+    image_paths: Sequence[str | os.PathLike[str]], top_k: int
+) -> tuple[list[Path], int]:
+    """``image_paths`` as a list of paths and ``top_k``, checked."""
     if isinstance(image_paths, (str, bytes, os.PathLike)):
         image_paths = [image_paths]
     if not isinstance(image_paths, (list, tuple)):
@@ -700,9 +708,56 @@ def predict(
         )
     if not image_paths:
         raise InputError("no images to predict: give one or more image files")
-    image_paths = [as_path(p, "each image path") for p in image_paths]
-    top_k = check_int(top_k, "top_k (--top-k)", 1)
-    model, arch = load_run(checkpoint, device=device)
+    paths = [as_path(p, "each image path") for p in image_paths]
+    return paths, check_int(top_k, "top_k (--top-k)", 1)
+
+
+@torch.no_grad()
+def predict_loaded(
+    model: nn.Module,
+    arch: Architecture,
+    image_paths: Sequence[str | os.PathLike[str]],
+    *,
+    top_k: int = 3,
+) -> list[Prediction]:
+    """:func:`predict` with a model already loaded by :func:`load_run` (to classify many
+    batches of images without reading the checkpoint again).
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        The run's model, in eval mode, on its device.
+    arch : Architecture
+        Its architecture (:func:`load_run`'s second value).
+    image_paths : sequence of path
+    top_k : int
+        Classes per image (at most the number of classes).
+
+    Returns
+    -------
+    list of Prediction
+        One per image, in order.
+
+    Raises
+    ------
+    InputError
+        No images, ``top_k`` < 1, ``model`` or ``arch`` of the wrong type.
+    FileFormatError
+        A missing or unreadable image.
+
+    Examples
+    --------
+    >>> model, arch = load_run("run/checkpoint.pt")  # doctest: +SKIP
+    >>> predict_loaded(model, arch, ["digit.png"], top_k=1)  # doctest: +SKIP
+    [Prediction(path=PosixPath('digit.png'), top=(('3', 0.98),))]
+    """
+    from robopercept.imaging import read_image
+
+    if not isinstance(model, nn.Module):
+        raise InputError(f"model must be a torch.nn.Module (load_run); got {plain_repr(model)}")
+    if not isinstance(arch, Architecture):
+        raise InputError(f"arch must be an Architecture (load_run); got {plain_repr(arch)}")
+    image_paths, top_k = _predict_inputs(image_paths, top_k)
     h, w = arch.input_size
     k = min(int(top_k), arch.num_classes)
     dev = next(model.parameters()).device

@@ -553,9 +553,10 @@ def _loaded(key: tuple[Any, ...], load: Callable[[], Any]) -> Any:
 
 
 def _run_nn_predict(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.run import predict
+    from robopercept.nn.run import load_run, predict_loaded
 
-    pred = predict(opts["model"], [src], top_k=opts["top_k"])[0]
+    model, arch = _loaded(("predict", opts["model"]), lambda: load_run(opts["model"]))
+    pred = predict_loaded(model, arch, [src], top_k=opts["top_k"])[0]
     top = [{"class": c, "probability": float(p)} for c, p in pred.top]
     atomic_write(out / "prediction.json", json.dumps({"file": str(src), "top": top}, indent=2))
     return {"class": top[0]["class"], "probability": top[0]["probability"]}
@@ -576,10 +577,10 @@ def _run_nn_image(src: Path, out: Path, opts: dict[str, Any], kind: str) -> dict
 
 
 def _run_nn_cloud(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.cloud import classify_cloud_file, load_cloud_model, shipped_cloud_model
+    from robopercept.nn.cloud import classify_cloud_file, load_cloud_model
+    from robopercept.nn.shipped import resolve_model
 
-    name = opts["model"]
-    path = shipped_cloud_model(name) if name in _CLOUD_CLASSIFIERS else Path(name)
+    path = resolve_model("cloud", opts["model"])
     model, info = _loaded(("cloud", str(path.resolve())), lambda: load_cloud_model(path))
     res = classify_cloud_file(src, model, info, n_points=opts["points"], rng=opts["seed"])
     prediction = res.to_dict()
@@ -650,6 +651,12 @@ class BatchResult:
     def count(self, status: str) -> int:
         """Items of ``status`` (``ok``, ``failed``, ``skipped``, ``cancelled``)."""
         return sum(r["status"] == status for r in self.items)
+
+    def first_failure(self) -> dict[str, Any] | None:
+        """The first failed item when every item this run ran failed (a batch that did
+        nothing: the command exits 1), else None."""
+        ran = [r for r in self.items if r["status"] in ("ok", "failed")]
+        return ran[0] if ran and all(r["status"] == "failed" for r in ran) else None
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON summary: the fields, counts per status and items per second."""
