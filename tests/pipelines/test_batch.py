@@ -161,6 +161,15 @@ def test_command_through_the_address_equals_single_process(cluster, tmp_path, ca
     items = read_manifest(out)["items"]
     res = BatchResult("cloud", out, cluster.address, 2, got["seconds"], items)
     _same_outputs("cloud", res, clouds, {"voxel": 0.005}, tmp_path / "ref")
+    images, out = _images(), tmp_path / "cli_images"  # and on images
+    argv = ["batch", "features", *map(str, images), "-o", str(out), "--scheduler",
+            cluster.address, "--quiet", "--json"]  # fmt: skip
+    assert main(argv) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert got["scheduler"] == cluster.address and got["ok"] == len(IMAGES)
+    items = read_manifest(out)["items"]
+    res = BatchResult("features", out, cluster.address, 2, got["seconds"], items)
+    _same_outputs("features", res, images, {}, tmp_path / "ref_images")
 
 
 @pytest.mark.realdata
