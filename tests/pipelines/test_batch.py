@@ -364,6 +364,25 @@ def test_plane_track_item_equals_run_plane_tracking(tmp_path) -> None:
 
 
 @pytest.mark.realdata
+def test_plane_track_item_of_a_realsense_bag(tmp_path) -> None:
+    from robopercept.pipelines.plane_outputs import run_plane_tracking
+    from robopercept.sources.realsense import RealSenseSource
+
+    pytest.importorskip("pyrealsense2")
+    bag = data_path("rgbd", "realsense_bag", "single_depth_color_640x480.bag")
+    assert find_inputs("plane-track", [bag.parent]) == [bag]
+    got = run_item("plane-track", bag, tmp_path / "o")
+    want = run_plane_tracking(RealSenseSource(bag), tmp_path / "ref", video=False,
+                              progress=False)  # fmt: skip
+    assert got["summary"]["frames"] == want.frames > 0
+
+    def rows(folder: Path) -> list[list[str]]:  # plane.csv without its timing column (ms)
+        return [line.split(",")[:-1] for line in (folder / "plane.csv").read_text().splitlines()]
+
+    assert rows(tmp_path / "o") == rows(tmp_path / "ref") and len(rows(tmp_path / "o")) > 1
+
+
+@pytest.mark.realdata
 def test_nn_cloud_equals_classify_cloud_file(tmp_path) -> None:
     pytest.importorskip("torch")
     from robopercept.nn.cloud import classify_cloud_file, load_cloud_model, shipped_cloud_model

@@ -32,7 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "item is recorded and the batch goes on; exit 1 when every item failed. Jobs: "
         "cloud (PCD/PLY -> segments.ply), edges (image -> edges.png), features (image -> "
         "keypoints.json), stereo (pair folder: left/right, im0/im1, im2/im6 or view1/view5 -> "
-        "disparity.npy and disparity.png), plane-track (recording folder -> its outputs), "
+        "disparity.npy and disparity.png), plane-track (recording folder or .bag/.db3 -> its "
+        "outputs), "
         "nn-predict, nn-detect, nn-segment, nn-pose (image -> prediction.json and the pictures "
         "of `robopercept nn predict|detect|segment|pose`), nn-cloud (PLY/PCD/OFF -> "
         "prediction.json: the class and probabilities of `robopercept nn cloud`).",

@@ -93,6 +93,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pg
 #: 2001/2003 ``im2``/``im6``, Middlebury 2005/2006 ``view1``/``view5``
 STEREO_PAIRS = (("left", "right"), ("im0", "im1"), ("im2", "im6"), ("view1", "view5"))
 _CLOUD_SUFFIXES = (".pcd", ".ply")
+_RECORDING_SUFFIXES = (".bag", ".db3")  # RealSense recordings (ROS 1 bag, ROS 2 SQLite)
 _NN_CLOUD_SUFFIXES = (".pcd", ".ply", ".off")
 #: Dask configuration the local workers start with (``docs/scale.md`` gives it as a
 #: YAML file for the workers of a cluster):
@@ -170,12 +171,14 @@ _FOLDER_JOBS: dict[str, Callable[[Path], bool]] = {
     "stereo": lambda p: stereo_pair(p) is not None,
 }
 _FOLDER_WHAT = {
-    "plane-track": "a recording folder (rgb.txt and depth.txt)",
+    "plane-track": "a recording folder (rgb.txt and depth.txt) or a .bag/.db3 recording",
     "stereo": "a stereo pair folder (" + ", ".join(f"{a}/{b}" for a, b in STEREO_PAIRS) + ")",
 }
 
 
 def _matches(job: str, path: Path) -> bool:
+    if job == "plane-track" and path.is_file():
+        return path.suffix.lower() in _RECORDING_SUFFIXES
     if job in _FOLDER_JOBS:
         return path.is_dir() and _FOLDER_JOBS[job](path)
     suffixes = {"cloud": _CLOUD_SUFFIXES, "nn-cloud": _NN_CLOUD_SUFFIXES}.get(job, IMAGE_SUFFIXES)
@@ -189,8 +192,9 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
     recursive): ``.pcd``/``.ply`` for ``cloud``, ``.pcd``/``.ply``/``.off`` for
     ``nn-cloud``, images (:data:`IMAGE_SUFFIXES`) for ``edges``, ``features`` and the
     image ``nn-*`` jobs. For ``plane-track`` a recording folder (``rgb.txt`` and
-    ``depth.txt``), for ``stereo`` a pair folder (:func:`stereo_pair`), is one input,
-    and another folder gives its such sub-folders. A pattern with ``*``, ``?`` or
+    ``depth.txt``) or a RealSense recording (``.bag``, ``.db3``), for ``stereo`` a pair
+    folder (:func:`stereo_pair`), is one input, and another folder gives its such
+    sub-folders (and recordings). A pattern with ``*``, ``?`` or
     ``[`` is expanded (sorted) and each match treated as above. Duplicates are
     dropped, the first kept.
 
@@ -247,7 +251,7 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
         what = {
             "cloud": ".pcd/.ply files",
             "nn-cloud": ".pcd/.ply/.off files",
-            "plane-track": "recording folders",
+            "plane-track": "recording folders or .bag/.db3 recordings",
             "stereo": "stereo pair folders",
         }
         raise InputError(
@@ -371,7 +375,9 @@ def run_item(
     NaN rejected) and ``disparity.png``
     (:func:`~robopercept.viz.plot.disparity_picture`). ``plane-track``:
     :func:`~robopercept.pipelines.plane_outputs.run_plane_tracking` of the recording
-    (no video; ``max_frames``), its outputs and ``summary.json``.
+    folder (:class:`~robopercept.sources.TUMFolderSource`) or ``.bag``/``.db3`` file
+    (:class:`~robopercept.sources.realsense.RealSenseSource`), no video, ``max_frames``:
+    its outputs and ``summary.json``.
 
     The ``nn-*`` jobs import torch only on the worker, and load their model once per
     worker process. ``nn-predict``: :func:`~robopercept.nn.run.predict` (what
@@ -395,7 +401,8 @@ SHIPPED`, default the command's, or a run folder or model file; ``score_thresh``
     job : str
         One of :data:`JOBS`.
     source : path
-        The input file (a recording folder for ``plane-track``); only read.
+        The input file (a recording folder or file for ``plane-track``, a pair folder
+        for ``stereo``); only read.
     out_dir : path
         The item's folder; created, and emptied when it exists.
     options : mapping, optional
@@ -491,9 +498,12 @@ def _run_features(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
 def _run_plane_track(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
     from robopercept.pipelines.plane_outputs import run_plane_tracking
     from robopercept.sources import TUMFolderSource
+    from robopercept.sources.realsense import RealSenseSource
 
+    bag = src.suffix.lower() in _RECORDING_SUFFIXES
+    source = RealSenseSource(src) if bag else TUMFolderSource(src)
     summary = run_plane_tracking(
-        TUMFolderSource(src), out, max_frames=opts["max_frames"], video=False, progress=False
+        source, out, max_frames=opts["max_frames"], video=False, progress=False
     )
     if summary.frames == 0:
         raise InputError(f"{src}: no frame was tracked ({summary.stopped or 'no readable frame'})")
