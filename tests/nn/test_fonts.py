@@ -1,17 +1,19 @@
-"""Tests of robopercept.nn.fonts: digits rendered from the system's TrueType fonts."""
+"""Tests of robopercept.nn.fonts: digits rendered from TrueType fonts (matplotlib's by
+default, the system's on request)."""
 
 from __future__ import annotations
+
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 pytest.importorskip("PIL")
 
+import robopercept.nn.fonts as fonts_module
 from robopercept.errors import InputError
-from robopercept.nn.fonts import find_fonts, render_digits
-
-FONTS = find_fonts()
-needs_fonts = pytest.mark.skipif(not FONTS, reason="no TrueType fonts on this system")
+from robopercept.nn.fonts import DEFAULT_FONTS, default_fonts, find_fonts, render_digits
 
 
 @pytest.fixture(scope="module")
@@ -46,17 +48,94 @@ def test_seeded_determinism():
     assert not np.array_equal(a[0], c[0])
 
 
-@needs_fonts
-def test_no_blank_images_with_system_fonts(rendered):
+def test_no_blank_images_with_the_default_fonts(rendered):
     images, _ = rendered
     ink = images.reshape(len(images), -1).sum(axis=1)
     assert (ink > 0.5).all(), f"{int((ink <= 0.5).sum())} nearly blank images"
 
 
-@needs_fonts
-def test_find_fonts_skips_symbol_fonts():
-    assert all(p.suffix.lower() in (".ttf", ".otf") for p in FONTS)
-    assert not any("symbol" in p.name.lower() or "math" in p.name.lower() for p in FONTS)
+def test_default_fonts_are_matplotlibs_and_draw_ten_distinct_digits():
+    """Every default face is a file of the installed matplotlib, and its ten digit glyphs
+    are ten different, inked shapes (no box-for-everything or symbol font slipped in)."""
+    import matplotlib
+    from PIL import Image, ImageDraw, ImageFont
+
+    paths = default_fonts()
+    assert [p.name for p in paths] == list(DEFAULT_FONTS) and len(paths) == 22
+    assert all(p.parent == Path(matplotlib.get_data_path()) / "fonts" / "ttf" for p in paths)
+    for path in paths:
+        font = ImageFont.truetype(str(path), 48, layout_engine=ImageFont.Layout.BASIC)
+        glyphs = []
+        for digit in "0123456789":
+            canvas = Image.new("L", (96, 96), 0)
+            ImageDraw.Draw(canvas).text((48, 48), digit, fill=255, font=font, anchor="mm")
+            glyphs.append((np.asarray(canvas) > 127).tobytes())
+        assert len(set(glyphs)) == 10, path.name
+        assert all(any(g) for g in glyphs), path.name
+
+
+def _fake_system(tmp_path: Path, monkeypatch, extra: list[Path]) -> Path:
+    """Point the system font search and the home folder at a folder of ``tmp_path``
+    holding only ``extra`` (copied)."""
+    root = tmp_path / f"fonts{len(extra)}"
+    (root / "home" / ".fonts").mkdir(parents=True)
+    for i, f in enumerate(extra):
+        shutil.copy(f, root / "home" / ".fonts" / f"extra{i}-{f.name}")
+    monkeypatch.setattr(fonts_module, "SYSTEM_FONT_DIRS", (str(root / "share"), "~/.fonts"))
+    monkeypatch.setenv("HOME", str(root / "home"))
+    return root
+
+
+def test_default_output_does_not_depend_on_the_systems_fonts(tmp_path, monkeypatch):
+    """The issue-44 regression: the default digits are the same arrays whether the
+    system's font folders are empty or hold extra fonts; the explicit system option does
+    see the change (so the patched search is the one in use)."""
+    reference = render_digits(200, seed=5)
+    extra = default_fonts()[12:16] + default_fonts()[16:18]  # STIX and Computer Modern
+    outputs, system = [], []
+    for faces in ([], extra[:1], extra):
+        _fake_system(tmp_path, monkeypatch, faces)
+        assert len(find_fonts()) == len(faces)
+        outputs.append(render_digits(200, seed=5))
+        if faces:
+            system.append(render_digits(200, seed=5, fonts="system")[0])
+        else:
+            with pytest.raises(InputError, match="fonts='default'"):
+                render_digits(10, fonts="system")
+    for images, labels in outputs:
+        np.testing.assert_array_equal(images, reference[0])
+        np.testing.assert_array_equal(labels, reference[1])
+    assert not np.array_equal(system[0], system[1])
+    assert not np.array_equal(system[1], reference[0])
+
+
+def test_explicit_font_list(tmp_path):
+    one = default_fonts()[:1]
+    images, _ = render_digits(30, seed=0, fonts=one)
+    np.testing.assert_array_equal(images, render_digits(30, seed=0, fonts=[str(one[0])])[0])
+    assert not np.array_equal(images, render_digits(30, seed=0)[0])
+    with pytest.raises(InputError, match="font files not found"):
+        render_digits(5, fonts=[tmp_path / "nope.ttf"])
+    with pytest.raises(InputError, match="empty list"):
+        render_digits(5, fonts=[])
+    for bad_fonts in ("arial", 3, [None]):
+        with pytest.raises(InputError, match="'default', 'system' or a list"):
+            render_digits(5, fonts=bad_fonts)  # type: ignore[arg-type]
+    bad = tmp_path / "bad.ttf"
+    bad.write_bytes(b"not a font")
+    with pytest.raises(InputError, match="cannot read the font"):
+        render_digits(5, fonts=[bad])
+
+
+def test_find_fonts_skips_symbol_fonts(tmp_path):
+    for name in ("A.ttf", "b.OTF", "DejaVuMathTeXGyre.ttf", "Symbol.ttf", "c.txt"):
+        (tmp_path / "sub").mkdir(exist_ok=True)
+        (tmp_path / "sub" / name).write_bytes(b"")
+    assert [p.name for p in find_fonts([tmp_path])] == ["A.ttf", "b.OTF"]
+    assert find_fonts([tmp_path / "missing"]) == []
+    assert find_fonts(str(tmp_path)) == find_fonts([tmp_path])  # one folder
+    with pytest.raises(InputError, match="list of folder paths"):
+        find_fonts(5)  # type: ignore[arg-type]
 
 
 def test_rendered_digits_look_like_the_real_ones():

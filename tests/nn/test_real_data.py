@@ -60,10 +60,13 @@ def test_lfw_one_fold_cnn_beats_hog_svm():
 def test_font_pretraining_helps_with_one_label_per_class():
     """Sim-to-real at CI size (6,000 rendered digits, 6 epochs, not the benchmark's
     20,000 x 8): with one real label per class, fine-tuning the font-pretrained
-    network beats training from scratch by >= 10 points (the benchmark's full
-    pretraining: >= 15, see docs)."""
+    network beats training from scratch by >= 10 points on each of the few-shot seeds
+    0-2 (the benchmark's full pretraining: >= 15 on their mean, see docs/nn.md). The
+    digits are rendered from matplotlib's fonts, so this is the same on every machine
+    (issue 44: with the system's fonts it held or failed by what was installed)."""
     pytest.importorskip("PIL")
     pretrained = pretrain_on_fonts(n_images=6000, epochs=6)
-    r = few_shot(pretrained, per_class=1, seed=0)
-    assert r["finetune"] >= r["scratch"] + 0.10, r
-    assert r["linear_probe"] > r["scratch"], r
+    runs = [few_shot(pretrained, per_class=1, seed=s) for s in (0, 1, 2)]
+    for r in runs:
+        assert r["finetune"] >= r["scratch"] + 0.10, runs
+        assert r["linear_probe"] > r["scratch"], runs
