@@ -3,7 +3,7 @@
 ``benchmarks/results/cloud_figures.json`` and the table printed).
 
 Every run draws its weights from ``torch.manual_seed(seed)``, trains on procedural
-shapes drawn with ``rng=seed`` (:func:`~robopercept.nn.cloud_data.procedural_shapes`,
+shapes drawn with ``rng=seed`` (:func:`~robopercept.nn.cloud.data.procedural_shapes`,
 12 classes, rotated about the up axis), picks its epoch on validation shapes
 (``rng=1000 + seed``) and is scored on test shapes (``rng=99``), never seen in training
 or selection.
@@ -22,7 +22,7 @@ Parts:
   restricted to its parts, ShapeNet-part's instance and class mIoU).
 - ``speed``: forward latency per cloud and training throughput of both models against
   the point count (512 to 4096), the share of DGCNN's forward spent on its k-NN graphs,
-  and :func:`~robopercept.nn.dgcnn.knn_graph` against ``scipy.spatial.cKDTree`` from
+  and :func:`~robopercept.nn.cloud.dgcnn.knn_graph` against ``scipy.spatial.cKDTree`` from
   1,000 to 100,000 points.
 
 ``--save DIR`` writes the seed's ``pointnet``, ``dgcnn`` and ``pointnet-parts`` models as
@@ -40,9 +40,9 @@ import numpy as np
 import torch
 
 from benchmarks._harness import figures_main, seeds_table, timing_row
-from robopercept.nn import cloud as C
-from robopercept.nn.cloud_data import procedural_shapes
-from robopercept.nn.training import TrainConfig
+from robopercept.nn.cloud.data import procedural_shapes
+from robopercept.nn.cloud.run import run as C
+from robopercept.nn.train.loop import TrainConfig
 
 NAME = "cloud_figures"
 #: per model: constructor settings, points per cloud, training shapes per class,
@@ -173,7 +173,7 @@ def speed(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]
     """Latency, training throughput and k-NN cost against the point count."""
     from scipy.spatial import cKDTree
 
-    from robopercept.nn.dgcnn import knn_graph
+    from robopercept.nn.cloud.dgcnn import knn_graph
 
     del progress, save
     rng = np.random.default_rng(seed)

@@ -1,9 +1,9 @@
-"""Issue 26's accuracy figures for :mod:`robopercept.nn.detection`, trained here on the
+"""Issue 26's accuracy figures for :mod:`robopercept.nn.detection.models`, trained here on the
 CPU (run ``python -m benchmarks.detection_figures --only PART --seeds 0 1 2``; each run
 is merged into ``benchmarks/results/detection_figures.json`` and the table printed).
 
 Every run: the weights drawn from ``torch.manual_seed(seed)``, trained with
-:func:`~robopercept.nn.detection.train_detector` (AdamW, cosine schedule), the epoch
+:func:`~robopercept.nn.detection.models.train_detector` (AdamW, cosine schedule), the epoch
 kept chosen on a validation split (``val=``), then evaluated once on a test split that
 no choice saw. Synthetic sets are generated with disjoint seeds (train ``seed``,
 validation ``1000 + seed``, test always ``99``, so every seed is tested on the same
@@ -13,17 +13,17 @@ Parts:
 
 - ``trees-fcos``, ``trees-faster``: the single-stage FCOS (target AP50 >= 0.45) and
   Faster R-CNN (reported beside it) on the real DeepForest NEON crowns
-  (:func:`~robopercept.nn.detection_data.deepforest_tiles`, 400 px tiles): the tiles
+  (:func:`~robopercept.nn.detection.data.deepforest_tiles`, 400 px tiles): the tiles
   above the held-out strip split 85/15 (seeded) into train and validation, AP50 on the
   held-out strip of YELL crop2, AP50 on the three other images reported. FCOS's final
   NMS threshold is chosen on the validation tiles (:func:`choose_nms`).
-  ``trees-fcos-zoom`` is FCOS with :class:`~robopercept.nn.detection_data.ScaleJitter`
+  ``trees-fcos-zoom`` is FCOS with :class:`~robopercept.nn.detection.data.ScaleJitter`
   (zoom 0.67-1.5) after the flips.
 - ``shapes-fcos``, ``shapes-faster``: the procedural set at 128 x 128 (target
   mAP@0.5 >= 0.90 and mAP@[.5:.95] >= 0.60).
 - ``digits``: Faster R-CNN on the real-digits canvases (target mAP@0.5 >= 0.90). FCOS
   reached only 0.35-0.38 here (600 or 2000 canvases, seed 0), with a very low AP75.
-- ``localizer``: :class:`~robopercept.nn.detection.SingleObjectLocalizer` on one real
+- ``localizer``: :class:`~robopercept.nn.detection.models.SingleObjectLocalizer` on one real
   digit per 64 x 64 canvas (target mean IoU >= 0.80).
 - ``family``: R-CNN, Fast R-CNN and Faster R-CNN on the same real-digits canvases:
   test mAP and the per-image latency (1 thread, batch 1, median of the test images;
@@ -47,8 +47,7 @@ import numpy as np
 import torch
 
 from benchmarks._harness import figures_main, load_runs, timing_row
-from robopercept.nn import detection_data as dd
-from robopercept.nn.detection import (
+from robopercept.nn.detection.models import (
     TestTimeAugmentation,
     build_detector,
     evaluate_detector,
@@ -57,7 +56,8 @@ from robopercept.nn.detection import (
     selective_search_proposals,
     train_detector,
 )
-from robopercept.nn.training import TrainConfig
+from robopercept.nn.detection.models import data as dd
+from robopercept.nn.train.loop import TrainConfig
 
 NAME = "detection_figures"
 TREES = os.environ.get("ROBOPERCEPT_DEEPFOREST", "../shared/data/detection/deepforest_neon")

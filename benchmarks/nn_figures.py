@@ -12,7 +12,7 @@ Parts (``--only digits lfw finetune throughput`` runs a subset):
   HOG + linear SVM (:class:`robopercept.learning.hog_detector.HogDetector`, fitted on the
   same folds, 24 x 24 top-left crops as its face model uses).
 - ``finetune``: sim-to-real. resnet_small pretrained on 20,000 font-rendered digits
-  (:func:`robopercept.nn.fonts.render_digits`), then trained on 1 or 5 real labelled
+  (:func:`robopercept.nn.data.fonts.render_digits`), then trained on 1 or 5 real labelled
   digits per class (from the train split) three ways at the same budget: fine-tuned
   (new head, whole network, trunk at 0.1x the head's learning rate), from scratch, and a
   linear probe (frozen trunk, frozen batch norm, new head); tested on the real test split.
@@ -37,7 +37,9 @@ import torch
 from torch import nn
 
 from benchmarks._harness import RESULTS, machine, paired_ms
-from robopercept.nn.data import (
+from robopercept.nn.classification.models import MODELS, build_model
+from robopercept.nn.core.transfer import freeze, keep_frozen_batchnorm_in_eval, replace_head
+from robopercept.nn.data.datasets import (
     ArrayDataset,
     Compose,
     RandomAffine,
@@ -47,10 +49,8 @@ from robopercept.nn.data import (
     normalization_stats,
     stratified_split,
 )
-from robopercept.nn.fonts import render_digits
-from robopercept.nn.models import MODELS, build_model
-from robopercept.nn.training import Normalize, TrainConfig, evaluate, fit
-from robopercept.nn.transfer import freeze, keep_frozen_batchnorm_in_eval, replace_head
+from robopercept.nn.data.fonts import render_digits
+from robopercept.nn.train.loop import Normalize, TrainConfig, evaluate, fit
 
 SEEDS = (0, 1, 2)
 FAMILY = ("vgg_small", "inception_small", "resnet_small")
@@ -326,7 +326,7 @@ def plain_model(name: str) -> nn.Sequential:
             layers += [*_cbr(cin, w, 3), *_cbr(w, w, 3), nn.MaxPool2d(2, 2)]
             cin = w
     elif name == "inception_small":
-        from robopercept.nn.models import INCEPTION_SMALL_BLOCKS
+        from robopercept.nn.classification.models import INCEPTION_SMALL_BLOCKS
 
         layers += _cbr(1, 32, 3)
         cin = 32

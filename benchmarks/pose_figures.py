@@ -6,7 +6,7 @@ Every run draws its weights from ``torch.manual_seed(seed)`` and trains with the
 seed's data order; the epoch is picked on the validation split, nothing on the test
 split.
 
-Parts (single-person parts on :func:`~robopercept.nn.pose_data.pose_sets` ``"figures"``,
+Parts (single-person parts on :func:`~robopercept.nn.pose.data.pose_sets` ``"figures"``,
 128 x 128, training seed ``seed``, validation ``1000 + seed``, test ``99``):
 
 - ``hrnet``, ``heatmap``: the HRNet-style network and the SimpleBaseline network,
@@ -16,7 +16,7 @@ Parts (single-person parts on :func:`~robopercept.nn.pose_data.pose_sets` ``"fig
 - ``pictorial``: pictorial structures (HOG-like cell descriptors, a logistic
   appearance model per joint, Gaussian springs, exact inference by the generalized
   distance transform): the pre-deep-learning baseline.
-- ``keypointrcnn``: Keypoint R-CNN on :func:`~robopercept.nn.pose_data.procedural_pose_scenes`
+- ``keypointrcnn``: Keypoint R-CNN on :func:`~robopercept.nn.pose.data.procedural_pose_scenes`
   (1-3 figures per 192 x 160 image): COCO keypoint AP with MPII's sigmas.
 - ``lift3d``: 3-D pose from the *true* 2-D joints of the test figures, by matching
   against a library of projected 3-D poses, and by the lifting MLP: PA-MPJPE (mm).
@@ -38,9 +38,9 @@ import numpy as np
 import torch
 
 from benchmarks._harness import figures_main, seeds_table, timing_row
-from robopercept.nn import pose as P
-from robopercept.nn.pose_data import pose_sets, procedural_pose_scenes
-from robopercept.nn.training import TrainConfig
+from robopercept.nn.pose.data import pose_sets, procedural_pose_scenes
+from robopercept.nn.pose.networks import networks as P
+from robopercept.nn.train.loop import TrainConfig
 
 NAME = "pose_figures"
 SIZE = (128, 128)
@@ -168,8 +168,8 @@ def network(part: str, seed: int, progress: bool, save: Path | None = None) -> d
 
 def pictorial(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
     """Pictorial structures fitted on 1,000 training figures, scored on the test set."""
-    from robopercept.nn.pictorial import PictorialStructures
-    from robopercept.nn.pose_eval import bbox_diagonal, pck
+    from robopercept.nn.pose.metrics import bbox_diagonal, pck
+    from robopercept.nn.pose.pictorial import PictorialStructures
 
     del progress, save
     sets = _sets(seed, images=1000)
@@ -209,7 +209,7 @@ KEYPOINT_RCNN_TRAIN = {"images": 1200, "epochs": 12, "batch_size": 4, "lr": 1e-3
 
 def keypointrcnn(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
     """Keypoint R-CNN on multi-person procedural scenes: keypoint AP (OKS, MPII sigmas)."""
-    from robopercept.nn.detection import (
+    from robopercept.nn.detection.models import (
         build_detector,
         evaluate_detector,
         save_detector,
@@ -279,8 +279,8 @@ def lift3d(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any
     """3-D from the test figures' 2-D joints (true, and with 2 px noise): matching
     against a library of projected poses (the course's recipe) vs the lifting MLP
     trained on the same library's pairs; PA-MPJPE and MPJPE (root-relative) in mm."""
-    from robopercept.nn import pose3d
-    from robopercept.nn.pose_data import random_poses_3d
+    from robopercept.nn.pose.data import random_poses_3d
+    from robopercept.nn.pose.networks import lifting as pose3d
 
     del progress, save
     test = _sets(seed, images=10).test

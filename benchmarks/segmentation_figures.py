@@ -10,20 +10,20 @@ Parts:
 
 - ``nuclei-unet``: a U-Net of 121k parameters (width 8, depth 3; the target allows
   150k) on the real fluorescence nuclei
-  (:func:`~robopercept.nn.segmentation_data.nuclei_quadrants`): three 256 x 256
+  (:func:`~robopercept.nn.segmentation.data.nuclei_quadrants`): three 256 x 256
   quadrants to train on, random 128 x 128 windows with flips and quarter turns, cross
   entropy + Dice, the last epoch kept (three tiles leave no validation split; the
   number of epochs was fixed before the held-out quadrant was scored). Test on the
   held-out quadrant: foreground IoU (target >= 0.85) and instance F1 at IoU 0.5
   (target >= 0.85) of the connected components of the predicted foreground
   (4-connected, :func:`~robopercept.imaging.label_components`) against the true
-  nuclei (:func:`~robopercept.nn.segmentation_eval.match_instances`).
+  nuclei (:func:`~robopercept.nn.segmentation.metrics.match_instances`).
 - ``nuclei-maskrcnn``: Mask R-CNN on the same tiles
-  (:meth:`~robopercept.nn.detection_data.DetectionDataset.from_instance_labels`), mask
+  (:meth:`~robopercept.nn.detection.data.DetectionDataset.from_instance_labels`), mask
   AP50 on the held-out quadrant (target >= 0.70) through our COCO evaluation.
 - ``shapes-unet``, ``shapes-fcn32s``, ``shapes-naive``: the three semantic networks on
   the procedural shapes' class maps
-  (:meth:`~robopercept.nn.detection_data.DetectionDataset.class_maps`, 5 classes with
+  (:meth:`~robopercept.nn.detection.data.DetectionDataset.class_maps`, 5 classes with
   the background), the same images, epochs and optimizer: test mIoU (U-Net target >=
   0.85 and above the other two), parameters, FLOPs of one 128 x 128 image
   (:class:`torch.utils.flop_counter.FlopCounterMode`, a multiply-add counted as 2) and
@@ -50,26 +50,26 @@ import torch
 from benchmarks._harness import figures_main, seeds_table, timing_row
 from benchmarks.detection_figures import chunked
 from robopercept.imaging import label_components
-from robopercept.nn import detection_data as dd
-from robopercept.nn.detection import (
+from robopercept.nn.detection.models import (
     build_detector,
     evaluate_detector,
     save_detector,
     train_detector,
 )
-from robopercept.nn.segmentation import (
+from robopercept.nn.detection.models import data as dd
+from robopercept.nn.segmentation.data import nuclei_quadrants
+from robopercept.nn.segmentation.metrics import (
+    match_instances,
+    segmentation_confusion,
+    segmentation_scores,
+)
+from robopercept.nn.segmentation.networks import (
     build_segmenter,
     predict_segmentation,
     save_segmenter,
     train_segmenter,
 )
-from robopercept.nn.segmentation_data import nuclei_quadrants
-from robopercept.nn.segmentation_eval import (
-    match_instances,
-    segmentation_confusion,
-    segmentation_scores,
-)
-from robopercept.nn.training import TrainConfig
+from robopercept.nn.train.loop import TrainConfig
 
 NAME = "segmentation_figures"
 NUCLEI = Path("../shared/data/segmentation/stardist_nuclei")

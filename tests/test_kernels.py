@@ -631,8 +631,8 @@ def _nn_cases() -> list[Case]:
         return []
     import torch
 
-    from robopercept.nn.boxes import batched_nms
-    from robopercept.nn.coco import coco_from_dict, evaluate_detections, results_from_list
+    from robopercept.nn.coco.formats import coco_from_dict, evaluate_detections, results_from_list
+    from robopercept.nn.ops.boxes import batched_nms
 
     rng = np.random.default_rng(7)
     xy = rng.uniform(0, 40, (60, 2))
@@ -676,7 +676,7 @@ def _nn_cases() -> list[Case]:
         ev = evaluate_detections(gt, results_from_list(dets))
         return [ev.precision, ev.recall, ev.scores, np.asarray(ev.stats)]
 
-    from robopercept.nn.pictorial import pictorial_structures
+    from robopercept.nn.pose.pictorial import pictorial_structures
 
     costs = rng.normal(size=(4, 9, 11))
     costs[rng.random(costs.shape) < 0.2] = np.inf  # forbidden cells skip the envelope

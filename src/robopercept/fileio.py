@@ -8,7 +8,7 @@ the complete new one, never a truncated one. On an error the temporary file is r
 and :class:`WriteError` names the target file and what happened (``no space left on the
 device`` for ``ENOSPC``/``EDQUOT``).
 
-This is the one atomic writer of the package (checkpoints of ``nn.training``, the
+This is the one atomic writer of the package (checkpoints of ``nn.train.loop``, the
 outputs of ``pipelines.plane_outputs``).
 """
 

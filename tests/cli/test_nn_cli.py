@@ -75,7 +75,7 @@ def test_eval_on_the_checkpoint(run_dir: Path, tmp_path: Path, capsys) -> None:
 
 
 def test_predict_finds_the_labels_of_digit_pictures(run_dir: Path, tmp_path: Path, capsys):
-    from robopercept.nn.data import load_digits, stratified_split
+    from robopercept.nn.data.datasets import load_digits, stratified_split
 
     ds = load_digits()
     test = stratified_split(ds.labels, (0.7, 0.15, 0.15), rng=0)[2]  # held out by the run
@@ -98,7 +98,7 @@ def test_predict_finds_the_labels_of_digit_pictures(run_dir: Path, tmp_path: Pat
 
 
 def test_summary_totals_equal_the_parameter_count(capsys) -> None:
-    from robopercept.nn.models import build_model
+    from robopercept.nn.classification.models import build_model
 
     assert main(["nn", "summary", "resnet_small", "--input", "1,8,8", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
@@ -112,7 +112,7 @@ def test_summary_totals_equal_the_parameter_count(capsys) -> None:
 
 def test_model_names_are_the_library_s() -> None:
     from robopercept.cli.nn import MODEL_NAMES
-    from robopercept.nn.models import MODELS
+    from robopercept.nn.classification.models import MODELS
 
     assert set(MODEL_NAMES) == set(MODELS)
 

@@ -1,7 +1,7 @@
 """``robopercept nn cloud train|eval|CLOUD...`` (issue 29, item 4): a tiny run (a few
 64-point procedural shapes, one epoch) so the file stays fast; the printed figures
 equal the library's on the same split, the cloud form's prediction equals
-:func:`~robopercept.nn.cloud.classify_cloud_file`'s, and bad arguments name their flag."""
+:func:`~robopercept.nn.cloud.run.classify_cloud_file`'s, and bad arguments name their flag."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
-from robopercept.nn.cloud import (  # noqa: E402
+from robopercept.nn.cloud.run import (  # noqa: E402
     classify_cloud_file,
     cloud_sets,
     evaluate_cloud_model,

@@ -17,14 +17,14 @@ torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
-from robopercept.nn.coco_mask import rle_decode  # noqa: E402
-from robopercept.nn.detection import load_detector  # noqa: E402
-from robopercept.nn.segmentation import load_segmenter, segment_arrays  # noqa: E402
-from robopercept.nn.segmentation_data import segmentation_sets  # noqa: E402
-from robopercept.nn.segmentation_eval import (  # noqa: E402
+from robopercept.nn.coco.rle import rle_decode  # noqa: E402
+from robopercept.nn.detection.models import load_detector  # noqa: E402
+from robopercept.nn.segmentation.data import segmentation_sets  # noqa: E402
+from robopercept.nn.segmentation.metrics import (  # noqa: E402
     segmentation_confusion,
     segmentation_scores,
 )
+from robopercept.nn.segmentation.networks import load_segmenter, segment_arrays  # noqa: E402
 
 DATA = ["--data", "shapes", "--images", "10", "--size", "64x64", "--seed", "0"]
 FILES = {"model.pt", "history.json", "metrics.json", "samples.png"}

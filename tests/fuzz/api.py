@@ -219,9 +219,11 @@ SCENE = _b(
 FRAME = _b("tests.fuzz.api:scene_frame", 0)
 PLANE = _b("robopercept.estimation:Plane", np.array([0.0, 0.0, 1.0]), -5.0)
 TORCH_IMG = _b("tests.fuzz.api:torch_image", 1, 16, 16)
-TINY_NET = _b("robopercept.nn.models:vgg_small", 1, 3, widths=(4,), convs_per_stage=1)
+TINY_NET = _b(
+    "robopercept.nn.classification.models:vgg_small", 1, 3, widths=(4,), convs_per_stage=1
+)
 ARRAY_DATA = _b(
-    "robopercept.nn.data:ArrayDataset",
+    "robopercept.nn.data.datasets:ArrayDataset",
     np.random.default_rng(5).uniform(0, 1, (12, 8, 8)).astype(np.float32),
     np.arange(12) % 3,
     ("a", "b", "c"),
@@ -229,7 +231,7 @@ ARRAY_DATA = _b(
 TBOXES = _b("tests.fuzz.api:torch_tensor", [[0, 0, 4, 4], [1, 1, 5, 6], [2, 0, 7, 3]])
 TSCORES = _b("tests.fuzz.api:torch_tensor", [0.9, 0.8, 0.3])
 TROIS = _b("tests.fuzz.api:torch_tensor", [[0, 0, 0, 4, 4], [0, 1, 2, 7, 6]])
-TRAIN_CFG = _b("robopercept.nn.training:TrainConfig", epochs=1, batch_size=4, device="cpu")
+TRAIN_CFG = _b("robopercept.nn.train.loop:TrainConfig", epochs=1, batch_size=4, device="cpu")
 
 
 @dataclass(frozen=True)
@@ -324,20 +326,20 @@ def _write_tum(path: Path) -> None:
 
 
 def _write_checkpoint(path: Path) -> None:
-    from robopercept.nn.training import save_checkpoint
+    from robopercept.nn.train.loop import save_checkpoint
 
     save_checkpoint(path, {"epoch": 1, "model": materialize(TINY_NET).state_dict()})
 
 
 def _write_detector(path: Path) -> None:
-    from robopercept.nn.detection import build_detector, save_detector
+    from robopercept.nn.detection.models import build_detector, save_detector
 
     save_detector(path, build_detector("fcos", 2, width=4), "fcos", {"width": 4}, ["a", "b"])
 
 
 def _write_run(path: Path) -> None:
-    from robopercept.nn.run import train_run
-    from robopercept.nn.training import TrainConfig
+    from robopercept.nn.classification.run import train_run
+    from robopercept.nn.train.loop import TrainConfig
 
     train_run(
         "digits",
@@ -941,9 +943,9 @@ VALID: dict[str, dict[str, Any]] = {
     "nn.functional.ConvSpec": {"in_channels": 3, "out_channels": 8, "kernel_size": 3},
     "nn.functional.parameter_count": {"spec": _b("robopercept.nn.functional:ConvSpec", 3, 8, 3)},
     "nn.functional.receptive_field": {"layers": [(3, 1, 1), (2, 2, 0), (3, 1, 1)]},
-    "nn.blocks.Bottleneck": {"in_channels": 8, "width": 4},
-    "nn.blocks.ConvBNAct": {"in_channels": 3, "out_channels": 4},
-    "nn.blocks.InceptionBlock": {
+    "nn.core.blocks.Bottleneck": {"in_channels": 8, "width": 4},
+    "nn.core.blocks.ConvBNAct": {"in_channels": 3, "out_channels": 4},
+    "nn.core.blocks.InceptionBlock": {
         "in_channels": 4,
         "ch1x1": 2,
         "ch3x3red": 2,
@@ -952,106 +954,117 @@ VALID: dict[str, dict[str, Any]] = {
         "ch5x5": 2,
         "pool_proj": 2,
     },
-    "nn.blocks.ResidualBlock": {"in_channels": 4, "out_channels": 4},
-    "nn.blocks.VGGStage": {"in_channels": 3, "out_channels": 4},
-    "nn.blocks.check_input": {"x": _b("tests.fuzz.api:torch_image", 1, 1, 8, 8), "in_channels": 1},
-    "nn.blocks.make_activation": {"act": "relu"},
-    "nn.models.Classifier": {
-        "features": _b("robopercept.nn.blocks:ConvBNAct", 1, 4),
+    "nn.core.blocks.ResidualBlock": {"in_channels": 4, "out_channels": 4},
+    "nn.core.blocks.VGGStage": {"in_channels": 3, "out_channels": 4},
+    "nn.core.blocks.check_input": {
+        "x": _b("tests.fuzz.api:torch_image", 1, 1, 8, 8),
+        "in_channels": 1,
+    },
+    "nn.core.blocks.make_activation": {"act": "relu"},
+    "nn.classification.models.Classifier": {
+        "features": _b("robopercept.nn.core.blocks:ConvBNAct", 1, 4),
         "num_features": 4,
         "num_classes": 3,
         "in_channels": 1,
     },
-    "nn.models.build_model": {"name": "vgg_small", "widths": (4,), "convs_per_stage": 1},
-    "nn.models.inception_small": {"stem_width": 8, "blocks": ((4, 4, 4, 2, 2, 2),)},
-    "nn.models.resnet_small": {"widths": (4, 8)},
-    "nn.models.vgg_small": {"widths": (4, 8)},
-    "nn.summary.summary": {"model": TINY_NET, "input_shape": (1, 1, 16, 16)},
-    "nn.data.ArrayDataset": {
+    "nn.classification.models.build_model": {
+        "name": "vgg_small",
+        "widths": (4,),
+        "convs_per_stage": 1,
+    },
+    "nn.classification.models.inception_small": {"stem_width": 8, "blocks": ((4, 4, 4, 2, 2, 2),)},
+    "nn.classification.models.resnet_small": {"widths": (4, 8)},
+    "nn.classification.models.vgg_small": {"widths": (4, 8)},
+    "nn.core.summary.summary": {"model": TINY_NET, "input_shape": (1, 1, 16, 16)},
+    "nn.data.datasets.ArrayDataset": {
         "images": np.random.default_rng(5).uniform(0, 1, (6, 8, 8)).astype(np.float32),
         "labels": np.arange(6) % 2,
         "classes": ("a", "b"),
     },
-    "nn.data.Compose": {"transforms": [_b("robopercept.nn.data:RandomFlip", generator=0)]},
-    "nn.data.ImageFolder": {"root": Fixture("images"), "size": (16, 16)},
-    "nn.data.Normalize": {"mean": [0.5], "std": [0.25]},
-    "nn.data.RandomCrop": {"size": 12, "padding": 2, "generator": 0},
-    "nn.data.RandomFlip": {"generator": 0},
-    "nn.data.RandomAffine": {"degrees": 10.0, "generator": 0},
-    "nn.data.ColorJitter": {"brightness": 0.2, "generator": 0},
-    "nn.data.GaussianNoise": {"generator": 0},
-    "nn.data.normalization_stats": {"data": np.random.default_rng(5).uniform(0, 1, (6, 1, 8, 8))},
-    "nn.data.shapes_dataset": {"n": 6, "size": 16, "rng": 0},
-    "nn.data.stratified_split": {"labels": np.arange(30) % 3},
-    "nn.data.to_unit_float": {"image": IMG},
-    "nn.training.TrainConfig": {"epochs": 1, "batch_size": 4},
-    "nn.training.evaluate": {"model": TINY_NET, "data": ARRAY_DATA, "device": "cpu"},
-    "nn.training.fit": {"model": TINY_NET, "train": ARRAY_DATA, "config": TRAIN_CFG},
-    "nn.training.load_checkpoint": {"path": Fixture("checkpoint.pt"), "model": TINY_NET},
-    "nn.training.save_checkpoint": {
+    "nn.data.datasets.Compose": {
+        "transforms": [_b("robopercept.nn.data.datasets:RandomFlip", generator=0)]
+    },
+    "nn.data.datasets.ImageFolder": {"root": Fixture("images"), "size": (16, 16)},
+    "nn.data.datasets.Normalize": {"mean": [0.5], "std": [0.25]},
+    "nn.data.datasets.RandomCrop": {"size": 12, "padding": 2, "generator": 0},
+    "nn.data.datasets.RandomFlip": {"generator": 0},
+    "nn.data.datasets.RandomAffine": {"degrees": 10.0, "generator": 0},
+    "nn.data.datasets.ColorJitter": {"brightness": 0.2, "generator": 0},
+    "nn.data.datasets.GaussianNoise": {"generator": 0},
+    "nn.data.datasets.normalization_stats": {
+        "data": np.random.default_rng(5).uniform(0, 1, (6, 1, 8, 8))
+    },
+    "nn.data.datasets.shapes_dataset": {"n": 6, "size": 16, "rng": 0},
+    "nn.data.datasets.stratified_split": {"labels": np.arange(30) % 3},
+    "nn.data.datasets.to_unit_float": {"image": IMG},
+    "nn.train.loop.TrainConfig": {"epochs": 1, "batch_size": 4},
+    "nn.train.loop.evaluate": {"model": TINY_NET, "data": ARRAY_DATA, "device": "cpu"},
+    "nn.train.loop.fit": {"model": TINY_NET, "train": ARRAY_DATA, "config": TRAIN_CFG},
+    "nn.train.loop.load_checkpoint": {"path": Fixture("checkpoint.pt"), "model": TINY_NET},
+    "nn.train.loop.save_checkpoint": {
         "path": _out("checkpoint.pt"),
         "state": {"epoch": 1, "w": [1.0, 2.0]},
     },
-    "nn.transfer.freeze": {"model": TINY_NET},
-    "nn.transfer.keep_frozen_batchnorm_in_eval": {"model": TINY_NET},
-    "nn.transfer.replace_head": {"model": TINY_NET, "num_classes": 5},
-    "nn.transfer.trainable_parameter_names": {"model": TINY_NET},
-    "nn.transfer.unfreeze": {"model": TINY_NET},
-    "nn.export.export_onnx": {
+    "nn.core.transfer.freeze": {"model": TINY_NET},
+    "nn.core.transfer.keep_frozen_batchnorm_in_eval": {"model": TINY_NET},
+    "nn.core.transfer.replace_head": {"model": TINY_NET, "num_classes": 5},
+    "nn.core.transfer.trainable_parameter_names": {"model": TINY_NET},
+    "nn.core.transfer.unfreeze": {"model": TINY_NET},
+    "nn.core.export.export_onnx": {
         "model": TINY_NET,
         "path": _out("net.onnx"),
         "input_shape": (1, 16, 16),
     },
-    "nn.boxes.box_area": {"boxes": TBOXES},
-    "nn.boxes.box_convert": {"boxes": TBOXES, "in_fmt": "xyxy", "out_fmt": "cxcywh"},
-    "nn.boxes.box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
-    "nn.boxes.generalized_box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
-    "nn.boxes.dihedral_boxes": {
+    "nn.ops.boxes.box_area": {"boxes": TBOXES},
+    "nn.ops.boxes.box_convert": {"boxes": TBOXES, "in_fmt": "xyxy", "out_fmt": "cxcywh"},
+    "nn.ops.boxes.box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
+    "nn.ops.boxes.generalized_box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
+    "nn.ops.boxes.dihedral_boxes": {
         "boxes": TBOXES,
         "size": (16, 24),
         "hflip": True,
         "quarter_turns": 1,
         "inverse": True,
     },
-    "nn.boxes.nms": {"boxes": TBOXES, "scores": TSCORES, "iou_threshold": 0.5},
-    "nn.boxes.batched_nms": {
+    "nn.ops.boxes.nms": {"boxes": TBOXES, "scores": TSCORES, "iou_threshold": 0.5},
+    "nn.ops.boxes.batched_nms": {
         "boxes": TBOXES,
         "scores": TSCORES,
         "idxs": _b("tests.fuzz.api:torch_tensor", [0, 1, 0], "int64"),
         "iou_threshold": 0.5,
     },
-    "nn.boxes.non_max_suppression": {"boxes": TBOXES, "scores": TSCORES, "top_k": 2},
-    "nn.boxes.roi_align": {
+    "nn.ops.boxes.non_max_suppression": {"boxes": TBOXES, "scores": TSCORES, "top_k": 2},
+    "nn.ops.boxes.roi_align": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
         "output_size": 2,
     },
-    "nn.boxes.roi_pool": {
+    "nn.ops.boxes.roi_pool": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
         "output_size": 2,
     },
-    "nn.boxes.RoIAlign": {"output_size": 2},
-    "nn.boxes.RoIPool": {"output_size": 2},
-    "nn.boxes.BoxCoder.encode": {"reference_boxes": TBOXES, "proposals": TBOXES},
-    "nn.boxes.BoxCoder.decode": {"deltas": TBOXES, "boxes": TBOXES},
-    "nn.boxes.RoIAlign.forward": {
+    "nn.ops.boxes.RoIAlign": {"output_size": 2},
+    "nn.ops.boxes.RoIPool": {"output_size": 2},
+    "nn.ops.boxes.BoxCoder.encode": {"reference_boxes": TBOXES, "proposals": TBOXES},
+    "nn.ops.boxes.BoxCoder.decode": {"deltas": TBOXES, "boxes": TBOXES},
+    "nn.ops.boxes.RoIAlign.forward": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
     },
-    "nn.boxes.RoIPool.forward": {
+    "nn.ops.boxes.RoIPool.forward": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
     },
-    "nn.boxes.AnchorGenerator.__call__": {"image_shape": (32, 32), "feature_shapes": [(4, 4)]},
-    "nn.run.evaluate_run": {
+    "nn.ops.boxes.AnchorGenerator.__call__": {"image_shape": (32, 32), "feature_shapes": [(4, 4)]},
+    "nn.classification.run.evaluate_run": {
         "checkpoint": Fixture("run/checkpoint.pt"),
         "data": "digits",
         "device": "cpu",
     },
-    "nn.run.load_data": {"data": Fixture("images"), "size": (16, 16)},
-    "nn.run.load_run": {"checkpoint": Fixture("run/checkpoint.pt"), "device": "cpu"},
-    "nn.run.predict": {
+    "nn.classification.run.load_data": {"data": Fixture("images"), "size": (16, 16)},
+    "nn.classification.run.load_run": {"checkpoint": Fixture("run/checkpoint.pt"), "device": "cpu"},
+    "nn.classification.run.predict": {
         "checkpoint": Fixture("run/checkpoint.pt"),
         "image_paths": [Fixture("image.png")],
         "device": "cpu",
@@ -1127,10 +1140,10 @@ METHODS: dict[str, tuple[str, ...]] = {
     "imaging.SnapshotVideoWriter": ("add",),
     "imaging.VideoReader": ("__iter__",),
     "geometry.CameraIntrinsics": ("scaled",),
-    "nn.boxes.BoxCoder": ("encode", "decode"),
-    "nn.boxes.AnchorGenerator": ("__call__", "base_anchors"),
-    "nn.boxes.RoIAlign": ("forward",),
-    "nn.boxes.RoIPool": ("forward",),
+    "nn.ops.boxes.BoxCoder": ("encode", "decode"),
+    "nn.ops.boxes.AnchorGenerator": ("__call__", "base_anchors"),
+    "nn.ops.boxes.RoIAlign": ("forward",),
+    "nn.ops.boxes.RoIPool": ("forward",),
     "estimation.Plane": ("distance", "project"),
     "estimation.Line": ("distance",),
     "estimation.LineModel": ("fit",),
@@ -1159,12 +1172,12 @@ METHODS: dict[str, tuple[str, ...]] = {
     "sources.VideoSource": ("__iter__",),
     "pipelines.PlaneMeasurer": ("measure",),
     "pipelines.PlaneTracker": ("process",),
-    "nn.data.RandomFlip": ("__call__",),
-    "nn.data.RandomCrop": ("__call__",),
-    "nn.data.RandomAffine": ("__call__",),
-    "nn.data.ColorJitter": ("__call__",),
-    "nn.data.GaussianNoise": ("__call__",),
-    "nn.data.Normalize": ("__call__",),
+    "nn.data.datasets.RandomFlip": ("__call__",),
+    "nn.data.datasets.RandomCrop": ("__call__",),
+    "nn.data.datasets.RandomAffine": ("__call__",),
+    "nn.data.datasets.ColorJitter": ("__call__",),
+    "nn.data.datasets.GaussianNoise": ("__call__",),
+    "nn.data.datasets.Normalize": ("__call__",),
 }
 
 #: the constructor arguments of a method's instance, where the constructor's own
@@ -1186,13 +1199,13 @@ PRE: dict[str, tuple[tuple[str, tuple[Any, ...]], ...]] = {
 
 #: roles that the valid value does not reveal (a tensor where an image goes)
 ROLES: dict[str, dict[str, str]] = {
-    "nn.data.RandomFlip.__call__": {"x": "image"},
-    "nn.data.RandomCrop.__call__": {"x": "image"},
-    "nn.data.RandomAffine.__call__": {"x": "image"},
-    "nn.data.ColorJitter.__call__": {"x": "image"},
-    "nn.data.GaussianNoise.__call__": {"x": "image"},
-    "nn.data.Normalize.__call__": {"x": "image"},
-    "nn.blocks.check_input": {"x": "image"},
+    "nn.data.datasets.RandomFlip.__call__": {"x": "image"},
+    "nn.data.datasets.RandomCrop.__call__": {"x": "image"},
+    "nn.data.datasets.RandomAffine.__call__": {"x": "image"},
+    "nn.data.datasets.ColorJitter.__call__": {"x": "image"},
+    "nn.data.datasets.GaussianNoise.__call__": {"x": "image"},
+    "nn.data.datasets.Normalize.__call__": {"x": "image"},
+    "nn.core.blocks.check_input": {"x": "image"},
     "pipelines.PlaneMeasurer.measure": {"frame": "frame"},
     "pipelines.PlaneTracker.process": {"frame": "frame"},
     "sources.write_tum_folder": {"frames": "frames"},
@@ -1206,11 +1219,11 @@ for _cls in (
     "GaussianNoise",
     "Normalize",
 ):
-    VALID.setdefault(f"nn.data.{_cls}.__call__", {"x": TORCH_IMG})
-VALID["nn.data.Normalize"] = {"mean": [0.5], "std": [0.25]}
+    VALID.setdefault(f"nn.data.datasets.{_cls}.__call__", {"x": TORCH_IMG})
+VALID["nn.data.datasets.Normalize"] = {"mean": [0.5], "std": [0.25]}
 
 
-# nn.coco (issue 26): a one-image COCO set, its results, a VOC file, an evaluation
+# nn.coco.formats (issue 26): a one-image COCO set, its results, a VOC file, an evaluation
 _COCO_GT = {
     "images": [{"id": 1, "file_name": "a.png", "width": 64, "height": 48}],
     "categories": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}],
@@ -1232,9 +1245,9 @@ _VOC_XML = (
 
 
 def coco_value(kind: str) -> Any:
-    """A valid nn.coco value: ``gt`` (CocoDataset), ``results`` (CocoResults),
+    """A valid nn.coco.formats value: ``gt`` (CocoDataset), ``results`` (CocoResults),
     ``evaluation`` (CocoEvaluation) or ``voc`` (a list of one VocAnnotation)."""
-    from robopercept.nn import coco
+    from robopercept.nn.coco.formats import formats as coco
 
     gt = coco.coco_from_dict(_COCO_GT)
     res = coco.results_from_list(_COCO_RES)
@@ -1256,42 +1269,46 @@ _CRES = _b("tests.fuzz.api:coco_value", "results")
 _CEV = _b("tests.fuzz.api:coco_value", "evaluation")
 VALID.update(
     {
-        "nn.coco.coco_from_dict": {"data": _COCO_GT},
-        "nn.coco.read_coco_json": {"path": Fixture("coco.json")},
-        "nn.coco.coco_to_dict": {"dataset": _CGT},
-        "nn.coco.write_coco_json": {"dataset": _CGT, "path": _out("gt.json")},
-        "nn.coco.results_from_list": {"results": _COCO_RES},
-        "nn.coco.read_coco_results": {"path": Fixture("coco_results.json")},
-        "nn.coco.results_to_list": {"results": _CRES},
-        "nn.coco.write_coco_results": {"results": _CRES, "path": _out("results.json")},
-        "nn.coco.results_from_ground_truth": {"dataset": _CGT},
-        "nn.coco.read_voc_xml": {"path": Fixture("voc.xml")},
-        "nn.coco.voc_to_coco": {"annotations": _b("tests.fuzz.api:coco_value", "voc")},
-        "nn.coco.evaluate_detections": {"gt": _CGT, "results": _COCO_RES, "max_dets": (1, 10, 100)},
-        "nn.coco.evaluate_voc": {"gt": _CGT, "results": _CRES},
-        "nn.coco.voc_average_precision": {
+        "nn.coco.formats.coco_from_dict": {"data": _COCO_GT},
+        "nn.coco.formats.read_coco_json": {"path": Fixture("coco.json")},
+        "nn.coco.formats.coco_to_dict": {"dataset": _CGT},
+        "nn.coco.formats.write_coco_json": {"dataset": _CGT, "path": _out("gt.json")},
+        "nn.coco.formats.results_from_list": {"results": _COCO_RES},
+        "nn.coco.formats.read_coco_results": {"path": Fixture("coco_results.json")},
+        "nn.coco.formats.results_to_list": {"results": _CRES},
+        "nn.coco.formats.write_coco_results": {"results": _CRES, "path": _out("results.json")},
+        "nn.coco.formats.results_from_ground_truth": {"dataset": _CGT},
+        "nn.coco.formats.read_voc_xml": {"path": Fixture("voc.xml")},
+        "nn.coco.formats.voc_to_coco": {"annotations": _b("tests.fuzz.api:coco_value", "voc")},
+        "nn.coco.formats.evaluate_detections": {
+            "gt": _CGT,
+            "results": _COCO_RES,
+            "max_dets": (1, 10, 100),
+        },
+        "nn.coco.formats.evaluate_voc": {"gt": _CGT, "results": _CRES},
+        "nn.coco.formats.voc_average_precision": {
             "recall": np.array([0.5, 0.5, 1.0]),
             "precision": np.array([1.0, 0.5, 2 / 3]),
         },
-        "nn.coco.pr_curves_picture": {"evaluation": _CEV, "width": 200, "height": 150},
-        "nn.coco.write_pr_curves": {"evaluation": _CEV, "path": _out("pr.png")},
+        "nn.coco.formats.pr_curves_picture": {"evaluation": _CEV, "width": 200, "height": 150},
+        "nn.coco.formats.write_pr_curves": {"evaluation": _CEV, "path": _out("pr.png")},
     }
 )
 
-# nn.coco keypoints and nn.pose_eval (issue 28): two persons of 3 keypoints, a detection
+# nn.coco.formats keypoints and nn.pose.metrics (issue 28): two persons of 3 keypoints, a detection
 _KP_GT = np.array([[[10.0, 10.0, 2.0], [20.0, 12.0, 2.0], [15.0, 30.0, 1.0]], np.zeros((3, 3))])
 _KP_DT = np.array([[[11.0, 10.0], [19.0, 13.0], [15.0, 28.0]]])
 _I2 = np.array([1, 2], dtype=np.int64)
 VALID.update(
     {
-        "nn.coco.keypoint_oks": {
+        "nn.coco.formats.keypoint_oks": {
             "dt_keypoints": _KP_DT,
             "gt_keypoints": _KP_GT,
             "gt_area": np.array([200.0, 50.0]),
             "gt_box": np.array([[8.0, 8.0, 14.0, 24.0], [40.0, 5.0, 5.0, 10.0]]),
             "sigmas": np.array([0.05, 0.07, 0.09]),
         },
-        "nn.coco.CocoDataset": {
+        "nn.coco.formats.CocoDataset": {
             "images": (),
             "categories": (),
             "ann_ids": _I2,
@@ -1303,50 +1320,50 @@ VALID.update(
             "keypoints": _KP_GT,
             "num_keypoints": np.array([3, 0]),
         },
-        "nn.coco.CocoResults": {
+        "nn.coco.formats.CocoResults": {
             "image_ids": _I2[:1],
             "category_ids": _I2[:1],
             "boxes": np.array([[11.0, 10.0, 8.0, 18.0]]),
             "scores": np.array([0.9]),
             "keypoints": np.concatenate([_KP_DT, np.ones((1, 3, 1))], axis=2),
         },
-        "nn.pose_eval.pck": {
+        "nn.pose.metrics.pck": {
             "pred": _KP_GT[:, :, :2] + 1.0,
             "truth": _KP_GT,
             "visible": None,
             "threshold": 0.2,
             "normalizer": np.array([28.0, 11.0]),
         },
-        "nn.pose_eval.pckh": {
+        "nn.pose.metrics.pckh": {
             "pred": _KP_GT[:, :, :2] + 1.0,
             "truth": _KP_GT,
             "visible": np.ones((2, 3), dtype=bool),
             "head_sizes": np.array([6.0, 4.0]),
         },
-        "nn.pose_eval.bbox_diagonal": {"boxes": np.array([[8.0, 8.0, 14.0, 24.0]])},
-        "nn.pose_eval.mpii_head_sizes": {"head_boxes": np.array([[8.0, 8.0, 22.0, 32.0]])},
+        "nn.pose.metrics.bbox_diagonal": {"boxes": np.array([[8.0, 8.0, 14.0, 24.0]])},
+        "nn.pose.metrics.mpii_head_sizes": {"head_boxes": np.array([[8.0, 8.0, 22.0, 32.0]])},
     }
 )
 
 
-# nn.coco_mask (issue 27): the compressed RLE of a 4 x 3 mask
+# nn.coco.rle (issue 27): the compressed RLE of a 4 x 3 mask
 _RLE = {"size": [4, 3], "counts": "12114"}  # runs 1, 2, 1, 3, 5
 VALID.update(
     {
-        "nn.coco_mask.rle_encode": {"mask": np.eye(4, 3, dtype=np.uint8)},
-        "nn.coco_mask.rle_decode": {"rle": _RLE},
-        "nn.coco_mask.rle_counts": {"rle": _RLE},
-        "nn.coco_mask.rle_from_counts": {"counts": [1, 2, 1, 3, 5], "size": (4, 3)},
-        "nn.coco_mask.rle_area": {"rle": _RLE},
-        "nn.coco_mask.rle_to_bbox": {"rle": _RLE},
-        "nn.coco_mask.rle_iou": {"dt": [_RLE], "gt": [_RLE, _RLE], "iscrowd": [0, 1]},
-        "nn.coco_mask.rle_merge": {"rles": [_RLE, _RLE]},
-        "nn.coco_mask.polygon_to_rle": {
+        "nn.coco.rle.rle_encode": {"mask": np.eye(4, 3, dtype=np.uint8)},
+        "nn.coco.rle.rle_decode": {"rle": _RLE},
+        "nn.coco.rle.rle_counts": {"rle": _RLE},
+        "nn.coco.rle.rle_from_counts": {"counts": [1, 2, 1, 3, 5], "size": (4, 3)},
+        "nn.coco.rle.rle_area": {"rle": _RLE},
+        "nn.coco.rle.rle_to_bbox": {"rle": _RLE},
+        "nn.coco.rle.rle_iou": {"dt": [_RLE], "gt": [_RLE, _RLE], "iscrowd": [0, 1]},
+        "nn.coco.rle.rle_merge": {"rles": [_RLE, _RLE]},
+        "nn.coco.rle.polygon_to_rle": {
             "polygon": [0.5, 0.5, 2.5, 0.5, 1.5, 3.5],
             "height": 4,
             "width": 3,
         },
-        "nn.coco_mask.annotation_to_rle": {
+        "nn.coco.rle.annotation_to_rle": {
             "segmentation": [[0.5, 0.5, 2.5, 0.5, 1.5, 3.5]],
             "height": 4,
             "width": 3,
@@ -1355,23 +1372,23 @@ VALID.update(
 )
 
 
-# nn.segmentation_eval (issue 27): two 3 x 4 label maps of 3 classes
+# nn.segmentation.metrics (issue 27): two 3 x 4 label maps of 3 classes
 _SEG_T = np.array([[0, 0, 1, 1], [0, 2, 2, 1], [0, 2, 2, 1]])
 _SEG_P = np.array([[0, 1, 1, 1], [0, 2, 2, 2], [0, 0, 2, 1]])
 VALID.update(
     {
-        "nn.segmentation_eval.segmentation_confusion": {
+        "nn.segmentation.metrics.segmentation_confusion": {
             "y_true": _SEG_T,
             "y_pred": _SEG_P,
             "num_classes": 3,
         },
-        "nn.segmentation_eval.segmentation_scores": {"confusion": [[3, 1], [0, 4]]},
-        "nn.segmentation_eval.boundary_f_score": {
+        "nn.segmentation.metrics.segmentation_scores": {"confusion": [[3, 1], [0, 4]]},
+        "nn.segmentation.metrics.boundary_f_score": {
             "y_true": _SEG_T,
             "y_pred": _SEG_P,
             "num_classes": 3,
         },
-        "nn.segmentation_eval.match_instances": {
+        "nn.segmentation.metrics.match_instances": {
             "true_labels": _SEG_T,
             "pred_labels": _SEG_P,
             "iou_threshold": 0.5,
@@ -1380,39 +1397,46 @@ VALID.update(
 )
 
 
-# nn.segmentation (issue 27): tiny networks, logits and labels of two 8 x 8 images
+# nn.segmentation.networks (issue 27): tiny networks, logits and labels of two 8 x 8 images
 _SLOGITS = _b("tests.fuzz.api:torch_image", 2, 3, 8, 8)
 _SLABELS = _b("tests.fuzz.api:torch_tensor", np.tile([[0, 1, 2, 1]], (2, 8, 2)), "int64")
 VALID.update(
     {
-        "nn.segmentation.NaiveFCN": {"num_classes": 3, "width": 4, "depth": 2},
-        "nn.segmentation.FCN": {"num_classes": 3, "width": 4},
-        "nn.segmentation.UNet": {"num_classes": 3, "width": 4, "depth": 2},
-        "nn.segmentation.NaiveFCN.forward": {"x": _b("tests.fuzz.api:torch_image", 1, 3, 8, 8)},
-        "nn.segmentation.FCN.forward": {"x": _b("tests.fuzz.api:torch_image", 2, 3, 8, 8)},
-        "nn.segmentation.UNet.forward": {"x": _b("tests.fuzz.api:torch_image", 1, 3, 8, 8)},
-        "nn.segmentation.bilinear_kernel": {"channels": 2, "factor": 2},
-        "nn.segmentation.build_segmenter": {"name": "unet", "num_classes": 2, "width": 4},
-        "nn.segmentation.segmentation_cross_entropy": {"logits": _SLOGITS, "target": _SLABELS},
-        "nn.segmentation.dice_loss": {"logits": _SLOGITS, "target": _SLABELS},
+        "nn.segmentation.networks.NaiveFCN": {"num_classes": 3, "width": 4, "depth": 2},
+        "nn.segmentation.networks.FCN": {"num_classes": 3, "width": 4},
+        "nn.segmentation.networks.UNet": {"num_classes": 3, "width": 4, "depth": 2},
+        "nn.segmentation.networks.NaiveFCN.forward": {
+            "x": _b("tests.fuzz.api:torch_image", 1, 3, 8, 8)
+        },
+        "nn.segmentation.networks.FCN.forward": {"x": _b("tests.fuzz.api:torch_image", 2, 3, 8, 8)},
+        "nn.segmentation.networks.UNet.forward": {
+            "x": _b("tests.fuzz.api:torch_image", 1, 3, 8, 8)
+        },
+        "nn.segmentation.networks.bilinear_kernel": {"channels": 2, "factor": 2},
+        "nn.segmentation.networks.build_segmenter": {"name": "unet", "num_classes": 2, "width": 4},
+        "nn.segmentation.networks.segmentation_cross_entropy": {
+            "logits": _SLOGITS,
+            "target": _SLABELS,
+        },
+        "nn.segmentation.networks.dice_loss": {"logits": _SLOGITS, "target": _SLABELS},
     }
 )
 for _cls in ("NaiveFCN", "FCN", "UNet"):
-    METHODS[f"nn.segmentation.{_cls}"] = ("forward",)
+    METHODS[f"nn.segmentation.networks.{_cls}"] = ("forward",)
 _SEG_X = np.tile(np.linspace(0, 1, 8, dtype=np.float32)[None, :, None, None], (2, 1, 8, 1))
 _SEG_Y = (_SEG_X[..., 0] > 0.5).astype(np.int64)
-_SEG_NET = _b("robopercept.nn.segmentation:UNet", 2, 1, 4, 2)
+_SEG_NET = _b("robopercept.nn.segmentation.networks:UNet", 2, 1, 4, 2)
 VALID.update(
     {
-        "nn.segmentation.train_segmenter": {
+        "nn.segmentation.networks.train_segmenter": {
             "model": _SEG_NET,
             "images": _SEG_X,
             "masks": _SEG_Y,
             "config": TRAIN_CFG,
             "progress": False,
         },
-        "nn.segmentation.predict_segmentation": {"model": _SEG_NET, "images": _SEG_X},
-        "nn.training.optimizer_step": {
+        "nn.segmentation.networks.predict_segmentation": {"model": _SEG_NET, "images": _SEG_X},
+        "nn.train.loop.optimizer_step": {
             "loss": _b("tests.fuzz.api:step_value", "loss"),
             "opt": _b("tests.fuzz.api:step_value", "opt"),
             "sched": _b("tests.fuzz.api:step_value", "sched"),
@@ -1420,7 +1444,7 @@ VALID.update(
             "cfg": TRAIN_CFG,
             "where": "epoch 1",
         },
-        "nn.training.step_optimizer": {
+        "nn.train.loop.step_optimizer": {
             "params": _b("tests.fuzz.api:parameters_of", TINY_NET),
             "cfg": TRAIN_CFG,
             "steps_per_epoch": 2,
@@ -1435,7 +1459,7 @@ def parameters_of(model: Any) -> list[Any]:
 
 
 def step_value(kind: str) -> Any:
-    """A valid nn.training.optimizer_step argument: ``loss`` (a scalar with a graph),
+    """A valid nn.train.loop.optimizer_step argument: ``loss`` (a scalar with a graph),
     ``params`` (one parameter), ``opt`` and ``sched`` (SGD on it, a constant schedule)."""
     import torch
 
@@ -1450,7 +1474,7 @@ def step_value(kind: str) -> Any:
     return values[kind]
 
 
-# nn.segmentation_data (issue 27): a nuclei folder of two 16 x 16 TIFFs
+# nn.segmentation.data (issue 27): a nuclei folder of two 16 x 16 TIFFs
 def _write_nuclei(path: Path) -> None:
     """img2d.tif (a ramp) and mask2d.tif (four labelled squares), 16 x 16 uint16."""
     from robopercept.imaging import write_image
@@ -1466,17 +1490,17 @@ def _write_nuclei(path: Path) -> None:
 FIXTURES["nuclei"] = _write_nuclei
 VALID.update(
     {
-        "nn.segmentation_data.nuclei_quadrants": {"folder": Fixture("nuclei")},
-        "nn.segmentation_data.percentile_normalize": {"image": IMG_F},
+        "nn.segmentation.data.nuclei_quadrants": {"folder": Fixture("nuclei")},
+        "nn.segmentation.data.percentile_normalize": {"image": IMG_F},
     }
 )
 
 
-# nn.detection_data (issue 26): a small detection set, a batch of it, a DeepForest folder
+# nn.detection.data (issue 26): a small detection set, a batch of it, a DeepForest folder
 def detection_value(kind: str) -> Any:
-    """A valid nn.detection_data value: ``dataset`` (DetectionDataset) or ``batch``
+    """A valid nn.detection.data value: ``dataset`` (DetectionDataset) or ``batch``
     (two items of it)."""
-    from robopercept.nn.detection_data import DetectionDataset
+    from robopercept.nn.detection.data import DetectionDataset
 
     ds = DetectionDataset(
         [np.full((16, 16, 3), 0.5, np.float32)] * 2,
@@ -1498,7 +1522,7 @@ def detection_value(kind: str) -> Any:
 def _write_deepforest(path: Path) -> None:
     """The four DeepForest file pairs as 80 x 72 images with one box each."""
     from robopercept.imaging import write_image
-    from robopercept.nn.detection_data import DEEPFOREST_IMAGES
+    from robopercept.nn.detection.data import DEEPFOREST_IMAGES
 
     path.mkdir(parents=True, exist_ok=True)
     for stem in DEEPFOREST_IMAGES:
@@ -1514,7 +1538,7 @@ FIXTURES["deepforest"] = _write_deepforest
 _DDS = _b("tests.fuzz.api:detection_value", "dataset")
 VALID.update(
     {
-        "nn.data.shape_masks": {
+        "nn.data.datasets.shape_masks": {
             "kinds": [0, 1, 2, 3],
             "cx": [8.0] * 4,
             "cy": [8.0] * 4,
@@ -1522,51 +1546,51 @@ VALID.update(
             "phi": [0.3] * 4,
             "size": (16, 16),
         },
-        "nn.detection_data.mask_to_box": {"mask": np.eye(5, dtype=bool)},
-        "nn.detection_data.DetectionDataset": {
+        "nn.detection.data.mask_to_box": {"mask": np.eye(5, dtype=bool)},
+        "nn.detection.data.DetectionDataset": {
             "images": [np.full((16, 16, 3), 0.5, np.float32)] * 2,
             "boxes": [[[1.0, 2.0, 9.0, 12.0]], [[0.0, 0.0, 16.0, 16.0]]],
             "labels": [[1], [1]],
             "classes": ["a"],
             "masks": _b("tests.fuzz.api:detection_value", "masks"),
         },
-        "nn.detection_data.DetectionDataset.from_instance_labels": {
+        "nn.detection.data.DetectionDataset.from_instance_labels": {
             "images": [np.full((6, 8), 0.5)],
             "instances": [np.repeat([[0, 0, 3, 3, 0, 7, 7, 0]], 6, axis=0)],
             "class_name": "cell",
         },
-        "nn.detection_data.DetectionDataset.subset": {"indices": [1, 0]},
-        "nn.detection_data.DetectionDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
-        "nn.detection_data.DetectionDataset.areas": {"index": 0},
-        "nn.detection_data.DetectionDataset.__getitem__": {"index": 0},
-        "nn.detection_data.collate_detection": {
+        "nn.detection.data.DetectionDataset.subset": {"indices": [1, 0]},
+        "nn.detection.data.DetectionDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
+        "nn.detection.data.DetectionDataset.areas": {"index": 0},
+        "nn.detection.data.DetectionDataset.__getitem__": {"index": 0},
+        "nn.detection.data.collate_detection": {
             "batch": _b("tests.fuzz.api:detection_value", "batch")
         },
-        "nn.detection_data.procedural_detection_set": {"n_images": 2, "size": (32, 32), "rng": 0},
-        "nn.detection_data.digits_detection_set": {
+        "nn.detection.data.procedural_detection_set": {"n_images": 2, "size": (32, 32), "rng": 0},
+        "nn.detection.data.digits_detection_set": {
             "n_images": 2,
             "size": (32, 32),
             "rng": 0,
             "scale": (8, 16),
         },
-        "nn.detection_data.single_digit_set": {
+        "nn.detection.data.single_digit_set": {
             "n_images": 2,
             "size": (32, 32),
             "rng": 0,
             "scale": (8, 16),
         },
-        "nn.detection_data.deepforest_tiles": {"folder": Fixture("deepforest"), "tile": 64},
-        "nn.detection_data.draw_detections": {
+        "nn.detection.data.deepforest_tiles": {"folder": Fixture("deepforest"), "tile": 64},
+        "nn.detection.data.draw_detections": {
             "image": IMG_RGB,
             "boxes": [[1.0, 2.0, 9.0, 12.0]],
             "labels": [1],
             "classes": ["a"],
         },
-        "nn.detection_data.samples_picture": {"dataset": _DDS},
-        "nn.detection_data.DeepForestTiles": {"train": _DDS, "test": _DDS},
+        "nn.detection.data.samples_picture": {"dataset": _DDS},
+        "nn.detection.data.DeepForestTiles": {"train": _DDS, "test": _DDS},
     }
 )
-METHODS["nn.detection_data.DetectionDataset"] = (
+METHODS["nn.detection.data.DetectionDataset"] = (
     "subset",
     "split",
     "areas",
@@ -1583,11 +1607,11 @@ SKIP: dict[str, str] = {
     "estimation.Model": "a typing Protocol (its implementations are fuzzed)",
     "geometry.EssentialModel": "takes no argument; fitted through find_essential",
     "geometry.FundamentalModel": "takes no argument; fitted through find_fundamental",
-    "nn.run.train_run": "trains a network (tens of seconds per call); its parts are fuzzed: "
-    "load_data, TrainConfig, fit, evaluate",
-    "nn.data.load_digits": "takes only a transform; loads a bundled data set "
+    "nn.classification.run.train_run": "trains a network (tens of seconds per call); its parts "
+    "are fuzzed: load_data, TrainConfig, fit, evaluate",
+    "nn.data.datasets.load_digits": "takes only a transform; loads a bundled data set "
     "(the datasets are fuzzed through shapes_dataset and ArrayDataset)",
-    "nn.data.load_lfw_subset": "downloads (network) on first use",
+    "nn.data.datasets.load_lfw_subset": "downloads (network) on first use",
     "pipelines.PlaneTracker.run": "iterates process() over a source: fuzzed as process",
 }
 
@@ -1829,7 +1853,7 @@ def _walk() -> Iterator[tuple[str, str, Any]]:
     for pkg in PACKAGES:
         mod = importlib.import_module(f"robopercept.{pkg}")
         if pkg == "nn":
-            for sub in mod.__all__:
+            for sub in mod.MODULES:
                 submod = importlib.import_module(f"robopercept.nn.{sub}")
                 for name in submod.__all__:
                     yield pkg, f"nn.{sub}.{name}", getattr(submod, name)
@@ -2306,14 +2330,14 @@ VALID.update(
 )
 
 
-# nn.detection (issue 26): tiny detectors, a batch of two images with their targets
+# nn.detection.models (issue 26): tiny detectors, a batch of two images with their targets
 def detector_value(kind: str) -> Any:
-    """A valid nn.detection value: a tiny ``fcos`` / ``faster`` / ``fast`` /
+    """A valid nn.detection.models value: a tiny ``fcos`` / ``faster`` / ``fast`` /
     ``localizer`` model (seeded), ``images`` (two 3 x 16 x 16 tensors) or ``targets``
     (one box each)."""
     import torch
 
-    from robopercept.nn import detection as det
+    from robopercept.nn.detection.models import models as det
 
     torch.manual_seed(0)
     if kind == "images":
@@ -2371,177 +2395,180 @@ _DTARGETS = _b("tests.fuzz.api:detector_value", "targets")
 _DPROPS = _b("tests.fuzz.api:torch_tensor", [[0.0, 0.0, 8.0, 8.0], [2.0, 2.0, 14.0, 12.0]])
 VALID.update(
     {
-        "nn.training.resolve_device": {"name": "cpu"},
-        "nn.detection.FPN": {"in_channels": [4, 8], "out_channels": 4},
-        "nn.detection.DetectionBackbone": {"width": 4, "strides": (8, 16)},
-        "nn.detection.SingleObjectLocalizer": {"num_classes": 2, "width": 4},
-        "nn.detection.FastRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
-        "nn.detection.FasterRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
-        "nn.detection.FCOS": {
+        "nn.train.loop.resolve_device": {"name": "cpu"},
+        "nn.detection.models.FPN": {"in_channels": [4, 8], "out_channels": 4},
+        "nn.detection.models.DetectionBackbone": {"width": 4, "strides": (8, 16)},
+        "nn.detection.models.SingleObjectLocalizer": {"num_classes": 2, "width": 4},
+        "nn.detection.models.FastRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
+        "nn.detection.models.FasterRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
+        "nn.detection.models.FCOS": {
             "num_classes": 2,
             "width": 4,
             "head_channels": 8,
             "box_activation": "exp",
             "centerness_weighted": True,
         },
-        "nn.detection.FCOS.forward": {"images": _DIMAGES, "targets": _DTARGETS},
-        "nn.detection.FasterRCNN.forward": {"images": _DIMAGES, "targets": _DTARGETS},
-        "nn.detection.FastRCNN.forward": {
+        "nn.detection.models.FCOS.forward": {"images": _DIMAGES, "targets": _DTARGETS},
+        "nn.detection.models.FasterRCNN.forward": {"images": _DIMAGES, "targets": _DTARGETS},
+        "nn.detection.models.FastRCNN.forward": {
             "images": _DIMAGES,
             "targets": _DTARGETS,
             "proposals": [_DPROPS, _DPROPS],
         },
-        "nn.detection.SingleObjectLocalizer.forward": {"images": _DIMAGES, "targets": _DTARGETS},
-        "nn.detection.match_boxes": {
+        "nn.detection.models.SingleObjectLocalizer.forward": {
+            "images": _DIMAGES,
+            "targets": _DTARGETS,
+        },
+        "nn.detection.models.match_boxes": {
             "iou": _b("tests.fuzz.api:torch_tensor", [[0.9, 0.2, 0.5]]),
             "fg_threshold": 0.7,
             "bg_threshold": 0.3,
         },
-        "nn.detection.sample_balanced": {
+        "nn.detection.models.sample_balanced": {
             "labels": _b("tests.fuzz.api:torch_tensor", [1, 0, -1, 0], "int64"),
             "batch_size": 2,
             "positive_fraction": 0.5,
         },
-        "nn.detection.sigmoid_focal_loss": {"inputs": TSCORES, "targets": TSCORES},
-        "nn.detection.train_detector": {
+        "nn.detection.models.sigmoid_focal_loss": {"inputs": TSCORES, "targets": TSCORES},
+        "nn.detection.models.train_detector": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "dataset": _DDS,
             "config": TRAIN_CFG,
             "progress": False,
         },
-        "nn.detection.evaluate_detector": {
+        "nn.detection.models.evaluate_detector": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "dataset": _DDS,
         },
     }
 )
 for _cls in ("FCOS", "FasterRCNN", "FastRCNN", "SingleObjectLocalizer"):
-    METHODS[f"nn.detection.{_cls}"] = ("forward",)
+    METHODS[f"nn.detection.models.{_cls}"] = ("forward",)
 VALID.update(
     {
-        "nn.detection.RCNN": {"num_classes": 2, "warp_size": 8, "width": 4, "hidden": 8},
-        "nn.detection.RCNN.forward": {
+        "nn.detection.models.RCNN": {"num_classes": 2, "warp_size": 8, "width": 4, "hidden": 8},
+        "nn.detection.models.RCNN.forward": {
             "images": _DIMAGES,
             "targets": _DTARGETS,
             "proposals": [_DPROPS, _DPROPS],
         },
-        "nn.detection.RCNN.warp": {
+        "nn.detection.models.RCNN.warp": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 16),
             "boxes": _DPROPS,
         },
-        "nn.detection.selective_search_proposals": {
+        "nn.detection.models.selective_search_proposals": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 16),
             "max_proposals": 5,
         },
-        "nn.detection.build_detector": {"kind": "fcos", "num_classes": 2, "width": 4},
-        "nn.detection.save_detector": {
+        "nn.detection.models.build_detector": {"kind": "fcos", "num_classes": 2, "width": 4},
+        "nn.detection.models.save_detector": {
             "path": _out("detector.pt"),
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "kind": "fcos",
             "settings": {"width": 4},
             "classes": ["a", "b"],
         },
-        "nn.detection.load_detector": {"path": Fixture("detector.pt")},
-        "nn.detection.detect_arrays": {
+        "nn.detection.models.load_detector": {"path": Fixture("detector.pt")},
+        "nn.detection.models.detect_arrays": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "images": [IMG_RGB],
         },
     }
 )
-METHODS["nn.detection.RCNN"] = ("forward", "warp")
+METHODS["nn.detection.models.RCNN"] = ("forward", "warp")
 _ONE_BOX = _b("tests.fuzz.api:detection_value", "one_box")
 VALID.update(
     {
-        "nn.detection.evaluate_localizer": {
+        "nn.detection.models.evaluate_localizer": {
             "model": _b("tests.fuzz.api:detector_value", "localizer"),
             "dataset": _ONE_BOX,
         },
-        "nn.detection.FasterRCNN.rpn_outputs": {"images": _DIMAGES},
-        "nn.detection_data.FlipRotate": {"horizontal": 0.5, "vertical": 0.5, "rotate90": True},
-        "nn.detection_data.FlipRotate.__call__": {
+        "nn.detection.models.FasterRCNN.rpn_outputs": {"images": _DIMAGES},
+        "nn.detection.data.FlipRotate": {"horizontal": 0.5, "vertical": 0.5, "rotate90": True},
+        "nn.detection.data.FlipRotate.__call__": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
             "target": _b("tests.fuzz.api:detection_value", "target"),
         },
-        "nn.detection.TestTimeAugmentation": {
+        "nn.detection.models.TestTimeAugmentation": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "views": "flips",
         },
-        "nn.detection.TestTimeAugmentation.forward": {"images": _DIMAGES},
-        "nn.detection.TestTimeAugmentation.predict": {"images": _DIMAGES},
-        "nn.detection_data.ScaleJitter": {"scale": (0.75, 1.33), "min_visible": 0.5},
-        "nn.detection_data.ScaleJitter.__call__": {
+        "nn.detection.models.TestTimeAugmentation.forward": {"images": _DIMAGES},
+        "nn.detection.models.TestTimeAugmentation.predict": {"images": _DIMAGES},
+        "nn.detection.data.ScaleJitter": {"scale": (0.75, 1.33), "min_visible": 0.5},
+        "nn.detection.data.ScaleJitter.__call__": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
             "target": _b("tests.fuzz.api:detection_value", "target"),
         },
     }
 )
-METHODS["nn.detection.FasterRCNN"] = ("forward", "rpn_outputs")
+METHODS["nn.detection.models.FasterRCNN"] = ("forward", "rpn_outputs")
 VALID.update(
     {
-        "nn.boxes.paste_masks": {
+        "nn.ops.boxes.paste_masks": {
             "masks": _b("tests.fuzz.api:torch_image", 3, 6, 6),
             "boxes": TBOXES,
             "size": (16, 24),
         },
-        "nn.detection.MaskRCNN": {
+        "nn.detection.models.MaskRCNN": {
             "num_classes": 2,
             "width": 4,
             "hidden": 8,
             "mask_channels": 4,
             "mask_convs": 1,
         },
-        "nn.detection.MaskRCNN.forward": {
+        "nn.detection.models.MaskRCNN.forward": {
             "images": _DIMAGES,
             "targets": _b("tests.fuzz.api:detector_value", "mtargets"),
         },
     }
 )
-METHODS["nn.detection.MaskRCNN"] = ("forward",)
-METHODS["nn.detection_data.FlipRotate"] = ("__call__",)
-METHODS["nn.detection_data.ScaleJitter"] = ("__call__",)
-METHODS["nn.detection.TestTimeAugmentation"] = ("forward", "predict")
+METHODS["nn.detection.models.MaskRCNN"] = ("forward",)
+METHODS["nn.detection.data.FlipRotate"] = ("__call__",)
+METHODS["nn.detection.data.ScaleJitter"] = ("__call__",)
+METHODS["nn.detection.models.TestTimeAugmentation"] = ("forward", "predict")
 
 
-# nn.segmentation checkpoints and inference, the built-in sets (issue 27)
+# nn.segmentation.networks checkpoints and inference, the built-in sets (issue 27)
 def _write_segmenter(path: Path) -> None:
     """A width-4 U-Net checkpoint of two classes (save_segmenter)."""
-    from robopercept.nn.segmentation import UNet, save_segmenter
+    from robopercept.nn.segmentation.networks import UNet, save_segmenter
 
     save_segmenter(path, UNet(3, 3, 4, 2), "unet", {"width": 4, "depth": 2}, ["a", "b"])
 
 
 FIXTURES["segmenter.pt"] = _write_segmenter
-_SEG3 = _b("robopercept.nn.segmentation:UNet", 3, 3, 4, 2)
+_SEG3 = _b("robopercept.nn.segmentation.networks:UNet", 3, 3, 4, 2)
 VALID.update(
     {
-        "nn.segmentation.save_segmenter": {
+        "nn.segmentation.networks.save_segmenter": {
             "path": _out("segmenter.pt"),
             "model": _SEG3,
             "name": "unet",
             "settings": {"width": 4, "depth": 2},
             "classes": ["a", "b"],
         },
-        "nn.segmentation.load_segmenter": {"path": Fixture("segmenter.pt")},
-        "nn.segmentation.segment_arrays": {"model": _SEG3, "images": [IMG_RGB, IMG]},
-        "nn.segmentation.coco_segmentation_results": {
+        "nn.segmentation.networks.load_segmenter": {"path": Fixture("segmenter.pt")},
+        "nn.segmentation.networks.segment_arrays": {"model": _SEG3, "images": [IMG_RGB, IMG]},
+        "nn.segmentation.networks.coco_segmentation_results": {
             "image_id": 1,
             "labels": (IMG // 100).astype(np.int64),
         },
-        "nn.training.save_built_model": {
+        "nn.train.loop.save_built_model": {
             "path": _out("built.pt"),
             "model": _SEG3,
             "kind": "unet",
             "settings": {"width": 4, "depth": 2},
             "classes": ["a", "b"],
         },
-        "nn.training.load_built_model": {
+        "nn.train.loop.load_built_model": {
             "path": Fixture("segmenter.pt"),
             "kinds": ["unet"],
             "build": _b("tests.fuzz.api:unet_builder"),
             "what": "segmenter",
             "writer": "save_segmenter",
         },
-        "nn.segmentation_data.segmentation_sets": {
+        "nn.segmentation.data.segmentation_sets": {
             "data": "shapes",
             "n_images": 3,
             "size": (32, 32),
@@ -2553,7 +2580,7 @@ VALID.update(
 
 def unet_builder() -> Any:
     """A builder for load_built_model: (kind, n_classes, **settings) -> a U-Net."""
-    from robopercept.nn.segmentation import UNet
+    from robopercept.nn.segmentation.networks import UNet
 
     def build(kind: str, n_classes: int, **settings: Any) -> Any:
         return UNet(n_classes + 1, **settings)
@@ -2561,7 +2588,7 @@ def unet_builder() -> Any:
     return build
 
 
-# nn.pose_io (issue 28): a two-person MPII list and an imgaug keypoint file
+# nn.pose.io (issue 28): a two-person MPII list and an imgaug keypoint file
 _MPII_JSON = [
     {
         "image": f"{i:03d}.jpg",
@@ -2588,12 +2615,12 @@ FIXTURES.update(
 )
 VALID.update(
     {
-        "nn.pose_io.read_mpii_json": {"path": Fixture("mpii.json")},
-        "nn.pose_io.read_imgaug_keypoints": {"path": Fixture("imgaug.json")},
+        "nn.pose.io.read_mpii_json": {"path": Fixture("mpii.json")},
+        "nn.pose.io.read_imgaug_keypoints": {"path": Fixture("imgaug.json")},
     }
 )
 
-# nn.pictorial (issue 28): cost maps, a 3-joint chain, four 16x16 pictures with poses
+# nn.pose.pictorial (issue 28): cost maps, a 3-joint chain, four 16x16 pictures with poses
 _PS_RNG = np.random.default_rng(28)
 PS_COSTS = _PS_RNG.normal(size=(3, 6, 7))
 PS_IMAGES = _PS_RNG.uniform(0, 1, (4, 16, 16, 3))
@@ -2601,40 +2628,40 @@ PS_KEYPOINTS = np.concatenate([_PS_RNG.uniform(2, 13, (4, 3, 2)), np.full((4, 3,
 _PS_ARM = _b("robopercept.nn.skeleton:Skeleton", "arm", ["a", "b", "c"], [(0, 1), (1, 2)], [])
 VALID.update(
     {
-        "nn.pictorial.distance_transform_1d": {"f": _PS_RNG.normal(size=(5, 9))},
-        "nn.pictorial.generalized_distance_transform": {"f": PS_COSTS[0]},
-        "nn.pictorial.pictorial_structures": {
+        "nn.pose.pictorial.distance_transform_1d": {"f": _PS_RNG.normal(size=(5, 9))},
+        "nn.pose.pictorial.generalized_distance_transform": {"f": PS_COSTS[0]},
+        "nn.pose.pictorial.pictorial_structures": {
             "unary_costs": PS_COSTS,
             "parents": [-1, 0, 1],
             "offsets": np.ones((3, 2)),
             "weights": np.ones((3, 2)),
         },
-        "nn.pictorial.grid_descriptors": {"image": IMG_RGB},
-        "nn.pictorial.PictorialStructures": {"skeleton": _PS_ARM, "random_state": 0},
-        "nn.pictorial.PictorialStructures.fit": {
+        "nn.pose.pictorial.grid_descriptors": {"image": IMG_RGB},
+        "nn.pose.pictorial.PictorialStructures": {"skeleton": _PS_ARM, "random_state": 0},
+        "nn.pose.pictorial.PictorialStructures.fit": {
             "images": PS_IMAGES,
             "keypoints": PS_KEYPOINTS,
         },
-        "nn.pictorial.PictorialStructures.predict": {"images": PS_IMAGES[:2]},
-        "nn.pictorial.PictorialStructures.predict_costs": {"image": IMG_RGB},
+        "nn.pose.pictorial.PictorialStructures.predict": {"images": PS_IMAGES[:2]},
+        "nn.pose.pictorial.PictorialStructures.predict_costs": {"image": IMG_RGB},
     }
 )
-METHODS["nn.pictorial.PictorialStructures"] = ("fit", "predict", "predict_costs")
-PRE["nn.pictorial.PictorialStructures.predict"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
-PRE["nn.pictorial.PictorialStructures.predict_costs"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
+METHODS["nn.pose.pictorial.PictorialStructures"] = ("fit", "predict", "predict_costs")
+PRE["nn.pose.pictorial.PictorialStructures.predict"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
+PRE["nn.pose.pictorial.PictorialStructures.predict_costs"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
 
 
-# nn.skeleton, nn.pose_data, nn.pose and the keypoint detector (issue 28)
+# nn.skeleton, nn.pose.data, nn.pose.networks and the keypoint detector (issue 28)
 _ARM = {"name": "arm", "joints": ["a", "left_b", "right_b"], "links": [(0, 1), (0, 2)]}
-_POSE_DS = _b("robopercept.nn.pose_data:procedural_pose_set", 2, (32, 32), 0)
-_POSE_NET = _b("robopercept.nn.pose:SimpleBaseline", 16, 2)
-_POSE_STAGE = _b("robopercept.nn.pose:DeepPoseRefiner", 16, 8.0, 8, 2)
+_POSE_DS = _b("robopercept.nn.pose.data:procedural_pose_set", 2, (32, 32), 0)
+_POSE_NET = _b("robopercept.nn.pose.networks:SimpleBaseline", 16, 2)
+_POSE_STAGE = _b("robopercept.nn.pose.networks:DeepPoseRefiner", 16, 8.0, 8, 2)
 _K = np.array([[40.0, 0.0, 16.0], [0.0, 40.0, 16.0], [0.0, 0.0, 1.0]])
 
 
 def _write_pose_model(path: Path) -> None:
     """A width-2 SimpleBaseline checkpoint of MPII's 16 joints (save_pose_model)."""
-    from robopercept.nn.pose import SimpleBaseline, save_pose_model
+    from robopercept.nn.pose.networks import SimpleBaseline, save_pose_model
     from robopercept.nn.skeleton import MPII_16
 
     save_pose_model(path, SimpleBaseline(16, 2), "heatmap", {"width": 2}, MPII_16)
@@ -2655,17 +2682,17 @@ VALID.update(
                 "skeleton": [[1, 2], [1, 3]],
             },
         },
-        "nn.detection_data.photo_background": {
+        "nn.detection.data.photo_background": {
             "gen": _b("numpy.random:default_rng", 0),
             "w": 16,
             "h": 12,
         },
-        "nn.detection_data.random_texture": {
+        "nn.detection.data.random_texture": {
             "gen": _b("numpy.random:default_rng", 0),
             "w": 16,
             "h": 12,
         },
-        "nn.detection.KeypointRCNN": {
+        "nn.detection.models.KeypointRCNN": {
             "num_classes": 2,
             "num_keypoints": 2,
             "width": 4,
@@ -2673,16 +2700,16 @@ VALID.update(
             "keypoint_channels": 4,
             "keypoint_convs": 1,
         },
-        "nn.detection.KeypointRCNN.forward": {
+        "nn.detection.models.KeypointRCNN.forward": {
             "images": _DIMAGES,
             "targets": _b("tests.fuzz.api:detector_value", "ktargets"),
         },
-        "nn.pose_data.random_poses_3d": {"n": 2, "rng": 0},
-        "nn.pose_data.project_points": {"points": [[0.1, -0.2, 2.0]], "camera_matrix": _K},
-        "nn.pose_data.procedural_pose_set": {"n_images": 2, "size": (32, 32), "rng": 0},
-        "nn.pose_data.procedural_pose_scenes": {"n_images": 1, "size": (48, 40), "rng": 0},
-        "nn.pose_data.pose_sets": {"data": "figures", "images": 2, "size": (32, 32)},
-        "nn.pose_data.PoseDataset": {
+        "nn.pose.data.random_poses_3d": {"n": 2, "rng": 0},
+        "nn.pose.data.project_points": {"points": [[0.1, -0.2, 2.0]], "camera_matrix": _K},
+        "nn.pose.data.procedural_pose_set": {"n_images": 2, "size": (32, 32), "rng": 0},
+        "nn.pose.data.procedural_pose_scenes": {"n_images": 1, "size": (48, 40), "rng": 0},
+        "nn.pose.data.pose_sets": {"data": "figures", "images": 2, "size": (32, 32)},
+        "nn.pose.data.PoseDataset": {
             "images": np.zeros((2, 8, 8, 3), np.float32),
             "keypoints": np.full((2, 16, 3), 2.0),
             "boxes": np.array([[0.0, 0.0, 8.0, 8.0]] * 2),
@@ -2690,61 +2717,72 @@ VALID.update(
             "joints3d": np.ones((2, 16, 3)),
             "cameras": np.stack([_K, _K]),
         },
-        "nn.pose_data.PoseDataset.subset": {"indices": [1, 0]},
-        "nn.pose_data.PoseDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
-        "nn.pose_data.PoseDataset.__getitem__": {"i": 0},
-        "nn.pose.gaussian_heatmaps": {
+        "nn.pose.data.PoseDataset.subset": {"indices": [1, 0]},
+        "nn.pose.data.PoseDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
+        "nn.pose.data.PoseDataset.__getitem__": {"i": 0},
+        "nn.pose.networks.gaussian_heatmaps": {
             "keypoints": [[[6.0, 2.0, 2.0], [1.0, 7.0, 1.0]]],
             "image_size": (8, 8),
             "stride": 4,
         },
-        "nn.pose.decode_heatmaps": {
+        "nn.pose.networks.decode_heatmaps": {
             "heatmaps": np.random.default_rng(0).uniform(0, 1, (1, 2, 4, 5)),
             "stride": 4,
         },
-        "nn.pose.heatmap_loss": {
+        "nn.pose.networks.heatmap_loss": {
             "output": _b("tests.fuzz.api:torch_image", 2, 3, 4, 4),
             "target": _b("tests.fuzz.api:torch_image", 2, 3, 4, 4),
             "weight": _b("tests.fuzz.api:torch_tensor", [[1.0, 0.0, 1.0], [1.0, 1.0, 1.0]]),
         },
-        "nn.pose.predict_heatmaps": {"model": _POSE_NET, "images": np.zeros((1, 32, 32, 3))},
-        "nn.pose.SimpleBaseline": {"num_joints": 3, "width": 2},
-        "nn.pose.HRNet": {"num_joints": 3, "width": 2, "blocks": 1},
-        "nn.pose.DeepPose": {"num_joints": 3, "image_size": (32, 32), "width": 2, "hidden": 8},
-        "nn.pose.DeepPoseRefiner": {"num_joints": 3, "crop": 8.0, "patch": 8, "width": 2},
-        "nn.pose.build_pose_model": {"name": "heatmap", "num_joints": 3},
-        "nn.pose.crop_patches": {
+        "nn.pose.networks.predict_heatmaps": {
+            "model": _POSE_NET,
+            "images": np.zeros((1, 32, 32, 3)),
+        },
+        "nn.pose.networks.SimpleBaseline": {"num_joints": 3, "width": 2},
+        "nn.pose.networks.HRNet": {"num_joints": 3, "width": 2, "blocks": 1},
+        "nn.pose.networks.DeepPose": {
+            "num_joints": 3,
+            "image_size": (32, 32),
+            "width": 2,
+            "hidden": 8,
+        },
+        "nn.pose.networks.DeepPoseRefiner": {"num_joints": 3, "crop": 8.0, "patch": 8, "width": 2},
+        "nn.pose.networks.build_pose_model": {"name": "heatmap", "num_joints": 3},
+        "nn.pose.networks.crop_patches": {
             "images": _b("tests.fuzz.api:torch_image", 1, 1, 6, 6),
             "centres": _b("tests.fuzz.api:torch_tensor", [[[2.0, 3.0], [4.5, 1.0]]]),
             "crop": 2.0,
             "patch": 2,
         },
-        "nn.pose.augment_pose_batch": {
+        "nn.pose.networks.augment_pose_batch": {
             "images": _b("tests.fuzz.api:torch_image", 2, 3, 8, 8),
             "keypoints": _b("tests.fuzz.api:torch_tensor", [[[2.0, 3.0, 2.0]], [[5.0, 1.0, 1.0]]]),
             "flip_permutation": [0],
             "generator": _b("torch:Generator"),
         },
-        "nn.pose.predict_keypoints": {"model": _POSE_NET, "images": np.zeros((1, 32, 32, 3))},
-        "nn.pose.refine_keypoints": {
+        "nn.pose.networks.predict_keypoints": {
+            "model": _POSE_NET,
+            "images": np.zeros((1, 32, 32, 3)),
+        },
+        "nn.pose.networks.refine_keypoints": {
             "images": np.zeros((1, 32, 32, 3)),
             "keypoints": np.full((1, 16, 2), 16.0),
             "refiners": [_POSE_STAGE],
         },
-        "nn.pose.train_pose": {
+        "nn.pose.networks.train_pose": {
             "model": _POSE_NET,
             "train": _POSE_DS,
             "config": TRAIN_CFG,
             "progress": False,
         },
-        "nn.pose.train_refiner": {
+        "nn.pose.networks.train_refiner": {
             "refiner": _POSE_STAGE,
             "train": _POSE_DS,
             "estimates": np.full((2, 16, 2), 16.0),
             "config": TRAIN_CFG,
             "progress": False,
         },
-        "nn.pose.train_cascade": {
+        "nn.pose.networks.train_cascade": {
             "model": _POSE_NET,
             "train": _POSE_DS,
             "stages": 1,
@@ -2753,22 +2791,22 @@ VALID.update(
             "width": 2,
             "progress": False,
         },
-        "nn.pose.save_pose_model": {
+        "nn.pose.networks.save_pose_model": {
             "path": _out("pose.pt"),
             "model": _POSE_NET,
             "name": "heatmap",
             "settings": {"width": 2},
             "skeleton": _b("tests.fuzz.api:mpii_skeleton"),
         },
-        "nn.pose.load_pose_model": {"path": Fixture("pose.pt")},
-        "nn.pose.pose_arrays": {"model": _POSE_NET, "images": [IMG_RGB, IMG]},
-        "nn.pose.evaluate_pose": {"model": _POSE_NET, "data": _POSE_DS},
-        "nn.pose.samples_picture": {"model": _POSE_NET, "data": _POSE_DS, "count": 2},
+        "nn.pose.networks.load_pose_model": {"path": Fixture("pose.pt")},
+        "nn.pose.networks.pose_arrays": {"model": _POSE_NET, "images": [IMG_RGB, IMG]},
+        "nn.pose.networks.evaluate_pose": {"model": _POSE_NET, "data": _POSE_DS},
+        "nn.pose.networks.samples_picture": {"model": _POSE_NET, "data": _POSE_DS, "count": 2},
     }
 )
 METHODS["nn.skeleton.Skeleton"] = ("index", "flip_permutation", "parents", "to_dict", "from_dict")
-METHODS["nn.pose_data.PoseDataset"] = ("subset", "split", "areas", "to_coco", "__getitem__")
-METHODS["nn.detection.KeypointRCNN"] = ("forward",)
+METHODS["nn.pose.data.PoseDataset"] = ("subset", "split", "areas", "to_coco", "__getitem__")
+METHODS["nn.detection.models.KeypointRCNN"] = ("forward",)
 
 
 def mpii_skeleton() -> Any:
@@ -2778,25 +2816,25 @@ def mpii_skeleton() -> Any:
     return MPII_16
 
 
-# nn.pose3d (issue 28): three 16-joint 3-D poses (metres), 2-D joints, a tiny lifter
+# nn.pose.lifting (issue 28): three 16-joint 3-D poses (metres), 2-D joints, a tiny lifter
 _P3_RNG = np.random.default_rng(283)
 P3D = _P3_RNG.normal(0.0, 0.3, (3, 16, 3))
 P3D_PRED = P3D[:2] + _P3_RNG.normal(0.0, 0.05, (2, 16, 3))
 KP2D = _P3_RNG.uniform(0.0, 100.0, (6, 16, 2))
-_LIFTER = _b("robopercept.nn.pose3d:LiftingMLP", 16, 8, 1)
+_LIFTER = _b("robopercept.nn.pose.lifting:LiftingMLP", 16, 8, 1)
 VALID.update(
     {
-        "nn.pose3d.procrustes_align": {"pred": P3D_PRED, "truth": P3D[:2]},
-        "nn.pose3d.mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
-        "nn.pose3d.pa_mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
-        "nn.pose3d.normalize_pose2d": {"keypoints2d": KP2D},
-        "nn.pose3d.random_views": {"poses3d": P3D, "views_per_pose": 2, "rng": 0},
-        "nn.pose3d.PoseLibrary": {"poses3d": P3D, "views_per_pose": 2},
-        "nn.pose3d.PoseLibrary.lift": {"keypoints2d": KP2D},
-        "nn.pose3d.LiftingMLP": {"width": 8, "blocks": 1},
-        "nn.pose3d.LiftingMLP.lift": {"keypoints2d": KP2D},
-        "nn.pose3d.LiftingMLP.forward": {"x": _b("tests.fuzz.api:torch_image", 2, 32)},
-        "nn.pose3d.train_lifter": {
+        "nn.pose.lifting.procrustes_align": {"pred": P3D_PRED, "truth": P3D[:2]},
+        "nn.pose.lifting.mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
+        "nn.pose.lifting.pa_mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
+        "nn.pose.lifting.normalize_pose2d": {"keypoints2d": KP2D},
+        "nn.pose.lifting.random_views": {"poses3d": P3D, "views_per_pose": 2, "rng": 0},
+        "nn.pose.lifting.PoseLibrary": {"poses3d": P3D, "views_per_pose": 2},
+        "nn.pose.lifting.PoseLibrary.lift": {"keypoints2d": KP2D},
+        "nn.pose.lifting.LiftingMLP": {"width": 8, "blocks": 1},
+        "nn.pose.lifting.LiftingMLP.lift": {"keypoints2d": KP2D},
+        "nn.pose.lifting.LiftingMLP.forward": {"x": _b("tests.fuzz.api:torch_image", 2, 32)},
+        "nn.pose.lifting.train_lifter": {
             "model": _LIFTER,
             "keypoints2d": KP2D,
             "joints3d": P3D_PRED[[0, 1, 0, 1, 0, 1]],
@@ -2805,8 +2843,8 @@ VALID.update(
         },
     }
 )
-METHODS["nn.pose3d.PoseLibrary"] = ("lift",)
-METHODS["nn.pose3d.LiftingMLP"] = ("lift", "forward")
+METHODS["nn.pose.lifting.PoseLibrary"] = ("lift",)
+METHODS["nn.pose.lifting.LiftingMLP"] = ("lift", "forward")
 
 
 # viz.cloud_dl (issue 29): a 60-point cloud, its labels, two 4-neighbour graphs
@@ -2838,7 +2876,7 @@ VALID.update(
 )
 
 
-# nn.training.epoch_loop (issue 29: the loop shared by the pose and point-cloud trainers)
+# nn.train.loop.epoch_loop (issue 29: the loop shared by the pose and point-cloud trainers)
 def loop_batch() -> Any:
     """A valid epoch_loop ``batch``: indices -> a scalar loss with a graph."""
     import torch
@@ -2847,7 +2885,7 @@ def loop_batch() -> Any:
     return lambda idx: (w * w).sum() * float(len(idx))
 
 
-VALID["nn.training.epoch_loop"] = {
+VALID["nn.train.loop.epoch_loop"] = {
     "model": TINY_NET,
     "n": 4,
     "cfg": TRAIN_CFG,
@@ -2857,65 +2895,65 @@ VALID["nn.training.epoch_loop"] = {
     "desc": "fuzz",
     "progress": False,
 }
-METHODS["nn.training.EpochHistory"] = ("to_dict",)
+METHODS["nn.train.loop.EpochHistory"] = ("to_dict",)
 
 
-# nn.pointnet and nn.dgcnn (issue 29): tiny PointNet / DGCNN, two clouds of 16 points
+# nn.cloud.pointnet and nn.cloud.dgcnn (issue 29): tiny PointNet / DGCNN, two clouds of 16 points
 _CLOUDS = _b("tests.fuzz.api:torch_image", 2, 16, 3)
 _CLOUD_MASK = _b("tests.fuzz.api:torch_tensor", [[True] * 12 + [False] * 4, [True] * 16], "bool")
 _CLOUD_CATS = _b("tests.fuzz.api:torch_tensor", [0, 1], "int64")
-_TINY_POINTNET = _b("robopercept.nn.pointnet:PointNet", 3, width=0.125)
-_CLOUD_GRAPH = _b("robopercept.nn.dgcnn:knn_graph", _CLOUDS, 4)
+_TINY_POINTNET = _b("robopercept.nn.cloud.pointnet:PointNet", 3, width=0.125)
+_CLOUD_GRAPH = _b("robopercept.nn.cloud.dgcnn:knn_graph", _CLOUDS, 4)
 VALID.update(
     {
-        "nn.pointnet.check_cloud_batch": {
+        "nn.cloud.pointnet.check_cloud_batch": {
             "x": _CLOUDS,
             "in_channels": 3,
             "mask": _CLOUD_MASK,
             "category": _CLOUD_CATS,
             "num_categories": 2,
         },
-        "nn.pointnet.masked_max_pool": {
+        "nn.cloud.pointnet.masked_max_pool": {
             "features": _b("tests.fuzz.api:torch_image", 2, 16, 5),
             "mask": _CLOUD_MASK,
         },
-        "nn.pointnet.MaskedBatchNorm": {"num_features": 4},
-        "nn.pointnet.MaskedBatchNorm.forward": {
+        "nn.cloud.pointnet.MaskedBatchNorm": {"num_features": 4},
+        "nn.cloud.pointnet.MaskedBatchNorm.forward": {
             "x": _b("tests.fuzz.api:torch_image", 2, 16, 4),
             "mask": _CLOUD_MASK,
         },
-        "nn.pointnet.SharedMLP": {"channels": [3, 8, 4]},
-        "nn.pointnet.SharedMLP.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
-        "nn.pointnet.TNet": {"k": 3, "width": 0.125},
-        "nn.pointnet.TNet.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
-        "nn.pointnet.transform_regularizer": {
+        "nn.cloud.pointnet.SharedMLP": {"channels": [3, 8, 4]},
+        "nn.cloud.pointnet.SharedMLP.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.cloud.pointnet.TNet": {"k": 3, "width": 0.125},
+        "nn.cloud.pointnet.TNet.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.cloud.pointnet.transform_regularizer": {
             "transform": _b("tests.fuzz.api:torch_image", 2, 3, 3)
         },
-        "nn.pointnet.PointNet": {"num_outputs": 3, "width": 0.125},
-        "nn.pointnet.PointNet.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
-        "nn.pointnet.PointNet.forward_aux": {"x": _CLOUDS, "mask": _CLOUD_MASK},
-        "nn.pointnet.critical_points": {
+        "nn.cloud.pointnet.PointNet": {"num_outputs": 3, "width": 0.125},
+        "nn.cloud.pointnet.PointNet.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.cloud.pointnet.PointNet.forward_aux": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.cloud.pointnet.critical_points": {
             "model": _TINY_POINTNET,
             "points": np.random.default_rng(29).uniform(-1, 1, (32, 3)),
         },
-        "nn.dgcnn.knn_graph": {"x": _CLOUDS, "k": 4, "mask": _CLOUD_MASK, "chunk_size": 5},
-        "nn.dgcnn.edge_features": {"x": _CLOUDS, "idx": _CLOUD_GRAPH},
-        "nn.dgcnn.EdgeConv": {"in_channels": 3, "out_channels": 8, "k": 4},
-        "nn.dgcnn.EdgeConv.forward": {"x": _CLOUDS, "idx": _CLOUD_GRAPH, "mask": _CLOUD_MASK},
-        "nn.dgcnn.DGCNN": {"num_outputs": 3, "k": 4, "widths": (8, 8), "embedding": 16},
-        "nn.dgcnn.DGCNN.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
-        "nn.dgcnn.DGCNN.forward_aux": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.cloud.dgcnn.knn_graph": {"x": _CLOUDS, "k": 4, "mask": _CLOUD_MASK, "chunk_size": 5},
+        "nn.cloud.dgcnn.edge_features": {"x": _CLOUDS, "idx": _CLOUD_GRAPH},
+        "nn.cloud.dgcnn.EdgeConv": {"in_channels": 3, "out_channels": 8, "k": 4},
+        "nn.cloud.dgcnn.EdgeConv.forward": {"x": _CLOUDS, "idx": _CLOUD_GRAPH, "mask": _CLOUD_MASK},
+        "nn.cloud.dgcnn.DGCNN": {"num_outputs": 3, "k": 4, "widths": (8, 8), "embedding": 16},
+        "nn.cloud.dgcnn.DGCNN.forward": {"x": _CLOUDS, "mask": _CLOUD_MASK},
+        "nn.cloud.dgcnn.DGCNN.forward_aux": {"x": _CLOUDS, "mask": _CLOUD_MASK},
     }
 )
-METHODS["nn.pointnet.MaskedBatchNorm"] = ("forward",)
-METHODS["nn.pointnet.SharedMLP"] = ("forward",)
-METHODS["nn.pointnet.TNet"] = ("forward",)
-METHODS["nn.pointnet.PointNet"] = ("forward", "forward_aux")
-METHODS["nn.dgcnn.EdgeConv"] = ("forward",)
-METHODS["nn.dgcnn.DGCNN"] = ("forward", "forward_aux")
+METHODS["nn.cloud.pointnet.MaskedBatchNorm"] = ("forward",)
+METHODS["nn.cloud.pointnet.SharedMLP"] = ("forward",)
+METHODS["nn.cloud.pointnet.TNet"] = ("forward",)
+METHODS["nn.cloud.pointnet.PointNet"] = ("forward", "forward_aux")
+METHODS["nn.cloud.dgcnn.EdgeConv"] = ("forward",)
+METHODS["nn.cloud.dgcnn.DGCNN"] = ("forward", "forward_aux")
 
 
-# pointcloud.mesh and nn.cloud_data (issue 29): a tetrahedron, a mesh file, a class folder
+# pointcloud.mesh and nn.cloud.data (issue 29): a tetrahedron, a mesh file, a class folder
 _TETRA_V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 _TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
 _TETRA = _b("robopercept.pointcloud:TriangleMesh", _TETRA_V, _TETRA_F)
@@ -2952,36 +2990,36 @@ VALID.update(
         "pointcloud.sample_surface": {"mesh": _TETRA, "n": 16, "rng": 0},
         "pointcloud.farthest_point_sampling": {"points": PTS3, "n": 8},
         "pointcloud.chamfer_distance": {"a": PTS3[:30], "b": PTS3[30:]},
-        "nn.cloud_data.CloudDataset": _CLOUD_DS_ARGS,
-        "nn.cloud_data.CloudDataset.subset": {"indices": [1, 0]},
-        "nn.cloud_data.CloudDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
-        "nn.cloud_data.shape_mesh": {"name": "mug", "rng": 0},
-        "nn.cloud_data.procedural_shapes": {
+        "nn.cloud.data.CloudDataset": _CLOUD_DS_ARGS,
+        "nn.cloud.data.CloudDataset.subset": {"indices": [1, 0]},
+        "nn.cloud.data.CloudDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
+        "nn.cloud.data.shape_mesh": {"name": "mug", "rng": 0},
+        "nn.cloud.data.procedural_shapes": {
             "n_per_class": 1,
             "n_points": 16,
             "classes": ("sphere", "torus"),
             "rng": 0,
         },
-        "nn.cloud_data.augment_clouds": {
+        "nn.cloud.data.augment_clouds": {
             "points": _b("tests.fuzz.api:torch_image", 2, 16, 3),
             "generator": 0,
             "dropout": 0.2,
         },
-        "nn.cloud_data.read_cloud_file": {"path": Fixture("mesh.off"), "n_points": 16},
-        "nn.cloud_data.read_cloud_folder": {"root": Fixture("clouds"), "n_points": 16},
+        "nn.cloud.data.read_cloud_file": {"path": Fixture("mesh.off"), "n_points": 16},
+        "nn.cloud.data.read_cloud_folder": {"root": Fixture("clouds"), "n_points": 16},
     }
 )
-METHODS["nn.cloud_data.CloudDataset"] = ("subset", "split")
+METHODS["nn.cloud.data.CloudDataset"] = ("subset", "split")
 
 
-# nn.cloud (issue 29): training, scoring, files and prediction of the point-cloud networks
-_CLOUD_NET = _b("robopercept.nn.cloud:build_cloud_model", "pointnet", 2, width=0.125, seed=0)
-_CLOUD_DS = _b("robopercept.nn.cloud_data:CloudDataset", **_CLOUD_DS_ARGS)
+# nn.cloud.run (issue 29): training, scoring, files and prediction of the point-cloud networks
+_CLOUD_NET = _b("robopercept.nn.cloud.run:build_cloud_model", "pointnet", 2, width=0.125, seed=0)
+_CLOUD_DS = _b("robopercept.nn.cloud.data:CloudDataset", **_CLOUD_DS_ARGS)
 
 
 def _write_cloud_model(path: Path) -> None:
     """A tiny PointNet classifier of the classes ("a", "b") saved by save_cloud_model."""
-    from robopercept.nn.cloud import build_cloud_model, save_cloud_model
+    from robopercept.nn.cloud.run import build_cloud_model, save_cloud_model
 
     save_cloud_model(path, build_cloud_model("pointnet", 2, width=0.125, seed=0), ["a", "b"])
 
@@ -2989,51 +3027,56 @@ def _write_cloud_model(path: Path) -> None:
 FIXTURES["cloud_model.pt"] = _write_cloud_model
 VALID.update(
     {
-        "nn.cloud.build_cloud_model": {"name": "dgcnn", "num_outputs": 2, "k": 4, "widths": [8]},
-        "nn.cloud.train_cloud_model": {
+        "nn.cloud.run.build_cloud_model": {
+            "name": "dgcnn",
+            "num_outputs": 2,
+            "k": 4,
+            "widths": [8],
+        },
+        "nn.cloud.run.train_cloud_model": {
             "model": _CLOUD_NET,
             "train": _CLOUD_DS,
             "config": TRAIN_CFG,
             "val": _CLOUD_DS,
             "progress": False,
         },
-        "nn.cloud.predict_clouds": {"model": _CLOUD_NET, "points": _CLOUD_DS_ARGS["points"]},
-        "nn.cloud.evaluate_cloud_model": {"model": _CLOUD_NET, "data": _CLOUD_DS},
-        "nn.cloud.part_ious": {
+        "nn.cloud.run.predict_clouds": {"model": _CLOUD_NET, "points": _CLOUD_DS_ARGS["points"]},
+        "nn.cloud.run.evaluate_cloud_model": {"model": _CLOUD_NET, "data": _CLOUD_DS},
+        "nn.cloud.run.part_ious": {
             "pred": _CLOUD_DS_ARGS["parts"],
             "parts": _CLOUD_DS_ARGS["parts"],
             "labels": _CLOUD_DS_ARGS["labels"],
             "part_classes": _CLOUD_DS_ARGS["part_classes"],
         },
-        "nn.cloud.cloud_sets": {"data": "shapes", "shapes": 1, "n_points": 8},
-        "nn.cloud.save_cloud_model": {
+        "nn.cloud.run.cloud_sets": {"data": "shapes", "shapes": 1, "n_points": 8},
+        "nn.cloud.run.save_cloud_model": {
             "path": _out("cloud.pt"),
             "model": _CLOUD_NET,
             "class_names": ["a", "b"],
         },
-        "nn.cloud.load_cloud_model": {"path": Fixture("cloud_model.pt")},
-        "nn.cloud.shipped_cloud_model": {"name": "pointnet"},
-        "nn.cloud.classify_cloud_file": {
+        "nn.cloud.run.load_cloud_model": {"path": Fixture("cloud_model.pt")},
+        "nn.cloud.run.shipped_cloud_model": {"name": "pointnet"},
+        "nn.cloud.run.classify_cloud_file": {
             "path": Fixture("mesh.off"),
             "model": _CLOUD_NET,
             "info": {"class_names": ["a", "b"], "n_points": 16},
         },
     }
 )
-VALID["nn.cloud.CloudEvaluation"] = {
+VALID["nn.cloud.run.CloudEvaluation"] = {
     "accuracy": 0.5,
     "mean_class_accuracy": 0.5,
     "confusion": np.array([[1, 1], [0, 0]]),
     "predictions": np.array([0, 1]),
 }
-VALID["nn.cloud.CloudPrediction"] = {
+VALID["nn.cloud.run.CloudPrediction"] = {
     "path": "a.ply",
     "label": "a",
     "probabilities": {"a": 0.75, "b": 0.25},
     "points": PTS3,
 }
-METHODS["nn.cloud.CloudEvaluation"] = ("summary",)
-METHODS["nn.cloud.CloudPrediction"] = ("to_dict",)
+METHODS["nn.cloud.run.CloudEvaluation"] = ("summary",)
+METHODS["nn.cloud.run.CloudPrediction"] = ("to_dict",)
 
 # ---- issue 30: text on images (viz.draw) and match pictures (viz.features); the names
 # take effect once robopercept.viz exports them (draw_label, label_font, label_size_for,
@@ -3269,24 +3312,24 @@ VALID.update(
     }
 )
 
-# -- nn.distributed (issue 31): DDP training on several processes ----------------------
+# -- nn.train.distributed (issue 31): DDP training on several processes ----------------------
 VALID.update(
     {
-        "nn.distributed.free_port": {"host": "127.0.0.1"},
-        "nn.distributed.torchrun_env": {"environ": {}},
+        "nn.train.distributed.free_port": {"host": "127.0.0.1"},
+        "nn.train.distributed.torchrun_env": {"environ": {}},
     }
 )
 SKIP.update(
     {
-        "nn.distributed.run_ranks": "starts processes joined in a process group (seconds "
+        "nn.train.distributed.run_ranks": "starts processes joined in a process group (seconds "
         "per call); its argument checks and a failing rank are tested in "
-        "tests/nn/test_distributed.py",
-        "nn.distributed.train_ddp": "trains a network on several processes (tens of seconds "
-        "per call); its checks are tested in tests/nn/test_distributed.py",
+        "tests/nn/train/test_distributed.py",
+        "nn.train.distributed.train_ddp": "trains a network on several processes (tens of seconds "
+        "per call); its checks are tested in tests/nn/train/test_distributed.py",
     }
 )
 
-# -- nn.shipped and nn.image_predict (issue 31): the shipped models, one image-predict path
+# -- nn.shipped and nn.predict (issue 31): the shipped models, one image-predict path
 _IP_VALUES = {
     "boxes": np.array([[2.0, 3.0, 20.0, 30.0]]),
     "labels": np.array([1]),
@@ -3296,43 +3339,43 @@ VALID.update(
     {
         "nn.shipped.shipped_model_path": {"kind": "detect", "name": "fcos"},
         "nn.shipped.resolve_model": {"kind": "segment", "model": "unet"},
-        "nn.image_predict.load_image_predictor": {
+        "nn.predict.load_image_predictor": {
             "kind": "detect",
             "model": Fixture("detector.pt"),
             "device": "cpu",
             "score_thresh": 0.5,
         },
-        "nn.image_predict.load_segment_model": {"path": Fixture("segmenter.pt")},
-        "nn.image_predict.ImagePrediction": {
+        "nn.predict.load_segment_model": {"path": Fixture("segmenter.pt")},
+        "nn.predict.ImagePrediction": {
             "kind": "detect",
             "image": IMG_RGB,
             "classes": ["a", "b"],
             "values": _IP_VALUES,
         },
-        "nn.image_predict.ImagePrediction.coco_results": {"image_id": 1},
-        "nn.image_predict.ImagePrediction.pictures": {"stem": "ip"},
-        "nn.image_predict.ImagePrediction.write": {"out_dir": _out("image_predict"), "stem": "ip"},
-        "nn.image_predict.ImagePredictor": {
+        "nn.predict.ImagePrediction.coco_results": {"image_id": 1},
+        "nn.predict.ImagePrediction.pictures": {"stem": "ip"},
+        "nn.predict.ImagePrediction.write": {"out_dir": _out("image_predict"), "stem": "ip"},
+        "nn.predict.ImagePredictor": {
             "kind": "detect",
             "path": None,
-            "model": _b("robopercept.nn.detection:build_detector", "fcos", 2, width=4),
+            "model": _b("robopercept.nn.detection.models:build_detector", "fcos", 2, width=4),
             "info": {"classes": ["a", "b"]},
         },
-        "nn.image_predict.ImagePredictor.predict": {"image": IMG_RGB},
-        "nn.image_predict.ImagePredictor.predict_file": {"path": Fixture("image.png")},
+        "nn.predict.ImagePredictor.predict": {"image": IMG_RGB},
+        "nn.predict.ImagePredictor.predict_file": {"path": Fixture("image.png")},
     }
 )
-METHODS["nn.image_predict.ImagePrediction"] = ("record", "coco_results", "pictures", "write")
-METHODS["nn.image_predict.ImagePredictor"] = ("predict", "predict_file")
+METHODS["nn.predict.ImagePrediction"] = ("record", "coco_results", "pictures", "write")
+METHODS["nn.predict.ImagePredictor"] = ("predict", "predict_file")
 
 # viz.plot.disparity_picture (issue 31: robopercept stereo and batch stereo)
 VALID.update({"viz.disparity_picture": {"disparity": _MAP, "max_disparity": 8}})
 
 
-# nn.run.predict_loaded (issue 31: batch nn-predict loads a run once per worker)
+# nn.classification.run.predict_loaded (issue 31: batch nn-predict loads a run once per worker)
 def loaded_run(part: int) -> Any:
     """``load_run``'s model (0) or architecture (1) of a tiny digits run."""
-    from robopercept.nn.run import load_run
+    from robopercept.nn.classification.run import load_run
 
     run = Path(tempfile.mkdtemp()) / "run"
     _write_run(run)
@@ -3341,7 +3384,7 @@ def loaded_run(part: int) -> Any:
 
 VALID.update(
     {
-        "nn.run.predict_loaded": {
+        "nn.classification.run.predict_loaded": {
             "model": _b("tests.fuzz.api:loaded_run", 0),
             "arch": _b("tests.fuzz.api:loaded_run", 1),
             "image_paths": [Fixture("image.png")],

@@ -43,7 +43,7 @@ def test_issue25_one_box_and_large_finite_boxes_still_work():
 
 def test_box_iou_matrix_equals_pycocotools():
     # pycocotools' bbox IoU (iscrowd 0) in double: equal up to rounding (1e-9); the
-    # torch box_iou of robopercept.nn.boxes is pinned to the same reference
+    # torch box_iou of robopercept.nn.ops.boxes is pinned to the same reference
     mask = pytest.importorskip("pycocotools.mask")
     rng = np.random.default_rng(0)
     a = np.concatenate([rng.uniform(0, 100, (40, 2)), rng.uniform(0, 30, (40, 2))], 1)

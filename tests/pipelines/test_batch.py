@@ -385,7 +385,7 @@ def test_plane_track_item_of_a_realsense_bag(tmp_path) -> None:
 @pytest.mark.realdata
 def test_nn_cloud_equals_classify_cloud_file(tmp_path) -> None:
     pytest.importorskip("torch")
-    from robopercept.nn.cloud import classify_cloud_file, load_cloud_model, shipped_cloud_model
+    from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model, shipped_cloud_model
 
     clouds = [
         data_path("pointcloud_cls", "ModelNet40", "monitor", "test", "monitor_0466.off"),
@@ -448,15 +448,15 @@ def test_nn_options_are_checked_before_the_cluster_starts(tmp_path) -> None:
 
 def test_nn_image_jobs_equal_the_library_predictor(tmp_path) -> None:
     """nn-detect, nn-segment (U-Net and Mask R-CNN), nn-pose on one LocalCluster worker
-    write what :func:`~robopercept.nn.image_predict.load_image_predictor` gives in this
+    write what :func:`~robopercept.nn.predict.load_image_predictor` gives in this
     process: the same record (JSON) and byte-equal pictures."""
     pytest.importorskip("torch")
     import numpy as np
 
     from robopercept.imaging import write_image
-    from robopercept.nn.detection_data import procedural_detection_set
-    from robopercept.nn.image_predict import load_image_predictor
-    from robopercept.nn.pose_data import procedural_pose_set
+    from robopercept.nn.detection.data import procedural_detection_set
+    from robopercept.nn.pose.data import procedural_pose_set
+    from robopercept.nn.predict import load_image_predictor
 
     def png(name: str, image: np.ndarray) -> Path:
         return write_image(tmp_path / "in" / name, np.round(image * 255).astype(np.uint8))
@@ -488,9 +488,9 @@ def test_nn_image_jobs_equal_the_library_predictor(tmp_path) -> None:
 def test_nn_predict_job_equals_nn_predict(tmp_path) -> None:
     pytest.importorskip("torch")
     from robopercept.imaging import write_image
-    from robopercept.nn.data import load_digits
-    from robopercept.nn.run import predict, train_run
-    from robopercept.nn.training import TrainConfig
+    from robopercept.nn.classification.run import predict, train_run
+    from robopercept.nn.data.datasets import load_digits
+    from robopercept.nn.train.loop import TrainConfig
 
     run = tmp_path / "run"
     train_run("digits", "vgg_small", run, config=TrainConfig(epochs=1, seed=0), progress=False)

@@ -8,8 +8,8 @@ Three forms, chosen by the first word after ``detect``::
 
 ``train`` keeps the weights of the epoch with the best validation mAP@[.5:.95]
 (evaluated every ``--val-every`` epochs) and writes ``run/model.pt`` (weights with the
-constructor settings and class names, :func:`~robopercept.nn.detection.save_detector`),
-``history.json``, ``metrics.json`` (the 12 COCO numbers of :func:`~robopercept.nn.detection.
+constructor settings and class names, :func:`~robopercept.nn.detection.models.save_detector`),
+``history.json``, ``metrics.json`` (the 12 COCO numbers of :func:`~robopercept.nn.detection.models.
 evaluate_detector` on the validation split), ``pr_curves.png`` and ``samples.png``.
 ``eval`` evaluates a run (or its ``model.pt``) on the validation split of the same
 built-in set (same ``--images``, ``--size`` and ``--seed``) or on a whole COCO file.
@@ -24,8 +24,8 @@ R-CNN (``detector_faster_shapes.pt``). Both were trained on the procedural shape
     python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster --seeds 0 \\
         --save src/robopercept/data
 
-The work is done by :mod:`robopercept.nn.detection`, :mod:`robopercept.nn.detection_data`
-and :mod:`robopercept.nn.coco`; this module parses and prints. torch is imported only
+The work is done by :mod:`robopercept.nn.detection.models`, :mod:`robopercept.nn.detection.data`
+and :mod:`robopercept.nn.coco.formats`; this module parses and prints. torch is imported only
 when a command runs. Progress goes to stderr; exit 2 for bad arguments (the message
 names the flag), 1 when the work fails.
 """
@@ -52,7 +52,7 @@ from robopercept.errors import InputError
 
 __all__ = ["BUILTIN_DATA", "DETECTOR_NAMES", "register"]
 
-#: the names of :data:`robopercept.nn.detection.DETECTORS` (the parser needs no torch)
+#: the names of :data:`robopercept.nn.detection.models.DETECTORS` (the parser needs no torch)
 DETECTOR_NAMES = ("fcos", "faster", "fast", "rcnn", "localizer")
 #: the built-in data sets of ``--data`` (anything else must be a COCO JSON file)
 BUILTIN_DATA = ("shapes", "digits", "trees")
@@ -129,7 +129,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("--device", help="cpu, cuda, ...")
     r.add_argument("--json", action="store_true", help="print COCO results")
     r.add_argument("--quiet", action="store_true")
-    for p in (e, r):  # the views of nn.detection.TTA_VIEWS (torch is not imported here)
+    for p in (e, r):  # the views of nn.detection.models.TTA_VIEWS (torch is not imported here)
         p.add_argument(
             "--tta",
             choices=("hflip", "flips", "dihedral"),
@@ -158,9 +158,9 @@ def _coco_dataset(path: Path, images_dir: str | None) -> Any:
     import numpy as np
 
     from robopercept.imaging import read_image
-    from robopercept.nn.coco import read_coco_json
-    from robopercept.nn.data import to_unit_float
-    from robopercept.nn.detection_data import DetectionDataset
+    from robopercept.nn.coco.formats import read_coco_json
+    from robopercept.nn.data.datasets import to_unit_float
+    from robopercept.nn.detection.data import DetectionDataset
 
     root = Path(images_dir) if images_dir else path.parent
     if not root.is_dir():
@@ -192,7 +192,7 @@ def _coco_dataset(path: Path, images_dir: str | None) -> Any:
 def _load_data(args: argparse.Namespace, kind: str | None) -> tuple[Any, Any]:
     """(train, validation) DetectionDatasets of ``--data``; a COCO file is split 80/20
     (seeded) for ``train`` and is wholly the validation set for ``eval``."""
-    from robopercept.nn import detection_data as dd
+    from robopercept.nn.detection.models import data as dd
 
     data, n, size, seed = args.data, args.images, args.size, args.seed
     if data in ("shapes", "digits"):
@@ -235,8 +235,8 @@ def _samples(model: Any, ds: Any, path: Path, count: int = 4) -> Path:
     import numpy as np
 
     from robopercept.imaging import write_image
-    from robopercept.nn.detection import detect_arrays
-    from robopercept.nn.detection_data import draw_detections
+    from robopercept.nn.detection.data import draw_detections
+    from robopercept.nn.detection.models import detect_arrays
 
     n = min(count, len(ds))
     pics = []
@@ -253,7 +253,7 @@ def _samples(model: Any, ds: Any, path: Path, count: int = 4) -> Path:
 
 
 def _write_metrics(ev: Any, ds: Any, out: Path, extra: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.coco import write_pr_curves
+    from robopercept.nn.coco.formats import write_pr_curves
 
     out.mkdir(parents=True, exist_ok=True)
     metrics = {**extra, "images": len(ds), "metrics": ev.summary(), "stats": ev.stats.tolist()}
@@ -270,13 +270,13 @@ def _print_metrics(metrics: dict[str, Any]) -> None:
 
 # --------------------------------------------------------------------------- forms
 def _train(args: argparse.Namespace) -> int:
-    from robopercept.nn.detection import (
+    from robopercept.nn.detection.models import (
         build_detector,
         evaluate_detector,
         save_detector,
         train_detector,
     )
-    from robopercept.nn.training import TrainConfig
+    from robopercept.nn.train.loop import TrainConfig
 
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
@@ -363,7 +363,11 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from robopercept.nn.detection import TestTimeAugmentation, evaluate_detector, load_detector
+    from robopercept.nn.detection.models import (
+        TestTimeAugmentation,
+        evaluate_detector,
+        load_detector,
+    )
 
     _, val = _load_data(args, None)
     path = run_or_model_path(args.model)
@@ -394,7 +398,7 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _images(args: argparse.Namespace) -> int:
-    from robopercept.nn.image_predict import load_image_predictor
+    from robopercept.nn.predict import load_image_predictor
 
     model_path = images_form_inputs(args, "detect", lambda stem: [f"{stem}.png"])
     predictor = load_image_predictor(

@@ -1,9 +1,9 @@
 """``robopercept nn train|eval|predict|summary``: convolutional networks (extra ``deep``).
 
-The work is done by :mod:`robopercept.nn.run` and :mod:`robopercept.nn.summary`; this
-module parses and prints. torch is imported only when a command runs, so the parser (and
-every other command) stays torch-free; without torch a command fails with the install
-line of the ``deep`` extra.
+The work is done by :mod:`robopercept.nn.classification.run` and
+:mod:`robopercept.nn.core.summary`; this module parses and prints. torch is imported only
+when a command runs, so the parser (and every other command) stays torch-free; without torch
+a command fails with the install line of the ``deep`` extra.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from robopercept.errors import InputError
 
 __all__ = ["MODEL_NAMES", "register"]
 
-#: the names of :data:`robopercept.nn.models.MODELS` (kept here so the parser needs no torch)
+#: the names of :data:`robopercept.nn.classification.models.MODELS` (kept here so the parser
+#: needs no torch)
 MODEL_NAMES = ("vgg_small", "inception_small", "resnet_small")
 
 _NO_TORCH = "robopercept nn needs the deep extra: pip install 'robopercept[deep]'"
@@ -160,8 +161,8 @@ def _split(text: str) -> tuple[float, float, float]:
 def run_train(args: argparse.Namespace) -> int:
     """Run ``robopercept nn train`` with the parsed ``args``; returns the exit status."""
     _need_torch()
-    from robopercept.nn.run import train_run
-    from robopercept.nn.training import TrainConfig
+    from robopercept.nn.classification.run import train_run
+    from robopercept.nn.train.loop import TrainConfig
 
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
@@ -190,11 +191,11 @@ def run_train(args: argparse.Namespace) -> int:
         "overwrite": args.overwrite,
         "progress": not (args.quiet or args.json),
     }
-    from robopercept.nn.distributed import torchrun_env, train_ddp
+    from robopercept.nn.train.distributed import torchrun_env, train_ddp
 
     env = torchrun_env()
     rank = 0 if env is None else env[0]
-    if args.nproc > 1 or env is not None:  # DDP (nn.distributed)
+    if args.nproc > 1 or env is not None:  # DDP (nn.train.distributed)
         res = train_ddp(args.data, args.model, args.out, nproc=args.nproc, **kwargs)
     else:
         res = train_run(args.data, args.model, args.out, **kwargs)
@@ -220,7 +221,7 @@ def run_eval(args: argparse.Namespace) -> int:
     """Run ``robopercept nn eval`` with the parsed ``args``; returns the exit status."""
     _need_torch()
     from robopercept.imaging import write_image
-    from robopercept.nn.run import evaluate_run
+    from robopercept.nn.classification.run import evaluate_run
 
     ev = evaluate_run(args.checkpoint, args.data, device=args.device)
     written = write_image(args.output, ev.picture(f"confusion matrix ({args.data})"))
@@ -242,7 +243,7 @@ def run_eval(args: argparse.Namespace) -> int:
 def run_predict(args: argparse.Namespace) -> int:
     """Run ``robopercept nn predict`` with the parsed ``args``; returns the exit status."""
     _need_torch()
-    from robopercept.nn.run import predict
+    from robopercept.nn.classification.run import predict
 
     preds = predict(args.checkpoint, args.images, top_k=args.top_k, device=args.device)
     if args.json:
@@ -266,8 +267,8 @@ def run_predict(args: argparse.Namespace) -> int:
 def run_summary(args: argparse.Namespace) -> int:
     """Run ``robopercept nn summary`` with the parsed ``args``; returns the exit status."""
     _need_torch()
-    from robopercept.nn.models import build_model
-    from robopercept.nn.summary import summary
+    from robopercept.nn.classification.models import build_model
+    from robopercept.nn.core.summary import summary
 
     c = args.input[0]
     s = summary(build_model(args.model, in_channels=c, num_classes=args.classes), args.input)

@@ -23,7 +23,7 @@ Without ``--model`` the shipped PointNet (trained on the procedural shapes) is u
 segmenter. They are rebuilt from a checkout by ``python -m benchmarks.cloud_figures
 --only pointnet dgcnn pointnet-parts --seeds 0 --save src/robopercept/data``.
 
-The work is done by :mod:`robopercept.nn.cloud`, :mod:`robopercept.nn.cloud_data` and
+The work is done by :mod:`robopercept.nn.cloud.run`, :mod:`robopercept.nn.cloud.data` and
 :mod:`robopercept.viz.cloud_dl`; this module parses and prints. Exit 2 for bad
 arguments (the message names the flag), 1 when the work fails.
 """
@@ -128,7 +128,7 @@ def register(ns: argparse._SubParsersAction, parser_class: type[argparse.Argumen
 
 def _sets(args: argparse.Namespace) -> Any:
     from robopercept.errors import InputError
-    from robopercept.nn.cloud import cloud_sets
+    from robopercept.nn.cloud.run import cloud_sets
 
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0; got {args.seed}")
@@ -156,13 +156,13 @@ def _write_metrics(out: Path, metrics: dict[str, Any], ev: Any, names: list[str]
 
 
 def _train(args: argparse.Namespace) -> int:
-    from robopercept.nn.cloud import (
+    from robopercept.nn.cloud.run import (
         build_cloud_model,
         evaluate_cloud_model,
         save_cloud_model,
         train_cloud_model,
     )
-    from robopercept.nn.training import TrainConfig
+    from robopercept.nn.train.loop import TrainConfig
 
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
@@ -238,14 +238,14 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from robopercept.nn.cloud import evaluate_cloud_model, load_cloud_model
+    from robopercept.nn.cloud.run import evaluate_cloud_model, load_cloud_model
 
     path = run_or_model_path(args.model)
     if not path.is_file():
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
     model, info = load_cloud_model(path)
     if args.device:
-        from robopercept.nn.training import resolve_device
+        from robopercept.nn.train.loop import resolve_device
 
         model.to(resolve_device(args.device))
     sets = _sets(args)
@@ -290,8 +290,8 @@ def _model(name: str | None, default: str) -> Path:
 
 def _clouds(args: argparse.Namespace) -> int:
     from robopercept.imaging import write_image
-    from robopercept.nn.cloud import classify_cloud_file, load_cloud_model
-    from robopercept.nn.training import resolve_device
+    from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model
+    from robopercept.nn.train.loop import resolve_device
     from robopercept.pointcloud import PointCloud, write_point_cloud
     from robopercept.viz.cloud_dl import cloud_picture
     from robopercept.viz.colormap import label_colors

@@ -23,8 +23,8 @@ shipped Mask R-CNN. Both were trained on the procedural shapes and are rebuilt, 
 checkout, by ``python -m benchmarks.segmentation_figures --only shapes-unet
 shapes-maskrcnn --seeds 0 --save src/robopercept/data``.
 
-The work is done by :mod:`robopercept.nn.segmentation`,
-:mod:`robopercept.nn.segmentation_data`, :mod:`robopercept.nn.detection` and
+The work is done by :mod:`robopercept.nn.segmentation.networks`,
+:mod:`robopercept.nn.segmentation.data`, :mod:`robopercept.nn.detection.models` and
 :mod:`robopercept.viz.segmentation`; this module parses and prints. Exit 2 for bad
 arguments (the message names the flag), 1 when the work fails.
 """
@@ -117,7 +117,7 @@ def register(ns: argparse._SubParsersAction, parser_class: type[argparse.Argumen
 
 # --------------------------------------------------------------------------- helpers
 def _sets(args: argparse.Namespace) -> Any:
-    from robopercept.nn.segmentation_data import segmentation_sets
+    from robopercept.nn.segmentation.data import segmentation_sets
 
     if args.data == "nuclei" and (not args.images_dir or not Path(args.images_dir).is_dir()):
         raise UsageError(
@@ -132,15 +132,15 @@ def _sets(args: argparse.Namespace) -> Any:
 def _scores(model: Any, val: Any, instance: bool, device: str | None) -> dict[str, Any]:
     import numpy as np
 
-    from robopercept.nn.detection import evaluate_detector
-    from robopercept.nn.segmentation import segment_arrays
-    from robopercept.nn.segmentation_eval import segmentation_confusion, segmentation_scores
+    from robopercept.nn.detection.models import evaluate_detector
+    from robopercept.nn.segmentation.metrics import segmentation_confusion, segmentation_scores
+    from robopercept.nn.segmentation.networks import segment_arrays
 
     if instance:
         ev = evaluate_detector(model, val, device=device, iou_type="segm")
         return {"metrics": ev.summary(), "stats": ev.stats.tolist()}
     if device:
-        from robopercept.nn.training import resolve_device
+        from robopercept.nn.train.loop import resolve_device
 
         model.to(resolve_device(device))
     pred = np.stack(segment_arrays(model, list(val.images)))
@@ -160,7 +160,7 @@ def _scores(model: Any, val: Any, instance: bool, device: str | None) -> dict[st
 
 def _samples(model: Any, val: Any, instance: bool, path: Path, count: int = 3) -> Path:
     from robopercept.imaging import write_image
-    from robopercept.nn.image_predict import ImagePrediction, ImagePredictor
+    from robopercept.nn.predict import ImagePrediction, ImagePredictor
     from robopercept.viz.segmentation import panels_picture
 
     classes = list(val.classes)
@@ -181,9 +181,13 @@ def _samples(model: Any, val: Any, instance: bool, path: Path, count: int = 3) -
 
 # --------------------------------------------------------------------------- forms
 def _train(args: argparse.Namespace) -> int:
-    from robopercept.nn.detection import build_detector, save_detector, train_detector
-    from robopercept.nn.segmentation import build_segmenter, save_segmenter, train_segmenter
-    from robopercept.nn.training import TrainConfig
+    from robopercept.nn.detection.models import build_detector, save_detector, train_detector
+    from robopercept.nn.segmentation.networks import (
+        build_segmenter,
+        save_segmenter,
+        train_segmenter,
+    )
+    from robopercept.nn.train.loop import TrainConfig
 
     model_name = args.model or ("maskrcnn" if args.task == "instance" else "unet")
     if (model_name == "maskrcnn") != (args.task == "instance"):
@@ -274,7 +278,7 @@ def _eval(args: argparse.Namespace) -> int:
     path = run_or_model_path(args.model)
     if not path.is_file():
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
-    from robopercept.nn.image_predict import load_segment_model
+    from robopercept.nn.predict import load_segment_model
 
     model, info, instance = load_segment_model(path)
     sets = _sets(args)
@@ -302,7 +306,7 @@ def _eval(args: argparse.Namespace) -> int:
 
 
 def _images(args: argparse.Namespace) -> int:
-    from robopercept.nn.image_predict import load_image_predictor
+    from robopercept.nn.predict import load_image_predictor
 
     model_path = images_form_inputs(
         args, "segment", lambda stem: [f"{stem}.png", f"{stem}_labels.png"]

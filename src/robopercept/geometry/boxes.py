@@ -1,6 +1,6 @@
 """Axis-aligned boxes in pixels: ``(x, y, w, h)`` for the IoU matrix, and conversions
 between the formats ``"xyxy"``, ``"xywh"`` and ``"cxcywh"`` (NumPy; the torch versions
-used by the detectors are in :mod:`robopercept.nn.boxes`); the smallest rotated
+used by the detectors are in :mod:`robopercept.nn.ops.boxes`); the smallest rotated
 rectangle around 2-D points (:func:`min_area_rectangle`)."""
 
 from __future__ import annotations

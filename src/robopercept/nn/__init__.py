@@ -1,10 +1,21 @@
 """Deep learning in pure PyTorch: the layer arithmetic, the blocks of VGG, Inception and
-ResNet, training and fine-tuning (extra ``deep``: ``pip install 'robopercept[deep]'``).
+ResNet, training and fine-tuning, detection, segmentation, pose and point-cloud networks
+(extra ``deep``: ``pip install 'robopercept[deep]'``).
 
-This is the only package that imports torch, and only its torch modules do:
-:mod:`robopercept.nn.functional` (convolution and pooling by the mathematics, in NumPy)
-works without torch. Submodules load on first use (``robopercept.nn.blocks``,
-``robopercept.nn.models``, ...), so ``import robopercept.nn`` stays cheap.
+The package is laid out as task wings over shared floors, as torchvision is:
+
+- ground, torch-free: :mod:`.functional` (convolution and pooling by the mathematics, in
+  NumPy), :mod:`.skeleton`, :mod:`.shipped` (the shipped-model table), ``_guards``;
+- shared floors: :mod:`.core` (blocks, summary, transfer, export), :mod:`.ops` (boxes,
+  NMS, RoI ops), :mod:`.coco` (COCO/VOC formats and evaluation), :mod:`.data`
+  (datasets, augmentations, fonts), :mod:`.train` (the loop, DDP);
+- task wings: :mod:`.classification`, :mod:`.detection`, :mod:`.segmentation`,
+  :mod:`.pose`, :mod:`.cloud`;
+- on top: :mod:`.predict` (one image-prediction path for the CLI and batch jobs).
+
+This is the only package that imports torch, and only its torch modules do. Submodules
+load on first use (``robopercept.nn.detection``, ...), so ``import robopercept.nn``
+stays cheap. :data:`MODULES` lists every public module (the API fuzzer walks it).
 """
 
 from __future__ import annotations
@@ -12,42 +23,61 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-#: submodules reachable as attributes of ``robopercept.nn``
+#: subpackages and modules reachable as attributes of ``robopercept.nn``
 _SUBMODULES = (
     "functional",
-    "blocks",
-    "models",
-    "summary",
-    "data",
-    "training",
-    "transfer",
-    "export",
-    "run",
-    "boxes",
-    "coco",
-    "coco_mask",
-    "segmentation_eval",
-    "segmentation",
-    "segmentation_data",
-    "detection_data",
-    "detection",
     "skeleton",
-    "pose_eval",
-    "pose_io",
-    "pictorial",
-    "pose3d",
-    "pose_data",
-    "pose",
-    "pointnet",
-    "dgcnn",
-    "cloud_data",
-    "cloud",
-    "distributed",
     "shipped",
-    "image_predict",
+    "core",
+    "ops",
+    "coco",
+    "data",
+    "train",
+    "classification",
+    "detection",
+    "segmentation",
+    "pose",
+    "cloud",
+    "predict",
 )
 
-__all__ = list(_SUBMODULES)
+#: every public module of ``robopercept.nn``, dotted below it, floor by floor
+MODULES = (
+    "functional",
+    "skeleton",
+    "shipped",
+    "core.blocks",
+    "core.summary",
+    "core.transfer",
+    "core.export",
+    "ops.boxes",
+    "coco.rle",
+    "coco.formats",
+    "data.datasets",
+    "data.fonts",
+    "train.loop",
+    "train.distributed",
+    "classification.models",
+    "classification.run",
+    "detection.data",
+    "detection.models",
+    "segmentation.metrics",
+    "segmentation.networks",
+    "segmentation.data",
+    "pose.metrics",
+    "pose.io",
+    "pose.pictorial",
+    "pose.data",
+    "pose.networks",
+    "pose.lifting",
+    "cloud.pointnet",
+    "cloud.dgcnn",
+    "cloud.data",
+    "cloud.run",
+    "predict",
+)
+
+__all__ = [*_SUBMODULES, "MODULES"]
 
 
 def __getattr__(name: str) -> Any:

@@ -128,15 +128,17 @@ def check_module(model: Any, name: str = "model") -> nn.Module:
     Raises
     ------
     InputError
-        Anything else (a checkpoint path: load it with ``robopercept.nn.run.load_run``).
+        Anything else (a checkpoint path: load it with
+        ``robopercept.nn.classification.run.load_run``).
     """
     from torch import nn
 
     if not isinstance(model, nn.Module):
         raise InputError(
-            f"{name} must be a torch.nn.Module (e.g. robopercept.nn.models.build_model(...)); "
+            f"{name} must be a torch.nn.Module "
+            "(e.g. robopercept.nn.classification.models.build_model(...)); "
             f"got {type(model).__name__} {plain_repr(model)[:60]}: for a checkpoint file, "
-            "load the model with robopercept.nn.run.load_run"
+            "load the model with robopercept.nn.classification.run.load_run"
         )
     return model
 
@@ -240,7 +242,7 @@ def check_dataset(data: Any, name: str) -> Any:
     ----------
     data : Dataset
         ``len(data)`` and ``data[i] == (image (C, H, W), label)``, as
-        :class:`~robopercept.nn.data.ArrayDataset`.
+        :class:`~robopercept.nn.data.datasets.ArrayDataset`.
     name : str
         The parameter named in the message.
 
@@ -260,7 +262,7 @@ def check_dataset(data: Any, name: str) -> Any:
     looks = hasattr(data, "__len__") and hasattr(data, "__getitem__")
     if not looks or isinstance(data, (str, bytes, dict, np.ndarray, torch.Tensor)):
         raise InputError(
-            f"{name} must be a data set of (image, label) pairs (robopercept.nn.data."
+            f"{name} must be a data set of (image, label) pairs (robopercept.nn.data.datasets."
             f"ArrayDataset, or any torch map-style Dataset); got {type(data).__name__}"
             f" {plain_repr(data)[:60]}"
         )

@@ -6,7 +6,7 @@ point-cloud networks on the shape clouds). Their files live in the package's ``d
 folder; they are rebuilt from a checkout by the commands of :data:`BUILD_SHIPPED`.
 
 A *model* argument, wherever robopercept takes one (``robopercept nn detect IMAGE
---model``, the batch jobs, :func:`~robopercept.nn.image_predict.load_image_predictor`),
+--model``, the batch jobs, :func:`~robopercept.nn.predict.load_image_predictor`),
 is one of three things, resolved by :func:`resolve_model`:
 
 - ``None``: the default shipped model of the kind (:data:`DEFAULT_SHIPPED`);

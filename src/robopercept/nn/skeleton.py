@@ -16,7 +16,7 @@ Presets
   knee, left ankle, pelvis, thorax, upper neck, head top, right wrist, right elbow,
   right shoulder, left shoulder, left elbow, left wrist), its 15 links (a tree rooted at
   the pelvis) and mmpose's MPII sigmas. The procedural figures of
-  :mod:`robopercept.nn.pose_data` use this layout.
+  :mod:`robopercept.nn.pose.data` use this layout.
 
 The OKS of a predicted pose :math:`\hat p` against ground truth :math:`p` with object
 area :math:`s` is :math:`\sum_i \exp(-d_i^2 / (2 s k_i^2)) / n` over the :math:`n`

@@ -380,17 +380,17 @@ def run_item(
     its outputs and ``summary.json``.
 
     The ``nn-*`` jobs import torch only on the worker, and load their model once per
-    worker process. ``nn-predict``: :func:`~robopercept.nn.run.predict` (what
+    worker process. ``nn-predict``: :func:`~robopercept.nn.classification.run.predict` (what
     ``robopercept nn predict`` runs) with the run folder or checkpoint ``model``
     (required) into ``prediction.json`` (``file`` and the ``top_k`` most probable
     classes). ``nn-detect``, ``nn-segment``, ``nn-pose``: the images form of
-    ``robopercept nn detect|segment|pose`` (:func:`~robopercept.nn.image_predict.\
+    ``robopercept nn detect|segment|pose`` (:func:`~robopercept.nn.predict.\
 load_image_predictor`; ``model`` a shipped name of :data:`~robopercept.nn.shipped.\
 SHIPPED`, default the command's, or a run folder or model file; ``score_thresh`` for
     detect and segment, default the command's) into ``prediction.json`` (``file`` and
-    :meth:`~robopercept.nn.image_predict.ImagePrediction.record`) and the command's
+    :meth:`~robopercept.nn.predict.ImagePrediction.record`) and the command's
     pictures named ``prediction*.png``. ``nn-cloud``:
-    :func:`~robopercept.nn.cloud.classify_cloud_file` (what ``robopercept nn cloud``
+    :func:`~robopercept.nn.cloud.run.classify_cloud_file` (what ``robopercept nn cloud``
     runs) with the classifier ``model`` (``pointnet``, the default, ``dgcnn`` or a
     ``model.pt`` file), ``points`` sampled (default: the model's) with ``seed``, into
     ``prediction.json`` (``class``, ``probabilities``, most probable first,
@@ -563,7 +563,7 @@ def _loaded(key: tuple[Any, ...], load: Callable[[], Any]) -> Any:
 
 
 def _run_nn_predict(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.run import load_run, predict_loaded
+    from robopercept.nn.classification.run import load_run, predict_loaded
 
     model, arch = _loaded(("predict", opts["model"]), lambda: load_run(opts["model"]))
     pred = predict_loaded(model, arch, [src], top_k=opts["top_k"])[0]
@@ -573,7 +573,7 @@ def _run_nn_predict(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any
 
 
 def _run_nn_image(src: Path, out: Path, opts: dict[str, Any], kind: str) -> dict[str, Any]:
-    from robopercept.nn.image_predict import load_image_predictor
+    from robopercept.nn.predict import load_image_predictor
 
     settings: dict[str, Any] = {"score_thresh": opts["score_thresh"]} if kind != "pose" else {}
     key = (kind, opts["model"], *settings.items())
@@ -587,7 +587,7 @@ def _run_nn_image(src: Path, out: Path, opts: dict[str, Any], kind: str) -> dict
 
 
 def _run_nn_cloud(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.cloud import classify_cloud_file, load_cloud_model
+    from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model
     from robopercept.nn.shipped import resolve_model
 
     path = resolve_model("cloud", opts["model"])

@@ -70,7 +70,7 @@ class TriangleMesh:
         Vertex indices of each triangle, in ``[0, V)``; ``F >= 1``.
     face_labels : (F,) int64 ndarray or None
         A non-negative label per triangle (part ids of the procedural shapes of
-        :mod:`robopercept.nn.cloud_data`); ``None`` when unknown.
+        :mod:`robopercept.nn.cloud.data`); ``None`` when unknown.
 
     ``len(mesh)`` is the number of triangles.
 

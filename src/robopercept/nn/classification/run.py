@@ -1,0 +1,776 @@
+"""A training run from data to files: what ``robopercept nn train|eval|predict`` does.
+
+:func:`train_run` is the course's recipe end to end: load the data (scikit-learn's
+``digits``, scikit-image's ``lfw_subset`` or an image folder ``root/class_name/*.png``),
+split it into train / validation / test keeping the class proportions (seeded), compute
+the normalization statistics on the training split only and put them first in the model
+(:class:`~robopercept.nn.train.loop.Normalize`, so the checkpoint carries them), train with
+:func:`~robopercept.nn.train.loop.fit`, evaluate the best epoch on the test split and
+write the run folder:
+
+========================  =============================================================
+``checkpoint.pt``         the last epoch (model, optimizer, schedule, random states):
+                          ``resume=True`` continues from it
+``checkpoint.best.pt``    the best epoch's weights (what ``eval`` and ``predict`` use)
+``history.csv``           one row per epoch (:meth:`History.write_csv`)
+``curves.png``            loss, accuracy and learning rate against the epoch
+``metrics.json``          test accuracy, per-class precision / recall / F1, confusion
+                          matrix, parameters, seconds, configuration, classes, the model
+``confusion.png``         the test confusion matrix (:func:`robopercept.viz.confusion_picture`)
+========================  =============================================================
+
+Both checkpoints record the model's :class:`Architecture` (builder name and arguments,
+channels, classes, input size, class names) as JSON, so :func:`load_run` rebuilds the
+model from the checkpoint alone.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, cast
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+from torch.utils.data import Dataset
+
+from robopercept._checks import as_path, check_choice, check_int, plain_repr
+from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import strict_json
+from robopercept.nn._guards import check_device
+from robopercept.nn.classification.models import MODELS, build_model
+from robopercept.nn.data.datasets import (
+    ArrayDataset,
+    Compose,
+    ImageFolder,
+    RandomAffine,
+    RandomCrop,
+    load_digits,
+    load_lfw_subset,
+    normalization_stats,
+    stratified_split,
+    to_unit_float,
+)
+from robopercept.nn.train.loop import (
+    History,
+    Normalize,
+    TrainConfig,
+    evaluate,
+    fit,
+    load_checkpoint,
+)
+
+__all__ = [
+    "BUILTIN_DATA",
+    "Architecture",
+    "Prediction",
+    "RunEvaluation",
+    "TrainResult",
+    "evaluate_run",
+    "load_data",
+    "load_run",
+    "predict",
+    "predict_loaded",
+    "train_run",
+]
+
+#: data sets named instead of a folder
+BUILTIN_DATA = ("digits", "lfw")
+
+CHECKPOINT = "checkpoint.pt"
+BEST_CHECKPOINT = "checkpoint.best.pt"
+
+
+@dataclass(frozen=True)
+class Architecture:
+    """Everything needed to rebuild a run's model: ``Sequential(Normalize, builder(...))``.
+
+    Attributes
+    ----------
+    model : str
+        A name of :data:`robopercept.nn.classification.models.MODELS`.
+    kwargs : dict
+        The builder's other keyword arguments (JSON values).
+    in_channels, num_classes : int
+    input_size : (height, width)
+        The size the model was trained on (predict resizes to it).
+    classes : tuple of str
+        Class names, ``classes[k]`` for output ``k``.
+    mode : {'gray', 'rgb'}
+        How images are read (``'gray'`` for C = 1).
+    """
+
+    model: str
+    kwargs: dict[str, Any]
+    in_channels: int
+    num_classes: int
+    input_size: tuple[int, int]
+    classes: tuple[str, ...]
+    mode: str
+
+    def to_json(self) -> str:
+        """The JSON text stored in the checkpoints' ``"architecture"`` entry."""
+        return json.dumps({"robopercept_run": 1, **asdict(self)}, sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: Any, where: str = "checkpoint") -> Architecture:
+        """The inverse of :meth:`to_json`.
+
+        Raises
+        ------
+        FileFormatError
+            ``text`` is not the JSON of a run (a checkpoint not written by
+            :func:`train_run`, e.g. one of :func:`~robopercept.nn.train.loop.fit` alone).
+        """
+        try:
+            d = json.loads(text)
+            if not isinstance(d, dict) or d.pop("robopercept_run", None) != 1:
+                raise ValueError("no run marker")
+            arch = cls(
+                model=str(d["model"]),
+                kwargs=dict(d["kwargs"]),
+                in_channels=int(d["in_channels"]),
+                num_classes=int(d["num_classes"]),
+                input_size=(int(d["input_size"][0]), int(d["input_size"][1])),
+                classes=tuple(str(c) for c in d["classes"]),
+                mode=str(d["mode"]),
+            )
+        except (TypeError, ValueError, KeyError, IndexError):
+            raise FileFormatError(
+                f"{where}: records no model architecture (not written by `robopercept nn "
+                "train`): give the checkpoint.pt or checkpoint.best.pt of a run folder"
+            ) from None
+        if arch.model not in MODELS or len(arch.classes) != arch.num_classes:
+            raise FileFormatError(f"{where}: unknown or inconsistent architecture {text}")
+        return arch
+
+    def build(self) -> nn.Sequential:
+        """The untrained model: ``Sequential(Normalize(0, 1), builder(**kwargs))`` (the
+        normalization statistics are loaded with the weights)."""
+        c = self.in_channels
+        net = build_model(self.model, in_channels=c, num_classes=self.num_classes, **self.kwargs)
+        return nn.Sequential(Normalize(np.zeros(c), np.ones(c)), net)
+
+
+@dataclass(frozen=True)
+class RunEvaluation:
+    """A run's model on a labelled data set.
+
+    Attributes
+    ----------
+    accuracy, loss : float
+    classes : tuple of str
+    precision, recall, f1 : (K,) float ndarray
+        Per class (0 where undefined), :func:`robopercept.learning.metrics.classification_report`.
+    support : (K,) int ndarray
+    confusion : (K, K) int ndarray
+        Counts ``[true, predicted]``.
+    n : int
+        Images evaluated.
+    """
+
+    accuracy: float
+    loss: float
+    classes: tuple[str, ...]
+    precision: np.ndarray
+    recall: np.ndarray
+    f1: np.ndarray
+    support: np.ndarray
+    confusion: np.ndarray
+    n: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: accuracy, loss, per-class figures by name, the confusion matrix."""
+        return {
+            "accuracy": self.accuracy,
+            "loss": self.loss,
+            "n": self.n,
+            "classes": list(self.classes),
+            "per_class": {
+                name: {
+                    "precision": float(self.precision[k]),
+                    "recall": float(self.recall[k]),
+                    "f1": float(self.f1[k]),
+                    "support": int(self.support[k]),
+                }
+                for k, name in enumerate(self.classes)
+            },
+            "confusion": self.confusion.tolist(),
+        }
+
+    def picture(self, title: str = "confusion matrix") -> np.ndarray:
+        """The confusion matrix drawn (:func:`robopercept.viz.confusion_picture`), (H, W, 3)
+        uint8."""
+        from robopercept.viz import confusion_picture
+
+        return confusion_picture(self.confusion, self.classes, title=title)
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """What :func:`train_run` made.
+
+    Attributes
+    ----------
+    out_dir : Path
+    files : dict of str to Path
+        ``checkpoint``, ``best``, ``history``, ``curves``, ``metrics``, ``confusion``.
+    architecture : Architecture
+    history : History
+    test : RunEvaluation
+        The best epoch's model on the test split.
+    parameters : int
+    seconds : float
+        Training time (fit only).
+    metrics : dict
+        The content of ``metrics.json``.
+    """
+
+    out_dir: Path
+    files: dict[str, Path]
+    architecture: Architecture
+    history: History
+    test: RunEvaluation
+    parameters: int
+    seconds: float
+    metrics: dict[str, Any] = field(repr=False)
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """The top classes of one image: ``top`` is ``((class, probability), ...)``,
+    most probable first."""
+
+    path: Path
+    top: tuple[tuple[str, float], ...]
+
+
+# --------------------------------------------------------------------------- data
+
+
+def load_data(
+    data: str | os.PathLike[str],
+    *,
+    mode: str = "rgb",
+    size: tuple[int, int] | None = None,
+) -> ArrayDataset:
+    """The data set named ``data``: ``"digits"``
+    (:func:`~robopercept.nn.data.datasets.load_digits`), ``"lfw"``
+    (:func:`~robopercept.nn.data.datasets.load_lfw_subset`) or a folder
+    ``root/class_name/*.png`` (:class:`~robopercept.nn.data.datasets.ImageFolder`).
+
+    Parameters
+    ----------
+    data : str or path
+    mode : {'rgb', 'gray'}
+        Folders only: colour or grey images.
+    size : (width, height), optional
+        Folders only: resize every image to this.
+
+    Returns
+    -------
+    ArrayDataset
+
+    Raises
+    ------
+    InputError
+        Neither a built-in name nor an existing folder; a folder without images.
+    FileFormatError
+        A non-image or unreadable file in the folder.
+    """
+    text = str(as_path(data, "--data (digits, lfw or an image folder)"))
+    mode = check_choice(mode, "mode", ("rgb", "gray"))
+    if text == "digits":
+        return load_digits()
+    if text == "lfw":
+        return load_lfw_subset()
+    if not Path(text).is_dir():
+        raise InputError(
+            f"--data {text!r}: no such folder; give 'digits', 'lfw' or a folder laid out "
+            "as root/class_name/image.png"
+        )
+    return ImageFolder(text, mode=mode, size=size)
+
+
+def _parameters(model: nn.Module) -> int:
+    return int(sum(p.numel() for p in model.parameters()))
+
+
+def _run_evaluation(model: nn.Module, data: ArrayDataset, device: str | None) -> RunEvaluation:
+    from robopercept.learning.metrics import classification_report
+
+    # ArrayDataset keeps torch's map-style contract without subclassing Dataset
+    ev = evaluate(model, cast(Dataset[Any], data), device=device)
+    k = len(data.classes)
+    rep = classification_report(ev.y_true, ev.y_pred)
+    full = {name: np.zeros(k) for name in ("precision", "recall", "f1")}
+    for i, label in enumerate(rep.labels):
+        for name in full:
+            full[name][int(label)] = getattr(rep, name)[i]
+    cm = ev.confusion_matrix(k)
+    return RunEvaluation(
+        accuracy=ev.accuracy,
+        loss=ev.loss,
+        classes=tuple(data.classes),
+        support=cm.sum(axis=1),
+        confusion=cm,
+        n=len(data),
+        **full,
+    )
+
+
+def _augmentation(shape: tuple[int, int, int], seed: int) -> Compose:
+    """Shifts of up to an eighth of the size (padded crop) and a small affine jitter;
+    no flips (a mirrored digit is another symbol)."""
+    _, h, w = shape
+    gen = torch.Generator().manual_seed(seed)
+    pad = max(1, min(h, w) // 8)
+    return Compose(
+        [
+            RandomCrop((h, w), padding=pad, generator=gen),
+            RandomAffine(degrees=10.0, scale=(0.9, 1.1), generator=gen),
+        ]
+    )
+
+
+# --------------------------------------------------------------------------- train
+
+
+def train_run(
+    data: str | os.PathLike[str],
+    model: str,
+    out_dir: str | os.PathLike[str],
+    *,
+    config: TrainConfig | None = None,
+    model_kwargs: dict[str, Any] | None = None,
+    mode: str = "rgb",
+    size: tuple[int, int] | None = None,
+    fractions: Sequence[float] = (0.7, 0.15, 0.15),
+    augment: bool = False,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool = True,
+    distributed: bool = False,
+) -> TrainResult:
+    """Train ``model`` on ``data`` and write the run folder ``out_dir`` (module docstring).
+
+    Steps: :func:`load_data`; :func:`~robopercept.nn.data.datasets.stratified_split` into train,
+    validation and test by ``fractions`` with ``config.seed``; per-channel mean and
+    standard deviation of the train split only
+    (:func:`~robopercept.nn.data.datasets.normalization_stats`) in a
+    :class:`~robopercept.nn.train.loop.Normalize` before the network; :func:`fit`
+    (checkpoint every epoch, early stopping and best-epoch restore on validation);
+    evaluation of the best weights on the test split.
+
+    Parameters
+    ----------
+    data : str or path
+        ``"digits"``, ``"lfw"`` or an image folder.
+    model : str
+        A name of :data:`robopercept.nn.classification.models.MODELS`.
+    out_dir : path
+        The run folder (created).
+    config : TrainConfig, optional
+        Epochs, optimizer, learning rate, schedule, seed, device...
+    model_kwargs : dict, optional
+        More arguments of the builder (``widths``, ``depth``, ``dropout``...; JSON values).
+    mode : {'rgb', 'gray'}
+        Image folders: read colour (C = 3) or grey (C = 1) images.
+    size : (width, height), optional
+        Image folders: resize every image to this.
+    fractions : (train, validation, test)
+        Shares of every class, summing to 1.
+    augment : bool
+        Random shifts, rotations and scales of the training images (seeded).
+    resume : bool
+        Continue the run in ``out_dir`` from its ``checkpoint.pt`` (same data, model and
+        configuration): ends as an uninterrupted run would.
+    overwrite : bool
+        Start afresh in a folder that already holds a run (refused otherwise).
+    progress : bool
+        A progress bar on stderr.
+    distributed : bool
+        This process is one rank of a DistributedDataParallel run (an initialized
+        ``torch.distributed`` process group; :func:`robopercept.nn.train.distributed.train_ddp`
+        sets it up): :func:`fit` trains with ``distributed=True``; rank 0 alone evaluates
+        the test split and writes the run folder, then sends the result to the other
+        ranks, which wait for it (every rank returns the same :class:`TrainResult`).
+
+    Returns
+    -------
+    TrainResult
+
+    Raises
+    ------
+    InputError
+        Unknown data or model, a bad split, ``resume`` without a checkpoint, a folder
+        holding a run without ``resume`` or ``overwrite``; errors of :func:`fit`.
+    FileFormatError
+        A non-image file in the image folder; a checkpoint of another architecture when
+        resuming.
+    """
+    cfg = config or TrainConfig()
+    if model not in MODELS:
+        raise InputError(f"unknown model {model!r} (--model): choose one of {', '.join(MODELS)}")
+    fr = tuple(float(f) for f in fractions)
+    if len(fr) != 3:
+        raise InputError(f"fractions must be (train, validation, test); got {fractions!r}")
+    out = Path(out_dir)
+    ckpt = out / CHECKPOINT
+    if resume and not ckpt.exists():
+        raise InputError(
+            f"nothing to resume: {ckpt} does not exist; drop --resume to start a new run"
+        )
+    if not resume and not overwrite and ckpt.exists():
+        raise InputError(
+            f"{out} already holds a run ({CHECKPOINT}): pass --resume to continue it, "
+            "--overwrite to start afresh, or choose another -o/--out folder"
+        )
+    if out.exists() and not out.is_dir():
+        raise InputError(f"-o/--out {out} is a file; give a folder")
+    ds = load_data(data, mode=mode, size=size)
+    train_idx, val_idx, test_idx = stratified_split(ds.labels, fr, rng=cfg.seed)
+    c, h, w = ds.image_shape
+    transform = _augmentation(ds.image_shape, cfg.seed) if augment else None
+    train = ds.subset(train_idx, transform=transform)
+    val, test = ds.subset(val_idx), ds.subset(test_idx)
+    mean, std = normalization_stats(ds.subset(train_idx))
+    std = np.where(std > 0, std, 1.0)  # a constant channel is only centred
+    arch = Architecture(
+        model=model,
+        kwargs=json.loads(json.dumps(model_kwargs or {})),
+        in_channels=c,
+        num_classes=len(ds.classes),
+        input_size=(h, w),
+        classes=tuple(ds.classes),
+        mode="gray" if c == 1 else "rgb",
+    )
+    torch.manual_seed(cfg.seed)  # the initial weights
+    net = arch.build()
+    net[0] = Normalize(mean, std)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    try:
+        hist = fit(
+            net,
+            cast(Dataset[Any], train),
+            cast(Dataset[Any], val),
+            cfg,
+            checkpoint=ckpt,
+            resume=resume,
+            architecture=arch.to_json(),
+            progress=progress,
+            distributed=distributed,
+        )
+    except KeyboardInterrupt:  # keep what the last complete epoch left: history.csv too
+        if ckpt.exists() and _rank(distributed) == 0:
+            History.from_dict(load_checkpoint(ckpt)["history"]).write_csv(out / "history.csv")
+        raise
+    seconds = time.perf_counter() - t0
+    if distributed:  # rank 0 evaluates and writes; the others receive its result
+        import torch.distributed as dist
+
+        box: list[Any] = [None]
+        if dist.get_rank() == 0:
+            box[0] = _finish_run(
+                net,
+                hist,
+                test,
+                seconds,
+                out,
+                arch,
+                data,
+                cfg,
+                mean,
+                std,
+                augment,
+                (len(train), len(val)),
+            )
+        dist.broadcast_object_list(box, src=0)
+        return cast(TrainResult, box[0])
+    return _finish_run(
+        net, hist, test, seconds, out, arch, data, cfg, mean, std, augment, (len(train), len(val))
+    )
+
+
+def _rank(distributed: bool) -> int:
+    if not distributed:
+        return 0
+    import torch.distributed as dist
+
+    return dist.get_rank()
+
+
+def _finish_run(
+    net: nn.Module,
+    hist: History,
+    test: ArrayDataset,
+    seconds: float,
+    out: Path,
+    arch: Architecture,
+    data: str | os.PathLike[str],
+    cfg: TrainConfig,
+    mean: np.ndarray,
+    std: np.ndarray,
+    augment: bool,
+    sizes: tuple[int, int],
+) -> TrainResult:
+    """Evaluate the best weights on the test split and write the run folder."""
+    test_ev = _run_evaluation(net, test, cfg.device)
+    files = _write_run(out, hist, test_ev)
+    metrics = {
+        "data": os.fspath(data),
+        "test_accuracy": test_ev.accuracy,
+        "test": test_ev.to_dict(),
+        "parameters": _parameters(net),
+        "seconds": seconds,
+        "best_epoch": hist.best_epoch,
+        "epochs_run": len(hist.epoch),
+        "stopped": hist.stopped,
+        "split": {"train": sizes[0], "validation": sizes[1], "test": len(test)},
+        "normalization": {"mean": np.asarray(mean).tolist(), "std": np.asarray(std).tolist()},
+        "augment": augment,
+        "config": asdict(cfg),
+        "classes": list(arch.classes),
+        "architecture": asdict(arch),
+    }
+    files["metrics"].write_text(json.dumps(strict_json(metrics), indent=2) + "\n")
+    return TrainResult(out, files, arch, hist, test_ev, _parameters(net), seconds, metrics)
+
+
+def _write_run(out: Path, hist: History, test_ev: RunEvaluation) -> dict[str, Path]:
+    from robopercept.imaging import write_image
+
+    files = {
+        "checkpoint": out / CHECKPOINT,
+        "best": out / BEST_CHECKPOINT,
+        "history": out / "history.csv",
+        "curves": out / "curves.png",
+        "metrics": out / "metrics.json",
+        "confusion": out / "confusion.png",
+    }
+    hist.write_csv(files["history"])
+    write_image(files["curves"], hist.picture())
+    write_image(files["confusion"], test_ev.picture("confusion matrix (test split)"))
+    return files
+
+
+# --------------------------------------------------------------------------- load, eval, predict
+
+
+def load_run(
+    checkpoint: str | os.PathLike[str], *, device: str | None = None
+) -> tuple[nn.Sequential, Architecture]:
+    """The model of a run, rebuilt from its checkpoint alone, in eval mode.
+
+    Parameters
+    ----------
+    checkpoint : path
+        ``checkpoint.pt`` or ``checkpoint.best.pt`` of a run folder, or the folder
+        itself (its ``checkpoint.best.pt``).
+    device : str, optional
+        Where to put the model (default: the CPU).
+
+    Returns
+    -------
+    model : nn.Sequential
+        ``Sequential(Normalize, classifier)``.
+    architecture : Architecture
+
+    Raises
+    ------
+    FileFormatError
+        Missing or unreadable file, no recorded architecture, or weights that do not fit
+        the recorded architecture.
+    """
+    p = as_path(checkpoint, "the checkpoint (a run's checkpoint.pt or its folder)")
+    dev = check_device(device, "device (--device)")
+    if p.is_dir():
+        p = p / BEST_CHECKPOINT
+    if not p.exists():
+        raise FileFormatError(f"{p}: no such checkpoint")
+    state = load_checkpoint(p)
+    arch = Architecture.from_json(state.get("architecture"), str(p))
+    model = arch.build()
+    load_checkpoint(p, model)
+    model.eval()
+    if dev is not None:
+        model.to(dev)
+    return model, arch
+
+
+def evaluate_run(
+    checkpoint: str | os.PathLike[str],
+    data: str | os.PathLike[str],
+    *,
+    device: str | None = None,
+) -> RunEvaluation:
+    """A run's model on a whole labelled data set (``"digits"``, ``"lfw"`` or a folder).
+
+    Folder images are read as the model was trained (grey or colour) and resized to its
+    input size. Note that the built-in sets hold the run's training images too: for an
+    unbiased figure use ``metrics.json``'s test accuracy, or a folder of new images.
+
+    Parameters
+    ----------
+    checkpoint : path
+        See :func:`load_run`.
+    data : str or path
+    device : str, optional
+
+    Returns
+    -------
+    RunEvaluation
+
+    Raises
+    ------
+    InputError
+        Data whose image shape or classes differ from the model's.
+    FileFormatError
+        See :func:`load_run`.
+    """
+    model, arch = load_run(checkpoint, device=device)
+    h, w = arch.input_size
+    ds = load_data(data, mode=arch.mode, size=(w, h))
+    expected = (arch.in_channels, h, w)
+    if ds.image_shape != expected:
+        raise InputError(
+            f"--data {os.fspath(data)!r} has images of shape (C, H, W) {ds.image_shape}; the "
+            f"model takes {expected}: evaluate on the kind of data it was trained on"
+        )
+    if tuple(ds.classes) != arch.classes:
+        raise InputError(
+            f"--data {os.fspath(data)!r} has classes {list(ds.classes)}; the model "
+            f"predicts {list(arch.classes)}: give data with the same classes"
+        )
+    return _run_evaluation(model, ds, device)
+
+
+@torch.no_grad()
+def predict(
+    checkpoint: str | os.PathLike[str],
+    image_paths: Sequence[str | os.PathLike[str]],
+    *,
+    top_k: int = 3,
+    device: str | None = None,
+) -> list[Prediction]:
+    """The ``top_k`` most probable classes of each image, by a run's model.
+
+    Each image is read grey or colour as the model was trained
+    (:func:`robopercept.imaging.read_image`), scaled to [0, 1] (8-bit / 255, 16-bit /
+    65535) and resized to the model's input size (bilinear with antialiasing,
+    ``torch.nn.functional.interpolate``); probabilities are the softmax of the logits.
+
+    A ``digits`` model sees 8 x 8 images of light strokes on a black background: it is
+    only meaningful for digit-like images of that kind (a photo shrunk to 8 x 8 still
+    gets ten probabilities, which then mean nothing).
+
+    Parameters
+    ----------
+    checkpoint : path
+        See :func:`load_run`.
+    image_paths : sequence of path
+    top_k : int
+        Classes per image (at most the number of classes).
+    device : str, optional
+
+    Returns
+    -------
+    list of Prediction
+        One per image, in order.
+
+    Raises
+    ------
+    InputError
+        No images, ``top_k`` < 1.
+    FileFormatError
+        A missing or unreadable image or checkpoint.
+    """
+    image_paths, top_k = _predict_inputs(image_paths, top_k)
+    model, arch = load_run(checkpoint, device=device)
+    return predict_loaded(model, arch, image_paths, top_k=top_k)
+
+
+def _predict_inputs(
+    image_paths: Sequence[str | os.PathLike[str]], top_k: int
+) -> tuple[list[Path], int]:
+    """``image_paths`` as a list of paths and ``top_k``, checked."""
+    if isinstance(image_paths, (str, bytes, os.PathLike)):
+        image_paths = [image_paths]
+    if not isinstance(image_paths, (list, tuple)):
+        raise InputError(
+            f"image_paths must be a list of image files; got {type(image_paths).__name__}"
+        )
+    if not image_paths:
+        raise InputError("no images to predict: give one or more image files")
+    paths = [as_path(p, "each image path") for p in image_paths]
+    return paths, check_int(top_k, "top_k (--top-k)", 1)
+
+
+@torch.no_grad()
+def predict_loaded(
+    model: nn.Module,
+    arch: Architecture,
+    image_paths: Sequence[str | os.PathLike[str]],
+    *,
+    top_k: int = 3,
+) -> list[Prediction]:
+    """:func:`predict` with a model already loaded by :func:`load_run` (to classify many
+    batches of images without reading the checkpoint again).
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        The run's model, in eval mode, on its device.
+    arch : Architecture
+        Its architecture (:func:`load_run`'s second value).
+    image_paths : sequence of path
+    top_k : int
+        Classes per image (at most the number of classes).
+
+    Returns
+    -------
+    list of Prediction
+        One per image, in order.
+
+    Raises
+    ------
+    InputError
+        No images, ``top_k`` < 1, ``model`` or ``arch`` of the wrong type.
+    FileFormatError
+        A missing or unreadable image.
+
+    Examples
+    --------
+    >>> model, arch = load_run("run/checkpoint.pt")  # doctest: +SKIP
+    >>> predict_loaded(model, arch, ["digit.png"], top_k=1)  # doctest: +SKIP
+    [Prediction(path=PosixPath('digit.png'), top=(('3', 0.98),))]
+    """
+    from robopercept.imaging import read_image
+
+    if not isinstance(model, nn.Module):
+        raise InputError(f"model must be a torch.nn.Module (load_run); got {plain_repr(model)}")
+    if not isinstance(arch, Architecture):
+        raise InputError(f"arch must be an Architecture (load_run); got {plain_repr(arch)}")
+    image_paths, top_k = _predict_inputs(image_paths, top_k)
+    h, w = arch.input_size
+    k = min(int(top_k), arch.num_classes)
+    dev = next(model.parameters()).device
+    out: list[Prediction] = []
+    for path in image_paths:
+        img = to_unit_float(read_image(path, mode=arch.mode))
+        chw = img[None] if img.ndim == 2 else img.transpose(2, 0, 1)
+        x = torch.from_numpy(np.ascontiguousarray(chw))[None]
+        if x.shape[2:] != (h, w):
+            x = F.interpolate(x, size=(h, w), mode="bilinear", align_corners=False, antialias=True)
+        prob = torch.softmax(model(x.to(dev)).float(), 1)[0].cpu()
+        values, indices = torch.topk(prob, k)
+        top = tuple((arch.classes[int(i)], float(v)) for v, i in zip(values, indices, strict=True))
+        out.append(Prediction(Path(path), top))
+    return out

@@ -1,0 +1,774 @@
+r"""Training, evaluating and running the point-cloud networks (PointNet, DGCNN).
+
+The models live in :mod:`robopercept.nn.cloud.pointnet` and :mod:`robopercept.nn.cloud.dgcnn`, the
+data in :mod:`robopercept.nn.cloud.data`; this module is the task around them, the
+recipe of the reference code (charlesq34/pointnet, WangYueFt/dgcnn):
+
+- **Training** (:func:`train_cloud_model`): mini-batches of a seeded shuffle,
+  augmented on the fly (:func:`~robopercept.nn.cloud.data.augment_clouds`: a random
+  rotation about the up axis, anisotropic scaling, jitter, shift), the cross-entropy of
+  the class (or of every point's part, with the object's category one-hot given to the
+  network, as in the reference part segmentation), plus for PointNet the feature
+  transform's regularizer :math:`w \lVert I - A A^\top \rVert_F^2` (``w = 0.001``, the
+  paper's). AdamW with a per-step cosine schedule (:class:`~robopercept.nn.train.loop.TrainConfig`),
+  the epoch with the best validation score kept
+  (:func:`~robopercept.nn.train.loop.epoch_loop`).
+- **Scores** (:func:`evaluate_cloud_model`): overall accuracy and the mean of the
+  per-class accuracies (ModelNet's "class avg"), the confusion matrix; for parts the
+  instance mIoU of ShapeNet-part's protocol: per shape, the IoU of each part of its
+  category (argmax restricted to those parts), a part absent from both truth and
+  prediction counting 1, averaged over the category's parts, then over shapes
+  (``instance_miou``) and per category, then over categories (``class_miou``).
+- **Files**: :func:`save_cloud_model` / :func:`load_cloud_model` (weights and what
+  rebuilds the network, read back without pickled code), :func:`classify_cloud_file`
+  for one PLY/PCD/OFF file (what ``robopercept nn cloud FILE`` prints).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple, cast
+
+import numpy as np
+import numpy.typing as npt
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
+from robopercept.errors import InputError
+from robopercept.nn._guards import check_count
+from robopercept.nn.shipped import BUILD_SHIPPED, SHIPPED_CLOUD_MODELS, shipped_model_path
+from robopercept.nn.train.loop import EpochHistory, TrainConfig, epoch_loop
+
+__all__ = [
+    "CLOUD_MODELS",
+    "CloudEvaluation",
+    "CloudHistory",
+    "CloudPrediction",
+    "build_cloud_model",
+    "classify_cloud_file",
+    "cloud_sets",
+    "evaluate_cloud_model",
+    "load_cloud_model",
+    "part_ious",
+    "predict_clouds",
+    "save_cloud_model",
+    "shipped_cloud_model",
+    "train_cloud_model",
+]
+
+#: the networks by name: ``"pointnet"`` (:class:`~robopercept.nn.cloud.pointnet.PointNet`) and
+#: ``"dgcnn"`` (:class:`~robopercept.nn.cloud.dgcnn.DGCNN`)
+CLOUD_MODELS = ("pointnet", "dgcnn")
+
+#: the command that rebuilds the shipped models from a checkout (the models,
+#: :data:`~robopercept.nn.shipped.SHIPPED_CLOUD_MODELS`, are re-exported here)
+BUILD_SHIPPED_CLOUD = BUILD_SHIPPED["cloud"]
+
+
+def build_cloud_model(
+    name: str, num_outputs: int, *, seed: int | None = None, **settings: Any
+) -> nn.Module:
+    """A point-cloud network by name.
+
+    Parameters
+    ----------
+    name : {"pointnet", "dgcnn"}
+    num_outputs : int
+        Classes (``task="classify"``) or parts (``task="segment"``).
+    seed : int, optional
+        Seeds torch's generator before the weights are drawn.
+    **settings
+        The constructor's keyword arguments (``task``, ``width``, ``k``, ...).
+
+    Returns
+    -------
+    torch.nn.Module
+
+    Examples
+    --------
+    >>> net = build_cloud_model("pointnet", 4, width=0.125, seed=0)
+    >>> net(torch.rand(2, 32, 3)).shape
+    torch.Size([2, 4])
+    """
+    check_choice(name, "name", CLOUD_MODELS)
+    num_outputs = check_count(num_outputs, "num_outputs", 1, 100_000)
+    if seed is not None:
+        torch.manual_seed(check_count(seed, "seed", 0, 2**63 - 1))
+    if name == "pointnet":
+        from robopercept.nn.cloud.pointnet import PointNet
+
+        return PointNet(num_outputs, **settings)
+    from robopercept.nn.cloud.dgcnn import DGCNN
+
+    return DGCNN(num_outputs, **settings)
+
+
+class _Spec(NamedTuple):
+    """What the task code reads off a point-cloud network (typed)."""
+
+    kind: str
+    task: str
+    num_outputs: int
+    in_channels: int
+    config: dict[str, Any]
+
+
+def _spec(model: nn.Module) -> _Spec:
+    name = type(model).__name__.lower()
+    task = getattr(model, "task", None)
+    if name not in CLOUD_MODELS or task not in ("classify", "segment"):
+        raise InputError(
+            f"model must be a PointNet or DGCNN (build_cloud_model); got {plain_repr(model)}"
+        )
+    config = getattr(model, "config", {})
+    return _Spec(
+        name,
+        str(task),
+        int(getattr(model, "num_outputs", 0)),
+        int(getattr(model, "in_channels", 3)),
+        dict(config) if isinstance(config, dict) else {},
+    )
+
+
+def _check_data(data: Any, what: str, task: str) -> Any:
+    from robopercept.nn.cloud.data import CloudDataset
+
+    if not isinstance(data, CloudDataset):
+        raise InputError(
+            f"{what} must be a CloudDataset (procedural_shapes or read_cloud_folder); got "
+            f"{plain_repr(data)}"
+        )
+    if len(data) == 0:
+        raise InputError(f"{what} is empty")
+    if task == "segment" and data.parts is None:
+        raise InputError(
+            f"{what} has no part labels: a segmentation network trains on data with parts "
+            "(procedural_shapes gives them)"
+        )
+    return data
+
+
+class CloudHistory(EpochHistory):
+    """What :func:`train_cloud_model` measured per epoch: the training loss, seconds and
+    the validation score (accuracy for classifiers, instance mIoU for segmenters)."""
+
+    val_name = "val_score"
+
+
+def train_cloud_model(
+    model: nn.Module,
+    train: Any,
+    config: TrainConfig | None = None,
+    *,
+    val: Any = None,
+    augment: bool = True,
+    rotate: str | None = "up",
+    up_axis: int = 2,
+    regularizer: float = 0.001,
+    progress: bool = True,
+) -> CloudHistory:
+    r"""Train a PointNet or DGCNN on a :class:`~robopercept.nn.cloud.data.CloudDataset`.
+
+    Each step takes ``config.batch_size`` clouds of a seeded shuffle, augmented
+    (``augment``: :func:`~robopercept.nn.cloud.data.augment_clouds` with ``rotate``
+    about ``up_axis``, scaling in [0.8, 1.25] per axis, jitter 0.01 clipped at 0.05 and
+    a shift of at most 0.1), and minimizes the cross-entropy of the classes
+    (``task="classify"``) or of every point's part (``"segment"``, the object's class
+    given as the category when the network takes one), plus
+    ``regularizer`` :math:`\cdot \lVert I - A A^\top \rVert_F^2` of PointNet's feature
+    transforms (batch mean, :func:`~robopercept.nn.cloud.pointnet.transform_regularizer`).
+    With ``val`` the score (accuracy, or instance mIoU) is measured after every epoch
+    and the best epoch's weights are kept.
+
+    Parameters
+    ----------
+    model : PointNet or DGCNN
+    train : CloudDataset
+    config : TrainConfig, optional
+        Epochs, batch size, AdamW learning rate, schedule, seed, device.
+    val : CloudDataset, optional
+    augment : bool
+    rotate : {"up", "so3", None}
+    up_axis : {0, 1, 2}
+    regularizer : float
+        The weight of the feature-transform regularizer (PointNet; 0 to disable).
+    progress : bool
+
+    Returns
+    -------
+    CloudHistory
+
+    Raises
+    ------
+    InputError
+        Not a point-cloud network, data without parts for a segmenter, labels out of the
+        network's range, or a loss that became NaN (lower the learning rate).
+    """
+    from robopercept.nn.cloud.data import augment_clouds
+    from robopercept.nn.cloud.pointnet import transform_regularizer
+    from robopercept.nn.train.loop import resolve_device
+
+    spec = _spec(model)
+    task = spec.task
+    if config is not None and not isinstance(config, TrainConfig):
+        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
+    cfg = config or TrainConfig()
+    train = _check_data(train, "train", task)
+    if val is not None:
+        val = _check_data(val, "val", task)
+    augment = check_bool(augment, "augment")
+    if rotate is not None:
+        check_choice(rotate, "rotate", ("up", "so3"))
+    up_axis = check_count(up_axis, "up_axis", 0, 2)
+    regularizer = check_real(regularizer, "regularizer", 0.0, 1e6)
+    target_all = train.labels if task == "classify" else train.parts
+    if int(target_all.max()) >= spec.num_outputs:
+        raise InputError(
+            f"the data has labels up to {int(target_all.max())}; the network predicts "
+            f"{spec.num_outputs} outputs: build it with num_outputs >= "
+            f"{int(target_all.max()) + 1}"
+        )
+    dev = resolve_device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    model.to(dev)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    points = torch.from_numpy(np.ascontiguousarray(train.points, dtype=np.float32))
+    labels = torch.from_numpy(train.labels.astype(np.int64))
+    parts = None if train.parts is None else torch.from_numpy(train.parts.astype(np.int64))
+    in_c = spec.in_channels
+
+    forward_aux = cast(Any, model).forward_aux
+
+    def batch(idx: torch.Tensor) -> torch.Tensor:
+        x = points[idx]
+        if augment:
+            x = augment_clouds(x, gen, rotate=rotate, up_axis=up_axis)
+        y = labels[idx].to(dev)
+        cat = y if spec.config.get("num_categories", 0) else None
+        out = forward_aux(x[..., :in_c].to(dev), category=cat)
+        if task == "classify":
+            loss = F.cross_entropy(out.logits, y)
+        else:
+            assert parts is not None
+            loss = F.cross_entropy(out.logits.flatten(0, 1), parts[idx].to(dev).flatten())
+        for t in out.transforms:
+            if regularizer and t.shape[-1] != in_c:  # the feature transforms only
+                loss = loss + regularizer * transform_regularizer(t)
+        return loss
+
+    def validate() -> float:
+        ev = evaluate_cloud_model(model, val, batch_size=cfg.batch_size)
+        return ev.instance_miou if task == "segment" else ev.accuracy
+
+    hist = CloudHistory()
+    hist.val_name = "val_miou" if task == "segment" else "val_accuracy"
+    epoch_loop(
+        model,
+        len(train),
+        cfg,
+        gen,
+        batch,
+        validate if val is not None else None,
+        desc=f"training {type(model).__name__} ({task})",
+        progress=progress,
+        history=hist,
+    )
+    return hist
+
+
+def _as_batch(points: Any) -> tuple[torch.Tensor, bool]:
+    if isinstance(points, torch.Tensor):
+        x = points.detach().float().cpu()
+    else:
+        try:
+            x = torch.from_numpy(np.asarray(points, dtype=np.float32))
+        except (TypeError, ValueError):
+            raise InputError(
+                f"points must be a (B, N, 3) or (N, 3) array; got {plain_repr(points)}"
+            ) from None
+    single = x.ndim == 2
+    if single:
+        x = x[None]
+    if x.ndim != 3 or x.shape[1] == 0:
+        raise InputError(
+            f"points must be a (B, N, C) batch or one (N, C) cloud; got shape {tuple(x.shape)}"
+        )
+    return x, single
+
+
+@torch.no_grad()
+def predict_clouds(
+    model: nn.Module,
+    points: Any,
+    *,
+    category: npt.ArrayLike | None = None,
+    mask: Any = None,
+    batch_size: int = 32,
+) -> np.ndarray:
+    """Class (or per-point part) probabilities of clouds, in eval mode.
+
+    Parameters
+    ----------
+    model : PointNet or DGCNN
+    points : (B, N, C) or (N, C) array_like or tensor
+        Normalized as the training data were (unit sphere).
+    category : (B,) int array_like, optional
+        The objects' classes, for a segmenter that takes its category.
+    mask : (B, N) bool, optional
+        Real points (padded batches).
+    batch_size : int
+
+    Returns
+    -------
+    (B, K) or (B, N, K) float32 ndarray
+        Softmax probabilities (without the batch axis for one cloud).
+
+    Examples
+    --------
+    >>> net = build_cloud_model("pointnet", 3, width=0.125, seed=0)
+    >>> p = predict_clouds(net, np.random.default_rng(0).random((16, 3)))
+    >>> p.shape, bool(np.isclose(p.sum(), 1.0))
+    ((3,), True)
+    """
+    spec = _spec(model)
+    x, single = _as_batch(points)
+    batch_size = check_int(batch_size, "batch_size", 1)
+    if spec.config.get("num_categories", 0) and category is None:
+        raise InputError(
+            "this segmenter takes the objects' category: pass category=(B,) class indices "
+            "(e.g. a classifier's prediction)"
+        )
+    cat = None
+    if category is not None:
+        cat = torch.as_tensor(np.asarray(category, dtype=np.int64).reshape(-1))
+        if cat.shape[0] != x.shape[0]:
+            raise InputError(f"category must give one class per cloud ({x.shape[0]})")
+    m = None
+    if mask is not None:
+        m = torch.as_tensor(np.asarray(mask, dtype=bool))
+        if m.ndim == 1:
+            m = m[None]
+        if tuple(m.shape) != tuple(x.shape[:2]):
+            raise InputError(f"mask must be (B, N) = {tuple(x.shape[:2])}; got {tuple(m.shape)}")
+    model.eval()
+    dev = next(model.parameters()).device
+    out = []
+    for s in range(0, x.shape[0], batch_size):
+        xb = x[s : s + batch_size].to(dev)
+        mb = None if m is None else m[s : s + batch_size].to(dev)
+        cb = None if cat is None else cat[s : s + batch_size].to(dev)
+        out.append(F.softmax(model(xb, mask=mb, category=cb), dim=-1).cpu())
+    prob = torch.cat(out).numpy()
+    return prob[0] if single else prob
+
+
+@dataclass(frozen=True)
+class CloudEvaluation:
+    """Scores of :func:`evaluate_cloud_model`.
+
+    Attributes
+    ----------
+    accuracy : float
+        Overall accuracy (classifiers) or per-point part accuracy (segmenters).
+    mean_class_accuracy : float
+        The mean over classes of each class's accuracy (ModelNet's "class avg").
+    confusion : (K, K) int64 ndarray
+        Rows true class, columns predicted (classifiers; parts for segmenters).
+    predictions : (M,) or (M, N) int64 ndarray
+    instance_miou, class_miou : float
+        Segmenters: ShapeNet-part mIoU averaged over shapes, and over categories (NaN
+        for classifiers).
+    per_class_miou : (C,) float64 ndarray
+        Segmenters: the mean shape IoU of each category (NaN where absent).
+    """
+
+    accuracy: float
+    mean_class_accuracy: float
+    confusion: np.ndarray
+    predictions: np.ndarray
+    instance_miou: float = float("nan")
+    class_miou: float = float("nan")
+    per_class_miou: np.ndarray | None = None
+
+    def summary(self) -> dict[str, float]:
+        """The scalar scores as a JSON-ready dict."""
+        out = {"accuracy": self.accuracy, "mean_class_accuracy": self.mean_class_accuracy}
+        if np.isfinite(self.instance_miou):
+            out.update(instance_miou=self.instance_miou, class_miou=self.class_miou)
+        return out
+
+
+def _confusion(true: np.ndarray, pred: np.ndarray, k: int) -> np.ndarray:
+    return np.bincount(true * k + pred, minlength=k * k).reshape(k, k).astype(np.int64)
+
+
+def part_ious(
+    pred: np.ndarray, parts: np.ndarray, labels: np.ndarray, part_classes: np.ndarray
+) -> np.ndarray:
+    r"""Per shape the ShapeNet-part mIoU: the mean over the parts of the shape's class of
+    :math:`|P \cap T| / |P \cup T|` (1 when a part is in neither prediction nor truth).
+
+    Parameters
+    ----------
+    pred, parts : (M, N) int
+        Predicted and true global part ids.
+    labels : (M,) int
+        Each shape's class.
+    part_classes : (P,) int
+        The class of each part id.
+
+    Returns
+    -------
+    (M,) float64 ndarray
+
+    Examples
+    --------
+    >>> part_ious(np.array([[0, 0, 1, 1]]), np.array([[0, 0, 0, 1]]), np.array([0]),
+    ...           np.array([0, 0, 1]))
+    array([0.58333333])
+    """
+    pred = np.asarray(pred)
+    parts = np.asarray(parts)
+    labels = np.asarray(labels)
+    part_classes = np.asarray(part_classes)
+    if pred.shape != parts.shape or pred.ndim != 2 or labels.shape != (pred.shape[0],):
+        raise InputError(
+            f"pred and parts must be (M, N) and labels (M,); got {pred.shape}, {parts.shape}, "
+            f"{labels.shape}"
+        )
+    out = np.empty(pred.shape[0])
+    for i in range(pred.shape[0]):
+        ids = np.flatnonzero(part_classes == labels[i])
+        ious = []
+        for p in ids:
+            a, b = pred[i] == p, parts[i] == p
+            union = np.count_nonzero(a | b)
+            ious.append(1.0 if union == 0 else np.count_nonzero(a & b) / union)
+        out[i] = float(np.mean(ious)) if ious else float("nan")
+    return out
+
+
+@torch.no_grad()
+def evaluate_cloud_model(model: nn.Module, data: Any, *, batch_size: int = 32) -> CloudEvaluation:
+    """Score a classifier or part segmenter on a
+    :class:`~robopercept.nn.cloud.data.CloudDataset` (eval mode, no augmentation).
+
+    Segmenters are given the true category (when they take one) and their argmax is
+    restricted to the parts of that category, as in the ShapeNet-part evaluation of the
+    PointNet and DGCNN reference code.
+
+    Returns
+    -------
+    CloudEvaluation
+    """
+    spec = _spec(model)
+    data = _check_data(data, "data", spec.task)
+    k = spec.num_outputs
+    cat = data.labels if spec.config.get("num_categories", 0) else None
+    prob = predict_clouds(
+        model, data.points[..., : spec.in_channels], category=cat, batch_size=batch_size
+    )
+    if spec.task == "classify":
+        pred = prob.argmax(-1).astype(np.int64)
+        true = data.labels.astype(np.int64)
+        conf = _confusion(true, pred, max(k, data.num_classes))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            per = np.diag(conf) / conf.sum(1)
+        return CloudEvaluation(float((pred == true).mean()), float(np.nanmean(per)), conf, pred)
+    assert data.parts is not None and data.part_classes is not None
+    pc = np.asarray(data.part_classes)
+    allowed = pc[None, :] == data.labels[:, None]  # (M, P) the parts of each shape's class
+    prob = np.where(allowed[:, None, : prob.shape[-1]], prob, -1.0)
+    pred = prob.argmax(-1).astype(np.int64)
+    true = data.parts.astype(np.int64)
+    ious = part_ious(pred, true, data.labels, pc)
+    per_class = np.full(data.num_classes, np.nan)
+    for c in range(data.num_classes):
+        sel = data.labels == c
+        if sel.any():
+            per_class[c] = float(ious[sel].mean())
+    conf = _confusion(true.ravel(), pred.ravel(), max(k, data.num_parts))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        per = np.diag(conf) / conf.sum(1)
+    return CloudEvaluation(
+        float((pred == true).mean()),
+        float(np.nanmean(per)),
+        conf,
+        pred,
+        float(ious.mean()),
+        float(np.nanmean(per_class)),
+        per_class,
+    )
+
+
+# ----------------------------------------------------------------------------- data
+@dataclass(frozen=True)
+class CloudSets:
+    """The training, validation and test splits of :func:`cloud_sets`."""
+
+    train: Any
+    val: Any
+    test: Any
+    source: str
+
+
+def cloud_sets(
+    data: str,
+    *,
+    shapes: int = 100,
+    n_points: int = 1024,
+    seed: int = 0,
+    progress: bool = False,
+) -> CloudSets:
+    """The splits a command trains and scores on.
+
+    ``data`` is ``"shapes"`` (the procedural shapes,
+    :func:`~robopercept.nn.cloud.data.procedural_shapes`, ``shapes`` per class for
+    training, a tenth as many for validation and for test, each drawn with its own
+    seed), ``"shapes-partial"`` or ``"shapes-noisy"`` (the harder variants), or a folder
+    ``root/<class>/*.off|*.ply|*.pcd`` (80/10/10 stratified split, seeded) or in
+    ModelNet's layout ``root/<class>/{train,test}/*.off`` (its test split kept; a tenth
+    of its training split held out for validation).
+
+    Returns
+    -------
+    CloudSets
+    """
+    from robopercept.nn.cloud.data import procedural_shapes, read_cloud_folder
+
+    shapes = check_count(shapes, "shapes", 1, 1_000_000)
+    n_points = check_count(n_points, "n_points", 1, 1 << 20)
+    seed = check_count(seed, "seed", 0, 2**31 - 1)
+    if data in ("shapes", "shapes-partial", "shapes-noisy"):
+        variant = "clean" if data == "shapes" else data.split("-")[1]
+        small = max(1, shapes // 10)
+        sets = [
+            procedural_shapes(n, n_points, variant=variant, rng=seed * 3 + i, progress=progress)
+            for i, n in enumerate((shapes, small, small))
+        ]
+        return CloudSets(sets[0], sets[1], sets[2], data)
+    root = Path(data)
+    if not root.is_dir():
+        raise InputError(
+            f"data must be shapes, shapes-partial, shapes-noisy or a folder root/<class>/*.off; "
+            f"{data} is not a folder"
+        )
+    has_split = any((c / "train").is_dir() for c in root.iterdir() if c.is_dir())
+    if has_split:
+        full = read_cloud_folder(root, n_points, split="train", rng=seed, progress=progress)
+        test = read_cloud_folder(root, n_points, split="test", rng=seed, progress=progress)
+        train, val = full.split((0.9, 0.1), rng=seed)
+        return CloudSets(train, val, test, str(root))
+    full = read_cloud_folder(root, n_points, rng=seed, progress=progress)
+    train, val, test = full.split((0.8, 0.1, 0.1), rng=seed)
+    return CloudSets(train, val, test, str(root))
+
+
+# ----------------------------------------------------------------------------- files
+def save_cloud_model(
+    path: str | os.PathLike[str],
+    model: nn.Module,
+    class_names: Sequence[str],
+    *,
+    part_names: Sequence[str] = (),
+    part_classes: npt.ArrayLike | None = None,
+    n_points: int = 1024,
+    **extra: Any,
+) -> Path:
+    """Write a point-cloud network with what rebuilds it (its name and constructor
+    settings), the class names (and part names and each part's class for a
+    segmenter), the point count it was trained on, and ``extra`` plain values.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> net = build_cloud_model("pointnet", 2, width=0.125, seed=0)
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "net.pt"
+    >>> _ = save_cloud_model(p, net, ["cube", "ball"], n_points=64)
+    >>> net2, info = load_cloud_model(p)
+    >>> info["class_names"], info["n_points"]
+    (['cube', 'ball'], 64)
+    """
+    from robopercept.nn.train.loop import save_built_model
+
+    spec = _spec(model)
+    names = [str(c) for c in class_names]
+    parts = [str(p) for p in part_names]
+    outputs = names if spec.task == "classify" else parts
+    if len(outputs) != spec.num_outputs:
+        raise InputError(
+            f"the network has {spec.num_outputs} outputs; got {len(outputs)} "
+            f"{'class' if spec.task == 'classify' else 'part'} names"
+        )
+    pcs = [] if part_classes is None else [int(v) for v in np.asarray(part_classes).ravel()]
+    settings = {k: v for k, v in spec.config.items() if k != "num_outputs"}
+    return save_built_model(
+        path,
+        model,
+        spec.kind,
+        settings,
+        outputs,
+        class_names=names,
+        part_names=parts,
+        part_classes=pcs,
+        n_points=check_int(n_points, "n_points", 1),
+        **extra,
+    )
+
+
+def _build(kind: str, n: int, **settings: Any) -> nn.Module:
+    return build_cloud_model(kind, n, **settings)
+
+
+def load_cloud_model(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, Any]]:
+    """Rebuild a network written by :func:`save_cloud_model` (eval mode, CPU).
+
+    Returns
+    -------
+    model : nn.Module
+    info : dict
+        ``class_names``, ``part_names``, ``part_classes``, ``n_points``, the settings
+        and what else was saved.
+
+    Raises
+    ------
+    FileFormatError
+        Missing or unreadable file, or a checkpoint that is not a point-cloud network's.
+    """
+    from robopercept.nn.train.loop import load_built_model
+
+    return load_built_model(
+        path,
+        CLOUD_MODELS,
+        _build,
+        "point-cloud network",
+        "save_cloud_model or `robopercept nn cloud train`",
+    )
+
+
+def shipped_cloud_model(name: str = "pointnet") -> Path:
+    """The path of a shipped model: ``"pointnet"`` (the default classifier), ``"dgcnn"``
+    or ``"pointnet-parts"`` (part segmentation), trained on the procedural shapes.
+
+    Raises
+    ------
+    InputError
+        Unknown name, or the file is not installed (the message gives the command that
+        builds it).
+    """
+    check_choice(name, "name", tuple(SHIPPED_CLOUD_MODELS))
+    return shipped_model_path("cloud", name)
+
+
+@dataclass(frozen=True)
+class CloudPrediction:
+    """What :func:`classify_cloud_file` found in one file.
+
+    Attributes
+    ----------
+    path : str
+    label : str
+        The most probable class.
+    probabilities : dict of str to float
+        Every class's probability, most probable first.
+    points : (n, 3) float32 ndarray
+        The sampled, unit-sphere-normalized points the network saw.
+    parts : (n,) int64 ndarray or None
+        Per-point part ids (with a segmenter).
+    part_names : tuple of str
+    """
+
+    path: str
+    label: str
+    probabilities: dict[str, float]
+    points: np.ndarray
+    parts: np.ndarray | None = None
+    part_names: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the class, the probabilities, and the part counts."""
+        out: dict[str, Any] = {
+            "file": self.path,
+            "class": self.label,
+            "probabilities": {k: round(v, 6) for k, v in self.probabilities.items()},
+            "points": int(self.points.shape[0]),
+        }
+        if self.parts is not None:
+            ids, counts = np.unique(self.parts, return_counts=True)
+            out["part_points"] = {
+                self.part_names[i]: int(c) for i, c in zip(ids, counts, strict=True)
+            }
+        return out
+
+
+def classify_cloud_file(
+    path: str | os.PathLike[str],
+    model: nn.Module,
+    info: dict[str, Any],
+    *,
+    segmenter: tuple[nn.Module, dict[str, Any]] | None = None,
+    n_points: int | None = None,
+    rng: int = 0,
+) -> CloudPrediction:
+    """Classify (and with ``segmenter``, segment) the cloud or mesh in one file.
+
+    The file (PLY or PCD cloud, OFF or PLY mesh) is read and sampled to ``n_points``
+    (default: the count the model was trained on) and normalized to the unit sphere by
+    :func:`~robopercept.nn.cloud.data.read_cloud_file`; the classifier gives the class
+    probabilities; the segmenter, given the predicted class as the category, labels each
+    point with the most probable part of that class.
+
+    Returns
+    -------
+    CloudPrediction
+    """
+    from robopercept.nn.cloud.data import read_cloud_file
+
+    _spec(model)
+    if not isinstance(info, dict) or not isinstance(info.get("class_names"), (list, tuple)):
+        raise InputError(
+            f"info must be load_cloud_model's dict (with class_names); got {plain_repr(info)}"
+        )
+    if segmenter is not None and not (
+        isinstance(segmenter, tuple)
+        and len(segmenter) == 2
+        and isinstance(segmenter[1], dict)
+        and _spec(segmenter[0]).task == "segment"
+    ):
+        raise InputError(
+            "segmenter must be a (model, info) pair of a segmentation network, as "
+            f"load_cloud_model returns; got {plain_repr(segmenter)}"
+        )
+    n = int(info.get("n_points", 1024)) if n_points is None else check_int(n_points, "n_points", 1)
+    pts = read_cloud_file(path, n, rng=rng)
+    prob = predict_clouds(model, pts)
+    names = list(info["class_names"])
+    order = np.argsort(-prob)
+    label = int(order[0])
+    parts = None
+    part_names: tuple[str, ...] = ()
+    if segmenter is not None:
+        seg, sinfo = segmenter
+        if list(sinfo["class_names"]) != names:
+            raise InputError(
+                "the segmenter was trained on other classes than the classifier: "
+                f"{sinfo['class_names']} vs {names}"
+            )
+        pp = predict_clouds(seg, pts, category=[label])
+        pcs = np.asarray(sinfo["part_classes"])
+        pp = np.where(pcs[None, : pp.shape[-1]] == label, pp, -1.0)
+        parts = pp.argmax(-1).astype(np.int64)
+        part_names = tuple(sinfo["part_names"])
+    return CloudPrediction(
+        str(path),
+        names[label],
+        {names[i]: float(prob[i]) for i in order},
+        pts,
+        parts,
+        part_names,
+    )

@@ -1,0 +1,3 @@
+"""Shared network parts: the VGG/Inception/ResNet blocks (:mod:`.blocks`), per-layer
+summaries (:mod:`.summary`), fine-tuning helpers (:mod:`.transfer`) and ONNX export
+(:mod:`.export`). Used by every task wing; imports no wing."""

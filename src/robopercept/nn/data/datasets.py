@@ -1,0 +1,1033 @@
+"""Datasets and augmentations for the networks of :mod:`robopercept.nn` (torch).
+
+A dataset here is a set of images ``(N, C, H, W)`` float32 in [0, 1] with integer labels
+``(N,)`` in ``0 .. K-1`` and class names ``(K,)``. :class:`ArrayDataset` holds them in
+memory and serves ``(image, label)`` pairs, ``image`` a ``(C, H, W)`` float32 tensor and
+``label`` an int, as ``torch.utils.data.DataLoader`` expects (the contract of
+``torch.utils.data.Dataset``: ``__len__`` and ``__getitem__``).
+
+Sources of real data that work offline:
+
+- :func:`load_digits`: scikit-learn's 1,797 handwritten digits, 8 x 8, values 0..16
+  divided by 16.
+- :func:`load_lfw_subset`: scikit-image's ``lfw_subset``, 200 images of 25 x 25 pixels,
+  the first 100 faces and the next 100 non-faces (scikit-image's docstring); label 1 is
+  ``face``.
+- :class:`ImageFolder`: the torchvision layout ``root/class_name/*.png``, classes sorted
+  by name, pixels divided by the file's maximum (255 for 8-bit, 65535 for 16-bit).
+- :func:`shapes_dataset`: procedural circles, squares, triangles and crosses (for
+  pretraining and tests).
+
+The course's data steps: :func:`stratified_split` (train / validation / test with the
+class proportions kept) and :func:`normalization_stats` (per-channel mean and standard
+deviation from the training split only, then :class:`Normalize`).
+
+Augmentations are written in torch and take their randomness from a ``torch.Generator``
+given to them (an int seed makes one), never from torch's global state: the same seed
+gives the same sequence of augmented images. Each works on one image ``(C, H, W)`` or a
+batch ``(N, C, H, W)`` (one independent draw per image) and returns the same shape.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import torch
+import torch.nn.functional as F
+
+from robopercept._checks import (
+    as_path,
+    as_rng,
+    check_bool,
+    check_choice,
+    check_finite,
+    check_int,
+    check_magnitude,
+    check_ndim,
+    check_numeric,
+    check_real,
+    check_size,
+    plain_repr,
+)
+from robopercept.errors import FileFormatError, InputError
+from robopercept.imaging.io import read_image
+from robopercept.nn._guards import MAX_BYTES, check_allocation
+from robopercept.nn.train.loop import Normalize
+
+__all__ = [
+    "IMAGE_EXTENSIONS",
+    "SHAPES",
+    "ArrayDataset",
+    "ColorJitter",
+    "Compose",
+    "GaussianNoise",
+    "ImageFolder",
+    "Normalize",
+    "RandomAffine",
+    "RandomCrop",
+    "RandomFlip",
+    "load_digits",
+    "load_lfw_subset",
+    "normalization_stats",
+    "shape_masks",
+    "shapes_dataset",
+    "stratified_split",
+    "to_unit_float",
+]
+
+#: file extensions :class:`ImageFolder` reads (lower case)
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm")
+
+Transform = Callable[[torch.Tensor], torch.Tensor]
+
+
+# --------------------------------------------------------------------------- datasets
+
+
+def _check_transform(transform: object) -> Transform | None:
+    """``transform`` if it is None or callable."""
+    if transform is not None and not callable(transform):
+        raise InputError(
+            "transform must be a callable Tensor -> Tensor (e.g. RandomFlip()) or None; "
+            f"got {type(transform).__name__} {transform!r}"[:200]
+        )
+    return transform
+
+
+def _check_images(images: npt.ArrayLike) -> np.ndarray:
+    """``images`` as float32 ``(N, C, H, W)``: gray ``(N, H, W)`` gets ``C = 1``."""
+    if isinstance(images, torch.Tensor):
+        images = images.detach().cpu().numpy()
+    arr = check_ndim(images, "images", (2, 3, 4))
+    if arr.ndim == 3:
+        arr = arr[:, None]
+    if arr.ndim != 4:
+        raise InputError(
+            f"images must be (N, C, H, W) or gray (N, H, W); got shape {arr.shape}"
+            + (": a single image? use images[None]" if arr.ndim == 2 else "")
+        )
+    if arr.shape[0] == 0:
+        raise InputError("images is empty (N = 0): the dataset needs at least one image")
+    if arr.shape[-1] in (1, 3, 4) and arr.shape[1] not in (1, 3, 4):
+        raise InputError(
+            f"images must be channels-first (N, C, H, W); got {arr.shape}: channels-last? "
+            "use images.transpose(0, 3, 1, 2)"
+        )
+    if arr.dtype.kind in "iub":
+        raise InputError(
+            f"images must be floating point in [0, 1]; got dtype {arr.dtype}: "
+            "divide by the maximum first (images / 255.0 for 8-bit)"
+        )
+    if arr.dtype.kind != "f":
+        raise InputError(f"images must be floating point; got dtype {arr.dtype}")
+    if not np.isfinite(arr).all():
+        raise InputError("images contain NaN or inf: drop or repair those images first")
+    # float32 storage: beyond 1e18 squares (variances, losses) overflow float32
+    check_magnitude(arr, "images", 1e18)
+    return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def _check_labels(labels: npt.ArrayLike, n: int, n_classes: int) -> np.ndarray:
+    """``labels`` as int64 ``(n,)`` with values in ``0 .. n_classes - 1``."""
+    arr = check_ndim(labels, "labels", (0, 1, 2, 3))
+    if arr.ndim != 1 or arr.shape[0] != n:
+        raise InputError(f"labels must have shape ({n},), one per image; got {arr.shape}")
+    if arr.dtype.kind not in "iu":
+        if arr.dtype.kind == "f" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
+            arr = arr.astype(np.int64)
+        else:
+            raise InputError(
+                f"labels must be integers 0 .. {n_classes - 1}; got dtype {arr.dtype}: "
+                "map class names to indices first (np.unique(names, return_inverse=True))"
+            )
+    bad = (arr < 0) | (arr >= n_classes)
+    if bad.any():
+        raise InputError(
+            f"labels must be in 0 .. {n_classes - 1} ({n_classes} classes); got "
+            f"{int(arr[bad][0])} at index {int(np.flatnonzero(bad)[0])}: pass all class "
+            "names in classes"
+        )
+    return arr.astype(np.int64)
+
+
+class ArrayDataset:
+    """Images and labels held in memory, served one ``(image, label)`` pair at a time.
+
+    Follows the ``torch.utils.data.Dataset`` map-style contract, so it can be given to
+    ``torch.utils.data.DataLoader`` directly.
+
+    Parameters
+    ----------
+    images : (N, C, H, W) or (N, H, W) float array
+        Pixels in [0, 1] (gray images get ``C = 1``). Integer images are refused rather
+        than rescaled: divide by 255 (8-bit) first.
+    labels : (N,) int array
+        Class indices in ``0 .. len(classes) - 1``.
+    classes : sequence of str, length K
+        Class names; ``classes[labels[i]]`` names image ``i``.
+    transform : callable, optional
+        Applied to each ``(C, H, W)`` tensor in ``__getitem__`` (an augmentation of this
+        module or any ``Tensor -> Tensor`` function).
+
+    Attributes
+    ----------
+    images : (N, C, H, W) float32 ndarray
+    labels : (N,) int64 ndarray
+    classes : tuple of str
+    transform : callable or None
+
+    Raises
+    ------
+    InputError
+        Empty dataset, channels-last or integer images, NaN pixels, labels of the wrong
+        length or out of range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ds = ArrayDataset(np.zeros((4, 8, 8), np.float32), [0, 1, 0, 1], ["a", "b"])
+    >>> len(ds), ds[1][0].shape, ds[1][1]
+    (4, torch.Size([1, 8, 8]), 1)
+    """
+
+    def __init__(
+        self,
+        images: npt.ArrayLike,
+        labels: npt.ArrayLike,
+        classes: Sequence[str],
+        transform: Transform | None = None,
+    ) -> None:
+        if isinstance(classes, bytes) or not isinstance(classes, Iterable):
+            raise InputError(
+                f"classes must be a sequence of class names, e.g. ['cat', 'dog']; got {classes!r}"
+            )
+        classes = tuple(str(c) for c in classes)
+        if len(classes) == 0:
+            raise InputError("classes is empty: pass one name per class, e.g. ['cat', 'dog']")
+        self.images = _check_images(images)
+        self.labels = _check_labels(labels, self.images.shape[0], len(classes))
+        self.classes = classes
+        self.transform = _check_transform(transform)
+
+    def __len__(self) -> int:
+        """Number of images ``N``."""
+        return int(self.images.shape[0])
+
+    def __getitem__(self, index: int) -> tuple[torch.Tensor, int]:
+        """Image ``index`` as a ``(C, H, W)`` float32 tensor (transformed) and its label."""
+        image = torch.from_numpy(self.images[index])
+        if self.transform is not None:
+            image = self.transform(image)
+        return image, int(self.labels[index])
+
+    @property
+    def image_shape(self) -> tuple[int, int, int]:
+        """``(C, H, W)`` of every image."""
+        c, h, w = self.images.shape[1:]
+        return int(c), int(h), int(w)
+
+    def subset(self, indices: npt.ArrayLike, transform: Transform | None = None) -> ArrayDataset:
+        """A new dataset with the images at ``indices`` (e.g. one split of
+        :func:`stratified_split`), the same classes and ``transform`` (or this one's).
+
+        Parameters
+        ----------
+        indices : (M,) int array
+            Positions in this dataset.
+        transform : callable, optional
+            Transform of the subset; None keeps this dataset's.
+
+        Returns
+        -------
+        ArrayDataset
+        """
+        idx = np.asarray(indices, dtype=np.int64)
+        return ArrayDataset(
+            self.images[idx],
+            self.labels[idx],
+            self.classes,
+            transform if transform is not None else self.transform,
+        )
+
+
+def load_digits(transform: Transform | None = None) -> ArrayDataset:
+    """scikit-learn's handwritten digits: 1,797 images of 8 x 8, ten classes.
+
+    The pixels (counts 0..16 of the original 32 x 32 bitmaps) are divided by 16, so they
+    lie in [0, 1]. Same images and order as ``sklearn.datasets.load_digits()``.
+
+    Parameters
+    ----------
+    transform : callable, optional
+        See :class:`ArrayDataset`.
+
+    Returns
+    -------
+    ArrayDataset
+        ``images`` (1797, 1, 8, 8), ``labels`` 0..9, ``classes`` ``('0', ..., '9')``.
+
+    Raises
+    ------
+    InputError
+        scikit-learn is not installed (``pip install scikit-learn``).
+    """
+    try:
+        from sklearn.datasets import load_digits as _sk_load_digits
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise InputError("load_digits needs scikit-learn: pip install scikit-learn") from exc
+    bunch = _sk_load_digits()
+    images = (np.asarray(bunch.images, dtype=np.float32) / 16.0)[:, None]
+    return ArrayDataset(images, bunch.target, [str(d) for d in range(10)], transform)
+
+
+def load_lfw_subset(transform: Transform | None = None) -> ArrayDataset:
+    """scikit-image's ``lfw_subset``: 100 faces and 100 non-faces of 25 x 25 pixels.
+
+    scikit-image documents the order: the first 100 images are faces, the next 100
+    non-faces (background crops of the same LFW photos). Pixels are uint8 divided by 255.
+
+    Parameters
+    ----------
+    transform : callable, optional
+        See :class:`ArrayDataset`.
+
+    Returns
+    -------
+    ArrayDataset
+        ``images`` (200, 1, 25, 25), ``classes`` ``('non-face', 'face')``: label 1 for
+        the first 100 images, 0 for the next 100.
+
+    Raises
+    ------
+    InputError
+        scikit-image is not installed (``pip install scikit-image``).
+    """
+    try:
+        from skimage.data import lfw_subset
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise InputError("load_lfw_subset needs scikit-image: pip install scikit-image") from exc
+    raw = np.asarray(lfw_subset())
+    images = (raw.astype(np.float32) / 255.0)[:, None]
+    labels = np.r_[np.ones(100, np.int64), np.zeros(raw.shape[0] - 100, np.int64)]
+    return ArrayDataset(images, labels, ("non-face", "face"), transform)
+
+
+def to_unit_float(image: np.ndarray) -> np.ndarray:
+    """An image read from a file as float32 with the file's full scale mapped to 1:
+    uint8 / 255, uint16 / 65535, floats kept."""
+    if image.dtype == np.uint8:
+        return image.astype(np.float32) / 255.0
+    if image.dtype == np.uint16:
+        return image.astype(np.float32) / 65535.0
+    return image.astype(np.float32)
+
+
+class ImageFolder(ArrayDataset):
+    """Images in the layout ``root/class_name/*.png`` (torchvision's ``ImageFolder``).
+
+    Every subfolder of ``root`` is a class; classes are sorted by name and numbered from
+    0. Every file in them is read eagerly with :func:`robopercept.imaging.read_image`
+    (so a broken file is found now, not mid-training), converted to ``mode`` and to
+    float32 in [0, 1] (8-bit / 255, 16-bit / 65535), optionally resized.
+
+    Files are handled so: names starting with ``.`` (``.DS_Store``) are ignored; a file
+    without an image extension (:data:`IMAGE_EXTENSIONS`) or one that cannot be decoded
+    raises :class:`~robopercept.errors.FileFormatError` naming it, unless
+    ``skip_invalid=True``, in which case it is skipped and one warning counts the skipped
+    files (their paths are in ``skipped``).
+
+    Parameters
+    ----------
+    root : path-like
+        The folder holding one subfolder per class.
+    mode : {'rgb', 'gray'}
+        ``'rgb'`` gives C = 3, ``'gray'`` C = 1 (BT.601 luma).
+    size : (width, height), optional
+        Resize every image to this size (bilinear with antialiasing,
+        ``torch.nn.functional.interpolate``). Without it all images must share one size.
+    transform : callable, optional
+        See :class:`ArrayDataset`.
+    skip_invalid : bool
+        Skip non-image and unreadable files with a warning instead of raising.
+
+    Attributes
+    ----------
+    paths : tuple of Path
+        The file of each image, in dataset order (class by class, names sorted).
+    skipped : tuple of Path
+        Files skipped (only with ``skip_invalid=True``).
+
+    Raises
+    ------
+    InputError
+        ``root`` is not a folder, has no class subfolder, or has no image; images of
+        different sizes without ``size``.
+    FileFormatError
+        A non-image or unreadable file (without ``skip_invalid``), naming the file.
+    """
+
+    def __init__(
+        self,
+        root: str | Path,
+        *,
+        mode: str = "rgb",
+        size: tuple[int, int] | None = None,
+        transform: Transform | None = None,
+        skip_invalid: bool = False,
+    ) -> None:
+        root = as_path(root, "root (the image folder)")
+        mode = check_choice(mode, "mode", ("rgb", "gray"))
+        skip_invalid = check_bool(skip_invalid, "skip_invalid")
+        transform = _check_transform(transform)
+        if size is not None:
+            size = _check_size(size)
+            check_allocation(3 * size[0] * size[1], 4, f"one image resized to {size}", "lower size")
+        loaded = 0
+        if not root.is_dir():
+            raise InputError(f"image folder {str(root)!r} does not exist or is not a folder")
+        class_dirs = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
+        if not class_dirs:
+            raise InputError(
+                f"image folder {str(root)!r} has no class subfolders: lay it out as "
+                "root/class_name/image.png"
+            )
+        images: list[np.ndarray] = []
+        labels: list[int] = []
+        paths: list[Path] = []
+        skipped: list[Path] = []
+        for label, cdir in enumerate(class_dirs):
+            for f in sorted(cdir.iterdir()):
+                if f.name.startswith(".") or f.is_dir():
+                    continue
+                if f.suffix.lower() not in IMAGE_EXTENSIONS:
+                    if skip_invalid:
+                        skipped.append(f)
+                        continue
+                    raise FileFormatError(
+                        f"{str(f)!r} is not an image file (extensions read: "
+                        f"{', '.join(IMAGE_EXTENSIONS)}): move it out of the image folder "
+                        "or pass skip_invalid=True"
+                    )
+                try:
+                    img = read_image(f, mode=mode)
+                except FileFormatError as exc:
+                    if skip_invalid:
+                        skipped.append(f)
+                        continue
+                    raise FileFormatError(
+                        f"cannot read image {str(f)!r} ({exc}): remove or repair it, or pass "
+                        "skip_invalid=True"
+                    ) from exc
+                arr = to_unit_float(img)
+                arr = arr[None] if arr.ndim == 2 else arr.transpose(2, 0, 1)
+                if size is not None:
+                    arr = _resize(arr, size)
+                loaded += arr.nbytes
+                if loaded > MAX_BYTES:
+                    raise InputError(
+                        f"the images of {str(root)!r} take more than 1 GiB as float32 (at "
+                        f"{f}): pass a smaller size=(width, height), or split the folder"
+                    )
+                images.append(np.ascontiguousarray(arr))
+                labels.append(label)
+                paths.append(f)
+        if skipped:
+            warnings.warn(
+                f"ImageFolder skipped {len(skipped)} non-image or unreadable file(s) in "
+                f"{str(root)!r} (see .skipped)",
+                stacklevel=2,
+            )
+        if not images:
+            raise InputError(
+                f"image folder {str(root)!r} has no images in its class subfolders "
+                f"({', '.join(p.name for p in class_dirs)}): add files with extensions "
+                f"{', '.join(IMAGE_EXTENSIONS)}"
+            )
+        shapes = sorted({im.shape[1:] for im in images})
+        if len(shapes) > 1:
+            raise InputError(
+                f"images in {str(root)!r} have {len(shapes)} different sizes (H, W) "
+                f"{shapes[:3]}...: pass size=(width, height) to resize them"
+            )
+        super().__init__(np.stack(images), labels, [p.name for p in class_dirs], transform)
+        self.paths = tuple(paths)
+        self.skipped = tuple(skipped)
+
+
+def _check_size(size: object) -> tuple[int, int]:
+    """``size`` as a ``(width, height)`` pair of positive ints."""
+    if not isinstance(size, (tuple, list)) or len(size) != 2:
+        raise InputError(f"size must be (width, height), e.g. (32, 32); got {size!r}")
+    return check_int(size[0], "size (width)", 1), check_int(size[1], "size (height)", 1)
+
+
+def _resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``(C, H, W)`` resized to ``size = (width, height)`` by antialiased bilinear."""
+    w, h = _check_size(size)
+    t = torch.from_numpy(image)[None]
+    out = F.interpolate(t, size=(h, w), mode="bilinear", align_corners=False, antialias=True)
+    return out[0].numpy()
+
+
+#: the shape classes of :func:`shapes_dataset` and :func:`shape_masks`, in label order
+SHAPES = ("circle", "square", "triangle", "cross")
+
+
+def shape_masks(
+    kinds: npt.ArrayLike,
+    cx: npt.ArrayLike,
+    cy: npt.ArrayLike,
+    r: npt.ArrayLike,
+    phi: npt.ArrayLike,
+    size: tuple[int, int],
+) -> np.ndarray:
+    """Rasterize rotated shapes of :data:`SHAPES`, one per row: the masks of
+    :func:`shapes_dataset`.
+
+    Pixel ``p`` (its centre, ``(col + 0.5, row + 0.5)`` with edges on integers) is in
+    shape ``i`` when, with ``q = R(-phi_i) (p - c_i)`` and ``r = r_i``:
+
+    - circle (kind 0): ``|q| <= r``;
+    - square (1): ``max(|q_x|, |q_y|) <= r / sqrt(2)``;
+    - triangle (2): equilateral, vertices ``r (cos a_k, sin a_k)``,
+      ``a_k = 2 pi k / 3 - pi/2``, ``q`` on the inner side of its three edges;
+    - cross (3): ``min(|q_x|, |q_y|) <= r / 4`` and ``max(|q_x|, |q_y|) <= r``.
+
+    Parameters
+    ----------
+    kinds : (N,) int array_like
+        Index into :data:`SHAPES` of each shape.
+    cx, cy, r, phi : (N,) float array_like
+        Centres, radii (> 0) and rotations (radians).
+    size : (int, int)
+        ``(width, height)`` of the masks.
+
+    Returns
+    -------
+    (N, H, W) bool ndarray
+
+    Examples
+    --------
+    >>> m = shape_masks([1], [4.0], [4.0], [2 * 2**0.5], [0.0], (8, 8))
+    >>> int(m.sum()), m[0, 2:6, 2:6].all()
+    (16, np.True_)
+    """
+    kf = check_finite(check_numeric(kinds, "kinds"), "kinds").reshape(-1)
+    if np.any((kf < 0) | (kf > len(SHAPES) - 1) | (kf != np.floor(kf))):
+        raise InputError(
+            f"kinds must be integers in [0, {len(SHAPES) - 1}] (indices into {SHAPES}); "
+            f"got {plain_repr(kinds)}"
+        )
+    k = kf.astype(np.int64)
+    rows = []
+    for name, v in (("cx", cx), ("cy", cy), ("r", r), ("phi", phi)):
+        arr = check_finite(check_numeric(v, name), name).astype(np.float64).reshape(-1)
+        if arr.shape != k.shape:
+            raise InputError(f"{name} must have one value per shape ({k.size}); got {arr.size}")
+        rows.append(check_magnitude(arr, name, 1e100))
+    cx_, cy_, r_, phi_ = rows
+    if np.any(r_ <= 0):
+        raise InputError(f"r must be > 0; got {plain_repr(r)}")
+    w, h = check_size(size, "size", max_pixels=1 << 26)
+    check_allocation(k.size * w * h, 100, f"{k.size} masks of {w} x {h}", "lower N or size")
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64) + 0.5
+    dx = xx[None] - cx_[:, None, None]
+    dy = yy[None] - cy_[:, None, None]
+    cos, sin = np.cos(phi_)[:, None, None], np.sin(phi_)[:, None, None]
+    qx = cos * dx + sin * dy
+    qy = -sin * dx + cos * dy
+    rr = r_[:, None, None]
+    ax, ay = np.abs(qx), np.abs(qy)
+    out = np.zeros((k.size, h, w), dtype=bool)
+    sel = k == 0
+    out[sel] = (qx**2 + qy**2 <= rr**2)[sel]
+    sel = k == 1
+    out[sel] = (np.maximum(ax, ay) <= rr / np.sqrt(2))[sel]
+    sel = k == 2
+    if sel.any():
+        inside = np.ones((int(sel.sum()), h, w), dtype=bool)
+        qxs, qys, rrs = qx[sel], qy[sel], rr[sel]
+        for j in range(3):
+            a = 2 * np.pi * j / 3 - np.pi / 2
+            b = 2 * np.pi * (j + 1) / 3 - np.pi / 2
+            # edge from vertex a to vertex b; the centre (origin) is on its inner side
+            ex, ey = np.cos(b) - np.cos(a), np.sin(b) - np.sin(a)
+            cross_p = ex * (qys / rrs - np.sin(a)) - ey * (qxs / rrs - np.cos(a))
+            cross_0 = ex * (0 - np.sin(a)) - ey * (0 - np.cos(a))
+            inside &= cross_p * np.sign(cross_0) >= 0
+        out[sel] = inside
+    sel = k == 3
+    out[sel] = ((np.minimum(ax, ay) <= rr / 4) & (np.maximum(ax, ay) <= rr))[sel]
+    return out
+
+
+def shapes_dataset(
+    n: int,
+    size: int = 32,
+    rng: int | np.random.Generator | None = None,
+    *,
+    noise: float = 0.05,
+    transform: Transform | None = None,
+) -> ArrayDataset:
+    """Procedural gray images of four shapes: circle, square, triangle, cross.
+
+    Each image has a uniform background of intensity ``b ~ U(0, 0.4)`` and one shape of
+    intensity ``f ~ U(0.6, 1)`` (so the shape is always at least 0.2 brighter), centre
+    ``c`` uniform with the shape inside the image, radius ``r ~ U(size/6, size/3)`` and
+    a random rotation (squares, triangles and crosses), then Gaussian noise of standard
+    deviation ``noise``, clipped to [0, 1]. Membership of pixel ``p`` (centre of the
+    pixel), with ``q = R(-phi) (p - c)``:
+
+    - circle: ``|q| <= r``;
+    - square: ``max(|q_x|, |q_y|) <= r / sqrt(2)`` (corners on the circle of radius r);
+    - triangle: equilateral, vertices ``r (cos a_k, sin a_k)`` with ``a_k = 2 pi k / 3 - pi/2``,
+      ``q`` on the inner side of its three edges;
+    - cross: ``min(|q_x|, |q_y|) <= r / 4`` and ``max(|q_x|, |q_y|) <= r``.
+
+    Labels are balanced (``i mod 4`` shuffled).
+
+    Parameters
+    ----------
+    n : int
+        Number of images (>= 1).
+    size : int
+        Side of the square images (>= 8).
+    rng : int, numpy.random.Generator or None
+        Seed: the same seed gives the same images.
+    noise : float
+        Standard deviation of the additive noise (>= 0).
+    transform : callable, optional
+        See :class:`ArrayDataset`.
+
+    Returns
+    -------
+    ArrayDataset
+        ``images`` (n, 1, size, size) in [0, 1]; ``classes``
+        ``('circle', 'square', 'triangle', 'cross')``.
+    """
+    n = check_int(n, "n", 1)
+    size = check_int(size, "size", 8)
+    noise = check_real(noise, "noise (a standard deviation)", 0.0)
+    transform = _check_transform(transform)
+    # about 100 bytes of intermediate arrays per pixel (masks, float64 coordinates)
+    check_allocation(
+        n * size * size,
+        100,
+        f"{n} images of {size} x {size} (with their intermediate arrays)",
+        "lower n or size, or make the data set in chunks with different seeds",
+    )
+    gen = as_rng(rng)
+    labels = gen.permutation(np.arange(n) % 4)
+    r = gen.uniform(size / 6, size / 3, n)
+    cx = gen.uniform(r, size - r)
+    cy = gen.uniform(r, size - r)
+    phi = gen.uniform(0, 2 * np.pi, n)
+    bg = gen.uniform(0.0, 0.4, n)
+    fg = gen.uniform(0.6, 1.0, n)
+    mask = shape_masks(labels, cx, cy, r, phi, (size, size))
+    images = np.where(mask, fg[:, None, None], bg[:, None, None])
+    images = images + noise * gen.standard_normal(images.shape)
+    images = np.clip(images, 0.0, 1.0).astype(np.float32)[:, None]
+    return ArrayDataset(images, labels, SHAPES, transform)
+
+
+# --------------------------------------------------------------------------- splits and stats
+
+
+def stratified_split(
+    labels: npt.ArrayLike,
+    fractions: Sequence[float] = (0.7, 0.15, 0.15),
+    rng: int | np.random.Generator | None = 0,
+) -> tuple[np.ndarray, ...]:
+    """Split indices into parts with the class proportions of ``labels`` kept in each.
+
+    For each class ``k`` with ``n_k`` members (shuffled), part ``j`` gets
+    ``floor(f_j n_k)`` of them and the remaining ones go to the parts with the largest
+    remainders ``f_j n_k - floor(f_j n_k)`` (Hamilton's method), so the parts are
+    disjoint, cover every index, and each holds ``f_j n_k`` members of class ``k``
+    rounded to a neighbouring integer. Same idea as scikit-learn's
+    ``train_test_split(..., stratify=labels)`` for any number of parts.
+
+    Parameters
+    ----------
+    labels : (N,) int array
+    fractions : sequence of float
+        One positive fraction per part, summing to 1 (e.g. train, validation, test).
+    rng : int, numpy.random.Generator or None
+        Seed of the shuffle.
+
+    Returns
+    -------
+    tuple of (N_j,) int64 ndarray
+        Sorted indices of each part, in the order of ``fractions``.
+
+    Examples
+    --------
+    >>> train, test = stratified_split([0, 0, 0, 0, 1, 1, 1, 1], (0.5, 0.5), rng=0)
+    >>> len(train), len(test)
+    (4, 4)
+    """
+    y = check_ndim(labels, "labels", (0, 1, 2, 3))
+    if y.ndim != 1 or y.size == 0:
+        raise InputError(f"labels must be a non-empty (N,) array; got shape {y.shape}")
+    y = check_finite(y, "labels")
+    f = check_ndim(fractions, "fractions", (0, 1, 2))
+    if f.dtype.kind not in "iuf":
+        raise InputError(
+            f"fractions must be positive numbers, e.g. (0.7, 0.15, 0.15); got {fractions!r}"
+        )
+    f = f.astype(np.float64)
+    if f.ndim != 1 or f.size < 1 or not np.all(np.isfinite(f)) or np.any(f <= 0):
+        raise InputError(
+            f"fractions must be positive numbers, e.g. (0.7, 0.15, 0.15); got {fractions!r}"
+        )
+    if abs(f.sum() - 1.0) > 1e-6:
+        raise InputError(f"fractions must sum to 1; got {fractions!r} (sum {f.sum():.6g})")
+    gen = as_rng(rng)
+    parts: list[list[np.ndarray]] = [[] for _ in f]
+    for k in np.unique(y):
+        members = gen.permutation(np.flatnonzero(y == k))
+        exact = f * members.size
+        counts = np.floor(exact).astype(np.int64)
+        left = members.size - int(counts.sum())
+        order = np.argsort(-(exact - counts), kind="stable")
+        counts[order[:left]] += 1
+        bounds = np.r_[0, np.cumsum(counts)]
+        for j in range(f.size):
+            parts[j].append(members[bounds[j] : bounds[j + 1]])
+    return tuple(np.sort(np.concatenate(p)).astype(np.int64) for p in parts)
+
+
+def normalization_stats(data: ArrayDataset | npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel mean and standard deviation, to normalize ``(x - mean) / std``.
+
+    ``mean_c = mean over n, h, w of x[n, c, h, w]``, ``std_c`` the population standard
+    deviation (``ddof = 0``, as ``numpy.std``). Compute them on the training split only
+    (``normalization_stats(ds.subset(train))``) and apply the same numbers to validation
+    and test, so nothing of the held-out data leaks into training.
+
+    Parameters
+    ----------
+    data : ArrayDataset or (N, C, H, W) / (N, H, W) float array
+
+    Returns
+    -------
+    mean, std : (C,) float64 ndarray
+
+    Raises
+    ------
+    InputError
+        Empty, channels-last, integer or non-finite images.
+    """
+    images = data.images if isinstance(data, ArrayDataset) else _check_images(data)
+    x = images.astype(np.float64)
+    return x.mean(axis=(0, 2, 3)), x.std(axis=(0, 2, 3))
+
+
+# --------------------------------------------------------------------------- augmentations
+
+
+def _as_generator(generator: torch.Generator | int | None) -> torch.Generator:
+    """A ``torch.Generator``: the one given, or a new one seeded with the int (0 if None)."""
+    if isinstance(generator, torch.Generator):
+        return generator
+    if generator is None:
+        generator = 0
+    if isinstance(generator, bool) or not isinstance(generator, (int, np.integer)):
+        raise InputError(f"generator must be a torch.Generator or an int seed; got {generator!r}")
+    if not -(2**63) <= int(generator) < 2**64:
+        raise InputError(f"the seed (generator) must be in [-2**63, 2**64); got {generator}")
+    return torch.Generator().manual_seed(int(generator))
+
+
+def _batched(x: torch.Tensor, name: str) -> tuple[torch.Tensor, bool]:
+    """``x`` as ``(N, C, H, W)`` and whether it was one ``(C, H, W)`` image."""
+    if not isinstance(x, torch.Tensor):
+        raise InputError(
+            f"{name} takes a torch tensor; got {type(x).__name__}: use torch.from_numpy"
+        )
+    if not x.is_floating_point():
+        raise InputError(
+            f"{name} takes floating-point images; got dtype {x.dtype}: use x.float() / 255 "
+            "for 8-bit images"
+        )
+    if x.ndim == 3:
+        return x[None], True
+    if x.ndim == 4:
+        return x, False
+    raise InputError(f"{name} takes (C, H, W) or (N, C, H, W); got shape {tuple(x.shape)}")
+
+
+def _real_pair(
+    value: object, name: str, low: float | None, high: float | None
+) -> tuple[float, float]:
+    """``value`` as a pair of finite floats in ``[low, high]``."""
+    if not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 2:
+        raise InputError(f"{name} must be a pair (a, b) of numbers; got {value!r}")
+    return check_real(value[0], name, low, high), check_real(value[1], name, low, high)
+
+
+def _uniform(n: int, lo: float, hi: float, gen: torch.Generator) -> torch.Tensor:
+    """``n`` draws of ``U(lo, hi)`` (float32, CPU) from ``gen``."""
+    return lo + (hi - lo) * torch.rand(n, generator=gen)
+
+
+class _Augmentation:
+    """Base of the augmentations: the generator and the batch handling."""
+
+    def __init__(self, generator: torch.Generator | int | None) -> None:
+        self.generator = _as_generator(generator)
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        """Augment one image ``(C, H, W)`` or each image of a batch ``(N, C, H, W)``."""
+        batch, single = _batched(x, type(self).__name__)
+        out = self._apply(batch)
+        return out[0] if single else out
+
+    def _apply(self, x: torch.Tensor) -> torch.Tensor:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class RandomCrop(_Augmentation):
+    """Pad by ``padding`` zeros on each side, then cut a random ``size`` window.
+
+    The window's top-left corner ``(i, j)`` is uniform over
+    ``0 .. H + 2 p - h`` by ``0 .. W + 2 p - w``; like torchvision's
+    ``RandomCrop(size, padding)`` with constant zero fill.
+
+    Parameters
+    ----------
+    size : int or (height, width)
+        Output size.
+    padding : int
+        Zeros added on each side first (>= 0).
+    generator : torch.Generator or int, optional
+        Source of randomness (an int seeds a new generator; None seeds 0).
+    """
+
+    def __init__(
+        self,
+        size: int | tuple[int, int],
+        padding: int = 0,
+        generator: torch.Generator | int | None = None,
+    ) -> None:
+        super().__init__(generator)
+        hw = (size, size) if isinstance(size, (int, np.integer)) else size
+        if not isinstance(hw, (tuple, list)) or len(hw) != 2:
+            raise InputError(f"size must be an int or (height, width); got {size!r}")
+        self.size = (check_int(hw[0], "size", 1), check_int(hw[1], "size", 1))
+        self.padding = check_int(padding, "padding", 0)
+
+    def _apply(self, x: torch.Tensor) -> torch.Tensor:
+        """Crop each image of the batch at its own random corner."""
+        p = self.padding
+        if p:
+            x = F.pad(x, (p, p, p, p))
+        n, _, hp, wp = x.shape
+        h, w = self.size
+        if h > hp or w > wp:
+            raise InputError(
+                f"RandomCrop size {self.size} is larger than the padded image ({hp}, {wp}): "
+                "use a smaller size or more padding"
+            )
+        i = torch.randint(0, hp - h + 1, (n,), generator=self.generator)
+        j = torch.randint(0, wp - w + 1, (n,), generator=self.generator)
+        return torch.stack([x[k, :, i[k] : i[k] + h, j[k] : j[k] + w] for k in range(n)])
+
+
+class RandomFlip(_Augmentation):
+    """Mirror each image with probability ``p``.
+
+    Parameters
+    ----------
+    p : float
+        Probability of flipping, in [0, 1].
+    axis : {'horizontal', 'vertical'}
+        ``'horizontal'`` mirrors left-right (``torch.flip(x, [-1])``), ``'vertical'``
+        top-bottom (``torch.flip(x, [-2])``).
+    generator : torch.Generator or int, optional
+        Source of randomness.
+    """
+
+    def __init__(
+        self,
+        p: float = 0.5,
+        axis: str = "horizontal",
+        generator: torch.Generator | int | None = None,
+    ) -> None:
+        super().__init__(generator)
+        self.p = check_real(p, "p (a probability)", 0.0, 1.0)
+        axis = check_choice(axis, "axis", ("horizontal", "vertical"))
+        self.axis = axis
+
+    def _apply(self, x: torch.Tensor) -> torch.Tensor:
+        """Flip the images whose uniform draw is below ``p``."""
+        dim = -1 if self.axis == "horizontal" else -2
+        flip = torch.rand(x.shape[0], generator=self.generator) < self.p
+        return torch.where(flip[:, None, None, None].to(x.device), torch.flip(x, [dim]), x)
+
+
+class RandomAffine(_Augmentation):
+    """Random rotation, translation and scaling about the image centre.
+
+    In pixel coordinates centred on the image (x right, y down), the output pixel
+    ``u`` takes the input at ``A^-1 (u - t)`` with ``A = s R(theta)``,
+    ``R(theta) = [[cos, sin], [-sin, cos]]`` (positive ``theta`` turns the picture
+    counter-clockwise as displayed, as torchvision's ``RandomAffine``),
+    ``theta ~ U(degrees)``, ``t = (t_x W, t_y H)`` with ``t_x ~ U(-translate[0],
+    translate[0])``, ``t_y`` likewise, ``s ~ U(scale)``. Sampled bilinearly with zeros
+    outside (``torch.nn.functional.affine_grid`` / ``grid_sample``, ``align_corners=False``,
+    whose normalized coordinates are ``n = D^-1 u`` with ``D = diag(W/2, H/2)``, so
+    ``theta_grid = [D^-1 A^-1 D | -D^-1 A^-1 t]``).
+
+    Parameters
+    ----------
+    degrees : float or (low, high)
+        Rotation range in degrees (a float ``d`` means ``(-d, d)``).
+    translate : (float, float)
+        Largest shift as fractions of width and height, in [0, 1] (as torchvision).
+    scale : (low, high)
+        Range of the scale factor, within [0.001, 1000].
+    generator : torch.Generator or int, optional
+        Source of randomness.
+    """
+
+    def __init__(
+        self,
+        degrees: float | tuple[float, float] = 0.0,
+        translate: tuple[float, float] = (0.0, 0.0),
+        scale: tuple[float, float] = (1.0, 1.0),
+        generator: torch.Generator | int | None = None,
+    ) -> None:
+        super().__init__(generator)
+        if isinstance(degrees, (int, float, np.integer, np.floating)) and not isinstance(
+            degrees, (bool, np.bool_)
+        ):
+            d = check_real(degrees, "degrees", 0.0)
+            degrees = (-d, d)
+        self.degrees = _real_pair(degrees, "degrees", None, None)
+        # beyond a shift of the whole image or a scale of 1000 nothing of it is left
+        self.translate = _real_pair(translate, "translate", 0.0, 1.0)
+        self.scale = _real_pair(scale, "scale", 1e-3, 1e3)
+        if self.degrees[0] > self.degrees[1] or self.scale[0] > self.scale[1]:
+            raise InputError("degrees and scale ranges must be (low, high) with low <= high")
+
+    def _apply(self, x: torch.Tensor) -> torch.Tensor:
+        """Warp each image of the batch with its own random affine map."""
+        n, _, h, w = x.shape
+        g = self.generator
+        theta = torch.deg2rad(_uniform(n, *self.degrees, g).double())
+        tx = _uniform(n, -self.translate[0], self.translate[0], g).double() * w
+        ty = _uniform(n, -self.translate[1], self.translate[1], g).double() * h
+        s = _uniform(n, *self.scale, g).double()
+        c, si = torch.cos(theta), torch.sin(theta)
+        # A^-1 = R(-theta) / s
+        inv = (
+            torch.stack([torch.stack([c, -si], -1), torch.stack([si, c], -1)], -2)
+            / s[:, None, None]
+        )
+        d = torch.tensor([w / 2.0, h / 2.0], dtype=torch.float64)
+        lin = inv * d[None, None, :] / d[None, :, None]
+        t = torch.stack([tx, ty], -1)
+        off = -(inv @ t[:, :, None])[:, :, 0] / d[None, :]
+        mat = torch.cat([lin, off[:, :, None]], -1).to(dtype=x.dtype, device=x.device)
+        grid = F.affine_grid(mat, list(x.shape), align_corners=False)
+        return F.grid_sample(x, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+class ColorJitter(_Augmentation):
+    """Random brightness and contrast: ``x' = clip(c (b x - m) + m, 0, 1)``.
+
+    ``b ~ U(1 - brightness, 1 + brightness)``, ``c ~ U(1 - contrast, 1 + contrast)``,
+    ``m`` the mean of ``b x`` over the image's pixels and channels (torchvision uses the
+    gray mean, the same for gray images). Apply before normalization (the clip assumes
+    [0, 1]; pass ``clip=False`` otherwise).
+
+    Parameters
+    ----------
+    brightness, contrast : float
+        Largest relative change, in [0, 1].
+    clip : bool
+        Clip the result to [0, 1].
+    generator : torch.Generator or int, optional
+        Source of randomness.
+    """
+
+    def __init__(
+        self,
+        brightness: float = 0.0,
+        contrast: float = 0.0,
+        clip: bool = True,
+        generator: torch.Generator | int | None = None,
+    ) -> None:
+        super().__init__(generator)
+        self.brightness = check_real(brightness, "brightness", 0.0, 1.0)
+        self.contrast = check_real(contrast, "contrast", 0.0, 1.0)
+        self.clip = check_bool(clip, "clip")
+
+    def _apply(self, x: torch.Tensor) -> torch.Tensor:
+        """Scale brightness, then stretch about the mean, per image."""
+        n = x.shape[0]
+        b = _uniform(n, 1 - self.brightness, 1 + self.brightness, self.generator)
+        c = _uniform(n, 1 - self.contrast, 1 + self.contrast, self.generator)
+        b = b.to(x)[:, None, None, None]
+        c = c.to(x)[:, None, None, None]
+        y = b * x
+        m = y.mean(dim=(1, 2, 3), keepdim=True)
+        y = c * (y - m) + m
+        return y.clamp(0.0, 1.0) if self.clip else y
+
+
+class GaussianNoise(_Augmentation):
+    """Add ``N(0, std^2)`` noise to every pixel (no clipping).
+
+    Parameters
+    ----------
+    std : float
+        Standard deviation (>= 0).
+    generator : torch.Generator or int, optional
+        Source of randomness.
+    """
+
+    def __init__(self, std: float = 0.05, generator: torch.Generator | int | None = None) -> None:
+        super().__init__(generator)
+        self.std = check_real(std, "std", 0.0)
+
+    def _apply(self, x: torch.Tensor) -> torch.Tensor:
+        """``x + std * z`` with ``z`` standard normal from the generator."""
+        z = torch.randn(x.shape, generator=self.generator, dtype=x.dtype)
+        return x + self.std * z.to(x.device)
+
+
+class Compose:
+    """Apply transforms in order: ``Compose([a, b])(x) == b(a(x))``.
+
+    Parameters
+    ----------
+    transforms : sequence of callables
+    """
+
+    def __init__(self, transforms: Sequence[Transform]) -> None:
+        if not isinstance(transforms, (tuple, list)):
+            raise InputError(
+                "transforms must be a list of callables, e.g. [RandomFlip(), "
+                f"GaussianNoise()]; got {transforms!r}"
+            )
+        self.transforms = list(transforms)
+        for t in self.transforms:
+            if not callable(t):
+                raise InputError(f"Compose takes callables; got {t!r}")
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        """Run every transform on ``x``."""
+        for t in self.transforms:
+            x = t(x)
+        return x
+
+    def __repr__(self) -> str:
+        """``Compose([...])`` with the transforms' class names."""
+        return f"Compose([{', '.join(type(t).__name__ for t in self.transforms)}])"

@@ -1,0 +1,404 @@
+"""``nn train`` on several processes: torch DistributedDataParallel (DDP).
+
+:func:`train_ddp` runs :func:`robopercept.nn.classification.run.train_run` on ``nproc`` processes of
+this machine (started with :func:`torch.multiprocessing.start_processes`), or, when the
+process was started by ``torchrun`` (the environment holds ``RANK``, ``WORLD_SIZE``,
+``LOCAL_RANK``, ``MASTER_ADDR`` and ``MASTER_PORT``), as the rank torchrun made, which
+is how a run spans machines::
+
+    torchrun --no-python --nnodes 2 --nproc-per-node 1 --rdzv-backend c10d \\
+        --rdzv-endpoint HOST:PORT robopercept nn train --data digits ...
+
+Every rank builds the same model (same seed) and joins a process group (backend gloo on
+the CPU, nccl when the device is CUDA); :func:`~robopercept.nn.train.loop.fit` wraps the
+model in :class:`~torch.nn.parallel.DistributedDataParallel` and draws each rank's
+shard with a :class:`~torch.utils.data.DistributedSampler` (shuffled with the run's
+seed, ``set_epoch`` every epoch).
+
+The global batch stays the one asked for: each of the N processes takes
+``batch_size / N`` images per step and DDP averages the gradients, so one step sees
+``batch_size`` images as on one process, and the learning rate is left unchanged (the
+learning rate scales linearly with the global batch, which does not change). The batch
+size must therefore be a multiple of N. Batch-norm layers keep per-process statistics
+(over ``batch_size / N`` images), as torch's DDP does by default: runs on 1 and N
+processes agree closely but not bit for bit.
+
+Rank 0 alone validates, evaluates the test split and writes the run folder (checkpoints,
+history, curves, metrics, confusion matrix); the other ranks wait for it. The process
+group is destroyed on the way out, error or not; an error or Ctrl-C on one rank stops
+them all (here the other processes are terminated; torchrun does the same for its
+workers) and the error is raised again in the launching process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import datetime
+import os
+import pickle
+import socket
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, cast
+
+import torch
+
+from robopercept._checks import check_choice, check_int, check_real, plain_repr
+from robopercept.errors import InputError
+from robopercept.nn.classification.run import TrainResult, train_run
+from robopercept.nn.train.loop import TrainConfig
+
+__all__ = ["free_port", "run_ranks", "torchrun_env", "train_ddp"]
+
+#: the environment variables torchrun sets for each worker (all of them: a torchrun run)
+TORCHRUN_VARIABLES = ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on ``host`` now (the operating system's pick): ``MASTER_PORT`` of a
+    run started here when none is given.
+
+    Raises
+    ------
+    InputError
+        ``host`` is not a name or address of this machine.
+
+    Examples
+    --------
+    >>> 0 < free_port() < 65536
+    True
+    """
+    if not isinstance(host, str) or not host:
+        raise InputError(f"host must be a host name or address; got {plain_repr(host)}")
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind((host, 0))
+        except OSError as exc:  # an unknown name (socket.gaierror) or a foreign address
+            raise InputError(
+                f"cannot bind a port on host {host!r} ({exc}); give this machine's name or "
+                "address (MASTER_ADDR), e.g. 127.0.0.1"
+            ) from None
+        return int(s.getsockname()[1])
+
+
+def torchrun_env(environ: dict[str, str] | None = None) -> tuple[int, int, int] | None:
+    """``(rank, world_size, local_rank)`` when this process was started by ``torchrun``
+    (every one of ``RANK``, ``WORLD_SIZE``, ``LOCAL_RANK``, ``MASTER_ADDR``,
+    ``MASTER_PORT`` set), else None.
+
+    Parameters
+    ----------
+    environ : dict, optional
+        The environment to read (default ``os.environ``).
+
+    Raises
+    ------
+    InputError
+        The variables are set but not integers with 0 <= rank < world size.
+
+    Examples
+    --------
+    >>> torchrun_env({})
+    >>> env = {"RANK": "1", "WORLD_SIZE": "2", "LOCAL_RANK": "0",
+    ...        "MASTER_ADDR": "10.0.0.1", "MASTER_PORT": "29500"}
+    >>> torchrun_env(env)
+    (1, 2, 0)
+    """
+    env = os.environ if environ is None else environ
+    if not isinstance(env, (dict, type(os.environ))):
+        raise InputError(f"environ must be a dict of str; got {plain_repr(environ)}")
+    if not all(k in env for k in TORCHRUN_VARIABLES):
+        return None
+    try:
+        rank, world, local = (int(env[k]) for k in ("RANK", "WORLD_SIZE", "LOCAL_RANK"))
+    except (TypeError, ValueError):
+        raise InputError(
+            "RANK, WORLD_SIZE and LOCAL_RANK must be integers (set by torchrun); got "
+            f"{[env[k] for k in ('RANK', 'WORLD_SIZE', 'LOCAL_RANK')]}"
+        ) from None
+    if not (0 <= rank < world and local >= 0):
+        raise InputError(f"RANK {rank} must be in 0..WORLD_SIZE-1 (WORLD_SIZE {world})")
+    return rank, world, local
+
+
+def _check_split(nproc: int, batch_size: int) -> None:
+    if nproc > batch_size:
+        raise InputError(
+            f"--nproc {nproc} is larger than --batch-size {batch_size} (the global batch, "
+            f"shared out among the processes): use at most --nproc {batch_size}"
+        )
+    if batch_size % nproc:
+        lower = batch_size - batch_size % nproc
+        raise InputError(
+            f"--batch-size {batch_size} (the global batch) must be a multiple of --nproc "
+            f"{nproc}: each process takes batch_size / nproc images; use --batch-size "
+            f"{lower} or {lower + nproc}"
+        )
+
+
+def _device(cfg: TrainConfig) -> tuple[TrainConfig, str]:
+    """The config with this rank's device (its own CUDA device: ``LOCAL_RANK``) and the
+    backend: nccl on CUDA, else gloo."""
+    name = cfg.device
+    if name is None:
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    dev = torch.device(name)
+    if dev.type != "cuda":
+        return cfg, "gloo"
+    index = int(os.environ.get("LOCAL_RANK", 0)) if dev.index is None else dev.index
+    return dataclasses.replace(cfg, device=f"cuda:{index}"), "nccl"
+
+
+def _rank_main(
+    local_rank: int, fn: Callable[..., Any], args: tuple[Any, ...], job: dict[str, Any]
+) -> Any:
+    """One process: join the process group, call ``fn(*args)``, leave the group (error
+    or not). Rank 0 stores the result, a failing rank its error, for the launcher."""
+    import torch.distributed as dist
+
+    torch.set_num_threads(job["threads"])
+    if job["spawned"]:
+        os.environ["LOCAL_RANK"] = str(local_rank)
+        rank, world = local_rank, job["nproc"]
+        init = f"tcp://{job['addr']}:{job['port']}"
+    else:
+        rank, world = job["rank"], job["world"]
+        init = "env://"
+    try:
+        if job["backend"] == "nccl":
+            torch.cuda.set_device(int(os.environ.get("LOCAL_RANK", 0)))
+        dist.init_process_group(
+            job["backend"],
+            init_method=init,
+            rank=rank,
+            world_size=world,
+            timeout=datetime.timedelta(seconds=job["timeout"]),
+        )
+        res = fn(*args)
+        dist.barrier()  # every rank done before any leaves (gloo aborts on a peer gone early)
+        if rank == 0 and job["result"] is not None:
+            Path(job["result"]).write_bytes(pickle.dumps(res))
+        return res
+    except BaseException as exc:
+        if job["errors"] is not None:  # the launcher raises the first rank's error again
+            with contextlib.suppress(Exception):
+                Path(job["errors"], f"{rank}.pkl").write_bytes(pickle.dumps((time.time_ns(), exc)))
+        raise
+    finally:
+        if dist.is_initialized():
+            dist.destroy_process_group()
+
+
+def run_ranks(
+    fn: Callable[..., Any],
+    nproc: int,
+    args: tuple[Any, ...] = (),
+    *,
+    backend: str = "gloo",
+    threads: int | None = None,
+    timeout: float = 1800.0,
+) -> Any:
+    """Call ``fn(*args)`` in ``nproc`` new processes of this machine joined in a
+    ``torch.distributed`` process group (or, under torchrun, in this process as its
+    rank); return rank 0's return value.
+
+    The processes are started with the spawn method (``fn``, ``args`` and the result
+    must pickle; ``fn`` a module-level function). ``MASTER_ADDR`` and ``MASTER_PORT`` are
+    taken from the environment when set, else 127.0.0.1 and a :func:`free_port`. The
+    first rank to fail stops the run: the others are terminated, every process is
+    joined, and its exception is raised here. Each process destroys its process group on
+    the way out.
+
+    Parameters
+    ----------
+    fn : callable
+        Runs on every rank (``torch.distributed.get_rank()`` tells which).
+    nproc : int
+        Processes (>= 1); must be 1 under torchrun (torchrun's processes are the ranks).
+    args : tuple
+        ``fn``'s arguments.
+    backend : {'gloo', 'nccl'}
+    threads : int, optional
+        torch threads per process (default: torch's thread count / processes, >= 1).
+    timeout : float
+        Seconds a collective waits for the other ranks.
+
+    Returns
+    -------
+    object
+        Rank 0's ``fn(*args)``.
+
+    Raises
+    ------
+    InputError
+        Bad ``nproc``, ``backend``, ``threads`` or ``timeout``; ``nproc`` > 1 under torchrun.
+    Exception
+        The first failing rank's exception (its class and message; or torch's
+        ProcessRaisedException / ProcessExitedException when it cannot be carried).
+
+    Examples
+    --------
+    >>> run_ranks(print, 0)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: nproc (--nproc) must be >= 1; got 0
+    """
+    if not callable(fn):
+        raise InputError(f"fn must be a module-level function; got {plain_repr(fn)}")
+    nproc = check_int(nproc, "nproc (--nproc)", 1)
+    if not isinstance(args, tuple):
+        raise InputError(f"args must be a tuple; got {plain_repr(args)}")
+    backend = check_choice(backend, "backend", ("gloo", "nccl"))
+    timeout = check_real(timeout, "timeout (seconds)", 0.0, low_inclusive=False)
+    if threads is not None:
+        threads = check_int(threads, "threads", 1)
+    env = torchrun_env()
+    if env is not None and nproc != 1:
+        raise InputError(
+            f"--nproc {nproc} under torchrun: torchrun starts the processes "
+            "(--nproc-per-node); leave --nproc at 1"
+        )
+    local = int(os.environ.get("LOCAL_WORLD_SIZE", 1)) if env is not None else nproc
+    job: dict[str, Any] = {
+        "backend": backend,
+        "threads": threads or max(1, torch.get_num_threads() // max(1, local)),
+        "timeout": timeout,
+        "nproc": nproc,
+        "spawned": env is None,
+        "result": None,
+        "errors": None,
+    }
+    if env is not None:  # this process is one rank
+        job.update(rank=env[0], world=env[1])
+        return _rank_main(env[2], fn, args, job)
+    return _spawn(fn, args, job)
+
+
+def _train_rank(
+    data: str, model: str, out_dir: str, cfg: TrainConfig, kwargs: dict[str, Any]
+) -> TrainResult:
+    """One rank of :func:`train_ddp`."""
+    cfg, _ = _device(cfg)
+    return train_run(data, model, out_dir, config=cfg, distributed=True, **kwargs)
+
+
+def train_ddp(
+    data: str | os.PathLike[str],
+    model: str,
+    out_dir: str | os.PathLike[str],
+    *,
+    nproc: int = 1,
+    config: TrainConfig | None = None,
+    threads: int | None = None,
+    timeout: float = 1800.0,
+    **kwargs: Any,
+) -> TrainResult:
+    """:func:`~robopercept.nn.classification.run.train_run` on ``nproc`` processes with
+    DistributedDataParallel (module docstring), or as one rank of a ``torchrun`` run.
+
+    The gradient of a step is the mean over the global batch of ``B = batch_size``
+    images, :math:`g = \\frac{1}{N}\\sum_{r=1}^{N} \\frac{1}{B/N}\\sum_{i \\in b_r}
+    \\nabla \\ell_i = \\frac{1}{B}\\sum_{i \\in b} \\nabla \\ell_i`, with rank ``r``'s
+    share :math:`b_r` of :math:`B/N` images (DDP's all-reduce averages over ranks): the
+    step of one process on the same ``B`` images, so the learning rate is unchanged.
+
+    Parameters
+    ----------
+    data, model, out_dir
+        As :func:`~robopercept.nn.classification.run.train_run`.
+    nproc : int
+        Processes on this machine (1: :func:`train_run` itself, unless under torchrun,
+        whose processes are then the ranks; torchrun needs ``nproc`` 1).
+    config : TrainConfig, optional
+        ``batch_size`` is the global batch (a multiple of the number of processes).
+    threads : int, optional
+        torch threads per process (default: torch's thread count divided by the
+        processes on this machine, at least 1).
+    timeout : float
+        Seconds a collective waits for the other ranks before failing.
+    **kwargs
+        More arguments of :func:`train_run` (``model_kwargs``, ``mode``, ``size``,
+        ``fractions``, ``augment``, ``resume``, ``overwrite``, ``progress``).
+
+    Returns
+    -------
+    TrainResult
+        Rank 0's (under torchrun every rank returns it).
+
+    Raises
+    ------
+    InputError
+        ``nproc`` < 1, larger than the batch or not dividing it, ``nproc`` > 1 under
+        torchrun; the errors of :func:`train_run`, raised again from the first rank that
+        failed.
+
+    Examples
+    --------
+    >>> train_ddp("digits", "vgg_small", "run", nproc=0)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: nproc (--nproc) must be >= 1; got 0
+    """
+    nproc = check_int(nproc, "nproc (--nproc)", 1)
+    if config is not None and not isinstance(config, TrainConfig):
+        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
+    cfg = config or TrainConfig()
+    timeout = check_real(timeout, "timeout (seconds)", 0.0, low_inclusive=False)
+    if threads is not None:
+        threads = check_int(threads, "threads", 1)
+    if "distributed" in kwargs:
+        raise InputError("train_ddp sets train_run's distributed itself; do not pass it")
+    env = torchrun_env()
+    world = env[1] if env is not None else nproc
+    _check_split(world, cfg.batch_size)
+    if env is None and nproc == 1:
+        return train_run(data, model, out_dir, config=cfg, **kwargs)
+    _, backend = _device(cfg)
+    return cast(
+        TrainResult,
+        run_ranks(
+            _train_rank,
+            nproc,
+            (os.fspath(data), model, os.fspath(out_dir), cfg, kwargs),
+            backend=backend,
+            threads=threads,
+            timeout=timeout,
+        ),
+    )
+
+
+def _spawn(fn: Callable[..., Any], args: tuple[Any, ...], job: dict[str, Any]) -> Any:
+    """Start the ranks, wait for them, terminate them all on the first failure."""
+    import torch.multiprocessing as mp
+
+    job["addr"] = os.environ.get("MASTER_ADDR", "127.0.0.1")
+    job["port"] = int(os.environ.get("MASTER_PORT", 0)) or free_port(job["addr"])
+    with tempfile.TemporaryDirectory(prefix="robopercept-ddp-") as tmp:
+        job["result"] = os.path.join(tmp, "result.pkl")
+        job["errors"] = tmp
+        ctx = mp.start_processes(
+            _rank_main, args=(fn, args, job), nprocs=job["nproc"], join=False, start_method="spawn"
+        )
+        try:
+            while not ctx.join():
+                pass
+        except mp.ProcessRaisedException:
+            # the first error written is the cause (a rank that fails leaves the group,
+            # so the others' collectives fail after it: "connection closed by peer")
+            errors = sorted(pickle.loads(f.read_bytes()) for f in Path(tmp).glob("[0-9]*.pkl"))
+            if errors:
+                raise errors[0][1] from None
+            raise
+        finally:
+            for p in ctx.processes:
+                if p.is_alive():
+                    p.terminate()
+            for p in ctx.processes:
+                p.join(10)
+                if p.is_alive():
+                    p.kill()
+                    p.join()
+        return pickle.loads(Path(job["result"]).read_bytes())
