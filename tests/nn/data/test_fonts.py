@@ -155,3 +155,14 @@ def test_rendered_digits_look_like_the_real_ones():
 def test_bad_n():
     with pytest.raises(InputError, match="n must be >= 1"):
         render_digits(0)
+    with pytest.raises(InputError, match="render in chunks"):
+        render_digits(10**9)
+    with pytest.raises(InputError, match="n must be an integer"):
+        render_digits(2.5)  # type: ignore[arg-type]
+
+
+def test_bad_seed_and_noise():
+    with pytest.raises(InputError, match="seed must be >= 0"):
+        render_digits(5, seed=-1)
+    with pytest.raises(InputError, match="noise"):
+        render_digits(5, noise=1.5)

@@ -28,15 +28,20 @@ from typing import Any, Literal
 
 import numpy as np
 
+from robopercept._checks import check_int, check_real
 from robopercept.errors import InputError
 
 __all__ = [
     "DEFAULT_FONTS",
+    "MAX_IMAGES",
     "SYSTEM_FONT_DIRS",
     "default_fonts",
     "find_fonts",
     "render_digits",
 ]
+
+#: The most images one :func:`render_digits` call makes (64 MiB of float32 output).
+MAX_IMAGES = 250_000
 
 #: The system's font folders searched by :func:`find_fonts` (``fonts="system"``).
 SYSTEM_FONT_DIRS: tuple[str, ...] = (
@@ -225,7 +230,8 @@ def render_digits(
     Raises
     ------
     InputError
-        ``n < 1``; unknown ``fonts``; a missing or unreadable font file; no system fonts.
+        ``n`` not in 1..:data:`MAX_IMAGES`; ``seed < 0``; ``noise`` outside [0, 1]; unknown
+        ``fonts``; a missing or unreadable font file; no system fonts.
 
     Examples
     --------
@@ -235,10 +241,12 @@ def render_digits(
     """
     from PIL import Image, ImageDraw
 
-    if int(n) < 1:
-        raise InputError(f"n must be >= 1; got {n}")
+    n = check_int(n, "n", 1)
+    if n > MAX_IMAGES:
+        raise InputError(f"n must be <= {MAX_IMAGES:,}; got {n:,}: render in chunks")
+    rng = np.random.default_rng(check_int(seed, "seed", 0))
+    noise = check_real(noise, "noise", 0.0, 1.0)
     pool = _font_pool(fonts)
-    rng = np.random.default_rng(seed)
     labels = np.tile(np.arange(10), n // 10 + 1)[:n]
     rng.shuffle(labels)
     out = np.empty((n, 1, 8, 8), np.float32)
