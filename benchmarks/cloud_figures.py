@@ -3,7 +3,7 @@
 ``benchmarks/results/cloud_figures.json`` and the table printed).
 
 Every run draws its weights from ``torch.manual_seed(seed)``, trains on procedural
-shapes drawn with ``rng=seed`` (:func:`~robopercept.nn.cloud.data.procedural_shapes`,
+shapes drawn with ``rng=seed`` (:func:`~robopercept.nn.cloud.synthetic.procedural_shapes`,
 12 classes, rotated about the up axis), picks its epoch on validation shapes
 (``rng=1000 + seed``) and is scored on test shapes (``rng=99``), never seen in training
 or selection.
@@ -40,9 +40,9 @@ import numpy as np
 import torch
 
 from benchmarks._harness import figures_main, seeds_table, timing_row
-from robopercept.nn.cloud.data import procedural_shapes
-from robopercept.nn.cloud.run import run as C
-from robopercept.nn.train.loop import TrainConfig
+from robopercept.nn.cloud import run as C
+from robopercept.nn.cloud.synthetic import procedural_shapes
+from robopercept.nn.train.config import TrainConfig
 
 NAME = "cloud_figures"
 #: per model: constructor settings, points per cloud, training shapes per class,

@@ -3,7 +3,7 @@ faster-coco-eval (``COCOeval_faster``), each from the same in-memory dicts (inde
 building and loading the results included), the 12 summary numbers asserted equal.
 
 ``synthetic_detections`` is also the generator of the parity tests
-(``tests/nn/coco/test_formats.py``): it makes every case the COCO evaluation treats apart.
+(``tests/nn/coco/test_evaluate.py``): it makes every case the COCO evaluation treats apart.
 """
 
 from __future__ import annotations
@@ -124,7 +124,7 @@ def _median_s(fn: Any, repeats: int) -> tuple[float, Any]:
 
 
 def run(repeats: int) -> tuple[list[Record], dict[str, Any]]:
-    from robopercept.nn.coco.formats import evaluate_detections
+    from robopercept.nn.coco.evaluate import evaluate_detections
 
     repeats = max(1, min(repeats, 5))
     gt, res = synthetic_detections(0, n_images=5000, n_categories=8, crowded_image=True)

@@ -19,8 +19,8 @@ RESULTS = Path(__file__).resolve().parent / "results" / "ddp_speed.json"
 
 def measure(nproc: int, epochs: int, batch_size: int, model: str) -> dict[str, float]:
     """One run of ``train_ddp``: images/s over the training (fit) time, validation included."""
-    from robopercept.nn.train.distributed import train_ddp
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.classification.run import train_ddp
+    from robopercept.nn.train.config import TrainConfig
 
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, patience=None, device="cpu")
     with tempfile.TemporaryDirectory() as tmp:

@@ -1,4 +1,4 @@
-"""Detection box operations: NMS and RoI Align, ours (torch, robopercept.nn.ops.boxes) vs
+"""Detection box operations: NMS and RoI Align, ours (torch, robopercept.nn.ops) vs
 onnxruntime's ``NonMaxSuppression`` and ``RoiAlign`` operators on the same input.
 
 Both single-threaded. The RoI Align difference (about 1.5e-5 on these 50 x 50 maps) is
@@ -42,7 +42,8 @@ def run(repeats: int) -> tuple[list[Record], dict]:
     import torch
     from onnx import TensorProto, helper
 
-    from robopercept.nn.ops.boxes import nms, roi_align
+    from robopercept.nn.ops.nms import nms
+    from robopercept.nn.ops.roi import roi_align
 
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)

@@ -1,9 +1,9 @@
-"""Issue 26's accuracy figures for :mod:`robopercept.nn.detection.models`, trained here on the
+"""Issue 26's accuracy figures for :mod:`robopercept.nn.detection`, trained here on the
 CPU (run ``python -m benchmarks.detection_figures --only PART --seeds 0 1 2``; each run
 is merged into ``benchmarks/results/detection_figures.json`` and the table printed).
 
 Every run: the weights drawn from ``torch.manual_seed(seed)``, trained with
-:func:`~robopercept.nn.detection.models.train_detector` (AdamW, cosine schedule), the epoch
+:func:`~robopercept.nn.detection.train.train_detector` (AdamW, cosine schedule), the epoch
 kept chosen on a validation split (``val=``), then evaluated once on a test split that
 no choice saw. Synthetic sets are generated with disjoint seeds (train ``seed``,
 validation ``1000 + seed``, test always ``99``, so every seed is tested on the same
@@ -13,17 +13,17 @@ Parts:
 
 - ``trees-fcos``, ``trees-faster``: the single-stage FCOS (target AP50 >= 0.45) and
   Faster R-CNN (reported beside it) on the real DeepForest NEON crowns
-  (:func:`~robopercept.nn.detection.data.deepforest_tiles`, 400 px tiles): the tiles
+  (:func:`~robopercept.nn.detection.deepforest.deepforest_tiles`, 400 px tiles): the tiles
   above the held-out strip split 85/15 (seeded) into train and validation, AP50 on the
   held-out strip of YELL crop2, AP50 on the three other images reported. FCOS's final
   NMS threshold is chosen on the validation tiles (:func:`choose_nms`).
-  ``trees-fcos-zoom`` is FCOS with :class:`~robopercept.nn.detection.data.ScaleJitter`
+  ``trees-fcos-zoom`` is FCOS with :class:`~robopercept.nn.detection.augment.ScaleJitter`
   (zoom 0.67-1.5) after the flips.
 - ``shapes-fcos``, ``shapes-faster``: the procedural set at 128 x 128 (target
   mAP@0.5 >= 0.90 and mAP@[.5:.95] >= 0.60).
 - ``digits``: Faster R-CNN on the real-digits canvases (target mAP@0.5 >= 0.90). FCOS
   reached only 0.35-0.38 here (600 or 2000 canvases, seed 0), with a very low AP75.
-- ``localizer``: :class:`~robopercept.nn.detection.models.SingleObjectLocalizer` on one real
+- ``localizer``: :class:`~robopercept.nn.detection.localizer.SingleObjectLocalizer` on one real
   digit per 64 x 64 canvas (target mean IoU >= 0.80).
 - ``family``: R-CNN, Fast R-CNN and Faster R-CNN on the same real-digits canvases:
   test mAP and the per-image latency (1 thread, batch 1, median of the test images;
@@ -47,17 +47,20 @@ import numpy as np
 import torch
 
 from benchmarks._harness import figures_main, load_runs, timing_row
-from robopercept.nn.detection.models import (
-    TestTimeAugmentation,
-    build_detector,
-    evaluate_detector,
-    evaluate_localizer,
-    save_detector,
-    selective_search_proposals,
-    train_detector,
+from robopercept.nn.detection.augment import FlipRotate, ScaleJitter
+from robopercept.nn.detection.data import DetectionDataset
+from robopercept.nn.detection.deepforest import deepforest_tiles
+from robopercept.nn.detection.localizer import evaluate_localizer
+from robopercept.nn.detection.rcnn import selective_search_proposals
+from robopercept.nn.detection.synthetic import (
+    digits_detection_set,
+    procedural_detection_set,
+    single_digit_set,
 )
-from robopercept.nn.detection.models import data as dd
-from robopercept.nn.train.loop import TrainConfig
+from robopercept.nn.detection.train import evaluate_detector, train_detector
+from robopercept.nn.detection.tta import TestTimeAugmentation
+from robopercept.nn.detection.zoo import build_detector, save_detector
+from robopercept.nn.train.config import TrainConfig
 
 NAME = "detection_figures"
 TREES = os.environ.get("ROBOPERCEPT_DEEPFOREST", "../shared/data/detection/deepforest_neon")
@@ -77,7 +80,7 @@ def chunked(
     if k <= chunk:
         return make(k, rng=rng)
     parts = [make(min(chunk, k - s), rng=rng * 100 + j) for j, s in enumerate(range(0, k, chunk))]
-    return dd.DetectionDataset(
+    return DetectionDataset(
         [im for p in parts for im in p.images],
         [b for p in parts for b in p.boxes],
         [lab for p in parts for lab in p.labels],
@@ -87,25 +90,25 @@ def chunked(
 
 
 def _shapes(n: tuple[int, int, int], seed: int) -> tuple:
-    make = functools.partial(dd.procedural_detection_set, size=(128, 128))
+    make = functools.partial(procedural_detection_set, size=(128, 128))
     return _synthetic(functools.partial(chunked, make), n, seed)
 
 
 def _digits(n: tuple[int, int, int], seed: int) -> tuple:
-    make = functools.partial(dd.digits_detection_set, size=(128, 128))
+    make = functools.partial(digits_detection_set, size=(128, 128))
     return _synthetic(functools.partial(chunked, make), n, seed)
 
 
 def _family_digits(n: tuple[int, int, int], seed: int) -> tuple:
-    return _synthetic(lambda k, rng: dd.digits_detection_set(k, (96, 96), (1, 3), rng=rng), n, seed)
+    return _synthetic(lambda k, rng: digits_detection_set(k, (96, 96), (1, 3), rng=rng), n, seed)
 
 
 def _single(n: tuple[int, int, int], seed: int) -> tuple:
-    return _synthetic(lambda k, rng: dd.single_digit_set(k, (64, 64), rng=rng), n, seed)
+    return _synthetic(lambda k, rng: single_digit_set(k, (64, 64), rng=rng), n, seed)
 
 
 def _trees(n: tuple[int, int, int], seed: int) -> tuple:
-    tiles = dd.deepforest_tiles(TREES)
+    tiles = deepforest_tiles(TREES)
     train, val = tiles.train.split((0.85, 0.15), rng=seed)
     return train, val, tiles.test, dict(tiles.cross)
 
@@ -286,10 +289,10 @@ def _augmenter(spec: dict[str, Any] | None, seed: int) -> Any:
     if not spec:
         return None
     flips = {k: v for k, v in spec.items() if k != "scale"}
-    flip = dd.FlipRotate(**flips, generator=seed)
+    flip = FlipRotate(**flips, generator=seed)
     if "scale" not in spec:
         return flip
-    zoom = dd.ScaleJitter(tuple(spec["scale"]), generator=10_000 + seed)
+    zoom = ScaleJitter(tuple(spec["scale"]), generator=10_000 + seed)
 
     def both(image: torch.Tensor, target: dict[str, Any]) -> tuple[torch.Tensor, dict]:
         return zoom(*flip(image, target))

@@ -39,18 +39,17 @@ from torch import nn
 from benchmarks._harness import RESULTS, machine, paired_ms
 from robopercept.nn.classification.models import MODELS, build_model
 from robopercept.nn.core.transfer import freeze, keep_frozen_batchnorm_in_eval, replace_head
+from robopercept.nn.data.augment import Compose, Normalize, RandomAffine, RandomFlip
 from robopercept.nn.data.datasets import (
     ArrayDataset,
-    Compose,
-    RandomAffine,
-    RandomFlip,
     load_digits,
     load_lfw_subset,
     normalization_stats,
     stratified_split,
 )
 from robopercept.nn.data.fonts import render_digits
-from robopercept.nn.train.loop import Normalize, TrainConfig, evaluate, fit
+from robopercept.nn.train.config import TrainConfig
+from robopercept.nn.train.loop import evaluate, fit
 
 SEEDS = (0, 1, 2)
 FAMILY = ("vgg_small", "inception_small", "resnet_small")

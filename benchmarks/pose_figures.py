@@ -39,8 +39,11 @@ import torch
 
 from benchmarks._harness import figures_main, seeds_table, timing_row
 from robopercept.nn.pose.data import pose_sets, procedural_pose_scenes
-from robopercept.nn.pose.networks import networks as P
-from robopercept.nn.train.loop import TrainConfig
+from robopercept.nn.pose.evaluate import PoseEvaluation, evaluate_pose
+from robopercept.nn.pose.inference import predict_keypoints
+from robopercept.nn.pose.networks import DeepPoseRefiner, build_pose_model, save_pose_model
+from robopercept.nn.pose.train import train_cascade, train_pose
+from robopercept.nn.train.config import TrainConfig
 
 NAME = "pose_figures"
 SIZE = (128, 128)
@@ -101,7 +104,7 @@ def _latency_ms(fn: Callable[[], object], repeats: int = 20) -> float:
     return 1000 * statistics.median(times)
 
 
-def _scores(ev: P.PoseEvaluation) -> dict[str, float]:
+def _scores(ev: PoseEvaluation) -> dict[str, float]:
     return {
         "PCK@0.05": round(ev.pck[0.05], 4),
         "PCK@0.1": round(ev.pck[0.1], 4),
@@ -118,25 +121,25 @@ def network(part: str, seed: int, progress: bool, save: Path | None = None) -> d
     sk = sets.train.skeleton
     settings = MODELS[part]
     torch.manual_seed(seed)
-    net = P.build_pose_model(part, sk.num_joints, **settings)
+    net = build_pose_model(part, sk.num_joints, **settings)
     t0 = time.perf_counter()
-    hist = P.train_pose(net, sets.train, _cfg(seed), val=sets.val, skeleton=sk, progress=progress)
-    refiners: list[P.DeepPoseRefiner] = []
+    hist = train_pose(net, sets.train, _cfg(seed), val=sets.val, skeleton=sk, progress=progress)
+    refiners: list[DeepPoseRefiner] = []
     row: dict[str, Any] = {}  # DeepPose: the first stage alone, the cascade's validation
     if part == "deeppose":
-        first = P.evaluate_pose(net, sets.test)
+        first = evaluate_pose(net, sets.test)
         row["stage1"] = _scores(first)
-        refiners, (h2,) = P.train_cascade(
+        refiners, (h2,) = train_cascade(
             net, sets.train, 1, _cfg(seed, STAGE_EPOCHS), val=sets.val, crop=32.0, width=16,
             progress=progress,
         )  # fmt: skip
         row["stage2_val"] = h2.val
     wall = time.perf_counter() - t0
-    ev = P.evaluate_pose(net, sets.test, refiners=refiners)
-    no_flip = P.evaluate_pose(net, sets.test, refiners=refiners, flip=False)
+    ev = evaluate_pose(net, sets.test, refiners=refiners)
+    no_flip = evaluate_pose(net, sets.test, refiners=refiners, flip=False)
     x = torch.rand((1, 3, *SIZE[::-1]), generator=torch.Generator().manual_seed(0))
     if save is not None:
-        P.save_pose_model(
+        save_pose_model(
             save / f"pose_{part}_figures.pt",
             net,
             part,
@@ -156,7 +159,7 @@ def network(part: str, seed: int, progress: bool, save: Path | None = None) -> d
         + sum(p.numel() for r in refiners for p in r.parameters()),
         "flops_128": _flops(net, (1, 3, *SIZE[::-1])),
         "latency_ms_128": round(
-            _latency_ms(lambda: P.predict_keypoints(net, x, flip_permutation=None)), 2
+            _latency_ms(lambda: predict_keypoints(net, x, flip_permutation=None)), 2
         ),
         "train_seconds": round(wall, 1),
         "val": hist.val,
@@ -169,7 +172,7 @@ def network(part: str, seed: int, progress: bool, save: Path | None = None) -> d
 def pictorial(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
     """Pictorial structures fitted on 1,000 training figures, scored on the test set."""
     from robopercept.nn.pose.metrics import bbox_diagonal, pck
-    from robopercept.nn.pose.pictorial import PictorialStructures
+    from robopercept.nn.pose.pictorial_learn import PictorialStructures
 
     del progress, save
     sets = _sets(seed, images=1000)
@@ -209,12 +212,8 @@ KEYPOINT_RCNN_TRAIN = {"images": 1200, "epochs": 12, "batch_size": 4, "lr": 1e-3
 
 def keypointrcnn(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
     """Keypoint R-CNN on multi-person procedural scenes: keypoint AP (OKS, MPII sigmas)."""
-    from robopercept.nn.detection.models import (
-        build_detector,
-        evaluate_detector,
-        save_detector,
-        train_detector,
-    )
+    from robopercept.nn.detection.train import evaluate_detector, train_detector
+    from robopercept.nn.detection.zoo import build_detector, save_detector
     from robopercept.nn.skeleton import MPII_16
 
     b = KEYPOINT_RCNN_TRAIN
@@ -280,27 +279,27 @@ def lift3d(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any
     against a library of projected poses (the course's recipe) vs the lifting MLP
     trained on the same library's pairs; PA-MPJPE and MPJPE (root-relative) in mm."""
     from robopercept.nn.pose.data import random_poses_3d
-    from robopercept.nn.pose.networks import lifting as pose3d
+    from robopercept.nn.pose.library import PoseLibrary
+    from robopercept.nn.pose.lifting import LiftingMLP, mpjpe, pa_mpjpe, train_lifter
+    from robopercept.nn.pose.views import PELVIS, random_views
 
     del progress, save
     test = _sets(seed, images=10).test
-    truth = test.joints3d - test.joints3d[:, pose3d.PELVIS : pose3d.PELVIS + 1]
+    truth = test.joints3d - test.joints3d[:, PELVIS : PELVIS + 1]
     clean = test.keypoints[..., :2]
     noisy = clean + np.random.default_rng(seed).normal(0.0, 2.0, clean.shape)
     library_poses = random_poses_3d(LIFT["poses"], rng=seed)
     t0 = time.perf_counter()
-    library = pose3d.PoseLibrary(
+    library = PoseLibrary(
         library_poses, views_per_pose=LIFT["views_per_pose"], rng=seed, k=LIFT["k"]
     )
     t_lib = time.perf_counter() - t0
-    pairs = pose3d.random_views(library_poses, LIFT["views_per_pose"], rng=seed)
+    pairs = random_views(library_poses, LIFT["views_per_pose"], rng=seed)
     # the MLP sees 2-D poses at the figures' pixel scale (100 px tall), with noise
     scale = 100.0 / np.ptp(pairs.keypoints2d[..., 1], axis=1)[:, None, None]
-    mlp = pose3d.LiftingMLP(
-        16, width=LIFT["mlp_width"], blocks=LIFT["mlp_blocks"], random_state=seed
-    )
+    mlp = LiftingMLP(16, width=LIFT["mlp_width"], blocks=LIFT["mlp_blocks"], random_state=seed)
     t0 = time.perf_counter()
-    pose3d.train_lifter(
+    train_lifter(
         mlp,
         pairs.keypoints2d * scale,
         pairs.joints3d,
@@ -313,9 +312,9 @@ def lift3d(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any
     out: dict[str, float] = {}
     for name, kp in (("", clean), ("_noisy", noisy)):
         for method, pred in (("matching", library.lift(kp)), ("mlp", mlp.lift(kp))):
-            out[f"PA-MPJPE_mm_{method}{name}"] = round(1000 * pose3d.pa_mpjpe(pred, truth), 1)
-            out[f"MPJPE_mm_{method}{name}"] = round(1000 * pose3d.mpjpe(pred, truth), 1)
-    out["PA-MPJPE_mm_mean_pose"] = round(1000 * pose3d.pa_mpjpe(mean_pose, truth), 1)
+            out[f"PA-MPJPE_mm_{method}{name}"] = round(1000 * pa_mpjpe(pred, truth), 1)
+            out[f"MPJPE_mm_{method}{name}"] = round(1000 * mpjpe(pred, truth), 1)
+    out["PA-MPJPE_mm_mean_pose"] = round(1000 * pa_mpjpe(mean_pose, truth), 1)
     return {
         "model": "lift3d",
         "settings": LIFT,
@@ -333,12 +332,12 @@ def time_part(part: str, epochs: int, threads: int) -> dict[str, Any]:
     sets = _sets(0)
     sk = sets.train.skeleton
     torch.manual_seed(0)
-    net = P.build_pose_model(part, sk.num_joints, **MODELS[part])
+    net = build_pose_model(part, sk.num_joints, **MODELS[part])
     t0 = time.perf_counter()
-    P.train_pose(net, sets.train, _cfg(0, epochs), skeleton=sk, progress=False)
+    train_pose(net, sets.train, _cfg(0, epochs), skeleton=sk, progress=False)
     per_epoch = (time.perf_counter() - t0) / epochs
     t0 = time.perf_counter()
-    P.predict_keypoints(net, sets.val.images)
+    predict_keypoints(net, sets.val.images)
     per_val = time.perf_counter() - t0
     full = TRAIN["epochs"]
     return timing_row(part, threads, epochs, per_epoch, per_val, full, 1)

@@ -38,7 +38,7 @@ def run(repeats: int) -> tuple[list[Record], dict[str, Any]]:
 
     from robopercept.features import selective_search
     from robopercept.imaging import felzenszwalb, read_image
-    from robopercept.nn.coco.formats import read_voc_xml
+    from robopercept.nn.coco.voc import read_voc_xml
 
     repeats = max(1, min(repeats, 3))
     records = []

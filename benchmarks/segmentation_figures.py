@@ -50,13 +50,11 @@ import torch
 from benchmarks._harness import figures_main, seeds_table, timing_row
 from benchmarks.detection_figures import chunked
 from robopercept.imaging import label_components
-from robopercept.nn.detection.models import (
-    build_detector,
-    evaluate_detector,
-    save_detector,
-    train_detector,
-)
-from robopercept.nn.detection.models import data as dd
+from robopercept.nn.detection.augment import FlipRotate
+from robopercept.nn.detection.data import DetectionDataset
+from robopercept.nn.detection.synthetic import procedural_detection_set
+from robopercept.nn.detection.train import evaluate_detector, train_detector
+from robopercept.nn.detection.zoo import build_detector, save_detector
 from robopercept.nn.segmentation.data import nuclei_quadrants
 from robopercept.nn.segmentation.metrics import (
     match_instances,
@@ -69,15 +67,15 @@ from robopercept.nn.segmentation.networks import (
     save_segmenter,
     train_segmenter,
 )
-from robopercept.nn.train.loop import TrainConfig
+from robopercept.nn.train.config import TrainConfig
 
 NAME = "segmentation_figures"
 NUCLEI = Path("../shared/data/segmentation/stardist_nuclei")
 
 
-def _procedural(k: int, rng: int) -> dd.DetectionDataset:
+def _procedural(k: int, rng: int) -> DetectionDataset:
     """``k`` procedural 128 x 128 canvases with their masks."""
-    make = functools.partial(dd.procedural_detection_set, size=(128, 128))
+    make = functools.partial(procedural_detection_set, size=(128, 128))
     return chunked(make, k, rng, masks=True)
 
 
@@ -85,18 +83,18 @@ def _shapes(n: tuple[int, int, int], seed: int) -> tuple:
     return _procedural(n[0], seed), _procedural(n[1], 1000 + seed), _procedural(n[2], 99)
 
 
-def _nuclei_sets() -> tuple[dd.DetectionDataset, dd.DetectionDataset]:
+def _nuclei_sets() -> tuple[DetectionDataset, DetectionDataset]:
     s = nuclei_quadrants(NUCLEI)
-    train = dd.DetectionDataset.from_instance_labels(
+    train = DetectionDataset.from_instance_labels(
         list(np.clip(s.train_images, 0, 1)), list(s.train_instances), "nucleus"
     )
-    test = dd.DetectionDataset.from_instance_labels(
+    test = DetectionDataset.from_instance_labels(
         [np.clip(s.test_image, 0, 1)], [s.test_instances], "nucleus"
     )
     return train, test
 
 
-def _images(ds: dd.DetectionDataset) -> np.ndarray:
+def _images(ds: DetectionDataset) -> np.ndarray:
     return np.stack(ds.images)
 
 
@@ -173,8 +171,8 @@ def nuclei_unet(seed: int, progress: bool, save: Path | None = None) -> dict[str
 
 
 def _maskrcnn_train(
-    train: dd.DetectionDataset,
-    val: dd.DetectionDataset | None,
+    train: DetectionDataset,
+    val: DetectionDataset | None,
     seed: int,
     settings: dict[str, Any],
     train_kw: dict[str, Any],
@@ -199,9 +197,9 @@ def _maskrcnn_train(
 
 
 def _maskrcnn_run(
-    train: dd.DetectionDataset,
-    val: dd.DetectionDataset | None,
-    test: dd.DetectionDataset,
+    train: DetectionDataset,
+    val: DetectionDataset | None,
+    test: DetectionDataset,
     seed: int,
     settings: dict[str, Any],
     train_kw: dict[str, Any],
@@ -256,7 +254,7 @@ NUCLEI_MASKRCNN_TRAIN = {"epochs": 150, "batch_size": 3, "lr": 2e-3, "weight_dec
 def nuclei_maskrcnn_model(seed: int, progress: bool) -> tuple[torch.nn.Module, Any, float]:
     """The nuclei Mask R-CNN trained on the three training quadrants with ``seed``."""
     train, _ = _nuclei_sets()
-    flips = dd.FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
+    flips = FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
     return _maskrcnn_train(
         train, None, seed, NUCLEI_MASKRCNN, NUCLEI_MASKRCNN_TRAIN, flips, progress
     )
@@ -264,7 +262,7 @@ def nuclei_maskrcnn_model(seed: int, progress: bool) -> tuple[torch.nn.Module, A
 
 def nuclei_maskrcnn(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
     train, test = _nuclei_sets()
-    flips = dd.FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
+    flips = FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
     return _maskrcnn_run(
         train,
         None,

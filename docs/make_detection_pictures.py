@@ -34,10 +34,13 @@ import torch
 
 from robopercept.features.selective_search import selective_search
 from robopercept.imaging import read_image, write_image
-from robopercept.nn.coco import read_voc_xml, write_pr_curves
-from robopercept.nn.detection import evaluate_detector, load_detector
-from robopercept.nn.detection_data import draw_detections, procedural_detection_set
+from robopercept.nn.coco.evaluate import write_pr_curves
+from robopercept.nn.coco.voc import read_voc_xml
+from robopercept.nn.detection.synthetic import procedural_detection_set
+from robopercept.nn.detection.train import evaluate_detector
+from robopercept.nn.detection.zoo import load_detector
 from robopercept.viz.colormap import turbo
+from robopercept.viz.detection import draw_detections
 from robopercept.viz.draw import draw_boxes, draw_lines, draw_text
 
 IMG = Path(__file__).resolve().parent / "img"
@@ -166,7 +169,7 @@ def nms_picture(fcos: torch.nn.Module, image: np.ndarray, classes: list[str]) ->
 
 
 def trees_picture(neon: Path, model_path: Path) -> None:
-    from robopercept.nn.detection_data import deepforest_tiles
+    from robopercept.nn.detection.deepforest import deepforest_tiles
 
     model, info = load_detector(model_path)
     model.nms_thresh = info["settings"].get("nms_thresh", model.nms_thresh)

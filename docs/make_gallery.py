@@ -120,7 +120,7 @@ _CHESS = f"{DATA}/calibration/opencv_chessboard_stereo"
 _CONES = f"{DATA}/stereo/middlebury2003_cones"
 _APACHE_CV = "OpenCV samples (Apache-2.0)"
 _SKIMAGE = "scikit-image's bundled pictures (public domain or CC0, as skimage.data says)"
-_PROCEDURAL = f"(robopercept.nn.detection_data, backgrounds from {_SKIMAGE})"
+_PROCEDURAL = f"(robopercept.nn.detection.synthetic, backgrounds from {_SKIMAGE})"
 
 #: the gallery: one command line per picture, in the order of the page
 ENTRIES: tuple[Entry, ...] = (
@@ -246,7 +246,7 @@ ENTRIES: tuple[Entry, ...] = (
         f"nn pose {INPUTS}/figure.png -o {OUT}/nn-pose --quiet",
         f"{OUT}/nn-pose/figure.png",
         "The shipped HRNet's 16 MPII joints and skeleton on a procedural figure.",
-        f"a procedural figure (robopercept.nn.pose_data, backgrounds from {_SKIMAGE})",
+        f"a procedural figure (robopercept.nn.pose.data, backgrounds from {_SKIMAGE})",
     ),
     Entry(
         "nn cloud",
@@ -254,7 +254,7 @@ ENTRIES: tuple[Entry, ...] = (
         f"{OUT}/nn-cloud/table.png",
         "The shipped PointNet's three best classes for a procedural table, its points "
         "coloured by the shipped part segmenter's labels.",
-        "a procedural shape (robopercept.nn.cloud_data), written as PLY",
+        "a procedural shape (robopercept.nn.cloud.synthetic), written as PLY",
     ),
     Entry(
         "demo",
@@ -399,10 +399,11 @@ def _float_to_u8(image: np.ndarray) -> np.ndarray:
 
 
 def _procedural_images(folder: Path) -> None:
+    from robopercept.nn.cloud.synthetic import procedural_shapes
+    from robopercept.nn.pose.data import procedural_pose_set
+
     from robopercept.imaging import write_image
-    from robopercept.nn.cloud_data import procedural_shapes
-    from robopercept.nn.detection_data import procedural_detection_set
-    from robopercept.nn.pose_data import procedural_pose_set
+    from robopercept.nn.detection.synthetic import procedural_detection_set
     from robopercept.pointcloud import PointCloud, write_point_cloud
 
     shapes = procedural_detection_set(1, size=(128, 128), rng=1)

@@ -18,9 +18,11 @@ import torch
 from torch import nn
 
 from robopercept.imaging import write_image
-from robopercept.nn.data import load_digits, normalization_stats, stratified_split
-from robopercept.nn.models import build_model
-from robopercept.nn.training import Normalize, TrainConfig, evaluate, fit
+from robopercept.nn.classification.models import build_model
+from robopercept.nn.data.augment import Normalize
+from robopercept.nn.data.datasets import load_digits, normalization_stats, stratified_split
+from robopercept.nn.train.config import TrainConfig
+from robopercept.nn.train.loop import evaluate, fit
 from robopercept.viz import confusion_picture, tiles_picture
 
 IMG = Path(__file__).resolve().parent / "img"

@@ -29,12 +29,14 @@ from pathlib import Path
 import numpy as np
 
 from robopercept.imaging import read_image, write_image
-from robopercept.nn import pose as P
-from robopercept.nn.coco import read_coco_json
-from robopercept.nn.pictorial import PictorialStructures
-from robopercept.nn.pose3d import default_pose_library, procrustes_align
-from robopercept.nn.pose_data import pose_sets, procedural_pose_scenes
-from robopercept.nn.pose_io import read_imgaug_keypoints, read_mpii_json
+from robopercept.nn.coco.dataset import read_coco_json
+from robopercept.nn.pose.data import pose_sets, procedural_pose_scenes
+from robopercept.nn.pose.inference import pose_arrays, predict_keypoints, refine_keypoints
+from robopercept.nn.pose.io import read_imgaug_keypoints, read_mpii_json
+from robopercept.nn.pose.library import default_pose_library
+from robopercept.nn.pose.lifting import procrustes_align
+from robopercept.nn.pose.networks import load_pose_model
+from robopercept.nn.pose.pictorial_learn import PictorialStructures
 from robopercept.nn.skeleton import COCO_17, MPII_16
 from robopercept.viz.draw import draw_boxes
 from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
@@ -131,11 +133,11 @@ def methods_picture(models: Path) -> Path | None:
         path = models / f"pose_{name}_figures.pt"
         if not path.is_file():
             continue
-        net, info = P.load_pose_model(path)
-        kp, _ = P.predict_keypoints(net, test.images[idx], flip_permutation=SK.flip_permutation())
+        net, info = load_pose_model(path)
+        kp, _ = predict_keypoints(net, test.images[idx], flip_permutation=SK.flip_permutation())
         if info["refiners"]:
             methods.append((f"{title}, stage 1", kp))
-            kp = P.refine_keypoints(test.images[idx], kp, info["refiners"])
+            kp = refine_keypoints(test.images[idx], kp, info["refiners"])
             title = f"{title} + cascade"
         methods.append((title, kp))
     for k, i in enumerate(idx):
@@ -149,10 +151,10 @@ def heatmaps_and_3d(models: Path) -> list[Path]:
     path = models / "pose_hrnet_figures.pt"
     if not path.is_file():
         return []
-    net, _ = P.load_pose_model(path)
+    net, _ = load_pose_model(path)
     test = pose_sets("figures", 10, (128, 128), 0, test_images=20).test
     i = 7
-    res = P.pose_arrays(net, [test.images[i]], flip_permutation=SK.flip_permutation())[0]
+    res = pose_arrays(net, [test.images[i]], flip_permutation=SK.flip_permutation())[0]
     grid = heatmap_grid(test.images[i], res.heatmaps, list(SK.joints), cols=8, tile_px=200)
     out = [write_image(OUT / "pose_heatmaps.png", grid)]
     library = default_pose_library(SK)
@@ -174,7 +176,7 @@ def heatmaps_and_3d(models: Path) -> list[Path]:
 
 
 def keypointrcnn_picture(models: Path) -> Path | None:
-    from robopercept.nn.detection import detect_arrays, load_detector
+    from robopercept.nn.detection.zoo import detect_arrays, load_detector
 
     path = models / "pose_keypointrcnn_scenes.pt"
     if not path.is_file():

@@ -31,13 +31,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from robopercept.nn.segmentation.data import nuclei_quadrants
 from torch.nn import functional as F
 
 from benchmarks.segmentation_figures import nuclei_maskrcnn_model, nuclei_unet_model
 from robopercept.imaging import label_components, write_image
-from robopercept.nn.detection import detect_arrays, load_detector
-from robopercept.nn.detection_data import procedural_detection_set
-from robopercept.nn.segmentation import (
+from robopercept.nn.detection.synthetic import procedural_detection_set
+from robopercept.nn.detection.zoo import detect_arrays, load_detector
+from robopercept.nn.segmentation.networks import (
     FCN,
     NaiveFCN,
     UNet,
@@ -45,7 +46,6 @@ from robopercept.nn.segmentation import (
     load_segmenter,
     segment_arrays,
 )
-from robopercept.nn.segmentation_data import nuclei_quadrants
 from robopercept.viz.colormap import turbo
 from robopercept.viz.segmentation import class_overlay, instance_overlay, panels_picture
 

@@ -13,7 +13,12 @@ violations, enforce:
   dunder), reads ``module._x`` through an imported module, or imports a private module
   (``calibration/_lattice.py``) from outside that module's own package.
   ``robopercept._checks`` is shared by every floor by design;
-* **cycles** -- no two topic packages import each other, directly or round a loop.
+* **cycles** -- no two topic packages import each other, directly or round a loop;
+* **inside nn** -- the same floors one level down (:data:`NN_FLOORS`): torch-free
+  ground files, then the shared floors (core, ops, coco, data, train), then the task
+  wings (a wing imports no other wing but those of :data:`NN_WING_USES`), then
+  predict; the modules of :data:`NN_TORCH_FREE` load no torch; no ``robopercept``
+  import inside a function of nn, except a torch-free module reaching torch.
 
 The checkers are tested on deliberately bad and good sources first, so a green run
 on the real tree means something.
@@ -538,3 +543,243 @@ def test_no_module_imports_torch_or_compiles_at_import() -> None:
         "print('torch' in sys.modules, compiled)\n"
     )
     assert _run(code) == "False []"
+
+
+# -- inside nn: the floors of its subpackages (DESIGN.md section 1, issue 45) ----------
+
+#: floor of each part of ``robopercept.nn`` (the third component of a module name;
+#: ``__init__`` stands for the package ``robopercept.nn`` itself): torch-free ground
+#: files; the shared floors; the task wings; the predictor on top
+NN_FLOORS: dict[str, int] = {
+    "__init__": 1,
+    "_guards": 1,
+    "functional": 1,
+    "skeleton": 1,
+    "shipped": 1,
+    "core": 2,
+    "ops": 2,
+    "coco": 2,
+    "data": 2,
+    "train": 2,
+    "classification": 3,
+    "detection": 3,
+    "segmentation": 3,
+    "pose": 3,
+    "cloud": 3,
+    "predict": 4,
+}
+#: the only wing-to-wing arrows: segmentation and pose build on detection
+NN_WING_USES: dict[str, set[str]] = {"segmentation": {"detection"}, "pose": {"detection"}}
+#: the modules of nn that load no torch when imported (checked by importing each in a
+#: fresh interpreter); they may reach torch only inside a function
+NN_TORCH_FREE: tuple[str, ...] = (
+    f"{PKG}.nn",
+    *(
+        f"{PKG}.nn.{m}"
+        for m in (
+            "_guards",
+            "functional",
+            "skeleton",
+            "shipped",
+            "coco",
+            "coco._fields",
+            "coco.rle",
+            "coco.dataset",
+            "coco.results",
+            "coco.evaluate",
+            "coco.voc",
+            "data.fonts",
+            "segmentation.metrics",
+            "pose.metrics",
+            "pose.pictorial",
+            "pose.io",
+        )
+    ),
+)
+
+
+def nn_part(module: str) -> str:
+    """``robopercept.nn.detection.fcos`` -> ``detection``; ``robopercept.nn`` -> ``__init__``."""
+    parts = module.split(".")
+    return parts[2] if len(parts) > 2 else "__init__"
+
+
+def _nn_target(imp: Import, known: set[str]) -> str:
+    """The module an import reaches (``from robopercept.nn import ops`` -> ``...nn.ops``)."""
+    if imp.name is not None and f"{imp.module}.{imp.name}" in known:
+        return f"{imp.module}.{imp.name}"
+    return imp.module
+
+
+def nn_floor_violations(
+    source: str,
+    module: str,
+    *,
+    is_package: bool = False,
+    modules: Iterable[str] = MODULES,
+    torch_free: Iterable[str] = NN_TORCH_FREE,
+) -> list[str]:
+    """Inside ``nn``: imports that run up an nn floor, a wing importing a wing it may
+    not, torch imported at module level by a module on the torch-free list."""
+    if top_part(module) != "nn":
+        return []
+    me = nn_part(module)
+    if me not in NN_FLOORS:
+        return [f"{module}: part {me!r} of nn has no floor; add it to NN_FLOORS"]
+    known, free = set(modules), set(torch_free)
+    out = []
+    tree = _parse(source, module)
+    for imp in resolve_imports(tree, module, is_package=is_package, modules=known):
+        where = f"{module}:{imp.lineno}"
+        if imp.module.split(".")[0] in NN_ONLY and module in free and not imp.lazy:
+            out.append(f"{where} imports {imp.module} at module level in a torch-free module")
+        target = _nn_target(imp, known)
+        if not _ours(target) or top_part(target) != "nn":
+            continue
+        other = nn_part(target)
+        if other not in NN_FLOORS:
+            out.append(f"{where} imports {target}, a part of nn with no floor")
+        elif NN_FLOORS[other] > NN_FLOORS[me]:
+            out.append(
+                f"{where} imports {target} (nn floor {NN_FLOORS[other]}) from nn floor "
+                f"{NN_FLOORS[me]}"
+            )
+        elif NN_FLOORS[me] == NN_FLOORS[other] == 3 and other != me:
+            if other not in NN_WING_USES.get(me, set()):
+                out.append(f"{where}: the {me} wing imports the {other} wing")
+        elif target in known and module in free and not imp.lazy and target not in free:
+            out.append(f"{where}: torch-free {module} imports {target} at module level")
+    return out
+
+
+def nn_local_import_violations(
+    source: str,
+    module: str,
+    *,
+    is_package: bool = False,
+    modules: Iterable[str] = MODULES,
+    torch_free: Iterable[str] = NN_TORCH_FREE,
+) -> list[str]:
+    """Inside ``nn``: ``robopercept`` imports inside a function, which hide the module's
+    real arrows; the one exception is a torch-free module reaching a torch module."""
+    if top_part(module) != "nn":
+        return []
+    known, free = set(modules), set(torch_free)
+    out: list[str] = []
+    tree = _parse(source, module)
+    for imp in resolve_imports(tree, module, is_package=is_package, modules=known):
+        target = _nn_target(imp, known)
+        if not imp.lazy or not _ours(target):
+            continue
+        if module in free and top_part(target) == "nn" and target not in free:
+            continue  # a torch-free module reaching torch lazily
+        line = f"{module}:{imp.lineno} imports {target} inside a function"
+        if line not in out:
+            out.append(line)
+    return out
+
+
+class TestNnCheckers:
+    """The nn checkers on made-up sources, so that a green run on the tree means
+    something."""
+
+    MODS = (
+        f"{PKG}.nn",
+        f"{PKG}.nn.functional",
+        f"{PKG}.nn.shipped",
+        f"{PKG}.nn.ops",
+        f"{PKG}.nn.ops.boxes",
+        f"{PKG}.nn.train",
+        f"{PKG}.nn.train.loop",
+        f"{PKG}.nn.detection",
+        f"{PKG}.nn.detection.fcos",
+        f"{PKG}.nn.pose.networks",
+        f"{PKG}.nn.cloud.pointnet",
+        f"{PKG}.nn.predict",
+    )
+    FREE = (f"{PKG}.nn.functional", f"{PKG}.nn.shipped", f"{PKG}.nn.coco.x")
+
+    def check(self, source: str, module: str) -> list[str]:
+        return nn_floor_violations(source, module, modules=self.MODS, torch_free=self.FREE)
+
+    def local(self, source: str, module: str) -> list[str]:
+        return nn_local_import_violations(source, module, modules=self.MODS, torch_free=self.FREE)
+
+    def test_upward_import_is_caught(self) -> None:
+        bad = "from robopercept.nn.detection.fcos import FCOS\n"
+        v = self.check(bad, f"{PKG}.nn.ops.boxes")
+        assert len(v) == 1 and "nn floor 3" in v[0] and "from nn floor 2" in v[0]
+        bad2 = "from robopercept.nn import predict\n"
+        assert len(self.check(bad2, f"{PKG}.nn.train.loop")) == 1
+        bad3 = "from ..predict import predict\n"  # relative, from a subpackage
+        assert len(self.check(bad3, f"{PKG}.nn.ops.boxes")) == 1
+
+    def test_wing_to_wing(self) -> None:
+        assert self.check("from robopercept.nn.detection import fcos\n", f"{PKG}.nn.pose.x") == []
+        bad = "from robopercept.nn.pose.networks import HRNet\n"
+        v = self.check(bad, f"{PKG}.nn.detection.x")
+        assert len(v) == 1 and "detection wing imports the pose wing" in v[0]
+        assert len(self.check(bad, f"{PKG}.nn.cloud.x")) == 1
+
+    def test_downward_and_same_floor_pass(self) -> None:
+        good = (
+            "import torch\n"
+            "from robopercept.nn.ops.boxes import box_iou\n"
+            "from robopercept.nn.train.loop import fit\n"
+            "from robopercept.nn import functional\n"
+            "from robopercept.imaging import read_image\n"
+            "from .fcos import FCOS\n"
+        )
+        assert self.check(good, f"{PKG}.nn.detection.x") == []
+
+    def test_torch_free_modules(self) -> None:
+        assert len(self.check("import torch\n", f"{PKG}.nn.functional")) == 1
+        eager = "from robopercept.nn.train.loop import fit\n"
+        v = self.check(eager, f"{PKG}.nn.coco.x")  # same floor, but it loads torch
+        assert len(v) == 1 and "torch-free" in v[0]
+        assert len(self.check(eager, f"{PKG}.nn.shipped")) == 1  # upward
+        lazy = "def f():\n    import torch\n    return torch\n"
+        assert self.check(lazy, f"{PKG}.nn.functional") == []
+
+    def test_unknown_part(self) -> None:
+        assert len(self.check("", f"{PKG}.nn.newwing.x")) == 1
+
+    def test_local_imports(self) -> None:
+        bad = "def f():\n    from robopercept.nn.ops.boxes import nms\n    return nms\n"
+        v = self.local(bad, f"{PKG}.nn.detection.fcos")
+        assert len(v) == 1 and "inside a function" in v[0]
+        viz = "def f():\n    from robopercept.viz import draw_boxes\n"
+        assert len(self.local(viz, f"{PKG}.nn.train.loop")) == 1
+        reach = "def f():\n    from robopercept.nn.detection.fcos import FCOS\n"
+        assert self.local(reach, f"{PKG}.nn.shipped") == []  # torch-free reaching torch
+        free = "def f():\n    from robopercept.nn import functional\n"
+        assert len(self.local(free, f"{PKG}.nn.shipped")) == 1
+        assert self.local("from robopercept.nn.ops import boxes\n", f"{PKG}.nn.x") == []
+
+
+def test_nn_parts_have_floors() -> None:
+    parts = {nn_part(n) for n in MODULES if top_part(n) == "nn"}
+    assert parts <= set(NN_FLOORS), parts - set(NN_FLOORS)
+
+
+def test_nn_floors() -> None:
+    found = _real_violations(nn_floor_violations)
+    assert not found, "imports that run up nn's floors (DESIGN.md section 1):\n" + "\n".join(found)
+
+
+def test_nn_no_function_local_imports() -> None:
+    found = _real_violations(nn_local_import_violations)
+    assert not found, "robopercept imports inside functions of nn:\n" + "\n".join(found)
+
+
+def test_nn_torch_free_modules_load_no_torch() -> None:
+    """Each module on :data:`NN_TORCH_FREE` imports without loading torch."""
+    assert set(NN_TORCH_FREE) <= set(MODULES), set(NN_TORCH_FREE) - set(MODULES)
+    code = (
+        "import importlib, sys\n"
+        f"for n in {list(NN_TORCH_FREE)!r}:\n"
+        "    importlib.import_module(n)\n"
+        "    assert 'torch' not in sys.modules, n\n"
+        "print('ok')\n"
+    )
+    assert _run(code) == "ok"

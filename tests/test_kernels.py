@@ -611,15 +611,26 @@ def _pipeline_cases() -> list[Case]:
 
 
 def _geometry_cases() -> list[Case]:
+    from robopercept.geometry.boxes import greedy_nms
     from robopercept.geometry.camera import distort
 
     x, y = np.meshgrid(np.linspace(-0.6, 0.6, 9), np.linspace(-0.4, 0.5, 7))
     c = (0.1, -0.05, 1e-3, -2e-3, 0.01)
+    rng = np.random.default_rng(3)
+    boxes = np.concatenate([rng.uniform(0, 40, (50, 2)), rng.uniform(2, 15, (50, 2))], axis=1)
+    scores, classes = rng.permutation(50) / 50.0, rng.integers(0, 3, 50)
     return [
         Case(
             "distort",
             lambda: [
                 distort(x, y, c, m) for m in ("brown_conrady", "modified_brown_conrady", "none")
+            ],
+        ),
+        Case(
+            "greedy_nms",
+            lambda: [
+                greedy_nms(boxes, scores, 0.3),
+                greedy_nms(boxes, scores, 0.2, classes=classes),
             ],
         ),
     ]
@@ -631,8 +642,10 @@ def _nn_cases() -> list[Case]:
         return []
     import torch
 
-    from robopercept.nn.coco.formats import coco_from_dict, evaluate_detections, results_from_list
-    from robopercept.nn.ops.boxes import batched_nms
+    from robopercept.nn.coco.dataset import coco_from_dict
+    from robopercept.nn.coco.evaluate import evaluate_detections
+    from robopercept.nn.coco.results import results_from_list
+    from robopercept.nn.ops.nms import batched_nms
 
     rng = np.random.default_rng(7)
     xy = rng.uniform(0, 40, (60, 2))

@@ -615,7 +615,7 @@ def nn_runs(tmp_path_factory) -> tuple[Path, dict[str, Path], dict[str, str]]:
     each training run's stdout."""
     torch = pytest.importorskip("torch")
     from robopercept.imaging import write_image
-    from robopercept.nn.detection.data import procedural_detection_set
+    from robopercept.nn.detection.synthetic import procedural_detection_set
     from robopercept.pointcloud import PointCloud, write_point_cloud
 
     out = tmp_path_factory.mktemp("json_nn")

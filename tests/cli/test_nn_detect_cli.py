@@ -14,9 +14,11 @@ torch = pytest.importorskip("torch")
 from robopercept.cli import detect as cli_detect  # noqa: E402
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
-from robopercept.nn.coco.formats import read_coco_results, write_coco_json  # noqa: E402
-from robopercept.nn.detection.data import digits_detection_set  # noqa: E402
-from robopercept.nn.detection.models import evaluate_detector, load_detector  # noqa: E402
+from robopercept.nn.coco.dataset import write_coco_json  # noqa: E402
+from robopercept.nn.coco.results import read_coco_results  # noqa: E402
+from robopercept.nn.detection.synthetic import digits_detection_set  # noqa: E402
+from robopercept.nn.detection.train import evaluate_detector  # noqa: E402
+from robopercept.nn.detection.zoo import load_detector  # noqa: E402
 
 DATA = ["--data", "digits", "--images", "8", "--size", "64x64", "--seed", "0"]
 TRAIN = ["nn", "detect", "train", *DATA, "--model", "fcos", "--width", "8"]
@@ -84,7 +86,8 @@ def test_metrics_equal_evaluate_detector_on_saved_model(run, capsys):
 
 
 def test_tta_flag_equals_the_wrapper_in_eval_and_detect(run, tmp_path, capsys):
-    from robopercept.nn.detection.models import TestTimeAugmentation, detect_arrays
+    from robopercept.nn.detection.tta import TestTimeAugmentation
+    from robopercept.nn.detection.zoo import detect_arrays
 
     out, _ = run
     model, _ = load_detector(out / "model.pt")
@@ -216,7 +219,7 @@ def test_no_words_prints_help_and_exits_2(capsys):
 
 
 def test_ema_flag_reaches_train_detector(tmp_path, monkeypatch, capsys):
-    import robopercept.nn.detection.models as det
+    import robopercept.nn.detection.train as det
 
     seen = {}
     real = det.train_detector

@@ -1,7 +1,7 @@
 """``robopercept nn pose train|eval|IMAGE...`` (issue 28, item 7): tiny runs (a few 64 x
 64 procedural figures, a few epochs) so the file runs in well under a minute; the
 printed figures equal the library's on the same split, the image form's keypoints
-equal :func:`~robopercept.nn.pose.networks.pose_arrays`', and bad arguments name their flag."""
+equal :func:`~robopercept.nn.pose.inference.pose_arrays`', and bad arguments name their flag."""
 
 from __future__ import annotations
 
@@ -18,7 +18,9 @@ torch = pytest.importorskip("torch")
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
 from robopercept.nn.pose.data import pose_sets  # noqa: E402
-from robopercept.nn.pose.networks import evaluate_pose, load_pose_model, pose_arrays  # noqa: E402
+from robopercept.nn.pose.evaluate import evaluate_pose  # noqa: E402
+from robopercept.nn.pose.inference import pose_arrays  # noqa: E402
+from robopercept.nn.pose.networks import load_pose_model  # noqa: E402
 
 DATA = ["--data", "figures", "--images", "12", "--size", "64x64", "--seed", "0"]
 FILES = {"model.pt", "history.json", "metrics.json", "samples.png"}

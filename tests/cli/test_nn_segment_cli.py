@@ -18,7 +18,7 @@ torch = pytest.importorskip("torch")
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
 from robopercept.nn.coco.rle import rle_decode  # noqa: E402
-from robopercept.nn.detection.models import load_detector  # noqa: E402
+from robopercept.nn.detection.zoo import load_detector  # noqa: E402
 from robopercept.nn.segmentation.data import segmentation_sets  # noqa: E402
 from robopercept.nn.segmentation.metrics import (  # noqa: E402
     segmentation_confusion,

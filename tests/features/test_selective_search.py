@@ -177,7 +177,7 @@ def test_recall_on_trees_beside_opencv():
     if not hasattr(cv2, "ximgproc"):
         pytest.skip("opencv-contrib (cv2.ximgproc) not installed")
     from robopercept.imaging import read_image
-    from robopercept.nn.coco.formats import read_voc_xml
+    from robopercept.nn.coco.voc import read_voc_xml
 
     folder = data_path("detection", "deepforest_neon")
     hits_ours = hits_cv = total = 0.0

@@ -231,7 +231,7 @@ ARRAY_DATA = _b(
 TBOXES = _b("tests.fuzz.api:torch_tensor", [[0, 0, 4, 4], [1, 1, 5, 6], [2, 0, 7, 3]])
 TSCORES = _b("tests.fuzz.api:torch_tensor", [0.9, 0.8, 0.3])
 TROIS = _b("tests.fuzz.api:torch_tensor", [[0, 0, 0, 4, 4], [0, 1, 2, 7, 6]])
-TRAIN_CFG = _b("robopercept.nn.train.loop:TrainConfig", epochs=1, batch_size=4, device="cpu")
+TRAIN_CFG = _b("robopercept.nn.train.config:TrainConfig", epochs=1, batch_size=4, device="cpu")
 
 
 @dataclass(frozen=True)
@@ -326,20 +326,20 @@ def _write_tum(path: Path) -> None:
 
 
 def _write_checkpoint(path: Path) -> None:
-    from robopercept.nn.train.loop import save_checkpoint
+    from robopercept.nn.train.checkpoint import save_checkpoint
 
     save_checkpoint(path, {"epoch": 1, "model": materialize(TINY_NET).state_dict()})
 
 
 def _write_detector(path: Path) -> None:
-    from robopercept.nn.detection.models import build_detector, save_detector
+    from robopercept.nn.detection.zoo import build_detector, save_detector
 
     save_detector(path, build_detector("fcos", 2, width=4), "fcos", {"width": 4}, ["a", "b"])
 
 
 def _write_run(path: Path) -> None:
     from robopercept.nn.classification.run import train_run
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.train.config import TrainConfig
 
     train_run(
         "digits",
@@ -468,6 +468,7 @@ VALID: dict[str, dict[str, Any]] = {
     "geometry.apply": {"T": T4, "points": PTS3},
     "geometry.box_convert": {"boxes": BOXES, "in_fmt": "xywh", "out_fmt": "cxcywh"},
     "geometry.box_iou_matrix": {"a": BOXES, "b": BOXES[::-1].copy()},
+    "geometry.greedy_nms": {"boxes": BOXES, "scores": np.array([0.9, 0.8]), "iou_threshold": 0.5},
     "geometry.compose": {"*": [T4, np.linalg.inv(T4)]},
     "geometry.decompose_essential": {"E": E_MAT, "x1": X1, "x2": X2, "K": K},
     "geometry.deproject": {"pixels": PTS2, "depth": np.full(40, 2.0), "intrinsics": CAM},
@@ -836,6 +837,14 @@ VALID: dict[str, dict[str, Any]] = {
         "width": 200,
         "height": 160,
     },
+    "viz.precision_recall_picture": {
+        "recall": np.linspace(0, 1, 11),
+        "precision": np.stack([1 - np.linspace(0, 1, 11) ** 2, -np.ones(11)]),
+        "labels": ["a", "b"],
+        "iou_threshold": 0.5,
+        "width": 200,
+        "height": 160,
+    },
     "viz.dense_flow_picture": {"field": FLOW[::8, ::8].copy(), "step": 8, "shape": (48, 64)},
     "viz.draw_boxes": {"image": IMG_RGB, "boxes": BOXES},
     "viz.draw_chessboard": {"image": IMG_RGB, "corners": VIEWS[0], "pattern_size": (4, 3)},
@@ -981,27 +990,28 @@ VALID: dict[str, dict[str, Any]] = {
         "labels": np.arange(6) % 2,
         "classes": ("a", "b"),
     },
-    "nn.data.datasets.Compose": {
-        "transforms": [_b("robopercept.nn.data.datasets:RandomFlip", generator=0)]
+    "nn.data.augment.Compose": {
+        "transforms": [_b("robopercept.nn.data.augment:RandomFlip", generator=0)]
     },
     "nn.data.datasets.ImageFolder": {"root": Fixture("images"), "size": (16, 16)},
-    "nn.data.datasets.Normalize": {"mean": [0.5], "std": [0.25]},
-    "nn.data.datasets.RandomCrop": {"size": 12, "padding": 2, "generator": 0},
-    "nn.data.datasets.RandomFlip": {"generator": 0},
-    "nn.data.datasets.RandomAffine": {"degrees": 10.0, "generator": 0},
-    "nn.data.datasets.ColorJitter": {"brightness": 0.2, "generator": 0},
-    "nn.data.datasets.GaussianNoise": {"generator": 0},
+    "nn.data.augment.Normalize": {"mean": [0.5], "std": [0.25]},
+    "nn.data.augment.RandomCrop": {"size": 12, "padding": 2, "generator": 0},
+    "nn.data.augment.RandomFlip": {"generator": 0},
+    "nn.data.augment.RandomAffine": {"degrees": 10.0, "generator": 0},
+    "nn.data.augment.ColorJitter": {"brightness": 0.2, "generator": 0},
+    "nn.data.augment.GaussianNoise": {"generator": 0},
     "nn.data.datasets.normalization_stats": {
         "data": np.random.default_rng(5).uniform(0, 1, (6, 1, 8, 8))
     },
     "nn.data.datasets.shapes_dataset": {"n": 6, "size": 16, "rng": 0},
     "nn.data.datasets.stratified_split": {"labels": np.arange(30) % 3},
     "nn.data.datasets.to_unit_float": {"image": IMG},
-    "nn.train.loop.TrainConfig": {"epochs": 1, "batch_size": 4},
+    "nn.data.fonts.render_digits": {"n": 4},
+    "nn.train.config.TrainConfig": {"epochs": 1, "batch_size": 4},
     "nn.train.loop.evaluate": {"model": TINY_NET, "data": ARRAY_DATA, "device": "cpu"},
     "nn.train.loop.fit": {"model": TINY_NET, "train": ARRAY_DATA, "config": TRAIN_CFG},
-    "nn.train.loop.load_checkpoint": {"path": Fixture("checkpoint.pt"), "model": TINY_NET},
-    "nn.train.loop.save_checkpoint": {
+    "nn.train.checkpoint.load_checkpoint": {"path": Fixture("checkpoint.pt"), "model": TINY_NET},
+    "nn.train.checkpoint.save_checkpoint": {
         "path": _out("checkpoint.pt"),
         "state": {"epoch": 1, "w": [1.0, 2.0]},
     },
@@ -1016,6 +1026,7 @@ VALID: dict[str, dict[str, Any]] = {
         "input_shape": (1, 16, 16),
     },
     "nn.ops.boxes.box_area": {"boxes": TBOXES},
+    "nn.ops.boxes.check_boxes": {"boxes": TBOXES, "name": "boxes"},
     "nn.ops.boxes.box_convert": {"boxes": TBOXES, "in_fmt": "xyxy", "out_fmt": "cxcywh"},
     "nn.ops.boxes.box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
     "nn.ops.boxes.generalized_box_iou": {"boxes1": TBOXES, "boxes2": TBOXES},
@@ -1026,37 +1037,40 @@ VALID: dict[str, dict[str, Any]] = {
         "quarter_turns": 1,
         "inverse": True,
     },
-    "nn.ops.boxes.nms": {"boxes": TBOXES, "scores": TSCORES, "iou_threshold": 0.5},
-    "nn.ops.boxes.batched_nms": {
+    "nn.ops.nms.nms": {"boxes": TBOXES, "scores": TSCORES, "iou_threshold": 0.5},
+    "nn.ops.nms.batched_nms": {
         "boxes": TBOXES,
         "scores": TSCORES,
         "idxs": _b("tests.fuzz.api:torch_tensor", [0, 1, 0], "int64"),
         "iou_threshold": 0.5,
     },
-    "nn.ops.boxes.non_max_suppression": {"boxes": TBOXES, "scores": TSCORES, "top_k": 2},
-    "nn.ops.boxes.roi_align": {
+    "nn.ops.nms.non_max_suppression": {"boxes": TBOXES, "scores": TSCORES, "top_k": 2},
+    "nn.ops.roi.roi_align": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
         "output_size": 2,
     },
-    "nn.ops.boxes.roi_pool": {
+    "nn.ops.roi.roi_pool": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
         "output_size": 2,
     },
-    "nn.ops.boxes.RoIAlign": {"output_size": 2},
-    "nn.ops.boxes.RoIPool": {"output_size": 2},
-    "nn.ops.boxes.BoxCoder.encode": {"reference_boxes": TBOXES, "proposals": TBOXES},
-    "nn.ops.boxes.BoxCoder.decode": {"deltas": TBOXES, "boxes": TBOXES},
-    "nn.ops.boxes.RoIAlign.forward": {
+    "nn.ops.roi.RoIAlign": {"output_size": 2},
+    "nn.ops.roi.RoIPool": {"output_size": 2},
+    "nn.ops.anchors.BoxCoder.encode": {"reference_boxes": TBOXES, "proposals": TBOXES},
+    "nn.ops.anchors.BoxCoder.decode": {"deltas": TBOXES, "boxes": TBOXES},
+    "nn.ops.roi.RoIAlign.forward": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
     },
-    "nn.ops.boxes.RoIPool.forward": {
+    "nn.ops.roi.RoIPool.forward": {
         "input": _b("tests.fuzz.api:torch_image", 1, 2, 8, 8),
         "boxes": TROIS,
     },
-    "nn.ops.boxes.AnchorGenerator.__call__": {"image_shape": (32, 32), "feature_shapes": [(4, 4)]},
+    "nn.ops.anchors.AnchorGenerator.__call__": {
+        "image_shape": (32, 32),
+        "feature_shapes": [(4, 4)],
+    },
     "nn.classification.run.evaluate_run": {
         "checkpoint": Fixture("run/checkpoint.pt"),
         "data": "digits",
@@ -1140,10 +1154,10 @@ METHODS: dict[str, tuple[str, ...]] = {
     "imaging.SnapshotVideoWriter": ("add",),
     "imaging.VideoReader": ("__iter__",),
     "geometry.CameraIntrinsics": ("scaled",),
-    "nn.ops.boxes.BoxCoder": ("encode", "decode"),
-    "nn.ops.boxes.AnchorGenerator": ("__call__", "base_anchors"),
-    "nn.ops.boxes.RoIAlign": ("forward",),
-    "nn.ops.boxes.RoIPool": ("forward",),
+    "nn.ops.anchors.BoxCoder": ("encode", "decode"),
+    "nn.ops.anchors.AnchorGenerator": ("__call__", "base_anchors"),
+    "nn.ops.roi.RoIAlign": ("forward",),
+    "nn.ops.roi.RoIPool": ("forward",),
     "estimation.Plane": ("distance", "project"),
     "estimation.Line": ("distance",),
     "estimation.LineModel": ("fit",),
@@ -1172,12 +1186,12 @@ METHODS: dict[str, tuple[str, ...]] = {
     "sources.VideoSource": ("__iter__",),
     "pipelines.PlaneMeasurer": ("measure",),
     "pipelines.PlaneTracker": ("process",),
-    "nn.data.datasets.RandomFlip": ("__call__",),
-    "nn.data.datasets.RandomCrop": ("__call__",),
-    "nn.data.datasets.RandomAffine": ("__call__",),
-    "nn.data.datasets.ColorJitter": ("__call__",),
-    "nn.data.datasets.GaussianNoise": ("__call__",),
-    "nn.data.datasets.Normalize": ("__call__",),
+    "nn.data.augment.RandomFlip": ("__call__",),
+    "nn.data.augment.RandomCrop": ("__call__",),
+    "nn.data.augment.RandomAffine": ("__call__",),
+    "nn.data.augment.ColorJitter": ("__call__",),
+    "nn.data.augment.GaussianNoise": ("__call__",),
+    "nn.data.augment.Normalize": ("__call__",),
 }
 
 #: the constructor arguments of a method's instance, where the constructor's own
@@ -1199,12 +1213,12 @@ PRE: dict[str, tuple[tuple[str, tuple[Any, ...]], ...]] = {
 
 #: roles that the valid value does not reveal (a tensor where an image goes)
 ROLES: dict[str, dict[str, str]] = {
-    "nn.data.datasets.RandomFlip.__call__": {"x": "image"},
-    "nn.data.datasets.RandomCrop.__call__": {"x": "image"},
-    "nn.data.datasets.RandomAffine.__call__": {"x": "image"},
-    "nn.data.datasets.ColorJitter.__call__": {"x": "image"},
-    "nn.data.datasets.GaussianNoise.__call__": {"x": "image"},
-    "nn.data.datasets.Normalize.__call__": {"x": "image"},
+    "nn.data.augment.RandomFlip.__call__": {"x": "image"},
+    "nn.data.augment.RandomCrop.__call__": {"x": "image"},
+    "nn.data.augment.RandomAffine.__call__": {"x": "image"},
+    "nn.data.augment.ColorJitter.__call__": {"x": "image"},
+    "nn.data.augment.GaussianNoise.__call__": {"x": "image"},
+    "nn.data.augment.Normalize.__call__": {"x": "image"},
     "nn.core.blocks.check_input": {"x": "image"},
     "pipelines.PlaneMeasurer.measure": {"frame": "frame"},
     "pipelines.PlaneTracker.process": {"frame": "frame"},
@@ -1219,11 +1233,11 @@ for _cls in (
     "GaussianNoise",
     "Normalize",
 ):
-    VALID.setdefault(f"nn.data.datasets.{_cls}.__call__", {"x": TORCH_IMG})
-VALID["nn.data.datasets.Normalize"] = {"mean": [0.5], "std": [0.25]}
+    VALID.setdefault(f"nn.data.augment.{_cls}.__call__", {"x": TORCH_IMG})
+VALID["nn.data.augment.Normalize"] = {"mean": [0.5], "std": [0.25]}
 
 
-# nn.coco.formats (issue 26): a one-image COCO set, its results, a VOC file, an evaluation
+# nn.coco (issue 26): a one-image COCO set, its results, a VOC file, an evaluation
 _COCO_GT = {
     "images": [{"id": 1, "file_name": "a.png", "width": 64, "height": 48}],
     "categories": [{"id": 1, "name": "a"}, {"id": 2, "name": "b"}],
@@ -1245,16 +1259,16 @@ _VOC_XML = (
 
 
 def coco_value(kind: str) -> Any:
-    """A valid nn.coco.formats value: ``gt`` (CocoDataset), ``results`` (CocoResults),
+    """A valid nn.coco value: ``gt`` (CocoDataset), ``results`` (CocoResults),
     ``evaluation`` (CocoEvaluation) or ``voc`` (a list of one VocAnnotation)."""
-    from robopercept.nn.coco.formats import formats as coco
+    from robopercept.nn.coco import dataset, evaluate, results, voc
 
-    gt = coco.coco_from_dict(_COCO_GT)
-    res = coco.results_from_list(_COCO_RES)
+    gt = dataset.coco_from_dict(_COCO_GT)
+    res = results.results_from_list(_COCO_RES)
     if kind == "voc":
-        obj = coco.VocObject("tree", (2.0, 3.0, 22.0, 13.0))
-        return [coco.VocAnnotation("a.png", 64, 48, 3, (obj,))]
-    return {"gt": gt, "results": res, "evaluation": coco.evaluate_detections(gt, res)}[kind]
+        obj = voc.VocObject("tree", (2.0, 3.0, 22.0, 13.0))
+        return [voc.VocAnnotation("a.png", 64, 48, 3, (obj,))]
+    return {"gt": gt, "results": res, "evaluation": evaluate.evaluate_detections(gt, res)}[kind]
 
 
 FIXTURES.update(
@@ -1269,46 +1283,48 @@ _CRES = _b("tests.fuzz.api:coco_value", "results")
 _CEV = _b("tests.fuzz.api:coco_value", "evaluation")
 VALID.update(
     {
-        "nn.coco.formats.coco_from_dict": {"data": _COCO_GT},
-        "nn.coco.formats.read_coco_json": {"path": Fixture("coco.json")},
-        "nn.coco.formats.coco_to_dict": {"dataset": _CGT},
-        "nn.coco.formats.write_coco_json": {"dataset": _CGT, "path": _out("gt.json")},
-        "nn.coco.formats.results_from_list": {"results": _COCO_RES},
-        "nn.coco.formats.read_coco_results": {"path": Fixture("coco_results.json")},
-        "nn.coco.formats.results_to_list": {"results": _CRES},
-        "nn.coco.formats.write_coco_results": {"results": _CRES, "path": _out("results.json")},
-        "nn.coco.formats.results_from_ground_truth": {"dataset": _CGT},
-        "nn.coco.formats.read_voc_xml": {"path": Fixture("voc.xml")},
-        "nn.coco.formats.voc_to_coco": {"annotations": _b("tests.fuzz.api:coco_value", "voc")},
-        "nn.coco.formats.evaluate_detections": {
+        "nn.coco.dataset.coco_from_dict": {"data": _COCO_GT},
+        "nn.coco.dataset.read_coco_json": {"path": Fixture("coco.json")},
+        "nn.coco.dataset.coco_to_dict": {"dataset": _CGT},
+        "nn.coco.dataset.write_coco_json": {"dataset": _CGT, "path": _out("gt.json")},
+        "nn.coco.dataset.as_coco_dataset": {"gt": _COCO_GT},
+        "nn.coco.results.results_from_list": {"results": _COCO_RES},
+        "nn.coco.results.read_coco_results": {"path": Fixture("coco_results.json")},
+        "nn.coco.results.results_to_list": {"results": _CRES},
+        "nn.coco.results.write_coco_results": {"results": _CRES, "path": _out("results.json")},
+        "nn.coco.results.results_from_ground_truth": {"dataset": _CGT},
+        "nn.coco.results.as_coco_results": {"results": _COCO_RES, "gt": _CGT},
+        "nn.coco.voc.read_voc_xml": {"path": Fixture("voc.xml")},
+        "nn.coco.voc.voc_to_coco": {"annotations": _b("tests.fuzz.api:coco_value", "voc")},
+        "nn.coco.evaluate.evaluate_detections": {
             "gt": _CGT,
             "results": _COCO_RES,
             "max_dets": (1, 10, 100),
         },
-        "nn.coco.formats.evaluate_voc": {"gt": _CGT, "results": _CRES},
-        "nn.coco.formats.voc_average_precision": {
+        "nn.coco.voc.evaluate_voc": {"gt": _CGT, "results": _CRES},
+        "nn.coco.voc.voc_average_precision": {
             "recall": np.array([0.5, 0.5, 1.0]),
             "precision": np.array([1.0, 0.5, 2 / 3]),
         },
-        "nn.coco.formats.pr_curves_picture": {"evaluation": _CEV, "width": 200, "height": 150},
-        "nn.coco.formats.write_pr_curves": {"evaluation": _CEV, "path": _out("pr.png")},
+        "nn.coco.evaluate.pr_curves_picture": {"evaluation": _CEV, "width": 200, "height": 150},
+        "nn.coco.evaluate.write_pr_curves": {"evaluation": _CEV, "path": _out("pr.png")},
     }
 )
 
-# nn.coco.formats keypoints and nn.pose.metrics (issue 28): two persons of 3 keypoints, a detection
+# nn.coco keypoints and nn.pose.metrics (issue 28): two persons of 3 keypoints, a detection
 _KP_GT = np.array([[[10.0, 10.0, 2.0], [20.0, 12.0, 2.0], [15.0, 30.0, 1.0]], np.zeros((3, 3))])
 _KP_DT = np.array([[[11.0, 10.0], [19.0, 13.0], [15.0, 28.0]]])
 _I2 = np.array([1, 2], dtype=np.int64)
 VALID.update(
     {
-        "nn.coco.formats.keypoint_oks": {
+        "nn.coco.evaluate.keypoint_oks": {
             "dt_keypoints": _KP_DT,
             "gt_keypoints": _KP_GT,
             "gt_area": np.array([200.0, 50.0]),
             "gt_box": np.array([[8.0, 8.0, 14.0, 24.0], [40.0, 5.0, 5.0, 10.0]]),
             "sigmas": np.array([0.05, 0.07, 0.09]),
         },
-        "nn.coco.formats.CocoDataset": {
+        "nn.coco.dataset.CocoDataset": {
             "images": (),
             "categories": (),
             "ann_ids": _I2,
@@ -1320,7 +1336,7 @@ VALID.update(
             "keypoints": _KP_GT,
             "num_keypoints": np.array([3, 0]),
         },
-        "nn.coco.formats.CocoResults": {
+        "nn.coco.results.CocoResults": {
             "image_ids": _I2[:1],
             "category_ids": _I2[:1],
             "boxes": np.array([[11.0, 10.0, 8.0, 18.0]]),
@@ -1496,7 +1512,8 @@ VALID.update(
 )
 
 
-# nn.detection.data (issue 26): a small detection set, a batch of it, a DeepForest folder
+# nn.detection.data, .synthetic, .deepforest (issue 26): a small detection set, a batch
+# of it, a DeepForest folder
 def detection_value(kind: str) -> Any:
     """A valid nn.detection.data value: ``dataset`` (DetectionDataset) or ``batch``
     (two items of it)."""
@@ -1522,7 +1539,7 @@ def detection_value(kind: str) -> Any:
 def _write_deepforest(path: Path) -> None:
     """The four DeepForest file pairs as 80 x 72 images with one box each."""
     from robopercept.imaging import write_image
-    from robopercept.nn.detection.data import DEEPFOREST_IMAGES
+    from robopercept.nn.detection.deepforest import DEEPFOREST_IMAGES
 
     path.mkdir(parents=True, exist_ok=True)
     for stem in DEEPFOREST_IMAGES:
@@ -1566,28 +1583,39 @@ VALID.update(
         "nn.detection.data.collate_detection": {
             "batch": _b("tests.fuzz.api:detection_value", "batch")
         },
-        "nn.detection.data.procedural_detection_set": {"n_images": 2, "size": (32, 32), "rng": 0},
-        "nn.detection.data.digits_detection_set": {
+        "nn.detection.synthetic.procedural_detection_set": {
+            "n_images": 2,
+            "size": (32, 32),
+            "rng": 0,
+        },
+        "nn.detection.synthetic.digits_detection_set": {
             "n_images": 2,
             "size": (32, 32),
             "rng": 0,
             "scale": (8, 16),
         },
-        "nn.detection.data.single_digit_set": {
+        "nn.detection.synthetic.single_digit_set": {
             "n_images": 2,
             "size": (32, 32),
             "rng": 0,
             "scale": (8, 16),
         },
-        "nn.detection.data.deepforest_tiles": {"folder": Fixture("deepforest"), "tile": 64},
-        "nn.detection.data.draw_detections": {
+        "nn.detection.deepforest.deepforest_tiles": {"folder": Fixture("deepforest"), "tile": 64},
+        "viz.draw_detections": {
             "image": IMG_RGB,
             "boxes": [[1.0, 2.0, 9.0, 12.0]],
             "labels": [1],
             "classes": ["a"],
         },
         "nn.detection.data.samples_picture": {"dataset": _DDS},
-        "nn.detection.data.DeepForestTiles": {"train": _DDS, "test": _DDS},
+        "nn.detection.data.check_classes": {"classes": ["a", "b"]},
+        "viz.detections_grid": {
+            "images": [IMG_RGB, IMG],
+            "boxes": [[[1.0, 2.0, 9.0, 12.0]], np.zeros((0, 4))],
+            "labels": [[1], []],
+            "classes": ["a"],
+        },
+        "nn.detection.deepforest.DeepForestTiles": {"train": _DDS, "test": _DDS},
     }
 )
 METHODS["nn.detection.data.DetectionDataset"] = (
@@ -2330,14 +2358,18 @@ VALID.update(
 )
 
 
-# nn.detection.models (issue 26): tiny detectors, a batch of two images with their targets
+# nn.detection (issue 26): tiny detectors, a batch of two images with their targets
 def detector_value(kind: str) -> Any:
-    """A valid nn.detection.models value: a tiny ``fcos`` / ``faster`` / ``fast`` /
+    """A valid nn.detection value: a tiny ``fcos`` / ``faster`` / ``fast`` /
     ``localizer`` model (seeded), ``images`` (two 3 x 16 x 16 tensors) or ``targets``
     (one box each)."""
     import torch
 
-    from robopercept.nn.detection.models import models as det
+    from robopercept.nn.detection.fast_rcnn import FastRCNN
+    from robopercept.nn.detection.faster_rcnn import FasterRCNN
+    from robopercept.nn.detection.fcos import FCOS
+    from robopercept.nn.detection.localizer import SingleObjectLocalizer
+    from robopercept.nn.detection.mask_rcnn import MaskRCNN
 
     torch.manual_seed(0)
     if kind == "images":
@@ -2380,14 +2412,14 @@ def detector_value(kind: str) -> Any:
             },
         ]
     if kind == "maskrcnn":
-        return det.MaskRCNN(2, width=4, hidden=8, mask_channels=4, mask_convs=1)
+        return MaskRCNN(2, width=4, hidden=8, mask_channels=4, mask_convs=1)
     if kind == "fcos":
-        return det.FCOS(2, width=4, head_channels=8)
+        return FCOS(2, width=4, head_channels=8)
     if kind == "faster":
-        return det.FasterRCNN(2, width=4, hidden=8)
+        return FasterRCNN(2, width=4, hidden=8)
     if kind == "fast":
-        return det.FastRCNN(2, width=4, hidden=8)
-    return det.SingleObjectLocalizer(2, width=4)
+        return FastRCNN(2, width=4, hidden=8)
+    return SingleObjectLocalizer(2, width=4)
 
 
 _DIMAGES = _b("tests.fuzz.api:detector_value", "images")
@@ -2395,138 +2427,149 @@ _DTARGETS = _b("tests.fuzz.api:detector_value", "targets")
 _DPROPS = _b("tests.fuzz.api:torch_tensor", [[0.0, 0.0, 8.0, 8.0], [2.0, 2.0, 14.0, 12.0]])
 VALID.update(
     {
-        "nn.train.loop.resolve_device": {"name": "cpu"},
-        "nn.detection.models.FPN": {"in_channels": [4, 8], "out_channels": 4},
-        "nn.detection.models.DetectionBackbone": {"width": 4, "strides": (8, 16)},
-        "nn.detection.models.SingleObjectLocalizer": {"num_classes": 2, "width": 4},
-        "nn.detection.models.FastRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
-        "nn.detection.models.FasterRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
-        "nn.detection.models.FCOS": {
+        "nn.train.config.resolve_device": {"name": "cpu"},
+        "nn.core.backbones.FPN": {"in_channels": [4, 8], "out_channels": 4},
+        "nn.core.backbones.DetectionBackbone": {"width": 4, "strides": (8, 16)},
+        "nn.detection.localizer.SingleObjectLocalizer": {"num_classes": 2, "width": 4},
+        "nn.detection.fast_rcnn.FastRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
+        "nn.detection.faster_rcnn.FasterRCNN": {"num_classes": 2, "width": 4, "hidden": 8},
+        "nn.detection.fcos.FCOS": {
             "num_classes": 2,
             "width": 4,
             "head_channels": 8,
             "box_activation": "exp",
             "centerness_weighted": True,
         },
-        "nn.detection.models.FCOS.forward": {"images": _DIMAGES, "targets": _DTARGETS},
-        "nn.detection.models.FasterRCNN.forward": {"images": _DIMAGES, "targets": _DTARGETS},
-        "nn.detection.models.FastRCNN.forward": {
+        "nn.detection.fcos.FCOS.forward": {"images": _DIMAGES, "targets": _DTARGETS},
+        "nn.detection.faster_rcnn.FasterRCNN.forward": {"images": _DIMAGES, "targets": _DTARGETS},
+        "nn.detection.fast_rcnn.FastRCNN.forward": {
             "images": _DIMAGES,
             "targets": _DTARGETS,
             "proposals": [_DPROPS, _DPROPS],
         },
-        "nn.detection.models.SingleObjectLocalizer.forward": {
+        "nn.detection.localizer.SingleObjectLocalizer.forward": {
             "images": _DIMAGES,
             "targets": _DTARGETS,
         },
-        "nn.detection.models.match_boxes": {
+        "nn.detection.targets.match_boxes": {
             "iou": _b("tests.fuzz.api:torch_tensor", [[0.9, 0.2, 0.5]]),
             "fg_threshold": 0.7,
             "bg_threshold": 0.3,
         },
-        "nn.detection.models.sample_balanced": {
+        "nn.detection.targets.sample_balanced": {
             "labels": _b("tests.fuzz.api:torch_tensor", [1, 0, -1, 0], "int64"),
             "batch_size": 2,
             "positive_fraction": 0.5,
         },
-        "nn.detection.models.sigmoid_focal_loss": {"inputs": TSCORES, "targets": TSCORES},
-        "nn.detection.models.train_detector": {
+        "nn.ops.losses.sigmoid_focal_loss": {"inputs": TSCORES, "targets": TSCORES},
+        "nn.detection.train.train_detector": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "dataset": _DDS,
             "config": TRAIN_CFG,
             "progress": False,
         },
-        "nn.detection.models.evaluate_detector": {
+        "nn.detection.train.evaluate_detector": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "dataset": _DDS,
         },
     }
 )
-for _cls in ("FCOS", "FasterRCNN", "FastRCNN", "SingleObjectLocalizer"):
-    METHODS[f"nn.detection.models.{_cls}"] = ("forward",)
+for _cls in (
+    "fcos.FCOS",
+    "faster_rcnn.FasterRCNN",
+    "fast_rcnn.FastRCNN",
+    "localizer.SingleObjectLocalizer",
+):
+    METHODS[f"nn.detection.{_cls}"] = ("forward",)
 VALID.update(
     {
-        "nn.detection.models.RCNN": {"num_classes": 2, "warp_size": 8, "width": 4, "hidden": 8},
-        "nn.detection.models.RCNN.forward": {
+        "nn.detection.base.check_images": {"images": _DIMAGES},
+        "nn.detection.train.check_detection_dataset": {"dataset": _DDS},
+    }
+)
+VALID.update(
+    {
+        "nn.detection.rcnn.RCNN": {"num_classes": 2, "warp_size": 8, "width": 4, "hidden": 8},
+        "nn.detection.rcnn.RCNN.forward": {
             "images": _DIMAGES,
             "targets": _DTARGETS,
             "proposals": [_DPROPS, _DPROPS],
         },
-        "nn.detection.models.RCNN.warp": {
+        "nn.detection.rcnn.RCNN.warp": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 16),
             "boxes": _DPROPS,
         },
-        "nn.detection.models.selective_search_proposals": {
+        "nn.detection.rcnn.selective_search_proposals": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 16),
             "max_proposals": 5,
         },
-        "nn.detection.models.build_detector": {"kind": "fcos", "num_classes": 2, "width": 4},
-        "nn.detection.models.save_detector": {
+        "nn.detection.zoo.build_detector": {"kind": "fcos", "num_classes": 2, "width": 4},
+        "nn.detection.zoo.save_detector": {
             "path": _out("detector.pt"),
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "kind": "fcos",
             "settings": {"width": 4},
             "classes": ["a", "b"],
         },
-        "nn.detection.models.load_detector": {"path": Fixture("detector.pt")},
-        "nn.detection.models.detect_arrays": {
+        "nn.detection.zoo.load_detector": {"path": Fixture("detector.pt")},
+        "nn.detection.zoo.detect_arrays": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "images": [IMG_RGB],
         },
     }
 )
-METHODS["nn.detection.models.RCNN"] = ("forward", "warp")
+METHODS["nn.detection.rcnn.RCNN"] = ("forward", "warp")
 _ONE_BOX = _b("tests.fuzz.api:detection_value", "one_box")
 VALID.update(
     {
-        "nn.detection.models.evaluate_localizer": {
+        "nn.detection.localizer.evaluate_localizer": {
             "model": _b("tests.fuzz.api:detector_value", "localizer"),
             "dataset": _ONE_BOX,
         },
-        "nn.detection.models.FasterRCNN.rpn_outputs": {"images": _DIMAGES},
-        "nn.detection.data.FlipRotate": {"horizontal": 0.5, "vertical": 0.5, "rotate90": True},
-        "nn.detection.data.FlipRotate.__call__": {
+        "nn.detection.faster_rcnn.FasterRCNN.rpn_outputs": {"images": _DIMAGES},
+        "nn.detection.augment.FlipRotate": {"horizontal": 0.5, "vertical": 0.5, "rotate90": True},
+        "nn.detection.augment.FlipRotate.__call__": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
             "target": _b("tests.fuzz.api:detection_value", "target"),
         },
-        "nn.detection.models.TestTimeAugmentation": {
+        "nn.detection.tta.TestTimeAugmentation": {
             "model": _b("tests.fuzz.api:detector_value", "fcos"),
             "views": "flips",
         },
-        "nn.detection.models.TestTimeAugmentation.forward": {"images": _DIMAGES},
-        "nn.detection.models.TestTimeAugmentation.predict": {"images": _DIMAGES},
-        "nn.detection.data.ScaleJitter": {"scale": (0.75, 1.33), "min_visible": 0.5},
-        "nn.detection.data.ScaleJitter.__call__": {
+        "nn.detection.tta.TestTimeAugmentation.forward": {"images": _DIMAGES},
+        "nn.detection.tta.TestTimeAugmentation.predict": {"images": _DIMAGES},
+        "nn.detection.augment.ScaleJitter": {"scale": (0.75, 1.33), "min_visible": 0.5},
+        "nn.detection.augment.ScaleJitter.__call__": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
             "target": _b("tests.fuzz.api:detection_value", "target"),
         },
     }
 )
-METHODS["nn.detection.models.FasterRCNN"] = ("forward", "rpn_outputs")
+METHODS["nn.detection.faster_rcnn.FasterRCNN"] = ("forward", "rpn_outputs")
 VALID.update(
     {
-        "nn.ops.boxes.paste_masks": {
+        "nn.ops.roi.paste_masks": {
             "masks": _b("tests.fuzz.api:torch_image", 3, 6, 6),
             "boxes": TBOXES,
             "size": (16, 24),
         },
-        "nn.detection.models.MaskRCNN": {
+        "nn.detection.mask_rcnn.MaskRCNN": {
             "num_classes": 2,
             "width": 4,
             "hidden": 8,
             "mask_channels": 4,
             "mask_convs": 1,
         },
-        "nn.detection.models.MaskRCNN.forward": {
+        "nn.detection.mask_rcnn.MaskRCNN.forward": {
             "images": _DIMAGES,
             "targets": _b("tests.fuzz.api:detector_value", "mtargets"),
         },
     }
 )
-METHODS["nn.detection.models.MaskRCNN"] = ("forward",)
-METHODS["nn.detection.data.FlipRotate"] = ("__call__",)
-METHODS["nn.detection.data.ScaleJitter"] = ("__call__",)
-METHODS["nn.detection.models.TestTimeAugmentation"] = ("forward", "predict")
+METHODS["nn.detection.mask_rcnn.MaskRCNN"] = ("forward",)
+METHODS["nn.detection.augment.FlipRotate"] = ("__call__",)
+METHODS["nn.detection.augment.ScaleJitter"] = ("__call__",)
+METHODS["nn.detection.tta.TestTimeAugmentation"] = ("forward", "predict")
 
 
 # nn.segmentation.networks checkpoints and inference, the built-in sets (issue 27)
@@ -2554,14 +2597,14 @@ VALID.update(
             "image_id": 1,
             "labels": (IMG // 100).astype(np.int64),
         },
-        "nn.train.loop.save_built_model": {
+        "nn.train.checkpoint.save_built_model": {
             "path": _out("built.pt"),
             "model": _SEG3,
             "kind": "unet",
             "settings": {"width": 4, "depth": 2},
             "classes": ["a", "b"],
         },
-        "nn.train.loop.load_built_model": {
+        "nn.train.checkpoint.load_built_model": {
             "path": Fixture("segmenter.pt"),
             "kinds": ["unet"],
             "build": _b("tests.fuzz.api:unet_builder"),
@@ -2636,22 +2679,25 @@ VALID.update(
             "offsets": np.ones((3, 2)),
             "weights": np.ones((3, 2)),
         },
-        "nn.pose.pictorial.grid_descriptors": {"image": IMG_RGB},
-        "nn.pose.pictorial.PictorialStructures": {"skeleton": _PS_ARM, "random_state": 0},
-        "nn.pose.pictorial.PictorialStructures.fit": {
+        "nn.pose.pictorial_learn.grid_descriptors": {"image": IMG_RGB},
+        "nn.pose.pictorial_learn.PictorialStructures": {"skeleton": _PS_ARM, "random_state": 0},
+        "nn.pose.pictorial_learn.PictorialStructures.fit": {
             "images": PS_IMAGES,
             "keypoints": PS_KEYPOINTS,
         },
-        "nn.pose.pictorial.PictorialStructures.predict": {"images": PS_IMAGES[:2]},
-        "nn.pose.pictorial.PictorialStructures.predict_costs": {"image": IMG_RGB},
+        "nn.pose.pictorial_learn.PictorialStructures.predict": {"images": PS_IMAGES[:2]},
+        "nn.pose.pictorial_learn.PictorialStructures.predict_costs": {"image": IMG_RGB},
     }
 )
-METHODS["nn.pose.pictorial.PictorialStructures"] = ("fit", "predict", "predict_costs")
-PRE["nn.pose.pictorial.PictorialStructures.predict"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
-PRE["nn.pose.pictorial.PictorialStructures.predict_costs"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
+METHODS["nn.pose.pictorial_learn.PictorialStructures"] = ("fit", "predict", "predict_costs")
+PRE["nn.pose.pictorial_learn.PictorialStructures.predict"] = (("fit", (PS_IMAGES, PS_KEYPOINTS)),)
+PRE["nn.pose.pictorial_learn.PictorialStructures.predict_costs"] = (
+    ("fit", (PS_IMAGES, PS_KEYPOINTS)),
+)
 
 
-# nn.skeleton, nn.pose.data, nn.pose.networks and the keypoint detector (issue 28)
+# nn.skeleton, nn.pose.data, nn.ops.heatmaps, the pose networks and the keypoint detector
+# (issue 28)
 _ARM = {"name": "arm", "joints": ["a", "left_b", "right_b"], "links": [(0, 1), (0, 2)]}
 _POSE_DS = _b("robopercept.nn.pose.data:procedural_pose_set", 2, (32, 32), 0)
 _POSE_NET = _b("robopercept.nn.pose.networks:SimpleBaseline", 16, 2)
@@ -2682,17 +2728,17 @@ VALID.update(
                 "skeleton": [[1, 2], [1, 3]],
             },
         },
-        "nn.detection.data.photo_background": {
+        "nn.data.textures.photo_background": {
             "gen": _b("numpy.random:default_rng", 0),
             "w": 16,
             "h": 12,
         },
-        "nn.detection.data.random_texture": {
+        "nn.data.textures.random_texture": {
             "gen": _b("numpy.random:default_rng", 0),
             "w": 16,
             "h": 12,
         },
-        "nn.detection.models.KeypointRCNN": {
+        "nn.detection.keypoint_rcnn.KeypointRCNN": {
             "num_classes": 2,
             "num_keypoints": 2,
             "width": 4,
@@ -2700,7 +2746,7 @@ VALID.update(
             "keypoint_channels": 4,
             "keypoint_convs": 1,
         },
-        "nn.detection.models.KeypointRCNN.forward": {
+        "nn.detection.keypoint_rcnn.KeypointRCNN.forward": {
             "images": _DIMAGES,
             "targets": _b("tests.fuzz.api:detector_value", "ktargets"),
         },
@@ -2720,21 +2766,21 @@ VALID.update(
         "nn.pose.data.PoseDataset.subset": {"indices": [1, 0]},
         "nn.pose.data.PoseDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
         "nn.pose.data.PoseDataset.__getitem__": {"i": 0},
-        "nn.pose.networks.gaussian_heatmaps": {
+        "nn.ops.heatmaps.gaussian_heatmaps": {
             "keypoints": [[[6.0, 2.0, 2.0], [1.0, 7.0, 1.0]]],
             "image_size": (8, 8),
             "stride": 4,
         },
-        "nn.pose.networks.decode_heatmaps": {
+        "nn.ops.heatmaps.decode_heatmaps": {
             "heatmaps": np.random.default_rng(0).uniform(0, 1, (1, 2, 4, 5)),
             "stride": 4,
         },
-        "nn.pose.networks.heatmap_loss": {
+        "nn.ops.heatmaps.heatmap_loss": {
             "output": _b("tests.fuzz.api:torch_image", 2, 3, 4, 4),
             "target": _b("tests.fuzz.api:torch_image", 2, 3, 4, 4),
             "weight": _b("tests.fuzz.api:torch_tensor", [[1.0, 0.0, 1.0], [1.0, 1.0, 1.0]]),
         },
-        "nn.pose.networks.predict_heatmaps": {
+        "nn.pose.inference.predict_heatmaps": {
             "model": _POSE_NET,
             "images": np.zeros((1, 32, 32, 3)),
         },
@@ -2754,35 +2800,35 @@ VALID.update(
             "crop": 2.0,
             "patch": 2,
         },
-        "nn.pose.networks.augment_pose_batch": {
+        "nn.pose.train.augment_pose_batch": {
             "images": _b("tests.fuzz.api:torch_image", 2, 3, 8, 8),
             "keypoints": _b("tests.fuzz.api:torch_tensor", [[[2.0, 3.0, 2.0]], [[5.0, 1.0, 1.0]]]),
             "flip_permutation": [0],
             "generator": _b("torch:Generator"),
         },
-        "nn.pose.networks.predict_keypoints": {
+        "nn.pose.inference.predict_keypoints": {
             "model": _POSE_NET,
             "images": np.zeros((1, 32, 32, 3)),
         },
-        "nn.pose.networks.refine_keypoints": {
+        "nn.pose.inference.refine_keypoints": {
             "images": np.zeros((1, 32, 32, 3)),
             "keypoints": np.full((1, 16, 2), 16.0),
             "refiners": [_POSE_STAGE],
         },
-        "nn.pose.networks.train_pose": {
+        "nn.pose.train.train_pose": {
             "model": _POSE_NET,
             "train": _POSE_DS,
             "config": TRAIN_CFG,
             "progress": False,
         },
-        "nn.pose.networks.train_refiner": {
+        "nn.pose.train.train_refiner": {
             "refiner": _POSE_STAGE,
             "train": _POSE_DS,
             "estimates": np.full((2, 16, 2), 16.0),
             "config": TRAIN_CFG,
             "progress": False,
         },
-        "nn.pose.networks.train_cascade": {
+        "nn.pose.train.train_cascade": {
             "model": _POSE_NET,
             "train": _POSE_DS,
             "stages": 1,
@@ -2799,14 +2845,14 @@ VALID.update(
             "skeleton": _b("tests.fuzz.api:mpii_skeleton"),
         },
         "nn.pose.networks.load_pose_model": {"path": Fixture("pose.pt")},
-        "nn.pose.networks.pose_arrays": {"model": _POSE_NET, "images": [IMG_RGB, IMG]},
-        "nn.pose.networks.evaluate_pose": {"model": _POSE_NET, "data": _POSE_DS},
-        "nn.pose.networks.samples_picture": {"model": _POSE_NET, "data": _POSE_DS, "count": 2},
+        "nn.pose.inference.pose_arrays": {"model": _POSE_NET, "images": [IMG_RGB, IMG]},
+        "nn.pose.evaluate.evaluate_pose": {"model": _POSE_NET, "data": _POSE_DS},
+        "nn.pose.inference.samples_picture": {"model": _POSE_NET, "data": _POSE_DS, "count": 2},
     }
 )
 METHODS["nn.skeleton.Skeleton"] = ("index", "flip_permutation", "parents", "to_dict", "from_dict")
 METHODS["nn.pose.data.PoseDataset"] = ("subset", "split", "areas", "to_coco", "__getitem__")
-METHODS["nn.detection.models.KeypointRCNN"] = ("forward",)
+METHODS["nn.detection.keypoint_rcnn.KeypointRCNN"] = ("forward",)
 
 
 def mpii_skeleton() -> Any:
@@ -2816,7 +2862,8 @@ def mpii_skeleton() -> Any:
     return MPII_16
 
 
-# nn.pose.lifting (issue 28): three 16-joint 3-D poses (metres), 2-D joints, a tiny lifter
+# nn.pose.views, .library and .lifting (issue 28): three 16-joint 3-D poses (metres), 2-D
+# joints, a tiny lifter
 _P3_RNG = np.random.default_rng(283)
 P3D = _P3_RNG.normal(0.0, 0.3, (3, 16, 3))
 P3D_PRED = P3D[:2] + _P3_RNG.normal(0.0, 0.05, (2, 16, 3))
@@ -2827,10 +2874,10 @@ VALID.update(
         "nn.pose.lifting.procrustes_align": {"pred": P3D_PRED, "truth": P3D[:2]},
         "nn.pose.lifting.mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
         "nn.pose.lifting.pa_mpjpe": {"pred": P3D_PRED, "truth": P3D[:2]},
-        "nn.pose.lifting.normalize_pose2d": {"keypoints2d": KP2D},
-        "nn.pose.lifting.random_views": {"poses3d": P3D, "views_per_pose": 2, "rng": 0},
-        "nn.pose.lifting.PoseLibrary": {"poses3d": P3D, "views_per_pose": 2},
-        "nn.pose.lifting.PoseLibrary.lift": {"keypoints2d": KP2D},
+        "nn.pose.views.normalize_pose2d": {"keypoints2d": KP2D},
+        "nn.pose.views.random_views": {"poses3d": P3D, "views_per_pose": 2, "rng": 0},
+        "nn.pose.library.PoseLibrary": {"poses3d": P3D, "views_per_pose": 2},
+        "nn.pose.library.PoseLibrary.lift": {"keypoints2d": KP2D},
         "nn.pose.lifting.LiftingMLP": {"width": 8, "blocks": 1},
         "nn.pose.lifting.LiftingMLP.lift": {"keypoints2d": KP2D},
         "nn.pose.lifting.LiftingMLP.forward": {"x": _b("tests.fuzz.api:torch_image", 2, 32)},
@@ -2843,8 +2890,53 @@ VALID.update(
         },
     }
 )
-METHODS["nn.pose.lifting.PoseLibrary"] = ("lift",)
+METHODS["nn.pose.library.PoseLibrary"] = ("lift",)
 METHODS["nn.pose.lifting.LiftingMLP"] = ("lift", "forward")
+
+# the checks and internal steps that the pose modules share (issue 45)
+VALID.update(
+    {
+        "nn.ops.heatmaps.keypoint_tensor": {"keypoints": [[[6.0, 2.0, 2.0], [1.0, 7.0, 1.0]]]},
+        "nn.ops.heatmaps.check_float_tensor": {
+            "value": _b("tests.fuzz.api:torch_image", 2, 3),
+            "name": "weight",
+            "ndim": 2,
+            "what": "(N, J)",
+        },
+        "nn.pose.inference.image_batch": {"images": np.zeros((1, 16, 16, 3))},
+        "nn.pose.inference.pose_data_arrays": {"data": _POSE_DS, "what": "data"},
+        "nn.pose.views.check_seed": {"value": 7, "name": "rng"},
+        "nn.pose.views.check_keypoints2d": {"value": KP2D},
+        "nn.pose.views.check_poses3d": {"value": P3D},
+    }
+)
+_CHECKED = "on inputs its callers checked"
+SKIP.update(
+    {
+        "nn.ops.heatmaps.check_image_size": "checks an image size against a stride the caller "
+        "checked; fuzzed through gaussian_heatmaps and DeepPose",
+        "nn.ops.heatmaps.check_permutation": "checks a flip permutation against a joint count "
+        "the caller checked; fuzzed through predict_heatmaps and augment_pose_batch",
+        "nn.ops.heatmaps.heatmap_probabilities": "an internal step of predict_heatmaps on a "
+        "network's output; fuzzed through it",
+        "nn.ops.heatmaps.flip_heatmaps": "an internal step of predict_heatmaps on a network's "
+        "output; fuzzed through it",
+        "nn.pose.inference.check_input_size": "a boundary step of predict_heatmaps and "
+        "train_pose on a checked batch; fuzzed through them",
+        "nn.pose.views.check_root": "checks a root against the joint count of checked poses; "
+        "fuzzed through normalize_pose2d, random_views, mpjpe and LiftingMLP",
+        "nn.pose.views.visibility_mask": "an internal step of normalize_pose2d and "
+        f"PoseLibrary.lift {_CHECKED}; fuzzed through them",
+        "nn.pose.views.normalize_joints": "the unchecked arithmetic of normalize_pose2d "
+        f"{_CHECKED}; fuzzed through it, PoseLibrary and LiftingMLP",
+        "nn.pose.views.check_scales": "an internal step of normalize_pose2d, PoseLibrary and "
+        f"LiftingMLP {_CHECKED}; fuzzed through them",
+        "nn.pose.pictorial.check_tree": "checks parents against the joint count of checked "
+        "costs; fuzzed through pictorial_structures and PictorialStructures",
+        "nn.pose.pictorial.solve_tree": "the unchecked arithmetic of pictorial_structures "
+        f"{_CHECKED}; fuzzed through it and PictorialStructures.predict",
+    }
+)
 
 
 # viz.cloud_dl (issue 29): a 60-point cloud, its labels, two 4-neighbour graphs
@@ -2993,8 +3085,8 @@ VALID.update(
         "nn.cloud.data.CloudDataset": _CLOUD_DS_ARGS,
         "nn.cloud.data.CloudDataset.subset": {"indices": [1, 0]},
         "nn.cloud.data.CloudDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
-        "nn.cloud.data.shape_mesh": {"name": "mug", "rng": 0},
-        "nn.cloud.data.procedural_shapes": {
+        "nn.cloud.synthetic.shape_mesh": {"name": "mug", "rng": 0},
+        "nn.cloud.synthetic.procedural_shapes": {
             "n_per_class": 1,
             "n_points": 16,
             "classes": ("sphere", "torus"),
@@ -3007,6 +3099,8 @@ VALID.update(
         },
         "nn.cloud.data.read_cloud_file": {"path": Fixture("mesh.off"), "n_points": 16},
         "nn.cloud.data.read_cloud_folder": {"root": Fixture("clouds"), "n_points": 16},
+        "nn.cloud.data.check_n_points": {"n_points": 16},
+        "nn.cloud.data.pick_points": {"points": PTS3, "n": 8, "rng": 0},
     }
 )
 METHODS["nn.cloud.data.CloudDataset"] = ("subset", "split")
@@ -3317,6 +3411,8 @@ VALID.update(
     {
         "nn.train.distributed.free_port": {"host": "127.0.0.1"},
         "nn.train.distributed.torchrun_env": {"environ": {}},
+        "nn.train.distributed.check_world_batch": {"nproc": 2, "batch_size": 64},
+        "nn.train.distributed.rank_device": {"cfg": TRAIN_CFG},
     }
 )
 SKIP.update(
@@ -3324,8 +3420,18 @@ SKIP.update(
         "nn.train.distributed.run_ranks": "starts processes joined in a process group (seconds "
         "per call); its argument checks and a failing rank are tested in "
         "tests/nn/train/test_distributed.py",
-        "nn.train.distributed.train_ddp": "trains a network on several processes (tens of seconds "
-        "per call); its checks are tested in tests/nn/train/test_distributed.py",
+        "nn.classification.run.train_ddp": "trains a network on several processes (tens of "
+        "seconds per call); its checks are tested in tests/nn/classification/test_run.py",
+        "nn.detection.base.check_targets": "a detector's boundary check, given images and "
+        "num_classes already checked by the detector; fuzzed through every detector's forward",
+        "nn.detection.base.check_proposals": "a detector's boundary check, given the checked "
+        "image sizes; fuzzed through FastRCNN.forward and RCNN.forward",
+        "nn.detection.base.clip_boxes": "an internal step of the detectors on boxes they made; "
+        "fuzzed through every detector's forward",
+        "nn.detection.base.init_conv": "initializes a layer the detector built; fuzzed through "
+        "the FCOS and FasterRCNN constructors",
+        "nn.detection.train.detections_per_image": "an internal step of evaluate_detector and "
+        "evaluate_localizer on a checked model and dataset; fuzzed through them",
     }
 )
 
@@ -3358,7 +3464,7 @@ VALID.update(
         "nn.predict.ImagePredictor": {
             "kind": "detect",
             "path": None,
-            "model": _b("robopercept.nn.detection.models:build_detector", "fcos", 2, width=4),
+            "model": _b("robopercept.nn.detection.zoo:build_detector", "fcos", 2, width=4),
             "info": {"classes": ["a", "b"]},
         },
         "nn.predict.ImagePredictor.predict": {"image": IMG_RGB},

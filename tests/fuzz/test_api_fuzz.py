@@ -202,7 +202,7 @@ def test_every_public_callable_is_planned_or_skipped(planned):
     for pkg in api.PACKAGES:
         mod = importlib.import_module(f"robopercept.{pkg}")
         subs = (
-            [importlib.import_module(f"robopercept.nn.{s}") for s in mod.__all__]
+            [importlib.import_module(f"robopercept.nn.{s}") for s in mod.MODULES]
             if pkg == "nn"
             else [mod]
         )

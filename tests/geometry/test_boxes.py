@@ -1,4 +1,5 @@
-"""Box IoU: a hand case and symmetry."""
+"""Boxes: the IoU matrix (a hand case, symmetry, pycocotools, its formats), conversions,
+and greedy NMS (a hand case with ties and the threshold; the kernel vs its reference)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from robopercept.errors import InputError
-from robopercept.geometry import box_iou_matrix
+from robopercept.geometry import box_convert, box_iou_matrix
 
 
 def test_box_iou_matrix_hand_case():
@@ -82,3 +83,56 @@ def test_box_convert_hand_case_and_round_trips():
         box_convert(np.ones((2, 3)), "xyxy", "xywh")
     with pytest.raises(InputError, match="boxes must be finite"):
         box_convert([[0, 0, np.nan, 1]], "xyxy", "xywh")
+
+
+# ------------------------------------------------------------------ greedy NMS
+def test_greedy_suppression_kernel_equals_numpy_reference():
+    from robopercept.geometry.boxes import (
+        corners_and_areas,
+        greedy_suppression,
+        greedy_suppression_reference,
+    )
+
+    rng = np.random.default_rng(10)
+    xy = rng.uniform(0, 50.0, (200, 2))
+    b = np.concatenate([xy, xy + rng.uniform(1, 50.0 / 3, (200, 2))], 1)
+    b[:10, 2] = b[:10, 0]  # zero-width boxes
+    corners, areas = corners_and_areas(b, "xyxy")
+    for cls in (np.zeros(200, np.int64), rng.integers(0, 4, 200)):
+        for thr in (0.0, 0.3, 0.6, 1.0):
+            want = greedy_suppression_reference(corners, areas, cls, thr)
+            np.testing.assert_array_equal(greedy_suppression(corners, areas, cls, thr), want)
+            assert 0 < want.sum() < 200 or thr == 1.0
+
+
+def test_greedy_nms_hand_case_ties_and_threshold():
+    from robopercept.geometry import greedy_nms
+
+    # (x, y, w, h): IoU(0, 1) = 90 / 110, IoU(0, 2) = 0.5 exactly, box 3 far away
+    b = np.array([[0, 0, 10, 10], [1, 0, 10, 10], [0, 0, 10, 5], [50, 50, 10, 10.0]])
+    assert greedy_nms(b, [0.9, 0.95, 0.5, 0.1], 0.3).tolist() == [1, 3]
+    # equal scores rank by index; an IoU equal to the threshold does not suppress
+    s = np.full(4, 0.5)
+    assert greedy_nms(b, s, 0.5).tolist() == [0, 2, 3]
+    assert greedy_nms(b, s, 0.49).tolist() == [0, 3]
+    # the same boxes as corners; per class, a box suppresses only its own class
+    xyxy = box_convert(b, "xywh", "xyxy")
+    assert greedy_nms(xyxy, s, 0.5, fmt="xyxy").tolist() == [0, 2, 3]
+    assert greedy_nms(b, s, 0.3, classes=[0, 1, 0, 0]).tolist() == [0, 1, 3]
+    assert greedy_nms(np.zeros((0, 4)), [], 0.5).dtype == np.int64
+    with pytest.raises(InputError, match="scores must not hold NaN"):
+        greedy_nms(b, [0.1, np.nan, 0.2, 0.3], 0.5)
+    with pytest.raises(InputError, match="one score per box"):
+        greedy_nms(b, [0.1], 0.5)
+    with pytest.raises(InputError, match="classes must be"):
+        greedy_nms(b, s, 0.5, classes=[0.5, 1, 0, 0])
+    with pytest.raises(InputError, match="x1 <= x2"):
+        greedy_nms([[5, 0, 1, 1]], [1.0], 0.5, fmt="xyxy")
+
+
+def test_box_iou_matrix_formats_agree():
+    x = np.random.default_rng(4).uniform(0, 50, (12, 4))
+    want = box_iou_matrix(x, x)
+    for fmt in ("xyxy", "cxcywh"):
+        y = box_convert(x, "xywh", fmt)
+        np.testing.assert_allclose(box_iou_matrix(y, y, fmt=fmt), want, rtol=0, atol=1e-12)

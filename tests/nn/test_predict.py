@@ -3,7 +3,7 @@ shipped-model tables (:mod:`robopercept.nn.shipped`).
 
 Each kind runs its shipped model on the CPU on one procedural canvas (the data the
 models were trained on, drawn with a test seed), and is checked against the direct
-library call (:func:`~robopercept.nn.detection.models.detect_arrays`, ...: exactly equal, the
+library call (:func:`~robopercept.nn.detection.zoo.detect_arrays`, ...: exactly equal, the
 same arithmetic in the same order) and against what ``robopercept nn detect/segment/pose
 IMAGE --json -o DIR`` prints and writes (equal JSON, byte-equal files).
 """
@@ -23,10 +23,11 @@ torch = pytest.importorskip("torch")
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.errors import InputError  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
-from robopercept.nn.detection.data import procedural_detection_set  # noqa: E402
-from robopercept.nn.detection.models import detect_arrays, load_detector  # noqa: E402
+from robopercept.nn.detection.synthetic import procedural_detection_set  # noqa: E402
+from robopercept.nn.detection.zoo import detect_arrays, load_detector  # noqa: E402
 from robopercept.nn.pose.data import procedural_pose_set  # noqa: E402
-from robopercept.nn.pose.networks import load_pose_model, pose_arrays  # noqa: E402
+from robopercept.nn.pose.inference import pose_arrays  # noqa: E402
+from robopercept.nn.pose.networks import load_pose_model  # noqa: E402
 from robopercept.nn.predict import (  # noqa: E402
     ImagePrediction,
     load_image_predictor,

@@ -454,7 +454,7 @@ def test_nn_image_jobs_equal_the_library_predictor(tmp_path) -> None:
     import numpy as np
 
     from robopercept.imaging import write_image
-    from robopercept.nn.detection.data import procedural_detection_set
+    from robopercept.nn.detection.synthetic import procedural_detection_set
     from robopercept.nn.pose.data import procedural_pose_set
     from robopercept.nn.predict import load_image_predictor
 
@@ -490,7 +490,7 @@ def test_nn_predict_job_equals_nn_predict(tmp_path) -> None:
     from robopercept.imaging import write_image
     from robopercept.nn.classification.run import predict, train_run
     from robopercept.nn.data.datasets import load_digits
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.train.config import TrainConfig
 
     run = tmp_path / "run"
     train_run("digits", "vgg_small", run, config=TrainConfig(epochs=1, seed=0), progress=False)

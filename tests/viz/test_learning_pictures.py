@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from robopercept.errors import InputError
-from robopercept.viz import confusion_picture, curves_picture, scatter_picture, tiles_picture
+from robopercept.viz import (
+    confusion_picture,
+    curves_picture,
+    precision_recall_picture,
+    scatter_picture,
+    tiles_picture,
+)
 
 
 def test_confusion_picture_shades_by_row_share():
@@ -36,6 +42,31 @@ def test_scatter_and_curves():
     assert curves_picture([(x, x, "diag")], title="ROC", xlabel="x", ylabel="y").ndim == 3
     with pytest.raises(InputError):
         curves_picture([], title="", xlabel="", ylabel="")
+
+
+def test_precision_recall_picture_is_the_curves_of_the_defined_classes():
+    r = np.linspace(0, 1, 101)
+    p = np.stack([np.ones(101), -np.ones(101), 1 - r])  # class "b" has no ground truth
+    pic = precision_recall_picture(r, p, ["a", "b", 3], iou_threshold=0.75, width=400, height=300)
+    # the same picture as the two defined curves, labelled with their mean (the AP)
+    ref = curves_picture(
+        [(r, p[0], "a (AP 1.000)"), (r, p[2], "3 (AP 0.500)")],
+        title="precision-recall per class, IoU 0.75",
+        xlabel="recall",
+        ylabel="precision",
+        width=400,
+        height=300,
+    )
+    np.testing.assert_array_equal(pic, ref)
+    assert precision_recall_picture(r, p[:1], ["a"], iou_threshold=0.5).shape == (1000, 1600, 3)
+    with pytest.raises(InputError, match="no category has ground truth"):
+        precision_recall_picture(r, p[1:2], ["b"], iou_threshold=0.5)
+    with pytest.raises(InputError, match=r"precision \(K, R\)"):
+        precision_recall_picture(r, p[:, :50], ["a", "b", "c"], iou_threshold=0.5)
+    with pytest.raises(InputError, match="labels must be 3 class names"):
+        precision_recall_picture(r, p, ["a", "b"], iou_threshold=0.5)
+    with pytest.raises(InputError, match="finite"):
+        precision_recall_picture(r, np.full((1, 101), np.nan), ["a"], iou_threshold=0.5)
 
 
 def test_tiles_picture_layout_and_colours() -> None:

@@ -8,9 +8,10 @@ Three forms, chosen by the first word after ``detect``::
 
 ``train`` keeps the weights of the epoch with the best validation mAP@[.5:.95]
 (evaluated every ``--val-every`` epochs) and writes ``run/model.pt`` (weights with the
-constructor settings and class names, :func:`~robopercept.nn.detection.models.save_detector`),
-``history.json``, ``metrics.json`` (the 12 COCO numbers of :func:`~robopercept.nn.detection.models.
-evaluate_detector` on the validation split), ``pr_curves.png`` and ``samples.png``.
+constructor settings and class names, :func:`~robopercept.nn.detection.zoo.save_detector`),
+``history.json``, ``metrics.json`` (the 12 COCO numbers of
+:func:`~robopercept.nn.detection.train.evaluate_detector` on the validation split),
+``pr_curves.png`` and ``samples.png``.
 ``eval`` evaluates a run (or its ``model.pt``) on the validation split of the same
 built-in set (same ``--images``, ``--size`` and ``--seed``) or on a whole COCO file.
 ``IMAGE...`` draws the boxes, labels and scores to ``out/NAME.png`` (``--json``: COCO
@@ -24,10 +25,10 @@ R-CNN (``detector_faster_shapes.pt``). Both were trained on the procedural shape
     python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster --seeds 0 \\
         --save src/robopercept/data
 
-The work is done by :mod:`robopercept.nn.detection.models`, :mod:`robopercept.nn.detection.data`
-and :mod:`robopercept.nn.coco.formats`; this module parses and prints. torch is imported only
-when a command runs. Progress goes to stderr; exit 2 for bad arguments (the message
-names the flag), 1 when the work fails.
+The work is done by the modules of :mod:`robopercept.nn.detection` (``zoo``, ``train``,
+``tta``, ``data``) and :mod:`robopercept.nn.coco`; this module parses and prints. torch is
+imported only when a command runs. Progress goes to stderr; exit 2 for bad arguments (the
+message names the flag), 1 when the work fails.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ from robopercept.errors import InputError
 
 __all__ = ["BUILTIN_DATA", "DETECTOR_NAMES", "register"]
 
-#: the names of :data:`robopercept.nn.detection.models.DETECTORS` (the parser needs no torch)
+#: the names of :data:`robopercept.nn.detection.zoo.DETECTORS` (the parser needs no torch)
 DETECTOR_NAMES = ("fcos", "faster", "fast", "rcnn", "localizer")
 #: the built-in data sets of ``--data`` (anything else must be a COCO JSON file)
 BUILTIN_DATA = ("shapes", "digits", "trees")
@@ -129,7 +130,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("--device", help="cpu, cuda, ...")
     r.add_argument("--json", action="store_true", help="print COCO results")
     r.add_argument("--quiet", action="store_true")
-    for p in (e, r):  # the views of nn.detection.models.TTA_VIEWS (torch is not imported here)
+    for p in (e, r):  # the views of nn.detection.tta.TTA_VIEWS (torch is not imported here)
         p.add_argument(
             "--tta",
             choices=("hflip", "flips", "dihedral"),
@@ -158,7 +159,7 @@ def _coco_dataset(path: Path, images_dir: str | None) -> Any:
     import numpy as np
 
     from robopercept.imaging import read_image
-    from robopercept.nn.coco.formats import read_coco_json
+    from robopercept.nn.coco.dataset import read_coco_json
     from robopercept.nn.data.datasets import to_unit_float
     from robopercept.nn.detection.data import DetectionDataset
 
@@ -192,16 +193,21 @@ def _coco_dataset(path: Path, images_dir: str | None) -> Any:
 def _load_data(args: argparse.Namespace, kind: str | None) -> tuple[Any, Any]:
     """(train, validation) DetectionDatasets of ``--data``; a COCO file is split 80/20
     (seeded) for ``train`` and is wholly the validation set for ``eval``."""
-    from robopercept.nn.detection.models import data as dd
+    from robopercept.nn.detection.deepforest import deepforest_tiles
+    from robopercept.nn.detection.synthetic import (
+        digits_detection_set,
+        procedural_detection_set,
+        single_digit_set,
+    )
 
     data, n, size, seed = args.data, args.images, args.size, args.seed
     if data in ("shapes", "digits"):
         if data == "shapes":
-            ds = dd.procedural_detection_set(n, size, rng=seed)
+            ds = procedural_detection_set(n, size, rng=seed)
         elif kind == "localizer":
-            ds = dd.single_digit_set(n, size, rng=seed)
+            ds = single_digit_set(n, size, rng=seed)
         else:
-            ds = dd.digits_detection_set(n, size, rng=seed)
+            ds = digits_detection_set(n, size, rng=seed)
         if n < 2:
             raise UsageError("--images: give at least 2 (a training and a validation image)")
         train, val = ds.split((1 - _VAL_FRACTION, _VAL_FRACTION), rng=seed)
@@ -212,7 +218,7 @@ def _load_data(args: argparse.Namespace, kind: str | None) -> tuple[Any, Any]:
                 f"--images-dir: --data trees needs the DeepForest NEON folder; got "
                 f"{args.images_dir!r} (e.g. ../shared/data/detection/deepforest_neon)"
             )
-        tiles = dd.deepforest_tiles(args.images_dir)
+        tiles = deepforest_tiles(args.images_dir)
         return tiles.train, tiles.test
     path = Path(data)
     if path.suffix.lower() != ".json":
@@ -235,8 +241,8 @@ def _samples(model: Any, ds: Any, path: Path, count: int = 4) -> Path:
     import numpy as np
 
     from robopercept.imaging import write_image
-    from robopercept.nn.detection.data import draw_detections
-    from robopercept.nn.detection.models import detect_arrays
+    from robopercept.nn.detection.zoo import detect_arrays
+    from robopercept.viz.detection import draw_detections
 
     n = min(count, len(ds))
     pics = []
@@ -253,7 +259,7 @@ def _samples(model: Any, ds: Any, path: Path, count: int = 4) -> Path:
 
 
 def _write_metrics(ev: Any, ds: Any, out: Path, extra: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.coco.formats import write_pr_curves
+    from robopercept.nn.coco.evaluate import write_pr_curves
 
     out.mkdir(parents=True, exist_ok=True)
     metrics = {**extra, "images": len(ds), "metrics": ev.summary(), "stats": ev.stats.tolist()}
@@ -270,13 +276,9 @@ def _print_metrics(metrics: dict[str, Any]) -> None:
 
 # --------------------------------------------------------------------------- forms
 def _train(args: argparse.Namespace) -> int:
-    from robopercept.nn.detection.models import (
-        build_detector,
-        evaluate_detector,
-        save_detector,
-        train_detector,
-    )
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.detection.train import evaluate_detector, train_detector
+    from robopercept.nn.detection.zoo import build_detector, save_detector
+    from robopercept.nn.train.config import TrainConfig
 
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
@@ -363,11 +365,9 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from robopercept.nn.detection.models import (
-        TestTimeAugmentation,
-        evaluate_detector,
-        load_detector,
-    )
+    from robopercept.nn.detection.train import evaluate_detector
+    from robopercept.nn.detection.tta import TestTimeAugmentation
+    from robopercept.nn.detection.zoo import load_detector
 
     _, val = _load_data(args, None)
     path = run_or_model_path(args.model)

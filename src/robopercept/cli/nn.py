@@ -162,7 +162,7 @@ def run_train(args: argparse.Namespace) -> int:
     """Run ``robopercept nn train`` with the parsed ``args``; returns the exit status."""
     _need_torch()
     from robopercept.nn.classification.run import train_run
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.train.config import TrainConfig
 
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
@@ -191,7 +191,8 @@ def run_train(args: argparse.Namespace) -> int:
         "overwrite": args.overwrite,
         "progress": not (args.quiet or args.json),
     }
-    from robopercept.nn.train.distributed import torchrun_env, train_ddp
+    from robopercept.nn.classification.run import train_ddp
+    from robopercept.nn.train.distributed import torchrun_env
 
     env = torchrun_env()
     rank = 0 if env is None else env[0]

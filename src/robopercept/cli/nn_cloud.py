@@ -162,7 +162,7 @@ def _train(args: argparse.Namespace) -> int:
         save_cloud_model,
         train_cloud_model,
     )
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.train.config import TrainConfig
 
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
@@ -245,7 +245,7 @@ def _eval(args: argparse.Namespace) -> int:
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
     model, info = load_cloud_model(path)
     if args.device:
-        from robopercept.nn.train.loop import resolve_device
+        from robopercept.nn.train.config import resolve_device
 
         model.to(resolve_device(args.device))
     sets = _sets(args)
@@ -291,7 +291,7 @@ def _model(name: str | None, default: str) -> Path:
 def _clouds(args: argparse.Namespace) -> int:
     from robopercept.imaging import write_image
     from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model
-    from robopercept.nn.train.loop import resolve_device
+    from robopercept.nn.train.config import resolve_device
     from robopercept.pointcloud import PointCloud, write_point_cloud
     from robopercept.viz.cloud_dl import cloud_picture
     from robopercept.viz.colormap import label_colors

@@ -16,7 +16,7 @@ model on the validation split of the same data (same ``--images``, ``--size`` an
 into the network's input, and ``out/NAME.png`` shows the skeleton with per-joint
 confidence; ``--heatmaps`` adds ``out/NAME_heatmaps.png``; ``--lift3d`` lifts the 2-D
 pose to 3-D by matching against a library of projected 3-D poses (the course's
-recipe, :class:`~robopercept.nn.pose.lifting.PoseLibrary`) and writes ``out/NAME_3d.png``
+recipe, :class:`~robopercept.nn.pose.library.PoseLibrary`) and writes ``out/NAME_3d.png``
 (two views). ``--json`` prints, per image, the keypoints (pixels), their scores and
 (with ``--lift3d``) the root-relative 3-D joints in metres.
 
@@ -25,8 +25,9 @@ shipped DeepPose with its cascade stage. Both were trained on the procedural fig
 and are rebuilt, from a checkout, by ``python -m benchmarks.pose_figures --only hrnet
 deeppose --seeds 0 --save src/robopercept/data``.
 
-The work is done by :mod:`robopercept.nn.pose.networks`, :mod:`robopercept.nn.pose.data`,
-:mod:`robopercept.nn.pose.lifting` and :mod:`robopercept.viz.pose`; this module parses and
+The work is done by :mod:`robopercept.nn.pose.networks`, :mod:`robopercept.nn.pose.train`,
+:mod:`robopercept.nn.pose.evaluate`, :mod:`robopercept.nn.pose.data`,
+:mod:`robopercept.nn.pose.library` and :mod:`robopercept.viz.pose`; this module parses and
 prints. Exit 2 for bad arguments (the message names the flag), 1 when the work fails.
 """
 
@@ -134,15 +135,11 @@ def _sets(args: argparse.Namespace) -> Any:
 
 def _train(args: argparse.Namespace) -> int:
     from robopercept.imaging import write_image
-    from robopercept.nn.pose.networks import (
-        build_pose_model,
-        evaluate_pose,
-        samples_picture,
-        save_pose_model,
-        train_cascade,
-        train_pose,
-    )
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.pose.evaluate import evaluate_pose
+    from robopercept.nn.pose.inference import samples_picture
+    from robopercept.nn.pose.networks import build_pose_model, save_pose_model
+    from robopercept.nn.pose.train import train_cascade, train_pose
+    from robopercept.nn.train.config import TrainConfig
 
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
@@ -208,14 +205,15 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from robopercept.nn.pose.networks import evaluate_pose, load_pose_model
+    from robopercept.nn.pose.evaluate import evaluate_pose
+    from robopercept.nn.pose.networks import load_pose_model
 
     path = run_or_model_path(args.model)
     if not path.is_file():
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
     model, info = load_pose_model(path)
     if args.device:
-        from robopercept.nn.train.loop import resolve_device
+        from robopercept.nn.train.config import resolve_device
 
         model.to(resolve_device(args.device))
     sets = _sets(args)

@@ -24,7 +24,7 @@ checkout, by ``python -m benchmarks.segmentation_figures --only shapes-unet
 shapes-maskrcnn --seeds 0 --save src/robopercept/data``.
 
 The work is done by :mod:`robopercept.nn.segmentation.networks`,
-:mod:`robopercept.nn.segmentation.data`, :mod:`robopercept.nn.detection.models` and
+:mod:`robopercept.nn.segmentation.data`, :mod:`robopercept.nn.detection.train` and
 :mod:`robopercept.viz.segmentation`; this module parses and prints. Exit 2 for bad
 arguments (the message names the flag), 1 when the work fails.
 """
@@ -132,7 +132,7 @@ def _sets(args: argparse.Namespace) -> Any:
 def _scores(model: Any, val: Any, instance: bool, device: str | None) -> dict[str, Any]:
     import numpy as np
 
-    from robopercept.nn.detection.models import evaluate_detector
+    from robopercept.nn.detection.train import evaluate_detector
     from robopercept.nn.segmentation.metrics import segmentation_confusion, segmentation_scores
     from robopercept.nn.segmentation.networks import segment_arrays
 
@@ -140,7 +140,7 @@ def _scores(model: Any, val: Any, instance: bool, device: str | None) -> dict[st
         ev = evaluate_detector(model, val, device=device, iou_type="segm")
         return {"metrics": ev.summary(), "stats": ev.stats.tolist()}
     if device:
-        from robopercept.nn.train.loop import resolve_device
+        from robopercept.nn.train.config import resolve_device
 
         model.to(resolve_device(device))
     pred = np.stack(segment_arrays(model, list(val.images)))
@@ -181,13 +181,14 @@ def _samples(model: Any, val: Any, instance: bool, path: Path, count: int = 3) -
 
 # --------------------------------------------------------------------------- forms
 def _train(args: argparse.Namespace) -> int:
-    from robopercept.nn.detection.models import build_detector, save_detector, train_detector
+    from robopercept.nn.detection.train import train_detector
+    from robopercept.nn.detection.zoo import build_detector, save_detector
     from robopercept.nn.segmentation.networks import (
         build_segmenter,
         save_segmenter,
         train_segmenter,
     )
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.train.config import TrainConfig
 
     model_name = args.model or ("maskrcnn" if args.task == "instance" else "unet")
     if (model_name == "maskrcnn") != (args.task == "instance"):

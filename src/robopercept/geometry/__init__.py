@@ -4,6 +4,7 @@ from robopercept.geometry.boxes import (
     BOX_FORMATS,
     box_convert,
     box_iou_matrix,
+    greedy_nms,
     min_area_rectangle,
 )
 from robopercept.geometry.camera import (
@@ -71,6 +72,7 @@ __all__ = [
     "find_essential",
     "find_fundamental",
     "fundamental_from_essential",
+    "greedy_nms",
     "invert",
     "min_area_rectangle",
     "nearest_rotation",

@@ -48,7 +48,7 @@ from robopercept._checks import (
 )
 from robopercept.errors import FileFormatError, InputError, RoboperceptError
 from robopercept.features.hog import hog, hog_windows
-from robopercept.geometry.boxes import box_iou_matrix
+from robopercept.geometry.boxes import box_iou_matrix, greedy_nms
 from robopercept.imaging.color import rgb_to_gray
 from robopercept.learning._base import RandomStateLike, random_generator, renamed_rng
 from robopercept.learning.persist import read_npz
@@ -96,19 +96,14 @@ def box_iou(box: np.ndarray, boxes: np.ndarray) -> np.ndarray:
 def non_max_suppression(
     boxes: npt.ArrayLike, scores: npt.ArrayLike, iou: float = 0.3
 ) -> np.ndarray:
-    """Indices of the boxes kept by greedy NMS, best score first."""
+    """Indices of the boxes kept by greedy NMS, best score first: a box overlapping a
+    better kept box by an IoU above ``iou`` is dropped
+    (:func:`robopercept.geometry.boxes.greedy_nms` on ``(x, y, w, h)`` boxes)."""
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     scores = np.asarray(scores, dtype=np.float64).ravel()
     if boxes.shape[0] != scores.size:
         raise InputError(f"{boxes.shape[0]} boxes but {scores.size} scores")
-    order = np.argsort(-scores, kind="stable")
-    keep = []
-    while order.size:
-        best = order[0]
-        keep.append(best)
-        rest = order[1:]
-        order = rest[box_iou(boxes[best], boxes[rest]) <= iou]
-    return np.asarray(keep, dtype=np.int64)
+    return greedy_nms(boxes, scores, iou, fmt="xywh")
 
 
 def _to_gray(image: np.ndarray) -> np.ndarray:

@@ -7,10 +7,10 @@ once (:func:`load_image_predictor`), predict each image
 (:class:`ImagePrediction`: :meth:`~ImagePrediction.record`,
 :meth:`~ImagePrediction.coco_results`, :meth:`~ImagePrediction.pictures`,
 :meth:`~ImagePrediction.write`). The arithmetic is that of
-:func:`~robopercept.nn.detection.models.detect_arrays`,
+:func:`~robopercept.nn.detection.zoo.detect_arrays`,
 :func:`~robopercept.nn.segmentation.networks.segment_arrays` and
-:func:`~robopercept.nn.pose.networks.pose_arrays`; this module only chains them, so a prediction
-equals the direct call exactly.
+:func:`~robopercept.nn.pose.inference.pose_arrays`; this module only chains them, so a
+prediction equals the direct call exactly.
 
 The three kinds:
 
@@ -23,7 +23,7 @@ The three kinds:
   ``score >= score_thresh``, default 0.5 as ``nn segment``);
 - ``"pose"``: one person per image (top-down): ``keypoints`` ``(J, 2)`` pixels,
   ``scores`` ``(J,)``, optionally ``heatmaps`` ``(J, h, w)`` and ``joints3d`` ``(J, 3)``
-  metres, root-relative (lifted by :class:`~robopercept.nn.pose.lifting.PoseLibrary`).
+  metres, root-relative (lifted by :class:`~robopercept.nn.pose.library.PoseLibrary`).
 """
 
 from __future__ import annotations
@@ -35,10 +35,34 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import check_bool, check_choice, check_image, check_real, plain_repr
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_image,
+    check_int,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import InputError
 from robopercept.fileio import strict_json
+from robopercept.imaging import read_image, write_image
+from robopercept.nn.detection.tta import TestTimeAugmentation
+from robopercept.nn.detection.zoo import detect_arrays, load_detector
+from robopercept.nn.pose.inference import pose_arrays
+from robopercept.nn.pose.library import default_pose_library
+from robopercept.nn.pose.networks import load_pose_model
+from robopercept.nn.segmentation.networks import (
+    coco_segmentation_results,
+    load_segmenter,
+    segment_arrays,
+)
 from robopercept.nn.shipped import resolve_model
+from robopercept.nn.train.checkpoint import load_checkpoint
+from robopercept.nn.train.config import resolve_device
+from robopercept.viz import voc_palette
+from robopercept.viz.detection import draw_detections
+from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
+from robopercept.viz.segmentation import class_overlay, instance_overlay
 
 __all__ = [
     "IMAGE_KINDS",
@@ -52,7 +76,7 @@ __all__ = [
 IMAGE_KINDS = ("detect", "segment", "pose")
 #: the default ``score_thresh`` of each kind (those of the command-line forms)
 _DEFAULT_SCORE = {"detect": 0.3, "segment": 0.5, "pose": 0.0}
-#: the views of ``tta`` (:data:`robopercept.nn.detection.models.TTA_VIEWS`)
+#: the views of ``tta`` (:data:`robopercept.nn.detection.tta.TTA_VIEWS`)
 _TTA = ("hflip", "flips", "dihedral")
 
 
@@ -209,7 +233,6 @@ class ImagePrediction:
         >>> p.coco_results(7)
         [{'image_id': 7, 'category_id': 1, 'bbox': [0.0, 0.0, 2.0, 3.0], 'score': 0.5}]
         """
-        from robopercept._checks import check_int
 
         image_id = check_int(image_id, "image_id")
         v = self.values
@@ -219,8 +242,6 @@ class ImagePrediction:
                 for b, lab, s in zip(v["boxes"], v["labels"], v["scores"], strict=True)
             ]
         if self.kind == "segment":
-            from robopercept.nn.segmentation.networks import coco_segmentation_results
-
             if self.instance:
                 return coco_segmentation_results(image_id, detections=v)
             return coco_segmentation_results(image_id, labels=v["labels"])
@@ -244,7 +265,7 @@ class ImagePrediction:
         """The pictures of this prediction by file name (those the command line writes).
 
         detect: ``STEM.png`` (boxes, class names and scores,
-        :func:`~robopercept.nn.detection.data.draw_detections`); segment: ``STEM.png``
+        :func:`~robopercept.viz.detection.draw_detections`); segment: ``STEM.png``
         (class or instance overlay, :mod:`robopercept.viz.segmentation`) and
         ``STEM_labels.png`` (the class labels, or instance ids 1..N in score order,
         best on top, as a uint8 map: write it with ``palette=voc_palette()``); pose:
@@ -270,15 +291,11 @@ class ImagePrediction:
         """
         v: dict[str, Any] = self.values
         if self.kind == "detect":
-            from robopercept.nn.detection.data import draw_detections
-
             pic = draw_detections(
                 self.image, v["boxes"], v["labels"], self.classes, scores=v["scores"]
             )
             return {f"{stem}.png": pic}
         if self.kind == "segment":
-            from robopercept.viz.segmentation import class_overlay, instance_overlay
-
             if self.instance:
                 overlay = instance_overlay(
                     self.image,
@@ -290,7 +307,6 @@ class ImagePrediction:
             else:
                 overlay = class_overlay(self.image, v["labels"], self.classes)
             return {f"{stem}.png": overlay, f"{stem}_labels.png": self._label_image()}
-        from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
 
         sk = self.skeleton
         if sk is None:
@@ -335,8 +351,6 @@ class ImagePrediction:
         ...     [f.name for f in p.write(d, "x")]
         ['x.png']
         """
-        from robopercept.imaging import write_image
-        from robopercept.viz import voc_palette
 
         out = Path(out_dir)
         written = []
@@ -358,7 +372,7 @@ class ImagePredictor:
         The checkpoint read (None for a model built in memory).
     model : torch.nn.Module
         On its device; a detector wrapped in
-        :class:`~robopercept.nn.detection.models.TestTimeAugmentation` with ``tta``.
+        :class:`~robopercept.nn.detection.tta.TestTimeAugmentation` with ``tta``.
     info : dict
         The checkpoint without the weights (``classes``, or ``skeleton`` and
         ``refiners`` for pose).
@@ -425,19 +439,14 @@ class ImagePredictor:
         """
         image = check_image(image)
         if self.kind == "detect" or (self.kind == "segment" and self.instance):
-            from robopercept.nn.detection.models import detect_arrays
-
             d = detect_arrays(self.model, [image])[0]
             keep = d["scores"] >= self.score_thresh
             return ImagePrediction(
                 self.kind, image, self.classes, {k: v[keep] for k, v in d.items()}
             )
         if self.kind == "segment":
-            from robopercept.nn.segmentation.networks import segment_arrays
-
             labels = segment_arrays(self.model, [image])[0]
             return ImagePrediction(self.kind, image, self.classes, {"labels": labels})
-        from robopercept.nn.pose.networks import pose_arrays
 
         sk = self.info["skeleton"]
         res = pose_arrays(
@@ -481,7 +490,6 @@ class ImagePredictor:
         ...     p.predict_file(f).image.shape
         (32, 32, 3)
         """
-        from robopercept.imaging import read_image
 
         return self.predict(read_image(path, mode="rgb"))
 
@@ -489,7 +497,7 @@ class ImagePredictor:
 def load_segment_model(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any], bool]:
     """Load a segmentation checkpoint: a semantic network
     (:func:`~robopercept.nn.segmentation.networks.load_segmenter`) or a Mask R-CNN
-    (:func:`~robopercept.nn.detection.models.load_detector`, told apart by the checkpoint's
+    (:func:`~robopercept.nn.detection.zoo.load_detector`, told apart by the checkpoint's
     ``kind``).
 
     Parameters
@@ -518,14 +526,10 @@ def load_segment_model(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any
     >>> (instance, info["classes"][:2])
     (False, ['circle', 'square'])
     """
-    from robopercept.nn.train.loop import load_checkpoint
 
     if load_checkpoint(path).get("kind") == "maskrcnn":
-        from robopercept.nn.detection.models import load_detector
-
         model, info = load_detector(path)
         return model, info, True
-    from robopercept.nn.segmentation.networks import load_segmenter
 
     model, info = load_segmenter(path)
     return model, info, False
@@ -554,14 +558,14 @@ def load_image_predictor(
         (:func:`~robopercept.nn.shipped.resolve_model`).
     device : str, optional
         ``"cpu"``, ``"cuda"``, ...; default CUDA when available
-        (:func:`~robopercept.nn.train.loop.resolve_device`).
+        (:func:`~robopercept.nn.train.config.resolve_device`).
     score_thresh : float in [0, 1], optional
         detect and instance segment: keep detections with ``score >= score_thresh``;
         default 0.3 for detect, 0.5 for segment (the command line's defaults). Ignored
         for pose and semantic segmentation.
     tta : {"hflip", "flips", "dihedral"}, optional
         detect: test-time augmentation
-        (:class:`~robopercept.nn.detection.models.TestTimeAugmentation`); ignored for the other
+        (:class:`~robopercept.nn.detection.tta.TestTimeAugmentation`); ignored for the other
         kinds.
     flip : bool
         pose: the flip test (average with the mirrored image); ignored otherwise.
@@ -569,7 +573,7 @@ def load_image_predictor(
         pose: keep the heatmaps (and draw ``STEM_heatmaps.png``); ignored otherwise.
     lift3d : bool
         pose: lift the 2-D joints to 3-D (root-relative metres) by matching against
-        :func:`~robopercept.nn.pose.lifting.default_pose_library`; ignored otherwise.
+        :func:`~robopercept.nn.pose.library.default_pose_library`; ignored otherwise.
 
     Returns
     -------
@@ -601,11 +605,8 @@ def load_image_predictor(
     if device is not None and not isinstance(device, str):
         raise InputError(f"device must be a name such as 'cpu' or 'cuda'; got {plain_repr(device)}")
     path = resolve_model(kind, model)
-    from robopercept.nn.train.loop import resolve_device
 
     if kind == "detect":
-        from robopercept.nn.detection.models import TestTimeAugmentation, load_detector
-
         net, info = load_detector(path)
         net.to(resolve_device(device))
         if tta:
@@ -615,14 +616,11 @@ def load_image_predictor(
         net, info, instance = load_segment_model(path)
         net.to(resolve_device(device))
         return ImagePredictor(kind, path, net, info, instance=instance, score_thresh=score_thresh)
-    from robopercept.nn.pose.networks import load_pose_model
 
     net, info = load_pose_model(path)
     net.to(resolve_device(device))
     library = None
     if lift3d:
-        from robopercept.nn.pose.lifting import default_pose_library
-
         library = default_pose_library(info["skeleton"])
     return ImagePredictor(
         kind,

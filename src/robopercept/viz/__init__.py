@@ -13,6 +13,7 @@ from robopercept.viz.colormap import (
     label_colors,
     voc_palette,
 )
+from robopercept.viz.detection import detections_grid, draw_detections
 from robopercept.viz.draw import (
     draw_boxes,
     draw_chessboard,
@@ -47,6 +48,7 @@ from robopercept.viz.learning import (
     confusion_picture,
     curves_figure,
     curves_picture,
+    precision_recall_picture,
     scatter_figure,
     scatter_picture,
     tiles_picture,
@@ -79,9 +81,11 @@ __all__ = [
     "curves_figure",
     "curves_picture",
     "dense_flow_picture",
+    "detections_grid",
     "disparity_picture",
     "draw_boxes",
     "draw_chessboard",
+    "draw_detections",
     "draw_flow",
     "draw_label",
     "draw_lines",
@@ -104,6 +108,7 @@ __all__ = [
     "matches_picture",
     "panels_picture",
     "plot_series",
+    "precision_recall_picture",
     "project_outline",
     "readable_dpi",
     "render_points",

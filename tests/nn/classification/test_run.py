@@ -17,8 +17,10 @@ from robopercept.nn.classification.run import (  # noqa: E402
     load_data,
     load_run,
     predict,
+    train_ddp,
     train_run,
 )
+from robopercept.nn.train.config import TrainConfig  # noqa: E402
 
 ARCH = Architecture(
     model="resnet_small",
@@ -88,7 +90,7 @@ def test_predict_resizes_to_the_input_size(tmp_path) -> None:
     """A checkpoint made by hand: the model sees the image resized to 12x10, so a
     constant image gives the same probabilities at any file size."""
     from robopercept.imaging import write_image
-    from robopercept.nn.train.loop import save_checkpoint
+    from robopercept.nn.train.checkpoint import save_checkpoint
 
     torch.manual_seed(0)
     model = ARCH.build().eval()
@@ -110,7 +112,8 @@ def test_predict_resizes_to_the_input_size(tmp_path) -> None:
 def test_ctrl_c_keeps_the_checkpoint_and_writes_the_history(tmp_path, monkeypatch) -> None:
     """An interrupted run leaves its last complete checkpoint and history.csv readable."""
     import robopercept.nn.classification.run as run_module
-    from robopercept.nn.train.loop import History, save_checkpoint
+    from robopercept.nn.train.checkpoint import save_checkpoint
+    from robopercept.nn.train.config import History
 
     def interrupted_fit(model, train, val, config, *, checkpoint, **kwargs):
         hist = History(
@@ -163,3 +166,18 @@ def test_issue25_bad_arguments_are_refused(tmp_path, call, match) -> None:
 
 def test_issue25_bytes_names_the_built_in_set() -> None:
     assert load_data(b"digits").image_shape == (1, 8, 8)
+
+
+def test_train_ddp_refuses_bad_process_counts(tmp_path) -> None:
+    with pytest.raises(InputError, match=r"nproc \(--nproc\) must be >= 1"):
+        train_ddp("digits", "vgg_small", tmp_path, nproc=0)
+    with pytest.raises(InputError, match="--nproc 3 is larger than --batch-size 2"):
+        train_ddp("digits", "vgg_small", tmp_path, nproc=3, config=TrainConfig(batch_size=2))
+    with pytest.raises(InputError, match=r"--batch-size 63 .*multiple of --nproc 2"):
+        train_ddp("digits", "vgg_small", tmp_path, nproc=2, config=TrainConfig(batch_size=63))
+
+
+def test_rank_errors_come_back_from_train_ddp(tmp_path) -> None:
+    # every rank refuses the unknown model; the launcher raises the error itself
+    with pytest.raises(InputError, match="unknown model 'nope'"):
+        train_ddp("digits", "nope", tmp_path, nproc=2, threads=1, timeout=120)

@@ -13,7 +13,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.errors import FileFormatError, InputError  # noqa: E402
-from robopercept.nn.cloud.data import CloudDataset, procedural_shapes  # noqa: E402
+from robopercept.nn.cloud.data import CloudDataset  # noqa: E402
 from robopercept.nn.cloud.run import (  # noqa: E402
     build_cloud_model,
     classify_cloud_file,
@@ -25,7 +25,8 @@ from robopercept.nn.cloud.run import (  # noqa: E402
     save_cloud_model,
     train_cloud_model,
 )
-from robopercept.nn.train.loop import TrainConfig  # noqa: E402
+from robopercept.nn.cloud.synthetic import procedural_shapes  # noqa: E402
+from robopercept.nn.train.config import TrainConfig  # noqa: E402
 from robopercept.pointcloud import PointCloud, write_point_cloud  # noqa: E402
 from tests.conftest import data_path  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""COCO keypoint data and evaluation (robopercept.nn.coco.formats, iou_type="keypoints").
+"""COCO keypoint data and evaluation (nn.coco.dataset, .results, .evaluate: iou_type="keypoints").
 
 Parity: pycocotools' ``COCOeval(gt, dt, "keypoints")``, the evaluation practitioners
 trust, on randomized results over the real COCO person-keypoints file that mmpose
@@ -23,25 +23,29 @@ import numpy as np
 import pytest
 
 from robopercept.errors import FileFormatError, InputError
-from robopercept.nn.coco.formats import (
-    KEYPOINT_SUMMARY_NAMES,
-    SUMMARY_NAMES,
+from robopercept.nn.coco.dataset import (
     CocoCategory,
     CocoDataset,
-    CocoResults,
     coco_from_dict,
     coco_to_dict,
+    read_coco_json,
+    write_coco_json,
+)
+from robopercept.nn.coco.evaluate import (
+    KEYPOINT_SUMMARY_NAMES,
+    SUMMARY_NAMES,
     evaluate_detections,
     keypoint_oks,
-    read_coco_json,
+)
+from robopercept.nn.coco.results import (
+    CocoResults,
     read_coco_results,
     results_from_ground_truth,
     results_from_list,
     results_to_list,
-    voc_to_coco,
-    write_coco_json,
     write_coco_results,
 )
+from robopercept.nn.coco.voc import voc_to_coco
 from robopercept.nn.skeleton import COCO_17, skeleton_from_coco_category
 from tests.conftest import data_path
 

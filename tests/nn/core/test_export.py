@@ -56,7 +56,7 @@ def test_export_keeps_the_training_mode_and_checks_names(tmp_path) -> None:
 @pytest.mark.parametrize("name", ["vgg_small", "inception_small", "resnet_small"])
 def test_every_model_of_the_family_exports(tmp_path, name) -> None:
     from robopercept.nn.classification.models import build_model
-    from robopercept.nn.train.loop import Normalize
+    from robopercept.nn.data.augment import Normalize
 
     torch.manual_seed(0)
     net = nn.Sequential(Normalize([0.3], [0.4]), build_model(name, in_channels=1, num_classes=10))

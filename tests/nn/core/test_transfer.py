@@ -18,7 +18,8 @@ from robopercept.nn.core.transfer import (  # noqa: E402
     trainable_parameter_names,
     unfreeze,
 )
-from robopercept.nn.train.loop import TrainConfig, fit  # noqa: E402
+from robopercept.nn.train.config import TrainConfig  # noqa: E402
+from robopercept.nn.train.loop import fit  # noqa: E402
 
 
 class _Net(nn.Module):

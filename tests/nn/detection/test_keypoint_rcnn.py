@@ -10,7 +10,8 @@ import torch.nn.functional as F
 
 from robopercept.errors import InputError
 from robopercept.nn.detection.data import DetectionDataset
-from robopercept.nn.detection.models import KeypointRCNN, detect_arrays
+from robopercept.nn.detection.keypoint_rcnn import KeypointRCNN
+from robopercept.nn.detection.zoo import detect_arrays
 from robopercept.nn.pose.data import procedural_pose_scenes
 
 

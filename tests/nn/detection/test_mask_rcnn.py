@@ -1,5 +1,5 @@
-"""Tests of Mask R-CNN (robopercept.nn.detection.models.MaskRCNN) and of pasting per-box masks
-back into the image (robopercept.nn.ops.boxes.paste_masks): hand cases, the round trip with
+"""Tests of Mask R-CNN (robopercept.nn.detection.mask_rcnn.MaskRCNN) and of pasting per-box masks
+back into the image (robopercept.nn.ops.roi.paste_masks): hand cases, the round trip with
 RoI Align, the mask loss by its formula, shapes in train and eval mode, overfitting two
 canvases to a high mask AP, and bad input."""
 
@@ -11,18 +11,12 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.errors import InputError  # noqa: E402
-from robopercept.nn.detection.data import digits_detection_set  # noqa: E402
-from robopercept.nn.detection.models import (  # noqa: E402
-    MaskRCNN,
-    build_detector,
-    detect_arrays,
-    evaluate_detector,
-    load_detector,
-    save_detector,
-    train_detector,
-)
-from robopercept.nn.ops.boxes import paste_masks, roi_align  # noqa: E402
-from robopercept.nn.train.loop import TrainConfig  # noqa: E402
+from robopercept.nn.detection.mask_rcnn import MaskRCNN  # noqa: E402
+from robopercept.nn.detection.synthetic import digits_detection_set  # noqa: E402
+from robopercept.nn.detection.train import evaluate_detector, train_detector  # noqa: E402
+from robopercept.nn.detection.zoo import build_detector, detect_arrays, load_detector, save_detector  # noqa: E402
+from robopercept.nn.ops.roi import paste_masks, roi_align  # noqa: E402
+from robopercept.nn.train.config import TrainConfig  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 

@@ -1,4 +1,4 @@
-"""Tests of robopercept.nn.detection.models's R-CNN (Girshick et al. 2014): the context-padded
+"""Tests of robopercept.nn.detection.rcnn's R-CNN (Girshick et al. 2014): the context-padded
 warp by hand, shapes and finite losses, the R-CNN IoU bands, overfitting two digit
 canvases with given proposals, timing, determinism and bad input."""
 
@@ -10,14 +10,10 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.errors import InputError  # noqa: E402
-from robopercept.nn.detection.data import digits_detection_set  # noqa: E402
-from robopercept.nn.detection.models import (  # noqa: E402
-    RCNN,
-    evaluate_detector,
-    selective_search_proposals,
-    train_detector,
-)
-from robopercept.nn.train.loop import TrainConfig  # noqa: E402
+from robopercept.nn.detection.rcnn import RCNN, selective_search_proposals  # noqa: E402
+from robopercept.nn.detection.synthetic import digits_detection_set  # noqa: E402
+from robopercept.nn.detection.train import evaluate_detector, train_detector  # noqa: E402
+from robopercept.nn.train.config import TrainConfig  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -237,7 +233,8 @@ def test_warp_bad_input():
 
 # --------------------------------------------------------------------------- build / save / load
 def test_build_detector_kinds_seed_and_errors():
-    from robopercept.nn.detection.models import DETECTORS, FastRCNN, build_detector
+    from robopercept.nn.detection.fast_rcnn import FastRCNN
+    from robopercept.nn.detection.zoo import DETECTORS, build_detector
 
     for kind, cls in DETECTORS.items():
         assert type(build_detector(kind, 3, width=4)) is cls
@@ -254,7 +251,7 @@ def test_build_detector_kinds_seed_and_errors():
 
 def test_save_load_round_trip_and_not_a_detector(tmp_path):
     from robopercept.errors import FileFormatError
-    from robopercept.nn.detection.models import build_detector, load_detector, save_detector
+    from robopercept.nn.detection.zoo import build_detector, load_detector, save_detector
 
     m = build_detector("rcnn", 2, seed=0, warp_size=16, width=4, hidden=8)
     save_detector(
@@ -277,7 +274,7 @@ def test_save_load_round_trip_and_not_a_detector(tmp_path):
 
 
 def test_detect_arrays_equals_predict_on_tensors():
-    from robopercept.nn.detection.models import build_detector, detect_arrays
+    from robopercept.nn.detection.zoo import build_detector, detect_arrays
 
     m = build_detector("fcos", 2, seed=0, width=4, score_thresh=0.0)
     im = (np.random.default_rng(0).random((32, 40, 3)) * 255).astype(np.uint8)

@@ -15,8 +15,9 @@ torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import write_image  # noqa: E402
-from robopercept.nn.detection.data import procedural_detection_set  # noqa: E402
-from robopercept.nn.detection.models import evaluate_detector, load_detector  # noqa: E402
+from robopercept.nn.detection.synthetic import procedural_detection_set  # noqa: E402
+from robopercept.nn.detection.train import evaluate_detector  # noqa: E402
+from robopercept.nn.detection.zoo import load_detector  # noqa: E402
 from robopercept.nn.shipped import SHIPPED_DETECTORS as SHIPPED_MODELS  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")

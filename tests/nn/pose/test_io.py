@@ -14,7 +14,7 @@ import pytest
 
 from robopercept.errors import FileFormatError
 from robopercept.imaging import read_image
-from robopercept.nn.coco.formats import read_coco_json
+from robopercept.nn.coco.dataset import read_coco_json
 from robopercept.nn.pose.io import (
     MPII_TRB_40,
     read_imgaug_keypoints,

@@ -1,9 +1,7 @@
-"""Tests of robopercept.nn.pose.lifting: Procrustes alignment and the MPJPE metrics, random
-views, the 2-D normalization, lifting by library matching and the lifting network."""
+"""Tests of robopercept.nn.pose.lifting: Procrustes alignment and the MPJPE metrics and
+the lifting network (fixtures in conftest.py)."""
 
 from __future__ import annotations
-
-import json
 
 import numpy as np
 import pytest
@@ -13,55 +11,16 @@ torch = pytest.importorskip("torch")
 from scipy.spatial import procrustes as scipy_procrustes  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from robopercept.errors import DegenerateError, InputError  # noqa: E402
-from robopercept.nn.pose.data import project_points, random_poses_3d  # noqa: E402
+from robopercept.errors import InputError  # noqa: E402
 from robopercept.nn.pose.lifting import (  # noqa: E402
-    PELVIS,
     LiftingMLP,
-    PoseLibrary,
     SimilarityTransform,
     mpjpe,
-    normalize_pose2d,
     pa_mpjpe,
     procrustes_align,
-    random_views,
     train_lifter,
 )
-from tests.conftest import data_path  # noqa: E402
-
-HEAD = 9  # MPII_16's head top
-
-
-def rooted(poses: np.ndarray) -> np.ndarray:
-    return poses - poses[:, PELVIS : PELVIS + 1]
-
-
-@pytest.fixture(scope="module")
-def library_poses() -> np.ndarray:
-    return random_poses_3d(600, rng=0)
-
-
-@pytest.fixture(scope="module")
-def library(library_poses: np.ndarray) -> PoseLibrary:
-    return PoseLibrary(library_poses, views_per_pose=16, rng=1)
-
-
-@pytest.fixture(scope="module")
-def held_out():
-    """300 new poses, one random view each: (pixel joints of a ~100 px figure, rooted
-    camera-frame truth)."""
-    v = random_views(random_poses_3d(300, rng=100), 1, rng=101)
-    px = v.keypoints2d * (100.0 / np.ptp(v.keypoints2d[..., 1], axis=1))[:, None, None]
-    return px + np.array([320.0, 240.0]), v.rooted()
-
-
-@pytest.fixture(scope="module")
-def mean_pose_error(library_poses, held_out) -> float:
-    """PA-MPJPE of the trivial lifter: the library's mean pose, whatever the input."""
-    _, truth = held_out
-    mean = rooted(library_poses).mean(0)
-    return pa_mpjpe(np.broadcast_to(mean, truth.shape), truth)
-
+from robopercept.nn.pose.views import PELVIS, random_views  # noqa: E402
 
 # ================================================================================ metrics
 
@@ -194,222 +153,6 @@ class TestMPJPE:
     def test_bad_root(self):
         with pytest.raises(InputError, match=r"root must index a joint, 0\.\.1"):
             mpjpe(np.zeros((2, 3)), np.zeros((2, 3)), root=2)
-
-
-# ============================================================================ views
-
-
-class TestRandomViews:
-    def test_projection_and_rigidity(self, library_poses):
-        k = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
-        v = random_views(library_poses[:20], 3, rng=5, camera_matrix=k)
-        assert len(v) == 60
-        np.testing.assert_allclose(project_points(v.joints3d, k), v.keypoints2d, atol=1e-9)
-        src = library_poses[v.pose_index]
-        d_src = np.linalg.norm(src[:, :, None] - src[:, None], axis=-1)
-        d_cam = np.linalg.norm(v.joints3d[:, :, None] - v.joints3d[:, None], axis=-1)
-        np.testing.assert_allclose(d_cam, d_src, atol=1e-12)
-        np.testing.assert_allclose(v.joints3d[:, PELVIS], np.c_[np.zeros((60, 2)), v.distance])
-        assert np.all((v.distance >= 3) & (v.distance <= 6))
-        assert np.all(np.abs(v.yaw) <= np.pi)
-
-    def test_hand_cases_of_the_camera(self):
-        # a head 1 m above the pelvis and a nose 0.5 m in front of it (J = 3, root 0)
-        pose = np.array([[[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.5]]])
-        v = random_views(pose, 50, rng=2, elevation=(0.0, 0.0), root=0)
-        head, nose = v.joints3d[:, 1], v.joints3d[:, 2]
-        np.testing.assert_allclose(head, np.c_[np.zeros(50), -np.ones(50), v.distance], atol=1e-12)
-        want = np.c_[0.5 * np.sin(v.yaw), np.zeros(50), v.distance - 0.5 * np.cos(v.yaw)]
-        np.testing.assert_allclose(nose, want, atol=1e-12)
-        # a raised camera (elevation e > 0) sees the head nearer: (0, -cos e, d - sin e)
-        v = random_views(pose, 50, rng=3, elevation=(0.2, 0.6), root=0)
-        e = v.elevation
-        want = np.c_[np.zeros(50), -np.cos(e), v.distance - np.sin(e)]
-        np.testing.assert_allclose(v.joints3d[:, 1], want, atol=1e-12)
-
-    def test_left_is_image_right_when_facing(self):
-        # the figure's left (+x) is on the image's right when it faces the camera
-        pose = np.array([[[0.0, 0.0, 0.0], [0.3, 0.0, 0.0]]])
-        v = random_views(pose, 200, rng=4, root=0)
-        facing = np.cos(v.yaw) > 0.5
-        assert np.all(v.keypoints2d[facing, 1, 0] > 0)
-        assert np.all(v.keypoints2d[~facing & (np.cos(v.yaw) < -0.5), 1, 0] < 0)
-
-    def test_seeded(self, library_poses):
-        a = random_views(library_poses[:5], 4, rng=9)
-        b = random_views(library_poses[:5], 4, rng=np.random.default_rng(9))
-        np.testing.assert_array_equal(a.keypoints2d, b.keypoints2d)
-        assert not np.allclose(a.keypoints2d, random_views(library_poses[:5], 4, rng=8).keypoints2d)
-
-    @pytest.mark.parametrize(
-        ("kwargs", "match"),
-        [
-            ({"poses3d": np.zeros((0, 16, 3))}, "empty"),
-            ({"poses3d": np.zeros((16, 3))}, "one pose"),
-            ({"poses3d": np.full((1, 16, 3), np.nan)}, "finite"),
-            ({"views_per_pose": 0}, "views_per_pose must be >= 1"),
-            ({"elevation": (0.5, 0.1)}, "elevation"),
-            ({"distance": (0.1, 0.2)}, "behind it"),
-            ({"camera_matrix": np.eye(2)}, "camera_matrix"),
-            ({"views_per_pose": 2**40}, "lower views_per_pose"),
-        ],
-    )
-    def test_bad_input(self, library_poses, kwargs, match):
-        args = {"poses3d": library_poses[:2], **kwargs}
-        with pytest.raises(InputError, match=match):
-            random_views(**args)
-
-    def test_millimetres_are_caught(self, library_poses):
-        with pytest.raises(InputError, match="metres"):
-            random_views(library_poses[:2] * 1000)
-
-
-# ========================================================================= normalization
-
-
-class TestNormalize:
-    def test_hand_case(self):
-        p = np.array([[10.0, 10.0], [12.0, 10.0], [10.0, 14.0]])
-        s = np.sqrt((0 + 4 + 16) / 3)  # RMS distance to joint 0
-        np.testing.assert_allclose(normalize_pose2d(p, root=0), (p - p[0]) / s)
-        c = p.mean(0)
-        s = np.sqrt(((p - c) ** 2).sum(1).mean())
-        np.testing.assert_allclose(normalize_pose2d(p, center="mean", root=0), (p - c) / s)
-
-    def test_invariance(self, rng):
-        p = rng.normal(size=(4, 16, 2))
-        q = 37.0 * p + [100.0, -50.0]
-        np.testing.assert_allclose(normalize_pose2d(q), normalize_pose2d(p), atol=1e-12)
-        n = normalize_pose2d(p)
-        np.testing.assert_allclose((n**2).sum(-1).mean(-1), 1.0)
-        np.testing.assert_array_equal(n[:, PELVIS], 0.0)
-
-    def test_missing_joints(self, rng):
-        p = rng.normal(size=(16, 2))
-        vis = np.ones(16, bool)
-        vis[[0, PELVIS]] = False  # the root is missing: the centre is the visible mean
-        p[0] = np.nan
-        n = normalize_pose2d(p, vis)
-        assert np.isnan(n[[0, PELVIS]]).all()
-        seen = p[vis]
-        c = seen.mean(0)
-        np.testing.assert_allclose(n[vis], (seen - c) / np.sqrt(((seen - c) ** 2).sum(1).mean()))
-
-    def test_errors(self):
-        with pytest.raises(DegenerateError, match="fewer than 2 visible joints"):
-            normalize_pose2d(np.ones((16, 2)))
-        with pytest.raises(DegenerateError, match="fewer than 2"):
-            normalize_pose2d(np.arange(32.0).reshape(16, 2), np.eye(16)[3])
-        with pytest.raises(InputError, match="NaN/inf at 2 visible joint"):
-            normalize_pose2d(np.where(np.eye(16, 2, dtype=bool), np.nan, 1.0))
-        with pytest.raises(InputError, match=r"\(x, y, v\) keypoints\?"):
-            normalize_pose2d(np.zeros((2, 16, 3)))
-        with pytest.raises(InputError, match="center must be one of"):
-            normalize_pose2d(np.eye(16, 2), center="median")
-
-
-# ============================================================================= matching
-
-
-class TestPoseLibrary:
-    def test_own_views_give_their_exact_pose(self, library, library_poses):
-        v = random_views(library_poses, 16, rng=1)  # the library's own views
-        pick = np.arange(0, len(v), 397)
-        query = 3.7 * v.keypoints2d[pick] * 100 + [512.0, -80.0]
-        np.testing.assert_allclose(library.lift(query), v.rooted()[pick], atol=1e-12)
-        np.testing.assert_array_equal(library.pose_index, v.pose_index)
-        # one pose alone, and the same with its missing joints marked
-        one = library.lift(query[0])
-        assert one.shape == (16, 3)
-        assert library.lift(np.zeros((0, 16, 2))).shape == (0, 16, 3)  # an empty batch
-        vis = np.ones(16, bool)
-        vis[[0, 15]] = False
-        masked = np.where(vis[:, None], query[0], np.nan)
-        np.testing.assert_allclose(library.lift(masked, vis), one, atol=1e-12)
-
-    def test_invariant_to_2d_translation_and_scale(self, library, held_out):
-        px, _ = held_out
-        a = library.lift(px)
-        b = library.lift(0.25 * px - [1000.0, 3.0])
-        np.testing.assert_allclose(b, a, atol=1e-12)
-
-    def test_nearest_neighbour_by_brute_force(self, library, held_out, rng):
-        # the reference: normalize both sides by normalize_pose2d, then argmin / k smallest
-        px, _ = held_out
-        q = normalize_pose2d(px[:40]).reshape(40, -1)
-        lib = library.keypoints2d.reshape(len(library), -1)
-        d = ((q[:, None] - lib[None]) ** 2).sum(-1)
-        np.testing.assert_allclose(library.lift(px[:40]), library.joints3d[d.argmin(1)])
-        near = np.argsort(d, axis=1)[:, :3]
-        np.testing.assert_allclose(library.lift(px[:40], k=3), library.joints3d[near].mean(1))
-        # with missing joints: over the visible joints, both sides normalized over them
-        vis = rng.random((40, 16)) > 0.25
-        vis[:, PELVIS] = True
-        vis[::2, PELVIS] = False
-        q = normalize_pose2d(px[:40], vis)
-        want = []
-        for i in range(40):
-            lv = normalize_pose2d(library.keypoints2d, np.broadcast_to(vis[i], (len(library), 16)))
-            dist = np.nansum((lv - q[i]) ** 2, axis=(1, 2))
-            want.append(library.joints3d[dist.argmin()])
-        np.testing.assert_allclose(
-            library.lift(np.where(vis[..., None], px[:40], np.nan), vis), want
-        )
-
-    def test_beats_the_mean_pose(self, library, held_out, mean_pose_error):
-        # measured (600 poses x 16 views): mean pose 185 mm, k=1 157 mm (0.85), k=5
-        # 129 mm (0.70); noise of 2 px on the 100 px figures: k=5 131 mm (0.71)
-        px, truth = held_out
-        noisy = px + np.random.default_rng(7).normal(0, 2.0, px.shape)
-        assert pa_mpjpe(library.lift(px), truth) < 0.92 * mean_pose_error
-        assert pa_mpjpe(library.lift(px, k=5), truth) < 0.78 * mean_pose_error
-        assert pa_mpjpe(library.lift(noisy, k=5), truth) < 0.78 * mean_pose_error
-
-    def test_seeded(self, library_poses):
-        a = PoseLibrary(library_poses[:10], views_per_pose=3, rng=4)
-        b = PoseLibrary(library_poses[:10], views_per_pose=3, rng=4)
-        np.testing.assert_array_equal(a.keypoints2d, b.keypoints2d)
-        np.testing.assert_array_equal(a.joints3d, b.joints3d)
-
-    def test_bad_input(self, library, library_poses):
-        with pytest.raises(InputError, match="library's 16 joints; got 17"):
-            library.lift(np.zeros((2, 17, 2)))
-        with pytest.raises(InputError, match="mark missing joints with visible"):
-            library.lift(np.where(np.eye(16, 2, dtype=bool), np.nan, 1.0))
-        with pytest.raises(InputError, match=r"visible must be one flag per joint, shape \(16,\)"):
-            library.lift(np.eye(16, 2), np.ones(15))
-        with pytest.raises(InputError, match="k must be at most the library size"):
-            library.lift(np.eye(16, 2), k=len(library) + 1)
-        with pytest.raises(DegenerateError, match="cannot be normalized"):
-            library.lift(np.ones((16, 2)))
-        with pytest.raises(InputError, match="empty"):
-            PoseLibrary(np.zeros((0, 16, 3)))
-        with pytest.raises(InputError, match="k must be at most the library size, 2"):
-            PoseLibrary(library_poses[:1], views_per_pose=2, k=3)
-        with pytest.raises(DegenerateError, match="library views"):
-            PoseLibrary(np.zeros((1, 16, 3)))
-
-    @pytest.mark.realdata
-    def test_real_mpii_annotations(self, library):
-        # five people of MPII Human Pose (mmpose's test subset; joints in MPII_16's
-        # order, joints_vis marks the labelled ones). No 3-D truth: the lifted pose,
-        # seen along the camera's axis, must look like the input -- its normalized
-        # projection closer to the query than the library's average 2-D pose is
-        records = json.loads(
-            data_path("detection", "mpii_keypoints_mmpose", "test_mpii.json").read_text()
-        )
-        kp = np.array([r["joints"] for r in records], float)
-        vis = np.array([r["joints_vis"] for r in records]) > 0
-        lifted = library.lift(kp, vis, k=3)
-        assert np.isfinite(lifted).all() and np.all(lifted[:, PELVIS] == 0)
-        mean2d = library.keypoints2d.mean(0)
-        for i in range(len(kp)):
-            q = normalize_pose2d(kp[i], vis[i])[vis[i]]
-            ours = normalize_pose2d(lifted[i, :, :2], vis[i])[vis[i]]
-            base = normalize_pose2d(mean2d, vis[i])[vis[i]]
-            assert np.sqrt(((ours - q) ** 2).sum(1).mean()) < np.sqrt(
-                ((base - q) ** 2).sum(1).mean()
-            )
 
 
 # ============================================================================= the network

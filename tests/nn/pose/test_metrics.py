@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from robopercept.errors import InputError
-from robopercept.nn.coco.formats import read_coco_json
+from robopercept.nn.coco.dataset import read_coco_json
 from robopercept.nn.pose.metrics import (
     MPII_HEAD_SCALE,
     PckScores,

@@ -16,7 +16,8 @@ torch = pytest.importorskip("torch")
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import write_image  # noqa: E402
 from robopercept.nn.pose.data import procedural_pose_set  # noqa: E402
-from robopercept.nn.pose.networks import evaluate_pose, load_pose_model  # noqa: E402
+from robopercept.nn.pose.evaluate import evaluate_pose  # noqa: E402
+from robopercept.nn.pose.networks import load_pose_model  # noqa: E402
 from robopercept.nn.shipped import SHIPPED_POSE_MODELS  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")

@@ -174,7 +174,7 @@ def _squares(n: int, size: int = 16, seed: int = 0):
 def test_train_segmenter_learns_keeps_the_best_epoch_and_repeats():
     from robopercept.nn.segmentation.metrics import segmentation_confusion, segmentation_scores
     from robopercept.nn.segmentation.networks import predict_segmentation, train_segmenter
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.train.config import TrainConfig
 
     x, y = _squares(24)
     vx, vy = _squares(8, seed=1)
@@ -200,7 +200,7 @@ def test_train_segmenter_learns_keeps_the_best_epoch_and_repeats():
 
 def test_train_segmenter_ignore_index_weights_and_refusals():
     from robopercept.nn.segmentation.networks import train_segmenter
-    from robopercept.nn.train.loop import TrainConfig
+    from robopercept.nn.train.config import TrainConfig
 
     x, y = _squares(4)
     y[:, 0, :] = 255  # a void row
@@ -229,7 +229,7 @@ def test_train_segmenter_ignore_index_weights_and_refusals():
 # ----------------------------------------------------------------------------- io
 def test_save_and_load_segmenter_round_trip_and_refuse_other_checkpoints(tmp_path):
     from robopercept.errors import FileFormatError
-    from robopercept.nn.detection.models import build_detector, save_detector
+    from robopercept.nn.detection.zoo import build_detector, save_detector
     from robopercept.nn.segmentation.networks import load_segmenter, save_segmenter, segment_arrays
 
     torch.manual_seed(0)

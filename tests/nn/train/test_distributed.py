@@ -22,8 +22,15 @@ from torch.utils.data import TensorDataset  # noqa: E402
 
 from robopercept.errors import InputError  # noqa: E402
 from robopercept.nn.data.datasets import load_digits  # noqa: E402
-from robopercept.nn.train.distributed import free_port, run_ranks, torchrun_env, train_ddp  # noqa: E402
-from robopercept.nn.train.loop import TrainConfig, fit  # noqa: E402
+from robopercept.nn.train.config import TrainConfig  # noqa: E402
+from robopercept.nn.train.distributed import (  # noqa: E402
+    check_world_batch,
+    free_port,
+    rank_device,
+    run_ranks,
+    torchrun_env,
+)
+from robopercept.nn.train.loop import fit  # noqa: E402
 
 SRC = str(Path(__file__).resolve().parents[3] / "src")
 B = 32  # the global batch of the parity test
@@ -134,15 +141,23 @@ def test_cli_refuses_bad_process_counts(tmp_path, flags, match) -> None:
     assert not (tmp_path / "r").exists()
 
 
-def test_library_refuses_bad_process_counts(tmp_path) -> None:
-    with pytest.raises(InputError, match=r"nproc \(--nproc\) must be >= 1"):
-        train_ddp("digits", "vgg_small", tmp_path, nproc=0)
-    with pytest.raises(InputError, match="--nproc 3 is larger than --batch-size 2"):
-        train_ddp("digits", "vgg_small", tmp_path, nproc=3, config=TrainConfig(batch_size=2))
-    with pytest.raises(InputError, match=r"--batch-size 63 .*multiple of --nproc 2"):
-        train_ddp("digits", "vgg_small", tmp_path, nproc=2, config=TrainConfig(batch_size=63))
+def test_fit_distributed_needs_a_process_group() -> None:
     with pytest.raises(InputError, match=r"initialized torch\.distributed process group"):
         fit(_mlp(), _first_digits(8), None, _config(), distributed=True, progress=False)
+
+
+def test_check_world_batch_and_rank_device() -> None:
+    check_world_batch(4, 64)
+    with pytest.raises(InputError, match="--nproc 3 is larger than --batch-size 2"):
+        check_world_batch(3, 2)
+    with pytest.raises(InputError, match=r"--batch-size 63 .*multiple of --nproc 2.* 62 or 64"):
+        check_world_batch(2, 63)
+    with pytest.raises(InputError, match=r"nproc \(--nproc\) must be >= 1"):
+        check_world_batch(0, 2)
+    cfg = TrainConfig(device="cpu")
+    assert rank_device(cfg) == (cfg, "gloo")
+    with pytest.raises(InputError, match="cfg must be a TrainConfig"):
+        rank_device("cpu")
 
 
 def test_a_failing_rank_stops_the_run() -> None:
@@ -151,12 +166,6 @@ def test_a_failing_rank_stops_the_run() -> None:
         run_ranks(_fail_on_rank_1, 2, threads=1, timeout=600)
     # the waiting rank was terminated, not left until the 600 s collective timeout
     assert time.monotonic() - t0 < 300
-
-
-def test_rank_errors_come_back_from_train_ddp(tmp_path) -> None:
-    # every rank refuses the unknown model; the launcher raises the error itself
-    with pytest.raises(InputError, match="unknown model 'nope'"):
-        train_ddp("digits", "nope", tmp_path, nproc=2, threads=1, timeout=120)
 
 
 def test_torchrun_env_and_free_port() -> None:

@@ -13,15 +13,9 @@ from torch import nn  # noqa: E402
 from torch.utils.data import TensorDataset  # noqa: E402
 
 from robopercept.errors import FileFormatError, InputError  # noqa: E402
-from robopercept.nn.train.loop import (  # noqa: E402
-    History,
-    Normalize,
-    TrainConfig,
-    evaluate,
-    fit,
-    load_checkpoint,
-    save_checkpoint,
-)
+from robopercept.nn.train.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
+from robopercept.nn.train.config import TrainConfig  # noqa: E402
+from robopercept.nn.train.loop import evaluate, fit, optimizer_step, step_optimizer  # noqa: E402
 
 
 def _blobs(n: int = 240, seed: int = 0) -> TensorDataset:
@@ -176,34 +170,6 @@ def test_checkpoint_of_another_architecture(tmp_path) -> None:
         load_checkpoint(tmp_path / "none.pt")
 
 
-def test_history_csv_and_picture(tmp_path) -> None:
-    h = History(
-        epoch=[1, 2],
-        train_loss=[1.0, 0.5],
-        train_accuracy=[0.5, 0.8],
-        val_loss=[1.1, 0.6],
-        val_accuracy=[0.4, 0.7],
-        lr=[0.1, 0.1],
-        seconds=[0.2, 0.2],
-        best_epoch=2,
-    )
-    text = h.write_csv(tmp_path / "h.csv").read_text().splitlines()
-    assert text[0] == "epoch,train_loss,train_accuracy,val_loss,val_accuracy,lr,seconds"
-    assert text[2] == "2,0.5,0.8,0.6,0.7,0.1,0.2"
-    assert History.from_dict(h.to_dict()) == h
-    img = h.picture()
-    assert img.dtype == np.uint8 and img.shape[1] == 1200 and img.shape[0] >= 3 * 260
-
-
-def test_normalize_layer() -> None:
-    n = Normalize([1.0, 2.0], [2.0, 4.0])
-    x = torch.ones(1, 2, 2, 2)
-    np.testing.assert_allclose(n(x)[0, :, 0, 0].numpy(), [0.0, -0.25])
-    assert set(n.state_dict()) == {"mean", "std"}
-    with pytest.raises(InputError):
-        Normalize([0.0], [0.0])  # std 0
-
-
 def test_cosine_and_onecycle_schedules() -> None:
     cfg = TrainConfig(epochs=4, lr=0.1, optimizer="sgd", schedule="cosine", patience=None)
     hist = fit(_model(), _blobs(64), None, cfg, progress=False)
@@ -279,8 +245,6 @@ def test_issue25_numpy_integers_and_defaults_still_work(tmp_path) -> None:
 
 
 def test_optimizer_step_by_hand():
-    from robopercept.nn.train.loop import TrainConfig, optimizer_step, step_optimizer
-
     w = torch.nn.Parameter(torch.ones(2, dtype=torch.float64))
     cfg = TrainConfig(optimizer="sgd", lr=0.1, momentum=0.0, weight_decay=0.0, schedule="constant")
     opt, sched = step_optimizer([w], cfg, 1)

@@ -4,9 +4,10 @@
 ``digits``, scikit-image's ``lfw_subset`` or an image folder ``root/class_name/*.png``),
 split it into train / validation / test keeping the class proportions (seeded), compute
 the normalization statistics on the training split only and put them first in the model
-(:class:`~robopercept.nn.train.loop.Normalize`, so the checkpoint carries them), train with
-:func:`~robopercept.nn.train.loop.fit`, evaluate the best epoch on the test split and
-write the run folder:
+(:class:`~robopercept.nn.data.augment.Normalize`, so the checkpoint carries them), train
+with :func:`~robopercept.nn.train.loop.fit`, evaluate the best epoch on the test split and
+write the run folder (:func:`train_ddp` does the same on several processes,
+DistributedDataParallel: ``nn train --nproc N``):
 
 ========================  =============================================================
 ``checkpoint.pt``         the last epoch (model, optimizer, schedule, random states):
@@ -40,31 +41,33 @@ import torch.nn.functional as F
 from torch import nn
 from torch.utils.data import Dataset
 
-from robopercept._checks import as_path, check_choice, check_int, plain_repr
+from robopercept._checks import as_path, check_choice, check_int, check_real, plain_repr
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import strict_json
+from robopercept.imaging import read_image, write_image
+from robopercept.learning.metrics import classification_report
 from robopercept.nn._guards import check_device
 from robopercept.nn.classification.models import MODELS, build_model
+from robopercept.nn.data.augment import Compose, Normalize, RandomAffine, RandomCrop
 from robopercept.nn.data.datasets import (
     ArrayDataset,
-    Compose,
     ImageFolder,
-    RandomAffine,
-    RandomCrop,
     load_digits,
     load_lfw_subset,
     normalization_stats,
     stratified_split,
     to_unit_float,
 )
-from robopercept.nn.train.loop import (
-    History,
-    Normalize,
-    TrainConfig,
-    evaluate,
-    fit,
-    load_checkpoint,
+from robopercept.nn.train.checkpoint import load_checkpoint
+from robopercept.nn.train.config import History, TrainConfig
+from robopercept.nn.train.distributed import (
+    check_world_batch,
+    rank_device,
+    run_ranks,
+    torchrun_env,
 )
+from robopercept.nn.train.loop import evaluate, fit
+from robopercept.viz import confusion_picture
 
 __all__ = [
     "BUILTIN_DATA",
@@ -77,6 +80,7 @@ __all__ = [
     "load_run",
     "predict",
     "predict_loaded",
+    "train_ddp",
     "train_run",
 ]
 
@@ -207,8 +211,6 @@ class RunEvaluation:
     def picture(self, title: str = "confusion matrix") -> np.ndarray:
         """The confusion matrix drawn (:func:`robopercept.viz.confusion_picture`), (H, W, 3)
         uint8."""
-        from robopercept.viz import confusion_picture
-
         return confusion_picture(self.confusion, self.classes, title=title)
 
 
@@ -303,8 +305,6 @@ def _parameters(model: nn.Module) -> int:
 
 
 def _run_evaluation(model: nn.Module, data: ArrayDataset, device: str | None) -> RunEvaluation:
-    from robopercept.learning.metrics import classification_report
-
     # ArrayDataset keeps torch's map-style contract without subclassing Dataset
     ev = evaluate(model, cast(Dataset[Any], data), device=device)
     k = len(data.classes)
@@ -364,7 +364,7 @@ def train_run(
     validation and test by ``fractions`` with ``config.seed``; per-channel mean and
     standard deviation of the train split only
     (:func:`~robopercept.nn.data.datasets.normalization_stats`) in a
-    :class:`~robopercept.nn.train.loop.Normalize` before the network; :func:`fit`
+    :class:`~robopercept.nn.data.augment.Normalize` before the network; :func:`fit`
     (checkpoint every epoch, early stopping and best-epoch restore on validation);
     evaluation of the best weights on the test split.
 
@@ -397,8 +397,8 @@ def train_run(
         A progress bar on stderr.
     distributed : bool
         This process is one rank of a DistributedDataParallel run (an initialized
-        ``torch.distributed`` process group; :func:`robopercept.nn.train.distributed.train_ddp`
-        sets it up): :func:`fit` trains with ``distributed=True``; rank 0 alone evaluates
+        ``torch.distributed`` process group; :func:`train_ddp` sets it up): :func:`fit`
+        trains with ``distributed=True``; rank 0 alone evaluates
         the test split and writes the run folder, then sends the result to the other
         ranks, which wait for it (every rank returns the same :class:`TrainResult`).
 
@@ -545,8 +545,6 @@ def _finish_run(
 
 
 def _write_run(out: Path, hist: History, test_ev: RunEvaluation) -> dict[str, Path]:
-    from robopercept.imaging import write_image
-
     files = {
         "checkpoint": out / CHECKPOINT,
         "best": out / BEST_CHECKPOINT,
@@ -559,6 +557,99 @@ def _write_run(out: Path, hist: History, test_ev: RunEvaluation) -> dict[str, Pa
     write_image(files["curves"], hist.picture())
     write_image(files["confusion"], test_ev.picture("confusion matrix (test split)"))
     return files
+
+
+def _train_rank(
+    data: str, model: str, out_dir: str, cfg: TrainConfig, kwargs: dict[str, Any]
+) -> TrainResult:
+    """One rank of :func:`train_ddp`."""
+    cfg, _ = rank_device(cfg)
+    return train_run(data, model, out_dir, config=cfg, distributed=True, **kwargs)
+
+
+def train_ddp(
+    data: str | os.PathLike[str],
+    model: str,
+    out_dir: str | os.PathLike[str],
+    *,
+    nproc: int = 1,
+    config: TrainConfig | None = None,
+    threads: int | None = None,
+    timeout: float = 1800.0,
+    **kwargs: Any,
+) -> TrainResult:
+    """:func:`train_run` on ``nproc`` processes with DistributedDataParallel
+    (:mod:`robopercept.nn.train.distributed`), or as one rank of a ``torchrun`` run.
+
+    The gradient of a step is the mean over the global batch of ``B = batch_size``
+    images, :math:`g = \\frac{1}{N}\\sum_{r=1}^{N} \\frac{1}{B/N}\\sum_{i \\in b_r}
+    \\nabla \\ell_i = \\frac{1}{B}\\sum_{i \\in b} \\nabla \\ell_i`, with rank ``r``'s
+    share :math:`b_r` of :math:`B/N` images (DDP's all-reduce averages over ranks): the
+    step of one process on the same ``B`` images, so the learning rate is unchanged.
+
+    Parameters
+    ----------
+    data, model, out_dir
+        As :func:`train_run`.
+    nproc : int
+        Processes on this machine (1: :func:`train_run` itself, unless under torchrun,
+        whose processes are then the ranks; torchrun needs ``nproc`` 1).
+    config : TrainConfig, optional
+        ``batch_size`` is the global batch (a multiple of the number of processes).
+    threads : int, optional
+        torch threads per process (default: torch's thread count divided by the
+        processes on this machine, at least 1).
+    timeout : float
+        Seconds a collective waits for the other ranks before failing.
+    **kwargs
+        More arguments of :func:`train_run` (``model_kwargs``, ``mode``, ``size``,
+        ``fractions``, ``augment``, ``resume``, ``overwrite``, ``progress``).
+
+    Returns
+    -------
+    TrainResult
+        Rank 0's (under torchrun every rank returns it).
+
+    Raises
+    ------
+    InputError
+        ``nproc`` < 1, larger than the batch or not dividing it, ``nproc`` > 1 under
+        torchrun; the errors of :func:`train_run`, raised again from the first rank that
+        failed.
+
+    Examples
+    --------
+    >>> train_ddp("digits", "vgg_small", "run", nproc=0)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: nproc (--nproc) must be >= 1; got 0
+    """
+    nproc = check_int(nproc, "nproc (--nproc)", 1)
+    if config is not None and not isinstance(config, TrainConfig):
+        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
+    cfg = config or TrainConfig()
+    timeout = check_real(timeout, "timeout (seconds)", 0.0, low_inclusive=False)
+    if threads is not None:
+        threads = check_int(threads, "threads", 1)
+    if "distributed" in kwargs:
+        raise InputError("train_ddp sets train_run's distributed itself; do not pass it")
+    env = torchrun_env()
+    world = env[1] if env is not None else nproc
+    check_world_batch(world, cfg.batch_size)
+    if env is None and nproc == 1:
+        return train_run(data, model, out_dir, config=cfg, **kwargs)
+    _, backend = rank_device(cfg)
+    return cast(
+        TrainResult,
+        run_ranks(
+            _train_rank,
+            nproc,
+            (os.fspath(data), model, os.fspath(out_dir), cfg, kwargs),
+            backend=backend,
+            threads=threads,
+            timeout=timeout,
+        ),
+    )
 
 
 # --------------------------------------------------------------------------- load, eval, predict
@@ -752,8 +843,6 @@ def predict_loaded(
     >>> predict_loaded(model, arch, ["digit.png"], top_k=1)  # doctest: +SKIP
     [Prediction(path=PosixPath('digit.png'), top=(('3', 0.98),))]
     """
-    from robopercept.imaging import read_image
-
     if not isinstance(model, nn.Module):
         raise InputError(f"model must be a torch.nn.Module (load_run); got {plain_repr(model)}")
     if not isinstance(arch, Architecture):

@@ -1,2 +1,3 @@
 """Point-cloud networks: PointNet (:mod:`.pointnet`), DGCNN (:mod:`.dgcnn`), their data
-(:mod:`.data`) and training, evaluation and files (:mod:`.run`)."""
+(:mod:`.data`: data sets, folders, augmentations), procedural shapes with parts
+(:mod:`.synthetic`) and training, evaluation and files (:mod:`.run`)."""

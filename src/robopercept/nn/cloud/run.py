@@ -10,9 +10,9 @@ recipe of the reference code (charlesq34/pointnet, WangYueFt/dgcnn):
   the class (or of every point's part, with the object's category one-hot given to the
   network, as in the reference part segmentation), plus for PointNet the feature
   transform's regularizer :math:`w \lVert I - A A^\top \rVert_F^2` (``w = 0.001``, the
-  paper's). AdamW with a per-step cosine schedule (:class:`~robopercept.nn.train.loop.TrainConfig`),
-  the epoch with the best validation score kept
-  (:func:`~robopercept.nn.train.loop.epoch_loop`).
+  paper's). AdamW with a per-step cosine schedule
+  (:class:`~robopercept.nn.train.config.TrainConfig`), the epoch with the best validation
+  score kept (:func:`~robopercept.nn.train.loop.epoch_loop`).
 - **Scores** (:func:`evaluate_cloud_model`): overall accuracy and the mean of the
   per-class accuracies (ModelNet's "class avg"), the confusion matrix; for parts the
   instance mIoU of ShapeNet-part's protocol: per shape, the IoU of each part of its
@@ -41,8 +41,19 @@ from torch import nn
 from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count
+from robopercept.nn.cloud.data import (
+    CloudDataset,
+    augment_clouds,
+    read_cloud_file,
+    read_cloud_folder,
+)
+from robopercept.nn.cloud.dgcnn import DGCNN
+from robopercept.nn.cloud.pointnet import PointNet, transform_regularizer
+from robopercept.nn.cloud.synthetic import procedural_shapes
 from robopercept.nn.shipped import BUILD_SHIPPED, SHIPPED_CLOUD_MODELS, shipped_model_path
-from robopercept.nn.train.loop import EpochHistory, TrainConfig, epoch_loop
+from robopercept.nn.train.checkpoint import load_built_model, save_built_model
+from robopercept.nn.train.config import TrainConfig, resolve_device
+from robopercept.nn.train.loop import EpochHistory, epoch_loop
 
 __all__ = [
     "CLOUD_MODELS",
@@ -100,11 +111,7 @@ def build_cloud_model(
     if seed is not None:
         torch.manual_seed(check_count(seed, "seed", 0, 2**63 - 1))
     if name == "pointnet":
-        from robopercept.nn.cloud.pointnet import PointNet
-
         return PointNet(num_outputs, **settings)
-    from robopercept.nn.cloud.dgcnn import DGCNN
-
     return DGCNN(num_outputs, **settings)
 
 
@@ -136,8 +143,6 @@ def _spec(model: nn.Module) -> _Spec:
 
 
 def _check_data(data: Any, what: str, task: str) -> Any:
-    from robopercept.nn.cloud.data import CloudDataset
-
     if not isinstance(data, CloudDataset):
         raise InputError(
             f"{what} must be a CloudDataset (procedural_shapes or read_cloud_folder); got "
@@ -209,10 +214,6 @@ def train_cloud_model(
         Not a point-cloud network, data without parts for a segmenter, labels out of the
         network's range, or a loss that became NaN (lower the learning rate).
     """
-    from robopercept.nn.cloud.data import augment_clouds
-    from robopercept.nn.cloud.pointnet import transform_regularizer
-    from robopercept.nn.train.loop import resolve_device
-
     spec = _spec(model)
     task = spec.task
     if config is not None and not isinstance(config, TrainConfig):
@@ -528,7 +529,7 @@ def cloud_sets(
     """The splits a command trains and scores on.
 
     ``data`` is ``"shapes"`` (the procedural shapes,
-    :func:`~robopercept.nn.cloud.data.procedural_shapes`, ``shapes`` per class for
+    :func:`~robopercept.nn.cloud.synthetic.procedural_shapes`, ``shapes`` per class for
     training, a tenth as many for validation and for test, each drawn with its own
     seed), ``"shapes-partial"`` or ``"shapes-noisy"`` (the harder variants), or a folder
     ``root/<class>/*.off|*.ply|*.pcd`` (80/10/10 stratified split, seeded) or in
@@ -539,8 +540,6 @@ def cloud_sets(
     -------
     CloudSets
     """
-    from robopercept.nn.cloud.data import procedural_shapes, read_cloud_folder
-
     shapes = check_count(shapes, "shapes", 1, 1_000_000)
     n_points = check_count(n_points, "n_points", 1, 1 << 20)
     seed = check_count(seed, "seed", 0, 2**31 - 1)
@@ -570,6 +569,13 @@ def cloud_sets(
 
 
 # ----------------------------------------------------------------------------- files
+def _name_list(value: Any, name: str) -> list[str]:
+    """``value`` (a list, tuple or array of names) as a list of str."""
+    if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray):
+        raise InputError(f"{name} must be a list of names; got {plain_repr(value)[:60]}")
+    return [str(v) for v in value]
+
+
 def save_cloud_model(
     path: str | os.PathLike[str],
     model: nn.Module,
@@ -594,11 +600,9 @@ def save_cloud_model(
     >>> info["class_names"], info["n_points"]
     (['cube', 'ball'], 64)
     """
-    from robopercept.nn.train.loop import save_built_model
-
     spec = _spec(model)
-    names = [str(c) for c in class_names]
-    parts = [str(p) for p in part_names]
+    names = _name_list(class_names, "class_names")
+    parts = _name_list(part_names, "part_names")
     outputs = names if spec.task == "classify" else parts
     if len(outputs) != spec.num_outputs:
         raise InputError(
@@ -640,8 +644,6 @@ def load_cloud_model(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str,
     FileFormatError
         Missing or unreadable file, or a checkpoint that is not a point-cloud network's.
     """
-    from robopercept.nn.train.loop import load_built_model
-
     return load_built_model(
         path,
         CLOUD_MODELS,
@@ -727,8 +729,6 @@ def classify_cloud_file(
     -------
     CloudPrediction
     """
-    from robopercept.nn.cloud.data import read_cloud_file
-
     _spec(model)
     if not isinstance(info, dict) or not isinstance(info.get("class_names"), (list, tuple)):
         raise InputError(

@@ -6,8 +6,8 @@
    layers whose parameters are frozen stay in evaluation mode
    (:func:`keep_frozen_batchnorm_in_eval`: their running statistics are part of what was
    learned); optionally discriminative learning rates
-   (:attr:`~robopercept.nn.train.loop.TrainConfig.lr_multipliers`) and gradual unfreezing
-   (:attr:`~robopercept.nn.train.loop.TrainConfig.unfreeze_at`).
+   (:attr:`~robopercept.nn.train.config.TrainConfig.lr_multipliers`) and gradual unfreezing
+   (:attr:`~robopercept.nn.train.config.TrainConfig.unfreeze_at`).
 3. **From scratch**: the same architecture with fresh weights.
 
 Layers are named by their qualified parameter-name prefixes (``"features.0"``,

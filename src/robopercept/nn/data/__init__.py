@@ -1,2 +1,3 @@
-"""Datasets and augmentations (:mod:`.datasets`) and font-rendered digits for sim-to-real
-pretraining (:mod:`.fonts`)."""
+"""Datasets, splits and statistics (:mod:`.datasets`), augmentations and normalization
+(:mod:`.augment`), font-rendered digits for sim-to-real pretraining (:mod:`.fonts`),
+and the photo backgrounds and textures of the procedural sets (:mod:`.textures`)."""

@@ -1,3 +1,7 @@
-"""Pose estimation: heatmap and regression networks (:mod:`.networks`), pictorial
-structures (:mod:`.pictorial`), 3-D by matching and lifting (:mod:`.lifting`), data
-(:mod:`.data`), annotation files (:mod:`.io`) and PCK (:mod:`.metrics`)."""
+"""Pose estimation: heatmap and regression networks, saved and loaded (:mod:`.networks`),
+run on images (:mod:`.inference`), trained (:mod:`.train`) and evaluated
+(:mod:`.evaluate`); pictorial structures (:mod:`.pictorial`, learned by
+:mod:`.pictorial_learn`); 3-D poses seen from cameras (:mod:`.views`), lifted by
+matching (:mod:`.library`) or by a network (:mod:`.lifting`, with MPJPE); data
+(:mod:`.data`), annotation files (:mod:`.io`) and PCK (:mod:`.metrics`). The heatmap
+codec is :mod:`robopercept.nn.ops.heatmaps`."""

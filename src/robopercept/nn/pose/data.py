@@ -61,14 +61,19 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-from robopercept._checks import as_rng, check_int, check_real, check_size, plain_repr
-from robopercept.errors import InputError
-from robopercept.nn.detection.data import (
-    DetectionDataset,
-    mask_to_box,
-    photo_background,
-    random_texture,
+from robopercept._checks import (
+    as_rng,
+    check_choice,
+    check_int,
+    check_numeric,
+    check_real,
+    check_size,
+    plain_repr,
 )
+from robopercept.errors import InputError
+from robopercept.nn.coco.dataset import coco_from_dict
+from robopercept.nn.data.textures import photo_background, random_texture
+from robopercept.nn.detection.data import DetectionDataset, mask_to_box
 from robopercept.nn.skeleton import MPII_16, Skeleton
 
 __all__ = [
@@ -226,8 +231,6 @@ def project_points(points: npt.ArrayLike, camera_matrix: npt.ArrayLike) -> np.nd
     >>> project_points([[0.1, -0.2, 2.0]], [[100, 0, 32], [0, 100, 24], [0, 0, 1]]).tolist()
     [[37.0, 14.0]]
     """
-    from robopercept._checks import check_numeric
-
     p = check_numeric(points, "points")
     k = check_numeric(camera_matrix, "camera_matrix")
     if p.ndim < 1 or p.shape[-1] != 3:
@@ -449,8 +452,6 @@ class PoseDataset:
     masks: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        from robopercept._checks import check_numeric
-
         if not isinstance(self.skeleton, Skeleton):
             raise InputError(f"skeleton must be a Skeleton; got {plain_repr(self.skeleton)}")
         images = check_numeric(self.images, "images").astype(np.float32)
@@ -495,8 +496,6 @@ class PoseDataset:
 
     def subset(self, indices: npt.ArrayLike) -> PoseDataset:
         """The items at ``indices`` (a new data set sharing nothing mutable)."""
-        from robopercept._checks import check_numeric
-
         raw = check_numeric(indices, "indices").ravel()
         if not np.all(np.isfinite(raw)) or np.any(raw != np.round(raw)):
             raise InputError(f"indices must be whole numbers; got {plain_repr(indices)}")
@@ -522,11 +521,11 @@ class PoseDataset:
         return (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
 
     def to_coco(self) -> Any:
-        """The ground truth as a COCO keypoint :class:`~robopercept.nn.coco.formats.CocoDataset`:
+        """The ground truth as a COCO keypoint :class:`~robopercept.nn.coco.dataset.CocoDataset`:
         image ``i`` has id ``i + 1`` and one ``person`` annotation (id ``i + 1``) with
         its box (``xywh``), :meth:`areas`, ``keypoints`` (unlabelled ones ``0, 0, 0``)
         and ``num_keypoints``; the category carries the skeleton's names and 1-based
-        links. Scored by :func:`~robopercept.nn.coco.formats.evaluate_detections` with
+        links. Scored by :func:`~robopercept.nn.coco.evaluate.evaluate_detections` with
         ``iou_type="keypoints"`` and the skeleton's sigmas.
 
         Examples
@@ -536,8 +535,6 @@ class PoseDataset:
         >>> len(c), c.keypoints.shape
         (2, (2, 16, 3))
         """
-        from robopercept.nn.coco.formats import coco_from_dict
-
         w, h = self.image_size
         areas = self.areas()
         anns = []
@@ -820,8 +817,6 @@ def pose_sets(
     >>> len(s.train), len(s.val), len(s.test)
     (10, 1, 1)
     """
-    from robopercept._checks import check_choice
-
     check_choice(data, "data", POSE_DATA)
     n = check_int(images, "images", 1)
     nv = max(1, n // 10) if val_images is None else check_int(val_images, "val_images", 1)

@@ -1,6 +1,6 @@
 r"""Keypoint annotation files: mmpose's MPII JSON (and its MPII-TRB variant) and imgaug's
 keypoint JSON (the quokka file). COCO keypoint files are read by
-:func:`robopercept.nn.coco.formats.read_coco_json`.
+:func:`robopercept.nn.coco.dataset.read_coco_json`.
 
 NumPy only (no torch). Every reader returns frozen records with read-only arrays, the
 keypoints as ``(J, 3)`` rows ``x, y, v`` in robopercept's pixel convention (``(x, y)`` =
@@ -486,7 +486,7 @@ def read_mpii_json(path: str | os.PathLike[str]) -> MpiiAnnotations:
     ------
     FileFormatError
         Not a file, not JSON, a COCO keypoint file without ``center``/``scale`` (read
-        it with :func:`~robopercept.nn.coco.formats.read_coco_json`), another layout, or an
+        it with :func:`~robopercept.nn.coco.dataset.read_coco_json`), another layout, or an
         entry with a missing or malformed field (named with its entry).
 
     Examples
@@ -511,7 +511,7 @@ def read_mpii_json(path: str | os.PathLike[str]) -> MpiiAnnotations:
             if isinstance(first, Mapping) and ("center" not in first or "scale" not in first):
                 raise FileFormatError(
                     "the annotations have no 'center' and 'scale': a COCO keypoint file? "
-                    "read it with robopercept.nn.coco.formats.read_coco_json"
+                    "read it with robopercept.nn.coco.dataset.read_coco_json"
                 )
             return _trb(data)
     except FileFormatError as exc:

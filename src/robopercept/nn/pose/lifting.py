@@ -1,59 +1,9 @@
-r"""3-D human pose from 2-D joints: the metrics (MPJPE, Procrustes-aligned MPJPE), lifting
-by matching against a library of projected 3-D poses, and the lifting network of Martinez
-et al. (2017).
+r"""3-D human pose from 2-D joints by a network, and how 3-D poses are scored: the
+lifting network of Martinez et al. (2017) and its trainer, MPJPE and the
+Procrustes-aligned PA-MPJPE.
 
-Frames and units
-----------------
-3-D library poses are ``(N, J, 3)`` arrays in the figure's own frame (x to the figure's
-left, y up, z the way it faces, metres; :func:`robopercept.nn.pose.data.random_poses_3d`).
-Lifted poses are in the camera frame of OpenCV (x right, y down, z forward), **rooted**
-at the root joint (the pelvis, joint 6 of :data:`~robopercept.nn.skeleton.MPII_16`):
-:math:`P_j - P_{root}`. Neither lifter recovers the distance to the camera (a 2-D pose
-is the same up to translation and scale, so the 2-D normalization discards both): the
-depth is relative to the root, and the scale is the library's (or the training data's):
-a child seen by a lifter built from adult figures comes out adult-sized.
-
-Random views
-------------
-:func:`random_views` turns each figure by a yaw :math:`\psi \sim U(-\pi, \pi)` about its
-vertical (the whole way round: front, sides and back), raises the camera by an
-elevation :math:`\varepsilon \sim U(\text{elevation})` and places it at a distance
-:math:`d \sim U(\text{distance})` from the root, looking at the root:
-
-.. math::
-
-    P^{cam}_j = R_x(\varepsilon)\, \mathrm{diag}(1, -1, -1)\, R_y(\psi)\,
-    (P_j - P_{root}) + (0, 0, d)^T
-
-with the right-handed rotations :math:`R_x(\varepsilon) = \begin{pmatrix} 1 & 0 & 0
-\\ 0 & \cos\varepsilon & -\sin\varepsilon \\ 0 & \sin\varepsilon & \cos\varepsilon
-\end{pmatrix}` and :math:`R_y(\psi) = \begin{pmatrix} \cos\psi & 0 & \sin\psi \\ 0 & 1
-& 0 \\ -\sin\psi & 0 & \cos\psi \end{pmatrix}`. At :math:`\psi = \varepsilon = 0`
-the figure faces the camera, upright (its left is the image's right); a joint a height
-:math:`h` above the root lands at :math:`(0, -h\cos\varepsilon, d - h\sin\varepsilon)`
-(nearer to a raised camera); a joint a distance :math:`a` in front of the root at
-:math:`(a\sin\psi, 0, d - a\cos\psi)` for :math:`\varepsilon = 0`. The camera then
-projects through the pinhole ``K``
-(:func:`~robopercept.nn.pose.data.project_points`; default the identity, normalized
-image coordinates :math:`(X/Z, Y/Z)`).
-
-2-D normalization
------------------
-:func:`normalize_pose2d` removes translation and scale: with centre :math:`c` (the
-root joint, or the mean of the joints) and :math:`s = \sqrt{\frac{1}{J}\sum_j
-\lVert p_j - c\rVert^2}` (the RMS distance to the centre), :math:`\hat p_j = (p_j - c)
-/ s`. With joints missing (``visible``), the sums run over the visible joints only, and
-the centre is their mean when the root is missing.
-
-Lifting by matching (the course's recipe)
------------------------------------------
-:class:`PoseLibrary` projects every library pose from ``views_per_pose`` random views,
-normalizes each projection and keeps the pairs (normalized 2-D pose, rooted camera-frame
-3-D pose). :meth:`PoseLibrary.lift` normalizes a query the same way, finds the nearest
-library 2-D pose (Euclidean distance between the flattened ``(2J,)`` vectors,
-:class:`scipy.spatial.cKDTree`) and returns its 3-D pose, or the mean of the ``k``
-nearest. A query with missing joints is matched on its visible joints only: the library
-poses are normalized again over the same joints and searched by brute force.
+Poses, views and the 2-D normalization are those of :mod:`robopercept.nn.pose.views`;
+lifting by matching is :mod:`robopercept.nn.pose.library`.
 
 The lifting network
 -------------------
@@ -79,54 +29,50 @@ the rotation is proper (:math:`\det R = +1`), so a mirrored prediction is not fo
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import torch
-from scipy.spatial import cKDTree
 from torch import nn
 
 from robopercept._checks import (
-    as_rng,
     check_bool,
     check_choice,
     check_int,
     check_magnitude,
     check_numeric,
     check_real,
-    plain_repr,
 )
-from robopercept.errors import DegenerateError, InputError
+from robopercept.errors import InputError
 from robopercept.nn._guards import MAX_LAYERS, check_allocation, check_count
-from robopercept.nn.pose.data import project_points, random_poses_3d
-from robopercept.nn.skeleton import MPII_16, Skeleton
-from robopercept.nn.train.loop import deterministic_algorithms
+from robopercept.nn.pose.views import (
+    CENTERS,
+    PELVIS,
+    check_keypoints2d,
+    check_poses3d,
+    check_root,
+    check_scales,
+    check_seed,
+    normalize_joints,
+)
+from robopercept.nn.train.config import deterministic_algorithms
 
 __all__ = [
-    "PELVIS",
+    "MAX_EPOCHS",
     "LiftingMLP",
-    "PoseLibrary",
-    "PoseViews",
     "SimilarityTransform",
-    "default_pose_library",
     "mpjpe",
-    "normalize_pose2d",
     "pa_mpjpe",
     "procrustes_align",
-    "random_views",
     "train_lifter",
 ]
 
-#: the root joint of :data:`~robopercept.nn.skeleton.MPII_16` (the pelvis)
-PELVIS = MPII_16.index("pelvis")
 #: the most epochs :func:`train_lifter` runs
 MAX_EPOCHS = 100_000
 #: the largest coordinate magnitude accepted (squares stay finite in float64)
 _LIMIT = 1e150
-_CENTERS = ("root", "mean")
 
 
 # =============================================================================== metrics
@@ -290,16 +236,6 @@ def procrustes_align(
     return aligned, SimilarityTransform(scale, rot, trans)
 
 
-def _check_root(root: Any, num_joints: int, name: str = "root") -> int:
-    r = check_int(root, name, 0)
-    if r >= num_joints:
-        raise InputError(
-            f"{name} must index a joint, 0..{num_joints - 1}; got {r} (the pelvis of "
-            f"MPII_16 is {PELVIS})"
-        )
-    return r
-
-
 def mpjpe(
     pred: npt.ArrayLike,
     truth: npt.ArrayLike,
@@ -341,7 +277,7 @@ def mpjpe(
     single = np.ndim(pred) == 2
     x, y = _pair(pred, truth)
     if root is not None:
-        r = _check_root(root, x.shape[1])
+        r = check_root(root, x.shape[1])
         x = x - x[:, r : r + 1]
         y = y - y[:, r : r + 1]
     err = np.linalg.norm(x - y, axis=-1).mean(-1)
@@ -382,515 +318,6 @@ def pa_mpjpe(
     aligned = procrustes_align(pred, truth)
     assert isinstance(aligned, np.ndarray)  # without return_transform
     return mpjpe(aligned, truth, per_sample=per_sample)
-
-
-# ============================================================================ 2-D poses
-
-
-def _keypoints(value: Any, name: str = "keypoints2d") -> tuple[np.ndarray, bool]:
-    """``value`` as float64 ``(M, J, 2)`` (NaN allowed: the caller decides) and whether
-    it was a single ``(J, 2)`` pose."""
-    a = check_numeric(value, name)
-    if a.ndim not in (2, 3) or a.shape[-1] != 2 or a.shape[-2] < 1:
-        hint = ""
-        if a.ndim in (2, 3) and a.shape[-1] == 3:
-            hint = f": (x, y, v) keypoints? pass {name}[..., :2] and visible={name}[..., 2] > 0"
-        raise InputError(f"{name} must be (J, 2) or (M, J, 2) image joints; got {a.shape}{hint}")
-    check_magnitude(a, name, _LIMIT)
-    if a.ndim == 2:
-        return a[None], True
-    return a, False
-
-
-def _visible(visible: Any, kp: np.ndarray, single: bool, name: str = "keypoints2d") -> np.ndarray:
-    """The (M, J) visibility mask (nonzero = visible); NaN/inf refused where visible."""
-    if visible is None:
-        mask = np.ones(kp.shape[:2], bool)
-    else:
-        v = check_numeric(visible, "visible")
-        want = kp.shape[1:2] if single else kp.shape[:2]
-        if v.shape != want:
-            raise InputError(f"visible must be one flag per joint, shape {want}; got {v.shape}")
-        if not np.isfinite(v).all():
-            raise InputError("visible must be finite flags (nonzero = visible); got NaN/inf")
-        mask = (v != 0).reshape(kp.shape[:2])
-    bad = mask & ~np.isfinite(kp).all(-1)
-    if bad.any():
-        raise InputError(
-            f"{name} has NaN/inf at {int(bad.sum())} visible joint(s): mark missing joints "
-            f"with visible=np.isfinite({name}).all(-1)"
-        )
-    return mask
-
-
-def _normalize(
-    kp: np.ndarray, mask: np.ndarray | None, center: str, root: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Normalized joints (M, J, 2) (0 where masked) and the scales (M,) (0: degenerate)."""
-    if mask is None:
-        c = kp[:, root] if center == "root" else kp.mean(1)
-        d = kp - c[:, None]
-        s = np.sqrt((d**2).sum(-1).mean(-1))
-        big = np.abs(kp).max((1, 2))
-    else:
-        m = mask[..., None]
-        n = np.maximum(mask.sum(1), 1)
-        z = np.where(m, kp, 0.0)
-        mean = z.sum(1) / n[:, None]
-        use_root = mask[:, root] if center == "root" else np.zeros(len(kp), bool)
-        c = np.where(use_root[:, None], z[:, root], mean)
-        d = np.where(m, kp - c[:, None], 0.0)
-        s = np.sqrt((d**2).sum((1, 2)) / n)
-        s = np.where(mask.sum(1) >= 2, s, 0.0)
-        big = np.abs(z).max((1, 2))
-    s = np.where(s > 1e-12 * np.maximum(big, 1e-300), s, 0.0)
-    return d / np.where(s > 0, s, 1.0)[:, None, None], s
-
-
-def _degenerate(scales: np.ndarray, name: str) -> None:
-    bad = np.flatnonzero(scales == 0)
-    if bad.size:
-        raise DegenerateError(
-            f"{name} {bad[:8].tolist()} cannot be normalized: fewer than 2 visible joints, "
-            "or all visible joints at one point; drop those poses"
-        )
-
-
-def normalize_pose2d(
-    keypoints2d: npt.ArrayLike,
-    visible: npt.ArrayLike | None = None,
-    *,
-    center: str = "root",
-    root: int = PELVIS,
-) -> np.ndarray:
-    r"""Translation- and scale-free 2-D poses: :math:`\hat p_j = (p_j - c) / s`.
-
-    :math:`c` is the root joint (``center="root"``) or the mean of the joints
-    (``"mean"``), and :math:`s = \sqrt{\frac{1}{J}\sum_j \lVert p_j - c\rVert^2}` the
-    RMS distance to it. With ``visible``, both run over the visible joints only (the
-    centre is their mean where the root is not visible); the missing joints come out
-    as NaN.
-
-    Parameters
-    ----------
-    keypoints2d : (J, 2) or (M, J, 2) array_like
-        Image joints (pixels or any unit).
-    visible : (J,) or (M, J) array_like, optional
-        Nonzero where the joint is known; default all. Missing joints may hold NaN.
-    center : {"root", "mean"}
-    root : int
-        The root joint (6, the pelvis, for :data:`~robopercept.nn.skeleton.MPII_16`).
-
-    Returns
-    -------
-    ndarray, the shape of ``keypoints2d``
-
-    Raises
-    ------
-    InputError
-        Wrong shapes, NaN/inf at a visible joint, a bad ``center`` or ``root``.
-    DegenerateError
-        A pose with fewer than 2 visible joints, or with all of them at one point.
-
-    Examples
-    --------
-    >>> p = normalize_pose2d([[10.0, 10.0], [12.0, 10.0], [10.0, 14.0]], center="root", root=0)
-    >>> np.round(p * np.sqrt(20 / 3), 6).tolist()
-    [[0.0, 0.0], [2.0, 0.0], [0.0, 4.0]]
-    """
-    kp, single = _keypoints(keypoints2d)
-    center = check_choice(center, "center", _CENTERS)
-    root = _check_root(root, kp.shape[1])
-    mask = _visible(visible, kp, single)
-    full = bool(mask.all())
-    out, s = _normalize(np.where(mask[..., None], kp, 0.0), None if full else mask, center, root)
-    _degenerate(s, "pose(s)")
-    out = np.where(mask[..., None], out, np.nan)
-    return out[0] if single else out
-
-
-# ============================================================================== views
-
-
-@dataclass(frozen=True)
-class PoseViews:
-    """Poses seen from random cameras (:func:`random_views`).
-
-    Attributes
-    ----------
-    keypoints2d : (M, J, 2) ndarray
-        The projections through the camera matrix.
-    joints3d : (M, J, 3) ndarray
-        The joints in the camera frame (metres; the root at ``(0, 0, distance)``).
-    pose_index : (M,) int64 ndarray
-        The library pose each view shows (views of a pose are consecutive).
-    yaw, elevation, distance : (M,) ndarray
-        The view: the figure's turn about its vertical and the camera's elevation
-        (radians), the camera's distance to the root.
-    """
-
-    keypoints2d: np.ndarray
-    joints3d: np.ndarray
-    pose_index: np.ndarray
-    yaw: np.ndarray
-    elevation: np.ndarray
-    distance: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.keypoints2d)
-
-    def rooted(self, root: int = PELVIS) -> np.ndarray:
-        """The camera-frame joints relative to the root, ``(M, J, 3)``.
-
-        Examples
-        --------
-        >>> v = random_views([[[0.0, 0.0, 0.0], [0.0, 1.0, 0.0]]], rng=0, root=0)
-        >>> v.rooted(0)[0, 0].tolist()
-        [0.0, 0.0, 0.0]
-        """
-        r = _check_root(root, self.joints3d.shape[1])
-        return self.joints3d - self.joints3d[:, r : r + 1]
-
-
-def _poses3d(value: Any, name: str = "poses3d") -> np.ndarray:
-    a = check_numeric(value, name)
-    if a.ndim == 2 and a.shape[-1] == 3:
-        raise InputError(f"{name} must be (N, J, 3); got {a.shape}: one pose? use {name}[None]")
-    if a.ndim != 3 or a.shape[-1] != 3:
-        raise InputError(f"{name} must be (N, J, 3) 3-D poses; got shape {a.shape}")
-    if a.shape[0] == 0 or a.shape[1] == 0:
-        raise InputError(f"{name} is empty (shape {a.shape}): give at least one pose of 1+ joints")
-    if not np.isfinite(a).all():
-        raise InputError(
-            f"{name} must be finite; got NaN/inf: keep the complete poses, "
-            f"{name}[np.isfinite({name}).all((1, 2))]"
-        )
-    return check_magnitude(a, name, 1e6)
-
-
-def _range(value: Any, name: str, low: float, high: float) -> tuple[float, float]:
-    try:
-        a, b = (float(v) for v in value)
-        ok = not any(isinstance(v, (bool, np.bool_, str)) for v in value)
-    except (TypeError, ValueError):
-        ok = False
-    if not ok or not (math.isfinite(a) and math.isfinite(b) and low <= a <= b <= high):
-        raise InputError(
-            f"{name} must be (low, high) with {low:g} <= low <= high <= {high:g}; "
-            f"got {plain_repr(value)}"
-        )
-    return a, b
-
-
-def _rotations(yaw: np.ndarray, elev: np.ndarray) -> np.ndarray:
-    """R_cam_fig (M, 3, 3) = R_x(elev) diag(1, -1, -1) R_y(yaw)."""
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    ce, se = np.cos(elev), np.sin(elev)
-    o, z = np.ones_like(yaw), np.zeros_like(yaw)
-    ry = np.stack(
-        [np.stack([cy, z, sy], -1), np.stack([z, o, z], -1), np.stack([-sy, z, cy], -1)], -2
-    )
-    rx = np.stack(
-        [np.stack([o, z, z], -1), np.stack([z, ce, -se], -1), np.stack([z, se, ce], -1)], -2
-    )
-    return rx @ (np.array([1.0, -1.0, -1.0])[:, None] * ry)
-
-
-_DEFAULT_ELEVATION = (math.radians(-10.0), math.radians(30.0))
-
-
-def random_views(
-    poses3d: npt.ArrayLike,
-    views_per_pose: int = 1,
-    rng: int | np.random.Generator | None = None,
-    *,
-    elevation: tuple[float, float] = _DEFAULT_ELEVATION,
-    distance: tuple[float, float] = (3.0, 6.0),
-    camera_matrix: npt.ArrayLike | None = None,
-    root: int = PELVIS,
-) -> PoseViews:
-    r"""Project each 3-D pose from ``views_per_pose`` random cameras.
-
-    See the module docstring for the camera: yaw :math:`U(-\pi, \pi)`, elevation
-    :math:`U(\text{elevation})`, distance :math:`U(\text{distance})`, the camera looking
-    at the root joint; points through
-    :func:`~robopercept.nn.pose.data.project_points`.
-
-    Parameters
-    ----------
-    poses3d : (N, J, 3) array_like
-        Poses in their own frame (x left, y up, z facing; metres), e.g.
-        :func:`~robopercept.nn.pose.data.random_poses_3d`.
-    views_per_pose : int
-        Views of each pose (>= 1).
-    rng : int, numpy.random.Generator or None
-        Seed: the same seed gives the same views.
-    elevation : (float, float)
-        Range of the camera's elevation, radians, within [-pi/2, pi/2]; default -10 to
-        30 degrees (as :func:`~robopercept.nn.pose.data.procedural_pose_set`).
-    distance : (float, float)
-        Range of the camera's distance to the root (metres, > 0); every joint must end
-        up in front of the camera.
-    camera_matrix : (3, 3) array_like, optional
-        ``K``; default the identity (normalized image coordinates).
-    root : int
-        The joint the camera looks at.
-
-    Returns
-    -------
-    PoseViews
-        ``N * views_per_pose`` views, the views of each pose consecutive.
-
-    Raises
-    ------
-    InputError
-        Bad shapes or ranges, NaN poses, a camera so close that a joint lies behind it
-        (poses in millimetres? convert to metres), too many views.
-
-    Examples
-    --------
-    >>> from robopercept.nn.pose.data import random_poses_3d
-    >>> v = random_views(random_poses_3d(2, rng=0), 3, rng=0)
-    >>> v.keypoints2d.shape, v.joints3d.shape, v.pose_index.tolist()
-    ((6, 16, 2), (6, 16, 3), [0, 0, 0, 1, 1, 1])
-    """
-    poses = _poses3d(poses3d)
-    n, j = poses.shape[:2]
-    views = check_int(views_per_pose, "views_per_pose", 1)
-    m = n * views
-    check_allocation(m * j * 18, 8, f"{m} views of {j} joints", "lower views_per_pose")
-    lo_e, hi_e = _range(elevation, "elevation (radians)", -math.pi / 2, math.pi / 2)
-    lo_d, hi_d = _range(distance, "distance", 1e-6, 1e6)
-    root = _check_root(root, j)
-    if camera_matrix is None:
-        k = np.eye(3)
-    else:
-        k = check_numeric(camera_matrix, "camera_matrix")
-        if k.shape != (3, 3) or not np.isfinite(k).all() or not np.array_equal(k[2], [0, 0, 1]):
-            raise InputError(
-                "camera_matrix must be a finite (3, 3) K = [[fx, s, cx], [0, fy, cy], "
-                f"[0, 0, 1]]; got {plain_repr(k) if k.size <= 16 else k.shape}"
-            )
-    gen = as_rng(rng)
-    yaw = gen.uniform(-math.pi, math.pi, m)
-    elev = gen.uniform(lo_e, hi_e, m)
-    dist = gen.uniform(lo_d, hi_d, m)
-    index = np.repeat(np.arange(n, dtype=np.int64), views)
-    rooted = poses - poses[:, root : root + 1]
-    rot = _rotations(yaw, elev)
-    cam = np.einsum("mij,mkj->mki", rot, rooted[index])
-    cam[..., 2] += dist[:, None]
-    if np.any(cam[..., 2] <= 1e-3 * dist[:, None]):
-        reach = float(np.linalg.norm(rooted, axis=-1).max())
-        raise InputError(
-            f"a camera at distance {lo_d:g} puts joints behind it (the poses reach {reach:g} "
-            "from the root): raise distance, or give the poses in metres"
-        )
-    kp = project_points(cam, k)
-    return PoseViews(kp, cam, index, yaw, elev, dist)
-
-
-# ============================================================================ matching
-
-
-class PoseLibrary:
-    r"""Lift 2-D poses to 3-D by matching against a library of projected 3-D poses.
-
-    The library holds, for every pose of ``poses3d`` seen from ``views_per_pose``
-    random views (:func:`random_views`), the pair (normalized 2-D projection,
-    :func:`normalize_pose2d`; the 3-D pose in that camera's frame, relative to the
-    root). :meth:`lift` returns the 3-D pose of the nearest 2-D pose (or the mean of the
-    ``k`` nearest).
-
-    The 3-D output is root-relative (its depth is relative to the root joint, the
-    distance to the camera is not recovered) and at the library's scale (metres of the
-    library poses, whatever the size of the person in the image).
-
-    Parameters
-    ----------
-    poses3d : (N, J, 3) array_like
-        Library poses in their own frame (x left, y up, z facing; metres).
-    views_per_pose : int
-        Random views of each pose (>= 1); the library has ``N * views_per_pose``
-        entries.
-    rng : int, numpy.random.Generator or None
-        Seed of the views.
-    elevation, distance : (float, float)
-        Ranges of the views, as :func:`random_views` (radians, metres).
-    center : {"root", "mean"}
-        The 2-D normalization's centre.
-    root : int
-        The root joint (the pelvis, 6, for :data:`~robopercept.nn.skeleton.MPII_16`).
-    k : int
-        Default number of nearest entries averaged by :meth:`lift`.
-
-    Attributes
-    ----------
-    keypoints2d : (M, J, 2) ndarray
-        Normalized 2-D poses.
-    joints3d : (M, J, 3) ndarray
-        Their rooted camera-frame 3-D poses.
-    pose_index : (M,) ndarray
-        The library pose of each entry.
-
-    Raises
-    ------
-    InputError
-        Empty or NaN poses, bad parameters.
-    DegenerateError
-        A pose whose projection collapses to a point.
-
-    Examples
-    --------
-    >>> from robopercept.nn.pose.data import random_poses_3d
-    >>> lib = PoseLibrary(random_poses_3d(50, rng=0), views_per_pose=4, rng=0)
-    >>> len(lib), lib.lift(lib.keypoints2d[:2] * 100 + 7).shape
-    (200, (2, 16, 3))
-    """
-
-    def __init__(
-        self,
-        poses3d: npt.ArrayLike,
-        *,
-        views_per_pose: int = 16,
-        rng: int | np.random.Generator | None = 0,
-        elevation: tuple[float, float] = _DEFAULT_ELEVATION,
-        distance: tuple[float, float] = (3.0, 6.0),
-        center: str = "root",
-        root: int = PELVIS,
-        k: int = 1,
-    ) -> None:
-        self.center = check_choice(center, "center", _CENTERS)
-        self.k = check_int(k, "k", 1)
-        views = random_views(
-            poses3d, views_per_pose, rng, elevation=elevation, distance=distance, root=root
-        )
-        self.root = int(root)
-        norm, s = _normalize(views.keypoints2d, None, self.center, self.root)
-        _degenerate(s, "library views")
-        self.keypoints2d = norm
-        self.joints3d = views.rooted(self.root)
-        self.pose_index = views.pose_index
-        if self.k > len(norm):
-            raise InputError(f"k must be at most the library size, {len(norm)}; got {self.k}")
-        self._tree = cKDTree(norm.reshape(len(norm), -1))
-
-    def __len__(self) -> int:
-        return len(self.keypoints2d)
-
-    @property
-    def num_joints(self) -> int:
-        """J, the joints of each pose."""
-        return int(self.keypoints2d.shape[1])
-
-    def lift(
-        self,
-        keypoints2d: npt.ArrayLike,
-        visible: npt.ArrayLike | None = None,
-        *,
-        k: int | None = None,
-    ) -> np.ndarray:
-        r"""The 3-D poses of the nearest library 2-D poses.
-
-        Each query is normalized (:func:`normalize_pose2d`, the library's ``center``
-        and ``root``) and compared with every library entry by the Euclidean distance
-        of the flattened normalized joints; with joints missing, over the visible
-        joints only, both sides normalized over them. The ``k`` nearest entries' 3-D
-        poses are averaged.
-
-        Parameters
-        ----------
-        keypoints2d : (J, 2) or (M, J, 2) array_like
-            Detected image joints (pixels: translation and scale do not matter).
-        visible : (J,) or (M, J) array_like, optional
-            Nonzero where the joint was detected; default all. Missing joints may hold
-            NaN.
-        k : int, optional
-            Entries averaged (default the library's ``k``).
-
-        Returns
-        -------
-        (J, 3) or (M, J, 3) ndarray
-            Root-relative joints in the camera frame, at the library's scale (metres).
-
-        Raises
-        ------
-        InputError
-            Wrong joint count or shape, NaN/inf at a visible joint (mark it missing in
-            ``visible``), ``k`` beyond the library size.
-        DegenerateError
-            A query with fewer than 2 visible joints, or all at one point.
-
-        Examples
-        --------
-        >>> from robopercept.nn.pose.data import random_poses_3d
-        >>> lib = PoseLibrary(random_poses_3d(20, rng=1), views_per_pose=2, rng=0)
-        >>> q = lib.keypoints2d[5] * 40 + [320, 240]  # an entry, moved and scaled
-        >>> bool(np.allclose(lib.lift(q), lib.joints3d[5]))
-        True
-        """
-        kp, single = _keypoints(keypoints2d)
-        if kp.shape[1] != self.num_joints:
-            raise InputError(
-                f"keypoints2d must have the library's {self.num_joints} joints; got "
-                f"{kp.shape[1]} (shape {kp.shape})"
-            )
-        kk = self.k if k is None else check_int(k, "k", 1)
-        if kk > len(self):
-            raise InputError(f"k must be at most the library size, {len(self)}; got {kk}")
-        mask = _visible(visible, kp, single)
-        kp = np.where(mask[..., None], kp, 0.0)
-        index = np.empty((len(kp), kk), np.int64)
-        full = mask.all(1)
-        if full.any():
-            q, s = _normalize(kp[full], None, self.center, self.root)
-            _degenerate(s, "query pose(s)")
-            _, idx = self._tree.query(q.reshape(len(q), -1), k=kk)
-            index[full] = np.asarray(idx).reshape(len(q), kk)
-        rows = np.flatnonzero(~full)
-        if rows.size:
-            patterns, inverse = np.unique(mask[rows], axis=0, return_inverse=True)
-            for p, pattern in enumerate(patterns):
-                group = rows[inverse.ravel() == p]
-                index[group] = self._masked(kp[group], pattern, kk)
-        out = self.joints3d[index].mean(1)
-        return out[0] if single else out
-
-    def _masked(self, kp: np.ndarray, pattern: np.ndarray, k: int) -> np.ndarray:
-        """Nearest entries (Q, k) over the joints of ``pattern`` (brute force)."""
-        qmask = np.broadcast_to(pattern, kp.shape[:2])
-        q, s = _normalize(kp, qmask, self.center, self.root)
-        _degenerate(s, "query pose(s)")
-        lmask = np.broadcast_to(pattern, self.keypoints2d.shape[:2])
-        lib, _ = _normalize(self.keypoints2d, lmask, self.center, self.root)
-        qv = q[:, pattern].reshape(len(q), -1)
-        lv = lib[:, pattern].reshape(len(lib), -1)
-        l2 = (lv**2).sum(1)
-        out = np.empty((len(qv), k), np.int64)
-        step = max(1, 2**22 // len(lv))
-        for a in range(0, len(qv), step):
-            qa = qv[a : a + step]
-            d2 = (qa**2).sum(1)[:, None] + l2[None] - 2.0 * qa @ lv.T
-            if k < len(lv):
-                cand = np.argpartition(d2, k - 1, axis=1)[:, :k]
-            else:
-                cand = np.broadcast_to(np.arange(len(lv)), d2.shape)
-            dc = np.take_along_axis(d2, cand, 1)
-            order = np.lexsort((cand, dc), axis=-1)
-            out[a : a + step] = np.take_along_axis(cand, order, 1)[:, :k]
-        return out
-
-
-# ============================================================================ the network
-
-
-def _as_int_seed(value: Any, name: str) -> int | None:
-    if value is None:
-        return None
-    seed = check_int(value, name, 0)
-    if seed >= 2**63:
-        raise InputError(f"{name} must be below 2**63; got {seed}")
-    return seed
 
 
 class _Block(nn.Module):
@@ -940,7 +367,7 @@ class LiftingMLP(nn.Module):
         Dropout probability in [0, 1) (0.5 in the paper; 0.2 does better in the short
         trainings here: 92 against 109 mm PA-MPJPE after 5 epochs on 20 000 pairs).
     center : {"root", "mean"}
-        The 2-D normalization's centre (:func:`normalize_pose2d`).
+        The 2-D normalization's centre (:func:`~.views.normalize_pose2d`).
     root : int
         The root joint.
     random_state : int or None
@@ -978,9 +405,9 @@ class LiftingMLP(nn.Module):
         params = 5 * j * width + 2 * blocks * width * width
         check_allocation(params, 4, f"a width-{width} network", "lower width or blocks")
         dropout = check_real(dropout, "dropout", 0.0, 1.0, high_inclusive=False)
-        self.center = check_choice(center, "center", _CENTERS)
-        self.root = _check_root(root, self.num_joints)
-        seed = _as_int_seed(random_state, "random_state")
+        self.center = check_choice(center, "center", CENTERS)
+        self.root = check_root(root, self.num_joints)
+        seed = check_seed(random_state, "random_state")
         with torch.random.fork_rng(devices=[], enabled=seed is not None):
             if seed is not None:
                 torch.manual_seed(seed)
@@ -1005,8 +432,8 @@ class LiftingMLP(nn.Module):
         return self.head(self.blocks(self.stem(x)))
 
     def _inputs(self, kp: np.ndarray) -> torch.Tensor:
-        norm, s = _normalize(kp, None, self.center, self.root)
-        _degenerate(s, "pose(s)")
+        norm, s = normalize_joints(kp, None, self.center, self.root)
+        check_scales(s, "pose(s)")
         x = torch.from_numpy(norm.reshape(len(norm), 2 * self.num_joints)).float()
         return (x - self.input_mean.cpu()) / self.input_std.cpu()
 
@@ -1029,7 +456,8 @@ class LiftingMLP(nn.Module):
         ------
         InputError
             Wrong joint count or shape, NaN or infinite joints (the network needs all
-            of them: use :class:`PoseLibrary` for incomplete poses).
+            of them: use :class:`~robopercept.nn.pose.library.PoseLibrary` for incomplete
+            poses).
         DegenerateError
             A pose with all joints at one point.
 
@@ -1039,7 +467,7 @@ class LiftingMLP(nn.Module):
         >>> net.lift(np.random.default_rng(0).normal(size=(3, 16, 2))).shape
         (3, 16, 3)
         """
-        kp, single = _keypoints(keypoints2d)
+        kp, single = check_keypoints2d(keypoints2d)
         if kp.shape[1] != self.num_joints:
             raise InputError(
                 f"keypoints2d must have the network's {self.num_joints} joints; got "
@@ -1085,7 +513,7 @@ def train_lifter(
     r"""Fit a :class:`LiftingMLP` to (2-D, 3-D) pairs: Adam on the mean squared error of
     the standardized rooted 3-D joints.
 
-    The 2-D poses are normalized (:func:`normalize_pose2d`) and both sides standardized
+    The 2-D poses are normalized (:func:`~.views.normalize_pose2d`) and both sides standardized
     per coordinate, :math:`(v - \mu) / \sigma` with the training set's mean and standard
     deviation (Martinez et al.; a constant coordinate, as the root's, gets
     :math:`\sigma = 1` on the input side and is predicted as its mean); the statistics
@@ -1131,6 +559,7 @@ def train_lifter(
     Examples
     --------
     >>> from robopercept.nn.pose.data import random_poses_3d
+    >>> from robopercept.nn.pose.views import random_views
     >>> v = random_views(random_poses_3d(64, rng=0), 2, rng=0)
     >>> net = LiftingMLP(16, width=32, blocks=1)
     >>> losses = train_lifter(net, v.keypoints2d, v.joints3d, epochs=2, batch_size=32)
@@ -1141,10 +570,10 @@ def train_lifter(
         raise InputError(
             f"model must be a LiftingMLP (e.g. LiftingMLP(16)); got {type(model).__name__}"
         )
-    kp, single = _keypoints(keypoints2d)
+    kp, single = check_keypoints2d(keypoints2d)
     if single:
         raise InputError(f"keypoints2d must be (N, J, 2), many poses; got {kp.shape[1:]}")
-    j3 = _poses3d(joints3d, "joints3d")
+    j3 = check_poses3d(joints3d, "joints3d")
     j = model.num_joints
     if kp.shape[1] != j or j3.shape[1] != j:
         raise InputError(
@@ -1165,15 +594,15 @@ def train_lifter(
     epochs = check_count(epochs, "epochs", 1, MAX_EPOCHS)
     batch_size = check_int(batch_size, "batch_size", 2)
     lr = check_real(lr, "lr", 0.0, 10.0, low_inclusive=False)
-    seed = _as_int_seed(random_state, "random_state")
+    seed = check_seed(random_state, "random_state")
     if seed is None:
         raise InputError("random_state must be an int seed >= 0; got None")
     noise = check_real(noise, "noise", 0.0, 1e6)
     weight_decay = check_real(weight_decay, "weight_decay", 0.0, 1.0)
 
     root, n = model.root, len(kp)
-    norm, s = _normalize(kp, None, model.center, root)
-    _degenerate(s, "training pose(s)")
+    norm, s = normalize_joints(kp, None, model.center, root)
+    check_scales(s, "training pose(s)")
     x_all = norm.reshape(n, -1)
     y_all = (j3 - j3[:, root : root + 1]).reshape(n, -1)
     in_mean, in_std = x_all.mean(0), x_all.std(0)
@@ -1230,53 +659,8 @@ def train_lifter(
 
 
 def _normalize_torch(x: torch.Tensor, model: LiftingMLP) -> torch.Tensor:
-    """:func:`normalize_pose2d` of a batch (B, J, 2), flattened to (B, 2J)."""
+    """:func:`~.views.normalize_pose2d` of a batch (B, J, 2), flattened to (B, 2J)."""
     c = x[:, model.root] if model.center == "root" else x.mean(1)
     d = x - c[:, None]
     s = d.pow(2).sum(-1).mean(-1).sqrt().clamp_min(1e-12)
     return (d / s[:, None, None]).reshape(len(x), -1)
-
-
-def default_pose_library(
-    skeleton: Skeleton | None = None,
-    *,
-    poses: int = 2000,
-    views_per_pose: int = 16,
-    k: int = 5,
-    rng: int | None = 0,
-) -> PoseLibrary:
-    """The library the ``robopercept nn pose --lift3d`` command matches against:
-    ``poses`` random poses of the procedural figure
-    (:func:`~robopercept.nn.pose.data.random_poses_3d`, seeded) seen from
-    ``views_per_pose`` random views, the mean of the ``k`` nearest returned.
-
-    Parameters
-    ----------
-    skeleton : Skeleton, optional
-        The layout of the 2-D poses to lift; it must be
-        :data:`~robopercept.nn.skeleton.MPII_16`'s (the figure's).
-    poses, views_per_pose, k : int
-    rng : int or None
-
-    Raises
-    ------
-    InputError
-        Another layout than MPII's 16 joints.
-
-    Examples
-    --------
-    >>> lib = default_pose_library(poses=20, views_per_pose=2)
-    >>> len(lib), lib.num_joints
-    (40, 16)
-    """
-    if skeleton is not None and (
-        not isinstance(skeleton, Skeleton) or skeleton.joints != MPII_16.joints
-    ):
-        raise InputError(
-            "the pose library holds the procedural figure's 3-D poses in MPII's 16-joint "
-            f"layout; got {plain_repr(skeleton)}: lift poses of a model trained on MPII's "
-            "joints (robopercept nn pose train --data figures)"
-        )
-    n = check_int(poses, "poses", 1)
-    seed = _as_int_seed(rng, "rng")
-    return PoseLibrary(random_poses_3d(n, rng=seed), views_per_pose=views_per_pose, rng=seed, k=k)

@@ -1,7 +1,7 @@
 """Segmentation data with ground truth: the real fluorescence nuclei image, split into
-quadrants for training and a held-out test, and the built-in sets by name.
-
-NumPy only at import (the detection sets are built lazily through torch).
+quadrants for training and a held-out test, and the built-in sets by name (the shapes
+and digits are the detection sets of :mod:`robopercept.nn.detection.synthetic`, whose
+masks give the class maps).
 """
 
 from __future__ import annotations
@@ -14,6 +14,9 @@ import numpy as np
 
 from robopercept._checks import as_path, check_int, check_real
 from robopercept.errors import FileFormatError, InputError
+from robopercept.imaging import read_image
+from robopercept.nn.detection.data import DetectionDataset
+from robopercept.nn.detection.synthetic import digits_detection_set, procedural_detection_set
 
 __all__ = [
     "BUILTIN_SEGMENTATION_DATA",
@@ -122,8 +125,6 @@ def nuclei_quadrants(folder: str | os.PathLike[str], test_quadrant: int = 3) -> 
     FileFormatError
         A file is missing or not a 2-D image, or the two differ in size.
     """
-    from robopercept.imaging import read_image
-
     path = as_path(folder, "folder")
     if not path.is_dir():
         raise InputError(
@@ -190,11 +191,11 @@ def segmentation_sets(
 ) -> SegmentationSets:
     """The built-in segmentation data by name (:data:`BUILTIN_SEGMENTATION_DATA`).
 
-    * ``"shapes"``: :func:`~robopercept.nn.detection.data.procedural_detection_set`
+    * ``"shapes"``: :func:`~robopercept.nn.detection.synthetic.procedural_detection_set`
       (``n_images`` canvases of ``size`` = (width, height), seeded), split
       ``1 - val_fraction`` / ``val_fraction``;
     * ``"digits"``: the real-digit canvases of
-      :func:`~robopercept.nn.detection.data.digits_detection_set` with their stroke
+      :func:`~robopercept.nn.detection.synthetic.digits_detection_set` with their stroke
       masks, split the same way;
     * ``"nuclei"``: the real fluorescence nuclei in ``folder``
       (:func:`nuclei_quadrants`): the three training quadrants and the held-out one as
@@ -206,8 +207,6 @@ def segmentation_sets(
     InputError
         Unknown name, fewer than 2 images to split, or ``"nuclei"`` without its folder.
     """
-    from robopercept.nn.detection.models import data as dd
-
     if data not in BUILTIN_SEGMENTATION_DATA:
         raise InputError(
             f"data must be one of {', '.join(BUILTIN_SEGMENTATION_DATA)}; got {data!r}"
@@ -219,10 +218,10 @@ def segmentation_sets(
                 "(e.g. ../shared/data/segmentation/stardist_nuclei)"
             )
         s = nuclei_quadrants(folder)
-        train = dd.DetectionDataset.from_instance_labels(
+        train = DetectionDataset.from_instance_labels(
             list(np.clip(s.train_images, 0, 1)), list(s.train_instances), "nucleus"
         )
-        val = dd.DetectionDataset.from_instance_labels(
+        val = DetectionDataset.from_instance_labels(
             [np.clip(s.test_image, 0, 1)], [s.test_instances], "nucleus"
         )
         return SegmentationSets(train, val, tuple(train.classes))
@@ -230,7 +229,7 @@ def segmentation_sets(
     frac = check_real(
         val_fraction, "val_fraction", 0.0, 1.0, low_inclusive=False, high_inclusive=False
     )
-    make = dd.procedural_detection_set if data == "shapes" else dd.digits_detection_set
+    make = procedural_detection_set if data == "shapes" else digits_detection_set
     ds = make(n, size, rng=seed)
     train, val = ds.split((1 - frac, frac), rng=seed)
     return SegmentationSets(train, val, tuple(ds.classes))

@@ -41,8 +41,15 @@ from torch.nn import functional as F
 from robopercept._checks import check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count
+from robopercept.nn.coco.rle import rle_encode
+from robopercept.nn.core.backbones import MAX_CHANNELS, DetectionBackbone
 from robopercept.nn.core.blocks import ConvBNAct, check_input
-from robopercept.nn.detection.models import MAX_CHANNELS, DetectionBackbone
+from robopercept.nn.data.datasets import to_unit_float
+from robopercept.nn.segmentation.metrics import segmentation_confusion, segmentation_scores
+from robopercept.nn.train.checkpoint import load_built_model, save_built_model
+from robopercept.nn.train.config import TrainConfig, deterministic_algorithms, resolve_device
+from robopercept.nn.train.loop import optimizer_step, step_optimizer
+from robopercept.progress import progress_bar
 
 __all__ = [
     "FCN",
@@ -469,7 +476,7 @@ def save_segmenter(
     """Write a segmenter's weights with what rebuilds it (``name`` of
     :data:`SEGMENTERS`, its keyword ``settings``, the ``classes`` of labels 1..K-1,
     label 0 being the background) and ``extra`` plain values; the format of
-    :func:`~robopercept.nn.detection.models.save_detector`. Returns the path.
+    :func:`~robopercept.nn.detection.zoo.save_detector`. Returns the path.
 
     Examples
     --------
@@ -481,7 +488,6 @@ def save_segmenter(
     >>> info["classes"], type(net2).__name__, net2.num_classes
     (['a', 'b'], 'UNet', 3)
     """
-    from robopercept.nn.train.loop import save_built_model
 
     check_choice(name, "name", SEGMENTERS)
     return save_built_model(path, model, name, settings, classes, **extra)
@@ -500,7 +506,6 @@ def load_segmenter(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, A
     FileFormatError
         Missing or unreadable file, or a checkpoint that is not a segmenter's.
     """
-    from robopercept.nn.train.loop import load_built_model
 
     return load_built_model(
         path,
@@ -631,7 +636,7 @@ def train_segmenter(
     Examples
     --------
     >>> import numpy as np
-    >>> from robopercept.nn.train.loop import TrainConfig
+    >>> from robopercept.nn.train.config import TrainConfig
     >>> x = np.zeros((4, 16, 16, 1), np.float32); x[:, 4:12, 4:12] = 1
     >>> y = (x[..., 0] > 0).astype(np.int64)
     >>> net = UNet(2, in_channels=1, width=4, depth=2)
@@ -640,15 +645,6 @@ def train_segmenter(
     >>> len(h.losses), sorted(h.val)
     (2, [1, 2])
     """
-    from robopercept.nn.segmentation.metrics import segmentation_confusion, segmentation_scores
-    from robopercept.nn.train.loop import (
-        TrainConfig,
-        deterministic_algorithms,
-        optimizer_step,
-        resolve_device,
-        step_optimizer,
-    )
-    from robopercept.progress import progress_bar
 
     if not isinstance(model, nn.Module):
         raise InputError(f"model must be a torch.nn.Module; got {plain_repr(model)}")
@@ -774,8 +770,6 @@ def segment_arrays(model: nn.Module, images: Sequence[Any]) -> list[Any]:
     """
     import numpy as np
 
-    from robopercept.nn.data.datasets import to_unit_float
-
     c = getattr(model, "in_channels", None)
     if not isinstance(model, nn.Module) or c not in (1, 3):
         raise InputError(
@@ -809,7 +803,7 @@ def coco_segmentation_results(
     (:func:`~robopercept.nn.coco.rle.rle_encode`) for one image: from a semantic label
     map, one entry per class present (``category_id`` = label, score 1, the class's
     pixels as its mask: COCO's stuff-segmentation format); from instance detections
-    (:func:`~robopercept.nn.detection.models.detect_arrays` of a Mask R-CNN), one entry per
+    (:func:`~robopercept.nn.detection.zoo.detect_arrays` of a Mask R-CNN), one entry per
     instance with its box and score (COCO's ``segm`` results).
 
     Examples
@@ -820,8 +814,6 @@ def coco_segmentation_results(
     [(3, 2, '13')]
     """
     import numpy as np
-
-    from robopercept.nn.coco.rle import rle_encode
 
     if (labels is None) == (detections is None):
         raise InputError("give either labels (semantic) or detections (instances)")

@@ -1,2 +1,3 @@
-"""Training: the loop, its configuration, checkpoints and history (:mod:`.loop`), and
-DistributedDataParallel training (:mod:`.distributed`)."""
+"""Training: its configuration, history, device and determinism (:mod:`.config`), THE
+loop (:mod:`.loop`), checkpoints (:mod:`.checkpoint`), and DistributedDataParallel
+training on several processes (:mod:`.distributed`)."""

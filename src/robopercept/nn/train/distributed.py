@@ -1,27 +1,29 @@
-"""``nn train`` on several processes: torch DistributedDataParallel (DDP).
+"""Data-parallel training on several processes: torch DistributedDataParallel (DDP).
 
-:func:`train_ddp` runs :func:`robopercept.nn.classification.run.train_run` on ``nproc`` processes of
-this machine (started with :func:`torch.multiprocessing.start_processes`), or, when the
-process was started by ``torchrun`` (the environment holds ``RANK``, ``WORLD_SIZE``,
-``LOCAL_RANK``, ``MASTER_ADDR`` and ``MASTER_PORT``), as the rank torchrun made, which
-is how a run spans machines::
+:func:`run_ranks` calls a function on ``nproc`` processes of this machine (started with
+:func:`torch.multiprocessing.start_processes`) joined in a ``torch.distributed`` process
+group, or, when the process was started by ``torchrun`` (the environment holds ``RANK``,
+``WORLD_SIZE``, ``LOCAL_RANK``, ``MASTER_ADDR`` and ``MASTER_PORT``,
+:func:`torchrun_env`), as the rank torchrun made, which is how a run spans machines::
 
     torchrun --no-python --nnodes 2 --nproc-per-node 1 --rdzv-backend c10d \\
         --rdzv-endpoint HOST:PORT robopercept nn train --data digits ...
 
-Every rank builds the same model (same seed) and joins a process group (backend gloo on
-the CPU, nccl when the device is CUDA); :func:`~robopercept.nn.train.loop.fit` wraps the
-model in :class:`~torch.nn.parallel.DistributedDataParallel` and draws each rank's
-shard with a :class:`~torch.utils.data.DistributedSampler` (shuffled with the run's
-seed, ``set_epoch`` every epoch).
+``nn train --nproc N`` is :func:`robopercept.nn.classification.run.train_ddp`, which
+runs its trainer through :func:`run_ranks`. Every rank builds the same model (same
+seed) and joins a process group (backend gloo on the CPU, nccl when the device is CUDA:
+:func:`rank_device`); :func:`~robopercept.nn.train.loop.fit` wraps the model in
+:class:`~torch.nn.parallel.DistributedDataParallel` and draws each rank's shard with a
+:class:`~torch.utils.data.DistributedSampler` (shuffled with the run's seed,
+``set_epoch`` every epoch).
 
 The global batch stays the one asked for: each of the N processes takes
 ``batch_size / N`` images per step and DDP averages the gradients, so one step sees
 ``batch_size`` images as on one process, and the learning rate is left unchanged (the
 learning rate scales linearly with the global batch, which does not change). The batch
-size must therefore be a multiple of N. Batch-norm layers keep per-process statistics
-(over ``batch_size / N`` images), as torch's DDP does by default: runs on 1 and N
-processes agree closely but not bit for bit.
+size must therefore be a multiple of N (:func:`check_world_batch`). Batch-norm layers
+keep per-process statistics (over ``batch_size / N`` images), as torch's DDP does by
+default: runs on 1 and N processes agree closely but not bit for bit.
 
 Rank 0 alone validates, evaluates the test split and writes the run folder (checkpoints,
 history, curves, metrics, confusion matrix); the other ranks wait for it. The process
@@ -42,16 +44,15 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import torch
 
 from robopercept._checks import check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
-from robopercept.nn.classification.run import TrainResult, train_run
-from robopercept.nn.train.loop import TrainConfig
+from robopercept.nn.train.config import TrainConfig
 
-__all__ = ["free_port", "run_ranks", "torchrun_env", "train_ddp"]
+__all__ = ["check_world_batch", "free_port", "rank_device", "run_ranks", "torchrun_env"]
 
 #: the environment variables torchrun sets for each worker (all of them: a torchrun run)
 TORCHRUN_VARIABLES = ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")
@@ -124,7 +125,33 @@ def torchrun_env(environ: dict[str, str] | None = None) -> tuple[int, int, int] 
     return rank, world, local
 
 
-def _check_split(nproc: int, batch_size: int) -> None:
+def check_world_batch(nproc: int, batch_size: int) -> None:
+    """Refuse a global batch that ``nproc`` processes cannot share out evenly: each
+    process takes ``batch_size / nproc`` images per step.
+
+    Parameters
+    ----------
+    nproc : int
+        Processes of the run (>= 1).
+    batch_size : int
+        The global batch (>= 1).
+
+    Raises
+    ------
+    InputError
+        ``nproc`` larger than ``batch_size`` or not dividing it (the message names the
+        nearest batch sizes that work).
+
+    Examples
+    --------
+    >>> check_world_batch(2, 64)
+    >>> check_world_batch(2, 63)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: --batch-size 63 (the global batch) must be a multiple of ...
+    """
+    nproc = check_int(nproc, "nproc (--nproc)", 1)
+    batch_size = check_int(batch_size, "batch_size (--batch-size)", 1)
     if nproc > batch_size:
         raise InputError(
             f"--nproc {nproc} is larger than --batch-size {batch_size} (the global batch, "
@@ -139,9 +166,33 @@ def _check_split(nproc: int, batch_size: int) -> None:
         )
 
 
-def _device(cfg: TrainConfig) -> tuple[TrainConfig, str]:
-    """The config with this rank's device (its own CUDA device: ``LOCAL_RANK``) and the
-    backend: nccl on CUDA, else gloo."""
+def rank_device(cfg: TrainConfig) -> tuple[TrainConfig, str]:
+    """The configuration of this rank (its device set to its own CUDA device, number
+    ``LOCAL_RANK``, when the run is on CUDA) and the process-group backend: nccl on
+    CUDA, else gloo.
+
+    Parameters
+    ----------
+    cfg : TrainConfig
+
+    Returns
+    -------
+    cfg : TrainConfig
+        ``cfg`` itself off CUDA, else a copy with ``device="cuda:<index>"``.
+    backend : {'gloo', 'nccl'}
+
+    Raises
+    ------
+    InputError
+        ``cfg`` is not a TrainConfig.
+
+    Examples
+    --------
+    >>> rank_device(TrainConfig(device="cpu"))[1]
+    'gloo'
+    """
+    if not isinstance(cfg, TrainConfig):
+        raise InputError(f"cfg must be a TrainConfig; got {plain_repr(cfg)}")
     name = cfg.device
     if name is None:
         name = "cuda" if torch.cuda.is_available() else "cpu"
@@ -275,99 +326,6 @@ def run_ranks(
         job.update(rank=env[0], world=env[1])
         return _rank_main(env[2], fn, args, job)
     return _spawn(fn, args, job)
-
-
-def _train_rank(
-    data: str, model: str, out_dir: str, cfg: TrainConfig, kwargs: dict[str, Any]
-) -> TrainResult:
-    """One rank of :func:`train_ddp`."""
-    cfg, _ = _device(cfg)
-    return train_run(data, model, out_dir, config=cfg, distributed=True, **kwargs)
-
-
-def train_ddp(
-    data: str | os.PathLike[str],
-    model: str,
-    out_dir: str | os.PathLike[str],
-    *,
-    nproc: int = 1,
-    config: TrainConfig | None = None,
-    threads: int | None = None,
-    timeout: float = 1800.0,
-    **kwargs: Any,
-) -> TrainResult:
-    """:func:`~robopercept.nn.classification.run.train_run` on ``nproc`` processes with
-    DistributedDataParallel (module docstring), or as one rank of a ``torchrun`` run.
-
-    The gradient of a step is the mean over the global batch of ``B = batch_size``
-    images, :math:`g = \\frac{1}{N}\\sum_{r=1}^{N} \\frac{1}{B/N}\\sum_{i \\in b_r}
-    \\nabla \\ell_i = \\frac{1}{B}\\sum_{i \\in b} \\nabla \\ell_i`, with rank ``r``'s
-    share :math:`b_r` of :math:`B/N` images (DDP's all-reduce averages over ranks): the
-    step of one process on the same ``B`` images, so the learning rate is unchanged.
-
-    Parameters
-    ----------
-    data, model, out_dir
-        As :func:`~robopercept.nn.classification.run.train_run`.
-    nproc : int
-        Processes on this machine (1: :func:`train_run` itself, unless under torchrun,
-        whose processes are then the ranks; torchrun needs ``nproc`` 1).
-    config : TrainConfig, optional
-        ``batch_size`` is the global batch (a multiple of the number of processes).
-    threads : int, optional
-        torch threads per process (default: torch's thread count divided by the
-        processes on this machine, at least 1).
-    timeout : float
-        Seconds a collective waits for the other ranks before failing.
-    **kwargs
-        More arguments of :func:`train_run` (``model_kwargs``, ``mode``, ``size``,
-        ``fractions``, ``augment``, ``resume``, ``overwrite``, ``progress``).
-
-    Returns
-    -------
-    TrainResult
-        Rank 0's (under torchrun every rank returns it).
-
-    Raises
-    ------
-    InputError
-        ``nproc`` < 1, larger than the batch or not dividing it, ``nproc`` > 1 under
-        torchrun; the errors of :func:`train_run`, raised again from the first rank that
-        failed.
-
-    Examples
-    --------
-    >>> train_ddp("digits", "vgg_small", "run", nproc=0)
-    Traceback (most recent call last):
-    ...
-    robopercept.errors.InputError: nproc (--nproc) must be >= 1; got 0
-    """
-    nproc = check_int(nproc, "nproc (--nproc)", 1)
-    if config is not None and not isinstance(config, TrainConfig):
-        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
-    cfg = config or TrainConfig()
-    timeout = check_real(timeout, "timeout (seconds)", 0.0, low_inclusive=False)
-    if threads is not None:
-        threads = check_int(threads, "threads", 1)
-    if "distributed" in kwargs:
-        raise InputError("train_ddp sets train_run's distributed itself; do not pass it")
-    env = torchrun_env()
-    world = env[1] if env is not None else nproc
-    _check_split(world, cfg.batch_size)
-    if env is None and nproc == 1:
-        return train_run(data, model, out_dir, config=cfg, **kwargs)
-    _, backend = _device(cfg)
-    return cast(
-        TrainResult,
-        run_ranks(
-            _train_rank,
-            nproc,
-            (os.fspath(data), model, os.fspath(out_dir), cfg, kwargs),
-            backend=backend,
-            threads=threads,
-            timeout=timeout,
-        ),
-    )
 
 
 def _spawn(fn: Callable[..., Any], args: tuple[Any, ...], job: dict[str, Any]) -> Any:

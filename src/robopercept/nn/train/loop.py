@@ -1,4 +1,5 @@
-"""Training a classifier: the course's steps spelled out, on any ``torch.nn.Module``.
+"""THE training loop: :func:`fit` for classifiers on any ``torch.nn.Module``,
+:func:`epoch_loop` for the per-batch trainers of the task wings, :func:`evaluate`.
 
 :func:`fit` runs the loop the notes teach: mini-batches of the training set (shuffled
 by a seeded generator), cross-entropy loss, back-propagation, an optimizer step (SGD
@@ -11,335 +12,51 @@ Mixed precision is used only on CUDA (``amp="auto"``).
 Optimizers and schedules are PyTorch's own (:mod:`torch.optim`,
 :mod:`torch.optim.lr_scheduler`): they are not perception methods. A run is
 deterministic on the CPU: the same seed and thread count give bit-identical weights
-(``torch.use_deterministic_algorithms`` during the run), and a run resumed from its
-checkpoint ends where an uninterrupted one does (the checkpoint holds the model, the
-optimizer, the schedule, the shuffling generator and torch's random state).
-
-Checkpoints are ``torch.save`` dictionaries of tensors and plain Python values, read back
-with ``weights_only=True`` (no pickled code), written atomically after every epoch, so
-Ctrl-C leaves the last complete one readable.
+(:func:`~robopercept.nn.train.config.deterministic_algorithms` during the run), and a
+run resumed from its checkpoint ends where an uninterrupted one does (the checkpoint,
+:mod:`robopercept.nn.train.checkpoint`, holds the model, the optimizer, the schedule,
+the shuffling generator and torch's random state), written after every epoch.
 """
 
 from __future__ import annotations
 
 import contextlib
 import copy
-import csv
 import math
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 from torch.utils.data import DataLoader, Dataset
 
-from robopercept._checks import (
-    as_path,
-    check_bool,
-    check_finite,
-    check_int,
-    check_magnitude,
-    check_ndim,
-    check_real,
-    plain_repr,
+from robopercept._checks import as_path, check_bool, plain_repr
+from robopercept.errors import InputError
+from robopercept.learning.metrics import confusion_matrix
+from robopercept.nn._guards import check_count, check_dataset, check_module
+from robopercept.nn.train.checkpoint import load_checkpoint, save_checkpoint
+from robopercept.nn.train.config import (
+    History,
+    TrainConfig,
+    deterministic_algorithms,
+    resolve_device,
 )
-from robopercept.errors import FileFormatError, InputError
-from robopercept.fileio import atomic_path
-from robopercept.nn._guards import (
-    check_count,
-    check_dataset,
-    check_device,
-    check_module,
-)
+from robopercept.progress import progress_bar
 
 __all__ = [
     "EpochHistory",
     "Evaluation",
-    "History",
-    "Normalize",
-    "TrainConfig",
-    "deterministic_algorithms",
     "epoch_loop",
     "evaluate",
     "fit",
-    "load_built_model",
-    "load_checkpoint",
     "optimizer_step",
-    "resolve_device",
-    "save_built_model",
-    "save_checkpoint",
     "step_optimizer",
 ]
-
-#: the most epochs (and the largest step size or patience) a run may ask for
-MAX_EPOCHS = 100_000
-
-Optimizer = Literal["sgd", "adamw"]
-Schedule = Literal["constant", "step", "cosine", "onecycle"]
-
-
-@dataclass
-class TrainConfig:
-    """How :func:`fit` trains.
-
-    Attributes
-    ----------
-    epochs : int
-        Most epochs (early stopping may end sooner).
-    batch_size : int
-    optimizer : {"sgd", "adamw"}
-        SGD with ``momentum`` (``nesterov``) and L2 ``weight_decay``, or AdamW
-        (decoupled weight decay).
-    lr : float
-        Learning rate (the peak for ``"onecycle"``).
-    momentum, nesterov, weight_decay
-        As in :class:`torch.optim.SGD` / :class:`torch.optim.AdamW`.
-    schedule : {"constant", "step", "cosine", "onecycle"}
-        ``"step"``: lr x ``gamma`` every ``step_size`` epochs
-        (:class:`~torch.optim.lr_scheduler.StepLR`); ``"cosine"``: cosine annealing to 0
-        over ``epochs`` (:class:`~torch.optim.lr_scheduler.CosineAnnealingLR`);
-        ``"onecycle"``: warm-up then annealing, stepped per batch
-        (:class:`~torch.optim.lr_scheduler.OneCycleLR`).
-    step_size, gamma
-        The step schedule.
-    patience : int or None
-        Stop after this many epochs without improvement of ``monitor`` (None: never).
-    monitor : {"val_loss", "val_accuracy"}
-        The figure that picks the best epoch (lower loss, higher accuracy).
-    clip_grad_norm : float or None
-        Clip the gradients' global L2 norm to this.
-    amp : {"auto", True, False}
-        Mixed precision (bfloat16 autocast); "auto" uses it on CUDA only.
-    seed : int
-        Seeds the initial weights' random state, the shuffling and dropout.
-    device : str or None
-        ``"cpu"``, ``"cuda"``, ...; None: CUDA when available, else the CPU.
-    lr_multipliers : dict of str to float, optional
-        Discriminative learning rates: parameters whose qualified name starts with a
-        key train at ``lr`` times its value (the longest matching key wins), e.g.
-        ``{"features": 0.1}`` for a pretrained trunk under a new head.
-    unfreeze_at : dict of int to list of str, optional
-        At the start of epoch ``k`` (1-based), make the parameters under these name
-        prefixes trainable (``[""]``: all): gradual unfreezing.
-    """
-
-    epochs: int = 30
-    batch_size: int = 64
-    optimizer: Optimizer = "adamw"
-    lr: float = 1e-3
-    momentum: float = 0.9
-    nesterov: bool = False
-    weight_decay: float = 1e-4
-    schedule: Schedule = "cosine"
-    step_size: int = 10
-    gamma: float = 0.1
-    patience: int | None = 10
-    monitor: Literal["val_loss", "val_accuracy"] = "val_accuracy"
-    clip_grad_norm: float | None = None
-    amp: bool | Literal["auto"] = "auto"
-    seed: int = 0
-    device: str | None = None
-    lr_multipliers: dict[str, float] | None = None
-    unfreeze_at: dict[int, list[str]] | None = None
-
-    def __post_init__(self) -> None:
-        self.epochs = check_count(self.epochs, "epochs (--epochs)", 1, MAX_EPOCHS)
-        self.batch_size = check_count(self.batch_size, "batch_size (--batch-size)", 1, 2**31)
-        self.step_size = check_count(self.step_size, "step_size", 1, MAX_EPOCHS)
-        self.lr = check_real(self.lr, "lr (the learning rate, --lr)", 0.0, low_inclusive=False)
-        self.momentum = check_real(self.momentum, "momentum", 0.0, 1.0)
-        self.nesterov = check_bool(self.nesterov, "nesterov")
-        self.weight_decay = check_real(self.weight_decay, "weight_decay", 0.0)
-        self.gamma = check_real(self.gamma, "gamma", 0.0, low_inclusive=False)
-        if self.clip_grad_norm is not None:
-            self.clip_grad_norm = check_real(
-                self.clip_grad_norm, "clip_grad_norm", 0.0, low_inclusive=False
-            )
-        if not (self.amp == "auto" and isinstance(self.amp, str)):
-            self.amp = check_bool(self.amp, "amp ('auto', True or False)")
-        self.seed = check_int(self.seed, "seed (--seed)", -(2**63))
-        if self.seed >= 2**64:
-            raise InputError(f"seed (--seed) must be below 2**64; got {self.seed}")
-        dev = check_device(self.device, "device (--device)")
-        self.device = None if dev is None else str(dev)
-        if self.lr_multipliers is None:
-            self.lr_multipliers = {}
-        if self.unfreeze_at is None:
-            self.unfreeze_at = {}
-        if not isinstance(self.lr_multipliers, dict) or not all(
-            isinstance(k, str) for k in self.lr_multipliers
-        ):
-            raise InputError(
-                "lr_multipliers must be a dict of parameter-name prefix to factor, e.g. "
-                f"{{'features': 0.1}}; got {self.lr_multipliers!r}"
-            )
-        self.lr_multipliers = {
-            k: check_real(v, f"lr_multipliers[{k!r}]", 0.0) for k, v in self.lr_multipliers.items()
-        }
-        if not isinstance(self.unfreeze_at, dict) or not all(
-            isinstance(v, (list, tuple)) and all(isinstance(pf, str) for pf in v)
-            for v in self.unfreeze_at.values()
-        ):
-            raise InputError(
-                "unfreeze_at must be a dict of epoch to a list of parameter-name prefixes, "
-                f"e.g. {{5: ['features.2']}}; got {self.unfreeze_at!r}"
-            )
-        self.unfreeze_at = {
-            check_int(k, "unfreeze_at epoch", 1): list(v) for k, v in self.unfreeze_at.items()
-        }
-        if self.optimizer not in ("sgd", "adamw"):
-            raise InputError(f"optimizer must be 'sgd' or 'adamw'; got {self.optimizer!r}")
-        if self.schedule not in ("constant", "step", "cosine", "onecycle"):
-            raise InputError(
-                "schedule must be 'constant', 'step', 'cosine' or 'onecycle'; "
-                f"got {self.schedule!r}"
-            )
-        if self.monitor not in ("val_loss", "val_accuracy"):
-            raise InputError(f"monitor must be 'val_loss' or 'val_accuracy'; got {self.monitor!r}")
-        if self.patience is not None:
-            self.patience = check_count(self.patience, "patience (or None)", 1, MAX_EPOCHS)
-
-
-@dataclass
-class History:
-    """Per-epoch figures of a run (``val_*`` are NaN without a validation set)."""
-
-    epoch: list[int] = field(default_factory=list)
-    train_loss: list[float] = field(default_factory=list)
-    train_accuracy: list[float] = field(default_factory=list)
-    val_loss: list[float] = field(default_factory=list)
-    val_accuracy: list[float] = field(default_factory=list)
-    lr: list[float] = field(default_factory=list)
-    seconds: list[float] = field(default_factory=list)
-    best_epoch: int = -1
-    stopped: str = ""
-
-    _COLUMNS = (
-        "epoch",
-        "train_loss",
-        "train_accuracy",
-        "val_loss",
-        "val_accuracy",
-        "lr",
-        "seconds",
-    )
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain lists and values (JSON- and checkpoint-ready)."""
-        return {k: v for k, v in asdict(self).items() if not k.startswith("_")}
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> History:
-        """The inverse of :meth:`to_dict`."""
-        return cls(
-            **{k: d[k] for k in cls.__dataclass_fields__ if not k.startswith("_") and k in d}
-        )
-
-    def write_csv(self, path: str | os.PathLike[str]) -> Path:
-        """One row per epoch: the columns of the class."""
-        p = Path(path)
-        with p.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(self._COLUMNS)
-            for row in zip(*(getattr(self, c) for c in self._COLUMNS), strict=True):
-                w.writerow([f"{v:.6g}" if isinstance(v, float) else v for v in row])
-        return p
-
-    def picture(self) -> np.ndarray:
-        """Loss, accuracy and learning rate against the epoch, as an (H, W, 3) uint8
-        image (:func:`robopercept.viz.plot.plot_series`), readable at 1080p."""
-        from robopercept.viz.plot import Panel, Series, plot_series
-
-        x = np.asarray(self.epoch, float)
-        blue, orange, green = (31, 119, 180), (255, 127, 14), (44, 160, 44)
-
-        def curves(name: str) -> list[Series]:
-            out = [Series(x, np.asarray(getattr(self, f"train_{name}"), float), "train", blue)]
-            val = np.asarray(getattr(self, f"val_{name}"), float)
-            if np.isfinite(val).any():
-                out.append(Series(x, val, "validation", orange))
-            return out
-
-        panels = [
-            Panel("loss (cross-entropy)", curves("loss"), "loss"),
-            Panel("accuracy", curves("accuracy"), "accuracy [0-1]"),
-            Panel(
-                "learning rate",
-                [Series(x, np.asarray(self.lr, float), "lr", green)],
-                "learning rate",
-            ),
-        ]
-        return plot_series(panels, width=1200, panel_height=260, xlabel="epoch")
-
-
-def _statistics(value: Any, name: str) -> np.ndarray:
-    """``value`` (a number or a (C,) sequence) as finite float32 ``(C,)`` statistics."""
-    arr = check_ndim(value, name, (0, 1))
-    if arr.dtype.kind not in "iuf" or arr.size == 0:
-        raise InputError(
-            f"{name} must be real numbers, one per channel (e.g. [0.5]); got {value!r}"
-        )
-    arr = check_finite(arr.astype(np.float64), name)
-    # float32 buffers: beyond 1e30 the statistics (and 1/std) leave float32's range
-    arr = check_magnitude(arr, name, 1e30, smallest=None)
-    if name == "std" and np.any((arr > 0) & (arr < 1e-30)):
-        raise InputError(f"std must be >= 1e-30 in every channel (float32); got {value!r}")
-    return np.atleast_1d(arr.astype(np.float32))
-
-
-class Normalize(nn.Module):
-    """``(x - mean_c) / std_c`` per channel, with the statistics as buffers (saved in the
-    checkpoint, moved with the model, exported to ONNX): put it first in a model, with
-    statistics of the training split only
-    (:func:`~robopercept.nn.data.datasets.normalization_stats`). Also usable as a dataset
-    transform: takes ``(C, H, W)`` images as well as ``(N, C, H, W)`` batches.
-
-    Parameters
-    ----------
-    mean, std : (C,) array
-        Per-channel statistics; ``std`` > 0.
-    """
-
-    mean: torch.Tensor
-    std: torch.Tensor
-
-    def __init__(self, mean: Any, std: Any) -> None:
-        super().__init__()
-        m, s = (_statistics(v, n) for v, n in ((mean, "mean"), (std, "std")))
-        if m.shape != s.shape or m.ndim != 1:
-            raise InputError(
-                f"mean and std must be (C,) of one length; got {m.shape} and {s.shape}"
-            )
-        if np.any(s <= 0):
-            raise InputError(
-                "std must be > 0 in every channel: a constant channel cannot be normalized"
-            )
-        self.register_buffer("mean", torch.from_numpy(m).view(1, -1, 1, 1))
-        self.register_buffer("std", torch.from_numpy(s).view(1, -1, 1, 1))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Normalize ``(C, H, W)`` or ``(N, C, H, W)``."""
-        if not isinstance(x, torch.Tensor) or not x.is_floating_point():
-            raise InputError(
-                "Normalize takes a floating-point torch tensor (C, H, W) or (N, C, H, W); "
-                f"got {type(x).__name__}"
-                + (f" of dtype {x.dtype}" if isinstance(x, torch.Tensor) else "")
-                + ": use torch.from_numpy(images).float()"
-            )
-        single = x.ndim == 3
-        batch = x[None] if single else x
-        if batch.ndim != 4 or batch.shape[1] != self.mean.shape[1]:
-            raise InputError(
-                f"Normalize has {self.mean.shape[1]} channels; got an input of shape "
-                f"{tuple(x.shape)} (images are (C, H, W), batches (N, C, H, W))"
-            )
-        out = (batch - self.mean.to(batch)) / self.std.to(batch)
-        return out[0] if single else out
 
 
 @dataclass
@@ -361,30 +78,8 @@ class Evaluation:
 
     def confusion_matrix(self, n_classes: int | None = None) -> np.ndarray:
         """Counts ``[true, predicted]`` (:func:`robopercept.learning.metrics.confusion_matrix`)."""
-        from robopercept.learning.metrics import confusion_matrix
-
         k = n_classes or self.probabilities.shape[1]
         return confusion_matrix(self.y_true, self.y_pred, labels=np.arange(k))
-
-
-def resolve_device(name: str | torch.device | None) -> torch.device:
-    """The torch device a run uses: ``name`` checked, or, for None, CUDA when
-    available, else the CPU (what :func:`fit` and the detectors' trainer do).
-
-    Raises
-    ------
-    InputError
-        A name torch does not know (``"cpu"``, ``"cuda"``, ``"cuda:1"``, ...).
-
-    Examples
-    --------
-    >>> resolve_device("cpu")
-    device(type='cpu')
-    """
-    dev = check_device(name, "device (--device)")
-    if dev is None:
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return dev
 
 
 def _check_batch(x: torch.Tensor, y: torch.Tensor, n_classes: int) -> None:
@@ -395,26 +90,6 @@ def _check_batch(x: torch.Tensor, y: torch.Tensor, n_classes: int) -> None:
             f"labels must be in 0..{n_classes - 1} (the model has {n_classes} outputs); "
             f"got {int(y.min())}..{int(y.max())}"
         )
-
-
-@contextlib.contextmanager
-def deterministic_algorithms() -> Iterator[None]:
-    """Within the block, torch uses deterministic algorithms only
-    (``torch.use_deterministic_algorithms(True, warn_only=True)``), restored after:
-    the same seed and thread count give bit-identical training runs on the CPU.
-
-    Examples
-    --------
-    >>> with deterministic_algorithms():
-    ...     torch.are_deterministic_algorithms_enabled()
-    True
-    """
-    before = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(True, warn_only=True)
-    try:
-        yield
-    finally:
-        torch.use_deterministic_algorithms(before)
 
 
 def _autocast(device: torch.device, amp: bool | str) -> contextlib.AbstractContextManager[Any]:
@@ -697,8 +372,6 @@ def epoch_loop(
     InputError
         A loss became NaN or infinite (lower the learning rate).
     """
-    from robopercept.progress import progress_bar
-
     model = check_module(model)
     n = check_count(n, "n (training samples)", 1, 1 << 40)
     if not isinstance(cfg, TrainConfig):
@@ -754,152 +427,6 @@ def epoch_loop(
         model.load_state_dict(best)
     model.eval()
     return hist
-
-
-def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path:
-    """Write ``state`` (tensors and plain values) to ``path`` atomically (a temporary
-    file renamed over it), so an interruption never leaves half a checkpoint."""
-    p = as_path(path, "the checkpoint path")
-    if not isinstance(state, dict):
-        raise InputError(f"state must be a dict of tensors and plain values; got {state!r}"[:200])
-    p.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(p) as tmp:  # the one atomic writer (robopercept.fileio)
-        torch.save(state, tmp)
-    return p
-
-
-def save_built_model(
-    path: str | os.PathLike[str],
-    model: nn.Module,
-    kind: str,
-    settings: Mapping[str, Any],
-    classes: Sequence[str],
-    **extra: Any,
-) -> Path:
-    """Write ``model``'s weights with what rebuilds it through a builder (``kind``, the
-    constructor ``settings``, the ``classes``) and ``extra`` plain values beside them:
-    the checkpoint format of the detectors and segmenters
-    (:func:`~robopercept.nn.detection.models.save_detector`,
-    :func:`~robopercept.nn.segmentation.networks.save_segmenter`). Returns the path.
-
-    Raises
-    ------
-    InputError
-        Settings not a dict of keyword arguments, or no class names.
-    """
-    model = check_module(model)
-    if not isinstance(settings, Mapping) or not all(isinstance(k, str) for k in settings):
-        raise InputError(
-            "settings must be a dict of the class's keyword arguments (e.g. {'width': 8}); "
-            f"got {plain_repr(settings)}"
-        )
-    if (
-        not isinstance(classes, (list, tuple))
-        or not classes
-        or not all(isinstance(c, str) for c in classes)
-    ):
-        raise InputError(
-            f"classes must be a non-empty list of class names (str); got {plain_repr(classes)}"
-        )
-    return save_checkpoint(
-        path,
-        {
-            **extra,
-            "model": model.state_dict(),
-            "architecture": type(model).__name__,
-            "kind": kind,
-            "settings": dict(settings),
-            "classes": list(classes),
-        },
-    )
-
-
-def load_built_model(
-    path: str | os.PathLike[str],
-    kinds: Sequence[str],
-    build: Callable[..., nn.Module],
-    what: str,
-    writer: str,
-) -> tuple[nn.Module, dict[str, Any]]:
-    """Rebuild a model written by :func:`save_built_model`: ``build(kind, n_classes,
-    **settings)``, its weights loaded, eval mode, on the CPU.
-
-    Parameters
-    ----------
-    path : path-like
-    kinds : sequence of str
-        The kinds this loader accepts (a detector's checkpoint is not a segmenter's).
-    build : callable
-    what, writer : str
-        What the model is ("detector") and what writes such checkpoints, for the
-        message.
-
-    Raises
-    ------
-    FileFormatError
-        Missing or unreadable file, or a checkpoint of another kind (or without
-        ``kind``/``classes``).
-    """
-    if (
-        not isinstance(kinds, (list, tuple))
-        or not kinds
-        or not all(isinstance(k, str) for k in kinds)
-    ):
-        raise InputError(f"kinds must be a non-empty list of names; got {plain_repr(kinds)}")
-    if not callable(build):
-        raise InputError(f"build must be a callable (kind, n_classes, **settings); got {build!r}")
-    state = load_checkpoint(path)
-    info = {k: v for k, v in state.items() if k != "model"}
-    kind, classes = info.get("kind"), info.get("classes")
-    if kind not in kinds or not isinstance(classes, list) or not classes:
-        raise FileFormatError(
-            f"{path}: not a {what} checkpoint (kind {plain_repr(kind)}, not one of "
-            f"{', '.join(sorted(kinds))}): write it with {writer}"
-        )
-    model = build(str(kind), len(classes), **dict(info.get("settings") or {}))
-    model.load_state_dict(state["model"])
-    return model.eval(), info
-
-
-def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None) -> dict[str, Any]:
-    """Read a checkpoint written by :func:`fit` (``weights_only=True``: tensors and plain
-    values only, no code) and, with ``model``, load its weights into it.
-
-    Raises
-    ------
-    FileFormatError
-        Missing or unreadable file, not a robopercept checkpoint, or weights of another
-        architecture (the message names the architecture recorded in the checkpoint).
-    """
-    p = as_path(path, "the checkpoint path")
-    if model is not None:
-        model = check_module(model)
-    if p.is_dir():
-        raise FileFormatError(f"{p} is a folder; give a checkpoint file (.pt)")
-    if not p.exists():
-        raise FileFormatError(f"{p}: no such file")
-    try:
-        state = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as exc:  # torch raises many kinds for a foreign file
-        raise FileFormatError(
-            f"{p}: not a readable torch checkpoint ({type(exc).__name__})"
-        ) from None
-    if not isinstance(state, dict) or "model" not in state:
-        raise FileFormatError(f"{p}: not a robopercept checkpoint (no 'model' weights)")
-    if model is not None:
-        own = model.state_dict()
-        theirs = state["model"]
-        bad = sorted(set(own) ^ set(theirs)) + sorted(
-            k for k in set(own) & set(theirs) if tuple(own[k].shape) != tuple(theirs[k].shape)
-        )
-        if bad:
-            arch = state.get("architecture", "an unrecorded architecture")
-            raise FileFormatError(
-                f"{p}: weights of {arch}, not of this model ({len(bad)} mismatched tensors, "
-                f"first {bad[0]!r}): build the model the checkpoint was trained with"
-            )
-        model.load_state_dict(theirs)
-    return state
 
 
 def _ranks(cfg: TrainConfig) -> tuple[int, int]:
@@ -997,8 +524,6 @@ def fit(
         NaN or infinite (lower the learning rate); ``distributed`` without a process
         group, or a batch size that the number of processes does not divide.
     """
-    from robopercept.progress import progress_bar
-
     model = check_module(model)
     if config is not None and not isinstance(config, TrainConfig):
         raise InputError(

@@ -1,45 +1,36 @@
-"""COCO/VOC formats and the COCO and VOC detection metrics (robopercept.nn.coco.formats).
+"""The COCO evaluation (robopercept.nn.coco.evaluate) of boxes and masks, and its PR curves.
 
 Parity: pycocotools' COCOeval (bbox), the evaluation practitioners trust, on seeded
 synthetic detection sets that hold every case it treats apart. The tolerance is 1e-9
 absolute on the precision/recall/score arrays and the 12 summary numbers: both sides do
 the same float64 operations in the same order (the IoU as pycocotools' C bbIou, the
 cumulative sums, the envelope), so the arrays agree to the last bit today; 1e-9 leaves
-room for a summation order change in NumPy's ``mean``, nothing more.
+room for a summation order change in NumPy's ``mean``, nothing more. The keypoint
+evaluation is tested in ``test_keypoints.py``.
 """
 
 from __future__ import annotations
 
 import copy
-import json
 
 import numpy as np
 import pytest
 
 from benchmarks.coco_eval import pycocotools_eval, synthetic_detections
-from robopercept.errors import FileFormatError, InputError
-from robopercept.nn.coco.formats import (
+from robopercept.errors import InputError
+from robopercept.nn.coco.dataset import CocoDataset, coco_from_dict, coco_to_dict
+from robopercept.nn.coco.evaluate import (
     SUMMARY_NAMES,
-    CocoDataset,
-    coco_from_dict,
-    coco_to_dict,
     evaluate_detections,
-    evaluate_voc,
     pr_curves_picture,
-    read_coco_json,
-    read_coco_results,
-    read_voc_xml,
+    write_pr_curves,
+)
+from robopercept.nn.coco.results import (
     results_from_ground_truth,
     results_from_list,
     results_to_list,
-    voc_average_precision,
-    voc_to_coco,
-    write_coco_json,
-    write_coco_results,
-    write_pr_curves,
 )
 from robopercept.nn.coco.rle import rle_counts, rle_encode
-from tests.conftest import data_path
 
 pytest.importorskip("pycocotools")
 M = pytest.importorskip("pycocotools.mask")
@@ -348,183 +339,9 @@ class TestBadInput:
         with pytest.raises(InputError, match="gt must be a CocoDataset"):
             evaluate_detections([1, 2], [])
 
-    def test_dataset_errors_name_the_annotation(self):
-        d = one_image([{"bbox": [0, 0, 10, 10]}])
-        bad = copy.deepcopy(d)
-        del bad["annotations"][0]["bbox"]
-        with pytest.raises(InputError, match="annotation id 1 has no 'bbox' field"):
-            coco_from_dict(bad)
-        bad = copy.deepcopy(d)
-        bad["annotations"][0]["category_id"] = 5
-        with pytest.raises(InputError, match="category_id 5, which is not in the 'categories'"):
-            coco_from_dict(bad)
-        bad = copy.deepcopy(d)
-        bad["annotations"][0]["bbox"] = [0, 0, float("nan"), 1]
-        with pytest.raises(InputError, match=r"annotation id 1: bbox .* is not finite"):
-            coco_from_dict(bad)
-        bad["annotations"][0]["bbox"] = [10, 10, 5, -5]
-        with pytest.raises(InputError, match=r"negative width or height.*not \[x1, y1"):
-            coco_from_dict(bad)
-        bad["annotations"][0]["bbox"] = [10, 10, 5]
-        with pytest.raises(InputError, match="bbox must be 4 numbers"):
-            coco_from_dict(bad)
-        bad = copy.deepcopy(d)
-        del bad["images"]
-        with pytest.raises(InputError, match="no 'images' list"):
-            coco_from_dict(bad)
-        bad = copy.deepcopy(d)
-        bad["annotations"].append(dict(bad["annotations"][0]))
-        with pytest.raises(InputError, match="annotation id 1 appears more than once"):
-            coco_from_dict(bad)
-
-    def test_hostile_numbers(self):
-        d = one_image([{"bbox": [0, 0, 10, 10]}])
-        bad = copy.deepcopy(d)
-        bad["annotations"][0]["bbox"] = [0, 0, 1e300, 1]
-        with pytest.raises(InputError, match="beyond 1e15 pixels"):
-            coco_from_dict(bad)
-        bad = copy.deepcopy(d)
-        bad["annotations"][0]["id"] = 2**70
-        with pytest.raises(InputError, match="must fit in 64 bits"):
-            coco_from_dict(bad)
-        bad = copy.deepcopy(d)
-        bad["annotations"][0]["iscrowd"] = [1]
-        with pytest.raises(InputError, match="iscrowd must be 0 or 1"):
-            coco_from_dict(bad)
-        bad = copy.deepcopy(d)
-        bad["images"][0]["id"] = "1"
-        with pytest.raises(InputError, match=r"images\[0\]\.id must be an integer; got '1'"):
-            coco_from_dict(bad)
-
     def test_empty_dataset_is_undefined_not_an_error(self):
         ev = evaluate_detections({"images": [], "categories": [], "annotations": []}, [])
         assert ev.precision.shape == (10, 101, 0, 4, 3) and (ev.stats == -1).all()
-
-    def test_bad_files(self, tmp_path):
-        p = tmp_path / "gt.json"
-        d = one_image([{"bbox": [0, 0, float("nan"), 10]}])
-        p.write_text(json.dumps(d))  # json writes NaN, as Python's json reads it
-        with pytest.raises(FileFormatError, match=r"gt\.json: annotation id 1: bbox"):
-            read_coco_json(p)
-        p.write_text("{not json")
-        with pytest.raises(FileFormatError, match="not a JSON file"):
-            read_coco_json(p)
-        with pytest.raises(FileFormatError, match="no such file"):
-            read_coco_json(tmp_path / "missing.json")
-        p.write_text(json.dumps([{"image_id": 1, "category_id": 1, "bbox": [0, 0, 1, 1]}]))
-        with pytest.raises(FileFormatError, match=r"results\[0\] has no 'score' field"):
-            read_coco_results(p)
-
-    def test_bad_voc(self, tmp_path):
-        p = tmp_path / "a.xml"
-        body = "<size><width>9</width><height>9</height></size>"
-        p.write_text(f"<annotation><filename>a</filename>{body}<object><name>t</name>"
-                     "<bndbox><xmin>5</xmin><ymin>1</ymin><xmax>2</xmax><ymax>3</ymax>"
-                     "</bndbox></object></annotation>")  # fmt: skip
-        with pytest.raises(FileFormatError, match="xmax < xmin or ymax < ymin; swap them"):
-            read_voc_xml(p)
-        p.write_text(f'<!DOCTYPE x [<!ENTITY e "boom">]><annotation>{body}</annotation>')
-        with pytest.raises(FileFormatError, match="DOCTYPE/ENTITY"):
-            read_voc_xml(p)
-        p.write_text(f"<annotation><filename>a</filename>{body}<object><name>t</name>"
-                     "</object></annotation>")  # fmt: skip
-        with pytest.raises(FileFormatError, match=r"\(t\) has no <bndbox>"):
-            read_voc_xml(p)
-        p.write_text("<annotation><filename>a</filename></annotation>")
-        with pytest.raises(FileFormatError, match="has no <size>"):
-            read_voc_xml(p)
-        p.write_text("plain text")
-        with pytest.raises(FileFormatError, match="not an XML file"):
-            read_voc_xml(p)
-
-
-# ----------------------------------------------------------------------------- formats
-
-
-class TestFormats:
-    def test_round_trip(self, tmp_path):
-        gt, res = synthetic_detections(3, n_images=8)
-        ds = coco_from_dict(gt)
-        back = read_coco_json(write_coco_json(ds, tmp_path / "sub" / "gt.json"))
-        for name in ("ann_ids", "image_ids", "category_ids", "boxes", "areas", "iscrowd"):
-            np.testing.assert_array_equal(getattr(back, name), getattr(ds, name))
-        assert back.images == ds.images and back.categories == ds.categories
-        assert coco_to_dict(back)["annotations"] == coco_to_dict(ds)["annotations"]
-        r = results_from_list(res)
-        r2 = read_coco_results(write_coco_results(r, tmp_path / "res.json"))
-        assert results_to_list(r2) == results_to_list(r)
-        assert results_to_list(r2)[0] == res[0]  # the same numbers come back
-        assert not ds.boxes.flags.writeable and not r.scores.flags.writeable
-
-    def test_defaults_for_area_and_iscrowd(self):
-        ds = coco_from_dict(one_image([{"bbox": [0, 0, 4, 5]}]))
-        assert ds.areas.tolist() == [20.0] and ds.iscrowd.tolist() == [False]
-
-    def test_voc_to_coco(self, tmp_path):
-        p = tmp_path / "a.xml"
-        p.write_text(
-            "<annotation><filename>a.png</filename><size><width>50</width><height>40"
-            "</height><depth>3</depth></size>"
-            + "".join(
-                f"<object><name>{n}</name><difficult>{d}</difficult><bndbox><xmin>{x}</xmin>"
-                f"<ymin>2</ymin><xmax>{x + 10}</xmax><ymax>7</ymax></bndbox></object>"
-                for n, d, x in (("b", 0, 1), ("a", 1, 20), ("b", 0, 30))
-            )
-            + "</annotation>"
-        )
-        voc = read_voc_xml(p)
-        assert (voc.width, voc.height, voc.depth, voc.filename) == (50, 40, 3, "a.png")
-        assert [o.difficult for o in voc.objects] == [False, True, False]
-        ds = voc_to_coco([voc, voc])
-        assert ds.category_names() == {1: "a", 2: "b"}
-        assert ds.boxes[0].tolist() == [1.0, 2.0, 10.0, 5.0] and len(ds) == 6
-        assert ds.image_ids.tolist() == [1, 1, 1, 2, 2, 2]
-        assert len(voc_to_coco([voc], include_difficult=False)) == 2
-        with pytest.raises(InputError, match="class 'a' is not in categories"):
-            voc_to_coco([voc], categories=["b"])
-
-
-# ----------------------------------------------------------------------------- VOC AP
-
-
-class TestVocAP:
-    def test_all_point_hand_case(self):
-        # TP, FP, TP over 2 gt: recall .5 .5 1, precision 1 .5 2/3; envelope 1, 2/3, 2/3
-        # AP = .5 * 1 + .5 * 2/3 = 5/6
-        assert voc_average_precision([0.5, 0.5, 1.0], [1.0, 0.5, 2 / 3]) == pytest.approx(5 / 6)
-        # recall never reaches 1: the last segment counts 0
-        assert voc_average_precision([0.25, 0.5], [1.0, 1.0]) == pytest.approx(0.5)
-        assert voc_average_precision([], []) == 0.0
-
-    def test_evaluate_voc(self):
-        gt = one_image(
-            [
-                {"bbox": [0, 0, 10, 10]},
-                {"bbox": [50, 50, 10, 10]},
-                {"bbox": [200, 200, 50, 50], "iscrowd": 1},  # VOC's "difficult"
-            ],
-            cats=(1, 2),
-        )
-        dets = [
-            det([0, 0, 10, 10], 0.9),
-            det([0, 0, 10, 10], 0.85),  # a duplicate: FP
-            det([200, 200, 50, 50], 0.8),  # on the difficult box: neither TP nor FP
-            det([50, 50, 10, 10], 0.7),
-        ]
-        ev = evaluate_voc(gt, dets)
-        assert ev.ap[1] == pytest.approx(5 / 6) and np.isnan(ev.ap[2])
-        assert ev.mean_ap == pytest.approx(5 / 6)
-        # IoU 0.5 exactly is not above the threshold (VOC's strict >)
-        half = evaluate_voc(gt, [det([0, 0, 10, 5], 0.9)], iou_threshold=0.5)
-        assert half.ap[1] == 0.0
-
-    def test_bad_input(self):
-        with pytest.raises(InputError, match="non-decreasing"):
-            voc_average_precision([0.5, 0.2], [1.0, 1.0])
-        with pytest.raises(InputError, match="one length"):
-            voc_average_precision([0.5], [1.0, 1.0])
-        with pytest.raises(InputError, match=r"precision must hold finite values in \[0, 1\]"):
-            voc_average_precision([0.5], [np.nan])
 
 
 # ----------------------------------------------------------------------------- pictures
@@ -548,15 +365,6 @@ def test_pr_curves_png(tmp_path):
 
 # ----------------------------------------------------------------------------- real data
 
-DEEPFOREST = {
-    "OSBS_029": (400, 400, {"Tree": 61}),
-    "SOAP_061": (400, 400, None),
-    "2019_YELL_2_541000_4977000_image_crop": (1249, 1035, None),
-    "2019_YELL_2_528000_4978000_image_crop2": (2299, 2472, None),
-}
-COUNTS = {"OSBS_029": 61, "SOAP_061": 37, "2019_YELL_2_541000_4977000_image_crop": 279,
-          "2019_YELL_2_528000_4978000_image_crop2": 574}  # fmt: skip
-
 
 def assert_self_evaluation_perfect(ds: CocoDataset, with_pycocotools: bool = True) -> None:
     """Ground truth as detections of score 1: every AP and the AR at the largest
@@ -578,35 +386,3 @@ def assert_self_evaluation_perfect(ds: CocoDataset, with_pycocotools: bool = Tru
         np.testing.assert_allclose(ours.stats[start:], ref.stats[start:], rtol=0, atol=TOL)
         np.testing.assert_allclose(ours.precision, ref.eval["precision"], rtol=0, atol=TOL)
         np.testing.assert_allclose(ours.recall, ref.eval["recall"], rtol=0, atol=TOL)
-
-
-@pytest.mark.realdata
-def test_deepforest_voc_files():
-    folder = data_path("detection", "deepforest_neon")
-    vocs = []
-    for stem, n in COUNTS.items():
-        voc = read_voc_xml(folder / f"{stem}.xml")
-        w, h, classes = DEEPFOREST[stem]
-        assert (voc.width, voc.height) == (w, h) and len(voc.objects) == n
-        if classes is not None:
-            assert {o.name for o in voc.objects} == set(classes)
-        vocs.append(voc)
-    assert {o.name for o in vocs[1].objects} == {"Alive", "Dead"}  # SOAP_061, as SOURCES.md
-    ds = voc_to_coco(vocs)
-    assert len(ds) == 951  # SOURCES.md: 951 boxes over 4 images
-    sides = ds.boxes[:, 2:]
-    assert sides.min() >= 1 and sides.max() <= 107 + 1  # "box sides 8-107 px"
-    assert_self_evaluation_perfect(ds)
-
-
-@pytest.mark.realdata
-def test_coco_json_files():
-    kp = read_coco_json(data_path("detection", "coco_keypoints_mmpose", "test_coco.json"))
-    assert len(kp.images) == 4 and len(kp) == 14 and kp.category_names() == {1: "person"}
-    assert_self_evaluation_perfect(kp)
-    lm = read_coco_json(data_path("detection", "labelme_voc_instances", "coco", "annotations.json"))
-    assert len(lm.images) == 3 and len(lm) == 12 and len(lm.categories) == 21
-    # labelme numbers annotations from 0, which pycocotools takes for "unmatched":
-    # ours only (the difference the module docstring states)
-    assert 0 in lm.ann_ids.tolist()
-    assert_self_evaluation_perfect(lm, with_pycocotools=False)
