@@ -71,7 +71,9 @@ class TestRandomViews:
         ],
     )
     def test_bad_input(self, library_poses, kwargs, match):
-        args = {"poses3d": library_poses[:2], **kwargs}
+        # seeded: with fresh entropy the "behind it" case passed or failed by the draw
+        # of the camera's yaw (issue 44: a test's outcome must depend on the code only)
+        args = {"poses3d": library_poses[:2], "rng": 0, **kwargs}
         with pytest.raises(InputError, match=match):
             random_views(**args)
 
