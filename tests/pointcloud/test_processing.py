@@ -313,6 +313,7 @@ def test_clusters_on_mosd_scenes_against_labels(scene, min_ari):
 @pytest.mark.realdata
 def test_segment_plane_finds_the_table_like_open3d(table):
     plane, inl = segment_plane(table, 0.01, rng=0)
+    o3d.utility.random.seed(0)  # the reference's RANSAC draws too: same outcome every run
     eq, ref = table.to_open3d().segment_plane(0.01, 3, 1000)
     ref = np.asarray(ref)
     assert np.degrees(plane.angle_to(Plane.from_equation(eq))) < 1.0
