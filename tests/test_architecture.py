@@ -604,11 +604,16 @@ def nn_part(module: str) -> str:
     return parts[2] if len(parts) > 2 else "__init__"
 
 
-def _nn_target(imp: Import, known: set[str]) -> str:
-    """The module an import reaches (``from robopercept.nn import ops`` -> ``...nn.ops``)."""
-    if imp.name is not None and f"{imp.module}.{imp.name}" in known:
-        return f"{imp.module}.{imp.name}"
-    return imp.module
+def _nn_imports(
+    source: str, module: str, is_package: bool, modules: Iterable[str]
+) -> Iterator[tuple[Import, str]]:
+    """Each import of ``module`` with the module it reaches
+    (``from robopercept.nn import ops`` -> ``robopercept.nn.ops``)."""
+    known = set(modules)
+    tree = _parse(source, module)
+    for imp in resolve_imports(tree, module, is_package=is_package, modules=known):
+        sub = f"{imp.module}.{imp.name}"
+        yield imp, sub if imp.name is not None and sub in known else imp.module
 
 
 def nn_floor_violations(
@@ -628,12 +633,10 @@ def nn_floor_violations(
         return [f"{module}: part {me!r} of nn has no floor; add it to NN_FLOORS"]
     known, free = set(modules), set(torch_free)
     out = []
-    tree = _parse(source, module)
-    for imp in resolve_imports(tree, module, is_package=is_package, modules=known):
+    for imp, target in _nn_imports(source, module, is_package, known):
         where = f"{module}:{imp.lineno}"
         if imp.module.split(".")[0] in NN_ONLY and module in free and not imp.lazy:
             out.append(f"{where} imports {imp.module} at module level in a torch-free module")
-        target = _nn_target(imp, known)
         if not _ours(target) or top_part(target) != "nn":
             continue
         other = nn_part(target)
@@ -664,11 +667,9 @@ def nn_local_import_violations(
     real arrows; the one exception is a torch-free module reaching a torch module."""
     if top_part(module) != "nn":
         return []
-    known, free = set(modules), set(torch_free)
+    free = set(torch_free)
     out: list[str] = []
-    tree = _parse(source, module)
-    for imp in resolve_imports(tree, module, is_package=is_package, modules=known):
-        target = _nn_target(imp, known)
+    for imp, target in _nn_imports(source, module, is_package, modules):
         if not imp.lazy or not _ours(target):
             continue
         if module in free and top_part(target) == "nn" and target not in free:

@@ -161,11 +161,11 @@ def _font_pool(fonts: Sequence[str | Path] | str | None) -> list[Path]:
                 f"{', '.join(SYSTEM_FONT_DIRS)}: use fonts='default' (matplotlib's)"
             )
         return pool
-    if isinstance(fonts, str | Path):
-        raise InputError(
-            f"fonts must be 'default', 'system' or a list of font files; got {fonts!r}"
-        )
-    if not isinstance(fonts, Sequence) or not all(isinstance(f, str | Path) for f in fonts):
+    if (
+        isinstance(fonts, str | Path)
+        or not isinstance(fonts, Sequence)
+        or not all(isinstance(f, str | Path) for f in fonts)
+    ):
         raise InputError(
             f"fonts must be 'default', 'system' or a list of font files; got {fonts!r}"
         )
