@@ -12,6 +12,7 @@ __all__ = [
     "InputError",
     "NotFittedError",
     "RoboperceptError",
+    "RunExistsError",
 ]
 
 
@@ -25,6 +26,12 @@ class InputError(RoboperceptError, ValueError):
     Subclasses :class:`ValueError` so that code written against NumPy or OpenCV
     conventions (``except ValueError``) keeps working.
     """
+
+
+class RunExistsError(InputError):
+    """An output folder already holds a training run, and neither resuming it nor
+    replacing it was asked for (the command line's ``--resume`` / ``--overwrite``): a
+    usage error, exit 2 on the command line."""
 
 
 class DegenerateError(RoboperceptError, ArithmeticError):

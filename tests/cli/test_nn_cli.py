@@ -17,6 +17,7 @@ torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
+from tests.cli.nn_runs import check_run_folder_rules  # noqa: E402
 
 TRAIN = ["nn", "train", "--data", "digits", "--model", "vgg_small", "--quiet"]
 
@@ -153,9 +154,15 @@ def test_resume_without_a_checkpoint(tmp_path: Path, capsys) -> None:
 
 def test_an_existing_run_is_not_overwritten(run_dir: Path, capsys) -> None:
     before = (run_dir / "checkpoint.pt").read_bytes()
-    assert main([*TRAIN, "--epochs", "1", "-o", str(run_dir)]) == 1
+    # exit 2 (issue 45: the fix is a flag, --resume or --overwrite; it was 1 before)
+    assert main([*TRAIN, "--epochs", "1", "-o", str(run_dir)]) == 2
     assert "--resume" in capsys.readouterr().err
     assert (run_dir / "checkpoint.pt").read_bytes() == before
+
+
+def test_run_folder_rules(tmp_path: Path, capsys, torch_one_thread) -> None:
+    # refusal (exit 2), Ctrl-C after epoch 1 (exit 130), --resume to the same weights
+    check_run_folder_rules([*TRAIN, "--epochs", "2"], tmp_path, "checkpoint.best.pt", capsys)
 
 
 def test_resume_continues_the_run(run_dir: Path, tmp_path: Path) -> None:

@@ -41,7 +41,7 @@ from typing import Any, NoReturn, TextIO
 
 from robopercept import __version__
 from robopercept.cli._args import UsageError
-from robopercept.errors import RoboperceptError
+from robopercept.errors import RoboperceptError, RunExistsError
 
 __all__ = ["EXIT_ERROR", "EXIT_INTERNAL", "EXIT_USAGE", "build_parser", "main"]
 
@@ -222,7 +222,7 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None, debug: bo
     except _ParserError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
-    except UsageError as exc:
+    except (UsageError, RunExistsError) as exc:  # the fix is a flag: --resume / --overwrite
         print(f"robopercept: error: {_first_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:

@@ -1,7 +1,7 @@
 """``robopercept nn train|eval|predict|summary``: convolutional networks (extra ``deep``).
 
-The work is done by :mod:`robopercept.nn.classification.run` and
-:mod:`robopercept.nn.core.summary`; this module parses and prints. torch is imported only
+The work is done by :mod:`robopercept.nn.classification.run` (training, evaluation,
+prediction and the layer table); this module parses and prints. torch is imported only
 when a command runs, so the parser (and every other command) stays torch-free; without torch
 a command fails with the install line of the ``deep`` extra.
 """
@@ -161,8 +161,7 @@ def _split(text: str) -> tuple[float, float, float]:
 def run_train(args: argparse.Namespace) -> int:
     """Run ``robopercept nn train`` with the parsed ``args``; returns the exit status."""
     _need_torch()
-    from robopercept.nn.classification.run import train_run
-    from robopercept.nn.train.config import TrainConfig
+    from robopercept.nn.classification.run import TrainConfig, torchrun_env, train_ddp, train_run
 
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
@@ -191,9 +190,6 @@ def run_train(args: argparse.Namespace) -> int:
         "overwrite": args.overwrite,
         "progress": not (args.quiet or args.json),
     }
-    from robopercept.nn.classification.run import train_ddp
-    from robopercept.nn.train.distributed import torchrun_env
-
     env = torchrun_env()
     rank = 0 if env is None else env[0]
     if args.nproc > 1 or env is not None:  # DDP (nn.train.distributed)
@@ -268,11 +264,9 @@ def run_predict(args: argparse.Namespace) -> int:
 def run_summary(args: argparse.Namespace) -> int:
     """Run ``robopercept nn summary`` with the parsed ``args``; returns the exit status."""
     _need_torch()
-    from robopercept.nn.classification.models import build_model
-    from robopercept.nn.core.summary import summary
+    from robopercept.nn.classification.run import model_summary
 
-    c = args.input[0]
-    s = summary(build_model(args.model, in_channels=c, num_classes=args.classes), args.input)
+    s = model_summary(args.model, args.input, args.classes)
     if not args.json:
         print(s)
         return 0

@@ -267,3 +267,126 @@ def test_optimizer_step_by_hand():
     )
     with pytest.raises(InputError, match="the loss became nan at epoch 3, batch 1: lower"):
         optimizer_step(w.sum() * float("nan"), opt, sched, [w], clip, "epoch 3, batch 1")
+
+
+# ------------------------------------------------------------------ the one loop: resume
+class _StopAfter:
+    """A forward pre-hook that raises KeyboardInterrupt at the n-th training forward."""
+
+    def __init__(self, n: int) -> None:
+        self.n = n
+
+    def __call__(self, module: torch.nn.Module, args: object) -> None:
+        if module.training:
+            self.n -= 1
+            if self.n < 0:
+                raise KeyboardInterrupt
+
+
+def interrupted_then_resumed(build, train, steps_before_stop: int, tmp_path) -> tuple:
+    """(uninterrupted model, resumed model): ``train(model, checkpoint, resume)`` runs
+    the same training; the second run is stopped by Ctrl-C after ``steps_before_stop``
+    training batches, then resumed from its checkpoint into a model with other weights."""
+    whole = build(0)
+    train(whole, None, False)
+    part = build(0)
+    first = next(
+        m
+        for m in part.modules()
+        if isinstance(m, (torch.nn.Conv1d, torch.nn.Conv2d, torch.nn.Linear))
+    )  # runs once per training batch
+    hook = first.register_forward_pre_hook(_StopAfter(steps_before_stop))
+    ck = tmp_path / "run.pt"
+    with pytest.raises(KeyboardInterrupt):
+        train(part, ck, False)
+    hook.remove()
+    assert ck.exists()
+    resumed = build(7)  # other initial weights: the checkpoint's replace them
+    hist = train(resumed, ck, True)
+    return whole, resumed, hist
+
+
+def test_train_loop_resumes_the_detector_segmenter_pose_and_cloud_trainers(tmp_path) -> None:
+    from robopercept.nn.cloud.run import build_cloud_model, train_cloud_model
+    from robopercept.nn.cloud.synthetic import procedural_shapes
+    from robopercept.nn.detection.synthetic import procedural_detection_set
+    from robopercept.nn.detection.train import train_detector
+    from robopercept.nn.detection.zoo import build_detector
+    from robopercept.nn.pose.data import procedural_pose_set
+    from robopercept.nn.pose.networks import HRNet
+    from robopercept.nn.pose.train import train_pose
+    from robopercept.nn.segmentation.networks import UNet, train_segmenter
+
+    torch.set_num_threads(1)
+    det = procedural_detection_set(6, (48, 48), rng=0)
+    dtr, dva = det.split((0.67, 0.33), rng=0)
+    rs = np.random.default_rng(0)
+    x = rs.random((6, 24, 24, 1)).astype(np.float32)
+    y = (x[..., 0] > 0.5).astype(np.int64)
+    poses = procedural_pose_set(12, (64, 64), rng=3)
+    ptr, pva = poses.subset(range(8)), poses.subset(range(8, 12))
+    classes = ("sphere", "plane", "l_shape")
+    ctr = procedural_shapes(4, 64, classes=classes, rng=0)  # 4 of each class: 6 batches
+    cva = procedural_shapes(2, 64, classes=classes, rng=1)
+
+    def seeded(make):
+        def build(seed):
+            torch.manual_seed(seed)
+            return make()
+
+        return build
+
+    cfg = TrainConfig(epochs=3, batch_size=2, lr=1e-3, device="cpu", schedule="cosine")
+    cases = {
+        "detector (EMA, validation every 2)": (
+            lambda s: build_detector("fcos", len(dtr.classes), seed=s, width=8),
+            lambda m, ck, r: train_detector(
+                m,
+                dtr,
+                cfg,
+                val=dva,
+                val_every=2,
+                ema=0.9,
+                checkpoint=ck,
+                resume=r,
+                progress=False,
+            ),
+            3,
+        ),
+        "segmenter": (
+            seeded(lambda: UNet(2, in_channels=1, width=4, depth=2)),
+            lambda m, ck, r: train_segmenter(
+                m,
+                x,
+                y,
+                cfg,
+                val=(x[:2], y[:2]),
+                crop=16,
+                checkpoint=ck,
+                resume=r,
+                progress=False,
+            ),
+            4,
+        ),
+        "pose": (
+            seeded(lambda: HRNet(16, width=4, blocks=1)),
+            lambda m, ck, r: train_pose(
+                m, ptr, cfg, val=pva, checkpoint=ck, resume=r, progress=False
+            ),
+            5,
+        ),
+        "cloud": (
+            lambda s: build_cloud_model("pointnet", 3, seed=s, width=0.125),
+            lambda m, ck, r: train_cloud_model(
+                m, ctr, cfg, val=cva, checkpoint=ck, resume=r, progress=False
+            ),
+            8,
+        ),
+    }
+    for name, (build, train, stop) in cases.items():
+        whole, resumed, hist = interrupted_then_resumed(build, train, stop, tmp_path / name)
+        for (k, u), v in zip(
+            whole.state_dict().items(), resumed.state_dict().values(), strict=True
+        ):
+            assert torch.equal(u, v), f"{name}: {k} differs after resuming"
+        assert len(hist.losses) == 3, name

@@ -48,6 +48,7 @@ from robopercept.imaging import read_image, write_image
 from robopercept.learning.metrics import classification_report
 from robopercept.nn._guards import check_device
 from robopercept.nn.classification.models import MODELS, build_model
+from robopercept.nn.core.summary import ModelSummary, summary
 from robopercept.nn.data.augment import Compose, Normalize, RandomAffine, RandomCrop
 from robopercept.nn.data.datasets import (
     ArrayDataset,
@@ -67,6 +68,7 @@ from robopercept.nn.train.distributed import (
     torchrun_env,
 )
 from robopercept.nn.train.loop import evaluate, fit
+from robopercept.nn.train.runs import BEST_CHECKPOINT, CHECKPOINT, prepare_run_folder
 from robopercept.viz import confusion_picture
 
 __all__ = [
@@ -78,6 +80,7 @@ __all__ = [
     "evaluate_run",
     "load_data",
     "load_run",
+    "model_summary",
     "predict",
     "predict_loaded",
     "train_ddp",
@@ -86,9 +89,6 @@ __all__ = [
 
 #: data sets named instead of a folder
 BUILTIN_DATA = ("digits", "lfw")
-
-CHECKPOINT = "checkpoint.pt"
-BEST_CHECKPOINT = "checkpoint.best.pt"
 
 
 @dataclass(frozen=True)
@@ -422,18 +422,7 @@ def train_run(
     if len(fr) != 3:
         raise InputError(f"fractions must be (train, validation, test); got {fractions!r}")
     out = Path(out_dir)
-    ckpt = out / CHECKPOINT
-    if resume and not ckpt.exists():
-        raise InputError(
-            f"nothing to resume: {ckpt} does not exist; drop --resume to start a new run"
-        )
-    if not resume and not overwrite and ckpt.exists():
-        raise InputError(
-            f"{out} already holds a run ({CHECKPOINT}): pass --resume to continue it, "
-            "--overwrite to start afresh, or choose another -o/--out folder"
-        )
-    if out.exists() and not out.is_dir():
-        raise InputError(f"-o/--out {out} is a file; give a folder")
+    ckpt = prepare_run_folder(out, resume=resume, overwrite=overwrite)
     ds = load_data(data, mode=mode, size=size)
     train_idx, val_idx, test_idx = stratified_split(ds.labels, fr, rng=cfg.seed)
     c, h, w = ds.image_shape
@@ -454,7 +443,6 @@ def train_run(
     torch.manual_seed(cfg.seed)  # the initial weights
     net = arch.build()
     net[0] = Normalize(mean, std)
-    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
         hist = fit(
@@ -744,6 +732,30 @@ def evaluate_run(
 
 
 @torch.no_grad()
+def model_summary(model: str, input_shape: Sequence[int], num_classes: int) -> ModelSummary:
+    """The layer table of a model of :data:`~robopercept.nn.classification.models.MODELS`
+    built for ``input_shape`` ``(C, H, W)`` and ``num_classes`` outputs
+    (:func:`~robopercept.nn.core.summary.summary`, equal to torchinfo's): what
+    ``robopercept nn summary`` prints.
+
+    Raises
+    ------
+    InputError
+        An unknown model (``--model``) or a shape the model cannot take.
+
+    Examples
+    --------
+    >>> model_summary("vgg_small", (1, 8, 8), 10).output_shape
+    (1, 10)
+    """
+    if model not in MODELS:
+        raise InputError(f"unknown model {model!r} (--model): choose one of {', '.join(MODELS)}")
+    if not isinstance(input_shape, (list, tuple)) or len(input_shape) != 3:
+        raise InputError(f"input_shape must be (C, H, W) (--input); got {plain_repr(input_shape)}")
+    net = build_model(model, in_channels=int(input_shape[0]), num_classes=num_classes)
+    return summary(net, input_shape)
+
+
 def predict(
     checkpoint: str | os.PathLike[str],
     image_paths: Sequence[str | os.PathLike[str]],

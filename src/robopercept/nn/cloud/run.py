@@ -176,6 +176,8 @@ def train_cloud_model(
     up_axis: int = 2,
     regularizer: float = 0.001,
     progress: bool = True,
+    checkpoint: str | os.PathLike[str] | None = None,
+    resume: bool = False,
 ) -> CloudHistory:
     r"""Train a PointNet or DGCNN on a :class:`~robopercept.nn.cloud.data.CloudDataset`.
 
@@ -203,6 +205,12 @@ def train_cloud_model(
     regularizer : float
         The weight of the feature-transform regularizer (PointNet; 0 to disable).
     progress : bool
+    checkpoint : path, optional
+        Written after every epoch (:func:`~robopercept.nn.train.loop.epoch_loop`'s
+        checkpoint); the best weights go to ``<stem>.best.pt``.
+    resume : bool
+        Continue the run of ``checkpoint`` (same model, data and settings): it ends with
+        the weights of an uninterrupted run.
 
     Returns
     -------
@@ -278,6 +286,9 @@ def train_cloud_model(
         desc=f"training {type(model).__name__} ({task})",
         progress=progress,
         history=hist,
+        checkpoint=checkpoint,
+        resume=check_bool(resume, "resume"),
+        checkpoint_extra={"architecture": type(model).__name__},
     )
     return hist
 

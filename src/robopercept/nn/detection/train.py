@@ -1,5 +1,5 @@
-r"""Training and COCO evaluation of the detectors: :func:`train_detector` (the
-optimizer loop of :mod:`robopercept.nn.train.loop` over a
+r"""Training and COCO evaluation of the detectors: :func:`train_detector` (the one
+loop, :func:`~robopercept.nn.train.loop.train_loop`, over a
 :class:`~robopercept.nn.detection.data.DetectionDataset`, with validation that keeps the
 best epoch and optional weight averaging), :func:`evaluate_detector` (boxes, masks or
 keypoints, equal to pycocotools) and :class:`DetectionHistory`.
@@ -11,12 +11,10 @@ CPU for the same thread count. Models run on CUDA when moved there (``config.dev
 
 from __future__ import annotations
 
-import copy
-import math
 import os
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import torch
@@ -29,10 +27,8 @@ from robopercept.nn._guards import check_count, check_module
 from robopercept.nn.coco.evaluate import evaluate_detections
 from robopercept.nn.coco.rle import rle_encode
 from robopercept.nn.detection.data import DetectionDataset, collate_detection
-from robopercept.nn.train.checkpoint import save_checkpoint
-from robopercept.nn.train.config import TrainConfig, deterministic_algorithms, resolve_device
-from robopercept.nn.train.loop import optimizer_step, step_optimizer
-from robopercept.progress import progress_bar
+from robopercept.nn.train.config import TrainConfig, resolve_device
+from robopercept.nn.train.loop import LoopResult, step_optimizer, train_loop
 
 __all__ = [
     "VAL_METRICS",
@@ -118,6 +114,7 @@ def train_detector(
     ema: float | None = None,
     val_iou_type: str = "bbox",
     val_sigmas: Any = None,
+    resume: bool = False,
 ) -> DetectionHistory:
     r"""Train a detector of this module (or any model keeping the torchvision detection
     contract) on a :class:`~robopercept.nn.detection.data.DetectionDataset`.
@@ -144,9 +141,11 @@ def train_detector(
         :class:`~robopercept.nn.train.config.TrainConfig` (``patience``, ``monitor`` and
         the learning-rate multipliers are not used here).
     checkpoint : path, optional
-        Written after every epoch (:func:`~robopercept.nn.train.checkpoint.save_checkpoint`:
-        ``{"model", "epoch", "losses", "architecture"}``, the class name); read it back
-        with :func:`~robopercept.nn.train.checkpoint.load_checkpoint` ``(path, model)``.
+        Written after every epoch (:func:`~robopercept.nn.train.loop.train_loop`'s
+        checkpoint with ``"epoch"``, ``"losses"``, ``"history"`` and ``"architecture"``,
+        the class name; ``"model"`` holds the kept weights, the average with ``ema``);
+        the best weights go to ``<stem>.best.pt``. Read the weights back with
+        :func:`~robopercept.nn.train.checkpoint.load_checkpoint` ``(path, model)``.
     progress : bool
         A bar per epoch on stderr.
     val : DetectionDataset, optional
@@ -174,6 +173,10 @@ def train_detector(
         :class:`KeypointRCNN` with ``"keypoints"`` (OKS with ``val_sigmas``).
     val_sigmas : (J,) array_like, optional
         The OKS constants for ``"keypoints"``.
+    resume : bool
+        Continue the run of ``checkpoint`` (same model, data and settings): it ends with
+        the weights of an uninterrupted run (``augment`` drawing from its own generator
+        is not part of the checkpoint: resume exactly without it, or with a stateless one).
 
     Returns
     -------
@@ -205,6 +208,7 @@ def train_detector(
     cfg = config or TrainConfig()
     progress = check_bool(progress, "progress")
     ckpt = as_path(checkpoint, "checkpoint") if checkpoint is not None else None
+    resume = check_bool(resume, "resume")
     val_ds = check_detection_dataset(val) if val is not None else None
     if augment is not None and not callable(augment):
         raise InputError(
@@ -225,89 +229,97 @@ def train_detector(
     steps = -(-n // cfg.batch_size)
     opt, sched = step_optimizer(params, cfg, steps)
     hist = DetectionHistory()
-    best_state: dict[str, torch.Tensor] | None = None
-    best_value = -math.inf
     averaged = _weight_average(model, ema) if ema is not None else None
     # the model validated and kept: the average when there is one
     kept = averaged.module if averaged is not None else model
-    bar = progress_bar(
-        total=cfg.epochs, desc="training detector", unit="epoch", disable=not progress
+    sums: dict[str, float] = {}
+
+    def batches(epoch: int) -> Iterator[list[tuple[torch.Tensor, dict[str, Any]]]]:
+        order = torch.randperm(n, generator=gen).tolist()
+        for b in range(steps):
+            items = [ds[j] for j in order[b * cfg.batch_size : (b + 1) * cfg.batch_size]]
+            yield [augment(im, t) for im, t in items] if augment is not None else items
+
+    def step(items: list[tuple[torch.Tensor, dict[str, Any]]], epoch: int, b: int) -> torch.Tensor:
+        images, targets = collate_detection(items)
+        losses = model(
+            [im.to(dev) for im in images],
+            [
+                {k: t[k].to(dev) for k in ("boxes", "labels", "masks", "keypoints") if k in t}
+                for t in targets
+            ],
+        )
+        if not isinstance(losses, dict) or not losses:
+            raise InputError(
+                "the model must return a dict of losses in train mode (the torchvision "
+                f"detection contract); got {type(losses).__name__}"
+            )
+        loss = sum(losses.values())
+        assert isinstance(loss, torch.Tensor)
+        for k, v in losses.items():
+            sums[k] = sums.get(k, 0.0) + float(v.detach())
+        sums["loss"] = sums.get("loss", 0.0) + float(loss.detach())
+        return loss
+
+    def end_epoch(epoch: int, seconds: float) -> None:
+        hist.losses.append({k: v / steps for k, v in sums.items()})
+        hist.seconds.append(seconds)
+        sums.clear()
+
+    def validate(epoch: int) -> float:
+        t1 = time.perf_counter()
+        ev = evaluate_detector(kept, val_ds, iou_type=val_iou_type, sigmas=val_sigmas)
+        hist.val_seconds += time.perf_counter() - t1
+        hist.val[epoch + 1] = float(ev.stats[VAL_METRICS[val_metric]])
+        return hist.val[epoch + 1]
+
+    def after_epoch(epoch: int, res: LoopResult, seconds: float) -> dict[str, str]:
+        hist.best_epoch = res.best_epoch
+        post = {"loss": f"{hist.losses[-1]['loss']:.3f}"}
+        if hist.val:
+            post[f"val {val_metric}"] = f"{hist.val[max(hist.val)]:.3f}"
+        return post
+
+    def restore(state: dict[str, Any]) -> None:
+        saved = state["history"]
+        hist.losses[:] = [dict(d) for d in saved["losses"]]
+        hist.seconds[:] = list(saved["seconds"])
+        hist.val.update({int(k): float(v) for k, v in saved["val"].items()})
+        hist.best_epoch = int(saved["best_epoch"])
+        hist.val_seconds = float(saved["val_seconds"])
+
+    def extra(epoch: int) -> dict[str, Any]:
+        return {
+            "epoch": epoch + 1,
+            "losses": hist.losses,
+            "architecture": type(model).__name__,
+            "history": {**asdict(hist), "val": {str(k): v for k, v in hist.val.items()}},
+        }
+
+    train_loop(
+        model,
+        opt,
+        batches,
+        step,
+        epochs=cfg.epochs,
+        schedule=sched,
+        clip_grad_norm=cfg.clip_grad_norm,
+        clip_params=params,
+        lr=cfg.lr,
+        end_epoch=end_epoch,
+        validate=validate if val_ds is not None else None,
+        val_every=val_every,
+        after_epoch=after_epoch,
+        averaged=averaged,
+        generators={"shuffle": gen},
+        checkpoint=ckpt,
+        checkpoint_extra=extra,
+        best_extra={"architecture": type(model).__name__},
+        resume=resume,
+        restore=restore,
+        desc="training detector",
+        progress=progress,
     )
-    try:
-        with deterministic_algorithms():
-            for epoch in range(cfg.epochs):
-                t0 = time.perf_counter()
-                model.train()
-                sums: dict[str, float] = {}
-                order = torch.randperm(n, generator=gen).tolist()
-                for b in range(steps):
-                    items = [ds[j] for j in order[b * cfg.batch_size : (b + 1) * cfg.batch_size]]
-                    if augment is not None:
-                        items = [augment(im, t) for im, t in items]
-                    images, targets = collate_detection(items)
-                    images = [im.to(dev) for im in images]
-                    targets = [
-                        {
-                            k: t[k].to(dev)
-                            for k in ("boxes", "labels", "masks", "keypoints")
-                            if k in t
-                        }
-                        for t in targets
-                    ]
-                    losses = model(images, targets)
-                    if not isinstance(losses, dict) or not losses:
-                        raise InputError(
-                            "the model must return a dict of losses in train mode (the "
-                            f"torchvision detection contract); got {type(losses).__name__}"
-                        )
-                    loss = sum(losses.values())
-                    assert isinstance(loss, torch.Tensor)
-                    optimizer_step(
-                        loss, opt, sched, params, cfg, f"epoch {epoch + 1}, batch {b + 1}"
-                    )
-                    if averaged is not None:
-                        averaged.update_parameters(model)
-                    for k, v in losses.items():
-                        sums[k] = sums.get(k, 0.0) + float(v.detach())
-                    sums["loss"] = sums.get("loss", 0.0) + float(loss.detach())
-                hist.losses.append({k: v / steps for k, v in sums.items()})
-                hist.seconds.append(time.perf_counter() - t0)
-                last = epoch + 1 == cfg.epochs
-                if val_ds is not None and ((epoch + 1) % val_every == 0 or last):
-                    t1 = time.perf_counter()
-                    value = float(
-                        evaluate_detector(
-                            kept, val_ds, iou_type=val_iou_type, sigmas=val_sigmas
-                        ).stats[VAL_METRICS[val_metric]]
-                    )
-                    hist.val_seconds += time.perf_counter() - t1
-                    hist.val[epoch + 1] = value
-                    if best_state is None or value > best_value:
-                        best_value, hist.best_epoch = value, epoch + 1
-                        best_state = copy.deepcopy(kept.state_dict())
-                elif val_ds is None:
-                    hist.best_epoch = epoch + 1
-                if ckpt is not None:
-                    save_checkpoint(
-                        ckpt,
-                        {
-                            "model": kept.state_dict(),
-                            "epoch": epoch + 1,
-                            "losses": hist.losses,
-                            "architecture": type(model).__name__,
-                        },
-                    )
-                bar.update(1)
-                post = {"loss": f"{hist.losses[-1]['loss']:.3f}"}
-                if hist.val:
-                    post[f"val {val_metric}"] = f"{hist.val[max(hist.val)]:.3f}"
-                bar.set_postfix(**post)
-    finally:
-        bar.close()
-    if best_state is not None:
-        model.load_state_dict(best_state)
-    elif averaged is not None:
-        model.load_state_dict(kept.state_dict())
     return hist
 
 

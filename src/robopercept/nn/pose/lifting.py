@@ -29,6 +29,7 @@ the rotation is proper (:math:`\det R = +1`), so a mirrored prediction is not fo
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -57,7 +58,7 @@ from robopercept.nn.pose.views import (
     check_seed,
     normalize_joints,
 )
-from robopercept.nn.train.config import deterministic_algorithms
+from robopercept.nn.train.loop import train_loop
 
 __all__ = [
     "MAX_EPOCHS",
@@ -621,34 +622,37 @@ def train_lifter(
     in_s = torch.from_numpy(in_std).float()
     opt = torch.optim.Adam(model.parameters(), lr=lr, weight_decay=weight_decay)
     losses = np.zeros(epochs)
-    with torch.random.fork_rng(devices=[]), deterministic_algorithms():
+    sums = [0.0, 0]  # the epoch's loss sum and pair count
+
+    def step(idx: torch.Tensor, epoch: int, b: int) -> torch.Tensor:
+        if noise > 0:
+            xb = _normalize_torch(raw[idx] + noise * torch.randn(len(idx), j, 2), model)
+            xb = (xb - in_m) / in_s
+        else:
+            xb = x_clean[idx]
+        loss = nn.functional.mse_loss(model(xb.to(dev)), y_std[idx].to(dev))
+        if bool(torch.isfinite(loss)):
+            sums[0] += loss.item() * len(idx)
+            sums[1] += len(idx)
+        return loss
+
+    def end_epoch(epoch: int, seconds: float) -> None:
+        losses[epoch] = sums[0] / max(sums[1], 1)
+        sums[:] = [0.0, 0]
+
+    with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         shuffle = torch.Generator().manual_seed(seed)
-        model.train()
-        for epoch in range(epochs):
+
+        def batches(epoch: int) -> Iterator[torch.Tensor]:
             perm = torch.randperm(n, generator=shuffle)
-            total, count = 0.0, 0
             for a in range(0, n, batch_size):
-                idx = perm[a : a + batch_size]
-                if len(idx) < 2:
-                    continue
-                if noise > 0:
-                    xb = _normalize_torch(raw[idx] + noise * torch.randn(len(idx), j, 2), model)
-                    xb = (xb - in_m) / in_s
-                else:
-                    xb = x_clean[idx]
-                yb = y_std[idx]
-                loss = nn.functional.mse_loss(model(xb.to(dev)), yb.to(dev))
-                if not torch.isfinite(loss):
-                    raise InputError(
-                        f"the loss became {loss.item()} at epoch {epoch + 1}: lower lr ({lr:g})"
-                    )
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                total += loss.item() * len(idx)
-                count += len(idx)
-            losses[epoch] = total / max(count, 1)
+                if len(perm[a : a + batch_size]) >= 2:  # BatchNorm needs two
+                    yield perm[a : a + batch_size]
+
+        train_loop(
+            model, opt, batches, step, epochs=epochs, lr=lr, end_epoch=end_epoch, progress=False
+        )
     model.eval()
     if not all(bool(torch.isfinite(p).all()) for p in model.parameters()):
         raise InputError(

@@ -12,6 +12,7 @@ validation PCK (:func:`~robopercept.nn.pose.metrics.pck`).
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -159,6 +160,8 @@ def train_pose(
     augment: bool = True,
     pck_alpha: float = 0.1,
     progress: bool = True,
+    checkpoint: str | os.PathLike[str] | None = None,
+    resume: bool = False,
 ) -> PoseHistory:
     r"""Train a heatmap network or DeepPose on a :class:`~robopercept.nn.pose.data.PoseDataset`.
 
@@ -174,6 +177,28 @@ def train_pose(
     :func:`~robopercept.nn.train.loop.step_optimizer`. With ``val``, the PCK@``pck_alpha``
     (of the box diagonal) is measured after every epoch and the best epoch's weights
     are kept.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        A network of :func:`~robopercept.nn.pose.networks.build_pose_model`.
+    train : PoseDataset
+    config : TrainConfig, optional
+    val : PoseDataset, optional
+    skeleton : Skeleton, optional
+        Its flip pairs allow mirrored training images.
+    sigma : float
+        The Gaussian targets' standard deviation (heatmap cells).
+    augment : bool
+    pck_alpha : float
+        The PCK threshold (fraction of the box diagonal) that selects the epoch kept.
+    progress : bool
+    checkpoint : path, optional
+        Written after every epoch (:func:`~robopercept.nn.train.loop.epoch_loop`'s
+        checkpoint); the best weights go to ``<stem>.best.pt``.
+    resume : bool
+        Continue the run of ``checkpoint`` (same model, data and settings): it ends with
+        the weights of an uninterrupted run.
 
     Returns
     -------
@@ -237,6 +262,9 @@ def train_pose(
         desc="training pose network",
         progress=progress,
         history=hist,
+        checkpoint=checkpoint,
+        resume=check_bool(resume, "resume"),
+        checkpoint_extra={"architecture": type(model).__name__},
     )
     return hist
 

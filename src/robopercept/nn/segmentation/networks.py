@@ -26,11 +26,9 @@ weights and an ignore index, ``torch.nn.functional.cross_entropy``) and
 
 from __future__ import annotations
 
-import copy
 import math
 import os
-import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,7 +36,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from robopercept._checks import check_choice, check_int, check_real, plain_repr
+from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count
 from robopercept.nn.coco.rle import rle_encode
@@ -47,9 +45,8 @@ from robopercept.nn.core.blocks import ConvBNAct, check_input
 from robopercept.nn.data.datasets import to_unit_float
 from robopercept.nn.segmentation.metrics import segmentation_confusion, segmentation_scores
 from robopercept.nn.train.checkpoint import load_built_model, save_built_model
-from robopercept.nn.train.config import TrainConfig, deterministic_algorithms, resolve_device
-from robopercept.nn.train.loop import optimizer_step, step_optimizer
-from robopercept.progress import progress_bar
+from robopercept.nn.train.config import TrainConfig, resolve_device
+from robopercept.nn.train.loop import LoopResult, step_optimizer, train_loop
 
 __all__ = [
     "FCN",
@@ -594,6 +591,8 @@ def train_segmenter(
     dihedral: bool = True,
     samples_per_epoch: int | None = None,
     progress: bool = True,
+    checkpoint: str | os.PathLike[str] | None = None,
+    resume: bool = False,
 ) -> SegmentationHistory:
     r"""Train a segmentation network on labelled images.
 
@@ -628,6 +627,13 @@ def train_segmenter(
         Samples per epoch (the number of images by default; more when ``crop`` cuts
         several windows from few images).
     progress : bool
+    checkpoint : path, optional
+        Written after every epoch (:func:`~robopercept.nn.train.loop.train_loop`'s
+        checkpoint with ``"history"`` and ``"architecture"``); the best weights go to
+        ``<stem>.best.pt``.
+    resume : bool
+        Continue the run of ``checkpoint`` (same model, data and settings): it ends with
+        the weights of an uninterrupted run.
 
     Returns
     -------
@@ -667,6 +673,7 @@ def train_segmenter(
         if samples_per_epoch is None
         else check_count(samples_per_epoch, "samples_per_epoch", 1, 1 << 30)
     )
+    resume = check_bool(resume, "resume")
     dev = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)
     model.to(dev)
@@ -701,49 +708,76 @@ def train_segmenter(
         return total
 
     hist = SegmentationHistory()
-    best: dict[str, torch.Tensor] | None = None
-    best_value = -math.inf
-    bar = progress_bar(
-        total=cfg.epochs, desc="training segmenter", unit="epoch", disable=not progress
+    total = [0.0]
+
+    def batches(epoch: int) -> Iterator[tuple[torch.Tensor, torch.Tensor]]:
+        for b in range(steps):
+            m = min(cfg.batch_size, per_epoch - b * cfg.batch_size)
+            pairs = [sample() for _ in range(m)]
+            yield torch.stack([p[0] for p in pairs]), torch.stack([p[1] for p in pairs])
+
+    def step(xy: tuple[torch.Tensor, torch.Tensor], epoch: int, b: int) -> torch.Tensor:
+        value = objective(model(xy[0].to(dev)), xy[1].to(dev))
+        total[0] += float(value.detach())
+        return value
+
+    def end_epoch(epoch: int, seconds: float) -> None:
+        hist.losses.append(total[0] / steps)
+        hist.seconds.append(seconds)
+        total[0] = 0.0
+
+    def validate(epoch: int) -> float:
+        assert vx is not None and vy is not None
+        pred = _predict(model, vx)
+        classes = k if isinstance(k, int) else int(max(pred.max(), vy.max())) + 1
+        conf = segmentation_confusion(vy.numpy(), pred.numpy(), classes, None if ig < 0 else ig)
+        hist.val[epoch + 1] = segmentation_scores(conf).miou
+        return hist.val[epoch + 1]
+
+    def after_epoch(epoch: int, res: LoopResult, seconds: float) -> dict[str, str]:
+        hist.best_epoch = res.best_epoch
+        post = {"loss": f"{hist.losses[-1]:.3f}"}
+        if hist.val:
+            post["val mIoU"] = f"{hist.val[epoch + 1]:.3f}"
+        return post
+
+    def restore(state: dict[str, Any]) -> None:
+        saved = state["history"]
+        hist.losses[:] = list(saved["losses"])
+        hist.seconds[:] = list(saved["seconds"])
+        hist.val.update({int(e): float(v) for e, v in saved["val"].items()})
+        hist.best_epoch = int(saved["best_epoch"])
+
+    train_loop(
+        model,
+        opt,
+        batches,
+        step,
+        epochs=cfg.epochs,
+        schedule=sched,
+        clip_grad_norm=cfg.clip_grad_norm,
+        clip_params=params,
+        lr=cfg.lr,
+        end_epoch=end_epoch,
+        validate=validate if vx is not None else None,
+        after_epoch=after_epoch,
+        generators={"sampling": gen},
+        checkpoint=checkpoint,
+        checkpoint_extra=lambda epoch: {
+            "architecture": type(model).__name__,
+            "history": {
+                "losses": hist.losses,
+                "seconds": hist.seconds,
+                "val": {str(e): v for e, v in hist.val.items()},
+                "best_epoch": hist.best_epoch,
+            },
+        },
+        best_extra={"architecture": type(model).__name__},
+        resume=resume,
+        restore=restore,
+        desc="training segmenter",
+        progress=progress,
     )
-    try:
-        with deterministic_algorithms():
-            for epoch in range(cfg.epochs):
-                t0 = time.perf_counter()
-                model.train()
-                total = 0.0
-                for b in range(steps):
-                    m = min(cfg.batch_size, per_epoch - b * cfg.batch_size)
-                    pairs = [sample() for _ in range(m)]
-                    xb = torch.stack([p[0] for p in pairs]).to(dev)
-                    yb = torch.stack([p[1] for p in pairs]).to(dev)
-                    value = objective(model(xb), yb)
-                    optimizer_step(value, opt, sched, params, cfg, f"epoch {epoch + 1}")
-                    total += float(value.detach())
-                hist.losses.append(total / steps)
-                hist.seconds.append(time.perf_counter() - t0)
-                if vx is not None and vy is not None:
-                    pred = _predict(model, vx)
-                    classes = k if isinstance(k, int) else int(max(pred.max(), vy.max())) + 1
-                    conf = segmentation_confusion(
-                        vy.numpy(), pred.numpy(), classes, None if ig < 0 else ig
-                    )
-                    score = segmentation_scores(conf).miou
-                    hist.val[epoch + 1] = score
-                    if best is None or score > best_value:
-                        best_value, hist.best_epoch = score, epoch + 1
-                        best = copy.deepcopy(model.state_dict())
-                else:
-                    hist.best_epoch = epoch + 1
-                bar.update(1)
-                post = {"loss": f"{hist.losses[-1]:.3f}"}
-                if hist.val:
-                    post["val mIoU"] = f"{hist.val[epoch + 1]:.3f}"
-                bar.set_postfix(**post)
-    finally:
-        bar.close()
-    if best is not None:
-        model.load_state_dict(best)
     return hist
 
 

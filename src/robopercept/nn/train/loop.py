@@ -1,5 +1,13 @@
-"""THE training loop: :func:`fit` for classifiers on any ``torch.nn.Module``,
-:func:`epoch_loop` for the per-batch trainers of the task wings, :func:`evaluate`.
+"""THE training loop, :func:`train_loop`, and the trainers built on it: :func:`fit`
+for classifiers on any ``torch.nn.Module``, :func:`epoch_loop` for the task trainers
+that draw batches of sample indices, :func:`evaluate`.
+
+:func:`train_loop` is the one loop of :mod:`robopercept.nn` (the detectors',
+segmenters', pose, point-cloud and lifting trainers run their epochs through it): a
+trainer gives its batches and its loss; the loop owns the optimizer step (non-finite
+losses refused, gradient clipping, per-batch or per-epoch schedules), weight averaging,
+validation every k epochs with the best epoch kept, early stopping, progress,
+checkpoints after every epoch and resuming from them, and determinism.
 
 :func:`fit` runs the loop the notes teach: mini-batches of the training set (shuffled
 by a seeded generator), cross-entropy loss, back-propagation, an optimizer step (SGD
@@ -25,9 +33,8 @@ import copy
 import math
 import os
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
-from pathlib import Path
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -36,7 +43,7 @@ from torch import nn
 from torch.utils.data import DataLoader, Dataset
 
 from robopercept._checks import as_path, check_bool, plain_repr
-from robopercept.errors import InputError
+from robopercept.errors import FileFormatError, InputError
 from robopercept.learning.metrics import confusion_matrix
 from robopercept.nn._guards import check_count, check_dataset, check_module
 from robopercept.nn.train.checkpoint import load_checkpoint, save_checkpoint
@@ -51,11 +58,13 @@ from robopercept.progress import progress_bar
 __all__ = [
     "EpochHistory",
     "Evaluation",
+    "LoopResult",
     "epoch_loop",
     "evaluate",
     "fit",
     "optimizer_step",
     "step_optimizer",
+    "train_loop",
 ]
 
 
@@ -300,6 +309,296 @@ def optimizer_step(
 
 
 @dataclass
+class LoopResult:
+    """What :func:`train_loop` ends with.
+
+    Attributes
+    ----------
+    epochs_done : int
+        Completed epochs (counting those of a resumed checkpoint).
+    best_epoch : int
+        The (1-based) epoch whose weights the model holds (the last epoch without
+        validation; 0 when no epoch ran).
+    best_score : float
+        Its validation score (``-inf`` without validation).
+    stopped : str
+        ``""``, or why the loop ended early (``"early stopping: ..."``).
+    """
+
+    epochs_done: int = 0
+    best_epoch: int = 0
+    best_score: float = -math.inf
+    stopped: str = ""
+
+
+def train_loop(
+    model: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    batches: Callable[[int], Iterable[Any]],
+    step: Callable[[Any, int, int], torch.Tensor],
+    *,
+    epochs: int,
+    schedule: Any = None,
+    schedule_per_batch: bool = True,
+    clip_grad_norm: float | None = None,
+    clip_params: Sequence[torch.Tensor] | None = None,
+    lr: float | None = None,
+    before_epoch: Callable[[int], None] | None = None,
+    end_epoch: Callable[[int, float], None] | None = None,
+    validate: Callable[[int], float] | None = None,
+    val_every: int = 1,
+    after_epoch: Callable[[int, LoopResult, float], dict[str, str]] | None = None,
+    averaged: Any = None,
+    patience: int | None = None,
+    generators: Mapping[str, torch.Generator] | None = None,
+    checkpoint: str | os.PathLike[str] | None = None,
+    checkpoint_extra: Callable[[int], dict[str, Any]] | None = None,
+    best_extra: Mapping[str, Any] | None = None,
+    resume: bool = False,
+    restore: Callable[[dict[str, Any]], None] | None = None,
+    write: bool = True,
+    desc: str = "training",
+    progress: bool = True,
+) -> LoopResult:
+    r"""THE training loop: every trainer of :mod:`robopercept.nn` runs its epochs here
+    (:func:`fit`, :func:`epoch_loop`,
+    :func:`~robopercept.nn.detection.train.train_detector`,
+    :func:`~robopercept.nn.segmentation.networks.train_segmenter`,
+    :func:`~robopercept.nn.pose.lifting.train_lifter`), each giving its batches and its
+    loss.
+
+    Per epoch ``e`` (0-based): ``before_epoch(e)``; the model in train mode; for each
+    batch ``b`` of ``batches(e)``, ``loss = step(batch, e, b)``, refused when not finite
+    (the message names the epoch, the batch and the learning rate ``lr`` to lower),
+    then ``zero_grad``, back-propagation, gradient-norm clipping at ``clip_grad_norm``
+    (of ``clip_params``, by default every parameter),
+    the optimizer step, the schedule's step when ``schedule_per_batch``, and the update
+    of the weight average ``averaged`` (a :class:`torch.optim.swa_utils.AveragedModel`);
+    the schedule's step after the batches otherwise; ``end_epoch(e, seconds)``. Every
+    ``val_every`` epochs and after the last, ``validate(e)`` scores the kept model (the
+    average when there is one; higher is better) and the best score's weights are
+    copied (the earliest on ties); without ``validate`` every epoch is the best, so the
+    last weights are kept. ``after_epoch(e, result, seconds)`` sees the running
+    :class:`LoopResult` and returns the progress bar's figures. With ``patience``, the
+    loop stops when the best epoch lies ``patience`` epochs back. At the end (and when
+    interrupted) the model holds the best weights.
+
+    The run is deterministic on the CPU for a thread count: the loop runs under
+    :func:`~robopercept.nn.train.config.deterministic_algorithms`, the caller seeds
+    torch and the ``generators`` it draws batches from.
+
+    **Checkpoints.** With ``checkpoint``, after every epoch (when ``write``: rank 0 of a
+    distributed run) the file holds the kept weights (``"model"``), the optimizer and
+    schedule, the ``generators``' and torch's random states, the weight average and the
+    trained weights under it, ``"epochs_done"``, ``"best_epoch"``, ``"best_score"`` and
+    ``checkpoint_extra(e)`` (the trainer's history and settings); the best weights go to
+    ``<stem>.best.pt`` beside it with ``best_extra``. Written atomically
+    (:func:`~robopercept.nn.train.checkpoint.save_checkpoint`), so Ctrl-C or SIGTERM
+    leaves the last complete epoch. ``resume`` reads them back (then ``restore(state)``
+    gives the trainer its history) and continues with epoch ``epochs_done``: the run
+    ends with the weights an uninterrupted one has.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+    optimizer : torch.optim.Optimizer
+    batches : callable
+        ``batches(epoch) -> iterable`` of the epoch's batches (drawn lazily, so that
+        the random draws interleave with the steps as they always did).
+    step : callable
+        ``step(batch, epoch, b) -> loss``, a scalar tensor attached to the graph; the
+        trainer accumulates its own figures here.
+    epochs : int
+    schedule : torch.optim.lr_scheduler.LRScheduler, optional
+    schedule_per_batch : bool
+    clip_grad_norm : float, optional
+    clip_params : sequence of Parameter, optional
+    lr : float, optional
+        The learning rate the user set, named when a loss is not finite (default: the
+        optimizer's first group's).
+    before_epoch, end_epoch, after_epoch : callable, optional
+    validate : callable, optional
+    val_every : int
+    averaged : AveragedModel, optional
+    patience : int, optional
+    generators : dict of str to torch.Generator, optional
+    checkpoint : path, optional
+    checkpoint_extra : callable, optional
+    best_extra : dict, optional
+    resume : bool
+    restore : callable, optional
+    write : bool
+    desc : str
+        The progress bar's label.
+    progress : bool
+
+    Returns
+    -------
+    LoopResult
+
+    Raises
+    ------
+    InputError
+        A loss that became NaN or infinite; ``resume`` without a checkpoint.
+    FileFormatError
+        ``resume`` from a file that is not such a checkpoint, or of another model.
+    """
+    model = check_module(model)
+    epochs = check_count(epochs, "epochs", 1, 1 << 30)
+    val_every = check_count(val_every, "val_every", 1, 1 << 30)
+    gens = dict(generators or {})
+    ckpt = as_path(checkpoint, "checkpoint") if checkpoint is not None else None
+    if resume and ckpt is None:
+        raise InputError("resume needs the checkpoint to resume from")
+    best_path = ckpt.with_name(ckpt.stem + ".best.pt") if ckpt is not None else None
+    kept = averaged.module if averaged is not None else model
+    rate = float(optimizer.param_groups[0]["lr"]) if lr is None else float(lr)
+    clip = list(clip_params) if clip_params is not None else None
+    result = LoopResult()
+    best_state: dict[str, torch.Tensor] | None = None
+    start = 0
+    if resume and ckpt is not None:
+        state = load_checkpoint(ckpt)
+        if "epochs_done" not in state or "optimizer" not in state:
+            raise FileFormatError(
+                f"{ckpt}: not a checkpoint of a training run that can be resumed (no "
+                "optimizer state): start a new run"
+            )
+        if averaged is not None:
+            if "averaged" not in state:
+                raise FileFormatError(
+                    f"{ckpt}: the run kept no weight average; resume it without one"
+                )
+            model.load_state_dict(state["trained_model"])
+            averaged.load_state_dict(state["averaged"])
+        else:
+            load_checkpoint(ckpt, model)
+        optimizer.load_state_dict(state["optimizer"])
+        if schedule is not None and state.get("scheduler") is not None:
+            schedule.load_state_dict(state["scheduler"])
+        for name, g in gens.items():
+            g.set_state(state["generators"][name])
+        torch.set_rng_state(state["torch_rng_state"])
+        start = int(state["epochs_done"])
+        result = LoopResult(
+            start,
+            int(state["best_epoch"]),
+            float(state["best_score"]),
+            str(state.get("stopped", "")),
+        )
+        if validate is not None and best_path is not None and best_path.exists():
+            best_state = load_checkpoint(best_path)["model"]
+        if restore is not None:
+            restore(state)
+    bar = progress_bar(total=epochs - start, desc=desc, unit="epoch", disable=not progress)
+    try:
+        with deterministic_algorithms():
+            for epoch in range(start, epochs):
+                t0 = time.perf_counter()
+                if before_epoch is not None:
+                    before_epoch(epoch)
+                model.train()
+                for b, batch in enumerate(batches(epoch)):
+                    loss = step(batch, epoch, b)
+                    if not bool(torch.isfinite(loss)):
+                        value = loss.item()
+                        raise InputError(
+                            f"the loss became {value} at epoch {epoch + 1}, batch {b + 1}: "
+                            f"lower the learning rate (lr {rate:g})"
+                        )
+                    optimizer.zero_grad(set_to_none=True)
+                    loss.backward()
+                    if clip_grad_norm is not None:
+                        nn.utils.clip_grad_norm_(
+                            clip if clip is not None else model.parameters(), clip_grad_norm
+                        )
+                    optimizer.step()
+                    if schedule is not None and schedule_per_batch:
+                        schedule.step()
+                    if averaged is not None:
+                        averaged.update_parameters(model)
+                if schedule is not None and not schedule_per_batch:
+                    schedule.step()
+                if end_epoch is not None:
+                    end_epoch(epoch, time.perf_counter() - t0)
+                improved = validate is None
+                if validate is not None and ((epoch + 1) % val_every == 0 or epoch + 1 == epochs):
+                    score = float(validate(epoch))
+                    if best_state is None or score > result.best_score:
+                        result.best_score, improved = score, True
+                        best_state = copy.deepcopy(kept.state_dict())
+                if improved:
+                    result.best_epoch = epoch + 1
+                result.epochs_done = epoch + 1
+                if (
+                    patience is not None
+                    and validate is not None
+                    and epoch + 1 - result.best_epoch >= patience
+                ):
+                    result.stopped = f"early stopping: no improvement for {patience} epochs"
+                post = after_epoch(epoch, result, time.perf_counter() - t0) if after_epoch else {}
+                if ckpt is not None and best_path is not None and write:
+                    if improved:
+                        save_checkpoint(
+                            best_path, {**dict(best_extra or {}), "model": kept.state_dict()}
+                        )
+                    save_checkpoint(
+                        ckpt,
+                        _loop_state(
+                            result,
+                            model,
+                            kept,
+                            optimizer,
+                            schedule,
+                            averaged,
+                            gens,
+                            checkpoint_extra,
+                            epoch,
+                        ),
+                    )
+                bar.update(1)
+                if post:
+                    bar.set_postfix(**post)
+                if result.stopped:
+                    break
+    finally:
+        bar.close()
+        if best_state is not None:
+            model.load_state_dict(best_state)
+        elif averaged is not None:
+            model.load_state_dict(kept.state_dict())
+    return result
+
+
+def _loop_state(
+    result: LoopResult,
+    model: nn.Module,
+    kept: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    schedule: Any,
+    averaged: Any,
+    gens: dict[str, torch.Generator],
+    extra: Callable[[int], dict[str, Any]] | None,
+    epoch: int,
+) -> dict[str, Any]:
+    state: dict[str, Any] = dict(extra(epoch)) if extra is not None else {}
+    state.update(
+        model=kept.state_dict(),
+        optimizer=optimizer.state_dict(),
+        scheduler=schedule.state_dict() if schedule is not None else None,
+        generators={k: g.get_state() for k, g in gens.items()},
+        torch_rng_state=torch.get_rng_state(),
+        epochs_done=result.epochs_done,
+        best_epoch=result.best_epoch,
+        best_score=result.best_score,
+        stopped=result.stopped,
+    )
+    if averaged is not None:
+        state.update(trained_model=model.state_dict(), averaged=averaged.state_dict())
+    return state
+
+
+@dataclass
 class EpochHistory:
     """What :func:`epoch_loop` measured: the mean training loss and the seconds of each
     epoch, the validation score by (1-based) epoch, and the epoch whose weights were kept."""
@@ -333,14 +632,17 @@ def epoch_loop(
     desc: str,
     progress: bool = True,
     history: EpochHistory | None = None,
+    checkpoint: str | os.PathLike[str] | None = None,
+    resume: bool = False,
+    checkpoint_extra: Mapping[str, Any] | None = None,
 ) -> EpochHistory:
-    """The per-batch training loop of the task trainers (pose networks, point-cloud
-    networks): per epoch a shuffle of the ``n`` samples by ``generator`` in batches of
-    ``cfg.batch_size``, ``batch(indices)`` giving each batch's loss, one optimizer step
-    per batch (:func:`step_optimizer`'s optimizer and per-step schedule,
-    :func:`optimizer_step`'s checks), then ``validate()`` (higher is better) and the
-    best epoch's weights kept (the last epoch's without ``validate``). Runs under
-    :func:`deterministic_algorithms`; the model is left in eval mode.
+    """:func:`train_loop` for the task trainers that draw batches of sample indices
+    (pose networks, point-cloud networks): per epoch a shuffle of the ``n`` samples by
+    ``generator`` in batches of ``cfg.batch_size``, ``batch(indices)`` giving each
+    batch's loss, one optimizer step per batch (:func:`step_optimizer`'s optimizer and
+    per-step schedule, the loss refused when not finite), then ``validate()`` (higher is
+    better) and the best epoch's weights kept (the last epoch's without ``validate``).
+    Runs under :func:`deterministic_algorithms`; the model is left in eval mode.
 
     Parameters
     ----------
@@ -362,6 +664,13 @@ def epoch_loop(
         Show a bar per run (one step per epoch) on stderr.
     history : EpochHistory, optional
         Filled in and returned (a subclass names its score, e.g. the pose PCK).
+    checkpoint : path, optional
+        Written after every epoch (:func:`train_loop`'s checkpoint, with the history
+        and ``checkpoint_extra``); the best weights in ``<stem>.best.pt``.
+    resume : bool
+        Continue from ``checkpoint``: ends with the weights of an uninterrupted run.
+    checkpoint_extra : dict, optional
+        Plain values stored in both checkpoint files (e.g. the model's settings).
 
     Returns
     -------
@@ -392,39 +701,69 @@ def epoch_loop(
     params = [p for p in model.parameters() if p.requires_grad]
     opt, sched = step_optimizer(params, cfg, steps)
     hist = EpochHistory() if history is None else history
-    best: dict[str, torch.Tensor] | None = None
-    best_value = -math.inf
-    bar = progress_bar(total=cfg.epochs, desc=desc, unit="epoch", disable=not progress)
-    try:
-        with deterministic_algorithms():
-            for epoch in range(cfg.epochs):
-                t0 = time.perf_counter()
-                model.train()
-                order = torch.randperm(n, generator=generator)
-                total = 0.0
-                for b in range(steps):
-                    value = batch(order[b * cfg.batch_size : (b + 1) * cfg.batch_size])
-                    optimizer_step(value, opt, sched, params, cfg, f"epoch {epoch + 1}")
-                    total += float(value.detach())
-                hist.losses.append(total / steps)
-                hist.seconds.append(time.perf_counter() - t0)
-                if validate is not None:
-                    score = float(validate())
-                    hist.val[epoch + 1] = score
-                    if best is None or score > best_value:
-                        best_value, hist.best_epoch = score, epoch + 1
-                        best = copy.deepcopy(model.state_dict())
-                else:
-                    hist.best_epoch = epoch + 1
-                bar.update(1)
-                post = {"loss": f"{hist.losses[-1]:.4g}"}
-                if hist.val:
-                    post[hist.val_name] = f"{hist.val[epoch + 1]:.3f}"
-                bar.set_postfix(**post)
-    finally:
-        bar.close()
-    if best is not None:
-        model.load_state_dict(best)
+
+    def batches(epoch: int) -> Iterator[torch.Tensor]:
+        order = torch.randperm(n, generator=generator)
+        for b in range(steps):
+            yield order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+
+    total = [0.0]
+
+    def step(idx: torch.Tensor, epoch: int, b: int) -> torch.Tensor:
+        value = batch(idx)
+        if not isinstance(value, torch.Tensor) or value.numel() != 1:
+            raise InputError(f"batch must return a scalar loss tensor; got {plain_repr(value)}")
+        total[0] += float(value.detach())
+        return value
+
+    def end_epoch(epoch: int, seconds: float) -> None:
+        hist.losses.append(total[0] / steps)
+        hist.seconds.append(seconds)
+        total[0] = 0.0
+
+    def scored(epoch: int) -> float:
+        assert validate is not None
+        score = float(validate())
+        hist.val[epoch + 1] = score
+        return score
+
+    def after_epoch(epoch: int, res: LoopResult, seconds: float) -> dict[str, str]:
+        hist.best_epoch = res.best_epoch
+        post = {"loss": f"{hist.losses[-1]:.4g}"}
+        if hist.val:
+            post[hist.val_name] = f"{hist.val[epoch + 1]:.3f}"
+        return post
+
+    def restore(state: dict[str, Any]) -> None:
+        saved = state["history"]
+        hist.losses[:] = list(saved["losses"])
+        hist.seconds[:] = list(saved["seconds"])
+        hist.val.clear()
+        hist.val.update({int(k): float(v) for k, v in saved[hist.val_name].items()})
+        hist.best_epoch = int(saved["best_epoch"])
+
+    train_loop(
+        model,
+        opt,
+        batches,
+        step,
+        epochs=cfg.epochs,
+        schedule=sched,
+        clip_grad_norm=cfg.clip_grad_norm,
+        clip_params=params,
+        lr=cfg.lr,
+        end_epoch=end_epoch,
+        validate=scored if validate is not None else None,
+        after_epoch=after_epoch,
+        generators={"shuffle": generator},
+        checkpoint=checkpoint,
+        checkpoint_extra=lambda e: {"history": hist.to_dict(), **dict(checkpoint_extra or {})},
+        best_extra=checkpoint_extra,
+        resume=resume,
+        restore=restore,
+        desc=desc,
+        progress=progress,
+    )
     model.eval()
     return hist
 
@@ -573,137 +912,111 @@ def fit(
     opt = _optimizer(model, cfg)
     sched = _scheduler(opt, cfg, len(loader))
     hist = History()
-    start_epoch = 0
-    best_state: dict[str, torch.Tensor] | None = None
-    best_value = math.inf
-    ckpt = Path(checkpoint) if checkpoint is not None else None
-    best_path = ckpt.with_name(ckpt.stem + ".best.pt") if ckpt is not None else None
-    if resume and ckpt is not None:
-        state = load_checkpoint(ckpt, model)
-        opt.load_state_dict(state["optimizer"])
-        sched.load_state_dict(state["scheduler"])
-        shuffle.set_state(state["shuffle_state"])
-        torch.set_rng_state(state["torch_rng_state"])
-        hist = History.from_dict(state["history"])
-        start_epoch = int(state["epoch"]) + 1
+    sign = -1.0 if cfg.monitor == "val_accuracy" else 1.0
+    figures = [0.0, 0.0, 0.0]  # loss sum, correct, count of the epoch
+
+    def unfreeze(epoch: int) -> None:
+        for prefix in (cfg.unfreeze_at or {}).get(epoch + 1, []):
+            for name, param in model.named_parameters():
+                if name.startswith(prefix):
+                    param.requires_grad_(True)
+        if sampler is not None:
+            sampler.set_epoch(epoch)
+        hist.lr.append(float(opt.param_groups[0]["lr"]))
+
+    def step(xy: Any, epoch: int, b: int) -> torch.Tensor:
+        x, y = xy[0].to(dev, torch.float32), xy[1].to(dev, torch.long)
+        _check_batch(x, y, n_classes)
+        with _autocast(dev, cfg.amp):
+            logits = net(x)
+            loss = nn.functional.cross_entropy(logits.float(), y)
+        if bool(torch.isfinite(loss)):
+            figures[0] += loss.item() * len(y)
+            figures[1] += int((logits.argmax(1) == y).sum())
+            figures[2] += len(y)
+        return loss
+
+    def end_epoch(epoch: int, seconds: float) -> None:
+        total, correct, count = figures
+        if distributed:
+            summed = _sum_over_ranks([total, correct, count], dev)
+            total, correct, count = summed[0], round(summed[1]), round(summed[2])
+        hist.epoch.append(epoch + 1)
+        hist.train_loss.append(total / count)
+        hist.train_accuracy.append(correct / count)
+        figures[:] = [0.0, 0.0, 0.0]
+        if val is None:
+            hist.val_loss.append(math.nan)
+            hist.val_accuracy.append(math.nan)
+
+    def validate(epoch: int) -> float:  # higher is better: -sign * the monitored figure
+        assert val is not None
+        if distributed:
+            both = [math.nan, math.nan]
+            if rank == 0:
+                ev = evaluate(model, val, batch_size=max(cfg.batch_size, 256), device=str(dev))
+                both = [ev.loss, ev.accuracy]
+            val_loss, val_acc = _from_rank0(both, dev)
+        else:
+            ev = evaluate(model, val, batch_size=max(cfg.batch_size, 256), device=str(dev))
+            val_loss, val_acc = ev.loss, ev.accuracy
+        hist.val_loss.append(val_loss)
+        hist.val_accuracy.append(val_acc)
+        return -sign * (val_acc if sign < 0 else val_loss)
+
+    def after_epoch(epoch: int, res: LoopResult, seconds: float) -> dict[str, str]:
+        hist.seconds.append(seconds)
+        hist.best_epoch = res.best_epoch
+        hist.stopped = res.stopped
+        return {
+            "loss": f"{hist.train_loss[-1]:.3f}",
+            "acc": f"{hist.train_accuracy[-1]:.3f}",
+            "val_acc": f"{hist.val_accuracy[-1]:.3f}",
+        }
+
+    def restore(state: dict[str, Any]) -> None:
+        saved = History.from_dict(state["history"])
+        for f in fields(History):
+            setattr(hist, f.name, getattr(saved, f.name))
+        done = int(state["epochs_done"])
         for k, prefixes in (cfg.unfreeze_at or {}).items():  # what the run had unfrozen
-            if k <= start_epoch:
+            if k <= done:
                 for name, param in model.named_parameters():
                     if any(name.startswith(pf) for pf in prefixes):
                         param.requires_grad_(True)
-        best_value = float(state["best_value"])
-        if best_path is not None and best_path.exists():
-            best_state = load_checkpoint(best_path)["model"]
-    sign = -1.0 if cfg.monitor == "val_accuracy" else 1.0
-    bar = progress_bar(
-        total=cfg.epochs - start_epoch, desc="training", unit="epoch", disable=not progress
-    )
+
     try:
-        with deterministic_algorithms():
-            for epoch in range(start_epoch, cfg.epochs):
-                t0 = time.perf_counter()
-                for prefix in (cfg.unfreeze_at or {}).get(epoch + 1, []):
-                    for name, param in model.named_parameters():
-                        if name.startswith(prefix):
-                            param.requires_grad_(True)
-                model.train()
-                if sampler is not None:
-                    sampler.set_epoch(epoch)
-                lr = float(opt.param_groups[0]["lr"])
-                total, correct, count = 0.0, 0, 0
-                for b, (x, y) in enumerate(loader):
-                    x, y = x.to(dev, torch.float32), y.to(dev, torch.long)
-                    _check_batch(x, y, n_classes)
-                    with _autocast(dev, cfg.amp):
-                        logits = net(x)
-                        loss = nn.functional.cross_entropy(logits.float(), y)
-                    if not torch.isfinite(loss):
-                        raise InputError(
-                            f"the loss became {loss.item()} at epoch {epoch + 1}, batch {b + 1}: "
-                            f"lower the learning rate (lr {cfg.lr:g})"
-                        )
-                    opt.zero_grad(set_to_none=True)
-                    loss.backward()
-                    if cfg.clip_grad_norm is not None:
-                        nn.utils.clip_grad_norm_(model.parameters(), cfg.clip_grad_norm)
-                    opt.step()
-                    if cfg.schedule == "onecycle":
-                        sched.step()
-                    total += loss.item() * len(y)
-                    correct += int((logits.argmax(1) == y).sum())
-                    count += len(y)
-                if cfg.schedule != "onecycle":
-                    sched.step()
-                if distributed:
-                    summed = _sum_over_ranks([total, correct, count], dev)
-                    total, correct, count = summed[0], round(summed[1]), round(summed[2])
-                hist.epoch.append(epoch + 1)
-                hist.train_loss.append(total / count)
-                hist.train_accuracy.append(correct / count)
-                if val is not None and distributed:
-                    figures = [math.nan, math.nan]
-                    if rank == 0:
-                        ev = evaluate(
-                            model, val, batch_size=max(cfg.batch_size, 256), device=str(dev)
-                        )
-                        figures = [ev.loss, ev.accuracy]
-                    val_loss, val_acc = _from_rank0(figures, dev)
-                    hist.val_loss.append(val_loss)
-                    hist.val_accuracy.append(val_acc)
-                    value = sign * (val_acc if sign < 0 else val_loss)
-                elif val is not None:
-                    ev = evaluate(model, val, batch_size=max(cfg.batch_size, 256), device=str(dev))
-                    hist.val_loss.append(ev.loss)
-                    hist.val_accuracy.append(ev.accuracy)
-                    value = sign * (ev.accuracy if sign < 0 else ev.loss)
-                else:
-                    hist.val_loss.append(math.nan)
-                    hist.val_accuracy.append(math.nan)
-                    value = -float(epoch)  # the last epoch is the best
-                hist.lr.append(lr)
-                hist.seconds.append(time.perf_counter() - t0)
-                if value < best_value:
-                    best_value = value
-                    hist.best_epoch = epoch + 1
-                    best_state = copy.deepcopy(model.state_dict())
-                    if best_path is not None and rank == 0:
-                        save_checkpoint(
-                            best_path, {"model": best_state, "architecture": architecture}
-                        )
-                if ckpt is not None and rank == 0:
-                    save_checkpoint(
-                        ckpt,
-                        {
-                            "model": model.state_dict(),
-                            "optimizer": opt.state_dict(),
-                            "scheduler": sched.state_dict(),
-                            "shuffle_state": shuffle.get_state(),
-                            "torch_rng_state": torch.get_rng_state(),
-                            "history": hist.to_dict(),
-                            "epoch": epoch,
-                            "best_value": best_value,
-                            "config": asdict(cfg),
-                            "architecture": architecture,
-                        },
-                    )
-                bar.update(1)
-                bar.set_postfix(
-                    loss=f"{hist.train_loss[-1]:.3f}",
-                    acc=f"{hist.train_accuracy[-1]:.3f}",
-                    val_acc=f"{hist.val_accuracy[-1]:.3f}",
-                )
-                if (
-                    cfg.patience is not None
-                    and val is not None
-                    and epoch + 1 - hist.best_epoch >= cfg.patience
-                ):
-                    hist.stopped = f"early stopping: no improvement for {cfg.patience} epochs"
-                    break
+        train_loop(
+            model,
+            opt,
+            lambda epoch: loader,
+            step,
+            epochs=cfg.epochs,
+            schedule=sched,
+            schedule_per_batch=cfg.schedule == "onecycle",
+            clip_grad_norm=cfg.clip_grad_norm,
+            lr=cfg.lr,
+            before_epoch=unfreeze,
+            end_epoch=end_epoch,
+            validate=validate if val is not None else None,
+            after_epoch=after_epoch,
+            patience=cfg.patience,
+            generators={"shuffle": shuffle},
+            checkpoint=checkpoint,
+            checkpoint_extra=lambda epoch: {
+                "history": hist.to_dict(),
+                "epoch": epoch,
+                "config": asdict(cfg),
+                "architecture": architecture,
+            },
+            best_extra={"architecture": architecture},
+            resume=resume,
+            restore=restore,
+            write=rank == 0,
+            desc="training",
+            progress=progress,
+        )
     except KeyboardInterrupt:
         hist.stopped = "interrupted"
         raise
-    finally:
-        bar.close()
-        if best_state is not None:
-            model.load_state_dict(best_state)
     return hist
