@@ -49,7 +49,7 @@ from robopercept.nn.data.datasets import (
 )
 from robopercept.nn.data.fonts import render_digits
 from robopercept.nn.train.config import TrainConfig
-from robopercept.nn.train.loop import evaluate, fit
+from robopercept.nn.train.fit import evaluate, fit
 
 SEEDS = (0, 1, 2)
 FAMILY = ("vgg_small", "inception_small", "resnet_small")

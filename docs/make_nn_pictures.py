@@ -22,7 +22,7 @@ from robopercept.nn.classification.models import build_model
 from robopercept.nn.data.augment import Normalize
 from robopercept.nn.data.datasets import load_digits, normalization_stats, stratified_split
 from robopercept.nn.train.config import TrainConfig
-from robopercept.nn.train.loop import evaluate, fit
+from robopercept.nn.train.fit import evaluate, fit
 from robopercept.viz import confusion_picture, tiles_picture
 
 IMG = Path(__file__).resolve().parent / "img"

@@ -726,7 +726,7 @@ class TestNnCheckers:
         good = (
             "import torch\n"
             "from robopercept.nn.ops.boxes import box_iou\n"
-            "from robopercept.nn.train.loop import fit\n"
+            "from robopercept.nn.train.fit import fit\n"
             "from robopercept.nn import functional\n"
             "from robopercept.imaging import read_image\n"
             "from .fcos import FCOS\n"
@@ -735,7 +735,7 @@ class TestNnCheckers:
 
     def test_torch_free_modules(self) -> None:
         assert len(self.check("import torch\n", f"{PKG}.nn.functional")) == 1
-        eager = "from robopercept.nn.train.loop import fit\n"
+        eager = "from robopercept.nn.train.fit import fit\n"
         v = self.check(eager, f"{PKG}.nn.coco.x")  # same floor, but it loads torch
         assert len(v) == 1 and "torch-free" in v[0]
         assert len(self.check(eager, f"{PKG}.nn.shipped")) == 1  # upward

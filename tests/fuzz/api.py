@@ -1008,8 +1008,8 @@ VALID: dict[str, dict[str, Any]] = {
     "nn.data.datasets.to_unit_float": {"image": IMG},
     "nn.data.fonts.render_digits": {"n": 4},
     "nn.train.config.TrainConfig": {"epochs": 1, "batch_size": 4},
-    "nn.train.loop.evaluate": {"model": TINY_NET, "data": ARRAY_DATA, "device": "cpu"},
-    "nn.train.loop.fit": {"model": TINY_NET, "train": ARRAY_DATA, "config": TRAIN_CFG},
+    "nn.train.fit.evaluate": {"model": TINY_NET, "data": ARRAY_DATA, "device": "cpu"},
+    "nn.train.fit.fit": {"model": TINY_NET, "train": ARRAY_DATA, "config": TRAIN_CFG},
     "nn.train.checkpoint.load_checkpoint": {"path": Fixture("checkpoint.pt"), "model": TINY_NET},
     "nn.train.checkpoint.save_checkpoint": {
         "path": _out("checkpoint.pt"),
@@ -2988,6 +2988,38 @@ VALID["nn.train.loop.epoch_loop"] = {
     "progress": False,
 }
 METHODS["nn.train.loop.EpochHistory"] = ("to_dict",)
+
+
+# nn.train.loop.train_loop (issue 45: THE loop every trainer runs)
+def loop_part(kind: str) -> Any:
+    """A valid train_loop ``optimizer`` (SGD on one parameter), ``batches`` (epoch ->
+    two batches) or ``step`` (batch -> a scalar loss with a graph)."""
+    import torch
+
+    w = torch.nn.Parameter(torch.ones(2))
+    parts = {
+        "optimizer": torch.optim.SGD([w], lr=0.1),
+        "batches": lambda epoch: [1, 2],
+        "step": lambda batch, epoch, b: (w * w).sum() * float(batch),
+    }
+    return parts[kind]
+
+
+VALID["nn.train.loop.train_loop"] = {
+    "model": TINY_NET,
+    "optimizer": _b("tests.fuzz.api:loop_part", "optimizer"),
+    "batches": _b("tests.fuzz.api:loop_part", "batches"),
+    "step": _b("tests.fuzz.api:loop_part", "step"),
+    "epochs": 2,
+    "progress": False,
+}
+VALID["nn.train.runs.prepare_run_folder"] = {"out_dir": _out("fuzz_run")}
+VALID["nn.train.runs.write_json"] = {"path": _out("x.json"), "value": {"a": 1}}
+VALID["nn.classification.run.model_summary"] = {
+    "model": "vgg_small",
+    "input_shape": (1, 8, 8),
+    "num_classes": 3,
+}
 
 
 # nn.cloud.pointnet and nn.cloud.dgcnn (issue 29): tiny PointNet / DGCNN, two clouds of 16 points

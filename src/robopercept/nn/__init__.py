@@ -69,6 +69,7 @@ MODULES = (
     "train.config",
     "train.checkpoint",
     "train.loop",
+    "train.fit",
     "train.runs",
     "train.distributed",
     "classification.models",

@@ -19,7 +19,7 @@ from robopercept.nn.core.transfer import (  # noqa: E402
     unfreeze,
 )
 from robopercept.nn.train.config import TrainConfig  # noqa: E402
-from robopercept.nn.train.loop import fit  # noqa: E402
+from robopercept.nn.train.fit import fit  # noqa: E402
 
 
 class _Net(nn.Module):

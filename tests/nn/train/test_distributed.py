@@ -30,7 +30,7 @@ from robopercept.nn.train.distributed import (  # noqa: E402
     run_ranks,
     torchrun_env,
 )
-from robopercept.nn.train.loop import fit  # noqa: E402
+from robopercept.nn.train.fit import fit  # noqa: E402
 
 SRC = str(Path(__file__).resolve().parents[3] / "src")
 B = 32  # the global batch of the parity test

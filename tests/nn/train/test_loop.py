@@ -15,7 +15,8 @@ from torch.utils.data import TensorDataset  # noqa: E402
 from robopercept.errors import FileFormatError, InputError  # noqa: E402
 from robopercept.nn.train.checkpoint import load_checkpoint, save_checkpoint  # noqa: E402
 from robopercept.nn.train.config import TrainConfig  # noqa: E402
-from robopercept.nn.train.loop import evaluate, fit, optimizer_step, step_optimizer  # noqa: E402
+from robopercept.nn.train.fit import evaluate, fit  # noqa: E402
+from robopercept.nn.train.loop import optimizer_step, step_optimizer  # noqa: E402
 
 
 def _blobs(n: int = 240, seed: int = 0) -> TensorDataset:
@@ -307,8 +308,8 @@ def interrupted_then_resumed(build, train, steps_before_stop: int, tmp_path) -> 
 
 
 def test_train_loop_resumes_the_detector_segmenter_pose_and_cloud_trainers(tmp_path) -> None:
-    from robopercept.nn.cloud.run import build_cloud_model, train_cloud_model
     from robopercept.nn.cloud.synthetic import procedural_shapes
+    from robopercept.nn.cloud.train import build_cloud_model, train_cloud_model
     from robopercept.nn.detection.synthetic import procedural_detection_set
     from robopercept.nn.detection.train import train_detector
     from robopercept.nn.detection.zoo import build_detector

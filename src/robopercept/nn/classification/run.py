@@ -5,7 +5,7 @@
 split it into train / validation / test keeping the class proportions (seeded), compute
 the normalization statistics on the training split only and put them first in the model
 (:class:`~robopercept.nn.data.augment.Normalize`, so the checkpoint carries them), train
-with :func:`~robopercept.nn.train.loop.fit`, evaluate the best epoch on the test split and
+with :func:`~robopercept.nn.train.fit.fit`, evaluate the best epoch on the test split and
 write the run folder (:func:`train_ddp` does the same on several processes,
 DistributedDataParallel: ``nn train --nproc N``):
 
@@ -67,7 +67,7 @@ from robopercept.nn.train.distributed import (
     run_ranks,
     torchrun_env,
 )
-from robopercept.nn.train.loop import evaluate, fit
+from robopercept.nn.train.fit import evaluate, fit
 from robopercept.nn.train.runs import BEST_CHECKPOINT, CHECKPOINT, prepare_run_folder
 from robopercept.viz import confusion_picture
 
@@ -130,7 +130,7 @@ class Architecture:
         ------
         FileFormatError
             ``text`` is not the JSON of a run (a checkpoint not written by
-            :func:`train_run`, e.g. one of :func:`~robopercept.nn.train.loop.fit` alone).
+            :func:`train_run`, e.g. one of :func:`~robopercept.nn.train.fit.fit` alone).
         """
         try:
             d = json.loads(text)

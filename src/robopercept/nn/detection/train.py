@@ -130,7 +130,7 @@ def train_detector(
     With ``val``, the model is evaluated on it (:func:`evaluate_detector`, COCO) every
     ``val_every`` epochs and after the last, and at the end holds the weights of the
     evaluated epoch with the highest ``val_metric`` (the earliest on ties), as
-    :func:`~robopercept.nn.train.loop.fit` keeps its best epoch; the schedule still runs
+    :func:`~robopercept.nn.train.fit.fit` keeps its best epoch; the schedule still runs
     its full ``config.epochs`` (no early stopping).
 
     Parameters

@@ -3,7 +3,7 @@ with ``weights_only=True`` (no pickled code), written atomically (a temporary fi
 over the target), so Ctrl-C leaves the last complete one readable.
 
 :func:`save_checkpoint` / :func:`load_checkpoint` are the format of
-:func:`~robopercept.nn.train.loop.fit` (model, optimizer, schedule, shuffling generator,
+:func:`~robopercept.nn.train.fit.fit` (model, optimizer, schedule, shuffling generator,
 torch's random state, history, configuration, architecture); :func:`save_built_model` /
 :func:`load_built_model` add what rebuilds the model through a builder (kind, settings,
 class names): the format of the detectors, segmenters and point-cloud networks.
@@ -138,7 +138,7 @@ def load_built_model(
 
 
 def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None) -> dict[str, Any]:
-    """Read a checkpoint written by :func:`~robopercept.nn.train.loop.fit`
+    """Read a checkpoint written by :func:`~robopercept.nn.train.fit.fit`
     (``weights_only=True``: tensors and plain values only, no code) and, with ``model``,
     load its weights into it.
 

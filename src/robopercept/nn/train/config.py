@@ -1,7 +1,7 @@
 """How a training run is configured and what it records: :class:`TrainConfig` (epochs,
 batch, optimizer, schedule, early stopping, seed, device, discriminative learning rates,
 gradual unfreezing), :class:`History` (the per-epoch figures of
-:func:`~robopercept.nn.train.loop.fit`), the device a run uses (:func:`resolve_device`)
+:func:`~robopercept.nn.train.fit.fit`), the device a run uses (:func:`resolve_device`)
 and the determinism switch every trainer runs under (:func:`deterministic_algorithms`).
 
 A run is deterministic on the CPU: the same seed and thread count give bit-identical
@@ -42,7 +42,7 @@ Schedule = Literal["constant", "step", "cosine", "onecycle"]
 
 @dataclass
 class TrainConfig:
-    """How :func:`~robopercept.nn.train.loop.fit` trains.
+    """How :func:`~robopercept.nn.train.fit.fit` trains.
 
     Attributes
     ----------
@@ -234,7 +234,7 @@ class History:
 
 def resolve_device(name: str | torch.device | None) -> torch.device:
     """The torch device a run uses: ``name`` checked, or, for None, CUDA when
-    available, else the CPU (what :func:`~robopercept.nn.train.loop.fit` and the
+    available, else the CPU (what :func:`~robopercept.nn.train.fit.fit` and the
     detectors' trainer do).
 
     Raises

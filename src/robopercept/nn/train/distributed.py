@@ -12,7 +12,7 @@ group, or, when the process was started by ``torchrun`` (the environment holds `
 ``nn train --nproc N`` is :func:`robopercept.nn.classification.run.train_ddp`, which
 runs its trainer through :func:`run_ranks`. Every rank builds the same model (same
 seed) and joins a process group (backend gloo on the CPU, nccl when the device is CUDA:
-:func:`rank_device`); :func:`~robopercept.nn.train.loop.fit` wraps the model in
+:func:`rank_device`); :func:`~robopercept.nn.train.fit.fit` wraps the model in
 :class:`~torch.nn.parallel.DistributedDataParallel` and draws each rank's shard with a
 :class:`~torch.utils.data.DistributedSampler` (shuffled with the run's seed,
 ``set_epoch`` every epoch).
