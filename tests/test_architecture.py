@@ -692,6 +692,7 @@ class TestNnCheckers:
         f"{PKG}.nn.ops.boxes",
         f"{PKG}.nn.train",
         f"{PKG}.nn.train.loop",
+        f"{PKG}.nn.train.fit",
         f"{PKG}.nn.detection",
         f"{PKG}.nn.detection.fcos",
         f"{PKG}.nn.pose.networks",
@@ -784,3 +785,77 @@ def test_nn_torch_free_modules_load_no_torch() -> None:
         "print('ok')\n"
     )
     assert _run(code) == "ok"
+
+
+# ------------------------------------------------------------------ the CLI reaches nn's runs only
+#: what a ``cli`` module may import from nn (issue 45): the run modules of the task
+#: wings, the predictor and the shipped-model table; everything else is reached through
+#: them, so that the CLI parses and prints while the library owns the runs
+CLI_NN_ALLOWED: tuple[str, ...] = (
+    f"{PKG}.nn.classification.run",
+    f"{PKG}.nn.detection.run",
+    f"{PKG}.nn.segmentation.run",
+    f"{PKG}.nn.pose.run",
+    f"{PKG}.nn.cloud.run",
+    f"{PKG}.nn.predict",
+    f"{PKG}.nn.shipped",
+)
+
+
+def cli_nn_violations(
+    source: str,
+    module: str,
+    *,
+    is_package: bool = False,
+    modules: Iterable[str] = MODULES,
+    allowed: Iterable[str] = CLI_NN_ALLOWED,
+) -> list[str]:
+    """Inside ``cli``: imports of nn modules other than :data:`CLI_NN_ALLOWED`
+    (function-local ones too: the CLI imports torch only when a command runs)."""
+    if top_part(module) != "cli":
+        return []
+    ok = set(allowed)
+    out = []
+    for imp, target in _nn_imports(source, module, is_package, modules):
+        if _ours(target) and top_part(target) == "nn" and target not in ok:
+            out.append(
+                f"{module}:{imp.lineno} imports {target}; the CLI reaches nn through the run "
+                "modules, the predictor and the shipped table only"
+            )
+    return out
+
+
+class TestCliNnChecker:
+    MODS = (
+        f"{PKG}.nn",
+        f"{PKG}.nn.train.config",
+        f"{PKG}.nn.detection.run",
+        f"{PKG}.nn.detection.train",
+        f"{PKG}.nn.predict",
+        f"{PKG}.cli.nn.detect",
+    )
+
+    def check(self, source: str, module: str = f"{PKG}.cli.nn.detect") -> list[str]:
+        return cli_nn_violations(source, module, modules=self.MODS)
+
+    def test_a_deep_import_is_caught(self) -> None:
+        bad = "def f():\n    from robopercept.nn.train.config import TrainConfig\n"
+        v = self.check(bad)
+        assert len(v) == 1 and "nn.train.config" in v[0] and ":2 " in v[0]
+        assert len(self.check("from robopercept.nn.detection import train\n")) == 1
+
+    def test_runs_predictor_and_shipped_pass(self) -> None:
+        good = (
+            "def f():\n"
+            "    from robopercept.nn.detection.run import TrainConfig, train_run\n"
+            "    from robopercept.nn.predict import load_image_predictor\n"
+            "    from robopercept.nn.shipped import SHIPPED\n"
+            "    from robopercept.imaging import read_image\n"
+        )
+        assert self.check(good) == []
+        assert self.check("from robopercept.nn.train import config\n", f"{PKG}.viz.x") == []
+
+
+def test_cli_imports_only_nn_runs() -> None:
+    found = _real_violations(cli_nn_violations)
+    assert not found, "cli modules importing nn beyond its runs:\n" + "\n".join(found)
