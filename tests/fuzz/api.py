@@ -2546,6 +2546,46 @@ VALID.update(
     }
 )
 METHODS["nn.detection.faster_rcnn.FasterRCNN"] = ("forward", "rpn_outputs")
+# the parts of the two-stage detectors (issue 45): the RPN alone, the RoI heads and
+# their box head, predictor and branches
+VALID.update(
+    {
+        "nn.detection.rpn.RegionProposalNetwork": {
+            "in_channels": 4,
+            "anchor_generator": _b("robopercept.nn.ops.anchors:AnchorGenerator", (8.0,), (1.0,)),
+        },
+        "nn.detection.rpn.RegionProposalNetwork.forward": {
+            "features": _b("tests.fuzz.api:torch_image", 2, 4, 2, 3),
+            "image_shape": (16, 24),
+            "sizes": [(16, 16), (16, 24)],
+            "targets": _DTARGETS,
+        },
+        "nn.detection.roi_heads.TwoMLPHead": {"in_channels": 4, "pool_size": 2, "hidden": 8},
+        "nn.detection.roi_heads.FastRCNNPredictor": {"in_features": 8, "num_classes": 2},
+        "nn.detection.roi_heads.RoIHeads": {
+            "box_pooler": _b("robopercept.nn.ops.roi:RoIAlign", 2, 0.125, 2),
+            "box_head": _b("robopercept.nn.detection.roi_heads:TwoMLPHead", 4, 2, 8),
+            "box_predictor": _b("robopercept.nn.detection.roi_heads:FastRCNNPredictor", 8, 2),
+            "num_classes": 2,
+        },
+        "nn.detection.mask_rcnn.MaskHead": {
+            "in_channels": 4,
+            "num_classes": 2,
+            "mask_channels": 4,
+            "mask_convs": 1,
+        },
+        "nn.detection.keypoint_rcnn.KeypointHead": {
+            "in_channels": 4,
+            "num_keypoints": 2,
+            "keypoint_channels": 4,
+            "keypoint_convs": 1,
+        },
+    }
+)
+METHODS["nn.detection.rpn.RegionProposalNetwork"] = ("forward",)
+SKIP["nn.detection.roi_heads.RegionBranch"] = (
+    "a typing Protocol (its implementations are fuzzed: MaskHead, KeypointHead)"
+)
 VALID.update(
     {
         "nn.ops.roi.paste_masks": {

@@ -80,6 +80,7 @@ MODULES = (
     "detection.deepforest",
     "detection.targets",
     "detection.base",
+    "detection.rpn",
     "detection.roi_heads",
     "detection.train",
     "detection.localizer",

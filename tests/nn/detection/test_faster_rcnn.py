@@ -1,5 +1,5 @@
 """Tests of robopercept.nn.detection.faster_rcnn: the region proposal network's sampling,
-proposal counts and outputs."""
+proposal counts and outputs inside the detector."""
 
 from __future__ import annotations
 
@@ -18,15 +18,15 @@ def test_faster_rcnn_rpn_sampling_and_proposal_counts():
     torch.manual_seed(0)
     batch, sizes, _ = m._prepare(images, targets)
     feats = m.backbone(batch)[-1]
-    obj, reg, anchors = m.rpn(feats, tuple(batch.shape[2:]))
+    obj, reg, anchors = m.rpn.anchor_outputs(feats, tuple(batch.shape[2:]))
     assert obj.shape == (2, 8 * 8 * 9) and reg.shape == (2, 8 * 8 * 9, 4)
     assert anchors.shape == (8 * 8 * 9, 4)
-    props, _ = m.proposals(obj, reg, anchors, sizes)
+    props, _ = m.rpn.filter_proposals(obj, reg, anchors, sizes)
     assert [p.shape[0] <= 40 for p in props] == [True, True]
     for p, (h, w) in zip(props, sizes, strict=True):
         assert bool((p[:, 2] <= w).all() and (p[:, 3] <= h).all() and (p[:, 0] >= 0).all())
     m.eval()
-    props, _ = m.proposals(obj, reg, anchors, sizes)
+    props, _ = m.rpn.filter_proposals(obj, reg, anchors, sizes)
     assert all(p.shape[0] <= 7 for p in props)
 
 
@@ -37,8 +37,8 @@ def test_rpn_outputs_agree_with_the_rpn_and_keep_the_mode():
     assert m.training  # restored
     m.eval()
     batch, sizes, _ = m._prepare(images, None)
-    obj, reg, anchors = m.rpn(m.backbone(batch)[-1], tuple(batch.shape[2:]))
-    props, scores = m.proposals(obj, reg, anchors, sizes)
+    obj, reg, anchors = m.rpn.anchor_outputs(m.backbone(batch)[-1], tuple(batch.shape[2:]))
+    props, scores = m.rpn.filter_proposals(obj, reg, anchors, sizes)
     for i, o in enumerate(out):
         assert o["objectness"].shape == (8, 8, 9) and o["anchors"].shape == (8, 8, 9, 4)
         # cell (r, c), anchor a is flat index (r * 8 + c) * 9 + a, as AnchorGenerator

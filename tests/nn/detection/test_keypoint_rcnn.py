@@ -27,12 +27,16 @@ def test_keypoint_targets_are_the_cells_that_contain_the_keypoints():
     m = _model()  # M = 8 cells over each region
     rois = torch.tensor([[10.0, 20.0, 26.0, 36.0]])  # 16 x 16: a cell is 2 px
     kp = torch.tensor([[[10.0, 20.0, 2], [25.9, 35.9, 1]]])
-    index, valid = m.keypoint_targets(rois, kp)
+    index, valid = m.roi_heads.keypoint_head.keypoint_targets(rois, kp)
     assert index.tolist() == [[0, 63]] and valid.tolist() == [[True, True]]
     # x = 13.0 is (13 - 10) * 8 / 16 = 1.5 -> column 1; y = 27 -> row 3
-    index, valid = m.keypoint_targets(rois, torch.tensor([[[13.0, 27.0, 2], [5.0, 27.0, 2]]]))
+    index, valid = m.roi_heads.keypoint_head.keypoint_targets(
+        rois, torch.tensor([[[13.0, 27.0, 2], [5.0, 27.0, 2]]])
+    )
     assert int(index[0, 0]) == 3 * 8 + 1 and valid.tolist() == [[True, False]]
-    _, valid = m.keypoint_targets(rois, torch.tensor([[[13.0, 27.0, 0], [26.0, 27.0, 2]]]))
+    _, valid = m.roi_heads.keypoint_head.keypoint_targets(
+        rois, torch.tensor([[[13.0, 27.0, 0], [26.0, 27.0, 2]]])
+    )
     assert valid.tolist() == [[False, False]]  # unlabelled; x2 itself is outside
 
 
@@ -45,18 +49,20 @@ def test_the_keypoint_loss_is_the_cross_entropy_over_the_region_cells():
         "keypoints": torch.tensor([[[12.0, 14.0, 2], [30.0, 33.0, 2]]]),
     }
     captured = {}
-    original = m.keypoint_logits
+    original = m.roi_heads.keypoint_head.keypoint_logits
 
     def spy(feats, rois):
         out = original(feats, rois)
         captured["z"], captured["rois"] = out, rois
         return out
 
-    m.keypoint_logits = spy  # type: ignore[method-assign]
+    m.roi_heads.keypoint_head.keypoint_logits = spy  # type: ignore[method-assign]
     torch.manual_seed(1)
     losses = m([image], [target])
     rois = torch.cat(captured["rois"])
-    index, valid = m.keypoint_targets(rois, target["keypoints"].expand(len(rois), -1, -1))
+    index, valid = m.roi_heads.keypoint_head.keypoint_targets(
+        rois, target["keypoints"].expand(len(rois), -1, -1)
+    )
     z = captured["z"].flatten(2)
     expected = F.cross_entropy(z[valid], index[valid])
     torch.testing.assert_close(losses["loss_keypoint"], expected)
@@ -65,7 +71,7 @@ def test_the_keypoint_loss_is_the_cross_entropy_over_the_region_cells():
 
 def test_decoding_puts_a_one_hot_cell_at_its_centre_in_the_box():
     m = _model().eval()
-    mres = m.keypoint_resolution  # 8
+    mres = m.roi_heads.keypoint_head.keypoint_resolution  # 8
 
     def fixed(feats, rois):
         r = torch.cat(rois)
@@ -74,10 +80,10 @@ def test_decoding_puts_a_one_hot_cell_at_its_centre_in_the_box():
         z[:, 1, 7, 0] = 30.0
         return z
 
-    m.keypoint_logits = fixed  # type: ignore[method-assign]
+    m.roi_heads.keypoint_head.keypoint_logits = fixed  # type: ignore[method-assign]
     box = torch.tensor([[8.0, 4.0, 40.0, 20.0]])  # 32 x 16: cells 4 x 2 px
     dets = [{"boxes": box, "labels": torch.tensor([1]), "scores": torch.tensor([0.9])}]
-    out = m._region_outputs(torch.zeros(1, 8, 6, 6), [(48, 48)], dets)[0]
+    out = m.roi_heads.keypoint_head.outputs(torch.zeros(1, 8, 6, 6), [(48, 48)], dets)[0]
     # a one-hot peak has equal (zero-probability) neighbours: the cell centre exactly
     np.testing.assert_allclose(
         out["keypoints"][0].numpy(), [[8 + 5.5 * 4, 4 + 2.5 * 2, 1], [8 + 0.5 * 4, 4 + 7.5 * 2, 1]]

@@ -161,12 +161,14 @@ def test_mask_targets_are_the_instance_mask_roi_aligned_over_the_region():
     d = disk(40, 40, 20, 18, 9)
     masks = torch.stack([torch.zeros_like(d), d])
     rois = torch.tensor([[8.0, 6.0, 32.0, 30.0], [0.0, 0.0, 20.0, 20.0]])
-    t = m.mask_targets(rois, masks, torch.tensor([1, 1]))
+    t = m.roi_heads.mask_head.mask_targets(rois, masks, torch.tensor([1, 1]))
     assert t.shape == (2, 28, 28) and float(t.min()) >= 0 and float(t.max()) <= 1
     ref = roi_align(d.float()[None, None], [rois], 28, 1.0, sampling_ratio=2, aligned=True)
     torch.testing.assert_close(t, ref[:, 0])
     # matched to the empty mask: all zero
-    assert float(m.mask_targets(rois[:1], masks, torch.tensor([0])).sum()) == 0.0
+    assert (
+        float(m.roi_heads.mask_head.mask_targets(rois[:1], masks, torch.tensor([0])).sum()) == 0.0
+    )
 
 
 def test_mask_loss_is_the_bce_of_the_ground_truth_class_map():
@@ -179,17 +181,17 @@ def test_mask_loss_is_the_bce_of_the_ground_truth_class_map():
     torch.manual_seed(3)
     batch, sizes, tgts = m._prepare(images, targets)
     feats = m.backbone(batch)[-1]
-    obj, reg, anchors = m.rpn(feats, (int(batch.shape[2]), int(batch.shape[3])))
-    props, _ = m.proposals(obj, reg, anchors, sizes)
-    m.rpn_losses(obj, reg, anchors, tgts)  # draws its samples, as forward does
-    rois, labels, _, matched = m.sample_regions(props, tgts)
+    obj, reg, anchors = m.rpn.anchor_outputs(feats, (int(batch.shape[2]), int(batch.shape[3])))
+    props, _ = m.rpn.filter_proposals(obj, reg, anchors, sizes)
+    m.rpn.losses(obj, reg, anchors, tgts)  # draws its samples, as forward does
+    rois, labels, _, matched = m.roi_heads.sample_regions(props, tgts)
     fg = [lab > 0 for lab in labels]
-    logits = m.mask_logits(feats, [r[f] for r, f in zip(rois, fg, strict=True)])
+    logits = m.roi_heads.mask_head.mask_logits(feats, [r[f] for r, f in zip(rois, fg, strict=True)])
     cls = torch.cat([lab[f] for lab, f in zip(labels, fg, strict=True)])
     zz = logits[torch.arange(cls.numel()), cls - 1]
     yy = torch.cat(
         [
-            m.mask_targets(r[f], t["masks"], mt[f])
+            m.roi_heads.mask_head.mask_targets(r[f], t["masks"], mt[f])
             for r, f, mt, t in zip(rois, fg, matched, tgts, strict=True)
         ]
     )

@@ -73,8 +73,8 @@ def test_train_losses_finite_and_gradients_flow():
     assert set(losses) == {"loss_classifier", "loss_box"}
     assert all(bool(torch.isfinite(v)) and float(v.detach()) >= 0 for v in losses.values())
     sum(losses.values()).backward()
-    assert m.roi.features[0].conv.weight.grad.abs().sum() > 0
-    assert m.roi.bbox_pred.weight.grad.abs().sum() > 0
+    assert m.roi_heads.box_head[0].conv.weight.grad.abs().sum() > 0
+    assert m.roi_heads.box_predictor.bbox_pred.weight.grad.abs().sum() > 0
 
 
 def test_box_loss_does_not_reach_the_cnn():
@@ -83,8 +83,8 @@ def test_box_loss_does_not_reach_the_cnn():
     images, targets, props = tiny_batch()
     m(images, targets, proposals=props)["loss_box"].backward()
     assert (
-        m.roi.features[0].conv.weight.grad is None
-        or float(m.roi.features[0].conv.weight.grad.abs().sum()) == 0.0
+        m.roi_heads.box_head[0].conv.weight.grad is None
+        or float(m.roi_heads.box_head[0].conv.weight.grad.abs().sum()) == 0.0
     )
 
 
@@ -94,7 +94,7 @@ def test_iou_bands_are_rcnns():
     gt = {"boxes": torch.tensor([[0.0, 0, 10, 10]]), "labels": torch.tensor([4])}
     props = torch.tensor([[0.0, 0, 10, 8], [0.0, 0, 10, 4], [0.0, 0, 10, 2], [20.0, 20, 30, 30]])
     # IoU 0.8 (fg), 0.4 (ignored), 0.2 (bg), 0 (bg), plus the gt itself (fg)
-    rois, labels, _ = m.select_training_samples([props], [gt])
+    rois, labels, _ = m.roi_heads.select_training_samples([props], [gt])
     got = {tuple(r.tolist()): int(c) for r, c in zip(rois[0], labels[0], strict=True)}
     assert got == {
         (0.0, 0.0, 10.0, 8.0): 4,

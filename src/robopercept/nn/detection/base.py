@@ -14,7 +14,9 @@ in the input image's pixels. The input normalization
 :class:`Detector` is the base class that does this plumbing (checks, normalization,
 padding, :meth:`Detector.predict`); :func:`check_images`, :func:`check_targets` and
 :func:`check_proposals` are its boundary checks, :func:`clip_boxes` clips boxes to an
-image and :func:`init_conv` initializes head convolutions as torchvision does.
+image and :func:`init_conv` initializes head convolutions as torchvision does. A detector
+whose module layout changed lists its old state-dict key prefixes in
+:attr:`Detector.renamed_keys`, and checkpoints with the old keys still load.
 Conventions follow torchvision's ``models.detection`` (looked up, not imported:
 torchvision is not a dependency).
 """
@@ -22,7 +24,7 @@ torchvision is not a dependency).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, ClassVar
 
 import torch
 from torch import nn
@@ -295,12 +297,27 @@ def init_conv(layer: nn.Conv2d, bias: float) -> None:
 
 
 class Detector(nn.Module):
-    """Shared plumbing: input checks, normalization, padding to one batch."""
+    """Shared plumbing: input checks, normalization, padding to one batch, and the
+    renaming of old state-dict keys on load (:attr:`renamed_keys`)."""
 
     num_classes: int
     size_divisible: int
     mean: torch.Tensor
     std: torch.Tensor
+    #: old state-dict key prefix -> new one: checkpoints written before a change of the
+    #: module layout load (``load_state_dict`` renames their keys first)
+    renamed_keys: ClassVar[Mapping[str, str]] = {}
+
+    def _load_from_state_dict(self, state_dict: Any, prefix: str, *args: Any) -> None:
+        # torch calls this on each module, parents first, before checking for unexpected
+        # keys: renaming here lets the children find theirs
+        for key in [k for k in state_dict if k.startswith(prefix)]:
+            rest = key[len(prefix) :]
+            for old, new in self.renamed_keys.items():
+                if rest.startswith(old) and prefix + new + rest[len(old) :] not in state_dict:
+                    state_dict[prefix + new + rest[len(old) :]] = state_dict.pop(key)
+                    break
+        super()._load_from_state_dict(state_dict, prefix, *args)
 
     def _init_common(self, num_classes: int, size_divisible: int) -> None:
         self.num_classes = check_count(num_classes, "num_classes", 1, 1 << 16)

@@ -1,9 +1,11 @@
 r"""Fast R-CNN (Girshick 2015): a shared backbone, **external** proposals per image
 (``proposal_fn``, e.g. selective search; the ground-truth boxes are added to them in
 training), RoI max pooling (:func:`~robopercept.nn.ops.roi.roi_pool`) and the
-per-region head of :class:`~robopercept.nn.detection.roi_heads.TwoStageDetector`.
+per-region head of :class:`~robopercept.nn.detection.roi_heads.RoIHeads`.
 Training samples 25 % foreground regions (IoU >= 0.5 with a ground-truth box) and
-background ones (IoU in [0.1, 0.5)), as the paper.
+background ones (IoU in [0.1, 0.5)), as the paper. The parts are ``backbone`` and
+``roi_heads``; checkpoints with the keys of the box head before it was composed
+(``roi.*``) load.
 """
 
 from __future__ import annotations
@@ -15,15 +17,22 @@ import torch
 
 from robopercept._checks import plain_repr
 from robopercept.errors import InputError
-from robopercept.nn.detection.base import check_images, check_proposals
-from robopercept.nn.detection.roi_heads import TwoStageDetector
+from robopercept.nn.core.backbones import DetectionBackbone
+from robopercept.nn.detection.base import Detector, check_images, check_proposals
+from robopercept.nn.detection.roi_heads import (
+    LEGACY_BOX_KEYS,
+    FastRCNNPredictor,
+    RoIHeads,
+    TwoMLPHead,
+)
+from robopercept.nn.ops.roi import RoIPool
 
 __all__ = [
     "FastRCNN",
 ]
 
 
-class FastRCNN(TwoStageDetector):
+class FastRCNN(Detector):
     r"""Fast R-CNN (Girshick 2015): a shared backbone (stride 8), RoI max pooling of
     external proposals, two fully connected layers, then class logits (background and
     ``num_classes``) and class-specific deltas (:class:`~robopercept.nn.ops.anchors.BoxCoder`
@@ -63,6 +72,8 @@ class FastRCNN(TwoStageDetector):
     ['boxes', 'labels', 'scores']
     """
 
+    renamed_keys = LEGACY_BOX_KEYS
+
     def __init__(
         self,
         num_classes: int,
@@ -82,17 +93,19 @@ class FastRCNN(TwoStageDetector):
         if proposal_fn is not None and not callable(proposal_fn):
             raise InputError(f"proposal_fn must be callable or None; got {plain_repr(proposal_fn)}")
         self.proposal_fn = proposal_fn
-        self.pooler = "pool"
-        self.bg_low = 0.1
-        self._init_heads(
-            width,
-            hidden,
-            pool_size,
-            box_batch_size,
-            box_positive_fraction,
-            score_thresh,
-            nms_thresh,
-            detections_per_img,
+        self.backbone = DetectionBackbone(width, strides=(8,))
+        box_head = TwoMLPHead(self.backbone.out_channels[-1], pool_size, hidden)
+        self.roi_heads = RoIHeads(
+            RoIPool(box_head.pool_size, 1.0 / self.backbone.strides[-1]),
+            box_head,
+            FastRCNNPredictor(box_head.fc7.out_features, self.num_classes),
+            self.num_classes,
+            bg_low=0.1,
+            box_batch_size=box_batch_size,
+            box_positive_fraction=box_positive_fraction,
+            score_thresh=score_thresh,
+            nms_thresh=nms_thresh,
+            detections_per_img=detections_per_img,
         )
 
     def forward(
@@ -133,4 +146,4 @@ class FastRCNN(TwoStageDetector):
             proposals = [self.proposal_fn(im) for im in check_images(images)]
         props = [p.to(batch.device) for p in check_proposals(proposals, sizes)]
         feats = self.backbone(batch)[-1]
-        return self._run_heads(feats, props, sizes, tgts)
+        return self.roi_heads(feats, props, sizes, tgts)

@@ -1,41 +1,65 @@
-r"""Faster R-CNN (Ren et al. 2015): a region proposal network (3 x 3 conv, objectness
-logit and deltas per anchor of :class:`~robopercept.nn.ops.anchors.AnchorGenerator`),
+r"""Faster R-CNN (Ren et al. 2015), composed as torchvision's ``FasterRCNN``: a stride-8
+backbone, a region proposal network
+(:class:`~robopercept.nn.detection.rpn.RegionProposalNetwork`: 3 x 3 conv, objectness
+logit and deltas per anchor of :class:`~robopercept.nn.ops.anchors.AnchorGenerator`;
 anchors labelled positive at IoU >= 0.7 (and the best anchor of each ground-truth box,
 even below), negative below 0.3, 256 sampled per image, half positive
 (:mod:`robopercept.nn.detection.targets`); proposals by decoding, clipping, removing
-small boxes and NMS (top-k before and after, fewer in eval); RoI Align
+small boxes and NMS, top-k before and after, fewer in eval), RoI Align
 (:func:`~robopercept.nn.ops.roi.roi_align`) and the per-region head of Fast R-CNN
-(:class:`~robopercept.nn.detection.roi_heads.TwoStageDetector`).
+(:class:`~robopercept.nn.detection.roi_heads.RoIHeads`), with optional per-region
+branches (Mask and Keypoint R-CNN pass theirs).
 The four losses are reported separately under torchvision's names:
 ``loss_rpn_objectness``, ``loss_rpn_box``, ``loss_classifier``, ``loss_box``.
 
-The region proposal network lives in :class:`FasterRCNN` itself (``rpn_conv``,
-``rpn_cls``, ``rpn_bbox`` and the methods ``rpn``, ``rpn_losses``, ``proposals``,
-``rpn_outputs``): the shipped checkpoints' state-dict keys depend on that layout.
+The parts are ``backbone``, ``roi_heads`` and ``rpn`` (in that order, the order of the
+parameters). Checkpoints written before the parts were composed (keys ``roi.*``,
+``rpn_conv``, ``rpn_cls``, ``rpn_bbox``, ``mask_head``, ``keypoint_head``: the shipped
+detector and segmenter) load: :data:`LEGACY_KEYS` renames them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import torch
-from torch import nn
-from torch.nn import functional as F
 
 from robopercept._checks import check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count
-from robopercept.nn.detection.base import clip_boxes, init_conv
-from robopercept.nn.detection.roi_heads import TwoStageDetector
-from robopercept.nn.detection.targets import match_boxes, sample_balanced
-from robopercept.nn.ops.anchors import AnchorGenerator, BoxCoder
-from robopercept.nn.ops.boxes import box_iou
-from robopercept.nn.ops.nms import nms
+from robopercept.nn.core.backbones import DetectionBackbone
+from robopercept.nn.detection.base import Detector
+from robopercept.nn.detection.roi_heads import (
+    LEGACY_BOX_KEYS,
+    FastRCNNPredictor,
+    RegionBranch,
+    RoIHeads,
+    TwoMLPHead,
+)
+from robopercept.nn.detection.rpn import RegionProposalNetwork
+from robopercept.nn.ops.anchors import AnchorGenerator
+from robopercept.nn.ops.roi import RoIAlign
 
 __all__ = [
+    "LEGACY_KEYS",
     "FasterRCNN",
 ]
+
+#: state-dict prefixes of checkpoints written before the parts were composed (the RPN
+#: as layers of the detector, the branches beside the box head) -> today's
+LEGACY_KEYS: dict[str, str] = {
+    **LEGACY_BOX_KEYS,
+    "rpn_conv.": "rpn.conv.",
+    "rpn_cls.": "rpn.cls_logits.",
+    "rpn_bbox.": "rpn.bbox_pred.",
+    "mask_head.": "roi_heads.mask_head.",
+    "keypoint_head.": "roi_heads.keypoint_head.",
+}
+
+#: ``(in_channels, spatial_scale) -> branch``: builds a per-region branch on the
+#: backbone's features
+_BranchFactory = Callable[[int, float], RegionBranch]
 
 
 def _sequence(value: Any, name: str) -> tuple[Any, ...]:
@@ -46,18 +70,21 @@ def _sequence(value: Any, name: str) -> tuple[Any, ...]:
     return tuple(value)
 
 
-def _pair(value: Any, name: str) -> tuple[int, int]:
-    if not isinstance(value, (tuple, list)) or len(value) != 2:
-        raise InputError(f"{name} must be a (train, eval) pair of ints; got {plain_repr(value)}")
-    a, b = (check_count(v, name, 1, 1 << 20) for v in value)
-    return a, b
+def _factory(value: Any, name: str) -> _BranchFactory | None:
+    if value is not None and not callable(value):
+        raise InputError(
+            f"{name} must be None or a callable (in_channels, spatial_scale) -> branch, e.g. "
+            f"lambda c, s: MaskHead(c, num_classes, spatial_scale=s); got {plain_repr(value)}"
+        )
+    return value
 
 
-class FasterRCNN(TwoStageDetector):
+class FasterRCNN(Detector):
     r"""Faster R-CNN (Ren et al. 2015): a region proposal network on a stride-8
     backbone, RoI Align, and the per-region head of :class:`FastRCNN`.
 
-    RPN: a 3 x 3 convolution and ReLU, then per anchor an objectness logit and deltas
+    RPN (:class:`~robopercept.nn.detection.rpn.RegionProposalNetwork`): a 3 x 3
+    convolution and ReLU, then per anchor an objectness logit and deltas
     (:class:`~robopercept.nn.ops.anchors.BoxCoder` weights (1, 1, 1, 1)). Anchors
     (:class:`~robopercept.nn.ops.anchors.AnchorGenerator`, centred on cells) are positive at
     IoU >= 0.7 with a ground-truth box or when they are a box's best anchor
@@ -70,8 +97,8 @@ class FasterRCNN(TwoStageDetector):
     clipped, boxes under ``min_size`` dropped, NMS at ``rpn_nms_thresh``, the
     ``post_nms_top_n`` best kept (train / eval counts separately, as torchvision);
     they are detached, as in the approximate joint training of the paper. The head
-    (``loss_classifier``, ``loss_box``) samples regions with IoU >= 0.5 foreground and
-    [0, 0.5) background.
+    (:class:`~robopercept.nn.detection.roi_heads.RoIHeads`, ``loss_classifier``,
+    ``loss_box``) samples regions with IoU >= 0.5 foreground and [0, 0.5) background.
 
     Parameters
     ----------
@@ -87,6 +114,11 @@ class FasterRCNN(TwoStageDetector):
         Proposal NMS IoU, smallest proposal side in pixels.
     box_batch_size, box_positive_fraction, score_thresh, nms_thresh, detections_per_img
         As in :class:`FastRCNN`.
+    mask_head, keypoint_head : callable, optional
+        ``(in_channels, spatial_scale) -> branch``: per-region branches of the
+        :class:`~robopercept.nn.detection.roi_heads.RoIHeads` (:class:`MaskRCNN` and
+        :class:`KeypointRCNN` pass theirs), built after the RPN so that seeded weights
+        are drawn in a fixed order.
 
     Examples
     --------
@@ -97,6 +129,8 @@ class FasterRCNN(TwoStageDetector):
     >>> sorted(m([torch.rand(3, 32, 32)], t))
     ['loss_box', 'loss_classifier', 'loss_rpn_box', 'loss_rpn_objectness']
     """
+
+    renamed_keys = LEGACY_KEYS
 
     def __init__(
         self,
@@ -120,56 +154,58 @@ class FasterRCNN(TwoStageDetector):
         score_thresh: float = 0.05,
         nms_thresh: float = 0.5,
         detections_per_img: int = 100,
+        mask_head: _BranchFactory | None = None,
+        keypoint_head: _BranchFactory | None = None,
     ) -> None:
         super().__init__()
         self._init_common(num_classes, 8)
-        self.pooler = "align"
-        self.bg_low = 0.0
-        self._init_heads(
-            width,
-            hidden,
-            pool_size,
-            box_batch_size,
-            box_positive_fraction,
-            score_thresh,
-            nms_thresh,
-            detections_per_img,
-        )
-        self.anchor_generator = AnchorGenerator(
+        mask_factory = _factory(mask_head, "mask_head")
+        keypoint_factory = _factory(keypoint_head, "keypoint_head")
+        # the weights are drawn in this order (seeded runs): backbone, box head, RPN,
+        # then the branches
+        backbone = DetectionBackbone(width, strides=(8,))
+        c = backbone.out_channels[-1]
+        scale = 1.0 / backbone.strides[-1]
+        box_head = TwoMLPHead(c, pool_size, hidden)
+        box_predictor = FastRCNNPredictor(box_head.fc7.out_features, self.num_classes)
+        anchor_generator = AnchorGenerator(
             _sequence(anchor_sizes, "anchor_sizes"),
             _sequence(aspect_ratios, "aspect_ratios"),
             offset=0.5,
         )
-        a = self.anchor_generator.num_anchors_per_location()[0]
-        c = self.backbone.out_channels[-1]
-        self.rpn_conv = nn.Conv2d(c, c, 3, padding=1)
-        self.rpn_cls = nn.Conv2d(c, a, 1)
-        self.rpn_bbox = nn.Conv2d(c, 4 * a, 1)
-        for layer in (self.rpn_conv, self.rpn_cls, self.rpn_bbox):
-            init_conv(layer, 0.0)
-        self.rpn_coder = BoxCoder((1.0, 1.0, 1.0, 1.0))
-        self.rpn_fg_iou = check_real(rpn_fg_iou, "rpn_fg_iou", 0.0, 1.0)
-        self.rpn_bg_iou = check_real(rpn_bg_iou, "rpn_bg_iou", 0.0, self.rpn_fg_iou)
-        self.rpn_batch_size = check_count(rpn_batch_size, "rpn_batch_size", 1, 1 << 20)
-        self.rpn_positive_fraction = check_real(
-            rpn_positive_fraction, "rpn_positive_fraction", 0.0, 1.0
+        # checked here to name the arguments of this class
+        fg = check_real(rpn_fg_iou, "rpn_fg_iou", 0.0, 1.0)
+        check_real(rpn_bg_iou, "rpn_bg_iou", 0.0, fg)
+        check_count(rpn_batch_size, "rpn_batch_size", 1, 1 << 20)
+        check_real(rpn_positive_fraction, "rpn_positive_fraction", 0.0, 1.0)
+        check_real(rpn_nms_thresh, "rpn_nms_thresh", 0.0, 1.0)
+        rpn = RegionProposalNetwork(
+            c,
+            anchor_generator,
+            fg_iou=rpn_fg_iou,
+            bg_iou=rpn_bg_iou,
+            batch_size=rpn_batch_size,
+            positive_fraction=rpn_positive_fraction,
+            pre_nms_top_n=pre_nms_top_n,
+            post_nms_top_n=post_nms_top_n,
+            nms_thresh=rpn_nms_thresh,
+            min_size=min_size,
         )
-        self.pre_nms_top_n = _pair(pre_nms_top_n, "pre_nms_top_n")
-        self.post_nms_top_n = _pair(post_nms_top_n, "post_nms_top_n")
-        self.rpn_nms_thresh = check_real(rpn_nms_thresh, "rpn_nms_thresh", 0.0, 1.0)
-        self.min_size = check_real(min_size, "min_size", 0.0)
-
-    def rpn(
-        self, feats: torch.Tensor, image_shape: tuple[int, int]
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Objectness logits ``(N, A_total)``, deltas ``(N, A_total, 4)`` and the anchors
-        ``(A_total, 4)`` (ordered cell-major, as :class:`AnchorGenerator`)."""
-        h = F.relu(self.rpn_conv(feats))
-        n, _, fh, fw = h.shape
-        obj = self.rpn_cls(h).permute(0, 2, 3, 1).reshape(n, -1)
-        reg = self.rpn_bbox(h).reshape(n, -1, 4, fh, fw).permute(0, 3, 4, 1, 2).reshape(n, -1, 4)
-        anchors = self.anchor_generator(image_shape, [(fh, fw)], dtype=h.dtype).to(h.device)
-        return obj, reg, anchors
+        self.backbone = backbone
+        self.roi_heads = RoIHeads(
+            RoIAlign(box_head.pool_size, scale, sampling_ratio=2),
+            box_head,
+            box_predictor,
+            self.num_classes,
+            box_batch_size=box_batch_size,
+            box_positive_fraction=box_positive_fraction,
+            score_thresh=score_thresh,
+            nms_thresh=nms_thresh,
+            detections_per_img=detections_per_img,
+            mask_head=mask_factory(c, scale) if mask_factory is not None else None,
+            keypoint_head=keypoint_factory(c, scale) if keypoint_factory is not None else None,
+        )
+        self.rpn = rpn
 
     @torch.no_grad()
     def rpn_outputs(self, images: Any) -> list[dict[str, torch.Tensor]]:
@@ -184,8 +220,10 @@ class FasterRCNN(TwoStageDetector):
         try:
             batch, sizes, _ = self._prepare(images, None)
             feats = self.backbone(batch)[-1]
-            obj, reg, anchors = self.rpn(feats, (int(batch.shape[2]), int(batch.shape[3])))
-            props, scores = self.proposals(obj, reg, anchors, sizes)
+            obj, reg, anchors = self.rpn.anchor_outputs(
+                feats, (int(batch.shape[2]), int(batch.shape[3]))
+            )
+            props, scores = self.rpn.filter_proposals(obj, reg, anchors, sizes)
         finally:
             self.train(was)
         fh, fw = int(feats.shape[2]), int(feats.shape[3])
@@ -198,67 +236,6 @@ class FasterRCNN(TwoStageDetector):
             }
             for i in range(len(sizes))
         ]
-
-    def rpn_losses(
-        self,
-        obj: torch.Tensor,
-        reg: torch.Tensor,
-        anchors: torch.Tensor,
-        targets: list[dict[str, torch.Tensor]],
-    ) -> dict[str, torch.Tensor]:
-        """The RPN's two losses over the anchors sampled from each image."""
-        sel_obj, sel_lab, sel_reg, sel_tgt, n_sampled = [], [], [], [], 0
-        for i, t in enumerate(targets):
-            gt = t["boxes"].to(anchors.dtype)
-            lab, matched = match_boxes(
-                box_iou(gt, anchors), self.rpn_fg_iou, self.rpn_bg_iou, allow_low_quality=True
-            )
-            pos, neg = sample_balanced(lab, self.rpn_batch_size, self.rpn_positive_fraction)
-            keep = pos | neg
-            n_sampled += int(keep.sum())
-            sel_obj.append(obj[i][keep])
-            sel_lab.append(pos[keep].to(obj.dtype))
-            if bool(pos.any()):
-                sel_reg.append(reg[i][pos])
-                sel_tgt.append(self.rpn_coder.encode(gt[matched[pos]], anchors[pos]))
-        o = torch.cat(sel_obj)
-        loss_obj = (
-            F.binary_cross_entropy_with_logits(o, torch.cat(sel_lab))
-            if o.numel()
-            else obj.sum() * 0
-        )
-        if sel_reg:
-            loss_box = F.smooth_l1_loss(
-                torch.cat(sel_reg), torch.cat(sel_tgt), beta=1.0 / 9, reduction="sum"
-            ) / max(n_sampled, 1)
-        else:
-            loss_box = reg.sum() * 0.0
-        return {"loss_rpn_objectness": loss_obj, "loss_rpn_box": loss_box}
-
-    def proposals(
-        self,
-        obj: torch.Tensor,
-        reg: torch.Tensor,
-        anchors: torch.Tensor,
-        sizes: list[tuple[int, int]],
-    ) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
-        """Per image: top ``pre_nms_top_n`` anchors by objectness, decoded, clipped,
-        small boxes removed, NMS, top ``post_nms_top_n``; returns the proposals and
-        their objectness logits (detached)."""
-        mode = 0 if self.training else 1
-        pre, post = self.pre_nms_top_n[mode], self.post_nms_top_n[mode]
-        obj, reg = obj.detach(), reg.detach()
-        boxes_out, scores_out = [], []
-        for i, size in enumerate(sizes):
-            k = min(pre, obj.shape[1])
-            s, idx = obj[i].topk(k)
-            b = clip_boxes(self.rpn_coder.decode(reg[i][idx], anchors[idx]), size)
-            keep = (b[:, 2] - b[:, 0] >= self.min_size) & (b[:, 3] - b[:, 1] >= self.min_size)
-            b, s = b[keep], s[keep]
-            kept = nms(b, s, self.rpn_nms_thresh)[:post]
-            boxes_out.append(b[kept])
-            scores_out.append(s[kept])
-        return boxes_out, scores_out
 
     def forward(
         self, images: Any, targets: Any = None
@@ -287,13 +264,13 @@ class FasterRCNN(TwoStageDetector):
         """
         batch, sizes, tgts = self._prepare(images, targets)
         feats = self.backbone(batch)[-1]
-        obj, reg, anchors = self.rpn(feats, (int(batch.shape[2]), int(batch.shape[3])))
-        props, _ = self.proposals(obj, reg, anchors, sizes)
+        shape = (int(batch.shape[2]), int(batch.shape[3]))
         if self.training:
             assert tgts is not None
-            losses = self.rpn_losses(obj, reg, anchors, tgts)
-            head = self._run_heads(feats, props, sizes, tgts)
+            props, losses = self.rpn(feats, shape, sizes, tgts)
+            head = self.roi_heads(feats, props, sizes, tgts)
             assert isinstance(head, dict)
             losses.update(head)
             return losses
-        return self._run_heads(feats, props, sizes, None)
+        props, _ = self.rpn(feats, shape, sizes)
+        return self.roi_heads(feats, props, sizes)

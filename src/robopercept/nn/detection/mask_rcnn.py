@@ -1,19 +1,20 @@
 r"""Mask R-CNN (He et al. 2017): :class:`~robopercept.nn.detection.faster_rcnn.FasterRCNN`
-with a mask branch beside its box head, trained with the per-pixel binary cross
-entropy of the true class's mask (``loss_mask``); at inference the masks are pasted
-into the image (:func:`~robopercept.nn.ops.roi.paste_masks`).
+with a mask branch (:class:`MaskHead`) plugged into its RoI heads beside the box head,
+trained with the per-pixel binary cross entropy of the true class's mask
+(``loss_mask``); at inference the masks are pasted into the image
+(:func:`~robopercept.nn.ops.roi.paste_masks`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import torch
 from torch import nn
 from torch.nn import functional as F
 
-from robopercept._checks import plain_repr
+from robopercept._checks import check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count
 from robopercept.nn.core.backbones import MAX_CHANNELS
@@ -21,32 +22,9 @@ from robopercept.nn.detection.faster_rcnn import FasterRCNN
 from robopercept.nn.ops.roi import paste_masks, roi_align
 
 __all__ = [
+    "MaskHead",
     "MaskRCNN",
 ]
-
-
-class _MaskHead(nn.Module):
-    """``convs`` 3 x 3 convolutions with ReLU, a 2 x 2 stride-2 transposed convolution
-    with ReLU, and a 1 x 1 convolution to one mask logit map per class (torchvision's
-    MaskRCNNHeads + MaskRCNNPredictor, with fewer channels)."""
-
-    def __init__(self, in_channels: int, channels: int, convs: int, num_classes: int) -> None:
-        super().__init__()
-        layers: list[nn.Module] = []
-        c = in_channels
-        for _ in range(convs):
-            layers += [nn.Conv2d(c, channels, 3, padding=1), nn.ReLU()]
-            c = channels
-        self.convs = nn.Sequential(*layers)
-        self.up = nn.ConvTranspose2d(c, channels, 2, stride=2)
-        self.logits = nn.Conv2d(channels, num_classes, 1)
-        for m in self.modules():
-            if isinstance(m, (nn.Conv2d, nn.ConvTranspose2d)):
-                nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
-                nn.init.zeros_(m.bias)  # type: ignore[arg-type]
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.logits(F.relu(self.up(self.convs(x))))
 
 
 def _check_masks_target(t: Mapping[str, Any], i: int, size: tuple[int, int]) -> torch.Tensor:
@@ -67,9 +45,175 @@ def _check_masks_target(t: Mapping[str, Any], i: int, size: tuple[int, int]) -> 
     return m
 
 
+class MaskHead(nn.Module):
+    r"""The mask branch of Mask R-CNN, a part of
+    :class:`~robopercept.nn.detection.roi_heads.RoIHeads` (its ``mask_head``).
+
+    Each region is pooled with RoI Align (``aligned=True``, pixel centres at
+    half-integers) to ``mask_pool_size`` cells of the features, then ``mask_convs``
+    3 x 3 convolutions of ``mask_channels`` with ReLU, a 2 x 2 stride-2 transposed
+    convolution with ReLU and a 1 x 1 convolution give :math:`C` logit maps of side
+    :math:`M = 2\,` ``mask_pool_size`` (28 by default): one mask per class, decoupled
+    from the classification (no competition between classes); torchvision's
+    ``MaskRCNNHeads`` + ``MaskRCNNPredictor``, with fewer channels. Convolutions are
+    initialized He-normal (``fan_out``) with zero bias.
+
+    Training (:meth:`losses`): for each sampled foreground region :math:`r` with
+    ground-truth class :math:`k` and matched instance mask :math:`G`, the target
+    :math:`T` is :math:`G` RoI-aligned to :math:`M \times M` over the region (soft
+    values in [0, 1], as torchvision's ``project_masks_on_boxes``), and ``loss_mask``
+    is the mean per-pixel binary cross entropy
+    :math:`-\overline{T \log \sigma(z_k) + (1 - T) \log(1 - \sigma(z_k))}` of the
+    class-:math:`k` map only (0 without foreground regions). Inference
+    (:meth:`outputs`): the map of each box's predicted class through the sigmoid,
+    pasted into the image (:func:`~robopercept.nn.ops.roi.paste_masks`).
+
+    Parameters
+    ----------
+    in_channels : int
+        Channels of the features.
+    num_classes : int
+        :math:`C`.
+    mask_pool_size : int
+        RoI Align side (14: 28 x 28 masks).
+    mask_channels, mask_convs : int
+        Width and depth (torchvision: 256 and 4).
+    spatial_scale : float
+        Features per image pixel (1/8 on a stride-8 map).
+
+    Examples
+    --------
+    >>> import torch
+    >>> head = MaskHead(8, 2, mask_pool_size=4, mask_channels=8, mask_convs=1)
+    >>> head.mask_logits(torch.rand(1, 8, 8, 8), [torch.tensor([[0.0, 0, 32, 32]])]).shape
+    torch.Size([1, 2, 8, 8])
+    """
+
+    def __init__(
+        self,
+        in_channels: int,
+        num_classes: int,
+        *,
+        mask_pool_size: int = 14,
+        mask_channels: int = 64,
+        mask_convs: int = 4,
+        spatial_scale: float = 0.125,
+    ) -> None:
+        super().__init__()
+        c = check_count(in_channels, "in_channels", 1, MAX_CHANNELS)
+        k = check_count(num_classes, "num_classes", 1, 1 << 16)
+        self.mask_pool_size = check_count(mask_pool_size, "mask_pool_size", 1, 64)
+        self.mask_resolution = 2 * self.mask_pool_size
+        channels = check_count(mask_channels, "mask_channels", 1, MAX_CHANNELS)
+        convs = check_count(mask_convs, "mask_convs", 0, 16)
+        self.spatial_scale = check_real(
+            spatial_scale, "spatial_scale", 0.0, 1e6, low_inclusive=False
+        )
+        layers: list[nn.Module] = []
+        for _ in range(convs):
+            layers += [nn.Conv2d(c, channels, 3, padding=1), nn.ReLU()]
+            c = channels
+        self.convs = nn.Sequential(*layers)
+        self.up = nn.ConvTranspose2d(c, channels, 2, stride=2)
+        self.logits = nn.Conv2d(channels, k, 1)
+        for m in self.modules():
+            if isinstance(m, (nn.Conv2d, nn.ConvTranspose2d)):
+                nn.init.kaiming_normal_(m.weight, mode="fan_out", nonlinearity="relu")
+                nn.init.zeros_(m.bias)  # type: ignore[arg-type]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(R, C, M, M)`` mask logits of pooled regions ``(R, in_channels, P, P)``."""
+        return self.logits(F.relu(self.up(self.convs(x))))
+
+    def mask_logits(self, features: torch.Tensor, rois: list[torch.Tensor]) -> torch.Tensor:
+        """``(R, C, M, M)`` mask logits of the regions ``rois`` (one list entry per image,
+        ``xyxy`` pixels) on ``features``."""
+        pooled = roi_align(
+            features,
+            rois,
+            self.mask_pool_size,
+            self.spatial_scale,
+            sampling_ratio=2,
+            aligned=True,
+        )
+        return self(pooled)
+
+    def mask_targets(
+        self, rois: torch.Tensor, masks: torch.Tensor, matched: torch.Tensor
+    ) -> torch.Tensor:
+        """``(R, M, M)`` soft targets: instance mask ``masks[matched[r]]`` RoI-aligned over
+        region ``rois[r]`` (``aligned=True``, 2 x 2 samples per cell)."""
+        if rois.shape[0] == 0:
+            return rois.new_zeros((0, self.mask_resolution, self.mask_resolution))
+        rows = torch.cat((matched.to(rois.dtype)[:, None], rois), dim=1)
+        m = masks.to(rois.dtype)[:, None]
+        return roi_align(m, rows, self.mask_resolution, 1.0, sampling_ratio=2, aligned=True)[:, 0]
+
+    def losses(
+        self,
+        features: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        targets: Sequence[Mapping[str, torch.Tensor]],
+        rois: list[torch.Tensor],
+        labels: list[torch.Tensor],
+        matched: list[torch.Tensor],
+    ) -> dict[str, torch.Tensor]:
+        """``{"loss_mask": ...}`` on the sampled foreground regions (the class
+        docstring); ``targets`` carry ``"masks"`` ``(K, H, W)`` per image.
+
+        Raises
+        ------
+        InputError
+            A target without ``"masks"``, or masks not ``(K, H, W)`` of the image's
+            size, or with NaN or inf.
+        """
+        gt_masks = [
+            _check_masks_target(t, i, s)
+            for i, (t, s) in enumerate(zip(targets, sizes, strict=True))
+        ]
+        fg = [lab > 0 for lab in labels]
+        fg_labels = torch.cat([lab[f] for lab, f in zip(labels, fg, strict=True)])
+        if fg_labels.numel() == 0:
+            # zero, with a graph through the mask branch (as torchvision's)
+            zero = torch.stack([p.sum() for p in self.parameters()]).sum() * 0.0
+            return {"loss_mask": zero}
+        z = self.mask_logits(features, [r[f] for r, f in zip(rois, fg, strict=True)])
+        z = z[torch.arange(z.shape[0], device=z.device), fg_labels - 1]
+        target = torch.cat(
+            [
+                self.mask_targets(r[f], gm, mt[f])
+                for r, f, gm, mt in zip(rois, fg, gt_masks, matched, strict=True)
+            ]
+        )
+        return {"loss_mask": F.binary_cross_entropy_with_logits(z, target)}
+
+    def outputs(
+        self,
+        features: torch.Tensor,
+        sizes: list[tuple[int, int]],
+        detections: list[dict[str, torch.Tensor]],
+    ) -> list[dict[str, torch.Tensor]]:
+        """``detections`` with ``"masks"`` ``(D, 1, H, W)`` probabilities: each box's
+        predicted-class map through the sigmoid, pasted into its image."""
+        boxes = [d["boxes"] for d in detections]
+        if not sum(b.shape[0] for b in boxes):
+            for d, size in zip(detections, sizes, strict=True):
+                d["masks"] = features.new_zeros((0, 1, *size))
+            return detections
+        z = self.mask_logits(features, boxes)
+        start = 0
+        for d, size in zip(detections, sizes, strict=True):
+            k = d["boxes"].shape[0]
+            zi = z[start : start + k]
+            start += k
+            probs = torch.sigmoid(zi[torch.arange(k, device=zi.device), d["labels"] - 1])
+            d["masks"] = paste_masks(probs, d["boxes"].detach(), size)[:, None]
+        return detections
+
+
 class MaskRCNN(FasterRCNN):
-    r"""Mask R-CNN (He et al. 2017): :class:`FasterRCNN` with a mask branch beside its
-    box head.
+    r"""Mask R-CNN (He et al. 2017): :class:`FasterRCNN` whose RoI heads carry a mask
+    branch (:class:`MaskHead`) beside the box head.
 
     The mask branch pools each region with RoI Align (``aligned=True``, pixel centres
     at half-integers) to ``mask_pool_size`` cells of the stride-8 features, runs
@@ -128,82 +272,17 @@ class MaskRCNN(FasterRCNN):
         mask_convs: int = 4,
         **settings: Any,
     ) -> None:
-        super().__init__(num_classes, **settings)
-        self.mask_pool_size = check_count(mask_pool_size, "mask_pool_size", 1, 64)
-        self.mask_resolution = 2 * self.mask_pool_size
-        channels = check_count(mask_channels, "mask_channels", 1, MAX_CHANNELS)
-        convs = check_count(mask_convs, "mask_convs", 0, 16)
-        self.mask_head = _MaskHead(self.backbone.out_channels[-1], channels, convs, num_classes)
+        if "mask_head" in settings or "keypoint_head" in settings:
+            raise InputError("MaskRCNN builds its own mask_head; give its mask_* settings")
 
-    def mask_logits(self, feats: torch.Tensor, rois: list[torch.Tensor]) -> torch.Tensor:
-        """``(R, C, M, M)`` mask logits of the regions ``rois`` (one list entry per image,
-        ``xyxy`` pixels) on the stride-8 features."""
-        pooled = roi_align(
-            feats,
-            rois,
-            self.mask_pool_size,
-            1.0 / self.backbone.strides[-1],
-            sampling_ratio=2,
-            aligned=True,
-        )
-        return self.mask_head(pooled)
+        def mask_head(in_channels: int, spatial_scale: float) -> MaskHead:
+            return MaskHead(
+                in_channels,
+                num_classes,
+                mask_pool_size=mask_pool_size,
+                mask_channels=mask_channels,
+                mask_convs=mask_convs,
+                spatial_scale=spatial_scale,
+            )
 
-    def mask_targets(
-        self, rois: torch.Tensor, masks: torch.Tensor, matched: torch.Tensor
-    ) -> torch.Tensor:
-        """``(R, M, M)`` soft targets: instance mask ``masks[matched[r]]`` RoI-aligned over
-        region ``rois[r]`` (``aligned=True``, 2 x 2 samples per cell)."""
-        if rois.shape[0] == 0:
-            return rois.new_zeros((0, self.mask_resolution, self.mask_resolution))
-        rows = torch.cat((matched.to(rois.dtype)[:, None], rois), dim=1)
-        m = masks.to(rois.dtype)[:, None]
-        return roi_align(m, rows, self.mask_resolution, 1.0, sampling_ratio=2, aligned=True)[:, 0]
-
-    def _region_losses(
-        self,
-        feats: torch.Tensor,
-        sizes: list[tuple[int, int]],
-        tgts: list[dict[str, torch.Tensor]],
-        rois: list[torch.Tensor],
-        labels: list[torch.Tensor],
-        matched: list[torch.Tensor],
-    ) -> dict[str, torch.Tensor]:
-        gt_masks = [
-            _check_masks_target(t, i, s) for i, (t, s) in enumerate(zip(tgts, sizes, strict=True))
-        ]
-        fg = [lab > 0 for lab in labels]
-        fg_labels = torch.cat([lab[f] for lab, f in zip(labels, fg, strict=True)])
-        if fg_labels.numel() == 0:
-            # zero, with a graph through the mask branch (as torchvision's)
-            zero = torch.stack([p.sum() for p in self.mask_head.parameters()]).sum() * 0.0
-            return {"loss_mask": zero}
-        z = self.mask_logits(feats, [r[f] for r, f in zip(rois, fg, strict=True)])
-        z = z[torch.arange(z.shape[0], device=z.device), fg_labels - 1]
-        target = torch.cat(
-            [
-                self.mask_targets(r[f], gm, mt[f])
-                for r, f, gm, mt in zip(rois, fg, gt_masks, matched, strict=True)
-            ]
-        )
-        return {"loss_mask": F.binary_cross_entropy_with_logits(z, target)}
-
-    def _region_outputs(
-        self,
-        feats: torch.Tensor,
-        sizes: list[tuple[int, int]],
-        dets: list[dict[str, torch.Tensor]],
-    ) -> list[dict[str, torch.Tensor]]:
-        boxes = [d["boxes"] for d in dets]
-        if not sum(b.shape[0] for b in boxes):
-            for d, size in zip(dets, sizes, strict=True):
-                d["masks"] = feats.new_zeros((0, 1, *size))
-            return dets
-        z = self.mask_logits(feats, boxes)
-        start = 0
-        for d, size in zip(dets, sizes, strict=True):
-            k = d["boxes"].shape[0]
-            zi = z[start : start + k]
-            start += k
-            probs = torch.sigmoid(zi[torch.arange(k, device=zi.device), d["labels"] - 1])
-            d["masks"] = paste_masks(probs, d["boxes"].detach(), size)[:, None]
-        return dets
+        super().__init__(num_classes, mask_head=mask_head, **settings)

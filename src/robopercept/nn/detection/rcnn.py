@@ -2,26 +2,28 @@ r"""R-CNN (Girshick et al. 2014), the "slow" R-CNN: each proposal (selective sea
 :func:`selective_search_proposals`, or given) warped with context padding to a fixed
 size and classified by a small CNN of its own (background included), with a linear
 per-class box regressor on its features; positives IoU >= 0.5, negatives < 0.3;
-``last_timing`` measures the seconds per image (:class:`RCNN`).
+``last_timing`` measures the seconds per image (:class:`RCNN`). Composed of
+:class:`~robopercept.nn.detection.roi_heads.RoIHeads` (``roi_heads``) whose pooler warps
+the regions out of the image, whose box head is the CNN and whose predictor the linear
+classifier and box regressor; checkpoints with the keys of before (``roi.*``) load.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar
 
 import torch
 from torch import nn
 
-from robopercept._checks import check_real, plain_repr
+from robopercept._checks import plain_repr
 from robopercept.errors import InputError
 from robopercept.features import selective_search
 from robopercept.nn._guards import check_count
 from robopercept.nn.core.blocks import ConvBNAct
-from robopercept.nn.detection.base import check_images, check_proposals
-from robopercept.nn.detection.roi_heads import TwoStageDetector
-from robopercept.nn.ops.anchors import BoxCoder
+from robopercept.nn.detection.base import Detector, check_images, check_proposals
+from robopercept.nn.detection.roi_heads import FastRCNNPredictor, RoIHeads
 from robopercept.nn.ops.roi import roi_align
 
 __all__ = [
@@ -74,35 +76,54 @@ def selective_search_proposals(
     return torch.cat((b[:, :2], b[:, :2] + b[:, 2:]), dim=1).to(im.device)
 
 
-class _WarpCNN(nn.Module):
-    """The region classifier of R-CNN: three ConvBNAct + max-pool stages, global average
-    pooling, one fully connected layer (the features), then class logits and a linear
-    per-class box regressor on the (detached) features."""
+def _warp_cnn(width: int, hidden: int) -> nn.Sequential:
+    """The region CNN of R-CNN: three ConvBNAct + max-pool stages, global average pooling,
+    one fully connected layer (the features)."""
+    return nn.Sequential(
+        ConvBNAct(3, width),
+        nn.MaxPool2d(2),
+        ConvBNAct(width, 2 * width),
+        nn.MaxPool2d(2),
+        ConvBNAct(2 * width, 4 * width),
+        nn.AdaptiveAvgPool2d(1),
+        nn.Flatten(),
+        nn.Linear(4 * width, hidden),
+        nn.ReLU(),
+    )
 
-    def __init__(self, width: int, hidden: int, num_classes: int) -> None:
-        super().__init__()
-        self.features = nn.Sequential(
-            ConvBNAct(3, width),
-            nn.MaxPool2d(2),
-            ConvBNAct(width, 2 * width),
-            nn.MaxPool2d(2),
-            ConvBNAct(2 * width, 4 * width),
-            nn.AdaptiveAvgPool2d(1),
-            nn.Flatten(),
-            nn.Linear(4 * width, hidden),
-            nn.ReLU(),
-        )
-        self.cls_score = nn.Linear(hidden, num_classes + 1)
-        self.bbox_pred = nn.Linear(hidden, 4 * (num_classes + 1))
+
+class _LinearOnFixedFeatures(FastRCNNPredictor):
+    """Class logits and a linear per-class box regressor on the (detached) features."""
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        h = self.features(x)
         # the box regressor is a linear model of fixed CNN features (as the paper's
         # ridge regressor on pool5): its gradient does not reach the CNN
-        return self.cls_score(h), self.bbox_pred(h.detach())
+        return self.cls_score(x), self.bbox_pred(x.detach())
 
 
-class RCNN(TwoStageDetector):
+def _warp(image: torch.Tensor, boxes: torch.Tensor, s: int, p: int) -> torch.Tensor:
+    cx, cy = (boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2
+    f = s / (s - 2 * p)
+    hw = (boxes[:, 2] - boxes[:, 0]) * f / 2
+    hh = (boxes[:, 3] - boxes[:, 1]) * f / 2
+    big = torch.stack((cx - hw, cy - hh, cx + hw, cy + hh), dim=1)
+    return roi_align(image[None], [big], s, 1.0, sampling_ratio=2, aligned=True)
+
+
+class _ContextWarp(nn.Module):
+    """The "pooler" of R-CNN: each image's regions warped with context padding to
+    ``(P, 3, S, S)`` (:meth:`RCNN.warp`), all images' concatenated."""
+
+    def __init__(self, warp_size: int, context: int) -> None:
+        super().__init__()
+        self.warp_size, self.context = warp_size, context
+
+    def forward(self, batch: torch.Tensor, rois: list[torch.Tensor]) -> torch.Tensor:
+        s, p = self.warp_size, self.context
+        return torch.cat([_warp(batch[i], r, s, p) for i, r in enumerate(rois)])
+
+
+class RCNN(Detector):
     r"""R-CNN (Girshick et al. 2014), the course's "slow" R-CNN: every region proposal
     is cut out of the image, warped to a fixed size and classified by a CNN of its own.
 
@@ -169,6 +190,13 @@ class RCNN(TwoStageDetector):
     (['boxes', 'labels', 'scores'], ['cnn', 'proposals', 'total'])
     """
 
+    #: checkpoints written before the region head was composed (``roi`` of the model)
+    renamed_keys: ClassVar[Mapping[str, str]] = {
+        "roi.features.": "roi_heads.box_head.",
+        "roi.cls_score.": "roi_heads.box_predictor.cls_score.",
+        "roi.bbox_pred.": "roi_heads.box_predictor.bbox_pred.",
+    }
+
     def __init__(
         self,
         num_classes: int,
@@ -194,21 +222,22 @@ class RCNN(TwoStageDetector):
         if context is None:
             context = round(self.warp_size * 16 / 227)
         self.context = check_count(context, "context", 0, (self.warp_size - 1) // 2)
-        self.roi = _WarpCNN(  # type: ignore[assignment]
-            check_count(width, "width", 1, 1024),
-            check_count(hidden, "hidden", 1, 1 << 14),
+        width = check_count(width, "width", 1, 1024)
+        hidden = check_count(hidden, "hidden", 1, 1 << 14)
+        box_head = _warp_cnn(width, hidden)
+        self.roi_heads = RoIHeads(
+            _ContextWarp(self.warp_size, self.context),
+            box_head,
+            _LinearOnFixedFeatures(hidden, self.num_classes),
             self.num_classes,
+            bg_threshold=0.3,
+            box_batch_size=box_batch_size,
+            box_positive_fraction=box_positive_fraction,
+            score_thresh=score_thresh,
+            nms_thresh=nms_thresh,
+            detections_per_img=detections_per_img,
+            chunk=chunk,
         )
-        self.box_coder = BoxCoder((10.0, 10.0, 5.0, 5.0))
-        self.bg_low, self.bg_high = 0.0, 0.3
-        self.box_batch_size = check_count(box_batch_size, "box_batch_size", 1, 1 << 20)
-        self.box_positive_fraction = check_real(
-            box_positive_fraction, "box_positive_fraction", 0.0, 1.0
-        )
-        self.score_thresh = check_real(score_thresh, "score_thresh", 0.0, 1.0)
-        self.nms_thresh = check_real(nms_thresh, "nms_thresh", 0.0, 1.0)
-        self.detections_per_img = check_count(detections_per_img, "detections_per_img", 1, 1 << 20)
-        self.chunk = check_count(chunk, "chunk", 1, 1 << 20)
         self.last_timing: dict[str, float] = {}
 
     def warp(self, image: torch.Tensor, boxes: torch.Tensor) -> torch.Tensor:
@@ -233,25 +262,7 @@ class RCNN(TwoStageDetector):
             raise InputError(
                 f"boxes must be a finite (P, 4) float torch.Tensor, xyxy; got {plain_repr(boxes)}"
             )
-        return self._warp(im, boxes.to(im.device, im.dtype))
-
-    def _warp(self, image: torch.Tensor, boxes: torch.Tensor) -> torch.Tensor:
-        s, p = self.warp_size, self.context
-        cx, cy = (boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2
-        f = s / (s - 2 * p)
-        hw = (boxes[:, 2] - boxes[:, 0]) * f / 2
-        hh = (boxes[:, 3] - boxes[:, 1]) * f / 2
-        big = torch.stack((cx - hw, cy - hh, cx + hw, cy + hh), dim=1)
-        return roi_align(image[None], [big], s, 1.0, sampling_ratio=2, aligned=True)
-
-    def _classify(
-        self, batch: torch.Tensor, rois: list[torch.Tensor]
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        crops = torch.cat([self._warp(batch[i], r) for i, r in enumerate(rois)])
-        if self.training or crops.shape[0] <= self.chunk:
-            return self.roi(crops)
-        parts = [self.roi(crops[i : i + self.chunk]) for i in range(0, crops.shape[0], self.chunk)]
-        return torch.cat([a for a, _ in parts]), torch.cat([b for _, b in parts])
+        return _warp(im, boxes.to(im.device, im.dtype), self.warp_size, self.context)
 
     def forward(
         self, images: Any, targets: Any = None, proposals: Any = None
@@ -289,12 +300,8 @@ class RCNN(TwoStageDetector):
         props = [p.to(batch.device) for p in check_proposals(proposals, sizes)]
         t1 = time.perf_counter()
         if self.training:
-            assert tgts is not None
-            rois, labels, deltas = self.select_training_samples(props, tgts)
-            logits, reg = self._classify(batch, rois)
-            return self._head_losses(logits, reg, labels, deltas)
-        logits, reg = self._classify(batch, props)
-        out = self._postprocess(logits, reg, props, sizes)
+            return self.roi_heads(batch, props, sizes, tgts)
+        out = self.roi_heads(batch, props, sizes)
         t2 = time.perf_counter()
         n = len(sizes)
         self.last_timing = {

@@ -4,9 +4,10 @@ foreground, background or ignored, and which of them a step trains on.
 :func:`match_boxes` labels candidates by IoU thresholds with an ignored band and
 low-quality matches (torchvision's ``Matcher``); :func:`sample_balanced` draws a fixed
 number of examples with a cap on the positive fraction (torchvision's
-``BalancedPositiveNegativeSampler``). The region proposal network of
-:class:`~robopercept.nn.detection.faster_rcnn.FasterRCNN` and the region heads of
-:mod:`robopercept.nn.detection.roi_heads` use both.
+``BalancedPositiveNegativeSampler``). The region proposal network
+(:class:`~robopercept.nn.detection.rpn.RegionProposalNetwork`) and the region heads
+(:class:`~robopercept.nn.detection.roi_heads.RoIHeads`) use both, with the box coder
+:class:`~robopercept.nn.ops.anchors.BoxCoder` for the regression targets.
 
 Determinism: sampling draws from torch's global generator, so a run seeded by
 :func:`~robopercept.nn.detection.train.train_detector` (``TrainConfig.seed``) gives the

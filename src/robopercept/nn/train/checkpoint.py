@@ -166,8 +166,16 @@ def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None
     if model is not None:
         own = model.state_dict()
         theirs = state["model"]
-        bad = sorted(set(own) ^ set(theirs)) + sorted(
-            k for k in set(own) & set(theirs) if tuple(own[k].shape) != tuple(theirs[k].shape)
+        if not isinstance(theirs, dict) or not all(
+            isinstance(k, str) and isinstance(v, torch.Tensor) for k, v in theirs.items()
+        ):
+            raise FileFormatError(f"{p}: its 'model' entry is not a dict of named tensors")
+        # a model that renamed its layers (a detector's renamed_keys) loads the old names:
+        # compare under the names its load_state_dict will give them
+        renames = getattr(model, "renamed_keys", None) or {}
+        named = {_renamed(k, renames, theirs): v for k, v in theirs.items()}
+        bad = sorted(set(own) ^ set(named)) + sorted(
+            k for k in set(own) & set(named) if tuple(own[k].shape) != tuple(named[k].shape)
         )
         if bad:
             arch = state.get("architecture", "an unrecorded architecture")
@@ -177,3 +185,12 @@ def load_checkpoint(path: str | os.PathLike[str], model: nn.Module | None = None
             )
         model.load_state_dict(theirs)
     return state
+
+
+def _renamed(key: str, renames: Mapping[str, str], keys: Mapping[str, Any]) -> str:
+    """``key`` under the first old prefix of ``renames`` it starts with, unless the new
+    name is already present (the rule of ``Detector._load_from_state_dict``)."""
+    for old, new in renames.items():
+        if key.startswith(old) and new + key[len(old) :] not in keys:
+            return new + key[len(old) :]
+    return key
