@@ -40,7 +40,7 @@ import numpy as np
 import torch
 
 from benchmarks._harness import figures_main, seeds_table, timing_row
-from robopercept.nn.cloud import run as C
+from robopercept.nn.cloud import train as C
 from robopercept.nn.cloud.synthetic import procedural_shapes
 from robopercept.nn.train.config import TrainConfig
 

@@ -31,8 +31,9 @@ import torch
 
 from robopercept.imaging import write_image
 from robopercept.nn.cloud.pointnet import critical_points
-from robopercept.nn.cloud.run import classify_cloud_file, evaluate_cloud_model, load_cloud_model
+from robopercept.nn.cloud.run import classify_cloud_file
 from robopercept.nn.cloud.synthetic import SHAPE_CLASSES, procedural_shapes
+from robopercept.nn.cloud.train import evaluate_cloud_model, load_cloud_model
 from robopercept.viz.cloud_dl import (
     clouds_grid,
     critical_points_picture,

@@ -7,6 +7,7 @@ expected, what came, and how to fix it.
 from __future__ import annotations
 
 __all__ = [
+    "ArgumentError",
     "DegenerateError",
     "FileFormatError",
     "InputError",
@@ -28,7 +29,14 @@ class InputError(RoboperceptError, ValueError):
     """
 
 
-class RunExistsError(InputError):
+class ArgumentError(InputError):
+    """A value given for a command-line flag names nothing usable (an unknown data
+    set, a missing file or folder, too few images); the message names the flag
+    (``--data``, ``--images-dir``, ``RUN_OR_MODEL``). The command line reports it as a
+    usage error (exit 2); in Python it is an :class:`InputError` like any other."""
+
+
+class RunExistsError(ArgumentError):
     """An output folder already holds a training run, and neither resuming it nor
     replacing it was asked for (the command line's ``--resume`` / ``--overwrite``): a
     usage error, exit 2 on the command line."""

@@ -69,3 +69,33 @@ def check_run_folder_rules(
     for k in a:
         assert torch.equal(a[k], b[k]), f"{k} differs between the resumed and the whole run"
     assert main([*argv, "--overwrite", "-o", str(part)]) == 0
+
+
+def stop_after_first_epoch(argv: Sequence[str], out: Path, sig: int, timeout: float = 300) -> int:
+    """Run ``robopercept *argv -o out`` in a child process, send it ``sig`` as soon as
+    its first ``checkpoint.pt`` is on disk, and return its exit status."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    code = "import sys; from robopercept.cli.main import main; sys.exit(main(sys.argv[1:]))"
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, *argv, "-o", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env=env,
+    )
+    deadline = time.monotonic() + timeout
+    while not (out / "checkpoint.pt").exists():
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            raise AssertionError(f"no checkpoint.pt before the run ended: {proc.stderr.read()!r}")
+        time.sleep(0.02)
+    proc.send_signal(sig)
+    try:
+        return proc.wait(timeout=timeout)
+    finally:
+        if proc.stderr is not None:
+            proc.stderr.close()

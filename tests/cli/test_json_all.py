@@ -209,7 +209,7 @@ def test_the_checker_finds_missing_extra_and_mistyped_keys() -> None:
 # --------------------------------------------------------------------------- the parser
 def _forms(func: Callable | None) -> dict[str, argparse.ArgumentParser]:
     """The parsers of a command of several forms (``nn detect``: ``train``, ``eval``
-    and ``images``, built by ``cli._args.register_forms``), else ``{}``."""
+    and ``images``, built by ``cli.nn._forms.register_forms``), else ``{}``."""
     if func is None:
         return {}
     make = inspect.getclosurevars(func).nonlocals.get("parsers")

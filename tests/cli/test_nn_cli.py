@@ -6,6 +6,7 @@ import csv
 import importlib.util
 import json
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -17,7 +18,7 @@ torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
-from tests.cli.nn_runs import check_run_folder_rules  # noqa: E402
+from tests.cli.nn_runs import check_run_folder_rules, stop_after_first_epoch  # noqa: E402
 
 TRAIN = ["nn", "train", "--data", "digits", "--model", "vgg_small", "--quiet"]
 
@@ -112,7 +113,7 @@ def test_summary_totals_equal_the_parameter_count(capsys) -> None:
 
 
 def test_model_names_are_the_library_s() -> None:
-    from robopercept.cli.nn import MODEL_NAMES
+    from robopercept.cli.nn.classify import MODEL_NAMES
     from robopercept.nn.classification.models import MODELS
 
     assert set(MODEL_NAMES) == set(MODELS)
@@ -163,6 +164,22 @@ def test_an_existing_run_is_not_overwritten(run_dir: Path, capsys) -> None:
 def test_run_folder_rules(tmp_path: Path, capsys, torch_one_thread) -> None:
     # refusal (exit 2), Ctrl-C after epoch 1 (exit 130), --resume to the same weights
     check_run_folder_rules([*TRAIN, "--epochs", "2"], tmp_path, "checkpoint.best.pt", capsys)
+
+
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_real_signal_keeps_the_last_epoch(sig, status, tmp_path: Path) -> None:
+    # the real thing in a child process: Ctrl-C (SIGINT) or SIGTERM during epoch 2 exits
+    # 130 / 143 and leaves epoch 1's checkpoint and history; --resume finishes the run
+    argv = [*TRAIN, "--epochs", "3", "--patience", "100"]
+    out = tmp_path / "run"
+    assert stop_after_first_epoch(argv, out, sig) == status
+    state = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert 1 <= state["epochs_done"] < 3
+    with (out / "history.csv").open() as f:
+        assert len(list(csv.DictReader(f))) == state["epochs_done"]
+    assert main([*argv, "--resume", "-o", str(out)]) == 0
+    with (out / "history.csv").open() as f:
+        assert [r["epoch"] for r in csv.DictReader(f)] == ["1", "2", "3"]
 
 
 def test_resume_continues_the_run(run_dir: Path, tmp_path: Path) -> None:

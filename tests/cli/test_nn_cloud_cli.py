@@ -16,13 +16,10 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
-from robopercept.nn.cloud.run import (  # noqa: E402
-    classify_cloud_file,
-    cloud_sets,
-    evaluate_cloud_model,
-    load_cloud_model,
-)
+from robopercept.nn.cloud.run import classify_cloud_file, cloud_sets  # noqa: E402
+from robopercept.nn.cloud.train import evaluate_cloud_model, load_cloud_model  # noqa: E402
 from robopercept.pointcloud import read_point_cloud  # noqa: E402
+from tests.cli.nn_runs import check_run_folder_rules  # noqa: E402
 from tests.conftest import data_path  # noqa: E402
 
 DATA = ["--data", "shapes", "--shapes", "3", "--points", "64", "--seed", "0"]
@@ -128,3 +125,16 @@ def test_segment_needs_an_output_folder(run, tmp_path, capsys):
     write_point_cloud(src, PointCloud(np.random.default_rng(0).random((30, 3))))
     assert main(["nn", "cloud", str(src), "--model", str(out), "--segment", str(out)]) == 2
     assert "--segment" in capsys.readouterr().err
+
+
+def test_run_folder_rules(tmp_path, capsys):
+    # a second run into the folder is refused, Ctrl-C keeps epoch 1, --resume ends with the
+    # uninterrupted run's weights, --overwrite starts afresh (issue 45)
+    argv = ["nn", "cloud", "train", *DATA, "--width", "0.125", "--epochs", "2"]
+    check_run_folder_rules([*argv, "--batch-size", "8", "--quiet"], tmp_path, "model.pt", capsys)
+
+
+def test_resume_and_overwrite_exclude_each_other(tmp_path, capsys):
+    argv = ["nn", "cloud", "train", *DATA, "--resume", "--overwrite", "-o", str(tmp_path)]
+    assert main(argv) == 2
+    assert "--resume and --overwrite exclude each other" in capsys.readouterr().err

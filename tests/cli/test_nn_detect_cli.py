@@ -11,14 +11,15 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from robopercept.cli import detect as cli_detect  # noqa: E402
 from robopercept.cli.main import main  # noqa: E402
+from robopercept.cli.nn import detect as cli_detect  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
 from robopercept.nn.coco.dataset import write_coco_json  # noqa: E402
 from robopercept.nn.coco.results import read_coco_results  # noqa: E402
 from robopercept.nn.detection.synthetic import digits_detection_set  # noqa: E402
 from robopercept.nn.detection.train import evaluate_detector  # noqa: E402
 from robopercept.nn.detection.zoo import load_detector  # noqa: E402
+from tests.cli.nn_runs import check_run_folder_rules  # noqa: E402
 
 DATA = ["--data", "digits", "--images", "8", "--size", "64x64", "--seed", "0"]
 TRAIN = ["nn", "detect", "train", *DATA, "--model", "fcos", "--width", "8"]
@@ -219,7 +220,7 @@ def test_no_words_prints_help_and_exits_2(capsys):
 
 
 def test_ema_flag_reaches_train_detector(tmp_path, monkeypatch, capsys):
-    import robopercept.nn.detection.train as det
+    import robopercept.nn.detection.run as det
 
     seen = {}
     real = det.train_detector
@@ -241,3 +242,24 @@ def test_outputs_over_the_inputs_are_refused(tmp_path, capsys):
     assert main(["nn", "detect", str(img), "-o", str(tmp_path)]) == 2
     assert "would overwrite the input" in capsys.readouterr().err
     assert read_image(img).max() == 0  # untouched
+
+
+def test_run_folder_rules(tmp_path, capsys):
+    # 2 epochs of a width-4 FCOS on 3 training canvases of 64 x 64 (a few seconds)
+    argv = ["nn", "detect", "train", "--data", "digits", "--images", "4", "--size", "64x64"]
+    argv += ["--model", "fcos", "--width", "4", "--batch-size", "2", "--epochs", "2"]
+    check_run_folder_rules([*argv, "--quiet"], tmp_path, "model.pt", capsys)
+
+
+def test_resume_and_overwrite_exclude_each_other(tmp_path, capsys):
+    argv = ["nn", "detect", "train", "--data", "digits", "--resume", "--overwrite"]
+    assert main([*argv, "-o", str(tmp_path / "r")]) == 2
+    assert "--resume and --overwrite exclude each other" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
+def test_parser_names_are_the_run_modules():
+    from robopercept.nn.detection.run import BUILTIN_DATA, RUN_DETECTORS
+
+    assert cli_detect.DETECTOR_NAMES == RUN_DETECTORS
+    assert cli_detect.BUILTIN_DATA == BUILTIN_DATA

@@ -21,6 +21,7 @@ from robopercept.nn.pose.data import pose_sets  # noqa: E402
 from robopercept.nn.pose.evaluate import evaluate_pose  # noqa: E402
 from robopercept.nn.pose.inference import pose_arrays  # noqa: E402
 from robopercept.nn.pose.networks import load_pose_model  # noqa: E402
+from tests.cli.nn_runs import check_run_folder_rules  # noqa: E402
 
 DATA = ["--data", "figures", "--images", "12", "--size", "64x64", "--seed", "0"]
 FILES = {"model.pt", "history.json", "metrics.json", "samples.png"}
@@ -106,6 +107,21 @@ def test_images_form_writes_skeletons_heatmaps_and_3d(hrnet, tmp_path):
         np.testing.assert_allclose(row["keypoints"], res.keypoints, atol=0.01)
         assert np.asarray(row["joints3d_m"]).shape == (16, 3)
         assert row["joints"][0] == "right_ankle"
+
+
+def test_run_folder_rules(tmp_path, capsys):
+    # refusal (exit 2), Ctrl-C after epoch 1 (exit 130), --resume to the same weights
+    args = ["--model", "hrnet", "--width", "4", "--epochs", "2", "--batch-size", "4"]
+    check_run_folder_rules(
+        ["nn", "pose", "train", *DATA, *args, "--quiet"], tmp_path, "model.pt", capsys
+    )
+
+
+def test_resume_and_overwrite_exclude_each_other(tmp_path, capsys):
+    args = ["train", *DATA, "--resume", "--overwrite", "-o", str(tmp_path / "run")]
+    assert main(["nn", "pose", *args]) == 2
+    assert "--resume and --overwrite" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
 
 
 @pytest.mark.parametrize(

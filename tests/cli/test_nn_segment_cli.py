@@ -25,6 +25,7 @@ from robopercept.nn.segmentation.metrics import (  # noqa: E402
     segmentation_scores,
 )
 from robopercept.nn.segmentation.networks import load_segmenter, segment_arrays  # noqa: E402
+from tests.cli.nn_runs import check_run_folder_rules  # noqa: E402
 
 DATA = ["--data", "shapes", "--images", "10", "--size", "64x64", "--seed", "0"]
 FILES = {"model.pt", "history.json", "metrics.json", "samples.png"}
@@ -124,6 +125,7 @@ def test_images_form_writes_overlays_label_pngs_and_rle_results(semantic, instan
         (["train", "--data", "nuclei", "--images-dir", "/nonexistent"], "--images-dir"),
         (["train", "--data", "shapes", "--images", "1"], "--images"),
         (["train", "--data", "shapes", "--lr", "0"], "--lr"),
+        (["train", *DATA, "--resume", "--overwrite"], "--resume and --overwrite exclude"),
         (["eval", "/nonexistent/run", *DATA], "RUN_OR_MODEL"),
         (["/nonexistent.png", "--model", "/nonexistent.pt", "-o", "x"], "--model"),
     ],
@@ -138,3 +140,21 @@ def test_image_form_needs_an_output_and_existing_images(semantic, capsys):
     assert "-o/--out" in capsys.readouterr().err
     assert main(["nn", "segment", "/nonexistent.png", "--model", str(semantic[0]), "--json"]) == 2
     assert "IMAGE: /nonexistent.png" in capsys.readouterr().err
+
+
+def test_train_run_folder_refusal_ctrl_c_resume_and_overwrite(tmp_path, capsys):
+    """Issue 45: an existing run is refused naming --resume and --overwrite; Ctrl-C
+    after epoch 1 keeps its checkpoint and --resume ends with the uninterrupted run's
+    weights; --overwrite is accepted (the fastest network, 2 epochs)."""
+    argv = ["nn", "segment", "train", *DATA, "--model", "naive", "--width", "4"]
+    argv += ["--epochs", "2", "--batch-size", "4", "--quiet"]
+    check_run_folder_rules(argv, tmp_path, "model.pt", capsys)
+    hist = json.loads((tmp_path / "part" / "history.json").read_text())
+    assert len(hist["losses"]) == 2 and hist["best_epoch"] in (1, 2)
+
+
+def test_train_model_names_match_the_library():
+    from robopercept.cli.nn.segment import SEGMENT_MODELS
+    from robopercept.nn.segmentation import run
+
+    assert SEGMENT_MODELS == run.SEGMENT_MODELS

@@ -1552,6 +1552,18 @@ def _write_deepforest(path: Path) -> None:
 
 
 FIXTURES["deepforest"] = _write_deepforest
+
+
+def _write_coco_folder(path: Path) -> None:
+    """A COCO file (:data:`_COCO_GT`, classes ``a`` and ``b``) with its image beside it."""
+    from robopercept.imaging import write_image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_image(path.parent / "a.png", np.full((48, 64, 3), 90, np.uint8))
+    path.write_text(json.dumps(_COCO_GT))
+
+
+FIXTURES["coco_images/gt.json"] = _write_coco_folder
 _DDS = _b("tests.fuzz.api:detection_value", "dataset")
 VALID.update(
     {
@@ -1616,6 +1628,13 @@ VALID.update(
             "classes": ["a"],
         },
         "nn.detection.deepforest.DeepForestTiles": {"train": _DDS, "test": _DDS},
+        "nn.detection.data.DetectionDataset.from_coco": {"path": Fixture("coco_images/gt.json")},
+        "nn.detection.run.load_detection_data": {"data": "shapes", "images": 4, "size": (32, 32)},
+        "nn.detection.run.evaluate_run": {
+            "model": Fixture("detector.pt"),
+            "data": Fixture("coco_images/gt.json"),
+            "device": "cpu",
+        },
     }
 )
 METHODS["nn.detection.data.DetectionDataset"] = (
@@ -1626,6 +1645,7 @@ METHODS["nn.detection.data.DetectionDataset"] = (
     "__getitem__",
     "class_maps",
     "from_instance_labels",
+    "from_coco",
 )
 
 #: callables not fuzzed, with the reason
@@ -1637,6 +1657,11 @@ SKIP: dict[str, str] = {
     "geometry.FundamentalModel": "takes no argument; fitted through find_fundamental",
     "nn.classification.run.train_run": "trains a network (tens of seconds per call); its parts "
     "are fuzzed: load_data, TrainConfig, fit, evaluate",
+    "nn.cloud.run.train_run": "trains a network and writes a run folder (seconds per call); its "
+    "parts are fuzzed: cloud_sets, build_cloud_model, train_cloud_model, evaluate_cloud_model, "
+    "save_cloud_model",
+    "nn.detection.run.train_run": "trains a detector (seconds per call); its parts are "
+    "fuzzed: load_detection_data, build_detector, train_detector, evaluate_run",
     "nn.data.datasets.load_digits": "takes only a transform; loads a bundled data set "
     "(the datasets are fuzzed through shapes_dataset and ArrayDataset)",
     "nn.data.datasets.load_lfw_subset": "downloads (network) on first use",
@@ -2671,6 +2696,53 @@ def unet_builder() -> Any:
     return build
 
 
+# nn.segmentation.run (issue 45): the run of `nn segment train|eval` on 32 x 32 shapes
+_SHAPES = ["circle", "square", "triangle", "cross"]
+
+
+def _write_shapes_segmenter(path: Path) -> None:
+    """A width-4 U-Net checkpoint of the shapes' classes (what train_run writes)."""
+    from robopercept.nn.segmentation.networks import UNet, save_segmenter
+
+    save_segmenter(path, UNet(5, 3, 4, 2), "unet", {"width": 4, "depth": 2}, _SHAPES)
+
+
+def segmentation_val() -> Any:
+    """The validation set of three 32 x 32 shapes canvases (with masks)."""
+    from robopercept.nn.segmentation.data import segmentation_sets
+
+    return segmentation_sets("shapes", 3, (32, 32), 0).val
+
+
+FIXTURES["shapes_segmenter.pt"] = _write_shapes_segmenter
+VALID.update(
+    {
+        "nn.segmentation.run.load_segmentation_data": {
+            "data": "shapes",
+            "images": 3,
+            "size": (32, 32),
+        },
+        "nn.segmentation.run.resolve_segment_model": {"task": "instance"},
+        "nn.segmentation.run.score_segmentation": {
+            "model": _SEG3,
+            "val": _b("tests.fuzz.api:segmentation_val"),
+            "device": "cpu",
+        },
+        "nn.segmentation.run.evaluate_run": {
+            "model": Fixture("shapes_segmenter.pt"),
+            "data": "shapes",
+            "images": 3,
+            "size": (32, 32),
+            "device": "cpu",
+        },
+    }
+)
+SKIP["nn.segmentation.run.train_run"] = (
+    "trains a network and writes a run folder (seconds per call); its parts are fuzzed: "
+    "load_segmentation_data, resolve_segment_model, train_segmenter, score_segmentation"
+)
+
+
 # nn.pose.io (issue 28): a two-person MPII list and an imgaug keypoint file
 _MPII_JSON = [
     {
@@ -2893,6 +2965,25 @@ VALID.update(
 METHODS["nn.skeleton.Skeleton"] = ("index", "flip_permutation", "parents", "to_dict", "from_dict")
 METHODS["nn.pose.data.PoseDataset"] = ("subset", "split", "areas", "to_coco", "__getitem__")
 METHODS["nn.detection.keypoint_rcnn.KeypointRCNN"] = ("forward",)
+
+# nn.pose.run (issue 45): the run of `nn pose train|eval`, on a width-2 SimpleBaseline
+VALID.update(
+    {
+        "nn.pose.run.load_pose_data": {"data": "figures", "images": 2, "size": (32, 32)},
+        "nn.pose.run.model_path": {"model": Fixture("pose.pt")},
+        "nn.pose.run.evaluate_run": {
+            "model": Fixture("pose.pt"),
+            "data": "figures",
+            "images": 2,
+            "size": (32, 32),
+            "out_dir": _out("pose_eval"),
+        },
+    }
+)
+SKIP["nn.pose.run.train_run"] = (
+    "trains a network and writes a run folder (seconds per call); its parts are fuzzed: "
+    "load_pose_data, train_pose, train_cascade, evaluate_pose, save_pose_model"
+)
 
 
 def mpii_skeleton() -> Any:
@@ -3178,49 +3269,76 @@ VALID.update(
 METHODS["nn.cloud.data.CloudDataset"] = ("subset", "split")
 
 
-# nn.cloud.run (issue 29): training, scoring, files and prediction of the point-cloud networks
-_CLOUD_NET = _b("robopercept.nn.cloud.run:build_cloud_model", "pointnet", 2, width=0.125, seed=0)
+# nn.cloud.train and nn.cloud.run (issues 29, 45): building, training, scoring and files of the
+# point-cloud networks; the run (data sets, evaluation of a saved network, one file's prediction)
+_CLOUD_NET = _b("robopercept.nn.cloud.train:build_cloud_model", "pointnet", 2, width=0.125, seed=0)
 _CLOUD_DS = _b("robopercept.nn.cloud.data:CloudDataset", **_CLOUD_DS_ARGS)
 
 
 def _write_cloud_model(path: Path) -> None:
     """A tiny PointNet classifier of the classes ("a", "b") saved by save_cloud_model."""
-    from robopercept.nn.cloud.run import build_cloud_model, save_cloud_model
+    from robopercept.nn.cloud.train import build_cloud_model, save_cloud_model
 
     save_cloud_model(path, build_cloud_model("pointnet", 2, width=0.125, seed=0), ["a", "b"])
 
 
+def _write_shapes_model(path: Path) -> None:
+    """A tiny PointNet classifier of the 12 procedural shapes (8 points per cloud)."""
+    from robopercept.nn.cloud.synthetic import SHAPE_CLASSES
+    from robopercept.nn.cloud.train import build_cloud_model, save_cloud_model
+
+    net = build_cloud_model("pointnet", len(SHAPE_CLASSES), width=0.125, seed=0)
+    save_cloud_model(path, net, list(SHAPE_CLASSES), n_points=8)
+
+
 FIXTURES["cloud_model.pt"] = _write_cloud_model
+FIXTURES["cloud_shapes_model.pt"] = _write_shapes_model
 VALID.update(
     {
-        "nn.cloud.run.build_cloud_model": {
+        "nn.cloud.train.build_cloud_model": {
             "name": "dgcnn",
             "num_outputs": 2,
             "k": 4,
             "widths": [8],
         },
-        "nn.cloud.run.train_cloud_model": {
+        "nn.cloud.train.train_cloud_model": {
             "model": _CLOUD_NET,
             "train": _CLOUD_DS,
             "config": TRAIN_CFG,
             "val": _CLOUD_DS,
             "progress": False,
         },
-        "nn.cloud.run.predict_clouds": {"model": _CLOUD_NET, "points": _CLOUD_DS_ARGS["points"]},
-        "nn.cloud.run.evaluate_cloud_model": {"model": _CLOUD_NET, "data": _CLOUD_DS},
-        "nn.cloud.run.part_ious": {
+        "nn.cloud.train.predict_clouds": {"model": _CLOUD_NET, "points": _CLOUD_DS_ARGS["points"]},
+        "nn.cloud.train.evaluate_cloud_model": {"model": _CLOUD_NET, "data": _CLOUD_DS},
+        "nn.cloud.train.part_ious": {
             "pred": _CLOUD_DS_ARGS["parts"],
             "parts": _CLOUD_DS_ARGS["parts"],
             "labels": _CLOUD_DS_ARGS["labels"],
             "part_classes": _CLOUD_DS_ARGS["part_classes"],
         },
         "nn.cloud.run.cloud_sets": {"data": "shapes", "shapes": 1, "n_points": 8},
-        "nn.cloud.run.save_cloud_model": {
+        "nn.cloud.train.save_cloud_model": {
             "path": _out("cloud.pt"),
             "model": _CLOUD_NET,
             "class_names": ["a", "b"],
         },
-        "nn.cloud.run.load_cloud_model": {"path": Fixture("cloud_model.pt")},
+        "nn.cloud.train.load_cloud_model": {"path": Fixture("cloud_model.pt")},
+        "nn.cloud.train.cloud_model_spec": {"model": _CLOUD_NET},
+        "nn.cloud.train.CloudModelSpec": {
+            "kind": "pointnet",
+            "task": "classify",
+            "num_outputs": 2,
+            "in_channels": 3,
+            "config": {"width": 0.125},
+        },
+        "nn.cloud.run.evaluate_run": {
+            "model": Fixture("cloud_shapes_model.pt"),
+            "data": "shapes",
+            "shapes": 1,
+            "n_points": 8,
+            "device": "cpu",
+            "progress": False,
+        },
         "nn.cloud.run.shipped_cloud_model": {"name": "pointnet"},
         "nn.cloud.run.classify_cloud_file": {
             "path": Fixture("mesh.off"),
@@ -3229,7 +3347,7 @@ VALID.update(
         },
     }
 )
-VALID["nn.cloud.run.CloudEvaluation"] = {
+VALID["nn.cloud.train.CloudEvaluation"] = {
     "accuracy": 0.5,
     "mean_class_accuracy": 0.5,
     "confusion": np.array([[1, 1], [0, 0]]),
@@ -3241,7 +3359,7 @@ VALID["nn.cloud.run.CloudPrediction"] = {
     "probabilities": {"a": 0.75, "b": 0.25},
     "points": PTS3,
 }
-METHODS["nn.cloud.run.CloudEvaluation"] = ("summary",)
+METHODS["nn.cloud.train.CloudEvaluation"] = ("summary",)
 METHODS["nn.cloud.run.CloudPrediction"] = ("to_dict",)
 
 # ---- issue 30: text on images (viz.draw) and match pictures (viz.features); the names

@@ -14,7 +14,6 @@ the flag the user typed (:func:`flag_errors`), in this one place.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import re
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -28,7 +27,6 @@ __all__ = [
     "UsageError",
     "board_size",
     "box_xywh",
-    "built_in_data_args",
     "check_output",
     "cloud_output",
     "file_output",
@@ -36,7 +34,6 @@ __all__ = [
     "hsv",
     "image_output",
     "image_size",
-    "images_form_inputs",
     "in_flags",
     "load_gray",
     "noise_filter",
@@ -45,8 +42,6 @@ __all__ = [
     "pass_through",
     "positive_float",
     "positive_int",
-    "register_forms",
-    "run_or_model_path",
     "unit_interval",
     "video_output",
 ]
@@ -300,124 +295,3 @@ def flag_errors(**flags: str) -> Iterator[None]:
         if text == str(exc):
             raise
         raise InputError(text) from exc
-
-
-def register_forms(
-    ns: argparse._SubParsersAction,
-    name: str,
-    help: str,
-    parsers: Callable[[], dict[str, argparse.ArgumentParser]],
-    handlers: Mapping[str, Callable[[argparse.Namespace], int]],
-) -> None:
-    """Add ``robopercept nn NAME train|eval|IMAGE...`` to ``ns``: a command of three
-    forms chosen by its first word (``train``, ``eval``, else the images form), each
-    with its own parser from ``parsers()`` (built only when the command runs) and its
-    handler in ``handlers`` (keys ``"train"``, ``"eval"``, ``"images"``). The handlers
-    need torch: without it the command says which extra to install."""
-
-    def run(args: argparse.Namespace) -> int:
-        words = list(args.words)
-        forms = parsers()
-        if not words or words[0] in ("-h", "--help"):
-            for p in forms.values():
-                p.print_help()
-                print()
-            return 0 if words else 2
-        form = words[0] if words[0] in ("train", "eval") else "images"
-        sub = forms[form].parse_args(words[1:] if form != "images" else words)
-        if importlib.util.find_spec("torch") is None:
-            raise InputError(
-                f"robopercept nn {name} needs the deep extra: pip install 'robopercept[deep]'"
-            )
-        return handlers[form](sub)
-
-    d = ns.add_parser(
-        name,
-        help=help,
-        description=f"robopercept nn {name} train|eval|IMAGE... (see --help of each form)",
-        prefix_chars="\x00",
-        add_help=False,
-    )
-    d.add_argument("words", nargs="*")
-    d.set_defaults(func=run)
-
-
-def built_in_data_args(
-    p: argparse.ArgumentParser,
-    data_help: str,
-    dir_help: str,
-    choices: tuple[str, ...] | None = None,
-    *,
-    images: int = 200,
-    generated: str = "shapes/digits",
-) -> None:
-    """The data flags of the ``nn detect``, ``nn segment`` and ``nn pose`` forms:
-    ``--data`` (with ``choices`` where only built-in sets are taken), ``--images-dir``
-    (unless ``dir_help`` is empty), ``--images`` (default ``images``), ``--size``,
-    ``--seed``, ``--device``, ``--json`` and ``--quiet``; ``generated`` names the
-    generated sets in the help."""
-    p.add_argument("--data", required=True, choices=choices, help=data_help)
-    if dir_help:
-        p.add_argument("--images-dir", help=dir_help)
-    p.add_argument(
-        "--images",
-        type=positive_int,
-        default=images,
-        help=f"{generated}: images (default {images})",
-    )
-    p.add_argument(
-        "--size",
-        type=image_size,
-        default=(128, 128),
-        help=f"{generated}: WxH (default 128x128)",
-    )
-    p.add_argument("--seed", type=int, default=0, help="data, split and weights (default 0)")
-    p.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")
-    p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
-
-
-def run_or_model_path(text: str) -> Path:
-    """A run folder's ``model.pt``, or the file itself."""
-    p = Path(text)
-    return p / "model.pt" if p.is_dir() else p
-
-
-def images_form_inputs(
-    args: argparse.Namespace,
-    kind: str,
-    outputs: Callable[[str], list[str]],
-) -> Path:
-    """Check the images form of ``nn detect`` / ``nn segment`` / ``nn pose`` and return
-    the model's path: ``--model`` a run folder, a ``model.pt`` or a shipped name of
-    ``kind`` (:func:`robopercept.nn.shipped.resolve_model`; without ``--model`` the
-    kind's default), ``-o/--out`` or ``--json`` given, every IMAGE present, and no
-    output (``outputs(stem)``, names in OUT) over an input."""
-    from robopercept.nn.shipped import BUILD_SHIPPED, DEFAULT_SHIPPED, SHIPPED, resolve_model
-
-    shipped = SHIPPED[kind]
-    if args.model is None or args.model in shipped:
-        rel = shipped[args.model or DEFAULT_SHIPPED[kind]]
-        try:
-            model_path = resolve_model(kind, args.model)
-        except InputError:
-            raise InputError(
-                f"the shipped model {rel} is not installed: give --model PATH (a run folder "
-                f"or model.pt), or build it from a checkout with: {BUILD_SHIPPED[kind]}"
-            ) from None
-    else:
-        model_path = run_or_model_path(args.model)
-        if not model_path.is_file():
-            raise UsageError(f"--model: {model_path} does not exist (a run folder or model.pt)")
-    if not args.out and not args.json:
-        raise UsageError("-o/--out: give a folder for the pictures (or --json for results)")
-    for name in args.images:
-        if not Path(name).is_file():
-            raise UsageError(f"IMAGE: {name} does not exist")
-        for written in outputs(Path(name).stem) if args.out else ():
-            if (Path(args.out) / written).resolve() == Path(name).resolve():
-                raise UsageError(
-                    f"-o/--out: {Path(args.out) / written} would overwrite the input {name}: "
-                    "write to another folder"
-                )
-    return model_path

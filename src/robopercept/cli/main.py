@@ -10,7 +10,9 @@ Errors print one line on stderr, never a traceback, and set the exit code:
 * **0**: success (also when the output is piped into a command that closes it early);
 * **2**: usage error: an unknown command or flag, a bad flag value or combination
   (argparse's message, or ``robopercept: error: ...`` for a
-  :class:`~robopercept.cli._args.UsageError` raised by a command);
+  :class:`~robopercept.cli._args.UsageError` raised by a command, or a library's
+  :class:`~robopercept.errors.ArgumentError`: a flag's value names nothing usable, or
+  ``-o`` holds a training run and neither ``--resume`` nor ``--overwrite`` was given);
 * **1**: a failure the user can fix: a missing, unreadable or corrupt file, or data the
   method refuses (:class:`~robopercept.errors.RoboperceptError`, ``OSError``,
   ``ValueError``): ``robopercept: error: <message>``;
@@ -41,7 +43,7 @@ from typing import Any, NoReturn, TextIO
 
 from robopercept import __version__
 from robopercept.cli._args import UsageError
-from robopercept.errors import RoboperceptError, RunExistsError
+from robopercept.errors import ArgumentError, RoboperceptError
 
 __all__ = ["EXIT_ERROR", "EXIT_INTERNAL", "EXIT_USAGE", "build_parser", "main"]
 
@@ -222,7 +224,7 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None, debug: bo
     except _ParserError as exc:
         print(str(exc), file=sys.stderr)
         return EXIT_USAGE
-    except (UsageError, RunExistsError) as exc:  # the fix is a flag: --resume / --overwrite
+    except (UsageError, ArgumentError) as exc:  # the fix is a flag (RunExistsError too)
         print(f"robopercept: error: {_first_line(exc)}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:

@@ -587,7 +587,8 @@ def _run_nn_image(src: Path, out: Path, opts: dict[str, Any], kind: str) -> dict
 
 
 def _run_nn_cloud(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model
+    from robopercept.nn.cloud.run import classify_cloud_file
+    from robopercept.nn.cloud.train import load_cloud_model
     from robopercept.nn.shipped import resolve_model
 
     path = resolve_model("cloud", opts["model"])

@@ -1,10 +1,10 @@
-"""robopercept.nn.cloud.run: training, scoring, files and single-file prediction of the
-point-cloud networks (issue 29). Tiny networks and clouds keep the file fast; the
-trained accuracy targets are measured by ``benchmarks/cloud_figures.py`` and the shipped
-models are checked in ``test_shipped_cloud.py``."""
+"""robopercept.nn.cloud.run: the data sets, the training run and its folder, the
+evaluation of a saved network and single-file prediction (issues 29 and 45). Tiny
+networks and clouds keep the file fast."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -12,170 +12,72 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from robopercept.errors import FileFormatError, InputError  # noqa: E402
-from robopercept.nn.cloud.data import CloudDataset  # noqa: E402
+from robopercept.errors import InputError, RunExistsError  # noqa: E402
 from robopercept.nn.cloud.run import (  # noqa: E402
-    build_cloud_model,
+    CloudTrainResult,
     classify_cloud_file,
     cloud_sets,
-    evaluate_cloud_model,
-    load_cloud_model,
-    part_ious,
-    predict_clouds,
-    save_cloud_model,
-    train_cloud_model,
+    evaluate_run,
+    train_run,
 )
 from robopercept.nn.cloud.synthetic import procedural_shapes  # noqa: E402
+from robopercept.nn.cloud.train import (  # noqa: E402
+    build_cloud_model,
+    evaluate_cloud_model,
+    load_cloud_model,
+)
 from robopercept.nn.train.config import TrainConfig  # noqa: E402
 from robopercept.pointcloud import PointCloud, write_point_cloud  # noqa: E402
+from tests.cli.nn_runs import ctrl_c_after_first_epoch  # noqa: E402
 from tests.conftest import data_path  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
 CLASSES = ("sphere", "plane", "l_shape")
-TINY = {"width": 0.125}
-DG = {"k": 4, "widths": [8, 8], "embedding": 16}
+#: a tiny run: 3 procedural shapes per class (36 training clouds) of 64 points
+TINY_RUN = {"shapes": 3, "n_points": 64, "width": 0.125, "progress": False}
+FILES = {"model.pt", "history.json", "metrics.json", "confusion.png"}
+
+
+def _cfg(epochs: int = 2) -> TrainConfig:
+    return TrainConfig(epochs=epochs, batch_size=8, seed=0, device="cpu")
 
 
 @pytest.fixture(scope="module")
-def shapes() -> tuple[CloudDataset, CloudDataset]:
-    train = procedural_shapes(12, 64, classes=CLASSES, rng=0)
-    test = procedural_shapes(10, 64, classes=CLASSES, rng=1)
-    return train, test
-
-
-def _cfg(epochs: int = 12, seed: int = 0) -> TrainConfig:
-    return TrainConfig(epochs=epochs, batch_size=8, lr=1e-2, seed=seed, device="cpu")
+def shapes():
+    return procedural_shapes(10, 64, classes=CLASSES, rng=1)
 
 
 @pytest.fixture(scope="module")
-def trained(shapes) -> torch.nn.Module:
-    # one thread, set here: a module fixture runs before the per-test torch_one_thread,
-    # and float sums (hence the trained weights) depend on the thread count
-    train, _ = shapes
+def net() -> torch.nn.Module:
+    return build_cloud_model("pointnet", 3, seed=0, width=0.125)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> CloudTrainResult:
+    # one thread, set here: a module fixture runs before the per-test torch_one_thread
     before = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        net = build_cloud_model("pointnet", 3, seed=0, **TINY)
-        train_cloud_model(net, train, _cfg(16), progress=False)
+        out = tmp_path_factory.mktemp("cloud") / "run"
+        return train_run("shapes", out, config=_cfg(), **TINY_RUN)
     finally:
         torch.set_num_threads(before)
-    return net
 
 
-def test_training_learns_three_distinct_shapes(trained, shapes):
-    # sphere, flat slab and L-prism differ at every scale: a tiny PointNet separates
-    # them on 30 held-out shapes after 16 epochs of 36 clouds (the last epoch kept: no
-    # selection on the test shapes)
-    ev = evaluate_cloud_model(trained, shapes[1])
-    assert ev.accuracy >= 0.9
-    assert ev.confusion.sum() == len(shapes[1]) and ev.confusion.shape == (3, 3)
-    assert ev.accuracy == pytest.approx(np.trace(ev.confusion) / ev.confusion.sum())
+def _folder(root: Path, classes: tuple[str, ...] = ("a", "b")) -> Path:
+    rng = np.random.default_rng(0)
+    for c in classes:
+        (root / c).mkdir(parents=True)
+        for i in range(10):
+            cloud = PointCloud(rng.random((50, 3)) * (1 if c == classes[0] else [1, 1, 0.01]))
+            write_point_cloud(root / c / f"{i}.pcd", cloud)
+    return root
 
 
-def test_training_is_seeded(shapes):
-    train, _ = shapes
-    states = []
-    for _ in range(2):
-        net = build_cloud_model("dgcnn", 3, seed=3, **DG)
-        hist = train_cloud_model(net, train, _cfg(2, seed=3), progress=False)
-        states.append(net.state_dict())
-        assert len(hist.losses) == 2 and hist.best_epoch == 2
-    for k, v in states[0].items():
-        assert torch.equal(v, states[1][k]), k
-
-
-def test_history_names_its_score(shapes):
-    train, test = shapes
-    net = build_cloud_model("pointnet", 3, seed=0, **TINY)
-    hist = train_cloud_model(net, train, _cfg(1), val=test, progress=False)
-    assert set(hist.to_dict()["val_accuracy"]) == {"1"}
-
-
-def test_mean_class_accuracy_by_hand():
-    # 4 clouds of class 0 (3 right), 1 of class 1 (right): overall 0.8, class mean 0.875
-    class Fixed(torch.nn.Module):
-        task, num_outputs, in_channels, config = "classify", 2, 3, {}
-
-        def forward(self, x, mask=None, category=None):
-            return torch.stack([x[:, 0, 0], 1 - x[:, 0, 0]], 1) * 10
-
-    Fixed.__name__ = "PointNet"
-    pts = np.zeros((5, 4, 3), np.float32)
-    pts[[0, 1, 2], 0, 0] = 1.0  # predicted class 0
-    data = CloudDataset(pts, np.array([0, 0, 0, 0, 1]), ("a", "b"))
-    net = Fixed()
-    net.register_parameter("w", torch.nn.Parameter(torch.zeros(1)))
-    ev = evaluate_cloud_model(net, data)
-    assert ev.accuracy == pytest.approx(0.8)
-    assert ev.mean_class_accuracy == pytest.approx((0.75 + 1.0) / 2)
-    assert ev.confusion.tolist() == [[3, 1], [0, 1]]
-
-
-def test_part_ious_by_hand_and_limits():
-    part_classes = np.array([0, 0, 1])
-    truth = np.array([[0, 0, 0, 1]])
-    # part 0: |{0,1}| / |{0,1,2}| = 2/3; part 1: |{3}| / |{2,3}| = 1/2 -> 7/12
-    assert part_ious(np.array([[0, 0, 1, 1]]), truth, np.array([0]), part_classes)[0] == (
-        pytest.approx(7 / 12)
-    )
-    assert part_ious(truth, truth, np.array([0]), part_classes)[0] == 1.0
-    # a part absent from truth and prediction counts 1 (ShapeNet-part's rule)
-    assert part_ious(np.zeros((1, 4), int), np.zeros((1, 4), int), np.array([0]), part_classes)[
-        0
-    ] == pytest.approx(1.0)
-    with pytest.raises(InputError, match="pred and parts"):
-        part_ious(np.zeros((1, 4)), np.zeros((1, 3)), np.array([0]), part_classes)
-
-
-def test_segmenter_predicts_only_its_category_parts():
-    train = procedural_shapes(4, 64, classes=("cylinder", "cone", "torus"), rng=0)
-    net = build_cloud_model(
-        "pointnet",
-        train.num_parts,
-        seed=0,
-        task="segment",
-        num_categories=train.num_classes,
-        **TINY,
-    )
-    hist = train_cloud_model(net, train, _cfg(2), val=train, progress=False)
-    ev = evaluate_cloud_model(net, train)
-    assert hist.to_dict()["val_miou"]["2"] == pytest.approx(ev.instance_miou)
-    pc = np.asarray(train.part_classes)
-    assert (pc[ev.predictions] == train.labels[:, None]).all()
-    assert 0.0 <= ev.instance_miou <= 1.0 and ev.per_class_miou is not None
-    assert ev.class_miou == pytest.approx(np.mean(ev.per_class_miou))
-    with pytest.raises(InputError, match="category"):
-        predict_clouds(net, train.points[:2])
-
-
-def test_predict_single_batch_and_mask(trained, shapes):
-    pts = shapes[1].points
-    batch = predict_clouds(trained, pts[:3])
-    assert batch.shape == (3, 3) and np.allclose(batch.sum(1), 1, atol=1e-5)
-    np.testing.assert_allclose(predict_clouds(trained, pts[1]), batch[1], atol=1e-6)
-    # a cloud padded with junk under a mask gives its own prediction
-    padded = np.concatenate([pts[:1], np.full((1, 16, 3), 5.0, np.float32)], axis=1)
-    mask = np.r_[np.ones(64, bool), np.zeros(16, bool)][None]
-    np.testing.assert_allclose(predict_clouds(trained, padded, mask=mask)[0], batch[0], atol=1e-5)
-
-
-def test_save_and_load_round_trip(trained, shapes, tmp_path):
-    p = save_cloud_model(tmp_path / "m.pt", trained, list(CLASSES), n_points=64, note="x")
-    net, info = load_cloud_model(p)
-    assert info["class_names"] == list(CLASSES) and info["n_points"] == 64
-    assert info["note"] == "x" and info["kind"] == "pointnet"
-    pts = shapes[1].points
-    np.testing.assert_allclose(predict_clouds(net, pts), predict_clouds(trained, pts), atol=1e-6)
-    with pytest.raises(InputError, match="3 outputs; got 2 class names"):
-        save_cloud_model(tmp_path / "bad.pt", trained, ["a", "b"])
-    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
-    with pytest.raises(FileFormatError, match="not a readable"):
-        load_cloud_model(tmp_path / "junk.pt")
-
-
-def test_classify_a_file_and_its_count(trained, shapes, tmp_path):
-    path = write_point_cloud(tmp_path / "c.ply", PointCloud(shapes[1].points[0].astype(float)))
+def test_classify_a_file_and_its_count(net, shapes, tmp_path):
+    trained = net
+    path = write_point_cloud(tmp_path / "c.ply", PointCloud(shapes.points[0].astype(float)))
     info = {"class_names": list(CLASSES), "n_points": 64}
     res = classify_cloud_file(path, trained, info)
     assert res.points.shape == (64, 3) and next(iter(res.probabilities)) == res.label
@@ -184,16 +86,20 @@ def test_classify_a_file_and_its_count(trained, shapes, tmp_path):
     assert classify_cloud_file(path, trained, info, n_points=32).points.shape == (32, 3)
 
 
+def test_classify_refuses_a_classifier_as_segmenter(net, shapes, tmp_path):
+    path = write_point_cloud(tmp_path / "c.ply", PointCloud(shapes.points[0].astype(float)))
+    info = {"class_names": list(CLASSES), "n_points": 64}
+    with pytest.raises(InputError, match="segmenter must be"):
+        classify_cloud_file(path, net, info, segmenter=(net, info))
+    with pytest.raises(InputError, match="PointNet or DGCNN"):
+        classify_cloud_file(path, torch.nn.Linear(3, 3), info)
+
+
 def test_cloud_sets_of_shapes_and_folders(tmp_path):
     sets = cloud_sets("shapes", shapes=10, n_points=32, seed=1)
     assert (len(sets.train), len(sets.val), len(sets.test)) == (120, 12, 12)
     assert sets.train.parts is not None
-    rng = np.random.default_rng(0)
-    for c in ("a", "b"):
-        (tmp_path / c).mkdir()
-        for i in range(10):
-            cloud = PointCloud(rng.random((50, 3)) * (1 if c == "a" else [1, 1, 0.01]))
-            write_point_cloud(tmp_path / c / f"{i}.pcd", cloud)
+    _folder(tmp_path)
     sets = cloud_sets(str(tmp_path), n_points=16, seed=0)
     assert sets.train.class_names == ("a", "b")
     assert len(sets.train) + len(sets.val) + len(sets.test) == 20
@@ -210,22 +116,84 @@ def test_modelnet_layout_keeps_its_test_split():
     assert names == {"test"}
 
 
-def test_bad_inputs(trained, shapes):
-    train, _ = shapes
-    with pytest.raises(InputError, match="name"):
-        build_cloud_model("pointnet++", 3)
-    with pytest.raises(InputError, match="CloudDataset"):
-        train_cloud_model(trained, train.points, _cfg(1), progress=False)
-    with pytest.raises(InputError, match="PointNet or DGCNN"):
-        train_cloud_model(torch.nn.Linear(3, 3), train, _cfg(1), progress=False)
-    small = build_cloud_model("pointnet", 2, seed=0, **TINY)
-    with pytest.raises(InputError, match="num_outputs >= 3"):
-        train_cloud_model(small, train, _cfg(1), progress=False)
-    seg = build_cloud_model("pointnet", 4, task="segment", **TINY)
-    nopart = CloudDataset(train.points, train.labels, train.class_names)
-    with pytest.raises(InputError, match="no part labels"):
-        train_cloud_model(seg, nopart, _cfg(1), progress=False)
-    with pytest.raises(InputError, match="rotate"):
-        train_cloud_model(trained, train, _cfg(1), rotate="x", progress=False)
-    with pytest.raises(InputError, match=r"\(B, N, C\)"):
-        predict_clouds(trained, np.zeros(3))
+# ----------------------------------------------------------------------------- runs
+def test_train_run_writes_the_run_folder(run):
+    out = run.out_dir
+    assert set(run.files) == FILES and all(p.parent == out for p in run.files.values())
+    assert {p.name for p in out.iterdir()} == FILES | {"checkpoint.pt", "checkpoint.best.pt"}
+    assert json.loads((out / "metrics.json").read_text()) == run.metrics
+    assert json.loads((out / "history.json").read_text()) == run.history.to_dict()
+    assert run.metrics["split"] == "test" and run.metrics["data"] == "shapes"
+    assert run.metrics["best_epoch"] == run.best_epoch == run.history.best_epoch
+    assert len(run.history.losses) == 2 and set(run.history.val) == {1, 2}
+    assert run.to_dict()["files"] == {name: str(p) for name, p in run.files.items()}
+    # the saved network is the kept one and records its data
+    model, info = load_cloud_model(out / "model.pt")
+    assert info["n_points"] == 64 and info["shapes"] == 3 and info["seed"] == 0
+    assert info["data"] == "shapes" and info["settings"]["width"] == 0.125
+    test = cloud_sets("shapes", shapes=3, n_points=64, seed=0).test
+    assert evaluate_cloud_model(model, test).accuracy == run.test.accuracy
+    assert run.metrics["metrics"] == run.test.summary() and run.seconds > 0
+
+
+def test_train_run_refuses_an_existing_run(run):
+    before = (run.out_dir / "checkpoint.pt").read_bytes()
+    with pytest.raises(RunExistsError, match="--resume"):
+        train_run("shapes", run.out_dir, config=_cfg(), **TINY_RUN)
+    with pytest.raises(InputError, match="exclude each other"):
+        train_run("shapes", run.out_dir, config=_cfg(), resume=True, overwrite=True, **TINY_RUN)
+    assert (run.out_dir / "checkpoint.pt").read_bytes() == before
+
+
+def test_interrupted_run_keeps_its_history_and_resumes(run, tmp_path):
+    out = tmp_path / "part"
+    with ctrl_c_after_first_epoch(), pytest.raises(KeyboardInterrupt):
+        train_run("shapes", out, config=_cfg(), **TINY_RUN)
+    assert (out / "checkpoint.pt").exists() and not (out / "model.pt").exists()
+    assert len(json.loads((out / "history.json").read_text())["losses"]) == 1
+    res = train_run("shapes", out, config=_cfg(), resume=True, **TINY_RUN)
+    assert res.history.to_dict()["losses"] == run.history.to_dict()["losses"]
+    a = torch.load(run.files["model.pt"], weights_only=True)["model"]
+    b = torch.load(res.files["model.pt"], weights_only=True)["model"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"data": "nowhere/"}, r"^--data: .*not a folder"),
+        ({"data": 3}, r"^--data must be"),
+        ({"model": "pointnet++"}, "--model"),
+        ({"task": "detect"}, "--task"),
+        ({"width": 0.0}, "--width"),
+        ({"model": "dgcnn", "k": 65}, r"--k: at most --points \(64\)"),
+        ({"n_points": 0}, "--points"),
+        ({"config": {"epochs": 1}}, "TrainConfig"),
+    ],
+)
+def test_train_run_errors_name_their_flag(kwargs, match, tmp_path):
+    args = {"data": "shapes", "config": _cfg(), **TINY_RUN, **kwargs}
+    with pytest.raises(InputError, match=match):
+        train_run(args.pop("data"), tmp_path / "run", **args)
+
+
+def test_evaluate_run_scores_the_test_split(run, tmp_path):
+    res = evaluate_run(run.out_dir, "shapes", shapes=3, n_points=64, progress=False)
+    assert res.metrics["metrics"] == run.metrics["metrics"] and res.files == {}
+    assert res.metrics["model"] == str(run.out_dir) and res.to_dict() == res.metrics
+    assert res.metrics["title"] == "run on shapes: test" and res.metrics["clouds"] == 12
+    out = tmp_path / "eval"
+    res = evaluate_run(
+        run.files["model.pt"], "shapes", shapes=3, n_points=64, out_dir=out, progress=False
+    )
+    assert set(res.files) == {"metrics.json", "confusion.png"}
+    assert json.loads((out / "metrics.json").read_text()) == res.metrics
+    assert res.evaluation.accuracy == run.test.accuracy
+
+
+def test_evaluate_run_refuses_other_classes(run, tmp_path):
+    folder = _folder(tmp_path / "clouds")
+    with pytest.raises(InputError, match=r"^--data: its classes \['a', 'b'\] are not the model"):
+        evaluate_run(run.out_dir, folder, n_points=64, progress=False)
+    with pytest.raises(InputError, match=r"^--data: .*not a folder"):
+        evaluate_run(run.out_dir, tmp_path / "missing", n_points=64, progress=False)

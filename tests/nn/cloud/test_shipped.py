@@ -17,16 +17,16 @@ torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
 from robopercept.nn.cloud.data import read_cloud_file  # noqa: E402
-from robopercept.nn.cloud.run import (  # noqa: E402
-    evaluate_cloud_model,
-    load_cloud_model,
-    predict_clouds,
-    shipped_cloud_model,
-)
+from robopercept.nn.cloud.run import shipped_cloud_model  # noqa: E402
 from robopercept.nn.cloud.synthetic import (  # noqa: E402
     SHAPE_CLASSES,
     procedural_shapes,
     shape_mesh,
+)
+from robopercept.nn.cloud.train import (  # noqa: E402
+    evaluate_cloud_model,
+    load_cloud_model,
+    predict_clouds,
 )
 from robopercept.pointcloud import normalize_unit_sphere, sample_surface  # noqa: E402
 from tests.conftest import data_path  # noqa: E402

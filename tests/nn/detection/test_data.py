@@ -190,3 +190,71 @@ def test_samples_picture(digits_set):
 def test_bad_input(call, message):
     with pytest.raises(InputError, match=message):
         call()
+
+
+# --------------------------------------------------------------------------- from_coco
+
+
+def _coco_folder(tmp_path, ds: DetectionDataset, images: bool = True):
+    """``ds`` written as a COCO file ``gt.json`` with PNG images beside it."""
+    from robopercept.imaging import write_image
+    from robopercept.nn.coco.dataset import write_coco_json
+
+    coco = ds.to_coco()
+    if images:
+        for im, rec in zip(ds.images, coco.images, strict=True):
+            write_image(tmp_path / rec.file_name, (np.asarray(im) * 255).round().astype(np.uint8))
+    return write_coco_json(coco, tmp_path / "gt.json")
+
+
+def test_from_coco_round_trip(tmp_path, shapes_set):
+    ds = shapes_set.subset([0, 1, 2])
+    back = DetectionDataset.from_coco(_coco_folder(tmp_path, ds))
+    assert back.classes == ds.classes and back.image_ids == ds.image_ids
+    assert back.file_names == ds.file_names
+    for a, b in zip(back.boxes, ds.boxes, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-9)
+    for a, b in zip(back.labels, ds.labels, strict=True):
+        assert a.tolist() == b.tolist()
+    for a, b in zip(back.images, ds.images, strict=True):
+        np.testing.assert_allclose(a, b, atol=0.5 / 255 + 1e-6)  # uint8 round trip
+
+
+def test_from_coco_labels_are_category_positions_and_crowds_dropped(tmp_path):
+    import json
+
+    from robopercept.imaging import write_image
+
+    write_image(tmp_path / "a.png", np.zeros((10, 12, 3), np.uint8))
+    gt = {
+        "images": [{"id": 5, "file_name": "a.png", "width": 12, "height": 10}],
+        "categories": [{"id": 9, "name": "x"}, {"id": 2, "name": "y"}],
+        "annotations": [
+            {"id": 1, "image_id": 5, "category_id": 2, "bbox": [1, 1, 2, 3], "iscrowd": 0},
+            {"id": 2, "image_id": 5, "category_id": 9, "bbox": [0, 0, 4, 4], "iscrowd": 1},
+            {"id": 3, "image_id": 5, "category_id": 9, "bbox": [5, 2, 3, 3], "iscrowd": 0},
+        ],
+    }
+    (tmp_path / "sub").mkdir()
+    f = tmp_path / "sub" / "gt.json"
+    f.write_text(json.dumps(gt))
+    ds = DetectionDataset.from_coco(f, images_dir=tmp_path)
+    assert ds.classes == ("x", "y") and ds.image_ids == (5,)
+    assert ds.labels[0].tolist() == [2, 1]
+    assert ds.boxes[0].tolist() == [[1, 1, 3, 4], [5, 2, 8, 5]]
+
+
+def test_from_coco_errors_name_the_flags(tmp_path, shapes_set):
+    import json
+
+    with pytest.raises(InputError, match=r"--data: COCO file .* does not exist"):
+        DetectionDataset.from_coco(tmp_path / "none.json")
+    f = tmp_path / "empty.json"
+    f.write_text(json.dumps({"images": [], "categories": [], "annotations": []}))
+    with pytest.raises(InputError, match=r"--images-dir: .* is not a folder"):
+        DetectionDataset.from_coco(f, images_dir=tmp_path / "no")
+    with pytest.raises(InputError, match=r"--data .*: no images in the COCO file"):
+        DetectionDataset.from_coco(f)
+    g = _coco_folder(tmp_path, shapes_set.subset([0]), images=False)
+    with pytest.raises(InputError, match=r"--images-dir: .*000001.png \(image 1 of .*\) does not"):
+        DetectionDataset.from_coco(g)

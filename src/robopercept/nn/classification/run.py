@@ -456,7 +456,7 @@ def train_run(
             progress=progress,
             distributed=distributed,
         )
-    except KeyboardInterrupt:  # keep what the last complete epoch left: history.csv too
+    except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the last epoch's history.csv too
         if ckpt.exists() and _rank(distributed) == 0:
             History.from_dict(load_checkpoint(ckpt)["history"]).write_csv(out / "history.csv")
         raise

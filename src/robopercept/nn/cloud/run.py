@@ -1,521 +1,102 @@
-r"""Training, evaluating and running the point-cloud networks (PointNet, DGCNN).
+r"""The run of ``robopercept nn cloud train|eval|CLOUD...``, owned by the library: the
+data sets, the run folder, the metrics and pictures, and the prediction of one file.
 
-The models live in :mod:`robopercept.nn.cloud.pointnet` and :mod:`robopercept.nn.cloud.dgcnn`, the
-data in :mod:`robopercept.nn.cloud.data`; this module is the task around them, the
-recipe of the reference code (charlesq34/pointnet, WangYueFt/dgcnn):
+The networks are built, trained, scored and saved by :mod:`robopercept.nn.cloud.train`;
+this module is what a command does with them.
 
-- **Training** (:func:`train_cloud_model`): mini-batches of a seeded shuffle,
-  augmented on the fly (:func:`~robopercept.nn.cloud.data.augment_clouds`: a random
-  rotation about the up axis, anisotropic scaling, jitter, shift), the cross-entropy of
-  the class (or of every point's part, with the object's category one-hot given to the
-  network, as in the reference part segmentation), plus for PointNet the feature
-  transform's regularizer :math:`w \lVert I - A A^\top \rVert_F^2` (``w = 0.001``, the
-  paper's). AdamW with a per-step cosine schedule
-  (:class:`~robopercept.nn.train.config.TrainConfig`), the epoch with the best validation
-  score kept (:func:`~robopercept.nn.train.loop.epoch_loop`).
-- **Scores** (:func:`evaluate_cloud_model`): overall accuracy and the mean of the
-  per-class accuracies (ModelNet's "class avg"), the confusion matrix; for parts the
-  instance mIoU of ShapeNet-part's protocol: per shape, the IoU of each part of its
-  category (argmax restricted to those parts), a part absent from both truth and
-  prediction counting 1, averaged over the category's parts, then over shapes
-  (``instance_miou``) and per category, then over categories (``class_miou``).
-- **Files**: :func:`save_cloud_model` / :func:`load_cloud_model` (weights and what
-  rebuilds the network, read back without pickled code), :func:`classify_cloud_file`
-  for one PLY/PCD/OFF file (what ``robopercept nn cloud FILE`` prints).
+- **Data** (:func:`cloud_sets`): the procedural shapes (``"shapes"``,
+  ``"shapes-partial"``, ``"shapes-noisy"``) or a folder of meshes and clouds, split into
+  training, validation and test sets (seeded).
+- **Training run** (:func:`train_run`): the run folder is checked first
+  (:func:`~robopercept.nn.train.runs.prepare_run_folder`: a folder holding a run is
+  refused unless resumed or overwritten), then the data are loaded, the network built
+  (seeded), trained with a checkpoint after every epoch
+  (:func:`~robopercept.nn.cloud.train.train_cloud_model`, the best validation epoch
+  kept), saved, and scored on the test split. The run folder:
+
+  ========================  ===========================================================
+  ``checkpoint.pt``         the last complete epoch (weights, optimizer, schedule, random
+                            states, history): Ctrl-C or SIGTERM keeps it, and
+                            ``resume=True`` (``--resume``) continues from it to the
+                            weights of an uninterrupted run
+  ``checkpoint.best.pt``    the best validation epoch's weights
+  ``model.pt``              the kept network and what rebuilds it
+                            (:func:`~robopercept.nn.cloud.train.save_cloud_model`): what
+                            ``eval`` and the cloud form load
+  ``history.json``          per epoch the training loss, the seconds and the validation
+                            score (:class:`~robopercept.nn.cloud.train.CloudHistory`);
+                            written so far when the run is interrupted
+  ``metrics.json``          the test split's scores (accuracy and class-mean accuracy;
+                            instance and class mIoU for parts), the kept epoch
+  ``confusion.png``         the test confusion matrix of classes (or parts)
+                            (:func:`robopercept.viz.confusion_picture`)
+  ========================  ===========================================================
+
+- **Evaluation** (:func:`evaluate_run`): a saved network on the test split of the same
+  data (same ``shapes``, ``n_points`` and ``seed``), optionally writing ``metrics.json``
+  and ``confusion.png``.
+- **One file** (:func:`classify_cloud_file`): a PLY/PCD cloud or OFF/PLY mesh classified
+  (and segmented); :func:`shipped_cloud_model` gives the shipped networks.
 """
 
 from __future__ import annotations
 
+import json
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass
+import sys
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple, cast
+from typing import Any
 
 import numpy as np
-import numpy.typing as npt
-import torch
-import torch.nn.functional as F
 from torch import nn
 
-from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
-from robopercept.errors import InputError
-from robopercept.nn._guards import check_count
-from robopercept.nn.cloud.data import (
-    CloudDataset,
-    augment_clouds,
-    read_cloud_file,
-    read_cloud_folder,
+from robopercept._checks import (
+    as_path,
+    check_bool,
+    check_choice,
+    check_int,
+    check_real,
+    plain_repr,
 )
-from robopercept.nn.cloud.dgcnn import DGCNN
-from robopercept.nn.cloud.pointnet import PointNet, transform_regularizer
+from robopercept.errors import ArgumentError, InputError
+from robopercept.imaging import write_image
+from robopercept.nn._guards import check_count
+from robopercept.nn.cloud.data import read_cloud_file, read_cloud_folder
 from robopercept.nn.cloud.synthetic import procedural_shapes
+from robopercept.nn.cloud.train import (
+    CLOUD_MODELS,
+    CloudEvaluation,
+    CloudHistory,
+    build_cloud_model,
+    cloud_model_spec,
+    evaluate_cloud_model,
+    load_cloud_model,
+    predict_clouds,
+    save_cloud_model,
+    train_cloud_model,
+)
 from robopercept.nn.shipped import BUILD_SHIPPED, SHIPPED_CLOUD_MODELS, shipped_model_path
-from robopercept.nn.train.checkpoint import load_built_model, save_built_model
+from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import TrainConfig, resolve_device
-from robopercept.nn.train.loop import EpochHistory, epoch_loop
+from robopercept.nn.train.runs import prepare_run_folder
+from robopercept.viz import confusion_picture
 
 __all__ = [
-    "CLOUD_MODELS",
-    "CloudEvaluation",
-    "CloudHistory",
     "CloudPrediction",
-    "build_cloud_model",
+    "CloudRunEvaluation",
+    "CloudTrainResult",
     "classify_cloud_file",
     "cloud_sets",
-    "evaluate_cloud_model",
-    "load_cloud_model",
-    "part_ious",
-    "predict_clouds",
-    "save_cloud_model",
+    "evaluate_run",
     "shipped_cloud_model",
-    "train_cloud_model",
+    "train_run",
 ]
-
-#: the networks by name: ``"pointnet"`` (:class:`~robopercept.nn.cloud.pointnet.PointNet`) and
-#: ``"dgcnn"`` (:class:`~robopercept.nn.cloud.dgcnn.DGCNN`)
-CLOUD_MODELS = ("pointnet", "dgcnn")
 
 #: the command that rebuilds the shipped models from a checkout (the models,
 #: :data:`~robopercept.nn.shipped.SHIPPED_CLOUD_MODELS`, are re-exported here)
 BUILD_SHIPPED_CLOUD = BUILD_SHIPPED["cloud"]
-
-
-def build_cloud_model(
-    name: str, num_outputs: int, *, seed: int | None = None, **settings: Any
-) -> nn.Module:
-    """A point-cloud network by name.
-
-    Parameters
-    ----------
-    name : {"pointnet", "dgcnn"}
-    num_outputs : int
-        Classes (``task="classify"``) or parts (``task="segment"``).
-    seed : int, optional
-        Seeds torch's generator before the weights are drawn.
-    **settings
-        The constructor's keyword arguments (``task``, ``width``, ``k``, ...).
-
-    Returns
-    -------
-    torch.nn.Module
-
-    Examples
-    --------
-    >>> net = build_cloud_model("pointnet", 4, width=0.125, seed=0)
-    >>> net(torch.rand(2, 32, 3)).shape
-    torch.Size([2, 4])
-    """
-    check_choice(name, "name", CLOUD_MODELS)
-    num_outputs = check_count(num_outputs, "num_outputs", 1, 100_000)
-    if seed is not None:
-        torch.manual_seed(check_count(seed, "seed", 0, 2**63 - 1))
-    if name == "pointnet":
-        return PointNet(num_outputs, **settings)
-    return DGCNN(num_outputs, **settings)
-
-
-class _Spec(NamedTuple):
-    """What the task code reads off a point-cloud network (typed)."""
-
-    kind: str
-    task: str
-    num_outputs: int
-    in_channels: int
-    config: dict[str, Any]
-
-
-def _spec(model: nn.Module) -> _Spec:
-    name = type(model).__name__.lower()
-    task = getattr(model, "task", None)
-    if name not in CLOUD_MODELS or task not in ("classify", "segment"):
-        raise InputError(
-            f"model must be a PointNet or DGCNN (build_cloud_model); got {plain_repr(model)}"
-        )
-    config = getattr(model, "config", {})
-    return _Spec(
-        name,
-        str(task),
-        int(getattr(model, "num_outputs", 0)),
-        int(getattr(model, "in_channels", 3)),
-        dict(config) if isinstance(config, dict) else {},
-    )
-
-
-def _check_data(data: Any, what: str, task: str) -> Any:
-    if not isinstance(data, CloudDataset):
-        raise InputError(
-            f"{what} must be a CloudDataset (procedural_shapes or read_cloud_folder); got "
-            f"{plain_repr(data)}"
-        )
-    if len(data) == 0:
-        raise InputError(f"{what} is empty")
-    if task == "segment" and data.parts is None:
-        raise InputError(
-            f"{what} has no part labels: a segmentation network trains on data with parts "
-            "(procedural_shapes gives them)"
-        )
-    return data
-
-
-class CloudHistory(EpochHistory):
-    """What :func:`train_cloud_model` measured per epoch: the training loss, seconds and
-    the validation score (accuracy for classifiers, instance mIoU for segmenters)."""
-
-    val_name = "val_score"
-
-
-def train_cloud_model(
-    model: nn.Module,
-    train: Any,
-    config: TrainConfig | None = None,
-    *,
-    val: Any = None,
-    augment: bool = True,
-    rotate: str | None = "up",
-    up_axis: int = 2,
-    regularizer: float = 0.001,
-    progress: bool = True,
-    checkpoint: str | os.PathLike[str] | None = None,
-    resume: bool = False,
-) -> CloudHistory:
-    r"""Train a PointNet or DGCNN on a :class:`~robopercept.nn.cloud.data.CloudDataset`.
-
-    Each step takes ``config.batch_size`` clouds of a seeded shuffle, augmented
-    (``augment``: :func:`~robopercept.nn.cloud.data.augment_clouds` with ``rotate``
-    about ``up_axis``, scaling in [0.8, 1.25] per axis, jitter 0.01 clipped at 0.05 and
-    a shift of at most 0.1), and minimizes the cross-entropy of the classes
-    (``task="classify"``) or of every point's part (``"segment"``, the object's class
-    given as the category when the network takes one), plus
-    ``regularizer`` :math:`\cdot \lVert I - A A^\top \rVert_F^2` of PointNet's feature
-    transforms (batch mean, :func:`~robopercept.nn.cloud.pointnet.transform_regularizer`).
-    With ``val`` the score (accuracy, or instance mIoU) is measured after every epoch
-    and the best epoch's weights are kept.
-
-    Parameters
-    ----------
-    model : PointNet or DGCNN
-    train : CloudDataset
-    config : TrainConfig, optional
-        Epochs, batch size, AdamW learning rate, schedule, seed, device.
-    val : CloudDataset, optional
-    augment : bool
-    rotate : {"up", "so3", None}
-    up_axis : {0, 1, 2}
-    regularizer : float
-        The weight of the feature-transform regularizer (PointNet; 0 to disable).
-    progress : bool
-    checkpoint : path, optional
-        Written after every epoch (:func:`~robopercept.nn.train.loop.epoch_loop`'s
-        checkpoint); the best weights go to ``<stem>.best.pt``.
-    resume : bool
-        Continue the run of ``checkpoint`` (same model, data and settings): it ends with
-        the weights of an uninterrupted run.
-
-    Returns
-    -------
-    CloudHistory
-
-    Raises
-    ------
-    InputError
-        Not a point-cloud network, data without parts for a segmenter, labels out of the
-        network's range, or a loss that became NaN (lower the learning rate).
-    """
-    spec = _spec(model)
-    task = spec.task
-    if config is not None and not isinstance(config, TrainConfig):
-        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
-    cfg = config or TrainConfig()
-    train = _check_data(train, "train", task)
-    if val is not None:
-        val = _check_data(val, "val", task)
-    augment = check_bool(augment, "augment")
-    if rotate is not None:
-        check_choice(rotate, "rotate", ("up", "so3"))
-    up_axis = check_count(up_axis, "up_axis", 0, 2)
-    regularizer = check_real(regularizer, "regularizer", 0.0, 1e6)
-    target_all = train.labels if task == "classify" else train.parts
-    if int(target_all.max()) >= spec.num_outputs:
-        raise InputError(
-            f"the data has labels up to {int(target_all.max())}; the network predicts "
-            f"{spec.num_outputs} outputs: build it with num_outputs >= "
-            f"{int(target_all.max()) + 1}"
-        )
-    dev = resolve_device(cfg.device)
-    torch.manual_seed(cfg.seed)
-    model.to(dev)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    points = torch.from_numpy(np.ascontiguousarray(train.points, dtype=np.float32))
-    labels = torch.from_numpy(train.labels.astype(np.int64))
-    parts = None if train.parts is None else torch.from_numpy(train.parts.astype(np.int64))
-    in_c = spec.in_channels
-
-    forward_aux = cast(Any, model).forward_aux
-
-    def batch(idx: torch.Tensor) -> torch.Tensor:
-        x = points[idx]
-        if augment:
-            x = augment_clouds(x, gen, rotate=rotate, up_axis=up_axis)
-        y = labels[idx].to(dev)
-        cat = y if spec.config.get("num_categories", 0) else None
-        out = forward_aux(x[..., :in_c].to(dev), category=cat)
-        if task == "classify":
-            loss = F.cross_entropy(out.logits, y)
-        else:
-            assert parts is not None
-            loss = F.cross_entropy(out.logits.flatten(0, 1), parts[idx].to(dev).flatten())
-        for t in out.transforms:
-            if regularizer and t.shape[-1] != in_c:  # the feature transforms only
-                loss = loss + regularizer * transform_regularizer(t)
-        return loss
-
-    def validate() -> float:
-        ev = evaluate_cloud_model(model, val, batch_size=cfg.batch_size)
-        return ev.instance_miou if task == "segment" else ev.accuracy
-
-    hist = CloudHistory()
-    hist.val_name = "val_miou" if task == "segment" else "val_accuracy"
-    epoch_loop(
-        model,
-        len(train),
-        cfg,
-        gen,
-        batch,
-        validate if val is not None else None,
-        desc=f"training {type(model).__name__} ({task})",
-        progress=progress,
-        history=hist,
-        checkpoint=checkpoint,
-        resume=check_bool(resume, "resume"),
-        checkpoint_extra={"architecture": type(model).__name__},
-    )
-    return hist
-
-
-def _as_batch(points: Any) -> tuple[torch.Tensor, bool]:
-    if isinstance(points, torch.Tensor):
-        x = points.detach().float().cpu()
-    else:
-        try:
-            x = torch.from_numpy(np.asarray(points, dtype=np.float32))
-        except (TypeError, ValueError):
-            raise InputError(
-                f"points must be a (B, N, 3) or (N, 3) array; got {plain_repr(points)}"
-            ) from None
-    single = x.ndim == 2
-    if single:
-        x = x[None]
-    if x.ndim != 3 or x.shape[1] == 0:
-        raise InputError(
-            f"points must be a (B, N, C) batch or one (N, C) cloud; got shape {tuple(x.shape)}"
-        )
-    return x, single
-
-
-@torch.no_grad()
-def predict_clouds(
-    model: nn.Module,
-    points: Any,
-    *,
-    category: npt.ArrayLike | None = None,
-    mask: Any = None,
-    batch_size: int = 32,
-) -> np.ndarray:
-    """Class (or per-point part) probabilities of clouds, in eval mode.
-
-    Parameters
-    ----------
-    model : PointNet or DGCNN
-    points : (B, N, C) or (N, C) array_like or tensor
-        Normalized as the training data were (unit sphere).
-    category : (B,) int array_like, optional
-        The objects' classes, for a segmenter that takes its category.
-    mask : (B, N) bool, optional
-        Real points (padded batches).
-    batch_size : int
-
-    Returns
-    -------
-    (B, K) or (B, N, K) float32 ndarray
-        Softmax probabilities (without the batch axis for one cloud).
-
-    Examples
-    --------
-    >>> net = build_cloud_model("pointnet", 3, width=0.125, seed=0)
-    >>> p = predict_clouds(net, np.random.default_rng(0).random((16, 3)))
-    >>> p.shape, bool(np.isclose(p.sum(), 1.0))
-    ((3,), True)
-    """
-    spec = _spec(model)
-    x, single = _as_batch(points)
-    batch_size = check_int(batch_size, "batch_size", 1)
-    if spec.config.get("num_categories", 0) and category is None:
-        raise InputError(
-            "this segmenter takes the objects' category: pass category=(B,) class indices "
-            "(e.g. a classifier's prediction)"
-        )
-    cat = None
-    if category is not None:
-        cat = torch.as_tensor(np.asarray(category, dtype=np.int64).reshape(-1))
-        if cat.shape[0] != x.shape[0]:
-            raise InputError(f"category must give one class per cloud ({x.shape[0]})")
-    m = None
-    if mask is not None:
-        m = torch.as_tensor(np.asarray(mask, dtype=bool))
-        if m.ndim == 1:
-            m = m[None]
-        if tuple(m.shape) != tuple(x.shape[:2]):
-            raise InputError(f"mask must be (B, N) = {tuple(x.shape[:2])}; got {tuple(m.shape)}")
-    model.eval()
-    dev = next(model.parameters()).device
-    out = []
-    for s in range(0, x.shape[0], batch_size):
-        xb = x[s : s + batch_size].to(dev)
-        mb = None if m is None else m[s : s + batch_size].to(dev)
-        cb = None if cat is None else cat[s : s + batch_size].to(dev)
-        out.append(F.softmax(model(xb, mask=mb, category=cb), dim=-1).cpu())
-    prob = torch.cat(out).numpy()
-    return prob[0] if single else prob
-
-
-@dataclass(frozen=True)
-class CloudEvaluation:
-    """Scores of :func:`evaluate_cloud_model`.
-
-    Attributes
-    ----------
-    accuracy : float
-        Overall accuracy (classifiers) or per-point part accuracy (segmenters).
-    mean_class_accuracy : float
-        The mean over classes of each class's accuracy (ModelNet's "class avg").
-    confusion : (K, K) int64 ndarray
-        Rows true class, columns predicted (classifiers; parts for segmenters).
-    predictions : (M,) or (M, N) int64 ndarray
-    instance_miou, class_miou : float
-        Segmenters: ShapeNet-part mIoU averaged over shapes, and over categories (NaN
-        for classifiers).
-    per_class_miou : (C,) float64 ndarray
-        Segmenters: the mean shape IoU of each category (NaN where absent).
-    """
-
-    accuracy: float
-    mean_class_accuracy: float
-    confusion: np.ndarray
-    predictions: np.ndarray
-    instance_miou: float = float("nan")
-    class_miou: float = float("nan")
-    per_class_miou: np.ndarray | None = None
-
-    def summary(self) -> dict[str, float]:
-        """The scalar scores as a JSON-ready dict."""
-        out = {"accuracy": self.accuracy, "mean_class_accuracy": self.mean_class_accuracy}
-        if np.isfinite(self.instance_miou):
-            out.update(instance_miou=self.instance_miou, class_miou=self.class_miou)
-        return out
-
-
-def _confusion(true: np.ndarray, pred: np.ndarray, k: int) -> np.ndarray:
-    return np.bincount(true * k + pred, minlength=k * k).reshape(k, k).astype(np.int64)
-
-
-def part_ious(
-    pred: np.ndarray, parts: np.ndarray, labels: np.ndarray, part_classes: np.ndarray
-) -> np.ndarray:
-    r"""Per shape the ShapeNet-part mIoU: the mean over the parts of the shape's class of
-    :math:`|P \cap T| / |P \cup T|` (1 when a part is in neither prediction nor truth).
-
-    Parameters
-    ----------
-    pred, parts : (M, N) int
-        Predicted and true global part ids.
-    labels : (M,) int
-        Each shape's class.
-    part_classes : (P,) int
-        The class of each part id.
-
-    Returns
-    -------
-    (M,) float64 ndarray
-
-    Examples
-    --------
-    >>> part_ious(np.array([[0, 0, 1, 1]]), np.array([[0, 0, 0, 1]]), np.array([0]),
-    ...           np.array([0, 0, 1]))
-    array([0.58333333])
-    """
-    pred = np.asarray(pred)
-    parts = np.asarray(parts)
-    labels = np.asarray(labels)
-    part_classes = np.asarray(part_classes)
-    if pred.shape != parts.shape or pred.ndim != 2 or labels.shape != (pred.shape[0],):
-        raise InputError(
-            f"pred and parts must be (M, N) and labels (M,); got {pred.shape}, {parts.shape}, "
-            f"{labels.shape}"
-        )
-    out = np.empty(pred.shape[0])
-    for i in range(pred.shape[0]):
-        ids = np.flatnonzero(part_classes == labels[i])
-        ious = []
-        for p in ids:
-            a, b = pred[i] == p, parts[i] == p
-            union = np.count_nonzero(a | b)
-            ious.append(1.0 if union == 0 else np.count_nonzero(a & b) / union)
-        out[i] = float(np.mean(ious)) if ious else float("nan")
-    return out
-
-
-@torch.no_grad()
-def evaluate_cloud_model(model: nn.Module, data: Any, *, batch_size: int = 32) -> CloudEvaluation:
-    """Score a classifier or part segmenter on a
-    :class:`~robopercept.nn.cloud.data.CloudDataset` (eval mode, no augmentation).
-
-    Segmenters are given the true category (when they take one) and their argmax is
-    restricted to the parts of that category, as in the ShapeNet-part evaluation of the
-    PointNet and DGCNN reference code.
-
-    Returns
-    -------
-    CloudEvaluation
-    """
-    spec = _spec(model)
-    data = _check_data(data, "data", spec.task)
-    k = spec.num_outputs
-    cat = data.labels if spec.config.get("num_categories", 0) else None
-    prob = predict_clouds(
-        model, data.points[..., : spec.in_channels], category=cat, batch_size=batch_size
-    )
-    if spec.task == "classify":
-        pred = prob.argmax(-1).astype(np.int64)
-        true = data.labels.astype(np.int64)
-        conf = _confusion(true, pred, max(k, data.num_classes))
-        with np.errstate(invalid="ignore", divide="ignore"):
-            per = np.diag(conf) / conf.sum(1)
-        return CloudEvaluation(float((pred == true).mean()), float(np.nanmean(per)), conf, pred)
-    assert data.parts is not None and data.part_classes is not None
-    pc = np.asarray(data.part_classes)
-    allowed = pc[None, :] == data.labels[:, None]  # (M, P) the parts of each shape's class
-    prob = np.where(allowed[:, None, : prob.shape[-1]], prob, -1.0)
-    pred = prob.argmax(-1).astype(np.int64)
-    true = data.parts.astype(np.int64)
-    ious = part_ious(pred, true, data.labels, pc)
-    per_class = np.full(data.num_classes, np.nan)
-    for c in range(data.num_classes):
-        sel = data.labels == c
-        if sel.any():
-            per_class[c] = float(ious[sel].mean())
-    conf = _confusion(true.ravel(), pred.ravel(), max(k, data.num_parts))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        per = np.diag(conf) / conf.sum(1)
-    return CloudEvaluation(
-        float((pred == true).mean()),
-        float(np.nanmean(per)),
-        conf,
-        pred,
-        float(ious.mean()),
-        float(np.nanmean(per_class)),
-        per_class,
-    )
 
 
 # ----------------------------------------------------------------------------- data
@@ -579,91 +160,339 @@ def cloud_sets(
     return CloudSets(train, val, test, str(root))
 
 
-# ----------------------------------------------------------------------------- files
-def _name_list(value: Any, name: str) -> list[str]:
-    """``value`` (a list, tuple or array of names) as a list of str."""
-    if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray):
-        raise InputError(f"{name} must be a list of names; got {plain_repr(value)[:60]}")
-    return [str(v) for v in value]
+# ----------------------------------------------------------------------------- runs
+@dataclass(frozen=True)
+class CloudTrainResult:
+    """What :func:`train_run` made.
 
-
-def save_cloud_model(
-    path: str | os.PathLike[str],
-    model: nn.Module,
-    class_names: Sequence[str],
-    *,
-    part_names: Sequence[str] = (),
-    part_classes: npt.ArrayLike | None = None,
-    n_points: int = 1024,
-    **extra: Any,
-) -> Path:
-    """Write a point-cloud network with what rebuilds it (its name and constructor
-    settings), the class names (and part names and each part's class for a
-    segmenter), the point count it was trained on, and ``extra`` plain values.
-
-    Examples
-    --------
-    >>> import pathlib, tempfile
-    >>> net = build_cloud_model("pointnet", 2, width=0.125, seed=0)
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "net.pt"
-    >>> _ = save_cloud_model(p, net, ["cube", "ball"], n_points=64)
-    >>> net2, info = load_cloud_model(p)
-    >>> info["class_names"], info["n_points"]
-    (['cube', 'ball'], 64)
+    Attributes
+    ----------
+    out_dir : Path
+        The run folder.
+    files : dict of str to Path
+        ``model.pt``, ``history.json``, ``metrics.json`` and ``confusion.png`` by name
+        (the checkpoints, ``checkpoint.pt`` and ``checkpoint.best.pt``, lie beside them).
+    metrics : dict
+        The content of ``metrics.json``.
+    history : CloudHistory
+    test : CloudEvaluation
+        The kept network on the test split.
+    best_epoch : int
+        The kept (1-based) epoch.
+    seconds : float
+        Training time (the epochs only).
     """
-    spec = _spec(model)
-    names = _name_list(class_names, "class_names")
-    parts = _name_list(part_names, "part_names")
-    outputs = names if spec.task == "classify" else parts
-    if len(outputs) != spec.num_outputs:
-        raise InputError(
-            f"the network has {spec.num_outputs} outputs; got {len(outputs)} "
-            f"{'class' if spec.task == 'classify' else 'part'} names"
+
+    out_dir: Path
+    files: dict[str, Path]
+    metrics: dict[str, Any] = field(repr=False)
+    history: CloudHistory = field(repr=False)
+    test: CloudEvaluation = field(repr=False)
+    best_epoch: int = 0
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: ``metrics.json``'s content and ``files`` (name -> path as str),
+        what ``robopercept nn cloud train --json`` prints."""
+        return {**self.metrics, "files": {name: str(p) for name, p in self.files.items()}}
+
+
+@dataclass(frozen=True)
+class CloudRunEvaluation:
+    """What :func:`evaluate_run` measured.
+
+    Attributes
+    ----------
+    evaluation : CloudEvaluation
+        The scores on the test split.
+    metrics : dict
+        The JSON-ready report (``model``, ``task``, ``data``, ``split``, ``clouds``,
+        ``metrics``: :meth:`CloudEvaluation.summary`, ``title``), as in ``metrics.json``.
+    files : dict of str to Path
+        ``metrics.json`` and ``confusion.png`` when an output folder was given, else empty.
+    """
+
+    evaluation: CloudEvaluation = field(repr=False)
+    metrics: dict[str, Any]
+    files: dict[str, Path] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the report, what ``robopercept nn cloud eval --json`` prints."""
+        return dict(self.metrics)
+
+
+def _data_name(data: Any) -> str:
+    """``data`` (a name or a folder) as text, checked to be one."""
+    if not isinstance(data, str | os.PathLike):
+        raise ArgumentError(
+            "--data must be shapes, shapes-partial, shapes-noisy or a folder "
+            f"root/<class>/*.off; got {plain_repr(data)}"
         )
-    pcs = [] if part_classes is None else [int(v) for v in np.asarray(part_classes).ravel()]
-    settings = {k: v for k, v in spec.config.items() if k != "num_outputs"}
-    return save_built_model(
-        path,
-        model,
-        spec.kind,
-        settings,
-        outputs,
-        class_names=names,
-        part_names=parts,
-        part_classes=pcs,
-        n_points=check_int(n_points, "n_points", 1),
-        **extra,
-    )
+    return os.fspath(data)
 
 
-def _build(kind: str, n: int, **settings: Any) -> nn.Module:
-    return build_cloud_model(kind, n, **settings)
+def _load_sets(data: str, shapes: int, n_points: int, seed: int, progress: bool) -> CloudSets:
+    """:func:`cloud_sets`, its errors an :class:`~robopercept.errors.ArgumentError`
+    starting with ``--data`` (exit 2 on the command line)."""
+    try:
+        return cloud_sets(data, shapes=shapes, n_points=n_points, seed=seed, progress=progress)
+    except InputError as exc:
+        raise ArgumentError(f"--data: {exc}") from None
 
 
-def load_cloud_model(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, Any]]:
-    """Rebuild a network written by :func:`save_cloud_model` (eval mode, CPU).
+def _write_metrics(
+    out: Path, metrics: dict[str, Any], ev: CloudEvaluation, names: list[str]
+) -> list[Path]:
+    """Write ``metrics.json`` and ``confusion.png`` (classes, or parts) into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=1))
+    k = len(names)
+    pic = confusion_picture(ev.confusion[:k, :k], names, title=metrics.get("title", ""))
+    return [out / "metrics.json", write_image(out / "confusion.png", pic)]
+
+
+def _history_so_far(ckpt: Path, stamp: int | None, path: Path) -> None:
+    """After an interruption: the history of the last complete epoch (the checkpoint's),
+    written to ``path`` when this run wrote (or resumed) that checkpoint."""
+    try:
+        if ckpt.exists() and ckpt.stat().st_mtime_ns != stamp:
+            path.write_text(json.dumps(load_checkpoint(ckpt)["history"], indent=1))
+    except Exception:  # never hide the interruption behind this
+        pass
+
+
+def train_run(
+    data: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str],
+    *,
+    model: str = "pointnet",
+    task: str = "classify",
+    config: TrainConfig | None = None,
+    shapes: int = 100,
+    n_points: int = 1024,
+    width: float = 0.5,
+    k: int = 16,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> CloudTrainResult:
+    """Train a point-cloud network on ``data`` and write the run folder ``out_dir``
+    (module docstring): what ``robopercept nn cloud train`` does.
+
+    Steps: the run folder is checked
+    (:func:`~robopercept.nn.train.runs.prepare_run_folder`); :func:`cloud_sets` with
+    ``config.seed``; the network built with ``config.seed``
+    (:func:`~robopercept.nn.cloud.train.build_cloud_model`: PointNet with ``width``,
+    DGCNN with ``k``; a part segmenter (``task="segment"``) takes the object's category);
+    :func:`~robopercept.nn.cloud.train.train_cloud_model` on the training split with the
+    validation split choosing the kept epoch (accuracy, or instance mIoU), a checkpoint
+    after every epoch; the network saved (``model.pt``, with the data, shapes, points and
+    seed it was trained on) and scored on the test split.
+
+    Parameters
+    ----------
+    data : str or path
+        ``"shapes"``, ``"shapes-partial"``, ``"shapes-noisy"`` or a folder
+        (:func:`cloud_sets`).
+    out_dir : path
+        The run folder (created).
+    model : {"pointnet", "dgcnn"}
+    task : {"classify", "segment"}
+    config : TrainConfig, optional
+        Epochs, batch size, AdamW learning rate, seed (data, split, weights), device.
+    shapes : int
+        Procedural data: training shapes per class.
+    n_points : int
+        Points per cloud.
+    width : float
+        PointNet: the channel multiplier, in (0, 8].
+    k : int
+        DGCNN: the neighbours of each point, at most ``n_points``.
+    resume : bool
+        Continue the run in ``out_dir`` from its ``checkpoint.pt`` (same data, model and
+        configuration): it ends with the weights of an uninterrupted run.
+    overwrite : bool
+        Start afresh in a folder that already holds a run (refused otherwise).
+    progress : bool
+        A line about the data and progress bars on stderr.
 
     Returns
     -------
-    model : nn.Module
-    info : dict
-        ``class_names``, ``part_names``, ``part_classes``, ``n_points``, the settings
-        and what else was saved.
+    CloudTrainResult
+
+    Raises
+    ------
+    RunExistsError
+        ``out_dir`` holds a run and neither ``resume`` nor ``overwrite`` was given.
+    InputError
+        A bad setting (the message names its flag), data that cannot be loaded (the
+        message starts with ``--data``), ``resume`` without a checkpoint; the errors of
+        :func:`~robopercept.nn.cloud.train.train_cloud_model`.
+
+    Examples
+    --------
+    >>> train_run("shapes", "run", model="pointnet++")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: model (--model) must be one of ...
+    """
+    if config is not None and not isinstance(config, TrainConfig):
+        raise InputError(f"config must be a TrainConfig or None; got {plain_repr(config)}")
+    cfg = config or TrainConfig()
+    name = _data_name(data)
+    check_choice(model, "model (--model)", CLOUD_MODELS)
+    check_choice(task, "task (--task)", ("classify", "segment"))
+    shapes = check_count(shapes, "shapes (--shapes)", 1, 1_000_000)
+    n_points = check_count(n_points, "n_points (--points)", 1, 1 << 20)
+    seed = check_count(cfg.seed, "config.seed (--seed)", 0, 2**31 - 1)
+    width = check_real(width, "width (--width)", 0.0, 8.0, low_inclusive=False)
+    k = check_int(k, "k (--k)", 1)
+    if model == "dgcnn" and k > n_points:
+        raise InputError(f"--k: at most --points ({n_points}); got {k}")
+    progress = check_bool(progress, "progress")
+    ckpt = prepare_run_folder(out_dir, resume=resume, overwrite=overwrite)
+    out = ckpt.parent
+    sets = _load_sets(name, shapes, n_points, seed, progress)
+    train, val, test = sets.train, sets.val, sets.test
+    segment = task == "segment"
+    if progress:
+        print(
+            f"nn cloud train: {model} ({task}) on {name}: {len(train)} training, "
+            f"{len(val)} validation, {len(test)} test clouds of {n_points} points",
+            file=sys.stderr,
+        )
+    settings: dict[str, Any] = {"task": task}
+    if model == "pointnet":
+        settings["width"] = width
+    else:
+        settings["k"] = k
+    if segment:
+        settings["num_categories"] = train.num_classes
+    outputs = train.num_parts if segment else train.num_classes
+    net = build_cloud_model(model, outputs, seed=seed, **settings)
+    stamp = ckpt.stat().st_mtime_ns if ckpt.exists() and not resume else None
+    t0 = time.perf_counter()
+    try:
+        hist = train_cloud_model(
+            net, train, cfg, val=val, progress=progress, checkpoint=ckpt, resume=resume
+        )
+    except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the history of the last epoch
+        _history_so_far(ckpt, stamp, out / "history.json")
+        raise
+    seconds = time.perf_counter() - t0
+    save_cloud_model(
+        out / "model.pt",
+        net,
+        list(train.class_names),
+        part_names=list(train.part_names) if segment else (),
+        part_classes=train.part_classes if segment else None,
+        n_points=n_points,
+        data=name,
+        shapes=shapes,
+        seed=seed,
+    )
+    (out / "history.json").write_text(json.dumps(hist.to_dict(), indent=1))
+    ev = evaluate_cloud_model(net, test)
+    names = list(train.part_names if segment else train.class_names)
+    metrics = {
+        "model": model,
+        "task": task,
+        "data": name,
+        "split": "test",
+        "clouds": len(test),
+        "best_epoch": hist.best_epoch,
+        "metrics": ev.summary(),
+        "title": f"{model} on {name}: test",
+    }
+    written = [out / "model.pt", out / "history.json", *_write_metrics(out, metrics, ev, names)]
+    return CloudTrainResult(
+        out, {p.name: p for p in written}, metrics, hist, ev, hist.best_epoch, seconds
+    )
+
+
+def evaluate_run(
+    model: str | os.PathLike[str],
+    data: str | os.PathLike[str],
+    *,
+    shapes: int = 100,
+    n_points: int = 1024,
+    seed: int = 0,
+    device: str | None = None,
+    out_dir: str | os.PathLike[str] | None = None,
+    progress: bool = True,
+) -> CloudRunEvaluation:
+    """Score a saved network on the test split of ``data``: what
+    ``robopercept nn cloud eval`` does.
+
+    The network (a run folder, i.e. its ``model.pt``, or the file itself) is loaded
+    (:func:`~robopercept.nn.cloud.train.load_cloud_model`), the data split as for
+    training (:func:`cloud_sets` with the same ``shapes``, ``n_points`` and ``seed``), and
+    the test split scored (:func:`~robopercept.nn.cloud.train.evaluate_cloud_model`).
+
+    Parameters
+    ----------
+    model : path
+        A run folder or a ``model.pt``.
+    data : str or path
+        As in :func:`train_run`; its classes must be the network's.
+    shapes, n_points, seed : int
+        The data's settings (those of the training run).
+    device : str, optional
+        Where to run the network (default: the CPU).
+    out_dir : path, optional
+        Write ``metrics.json`` and ``confusion.png`` there.
+    progress : bool
+        Progress bars on stderr while the data are made or read.
+
+    Returns
+    -------
+    CloudRunEvaluation
 
     Raises
     ------
     FileFormatError
-        Missing or unreadable file, or a checkpoint that is not a point-cloud network's.
+        A missing or unreadable network.
+    InputError
+        Data that cannot be loaded or whose classes are not the network's (the messages
+        start with ``--data``); a bad device.
     """
-    return load_built_model(
-        path,
-        CLOUD_MODELS,
-        _build,
-        "point-cloud network",
-        "save_cloud_model or `robopercept nn cloud train`",
-    )
+    given = as_path(model, "model (RUN_OR_MODEL)")
+    path = given / "model.pt" if given.is_dir() else given
+    name = _data_name(data)
+    shapes = check_count(shapes, "shapes (--shapes)", 1, 1_000_000)
+    n_points = check_count(n_points, "n_points (--points)", 1, 1 << 20)
+    seed = check_count(seed, "seed (--seed)", 0, 2**31 - 1)
+    progress = check_bool(progress, "progress")
+    net, info = load_cloud_model(path)
+    if device:
+        net.to(resolve_device(device))
+    sets = _load_sets(name, shapes, n_points, seed, progress)
+    if list(sets.test.class_names) != list(info["class_names"]):
+        raise ArgumentError(
+            f"--data: its classes {list(sets.test.class_names)} are not the model's "
+            f"{info['class_names']}"
+        )
+    ev = evaluate_cloud_model(net, sets.test)
+    task = cloud_model_spec(net).task
+    segment = task == "segment"
+    names = list(info["part_names"] if segment else info["class_names"])
+    metrics = {
+        "model": os.fspath(model),
+        "task": task,
+        "data": name,
+        "split": "test",
+        "clouds": len(sets.test),
+        "metrics": ev.summary(),
+        "title": f"{given.name} on {name}: test",
+    }
+    files: dict[str, Path] = {}
+    if out_dir is not None:
+        out = as_path(out_dir, "out_dir (-o/--out)")
+        files = {p.name: p for p in _write_metrics(out, metrics, ev, names)}
+    return CloudRunEvaluation(ev, metrics, files)
 
 
+# ----------------------------------------------------------------------------- files
 def shipped_cloud_model(name: str = "pointnet") -> Path:
     """The path of a shipped model: ``"pointnet"`` (the default classifier), ``"dgcnn"``
     or ``"pointnet-parts"`` (part segmentation), trained on the procedural shapes.
@@ -740,7 +569,7 @@ def classify_cloud_file(
     -------
     CloudPrediction
     """
-    _spec(model)
+    cloud_model_spec(model)
     if not isinstance(info, dict) or not isinstance(info.get("class_names"), (list, tuple)):
         raise InputError(
             f"info must be load_cloud_model's dict (with class_names); got {plain_repr(info)}"
@@ -749,7 +578,7 @@ def classify_cloud_file(
         isinstance(segmenter, tuple)
         and len(segmenter) == 2
         and isinstance(segmenter[1], dict)
-        and _spec(segmenter[0]).task == "segment"
+        and cloud_model_spec(segmenter[0]).task == "segment"
     ):
         raise InputError(
             "segmenter must be a (model, info) pair of a segmentation network, as "

@@ -15,7 +15,8 @@ training loop indexes like torchvision's detection data sets: item ``i`` is
 
 :func:`collate_detection` batches items as lists (images of different sizes stay
 apart), :meth:`DetectionDataset.to_coco` gives the :class:`~robopercept.nn.coco.dataset.CocoDataset`
-that :func:`~robopercept.nn.coco.evaluate.evaluate_detections` scores, and
+that :func:`~robopercept.nn.coco.evaluate.evaluate_detections` scores,
+:meth:`DetectionDataset.from_coco` the set of a COCO file and its images, and
 :meth:`DetectionDataset.split` a seeded train/validation/test split.
 :func:`samples_picture` draws a grid of a set's images with their ground truth
 (:mod:`robopercept.viz.detection` draws).
@@ -42,6 +43,7 @@ The sets themselves live beside this module: the procedural shapes and the digit
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -49,11 +51,12 @@ import numpy as np
 import numpy.typing as npt
 import torch
 
-from robopercept._checks import check_bool, check_int, check_numeric, plain_repr
+from robopercept._checks import as_path, check_bool, check_int, check_numeric, plain_repr
 from robopercept.errors import InputError
-from robopercept.nn.coco.dataset import CocoDataset, coco_from_dict
+from robopercept.imaging import read_image
+from robopercept.nn.coco.dataset import CocoDataset, coco_from_dict, read_coco_json
 from robopercept.nn.coco.rle import rle_encode
-from robopercept.nn.data.datasets import stratified_split
+from robopercept.nn.data.datasets import stratified_split, to_unit_float
 from robopercept.viz.detection import detections_grid
 
 __all__ = [
@@ -310,6 +313,90 @@ class DetectionDataset:
             boxes.append(np.array([mask_to_box(k) for k in m]) if len(ids) else np.zeros((0, 4)))
             labels.append(np.ones(len(ids), np.int64))
         return cls(rgb, boxes, labels, [class_name], masks=masks)
+
+    @classmethod
+    def from_coco(
+        cls, path: str | os.PathLike[str], images_dir: str | os.PathLike[str] | None = None
+    ) -> DetectionDataset:
+        """A COCO ground-truth JSON file and its images as a detection set (what
+        ``robopercept nn detect train|eval --data FILE.json`` reads).
+
+        Each image ``images_dir / file_name`` is read as RGB in [0, 1]
+        (:func:`robopercept.imaging.read_image`,
+        :func:`~robopercept.nn.data.datasets.to_unit_float`); each non-crowd annotation
+        gives a box, COCO's ``[x, y, w, h]`` turned into ``xyxy``
+        ``(x, y, x + w, y + h)``, and a label, the 1-based position of its category in
+        the file's ``categories`` (whose names become :attr:`classes`). Crowd regions
+        (``iscrowd`` 1) are dropped, as torchvision's COCO detection references drop
+        them for training. Image ids and file names are kept, so :meth:`to_coco` gives
+        the file's images back.
+
+        Parameters
+        ----------
+        path : path
+            The COCO JSON file (:func:`~robopercept.nn.coco.dataset.read_coco_json`).
+        images_dir : path, optional
+            The folder of the images (default: the JSON file's folder).
+
+        Returns
+        -------
+        DetectionDataset
+
+        Raises
+        ------
+        InputError
+            ``path`` is not a file, ``images_dir`` is not a folder, a listed image is
+            missing from it, or the file lists no images (the messages name the command
+            line's ``--data`` and ``--images-dir``).
+        FileFormatError
+            The file is not COCO JSON, or an image is unreadable.
+
+        Examples
+        --------
+        >>> import json, tempfile, pathlib
+        >>> from robopercept.imaging import write_image
+        >>> d = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = write_image(d / "a.png", np.zeros((8, 10, 3), np.uint8))
+        >>> _ = (d / "gt.json").write_text(json.dumps({
+        ...     "images": [{"id": 7, "file_name": "a.png", "width": 10, "height": 8}],
+        ...     "categories": [{"id": 3, "name": "cat"}],
+        ...     "annotations": [{"id": 1, "image_id": 7, "category_id": 3,
+        ...                      "bbox": [1, 2, 4, 5], "area": 20, "iscrowd": 0}]}))
+        >>> ds = DetectionDataset.from_coco(d / "gt.json")
+        >>> ds.boxes[0].tolist(), ds.labels[0].tolist(), ds.classes, ds.image_ids
+        ([[1.0, 2.0, 5.0, 7.0]], [1], ('cat',), (7,))
+        """
+        p = as_path(path, "path (--data)")
+        if not p.is_file():
+            raise InputError(f"--data: COCO file {p} does not exist")
+        if images_dir is None or (isinstance(images_dir, str) and not images_dir):
+            root = p.parent
+        else:
+            root = as_path(images_dir, "images_dir (--images-dir)")
+        if not root.is_dir():
+            raise InputError(f"--images-dir: {root} is not a folder")
+        coco = read_coco_json(p)
+        if not coco.images:
+            raise InputError(f"--data {p}: no images in the COCO file")
+        label = {c.id: k + 1 for k, c in enumerate(coco.categories)}
+        images, boxes, labels = [], [], []
+        for im in coco.images:
+            f = root / im.file_name
+            if not f.is_file():
+                raise InputError(f"--images-dir: {f} (image {im.id} of {p}) does not exist")
+            images.append(to_unit_float(read_image(f, mode="rgb")))
+            sel = (coco.image_ids == im.id) & ~coco.iscrowd
+            b = coco.boxes[sel]
+            boxes.append(np.hstack((b[:, :2], b[:, :2] + b[:, 2:])))
+            labels.append([label[int(c)] for c in coco.category_ids[sel]])
+        return cls(
+            images,
+            boxes,
+            labels,
+            [c.name for c in coco.categories],
+            image_ids=[im.id for im in coco.images],
+            file_names=[im.file_name for im in coco.images],
+        )
 
     def class_maps(self) -> np.ndarray:
         """Per-pixel class labels ``(N, H, W)`` int64 from the instance masks: 0 the

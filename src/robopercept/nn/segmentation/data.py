@@ -7,7 +7,7 @@ masks give the class maps).
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -174,11 +174,16 @@ class SegmentationSets:
         gives their semantic labels.
     classes : tuple of str
         The names of labels 1..K (0 is the background).
+    source : dict
+        The arguments that made the sets (``data``, ``images``, ``size`` as
+        ``[width, height]``, ``seed``; what a trained model records beside its
+        weights); empty for sets built otherwise.
     """
 
     train: Any
     val: Any
     classes: tuple[str, ...]
+    source: dict[str, Any] = field(default_factory=dict, compare=False)
 
 
 def segmentation_sets(
@@ -224,7 +229,9 @@ def segmentation_sets(
         val = DetectionDataset.from_instance_labels(
             [np.clip(s.test_image, 0, 1)], [s.test_instances], "nucleus"
         )
-        return SegmentationSets(train, val, tuple(train.classes))
+        given = list(size) if isinstance(size, (tuple, list)) else size
+        source = {"data": data, "images": n_images, "size": given, "seed": seed}
+        return SegmentationSets(train, val, tuple(train.classes), source)
     n = check_int(n_images, "n_images", 2)
     frac = check_real(
         val_fraction, "val_fraction", 0.0, 1.0, low_inclusive=False, high_inclusive=False
@@ -232,4 +239,5 @@ def segmentation_sets(
     make = procedural_detection_set if data == "shapes" else digits_detection_set
     ds = make(n, size, rng=seed)
     train, val = ds.split((1 - frac, frac), rng=seed)
-    return SegmentationSets(train, val, tuple(ds.classes))
+    source = {"data": data, "images": n, "size": list(size), "seed": seed}
+    return SegmentationSets(train, val, tuple(ds.classes), source)

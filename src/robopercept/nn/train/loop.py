@@ -3,9 +3,10 @@ and per-batch schedule of the task trainers (:func:`step_optimizer`,
 :func:`optimizer_step`) and :func:`epoch_loop`, the loop of the trainers that draw
 batches of sample indices (pose networks, point-cloud networks).
 
-:func:`train_loop` is the one loop (``grep "for epoch in" src/robopercept/nn`` finds it
-alone): :func:`~robopercept.nn.train.fit.fit`, the detectors', segmenters', pose,
-point-cloud and lifting trainers give it their batches and their loss; the loop owns the
+:func:`train_loop` is the one loop (the only epoch loop in the package, as a grep
+for the loop's header shows): :func:`~robopercept.nn.train.fit.fit`, the detectors',
+segmenters', pose, point-cloud and lifting trainers give it their batches and their
+loss; the loop owns the
 optimizer step (non-finite losses refused, gradient clipping, per-batch or per-epoch
 schedules), weight averaging, validation every k epochs with the best epoch kept, early
 stopping, progress, checkpoints after every epoch and resuming from them, and

@@ -3,12 +3,17 @@
 Three forms, chosen by the first word after ``cloud``::
 
     robopercept nn cloud train --model pointnet|dgcnn --data shapes|FOLDER -o run/
+                               [--resume | --overwrite]
     robopercept nn cloud eval RUN_OR_MODEL --data shapes|FOLDER [-o DIR]
     robopercept nn cloud CLOUD... [--model PATH|pointnet|dgcnn] [--segment] [-o OUT] [--json]
 
 ``train`` keeps the weights of the epoch with the best validation score (accuracy, or
 instance mIoU with ``--task segment``) and writes ``run/model.pt``, ``history.json``,
-``metrics.json`` (on the test split) and ``confusion.png``. ``--data`` is ``shapes``
+``metrics.json`` (on the test split) and ``confusion.png``, beside ``checkpoint.pt``
+(the last complete epoch, written after every epoch) and ``checkpoint.best.pt``. A
+folder that already holds a run is refused (exit 2) unless ``--resume`` continues it
+(to the weights of an uninterrupted run; after Ctrl-C, exit 130, or SIGTERM, exit 143)
+or ``--overwrite`` starts afresh. ``--data`` is ``shapes``
 (the procedural shapes), ``shapes-partial`` or ``shapes-noisy`` (harder variants), or a
 folder ``root/<class>/*.off|*.ply|*.pcd`` (ModelNet's ``root/<class>/{train,test}/``
 too). ``eval`` scores a model on the test split of the same data (same ``--shapes``,
@@ -23,7 +28,9 @@ Without ``--model`` the shipped PointNet (trained on the procedural shapes) is u
 segmenter. They are rebuilt from a checkout by ``python -m benchmarks.cloud_figures
 --only pointnet dgcnn pointnet-parts --seeds 0 --save src/robopercept/data``.
 
-The work is done by :mod:`robopercept.nn.cloud.run`, :mod:`robopercept.nn.cloud.data` and
+The work is done by :mod:`robopercept.nn.cloud.run` (:func:`~robopercept.nn.cloud.run.train_run`,
+:func:`~robopercept.nn.cloud.run.evaluate_run`,
+:func:`~robopercept.nn.cloud.run.classify_cloud_file`), the pictures by
 :mod:`robopercept.viz.cloud_dl`; this module parses and prints. Exit 2 for bad
 arguments (the message names the flag), 1 when the work fails.
 """
@@ -32,11 +39,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
-from typing import Any
 
-from robopercept.cli._args import UsageError, positive_int, register_forms, run_or_model_path
+from robopercept.cli._args import UsageError, positive_int
+from robopercept.cli.nn._forms import (
+    check_run_folder_args,
+    register_forms,
+    run_folder_args,
+    run_or_model_path,
+)
 
 __all__ = ["CLOUD_CLI_MODELS", "register"]
 
@@ -68,7 +79,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     t = cls(
         prog="robopercept nn cloud train",
         description="Train a point-cloud network; writes OUT/model.pt, history.json, "
-        "metrics.json (test split) and confusion.png.",
+        "metrics.json (test split), confusion.png and the checkpoints.",
     )
     _data_args(t)
     t.add_argument("--model", choices=CLOUD_CLI_MODELS, default="pointnet")
@@ -80,7 +91,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         "--width", type=float, default=0.5, help="pointnet: channel multiplier (default 0.5)"
     )
     t.add_argument("--k", type=positive_int, default=16, help="dgcnn: neighbours (default 16)")
-    t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
+    run_folder_args(t)
     e = cls(
         prog="robopercept nn cloud eval",
         description="Accuracy (or part mIoU) of a trained network (RUN folder or model.pt) "
@@ -126,71 +137,23 @@ def register(ns: argparse._SubParsersAction, parser_class: type[argparse.Argumen
     )
 
 
-def _sets(args: argparse.Namespace) -> Any:
-    from robopercept.errors import InputError
-    from robopercept.nn.cloud.run import cloud_sets
-
+def _check_seed(args: argparse.Namespace) -> None:
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0; got {args.seed}")
-    try:
-        return cloud_sets(
-            args.data,
-            shapes=args.shapes,
-            n_points=args.points,
-            seed=args.seed,
-            progress=not (args.quiet or args.json),
-        )
-    except InputError as exc:
-        raise UsageError(f"--data: {exc}") from None
-
-
-def _write_metrics(out: Path, metrics: dict[str, Any], ev: Any, names: list[str]) -> list[Path]:
-    from robopercept.imaging import write_image
-    from robopercept.viz.learning import confusion_picture
-
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=1))
-    k = len(names)
-    pic = confusion_picture(ev.confusion[:k, :k], names, title=metrics.get("title", ""))
-    return [out / "metrics.json", write_image(out / "confusion.png", pic)]
 
 
 def _train(args: argparse.Namespace) -> int:
-    from robopercept.nn.cloud.run import (
-        build_cloud_model,
-        evaluate_cloud_model,
-        save_cloud_model,
-        train_cloud_model,
-    )
-    from robopercept.nn.train.config import TrainConfig
+    from robopercept.nn.cloud.run import TrainConfig, train_run
 
+    check_run_folder_args(args)
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
     if not 0 < args.width <= 8:
         raise UsageError(f"--width: a channel multiplier in (0, 8]; got {args.width}")
     if args.model == "dgcnn" and args.k > args.points:
         raise UsageError(f"--k: at most --points ({args.points}); got {args.k}")
-    sets = _sets(args)
-    train, val, test = sets.train, sets.val, sets.test
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    _check_seed(args)
     quiet = args.quiet or args.json
-    segment = args.task == "segment"
-    if not quiet:
-        print(
-            f"nn cloud train: {args.model} ({args.task}) on {args.data}: {len(train)} training, "
-            f"{len(val)} validation, {len(test)} test clouds of {args.points} points",
-            file=sys.stderr,
-        )
-    settings: dict[str, Any] = {"task": args.task}
-    if args.model == "pointnet":
-        settings["width"] = args.width
-    else:
-        settings["k"] = args.k
-    if segment:
-        settings["num_categories"] = train.num_classes
-    outputs = train.num_parts if segment else train.num_classes
-    model = build_cloud_model(args.model, outputs, seed=args.seed, **settings)
     cfg = TrainConfig(
         epochs=args.epochs,
         batch_size=args.batch_size,
@@ -198,80 +161,54 @@ def _train(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device,
     )
-    hist = train_cloud_model(model, train, cfg, val=val, progress=not quiet)
-    save_cloud_model(
-        out / "model.pt",
-        model,
-        list(train.class_names),
-        part_names=list(train.part_names) if segment else (),
-        part_classes=train.part_classes if segment else None,
-        n_points=args.points,
-        data=args.data,
+    res = train_run(
+        args.data,
+        args.out,
+        model=args.model,
+        task=args.task,
+        config=cfg,
         shapes=args.shapes,
-        seed=args.seed,
+        n_points=args.points,
+        width=args.width,
+        k=args.k,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        progress=not quiet,
     )
-    (out / "history.json").write_text(json.dumps(hist.to_dict(), indent=1))
-    ev = evaluate_cloud_model(model, test)
-    names = list(train.part_names if segment else train.class_names)
-    metrics = {
-        "model": args.model,
-        "task": args.task,
-        "data": args.data,
-        "split": "test",
-        "clouds": len(test),
-        "best_epoch": hist.best_epoch,
-        "metrics": ev.summary(),
-        "title": f"{args.model} on {args.data}: test",
-    }
-    written = [out / "model.pt", out / "history.json", *_write_metrics(out, metrics, ev, names)]
-    files = {p.name: str(p) for p in written}
     if args.json:
-        print(json.dumps({**metrics, "files": files}))
+        print(json.dumps(res.to_dict()))
         return 0
+    ev = res.test
+    segment = args.task == "segment"
     score = f"instance mIoU {ev.instance_miou:.4f}" if segment else f"accuracy {ev.accuracy:.4f}"
-    print(
-        f"nn cloud train: {args.model} on {args.data}, kept epoch {hist.best_epoch}; test {score}"
-    )
-    for name, path in files.items():
+    print(f"nn cloud train: {args.model} on {args.data}, kept epoch {res.best_epoch}; test {score}")
+    for name, path in res.files.items():
         print(f"  {name:<13} {path}")
     return 0
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from robopercept.nn.cloud.run import evaluate_cloud_model, load_cloud_model
+    from robopercept.nn.cloud.run import evaluate_run
 
     path = run_or_model_path(args.model)
     if not path.is_file():
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
-    model, info = load_cloud_model(path)
-    if args.device:
-        from robopercept.nn.train.config import resolve_device
-
-        model.to(resolve_device(args.device))
-    sets = _sets(args)
-    if list(sets.test.class_names) != list(info["class_names"]):
-        raise UsageError(
-            f"--data: its classes {list(sets.test.class_names)} are not the model's "
-            f"{info['class_names']}"
-        )
-    ev = evaluate_cloud_model(model, sets.test)
-    segment = model.task == "segment"
-    names = list(info["part_names"] if segment else info["class_names"])
-    metrics = {
-        "model": str(args.model),
-        "task": model.task,
-        "data": args.data,
-        "split": "test",
-        "clouds": len(sets.test),
-        "metrics": ev.summary(),
-        "title": f"{Path(args.model).name} on {args.data}: test",
-    }
-    if args.out:
-        _write_metrics(Path(args.out), metrics, ev, names)
+    _check_seed(args)
+    res = evaluate_run(
+        args.model,
+        args.data,
+        shapes=args.shapes,
+        n_points=args.points,
+        seed=args.seed,
+        device=args.device,
+        out_dir=args.out,
+        progress=not (args.quiet or args.json),
+    )
+    metrics = res.metrics
     if args.json:
-        print(json.dumps(metrics))
+        print(json.dumps(res.to_dict()))
         return 0
-    print(f"nn cloud eval: {args.model} on {args.data} ({len(sets.test)} clouds)")
+    print(f"nn cloud eval: {args.model} on {args.data} ({metrics['clouds']} clouds)")
     for name, v in metrics["metrics"].items():
         print(f"  {name:<22} {v:7.4f}")
     return 0
@@ -290,8 +227,7 @@ def _model(name: str | None, default: str) -> Path:
 
 def _clouds(args: argparse.Namespace) -> int:
     from robopercept.imaging import write_image
-    from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model
-    from robopercept.nn.train.config import resolve_device
+    from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model, resolve_device
     from robopercept.pointcloud import PointCloud, write_point_cloud
     from robopercept.viz.cloud_dl import cloud_picture
     from robopercept.viz.colormap import label_colors

@@ -1,4 +1,4 @@
-"""``robopercept nn train|eval|predict|summary``: convolutional networks (extra ``deep``).
+"""``robopercept nn train|eval|predict|summary``: convolutional classifiers (extra ``deep``).
 
 The work is done by :mod:`robopercept.nn.classification.run` (training, evaluation,
 prediction and the layer table); this module parses and prints. torch is imported only
@@ -14,6 +14,7 @@ import json
 from typing import Any
 
 from robopercept.cli._args import UsageError, image_output, numbers, positive_float, positive_int
+from robopercept.cli.nn._forms import check_run_folder_args, run_folder_args
 from robopercept.errors import InputError
 
 __all__ = ["MODEL_NAMES", "register"]
@@ -41,18 +42,9 @@ _chw = numbers((positive_int,) * 3, "C,H,W, three positive integers, e.g. 1,8,8"
 _chw.__doc__ = "``C,H,W`` -> three integers >= 1 (argparse type)."
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``nn`` and its subcommands ``train``, ``eval``, ``predict`` and ``summary`` to
-    the subcommand parsers ``sub``."""
-    p = sub.add_parser(
-        "nn",
-        help="convolutional networks: train, evaluate, predict, summarize (needs torch)",
-        description="Small VGG, Inception and ResNet classifiers in PyTorch (extra deep: "
-        "pip install 'robopercept[deep]').",
-    )
-    ns = p.add_subparsers(dest="nn_command", metavar="TASK", parser_class=type(p))
-    ns.required = True
-
+def register(ns: argparse._SubParsersAction) -> None:
+    """Add the classifier commands ``train``, ``eval``, ``predict`` and ``summary`` to the
+    ``nn`` task parsers ``ns``."""
     t = ns.add_parser(
         "train",
         help="train a classifier and write a run folder",
@@ -92,9 +84,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="processes (DistributedDataParallel; --batch-size is the global batch, "
         "a multiple of N; default 1)",
     )
-    t.add_argument("--resume", action="store_true", help="continue the run in --out")
-    t.add_argument("--overwrite", action="store_true", help="replace a run already in --out")
-    t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
+    run_folder_args(t)
     t.add_argument("--json", action="store_true", help="print metrics.json")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=run_train)
@@ -137,13 +127,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--json", action="store_true", help="print the table as JSON")
     s.set_defaults(func=run_summary)
 
-    from robopercept.cli import detect, nn_cloud, pose, segment
-
-    detect.register(ns, type(p))
-    segment.register(ns, type(p))
-    pose.register(ns, type(p))
-    nn_cloud.register(ns, type(p))
-
 
 def _split(text: str) -> tuple[float, float, float]:
     """``0.7,0.15,0.15`` -> three positive shares summing to 1 (argparse type)."""
@@ -163,8 +146,7 @@ def run_train(args: argparse.Namespace) -> int:
     _need_torch()
     from robopercept.nn.classification.run import TrainConfig, torchrun_env, train_ddp, train_run
 
-    if args.resume and args.overwrite:
-        raise UsageError("--resume and --overwrite exclude each other")
+    check_run_folder_args(args)
     if args.batch_size % args.nproc:
         raise UsageError(
             f"--batch-size {args.batch_size} (the global batch) must be a multiple of "

@@ -3,16 +3,21 @@
 Three forms, chosen by the first word after ``pose``::
 
     robopercept nn pose train --model deeppose|heatmap|hrnet --data figures -o run/
+                              [--resume | --overwrite]
     robopercept nn pose eval RUN_OR_MODEL --data figures [-o DIR]
     robopercept nn pose IMAGE... [--model PATH|hrnet|deeppose] -o out/ [--json]
                                  [--lift3d] [--heatmaps]
 
 ``train`` keeps the weights of the epoch with the best validation PCK@0.1 and writes
 ``run/model.pt``, ``history.json``, ``metrics.json`` (PCK and COCO keypoint AP on the
-validation split) and ``samples.png`` (predicted skeletons). ``--model deeppose`` also
-trains ``--stages`` cascade stages on the first stage's estimates. ``eval`` scores a
-model on the validation split of the same data (same ``--images``, ``--size`` and
-``--seed``). ``IMAGE...`` treats each image as one person (top-down): it is letterboxed
+validation split) and ``samples.png`` (predicted skeletons), beside ``checkpoint.pt``
+(the last complete epoch, written after every epoch) and ``checkpoint.best.pt``.
+``--model deeppose`` also trains ``--stages`` cascade stages on the first stage's
+estimates. A folder that already holds a run is refused (exit 2) unless ``--resume``
+continues it (to the weights of an uninterrupted run) or ``--overwrite`` replaces it;
+Ctrl-C keeps the last complete epoch (exit 130). ``eval`` scores a model on the
+validation split of the same data (same ``--images``, ``--size`` and ``--seed``).
+``IMAGE...`` treats each image as one person (top-down): it is letterboxed
 into the network's input, and ``out/NAME.png`` shows the skeleton with per-joint
 confidence; ``--heatmaps`` adds ``out/NAME_heatmaps.png``; ``--lift3d`` lifts the 2-D
 pose to 3-D by matching against a library of projected 3-D poses (the course's
@@ -25,29 +30,27 @@ shipped DeepPose with its cascade stage. Both were trained on the procedural fig
 and are rebuilt, from a checkout, by ``python -m benchmarks.pose_figures --only hrnet
 deeppose --seeds 0 --save src/robopercept/data``.
 
-The work is done by :mod:`robopercept.nn.pose.networks`, :mod:`robopercept.nn.pose.train`,
-:mod:`robopercept.nn.pose.evaluate`, :mod:`robopercept.nn.pose.data`,
-:mod:`robopercept.nn.pose.library` and :mod:`robopercept.viz.pose`; this module parses and
-prints. Exit 2 for bad arguments (the message names the flag), 1 when the work fails.
+The work is done by :mod:`robopercept.nn.pose.run` (``train`` and ``eval``:
+:func:`~robopercept.nn.pose.run.train_run`, :func:`~robopercept.nn.pose.run.evaluate_run`)
+and :mod:`robopercept.nn.predict` (the image form); this module parses and prints.
+Exit 2 for bad arguments (the message names the flag), 1 when the work fails.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
-from typing import Any
 
-from robopercept.cli._args import (
-    UsageError,
+from robopercept.cli._args import UsageError, positive_int
+from robopercept.cli.nn._forms import (
     built_in_data_args,
+    check_run_folder_args,
     images_form_inputs,
-    positive_int,
     register_forms,
-    run_or_model_path,
+    run_folder_args,
 )
-from robopercept.fileio import strict_json
+from robopercept.errors import InputError
 
 __all__ = ["POSE_CLI_MODELS", "register"]
 
@@ -84,7 +87,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         default=1,
         help="deeppose: cascade refinement stages after the first (default 1; 0 for none)",
     )
-    t.add_argument("-o", "--out", default="run", help="run folder (default run/)")
+    run_folder_args(t)
     e = cls(
         prog="robopercept nn pose eval",
         description="PCK and COCO keypoint AP of a trained pose network (RUN folder or "
@@ -125,33 +128,23 @@ def register(ns: argparse._SubParsersAction, parser_class: type[argparse.Argumen
     )
 
 
-def _sets(args: argparse.Namespace) -> Any:
-    from robopercept.nn.pose.data import pose_sets
-
+def _check_data(args: argparse.Namespace) -> None:
+    """The data flags a usage error refuses (exit 2) before any work."""
     if args.images < 2:
         raise UsageError("--images: give at least 2")
-    return pose_sets(args.data, args.images, args.size, args.seed, test_images=1)
 
 
 def _train(args: argparse.Namespace) -> int:
-    from robopercept.imaging import write_image
-    from robopercept.nn.pose.evaluate import evaluate_pose
-    from robopercept.nn.pose.inference import samples_picture
-    from robopercept.nn.pose.networks import build_pose_model, save_pose_model
-    from robopercept.nn.pose.train import train_cascade, train_pose
-    from robopercept.nn.train.config import TrainConfig
+    from robopercept.nn.pose.run import TrainConfig, train_run
 
+    check_run_folder_args(args)
     if not args.lr > 0:
         raise UsageError(f"--lr: must be > 0; got {args.lr}")
     if args.stages < 0 or args.stages > 8:
         raise UsageError(f"--stages: 0 to 8 cascade stages; got {args.stages}")
     if args.size[0] % 16 or args.size[1] % 16:
         raise UsageError(f"--size: width and height must be multiples of 16; got {args.size}")
-    sets = _sets(args)
-    train, val = sets.train, sets.val
-    sk = train.skeleton
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    _check_data(args)
     cfg = TrainConfig(
         epochs=args.epochs,
         batch_size=args.batch_size,
@@ -159,83 +152,55 @@ def _train(args: argparse.Namespace) -> int:
         seed=args.seed,
         device=args.device,
     )
-    quiet = args.quiet or args.json
-    if not quiet:
-        print(
-            f"nn pose train: {args.model} on {args.data} ({len(train)} training, "
-            f"{len(val)} validation images)",
-            file=sys.stderr,
-        )
-    settings: dict[str, Any] = {"width": args.width}
-    if args.model == "deeppose":
-        settings["image_size"] = list(args.size)
-    model = build_pose_model(args.model, sk.num_joints, seed=args.seed, **settings)
-    hist = train_pose(model, train, cfg, val=val, skeleton=sk, progress=not quiet)
-    history: dict[str, Any] = {"network": hist.to_dict(), "stages": []}
-    refiners: list[Any] = []
-    if args.model == "deeppose" and args.stages:
-        refiners, stage_hist = train_cascade(
-            model, train, args.stages, cfg, val=val, width=args.width, progress=not quiet
-        )
-        history["stages"] = [h.to_dict() for h in stage_hist]
-    extra = {"data": args.data, "images": args.images, "size": list(args.size), "seed": args.seed}
-    save_pose_model(out / "model.pt", model, args.model, settings, sk, refiners=refiners, **extra)
-    (out / "history.json").write_text(json.dumps(history, indent=1))
-    ev = evaluate_pose(model, val, refiners=refiners)
-    metrics = {
-        "model": args.model,
-        "data": args.data,
-        "split": "validation",
-        "best_epoch": hist.best_epoch,
-        "metrics": ev.summary(),
-    }
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=1))
-    write_image(out / "samples.png", samples_picture(model, val, refiners=refiners))
-    files = {n: str(out / n) for n in ("model.pt", "history.json", "metrics.json", "samples.png")}
+    res = train_run(
+        args.data,
+        args.out,
+        model=args.model,
+        images=args.images,
+        size=args.size,
+        config=cfg,
+        width=args.width,
+        stages=args.stages,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        progress=not (args.quiet or args.json),
+    )
     if args.json:
-        print(json.dumps({**metrics, "files": files}))
+        print(json.dumps(res.to_dict()))
         return 0
+    ev = res.evaluation
     print(
-        f"nn pose train: {args.model} on {args.data}, kept epoch {hist.best_epoch}; "
+        f"nn pose train: {args.model} on {args.data}, kept epoch {res.best_epoch}; "
         f"validation PCK@0.1 {ev.pck[0.1]:.4f}, OKS AP {ev.oks.stats[0]:.4f}"
     )
-    for name, path in files.items():
+    for name, path in res.files.items():
         print(f"  {name:<13} {path}")
     return 0
 
 
 def _eval(args: argparse.Namespace) -> int:
-    from robopercept.nn.pose.evaluate import evaluate_pose
-    from robopercept.nn.pose.networks import load_pose_model
+    from robopercept.nn.pose.run import evaluate_run, model_path
 
-    path = run_or_model_path(args.model)
-    if not path.is_file():
-        raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
-    model, info = load_pose_model(path)
-    if args.device:
-        from robopercept.nn.train.config import resolve_device
-
-        model.to(resolve_device(args.device))
-    sets = _sets(args)
-    ev = evaluate_pose(model, sets.val, refiners=info["refiners"], flip=not args.no_flip)
-    metrics = {
-        "model": str(args.model),
-        "data": args.data,
-        "images": len(sets.val),
-        "flip_test": not args.no_flip,
-        "metrics": ev.summary(),
-        "pck_per_joint": dict(
-            zip(sets.val.skeleton.joints, [float(v) for v in ev.per_joint], strict=True)
-        ),
-    }
-    if args.out:
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / "metrics.json").write_text(json.dumps(strict_json(metrics), indent=1))
+    try:
+        model_path(args.model)
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+    _check_data(args)
+    res = evaluate_run(
+        args.model,
+        args.data,
+        images=args.images,
+        size=args.size,
+        seed=args.seed,
+        flip=not args.no_flip,
+        device=args.device,
+        out_dir=args.out,
+    )
     if args.json:  # a joint no validation sample counts has PCK NaN: null
-        print(json.dumps(strict_json(metrics)))
+        print(json.dumps(res.to_dict()))
         return 0
-    print(f"nn pose eval: {args.model} on {args.data} ({len(sets.val)} images)")
-    for name, v in metrics["metrics"].items():
+    print(f"nn pose eval: {args.model} on {args.data} ({res.n} images)")
+    for name, v in res.metrics["metrics"].items():
         print(f"  {name:<40} {v:7.4f}")
     return 0
 

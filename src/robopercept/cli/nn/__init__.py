@@ -1,0 +1,34 @@
+"""``robopercept nn``: the deep-learning commands (extra ``deep``), one module per task,
+as the command line reads: ``nn train|eval|predict|summary`` (:mod:`.classify`),
+``nn detect`` (:mod:`.detect`), ``nn segment`` (:mod:`.segment`), ``nn pose``
+(:mod:`.pose`) and ``nn cloud`` (:mod:`.cloud`); :mod:`._forms` holds what the task
+commands share (their three forms ``train``, ``eval`` and ``IMAGE...``, the data flags).
+
+These modules parse and print. From :mod:`robopercept.nn` they import only the task
+wings' ``run`` modules, the predictor (:mod:`robopercept.nn.predict`) and the
+shipped-model table (:mod:`robopercept.nn.shipped`), and only when a command runs, so
+the parser stays torch-free (``tests/test_architecture.py`` checks both).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from robopercept.cli.nn import classify, cloud, detect, pose, segment
+
+__all__ = ["register"]
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``nn`` and its tasks to the subcommand parsers ``sub``."""
+    p = sub.add_parser(
+        "nn",
+        help="convolutional networks: train, evaluate, predict, summarize (needs torch)",
+        description="Small VGG, Inception and ResNet classifiers in PyTorch (extra deep: "
+        "pip install 'robopercept[deep]').",
+    )
+    ns = p.add_subparsers(dest="nn_command", metavar="TASK", parser_class=type(p))
+    ns.required = True
+    classify.register(ns)
+    for task in (detect, segment, pose, cloud):
+        task.register(ns, type(p))

@@ -1,0 +1,249 @@
+"""``robopercept nn detect``: train, evaluate and run object detectors (extra ``deep``).
+
+Three forms, chosen by the first word after ``detect``::
+
+    robopercept nn detect train --data shapes|digits|trees|COCO_JSON --model fcos -o run/ \
+        [--resume | --overwrite]
+    robopercept nn detect eval RUN_OR_MODEL --data ... [-o DIR]
+    robopercept nn detect IMAGE... [--model PATH] -o out/
+
+``train`` keeps the weights of the epoch with the best validation mAP@[.5:.95]
+(evaluated every ``--val-every`` epochs) and writes ``run/model.pt`` (weights with the
+constructor settings and class names, :func:`~robopercept.nn.detection.zoo.save_detector`),
+``history.json``, ``metrics.json`` (the 12 COCO numbers of
+:func:`~robopercept.nn.detection.train.evaluate_detector` on the validation split),
+``pr_curves.png`` and ``samples.png``, beside ``checkpoint.pt`` (the last complete
+epoch, written after every epoch) and ``checkpoint.best.pt``. A folder that holds a run
+is refused (exit 2) unless ``--resume`` continues it (to the weights of an uninterrupted
+run) or ``--overwrite`` replaces it; Ctrl-C (exit 130) and SIGTERM (exit 143) keep the
+last complete epoch.
+``eval`` evaluates a run (or its ``model.pt``) on the validation split of the same
+built-in set (same ``--images``, ``--size`` and ``--seed``) or on a whole COCO file.
+``IMAGE...`` draws the boxes, labels and scores to ``out/NAME.png`` (``--json``: COCO
+results, ``image_id`` the 1-based position of the image on the command line).
+
+Without ``--model`` the ``IMAGE`` form uses the shipped FCOS model
+``robopercept/data/detector_fcos_shapes.pt``; ``--model faster`` the shipped Faster
+R-CNN (``detector_faster_shapes.pt``). Both were trained on the procedural shapes set
+(``circle``, ``square``, ``triangle``, ``cross``) and are rebuilt, from a checkout, by::
+
+    python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster --seeds 0 \\
+        --save src/robopercept/data
+
+The work is done by :mod:`robopercept.nn.detection.run` (``train`` and ``eval``:
+:func:`~robopercept.nn.detection.run.train_run`,
+:func:`~robopercept.nn.detection.run.evaluate_run`) and :mod:`robopercept.nn.predict`
+(``IMAGE...``); this module parses and prints. torch is imported only when a command
+runs. Progress goes to stderr; exit 2 for bad arguments (the
+message names the flag), 1 when the work fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from robopercept.cli._args import UsageError, positive_int, unit_interval
+from robopercept.cli.nn._forms import (
+    built_in_data_args,
+    check_run_folder_args,
+    images_form_inputs,
+    register_forms,
+    run_folder_args,
+)
+
+__all__ = ["BUILTIN_DATA", "DETECTOR_NAMES", "register"]
+
+#: the names of :data:`robopercept.nn.detection.zoo.DETECTORS` (the parser needs no torch)
+DETECTOR_NAMES = ("fcos", "faster", "fast", "rcnn", "localizer")
+#: the built-in data sets of ``--data`` (anything else must be a COCO JSON file)
+BUILTIN_DATA = ("shapes", "digits", "trees")
+
+
+def _decay(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not 0 < v < 1:
+        raise argparse.ArgumentTypeError(f"expects a decay in (0, 1), e.g. 0.999; got {text!r}")
+    return v
+
+
+def _data_args(p: argparse.ArgumentParser) -> None:
+    built_in_data_args(
+        p,
+        "shapes, digits, trees (with --images-dir: the DeepForest folder) or a COCO JSON",
+        "COCO: folder of the images (default: the JSON's folder)",
+    )
+
+
+def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentParser]:
+    t = cls(
+        prog="robopercept nn detect train",
+        description="Train a detector; writes OUT/model.pt, history.json, metrics.json "
+        "(validation split), pr_curves.png and samples.png.",
+    )
+    _data_args(t)
+    t.add_argument("--model", choices=DETECTOR_NAMES, default="fcos")
+    t.add_argument("--epochs", type=positive_int, default=30, help="default 30")
+    t.add_argument("--batch-size", type=positive_int, default=8, help="default 8")
+    t.add_argument("--lr", type=float, default=1e-3, help="AdamW learning rate (default 1e-3)")
+    t.add_argument("--width", type=positive_int, default=16, help="backbone width (default 16)")
+    t.add_argument(
+        "--val-every",
+        type=positive_int,
+        default=None,
+        help="evaluate the validation split every N epochs and keep the best epoch's "
+        "weights (default: epochs / 10)",
+    )
+    t.add_argument(
+        "--ema",
+        type=_decay,
+        default=None,
+        metavar="DECAY",
+        help="keep an exponential moving average of the weights with this decay, e.g. "
+        "0.999, and validate and save it (default: none)",
+    )
+    run_folder_args(t)
+    e = cls(
+        prog="robopercept nn detect eval",
+        description="COCO metrics of a trained detector (RUN folder or model.pt) on the "
+        "validation split of a built-in set or on a whole COCO file.",
+    )
+    e.add_argument("model", metavar="RUN_OR_MODEL")
+    _data_args(e)
+    e.add_argument("-o", "--out", help="folder for metrics.json and pr_curves.png")
+    r = cls(
+        prog="robopercept nn detect",
+        description="Detect objects in IMAGE... and draw boxes, labels and scores to OUT/NAME.png.",
+    )
+    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument(
+        "--model",
+        help="a model.pt or run folder, or a shipped model: fcos (the default) or faster",
+    )
+    r.add_argument("-o", "--out", help="folder for the pictures")
+    r.add_argument(
+        "--score-thresh", type=unit_interval, default=0.3, help="detections kept (default 0.3)"
+    )
+    r.add_argument("--device", help="cpu, cuda, ...")
+    r.add_argument("--json", action="store_true", help="print COCO results")
+    r.add_argument("--quiet", action="store_true")
+    for p in (e, r):  # the views of nn.detection.tta.TTA_VIEWS (torch is not imported here)
+        p.add_argument(
+            "--tta",
+            choices=("hflip", "flips", "dihedral"),
+            help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
+            "8 views: for top-down images) copies and fuse the boxes (default: none)",
+        )
+    return {"train": t, "eval": e, "images": r}
+
+
+def register(ns: argparse._SubParsersAction, parser_class: type[argparse.ArgumentParser]) -> None:
+    """Add ``detect`` to the ``nn`` task parsers ``ns``; ``parser_class`` parses the
+    three forms (so their errors exit 2 like the others)."""
+    register_forms(
+        ns,
+        "detect",
+        "object detectors: train, eval, or detect in images (needs torch)",
+        lambda: _parsers(parser_class),
+        {"train": _train, "eval": _eval, "images": _images},
+    )
+
+
+def _print_metrics(metrics: dict[str, Any]) -> None:
+    for name, v in metrics["metrics"].items():
+        print(f"  {name:<40} {v:7.4f}")
+
+
+# --------------------------------------------------------------------------- forms
+def _train(args: argparse.Namespace) -> int:
+    from robopercept.nn.detection.run import TrainConfig, train_run
+
+    check_run_folder_args(args)
+    if not args.lr > 0:
+        raise UsageError(f"--lr: must be > 0; got {args.lr}")
+    cfg = TrainConfig(
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        seed=args.seed,
+        device=args.device,
+    )
+    res = train_run(
+        args.data,
+        args.out,
+        model=args.model,
+        config=cfg,
+        width=args.width,
+        images=args.images,
+        size=args.size,
+        images_dir=args.images_dir,
+        val_every=args.val_every,
+        ema=args.ema,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        progress=not (args.quiet or args.json),
+    )
+    if args.json:
+        print(json.dumps(res.to_dict()))
+        return 0
+    ev = res.evaluation
+    print(
+        f"nn detect train: {args.model} on {args.data}, {len(res.history.losses)} epochs in "
+        f"{res.seconds:.1f} s, kept epoch {res.best_epoch} (best validation "
+        f"mAP@[.5:.95]); validation mAP@0.5 {ev.stats[1]:.4f}, mAP@[.5:.95] {ev.stats[0]:.4f}"
+    )
+    for name, path in res.files.items():
+        print(f"  {name:<13} {path}")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from robopercept.nn.detection.run import evaluate_run
+
+    res = evaluate_run(
+        args.model,
+        args.data,
+        images=args.images,
+        size=args.size,
+        seed=args.seed,
+        images_dir=args.images_dir,
+        tta=args.tta,
+        device=args.device,
+        out_dir=args.out or None,
+    )
+    metrics = res.to_dict()
+    if args.json:
+        print(json.dumps(metrics))
+        return 0
+    print(f"nn detect eval: {args.model} on {args.data} ({res.images} images)")
+    _print_metrics(metrics)
+    if args.out:
+        print(f"-> {Path(args.out) / 'metrics.json'}, {Path(args.out) / 'pr_curves.png'}")
+    return 0
+
+
+def _images(args: argparse.Namespace) -> int:
+    from robopercept.nn.predict import load_image_predictor
+
+    model_path = images_form_inputs(args, "detect", lambda stem: [f"{stem}.png"])
+    predictor = load_image_predictor(
+        "detect", model_path, device=args.device, score_thresh=args.score_thresh, tta=args.tta
+    )
+    results: list[dict[str, Any]] = []
+    out = Path(args.out) if args.out else None
+    for k, name in enumerate(args.images, 1):
+        pred = predictor.predict_file(name)
+        results += pred.coco_results(k)
+        if out is not None:
+            (written,) = pred.write(out, Path(name).stem)
+            if not (args.quiet or args.json):
+                print(f"{name}: {len(pred.values['boxes'])} detections -> {written}")
+    if args.json:
+        print(json.dumps(results))
+    return 0

@@ -1,0 +1,232 @@
+"""``robopercept nn segment``: train, evaluate and run segmentation networks (extra
+``deep``).
+
+Three forms, chosen by the first word after ``segment``::
+
+    robopercept nn segment train --task semantic|instance --model unet|fcn8s|...|maskrcnn
+                                 --data shapes|digits|nuclei [--images-dir DIR] -o run/
+                                 [--resume | --overwrite]
+    robopercept nn segment eval RUN_OR_MODEL --data ... [-o DIR]
+    robopercept nn segment IMAGE... [--model PATH|unet|maskrcnn] -o out/ [--json]
+
+``train`` keeps the weights of the epoch with the best validation score (mIoU for the
+semantic networks, mask AP@[.5:.95] for Mask R-CNN) and writes ``run/model.pt``,
+``history.json``, ``metrics.json`` (the validation split) and ``samples.png``
+(prediction beside ground truth), with ``checkpoint.pt`` (the last complete epoch,
+written after every epoch) and ``checkpoint.best.pt``. A folder holding a run is
+refused (exit 2) unless ``--resume`` continues it (after Ctrl-C, exit 130, or SIGTERM,
+exit 143: it ends with the weights of an uninterrupted run) or ``--overwrite`` replaces
+it. ``eval`` scores a run on the validation split of the
+same data (same ``--images``, ``--size`` and ``--seed``): pixel accuracy, mIoU,
+frequency-weighted IoU and per-class IoU, or the 12 COCO ``segm`` numbers.
+``IMAGE...`` writes ``out/NAME.png`` (class overlay with a legend, or instance
+overlay with outlines and scores) and ``out/NAME_labels.png`` (class labels, or
+instance ids, as a VOC-palette PNG); ``--json`` prints COCO results with RLE masks.
+
+Without ``--model`` the ``IMAGE`` form uses the shipped U-Net; ``--model maskrcnn`` the
+shipped Mask R-CNN. Both were trained on the procedural shapes and are rebuilt, from a
+checkout, by ``python -m benchmarks.segmentation_figures --only shapes-unet
+shapes-maskrcnn --seeds 0 --save src/robopercept/data``.
+
+The work is done by :mod:`robopercept.nn.segmentation.run` (``train`` and ``eval``: data,
+training, run folder, scores, pictures) and :mod:`robopercept.nn.predict` (``IMAGE...``);
+this module parses and prints. Exit 2 for bad arguments (the message names the flag), 1
+when the work fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from robopercept.cli._args import UsageError, positive_int, unit_interval
+from robopercept.cli.nn._forms import (
+    built_in_data_args,
+    check_run_folder_args,
+    images_form_inputs,
+    register_forms,
+    run_folder_args,
+    run_or_model_path,
+)
+from robopercept.errors import InputError
+
+__all__ = ["SEGMENT_MODELS", "register"]
+
+#: ``--model`` of ``train``: the semantic networks, then the instance one
+SEGMENT_MODELS = ("unet", "fcn8s", "fcn16s", "fcn32s", "naive", "maskrcnn")
+
+
+def _data_args(p: argparse.ArgumentParser) -> None:
+    built_in_data_args(
+        p,
+        "procedural shapes, real-digit canvases, or the real nuclei (with --images-dir)",
+        "nuclei: the stardist_nuclei folder",
+        ("shapes", "digits", "nuclei"),
+    )
+
+
+def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentParser]:
+    t = cls(
+        prog="robopercept nn segment train",
+        description="Train a segmentation network; writes OUT/model.pt, history.json, "
+        "metrics.json (validation split), samples.png and the checkpoints.",
+    )
+    _data_args(t)
+    t.add_argument("--task", choices=("semantic", "instance"), default="semantic")
+    t.add_argument("--model", choices=SEGMENT_MODELS, default=None, help="default unet / maskrcnn")
+    t.add_argument("--epochs", type=positive_int, default=20, help="default 20")
+    t.add_argument("--batch-size", type=positive_int, default=8, help="default 8")
+    t.add_argument("--lr", type=float, default=2e-3, help="AdamW learning rate (default 2e-3)")
+    t.add_argument("--width", type=positive_int, default=16, help="network width (default 16)")
+    run_folder_args(t)
+    e = cls(
+        prog="robopercept nn segment eval",
+        description="Scores of a trained segmenter (RUN folder or model.pt) on the validation "
+        "split of a built-in set.",
+    )
+    e.add_argument("model", metavar="RUN_OR_MODEL")
+    _data_args(e)
+    e.add_argument("-o", "--out", help="folder for metrics.json")
+    r = cls(
+        prog="robopercept nn segment",
+        description="Segment IMAGE... and write OUT/NAME.png (overlay) and OUT/NAME_labels.png.",
+    )
+    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument(
+        "--model", help="a model.pt or run folder, or a shipped model: unet (default) or maskrcnn"
+    )
+    r.add_argument("-o", "--out", help="folder for the pictures and label PNGs")
+    r.add_argument(
+        "--score-thresh", type=unit_interval, default=0.5, help="instances kept (default 0.5)"
+    )
+    r.add_argument("--device", help="cpu, cuda, ...")
+    r.add_argument("--json", action="store_true", help="print COCO results with RLE masks")
+    r.add_argument("--quiet", action="store_true")
+    return {"train": t, "eval": e, "images": r}
+
+
+def register(ns: argparse._SubParsersAction, parser_class: type[argparse.ArgumentParser]) -> None:
+    """Add ``segment`` to the ``nn`` task parsers ``ns``; ``parser_class`` parses the
+    three forms (so their errors exit 2 like the others)."""
+    register_forms(
+        ns,
+        "segment",
+        "segmentation networks: train, eval, or segment images (needs torch)",
+        lambda: _parsers(parser_class),
+        {"train": _train, "eval": _eval, "images": _images},
+    )
+
+
+# --------------------------------------------------------------------------- forms
+def _sets(args: argparse.Namespace) -> Any:
+    """The data of ``--data`` and its flags; a bad flag is a usage error (exit 2)."""
+    from robopercept.nn.segmentation.run import load_segmentation_data
+
+    try:
+        return load_segmentation_data(
+            args.data,
+            images=args.images,
+            size=args.size,
+            seed=args.seed,
+            images_dir=args.images_dir,
+        )
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _train(args: argparse.Namespace) -> int:
+    from robopercept.nn.segmentation.run import TrainConfig, resolve_segment_model, train_run
+
+    check_run_folder_args(args)
+    try:
+        model_name = resolve_segment_model(args.task, args.model)
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+    if not args.lr > 0:
+        raise UsageError(f"--lr: must be > 0; got {args.lr}")
+    sets = _sets(args)
+    cfg = TrainConfig(
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        seed=args.seed,
+        device=args.device,
+    )
+    quiet = args.quiet or args.json
+    if not quiet:
+        print(
+            f"nn segment train: {model_name} ({args.task}) on {args.data} ({len(sets.train)} "
+            f"training, {len(sets.val)} validation images)",
+            file=sys.stderr,
+        )
+    res = train_run(
+        sets,
+        args.out,
+        task=args.task,
+        model=model_name,
+        config=cfg,
+        width=args.width,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        progress=not quiet,
+    )
+    if args.json:
+        print(json.dumps(res.to_dict()))
+        return 0
+    instance = res.task == "instance"
+    key = "AP" if instance else "mIoU"
+    figure = res.metrics["metrics"][next(k for k in res.metrics["metrics"] if k.startswith(key))]
+    print(
+        f"nn segment train: {model_name} on {args.data}, kept epoch {res.best_epoch}; "
+        f"validation {'mask AP@[.5:.95]' if instance else 'mIoU'} {figure:.4f}"
+    )
+    for name, path in res.files.items():
+        print(f"  {name:<13} {path}")
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    path = run_or_model_path(args.model)
+    if not path.is_file():
+        raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
+    from robopercept.nn.segmentation.run import evaluate_run
+
+    ev = evaluate_run(args.model, _sets(args), device=args.device, out_dir=args.out)
+    metrics = ev.to_dict()
+    if args.json:
+        print(json.dumps(metrics))
+        return 0
+    print(f"nn segment eval: {args.model} on {args.data} ({ev.images} images)")
+    for name, v in metrics["metrics"].items():
+        print(f"  {name:<40} {v:7.4f}")
+    return 0
+
+
+def _images(args: argparse.Namespace) -> int:
+    from robopercept.nn.predict import load_image_predictor
+
+    model_path = images_form_inputs(
+        args, "segment", lambda stem: [f"{stem}.png", f"{stem}_labels.png"]
+    )
+    predictor = load_image_predictor(
+        "segment", model_path, device=args.device, score_thresh=args.score_thresh
+    )
+    instance = predictor.instance
+    out = Path(args.out) if args.out else None
+    results: list[dict[str, Any]] = []
+    for k, name in enumerate(args.images, 1):
+        pred = predictor.predict_file(name)
+        results += pred.coco_results(k)
+        if out is not None:
+            pic, lab = pred.write(out, Path(name).stem)
+            if not (args.quiet or args.json):
+                v = pred.values
+                n = len(v["masks"]) if instance else len({int(x) for x in v["labels"].flat})
+                what = "instances" if instance else "labels"
+                print(f"{name}: {n} {what} -> {pic}, {lab}")
+    if args.json:
+        print(json.dumps(results))
+    return 0
