@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import torch
@@ -46,7 +46,7 @@ from robopercept.nn.data.datasets import to_unit_float
 from robopercept.nn.segmentation.metrics import segmentation_confusion, segmentation_scores
 from robopercept.nn.train.checkpoint import load_built_model, save_built_model
 from robopercept.nn.train.config import TrainConfig, resolve_device
-from robopercept.nn.train.loop import LoopResult, step_optimizer, train_loop
+from robopercept.nn.train.loop import EpochHistory, LoopResult, step_optimizer, train_loop
 
 __all__ = [
     "FCN",
@@ -515,14 +515,9 @@ def load_segmenter(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, A
 
 # ----------------------------------------------------------------------------- training
 @dataclass
-class SegmentationHistory:
+class SegmentationHistory(EpochHistory):
     """What :func:`train_segmenter` did: the mean training loss per epoch, the
-    validation mIoU by epoch, the epoch kept and the seconds per epoch."""
-
-    losses: list[float] = field(default_factory=list)
-    val: dict[int, float] = field(default_factory=dict)
-    best_epoch: int = 0
-    seconds: list[float] = field(default_factory=list)
+    validation mIoU by epoch (``val``), the epoch kept and the seconds per epoch."""
 
 
 def _images_tensor(images: Any, what: str) -> torch.Tensor:
@@ -741,13 +736,6 @@ def train_segmenter(
             post["val mIoU"] = f"{hist.val[epoch + 1]:.3f}"
         return post
 
-    def restore(state: dict[str, Any]) -> None:
-        saved = state["history"]
-        hist.losses[:] = list(saved["losses"])
-        hist.seconds[:] = list(saved["seconds"])
-        hist.val.update({int(e): float(v) for e, v in saved["val"].items()})
-        hist.best_epoch = int(saved["best_epoch"])
-
     train_loop(
         model,
         opt,
@@ -765,16 +753,11 @@ def train_segmenter(
         checkpoint=checkpoint,
         checkpoint_extra=lambda epoch: {
             "architecture": type(model).__name__,
-            "history": {
-                "losses": hist.losses,
-                "seconds": hist.seconds,
-                "val": {str(e): v for e, v in hist.val.items()},
-                "best_epoch": hist.best_epoch,
-            },
+            "history": hist.to_dict(),
         },
         best_extra={"architecture": type(model).__name__},
         resume=resume,
-        restore=restore,
+        restore=lambda state: hist.load_dict(state["history"]),
         desc="training segmenter",
         progress=progress,
     )

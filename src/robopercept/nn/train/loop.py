@@ -530,6 +530,14 @@ class EpochHistory:
             "best_epoch": self.best_epoch,
         }
 
+    def load_dict(self, saved: Mapping[str, Any]) -> None:
+        """Take back what :meth:`to_dict` gave (a resumed run's history)."""
+        self.losses[:] = list(saved["losses"])
+        self.seconds[:] = list(saved["seconds"])
+        self.val.clear()
+        self.val.update({int(k): float(v) for k, v in saved[self.val_name].items()})
+        self.best_epoch = int(saved["best_epoch"])
+
 
 def epoch_loop(
     model: nn.Module,
@@ -644,14 +652,6 @@ def epoch_loop(
             post[hist.val_name] = f"{hist.val[epoch + 1]:.3f}"
         return post
 
-    def restore(state: dict[str, Any]) -> None:
-        saved = state["history"]
-        hist.losses[:] = list(saved["losses"])
-        hist.seconds[:] = list(saved["seconds"])
-        hist.val.clear()
-        hist.val.update({int(k): float(v) for k, v in saved[hist.val_name].items()})
-        hist.best_epoch = int(saved["best_epoch"])
-
     train_loop(
         model,
         opt,
@@ -670,7 +670,7 @@ def epoch_loop(
         checkpoint_extra=lambda e: {"history": hist.to_dict(), **dict(checkpoint_extra or {})},
         best_extra=checkpoint_extra,
         resume=resume,
-        restore=restore,
+        restore=lambda state: hist.load_dict(state["history"]),
         desc=desc,
         progress=progress,
     )
