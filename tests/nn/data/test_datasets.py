@@ -212,6 +212,25 @@ class TestStratifiedSplit:
         other = stratified_split(labels, (0.7, 0.15, 0.15), rng=1)
         assert not np.array_equal(parts[0], other[0])
 
+    @pytest.mark.parametrize("seed", range(20))
+    def test_small_sets_leave_no_part_empty(self, seed):
+        # issue 46: a folder of a few meshes per class gave an empty validation or test
+        # split (rounding put every item of every class in training)
+        rng = np.random.default_rng(seed)
+        n = int(rng.integers(3, 12))
+        labels = rng.integers(0, int(rng.integers(1, 4)), n)
+        parts = stratified_split(labels, (0.8, 0.1, 0.1), rng=seed)
+        assert all(len(p) >= 1 for p in parts)
+        assert np.array_equal(np.sort(np.concatenate(parts)), np.arange(n))
+
+    def test_one_item_per_class_by_hand(self):
+        # two classes of one item each, 90/10: class-wise rounding gives both to
+        # training; validation takes the last of them
+        train, val = stratified_split([0, 1], (0.9, 0.1), rng=0)
+        assert (len(train), len(val)) == (1, 1)
+        with pytest.raises(InputError, match="give at least 3, one per part"):
+            stratified_split([0, 1], (0.8, 0.1, 0.1))
+
     def test_hand_case(self):
         train, test = stratified_split([0, 0, 0, 0, 1, 1, 1, 1], (0.5, 0.5), rng=0)
         assert sorted(np.asarray([0, 0, 0, 0, 1, 1, 1, 1])[train]) == [0, 0, 1, 1]

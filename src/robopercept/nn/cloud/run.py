@@ -126,11 +126,18 @@ def cloud_sets(
     seed), ``"shapes-partial"`` or ``"shapes-noisy"`` (the harder variants), or a folder
     ``root/<class>/*.off|*.ply|*.pcd`` (80/10/10 stratified split, seeded) or in
     ModelNet's layout ``root/<class>/{train,test}/*.off`` (its test split kept; a tenth
-    of its training split held out for validation).
+    of its training split held out for validation). No split is left empty
+    (:func:`~robopercept.nn.data.datasets.stratified_split`).
 
     Returns
     -------
     CloudSets
+
+    Raises
+    ------
+    InputError
+        Not a data name or folder; a folder too small to split (fewer than 4 clouds, or
+        than 3 in the ModelNet layout's train folders: the message gives the count).
     """
     shapes = check_count(shapes, "shapes", 1, 1_000_000)
     n_points = check_count(n_points, "n_points", 1, 1 << 20)
@@ -153,11 +160,23 @@ def cloud_sets(
     if has_split:
         full = read_cloud_folder(root, n_points, split="train", rng=seed, progress=progress)
         test = read_cloud_folder(root, n_points, split="test", rng=seed, progress=progress)
+        _check_enough(full, 3, f"{data}: its train folders")
         train, val = full.split((0.9, 0.1), rng=seed)
         return CloudSets(train, val, test, str(root))
     full = read_cloud_folder(root, n_points, rng=seed, progress=progress)
+    _check_enough(full, 4, f"{data} and its class folders")
     train, val, test = full.split((0.8, 0.1, 0.1), rng=seed)
     return CloudSets(train, val, test, str(root))
+
+
+def _check_enough(data: Any, least: int, where: str) -> None:
+    """Refuse a folder too small to split: every split needs one cloud and training
+    two (batch norm learns from two clouds or more)."""
+    if len(data) < least:
+        raise InputError(
+            f"{where} hold {len(data)} clouds; training needs at least {least} (two to "
+            f"train on, as batch norm needs, and one for each held-out split): add clouds"
+        )
 
 
 # ----------------------------------------------------------------------------- runs

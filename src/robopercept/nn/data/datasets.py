@@ -638,7 +638,9 @@ def stratified_split(
     remainders ``f_j n_k - floor(f_j n_k)`` (Hamilton's method), so the parts are
     disjoint, cover every index, and each holds ``f_j n_k`` members of class ``k``
     rounded to a neighbouring integer. Same idea as scikit-learn's
-    ``train_test_split(..., stratify=labels)`` for any number of parts.
+    ``train_test_split(..., stratify=labels)`` for any number of parts. A part that
+    rounding leaves empty (a small set: a few items per class) takes the last item of
+    the largest part, so every part holds at least one item.
 
     Parameters
     ----------
@@ -651,13 +653,20 @@ def stratified_split(
     Returns
     -------
     tuple of (N_j,) int64 ndarray
-        Sorted indices of each part, in the order of ``fractions``.
+        Sorted indices of each part, in the order of ``fractions``; none empty.
+
+    Raises
+    ------
+    InputError
+        Fewer items than parts (the message names the smallest count), bad fractions.
 
     Examples
     --------
     >>> train, test = stratified_split([0, 0, 0, 0, 1, 1, 1, 1], (0.5, 0.5), rng=0)
     >>> len(train), len(test)
     (4, 4)
+    >>> [len(p) for p in stratified_split([0, 1], (0.9, 0.1))]  # one item per class
+    [1, 1]
     """
     y = check_ndim(labels, "labels", (0, 1, 2, 3))
     if y.ndim != 1 or y.size == 0:
@@ -687,7 +696,17 @@ def stratified_split(
         bounds = np.r_[0, np.cumsum(counts)]
         for j in range(f.size):
             parts[j].append(members[bounds[j] : bounds[j + 1]])
-    return tuple(np.sort(np.concatenate(p)).astype(np.int64) for p in parts)
+    out = [np.concatenate(p).astype(np.int64) for p in parts]
+    if y.size < f.size:
+        raise InputError(
+            f"{y.size} items cannot fill {f.size} parts (e.g. training, validation and "
+            f"test): give at least {f.size}, one per part"
+        )
+    for j in range(f.size):  # a small set: no part is left empty
+        if not out[j].size:
+            big = int(np.argmax([p.size for p in out]))
+            out[j], out[big] = out[big][-1:], out[big][:-1]
+    return tuple(np.sort(p) for p in out)
 
 
 def normalization_stats(data: ArrayDataset | npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
