@@ -59,7 +59,7 @@ from robopercept.nn.detection.synthetic import (
 )
 from robopercept.nn.detection.train import evaluate_detector, train_detector
 from robopercept.nn.detection.tta import TestTimeAugmentation
-from robopercept.nn.detection.zoo import build_detector, save_detector
+from robopercept.nn.detection.zoo import build_detector, calibrate_detector, save_detector
 from robopercept.nn.train.config import TrainConfig
 
 NAME = "detection_figures"
@@ -395,6 +395,9 @@ def run_one(
             spec["kind"],
             {**spec["settings"], "nms_thresh": model.nms_thresh},
             train.classes,
+            calibration=calibrate_detector(model, val).to_dict(),
+            # the procedural canvases: a much larger input is outside the domain
+            **({"canvas": [128, 128]} if part.startswith("shapes") else {}),
             data=part,
             seed=seed,
             built_by=f"python -m benchmarks.detection_figures --only {part} --seeds {seed} "

@@ -39,7 +39,7 @@ import torch
 
 from benchmarks._harness import figures_main, seeds_table, timing_row
 from robopercept.nn.pose.data import pose_sets, procedural_pose_scenes
-from robopercept.nn.pose.evaluate import PoseEvaluation, evaluate_pose
+from robopercept.nn.pose.evaluate import PoseEvaluation, evaluate_pose, joint_threshold
 from robopercept.nn.pose.inference import predict_keypoints
 from robopercept.nn.pose.networks import DeepPoseRefiner, build_pose_model, save_pose_model
 from robopercept.nn.pose.train import train_cascade, train_pose
@@ -147,6 +147,7 @@ def network(part: str, seed: int, progress: bool, save: Path | None = None) -> d
             sk,
             refiners=refiners,
             seed=seed,
+            calibration=joint_threshold(net, sets.val, refiners=refiners).to_dict(),
             built_by=f"python -m benchmarks.pose_figures --only {part} --seeds {seed} --save DIR",
             test=_scores(ev),
         )

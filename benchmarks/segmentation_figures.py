@@ -54,7 +54,7 @@ from robopercept.nn.detection.augment import FlipRotate
 from robopercept.nn.detection.data import DetectionDataset
 from robopercept.nn.detection.synthetic import procedural_detection_set
 from robopercept.nn.detection.train import evaluate_detector, train_detector
-from robopercept.nn.detection.zoo import build_detector, save_detector
+from robopercept.nn.detection.zoo import build_detector, calibrate_detector, save_detector
 from robopercept.nn.segmentation.data import nuclei_quadrants
 from robopercept.nn.segmentation.metrics import (
     match_instances,
@@ -83,7 +83,7 @@ def _shapes(n: tuple[int, int, int], seed: int) -> tuple:
     return _procedural(n[0], seed), _procedural(n[1], 1000 + seed), _procedural(n[2], 99)
 
 
-def _nuclei_sets() -> tuple[DetectionDataset, DetectionDataset]:
+def nuclei_sets() -> tuple[DetectionDataset, DetectionDataset]:
     s = nuclei_quadrants(NUCLEI)
     train = DetectionDataset.from_instance_labels(
         list(np.clip(s.train_images, 0, 1)), list(s.train_instances), "nucleus"
@@ -219,6 +219,9 @@ def _maskrcnn_run(
             settings,
             list(train.classes),
             seed=seed,
+            calibration=calibrate_detector(model, val if val is not None else train).to_dict(),
+            calibrated_on="validation" if val is not None else "training images",
+            **({"canvas": [128, 128]} if part.startswith("shapes") else {}),
             built_by=f"python -m benchmarks.segmentation_figures --only {part} --seeds {seed} "
             "--save DIR",
             test={"mask_AP50": segm["AP50"], "mask_AP": segm["AP"]},
@@ -253,7 +256,7 @@ NUCLEI_MASKRCNN_TRAIN = {"epochs": 150, "batch_size": 3, "lr": 2e-3, "weight_dec
 
 def nuclei_maskrcnn_model(seed: int, progress: bool) -> tuple[torch.nn.Module, Any, float]:
     """The nuclei Mask R-CNN trained on the three training quadrants with ``seed``."""
-    train, _ = _nuclei_sets()
+    train, _ = nuclei_sets()
     flips = FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
     return _maskrcnn_train(
         train, None, seed, NUCLEI_MASKRCNN, NUCLEI_MASKRCNN_TRAIN, flips, progress
@@ -261,7 +264,7 @@ def nuclei_maskrcnn_model(seed: int, progress: bool) -> tuple[torch.nn.Module, A
 
 
 def nuclei_maskrcnn(seed: int, progress: bool, save: Path | None = None) -> dict[str, Any]:
-    train, test = _nuclei_sets()
+    train, test = nuclei_sets()
     flips = FlipRotate(0.5, 0.5, rotate90=True, generator=seed)
     return _maskrcnn_run(
         train,
@@ -350,6 +353,7 @@ def shapes_semantic(
             settings,
             list(train.classes),
             seed=seed,
+            canvas=[128, 128],
             built_by=f"python -m benchmarks.segmentation_figures --only {part} --seeds {seed} "
             "--save DIR",
             test={"mIoU": float(scores.miou)},

@@ -588,6 +588,7 @@ def _nn_use(p: dict[str, Path], out: Path) -> dict[str, list[str]]:
                     str(out / "cm.png")],
         "nn predict": ["nn", "predict", str(out / "nn"), s["digit"]],
         "nn summary": ["nn", "summary", "vgg_small", "--input", "1,8,8"],
+        "nn models": ["nn", "models"],
         "nn detect eval": ["nn", "detect", "eval", str(out / "detect"), *_NN_DATA["detect"]],
         "nn detect": ["nn", "detect", s["shapes"], "-o", str(out / "detected")],
         "nn segment eval": ["nn", "segment", "eval", str(out / "segment"),

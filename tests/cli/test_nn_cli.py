@@ -88,7 +88,10 @@ def test_predict_finds_the_labels_of_digit_pictures(run_dir: Path, tmp_path: Pat
         write_image(p, np.round(ds.images[i, 0] * 255).astype(np.uint8))
         paths.append(str(p))
     assert main(["nn", "predict", str(run_dir / "checkpoint.best.pt"), *paths, "--json"]) == 0
-    rows = json.loads(capsys.readouterr().out)
+    doc = json.loads(capsys.readouterr().out)
+    rows = doc["results"]
+    assert doc["model"].endswith("(your own run; its training data is what you gave it)")
+    assert doc["warnings"] == []  # 8 x 8 digits for an 8 x 8 model
     assert [r["image"] for r in rows] == paths
     for r, i in zip(rows, picks, strict=True):
         probs = [t["probability"] for t in r["top"]]
@@ -96,7 +99,8 @@ def test_predict_finds_the_labels_of_digit_pictures(run_dir: Path, tmp_path: Pat
         assert str(ds.labels[i]) in [t["class"] for t in r["top"]]
     assert main(["nn", "predict", str(run_dir), paths[0], "--top-k", "2"]) == 0
     table = capsys.readouterr().out.splitlines()
-    assert table[0].split()[:3] == ["image", "rank", "class"] and len(table) == 3
+    assert table[0].startswith("model: ")
+    assert table[1].split()[:3] == ["image", "rank", "class"] and len(table) == 4
 
 
 def test_summary_totals_equal_the_parameter_count(capsys) -> None:

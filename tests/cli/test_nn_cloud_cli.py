@@ -72,7 +72,7 @@ def test_cloud_form_on_real_modelnet_meshes(run, tmp_path):
     out, _ = run
     meshes = sorted(data_path("pointcloud_cls", "ModelNet10").rglob("*.off"))[:2]
     rc, text = _run(["nn", "cloud", *map(str, meshes), "--model", str(out), "--json"])
-    rows = json.loads(text)
+    rows = json.loads(text)["results"]
     assert rc == 0 and len(rows) == 2
     model, info = load_cloud_model(out / "model.pt")
     for mesh, row in zip(meshes, rows, strict=True):
@@ -138,3 +138,36 @@ def test_resume_and_overwrite_exclude_each_other(tmp_path, capsys):
     argv = ["nn", "cloud", "train", *DATA, "--resume", "--overwrite", "-o", str(tmp_path)]
     assert main(argv) == 2
     assert "--resume and --overwrite exclude each other" in capsys.readouterr().err
+
+
+@pytest.mark.realdata
+def test_train_eval_predict_on_a_small_real_mesh_folder(tmp_path):
+    # issue 46: nine ModelNet meshes in three class folders (1, 5 and 3) used to train,
+    # write model.pt, then fail with "data is empty" (an empty test split)
+    folder = data_path("pointcloud_cls", "ModelNet_samples_zeaggler")
+    data = ["--data", str(folder), "--points", "128", "--seed", "0"]
+    out = tmp_path / "run"
+    rc, text = _run(["nn", "cloud", "train", *data, "--epochs", "2", "-o", str(out), "--quiet"])
+    assert rc == 0 and {p.name for p in out.iterdir()} >= FILES
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["clouds"] >= 1  # a test split of its own, not empty
+    rc, text = _run(["nn", "cloud", "eval", str(out), *data, "--json"])
+    assert rc == 0 and json.loads(text)["clouds"] == metrics["clouds"]
+    meshes = sorted(map(str, folder.rglob("*.off")))
+    rc, text = _run(["nn", "cloud", *meshes, "--model", str(out), "--json"])
+    rows = json.loads(text)["results"]
+    assert rc == 0 and len(rows) == 9
+    assert {r["class"] for r in rows} <= {"airplane", "bathtub", "bed"}
+
+
+@pytest.mark.realdata
+def test_a_mesh_folder_too_small_to_split_names_the_smallest_count(tmp_path, capsys):
+    # ModelNet10 here holds one training mesh per class: a validation tenth would leave
+    # one cloud to train on, which batch norm cannot learn from
+    folder = data_path("pointcloud_cls", "ModelNet10")
+    argv = ["nn", "cloud", "train", "--data", str(folder), "-o", str(tmp_path / "r")]
+    assert main(argv) == 2  # a --data value that cannot work, as every bad flag value
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if "error:" in line]
+    assert len(errors) == 1 and "hold 2 clouds; training needs at least 3" in errors[0]
+    assert not (tmp_path / "r" / "model.pt").exists()

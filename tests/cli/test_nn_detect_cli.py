@@ -101,7 +101,7 @@ def test_tta_flag_equals_the_wrapper_in_eval_and_detect(run, tmp_path, capsys):
     write_image(tmp_path / "c.png", image)
     argv = ["nn", "detect", str(tmp_path / "c.png"), "--model", str(out), "--tta", "hflip"]
     assert main([*argv, "--json", "--score-thresh", "0.0"]) == 0
-    rows = json.loads(capsys.readouterr().out)
+    rows = json.loads(capsys.readouterr().out)["results"]
     d = detect_arrays(tta, [image])[0]
     assert len(rows) == len(d["scores"]) > 0
     assert [r["score"] for r in rows] == pytest.approx(d["scores"].tolist(), abs=1e-7)
@@ -141,7 +141,10 @@ def test_detect_images_draws_and_prints_coco_results(run, tmp_path, capsys):
         paths.append(str(p))
     argv = ["nn", "detect", *paths, "--model", str(out / "model.pt"), "-o", str(tmp_path / "o")]
     assert main([*argv, "--json", "--score-thresh", "0.05"]) == 0
-    rows = json.loads(capsys.readouterr().out)
+    doc = json.loads(capsys.readouterr().out)
+    own = "(your own run; its training data is what you gave it)"
+    assert doc["model"] == f"model: {out / 'model.pt'} {own}"
+    rows = doc["results"]
     assert rows, "a trained model finds something at score 0.05"
     assert {r["image_id"] for r in rows} <= {1, 2}
     assert len(read_coco_results_list(rows, tmp_path)) == len(rows)
@@ -167,9 +170,11 @@ def test_default_model_missing_names_the_build_command(tmp_path, capsys, monkeyp
     write_image(img, np.zeros((32, 32, 3), np.uint8))
     assert main(["nn", "detect", str(img), "-o", str(tmp_path / "out")]) == 1
     err = capsys.readouterr().err
-    build = "python -m benchmarks.detection_figures --only shapes-fcos-ema shapes-faster"
+    # the card's own command: rebuilds just that model
+    build = shipped.MODEL_CARDS[shipped.DEFAULT_SHIPPED["detect"]].build
     assert build in err and "data/no_such_model.pt" in err
-    assert build in " ".join(cli_detect.__doc__.split())
+    assert "python -m benchmarks.detection_figures --only shapes-fcos-ema" in build
+    assert "shapes-fcos-ema shapes-faster" in " ".join(cli_detect.__doc__.split())
 
 
 @pytest.mark.parametrize(

@@ -101,7 +101,7 @@ def test_images_form_writes_skeletons_heatmaps_and_3d(hrnet, tmp_path):
         for name in (f"{stem}.png", f"{stem}_heatmaps.png", f"{stem}_3d.png"):
             assert read_image(out / name).shape[0] >= 256
     rc, text = _run(["nn", "pose", *paths, "--model", str(hrnet[0]), "--json", "--lift3d"])
-    rows = json.loads(text)
+    rows = json.loads(text)["results"]
     assert rc == 0 and len(rows) == 2
     for row, res in zip(rows, expect, strict=True):
         np.testing.assert_allclose(row["keypoints"], res.keypoints, atol=0.01)

@@ -104,7 +104,7 @@ def test_images_form_writes_overlays_label_pngs_and_rle_results(semantic, instan
         assert read_image(out / f"{stem}.png").shape[0] >= 512  # readable at 1080p
         np.testing.assert_array_equal(read_image(out / f"{stem}_labels.png", mode="index"), lab)
     rc, text = _run(["nn", "segment", paths[0], "--model", str(semantic[0]), "--json"])
-    results = json.loads(text)
+    results = json.loads(text)["results"]
     rebuilt = np.zeros_like(expect[0])
     for r in results:
         assert r["image_id"] == 1
@@ -113,7 +113,7 @@ def test_images_form_writes_overlays_label_pngs_and_rle_results(semantic, instan
     rc, text = _run(
         ["nn", "segment", paths[0], "--model", str(instance[0]), "--json", "--score-thresh", "0"]
     )
-    results = json.loads(text)
+    results = json.loads(text)["results"]
     assert rc == 0 and all({"bbox", "score", "segmentation"} <= set(r) for r in results)
     assert [r["score"] for r in results] == sorted((r["score"] for r in results), reverse=True)
 

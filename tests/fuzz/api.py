@@ -3687,3 +3687,99 @@ VALID.update(
         }
     }
 )
+
+
+# -- issue 46: models useful on real inputs (tiling, thresholds, cards, one Python path)
+def box_per_window() -> Any:
+    """A detector of one window: one box at its centre (for the tiling plans)."""
+    return _box_per_window
+
+
+def _box_per_window(window: np.ndarray) -> dict[str, np.ndarray]:
+    h, w = window.shape[:2]
+    box = np.array([[w / 2 - 2, h / 2 - 2, w / 2 + 2, h / 2 + 2]])
+    return {"boxes": box, "labels": np.array([1]), "scores": np.array([0.9])}
+
+
+def threshold_value() -> Any:
+    """A window's class map: bright pixels (for the tiled segmentation plan)."""
+    return _bright
+
+
+def _bright(window: np.ndarray) -> np.ndarray:
+    x = np.asarray(window, np.float64).reshape((*window.shape[:2], -1))
+    return (x.mean(-1) > 0.5).astype(np.int64)
+
+
+_DETS = [
+    {
+        "boxes": np.array([[0.0, 0, 10, 10], [20.0, 20, 30, 30]]),
+        "labels": np.array([1, 1]),
+        "scores": np.array([0.9, 0.4]),
+    }
+]
+_TRUTHS = [{"boxes": np.array([[0.0, 0, 10, 10]]), "labels": np.array([1])}]
+VALID.update(
+    {
+        "nn.detection.tiling.tile_origins": {"length": 1000, "tile": 400, "overlap": 100},
+        "nn.detection.tiling.tile_windows": {
+            "height": 500,
+            "width": 300,
+            "tile": 400,
+            "overlap": 100,
+        },
+        "nn.detection.tiling.check_tiling": {"tile": 400, "overlap": 100},
+        "nn.detection.tiling.detect_tiled": {
+            "detect": _b("tests.fuzz.api:box_per_window"),
+            "image": IMG_RGB,
+            "tile": 32,
+            "overlap": 8,
+            "nms_thresh": 0.5,
+        },
+        "nn.detection.tiling.segment_tiled": {
+            "segment": _b("tests.fuzz.api:threshold_value"),
+            "image": IMG_RGB,
+            "tile": 32,
+            "overlap": 8,
+        },
+        "nn.detection.thresholds.choose_score_threshold": {
+            "detections": _DETS,
+            "truths": _TRUTHS,
+            "iou": 0.5,
+        },
+        "nn.detection.thresholds.f1_threshold": {
+            "scores": np.array([0.9, 0.5, 0.2]),
+            "hits": np.array([True, False, True]),
+            "positives": 3,
+        },
+        "nn.detection.thresholds.domain_warning": {
+            "best": 0.3,
+            "calibration": {"score_thresh": 0.4, "match_median": 0.7},
+            "model_name": "m",
+            "trained_on": "x",
+        },
+        "nn.detection.thresholds.input_warning": {
+            "image": IMG_RGB,
+            "info": {"canvas": [16, 16], "input_colour": "grey"},
+            "model_name": "m",
+            "trained_on": "x",
+        },
+        "nn.detection.zoo.calibrate_detector": {
+            "model": _b("robopercept.nn.detection.zoo:build_detector", "fcos", 1, width=4),
+            "dataset": _DDS,
+        },
+        "nn.detection.deepforest.deepforest_strip": {"folder": Fixture("deepforest")},
+        "nn.pose.evaluate.joint_threshold": {"model": _POSE_NET, "data": _POSE_DS},
+        "nn.shipped.model_card": {"name": "trees"},
+        "nn.shipped.domain_line": {"kind": "detect", "model": "trees"},
+        "nn.predict.load_predictor": {"model": "fcos", "device": "cpu"},
+    }
+)
+SKIP.update(
+    {
+        "nn.train.checkpoint.update_checkpoint": "rewrites a checkpoint file in place: its "
+        "reading and writing are load_checkpoint's and save_checkpoint's, both fuzzed",
+        "nn.shipped.ModelCard": "a model card of the shipped table, built by the library "
+        "(MODEL_CARDS); model_card and domain_line, which read it, are fuzzed",
+    }
+)

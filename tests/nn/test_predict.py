@@ -21,7 +21,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from robopercept.cli.main import main  # noqa: E402
-from robopercept.errors import InputError  # noqa: E402
+from robopercept.errors import FileFormatError, InputError  # noqa: E402
 from robopercept.imaging import read_image, write_image  # noqa: E402
 from robopercept.nn.detection.synthetic import procedural_detection_set  # noqa: E402
 from robopercept.nn.detection.zoo import detect_arrays, load_detector  # noqa: E402
@@ -52,7 +52,10 @@ def _as_png(tmp: Path, name: str, image: np.ndarray) -> Path:
 @pytest.fixture(scope="module")
 def images(tmp_path_factory) -> dict[str, Path]:
     tmp = tmp_path_factory.mktemp("inputs")
-    shapes = procedural_detection_set(1, (128, 128), rng=99).images[0]
+    # the second test canvas: three shapes the shipped detectors find above their
+    # stored thresholds (the first holds one small triangle that FCOS scores 0.51, under
+    # its threshold 0.59)
+    shapes = procedural_detection_set(2, (128, 128), rng=99).images[1]
     figure = procedural_pose_set(1, (128, 128), rng=99).images[0]
     return {
         "shapes": _as_png(tmp, "shapes.png", shapes),
@@ -105,7 +108,7 @@ def test_predictor_equals_the_library_call_and_the_command_line(
     np.testing.assert_array_equal(pred.image, image)
 
     # the same arithmetic as the direct call, so exactly equal
-    direct = _direct(kind, name, image, 0.3 if kind == "detect" else 0.5)
+    direct = _direct(kind, name, image, predictor.score_thresh)
     values = dict(pred.values)
     if pose:
         assert pred.joints == list(predictor.info["skeleton"].joints) and len(pred.joints) == 16
@@ -133,7 +136,11 @@ def test_predictor_equals_the_library_call_and_the_command_line(
     cli_out, lib_out = tmp_path / "cli", tmp_path / "lib"
     argv = ["nn", kind, str(src), "--model", name, "--device", "cpu", "--json"]
     assert main([*argv, *flags, "-o", str(cli_out)]) == 0
-    printed = json.loads(capsys.readouterr().out)
+    doc = json.loads(capsys.readouterr().out)
+    assert (
+        doc["model"].startswith(f"model: {name} (") and "trained on procedural data" in doc["model"]
+    )
+    printed = doc["results"]
     if pose:
         assert printed == [{"image": str(src), **rec}]
         with pytest.raises(InputError, match="use record"):
@@ -180,7 +187,10 @@ def test_instance_label_image_puts_the_best_instance_on_top():
 
 
 def test_score_threshold_defaults_follow_the_commands():
-    assert load_image_predictor("detect", device="cpu").score_thresh == 0.3
+    from robopercept.nn.train.checkpoint import load_checkpoint
+
+    stored = load_checkpoint(shipped_model_path("detect", "fcos"))["calibration"]
+    assert load_image_predictor("detect", device="cpu").score_thresh == stored["score_thresh"]
     seg = load_image_predictor("segment", "maskrcnn", device="cpu", score_thresh=0.8)
     assert seg.instance and seg.score_thresh == 0.8
 
@@ -203,12 +213,15 @@ def test_bad_inputs_are_refused_with_the_fix(tmp_path):
     with pytest.raises(InputError, match="kind must be one of"):
         shipped_model_path("track")
     with pytest.raises(
-        InputError, match="no shipped detect model 'yolo'; the shipped ones are fcos, faster"
+        InputError, match="no shipped detect model 'yolo'; the shipped ones are trees, fcos, faster"
     ):
         shipped_model_path("detect", "yolo")
     with pytest.raises(InputError, match=r"MODEL: no such file: .*nope\.pt: give a run folder"):
         load_image_predictor("detect", tmp_path / "nope.pt")
-    with pytest.raises(InputError, match=r"MODEL: no such file: .*model.pt.*\(unet, maskrcnn\)"):
+    with pytest.raises(
+        InputError,
+        match=r"MODEL: no such file: .*model.pt.*\(nuclei, nuclei-maskrcnn, unet, maskrcnn\)",
+    ):
         resolve_model("segment", tmp_path)  # a folder without model.pt
     with pytest.raises(InputError, match="tta must be one of"):
         load_image_predictor("detect", tta="rotate")
@@ -234,3 +247,66 @@ def test_real_photo_detections_equal_the_library_call():
     for key in ("boxes", "labels", "scores"):
         np.testing.assert_array_equal(pred.values[key], direct[key])
     json.dumps(pred.record(), allow_nan=False)
+
+
+# ---------------------------------------------------------------- issue 46: one path
+def test_a_predictor_is_called_on_a_path_string_an_array_or_a_list(images):
+    from robopercept.nn import load_predictor
+
+    p = load_predictor("fcos", device="cpu")
+    path = str(images["shapes"])
+    by_path = p(path)  # a str, as a user types it
+    by_array = p.predict(read_image(path, mode="rgb"))
+    both = p([path, Path(path)])
+    assert isinstance(both, list) and len(both) == 2
+    for pred in (by_array, *both):
+        np.testing.assert_array_equal(pred.boxes, by_path.boxes)
+        np.testing.assert_array_equal(pred.scores, by_path.scores)
+    assert by_path.boxes.shape[1] == 4 and len(by_path.boxes) > 0
+    assert by_path.class_names == [p.classes[k - 1] for k in by_path.labels]
+    with pytest.raises(InputError, match="no masks"):
+        _ = by_path.masks
+    with pytest.raises(FileFormatError, match="no such file"):
+        p(str(images["shapes"]) + ".missing")
+
+
+def test_the_stored_threshold_is_the_default_and_all_scores_keeps_everything(images):
+    from robopercept.nn.train.checkpoint import load_checkpoint
+
+    stored = load_checkpoint(shipped_model_path("detect", "fcos"))["calibration"]
+    p = load_image_predictor("detect", "fcos", device="cpu")
+    assert p.score_thresh == stored["score_thresh"]
+    every = load_image_predictor("detect", "fcos", device="cpu", all_scores=True)
+    assert every.score_thresh == 0.0
+    kept, allof = p(str(images["shapes"])), every(str(images["shapes"]))
+    assert len(allof.scores) >= len(kept.scores)
+    np.testing.assert_array_equal(allof.scores[allof.scores >= p.score_thresh], kept.scores)
+    # an explicit threshold wins
+    assert load_image_predictor("detect", "fcos", score_thresh=0.25).score_thresh == 0.25
+
+
+def test_tiling_follows_the_model_and_can_be_turned_off():
+    from robopercept.nn import load_predictor
+
+    assert load_predictor("trees", device="cpu").tile == 400
+    assert load_predictor("trees", device="cpu", tile=0).tile == 0
+    assert load_predictor("fcos", device="cpu").tile == 0  # no window stored: whole images
+    p = load_predictor("fcos", device="cpu", tile=64, overlap=16)
+    assert (p.tile, p.overlap) == (64, 16)
+    canvas = np.zeros((100, 150, 3), np.uint8)
+    assert p(canvas).image.shape == (100, 150, 3)
+    with pytest.raises(InputError, match="--tile"):
+        load_predictor("fcos", tile=8)
+
+
+def test_load_predictor_names_the_loader_of_other_kinds(tmp_path):
+    from robopercept.nn import load_predictor
+
+    with pytest.raises(InputError, match=r"classification\.run\.load_run"):
+        load_predictor("digits")
+    with pytest.raises(InputError, match=r"cloud\.run\.load_cloud_model"):
+        load_predictor("pointnet")
+    with pytest.raises(InputError, match="does not match"):
+        load_predictor("trees", kind="segment")
+    assert load_predictor(shipped_model_path("segment", "maskrcnn")).kind == "segment"
+    assert load_predictor(shipped_model_path("pose", "hrnet")).kind == "pose"

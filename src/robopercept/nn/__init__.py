@@ -11,7 +11,8 @@ The package is laid out as task wings over shared floors, as torchvision is:
   (datasets, augmentations, fonts), :mod:`.train` (config, the loop, checkpoints, DDP);
 - task wings: :mod:`.classification`, :mod:`.detection`, :mod:`.segmentation`,
   :mod:`.pose`, :mod:`.cloud`;
-- on top: :mod:`.predict` (one image-prediction path for the CLI and batch jobs).
+- on top: :mod:`.predict` (one image-prediction path for the CLI, the batch jobs and
+  Python: ``robopercept.nn.load_predictor("trees")("aerial.png").boxes``).
 
 This is the only package that imports torch, and only its torch modules do. Submodules
 load on first use (``robopercept.nn.detection``, ...), so ``import robopercept.nn``
@@ -92,6 +93,8 @@ MODULES = (
     "detection.fcos",
     "detection.tta",
     "detection.zoo",
+    "detection.thresholds",
+    "detection.tiling",
     "detection.run",
     "segmentation.metrics",
     "segmentation.networks",
@@ -119,10 +122,15 @@ MODULES = (
     "predict",
 )
 
-__all__ = [*_SUBMODULES, "MODULES"]
+#: functions reachable from ``robopercept.nn`` itself, by module
+_FUNCTIONS = {"load_predictor": "predict"}
+
+__all__ = [*_SUBMODULES, *_FUNCTIONS, "MODULES"]
 
 
 def __getattr__(name: str) -> Any:
     if name in _SUBMODULES:
         return importlib.import_module(f"{__name__}.{name}")
+    if name in _FUNCTIONS:
+        return getattr(importlib.import_module(f"{__name__}.{_FUNCTIONS[name]}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -46,17 +46,22 @@ from robopercept._checks import (
 from robopercept.errors import InputError
 from robopercept.fileio import strict_json
 from robopercept.imaging import read_image, write_image
+from robopercept.nn.data.datasets import to_unit_float
+from robopercept.nn.detection.thresholds import domain_warning, input_warning
+from robopercept.nn.detection.tiling import check_tiling, detect_tiled, segment_tiled
 from robopercept.nn.detection.tta import TestTimeAugmentation
-from robopercept.nn.detection.zoo import detect_arrays, load_detector
+from robopercept.nn.detection.zoo import DETECTORS, detect_arrays, load_detector
 from robopercept.nn.pose.inference import pose_arrays
 from robopercept.nn.pose.library import default_pose_library
 from robopercept.nn.pose.networks import load_pose_model
+from robopercept.nn.segmentation.data import percentile_normalize
 from robopercept.nn.segmentation.networks import (
+    SEGMENTERS,
     coco_segmentation_results,
     load_segmenter,
     segment_arrays,
 )
-from robopercept.nn.shipped import resolve_model
+from robopercept.nn.shipped import DEFAULT_SHIPPED, MODEL_CARDS, SHIPPED, resolve_model
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import resolve_device
 from robopercept.viz import voc_palette
@@ -69,6 +74,7 @@ __all__ = [
     "ImagePrediction",
     "ImagePredictor",
     "load_image_predictor",
+    "load_predictor",
     "load_segment_model",
 ]
 
@@ -109,6 +115,11 @@ class ImagePrediction:
     skeleton : Skeleton, optional
         Pose: the :class:`~robopercept.nn.skeleton.Skeleton` (links and mirror pairs of
         the picture).
+    warning : str or None
+        The line saying the image looks outside the model's domain
+        (:func:`~robopercept.nn.detection.thresholds.domain_warning`), else None.
+    joint_thresh : float
+        Pose: joints scoring under it are not drawn (nor the limbs they end).
 
     Examples
     --------
@@ -130,6 +141,46 @@ class ImagePrediction:
     values: dict[str, np.ndarray]
     joints: list[str] = field(default_factory=list)
     skeleton: Any = None
+    warning: str | None = None
+    joint_thresh: float = 0.0
+
+    @property
+    def boxes(self) -> np.ndarray:
+        """detect and instance segment: ``(K, 4)`` boxes ``(x1, y1, x2, y2)`` pixels."""
+        return self._value("boxes")
+
+    @property
+    def labels(self) -> np.ndarray:
+        """``(K,)`` labels (1-based positions in :attr:`classes`), or a semantic
+        segmentation's ``(H, W)`` class map (0 the background)."""
+        return self._value("labels")
+
+    @property
+    def scores(self) -> np.ndarray:
+        """``(K,)`` detection scores, or pose's ``(J,)`` joint scores."""
+        return self._value("scores")
+
+    @property
+    def masks(self) -> np.ndarray:
+        """instance segment: ``(K, H, W)`` bool masks."""
+        return self._value("masks")
+
+    @property
+    def keypoints(self) -> np.ndarray:
+        """pose: ``(J, 2)`` joint positions, pixels."""
+        return self._value("keypoints")
+
+    @property
+    def class_names(self) -> list[str]:
+        """detect and instance segment: the class name of each box, in order."""
+        return [_class_name(self.classes, int(k)) for k in self._value("labels")]
+
+    def _value(self, name: str) -> np.ndarray:
+        if name not in self.values or (name == "labels" and self.kind == "pose"):
+            raise InputError(
+                f"a {self.kind} prediction has no {name}; it holds {', '.join(self.values)}"
+            )
+        return self.values[name]
 
     @property
     def instance(self) -> bool:
@@ -311,12 +362,13 @@ class ImagePrediction:
         sk = self.skeleton
         if sk is None:
             raise InputError("pictures: a pose prediction needs its skeleton (skeleton=...)")
+        shown = np.where(v["scores"] >= self.joint_thresh, v["scores"], np.nan)
         out = {
             f"{stem}.png": draw_skeleton(
                 self.image,
                 v["keypoints"],
                 sk.links,
-                confidence=v["scores"],
+                confidence=shown,
                 flip_pairs=sk.flip_pairs,
                 min_side=512,
             )
@@ -362,8 +414,8 @@ class ImagePrediction:
 
 @dataclass
 class ImagePredictor:
-    """A loaded image network with its settings (:func:`load_image_predictor`); call
-    :meth:`predict` or :meth:`predict_file` on as many images as needed.
+    """A loaded image network with its settings (:func:`load_image_predictor`); call it
+    (or :meth:`predict`) on an image path, an array, or a list of them.
 
     Attributes
     ----------
@@ -375,23 +427,34 @@ class ImagePredictor:
         :class:`~robopercept.nn.detection.tta.TestTimeAugmentation` with ``tta``.
     info : dict
         The checkpoint without the weights (``classes``, or ``skeleton`` and
-        ``refiners`` for pose).
+        ``refiners`` for pose; ``calibration`` and ``tile`` where stored).
     instance : bool
         segment: a Mask R-CNN (instances) rather than a semantic network.
     score_thresh : float
-        detect and instance segment: the smallest score kept.
+        detect and instance segment: the smallest score kept; pose: the smallest joint
+        score drawn.
     flip : bool
         pose: average with the mirrored image (the flip test).
     heatmaps : bool
         pose: keep the heatmaps (for ``STEM_heatmaps.png``).
     library : PoseLibrary or None
         pose: lifts the 2-D joints to 3-D when given.
+    tile : int
+        detect and segment: images larger than this (either side) are predicted in
+        overlapping windows of this side (:mod:`robopercept.nn.detection.tiling`); 0
+        never tiles.
+    overlap : int
+        Pixels shared by neighbouring windows.
+    name : str
+        The model's name (a shipped name, or the checkpoint's path).
+    trained_on : str
+        What it learnt from (the shipped model's card; "your own data" otherwise).
 
     Examples
     --------
     >>> import numpy as np
     >>> p = load_image_predictor("detect", device="cpu")
-    >>> p.predict(np.zeros((32, 32, 3), np.uint8)).values["boxes"].shape[1]
+    >>> p(np.zeros((32, 32, 3), np.uint8)).boxes.shape[1]
     4
     """
 
@@ -404,49 +467,116 @@ class ImagePredictor:
     flip: bool = True
     heatmaps: bool = False
     library: Any = None
+    tile: int = 0
+    overlap: int = 0
+    name: str = ""
+    trained_on: str = "your own data"
 
     @property
     def classes(self) -> list[str]:
         """The class names (``[]`` for pose)."""
         return [] if self.kind == "pose" else list(self.info["classes"])
 
-    def predict(self, image: np.ndarray) -> ImagePrediction:
-        """Predict one image.
+    def __call__(self, image: Any) -> Any:
+        """:meth:`predict`."""
+        return self.predict(image)
+
+    def predict(self, image: Any) -> Any:
+        """Predict one image, or each of a list.
 
         Parameters
         ----------
-        image : (H, W, 3) ndarray
-            RGB, ``uint8``, ``uint16`` or float in [0, 1] (what
-            :func:`~robopercept.imaging.read_image` gives with ``mode="rgb"``); a
-            semantic segmenter of grey images also takes ``(H, W)``.
+        image : path-like, (H, W, 3) ndarray, or list of them
+            A file (read as RGB by :func:`~robopercept.imaging.read_image`), or RGB
+            ``uint8``, ``uint16`` or float in [0, 1]; a semantic segmenter of grey
+            images also takes ``(H, W)``.
 
         Returns
         -------
-        ImagePrediction
+        ImagePrediction, or a list of them for a list
 
         Raises
         ------
         InputError
             Not an image (NaN, channels-first, ...), or a grey one for a network that
             needs RGB.
+        FileFormatError
+            A missing or unreadable image file.
 
         Examples
         --------
         >>> import numpy as np
         >>> p = load_image_predictor("segment", device="cpu")
-        >>> p.predict(np.zeros((32, 32, 3), np.uint8)).values["labels"].shape
+        >>> p.predict(np.zeros((32, 32, 3), np.uint8)).labels.shape
         (32, 32)
+        >>> len(p.predict([np.zeros((16, 16, 3)), np.ones((16, 16, 3))]))
+        2
         """
+        if isinstance(image, (str, os.PathLike)):
+            return self.predict_file(image)
+        if isinstance(image, (list, tuple)):
+            return [self.predict(im) for im in image]
         image = check_image(image)
+        return self._predict_array(image)
+
+    def _tiled(self, image: np.ndarray) -> bool:
+        return bool(self.tile) and max(image.shape[:2]) > self.tile
+
+    def _detections(self, image: np.ndarray) -> dict[str, np.ndarray]:
+        def one(im: np.ndarray) -> dict[str, np.ndarray]:
+            return detect_arrays(self.model, [im])[0]
+
+        if not self._tiled(image):
+            return one(image)
+        base = getattr(self.model, "model", self.model)  # TestTimeAugmentation wraps
+        nms = float(getattr(base, "nms_thresh", 0.5))
+        return detect_tiled(one, image, self.tile, self.overlap, nms)
+
+    def _warning(self, scores: np.ndarray) -> str | None:
+        best = float(np.max(scores)) if len(scores) else 0.0
+        return domain_warning(best, self.info.get("calibration"), self.name, self.trained_on)
+
+    def _network_input(self, image: np.ndarray) -> np.ndarray:
+        """The image as the network was trained to see it: a model that stores
+        ``input_normalize`` (the nuclei models) takes the grey image scaled by its own
+        1st and 99.8th percentiles (StarDist's normalisation,
+        :func:`~robopercept.nn.segmentation.data.percentile_normalize`), clipped to
+        [0, 1] where training clipped it, in three channels for a detector."""
+        norm = self.info.get("input_normalize")
+        if not norm:
+            return image
+        grey = to_unit_float(image)
+        grey = grey.mean(axis=2) if grey.ndim == 3 else grey
+        lo, hi = norm["percentile"]
+        x = percentile_normalize(grey, lo, hi)
+        if norm.get("clip"):
+            x = np.clip(x, 0.0, 1.0)
+        if self.kind == "detect" or self.instance:
+            x = np.repeat(x[..., None], 3, axis=2)
+        return x
+
+    def _predict_array(self, image: np.ndarray) -> ImagePrediction:
+        shown = image
+        seen = input_warning(image, self.info, self.name, self.trained_on)
+        image = self._network_input(image)
         if self.kind == "detect" or (self.kind == "segment" and self.instance):
-            d = detect_arrays(self.model, [image])[0]
+            d = self._detections(image)
             keep = d["scores"] >= self.score_thresh
             return ImagePrediction(
-                self.kind, image, self.classes, {k: v[keep] for k, v in d.items()}
+                self.kind,
+                shown,
+                self.classes,
+                {k: v[keep] for k, v in d.items()},
+                warning=seen or self._warning(d["scores"]),
             )
         if self.kind == "segment":
-            labels = segment_arrays(self.model, [image])[0]
-            return ImagePrediction(self.kind, image, self.classes, {"labels": labels})
+            if self._tiled(image):
+                labels = segment_tiled(
+                    lambda im: segment_arrays(self.model, [im])[0], image, self.tile, self.overlap
+                )
+            else:
+                labels = segment_arrays(self.model, [image])[0]
+            return ImagePrediction(self.kind, shown, self.classes, {"labels": labels}, warning=seen)
 
         sk = self.info["skeleton"]
         res = pose_arrays(
@@ -460,7 +590,16 @@ class ImagePredictor:
             values["heatmaps"] = res.heatmaps
         if self.library is not None:
             values["joints3d"] = self.library.lift(res.keypoints[None])[0]
-        return ImagePrediction(self.kind, image, [], values, list(sk.joints), sk)
+        return ImagePrediction(
+            self.kind,
+            shown,
+            [],
+            values,
+            list(sk.joints),
+            sk,
+            warning=seen or self._warning(np.array([np.median(res.scores)])),
+            joint_thresh=self.score_thresh,
+        )
 
     def predict_file(self, path: str | os.PathLike[str]) -> ImagePrediction:
         """Read an image file as RGB (:func:`~robopercept.imaging.read_image`) and
@@ -491,7 +630,7 @@ class ImagePredictor:
         (32, 32, 3)
         """
 
-        return self.predict(read_image(path, mode="rgb"))
+        return self._predict_array(check_image(read_image(path, mode="rgb")))
 
 
 def load_segment_model(path: str | os.PathLike[str]) -> tuple[Any, dict[str, Any], bool]:
@@ -545,6 +684,9 @@ def load_image_predictor(
     flip: bool = True,
     heatmaps: bool = False,
     lift3d: bool = False,
+    all_scores: bool = False,
+    tile: int | None = None,
+    overlap: int | float | None = None,
 ) -> ImagePredictor:
     """Load an image network for :meth:`ImagePredictor.predict`.
 
@@ -561,8 +703,9 @@ def load_image_predictor(
         (:func:`~robopercept.nn.train.config.resolve_device`).
     score_thresh : float in [0, 1], optional
         detect and instance segment: keep detections with ``score >= score_thresh``;
-        default 0.3 for detect, 0.5 for segment (the command line's defaults). Ignored
-        for pose and semantic segmentation.
+        default the threshold stored with the model (chosen on its validation images,
+        :func:`~robopercept.nn.detection.thresholds.choose_score_threshold`), else 0.3
+        for detect and 0.5 for segment. Ignored for pose and semantic segmentation.
     tta : {"hflip", "flips", "dihedral"}, optional
         detect: test-time augmentation
         (:class:`~robopercept.nn.detection.tta.TestTimeAugmentation`); ignored for the other
@@ -574,6 +717,16 @@ def load_image_predictor(
     lift3d : bool
         pose: lift the 2-D joints to 3-D (root-relative metres) by matching against
         :func:`~robopercept.nn.pose.library.default_pose_library`; ignored otherwise.
+    all_scores : bool
+        detect and instance segment: keep every output (``score_thresh`` 0).
+    tile : int, optional
+        detect and segment: predict images larger than ``tile`` in overlapping windows
+        of that side (:mod:`~robopercept.nn.detection.tiling`); default the window the
+        model was trained on where it stores one (the trees model: 400), else no
+        tiling; 0 never tiles.
+    overlap : int or float, optional
+        Pixels shared by neighbouring windows, or a fraction of ``tile`` (default
+        0.25).
 
     Returns
     -------
@@ -594,9 +747,12 @@ def load_image_predictor(
     ('pose', 'pose_hrnet_figures.pt', 16)
     """
     check_choice(kind, "kind", IMAGE_KINDS)
-    if score_thresh is None:
-        score_thresh = _DEFAULT_SCORE[kind]
-    score_thresh = check_real(score_thresh, "score_thresh", low=0.0, high=1.0)
+    if score_thresh is not None:
+        score_thresh = check_real(score_thresh, "score_thresh (--score-thresh)", 0.0, 1.0)
+    if check_bool(all_scores, "all_scores"):
+        score_thresh = 0.0
+    if tile is not None:
+        tile = 0 if tile == 0 else check_int(tile, "tile (--tile)", 16)
     if tta is not None:
         check_choice(tta, "tta", _TTA)
     flip = check_bool(flip, "flip")
@@ -605,17 +761,41 @@ def load_image_predictor(
     if device is not None and not isinstance(device, str):
         raise InputError(f"device must be a name such as 'cpu' or 'cuda'; got {plain_repr(device)}")
     path = resolve_model(kind, model)
+    name = DEFAULT_SHIPPED[kind] if model is None else model if isinstance(model, str) else None
+    if name is not None and name not in SHIPPED[kind]:
+        name = None
+    common: dict[str, Any] = {
+        "name": name or str(path),
+        "trained_on": MODEL_CARDS[name].trained_on if name else "your own data",
+    }
+
+    def settle(info: dict[str, Any]) -> dict[str, Any]:
+        """The threshold and tiling of a loaded model."""
+        cal = info.get("calibration") or {}
+        window = int(info.get("tile") or 0) if tile is None else tile
+        return {
+            **common,
+            "score_thresh": score_thresh
+            if score_thresh is not None
+            else float(cal.get("score_thresh", _DEFAULT_SCORE[kind])),
+            "tile": window,
+            "overlap": check_tiling(
+                window, info.get("tile_overlap") if overlap is None else overlap
+            )[1]
+            if window
+            else 0,
+        }
 
     if kind == "detect":
         net, info = load_detector(path)
         net.to(resolve_device(device))
         if tta:
             net = TestTimeAugmentation(net, tta)
-        return ImagePredictor(kind, path, net, info, score_thresh=score_thresh)
+        return ImagePredictor(kind, path, net, info, **settle(info))
     if kind == "segment":
         net, info, instance = load_segment_model(path)
         net.to(resolve_device(device))
-        return ImagePredictor(kind, path, net, info, instance=instance, score_thresh=score_thresh)
+        return ImagePredictor(kind, path, net, info, instance=instance, **settle(info))
 
     net, info = load_pose_model(path)
     net.to(resolve_device(device))
@@ -627,8 +807,86 @@ def load_image_predictor(
         path,
         net,
         info,
-        score_thresh=score_thresh,
         flip=flip,
         heatmaps=heatmaps,
         library=library,
+        **settle(info),
     )
+
+
+def _checkpoint_kind(path: Path) -> str:
+    """The image kind a checkpoint's model predicts (its ``kind`` entry)."""
+    state = load_checkpoint(path)
+    name = state.get("kind") if isinstance(state, dict) else None
+    if "skeleton" in state:
+        return "pose"
+    if name == "maskrcnn" or name in SEGMENTERS:
+        return "segment"
+    if name in DETECTORS:
+        return "detect"
+    raise InputError(
+        f"{path}: not a detector, segmenter or pose network (kind {plain_repr(name)}): give "
+        "kind=, or load a classifier with robopercept.nn.classification.run.load_run and a "
+        "point-cloud network with robopercept.nn.cloud.run.load_cloud_model"
+    )
+
+
+def load_predictor(
+    model: str | os.PathLike[str], *, kind: str | None = None, **options: Any
+) -> ImagePredictor:
+    """The one way into an image model from Python: a shipped model by name
+    (``robopercept nn models`` lists them) or a run folder / ``model.pt``, ready to call
+    on an image path, an array or a list of them.
+
+    Parameters
+    ----------
+    model : str or path-like
+        A shipped name (``"trees"``, ``"nuclei"``, ``"fcos"``, ``"hrnet"``, ...), a run
+        folder or a checkpoint file.
+    kind : {"detect", "segment", "pose"}, optional
+        Default: the shipped model's, or read from the checkpoint.
+    **options
+        The keywords of :func:`load_image_predictor` (``device``, ``score_thresh``,
+        ``all_scores``, ``tile``, ``overlap``, ``tta``, ``flip``, ``heatmaps``,
+        ``lift3d``).
+
+    Returns
+    -------
+    ImagePredictor
+        Call it: ``predictor("photo.png")`` gives an :class:`ImagePrediction` with
+        ``boxes``, ``labels``, ``class_names``, ``scores``, ``masks`` or ``keypoints``,
+        ``warning`` and ``pictures()``.
+
+    Raises
+    ------
+    InputError
+        An unknown name, a missing file, a ``kind`` other than the shipped model's, or a
+        checkpoint that is no image model (a classifier or point-cloud network: the
+        message names their loaders).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> shapes = load_predictor("fcos", device="cpu")
+    >>> (shapes.kind, shapes.name, shapes.classes)
+    ('detect', 'fcos', ['circle', 'square', 'triangle', 'cross'])
+    >>> shapes(np.zeros((64, 64, 3), np.uint8)).class_names
+    []
+    """
+    if isinstance(model, str) and model in MODEL_CARDS:
+        card_kind = MODEL_CARDS[model].kind
+        if card_kind not in IMAGE_KINDS:
+            raise InputError(
+                f"{model} is a {card_kind} model: load it with "
+                + (
+                    "robopercept.nn.classification.run.load_run"
+                    if card_kind == "classify"
+                    else "robopercept.nn.cloud.run.load_cloud_model"
+                )
+            )
+        if kind is not None and kind != card_kind:
+            raise InputError(f"kind {kind!r} does not match {model!r}, a {card_kind} model")
+        return load_image_predictor(card_kind, model, **options)
+    if kind is None:
+        kind = _checkpoint_kind(resolve_model("detect", model))
+    return load_image_predictor(kind, model, **options)

@@ -54,7 +54,7 @@ def test_nn_pose_finds_a_figure_from_the_command_line(tmp_path, test_set, capsys
     img = tmp_path / "figure.png"
     write_image(img, (test_set.images[0] * 255 + 0.5).astype(np.uint8))
     assert main(["nn", "pose", str(img), "--json"]) == 0
-    row = json.loads(capsys.readouterr().out)[0]
+    row = json.loads(capsys.readouterr().out)["results"][0]
     truth = test_set.keypoints[0]
     err = np.linalg.norm(np.asarray(row["keypoints"]) - truth[:, :2], axis=1)
     diag = np.hypot(*(test_set.boxes[0, 2:] - test_set.boxes[0, :2]))

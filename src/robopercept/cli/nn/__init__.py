@@ -1,7 +1,8 @@
 """``robopercept nn``: the deep-learning commands (extra ``deep``), one module per task,
 as the command line reads: ``nn train|eval|predict|summary`` (:mod:`.classify`),
 ``nn detect`` (:mod:`.detect`), ``nn segment`` (:mod:`.segment`), ``nn pose``
-(:mod:`.pose`) and ``nn cloud`` (:mod:`.cloud`); :mod:`._forms` holds what the task
+(:mod:`.pose`), ``nn cloud`` (:mod:`.cloud`) and ``nn models`` (:mod:`.models`, the
+shipped models' cards); :mod:`._forms` holds what the task
 commands share (their three forms ``train``, ``eval`` and ``IMAGE...``, the data flags).
 
 These modules parse and print. From :mod:`robopercept.nn` they import only the task
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 
-from robopercept.cli.nn import classify, cloud, detect, pose, segment
+from robopercept.cli.nn import classify, cloud, detect, models, pose, segment
 
 __all__ = ["register"]
 
@@ -30,5 +31,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     ns = p.add_subparsers(dest="nn_command", metavar="TASK", parser_class=type(p))
     ns.required = True
     classify.register(ns)
+    models.register(ns)
     for task in (detect, segment, pose, cloud):
         task.register(ns, type(p))

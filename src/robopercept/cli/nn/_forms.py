@@ -10,17 +10,23 @@ import argparse
 import importlib.util
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
-from robopercept.cli._args import UsageError, image_size, positive_int
+from robopercept.cli._args import UsageError, image_size, positive_int, unit_interval
 from robopercept.errors import InputError
 
 __all__ = [
     "built_in_data_args",
     "check_run_folder_args",
     "images_form_inputs",
+    "note_warning",
+    "prediction_args",
+    "prediction_json",
+    "print_model_line",
     "register_forms",
     "run_folder_args",
     "run_or_model_path",
+    "shipped_help",
 ]
 
 
@@ -124,28 +130,23 @@ def images_form_inputs(
     args: argparse.Namespace,
     kind: str,
     outputs: Callable[[str], list[str]],
-) -> Path:
+) -> str | Path | None:
     """Check the images form of ``nn detect`` / ``nn segment`` / ``nn pose`` and return
-    the model's path: ``--model`` a run folder, a ``model.pt`` or a shipped name of
+    the model argument of the predictor (None or a shipped name as given, else the
+    checkpoint's path): ``--model`` a run folder, a ``model.pt`` or a shipped name of
     ``kind`` (:func:`robopercept.nn.shipped.resolve_model`; without ``--model`` the
     kind's default), ``-o/--out`` or ``--json`` given, every IMAGE present, and no
     output (``outputs(stem)``, names in OUT) over an input."""
-    from robopercept.nn.shipped import BUILD_SHIPPED, DEFAULT_SHIPPED, SHIPPED, resolve_model
+    from robopercept.nn.shipped import SHIPPED, resolve_model
 
-    shipped = SHIPPED[kind]
-    if args.model is None or args.model in shipped:
-        rel = shipped[args.model or DEFAULT_SHIPPED[kind]]
-        try:
-            model_path = resolve_model(kind, args.model)
-        except InputError:
-            raise InputError(
-                f"the shipped model {rel} is not installed: give --model PATH (a run folder "
-                f"or model.pt), or build it from a checkout with: {BUILD_SHIPPED[kind]}"
-            ) from None
+    model: str | Path | None = args.model
+    if args.model is None or args.model in SHIPPED[kind]:
+        resolve_model(kind, args.model)  # says how to build one that is not installed
     else:
         model_path = run_or_model_path(args.model)
         if not model_path.is_file():
             raise UsageError(f"--model: {model_path} does not exist (a run folder or model.pt)")
+        model = model_path
     if not args.out and not args.json:
         raise UsageError("-o/--out: give a folder for the pictures (or --json for results)")
     for name in args.images:
@@ -157,4 +158,86 @@ def images_form_inputs(
                     f"-o/--out: {Path(args.out) / written} would overwrite the input {name}: "
                     "write to another folder"
                 )
-    return model_path
+    return model
+
+
+def shipped_help(kind: str) -> str:
+    """The ``--model`` help of a prediction command: every shipped model of ``kind``
+    with what it learnt from (the model cards; torch-free)."""
+    from robopercept.nn.shipped import DEFAULT_SHIPPED, MODEL_CARDS
+
+    names = [
+        f"{c.name} ({'real' if c.real else 'procedural'} data: {c.domain.split(',')[0]})"
+        for c in MODEL_CARDS.values()
+        if c.kind == kind
+    ]
+    return (
+        f"a model.pt or run folder, or a shipped model: {'; '.join(names)}; default "
+        f"{DEFAULT_SHIPPED[kind]} (robopercept nn models describes them)"
+    )
+
+
+def prediction_args(
+    r: argparse.ArgumentParser, kind: str, *, scores: str | None, tiling: bool
+) -> None:
+    """The model flags of a prediction form: ``--model`` (listing the shipped models of
+    ``kind``), and with ``scores`` (what a score keeps, e.g. "detections")
+    ``--score-thresh`` (default the model's stored threshold) and ``--all-scores``;
+    with ``tiling`` ``--tile`` and ``--overlap``."""
+    r.add_argument("--model", help=shipped_help(kind))
+    if scores:
+        r.add_argument(
+            "--score-thresh",
+            type=unit_interval,
+            default=None,
+            help=f"{scores} kept (default: the threshold stored with the model, chosen on "
+            "its validation images; 0.3 for detect and 0.5 for segment where none is stored)",
+        )
+        r.add_argument("--all-scores", action="store_true", help=f"keep every one of the {scores}")
+    if tiling:
+        r.add_argument(
+            "--tile",
+            type=int,
+            default=None,
+            metavar="PX",
+            help="predict images larger than PX in overlapping PX x PX windows and merge "
+            "them (default: the window the model was trained on, where it stores one; "
+            "0 never tiles)",
+        )
+        r.add_argument(
+            "--overlap",
+            type=int,
+            default=None,
+            metavar="PX",
+            help="pixels shared by neighbouring windows (default a quarter of --tile)",
+        )
+
+
+def print_model_line(args: argparse.Namespace, kind: str) -> str:
+    """Print (unless ``--json``) and return the line naming the model of a prediction
+    run and what it was trained on."""
+    from robopercept.nn.shipped import domain_line
+
+    line = domain_line(kind, args.model)
+    if not args.json:
+        print(line)
+    return line
+
+
+def prediction_json(line: str, warnings: list[str], results: list[Any]) -> str:
+    """The ``--json`` document of a prediction run: the model line, the domain
+    warnings and the per-image results."""
+    import json
+
+    return json.dumps({"model": line, "warnings": warnings, "results": results})
+
+
+def note_warning(args: argparse.Namespace, name: str, warning: str | None, into: list[str]) -> None:
+    """Keep an image's domain warning for ``--json`` (in ``into``) and print it on
+    stderr otherwise."""
+    import sys
+
+    if warning:
+        into.append(f"{name}: {warning}")
+        if not args.json:
+            print(into[-1], file=sys.stderr)

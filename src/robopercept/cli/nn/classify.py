@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import sys
 from typing import Any
 
 from robopercept.cli._args import UsageError, image_output, numbers, positive_float, positive_int
@@ -109,7 +110,12 @@ def register(ns: argparse._SubParsersAction) -> None:
         description="Classify each IMAGE with CHECKPOINT (read grey or colour and resized "
         "as the model was trained). A digits model expects 8x8 light-on-dark digits.",
     )
-    r.add_argument("checkpoint")
+    r.add_argument(
+        "checkpoint",
+        metavar="CHECKPOINT",
+        help="a run folder or its checkpoint, or a shipped classifier: digits (robopercept "
+        "nn models describes it)",
+    )
     r.add_argument("images", nargs="+", metavar="IMAGE")
     r.add_argument("--top-k", type=positive_int, default=3, help="classes per image (default 3)")
     r.add_argument("--device", help="cpu, cuda, ...")
@@ -223,8 +229,11 @@ def run_predict(args: argparse.Namespace) -> int:
     """Run ``robopercept nn predict`` with the parsed ``args``; returns the exit status."""
     _need_torch()
     from robopercept.nn.classification.run import predict
+    from robopercept.nn.shipped import domain_line
 
+    line = domain_line("classify", args.checkpoint)
     preds = predict(args.checkpoint, args.images, top_k=args.top_k, device=args.device)
+    warnings = [f"{p.path}: {p.warning}" for p in preds if p.warning]
     if args.json:
         rows: list[dict[str, Any]] = [
             {
@@ -233,8 +242,11 @@ def run_predict(args: argparse.Namespace) -> int:
             }
             for p in preds
         ]
-        print(json.dumps(rows))
+        print(json.dumps({"model": line, "warnings": warnings, "results": rows}))
         return 0
+    print(line)
+    for w in warnings:
+        print(w, file=sys.stderr)
     width = max(5, *(len(str(p.path)) for p in preds))
     print(f"{'image':<{width}}  rank  class                 probability")
     for p in preds:

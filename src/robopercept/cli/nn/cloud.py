@@ -44,9 +44,12 @@ from pathlib import Path
 from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
     check_run_folder_args,
+    prediction_json,
+    print_model_line,
     register_forms,
     run_folder_args,
     run_or_model_path,
+    shipped_help,
 )
 
 __all__ = ["CLOUD_CLI_MODELS", "register"]
@@ -105,10 +108,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Classify each CLOUD (.ply/.pcd cloud or .off/.ply mesh).",
     )
     r.add_argument("clouds", nargs="+", metavar="CLOUD")
-    r.add_argument(
-        "--model",
-        help="a model.pt or run folder, or a shipped model: pointnet (default) or dgcnn",
-    )
+    r.add_argument("--model", help=shipped_help("cloud"))
     r.add_argument(
         "--segment",
         nargs="?",
@@ -121,7 +121,11 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
     r.add_argument("-o", "--out", help="folder for NAME.png (and NAME_parts.ply)")
     r.add_argument("--device", help="cpu, cuda, ...")
-    r.add_argument("--json", action="store_true", help="print the predictions as JSON")
+    r.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"model": LINE, "warnings": [], "results": [predictions]}',
+    )
     r.add_argument("--quiet", action="store_true")
     return {"train": t, "eval": e, "images": r}
 
@@ -237,6 +241,7 @@ def _clouds(args: argparse.Namespace) -> int:
             raise UsageError(f"CLOUD: {name} does not exist")
     if args.segment and not args.out:
         raise UsageError("--segment: give -o/--out, the folder for NAME_parts.ply")
+    line = print_model_line(args, "cloud")
     model, info = load_cloud_model(_model(args.model, "pointnet"))
     dev = resolve_device(args.device)
     model.to(dev)
@@ -280,5 +285,5 @@ def _clouds(args: argparse.Namespace) -> int:
             for f in row.get("files", []):
                 print(f"  wrote {f}")
     if args.json:
-        print(json.dumps(results))
+        print(prediction_json(line, [], results))
     return 0

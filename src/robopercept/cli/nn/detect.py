@@ -46,11 +46,15 @@ import math
 from pathlib import Path
 from typing import Any
 
-from robopercept.cli._args import UsageError, positive_int, unit_interval
+from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
     built_in_data_args,
     check_run_folder_args,
     images_form_inputs,
+    note_warning,
+    prediction_args,
+    prediction_json,
+    print_model_line,
     register_forms,
     run_folder_args,
 )
@@ -122,16 +126,14 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Detect objects in IMAGE... and draw boxes, labels and scores to OUT/NAME.png.",
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
-    r.add_argument(
-        "--model",
-        help="a model.pt or run folder, or a shipped model: fcos (the default) or faster",
-    )
+    prediction_args(r, "detect", scores="detections", tiling=True)
     r.add_argument("-o", "--out", help="folder for the pictures")
-    r.add_argument(
-        "--score-thresh", type=unit_interval, default=0.3, help="detections kept (default 0.3)"
-    )
     r.add_argument("--device", help="cpu, cuda, ...")
-    r.add_argument("--json", action="store_true", help="print COCO results")
+    r.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"model": LINE, "warnings": [...], "results": [COCO results]}',
+    )
     r.add_argument("--quiet", action="store_true")
     for p in (e, r):  # the views of nn.detection.tta.TTA_VIEWS (torch is not imported here)
         p.add_argument(
@@ -232,18 +234,28 @@ def _images(args: argparse.Namespace) -> int:
     from robopercept.nn.predict import load_image_predictor
 
     model_path = images_form_inputs(args, "detect", lambda stem: [f"{stem}.png"])
+    line = print_model_line(args, "detect")
     predictor = load_image_predictor(
-        "detect", model_path, device=args.device, score_thresh=args.score_thresh, tta=args.tta
+        "detect",
+        model_path,
+        device=args.device,
+        score_thresh=args.score_thresh,
+        all_scores=args.all_scores,
+        tta=args.tta,
+        tile=args.tile,
+        overlap=args.overlap,
     )
     results: list[dict[str, Any]] = []
+    warnings: list[str] = []
     out = Path(args.out) if args.out else None
     for k, name in enumerate(args.images, 1):
         pred = predictor.predict_file(name)
         results += pred.coco_results(k)
+        note_warning(args, name, pred.warning, warnings)
         if out is not None:
             (written,) = pred.write(out, Path(name).stem)
             if not (args.quiet or args.json):
-                print(f"{name}: {len(pred.values['boxes'])} detections -> {written}")
+                print(f"{name}: {len(pred.boxes)} detections -> {written}")
     if args.json:
-        print(json.dumps(results))
+        print(prediction_json(line, warnings, results))
     return 0

@@ -47,6 +47,10 @@ from robopercept.cli.nn._forms import (
     built_in_data_args,
     check_run_folder_args,
     images_form_inputs,
+    note_warning,
+    prediction_args,
+    prediction_json,
+    print_model_line,
     register_forms,
     run_folder_args,
 )
@@ -102,17 +106,17 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Find one person's joints in each IMAGE and write OUT/NAME.png.",
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
-    r.add_argument(
-        "--model",
-        help="a model.pt or run folder, or a shipped model: hrnet (default) or deeppose "
-        "(with its cascade stage)",
-    )
+    prediction_args(r, "pose", scores="joints drawn", tiling=False)
     r.add_argument("-o", "--out", help="folder for the pictures")
     r.add_argument("--lift3d", action="store_true", help="also the 3-D pose (by matching)")
     r.add_argument("--heatmaps", action="store_true", help="also OUT/NAME_heatmaps.png")
     r.add_argument("--no-flip", action="store_true", help="without the flip test")
     r.add_argument("--device", help="cpu, cuda, ...")
-    r.add_argument("--json", action="store_true", help="print keypoints (and 3-D) as JSON")
+    r.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"model": LINE, "warnings": [...], "results": [keypoints (and 3-D)]}',
+    )
     r.add_argument("--quiet", action="store_true")
     return {"train": t, "eval": e, "images": r}
 
@@ -218,25 +222,30 @@ def _images(args: argparse.Namespace) -> int:
             names.append(f"{stem}_3d.png")
         return names
 
-    model_path = images_form_inputs(args, "pose", outputs)
+    model = images_form_inputs(args, "pose", outputs)
+    line = print_model_line(args, "pose")
     predictor = load_image_predictor(
         "pose",
-        model_path,
+        model,
         device=args.device,
+        score_thresh=args.score_thresh,
+        all_scores=args.all_scores,
         flip=not args.no_flip,
         heatmaps=args.heatmaps,
         lift3d=args.lift3d,
     )
     out = Path(args.out) if args.out else None
     results = []
+    warnings: list[str] = []
     for name in args.images:
         pred = predictor.predict_file(name)
         results.append({"image": name, **pred.record()})
+        note_warning(args, name, pred.warning, warnings)
         if out is not None:
             written = pred.write(out, Path(name).stem)
             if not (args.quiet or args.json):
                 mean = float(np.mean(pred.values["scores"]))
                 print(f"{name}: mean joint score {mean:.3f} -> {', '.join(map(str, written))}")
     if args.json:
-        print(json.dumps(results))
+        print(prediction_json(line, warnings, results))
     return 0

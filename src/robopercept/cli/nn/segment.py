@@ -42,11 +42,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from robopercept.cli._args import UsageError, positive_int, unit_interval
+from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
     built_in_data_args,
     check_run_folder_args,
     images_form_inputs,
+    note_warning,
+    prediction_args,
+    prediction_json,
+    print_model_line,
     register_forms,
     run_folder_args,
     run_or_model_path,
@@ -95,15 +99,14 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Segment IMAGE... and write OUT/NAME.png (overlay) and OUT/NAME_labels.png.",
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
-    r.add_argument(
-        "--model", help="a model.pt or run folder, or a shipped model: unet (default) or maskrcnn"
-    )
+    prediction_args(r, "segment", scores="instances", tiling=True)
     r.add_argument("-o", "--out", help="folder for the pictures and label PNGs")
-    r.add_argument(
-        "--score-thresh", type=unit_interval, default=0.5, help="instances kept (default 0.5)"
-    )
     r.add_argument("--device", help="cpu, cuda, ...")
-    r.add_argument("--json", action="store_true", help="print COCO results with RLE masks")
+    r.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"model": LINE, "warnings": [...], "results": [COCO results, RLE masks]}',
+    )
     r.add_argument("--quiet", action="store_true")
     return {"train": t, "eval": e, "images": r}
 
@@ -208,25 +211,31 @@ def _eval(args: argparse.Namespace) -> int:
 def _images(args: argparse.Namespace) -> int:
     from robopercept.nn.predict import load_image_predictor
 
-    model_path = images_form_inputs(
-        args, "segment", lambda stem: [f"{stem}.png", f"{stem}_labels.png"]
-    )
+    model = images_form_inputs(args, "segment", lambda stem: [f"{stem}.png", f"{stem}_labels.png"])
+    line = print_model_line(args, "segment")
     predictor = load_image_predictor(
-        "segment", model_path, device=args.device, score_thresh=args.score_thresh
+        "segment",
+        model,
+        device=args.device,
+        score_thresh=args.score_thresh,
+        all_scores=args.all_scores,
+        tile=args.tile,
+        overlap=args.overlap,
     )
     instance = predictor.instance
     out = Path(args.out) if args.out else None
     results: list[dict[str, Any]] = []
+    warnings: list[str] = []
     for k, name in enumerate(args.images, 1):
         pred = predictor.predict_file(name)
         results += pred.coco_results(k)
+        note_warning(args, name, pred.warning, warnings)
         if out is not None:
             pic, lab = pred.write(out, Path(name).stem)
             if not (args.quiet or args.json):
-                v = pred.values
-                n = len(v["masks"]) if instance else len({int(x) for x in v["labels"].flat})
+                n = len(pred.masks) if instance else len({int(x) for x in pred.labels.flat})
                 what = "instances" if instance else "labels"
                 print(f"{name}: {n} {what} -> {pic}, {lab}")
     if args.json:
-        print(json.dumps(results))
+        print(prediction_json(line, warnings, results))
     return 0

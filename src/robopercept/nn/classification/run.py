@@ -59,6 +59,7 @@ from robopercept.nn.data.datasets import (
     stratified_split,
     to_unit_float,
 )
+from robopercept.nn.shipped import SHIPPED_CLASSIFIERS, shipped_model_path
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import History, TrainConfig
 from robopercept.nn.train.distributed import (
@@ -73,6 +74,8 @@ from robopercept.viz import confusion_picture
 
 __all__ = [
     "BUILTIN_DATA",
+    "SHRINK_LIMIT",
+    "SHRINK_WARNING",
     "Architecture",
     "Prediction",
     "RunEvaluation",
@@ -247,10 +250,22 @@ class TrainResult:
 @dataclass(frozen=True)
 class Prediction:
     """The top classes of one image: ``top`` is ``((class, probability), ...)``,
-    most probable first."""
+    most probable first; ``warning`` says when the image lies outside what the model
+    was trained on (:data:`SHRINK_WARNING`)."""
 
     path: Path
     top: tuple[tuple[str, float], ...]
+    warning: str | None = None
+
+
+#: the domain rule of the classifiers: an image shrunk by more than this factor to the
+#: model's input size lies outside what it learnt (its details are gone)
+SHRINK_LIMIT = 4.0
+#: the warning of :func:`predict_loaded` when the rule holds
+SHRINK_WARNING = (
+    "warning: the model sees {h} x {w} images; this one is {H} x {W}, shrunk {f:.0f} "
+    "times: it may lie outside what the model was trained on"
+)
 
 
 # --------------------------------------------------------------------------- data
@@ -651,8 +666,9 @@ def load_run(
     Parameters
     ----------
     checkpoint : path
-        ``checkpoint.pt`` or ``checkpoint.best.pt`` of a run folder, or the folder
-        itself (its ``checkpoint.best.pt``).
+        ``checkpoint.pt`` or ``checkpoint.best.pt`` of a run folder, the folder itself
+        (its ``checkpoint.best.pt``), or a shipped classifier's name
+        (:data:`~robopercept.nn.shipped.SHIPPED_CLASSIFIERS`: ``"digits"``).
     device : str, optional
         Where to put the model (default: the CPU).
 
@@ -668,6 +684,8 @@ def load_run(
         Missing or unreadable file, no recorded architecture, or weights that do not fit
         the recorded architecture.
     """
+    if isinstance(checkpoint, str) and checkpoint in SHIPPED_CLASSIFIERS:
+        checkpoint = shipped_model_path("classify", checkpoint)
     p = as_path(checkpoint, "the checkpoint (a run's checkpoint.pt or its folder)")
     dev = check_device(device, "device (--device)")
     if p.is_dir():
@@ -873,5 +891,11 @@ def predict_loaded(
         prob = torch.softmax(model(x.to(dev)).float(), 1)[0].cpu()
         values, indices = torch.topk(prob, k)
         top = tuple((arch.classes[int(i)], float(v)) for v, i in zip(values, indices, strict=True))
-        out.append(Prediction(Path(path), top))
+        shrink = max(chw.shape[1] / h, chw.shape[2] / w)
+        warning = (
+            SHRINK_WARNING.format(h=h, w=w, H=chw.shape[1], W=chw.shape[2], f=shrink)
+            if shrink > SHRINK_LIMIT
+            else None
+        )
+        out.append(Prediction(Path(path), top, warning))
     return out

@@ -24,7 +24,7 @@ from robopercept.imaging.io import read_image
 from robopercept.nn.coco.voc import read_voc_xml
 from robopercept.nn.detection.data import DetectionDataset
 
-__all__ = ["DEEPFOREST_IMAGES", "DeepForestTiles", "deepforest_tiles"]
+__all__ = ["DEEPFOREST_IMAGES", "DeepForestTiles", "deepforest_strip", "deepforest_tiles"]
 
 #: the four DeepForest NEON images (file stems); the first is the one cut into tiles
 DEEPFOREST_IMAGES = (
@@ -77,6 +77,92 @@ def _read_deepforest(folder: Any, stem: str) -> tuple[np.ndarray, np.ndarray]:
     boxes = np.array([o.bbox for o in voc.objects], dtype=np.float64).reshape(-1, 4)
     scale = 65535.0 if image.dtype == np.uint16 else 255.0
     return (image.astype(np.float32) / np.float32(scale)), boxes
+
+
+def _check_folder(folder: Any) -> Any:
+    path = as_path(folder, "folder")
+    if not path.is_dir():
+        raise InputError(
+            f"DeepForest folder {str(path)!r} does not exist or is not a folder: pass the "
+            "deepforest_neon folder (e.g. ../shared/data/detection/deepforest_neon) that "
+            f"holds {DEEPFOREST_IMAGES[0]}.png/.xml"
+        )
+    return path
+
+
+def _strip_top(height: int, test_fraction: Any) -> int:
+    test_fraction = check_real(
+        test_fraction, "test_fraction", 0.0, 1.0, low_inclusive=False, high_inclusive=False
+    )
+    return height - math.ceil(test_fraction * height)
+
+
+def _clip_boxes(
+    src: np.ndarray, x: int, y: int, tw: int, th: int, frac: float
+) -> tuple[np.ndarray, int]:
+    """The boxes of ``src`` kept in the window ``(x, y, tw, th)`` (at least ``frac`` of
+    their area inside), clipped and shifted to window coordinates; and the pieces
+    dropped."""
+    area = (src[:, 2] - src[:, 0]) * (src[:, 3] - src[:, 1])
+    ix = np.minimum(src[:, 2], x + tw) - np.maximum(src[:, 0], x)
+    iy = np.minimum(src[:, 3], y + th) - np.maximum(src[:, 1], y)
+    meets = (ix > 0) & (iy > 0)
+    inter = np.where(meets, ix * iy, 0.0)
+    keep = meets & (inter >= frac * area)
+    b = src[keep].copy()
+    b[:, [0, 2]] = np.clip(b[:, [0, 2]], x, x + tw) - x
+    b[:, [1, 3]] = np.clip(b[:, [1, 3]], y, y + th) - y
+    return b, int((meets & ~keep).sum())
+
+
+def deepforest_strip(
+    folder: str | os.PathLike[str],
+    *,
+    test_fraction: float = 0.2,
+    min_area_fraction: float = 0.5,
+) -> DetectionDataset:
+    """The held-out strip of YELL crop2 as one image (2299 x 495 with the defaults):
+    the region :func:`deepforest_tiles` tests on, not cut into tiles, with its VOC boxes
+    kept and clipped by the same rule (at least ``min_area_fraction`` of a box inside
+    the strip).
+
+    Parameters
+    ----------
+    folder : path-like
+        The ``deepforest_neon`` folder.
+    test_fraction : float
+        Height of the strip as a fraction of the image height, in (0, 1).
+    min_area_fraction : float
+        Smallest fraction of a box's area inside the strip, in (0, 1].
+
+    Returns
+    -------
+    DetectionDataset
+        One image (float32 RGB in [0, 1]), class ``"Tree"``, ``meta`` giving the
+        strip's origin in the source image.
+
+    Raises
+    ------
+    InputError
+        No such folder or a parameter out of range.
+    FileFormatError
+        A missing or malformed file.
+    """
+    path = _check_folder(folder)
+    frac = check_real(min_area_fraction, "min_area_fraction", 0.0, 1.0, low_inclusive=False)
+    stem = DEEPFOREST_IMAGES[0]
+    image, src = _read_deepforest(path, stem)
+    h, w = image.shape[:2]
+    top = _strip_top(h, test_fraction)
+    b, _ = _clip_boxes(src, 0, top, w, h - top, frac)
+    return DetectionDataset(
+        [image[top:]],
+        [b],
+        [np.ones(len(b), dtype=np.int64)],
+        ("Tree",),
+        file_names=[f"{stem}_strip_y{top}.png"],
+        meta=[{"source": stem, "origin": (0, top)}],
+    )
 
 
 def deepforest_tiles(
@@ -132,25 +218,15 @@ def deepforest_tiles(
     FileFormatError
         A file is missing or malformed.
     """
-    path = as_path(folder, "folder")
-    if not path.is_dir():
-        raise InputError(
-            f"DeepForest folder {str(path)!r} does not exist or is not a folder: pass the "
-            "deepforest_neon folder (e.g. ../shared/data/detection/deepforest_neon) that "
-            f"holds {DEEPFOREST_IMAGES[0]}.png/.xml"
-        )
+    path = _check_folder(folder)
     tile = check_int(tile, "tile", 64)
     if tile > 2472:
         raise InputError(f"tile must be in [64, 2472] pixels; got {tile}")
-    test_fraction = check_real(
-        test_fraction, "test_fraction", 0.0, 1.0, low_inclusive=False, high_inclusive=False
-    )
     frac = check_real(min_area_fraction, "min_area_fraction", 0.0, 1.0, low_inclusive=False)
     stem = DEEPFOREST_IMAGES[0]
     image, src = _read_deepforest(path, stem)
     h, w = image.shape[:2]
-    strip_top = h - math.ceil(test_fraction * h)
-    area = (src[:, 2] - src[:, 0]) * (src[:, 3] - src[:, 1])
+    strip_top = _strip_top(h, test_fraction)
     parts: dict[bool, dict[str, list[Any]]] = {
         t: {"images": [], "boxes": [], "names": [], "meta": []} for t in (False, True)
     }
@@ -159,15 +235,8 @@ def deepforest_tiles(
         for y in range(top, bottom, tile):
             for x in range(0, w, tile):
                 tw, th = min(tile, w - x), min(tile, bottom - y)
-                ix = np.minimum(src[:, 2], x + tw) - np.maximum(src[:, 0], x)
-                iy = np.minimum(src[:, 3], y + th) - np.maximum(src[:, 1], y)
-                meets = (ix > 0) & (iy > 0)
-                inter = np.where(meets, ix * iy, 0.0)
-                keep = meets & (inter >= frac * area)
-                dropped += int((meets & ~keep).sum())
-                b = src[keep].copy()
-                b[:, [0, 2]] = np.clip(b[:, [0, 2]], x, x + tw) - x
-                b[:, [1, 3]] = np.clip(b[:, [1, 3]], y, y + th) - y
+                b, n = _clip_boxes(src, x, y, tw, th, frac)
+                dropped += n
                 p = parts[is_test]
                 p["images"].append(image[y : y + th, x : x + tw])
                 p["boxes"].append(b)

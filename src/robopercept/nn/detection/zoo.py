@@ -25,11 +25,13 @@ from robopercept.nn.detection.keypoint_rcnn import KeypointRCNN
 from robopercept.nn.detection.localizer import SingleObjectLocalizer
 from robopercept.nn.detection.mask_rcnn import MaskRCNN
 from robopercept.nn.detection.rcnn import RCNN, selective_search_proposals
+from robopercept.nn.detection.thresholds import ScoreThreshold, choose_score_threshold
 from robopercept.nn.train.checkpoint import load_built_model, save_built_model
 
 __all__ = [
     "DETECTORS",
     "build_detector",
+    "calibrate_detector",
     "detect_arrays",
     "load_detector",
     "save_detector",
@@ -212,3 +214,37 @@ def detect_arrays(model: nn.Module, images: Sequence[Any]) -> list[dict[str, Any
             res["keypoints"] = kp
         out.append(res)
     return out
+
+
+def calibrate_detector(model: nn.Module, dataset: Any, iou: float = 0.5) -> ScoreThreshold:
+    """The score threshold ``model`` should ship with, chosen on the validation images
+    of ``dataset``: its eval-mode detections (:func:`detect_arrays`) matched to the
+    true boxes and the F1-best threshold taken
+    (:func:`~robopercept.nn.detection.thresholds.choose_score_threshold`). Store
+    ``.to_dict()`` as the checkpoint's ``calibration``: the predictor keeps detections
+    at or above it and warns on images whose best score falls short.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        A detector of this module.
+    dataset : DetectionDataset
+        Validation images with their boxes and labels.
+    iou : float
+        The IoU a detection needs to count as right.
+
+    Returns
+    -------
+    ScoreThreshold
+    """
+    images = [np.asarray(im) for im in dataset.images]
+    truths = [
+        {"boxes": np.asarray(b), "labels": np.asarray(lab)}
+        for b, lab in zip(dataset.boxes, dataset.labels, strict=True)
+    ]
+    was = model.training
+    model.eval()
+    try:
+        return choose_score_threshold(detect_arrays(model, images), truths, iou)
+    finally:
+        model.train(was)

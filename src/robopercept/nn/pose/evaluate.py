@@ -16,12 +16,13 @@ from torch import nn
 from robopercept._checks import check_bool, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn.coco.evaluate import evaluate_detections
+from robopercept.nn.detection.thresholds import ScoreThreshold, f1_threshold
 from robopercept.nn.pose.inference import pose_data_arrays, predict_keypoints, refine_keypoints
 from robopercept.nn.pose.metrics import bbox_diagonal, pck
 from robopercept.nn.pose.networks import DeepPoseRefiner
 from robopercept.nn.skeleton import Skeleton
 
-__all__ = ["PoseEvaluation", "evaluate_pose"]
+__all__ = ["PoseEvaluation", "evaluate_pose", "joint_threshold"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,3 +105,52 @@ def evaluate_pose(
     ]
     oks = evaluate_detections(data.to_coco(), results, "keypoints", sigmas=sk.sigmas)
     return PoseEvaluation(values, np.asarray(per_joint), oks, pred)
+
+
+def joint_threshold(
+    model: nn.Module,
+    data: Any,
+    *,
+    refiners: Sequence[DeepPoseRefiner] = (),
+    flip: bool = True,
+    alpha: float = 0.1,
+    skeleton: Skeleton | None = None,
+) -> ScoreThreshold:
+    """The joint score threshold a pose network ships with, chosen on validation
+    figures: each predicted joint is an output with its score, right when it lies within
+    ``alpha`` times the figure's box diagonal of the truth (PCK's rule), and the
+    threshold is the F1-best one
+    (:func:`~robopercept.nn.detection.thresholds.f1_threshold`; every joint of every
+    figure is a positive). Joints scoring under it are not drawn.
+
+    Parameters
+    ----------
+    model : nn.Module
+    data : PoseDataset
+        Validation figures.
+    refiners : sequence of DeepPoseRefiner
+    flip : bool
+        The flip test, as at run time.
+    alpha : float
+        The PCK distance, a fraction of the box diagonal.
+    skeleton : Skeleton, optional
+        Default: the data set's.
+
+    Returns
+    -------
+    ScoreThreshold
+        ``iou`` holds ``alpha``; ``match_median`` the median score of the right joints.
+    """
+    x, kp, boxes = pose_data_arrays(data, "data")
+    sk = skeleton if skeleton is not None else getattr(data, "skeleton", None)
+    if not isinstance(sk, Skeleton):
+        raise InputError(f"skeleton must be a Skeleton; got {plain_repr(sk)}")
+    perm = sk.flip_permutation() if check_bool(flip, "flip") else None
+    pred, scores = predict_keypoints(model, x, flip_permutation=perm)
+    if refiners:
+        pred = refine_keypoints(x, pred, refiners)
+    truth = kp.numpy().astype(np.float64)[..., :2]
+    diag = bbox_diagonal(boxes, "xyxy")
+    right = np.linalg.norm(pred - truth, axis=-1) <= alpha * diag[:, None]
+    s = np.asarray(scores, np.float64)
+    return f1_threshold(s.ravel(), right.ravel(), right.size, iou=alpha, images=len(s))

@@ -29,6 +29,7 @@ __all__ = [
     "load_checkpoint",
     "save_built_model",
     "save_checkpoint",
+    "update_checkpoint",
 ]
 
 
@@ -194,3 +195,22 @@ def _renamed(key: str, renames: Mapping[str, str], keys: Mapping[str, Any]) -> s
         if key.startswith(old) and new + key[len(old) :] not in keys:
             return new + key[len(old) :]
     return key
+
+
+def update_checkpoint(path: str | os.PathLike[str], **values: Any) -> Path:
+    """Set plain ``values`` in the checkpoint at ``path`` (its weights unchanged),
+    atomically: e.g. the ``calibration`` chosen on validation after training.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = save_checkpoint(pathlib.Path(tempfile.mkdtemp()) / "c.pt", {"model": {}})
+    >>> _ = update_checkpoint(p, calibration={"score_thresh": 0.4})
+    >>> load_checkpoint(p)["calibration"]
+    {'score_thresh': 0.4}
+    """
+    state = load_checkpoint(path)
+    if not isinstance(state, dict):
+        raise FileFormatError(f"{path}: not a checkpoint dictionary")
+    state.update(values)
+    return save_checkpoint(path, state)

@@ -1,0 +1,320 @@
+r"""The score threshold a detector ships with, chosen on validation images
+(:func:`choose_score_threshold`), and the rule that says an image lies outside the
+model's domain (:func:`domain_warning`).
+
+Choosing the threshold. Every validation detection is matched greedily to the
+ground truth, as COCO's evaluation does at one IoU: per image and class, detections in
+decreasing score take the unmatched true box of highest IoU, if that IoU is at least
+``iou`` (0.5). Sorted by decreasing score over all images, the first :math:`k`
+detections hold :math:`TP_k` matches, so keeping the scores :math:`\ge s_k` gives
+
+.. math::
+
+    P_k = TP_k / k, \qquad R_k = TP_k / G, \qquad F1_k = 2 P_k R_k / (P_k + R_k),
+
+with :math:`G` the true boxes. The threshold is the score :math:`s_k` of the
+:math:`k` with the largest :math:`F1_k` (the highest such score on ties): the operating
+point a detector's user would pick from the validation precision-recall curve when
+misses and false alarms cost the same.
+
+The domain rules. A model's detections on images of its own kind reach the scores of
+its validation matches; on an image of another kind (a street photo for a tree-crown
+model) the best score stays far below. :func:`domain_warning` says so when the image's
+highest score is below half the median score of the validation matches, or when no
+detection reaches the threshold at all. Scores alone miss a confident mistake, so
+:func:`input_warning` also compares the input with what the model was trained on: a
+colour image for a model of grey micrographs (``input_colour == "grey"``: more than 5%
+of the pixels with channels differing by over 0.1 of the full scale), or an image far
+larger than the training canvases (``canvas`` ``(h, w)``: the shorter side over twice
+the canvas's, as a photo for a model of 128 px procedural shapes).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from robopercept._checks import check_real
+from robopercept.errors import InputError
+from robopercept.geometry.boxes import box_iou_matrix
+
+__all__ = [
+    "ScoreThreshold",
+    "choose_score_threshold",
+    "domain_warning",
+    "f1_threshold",
+    "input_warning",
+]
+
+
+@dataclass(frozen=True)
+class ScoreThreshold:
+    """A threshold chosen on validation (:func:`choose_score_threshold`).
+
+    Attributes
+    ----------
+    score_thresh : float
+        Keep detections with ``score >= score_thresh``.
+    f1, precision, recall : float
+        On the validation images at that threshold.
+    match_median : float
+        The median score of the validation detections that matched a true box (the
+        scores a model reaches on its own kind of images; :func:`domain_warning`).
+    iou : float
+        The IoU a match needs.
+    images, truths : int
+        Validation images and true boxes.
+    """
+
+    score_thresh: float
+    f1: float
+    precision: float
+    recall: float
+    match_median: float
+    iou: float
+    images: int
+    truths: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain values (stored in a checkpoint's ``"calibration"``)."""
+        return {k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(self).items()}
+
+
+def _matches(
+    boxes: np.ndarray,
+    labels: np.ndarray,
+    scores: np.ndarray,
+    tb: np.ndarray,
+    tl: np.ndarray,
+    iou: float,
+) -> np.ndarray:
+    """True where a detection (in decreasing score) matches a free true box of its class."""
+    order = np.argsort(-scores, kind="stable")
+    hit = np.zeros(len(scores), bool)
+    used = np.zeros(len(tb), bool)
+    if not len(tb) or not len(boxes):
+        return hit
+    ious = box_iou_matrix(boxes, tb, fmt="xyxy")
+    for i in order:
+        cand = np.where((tl == labels[i]) & ~used & (ious[i] >= iou))[0]
+        if len(cand):
+            j = cand[np.argmax(ious[i, cand])]
+            used[j] = True
+            hit[i] = True
+    return hit
+
+
+def choose_score_threshold(
+    detections: Sequence[Mapping[str, Any]],
+    truths: Sequence[Mapping[str, Any]],
+    iou: float = 0.5,
+) -> ScoreThreshold:
+    """The F1-best score threshold on validation images (module docstring).
+
+    Parameters
+    ----------
+    detections : sequence of dict
+        Per image: ``boxes`` (D, 4) xyxy, ``labels`` (D,), ``scores`` (D,) (what
+        :func:`~robopercept.nn.detection.zoo.detect_arrays` gives).
+    truths : sequence of dict
+        Per image, in the same order: ``boxes`` (G, 4) xyxy and ``labels`` (G,).
+    iou : float in (0, 1]
+        The IoU a match needs.
+
+    Returns
+    -------
+    ScoreThreshold
+
+    Raises
+    ------
+    InputError
+        Lists of different lengths, or no true box at all (nothing to choose on).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> truth = [{"boxes": np.array([[0, 0, 10, 10], [20, 20, 30, 30]]),
+    ...           "labels": np.array([1, 1])}]
+    >>> det = [{"boxes": np.array([[0, 0, 10, 10], [50, 50, 60, 60], [20, 20, 30, 31]]),
+    ...         "labels": np.array([1, 1, 1]), "scores": np.array([0.9, 0.8, 0.6])}]
+    >>> t = choose_score_threshold(det, truth)
+    >>> (t.score_thresh, round(t.f1, 3), t.precision, t.recall)
+    (0.6, 0.8, 0.6666666666666666, 1.0)
+    """
+    iou = check_real(iou, "iou", 1e-9, 1.0)
+    if len(detections) != len(truths):
+        raise InputError(
+            f"detections ({len(detections)} images) and truths ({len(truths)}) must pair up"
+        )
+    hits, scores = [], []
+    n_true = 0
+    for d, t in zip(detections, truths, strict=True):
+        b = np.asarray(d["boxes"], np.float64).reshape(-1, 4)
+        s = np.asarray(d["scores"], np.float64).reshape(-1)
+        lab = np.asarray(d["labels"]).reshape(-1)
+        tb = np.asarray(t["boxes"], np.float64).reshape(-1, 4)
+        n_true += len(tb)
+        hits.append(_matches(b, lab, s, tb, np.asarray(t["labels"]).reshape(-1), iou))
+        scores.append(s)
+    if n_true == 0:
+        raise InputError("the validation images hold no true box: nothing to choose a threshold on")
+    hit = np.concatenate(hits) if hits else np.zeros(0, bool)
+    sc = np.concatenate(scores) if scores else np.zeros(0)
+    return f1_threshold(sc, hit, n_true, iou=iou, images=len(truths))
+
+
+def f1_threshold(
+    scores: np.ndarray, hits: np.ndarray, positives: int, *, iou: float = 0.5, images: int = 0
+) -> ScoreThreshold:
+    """The F1-best threshold of scored outputs of which ``hits`` are right, out of
+    ``positives`` that should be found (module docstring; a detection matched to a
+    true box, or a joint within its PCK distance).
+
+    Parameters
+    ----------
+    scores : (N,) ndarray
+    hits : (N,) bool ndarray
+    positives : int
+        The number of true items (``G``), >= 1.
+    iou : float
+        Recorded in the result (the match rule).
+    images : int
+        Recorded in the result.
+
+    Returns
+    -------
+    ScoreThreshold
+        ``score_thresh`` 1.0 and F1 0 when there is no output.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = f1_threshold(np.array([0.9, 0.8, 0.3, 0.2]), np.array([1, 1, 0, 1], bool), 3)
+    >>> t.score_thresh, round(t.f1, 3)  # all four: P 3/4, R 1; the top two: P 1, R 2/3
+    (0.2, 0.857)
+    """
+    sc = np.asarray(scores, np.float64).reshape(-1)
+    hit = np.asarray(hits, bool).reshape(-1)
+    if sc.shape != hit.shape:
+        raise InputError(f"scores {sc.shape} and hits {hit.shape} must have the same length")
+    if positives < 1:
+        raise InputError("positives must be >= 1: nothing to choose a threshold on")
+    if not len(sc):
+        return ScoreThreshold(1.0, 0.0, 0.0, 0.0, 0.0, iou, images, positives)
+    order = np.argsort(-sc, kind="stable")
+    sc, hit = sc[order], hit[order]
+    # cut only between distinct scores: keeping "score >= s" keeps every tie of s
+    last = np.r_[sc[1:] != sc[:-1], True]
+    tp = np.cumsum(hit)[last]
+    k = np.arange(1, len(sc) + 1)[last]
+    f1 = np.where(tp > 0, 2 * tp / (k + positives), 0.0)
+    best = int(np.flatnonzero(f1 == f1.max())[0])
+    matched = sc[hit]
+    return ScoreThreshold(
+        score_thresh=float(sc[last][best]),
+        f1=float(f1[best]),
+        precision=float(tp[best] / k[best]),
+        recall=float(tp[best] / positives),
+        match_median=float(np.median(matched)) if len(matched) else 0.0,
+        iou=iou,
+        images=images,
+        truths=positives,
+    )
+
+
+def domain_warning(
+    best: float, calibration: Mapping[str, Any] | None, model_name: str, trained_on: str
+) -> str | None:
+    """The one-line warning when an image looks outside a model's domain, else None.
+
+    The rule (module docstring): ``best`` (a detector's highest score on the image, a
+    pose network's median joint score) is below ``calibration["score_thresh"]``, or
+    below half of ``calibration["match_median"]``.
+
+    Parameters
+    ----------
+    best : float
+        The image's score to judge (0 when there is no output).
+    calibration : dict or None
+        :meth:`ScoreThreshold.to_dict` as stored with the model; None (an uncalibrated
+        model) gives no warning.
+    model_name, trained_on : str
+        For the message.
+
+    Returns
+    -------
+    str or None
+
+    Examples
+    --------
+    >>> cal = {"score_thresh": 0.4, "match_median": 0.7}
+    >>> domain_warning(0.9, cal, "trees", "aerial tree crowns") is None
+    True
+    >>> print(domain_warning(0.2, cal, "trees", "aerial tree crowns"))
+    warning: trees scores at most 0.20 here (threshold 0.40, true detections on validation
+    0.70): this input may lie outside what it was trained on (aerial tree crowns)
+    """
+    if not calibration:
+        return None
+    top = float(best)
+    thr = float(calibration["score_thresh"])
+    med = float(calibration.get("match_median", 0.0))
+    if top >= thr and top >= 0.5 * med:
+        return None
+    return (
+        f"warning: {model_name} scores at most {top:.2f} here (threshold {thr:.2f}, true "
+        f"detections on validation {med:.2f}): this input may lie outside what it was "
+        f"trained on ({trained_on})"
+    )
+
+
+def input_warning(
+    image: np.ndarray, info: Mapping[str, Any], model_name: str, trained_on: str
+) -> str | None:
+    """The one-line warning when an input differs from a model's training images in
+    colour or scale (module docstring), else None.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        As given (uint8, uint16 or float in [0, 1]).
+    info : dict
+        The checkpoint's entries: ``input_colour`` ("grey") and ``canvas`` ``(h, w)``
+        where stored.
+    model_name, trained_on : str
+        For the message.
+
+    Returns
+    -------
+    str or None
+
+    Examples
+    --------
+    >>> im = np.zeros((600, 800, 3), np.uint8)
+    >>> print(input_warning(im, {"canvas": [128, 128]}, "fcos", "generated shapes"))
+    warning: fcos was trained on 128 x 128 images and this one is 800 x 600: it may lie
+    outside what it was trained on (generated shapes)
+    >>> im[..., 0] = 255  # a red image for a model of grey micrographs
+    >>> input_warning(im, {"input_colour": "grey"}, "nuclei", "micrographs")[:40]
+    'warning: nuclei was trained on grey imag'
+    """
+    h, w = image.shape[:2]
+    what = None
+    if info.get("input_colour") == "grey" and image.ndim == 3 and image.shape[2] == 3:
+        scale = 255.0 if image.dtype == np.uint8 else 65535.0 if image.dtype == np.uint16 else 1.0
+        x = image.astype(np.float32) / np.float32(scale)
+        spread = x.max(axis=2) - x.min(axis=2)
+        if float((spread > 0.1).mean()) > 0.05:
+            what = "grey images and this one is in colour"
+    canvas = info.get("canvas")
+    if what is None and canvas is not None and min(h, w) > 2 * min(canvas):
+        what = f"{canvas[1]} x {canvas[0]} images and this one is {w} x {h}"
+    if what is None:
+        return None
+    return (
+        f"warning: {model_name} was trained on {what}: it may lie outside what it was "
+        f"trained on ({trained_on})"
+    )
