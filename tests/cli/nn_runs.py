@@ -99,3 +99,13 @@ def stop_after_first_epoch(argv: Sequence[str], out: Path, sig: int, timeout: fl
     finally:
         if proc.stderr is not None:
             proc.stderr.close()
+
+
+def run_cli(args: list[str]) -> tuple[int, str]:
+    """``robopercept ARGS`` in this process: its exit status and its stdout."""
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = main(args)
+    return rc, buf.getvalue()

@@ -310,3 +310,14 @@ def test_load_predictor_names_the_loader_of_other_kinds(tmp_path):
         load_predictor("trees", kind="segment")
     assert load_predictor(shipped_model_path("segment", "maskrcnn")).kind == "segment"
     assert load_predictor(shipped_model_path("pose", "hrnet")).kind == "pose"
+
+
+def test_device_auto_is_cuda_when_torch_sees_a_gpu_else_cpu(images, capsys):
+    want = "cuda" if torch.cuda.is_available() else "cpu"
+    p = load_image_predictor("detect", "fcos", device="auto")
+    assert next(p.model.parameters()).device.type == want
+    argv = ["nn", "detect", str(images["shapes"]), "--device", "auto", "--json"]
+    assert main(argv) == 0
+    assert json.loads(capsys.readouterr().out)["results"]
+    with pytest.raises(InputError, match="'auto', 'cpu', 'cuda'"):
+        load_image_predictor("detect", "fcos", device="gpu")

@@ -150,7 +150,8 @@ def check_device(device: Any, name: str = "device") -> torch.device | None:
     Parameters
     ----------
     device : str, torch.device or None
-        ``"cpu"``, ``"cuda"``, ``"cuda:1"``, ``"mps"``.
+        ``"auto"`` (CUDA when torch sees a GPU, else the CPU), ``"cpu"``, ``"cuda"``,
+        ``"cuda:1"``, ``"mps"``.
     name : str
         The parameter (and CLI flag) for the message.
 
@@ -169,16 +170,20 @@ def check_device(device: Any, name: str = "device") -> torch.device | None:
     --------
     >>> check_device("cpu")
     device(type='cpu')
-    >>> check_device("gpu")
+    >>> check_device("gpu")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    robopercept.errors.InputError: device must be 'cpu', 'cuda', 'cuda:N' or 'mps'; got 'gpu'
+    robopercept.errors.InputError: device must be 'auto', 'cpu', 'cuda', ... got 'gpu'
+    >>> check_device("auto").type in ("cpu", "cuda")  # CUDA when torch sees a GPU
+    True
     """
     import torch
 
     if device is None:
         return None
-    choices = "'cpu', 'cuda', 'cuda:N' or 'mps'"
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    choices = "'auto', 'cpu', 'cuda', 'cuda:N' or 'mps'"
     if isinstance(device, torch.device):
         dev = device
     elif isinstance(device, str):

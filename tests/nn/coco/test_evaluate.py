@@ -386,3 +386,13 @@ def assert_self_evaluation_perfect(ds: CocoDataset, with_pycocotools: bool = Tru
         np.testing.assert_allclose(ours.stats[start:], ref.stats[start:], rtol=0, atol=TOL)
         np.testing.assert_allclose(ours.precision, ref.eval["precision"], rtol=0, atol=TOL)
         np.testing.assert_allclose(ours.recall, ref.eval["recall"], rtol=0, atol=TOL)
+
+
+def test_segm_with_no_result_scores_like_bbox_with_none():
+    # a model that found nothing (one epoch on three photos): AP 0, not an error about
+    # "results[0]" (issue 46); the same numbers as the box evaluation of no result
+    gt = one_image([{"bbox": [1, 1, 4, 4], "segmentation": [[1, 1, 5, 1, 5, 5, 1, 5]]}])
+    segm = evaluate_detections(coco_from_dict(gt), [], "segm").stats
+    bbox = evaluate_detections(coco_from_dict(gt), [], "bbox").stats
+    np.testing.assert_array_equal(segm, bbox)
+    assert segm[1] in (0.0, -1.0)

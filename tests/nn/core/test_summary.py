@@ -115,7 +115,7 @@ def test_bad_shape() -> None:
     ("kwargs", "match"),
     [
         ({"model": None}, r"model must be a torch.nn.Module"),
-        ({"device": ""}, r"device must be 'cpu', 'cuda', 'cuda:N' or 'mps'; got ''"),
+        ({"device": ""}, r"device must be 'auto', 'cpu', 'cuda', 'cuda:N' or 'mps'; got ''"),
         ({"device": "CPU"}, r"device must be .* got 'CPU'"),
         ({"device": ["cpu"]}, r"device must be .* got \['cpu'\]"),
         ({"device": "xla"}, r"device 'xla' is not available here"),

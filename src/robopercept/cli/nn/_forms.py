@@ -18,6 +18,7 @@ from robopercept.errors import InputError
 __all__ = [
     "built_in_data_args",
     "check_run_folder_args",
+    "device_arg",
     "images_form_inputs",
     "note_warning",
     "prediction_args",
@@ -100,7 +101,7 @@ def built_in_data_args(
         help=f"{generated}: WxH (default 128x128)",
     )
     p.add_argument("--seed", type=int, default=0, help="data, split and weights (default 0)")
-    p.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")
+    device_arg(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
@@ -241,3 +242,13 @@ def note_warning(args: argparse.Namespace, name: str, warning: str | None, into:
         into.append(f"{name}: {warning}")
         if not args.json:
             print(into[-1], file=sys.stderr)
+
+
+def device_arg(p: argparse.ArgumentParser) -> None:
+    """``--device auto|cpu|cuda|cuda:N`` (``auto``, like leaving it out: CUDA when torch
+    sees a GPU, else the CPU; :func:`robopercept.nn._guards.check_device`)."""
+    p.add_argument(
+        "--device",
+        metavar="DEVICE",
+        help="auto, cpu, cuda or cuda:N (default: cuda when torch sees a GPU, else cpu)",
+    )

@@ -15,7 +15,7 @@ import sys
 from typing import Any
 
 from robopercept.cli._args import UsageError, image_output, numbers, positive_float, positive_int
-from robopercept.cli.nn._forms import check_run_folder_args, run_folder_args
+from robopercept.cli.nn._forms import check_run_folder_args, device_arg, run_folder_args
 from robopercept.errors import InputError
 
 __all__ = ["MODEL_NAMES", "register"]
@@ -77,7 +77,7 @@ def register(ns: argparse._SubParsersAction) -> None:
         default=(0.7, 0.15, 0.15),
         help="train,validation,test shares (default 0.7,0.15,0.15)",
     )
-    t.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")
+    device_arg(t)
     t.add_argument(
         "--nproc",
         type=positive_int,
@@ -100,7 +100,7 @@ def register(ns: argparse._SubParsersAction) -> None:
     e.add_argument("checkpoint")
     e.add_argument("--data", required=True, help="digits, lfw, or an image folder")
     e.add_argument("-o", "--output", type=image_output, default="confusion.png")
-    e.add_argument("--device", help="cpu, cuda, ...")
+    device_arg(e)
     e.add_argument("--json", action="store_true", help="print the figures as JSON")
     e.set_defaults(func=run_eval)
 
@@ -118,7 +118,7 @@ def register(ns: argparse._SubParsersAction) -> None:
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
     r.add_argument("--top-k", type=positive_int, default=3, help="classes per image (default 3)")
-    r.add_argument("--device", help="cpu, cuda, ...")
+    device_arg(r)
     r.add_argument("--json", action="store_true", help="print the predictions as JSON")
     r.set_defaults(func=run_predict)
 

@@ -44,6 +44,7 @@ from pathlib import Path
 from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
     check_run_folder_args,
+    device_arg,
     prediction_json,
     print_model_line,
     register_forms,
@@ -73,7 +74,7 @@ def _data_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--points", type=positive_int, default=1024, help="per cloud (default 1024)")
     p.add_argument("--seed", type=int, default=0, help="data, split and weights (default 0)")
-    p.add_argument("--device", help="cpu, cuda, ... (default: cuda when present)")
+    device_arg(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
@@ -120,7 +121,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("--points", type=positive_int, help="sample this many (default: the model's)")
     r.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
     r.add_argument("-o", "--out", help="folder for NAME.png (and NAME_parts.ply)")
-    r.add_argument("--device", help="cpu, cuda, ...")
+    device_arg(r)
     r.add_argument(
         "--json",
         action="store_true",

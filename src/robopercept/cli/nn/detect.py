@@ -50,6 +50,7 @@ from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
     built_in_data_args,
     check_run_folder_args,
+    device_arg,
     images_form_inputs,
     note_warning,
     prediction_args,
@@ -128,7 +129,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("images", nargs="+", metavar="IMAGE")
     prediction_args(r, "detect", scores="detections", tiling=True)
     r.add_argument("-o", "--out", help="folder for the pictures")
-    r.add_argument("--device", help="cpu, cuda, ...")
+    device_arg(r)
     r.add_argument(
         "--json",
         action="store_true",

@@ -46,6 +46,7 @@ from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
     built_in_data_args,
     check_run_folder_args,
+    device_arg,
     images_form_inputs,
     note_warning,
     prediction_args,
@@ -111,7 +112,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("--lift3d", action="store_true", help="also the 3-D pose (by matching)")
     r.add_argument("--heatmaps", action="store_true", help="also OUT/NAME_heatmaps.png")
     r.add_argument("--no-flip", action="store_true", help="without the flip test")
-    r.add_argument("--device", help="cpu, cuda, ...")
+    device_arg(r)
     r.add_argument(
         "--json",
         action="store_true",

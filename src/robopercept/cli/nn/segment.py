@@ -46,6 +46,7 @@ from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
     built_in_data_args,
     check_run_folder_args,
+    device_arg,
     images_form_inputs,
     note_warning,
     prediction_args,
@@ -66,9 +67,9 @@ SEGMENT_MODELS = ("unet", "fcn8s", "fcn16s", "fcn32s", "naive", "maskrcnn")
 def _data_args(p: argparse.ArgumentParser) -> None:
     built_in_data_args(
         p,
-        "procedural shapes, real-digit canvases, or the real nuclei (with --images-dir)",
-        "nuclei: the stardist_nuclei folder",
-        ("shapes", "digits", "nuclei"),
+        "shapes (procedural), digits (real-digit canvases), nuclei (real, with "
+        "--images-dir), or your own COCO instances JSON (polygon or RLE masks)",
+        "nuclei: the stardist_nuclei folder; COCO: the images' folder (default: the JSON's)",
     )
 
 
@@ -101,7 +102,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     r.add_argument("images", nargs="+", metavar="IMAGE")
     prediction_args(r, "segment", scores="instances", tiling=True)
     r.add_argument("-o", "--out", help="folder for the pictures and label PNGs")
-    r.add_argument("--device", help="cpu, cuda, ...")
+    device_arg(r)
     r.add_argument(
         "--json",
         action="store_true",

@@ -371,13 +371,16 @@ def _mask_ious(
     flattened into one array with each group's offset, and each detection's mask
     area."""
     sizes = {i.id: (i.height, i.width) for i in gt.images}
-    if not gt.segmentations or any(sg is None for sg in gt.segmentations):
+    # (no annotation or no result: nothing to check; the IoUs are empty)
+    if len(gt.ann_ids) and (not gt.segmentations or any(sg is None for sg in gt.segmentations)):
         k = 0 if not gt.segmentations else [sg is None for sg in gt.segmentations].index(True)
         raise InputError(
             f"annotation id {int(gt.ann_ids[k])} has no segmentation: iou_type='segm' "
             "needs polygons or an RLE on every ground-truth annotation"
         )
-    if not res.segmentations or any(sg is None for sg in res.segmentations):
+    if len(res.image_ids) and (
+        not res.segmentations or any(sg is None for sg in res.segmentations)
+    ):
         k = 0 if not res.segmentations else [sg is None for sg in res.segmentations].index(True)
         raise InputError(
             f"results[{k}] has no segmentation: iou_type='segm' needs an RLE mask "

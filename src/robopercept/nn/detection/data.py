@@ -55,7 +55,7 @@ from robopercept._checks import as_path, check_bool, check_int, check_numeric, p
 from robopercept.errors import InputError
 from robopercept.imaging import read_image
 from robopercept.nn.coco.dataset import CocoDataset, coco_from_dict, read_coco_json
-from robopercept.nn.coco.rle import rle_encode
+from robopercept.nn.coco.rle import annotation_to_rle, rle_decode, rle_encode
 from robopercept.nn.data.datasets import stratified_split, to_unit_float
 from robopercept.viz.detection import detections_grid
 
@@ -316,7 +316,10 @@ class DetectionDataset:
 
     @classmethod
     def from_coco(
-        cls, path: str | os.PathLike[str], images_dir: str | os.PathLike[str] | None = None
+        cls,
+        path: str | os.PathLike[str],
+        images_dir: str | os.PathLike[str] | None = None,
+        masks: bool = False,
     ) -> DetectionDataset:
         """A COCO ground-truth JSON file and its images as a detection set (what
         ``robopercept nn detect train|eval --data FILE.json`` reads).
@@ -337,6 +340,11 @@ class DetectionDataset:
             The COCO JSON file (:func:`~robopercept.nn.coco.dataset.read_coco_json`).
         images_dir : path, optional
             The folder of the images (default: the JSON file's folder).
+        masks : bool
+            Also each annotation's mask: its ``segmentation`` (polygons or RLE)
+            rasterized at the image's size
+            (:func:`~robopercept.nn.coco.rle.annotation_to_rle`, pycocotools' rule);
+            what ``robopercept nn segment train --data FILE.json`` reads.
 
         Returns
         -------
@@ -346,8 +354,9 @@ class DetectionDataset:
         ------
         InputError
             ``path`` is not a file, ``images_dir`` is not a folder, a listed image is
-            missing from it, or the file lists no images (the messages name the command
-            line's ``--data`` and ``--images-dir``).
+            missing from it, the file lists no images, or ``masks`` and an annotation
+            without a ``segmentation`` (the messages name the command line's ``--data``
+            and ``--images-dir``).
         FileFormatError
             The file is not COCO JSON, or an image is unreadable.
 
@@ -379,7 +388,8 @@ class DetectionDataset:
         if not coco.images:
             raise InputError(f"--data {p}: no images in the COCO file")
         label = {c.id: k + 1 for k, c in enumerate(coco.categories)}
-        images, boxes, labels = [], [], []
+        images, boxes, labels, all_masks = [], [], [], []
+        segs = coco.segmentations or (None,) * len(coco.image_ids)
         for im in coco.images:
             f = root / im.file_name
             if not f.is_file():
@@ -389,11 +399,23 @@ class DetectionDataset:
             b = coco.boxes[sel]
             boxes.append(np.hstack((b[:, :2], b[:, :2] + b[:, 2:])))
             labels.append([label[int(c)] for c in coco.category_ids[sel]])
+            if masks:
+                h, w = images[-1].shape[:2]
+                one = []
+                for j in np.flatnonzero(sel):
+                    if segs[j] is None:
+                        raise InputError(
+                            f"--data {p}: annotation {j + 1} of image {im.id} has no "
+                            "segmentation: a segmenter needs masks"
+                        )
+                    one.append(rle_decode(annotation_to_rle(segs[j], h, w)).astype(bool))
+                all_masks.append(np.array(one, bool).reshape(-1, h, w))
         return cls(
             images,
             boxes,
             labels,
             [c.name for c in coco.categories],
+            masks=all_masks if masks else None,
             image_ids=[im.id for im in coco.images],
             file_names=[im.file_name for im in coco.images],
         )

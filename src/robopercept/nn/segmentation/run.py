@@ -62,6 +62,7 @@ from robopercept._checks import as_path, check_choice, check_int, plain_repr
 from robopercept.errors import InputError
 from robopercept.imaging import write_image
 from robopercept.nn._guards import check_module
+from robopercept.nn.detection.data import DetectionDataset
 from robopercept.nn.detection.mask_rcnn import MaskRCNN
 from robopercept.nn.detection.train import (
     check_detection_dataset,
@@ -222,8 +223,16 @@ class SegmentTrainResult:
 
 
 # --------------------------------------------------------------------------- data, model
+def _is_coco(data: Any) -> bool:
+    return isinstance(data, (str, os.PathLike)) and str(data).lower().endswith(".json")
+
+
 def _check_data_args(data: Any, images: Any, images_dir: Any) -> tuple[str, int]:
     """The cheap checks of :func:`load_segmentation_data` (no data is made)."""
+    if _is_coco(data):
+        if not Path(data).is_file():
+            raise InputError(f"--data: COCO file {data} does not exist")
+        return "coco", check_int(images, "--images")
     name = check_choice(data, "--data", BUILTIN_SEGMENTATION_DATA)
     if name == "nuclei":
         folder = None if images_dir is None else as_path(images_dir, "--images-dir")
@@ -246,14 +255,18 @@ def load_segmentation_data(
     seed: int = 0,
     images_dir: str | os.PathLike[str] | None = None,
 ) -> SegmentationSets:
-    """The built-in segmentation data ``data`` split into training and validation sets
-    (:func:`~robopercept.nn.segmentation.data.segmentation_sets`: 80 % / 20 % of
-    ``images`` seeded canvases, or the nuclei's three training quadrants and the
-    held-out one), with the checks of ``nn segment``'s flags.
+    """The segmentation data ``data`` split into training and validation sets: a
+    built-in set (:func:`~robopercept.nn.segmentation.data.segmentation_sets`: 80 % /
+    20 % of ``images`` seeded canvases, or the nuclei's three training quadrants and the
+    held-out one), or a COCO instances JSON file with its images (your own data:
+    :meth:`~robopercept.nn.detection.data.DetectionDataset.from_coco` with the masks,
+    split 80 % / 20 % by image with ``seed``, neither part empty), with the checks of
+    ``nn segment``'s flags.
 
     Parameters
     ----------
-    data : {"shapes", "digits", "nuclei"}
+    data : {"shapes", "digits", "nuclei"} or path
+        A built-in name, or a ``.json`` COCO file (polygons or RLE masks).
     images : int
         shapes / digits: canvases (at least 2: one to train on, one to validate).
     size : (width, height)
@@ -261,7 +274,8 @@ def load_segmentation_data(
     seed : int
         shapes / digits: the canvases and the split.
     images_dir : path, optional
-        nuclei: the ``stardist_nuclei`` folder (``img2d.tif``, ``mask2d.tif``).
+        nuclei: the ``stardist_nuclei`` folder (``img2d.tif``, ``mask2d.tif``); a COCO
+        file: its images' folder (default: the file's folder).
 
     Returns
     -------
@@ -288,6 +302,11 @@ def load_segmentation_data(
     robopercept.errors.InputError: --images: give at least 2 (a training and a validation image)
     """
     name, n = _check_data_args(data, images, images_dir)
+    if name == "coco":
+        full = DetectionDataset.from_coco(data, images_dir, masks=True)
+        train, val = full.split((0.8, 0.2), rng=seed)
+        source = {"data": str(data), "images_dir": None if images_dir is None else str(images_dir)}
+        return SegmentationSets(train, val, full.classes, {**source, "seed": seed})
     return segmentation_sets(name, n, size, seed, images_dir)
 
 
@@ -553,6 +572,13 @@ def train_run(
         else:
             if name == "unet":
                 settings["depth"] = _UNET_DEPTH
+            sizes = {im.shape[:2] for im in (*train.images, *val.images)}
+            if len(sizes) > 1:
+                raise InputError(
+                    f"--data: a semantic network trains on images of one size; these have "
+                    f"{len(sizes)} ({', '.join(f'{w}x{h}' for h, w in sorted(sizes))}): use "
+                    "--task instance (Mask R-CNN takes any size), or resize the images"
+                )
             torch.manual_seed(cfg.seed)  # the initial weights
             net = build_segmenter(name, len(sets.classes) + 1, **settings)
             hist = train_segmenter(
