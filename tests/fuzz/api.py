@@ -3783,3 +3783,9 @@ SKIP.update(
         "(MODEL_CARDS); model_card and domain_line, which read it, are fuzzed",
     }
 )
+VALID.update(
+    {
+        "nn.train.distributed.SyncBatchNorm": {"num_features": 3},
+        "nn.train.distributed.sync_batchnorm": {"model": TINY_NET},
+    }
+)

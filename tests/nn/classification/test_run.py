@@ -141,7 +141,7 @@ def test_ctrl_c_keeps_the_checkpoint_and_writes_the_history(tmp_path, monkeypatc
 @pytest.mark.parametrize(
     ("call", "match"),
     [
-        (lambda p: load_run(p, device="CPU"), r"device \(--device\) must be 'cpu', 'cuda'"),
+        (lambda p: load_run(p, device="CPU"), r"device \(--device\) must be 'auto', 'cpu', 'cuda'"),
         (lambda p: load_run(p, device=" cpu "), r"got ' cpu '"),
         (lambda p: load_run(p, device=["cpu"]), r"device \(--device\) must be"),
         (lambda p: load_run(p, device=3), r"device \(--device\) must be"),

@@ -205,7 +205,7 @@ _DATA = _blobs(12)
         (lambda: TrainConfig(nesterov="yes"), r"nesterov must be True or False"),
         (lambda: TrainConfig(amp="always"), r"amp \('auto', True or False\)"),
         (lambda: TrainConfig(seed=2**64), r"seed \(--seed\) must be below 2\*\*64"),
-        (lambda: TrainConfig(device="gpu"), r"device \(--device\) must be 'cpu', 'cuda'"),
+        (lambda: TrainConfig(device="gpu"), r"device \(--device\) must be 'auto', 'cpu', 'cuda'"),
         (lambda: TrainConfig(patience=0), r"patience \(or None\) must be >= 1"),
         (lambda: TrainConfig(lr_multipliers=[1]), r"lr_multipliers must be a dict"),
         (lambda: TrainConfig(unfreeze_at={1: "head"}), r"unfreeze_at must be a dict"),

@@ -83,7 +83,20 @@ def register(ns: argparse._SubParsersAction) -> None:
         type=positive_int,
         default=1,
         help="processes (DistributedDataParallel; --batch-size is the global batch, "
-        "a multiple of N; default 1)",
+        "a multiple of N; default 1): the model one process trains, batch norm over the "
+        "global batch",
+    )
+    t.add_argument(
+        "--dropout",
+        type=float,
+        default=None,
+        metavar="P",
+        help="dropout before the classifier, in [0, 1) (default: the model's, 0.2)",
+    )
+    t.add_argument(
+        "--per-process-bn",
+        action="store_true",
+        help="with --nproc N: batch-norm statistics of each process's share only",
     )
     run_folder_args(t)
     t.add_argument("--json", action="store_true", help="print metrics.json")
@@ -178,6 +191,10 @@ def run_train(args: argparse.Namespace) -> int:
         "overwrite": args.overwrite,
         "progress": not (args.quiet or args.json),
     }
+    if args.per_process_bn:
+        kwargs["sync_batchnorm"] = False
+    if args.dropout is not None:
+        kwargs["model_kwargs"] = {"dropout": args.dropout}
     env = torchrun_env()
     rank = 0 if env is None else env[0]
     if args.nproc > 1 or env is not None:  # DDP (nn.train.distributed)

@@ -372,6 +372,7 @@ def train_run(
     overwrite: bool = False,
     progress: bool = True,
     distributed: bool = False,
+    sync_batchnorm: bool = True,
 ) -> TrainResult:
     """Train ``model`` on ``data`` and write the run folder ``out_dir`` (module docstring).
 
@@ -416,6 +417,10 @@ def train_run(
         trains with ``distributed=True``; rank 0 alone evaluates
         the test split and writes the run folder, then sends the result to the other
         ranks, which wait for it (every rank returns the same :class:`TrainResult`).
+    sync_batchnorm : bool
+        With ``distributed``: batch norm over the whole global batch (the default: the
+        model one process would train); False keeps each process's statistics.
+        ``metrics.json`` records it and the process count (``nproc``).
 
     Returns
     -------
@@ -470,6 +475,7 @@ def train_run(
             architecture=arch.to_json(),
             progress=progress,
             distributed=distributed,
+            sync_batchnorm=sync_batchnorm,
         )
     except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the last epoch's history.csv too
         if ckpt.exists() and _rank(distributed) == 0:
@@ -494,6 +500,8 @@ def train_run(
                 std,
                 augment,
                 (len(train), len(val)),
+                nproc=dist.get_world_size(),
+                sync_batchnorm=sync_batchnorm,
             )
         dist.broadcast_object_list(box, src=0)
         return cast(TrainResult, box[0])
@@ -523,6 +531,8 @@ def _finish_run(
     std: np.ndarray,
     augment: bool,
     sizes: tuple[int, int],
+    nproc: int = 1,
+    sync_batchnorm: bool = True,
 ) -> TrainResult:
     """Evaluate the best weights on the test split and write the run folder."""
     test_ev = _run_evaluation(net, test, cfg.device)
@@ -539,7 +549,9 @@ def _finish_run(
         "split": {"train": sizes[0], "validation": sizes[1], "test": len(test)},
         "normalization": {"mean": np.asarray(mean).tolist(), "std": np.asarray(std).tolist()},
         "augment": augment,
-        "config": asdict(cfg),
+        "nproc": nproc,
+        "batch_norm": "global batch" if sync_batchnorm or nproc == 1 else "per process",
+        "config": {**asdict(cfg), "nproc": nproc},
         "classes": list(arch.classes),
         "architecture": asdict(arch),
     }

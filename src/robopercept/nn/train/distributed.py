@@ -13,17 +13,18 @@ group, or, when the process was started by ``torchrun`` (the environment holds `
 runs its trainer through :func:`run_ranks`. Every rank builds the same model (same
 seed) and joins a process group (backend gloo on the CPU, nccl when the device is CUDA:
 :func:`rank_device`); :func:`~robopercept.nn.train.fit.fit` wraps the model in
-:class:`~torch.nn.parallel.DistributedDataParallel` and draws each rank's shard with a
-:class:`~torch.utils.data.DistributedSampler` (shuffled with the run's seed,
-``set_epoch`` every epoch).
+:class:`~torch.nn.parallel.DistributedDataParallel`, swaps its batch norms for
+:class:`SyncBatchNorm` (statistics of the global batch), and every rank draws the global
+batches of one process (the same seeded shuffle) and runs its share of each.
 
 The global batch stays the one asked for: each of the N processes takes
 ``batch_size / N`` images per step and DDP averages the gradients, so one step sees
 ``batch_size`` images as on one process, and the learning rate is left unchanged (the
 learning rate scales linearly with the global batch, which does not change). The batch
-size must therefore be a multiple of N (:func:`check_world_batch`). Batch-norm layers
-keep per-process statistics (over ``batch_size / N`` images), as torch's DDP does by
-default: runs on 1 and N processes agree closely but not bit for bit.
+size must therefore be a multiple of N (:func:`check_world_batch`). Batch norm takes the
+global batch's statistics (:class:`SyncBatchNorm`), so runs on 1 and N processes of a
+model without dropout agree to float rounding (``nn train --per-process-bn`` keeps each
+process's own statistics, torch DDP's default).
 
 Rank 0 alone validates, evaluates the test split and writes the run folder (checkpoints,
 history, curves, metrics, confusion matrix); the other ranks wait for it. The process
@@ -52,7 +53,15 @@ from robopercept._checks import check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn.train.config import TrainConfig
 
-__all__ = ["check_world_batch", "free_port", "rank_device", "run_ranks", "torchrun_env"]
+__all__ = [
+    "SyncBatchNorm",
+    "check_world_batch",
+    "free_port",
+    "rank_device",
+    "run_ranks",
+    "sync_batchnorm",
+    "torchrun_env",
+]
 
 #: the environment variables torchrun sets for each worker (all of them: a torchrun run)
 TORCHRUN_VARIABLES = ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")
@@ -360,3 +369,123 @@ def _spawn(fn: Callable[..., Any], args: tuple[Any, ...], job: dict[str, Any]) -
                     p.kill()
                     p.join()
         return pickle.loads(Path(job["result"]).read_bytes())
+
+
+# ------------------------------------------------------------------ batch norm
+class SyncBatchNorm(torch.nn.modules.batchnorm._BatchNorm):
+    r"""Batch normalization whose training statistics are those of the *global* batch
+    (every process's share together), on any device: the CPU processes of ``nn train
+    --nproc N`` (gloo) as well as GPUs. Torch's own ``SyncBatchNorm`` refuses CPU
+    tensors.
+
+    In training, each process sums its share, :math:`s = \sum x`, :math:`q = \sum x^2`
+    and the count :math:`n` per channel; an all-reduce
+    (``torch.distributed.nn.functional.all_reduce``, which carries the gradient back
+    through the sum) gives the global :math:`S, Q, N`, then
+    :math:`\mu = S / N`, :math:`\sigma^2 = Q / N - \mu^2` (biased, as BatchNorm
+    normalizes) and :math:`y = \gamma (x - \mu) / \sqrt{\sigma^2 + \epsilon} + \beta`.
+    The running variance takes the unbiased :math:`\sigma^2 N / (N - 1)`, as
+    ``torch.nn.BatchNorm`` does. Without an initialized process group, or in eval mode,
+    it is a plain batch norm. The state-dict keys are BatchNorm's.
+
+    Examples
+    --------
+    >>> bn = SyncBatchNorm(3)
+    >>> x = torch.randn(4, 3, 5, 5)
+    >>> ref = torch.nn.BatchNorm2d(3)
+    >>> bool(torch.allclose(bn(x), ref(x), atol=1e-6))  # one process: BatchNorm2d
+    True
+    """
+
+    def _check_input_dim(self, input: torch.Tensor) -> None:
+        if input.dim() < 2:
+            raise InputError(f"SyncBatchNorm expects (N, C, ...) input; got {tuple(input.shape)}")
+
+    def forward(self, input: torch.Tensor) -> torch.Tensor:
+        import torch.distributed as dist
+
+        self._check_input_dim(input)
+        if not (self.training and dist.is_available() and dist.is_initialized()):
+            return super().forward(input)
+        from torch.distributed.nn.functional import all_reduce
+
+        dims = [0, *range(2, input.dim())]
+        x = input.float()
+        n_local = x.numel() // x.shape[1]
+        stats = torch.cat(
+            [
+                x.sum(dims),
+                (x * x).sum(dims),
+                torch.full((1,), float(n_local), dtype=x.dtype, device=x.device),
+            ]
+        )
+        total = all_reduce(stats)
+        c = x.shape[1]
+        n = total[2 * c]
+        mean = total[:c] / n
+        var = (total[c : 2 * c] / n - mean * mean).clamp_min(0)
+        shape = [1, c] + [1] * (input.dim() - 2)
+        y = (x - mean.view(shape)) / torch.sqrt(var.view(shape) + self.eps)
+        if self.affine:
+            y = y * self.weight.view(shape) + self.bias.view(shape)
+        if self.track_running_stats and self.running_mean is not None:
+            with torch.no_grad():
+                assert self.running_var is not None and self.num_batches_tracked is not None
+                self.num_batches_tracked.add_(1)
+                m = (
+                    1.0 / float(self.num_batches_tracked)
+                    if self.momentum is None
+                    else float(self.momentum)
+                )
+                unbiased = var * n / (n - 1).clamp_min(1)
+                self.running_mean.mul_(1 - m).add_(mean.detach(), alpha=m)
+                self.running_var.mul_(1 - m).add_(unbiased.detach(), alpha=m)
+        return y.to(input.dtype)
+
+
+def sync_batchnorm(model: torch.nn.Module) -> Callable[[], None]:
+    """Replace every batch-norm layer of ``model`` (in place) by a :class:`SyncBatchNorm`
+    sharing its parameters and statistics (the same tensors); return the function that
+    puts the original layers back, trained (what
+    :func:`~robopercept.nn.train.fit.fit` does around a distributed run).
+
+    Examples
+    --------
+    >>> net = torch.nn.Sequential(torch.nn.Conv2d(1, 2, 3), torch.nn.BatchNorm2d(2))
+    >>> undo = sync_batchnorm(net)
+    >>> type(net[1]).__name__
+    'SyncBatchNorm'
+    >>> undo()
+    >>> type(net[1]).__name__
+    'BatchNorm2d'
+    """
+    swapped: list[tuple[torch.nn.Module, str, torch.nn.Module, torch.nn.Module]] = []
+    for parent in list(model.modules()):
+        for name, child in list(parent.named_children()):
+            if isinstance(child, torch.nn.modules.batchnorm._BatchNorm) and not isinstance(
+                child, SyncBatchNorm
+            ):
+                sync = SyncBatchNorm(
+                    child.num_features,
+                    child.eps,
+                    child.momentum,  # type: ignore[arg-type]
+                    child.affine,
+                    child.track_running_stats,
+                )
+                # the very same parameters and buffers (updated in place): the optimizer
+                # and the original layer see every step
+                for key in ("weight", "bias"):
+                    if getattr(child, key, None) is not None:
+                        setattr(sync, key, getattr(child, key))
+                for key in ("running_mean", "running_var", "num_batches_tracked"):
+                    sync._buffers[key] = child._buffers.get(key)
+                sync.train(child.training)
+                setattr(parent, name, sync)
+                swapped.append((parent, name, child, sync))
+
+    def undo() -> None:
+        for parent, name, child, sync in swapped:
+            child.train(sync.training)
+            setattr(parent, name, child)
+
+    return undo

@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -34,6 +35,7 @@ from robopercept.nn.train.config import (
     TrainConfig,
     resolve_device,
 )
+from robopercept.nn.train.distributed import sync_batchnorm as sync_bn_layers
 from robopercept.nn.train.loop import LoopResult, train_loop
 
 __all__ = ["Evaluation", "evaluate", "fit"]
@@ -226,6 +228,7 @@ def fit(
     architecture: str = "",
     progress: bool = True,
     distributed: bool = False,
+    sync_batchnorm: bool = True,
 ) -> History:
     """Train ``model`` on ``train`` (items ``(image (C, H, W), label)``), validating on
     ``val`` after each epoch; return the :class:`History`.
@@ -251,13 +254,20 @@ def fit(
         This process is one rank of a data-parallel run (a ``torch.distributed`` process
         group is initialized; :mod:`robopercept.nn.train.distributed` sets it up): the model is
         wrapped in :class:`~torch.nn.parallel.DistributedDataParallel` (gradients
-        averaged over the ranks), each rank draws its shard of the training set through
-        a :class:`~torch.utils.data.DistributedSampler` (shuffled with ``config.seed``,
-        ``set_epoch`` every epoch) in batches of ``batch_size / world_size``, so the
-        global batch and the learning rate are those of one process; the training
-        figures are summed over the ranks, rank 0 validates and sends its figures to the
-        others (one early-stopping decision), and only rank 0 writes checkpoints and
-        shows the progress bar. False (the default): the single-process loop, unchanged.
+        averaged over the ranks); every rank draws the global batches of one process
+        (the same seeded shuffle, so every image is seen once per epoch, none repeated)
+        and runs its contiguous share of each (a last batch that does not divide evenly
+        gives some ranks one image fewer, their loss weighed by their share), so the
+        gradient, the global batch and the learning rate are those of one process; the
+        training figures are summed over the ranks, rank 0 validates and sends its
+        figures to the others (one early-stopping decision), and only rank 0 writes
+        checkpoints and shows the progress bar. False (the default): the single-process
+        loop, unchanged.
+    sync_batchnorm : bool
+        With ``distributed``: batch norm takes the statistics of the whole global batch
+        (:class:`~robopercept.nn.train.distributed.SyncBatchNorm`, swapped in for the
+        run and back after), so 2 processes train the model 1 process would; False keeps
+        each process's own statistics (``nn train --per-process-bn``).
 
     Returns
     -------
@@ -287,6 +297,7 @@ def fit(
     if resume and checkpoint is None:
         raise InputError("resume needs the checkpoint to resume from")
     distributed = check_bool(distributed, "distributed")
+    sync_batchnorm = check_bool(sync_batchnorm, "sync_batchnorm")
     rank, world = _ranks(cfg) if distributed else (0, 1)
     dev = resolve_device(cfg.device)
     # one process and rank 0 draw as before; the other ranks' dropout differs from rank 0's
@@ -300,22 +311,20 @@ def fit(
         )
     n_classes = _n_outputs(model, torch.as_tensor(x0)[None].float(), dev)
     shuffle = torch.Generator().manual_seed(cfg.seed)
-    sampler: Any = None
     net: nn.Module = model  # what runs forward and backward: the model or its DDP wrapper
+    # every process draws the same global batches as one process would (the same
+    # seeded shuffle) and runs its contiguous share of each: every image once per epoch
+    loader = DataLoader(train, batch_size=cfg.batch_size, shuffle=True, generator=shuffle)
+    undo_sync: Callable[[], None] | None = None
     if distributed:
         from torch.nn.parallel import DistributedDataParallel
-        from torch.utils.data import DistributedSampler
 
-        sampler = DistributedSampler(
-            train, num_replicas=world, rank=rank, shuffle=True, seed=cfg.seed
-        )
-        loader = DataLoader(train, batch_size=cfg.batch_size // world, sampler=sampler)
+        if sync_batchnorm:
+            undo_sync = sync_bn_layers(model)
         net = DistributedDataParallel(
             model, device_ids=[dev.index] if dev.type == "cuda" and dev.index is not None else None
         )
         progress = progress and rank == 0
-    else:
-        loader = DataLoader(train, batch_size=cfg.batch_size, shuffle=True, generator=shuffle)
     opt = _optimizer(model, cfg)
     sched = _scheduler(opt, cfg, len(loader))
     hist = History()
@@ -327,21 +336,28 @@ def fit(
             for name, param in model.named_parameters():
                 if name.startswith(prefix):
                     param.requires_grad_(True)
-        if sampler is not None:
-            sampler.set_epoch(epoch)
         hist.lr.append(float(opt.param_groups[0]["lr"]))
 
     def step(xy: Any, epoch: int, b: int) -> torch.Tensor:
         x, y = xy[0].to(dev, torch.float32), xy[1].to(dev, torch.long)
         _check_batch(x, y, n_classes)
+        weight = 1.0
+        if distributed:  # this rank's share; DDP averages, so weigh by the share's size
+            n_global = len(y)
+            share = torch.tensor_split(torch.arange(n_global), world)[rank]
+            x, y = x[share], y[share]
+            weight = len(y) * world / n_global
         with _autocast(dev, cfg.amp):
             logits = net(x)
-            loss = nn.functional.cross_entropy(logits.float(), y)
+            if len(y):
+                loss = nn.functional.cross_entropy(logits.float(), y)
+            else:  # a last batch smaller than the world: this rank only joins the sums
+                loss = logits.float().sum() * 0.0
         if bool(torch.isfinite(loss)):
             figures[0] += loss.item() * len(y)
             figures[1] += int((logits.argmax(1) == y).sum())
             figures[2] += len(y)
-        return loss
+        return loss * weight if distributed else loss
 
     def end_epoch(epoch: int, seconds: float) -> None:
         total, correct, count = figures
@@ -426,4 +442,7 @@ def fit(
     except KeyboardInterrupt:
         hist.stopped = "interrupted"
         raise
+    finally:
+        if undo_sync is not None:
+            undo_sync()
     return hist
