@@ -162,12 +162,13 @@ def test_train_eval_predict_on_a_small_real_mesh_folder(tmp_path):
 
 @pytest.mark.realdata
 def test_a_mesh_folder_too_small_to_split_names_the_smallest_count(tmp_path, capsys):
-    # ModelNet10 here holds one training mesh per class: a validation tenth would leave
-    # one cloud to train on, which batch norm cannot learn from
+    # ModelNet10 here holds one training mesh per class: the validation split takes one
+    # of the two, leaving one cloud to train on, which batch norm cannot learn from
     folder = data_path("pointcloud_cls", "ModelNet10")
     argv = ["nn", "cloud", "train", "--data", str(folder), "-o", str(tmp_path / "r")]
-    assert main(argv) == 2  # a --data value that cannot work, as every bad flag value
+    assert main(argv) == 1
     err = capsys.readouterr().err
     errors = [line for line in err.splitlines() if "error:" in line]
-    assert len(errors) == 1 and "hold 2 clouds; training needs at least 3" in errors[0]
+    assert len(errors) == 1 and "1 cloud left to train on" in errors[0]
+    assert "training needs at least 2" in errors[0]
     assert not (tmp_path / "r" / "model.pt").exists()

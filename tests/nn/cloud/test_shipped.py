@@ -104,7 +104,7 @@ def test_cli_classifies_every_real_modelnet_mesh(tmp_path):
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         rc = main(["nn", "cloud", *map(str, meshes), "--json"])
-    rows = json.loads(buf.getvalue())
+    rows = json.loads(buf.getvalue())["results"]
     assert rc == 0 and len(rows) == len(meshes)
     for row in rows:
         assert row["class"] in SHAPE_CLASSES

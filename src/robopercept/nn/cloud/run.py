@@ -136,8 +136,8 @@ def cloud_sets(
     Raises
     ------
     InputError
-        Not a data name or folder; a folder too small to split (fewer than 4 clouds, or
-        than 3 in the ModelNet layout's train folders: the message gives the count).
+        Not a data name or folder; fewer clouds than splits (the message gives the
+        count).
     """
     shapes = check_count(shapes, "shapes", 1, 1_000_000)
     n_points = check_count(n_points, "n_points", 1, 1 << 20)
@@ -160,23 +160,11 @@ def cloud_sets(
     if has_split:
         full = read_cloud_folder(root, n_points, split="train", rng=seed, progress=progress)
         test = read_cloud_folder(root, n_points, split="test", rng=seed, progress=progress)
-        _check_enough(full, 3, f"{data}: its train folders")
         train, val = full.split((0.9, 0.1), rng=seed)
         return CloudSets(train, val, test, str(root))
     full = read_cloud_folder(root, n_points, rng=seed, progress=progress)
-    _check_enough(full, 4, f"{data} and its class folders")
     train, val, test = full.split((0.8, 0.1, 0.1), rng=seed)
     return CloudSets(train, val, test, str(root))
-
-
-def _check_enough(data: Any, least: int, where: str) -> None:
-    """Refuse a folder too small to split: every split needs one cloud and training
-    two (batch norm learns from two clouds or more)."""
-    if len(data) < least:
-        raise InputError(
-            f"{where} hold {len(data)} clouds; training needs at least {least} (two to "
-            f"train on, as batch norm needs, and one for each held-out split): add clouds"
-        )
 
 
 # ----------------------------------------------------------------------------- runs
@@ -373,6 +361,12 @@ def train_run(
     out = ckpt.parent
     sets = _load_sets(name, shapes, n_points, seed, progress)
     train, val, test = sets.train, sets.val, sets.test
+    if len(train) < 2:  # batch norm learns from two clouds or more
+        raise InputError(
+            f"--data {name}: {len(train)} cloud left to train on after the held-out "
+            "splits; training needs at least 2 (batch norm learns from two clouds or "
+            "more): add clouds"
+        )
     segment = task == "segment"
     if progress:
         print(
