@@ -351,9 +351,12 @@ NO_PICTURE: dict[str, str] = {
     "docs/nn.md (the train forms of nn detect, segment, pose and cloud: "
     "docs/detection.md, docs/segmentation.md, docs/pose.md, docs/pointcloud_dl.md).",
     "nn eval": "scores a trained classifier (a checkpoint of `nn train`) and writes its "
-    "confusion matrix; no classifier is shipped.",
-    "nn predict": "needs a checkpoint of `nn train` (no classifier is shipped) and prints classes.",
+    "confusion matrix.",
+    "nn predict": "prints the classes of 8 x 8 digits (the shipped `digits` classifier) or "
+    "of images for a checkpoint of `nn train`.",
     "nn summary": "prints a model's layer table.",
+    "nn models": "prints the shipped models' cards (training data, inputs, figure); "
+    "nothing to draw.",
 }
 
 

@@ -301,6 +301,10 @@ def input_warning(
     >>> input_warning(im, {"input_colour": "grey"}, "nuclei", "micrographs")[:40]
     'warning: nuclei was trained on grey imag'
     """
+    if not isinstance(info, Mapping):
+        raise InputError(f"info must be a dict of entries; got {type(info).__name__}")
+    if not isinstance(image, np.ndarray) or image.ndim not in (2, 3):
+        raise InputError("image must be an (H, W) or (H, W, 3) array")
     h, w = image.shape[:2]
     what = None
     if info.get("input_colour") == "grey" and image.ndim == 3 and image.shape[2] == 3:

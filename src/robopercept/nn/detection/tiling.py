@@ -219,6 +219,8 @@ def detect_tiled(
     >>> d["boxes"].round(1).tolist()
     [[45.0, 45.0, 55.0, 55.0], [125.0, 45.0, 135.0, 55.0]]
     """
+    if not callable(detect):
+        raise InputError(f"detect must be a function of a window; got {type(detect).__name__}")
     if not isinstance(image, np.ndarray) or image.ndim != 3 or image.shape[2] != 3:
         raise InputError("image must be an (H, W, 3) RGB array")
     tile, overlap = check_tiling(tile, overlap)
@@ -284,6 +286,8 @@ def segment_tiled(
     >>> bool((labels == (image > 1000)).all())
     True
     """
+    if not callable(segment):
+        raise InputError(f"segment must be a function of a window; got {type(segment).__name__}")
     if not isinstance(image, np.ndarray) or image.ndim not in (2, 3):
         raise InputError("image must be an (H, W) or (H, W, C) array")
     tile, overlap = check_tiling(tile, overlap)

@@ -237,6 +237,12 @@ def calibrate_detector(model: nn.Module, dataset: Any, iou: float = 0.5) -> Scor
     -------
     ScoreThreshold
     """
+    model = check_module(model)
+    if not all(hasattr(dataset, a) for a in ("images", "boxes", "labels")):
+        raise InputError(
+            f"dataset must be a DetectionDataset (images with boxes and labels); got "
+            f"{plain_repr(dataset)}"
+        )
     images = [np.asarray(im) for im in dataset.images]
     truths = [
         {"boxes": np.asarray(b), "labels": np.asarray(lab)}

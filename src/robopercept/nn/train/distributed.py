@@ -459,6 +459,8 @@ def sync_batchnorm(model: torch.nn.Module) -> Callable[[], None]:
     >>> type(net[1]).__name__
     'BatchNorm2d'
     """
+    if not isinstance(model, torch.nn.Module):
+        raise InputError(f"model must be a torch.nn.Module; got {plain_repr(model)}")
     swapped: list[tuple[torch.nn.Module, str, torch.nn.Module, torch.nn.Module]] = []
     for parent in list(model.modules()):
         for name, child in list(parent.named_children()):
