@@ -532,8 +532,7 @@ class ImagePredictor:
         nms = float(getattr(base, "nms_thresh", 0.5))
         return detect_tiled(one, image, self.tile, self.overlap, nms)
 
-    def _warning(self, scores: np.ndarray) -> str | None:
-        best = float(np.max(scores)) if len(scores) else 0.0
+    def _warning(self, best: float) -> str | None:
         return domain_warning(best, self.info.get("calibration"), self.name, self.trained_on)
 
     def _network_input(self, image: np.ndarray) -> np.ndarray:
@@ -567,7 +566,7 @@ class ImagePredictor:
                 shown,
                 self.classes,
                 {k: v[keep] for k, v in d.items()},
-                warning=seen or self._warning(d["scores"]),
+                warning=seen or self._warning(float(d["scores"].max(initial=0.0))),
             )
         if self.kind == "segment":
             if self._tiled(image):
@@ -597,7 +596,7 @@ class ImagePredictor:
             values,
             list(sk.joints),
             sk,
-            warning=seen or self._warning(np.array([np.median(res.scores)])),
+            warning=seen or self._warning(float(np.median(res.scores))),
             joint_thresh=self.score_thresh,
         )
 

@@ -124,22 +124,6 @@ _SHAPES_DOMAIN = "RGB images of the generated shapes, objects 16-60 px"
 _NUCLEI_DOMAIN = "grey fluorescence microscopy of cell nuclei, nuclei about 10-30 px across"
 
 
-def _card(
-    name: str,
-    kind: str,
-    file: str,
-    network: str,
-    classes: tuple[str, ...],
-    real: bool,
-    data: str,
-    domain: str,
-    tile: int | None,
-    figure: str,
-    build: str,
-) -> ModelCard:
-    return ModelCard(name, kind, file, network, classes, real, data, domain, tile, figure, build)
-
-
 _SHIPPED_MODELS = (
     "python -m benchmarks.shipped_models --only {} --seeds 0 --threads {} "
     "--save src/robopercept/data"
@@ -149,7 +133,7 @@ _SHIPPED_MODELS = (
 MODEL_CARDS: dict[str, ModelCard] = {
     c.name: c
     for c in (
-        _card(
+        ModelCard(
             "trees",
             "detect",
             "data/detector_fcos_trees.pt",
@@ -164,7 +148,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "the other sites in docs/detection.md",
             _SHIPPED_MODELS.format("trees", 2),
         ),
-        _card(
+        ModelCard(
             "fcos",
             "detect",
             "data/detector_fcos_shapes.pt",
@@ -178,7 +162,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "python -m benchmarks.detection_figures --only shapes-fcos-ema --seeds 0 "
             "--save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "faster",
             "detect",
             "data/detector_faster_shapes.pt",
@@ -192,7 +176,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "python -m benchmarks.detection_figures --only shapes-faster --seeds 0 "
             "--save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "nuclei",
             "segment",
             "data/segmenter_unet_nuclei.pt",
@@ -205,7 +189,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "foreground IoU 0.90, instance F1@0.5 0.88 on the held-out quadrant",
             _SHIPPED_MODELS.format("nuclei", 1),
         ),
-        _card(
+        ModelCard(
             "nuclei-maskrcnn",
             "segment",
             "data/segmenter_maskrcnn_nuclei.pt",
@@ -218,7 +202,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "mask AP50 0.86 on the held-out quadrant",
             _SHIPPED_MODELS.format("nuclei-maskrcnn", 1),
         ),
-        _card(
+        ModelCard(
             "unet",
             "segment",
             "data/segmenter_unet_shapes.pt",
@@ -232,7 +216,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "python -m benchmarks.segmentation_figures --only shapes-unet --seeds 0 "
             "--save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "maskrcnn",
             "segment",
             "data/segmenter_maskrcnn_shapes.pt",
@@ -246,7 +230,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "python -m benchmarks.segmentation_figures --only shapes-maskrcnn --seeds 0 "
             "--save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "hrnet",
             "pose",
             "data/pose_hrnet_figures.pt",
@@ -259,7 +243,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "PCKh@0.5 in docs/pose.md",
             "python -m benchmarks.pose_figures --only hrnet --seeds 0 --save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "deeppose",
             "pose",
             "data/pose_deeppose_figures.pt",
@@ -273,7 +257,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "python -m benchmarks.pose_figures --only deeppose --seeds 0 "
             "--save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "pointnet",
             "cloud",
             "data/cloud_pointnet_shapes.pt",
@@ -287,7 +271,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "python -m benchmarks.cloud_figures --only pointnet --seeds 0 "
             "--save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "dgcnn",
             "cloud",
             "data/cloud_dgcnn_shapes.pt",
@@ -300,7 +284,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "accuracy in docs/pointnet.md",
             "python -m benchmarks.cloud_figures --only dgcnn --seeds 0 --save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "pointnet-parts",
             "cloud",
             "data/cloud_pointnet_parts.pt",
@@ -314,7 +298,7 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "python -m benchmarks.cloud_figures --only pointnet-parts --seeds 0 "
             "--save src/robopercept/data",
         ),
-        _card(
+        ModelCard(
             "digits",
             "classify",
             "data/classifier_digits.pt",
