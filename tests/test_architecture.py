@@ -588,6 +588,7 @@ NN_TORCH_FREE: tuple[str, ...] = (
             "coco.results",
             "coco.evaluate",
             "coco.voc",
+            "coco.folders",
             "data.fonts",
             "segmentation.metrics",
             "pose.metrics",

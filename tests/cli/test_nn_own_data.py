@@ -1,17 +1,20 @@
 """Training on a user's own small data, end to end (issue 46, item 6): the labelme
-VOC instances (3 PASCAL VOC photos, 12 polygon instances, exported as COCO JSON) through
-``nn detect`` and ``nn segment`` train -> eval -> predict. One epoch of a narrow
+VOC instances (3 PASCAL VOC photos, 12 polygon instances, as labelme files, a VOC
+segmentation folder and a COCO JSON export) through ``nn detect`` and ``nn segment``
+train -> eval -> predict. One epoch of a narrow
 network: the point is the path from a user's files to a prediction, not the figure."""
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 pytest.importorskip("torch")
 
 from robopercept.cli.main import main
+from robopercept.imaging import write_image
 from tests.cli.nn_runs import run_cli
 from tests.conftest import data_path
 
@@ -20,35 +23,55 @@ pytestmark = [pytest.mark.realdata, pytest.mark.usefixtures("torch_one_thread")]
 
 @pytest.fixture(scope="module")
 def labelme():
-    root = data_path("detection", "labelme_voc_instances", "coco")
-    return root / "annotations.json", sorted(map(str, (root / "JPEGImages").glob("*.jpg")))
+    root = data_path("detection", "labelme_voc_instances")
+    forms = {
+        "coco": root / "coco" / "annotations.json",
+        "labelme": root / "data_annotated",
+        "voc": root / "voc",
+    }
+    return forms, sorted(map(str, (root / "coco" / "JPEGImages").glob("*.jpg")))
 
 
 @pytest.mark.parametrize(
-    ("task", "train_args"),
+    ("task", "train_args", "train_on", "eval_on"),
     [
-        ("detect", ["--model", "faster", "--width", "4"]),
-        ("segment", ["--task", "instance", "--width", "4"]),
+        ("detect", ["--model", "faster", "--width", "4"], "labelme", "coco"),
+        ("segment", ["--task", "instance", "--width", "4"], "voc", "labelme"),
     ],
 )
-def test_coco_file_train_eval_predict(task, train_args, labelme, tmp_path):
-    coco, photos = labelme
+def test_train_eval_predict_on_each_form(task, train_args, train_on, eval_on, labelme, tmp_path):
+    """Train on one form of the annotations, score on another (the classes matched by
+    name: the COCO file and the VOC folder list all 20 VOC classes, the labelme files
+    only the 6 they use), predict on the photos."""
+    forms, photos = labelme
     out = tmp_path / "run"
-    argv = ["nn", task, "train", "--data", str(coco), *train_args, "--epochs", "1"]
+    argv = ["nn", task, "train", "--data", str(forms[train_on]), *train_args, "--epochs", "1"]
     rc, _ = run_cli([*argv, "--batch-size", "2", "-o", str(out), "--quiet"])
     assert rc == 0 and (out / "model.pt").is_file() and (out / "metrics.json").is_file()
     info = json.loads((out / "metrics.json").read_text())
-    assert info["data"] == str(coco)
-    rc, text = run_cli(["nn", task, "eval", str(out), "--data", str(coco), "--json"])
-    assert rc == 0 and json.loads(text)["images"] >= 1
+    assert info["data"] == str(forms[train_on])
+    rc, text = run_cli(["nn", task, "eval", str(out), "--data", str(forms[eval_on]), "--json"])
+    assert rc == 0 and json.loads(text)["images"] == 3  # the whole set, not a split
     rc, text = run_cli(["nn", task, *photos, "--model", str(out), "-o", str(tmp_path / "o")])
     assert rc == 0 and text.splitlines()[0].startswith(f"model: {out}")
     assert len(list((tmp_path / "o").glob("*.png"))) >= len(photos)
 
 
+def test_boxes_cannot_train_a_segmenter(tmp_path, capsys):
+    write_image(tmp_path / "a.png", np.zeros((8, 10, 3), np.uint8))
+    (tmp_path / "a.xml").write_text(
+        "<annotation><filename>a.png</filename><size><width>10</width><height>8</height>"
+        "</size><object><name>t</name><bndbox><xmin>1</xmin><ymin>2</ymin><xmax>5</xmax>"
+        "<ymax>6</ymax></bndbox></object></annotation>"
+    )
+    argv = ["nn", "segment", "train", "--data", str(tmp_path), "--task", "instance"]
+    assert main([*argv, "-o", str(tmp_path / "r"), "--quiet"]) == 2
+    assert "Pascal-VOC XML files hold boxes, not masks" in capsys.readouterr().err
+
+
 def test_a_semantic_network_on_images_of_several_sizes_says_what_to_do(labelme, tmp_path, capsys):
-    coco, _ = labelme
-    argv = ["nn", "segment", "train", "--data", str(coco), "--epochs", "1"]
+    forms, _ = labelme
+    argv = ["nn", "segment", "train", "--data", str(forms["coco"]), "--epochs", "1"]
     assert main([*argv, "-o", str(tmp_path / "r"), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "trains on images of one size" in err and "--task instance" in err

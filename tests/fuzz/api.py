@@ -3789,3 +3789,57 @@ VALID.update(
         "nn.train.distributed.sync_batchnorm": {"model": TINY_NET},
     }
 )
+
+
+def _labelme_folder(p: Path) -> None:
+    """A labelme folder: one 10 x 8 image and its file with one rectangle."""
+    from robopercept.imaging import write_image
+
+    p.mkdir()
+    write_image(p / "a.png", np.zeros((8, 10, 3), np.uint8))
+    _labelme_file(p / "a.json")
+
+
+def _labelme_file(p: Path) -> None:
+    doc = {"imagePath": "a.png", "imageHeight": 8, "imageWidth": 10, "shapes": [
+        {"label": "cat", "points": [[1, 2], [5, 6]], "shape_type": "rectangle", "group_id": None}
+    ]}  # fmt: skip
+    p.write_text(json.dumps(doc))
+
+
+def _voc_masks_folder(p: Path) -> None:
+    """A VOC segmentation folder: one 8 x 6 image with one instance of class 15."""
+    from robopercept.imaging import write_image
+
+    for d in ("SegmentationObject", "SegmentationClass", "JPEGImages"):
+        (p / d).mkdir(parents=True)
+    obj = np.zeros((6, 8), np.uint8)
+    obj[1:4, 2:6] = 1
+    write_image(p / "SegmentationObject" / "a.png", obj)
+    write_image(p / "SegmentationClass" / "a.png", obj * 15)
+    write_image(p / "JPEGImages" / "a.png", np.zeros((6, 8, 3), np.uint8))
+
+
+def labelme_value() -> Any:
+    """A list of one LabelmeAnnotation (a 4 x 4 square labelled cat)."""
+    from robopercept.nn.coco.folders import LabelmeAnnotation, LabelmeShape
+
+    sq = np.array([[0.0, 0], [4, 0], [4, 4], [0, 4]])
+    return [LabelmeAnnotation("a.png", 10, 8, (LabelmeShape("cat", sq, None, "polygon"),))]
+
+
+FIXTURES.update(
+    {
+        "labelme.json": _labelme_file,
+        "labelme_folder": _labelme_folder,
+        "voc_masks": _voc_masks_folder,
+    }
+)
+VALID.update(
+    {
+        "nn.coco.folders.read_labelme_json": {"path": Fixture("labelme.json")},
+        "nn.coco.folders.labelme_to_coco": {"annotations": _b("tests.fuzz.api:labelme_value")},
+        "nn.coco.folders.read_voc_segmentation": {"folder": Fixture("voc_masks")},
+        "nn.coco.folders.read_annotations": {"path": Fixture("labelme_folder")},
+    }
+)

@@ -26,6 +26,7 @@ from robopercept.imaging.filters import (
     sobel,
 )
 from robopercept.imaging.io import (
+    IMAGE_EXTENSIONS,
     SnapshotVideoWriter,
     VideoReader,
     VideoWriter,
@@ -41,6 +42,7 @@ from robopercept.imaging.segmentation import felzenszwalb, grid_edges
 from robopercept.imaging.warp import remap, transform_points, warp_perspective
 
 __all__ = [
+    "IMAGE_EXTENSIONS",
     "BlobFeatures",
     "SnapshotVideoWriter",
     "VideoReader",

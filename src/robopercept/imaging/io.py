@@ -48,6 +48,7 @@ except ImportError:  # pragma: no cover - a platform without isal wheels
     _inflate_lib, _inflate_errors = zlib, (zlib.error,)
 
 __all__ = [
+    "IMAGE_EXTENSIONS",
     "SnapshotVideoWriter",
     "VideoReader",
     "VideoWriter",
@@ -58,7 +59,8 @@ __all__ = [
     "write_image",
 ]
 
-_IMAGE_EXTS = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".ppm", ".pgm", ".pnm"}
+#: the image file extensions :func:`read_image` and :func:`write_image` take (any case)
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm")
 #: containers that take the H.264 stream :class:`VideoWriter` encodes
 _VIDEO_EXTS = {".mp4", ".m4v", ".mov", ".mkv", ".avi"}
 
@@ -88,7 +90,7 @@ def check_image_path(path: str | os.PathLike[str]) -> Path:
     >>> check_image_path("edges.PNG").name
     'edges.PNG'
     """
-    return check_extension(path, _IMAGE_EXTS, "an image")
+    return check_extension(path, set(IMAGE_EXTENSIONS), "an image")
 
 
 def check_video_path(path: str | os.PathLike[str]) -> Path:

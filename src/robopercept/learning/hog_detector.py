@@ -50,6 +50,7 @@ from robopercept.errors import FileFormatError, InputError, RoboperceptError
 from robopercept.features.hog import hog, hog_windows
 from robopercept.geometry.boxes import box_iou_matrix, greedy_nms
 from robopercept.imaging.color import rgb_to_gray
+from robopercept.imaging.io import IMAGE_EXTENSIONS
 from robopercept.learning._base import RandomStateLike, random_generator, renamed_rng
 from robopercept.learning.persist import read_npz
 from robopercept.learning.svm import LinearSVC
@@ -69,7 +70,7 @@ __all__ = [
 ]
 
 #: image files :func:`train_detector_from_folders` reads (other files are ignored)
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm")
+IMAGE_SUFFIXES = IMAGE_EXTENSIONS
 
 # scikit-image pictures without a human face: hard negatives for the face model
 NEGATIVE_PICTURES = ("coffee", "rocket", "coins", "moon", "page", "text", "brick", "grass",

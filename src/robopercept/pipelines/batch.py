@@ -47,6 +47,7 @@ from typing import Any
 
 from robopercept.errors import InputError
 from robopercept.fileio import atomic_write
+from robopercept.imaging.io import IMAGE_EXTENSIONS
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -87,7 +88,7 @@ REQUIRED = {"stereo": ("max_disparity",), "nn-predict": ("model",)}
 #: the manifest's file name inside ``OUT``
 MANIFEST = "batch.json"
 #: files an image job takes from a folder
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
+IMAGE_SUFFIXES = IMAGE_EXTENSIONS
 #: the file stems of a stereo pair folder's left and right images, the first pair
 #: present wins: ``left``/``right``, Middlebury 2014 ``im0``/``im1``, Middlebury
 #: 2001/2003 ``im2``/``im6``, Middlebury 2005/2006 ``view1``/``view5``

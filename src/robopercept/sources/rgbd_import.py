@@ -63,7 +63,7 @@ from robopercept._checks import (
 )
 from robopercept.errors import FileFormatError, InputError
 from robopercept.geometry import CameraIntrinsics
-from robopercept.imaging.io import read_image
+from robopercept.imaging.io import IMAGE_EXTENSIONS, read_image
 from robopercept.sources.frames import RGBDFrame
 from robopercept.sources.tum import (
     associate_timestamps,
@@ -121,7 +121,6 @@ ASSOCIATION_FILES = ("associations.txt", "associate.txt", "association.txt", "as
 
 _COLOR_DIRS = ("color", "rgb", "colour")
 _COLOR_WORDS = ("color", "rgb", "colour")
-_IMAGE_EXTS = {".png", ".pgm", ".ppm", ".pnm", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp"}
 _DEPTH_STEM = re.compile(r"^(?P<key>.*?)[_\-.]?depth$", re.IGNORECASE)
 _FLOAT_UNITS = 5000.0  # output units per metre for floating-point or nyu depth (TUM's)
 
@@ -303,7 +302,7 @@ def _name_time(name: str) -> float | None:
 
 def _images(folder: Path) -> list[Path]:
     return sorted(
-        (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in _IMAGE_EXTS),
+        (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS),
         key=lambda p: _natural_key(p.name),
     )
 

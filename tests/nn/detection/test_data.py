@@ -253,7 +253,7 @@ def test_from_coco_errors_name_the_flags(tmp_path, shapes_set):
     f.write_text(json.dumps({"images": [], "categories": [], "annotations": []}))
     with pytest.raises(InputError, match=r"--images-dir: .* is not a folder"):
         DetectionDataset.from_coco(f, images_dir=tmp_path / "no")
-    with pytest.raises(InputError, match=r"--data .*: no images in the COCO file"):
+    with pytest.raises(InputError, match=r"--data .*: lists no images"):
         DetectionDataset.from_coco(f)
     g = _coco_folder(tmp_path, shapes_set.subset([0]), images=False)
     with pytest.raises(InputError, match=r"--images-dir: .*000001.png \(image 1 of .*\) does not"):

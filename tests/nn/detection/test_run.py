@@ -87,7 +87,7 @@ def test_coco_file_is_split_for_training_and_whole_for_evaluation(tmp_path):
 @pytest.mark.parametrize(
     ("data", "kwargs", "flag"),
     [
-        ("foo", {}, "--data: expects one of shapes, digits, trees or a COCO .json file"),
+        ("foo", {}, "--data: expects one of shapes, digits, trees, a COCO .json file or a folder"),
         ("missing.json", {}, "--data: COCO file missing.json does not exist"),
         ("trees", {}, "--images-dir: --data trees needs the DeepForest NEON folder"),
         ("trees", {"images_dir": "no_such_folder"}, "--images-dir"),
@@ -115,7 +115,7 @@ def test_coco_errors_are_argument_errors(tmp_path):
         load_detection_data(f, evaluate=True)
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"images": [], "categories": [], "annotations": []}))
-    with pytest.raises(ArgumentError, match="no images in the COCO file"):
+    with pytest.raises(ArgumentError, match="lists no images"):
         load_detection_data(empty)
 
 
@@ -235,7 +235,7 @@ def test_evaluate_run_errors(run, tmp_path):
         evaluate_run(tmp_path / "no_run", "digits", **DATA)
     with pytest.raises(ArgumentError, match="--data"):  # the data is checked first
         evaluate_run(tmp_path / "no_run", "foo")
-    with pytest.raises(InputError, match="differ from the model's"):
+    with pytest.raises(InputError, match="not among the model's classes"):
         evaluate_run(run.out_dir, "shapes", images=4, size=(64, 64))
     with pytest.raises(InputError, match="tta"):
         evaluate_run(run.out_dir, "digits", tta="rotations")

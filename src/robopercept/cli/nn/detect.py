@@ -2,7 +2,7 @@
 
 Three forms, chosen by the first word after ``detect``::
 
-    robopercept nn detect train --data shapes|digits|trees|COCO_JSON --model fcos -o run/ \
+    robopercept nn detect train --data shapes|digits|trees|COCO_JSON|FOLDER --model fcos -o run/ \
         [--resume | --overwrite]
     robopercept nn detect eval RUN_OR_MODEL --data ... [-o DIR]
     robopercept nn detect IMAGE... [--model PATH] -o out/
@@ -81,8 +81,10 @@ def _decay(text: str) -> float:
 def _data_args(p: argparse.ArgumentParser) -> None:
     built_in_data_args(
         p,
-        "shapes, digits, trees (with --images-dir: the DeepForest folder) or a COCO JSON",
-        "COCO: folder of the images (default: the JSON's folder)",
+        "shapes, digits, trees (with --images-dir: the DeepForest folder), or your own "
+        "annotated images: a COCO JSON, or a folder of labelme .json or Pascal-VOC .xml files "
+        "or a VOC SegmentationObject/ folder",
+        "your own data: folder of the images (default: where the annotations put them)",
     )
 
 

@@ -16,8 +16,8 @@ semantic networks, mask AP@[.5:.95] for Mask R-CNN) and writes ``run/model.pt``,
 written after every epoch) and ``checkpoint.best.pt``. A folder holding a run is
 refused (exit 2) unless ``--resume`` continues it (after Ctrl-C, exit 130, or SIGTERM,
 exit 143: it ends with the weights of an uninterrupted run) or ``--overwrite`` replaces
-it. ``eval`` scores a run on the validation split of the
-same data (same ``--images``, ``--size`` and ``--seed``): pixel accuracy, mIoU,
+it. ``eval`` scores a run on the validation split of a built-in set (same ``--images``,
+``--size`` and ``--seed``) or on the whole of your own annotations: pixel accuracy, mIoU,
 frequency-weighted IoU and per-class IoU, or the 12 COCO ``segm`` numbers.
 ``IMAGE...`` writes ``out/NAME.png`` (class overlay with a legend, or instance
 overlay with outlines and scores) and ``out/NAME_labels.png`` (class labels, or
@@ -68,8 +68,11 @@ def _data_args(p: argparse.ArgumentParser) -> None:
     built_in_data_args(
         p,
         "shapes (procedural), digits (real-digit canvases), nuclei (real, with "
-        "--images-dir), or your own COCO instances JSON (polygon or RLE masks)",
-        "nuclei: the stardist_nuclei folder; COCO: the images' folder (default: the JSON's)",
+        "--images-dir), or your own instances: a COCO JSON (polygon or RLE masks), a folder "
+        "of labelme .json files or a VOC folder (SegmentationObject/, SegmentationClass/, "
+        "JPEGImages/)",
+        "nuclei: the stardist_nuclei folder; your own data: the images' folder (default: "
+        "where the annotations put them)",
     )
 
 
@@ -125,8 +128,9 @@ def register(ns: argparse._SubParsersAction, parser_class: type[argparse.Argumen
 
 
 # --------------------------------------------------------------------------- forms
-def _sets(args: argparse.Namespace) -> Any:
-    """The data of ``--data`` and its flags; a bad flag is a usage error (exit 2)."""
+def _sets(args: argparse.Namespace, evaluate: bool = False) -> Any:
+    """The data of ``--data`` and its flags (``evaluate``: your own annotations whole,
+    not split); a bad flag is a usage error (exit 2)."""
     from robopercept.nn.segmentation.run import load_segmentation_data
 
     try:
@@ -136,6 +140,7 @@ def _sets(args: argparse.Namespace) -> Any:
             size=args.size,
             seed=args.seed,
             images_dir=args.images_dir,
+            evaluate=evaluate,
         )
     except InputError as exc:
         raise UsageError(str(exc)) from None
@@ -198,7 +203,7 @@ def _eval(args: argparse.Namespace) -> int:
         raise UsageError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
     from robopercept.nn.segmentation.run import evaluate_run
 
-    ev = evaluate_run(args.model, _sets(args), device=args.device, out_dir=args.out)
+    ev = evaluate_run(args.model, _sets(args, evaluate=True), device=args.device, out_dir=args.out)
     metrics = ev.to_dict()
     if args.json:
         print(json.dumps(metrics))

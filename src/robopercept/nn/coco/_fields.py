@@ -24,6 +24,7 @@ from robopercept.errors import FileFormatError, InputError
 __all__ = [
     "as_int",
     "boxes_array",
+    "category_list",
     "json_field",
     "keypoint_array",
     "keypoints_rows",
@@ -195,3 +196,20 @@ def write_json(obj: Any, path: str | os.PathLike[str]) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     p.write_text(json.dumps(obj), encoding="utf-8")
     return p
+
+
+def category_list(found: list[str], categories: Any, what: str) -> list[str]:
+    """The category names of a conversion to COCO: ``categories`` checked to be a list
+    of names holding every one of ``found`` (the sorted names the annotations use,
+    also the default when ``categories`` is None); ``what`` names an annotation's
+    class (``"class"``, ``"label"``) in the message."""
+    if categories is None:
+        return list(found)
+    if not isinstance(categories, (list, tuple)) or not all(isinstance(c, str) for c in categories):
+        raise InputError(f"categories must be a list of class names; got {plain_repr(categories)}")
+    missing = sorted(set(found) - set(categories))
+    if missing:
+        raise InputError(
+            f"{what} {missing[0]!r} is not in categories {plain_repr(list(categories))}: add it"
+        )
+    return list(categories)

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import check_bool, check_file, check_numeric, check_real, plain_repr
+from robopercept._checks import check_bool, check_file, check_numeric, check_real
 from robopercept.errors import FileFormatError, InputError
-from robopercept.nn.coco._fields import readonly
+from robopercept.nn.coco._fields import category_list, readonly
 from robopercept.nn.coco.dataset import CocoCategory, CocoDataset, CocoImage, as_coco_dataset
 from robopercept.nn.coco.results import CocoResults, as_coco_results
 
@@ -202,21 +202,7 @@ def voc_to_coco(
         )
     keep_difficult = check_bool(include_difficult, "include_difficult")
     names = sorted({o.name for a in annotations for o in a.objects})
-    if categories is None:
-        cats = names
-    else:
-        if not isinstance(categories, (list, tuple)) or not all(
-            isinstance(c, str) for c in categories
-        ):
-            raise InputError(
-                f"categories must be a list of class names; got {plain_repr(categories)}"
-            )
-        cats = list(categories)
-        missing = sorted(set(names) - set(cats))
-        if missing:
-            raise InputError(
-                f"class {missing[0]!r} is not in categories {plain_repr(cats)}: add it"
-            )
+    cats = category_list(names, categories, "class")
     cat_id = {c: k + 1 for k, c in enumerate(cats)}
     rows: list[tuple[int, int, tuple[float, float, float, float]]] = []
     for i, a in enumerate(annotations):

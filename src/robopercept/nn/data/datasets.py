@@ -52,6 +52,7 @@ from robopercept._checks import (
     plain_repr,
 )
 from robopercept.errors import FileFormatError, InputError
+from robopercept.imaging.io import IMAGE_EXTENSIONS as _IMAGE_EXTENSIONS
 from robopercept.imaging.io import read_image
 from robopercept.nn._guards import MAX_BYTES, check_allocation
 from robopercept.nn.data.augment import Transform
@@ -71,7 +72,7 @@ __all__ = [
 ]
 
 #: file extensions :class:`ImageFolder` reads (lower case)
-IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm")
+IMAGE_EXTENSIONS = _IMAGE_EXTENSIONS
 
 # --------------------------------------------------------------------------- datasets
 

@@ -55,6 +55,7 @@ from robopercept._checks import as_path, check_bool, check_int, check_numeric, p
 from robopercept.errors import InputError
 from robopercept.imaging import read_image
 from robopercept.nn.coco.dataset import CocoDataset, coco_from_dict, read_coco_json
+from robopercept.nn.coco.folders import read_annotations
 from robopercept.nn.coco.rle import annotation_to_rle, rle_decode, rle_encode
 from robopercept.nn.data.datasets import stratified_split, to_unit_float
 from robopercept.viz.detection import detections_grid
@@ -378,15 +379,86 @@ class DetectionDataset:
         p = as_path(path, "path (--data)")
         if not p.is_file():
             raise InputError(f"--data: COCO file {p} does not exist")
+        return cls._from_coco_dataset(read_coco_json(p), p, p.parent, images_dir, masks)
+
+    @classmethod
+    def from_annotations(
+        cls,
+        path: str | os.PathLike[str],
+        images_dir: str | os.PathLike[str] | None = None,
+        masks: bool = False,
+    ) -> DetectionDataset:
+        """A user's annotated images in any form an annotation tool writes (what
+        ``robopercept nn detect|segment train|eval --data PATH`` reads): a COCO JSON
+        file, a folder of labelme JSON files, of Pascal-VOC XML files, or a VOC
+        segmentation folder (:func:`~robopercept.nn.coco.folders.read_annotations`
+        recognises which), read as :meth:`from_coco` reads a COCO file.
+
+        Parameters
+        ----------
+        path : path
+            The file or folder.
+        images_dir : path, optional
+            The images' folder, when not where the form puts them.
+        masks : bool
+            Also the instance masks (labelme polygons, VOC ``SegmentationObject``, COCO
+            segmentations); a VOC XML folder has none.
+
+        Returns
+        -------
+        DetectionDataset
+
+        Raises
+        ------
+        InputError
+            Nothing there in any form, a missing image, ``masks`` with boxes only.
+        FileFormatError
+            A file of the form that cannot be read.
+
+        Examples
+        --------
+        >>> import tempfile, pathlib
+        >>> from robopercept.imaging import write_image
+        >>> d = pathlib.Path(tempfile.mkdtemp())
+        >>> _ = write_image(d / "a.png", np.zeros((8, 10, 3), np.uint8))
+        >>> _ = (d / "a.xml").write_text(
+        ...     "<annotation><filename>a.png</filename><size><width>10</width>"
+        ...     "<height>8</height></size><object><name>tree</name><bndbox><xmin>1</xmin>"
+        ...     "<ymin>2</ymin><xmax>5</xmax><ymax>6</ymax></bndbox></object></annotation>")
+        >>> ds = DetectionDataset.from_annotations(d)
+        >>> ds.boxes[0].tolist(), ds.classes
+        ([[1.0, 2.0, 5.0, 6.0]], ('tree',))
+        """
+        found = read_annotations(path)
+        if masks and found.form == "voc-xml":
+            raise InputError(
+                f"--data {found.root}: Pascal-VOC XML files hold boxes, not masks; a "
+                "segmenter needs COCO segmentations, labelme polygons or a VOC "
+                "SegmentationObject folder"
+            )
+        where = found.root if found.form != "coco" else as_path(path)
+        return cls._from_coco_dataset(found.coco, where, found.root, images_dir, masks)
+
+    @classmethod
+    def _from_coco_dataset(
+        cls,
+        coco: CocoDataset,
+        p: Any,
+        default_root: Any,
+        images_dir: str | os.PathLike[str] | None,
+        masks: bool,
+    ) -> DetectionDataset:
+        """The set of ``coco`` (read from ``p``) with its images under ``images_dir``
+        or ``default_root`` (:meth:`from_coco`)."""
         if images_dir is None or (isinstance(images_dir, str) and not images_dir):
-            root = p.parent
+            root = default_root
         else:
             root = as_path(images_dir, "images_dir (--images-dir)")
         if not root.is_dir():
             raise InputError(f"--images-dir: {root} is not a folder")
-        coco = read_coco_json(p)
+        masks = check_bool(masks, "masks")
         if not coco.images:
-            raise InputError(f"--data {p}: no images in the COCO file")
+            raise InputError(f"--data {p}: lists no images")
         label = {c.id: k + 1 for k, c in enumerate(coco.categories)}
         images, boxes, labels, all_masks = [], [], [], []
         segs = coco.segmentations or (None,) * len(coco.image_ids)
@@ -516,6 +588,48 @@ class DetectionDataset:
             file_names=[self.file_names[i] for i in sel],
             meta=[self.meta[i] for i in sel],
             keypoints=None if self.keypoints is None else [self.keypoints[i] for i in sel],
+        )
+
+    def with_classes(self, classes: Sequence[str], what: str = "--data") -> DetectionDataset:
+        """The same images with labels renumbered for the class list ``classes``, by
+        name (a model's classes, to score it on annotations that list theirs in another
+        order or list fewer).
+
+        Raises
+        ------
+        InputError
+            An object's class is not in ``classes`` (the message names the classes
+            missing and ``what``, the flag that gave the data).
+
+        Examples
+        --------
+        >>> ds = DetectionDataset([np.zeros((4, 4, 3))], [[[0, 0, 2, 2]]], [[2]], ["a", "b"])
+        >>> ds.with_classes(["x", "b", "a"]).labels[0].tolist()
+        [2]
+        """
+        if not isinstance(classes, (list, tuple)) or not all(isinstance(c, str) for c in classes):
+            raise InputError(f"classes must be a list of class names; got {plain_repr(classes)}")
+        if list(classes) == list(self.classes):
+            return self
+        where = {c: k + 1 for k, c in enumerate(classes)}
+        used = sorted({self.classes[int(v) - 1] for lab in self.labels for v in lab})
+        missing = [c for c in used if c not in where]
+        if missing:
+            raise InputError(
+                f"{what}: its objects of class {missing} are not among the model's classes "
+                f"{list(classes)}: evaluate on data of the classes the model was trained for"
+            )
+        relabel = np.array([0] + [where.get(c, 0) for c in self.classes], dtype=np.int64)
+        return DetectionDataset(
+            self.images,
+            self.boxes,
+            [relabel[np.asarray(lab, dtype=np.int64)] for lab in self.labels],
+            list(classes),
+            masks=self.masks,
+            image_ids=self.image_ids,
+            file_names=self.file_names,
+            meta=self.meta,
+            keypoints=self.keypoints,
         )
 
     def split(

@@ -221,13 +221,14 @@ def _check_source(data: Any, images: Any, images_dir: Any, evaluate: bool) -> tu
             )
     else:
         path = Path(text)
-        if path.suffix.lower() != ".json":
-            raise ArgumentError(
-                f"--data: expects one of {', '.join(BUILTIN_DATA)} or a COCO .json file; "
-                f"got {text!r}"
-            )
-        if not path.is_file():
+        if path.suffix.lower() == ".json" and not path.is_file():
             raise ArgumentError(f"--data: COCO file {path} does not exist")
+        if not path.is_dir() and path.suffix.lower() != ".json":
+            raise ArgumentError(
+                f"--data: expects one of {', '.join(BUILTIN_DATA)}, a COCO .json file or a "
+                f"folder of annotated images (labelme .json, Pascal-VOC .xml or "
+                f"SegmentationObject/); got {text!r}"
+            )
     return text, n
 
 
@@ -253,15 +254,17 @@ def load_detection_data(
     - ``"trees"``: the DeepForest NEON tiles of ``images_dir``
       (:func:`~robopercept.nn.detection.deepforest.deepforest_tiles`): its training tiles
       and its held-out strip;
-    - a COCO ``.json`` file with its images in ``images_dir`` (default: the file's
-      folder), :meth:`~robopercept.nn.detection.data.DetectionDataset.from_coco`: split
+    - your own annotated images: a COCO ``.json`` file with its images in
+      ``images_dir`` (default: the file's folder), or a folder of labelme JSON files,
+      of Pascal-VOC XML files or a VOC segmentation folder
+      (:meth:`~robopercept.nn.detection.data.DetectionDataset.from_annotations`): split
       as the synthetic sets, or with ``evaluate`` wholly the validation set (and the
       training set too).
 
     Parameters
     ----------
     data : str or path
-        A name of :data:`BUILTIN_DATA` or a COCO JSON file.
+        A name of :data:`BUILTIN_DATA`, a COCO JSON file or an annotation folder.
     images : int
         Canvases of the synthetic sets (at least 2).
     size : (width, height)
@@ -321,7 +324,7 @@ def load_detection_data(
         return tiles.train, tiles.test
     path = Path(text)
     try:
-        ds = DetectionDataset.from_coco(path, images_dir)
+        ds = DetectionDataset.from_annotations(path, images_dir)
     except ArgumentError:
         raise
     except InputError as exc:  # the file's or the folder's fault: a usage error
@@ -599,7 +602,7 @@ def evaluate_run(
         A run folder (its ``model.pt``) or a model file of
         :func:`~robopercept.nn.detection.zoo.save_detector`.
     data : str or path
-        A name of :data:`BUILTIN_DATA` or a COCO JSON file.
+        A name of :data:`BUILTIN_DATA`, a COCO JSON file or an annotation folder.
     images, size, seed, images_dir
         As :func:`load_detection_data`.
     tta : {"hflip", "flips", "dihedral"}, optional
@@ -637,11 +640,7 @@ def evaluate_run(
     if not path.is_file():
         raise ArgumentError(f"RUN_OR_MODEL: {path} does not exist (a run folder or its model.pt)")
     net, info = load_detector(path)
-    if list(val.classes) != list(info["classes"]):
-        raise InputError(
-            f"--data: its classes {list(val.classes)} differ from the model's "
-            f"{info['classes']}: evaluate on the data the model was trained for"
-        )
+    val = val.with_classes(list(info["classes"]))
     if tta:
         net = TestTimeAugmentation(net, tta)
     ev = evaluate_detector(net, val, device=device)

@@ -58,7 +58,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from robopercept._checks import as_path, check_choice, check_int, plain_repr
+from robopercept._checks import as_path, check_bool, check_choice, check_int, plain_repr
 from robopercept.errors import InputError
 from robopercept.imaging import write_image
 from robopercept.nn._guards import check_module
@@ -223,16 +223,19 @@ class SegmentTrainResult:
 
 
 # --------------------------------------------------------------------------- data, model
-def _is_coco(data: Any) -> bool:
-    return isinstance(data, (str, os.PathLike)) and str(data).lower().endswith(".json")
+def _is_own(data: Any) -> bool:
+    """``data`` names a user's annotations: a ``.json`` file or a folder."""
+    if not isinstance(data, (str, os.PathLike)) or str(data) in BUILTIN_SEGMENTATION_DATA:
+        return False
+    return str(data).lower().endswith(".json") or Path(data).is_dir()
 
 
 def _check_data_args(data: Any, images: Any, images_dir: Any) -> tuple[str, int]:
     """The cheap checks of :func:`load_segmentation_data` (no data is made)."""
-    if _is_coco(data):
-        if not Path(data).is_file():
+    if _is_own(data):
+        if str(data).lower().endswith(".json") and not Path(data).is_file():
             raise InputError(f"--data: COCO file {data} does not exist")
-        return "coco", check_int(images, "--images")
+        return "own", check_int(images, "--images")
     name = check_choice(data, "--data", BUILTIN_SEGMENTATION_DATA)
     if name == "nuclei":
         folder = None if images_dir is None else as_path(images_dir, "--images-dir")
@@ -254,19 +257,22 @@ def load_segmentation_data(
     size: tuple[int, int] = (128, 128),
     seed: int = 0,
     images_dir: str | os.PathLike[str] | None = None,
+    evaluate: bool = False,
 ) -> SegmentationSets:
     """The segmentation data ``data`` split into training and validation sets: a
     built-in set (:func:`~robopercept.nn.segmentation.data.segmentation_sets`: 80 % /
     20 % of ``images`` seeded canvases, or the nuclei's three training quadrants and the
-    held-out one), or a COCO instances JSON file with its images (your own data:
-    :meth:`~robopercept.nn.detection.data.DetectionDataset.from_coco` with the masks,
+    held-out one), or your own annotated images, a COCO instances JSON file, a folder of
+    labelme files or a VOC segmentation folder
+    (:meth:`~robopercept.nn.detection.data.DetectionDataset.from_annotations` with the masks,
     split 80 % / 20 % by image with ``seed``, neither part empty), with the checks of
     ``nn segment``'s flags.
 
     Parameters
     ----------
     data : {"shapes", "digits", "nuclei"} or path
-        A built-in name, or a ``.json`` COCO file (polygons or RLE masks).
+        A built-in name, a ``.json`` COCO file (polygons or RLE masks), or a folder of
+        labelme ``.json`` files or a VOC ``SegmentationObject`` folder.
     images : int
         shapes / digits: canvases (at least 2: one to train on, one to validate).
     size : (width, height)
@@ -276,6 +282,10 @@ def load_segmentation_data(
     images_dir : path, optional
         nuclei: the ``stardist_nuclei`` folder (``img2d.tif``, ``mask2d.tif``); a COCO
         file: its images' folder (default: the file's folder).
+    evaluate : bool
+        The data is for evaluation: your own annotations are not split (all of them
+        are the validation set, and the training set too), as ``nn segment eval``
+        scores a whole file.
 
     Returns
     -------
@@ -302,9 +312,11 @@ def load_segmentation_data(
     robopercept.errors.InputError: --images: give at least 2 (a training and a validation image)
     """
     name, n = _check_data_args(data, images, images_dir)
-    if name == "coco":
-        full = DetectionDataset.from_coco(data, images_dir, masks=True)
-        train, val = full.split((0.8, 0.2), rng=seed)
+    if name == "own":
+        full = DetectionDataset.from_annotations(data, images_dir, masks=True)
+        train, val = (
+            (full, full) if check_bool(evaluate, "evaluate") else full.split((0.8, 0.2), rng=seed)
+        )
         source = {"data": str(data), "images_dir": None if images_dir is None else str(images_dir)}
         return SegmentationSets(train, val, full.classes, {**source, "seed": seed})
     return segmentation_sets(name, n, size, seed, images_dir)
@@ -693,14 +705,12 @@ folder or its model.pt)
         data
         if isinstance(data, SegmentationSets)
         else load_segmentation_data(
-            data, images=images, size=size, seed=seed, images_dir=images_dir
+            data, images=images, size=size, seed=seed, images_dir=images_dir, evaluate=True
         )
     )
-    if list(sets.classes) != list(info["classes"]):
-        raise InputError(
-            f"--data: its classes {list(sets.classes)} differ from the model's "
-            f"{info['classes']}: evaluate on the data the model was trained for"
-        )
+    if list(sets.classes) != list(info["classes"]):  # by name, as the model numbers them
+        val = sets.val.with_classes(list(info["classes"]))
+        sets = SegmentationSets(sets.train, val, val.classes, sets.source)
     folder = None if out_dir is None else as_path(out_dir, "-o/--out")
     scores = score_segmentation(net, sets.val, device=device)
     name = sets.source.get("data", data if isinstance(data, str) else None)
