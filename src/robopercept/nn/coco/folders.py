@@ -425,7 +425,9 @@ def read_voc_segmentation(folder: str | os.PathLike[str]) -> CocoDataset:
                     f"{cf}: class value {value} has no name ({len(names)} in "
                     f"{root / 'class_names.txt'} or VOC's list): add it"
                 )
-            rows.append((i + 1, value, rle_encode(m)))
+            rle = rle_encode(m)
+            assert isinstance(rle, dict)  # one (H, W) mask gives one RLE
+            rows.append((i + 1, value, rle))
     cats = [CocoCategory(c, names[c]) for c in range(1, len(names))]
     return _instances(images, cats, rows, [r[2] for r in rows])
 
