@@ -75,3 +75,24 @@ def test_a_semantic_network_on_images_of_several_sizes_says_what_to_do(labelme, 
     assert main([*argv, "-o", str(tmp_path / "r"), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "trains on images of one size" in err and "--task instance" in err
+
+
+def test_pose_on_a_coco_keypoints_file(tmp_path, capsys):
+    """nn pose train -> eval -> predict on mmpose's COCO val2017 sample (12 persons with
+    keypoints, cut out around their boxes): COCO's 17 joints end to end."""
+    root = data_path("detection", "coco_keypoints_mmpose")
+    coco = root / "test_coco.json"
+    out = tmp_path / "run"
+    argv = ["nn", "pose", "train", "--data", str(coco), "--width", "4", "--epochs", "1"]
+    rc, _ = run_cli([*argv, "--batch-size", "4", "-o", str(out), "--quiet"])
+    assert rc == 0 and (out / "model.pt").is_file()
+    rc, text = run_cli(["nn", "pose", "eval", str(out), "--data", str(coco), "--json"])
+    ev = json.loads(text)
+    assert rc == 0 and ev["images"] == 12 and len(ev["pck_per_joint"]) == 17
+    assert "left_ankle" in ev["pck_per_joint"]
+    photos = sorted(map(str, root.glob("*.jpg")))[:2]
+    rc, text = run_cli(["nn", "pose", *photos, "--model", str(out), "--json"])
+    assert rc == 0 and len(json.loads(text)["results"]) == 2
+    capsys.readouterr()
+    rc, _ = run_cli(["nn", "pose", "eval", str(out), "--data", "figures", "--images", "4"])
+    assert rc == 1 and "17 joints of person" in capsys.readouterr().err

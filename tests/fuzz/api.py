@@ -3843,3 +3843,26 @@ VALID.update(
         "nn.coco.folders.read_annotations": {"path": Fixture("labelme_folder")},
     }
 )
+
+
+def _pose_coco_file(p: Path) -> None:
+    """A COCO keypoint file with one person in a 40 x 40 image beside it."""
+    from robopercept.imaging import write_image
+
+    write_image(p.parent / "pose_a.png", np.zeros((40, 40, 3), np.uint8))
+    doc = {
+        "images": [{"id": 1, "file_name": "pose_a.png", "width": 40, "height": 40}],
+        "categories": [{"id": 1, "name": "person", "keypoints": ["a", "b"], "skeleton": [[1, 2]]}],
+        "annotations": [{"id": 1, "image_id": 1, "category_id": 1, "bbox": [5, 5, 20, 20],
+                         "keypoints": [10, 10, 2, 15, 20, 2]}],
+    }  # fmt: skip
+    p.write_text(json.dumps(doc))
+
+
+FIXTURES["pose_coco.json"] = _pose_coco_file
+VALID.update(
+    {
+        "nn.pose.crops.crop_window": {"box": [5.0, 5.0, 20.0, 10.0], "size": (32, 32)},
+        "nn.pose.crops.pose_set_from_coco": {"path": Fixture("pose_coco.json"), "size": (32, 32)},
+    }
+)

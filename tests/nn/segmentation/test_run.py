@@ -157,7 +157,7 @@ def test_evaluate_run_errors(run, tmp_path):
     with pytest.raises(InputError, match=r"RUN_OR_MODEL: .* does not exist"):
         evaluate_run(tmp_path / "none", "shapes")
     with pytest.raises(
-        InputError, match="--data: its objects of class .* are not among the model.s classes"
+        InputError, match=r"--data: its objects of class .* are not among the model.s classes"
     ):
         evaluate_run(run.out_dir, "digits", images=4, size=(64, 64))
     with pytest.raises(InputError, match="--images"):

@@ -2,9 +2,9 @@
 
 Three forms, chosen by the first word after ``pose``::
 
-    robopercept nn pose train --model deeppose|heatmap|hrnet --data figures -o run/
+    robopercept nn pose train --model deeppose|heatmap|hrnet --data figures|COCO_JSON -o run/
                               [--resume | --overwrite]
-    robopercept nn pose eval RUN_OR_MODEL --data figures [-o DIR]
+    robopercept nn pose eval RUN_OR_MODEL --data figures|COCO_JSON [-o DIR]
     robopercept nn pose IMAGE... [--model PATH|hrnet|deeppose] -o out/ [--json]
                                  [--lift3d] [--heatmaps]
 
@@ -66,9 +66,9 @@ POSE_CLI_MODELS = ("hrnet", "heatmap", "deeppose")
 def _data_args(p: argparse.ArgumentParser) -> None:
     built_in_data_args(
         p,
-        "procedural articulated figures over real photos (MPII's 16 joints)",
-        "",
-        ("figures",),
+        "figures (procedural articulated figures over real photos, MPII's 16 joints) or "
+        "your own COCO person-keypoints .json (each person cut out around its box)",
+        "COCO: folder of the images (default: the JSON's folder)",
         images=2000,
         generated="figures",
     )
@@ -96,7 +96,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     e = cls(
         prog="robopercept nn pose eval",
         description="PCK and COCO keypoint AP of a trained pose network (RUN folder or "
-        "model.pt) on the validation split of a built-in set.",
+        "model.pt) on the validation split of the figures or on every person of a COCO file.",
     )
     e.add_argument("model", metavar="RUN_OR_MODEL")
     _data_args(e)
@@ -137,6 +137,13 @@ def _check_data(args: argparse.Namespace) -> None:
     """The data flags a usage error refuses (exit 2) before any work."""
     if args.images < 2:
         raise UsageError("--images: give at least 2")
+    if args.data.lower().endswith(".json"):
+        if not Path(args.data).is_file():
+            raise UsageError(f"--data: COCO file {args.data} does not exist")
+    elif args.data != "figures":
+        raise UsageError(
+            f"--data: figures or a COCO person-keypoints .json file; got {args.data!r}"
+        )
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -166,6 +173,7 @@ def _train(args: argparse.Namespace) -> int:
         config=cfg,
         width=args.width,
         stages=args.stages,
+        images_dir=args.images_dir,
         resume=args.resume,
         overwrite=args.overwrite,
         progress=not (args.quiet or args.json),
@@ -200,6 +208,7 @@ def _eval(args: argparse.Namespace) -> int:
         flip=not args.no_flip,
         device=args.device,
         out_dir=args.out,
+        images_dir=args.images_dir,
     )
     if args.json:  # a joint no validation sample counts has PCK NaN: null
         print(json.dumps(res.to_dict()))

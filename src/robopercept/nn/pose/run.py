@@ -1,8 +1,9 @@
 """A pose training run from data to files: what ``robopercept nn pose train|eval`` does.
 
-:func:`train_run` is the recipe end to end: the built-in data
-(:func:`load_pose_data`: procedural figures over real photos, MPII's 16 joints, split
-into training and validation images), a network of
+:func:`train_run` is the recipe end to end: the data (:func:`load_pose_data`: the
+built-in procedural figures over real photos, MPII's 16 joints, or your own COCO
+keypoints file cut into top-down crops, :mod:`robopercept.nn.pose.crops`; split into
+training and validation images), a network of
 :func:`~robopercept.nn.pose.networks.build_pose_model` (``"hrnet"``, ``"heatmap"`` or
 ``"deeppose"``) trained by :func:`~robopercept.nn.pose.train.train_pose` (THE loop,
 :func:`~robopercept.nn.train.loop.train_loop`, keeping the epoch of the best validation
@@ -36,7 +37,8 @@ included. Ctrl-C (``KeyboardInterrupt``) propagates after ``history.json`` is wr
 with the network's epochs done so far.
 
 :func:`evaluate_run` scores a trained model (``model.pt`` or its run folder) on the
-validation split of the same data (same ``images``, ``size`` and ``seed``).
+validation split of the same data (same ``images``, ``size`` and ``seed``), or on every
+person of a COCO file.
 """
 
 from __future__ import annotations
@@ -49,6 +51,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from robopercept._checks import (
     as_path,
     check_bool,
@@ -60,6 +64,8 @@ from robopercept._checks import (
 from robopercept.errors import InputError
 from robopercept.fileio import strict_json
 from robopercept.imaging import write_image
+from robopercept.nn.data.datasets import stratified_split
+from robopercept.nn.pose.crops import pose_set_from_coco
 from robopercept.nn.pose.data import POSE_DATA, PoseDataset, pose_sets
 from robopercept.nn.pose.evaluate import PoseEvaluation, evaluate_pose
 from robopercept.nn.pose.inference import samples_picture
@@ -170,7 +176,12 @@ def _data_args(
     data: Any, images: Any, size: Any, seed: Any
 ) -> tuple[str, int, tuple[int, int], int]:
     """The data arguments, checked, with their flags in the messages."""
-    data = check_choice(data, "--data", POSE_DATA)
+    if _is_coco(data):
+        if not Path(data).is_file():
+            raise InputError(f"--data: COCO file {data} does not exist")
+        data = os.fspath(data)
+    else:
+        data = check_choice(data, "--data (figures or a COCO keypoints .json)", POSE_DATA)
     if isinstance(images, bool) or not isinstance(images, int):
         raise InputError(f"--images must be an integer; got {plain_repr(images)}")
     if images < 2:
@@ -184,30 +195,45 @@ def _data_args(
     return data, images, (w, h), seed
 
 
+def _is_coco(data: Any) -> bool:
+    return isinstance(data, (str, os.PathLike)) and os.fspath(data).lower().endswith(".json")
+
+
 def load_pose_data(
     data: str = "figures",
     *,
     images: int = 2000,
     size: tuple[int, int] = (128, 128),
     seed: int = 0,
+    images_dir: str | os.PathLike[str] | None = None,
+    evaluate: bool = False,
 ) -> tuple[PoseDataset, PoseDataset]:
-    """The training and validation sets of a built-in pose data set, as ``robopercept nn
-    pose train|eval`` make them: :func:`~robopercept.nn.pose.data.pose_sets` with a
-    one-image test split (unused here).
+    """The training and validation sets of a pose data set, as ``robopercept nn pose
+    train|eval`` make them.
 
-    ``"figures"``: ``images`` procedural figures for training (seed ``seed``) and a
-    tenth of them, at least 1, for validation (seed ``1000 + seed``).
+    ``"figures"``: :func:`~robopercept.nn.pose.data.pose_sets` with a one-image test
+    split (unused here): ``images`` procedural figures for training (seed ``seed``) and
+    a tenth of them, at least 1, for validation (seed ``1000 + seed``). A COCO keypoints
+    ``.json`` file (your own people): its persons as top-down crops of ``size``
+    (:func:`~robopercept.nn.pose.crops.pose_set_from_coco`), split 80/20 with ``seed``
+    (neither part empty, :func:`~robopercept.nn.data.datasets.stratified_split`), or
+    with ``evaluate`` all of them for validation (and training).
 
     Parameters
     ----------
     data : str
-        ``"figures"`` (:data:`~robopercept.nn.pose.data.POSE_DATA`).
+        ``"figures"`` (:data:`~robopercept.nn.pose.data.POSE_DATA`) or a COCO keypoints
+        JSON file.
     images : int
-        Training images, at least 2.
+        Training images, at least 2 (figures).
     size : (width, height)
         Pixels, each side in [32, 1024].
     seed : int
         >= 0.
+    images_dir : path, optional
+        The COCO file's images (default: its folder).
+    evaluate : bool
+        The data is for evaluation: a COCO file is not split.
 
     Returns
     -------
@@ -226,6 +252,17 @@ def load_pose_data(
     (10, 1, 'mpii16')
     """
     data, images, size, seed = _data_args(data, images, size, seed)
+    if _is_coco(data):
+        full = pose_set_from_coco(data, images_dir, size)
+        if check_bool(evaluate, "evaluate"):
+            return full, full
+        if len(full) < 2:
+            raise InputError(
+                f"--data {data}: {len(full)} person with keypoints; training needs at least 2 "
+                "(one to train on, one to validate)"
+            )
+        train, val = stratified_split(np.zeros(len(full), np.int64), (0.8, 0.2), seed)
+        return full.subset(train), full.subset(val)
     sets = pose_sets(data, images, size, seed, test_images=1)
     return sets.train, sets.val
 
@@ -281,6 +318,7 @@ def train_run(
     config: TrainConfig | None = None,
     width: int = 16,
     stages: int = 1,
+    images_dir: str | os.PathLike[str] | None = None,
     resume: bool = False,
     overwrite: bool = False,
     progress: bool = True,
@@ -301,7 +339,7 @@ def train_run(
     Parameters
     ----------
     data : str
-        ``"figures"``.
+        ``"figures"`` or a COCO keypoints JSON file (:func:`load_pose_data`).
     out_dir : path
         The run folder (created).
     model : {'hrnet', 'heatmap', 'deeppose'}
@@ -315,6 +353,8 @@ def train_run(
         The network's width.
     stages : int
         DeepPose: cascade stages after the network, 0 to 8 (ignored for the others).
+    images_dir : path, optional
+        A COCO file's images (default: its folder).
     resume : bool
         Continue the run in ``out_dir`` from its ``checkpoint.pt`` (same data, model and
         configuration): ends as an uninterrupted run would.
@@ -355,7 +395,7 @@ def train_run(
     progress = check_bool(progress, "progress")
     ckpt = prepare_run_folder(out_dir, resume=resume, overwrite=overwrite)
     out = ckpt.parent
-    train, val = load_pose_data(data, images=images, size=size, seed=seed)
+    train, val = load_pose_data(data, images=images, size=size, seed=seed, images_dir=images_dir)
     sk = train.skeleton
     if progress:
         print(
@@ -416,10 +456,11 @@ def evaluate_run(
     flip: bool = True,
     device: str | None = None,
     out_dir: str | os.PathLike[str] | None = None,
+    images_dir: str | os.PathLike[str] | None = None,
 ) -> PoseRunEvaluation:
     """PCK and COCO keypoint AP of a trained pose network on the validation split of
     ``data`` (:func:`load_pose_data` with the same ``images``, ``size`` and ``seed`` as
-    its training run), cascade stages applied
+    its training run; a COCO file whole), cascade stages applied
     (:func:`~robopercept.nn.pose.evaluate.evaluate_pose`).
 
     Parameters
@@ -435,6 +476,8 @@ def evaluate_run(
         Where the network runs (default: the CPU).
     out_dir : path, optional
         A folder (created) for ``metrics.json`` (:attr:`PoseRunEvaluation.to_dict`).
+    images_dir : path, optional
+        A COCO file's images (default: its folder); the whole file is scored.
 
     Returns
     -------
@@ -457,7 +500,9 @@ def evaluate_run(
     net, info = load_pose_model(path)
     if device is not None:
         net.to(resolve_device(device))
-    _, val = load_pose_data(data, images=images, size=size, seed=seed)
+    _, val = load_pose_data(
+        data, images=images, size=size, seed=seed, images_dir=images_dir, evaluate=True
+    )
     joints = tuple(info["skeleton"].joints)
     if joints != tuple(val.skeleton.joints):
         raise InputError(
