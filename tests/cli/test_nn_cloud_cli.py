@@ -161,11 +161,38 @@ def test_train_eval_predict_on_a_small_real_mesh_folder(tmp_path):
 
 
 @pytest.mark.realdata
-def test_a_mesh_folder_too_small_to_split_names_the_smallest_count(tmp_path, capsys):
-    # ModelNet10 here holds one training mesh per class: the validation split takes one
-    # of the two, leaving one cloud to train on, which batch norm cannot learn from
-    folder = data_path("pointcloud_cls", "ModelNet10")
-    argv = ["nn", "cloud", "train", "--data", str(folder), "-o", str(tmp_path / "r")]
+@pytest.mark.parametrize("name", ["ModelNet10", "ModelNet40"])
+def test_modelnet_folders_train_without_a_validation_split(name, tmp_path):
+    """ModelNet's layout with one training mesh per class (2 classes): too few to hold
+    a validation cloud of each class out and keep 2 to train on, so training runs on
+    both without validation (the last epoch kept, validation_clouds 0); its test split
+    scores it; the meshes are classified into its two classes."""
+    folder = data_path("pointcloud_cls", name)
+    data = ["--data", str(folder), "--points", "128", "--seed", "0"]
+    out = tmp_path / "run"
+    rc, _ = _run(["nn", "cloud", "train", *data, "--epochs", "2", "-o", str(out), "--quiet"])
+    assert rc == 0 and {p.name for p in out.iterdir()} >= FILES
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["validation_clouds"] == 0 and metrics["best_epoch"] == 2
+    assert metrics["clouds"] == 2  # ModelNet's own test split, one mesh per class
+    rc, text = _run(["nn", "cloud", "eval", str(out), *data, "--json"])
+    assert rc == 0 and json.loads(text)["clouds"] == 2
+    meshes = sorted(map(str, folder.rglob("*.off")))
+    rc, text = _run(["nn", "cloud", *meshes, "--model", str(out), "--json"])
+    classes = {d.name for d in folder.iterdir() if d.is_dir()}
+    assert rc == 0 and {r["class"] for r in json.loads(text)["results"]} <= classes
+
+
+@pytest.mark.realdata
+def test_a_mesh_folder_too_small_to_train_names_the_smallest_count(tmp_path, capsys):
+    # two meshes in two class folders: the test split takes one, leaving one cloud to
+    # train on, which batch norm cannot learn from
+    src = data_path("pointcloud_cls", "ModelNet10")
+    for c in ("sofa", "table"):
+        (tmp_path / "d" / c).mkdir(parents=True)
+        mesh = next((src / c / "train").glob("*.off"))
+        (tmp_path / "d" / c / mesh.name).write_bytes(mesh.read_bytes())
+    argv = ["nn", "cloud", "train", "--data", str(tmp_path / "d"), "-o", str(tmp_path / "r")]
     assert main(argv) == 1
     err = capsys.readouterr().err
     errors = [line for line in err.splitlines() if "error:" in line]

@@ -391,3 +391,28 @@ def test_train_loop_resumes_the_detector_segmenter_pose_and_cloud_trainers(tmp_p
         ):
             assert torch.equal(u, v), f"{name}: {k} differs after resuming"
         assert len(hist.losses) == 3, name
+
+
+@pytest.mark.parametrize(
+    ("n", "batch_size", "sizes"), [(5, 2, [2, 3]), (7, 3, [3, 4]), (6, 4, [4, 2])]
+)
+def test_epoch_loop_never_draws_a_batch_of_one(n, batch_size, sizes):
+    """A last batch of one sample joins the one before (batch norm in training mode
+    cannot learn from one: torch raises); every sample is drawn once per epoch."""
+    from robopercept.nn.train.loop import epoch_loop
+
+    torch.manual_seed(0)
+    model = nn.Sequential(nn.Linear(2, 4), nn.BatchNorm1d(4), nn.Linear(4, 1))
+    x = torch.randn(n, 2)
+    seen: list[list[int]] = []
+
+    def batch(idx):
+        seen.append(idx.tolist())
+        return model(x[idx]).pow(2).mean()
+
+    cfg = TrainConfig(epochs=2, batch_size=batch_size, lr=1e-2)
+    gen = torch.Generator().manual_seed(0)
+    epoch_loop(model, n, cfg, gen, batch, None, desc="t", progress=False)
+    assert [len(b) for b in seen] == sizes * 2
+    for epoch in (seen[: len(sizes)], seen[len(sizes) :]):
+        assert sorted(i for b in epoch for i in b) == list(range(n))

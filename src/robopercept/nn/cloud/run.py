@@ -100,9 +100,14 @@ BUILD_SHIPPED_CLOUD = BUILD_SHIPPED["cloud"]
 
 
 # ----------------------------------------------------------------------------- data
+#: clouds a training split keeps at least (batch norm learns from two clouds or more)
+_MIN_TRAIN = 2
+
+
 @dataclass(frozen=True)
 class CloudSets:
-    """The training, validation and test splits of :func:`cloud_sets`."""
+    """The training, validation and test splits of :func:`cloud_sets` (``val`` None
+    when the folder is too small to hold clouds out for it)."""
 
     train: Any
     val: Any
@@ -127,7 +132,10 @@ def cloud_sets(
     ``root/<class>/*.off|*.ply|*.pcd`` (80/10/10 stratified split, seeded) or in
     ModelNet's layout ``root/<class>/{train,test}/*.off`` (its test split kept; a tenth
     of its training split held out for validation). No split is left empty
-    (:func:`~robopercept.nn.data.datasets.stratified_split`).
+    (:func:`~robopercept.nn.data.datasets.stratified_split`). A folder too small to
+    hold a validation cloud of each class out and keep 2 to train on has no validation
+    split (``val`` None: training keeps its last epoch), as Keras trains without
+    ``validation_split``.
 
     Returns
     -------
@@ -160,11 +168,16 @@ def cloud_sets(
     if has_split:
         full = read_cloud_folder(root, n_points, split="train", rng=seed, progress=progress)
         test = read_cloud_folder(root, n_points, split="test", rng=seed, progress=progress)
-        train, val = full.split((0.9, 0.1), rng=seed)
-        return CloudSets(train, val, test, str(root))
+        if len(full) >= _MIN_TRAIN + full.num_classes:  # a held-out cloud of each class
+            train, val = full.split((0.9, 0.1), rng=seed)
+            return CloudSets(train, val, test, str(root))
+        return CloudSets(full, None, test, str(root))
     full = read_cloud_folder(root, n_points, rng=seed, progress=progress)
-    train, val, test = full.split((0.8, 0.1, 0.1), rng=seed)
-    return CloudSets(train, val, test, str(root))
+    if len(full) >= _MIN_TRAIN + 2 * full.num_classes:
+        train, val, test = full.split((0.8, 0.1, 0.1), rng=seed)
+        return CloudSets(train, val, test, str(root))
+    train, test = full.split((0.9, 0.1), rng=seed)
+    return CloudSets(train, None, test, str(root))
 
 
 # ----------------------------------------------------------------------------- runs
@@ -371,7 +384,9 @@ def train_run(
     if progress:
         print(
             f"nn cloud train: {model} ({task}) on {name}: {len(train)} training, "
-            f"{len(val)} validation, {len(test)} test clouds of {n_points} points",
+            f"{'no' if val is None else len(val)} validation, {len(test)} test clouds of "
+            f"{n_points} points" + (" (too few clouds to hold any out for validation: the last "
+            "epoch is kept)" if val is None else ""),
             file=sys.stderr,
         )
     settings: dict[str, Any] = {"task": task}
@@ -413,6 +428,7 @@ def train_run(
         "data": name,
         "split": "test",
         "clouds": len(test),
+        "validation_clouds": 0 if val is None else len(val),
         "best_epoch": hist.best_epoch,
         "metrics": ev.summary(),
         "title": f"{model} on {name}: test",

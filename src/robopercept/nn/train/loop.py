@@ -556,7 +556,8 @@ def epoch_loop(
 ) -> EpochHistory:
     """:func:`train_loop` for the task trainers that draw batches of sample indices
     (pose networks, point-cloud networks): per epoch a shuffle of the ``n`` samples by
-    ``generator`` in batches of ``cfg.batch_size``, ``batch(indices)`` giving each
+    ``generator`` in batches of ``cfg.batch_size`` (a last batch of one sample joins the
+    one before it: batch norm cannot learn from one), ``batch(indices)`` giving each
     batch's loss, one optimizer step per batch (:func:`step_optimizer`'s optimizer and
     per-step schedule, the loss refused when not finite), then ``validate()`` (higher is
     better) and the best epoch's weights kept (the last epoch's without ``validate``).
@@ -616,6 +617,8 @@ def epoch_loop(
     if not isinstance(desc, str) or not isinstance(history, (EpochHistory, type(None))):
         raise InputError("desc must be a str and history an EpochHistory or None")
     steps = -(-n // cfg.batch_size)
+    if n > 1 and n % cfg.batch_size == 1:  # a last batch of one joins the one before:
+        steps -= 1  # batch norm cannot learn from one sample
     params = [p for p in model.parameters() if p.requires_grad]
     opt, sched = step_optimizer(params, cfg, steps)
     hist = EpochHistory() if history is None else history
@@ -623,7 +626,8 @@ def epoch_loop(
     def batches(epoch: int) -> Iterator[torch.Tensor]:
         order = torch.randperm(n, generator=generator)
         for b in range(steps):
-            yield order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+            end = n if b == steps - 1 else (b + 1) * cfg.batch_size
+            yield order[b * cfg.batch_size : end]
 
     total = [0.0]
 
