@@ -567,6 +567,7 @@ NN_FLOORS: dict[str, int] = {
     "pose": 3,
     "cloud": 3,
     "predict": 4,
+    "predict_class": 4,
 }
 #: the only wing-to-wing arrows: segmentation and pose build on detection
 NN_WING_USES: dict[str, set[str]] = {"segmentation": {"detection"}, "pose": {"detection"}}

@@ -3866,3 +3866,40 @@ VALID.update(
         "nn.pose.crops.pose_set_from_coco": {"path": Fixture("pose_coco.json"), "size": (32, 32)},
     }
 )
+VALID.update(
+    {
+        "nn.classification.run.class_probabilities": {
+            "model": _b("tests.fuzz.api:loaded_run", 0),
+            "arch": _b("tests.fuzz.api:loaded_run", 1),
+            "image": np.zeros((8, 8), np.uint8),
+        },
+        "nn.cloud.data.sample_cloud": {
+            "points": np.random.default_rng(0).normal(size=(40, 3)),
+            "n_points": 16,
+        },
+        "nn.predict_class.load_class_predictor": {"kind": "cloud", "model": "pointnet"},
+    }
+)
+VALID.update(
+    {
+        "nn.predict_class.ClassPrediction": {
+            "source": "a.off",
+            "probabilities": {"box": 0.7, "cone": 0.3},
+            "points": np.random.default_rng(0).normal(size=(32, 3)).astype(np.float32),
+        },
+        "nn.predict_class.ClassPrediction.top": {"k": 1},
+        "nn.predict_class.ClassPrediction.write": {"out_dir": _out("class_predict"), "stem": "c"},
+        "nn.predict_class.ClassPredictor": {
+            "kind": "cloud",
+            "name": "m",
+            "model": _b("robopercept.nn.cloud.train:build_cloud_model", "pointnet", 2, width=0.25),
+            "info": {"class_names": ["a", "b"]},
+            "n_points": 32,
+        },
+        "nn.predict_class.ClassPredictor.predict": {
+            "x": np.random.default_rng(0).normal(size=(40, 3))
+        },
+    }
+)
+METHODS["nn.predict_class.ClassPrediction"] = ("record", "top", "picture", "write")
+METHODS["nn.predict_class.ClassPredictor"] = ("predict",)

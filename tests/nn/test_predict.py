@@ -299,17 +299,21 @@ def test_tiling_follows_the_model_and_can_be_turned_off():
         load_predictor("fcos", tile=8)
 
 
-def test_load_predictor_names_the_loader_of_other_kinds(tmp_path):
+def test_load_predictor_reads_the_kind_of_every_model(tmp_path):
     from robopercept.nn import load_predictor
 
-    with pytest.raises(InputError, match=r"classification\.run\.load_run"):
-        load_predictor("digits")
-    with pytest.raises(InputError, match=r"cloud\.run\.load_cloud_model"):
-        load_predictor("pointnet")
+    assert load_predictor("digits").kind == "classify"
+    assert load_predictor("pointnet").kind == "cloud"
     with pytest.raises(InputError, match="does not match"):
         load_predictor("trees", kind="segment")
+    with pytest.raises(InputError, match="tile= is not an option of a classify model"):
+        load_predictor("digits", tile=64)
+    with pytest.raises(InputError, match="part segmentation network"):
+        load_predictor("pointnet-parts")
     assert load_predictor(shipped_model_path("segment", "maskrcnn")).kind == "segment"
     assert load_predictor(shipped_model_path("pose", "hrnet")).kind == "pose"
+    assert load_predictor(shipped_model_path("cloud", "dgcnn")).kind == "cloud"
+    assert load_predictor(shipped_model_path("classify", "digits")).kind == "classify"
 
 
 def test_device_auto_is_cuda_when_torch_sees_a_gpu_else_cpu(images, capsys):

@@ -11,8 +11,10 @@ The package is laid out as task wings over shared floors, as torchvision is:
   (datasets, augmentations, fonts), :mod:`.train` (config, the loop, checkpoints, DDP);
 - task wings: :mod:`.classification`, :mod:`.detection`, :mod:`.segmentation`,
   :mod:`.pose`, :mod:`.cloud`;
-- on top: :mod:`.predict` (one image-prediction path for the CLI, the batch jobs and
-  Python: ``robopercept.nn.load_predictor("trees")("aerial.png").boxes``).
+- on top: :mod:`.predict` (one prediction path for the CLI, the batch jobs and Python:
+  ``robopercept.nn.load_predictor("trees")("aerial.png").boxes``; classifiers and
+  point-cloud networks through :mod:`.predict_class`,
+  ``load_predictor("digits")("digit.png").class_name``).
 
 This is the only package that imports torch, and only its torch modules do. Submodules
 load on first use (``robopercept.nn.detection``, ...), so ``import robopercept.nn``
@@ -120,6 +122,7 @@ MODULES = (
     "cloud.train",
     "cloud.run",
     "predict",
+    "predict_class",
 )
 
 #: functions reachable from ``robopercept.nn`` itself, by module

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from robopercept._checks import (
+    as_path,
     check_bool,
     check_choice,
     check_image,
@@ -46,6 +47,7 @@ from robopercept._checks import (
 from robopercept.errors import InputError
 from robopercept.fileio import strict_json
 from robopercept.imaging import read_image, write_image
+from robopercept.nn.cloud.train import CLOUD_MODELS
 from robopercept.nn.data.datasets import to_unit_float
 from robopercept.nn.detection.thresholds import domain_warning, input_warning
 from robopercept.nn.detection.tiling import check_tiling, detect_tiled, segment_tiled
@@ -54,6 +56,7 @@ from robopercept.nn.detection.zoo import DETECTORS, detect_arrays, load_detector
 from robopercept.nn.pose.inference import pose_arrays
 from robopercept.nn.pose.library import default_pose_library
 from robopercept.nn.pose.networks import load_pose_model
+from robopercept.nn.predict_class import CLASS_KINDS, ClassPredictor, load_class_predictor
 from robopercept.nn.segmentation.data import percentile_normalize
 from robopercept.nn.segmentation.networks import (
     SEGMENTERS,
@@ -64,6 +67,7 @@ from robopercept.nn.segmentation.networks import (
 from robopercept.nn.shipped import DEFAULT_SHIPPED, MODEL_CARDS, SHIPPED, resolve_model
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import resolve_device
+from robopercept.nn.train.runs import BEST_CHECKPOINT
 from robopercept.viz import voc_palette
 from robopercept.viz.detection import draw_detections
 from robopercept.viz.pose import draw_skeleton, heatmap_grid, skeleton_3d_picture
@@ -813,8 +817,13 @@ def load_image_predictor(
     )
 
 
-def _checkpoint_kind(path: Path) -> str:
-    """The image kind a checkpoint's model predicts (its ``kind`` entry)."""
+def _checkpoint_kind(model: str | os.PathLike[str]) -> str:
+    """The kind a run folder's or checkpoint's model predicts (its ``kind`` entry; a
+    classifier's run keeps its recorded ``architecture`` in ``checkpoint.best.pt``)."""
+    p = as_path(model, "model (a run folder or a checkpoint)")
+    if p.is_dir() and not (p / "model.pt").is_file() and (p / BEST_CHECKPOINT).is_file():
+        p = p / BEST_CHECKPOINT
+    path = resolve_model("detect", p)
     state = load_checkpoint(path)
     name = state.get("kind") if isinstance(state, dict) else None
     if "skeleton" in state:
@@ -823,45 +832,51 @@ def _checkpoint_kind(path: Path) -> str:
         return "segment"
     if name in DETECTORS:
         return "detect"
+    if name in CLOUD_MODELS:
+        return "cloud"
+    if "architecture" in state:  # what robopercept nn train records
+        return "classify"
     raise InputError(
-        f"{path}: not a detector, segmenter or pose network (kind {plain_repr(name)}): give "
-        "kind=, or load a classifier with robopercept.nn.classification.run.load_run and a "
-        "point-cloud network with robopercept.nn.cloud.run.load_cloud_model"
+        f"{path}: not a model robopercept saved (kind {plain_repr(name)}): give kind= one of "
+        f"{', '.join(IMAGE_KINDS + CLASS_KINDS)}"
     )
 
 
 def load_predictor(
     model: str | os.PathLike[str], *, kind: str | None = None, **options: Any
-) -> ImagePredictor:
-    """The one way into an image model from Python: a shipped model by name
-    (``robopercept nn models`` lists them) or a run folder / ``model.pt``, ready to call
-    on an image path, an array or a list of them.
+) -> ImagePredictor | ClassPredictor:
+    """The one way into a model from Python: a shipped model by name (``robopercept nn
+    models`` lists them) or a run folder / checkpoint, ready to call on a path, an array
+    or a list of them.
 
     Parameters
     ----------
     model : str or path-like
         A shipped name (``"trees"``, ``"nuclei"``, ``"fcos"``, ``"hrnet"``, ...), a run
         folder or a checkpoint file.
-    kind : {"detect", "segment", "pose"}, optional
+    kind : {"detect", "segment", "pose", "classify", "cloud"}, optional
         Default: the shipped model's, or read from the checkpoint.
     **options
         The keywords of :func:`load_image_predictor` (``device``, ``score_thresh``,
         ``all_scores``, ``tile``, ``overlap``, ``tta``, ``flip``, ``heatmaps``,
-        ``lift3d``).
+        ``lift3d``), or for a classifier or point-cloud network those of
+        :func:`~robopercept.nn.predict_class.load_class_predictor` (``device``,
+        ``n_points``, ``seed``).
 
     Returns
     -------
-    ImagePredictor
+    ImagePredictor or ClassPredictor
         Call it: ``predictor("photo.png")`` gives an :class:`ImagePrediction` with
         ``boxes``, ``labels``, ``class_names``, ``scores``, ``masks`` or ``keypoints``,
-        ``warning`` and ``pictures()``.
+        ``warning`` and ``pictures()``; a classifier or point-cloud network gives a
+        :class:`~robopercept.nn.predict_class.ClassPrediction` with ``class_name``,
+        ``score``, ``probabilities``, ``warning`` and ``picture()``.
 
     Raises
     ------
     InputError
-        An unknown name, a missing file, a ``kind`` other than the shipped model's, or a
-        checkpoint that is no image model (a classifier or point-cloud network: the
-        message names their loaders).
+        An unknown name, a missing file, a ``kind`` other than the shipped model's, a
+        checkpoint that robopercept did not save, options of another kind.
 
     Examples
     --------
@@ -871,21 +886,23 @@ def load_predictor(
     ('detect', 'fcos', ['circle', 'square', 'triangle', 'cross'])
     >>> shapes(np.zeros((64, 64, 3), np.uint8)).class_names
     []
+    >>> load_predictor("digits")(np.zeros((8, 8))).class_name in [str(d) for d in range(10)]
+    True
     """
+    if kind is not None:
+        check_choice(kind, "kind", IMAGE_KINDS + CLASS_KINDS)
     if isinstance(model, str) and model in MODEL_CARDS:
         card_kind = MODEL_CARDS[model].kind
-        if card_kind not in IMAGE_KINDS:
-            raise InputError(
-                f"{model} is a {card_kind} model: load it with "
-                + (
-                    "robopercept.nn.classification.run.load_run"
-                    if card_kind == "classify"
-                    else "robopercept.nn.cloud.run.load_cloud_model"
-                )
-            )
         if kind is not None and kind != card_kind:
             raise InputError(f"kind {kind!r} does not match {model!r}, a {card_kind} model")
-        return load_image_predictor(card_kind, model, **options)
-    if kind is None:
-        kind = _checkpoint_kind(resolve_model("detect", model))
+        kind = card_kind
+    elif kind is None:
+        kind = _checkpoint_kind(model)
+    if kind in CLASS_KINDS:
+        extra = sorted(set(options) - {"device", "n_points", "seed"})
+        if extra:
+            raise InputError(
+                f"{extra[0]}= is not an option of a {kind} model (device, n_points, seed)"
+            )
+        return load_class_predictor(kind, model, **options)
     return load_image_predictor(kind, model, **options)

@@ -41,10 +41,17 @@ import torch.nn.functional as F
 from torch import nn
 from torch.utils.data import Dataset
 
-from robopercept._checks import as_path, check_choice, check_int, check_real, plain_repr
+from robopercept._checks import (
+    as_path,
+    check_choice,
+    check_image,
+    check_int,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import strict_json
-from robopercept.imaging import read_image, write_image
+from robopercept.imaging import read_image, rgb_to_gray, write_image
 from robopercept.learning.metrics import classification_report
 from robopercept.nn._guards import check_device
 from robopercept.nn.classification.models import MODELS, build_model
@@ -80,6 +87,7 @@ __all__ = [
     "Prediction",
     "RunEvaluation",
     "TrainResult",
+    "class_probabilities",
     "evaluate_run",
     "load_data",
     "load_run",
@@ -890,24 +898,70 @@ def predict_loaded(
     if not isinstance(arch, Architecture):
         raise InputError(f"arch must be an Architecture (load_run); got {plain_repr(arch)}")
     image_paths, top_k = _predict_inputs(image_paths, top_k)
-    h, w = arch.input_size
     k = min(int(top_k), arch.num_classes)
-    dev = next(model.parameters()).device
     out: list[Prediction] = []
     for path in image_paths:
-        img = to_unit_float(read_image(path, mode=arch.mode))
-        chw = img[None] if img.ndim == 2 else img.transpose(2, 0, 1)
-        x = torch.from_numpy(np.ascontiguousarray(chw))[None]
-        if x.shape[2:] != (h, w):
-            x = F.interpolate(x, size=(h, w), mode="bilinear", align_corners=False, antialias=True)
-        prob = torch.softmax(model(x.to(dev)).float(), 1)[0].cpu()
-        values, indices = torch.topk(prob, k)
-        top = tuple((arch.classes[int(i)], float(v)) for v, i in zip(values, indices, strict=True))
-        shrink = max(chw.shape[1] / h, chw.shape[2] / w)
-        warning = (
-            SHRINK_WARNING.format(h=h, w=w, H=chw.shape[1], W=chw.shape[2], f=shrink)
-            if shrink > SHRINK_LIMIT
-            else None
-        )
+        prob, warning = class_probabilities(model, arch, read_image(path, mode=arch.mode))
+        order = np.argsort(-prob, kind="stable")[:k]
+        top = tuple((arch.classes[int(i)], float(prob[i])) for i in order)
         out.append(Prediction(Path(path), top, warning))
     return out
+
+
+@torch.no_grad()
+def class_probabilities(
+    model: nn.Module, arch: Architecture, image: np.ndarray
+) -> tuple[np.ndarray, str | None]:
+    """The class probabilities of one image by a run's model, and the domain warning.
+
+    The image is made grey or colour as the model was trained (a colour image given to a
+    grey model by :func:`~robopercept.imaging.rgb_to_gray`, a grey one to a colour model
+    repeated in three channels), scaled to [0, 1] (8-bit / 255, 16-bit / 65535,
+    :func:`~robopercept.nn.data.datasets.to_unit_float`) and resized to the model's input
+    size (bilinear with antialiasing, ``torch.nn.functional.interpolate``); the
+    probabilities are the softmax of the logits. The warning
+    (:data:`SHRINK_WARNING`) is set when the image is shrunk more than
+    :data:`SHRINK_LIMIT` times.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        The run's model (:func:`load_run`), in eval mode, on its device.
+    arch : Architecture
+    image : (H, W) or (H, W, 3) ndarray
+        uint8, uint16 or float in [0, 1].
+
+    Returns
+    -------
+    probabilities : (K,) float64 ndarray
+        In ``arch.classes`` order, summing to 1.
+    warning : str or None
+
+    Raises
+    ------
+    InputError
+        ``model`` or ``arch`` of the wrong type, not an image.
+    """
+    if not isinstance(model, nn.Module):
+        raise InputError(f"model must be a torch.nn.Module (load_run); got {plain_repr(model)}")
+    if not isinstance(arch, Architecture):
+        raise InputError(f"arch must be an Architecture (load_run); got {plain_repr(arch)}")
+    img = to_unit_float(check_image(image, "image"))
+    if arch.mode == "gray" and img.ndim == 3:
+        img = rgb_to_gray(img).astype(np.float32)
+    elif arch.mode == "rgb" and img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    h, w = arch.input_size
+    chw = img[None] if img.ndim == 2 else img.transpose(2, 0, 1)
+    x = torch.from_numpy(np.ascontiguousarray(chw, dtype=np.float32))[None]
+    if x.shape[2:] != (h, w):
+        x = F.interpolate(x, size=(h, w), mode="bilinear", align_corners=False, antialias=True)
+    dev = next(model.parameters()).device
+    prob = torch.softmax(model(x.to(dev)).double(), 1)[0].cpu().numpy()
+    shrink = max(chw.shape[1] / h, chw.shape[2] / w)
+    warning = (
+        SHRINK_WARNING.format(h=h, w=w, H=chw.shape[1], W=chw.shape[2], f=shrink)
+        if shrink > SHRINK_LIMIT
+        else None
+    )
+    return prob, warning

@@ -54,6 +54,7 @@ __all__ = [
     "pick_points",
     "read_cloud_file",
     "read_cloud_folder",
+    "sample_cloud",
 ]
 
 #: file extensions :func:`read_cloud_folder` reads (any case)
@@ -498,17 +499,69 @@ def _file_cloud(path: Path, n: int, fps: bool, gen: np.random.Generator) -> np.n
         if fps:
             pts = pts[farthest_point_sampling(pts, n, start=None, rng=gen)]
     else:
-        pts = read_point_cloud(path).points
-        pts = pts[np.isfinite(pts).all(1)]
-        if len(pts) == 0:
-            raise DegenerateError(f"{path}: no finite point")
-        if len(pts) >= n:
-            if fps and len(pts) > 8 * n:  # FPS from a random 8 n of them: O(8 n^2)
-                pts = pts[gen.choice(len(pts), 8 * n, replace=False)]
-            pts = pts[_pick(pts, n, fps, gen)]
-        else:  # every point once, the rest drawn with replacement
-            pts = pts[np.concatenate([np.arange(len(pts)), gen.choice(len(pts), n - len(pts))])]
+        try:
+            return _thin(read_point_cloud(path).points, n, fps, gen)
+        except DegenerateError as exc:
+            raise DegenerateError(f"{path}: {exc}") from None
     return normalize_unit_sphere(pts)[0].astype(np.float32)
+
+
+def _thin(pts: np.ndarray, n: int, fps: bool, gen: np.random.Generator) -> np.ndarray:
+    """A cloud's finite points thinned (or filled) to ``n`` and normalized
+    (:func:`sample_cloud`)."""
+    pts = pts[np.isfinite(pts).all(1)]
+    if len(pts) == 0:
+        raise DegenerateError("no finite point")
+    if len(pts) >= n:
+        if fps and len(pts) > 8 * n:  # FPS from a random 8 n of them: O(8 n^2)
+            pts = pts[gen.choice(len(pts), 8 * n, replace=False)]
+        pts = pts[_pick(pts, n, fps, gen)]
+    else:  # every point once, the rest drawn with replacement
+        pts = pts[np.concatenate([np.arange(len(pts)), gen.choice(len(pts), n - len(pts))])]
+    return normalize_unit_sphere(pts)[0].astype(np.float32)
+
+
+def sample_cloud(
+    points: npt.ArrayLike,
+    n_points: int = 1024,
+    rng: int | np.random.Generator | None = 0,
+    *,
+    fps: bool = True,
+) -> np.ndarray:
+    """A point cloud given as an array, made what a network sees, by
+    :func:`read_cloud_file`'s rules for a cloud file: NaN/inf points dropped, thinned
+    to ``n_points`` by farthest point sampling (``fps=False``: a random draw) or, with
+    fewer, every point once and the rest drawn with replacement; normalized to the unit
+    sphere.
+
+    Parameters
+    ----------
+    points : (N, 3) array_like
+    n_points, rng, fps
+        As :func:`read_cloud_file`.
+
+    Returns
+    -------
+    (n_points, 3) float32 ndarray
+
+    Raises
+    ------
+    InputError
+        Not an ``(N, 3)`` array of numbers.
+    DegenerateError
+        No finite point, or all points equal.
+
+    Examples
+    --------
+    >>> sample_cloud(np.random.default_rng(0).normal(size=(100, 3)), 16).shape
+    (16, 3)
+    """
+    a = check_numeric(points, "points")
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise InputError(f"points must be an (N, 3) array of x, y, z; got {plain_repr(points)}")
+    return _thin(
+        a.astype(np.float64), check_n_points(n_points), check_bool(fps, "fps"), as_rng(rng)
+    )
 
 
 def read_cloud_file(

@@ -385,8 +385,12 @@ def train_run(
         print(
             f"nn cloud train: {model} ({task}) on {name}: {len(train)} training, "
             f"{'no' if val is None else len(val)} validation, {len(test)} test clouds of "
-            f"{n_points} points" + (" (too few clouds to hold any out for validation: the last "
-            "epoch is kept)" if val is None else ""),
+            f"{n_points} points"
+            + (
+                " (too few clouds to hold any out for validation: the last epoch is kept)"
+                if val is None
+                else ""
+            ),
             file=sys.stderr,
         )
     settings: dict[str, Any] = {"task": task}
