@@ -3903,3 +3903,4 @@ VALID.update(
 )
 METHODS["nn.predict_class.ClassPrediction"] = ("record", "top", "picture", "write")
 METHODS["nn.predict_class.ClassPredictor"] = ("predict",)
+VALID["nn.segmentation.run.padded_class_maps"] = {"ds": _b("tests.fuzz.api:segmentation_val")}

@@ -172,3 +172,43 @@ def test_score_segmentation_of_a_mask_rcnn_is_coco_segm():
     assert s.to_dict() == {"metrics": s.metrics, "stats": list(s.stats)}
     with pytest.raises(InputError, match="DetectionDataset"):
         score_segmentation(net, [np.zeros((8, 8, 3))])
+
+
+def test_images_of_several_sizes_are_scored_each_at_its_own_size():
+    """score_segmentation sums each image's confusion at its own size (a stack would
+    refuse two sizes): equal to the confusion of the two images by hand; the padding a
+    semantic network trains on is void (255), neither learnt nor scored."""
+    import torch
+
+    from robopercept.nn.detection.data import DetectionDataset
+    from robopercept.nn.segmentation.networks import build_segmenter
+    from robopercept.nn.segmentation.run import VOID, padded_class_maps
+
+    rng = np.random.default_rng(0)
+    images = [rng.random((16, 24, 3)), rng.random((32, 16, 3))]
+    masks = [np.zeros((1, 16, 24), bool), np.zeros((1, 32, 16), bool)]
+    masks[0][0, 2:9, 3:12] = True
+    masks[1][0, 10:30, 1:8] = True
+    ds = DetectionDataset(
+        images,
+        [[[3, 2, 12, 9]], [[1, 10, 8, 30]]],
+        [[1], [1]],
+        ["blob"],
+        masks=masks,
+    )
+    torch.manual_seed(0)
+    net = build_segmenter("naive", 2, width=4)
+    got = score_segmentation(net, ds)
+    pred = segment_arrays(net, images)
+    conf = sum(
+        segmentation_confusion(m[0].astype(np.int64), p, 2)
+        for m, p in zip(masks, pred, strict=True)
+    )
+    ref = segmentation_scores(conf)
+    assert got.metrics["pixel_accuracy"] == pytest.approx(ref.pixel_accuracy)
+    assert got.metrics["mIoU"] == pytest.approx(ref.miou)
+    x, y = padded_class_maps(ds)
+    assert x.shape == (2, 32, 24, 3) and y.shape == (2, 32, 24)
+    assert (y[0, 16:] == VOID).all() and (y[1, :, 16:] == VOID).all()
+    assert (y[0, :16] != VOID).all() and y[1, 10:30, 1:8].min() == 1
+    assert np.array_equal(x[1, :, :16], images[1].astype(np.float32)) and not x[1, :, 16:].any()

@@ -92,11 +92,13 @@ __all__ = [
     "RUN_FILES",
     "SEGMENT_MODELS",
     "TASKS",
+    "VOID",
     "SegmentEvaluation",
     "SegmentScores",
     "SegmentTrainResult",
     "evaluate_run",
     "load_segmentation_data",
+    "padded_class_maps",
     "resolve_segment_model",
     "score_segmentation",
     "train_run",
@@ -372,6 +374,61 @@ def _load_model(path: Path) -> tuple[nn.Module, dict[str, Any]]:
     return load_segmenter(path)
 
 
+#: the label of padding in :func:`padded_class_maps` (Pascal VOC's "void"): no loss, no score
+VOID = 255
+
+
+def _canvas(images: list[np.ndarray]) -> tuple[int, int]:
+    """``(H, W)``: the largest height and width of ``images``."""
+    return max(im.shape[0] for im in images), max(im.shape[1] for im in images)
+
+
+def padded_class_maps(
+    ds: DetectionDataset, canvas: tuple[int, int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """A segmentation set's images and class maps as two stacked arrays, each image
+    padded at its bottom and right to ``canvas`` ``(H, W)`` (default: the largest
+    height and width of the set) with black and its class map with :data:`VOID`, which
+    the loss and the scores ignore: how a semantic network trains on your own images of
+    several sizes (as torchvision's segmentation references pad a batch with 255).
+
+    Returns
+    -------
+    images : (N, H, W, 3) float32 ndarray
+    maps : (N, H, W) int64 ndarray
+        0 background, ``k`` the class ``classes[k - 1]``, :data:`VOID` the padding.
+
+    Raises
+    ------
+    InputError
+        A set without masks, an image larger than ``canvas``.
+
+    Examples
+    --------
+    >>> m = [np.ones((1, 2, 2), bool), np.ones((1, 1, 3), bool)]
+    >>> ds = DetectionDataset([np.zeros((2, 2, 3)), np.zeros((1, 3, 3))],
+    ...                       [[[0, 0, 2, 2]], [[0, 0, 3, 1]]], [[1], [1]], ["a"], masks=m)
+    >>> padded_class_maps(ds)[1].tolist()
+    [[[1, 1, 255], [1, 1, 255]], [[1, 1, 1], [255, 255, 255]]]
+    """
+    ds = check_detection_dataset(ds)
+    if canvas is None:
+        h, w = _canvas(list(ds.images))
+    elif isinstance(canvas, (tuple, list)) and len(canvas) == 2:
+        h, w = (check_int(v, "canvas (H, W)", 1) for v in canvas)
+    else:
+        raise InputError(f"canvas must be (H, W) pixels; got {plain_repr(canvas)}")
+    images = np.zeros((len(ds), h, w, 3), np.float32)
+    maps = np.full((len(ds), h, w), VOID, np.int64)
+    for i, im in enumerate(ds.images):
+        ih, iw = im.shape[:2]
+        if ih > h or iw > w:
+            raise InputError(f"image {i} is {iw} x {ih}, larger than the canvas {w} x {h}")
+        images[i, :ih, :iw] = im
+        maps[i, :ih, :iw] = ds.subset([i]).class_maps()[0]
+    return images, maps
+
+
 # --------------------------------------------------------------------------- scores
 def score_segmentation(model: nn.Module, val: Any, *, device: str | None = None) -> SegmentScores:
     """The scores of a segmentation model on a labelled set (module docstring).
@@ -419,10 +476,13 @@ def score_segmentation(model: nn.Module, val: Any, *, device: str | None = None)
         return SegmentScores(True, ev.summary(), stats=tuple(ev.stats.tolist()))
     if device:
         model.to(resolve_device(device))
-    truth = val.class_maps()
-    pred = np.stack(segment_arrays(model, list(val.images)))
+    pred = segment_arrays(model, list(val.images))
     names = ["background", *val.classes]
-    s = segmentation_scores(segmentation_confusion(truth, pred, len(names)))
+    conf = sum(  # image by image: the images may differ in size
+        segmentation_confusion(val.subset([i]).class_maps()[0], p, len(names))
+        for i, p in enumerate(pred)
+    )
+    s = segmentation_scores(conf)
     metrics = {
         "pixel_accuracy": s.pixel_accuracy,
         "mean_accuracy": s.mean_accuracy,
@@ -584,21 +644,15 @@ def train_run(
         else:
             if name == "unet":
                 settings["depth"] = _UNET_DEPTH
-            sizes = {im.shape[:2] for im in (*train.images, *val.images)}
-            if len(sizes) > 1:
-                raise InputError(
-                    f"--data: a semantic network trains on images of one size; these have "
-                    f"{len(sizes)} ({', '.join(f'{w}x{h}' for h, w in sorted(sizes))}): use "
-                    "--task instance (Mask R-CNN takes any size), or resize the images"
-                )
             torch.manual_seed(cfg.seed)  # the initial weights
             net = build_segmenter(name, len(sets.classes) + 1, **settings)
+            canvas = _canvas([*train.images, *val.images])
             hist = train_segmenter(
                 net,
-                np.stack(train.images),
-                train.class_maps(),
+                *padded_class_maps(train, canvas),
                 cfg,
-                val=(np.stack(val.images), val.class_maps()),
+                val=padded_class_maps(val, canvas),
+                ignore_index=VOID,
                 dihedral=False,
                 progress=progress,
                 checkpoint=ckpt,
