@@ -49,7 +49,7 @@ test: $(VENV)/.dev syslibs
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m ruff format --check src tests benchmarks
 	$(PY) tools/typecheck.py
-	$(PY) -m pytest -p no:cacheprovider
+	$(PY) -m pytest -p no:cacheprovider -n 2 --dist loadfile
 
 bench: $(VENV)/.dev
 	$(PY) -m benchmarks

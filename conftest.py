@@ -10,11 +10,16 @@ Crash traceback: :mod:`faulthandler` writes the Python stacks of every thread at
 crash to ``.pytest-crash.txt`` instead of stderr (where CPython 3.12+ follows them with
 a list of extension modules that pushes them out of a log's tail); ``.ci/run`` prints
 the stacks last, after the marker.
+
+Under pytest-xdist (``make test`` runs two workers) every worker appends to the one
+crash file the controller opened, and xdist itself names a test whose worker died
+("worker 'gw0' crashed while running ...").
 """
 
 from __future__ import annotations
 
 import faulthandler
+import os
 from pathlib import Path
 from typing import IO
 
@@ -31,7 +36,8 @@ def pytest_configure(config: pytest.Config) -> None:
     # trylast: after pytest's own faulthandler plugin, whose stderr target this replaces
     global _crash_file
     if _crash_file is None:
-        _crash_file = _CRASH.open("w", encoding="utf-8")
+        worker = "PYTEST_XDIST_WORKER" in os.environ  # the controller opened it first
+        _crash_file = _CRASH.open("a" if worker else "w", encoding="utf-8")
         faulthandler.enable(file=_crash_file, all_threads=True)
 
 
