@@ -1591,6 +1591,7 @@ VALID.update(
         "nn.detection.data.DetectionDataset.subset": {"indices": [1, 0]},
         "nn.detection.data.DetectionDataset.split": {"fractions": (0.5, 0.5), "rng": 0},
         "nn.detection.data.DetectionDataset.areas": {"index": 0},
+        "nn.detection.data.DetectionDataset.class_map": {"index": 0},
         "nn.detection.data.DetectionDataset.__getitem__": {"index": 0},
         "nn.detection.data.collate_detection": {
             "batch": _b("tests.fuzz.api:detection_value", "batch")
@@ -1644,6 +1645,7 @@ METHODS["nn.detection.data.DetectionDataset"] = (
     "to_coco",
     "__getitem__",
     "class_maps",
+    "class_map",
     "from_instance_labels",
     "from_coco",
 )

@@ -198,17 +198,17 @@ class ClassPredictor:
                 return ClassPrediction(source, res.probabilities, points=res.points)
             pts = sample_cloud(x, self.n_points, self.seed)
             prob = predict_clouds(self.model, pts)
-            names = self.classes
-            order = np.argsort(-prob, kind="stable")
-            probs = {names[i]: float(prob[i]) for i in order}
-            return ClassPrediction(source, probs, points=pts)
+            return ClassPrediction(source, self._ranked(prob), points=pts)
         arch = self.info
         image = read_image(source, mode=arch.mode) if source != "<array>" else np.asarray(x)
         prob, warning = class_probabilities(self.model, arch, image)
-        order = np.argsort(-prob, kind="stable")
-        probs = {arch.classes[int(i)]: float(prob[i]) for i in order}
         warn = None if warning is None else f"{source}: {warning}"
-        return ClassPrediction(source, probs, warn, image=image)
+        return ClassPrediction(source, self._ranked(prob), warn, image=image)
+
+    def _ranked(self, prob: np.ndarray) -> dict[str, float]:
+        """``{class: probability}``, most probable first (ties in class order)."""
+        names = self.classes
+        return {names[int(i)]: float(prob[i]) for i in np.argsort(-prob, kind="stable")}
 
 
 def load_class_predictor(

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -160,8 +160,11 @@ def read_labelme_json(path: str | os.PathLike[str]) -> LabelmeAnnotation:
     >>> a.image_path, a.shapes[0].label, a.shapes[0].points.tolist()
     ('a.jpg', 'cat', [[1.0, 2.0], [5.0, 6.0]])
     """
-    data = load_json(path, "a labelme JSON file")
-    where = str(path)
+    return _labelme(load_json(path, "a labelme JSON file"), str(path))
+
+
+def _labelme(data: Any, where: str) -> LabelmeAnnotation:
+    """:func:`read_labelme_json` of the JSON value ``data`` read from ``where``."""
     if not isinstance(data, dict) or "shapes" not in data:
         raise FileFormatError(f"{where}: not a labelme file (no 'shapes')")
     for key in ("imagePath", "imageHeight", "imageWidth"):
@@ -446,36 +449,20 @@ def _voc_xml_folder(root: Path, xmls: list[Path]) -> AnnotatedImages:
             )
         found.append(img.relative_to(root).as_posix())
     coco = voc_to_coco(anns)
-    images = tuple(
-        CocoImage(im.id, f, im.width, im.height) for im, f in zip(coco.images, found, strict=True)
-    )
-    return AnnotatedImages(
-        CocoDataset(
-            images,
-            coco.categories,
-            coco.ann_ids,
-            coco.image_ids,
-            coco.category_ids,
-            coco.boxes,
-            coco.areas,
-            coco.iscrowd,
-        ),
-        root,
-        "voc-xml",
-    )
+    images = tuple(replace(im, file_name=f) for im, f in zip(coco.images, found, strict=True))
+    return AnnotatedImages(replace(coco, images=images), root, "voc-xml")
 
 
-def _labelme_folder(root: Path, files: list[Path]) -> AnnotatedImages:
-    anns = [read_labelme_json(f) for f in files]
+def _labelme_folder(root: Path, files: list[Path], docs: list[Any]) -> AnnotatedImages:
+    """The labelme files ``files`` of ``root`` (their JSON values ``docs``)."""
+    anns = [_labelme(d, str(f)) for f, d in zip(files, docs, strict=True)]
     found = []
     for f, a in zip(files, anns, strict=True):
         img = _image_beside(f.parent, f.stem, a.image_path)
         if img is None:
             raise InputError(f"--data {root}: no image for {f} ({a.image_path!r} beside it)")
         found.append(img.relative_to(root).as_posix())
-    anns = [
-        LabelmeAnnotation(p, a.width, a.height, a.shapes) for a, p in zip(anns, found, strict=True)
-    ]
+    anns = [replace(a, image_path=p) for a, p in zip(anns, found, strict=True)]
     return AnnotatedImages(labelme_to_coco(anns, where=[str(f) for f in files]), root, "labelme")
 
 
@@ -528,19 +515,20 @@ def read_annotations(path: str | os.PathLike[str]) -> AnnotatedImages:
     if (p / "SegmentationObject").is_dir():
         return AnnotatedImages(read_voc_segmentation(p), p, "voc-masks")
     jsons = sorted(f for f in p.glob("*.json") if f.is_file())
-    labelme, bad = [], []
+    labelme, docs, bad = [], [], []
     for f in jsons:
         try:
-            head = load_json(f, "a labelme JSON file")
+            doc = load_json(f, "a labelme JSON file")
         except FileFormatError as exc:
             bad.append(exc)
             continue
-        if isinstance(head, dict) and "shapes" in head:
+        if isinstance(doc, dict) and "shapes" in doc:
             labelme.append(f)
+            docs.append(doc)
     if labelme and bad:  # a broken file among labelme files is not skipped unsaid
         raise bad[0]
     if labelme:
-        return _labelme_folder(p, labelme)
+        return _labelme_folder(p, labelme, docs)
     xmls = sorted(f for f in p.glob("*.xml") if f.is_file())
     if not xmls and (p / "Annotations").is_dir():
         xmls = sorted(f for f in (p / "Annotations").glob("*.xml") if f.is_file())

@@ -511,20 +511,43 @@ class DetectionDataset:
         >>> ds.class_maps().tolist()
         [[[0, 2, 2], [0, 0, 0]]]
         """
+        self._check_masks()
+        shapes = {im.shape[:2] for im in self.images}
+        if len(shapes) != 1:
+            raise InputError(f"class maps stack images of one size; these have {sorted(shapes)}")
+        return np.stack([self.class_map(i) for i in range(len(self))])
+
+    def class_map(self, index: int) -> np.ndarray:
+        """The per-pixel class labels ``(H, W)`` int64 of image ``index``, at its own
+        size (:meth:`class_maps`' rule: 0 the background, the later object wins).
+
+        Raises
+        ------
+        InputError
+            The set has no masks, or ``index`` is out of range.
+
+        Examples
+        --------
+        >>> m = np.zeros((1, 2, 3), bool); m[0, 1, :2] = True
+        >>> ds = DetectionDataset([np.zeros((2, 3, 3))], [[[0, 1, 2, 2]]], [[1]], ["a"],
+        ...                       masks=[m])
+        >>> ds.class_map(0).tolist()
+        [[0, 0, 0], [1, 1, 0]]
+        """
+        self._check_masks()
+        assert self.masks is not None
+        i = self._index(index)
+        out = np.zeros(self.images[i].shape[:2], np.int64)
+        for mk, k in zip(self.masks[i], self.labels[i], strict=True):
+            out[mk] = k
+        return out
+
+    def _check_masks(self) -> None:
         if self.masks is None:
             raise InputError(
                 "this set has no masks, so no class maps: build it with masks "
                 "(procedural_detection_set and digits_detection_set have them)"
             )
-        shapes = {im.shape[:2] for im in self.images}
-        if len(shapes) != 1:
-            raise InputError(f"class maps stack images of one size; these have {sorted(shapes)}")
-        h, w = shapes.pop()
-        out = np.zeros((len(self), h, w), np.int64)
-        for i, (m, lab) in enumerate(zip(self.masks, self.labels, strict=True)):
-            for mk, k in zip(m, lab, strict=True):
-                out[i][mk] = k
-        return out
 
     def __len__(self) -> int:
         return len(self.images)

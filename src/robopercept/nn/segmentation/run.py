@@ -425,7 +425,7 @@ def padded_class_maps(
         if ih > h or iw > w:
             raise InputError(f"image {i} is {iw} x {ih}, larger than the canvas {w} x {h}")
         images[i, :ih, :iw] = im
-        maps[i, :ih, :iw] = ds.subset([i]).class_maps()[0]
+        maps[i, :ih, :iw] = ds.class_map(i)
     return images, maps
 
 
@@ -479,8 +479,7 @@ def score_segmentation(model: nn.Module, val: Any, *, device: str | None = None)
     pred = segment_arrays(model, list(val.images))
     names = ["background", *val.classes]
     conf = sum(  # image by image: the images may differ in size
-        segmentation_confusion(val.subset([i]).class_maps()[0], p, len(names))
-        for i, p in enumerate(pred)
+        segmentation_confusion(val.class_map(i), p, len(names)) for i, p in enumerate(pred)
     )
     s = segmentation_scores(conf)
     metrics = {
