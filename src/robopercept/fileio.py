@@ -1,4 +1,5 @@
-"""Writing output files safely: atomically, and with errors that name the file.
+"""Reading and writing files safely: bounded structured text in, atomic files out,
+with errors that name the file.
 
 :func:`atomic_write` and :func:`atomic_path` write a file as a temporary file in the
 same folder, flushed to the disk (``fsync``), then renamed over the target with
@@ -10,11 +11,22 @@ device`` for ``ENOSPC``/``EDQUOT``).
 
 This is the one atomic writer of the package (checkpoints of ``nn.train.loop``, the
 outputs of ``pipelines.plane_outputs``).
+
+Reading, :func:`parse_json` / :func:`read_json` and :func:`check_nesting` are the one
+policy for structured text (JSON, the OpenCV FileStorage YAML and XML, manifests,
+annotation files): a document nested deeper than :data:`MAX_NESTING` levels, or one that
+exhausts the parser's recursion, numbers with more digits than Python converts, invalid
+UTF-8 or invalid JSON all give :class:`~robopercept.errors.FileFormatError` naming the
+file, never ``RecursionError`` or ``ValueError`` from deep inside a reader. Real files
+nest a handful of levels (a COCO file 4, a calibration file 3); 64 leaves room for any
+hand-written configuration while every recursive walk of the value stays far from
+Python's recursion limit.
 """
 
 from __future__ import annotations
 
 import errno
+import json
 import math
 import os
 from collections.abc import Iterator
@@ -22,14 +34,21 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from robopercept.errors import RoboperceptError
+from robopercept._checks import check_file
+from robopercept.errors import FileFormatError, RoboperceptError
 
 __all__ = [
     "DISK_FULL_ERRNOS",
+    "MAX_NESTING",
     "WriteError",
     "atomic_path",
     "atomic_write",
+    "check_nesting",
     "describe_write_error",
+    "nesting_depth",
+    "nesting_error",
+    "parse_json",
+    "read_json",
     "strict_json",
     "write_error",
 ]
@@ -227,3 +246,162 @@ def strict_json(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [strict_json(v) for v in value]
     return value
+
+
+# --------------------------------------------------------------------------- reading
+
+MAX_NESTING = 64
+"""The deepest nesting of lists and mappings (or XML elements) a structured file may
+have (see the module docstring)."""
+
+
+def nesting_depth(value: Any, limit: int = MAX_NESTING) -> int:
+    """The nesting depth of ``value`` (0 for a scalar, 1 for a flat list or dict, ...),
+    counted without recursion; the count stops at ``limit + 1``.
+
+    Examples
+    --------
+    >>> nesting_depth({"a": [1, [2]]})
+    3
+    """
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(value, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, dict):
+            children: Any = node.values()
+        elif isinstance(node, list | tuple):
+            children = node
+        else:
+            continue
+        depth += 1
+        if depth > deepest:
+            deepest = depth
+            if deepest > limit:
+                return deepest
+        stack.extend((c, depth) for c in children)
+    return deepest
+
+
+def check_nesting(value: Any, where: str, limit: int = MAX_NESTING) -> Any:
+    """Return ``value`` (a parsed JSON or YAML document) after checking that its lists
+    and mappings nest at most ``limit`` levels.
+
+    Parameters
+    ----------
+    value : any
+    where : str
+        The file (or entry) it came from, for the message.
+    limit : int, default MAX_NESTING
+
+    Raises
+    ------
+    FileFormatError
+        ``"<where>: nested more than <limit> levels deep ..."``.
+
+    Examples
+    --------
+    >>> check_nesting([[[1]]], "a.json", limit=2)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.FileFormatError: a.json: nested more than 2 levels deep; no file \
+this reader knows nests that deep (is it the right file?)
+    """
+    if nesting_depth(value, limit) > limit:
+        raise nesting_error(where, limit)
+    return value
+
+
+def nesting_error(where: str, limit: int = MAX_NESTING) -> FileFormatError:
+    """The :class:`FileFormatError` of a document nested too deep (for parsers that
+    detect it themselves, such as an XML tree walk)."""
+    return FileFormatError(
+        f"{where}: nested more than {limit} levels deep; no file this reader knows nests "
+        "that deep (is it the right file?)"
+    )
+
+
+def parse_json(text: str | bytes, where: str, limit: int = MAX_NESTING) -> Any:
+    """The JSON value of ``text`` under the reading policy of the module docstring.
+
+    Parameters
+    ----------
+    text : str or bytes
+        JSON text (bytes are decoded as UTF-8, a byte-order mark allowed).
+    where : str
+        The file it came from, for messages.
+    limit : int, default MAX_NESTING
+        The deepest nesting allowed.
+
+    Returns
+    -------
+    any
+        ``json.loads(text)``; ``NaN`` and ``Infinity`` are read as Python reads them.
+
+    Raises
+    ------
+    FileFormatError
+        Not UTF-8, not JSON, a number Python refuses to convert (over 4300 digits), or
+        nested deeper than ``limit``.
+
+    Examples
+    --------
+    >>> parse_json('{"a": [1, 2]}', "a.json")
+    {'a': [1, 2]}
+    >>> parse_json("[" * 100000, "deep.json")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.FileFormatError: deep.json: nested more than 64 levels deep; no \
+file this reader knows nests that deep (is it the right file?)
+    """
+    if isinstance(text, bytes | bytearray):
+        try:
+            text = bytes(text).decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise FileFormatError(f"{where}: not UTF-8 text ({exc})") from None
+    if not isinstance(text, str):
+        raise FileFormatError(f"{where}: expected JSON text; got {type(text).__name__}")
+    if _opens_deeper(text, limit):
+        raise nesting_error(where, limit)
+    try:
+        value = json.loads(text)
+    except RecursionError:
+        raise nesting_error(where, limit) from None
+    except ValueError as exc:  # JSONDecodeError, or an integer of over 4300 digits
+        raise FileFormatError(f"{where}: not valid JSON ({exc})") from None
+    return check_nesting(value, where, limit)
+
+
+def _opens_deeper(text: str, limit: int) -> bool:
+    """Whether ``text`` opens more than ``limit`` brackets in a row at its start (the
+    usual shape of a nesting attack), checked before the parser recurses."""
+    head = text[: 2 * limit + 2].lstrip()
+    run = len(head) - len(head.lstrip("[{ \t\r\n"))
+    return sum(c in "[{" for c in head[:run]) > limit
+
+
+def read_json(path: str | os.PathLike[str], what: str, limit: int = MAX_NESTING) -> Any:
+    """The JSON value of the file ``path`` under the reading policy of the module
+    docstring.
+
+    Parameters
+    ----------
+    path : path-like
+    what : str
+        What the caller reads, with its article (``"a COCO annotation file"``), for
+        the message of a folder.
+    limit : int, default MAX_NESTING
+
+    Raises
+    ------
+    InputError
+        Not a usable path.
+    FileFormatError
+        Missing, a folder, unreadable, not UTF-8 JSON, or nested deeper than ``limit``.
+    """
+    p = check_file(path, what)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    return parse_json(raw, str(p), limit)
