@@ -86,10 +86,6 @@ def test_bad_flags(tmp_path, capsys, extra, message) -> None:
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (
-            ["edges", "--scheduler", "somewhere:8786"],
-            "scheduler must be 'local' or an address like tcp://HOST:PORT",
-        ),
         (["nn-cloud", "--model", "nowhere.pt"], "--model nowhere.pt: no such file or folder"),
         (["stereo"], "the stereo job needs --max-disparity"),
         (["stereo", "--max-disparity", "8", "--method", "sobel"], "--method must be one of"),
@@ -104,6 +100,18 @@ def test_library_refusals_name_the_flags(tmp_path, capsys, argv, message) -> Non
     src = {"stereo": pair, "nn-cloud": tmp_path / "a.off"}.get(argv[0], sample_image_path())
     assert main(["batch", argv[0], str(src), "-o", str(tmp_path / "o"), *argv[1:]]) == 1
     assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+# issue 47 (R58): an address Dask cannot use is a usage error naming --scheduler and the
+# forms it takes (tests/pipelines/test_batch_hostile.py has each form)
+def test_an_address_without_scheme_is_a_usage_error(tmp_path, capsys) -> None:
+    argv = ["batch", "edges", str(sample_image_path()), "-o", str(tmp_path / "o"),
+            "--scheduler", "somewhere:8786"]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--scheduler must be 'local' or the address of a running Dask cluster" in err
+    assert "write tcp://somewhere:8786" in err
     assert not (tmp_path / "o").exists()
 
 

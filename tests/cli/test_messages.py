@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from robopercept._checks import check_extension, check_file, plain_repr
-from robopercept.cli._args import in_flags
+from robopercept.cli._args import flag_errors, in_flags
 from robopercept.cli.main import build_parser, main
-from robopercept.errors import FileFormatError, InputError
+from robopercept.errors import ArgumentError, FileFormatError, InputError
 from robopercept.imaging import SnapshotVideoWriter, VideoWriter, write_image
 from tests.conftest import data_path
 
@@ -121,6 +121,18 @@ def test_in_flags_hand_cases():
         "got --low 200, --high 100"
     )
     assert in_flags("nothing to do", flags) == "nothing to do"
+
+
+def test_flag_errors_keeps_the_error_class():
+    # an ArgumentError (exit 2) renamed into flags stays an ArgumentError, not exit 1
+    with pytest.raises(ArgumentError, match=r"^--scheduler must be") as info:
+        with flag_errors(scheduler="--scheduler"):
+            raise ArgumentError("scheduler must be tcp://HOST:PORT")
+    assert type(info.value) is ArgumentError
+    with pytest.raises(InputError, match=r"^--sigma") as info2:
+        with flag_errors(sigma="--sigma"):
+            raise InputError("sigma must be > 0")
+    assert type(info2.value) is InputError
 
 
 def test_meanshift_feature_advice_names_the_flags(tmp_path, capsys):

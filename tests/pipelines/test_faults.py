@@ -513,3 +513,201 @@ def test_a_full_disk_while_finalizing_names_the_file_and_keeps_the_rest(tmp_path
     assert json.loads((tmp_path / "summary.json").read_text())["stopped"] == summary.stopped
     assert len(_rows(tmp_path / "plane.csv")) == 3
     assert sorted(p.name for p in tmp_path.iterdir()) == ["plane.csv", "summary.json"]
+
+
+# -- batch: the scheduler gone, Ctrl-C while the cluster starts (issue 47) -----------------
+
+
+def _batch_images(tmp_path: Path, n: int) -> list[Path]:
+    from robopercept.imaging import sample_image_path
+
+    (tmp_path / "in").mkdir()
+    paths = [tmp_path / "in" / f"img{i}.png" for i in range(n)]
+    for p in paths:
+        p.write_bytes(sample_image_path().read_bytes())
+    return paths
+
+
+def _manifest_items(out: Path) -> list[dict]:
+    return json.loads((out / "batch.json").read_text())["items"]
+
+
+def _free_tcp_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _tcp_cluster():
+    """A scheduler and one worker thread in this process, reached over TCP."""
+    from distributed import LocalCluster
+
+    return LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp://",
+                        dashboard_address=None, silence_logs=40)  # fmt: skip
+
+
+# issue 47 (R56): a scheduler killed mid-batch made the command exit 0 and record the
+# other items failed with the error "NoneType: None"
+def test_the_scheduler_gone_mid_batch_exits_1_keeps_the_done_and_resumes(
+    tmp_path, monkeypatch, capsys
+):
+    pytest.importorskip("distributed")
+    import asyncio
+    import functools
+
+    from distributed import Worker
+
+    import robopercept.pipelines.batch as batch
+
+    images, out = _batch_images(tmp_path, 4), tmp_path / "out"
+    port = _free_tcp_port()
+    address = f"tcp://127.0.0.1:{port}"
+    dask = Path(sys.executable).parent / "dask"
+    scheduler = subprocess.Popen(
+        [str(dask), "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )  # fmt: skip
+    stop = threading.Event()
+
+    def worker() -> None:  # in this process: the imports and kernels are warm
+        async def serve() -> None:
+            async with Worker(address, nthreads=1, host="127.0.0.1", dashboard=False):
+                while not stop.is_set():
+                    await asyncio.sleep(0.05)
+
+        asyncio.run(serve())
+
+    def kill_after_the_first_item() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            try:
+                if any(r["status"] == "ok" for r in _manifest_items(out)):
+                    break
+            except (OSError, ValueError, KeyError):
+                pass
+            time.sleep(0.02)
+        os.killpg(scheduler.pid, signal.SIGKILL)
+
+    threads = [threading.Thread(target=worker, daemon=True),
+               threading.Thread(target=kill_after_the_first_item, daemon=True)]  # fmt: skip
+    monkeypatch.setattr(batch, "run_batch", functools.partial(batch.run_batch, delay=0.3))
+    argv = ["batch", "edges", *map(str, images), "-o", str(out), "--scheduler", address,
+            "--connect-timeout", "60", "--quiet"]  # fmt: skip
+    try:
+        for t in threads:
+            t.start()
+        code = main(argv)
+    finally:
+        stop.set()
+        if scheduler.poll() is None:
+            os.killpg(scheduler.pid, signal.SIGKILL)
+        scheduler.wait(timeout=30)
+        for t in threads:
+            t.join(timeout=30)
+    assert code == 1
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith(f"robopercept: error: the Dask scheduler at {address} went away")
+    assert "--resume" in err
+    items = _manifest_items(out)
+    statuses = [r["status"] for r in items]
+    assert "ok" in statuses and set(statuses) == {"ok", "failed"}, statuses
+    for r in items:
+        if r["status"] == "ok":
+            assert (out / r["outputs"][0]).is_file()  # kept
+        else:
+            assert r["error"] == (
+                f"SchedulerGoneError: the Dask scheduler at {address} went away before the "
+                "item finished"
+            )
+    assert "NoneType" not in (out / "batch.json").read_text()
+    # --resume on another cluster finishes the batch, the done items skipped
+    with _tcp_cluster() as cluster:
+        argv[argv.index(address)] = cluster.scheduler_address
+        assert main([*argv, "--resume", "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["skipped"] == statuses.count("ok") and again["ok"] == statuses.count("failed")
+    assert all((out / f"img{i}" / "edges.png").is_file() for i in range(4))
+
+
+# issue 47 (R57): Ctrl-C while the local cluster started left every item "pending"
+def test_ctrl_c_while_the_cluster_starts_cancels_every_item_not_done(tmp_path, monkeypatch):
+    pytest.importorskip("distributed")
+    import robopercept.pipelines.batch as batch
+
+    images, out = _batch_images(tmp_path, 3), tmp_path / "out"
+    (out / "img0").mkdir(parents=True)  # an earlier batch did img0
+    (out / "img0" / "edges.png").write_bytes(b"png")
+    record = {"item": "img0", "input": str(images[0]), "status": "ok", "attempts": 1,
+              "seconds": 0.1, "worker": "", "error": "", "outputs": ["img0/edges.png"]}  # fmt: skip
+    (out / "batch.json").write_text(json.dumps(
+        {"job": "edges", "options": batch.JOB_OPTIONS["edges"], "items": [record]}))  # fmt: skip
+
+    def interrupted(workers):
+        raise KeyboardInterrupt
+
+    before = dict(os.environ)
+    monkeypatch.setattr(batch, "local_cluster", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        batch.run_batch("edges", images, out, workers=1, resume=True, progress=False)
+    assert [r["status"] for r in _manifest_items(out)] == ["skipped", "cancelled", "cancelled"]
+    assert dict(os.environ) == before
+    monkeypatch.setattr(batch, "local_cluster", interrupted)
+    argv = ["batch", "edges", *map(str, images), "-o", str(out), "--resume", "--quiet"]
+    assert main(argv) == 130
+    assert [r["status"] for r in _manifest_items(out)] == ["skipped", "cancelled", "cancelled"]
+
+
+def _children(pid: int) -> list[str]:
+    """The child processes of ``pid``, started by any of its threads (Linux)."""
+    found: list[str] = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            found += (task / "children").read_text().split()
+        except OSError:
+            pass
+    return found
+
+
+def _living(pgid: int) -> list[int]:
+    """Processes of the group ``pgid`` that are not zombies (Linux)."""
+    alive = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            alive.append(int(stat.parent.name))
+    return alive
+
+
+# issue 47 (R57), the real signal: SIGINT once the local cluster spawns its worker
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux /proc")
+def test_sigint_while_the_local_cluster_starts(tmp_path):
+    pytest.importorskip("distributed")
+    images, out = _batch_images(tmp_path, 3), tmp_path / "out"
+    src = Path(__file__).resolve().parents[2] / "src"
+    env = {**os.environ, "PYTHONPATH": f"{src}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    argv = ["batch", "edges", *map(str, images), "-o", str(out), "--workers", "1", "--quiet"]
+    child = subprocess.Popen(
+        [sys.executable, "-m", "robopercept.cli.main", *argv], env=env, start_new_session=True,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        _wait_for(lambda: bool(_children(child.pid)), child)  # a worker is being spawned
+        child.send_signal(signal.SIGINT)
+        _, err = child.communicate(timeout=120)
+        deadline = time.monotonic() + 60  # the half-started cluster's processes go too
+        while _living(child.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _living(child.pid), "processes of the batch were left behind"
+    finally:
+        if child.poll() is None or _living(child.pid):
+            os.killpg(child.pid, signal.SIGKILL)
+        child.wait(timeout=30)
+    assert child.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "robopercept: interrupted"
+    statuses = [r["status"] for r in _manifest_items(out)]
+    assert "pending" not in statuses and "cancelled" in statuses, statuses

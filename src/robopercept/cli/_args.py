@@ -280,7 +280,8 @@ def in_flags(message: str, flags: Mapping[str, str]) -> str:
 def flag_errors(**flags: str) -> Iterator[None]:
     """Inside, an :class:`~robopercept.errors.InputError` from the library has the Python
     parameters of ``flags`` (``cell_size="--cell"``) written as the flags the user typed
-    (:func:`in_flags`); it stays an ``InputError`` (exit code 1). Usable as a ``with``
+    (:func:`in_flags`); it keeps its class (an ``InputError`` exits 1, an
+    ``ArgumentError`` 2). Usable as a ``with``
     block around a library call or as a decorator of a command's ``run`` function.
 
     Examples
@@ -294,4 +295,8 @@ def flag_errors(**flags: str) -> Iterator[None]:
         text = in_flags(str(exc), flags)
         if text == str(exc):
             raise
-        raise InputError(text) from exc
+        try:
+            renamed = type(exc)(text)
+        except Exception:  # a subclass whose constructor takes more than the message
+            renamed = InputError(text)
+        raise renamed from exc

@@ -11,11 +11,13 @@ from typing import Any
 from robopercept.cli._args import (
     UsageError,
     flag_errors,
+    in_flags,
     non_negative_int,
     numbers,
     positive_float,
     positive_int,
 )
+from robopercept.errors import ArgumentError
 from robopercept.pipelines.batch import JOB_OPTIONS, JOBS
 
 __all__ = ["register"]
@@ -45,7 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--scheduler",
         default="local",
         help="'local' (default: a LocalCluster of --workers processes) or the address of a "
-        "running scheduler, tcp://HOST:PORT (its workers must see the same files)",
+        "running scheduler, tcp://HOST:PORT (HOST a name, an IPv4 address or [IPv6]; its "
+        "workers must see the same files); tls://, ucx:// and others are refused",
     )
     p.add_argument(
         "--workers", type=positive_int, default=2, help="local workers (default: %(default)s)"
@@ -65,7 +68,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     again = p.add_mutually_exclusive_group()
     again.add_argument(
-        "--resume", action="store_true", help="skip the items OUT/batch.json has as done"
+        "--resume",
+        action="store_true",
+        help="skip the items OUT/batch.json has as done and run the others; the job and its "
+        "options must be those the manifest records (else exit 2: use --overwrite)",
     )
     again.add_argument("--overwrite", action="store_true", help="run every item again")
     p.add_argument("--voxel", type=float, default=None, metavar="SIZE", help="cloud: voxel (m)")
@@ -177,19 +183,25 @@ def run_batch_command(args: argparse.Namespace) -> int:
             raise UsageError(f"{flag} does not apply to the {args.job} job")
         options[name] = None if given == "off" else given
     out = Path(args.output)
-    result = run_batch(
-        args.job,
-        args.inputs,
-        out,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        retries=args.retries,
-        resume=args.resume,
-        overwrite=args.overwrite,
-        connect_timeout=args.connect_timeout,
-        options=options,
-        progress=not args.quiet,
-    )
+    try:
+        result = run_batch(
+            args.job,
+            args.inputs,
+            out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            retries=args.retries,
+            resume=args.resume,
+            overwrite=args.overwrite,
+            connect_timeout=args.connect_timeout,
+            options=options,
+            progress=not args.quiet,
+        )
+    except ArgumentError as exc:  # in the flags' terms, still a usage error (exit 2)
+        text = in_flags(str(exc), {**_FLAGS, "scheduler": "--scheduler"})
+        if text == str(exc):
+            raise
+        raise ArgumentError(text) from exc
     summary = result.to_dict()
     if args.json:
         print(json.dumps(summary, indent=2, default=str))

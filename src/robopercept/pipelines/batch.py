@@ -19,8 +19,23 @@ is rewritten atomically (:func:`~robopercept.fileio.atomic_write`): one record p
 item with its ``status`` (``pending``, ``ok``, ``failed``, ``skipped``: done by an
 earlier run and resumed, ``cancelled``: pending when the batch was interrupted), its
 ``attempts``, ``seconds`` (the worker's time on the last attempt), ``worker`` (its
-address), ``error`` (the last one) and ``outputs`` (paths relative to ``OUT``). A
-failed item does not stop the batch. Inputs are only read.
+address), ``error`` (the last one) and ``outputs`` (paths relative to ``OUT``), and
+the job's ``options`` (every one, defaults filled in). A failed item does not stop the
+batch. Inputs are only read.
+
+Resuming (``resume=True``, ``robopercept batch --resume``) reads the manifest with
+:func:`read_manifest`, which checks every field's type (a damaged manifest is a
+:class:`~robopercept.errors.FileFormatError` naming ``--overwrite``), and refuses a
+manifest of another job or other options (:class:`~robopercept.errors.ArgumentError`,
+exit 2, naming ``--overwrite``; the manifest is left as it was), since the skipped
+items would keep results of the old options. An item counts as done only when its
+status is ``ok`` or ``skipped`` and every recorded output is a file inside its own
+folder ``OUT/<item>/``; any other item runs again.
+
+A scheduler that goes away mid-batch ends it with :class:`SchedulerGoneError` once
+the manifest is written: the items done are kept, the others recorded ``failed`` with
+the reason, and ``resume`` finishes them. A Ctrl-C at any point, the cluster's start
+included, records every item not done ``cancelled``.
 
 Wall time of a batch of :math:`n` items on :math:`w` workers, each item taking
 :math:`t` seconds, is about
@@ -35,8 +50,11 @@ from __future__ import annotations
 
 import functools
 import glob
+import ipaddress
 import json
 import os
+import re
+import reprlib
 import shutil
 import time
 import warnings
@@ -45,8 +63,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from robopercept.errors import InputError
-from robopercept.fileio import atomic_write
+from robopercept.errors import ArgumentError, FileFormatError, InputError, RoboperceptError
+from robopercept.fileio import atomic_write, read_json
 from robopercept.imaging.io import IMAGE_EXTENSIONS
 
 __all__ = [
@@ -55,9 +73,11 @@ __all__ = [
     "JOB_OPTIONS",
     "MANIFEST",
     "REQUIRED",
+    "STATUSES",
     "STEREO_PAIRS",
     "WORKER_CONFIG",
     "BatchResult",
+    "SchedulerGoneError",
     "find_inputs",
     "item_names",
     "local_cluster",
@@ -87,6 +107,8 @@ JOBS = tuple(JOB_OPTIONS)
 REQUIRED = {"stereo": ("max_disparity",), "nn-predict": ("model",)}
 #: the manifest's file name inside ``OUT``
 MANIFEST = "batch.json"
+#: an item's states in the manifest
+STATUSES = ("pending", "ok", "failed", "skipped", "cancelled")
 #: files an image job takes from a folder
 IMAGE_SUFFIXES = IMAGE_EXTENSIONS
 #: the file stems of a stereo pair folder's left and right images, the first pair
@@ -118,10 +140,92 @@ WORKER_CONFIG = {
 _CLOUD_CLASSIFIERS = ("pointnet", "dgcnn")
 
 
+class SchedulerGoneError(RoboperceptError, ConnectionError):
+    """The Dask scheduler of a batch went away (stopped, killed, unreachable) before
+    every item finished. Raised by :func:`run_batch` after the manifest is written:
+    the items done keep their outputs, the others are recorded ``failed`` with the
+    reason, and ``resume=True`` (``--resume``) finishes them. The command line exits
+    1 with its message."""
+
+
 def _check_job(job: str) -> str:
-    if job not in JOBS:
-        raise InputError(f"job must be one of {', '.join(JOBS)}; got {job!r}")
+    if not isinstance(job, str) or job not in JOBS:
+        raise InputError(f"job must be one of {', '.join(JOBS)}; got {reprlib.repr(job)}")
     return job
+
+
+#: the address forms :func:`run_batch` takes, for messages
+_SCHEDULER_FORMS = (
+    "'local' or the address of a running Dask cluster, tcp://HOST:PORT (HOST a name, an "
+    "IPv4 address or an [IPv6] address in brackets, PORT 1-65535)"
+)
+_HOSTNAME = re.compile(
+    r"(?=.{1,253}$)[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?"
+    r"(?:\.[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?)*\.?"
+)
+#: schemes Dask knows that a batch cannot use, and why
+_OTHER_SCHEMES = {
+    "tls": "needs certificates (a distributed.Security) that a batch does not pass",
+    "ucx": "needs UCX-Py and its network hardware",
+    "ws": "needs the websockets package and a cluster started for it",
+    "wss": "needs the websockets package and certificates",
+    "inproc": "reaches only a cluster inside this process",
+}
+
+
+def _check_scheduler(scheduler: Any) -> str:
+    """``scheduler`` after checking that it is ``"local"`` or ``tcp://HOST:PORT`` (before
+    anything connects); anything else is an :class:`ArgumentError` saying the forms."""
+    if scheduler == "local" and isinstance(scheduler, str):
+        return scheduler
+    if not isinstance(scheduler, str):
+        raise ArgumentError(
+            f"scheduler must be {_SCHEDULER_FORMS}; got {type(scheduler).__name__} "
+            f"{reprlib.repr(scheduler)}"
+        )
+    got = f"got {reprlib.repr(scheduler)}"
+    scheme, sep, rest = scheduler.partition("://")
+    if not sep:
+        host, colon, port = scheduler.rpartition(":")
+        hint = f": write tcp://{scheduler}" if colon and host and port.isdigit() else ""
+        raise ArgumentError(f"scheduler must be {_SCHEDULER_FORMS}; {got}{hint}")
+    if scheme != "tcp":
+        why = _OTHER_SCHEMES.get(scheme.lower(), "is not one a batch can use")
+        if scheme.lower() == "tcp":
+            why = "is written tcp:// (lower case)"
+        raise ArgumentError(
+            f"scheduler must be {_SCHEDULER_FORMS}; {got}: the {scheme}:// protocol {why}"
+        )
+    if rest.startswith("["):
+        inside, bracket, after = rest[1:].partition("]")
+        try:
+            ipaddress.IPv6Address(inside)
+        except ValueError:
+            bracket = ""
+        if not bracket or not after.startswith(":"):
+            raise ArgumentError(
+                f"scheduler must be {_SCHEDULER_FORMS}; {got}: the [IPv6] host or its :PORT "
+                "is missing or malformed"
+            )
+        port = after[1:]
+    else:
+        host, colon, port = rest.rpartition(":")
+        if not colon:
+            raise ArgumentError(
+                f"scheduler must be {_SCHEDULER_FORMS}; {got}: the port is missing (Dask listens "
+                "on 8786 unless told otherwise)"
+            )
+        if not _HOSTNAME.fullmatch(host):
+            raise ArgumentError(
+                f"scheduler must be {_SCHEDULER_FORMS}; {got}: {reprlib.repr(host)} is not a "
+                "host name or address"
+            )
+    if not (port.isascii() and port.isdigit() and len(port) <= 5 and 1 <= int(port) <= 65535):
+        raise ArgumentError(
+            f"scheduler must be {_SCHEDULER_FORMS}; {got}: the port must be a number "
+            "from 1 to 65535"
+        )
+    return scheduler
 
 
 def _is_recording(path: Path) -> bool:
@@ -346,7 +450,9 @@ def _model_option(job: str, model: Any) -> str | None:
             f"model {os.fspath(model)}: no such file or folder: give {shipped}a run folder "
             "or a model file"
         )
-    return os.fspath(model)
+    # absolute: the workers need not share this process's working folder, and the
+    # manifest compares it on --resume whatever folder that is run from
+    return os.path.abspath(model)
 
 
 def _files(folder: Path, root: Path) -> list[str]:
@@ -688,8 +794,15 @@ class BatchResult:
 
 
 def read_manifest(out: str | os.PathLike[str]) -> dict[str, Any] | None:
-    """The manifest ``OUT/batch.json`` of an earlier batch, or None when absent or
-    unreadable.
+    """The manifest ``OUT/batch.json`` of an earlier batch, checked, or None when absent.
+
+    Read with :func:`robopercept.fileio.read_json` (the bounded reading policy), then
+    every field :func:`run_batch` uses is checked: ``job`` a string, ``options`` (when
+    present) an object with string keys, ``items`` a list of objects, each with ``item``
+    (a non-empty string), ``input`` (a string), ``status`` (one of :data:`STATUSES`),
+    ``outputs`` (a list of strings) and, when present, ``attempts`` (an integer >= 0),
+    ``seconds`` (a number or null), ``worker`` and ``error`` (strings). Other keys
+    (the counts of :meth:`BatchResult.to_dict`, ``summary``) are not used.
 
     Parameters
     ----------
@@ -699,7 +812,15 @@ def read_manifest(out: str | os.PathLike[str]) -> dict[str, Any] | None:
     Returns
     -------
     dict or None
-        ``job``, ``options`` and ``items`` (one record per item).
+        ``job``, ``options`` (absent in a manifest written before robopercept recorded
+        them) and ``items`` (one record per item), as the file has them.
+
+    Raises
+    ------
+    FileFormatError
+        The manifest exists but is a folder, unreadable, not JSON, nested too deep, or
+        a field has the wrong type; the message names the file, the field and the fix
+        (``--overwrite``, ``overwrite=True``: start the batch again).
 
     Examples
     --------
@@ -708,19 +829,120 @@ def read_manifest(out: str | os.PathLike[str]) -> dict[str, Any] | None:
     True
     """
     path = Path(out) / MANIFEST
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
+    if not os.path.lexists(path):
         return None
-    return data if isinstance(data, dict) and isinstance(data.get("items"), list) else None
+    fix = "start the batch again with --overwrite (overwrite=True), or choose another output folder"
+    try:
+        data = read_json(path, "a batch manifest (batch.json)")
+    except FileFormatError as exc:
+        raise FileFormatError(f"{exc}: the batch manifest cannot be resumed: {fix}") from None
+
+    def bad(where: str, expected: str, value: Any) -> FileFormatError:
+        shown = f"{type(value).__name__} {reprlib.repr(value)}"
+        return FileFormatError(
+            f"{path}: {where} must be {expected}; got {shown}: the manifest is damaged "
+            f"(not as run_batch writes it): {fix}"
+        )
+
+    if not isinstance(data, dict):
+        raise bad("the document", "an object", data)
+    if not isinstance(data.get("job"), str):
+        raise bad("job", "a string", data.get("job"))
+    if "options" in data:
+        opts = data["options"]
+        if not isinstance(opts, dict) or not all(isinstance(k, str) for k in opts):
+            raise bad("options", "an object", opts)
+    items = data.get("items")
+    if not isinstance(items, list):
+        raise bad("items", "a list of records", items)
+    optional: dict[str, tuple[Callable[[Any], bool], str]] = {
+        "attempts": (_is_count, "an integer >= 0"),
+        "seconds": (lambda v: v is None or _is_number(v), "a number or null"),
+        "worker": (lambda v: isinstance(v, str), "a string"),
+        "error": (lambda v: isinstance(v, str), "a string"),
+    }
+    for i, rec in enumerate(items):
+        where = f"items[{i}]"
+        if not isinstance(rec, dict):
+            raise bad(where, "an object", rec)
+        if not isinstance(rec.get("item"), str) or not rec["item"]:
+            raise bad(f"{where}.item", "a non-empty string", rec.get("item"))
+        if not isinstance(rec.get("input"), str):
+            raise bad(f"{where}.input", "a string", rec.get("input"))
+        if not isinstance(rec.get("status"), str) or rec["status"] not in STATUSES:
+            raise bad(f"{where}.status", f"one of {', '.join(STATUSES)}", rec.get("status"))
+        outputs = rec.get("outputs")
+        if not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
+            raise bad(f"{where}.outputs", "a list of strings", outputs)
+        for key, (ok, expected) in optional.items():
+            if key in rec and not ok(rec[key]):
+                raise bad(f"{where}.{key}", expected, rec[key])
+    return data
+
+
+def _is_count(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _recorded(opts: Mapping[str, Any]) -> dict[str, Any]:
+    """The options as the manifest records them (JSON: tuples as lists)."""
+    return dict(json.loads(json.dumps(opts, default=str)))
+
+
+def _check_resumable(
+    previous: Mapping[str, Any], job: str, opts: dict[str, Any], path: Path
+) -> None:
+    """Refuse to resume the batch the manifest ``previous`` (at ``path``) records under
+    another job or other options: its skipped items would keep the old results."""
+    again = "give --overwrite to run every item again, or choose another output folder"
+    if previous["job"] != job:
+        raise ArgumentError(
+            f"{path}: records a batch of the {reprlib.repr(previous['job'])} job, not {job}: "
+            f"--resume continues only the same job: {again}"
+        )
+    if "options" not in previous:
+        raise ArgumentError(
+            f"{path}: records no options (an older or hand-written manifest), so "
+            f"--resume cannot tell whether its items were made with these: {again}"
+        )
+    old, new = previous["options"], _recorded(opts)
+    changed = []
+    for k in sorted(set(old) | set(new)):
+        if k not in new:
+            changed.append(f"{reprlib.repr(k)} (the manifest has it; {job} takes no such option)")
+        elif k not in old:
+            changed.append(f"{k}={new[k]!r} (the manifest has no {k})")
+        elif old[k] != new[k]:
+            changed.append(f"{k}={new[k]!r} (the manifest has {reprlib.repr(old[k])})")
+    if changed:
+        raise ArgumentError(
+            f"{path}: --resume under other options than the batch it records: "
+            f"{'; '.join(changed)}; resuming would mix results of both: give the options "
+            f"of that batch, or {again}"
+        )
 
 
 def _done(record: Mapping[str, Any], out: Path) -> bool:
-    """Finished in an earlier run, its outputs still there."""
-    if record.get("status") not in ("ok", "skipped"):
+    """Finished in an earlier run, every recorded output a file inside the item's own
+    folder ``out/<item>/`` (no absolute path, ``..`` or link leading elsewhere)."""
+    if record["status"] not in ("ok", "skipped") or not record["outputs"]:
         return False
-    outputs = record.get("outputs") or []
-    return bool(outputs) and all((out / o).is_file() for o in outputs)
+    try:
+        folder = (out / record["item"]).resolve()
+        for o in record["outputs"]:
+            rel = Path(o)
+            if rel.is_absolute() or ".." in rel.parts or rel.parts[:1] != (record["item"],):
+                return False
+            target = (out / rel).resolve()
+            if folder not in target.parents or not target.is_file():
+                return False
+    except (OSError, RuntimeError, ValueError):  # a link loop, a NUL byte
+        return False
+    return True
 
 
 def local_cluster(workers: int = 2) -> Any:
@@ -792,15 +1014,28 @@ def _check_worker_env(client: Any) -> None:
 def _connect(scheduler: str, workers: int, connect_timeout: float) -> tuple[Any, Any]:
     """``(client, cluster)``: a new :func:`local_cluster` (cluster not None) or a client
     of the cluster at ``scheduler``."""
+    import signal
+
     from distributed import Client
 
+    from robopercept.pipelines.plane_outputs import StopSignals
+
     if scheduler == "local":
-        cluster = local_cluster(workers)
-        try:
-            return Client(cluster), cluster
-        except BaseException:
+        # a Ctrl-C that interrupts the cluster's start leaves it half-built (its atexit
+        # close then fails with a traceback): the first one waits for the start, then
+        # the cluster is closed and KeyboardInterrupt raised; a second one stops at once
+        with StopSignals((signal.SIGINT,)) as stop:
+            cluster = local_cluster(workers)
+            try:
+                client = Client(cluster)
+            except BaseException:
+                cluster.close()
+                raise
+        if stop.received:
+            client.close()
             cluster.close()
-            raise
+            raise KeyboardInterrupt
+        return client, cluster
     try:
         return Client(scheduler, timeout=connect_timeout), None
     except (OSError, TimeoutError) as exc:
@@ -809,11 +1044,24 @@ def _connect(scheduler: str, workers: int, connect_timeout: float) -> tuple[Any,
             f"({type(exc).__name__}): start one (dask scheduler) and check the address, or "
             "use --scheduler local"
         ) from None
+    except (ValueError, TypeError) as exc:  # an address Dask refuses after our check
+        raise ArgumentError(
+            f"scheduler must be {_SCHEDULER_FORMS}; got {scheduler!r}, which Dask refuses "
+            f"({_error_text(exc)})"
+        ) from None
 
 
-def _error_text(exc: BaseException) -> str:
+def _error_text(exc: BaseException | None) -> str:
+    """``"Type: first line"`` of an item's error (a future gives None for no error)."""
+    if exc is None:
+        return "the task ended without a result or an error (Dask gave none)"
     text = str(exc).strip()
     return f"{type(exc).__name__}: {text.splitlines()[0]}" if text else type(exc).__name__
+
+
+def _scheduler_gone(client: Any) -> bool:
+    """Whether ``client`` lost its scheduler (it reconnects or closed)."""
+    return getattr(client, "status", "running") != "running"
 
 
 def run_batch(
@@ -845,7 +1093,9 @@ def run_batch(
     scheduler : str
         ``"local"``: a :class:`distributed.LocalCluster` of ``workers`` processes with
         one thread each, closed at the end; or the address of a running scheduler
-        (``tcp://HOST:PORT``), whose workers share the file system.
+        (``tcp://HOST:PORT``, HOST a name, an IPv4 address or ``[IPv6]``, PORT 1-65535),
+        whose workers share the file system. Other forms (``tls://``, ``ucx://``, no
+        port) are refused before anything connects.
     workers : int
         Workers of the local cluster (ignored for an address).
     retries : int
@@ -853,7 +1103,10 @@ def run_batch(
         Dask may place on another worker); the record's ``attempts`` counts them.
     resume : bool
         Skip the items the manifest in ``out`` records as done whose outputs all
-        exist (their status becomes ``skipped``); run the others.
+        exist inside their own folders (their status becomes ``skipped``); run the
+        others. The manifest must record the same job and options (an
+        :class:`~robopercept.errors.ArgumentError` otherwise, and the manifest is left
+        as it was). Without a manifest every item runs.
     overwrite : bool
         Run every item again (each item's folder is emptied before it runs).
     connect_timeout : float
@@ -877,9 +1130,18 @@ def run_batch(
     InputError
         A bad argument, no input, an ``out`` that exists (refused), or a scheduler
         address that does not answer within ``connect_timeout``.
+    ArgumentError
+        A ``scheduler`` of another form than above; ``resume`` of a manifest that
+        records another job or other options, or none (the message names
+        ``--overwrite``).
+    FileFormatError
+        ``resume`` of a damaged manifest (:func:`read_manifest`).
+    SchedulerGoneError
+        The scheduler went away mid-batch; raised after the manifest is written, the
+        items not done recorded ``failed`` with the reason.
     KeyboardInterrupt
-        Re-raised after the pending items are cancelled, the cluster closed and the
-        manifest written (the pending items ``cancelled``).
+        Re-raised after the pending items are cancelled, the cluster closed (or its
+        start abandoned) and the manifest written (the items not done ``cancelled``).
 
     Examples
     --------
@@ -901,10 +1163,7 @@ def run_batch(
     overwrite = check_bool(overwrite, "overwrite")
     if resume and overwrite:
         raise InputError("resume and overwrite exclude each other: give one")
-    if not isinstance(scheduler, str) or not (scheduler == "local" or "://" in scheduler):
-        raise InputError(
-            f"scheduler must be 'local' or an address like tcp://HOST:PORT; got {scheduler!r}"
-        )
+    scheduler = _check_scheduler(scheduler)
     opts = _options(job, options)
     paths = find_inputs(job, inputs)
     out_path = Path(out)
@@ -919,18 +1178,29 @@ def run_batch(
     for p in paths:
         if p.resolve() == resolved_out or resolved_out in p.resolve().parents:
             raise InputError(f"{p}: an input inside the output folder {out_path}: move one")
-    out_path.mkdir(parents=True, exist_ok=True)
     previous = read_manifest(out_path) if resume else None
-    earlier = {
-        (r.get("item"), r.get("input")): r
-        for r in (previous or {}).get("items", [])
-        if previous and previous.get("job") == job and isinstance(r, dict)
-    }
+    if previous is not None:  # checked before anything is written
+        _check_resumable(previous, job, opts, out_path / MANIFEST)
+    out_path.mkdir(parents=True, exist_ok=True)
+    earlier = {(r["item"], r["input"]): r for r in (previous or {}).get("items", [])}
     records: list[dict[str, Any]] = []
     for name, p in zip(item_names(paths), paths, strict=True):
         old = earlier.get((name, str(p)))
         if old is not None and _done(old, out_path):
-            records.append({**old, "status": "skipped"})
+            kept = {k: old[k] for k in ("attempts", "seconds", "worker", "summary") if k in old}
+            records.append(
+                {
+                    "item": name,
+                    "input": str(p),
+                    "status": "skipped",
+                    "attempts": 0,
+                    "seconds": None,
+                    "worker": "",
+                    **kept,
+                    "error": "",
+                    "outputs": list(old["outputs"]),
+                }
+            )
         else:
             records.append(
                 {
@@ -947,9 +1217,11 @@ def run_batch(
     t0 = time.perf_counter()
     result = BatchResult(job, out_path, scheduler, 0, 0.0, records)
 
+    recorded_opts = _recorded(opts)
+
     def save() -> None:
         result.seconds = time.perf_counter() - t0
-        doc = {"job": job, "options": opts, **result.to_dict()}
+        doc = {"job": job, "options": recorded_opts, **result.to_dict()}
         doc.pop("results")
         doc["items"] = records
         atomic_write(out_path / MANIFEST, json.dumps(doc, indent=2, default=str) + "\n")
@@ -958,20 +1230,32 @@ def run_batch(
     save()
     if not todo:
         return result
-    import dask
-    from distributed import as_completed
 
-    from robopercept.progress import progress_bar
+    def cancel_pending() -> None:
+        for r in records:
+            if r["status"] == "pending":
+                r["status"] = "cancelled"
+        save()
 
-    # Dask's nannies write their pre-spawn variables (OMP_NUM_THREADS=1, ...) into this
-    # process's environment: put back what was there when the batch ends
-    spawn_keys = set(dask.config.get("distributed.nanny.pre-spawn-environ"))
-    env_before = {k: os.environ.get(k) for k in spawn_keys}
-    try:
+    env_before: dict[str, str | None] = {}
+    try:  # a Ctrl-C while dask loads or the cluster starts cancels every item
+        import dask
+        from distributed import as_completed
+
+        from robopercept.progress import progress_bar
+
+        # Dask's nannies write their pre-spawn variables (OMP_NUM_THREADS=1, ...) into
+        # this process's environment: put back what was there when the batch ends
+        spawn_keys = set(dask.config.get("distributed.nanny.pre-spawn-environ"))
+        env_before = {k: os.environ.get(k) for k in spawn_keys}
         client, cluster = _connect(scheduler, workers, connect_timeout)
     except BaseException:
         _restore_env(env_before)
+        cancel_pending()
         raise
+    address = (
+        "the local Dask scheduler" if cluster is not None else f"the Dask scheduler at {scheduler}"
+    )
     futures: dict[Any, int] = {}
     finished = as_completed()
     bar = progress_bar(total=len(todo), unit="item", desc=f"batch {job}", disable=not progress)
@@ -1001,8 +1285,15 @@ def run_batch(
                 r.update(status="ok", seconds=value["seconds"], worker=value["worker"], error="")
                 r["outputs"] = [f"{r['item']}/{o}" for o in value["outputs"]]
                 r["summary"] = value["summary"]
+            elif fut.status == "cancelled" and _scheduler_gone(client):
+                raise SchedulerGoneError(address)  # finished below
             else:
-                r["error"] = _error_text(fut.exception())
+                cancelled = fut.status == "cancelled"
+                r["error"] = (
+                    f"the task was cancelled by {address}"
+                    if cancelled
+                    else _error_text(fut.exception())
+                )
                 if r["attempts"] <= retries:
                     save()
                     submit(i)  # the record stays pending; the bar waits for it
@@ -1011,15 +1302,31 @@ def run_batch(
             save()
             bar.update(1)
             bar.set_postfix(failed=result.count("failed"))
-    except BaseException:
-        for fut, i in futures.items():
-            fut.cancel()
-            records[i]["status"] = "cancelled"
+    except BaseException as exc:
+        gone = isinstance(exc, SchedulerGoneError) or (
+            not isinstance(exc, KeyboardInterrupt | SystemExit | RoboperceptError)
+            and _scheduler_gone(client)
+        )
+        if not gone:
+            for fut, i in futures.items():
+                fut.cancel()
+                records[i]["status"] = "cancelled"
+            cancel_pending()
+            raise
+        # the scheduler went away: what finished stays, the rest failed with the reason
+        lost = f"SchedulerGoneError: {address} went away before the item finished"
         for r in records:
             if r["status"] == "pending":
-                r["status"] = "cancelled"
+                r.update(status="failed", error=lost, outputs=[])
         save()
-        raise
+        n_done = sum(r["status"] in ("ok", "skipped") for r in records)
+        how = "" if isinstance(exc, SchedulerGoneError) else f" ({_error_text(exc)})"
+        raise SchedulerGoneError(
+            f"{address} went away mid-batch{how}: {n_done} of {len(records)} items done "
+            f"and kept, the others recorded failed in {out_path / MANIFEST}: start the "
+            "scheduler again (or use --scheduler local) and run the same command with "
+            "--resume (resume=True) to finish them"
+        ) from None
     finally:
         bar.close()
         client.close()
