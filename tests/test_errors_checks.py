@@ -107,3 +107,23 @@ def test_as_path_takes_str_bytes_and_pathlike(tmp_path):
     assert as_path("n" * 255) == Path("n" * 255)  # the longest name Linux allows
     with pytest.raises(InputError, match="the path of an image file"):
         check_file(None, "an image file")
+
+
+def test_plain_repr_is_bounded_for_hostile_values():
+    # a list nested far past the recursion limit, a huge array, a long string: a short
+    # message, never RecursionError (issue 47: check_int(stride=<deep list>) raised it)
+    deep: list = []
+    for _ in range(10_000):
+        deep = [deep]
+    assert c.plain_repr(deep) == "[[[[[[[...]]]]]]]"
+    with pytest.raises(InputError, match=r"stride must be an integer; got \[\[\["):
+        c.check_int(deep, "stride")
+    assert c.plain_repr(np.arange(1000)).endswith("29, ...]")
+    assert len(c.plain_repr("x" * 10**6)) < 300
+    assert c.plain_repr((np.float64(1.5), 2)) == "(1.5, 2)"
+
+    class Broken:
+        def __repr__(self):
+            raise RuntimeError("no")
+
+    assert c.plain_repr(Broken()) == "<Broken>"

@@ -8,6 +8,7 @@ call sites read ``image = check_image(image)``.
 from __future__ import annotations
 
 import os
+import reprlib
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -126,7 +127,7 @@ def check_range(
     try:
         v = float(value)
     except (TypeError, ValueError) as exc:
-        raise InputError(f"{name} must be a number; got {value!r}") from exc
+        raise InputError(f"{name} must be a number; got {plain_repr(value)}") from exc
     if not np.isfinite(v):
         raise InputError(f"{name} must be finite; got {plain_repr(value)}")
     too_low = low is not None and (v < low if low_inclusive else v <= low)
@@ -148,7 +149,7 @@ def check_positive(value: float, name: str) -> float:
 def check_odd_size(value: npt.ArrayLike, name: str, minimum: int = 1) -> int:
     """Return ``value`` as an int after checking that it is odd and >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InputError(f"{name} must be an odd integer; got {value!r}")
+        raise InputError(f"{name} must be an odd integer; got {plain_repr(value)}")
     v = int(value)
     if v < minimum or v % 2 == 0:
         raise InputError(
@@ -230,7 +231,7 @@ def as_float(image: np.ndarray) -> np.ndarray:
 def check_int(value: npt.ArrayLike, name: str, minimum: int | None = None) -> int:
     """Return ``value`` as an int after checking that it is an integer >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InputError(f"{name} must be an integer; got {value!r}")
+        raise InputError(f"{name} must be an integer; got {plain_repr(value)}")
     v = int(value)
     if minimum is not None and v < minimum:
         raise InputError(f"{name} must be >= {minimum}; got {v}")
@@ -277,7 +278,11 @@ def plain_repr(value: Any) -> str:
 
     ``repr((np.float64(1.5), 2))`` is ``(np.float64(1.5), 2)`` under NumPy 2; a message
     shows ``(1.5, 2)``. Tuples and lists are converted element by element; anything
-    else is left to ``repr``.
+    else is left to ``repr``. The text is bounded whatever the value (:data:`_REPR`):
+    at most 30 items of a list and 6 levels of nesting are shown, strings and other
+    objects are shortened to 240 characters, so a hostile argument (a list nested
+    10,000 deep, an array of a million numbers) gives a short message, not a
+    ``RecursionError`` or a megabyte of text.
 
     Parameters
     ----------
@@ -295,14 +300,28 @@ def plain_repr(value: Any) -> str:
     '[1.0, 2.5]'
     """
 
-    def plain(v: Any) -> Any:
-        if isinstance(v, (np.generic, np.ndarray)):
+    def plain(v: Any, depth: int) -> Any:
+        if isinstance(v, np.ndarray) and v.size > _REPR.maxlist:
+            v = v.reshape(-1)[: _REPR.maxlist + 1]  # enough to show "..."
+        if isinstance(v, (np.generic, np.ndarray)) and v.dtype != object:
             return v.tolist()
         if isinstance(v, (tuple, list)):
-            return type(v)(plain(x) for x in v)
+            if depth >= _REPR.maxlevel:
+                return v  # reprlib writes [...] for it
+            return type(v)(plain(x, depth + 1) for x in v[: _REPR.maxlist + 1])
         return v
 
-    return repr(plain(value))
+    try:
+        return _REPR.repr(plain(value, 0))
+    except Exception:  # a __repr__ that fails
+        return f"<{type(value).__name__}>"
+
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel = 6
+_REPR.maxlist = _REPR.maxtuple = _REPR.maxset = _REPR.maxdict = 30
+_REPR.maxstring = _REPR.maxother = 240
+_REPR.maxlong = 80
 
 
 def as_path(value: Any, name: str = "path") -> Path:
