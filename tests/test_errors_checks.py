@@ -126,4 +126,4 @@ def test_plain_repr_is_bounded_for_hostile_values():
         def __repr__(self):
             raise RuntimeError("no")
 
-    assert c.plain_repr(Broken()) == "<Broken>"
+    assert c.plain_repr(Broken()).startswith("<Broken")
