@@ -30,7 +30,6 @@ scalars (``|``, ``>``) are refused with :class:`~robopercept.errors.FileFormatEr
 
 from __future__ import annotations
 
-import json
 import math
 import re
 from collections.abc import Mapping
@@ -41,6 +40,7 @@ import numpy as np
 
 from robopercept._checks import as_path, check_file, plain_repr
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import MAX_NESTING, check_nesting, nesting_error, parse_json
 
 __all__ = ["read_opencv_storage", "write_opencv_storage"]
 
@@ -50,6 +50,10 @@ _INT = re.compile(r"[-+]?\d+\Z")
 _FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\Z")
 _SPECIAL = {".inf": np.inf, "+.inf": np.inf, "-.inf": -np.inf, ".nan": np.nan}
 _XML_TOKEN = re.compile(r'"([^"]*)"|(\S+)')  # XML strings have no backslash escapes
+_NOT_IN_KEY = re.compile(r"[\[\]{},#]")  # a plain block key holds none of these
+_TAG = re.compile(r"!\S*")
+_FLOW_KEY = re.compile(r"[^:,}\]]*")
+_FLOW_SCALAR = re.compile(r"[^,\]}]*")
 
 
 def read_opencv_storage(path: str | Path) -> dict[str, Any]:
@@ -75,8 +79,10 @@ def read_opencv_storage(path: str | Path) -> dict[str, Any]:
     InputError
         ``path`` is not a usable path (None, a number, a NUL byte, a name too long).
     FileFormatError
-        Missing, a folder, unreadable, not well-formed (the message gives the line), or
-        a matrix whose ``data`` does not hold ``rows x cols x channels`` numbers.
+        Missing, a folder, unreadable, not well-formed (the message gives the line),
+        nested deeper than :data:`~robopercept.fileio.MAX_NESTING` levels (mappings,
+        sequences, XML elements: the one reading policy of :mod:`robopercept.fileio`),
+        or a matrix whose ``data`` does not hold ``rows x cols x channels`` numbers.
 
     Examples
     --------
@@ -109,10 +115,7 @@ def read_opencv_storage(path: str | Path) -> dict[str, Any]:
     if head.startswith("<"):
         return _read_xml(text, str(p))
     if head.startswith("{"):
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(f"{p}: not valid JSON ({exc})") from exc
+        data = parse_json(text, str(p))  # bounded nesting; FileFormatError if not JSON
         if not isinstance(data, dict):
             raise FileFormatError(f"{p}: expected a JSON object at the top")
         return {k: _typed(v, str(p)) for k, v in data.items()}
@@ -273,9 +276,11 @@ def _strip_comment(line: str) -> str:
     return line
 
 
-def _open_brackets(text: str) -> int:
-    """Flow brackets ``[`` / ``{`` left open at the end of ``text`` (outside quotes)."""
-    depth, quote, k = 0, "", 0
+def _brackets(text: str, depth: int = 0, quote: str = "") -> tuple[int, int, str]:
+    """Flow brackets ``[`` / ``{`` left open at the end of ``text`` (outside quotes),
+    the deepest they nest, and the quote left open; ``depth`` and ``quote`` continue
+    the scan of an earlier piece (a flow collection over several lines)."""
+    deepest, k = depth, 0
     while k < len(text):
         c = text[k]
         if quote:
@@ -287,10 +292,11 @@ def _open_brackets(text: str) -> int:
             quote = c
         elif c in "[{":
             depth += 1
+            deepest = max(deepest, depth)
         elif c in "]}":
             depth -= 1
         k += 1
-    return depth
+    return depth, deepest, quote
 
 
 def _read_yaml(text: str, name: str) -> Any:
@@ -310,19 +316,52 @@ def _read_yaml(text: str, name: str) -> Any:
     k = 0
     while k < len(lines):  # a flow collection continues until its brackets close
         no, ind, body = lines[k]
-        while _open_brackets(body) > 0 and k + 1 < len(lines):
+        depth, deepest, quote = _brackets(body)
+        pieces = [body]
+        while depth > 0 and k + 1 < len(lines) and deepest <= MAX_NESTING:
             k += 1
-            body += " " + lines[k][2]
-        if _open_brackets(body) != 0:
+            piece = " " + lines[k][2]
+            depth, more, quote = _brackets(piece, depth, quote)
+            deepest = max(deepest, more)
+            pieces.append(piece)
+        if deepest > MAX_NESTING:
+            raise nesting_error(f"{name}: line {no}")
+        if depth != 0:
             raise FileFormatError(f"{name}: line {no}: unbalanced brackets")
-        logical.append((no, ind, body))
+        logical.append((no, ind, "".join(pieces)))
         k += 1
     if not logical:
         return None
-    node, k = _block(logical, 0, name)
+    _check_yaml_depth(logical, name)
+    try:
+        node, k = _block(logical, 0, name)
+    except RecursionError:  # a safety net: _check_yaml_depth bounds the recursion
+        raise nesting_error(name) from None
     if k != len(logical):
         raise FileFormatError(f"{name}: line {logical[k][0]}: unexpected indentation")
-    return node
+    return check_nesting(node, name)
+
+
+def _check_yaml_depth(lines: list[tuple[int, int, str]], name: str) -> None:
+    """Refuse, before the recursive parse, a document with a line nested past
+    :data:`~robopercept.fileio.MAX_NESTING` by a cheap count: the indentations open
+    above it and its own, plus its leading dashes (``- - x``), plus its flow brackets.
+    The count is within a factor 2 of the true depth (a sequence at its key's own
+    indentation adds a level without an indentation), so it bounds the parser's
+    recursion far below Python's limit; the exact depth is checked on the parsed
+    value (:func:`~robopercept.fileio.check_nesting`)."""
+    open_indents: list[int] = []
+    for no, ind, body in lines:
+        while open_indents and open_indents[-1] >= ind:
+            open_indents.pop()
+        open_indents.append(ind)
+        dashes = 0
+        rest = body
+        while _is_item(rest):
+            dashes += 1
+            rest = rest[1:].lstrip()
+        if len(open_indents) + dashes + _brackets(rest)[1] > MAX_NESTING:
+            raise nesting_error(f"{name}: line {no}")
 
 
 def _is_item(body: str) -> bool:
@@ -339,10 +378,13 @@ def _key_split(body: str) -> tuple[str, str] | None:
                 key = body[1:close]
                 return (_unescape(key) if body[0] == '"' else key), rest.strip()
         return None
-    m = re.match(r"([^:\[\]{},#]+?)\s*:(\s|$)", body)
-    if m is None:
+    # the key runs to the first ':' (a key holds none) followed by a blank or the end;
+    # no brackets, commas or '#' before it (a scan, not a backtracking pattern)
+    colon = body.find(":")
+    after = body[colon + 1 : colon + 2]
+    if colon < 1 or (after and not after.isspace()) or _NOT_IN_KEY.search(body, 0, colon):
         return None
-    return m.group(1), body[m.end() :].strip()
+    return body[:colon].rstrip(), body[colon + 1 :].strip()
 
 
 def _block(lines: list[tuple[int, int, str]], k: int, name: str) -> tuple[Any, int]:
@@ -445,11 +487,17 @@ def _flow(text: str, k: int, where: str) -> tuple[Any, int]:
     if k >= len(text):
         raise FileFormatError(f"{where}: a value is missing")
     c = text[k]
-    if c == "!":  # a tag inside a flow collection
-        m = re.match(r"!\S*", text[k:])
-        assert m is not None
-        value, end = _flow(text, k + m.end(), where)
-        return _tagged(m.group(0), value, where), end
+    if c == "!":  # tags inside a flow collection, read in a loop (no recursion per tag)
+        tags = []
+        while k < len(text) and text[k] == "!":
+            m = _TAG.match(text, k)
+            assert m is not None
+            tags.append(m.group(0))
+            k = _skip(text, m.end())
+        value, end = _flow(text, k, where)
+        for tag in reversed(tags):
+            value = _tagged(tag, value, where)
+        return value, end
     if c in "\"'":
         return _quoted(text, k, where)
     if c in "[{":
@@ -462,9 +510,9 @@ def _flow(text: str, k: int, where: str) -> tuple[Any, int]:
                 if text[k] in "\"'":
                     key, k = _quoted(text, k, where)
                 else:
-                    m = re.match(r"[^:,}\]]*", text[k:])
+                    m = _FLOW_KEY.match(text, k)
                     assert m is not None
-                    key, k = m.group(0).strip(), k + m.end()
+                    key, k = m.group(0).strip(), m.end()
                 k = _skip(text, k)
                 if k >= len(text) or text[k] != ":":
                     raise FileFormatError(f"{where}: expected ':' after {key!r} in {{...}}")
@@ -480,9 +528,9 @@ def _flow(text: str, k: int, where: str) -> tuple[Any, int]:
         if k >= len(text):
             raise FileFormatError(f"{where}: {close!r} missing")
         return (mapping if c == "{" else seq), k + 1
-    m = re.match(r"[^,\]}]*", text[k:])
+    m = _FLOW_SCALAR.match(text, k)  # at k: no copy of the rest of the text
     assert m is not None
-    return _scalar(m.group(0).strip()), k + m.end()
+    return _scalar(m.group(0).strip()), m.end()
 
 
 # --------------------------------------------------------------------------- XML
@@ -495,11 +543,24 @@ def _read_xml(text: str, name: str) -> dict[str, Any]:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise FileFormatError(f"{name}: not well-formed XML ({exc})") from exc
+    _check_xml_depth(root, name)
     if root.tag != "opencv_storage":
         raise FileFormatError(
             f"{name}: the XML root is <{root.tag}>; an OpenCV FileStorage file has <opencv_storage>"
         )
     return {child.tag: _xml_node(child, name) for child in root}
+
+
+def _check_xml_depth(root: Any, name: str) -> None:
+    """Refuse an element tree deeper than :data:`~robopercept.fileio.MAX_NESTING`
+    levels below the root (walked without recursion) before :func:`_xml_node` recurses
+    into it."""
+    stack = [(root, 0)]
+    while stack:
+        e, depth = stack.pop()
+        if depth > MAX_NESTING:
+            raise nesting_error(name)
+        stack.extend((k, depth + 1) for k in e)
 
 
 def _xml_node(e: Any, name: str) -> Any:

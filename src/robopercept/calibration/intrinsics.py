@@ -62,6 +62,7 @@ from robopercept.calibration.filestorage import read_opencv_storage, write_openc
 from robopercept.calibration.ros import camera_info, write_ros_yaml
 from robopercept.errors import DegenerateError, FileFormatError, InputError
 from robopercept.estimation.models import homography_dlt
+from robopercept.fileio import parse_json
 from robopercept.geometry.camera import (
     CameraIntrinsics,
     check_distortion,
@@ -1117,10 +1118,7 @@ def load_calibration(path: str | Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError) as exc:
         raise FileFormatError(f"{p}: not a readable calibration file ({exc})") from exc
     if text.lstrip().startswith("{"):
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(f"{p}: not a readable calibration JSON ({exc})") from exc
+        data = parse_json(text, str(p))  # bounded nesting; FileFormatError if not JSON
         if not isinstance(data, dict):
             raise FileFormatError(f"{p}: expected a JSON object")
     else:

@@ -18,7 +18,7 @@ import re
 import struct
 import types
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, cast
 
@@ -54,6 +54,8 @@ __all__ = [
     "VideoWriter",
     "check_image_path",
     "check_video_path",
+    "contained_path",
+    "output_stems",
     "read_image",
     "sample_image_path",
     "write_image",
@@ -257,6 +259,189 @@ def sample_image_path() -> Path:
     from importlib import resources
 
     return Path(str(resources.files("robopercept") / "data" / "box.png"))
+
+
+# --------------------------------------------------------------------------- file names
+
+
+def contained_path(
+    root: str | os.PathLike[str],
+    name: str | os.PathLike[str],
+    what: str,
+    allow_outside: bool = False,
+) -> Path:
+    """The file ``root / name`` that an annotation or list file names, refused when the
+    name leads outside ``root`` (the data set's folder).
+
+    A data set's files name their images relative to a folder: COCO's ``file_name``,
+    labelme's ``imagePath``, Pascal VOC's ``<filename>``, the lists of a TUM folder
+    (``rgb.txt``, ``depth.txt``, ``associations.txt``). A file from elsewhere could name
+    ``../../home/user/.ssh/id_rsa`` or ``/etc/passwd`` and have it read (and copied into
+    an output folder). The rule, on the name as written (lexically, without touching the
+    disk): an absolute name, or one whose ``..`` climb above ``root`` once normalised
+    (``os.path.normpath``), is outside. ``a/../b.png`` stays inside. A symbolic link
+    inside ``root`` is followed wherever it points: putting it there was the folder
+    owner's choice. With ``allow_outside`` every name is taken, as before this rule.
+
+    Parameters
+    ----------
+    root : str or path-like
+        The data set's folder.
+    name : str or path-like
+        The path as the file writes it, relative to ``root``.
+    what : str
+        The entry, for the message: the file and where in it (``"gt.json:
+        images[3].file_name"``, ``"rgb.txt:12"``).
+    allow_outside : bool, default False
+        Take names outside ``root`` (a file you trust; the command-line option
+        ``--allow-outside-paths``).
+
+    Returns
+    -------
+    Path
+        ``Path(root) / name``, as written (not normalised).
+
+    Raises
+    ------
+    FileFormatError
+        ``name`` is not a usable path (not a string, empty, a NUL byte, too long), or
+        leads outside ``root`` while ``allow_outside`` is False; the message names the
+        entry and the remedies.
+    InputError
+        ``root`` is not a usable path, ``allow_outside`` not a bool.
+
+    Examples
+    --------
+    >>> contained_path("data", "images/a.png", "gt.json: images[0].file_name")
+    PosixPath('data/images/a.png')
+    >>> contained_path("data", "../../etc/passwd", "gt.json: images[1].file_name")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.FileFormatError: gt.json: images[1].file_name '../../etc/passwd' \
+leads outside the data set's folder data (an absolute path, or '..' above it): move the \
+file into data and name it relative to data, or allow paths outside the folder for a file \
+you trust (allow_outside=True in Python, --allow-outside-paths on the command line)
+    >>> contained_path("data", "/tmp/a.png", "rgb.txt:3", allow_outside=True)
+    PosixPath('/tmp/a.png')
+    """
+    base = as_path(root, "root")
+    allow_outside = check_bool(allow_outside, "allow_outside")
+    try:
+        rel = as_path(name, what)
+    except InputError as exc:
+        raise FileFormatError(f"{what}: not a usable file name ({exc})") from None
+    joined = base / rel
+    if allow_outside:
+        return joined
+    norm = os.path.normpath(os.fspath(rel))
+    if (
+        rel.is_absolute()
+        or rel.drive
+        or rel.root
+        or norm == os.pardir
+        or norm.startswith(os.pardir + os.sep)
+    ):
+        raise FileFormatError(
+            f"{what} {os.fspath(name)!r} leads outside the data set's folder {base} (an "
+            f"absolute path, or '..' above it): move the file into {base} and name it "
+            f"relative to {base}, or allow paths outside the folder for a file you trust "
+            "(allow_outside=True in Python, --allow-outside-paths on the command line)"
+        )
+    return joined
+
+
+def output_stems(
+    paths: Sequence[str | os.PathLike[str]], suffixes: Sequence[str] = ("",)
+) -> list[str]:
+    """One output name stem per input file, distinct even when inputs share a name.
+
+    A command that writes ``OUT/<stem><suffix>`` for each input (``nn segment a/x.png
+    b/x.png -o OUT``) would write the second input's files over the first's. The rule:
+
+    1. each input's stem is its file name without the extension (``x`` for ``a/x.png``);
+    2. inputs whose stems are equal (compared without case, as on macOS and Windows
+       file systems) get the names of their folders prefixed, joined by ``_``, one
+       level more at a time until they differ: ``a/x.png``, ``b/x.png`` give ``a_x``
+       and ``b_x``; ``a/c/x.png``, ``b/c/x.png`` give ``a_c_x`` and ``b_c_x`` (the
+       folders of the absolute path; the fewest levels that tell most of them apart);
+    3. a name whose output files (``stem + suffix`` for each of ``suffixes``) would
+       still meet those of an earlier input (the same file given twice, ``x.png`` and
+       ``x.jpg`` in one folder, ``x.png`` beside ``x_labels.png`` when ``_labels.png``
+       is a suffix) gets ``-2``, ``-3``, ... in input order: ``x``, ``x-2``.
+
+    Inputs with distinct stems keep their stems, so a single input, or inputs with
+    different names, are written as ``OUT/<stem>...`` as always.
+
+    Parameters
+    ----------
+    paths : sequence of str or path-like
+        The inputs, in order.
+    suffixes : sequence of str, default ("",)
+        What each input writes after its stem (``(".png", "_labels.png")``): rule 3
+        keeps every written name distinct (without case).
+
+    Returns
+    -------
+    list of str
+        One stem per input, in order.
+
+    Raises
+    ------
+    InputError
+        ``paths`` not a sequence of paths (or one naming no file: ``/``, ``..``), or
+        ``suffixes`` not a sequence of strings.
+
+    Examples
+    --------
+    >>> output_stems(["a/x.png", "b/x.png", "b/y.png"])
+    ['a_x', 'b_x', 'y']
+    >>> output_stems(["x.png", "x.png", "x.jpg"])
+    ['x', 'x-2', 'x-3']
+    >>> output_stems(["x.png", "x_labels.png"], suffixes=(".png", "_labels.png"))
+    ['x', 'x_labels-2']
+    """
+    if isinstance(paths, (str, bytes, os.PathLike)) or not isinstance(paths, Sequence):
+        raise InputError(f"paths must be a list of file paths; got {plain_repr(paths)}")
+    if isinstance(suffixes, (str, bytes)) or not (
+        isinstance(suffixes, Sequence) and all(isinstance(s, str) for s in suffixes)
+    ):
+        raise InputError(
+            f"suffixes must be a list of strings such as ['.png']; got {plain_repr(suffixes)}"
+        )
+    files = [as_path(p, f"paths[{k}]") for k, p in enumerate(paths)]
+    for k, f in enumerate(files):
+        if f.name in ("", ".", ".."):
+            raise InputError(f"paths[{k}] must name a file; got {os.fspath(f)!r}")
+    stems = [f.stem for f in files]
+    groups: dict[str, list[int]] = {}
+    for k, stem in enumerate(stems):
+        groups.setdefault(stem.casefold(), []).append(k)
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        folders = {k: Path(os.path.abspath(files[k])).parent.parts[1:] for k in members}
+        deepest = max(len(f) for f in folders.values())
+        best, best_count = 0, 1
+        for level in range(1, deepest + 1):
+            names = {"_".join((*folders[k][-level:], stems[k])).casefold() for k in members}
+            if len(names) > best_count:
+                best, best_count = level, len(names)
+            if best_count == len(members):
+                break
+        if best:
+            for k in members:
+                stems[k] = "_".join((*folders[k][-best:], stems[k]))
+    ends = tuple(suffixes) or ("",)
+    used: set[str] = set()
+    out = []
+    for stem in stems:
+        name, n = stem, 1
+        while any((name + e).casefold() in used for e in ends):
+            n += 1
+            name = f"{stem}-{n}"
+        used.update((name + e).casefold() for e in ends)
+        out.append(name)
+    return out
 
 
 def write_image(

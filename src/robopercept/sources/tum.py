@@ -30,11 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import as_path, check_real
+from robopercept._checks import as_path, check_bool, check_real
 from robopercept.depth.rgbd import check_intrinsics
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import parse_json
 from robopercept.geometry import CameraIntrinsics
-from robopercept.imaging.io import read_image, write_image
+from robopercept.imaging.io import contained_path, read_image, write_image
 from robopercept.sources.frames import RGBDFrame
 
 __all__ = [
@@ -104,7 +105,8 @@ def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
     Raises
     ------
     FileFormatError
-        Missing, unreadable or incomplete file; the message ends with
+        Missing, unreadable or incomplete file, not UTF-8 JSON, or nested deeper than
+        :data:`~robopercept.fileio.MAX_NESTING` levels; the message ends with
         :data:`CAMERA_JSON_HELP` (the fields and ``robopercept rgbd-import``).
     InputError
         ``path`` cannot name a file (:func:`~robopercept._checks.as_path`).
@@ -113,19 +115,17 @@ def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         if not p.is_file():
             raise FileFormatError(f"{p}: missing; {CAMERA_JSON_HELP}")
-        raw = json.loads(p.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(
-            f"{p}: not UTF-8 text (byte {exc.start}); {CAMERA_JSON_HELP}"
-        ) from None
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(f"{p}: not valid JSON ({exc}); {CAMERA_JSON_HELP}") from None
+        text = p.read_bytes()
     except FileFormatError:
         raise
     except OSError as exc:
         raise FileFormatError(
             f"{p}: cannot read ({exc.strerror or exc}); {CAMERA_JSON_HELP}"
         ) from None
+    try:  # the one reading policy: not UTF-8, not JSON, nested too deep
+        raw = parse_json(text, str(p))
+    except FileFormatError as exc:
+        raise FileFormatError(f"{exc}; {CAMERA_JSON_HELP}") from None
     try:
         T = np.asarray(raw["T_color_depth"], dtype=np.float64)
         scale = float(raw["depth_scale"])
@@ -145,14 +145,21 @@ def read_camera_json(path: str | os.PathLike[str]) -> dict[str, Any]:
     return out
 
 
-def read_timestamp_list(path: str | os.PathLike[str]) -> list[tuple[float, str]]:
+def read_timestamp_list(
+    path: str | os.PathLike[str], *, allow_outside: bool = False
+) -> list[tuple[float, str]]:
     """Read a TUM list such as ``rgb.txt``: ``timestamp file`` per line.
 
     Blank lines and ``#`` comments are skipped; columns after the second are ignored.
+    A file that leads outside the list's folder (``../../x.png``, an absolute path) is
+    refused unless ``allow_outside`` (:func:`~robopercept.imaging.io.contained_path`):
+    a folder from elsewhere cannot make a reader open files outside it.
 
     Parameters
     ----------
     path : str or path-like
+    allow_outside : bool, default False
+        Take files outside the list's folder (a list you trust).
 
     Returns
     -------
@@ -162,12 +169,14 @@ def read_timestamp_list(path: str | os.PathLike[str]) -> list[tuple[float, str]]
     Raises
     ------
     FileFormatError
-        A missing file (naming ``robopercept rgbd-import`` for other layouts) or a line
-        that is not ``timestamp file``.
+        A missing file (naming ``robopercept rgbd-import`` for other layouts), a line
+        that is not ``timestamp file``, or a file outside the folder (naming the line).
     InputError
-        ``path`` cannot name a file (:func:`~robopercept._checks.as_path`).
+        ``path`` cannot name a file (:func:`~robopercept._checks.as_path`), or
+        ``allow_outside`` is not a bool.
     """
     path = as_path(path, "the path of the timestamp list")
+    allow_outside = check_bool(allow_outside, "allow_outside")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -200,6 +209,7 @@ def read_timestamp_list(path: str | os.PathLike[str]) -> list[tuple[float, str]]
                 f"{path}:{n}: file name too long ({len(name.encode('utf-8'))} bytes, a "
                 f"name may have {_NAME_MAX} per folder level): expected 'timestamp file'"
             )
+        contained_path(path.parent, name, f"{path}:{n}: file", allow_outside)
         rows.append((t, name))
     return rows
 
@@ -262,6 +272,15 @@ class TUMFolderSource:
     path : str or path-like
     max_difference : float
         Largest colour/depth timestamp gap, seconds.
+    allow_outside : bool, default False
+        Take images that ``rgb.txt`` / ``depth.txt`` place outside the folder
+        (:func:`read_timestamp_list`); refused by default.
+
+    Raises
+    ------
+    FileFormatError
+        Not a folder, or a bad ``camera.json`` or list (an entry outside the folder
+        included).
 
     Attributes
     ----------
@@ -273,9 +292,16 @@ class TUMFolderSource:
         Frame index and reason of every skipped frame.
     """
 
-    def __init__(self, path: str | os.PathLike[str], max_difference: float = 0.02) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        max_difference: float = 0.02,
+        *,
+        allow_outside: bool = False,
+    ) -> None:
         self.path = as_path(path, "the TUM folder")
         max_difference = check_real(max_difference, "max_difference (seconds)", 0.0)
+        allow_outside = check_bool(allow_outside, "allow_outside")
         try:
             is_dir = self.path.is_dir()
         except OSError as exc:  # ENAMETOOLONG, ELOOP, EACCES
@@ -284,8 +310,8 @@ class TUMFolderSource:
             raise FileFormatError(f"{self.path}: not a folder")
         self.camera = read_camera_json(self.path / "camera.json")
         self.pairs = associate_timestamps(
-            read_timestamp_list(self.path / "depth.txt"),
-            read_timestamp_list(self.path / "rgb.txt"),
+            read_timestamp_list(self.path / "depth.txt", allow_outside=allow_outside),
+            read_timestamp_list(self.path / "rgb.txt", allow_outside=allow_outside),
             max_difference,
         )
         self.planes = self._read_planes(self.path / "planes.csv")

@@ -84,7 +84,7 @@ class TestBadInput:
         with pytest.raises(FileFormatError, match=r"gt\.json: annotation id 1: bbox"):
             read_coco_json(p)
         p.write_text("{not json")
-        with pytest.raises(FileFormatError, match="not a JSON file"):
+        with pytest.raises(FileFormatError, match="not valid JSON"):
             read_coco_json(p)
         with pytest.raises(FileFormatError, match="no such file"):
             read_coco_json(tmp_path / "missing.json")

@@ -230,7 +230,7 @@ class TestDispatch:
         found = read_annotations(tmp_path)
         assert found.form == "labelme" and found.coco.boxes.tolist() == [[1.0, 2.0, 4.0, 4.0]]
         (tmp_path / "b.json").write_text("{not json")
-        with pytest.raises(FileFormatError, match=r"b\.json: not a JSON file"):
+        with pytest.raises(FileFormatError, match=r"b\.json: not valid JSON"):
             read_annotations(tmp_path)
 
     def test_nothing_there_lists_the_forms(self, tmp_path):

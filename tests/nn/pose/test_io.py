@@ -356,7 +356,7 @@ def test_bad_mpii_files(tmp_path):
         read_mpii_json(_write(tmp_path, {"people": []}))
     bad = tmp_path / "b.json"
     bad.write_text("[{")
-    with pytest.raises(FileFormatError, match="not a JSON file"):
+    with pytest.raises(FileFormatError, match="not valid JSON"):
         read_mpii_json(bad)
     with pytest.raises(FileFormatError, match="no such file"):
         read_mpii_json(tmp_path / "missing.json")

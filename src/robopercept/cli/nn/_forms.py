@@ -1,14 +1,15 @@
 """What the task commands of ``robopercept nn`` share: the three forms of ``nn detect``,
 ``nn segment``, ``nn pose`` and ``nn cloud`` (``train``, ``eval`` and ``IMAGE...``,
 chosen by the first word; :func:`register_forms`), their data flags
-(:func:`built_in_data_args`), and the checks of the images form
-(:func:`images_form_inputs`, :func:`run_or_model_path`)."""
+(:func:`built_in_data_args`, :func:`data_path_options`), and the checks of the images
+form (:func:`images_form_inputs`, :func:`run_or_model_path`) with its output names
+(:data:`OUTPUT_NAMES_HELP`, :func:`robopercept.imaging.io.output_stems`)."""
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -16,8 +17,10 @@ from robopercept.cli._args import UsageError, image_size, positive_int, unit_int
 from robopercept.errors import InputError
 
 __all__ = [
+    "OUTPUT_NAMES_HELP",
     "built_in_data_args",
     "check_run_folder_args",
+    "data_path_options",
     "device_arg",
     "images_form_inputs",
     "note_warning",
@@ -29,6 +32,16 @@ __all__ = [
     "run_or_model_path",
     "shipped_help",
 ]
+
+
+#: how the images forms name their outputs (robopercept.imaging.io.output_stems), for
+#: the commands' help
+OUTPUT_NAMES_HELP = (
+    "NAME is the input's file name without its extension; inputs that share a name get "
+    "their folders' names in front (a/x.png, b/x.png -> a_x, b_x), and inputs still "
+    "alike (the same file twice) -2, -3, ... after it, so no input's output is written "
+    "over another's"
+)
 
 
 def register_forms(
@@ -82,12 +95,21 @@ def built_in_data_args(
 ) -> None:
     """The data flags of the ``nn detect``, ``nn segment`` and ``nn pose`` forms:
     ``--data`` (with ``choices`` where only built-in sets are taken), ``--images-dir``
-    (unless ``dir_help`` is empty), ``--images`` (default ``images``), ``--size``,
+    (unless ``dir_help`` is empty) and ``--allow-outside-paths`` (with it;
+    :func:`data_path_options`), ``--images`` (default ``images``), ``--size``,
     ``--seed``, ``--device``, ``--json`` and ``--quiet``; ``generated`` names the
     generated sets in the help."""
     p.add_argument("--data", required=True, choices=choices, help=data_help)
     if dir_help:
         p.add_argument("--images-dir", help=dir_help)
+        p.add_argument(
+            "--allow-outside-paths",
+            action="store_true",
+            help="your own data: read images that the annotations place outside their "
+            "folder (a file_name, imagePath or <filename> with '..' above it, or an "
+            "absolute path); refused by default, so that annotations from elsewhere cannot "
+            "make the command read other files. Give it only for annotations you trust",
+        )
     p.add_argument(
         "--images",
         type=positive_int,
@@ -104,6 +126,14 @@ def built_in_data_args(
     device_arg(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def data_path_options(args: argparse.Namespace) -> dict[str, bool]:
+    """The keyword arguments of ``--allow-outside-paths`` for the library's data
+    loaders: ``{"allow_outside": True}`` when it is given, else none (the loaders'
+    default: image paths stay inside the data set's folder,
+    :func:`robopercept.imaging.io.contained_path`)."""
+    return {"allow_outside": True} if getattr(args, "allow_outside_paths", False) else {}
 
 
 def run_folder_args(p: argparse.ArgumentParser) -> None:
@@ -130,14 +160,18 @@ def run_or_model_path(text: str) -> Path:
 def images_form_inputs(
     args: argparse.Namespace,
     kind: str,
-    outputs: Callable[[str], list[str]],
-) -> str | Path | None:
+    outputs: Sequence[str],
+) -> tuple[str | Path | None, list[str]]:
     """Check the images form of ``nn detect`` / ``nn segment`` / ``nn pose`` and return
     the model argument of the predictor (None or a shipped name as given, else the
-    checkpoint's path): ``--model`` a run folder, a ``model.pt`` or a shipped name of
-    ``kind`` (:func:`robopercept.nn.shipped.resolve_model`; without ``--model`` the
-    kind's default), ``-o/--out`` or ``--json`` given, every IMAGE present, and no
-    output (``outputs(stem)``, names in OUT) over an input."""
+    checkpoint's path) and each IMAGE's output stem: ``--model`` a run folder, a
+    ``model.pt`` or a shipped name of ``kind``
+    (:func:`robopercept.nn.shipped.resolve_model`; without ``--model`` the kind's
+    default), ``-o/--out`` or ``--json`` given, every IMAGE present, and no output
+    (``OUT/<stem><ending>`` for each of the ``outputs`` endings, such as ``".png"``)
+    over an input. The stems are :func:`robopercept.imaging.io.output_stems` of the
+    IMAGEs (:data:`OUTPUT_NAMES_HELP`): two inputs never write to the same file."""
+    from robopercept.imaging.io import output_stems
     from robopercept.nn.shipped import SHIPPED, resolve_model
 
     model: str | Path | None = args.model
@@ -153,13 +187,17 @@ def images_form_inputs(
     for name in args.images:
         if not Path(name).is_file():
             raise UsageError(f"IMAGE: {name} does not exist")
-        for written in outputs(Path(name).stem) if args.out else ():
-            if (Path(args.out) / written).resolve() == Path(name).resolve():
+    stems = output_stems(args.images, outputs)
+    inputs = {Path(name).resolve(): name for name in args.images}
+    for stem in stems if args.out else ():
+        for end in outputs:
+            written = Path(args.out) / f"{stem}{end}"
+            if written.resolve() in inputs:
                 raise UsageError(
-                    f"-o/--out: {Path(args.out) / written} would overwrite the input {name}: "
-                    "write to another folder"
+                    f"-o/--out: {written} would overwrite the input "
+                    f"{inputs[written.resolve()]}: write to another folder"
                 )
-    return model
+    return model, stems
 
 
 def shipped_help(kind: str) -> str:

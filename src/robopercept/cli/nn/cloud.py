@@ -22,6 +22,9 @@ too). ``eval`` scores a model on the test split of the same data (same ``--shape
 class with its probabilities; ``--segment`` also labels every point with a part of that
 class and writes ``OUT/NAME_parts.ply`` coloured by part, and ``-o`` writes
 ``OUT/NAME.png`` (the cloud as the network saw it).
+``NAME`` is the input's file name without its extension; inputs that share one get
+their folders' names in front (``a/x.png``, ``b/x.png``: ``a_x``, ``b_x``), and inputs
+still alike ``-2``, ``-3`` (:func:`robopercept.imaging.io.output_stems`).
 
 Without ``--model`` the shipped PointNet (trained on the procedural shapes) is used;
 ``--model dgcnn`` the shipped DGCNN; ``--segment`` the shipped PointNet part
@@ -43,6 +46,7 @@ from pathlib import Path
 
 from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
+    OUTPUT_NAMES_HELP,
     check_run_folder_args,
     device_arg,
     prediction_json,
@@ -106,7 +110,8 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     e.add_argument("-o", "--out", help="folder for metrics.json and confusion.png")
     r = cls(
         prog="robopercept nn cloud",
-        description="Classify each CLOUD (.ply/.pcd cloud or .off/.ply mesh).",
+        description="Classify each CLOUD (.ply/.pcd cloud or .off/.ply mesh); with -o, "
+        f"write OUT/NAME.png (and OUT/NAME_parts.ply). {OUTPUT_NAMES_HELP}.",
     )
     r.add_argument("clouds", nargs="+", metavar="CLOUD")
     r.add_argument("--model", help=shipped_help("cloud"))
@@ -232,6 +237,7 @@ def _model(name: str | None, default: str) -> Path:
 
 def _clouds(args: argparse.Namespace) -> int:
     from robopercept.imaging import write_image
+    from robopercept.imaging.io import output_stems
     from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model, resolve_device
     from robopercept.pointcloud import PointCloud, write_point_cloud
     from robopercept.viz.cloud_dl import cloud_picture
@@ -242,6 +248,15 @@ def _clouds(args: argparse.Namespace) -> int:
             raise UsageError(f"CLOUD: {name} does not exist")
     if args.segment and not args.out:
         raise UsageError("--segment: give -o/--out, the folder for NAME_parts.ply")
+    stems = output_stems(args.clouds, [".png", "_parts.ply"] if args.segment else [".png"])
+    inputs = {Path(name).resolve(): name for name in args.clouds}
+    for stem in stems if args.segment else ():
+        ply = Path(args.out) / f"{stem}_parts.ply"
+        if ply.resolve() in inputs:
+            raise UsageError(
+                f"-o/--out: {ply} would overwrite the input {inputs[ply.resolve()]}: write "
+                "to another folder"
+            )
     line = print_model_line(args, "cloud")
     model, info = load_cloud_model(_model(args.model, "pointnet"))
     dev = resolve_device(args.device)
@@ -252,21 +267,18 @@ def _clouds(args: argparse.Namespace) -> int:
         segmenter = (seg.to(dev), sinfo)
     out = Path(args.out) if args.out else None
     results = []
-    for name in args.clouds:
+    for name, stem in zip(args.clouds, stems, strict=True):
         res = classify_cloud_file(
             name, model, info, segmenter=segmenter, n_points=args.points, rng=args.seed
         )
         row = res.to_dict()
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
-            stem = Path(name).stem
             top = ", ".join(f"{k} {v:.2f}" for k, v in list(res.probabilities.items())[:3])
             written = []
             if res.parts is not None:
                 colors = label_colors(res.parts + 1) / 255.0
                 ply = out / f"{stem}_parts.ply"
-                if ply.resolve() == Path(name).resolve():
-                    raise UsageError(f"-o/--out: {ply} would overwrite the input {name}")
                 cloud = PointCloud(res.points.astype(float), colors=colors)
                 written.append(write_point_cloud(ply, cloud))
                 pic = cloud_picture(

@@ -21,6 +21,11 @@ last complete epoch.
 built-in set (same ``--images``, ``--size`` and ``--seed``) or on a whole COCO file.
 ``IMAGE...`` draws the boxes, labels and scores to ``out/NAME.png`` (``--json``: COCO
 results, ``image_id`` the 1-based position of the image on the command line).
+``NAME`` is the input's file name without its extension; inputs that share one get
+their folders' names in front (``a/x.png``, ``b/x.png``: ``a_x``, ``b_x``), and inputs
+still alike ``-2``, ``-3`` (:func:`robopercept.imaging.io.output_stems`).
+``--allow-outside-paths`` lets ``train`` and ``eval`` read images that your annotations
+place outside their folder (refused by default).
 
 Without ``--model`` the ``IMAGE`` form uses the shipped FCOS model
 ``robopercept/data/detector_fcos_shapes.pt``; ``--model faster`` the shipped Faster
@@ -48,8 +53,10 @@ from typing import Any
 
 from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
+    OUTPUT_NAMES_HELP,
     built_in_data_args,
     check_run_folder_args,
+    data_path_options,
     device_arg,
     images_form_inputs,
     note_warning,
@@ -126,7 +133,8 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     e.add_argument("-o", "--out", help="folder for metrics.json and pr_curves.png")
     r = cls(
         prog="robopercept nn detect",
-        description="Detect objects in IMAGE... and draw boxes, labels and scores to OUT/NAME.png.",
+        description="Detect objects in IMAGE... and draw boxes, labels and scores to "
+        f"OUT/NAME.png. {OUTPUT_NAMES_HELP}.",
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
     prediction_args(r, "detect", scores="detections", tiling=True)
@@ -189,6 +197,7 @@ def _train(args: argparse.Namespace) -> int:
         size=args.size,
         images_dir=args.images_dir,
         val_every=args.val_every,
+        **data_path_options(args),
         ema=args.ema,
         resume=args.resume,
         overwrite=args.overwrite,
@@ -219,6 +228,7 @@ def _eval(args: argparse.Namespace) -> int:
         seed=args.seed,
         images_dir=args.images_dir,
         tta=args.tta,
+        **data_path_options(args),
         device=args.device,
         out_dir=args.out or None,
     )
@@ -236,7 +246,7 @@ def _eval(args: argparse.Namespace) -> int:
 def _images(args: argparse.Namespace) -> int:
     from robopercept.nn.predict import load_image_predictor
 
-    model_path = images_form_inputs(args, "detect", lambda stem: [f"{stem}.png"])
+    model_path, stems = images_form_inputs(args, "detect", [".png"])
     line = print_model_line(args, "detect")
     predictor = load_image_predictor(
         "detect",
@@ -251,12 +261,12 @@ def _images(args: argparse.Namespace) -> int:
     results: list[dict[str, Any]] = []
     warnings: list[str] = []
     out = Path(args.out) if args.out else None
-    for k, name in enumerate(args.images, 1):
+    for k, (name, stem) in enumerate(zip(args.images, stems, strict=True), 1):
         pred = predictor.predict_file(name)
         results += pred.coco_results(k)
         note_warning(args, name, pred.warning, warnings)
         if out is not None:
-            (written,) = pred.write(out, Path(name).stem)
+            (written,) = pred.write(out, stem)
             if not (args.quiet or args.json):
                 print(f"{name}: {len(pred.boxes)} detections -> {written}")
     if args.json:

@@ -24,6 +24,11 @@ pose to 3-D by matching against a library of projected 3-D poses (the course's
 recipe, :class:`~robopercept.nn.pose.library.PoseLibrary`) and writes ``out/NAME_3d.png``
 (two views). ``--json`` prints, per image, the keypoints (pixels), their scores and
 (with ``--lift3d``) the root-relative 3-D joints in metres.
+``NAME`` is the input's file name without its extension; inputs that share one get
+their folders' names in front (``a/x.png``, ``b/x.png``: ``a_x``, ``b_x``), and inputs
+still alike ``-2``, ``-3`` (:func:`robopercept.imaging.io.output_stems`).
+``--allow-outside-paths`` lets ``train`` and ``eval`` read images that a COCO file
+places outside its folder (refused by default).
 
 Without ``--model`` the ``IMAGE`` form uses the shipped HRNet; ``--model deeppose`` the
 shipped DeepPose with its cascade stage. Both were trained on the procedural figures
@@ -44,8 +49,10 @@ from pathlib import Path
 
 from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
+    OUTPUT_NAMES_HELP,
     built_in_data_args,
     check_run_folder_args,
+    data_path_options,
     device_arg,
     images_form_inputs,
     note_warning,
@@ -104,7 +111,8 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     e.add_argument("-o", "--out", help="folder for metrics.json")
     r = cls(
         prog="robopercept nn pose",
-        description="Find one person's joints in each IMAGE and write OUT/NAME.png.",
+        description="Find one person's joints in each IMAGE and write OUT/NAME.png. "
+        f"{OUTPUT_NAMES_HELP}.",
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
     prediction_args(r, "pose", scores="joints drawn", tiling=False)
@@ -175,6 +183,7 @@ def _train(args: argparse.Namespace) -> int:
         stages=args.stages,
         images_dir=args.images_dir,
         resume=args.resume,
+        **data_path_options(args),
         overwrite=args.overwrite,
         progress=not (args.quiet or args.json),
     )
@@ -209,6 +218,7 @@ def _eval(args: argparse.Namespace) -> int:
         device=args.device,
         out_dir=args.out,
         images_dir=args.images_dir,
+        **data_path_options(args),
     )
     if args.json:  # a joint no validation sample counts has PCK NaN: null
         print(json.dumps(res.to_dict()))
@@ -224,15 +234,8 @@ def _images(args: argparse.Namespace) -> int:
 
     from robopercept.nn.predict import load_image_predictor
 
-    def outputs(stem: str) -> list[str]:
-        names = [f"{stem}.png"]
-        if args.heatmaps:
-            names.append(f"{stem}_heatmaps.png")
-        if args.lift3d:
-            names.append(f"{stem}_3d.png")
-        return names
-
-    model = images_form_inputs(args, "pose", outputs)
+    outputs = [".png"] + ["_heatmaps.png"] * args.heatmaps + ["_3d.png"] * args.lift3d
+    model, stems = images_form_inputs(args, "pose", outputs)
     line = print_model_line(args, "pose")
     predictor = load_image_predictor(
         "pose",
@@ -247,12 +250,12 @@ def _images(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     results = []
     warnings: list[str] = []
-    for name in args.images:
+    for name, stem in zip(args.images, stems, strict=True):
         pred = predictor.predict_file(name)
         results.append({"image": name, **pred.record()})
         note_warning(args, name, pred.warning, warnings)
         if out is not None:
-            written = pred.write(out, Path(name).stem)
+            written = pred.write(out, stem)
             if not (args.quiet or args.json):
                 mean = float(np.mean(pred.values["scores"]))
                 print(f"{name}: mean joint score {mean:.3f} -> {', '.join(map(str, written))}")

@@ -22,6 +22,11 @@ frequency-weighted IoU and per-class IoU, or the 12 COCO ``segm`` numbers.
 ``IMAGE...`` writes ``out/NAME.png`` (class overlay with a legend, or instance
 overlay with outlines and scores) and ``out/NAME_labels.png`` (class labels, or
 instance ids, as a VOC-palette PNG); ``--json`` prints COCO results with RLE masks.
+``NAME`` is the input's file name without its extension; inputs that share one get
+their folders' names in front (``a/x.png``, ``b/x.png``: ``a_x``, ``b_x``), and inputs
+still alike ``-2``, ``-3`` (:func:`robopercept.imaging.io.output_stems`).
+``--allow-outside-paths`` lets ``train`` and ``eval`` read images that your annotations
+place outside their folder (refused by default).
 
 Without ``--model`` the ``IMAGE`` form uses the shipped U-Net; ``--model maskrcnn`` the
 shipped Mask R-CNN. Both were trained on the procedural shapes and are rebuilt, from a
@@ -44,8 +49,10 @@ from typing import Any
 
 from robopercept.cli._args import UsageError, positive_int
 from robopercept.cli.nn._forms import (
+    OUTPUT_NAMES_HELP,
     built_in_data_args,
     check_run_folder_args,
+    data_path_options,
     device_arg,
     images_form_inputs,
     note_warning,
@@ -100,7 +107,8 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
     e.add_argument("-o", "--out", help="folder for metrics.json")
     r = cls(
         prog="robopercept nn segment",
-        description="Segment IMAGE... and write OUT/NAME.png (overlay) and OUT/NAME_labels.png.",
+        description="Segment IMAGE... and write OUT/NAME.png (overlay) and "
+        f"OUT/NAME_labels.png. {OUTPUT_NAMES_HELP}.",
     )
     r.add_argument("images", nargs="+", metavar="IMAGE")
     prediction_args(r, "segment", scores="instances", tiling=True)
@@ -141,6 +149,7 @@ def _sets(args: argparse.Namespace, evaluate: bool = False) -> Any:
             seed=args.seed,
             images_dir=args.images_dir,
             evaluate=evaluate,
+            **data_path_options(args),
         )
     except InputError as exc:
         raise UsageError(str(exc)) from None
@@ -217,7 +226,7 @@ def _eval(args: argparse.Namespace) -> int:
 def _images(args: argparse.Namespace) -> int:
     from robopercept.nn.predict import load_image_predictor
 
-    model = images_form_inputs(args, "segment", lambda stem: [f"{stem}.png", f"{stem}_labels.png"])
+    model, stems = images_form_inputs(args, "segment", [".png", "_labels.png"])
     line = print_model_line(args, "segment")
     predictor = load_image_predictor(
         "segment",
@@ -232,12 +241,12 @@ def _images(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     results: list[dict[str, Any]] = []
     warnings: list[str] = []
-    for k, name in enumerate(args.images, 1):
+    for k, (name, stem) in enumerate(zip(args.images, stems, strict=True), 1):
         pred = predictor.predict_file(name)
         results += pred.coco_results(k)
         note_warning(args, name, pred.warning, warnings)
         if out is not None:
-            pic, lab = pred.write(out, Path(name).stem)
+            pic, lab = pred.write(out, stem)
             if not (args.quiet or args.json):
                 n = len(pred.masks) if instance else len({int(x) for x in pred.labels.flat})
                 what = "instances" if instance else "labels"

@@ -18,8 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import as_path, check_file, check_numeric, plain_repr
-from robopercept.errors import FileFormatError, InputError
+from robopercept._checks import as_path, check_numeric, plain_repr
+from robopercept.errors import InputError
+from robopercept.fileio import read_json
 
 __all__ = [
     "as_int",
@@ -91,23 +92,39 @@ def as_int(value: Any, what: str, err: type[Exception]) -> int:
     return out
 
 
+def _is_number(v: Any) -> bool:
+    """``v`` is an int or float (NumPy's too), not a bool."""
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(
+        v, (bool, np.bool_)
+    )
+
+
+def _box_row(b: Any) -> bool:
+    """``b`` is 4 numbers: a list or tuple of 4 ints or floats, or a numeric (4,) array."""
+    if isinstance(b, np.ndarray):
+        return b.shape == (4,) and b.dtype.kind in "iuf"
+    return isinstance(b, (list, tuple)) and len(b) == 4 and all(_is_number(v) for v in b)
+
+
 def boxes_array(rows: list[Any], ids: Sequence[Any], what: str, err: type[Exception]) -> np.ndarray:
-    """``rows`` (each a 4-list) as a (N, 4) float64 array of finite boxes with w, h >= 0."""
+    """``rows`` (each a 4-list) as a (N, 4) float64 array of finite boxes with w, h >= 0;
+    ``err`` naming the entry (``what`` and its id in ``ids``) for a row that is not 4
+    numbers (None, a string, nested lists, booleans), not finite, beyond 1e15 or of
+    negative size."""
+    for k, b in enumerate(rows):
+        if not _box_row(b):
+            raise err(
+                f"{what} {ids[k]}: bbox must be 4 numbers [x, y, width, height]; got "
+                f"{plain_repr(b)}"
+            )
     try:
         boxes = np.array(rows, dtype=np.float64).reshape(len(rows), 4)
-    except (TypeError, ValueError):
-        for k, b in enumerate(rows):
-            ok = (
-                isinstance(b, (list, tuple))
-                and len(b) == 4
-                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in b)
-            )
-            if not ok:
-                raise err(
-                    f"{what} {ids[k]}: bbox must be 4 numbers [x, y, width, height]; got "
-                    f"{plain_repr(b)}"
-                ) from None
-        raise err(f"{what}: bbox must be 4 numbers [x, y, width, height]") from None
+    except OverflowError:  # an integer beyond float64 (JSON allows any digits)
+        k = next(j for j, b in enumerate(rows) if not _finite_float(b))
+        raise err(
+            f"{what} {ids[k]}: bbox {plain_repr(rows[k])} has coordinates beyond 1e15 "
+            "pixels, where areas and IoU lose their precision: rescale the boxes"
+        ) from None
     bad = ~np.isfinite(boxes).all(axis=1)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
@@ -130,6 +147,15 @@ def boxes_array(rows: list[Any], ids: Sequence[Any], what: str, err: type[Except
             "COCO boxes are [x, y, width, height], not [x1, y1, x2, y2]"
         )
     return boxes
+
+
+def _finite_float(b: Any) -> bool:
+    """Every value of ``b`` converts to float64 (no integer beyond 1.8e308)."""
+    try:
+        np.array(b, dtype=np.float64)
+    except OverflowError:
+        return False
+    return True
 
 
 def keypoints_rows(rows: list[Any], where: list[str], err: type[Exception]) -> np.ndarray:
@@ -177,14 +203,11 @@ def keypoints_rows(rows: list[Any], where: list[str], err: type[Exception]) -> n
 
 
 def load_json(path: str | os.PathLike[str], what: str) -> Any:
-    """The JSON value of the file ``path`` (``what`` names the file kind expected);
-    :class:`FileFormatError` when it is missing or not UTF-8 JSON."""
-    p = check_file(path, what)
-    try:
-        with open(p, encoding="utf-8") as f:
-            return json.load(f)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FileFormatError(f"{p}: not a JSON file ({exc})") from None
+    """The JSON value of the file ``path`` (``what`` names the file kind expected) under
+    the one reading policy of :func:`robopercept.fileio.read_json`:
+    :class:`FileFormatError` when it is missing, not UTF-8 JSON, or nested deeper than
+    :data:`~robopercept.fileio.MAX_NESTING` levels (never ``RecursionError``)."""
+    return read_json(path, what)
 
 
 def write_json(obj: Any, path: str | os.PathLike[str]) -> Path:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -260,7 +261,7 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
         cats.append(CocoCategory(cid, name, sup, names, links))
     for what, ids in (("image", [i.id for i in images]), ("category", [c.id for c in cats])):
         if len(set(ids)) != len(ids):
-            dup = next(i for i in ids if ids.count(i) > 1)
+            dup = next(i for i, count in Counter(ids).items() if count > 1)
             raise err(f"{what} id {dup} appears more than once; ids must be unique")
     anns = lists["annotations"]
     n = len(anns)
@@ -294,7 +295,12 @@ def _parse_coco(data: Any, err: type[Exception]) -> CocoDataset:
             num_kp[k] = nk
         if "area" in a:
             ar = a["area"]
-            if isinstance(ar, bool) or not isinstance(ar, (int, float)) or not math.isfinite(ar):
+            if (
+                isinstance(ar, bool)
+                or not isinstance(ar, (int, float))
+                or (isinstance(ar, int) and abs(ar) > 2**1023)  # math.isfinite overflows
+                or not math.isfinite(ar)
+            ):
                 raise err(f"{where}: area must be a finite number; got {plain_repr(ar)}")
             areas[k] = ar
             has_area[k] = True

@@ -44,9 +44,9 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import as_path, plain_repr
+from robopercept._checks import as_path, check_bool, plain_repr
 from robopercept.errors import FileFormatError, InputError
-from robopercept.imaging.io import IMAGE_EXTENSIONS, read_image
+from robopercept.imaging.io import IMAGE_EXTENSIONS, contained_path, read_image
 from robopercept.nn.coco._fields import category_list, load_json, readonly
 from robopercept.nn.coco.dataset import CocoCategory, CocoDataset, CocoImage, read_coco_json
 from robopercept.nn.coco.rle import annotation_to_rle, rle_area, rle_encode, rle_to_bbox
@@ -339,7 +339,9 @@ def _class_names(folder: Path) -> tuple[str, ...]:
 
 def _image_beside(folder: Path, stem: str, hint: str = "") -> Path | None:
     """The image file named ``hint`` in ``folder``, else the one with ``stem`` and an
-    image extension (a VOC XML may name a ``.tif`` beside a ``.png``)."""
+    image extension (a VOC XML may name a ``.tif`` beside a ``.png``). ``hint`` has
+    passed :func:`~robopercept.imaging.io.contained_path` (or outside paths are
+    allowed)."""
     if hint and (folder / hint).is_file():
         return folder / hint
     for ext in IMAGE_EXTENSIONS:
@@ -435,38 +437,56 @@ def read_voc_segmentation(folder: str | os.PathLike[str]) -> CocoDataset:
     return _instances(images, cats, rows, [r[2] for r in rows])
 
 
-def _voc_xml_folder(root: Path, xmls: list[Path]) -> AnnotatedImages:
+def _relative(img: Path, root: Path) -> str:
+    """``img`` relative to ``root`` (``..`` included) when it starts with ``root``, else
+    as it is (an absolute path, taken only with outside paths allowed)."""
+    try:
+        return img.relative_to(root).as_posix()
+    except ValueError:
+        return img.as_posix()
+
+
+def _voc_xml_folder(root: Path, xmls: list[Path], allow_outside: bool) -> AnnotatedImages:
     """VOC XML files of ``root`` (or ``root/Annotations``) with their images."""
     anns = [read_voc_xml(x) for x in xmls]
     img_dir = root / "JPEGImages" if (root / "JPEGImages").is_dir() else xmls[0].parent
     found = []
     for x, a in zip(xmls, anns, strict=True):
+        if a.filename:  # relative to the images' folder, which lies in root
+            name = img_dir.relative_to(root) / a.filename
+            contained_path(root, name, f"{x}: <filename>", allow_outside)
         img = _image_beside(img_dir, x.stem, a.filename)
         if img is None:
             raise InputError(
                 f"--data {root}: no image for {x} ({a.filename!r} or {x.stem}.<image "
                 f"extension> in {img_dir})"
             )
-        found.append(img.relative_to(root).as_posix())
+        found.append(_relative(img, root))
     coco = voc_to_coco(anns)
     images = tuple(replace(im, file_name=f) for im, f in zip(coco.images, found, strict=True))
     return AnnotatedImages(replace(coco, images=images), root, "voc-xml")
 
 
-def _labelme_folder(root: Path, files: list[Path], docs: list[Any]) -> AnnotatedImages:
+def _labelme_folder(
+    root: Path, files: list[Path], docs: list[Any], allow_outside: bool
+) -> AnnotatedImages:
     """The labelme files ``files`` of ``root`` (their JSON values ``docs``)."""
     anns = [_labelme(d, str(f)) for f, d in zip(files, docs, strict=True)]
     found = []
     for f, a in zip(files, anns, strict=True):
+        name = f.parent.relative_to(root) / a.image_path  # imagePath: beside the file
+        contained_path(root, name, f"{f}: imagePath", allow_outside)
         img = _image_beside(f.parent, f.stem, a.image_path)
         if img is None:
             raise InputError(f"--data {root}: no image for {f} ({a.image_path!r} beside it)")
-        found.append(img.relative_to(root).as_posix())
+        found.append(_relative(img, root))
     anns = [replace(a, image_path=p) for a, p in zip(anns, found, strict=True)]
     return AnnotatedImages(labelme_to_coco(anns, where=[str(f) for f in files]), root, "labelme")
 
 
-def read_annotations(path: str | os.PathLike[str]) -> AnnotatedImages:
+def read_annotations(
+    path: str | os.PathLike[str], *, allow_outside: bool = False
+) -> AnnotatedImages:
     """A user's annotated images in any of :data:`ANNOTATION_FORMS` (module docstring),
     recognised by what ``path`` holds, in this order:
 
@@ -475,10 +495,18 @@ def read_annotations(path: str | os.PathLike[str]) -> AnnotatedImages:
     3. a folder with ``.json`` files that have ``shapes``: labelme;
     4. a folder with ``.xml`` files, or ``Annotations/*.xml``: VOC XML boxes.
 
+    A labelme ``imagePath`` or a VOC ``<filename>`` that leads outside the folder
+    (``../../x.png``, an absolute path) is refused unless ``allow_outside``
+    (:func:`~robopercept.imaging.io.contained_path`); a COCO file's ``file_name`` is
+    checked where the images are read
+    (:meth:`~robopercept.nn.detection.data.DetectionDataset.from_coco`).
+
     Parameters
     ----------
     path : path
         What ``--data`` names.
+    allow_outside : bool, default False
+        Take image paths outside the folder (``--allow-outside-paths``).
 
     Returns
     -------
@@ -490,7 +518,7 @@ def read_annotations(path: str | os.PathLike[str]) -> AnnotatedImages:
         ``path`` does not exist, or is a folder in none of the forms (the message lists
         them), or an image is missing.
     FileFormatError
-        A file of the form that cannot be read.
+        A file of the form that cannot be read, or an image path outside the folder.
 
     Examples
     --------
@@ -506,6 +534,7 @@ def read_annotations(path: str | os.PathLike[str]) -> AnnotatedImages:
     ('labelme', [[1.0, 2.0, 4.0, 4.0]], 'a.png')
     """
     p = as_path(path, "path (--data)")
+    allow_outside = check_bool(allow_outside, "allow_outside (--allow-outside-paths)")
     if p.is_file():
         if p.suffix.lower() != ".json":
             raise InputError(f"--data: {p} is a file but not a COCO .json file")
@@ -528,12 +557,12 @@ def read_annotations(path: str | os.PathLike[str]) -> AnnotatedImages:
     if labelme and bad:  # a broken file among labelme files is not skipped unsaid
         raise bad[0]
     if labelme:
-        return _labelme_folder(p, labelme, docs)
+        return _labelme_folder(p, labelme, docs, allow_outside)
     xmls = sorted(f for f in p.glob("*.xml") if f.is_file())
     if not xmls and (p / "Annotations").is_dir():
         xmls = sorted(f for f in (p / "Annotations").glob("*.xml") if f.is_file())
     if xmls:
-        return _voc_xml_folder(p, xmls)
+        return _voc_xml_folder(p, xmls, allow_outside)
     raise InputError(
         f"--data: {p} holds no annotations: give a COCO .json file, or a folder of labelme "
         ".json files, of Pascal-VOC .xml files (or Annotations/*.xml), or a VOC "

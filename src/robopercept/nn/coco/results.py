@@ -102,6 +102,9 @@ class CocoResults:
         return int(self.scores.size)
 
 
+_FROM_KEYPOINTS = object()  # a keypoint result's box: the tight box of its keypoints
+
+
 def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
     if not isinstance(data, list):
         raise err(
@@ -139,13 +142,15 @@ def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
             # as pycocotools' loadRes: the mask's box where no bbox is given
             rows.append(r["bbox"] if "bbox" in r else box)
         elif kp is not None and "bbox" not in r:
-            rows.append(None)  # the tight box of the keypoints, below
+            rows.append(_FROM_KEYPOINTS)  # the tight box of the keypoints, below
         else:
             rows.append(json_field(r, "bbox", where, fix, err))
         segs.append(seg)
         s = json_field(r, "score", where, fix, err)
         if isinstance(s, bool) or not isinstance(s, (int, float, np.floating, np.integer)):
             raise err(f"{where}.score must be a number; got {plain_repr(s)}")
+        if isinstance(s, int) and abs(s) > 2**1023:  # math.isfinite would overflow
+            raise err(f"{where}.score {plain_repr(s)} is beyond float64: give a score in [0, 1]")
         if not math.isfinite(s):
             raise err(f"{where}.score is {s}; scores must be finite: drop that detection")
         scores[k] = s
@@ -162,7 +167,7 @@ def _parse_results(data: Any, err: type[Exception]) -> CocoResults:
     if any(has_kp) and empty:
         k = empty[0]
         raise err(f"results[{k}].keypoints is empty: give [x, y, s] for each of the K keypoints")
-    for k in [j for j, row in enumerate(rows) if row is None]:
+    for k in [j for j, row in enumerate(rows) if row is _FROM_KEYPOINTS]:
         # as pycocotools' loadRes: the tight box of all the keypoints, area (x1-x0)(y1-y0)
         x, y = keypoints[k, :, 0], keypoints[k, :, 1]
         x0, x1, y0, y1 = x.min(), x.max(), y.min(), y.max()

@@ -54,6 +54,11 @@ __all__ = [
 
 #: pixels of the largest mask accepted (h w), as pycocotools' 32-bit run lengths allow
 MAX_PIXELS = 2**32 - 1
+#: 5-bit groups of the longest number in a compressed counts string (2^32 takes 7)
+_MAX_GROUPS = 13
+#: coordinates of a polygon beyond this many pixels are refused (COCO's rasterization
+#: works on int64 at 5x: far below its range; areas lose precision beyond it)
+MAX_COORDINATE = 1e15
 #: points of the longest polygon outline traced (on COCO's 5x grid): 4 M px of outline,
 #: 10 times the border of a 100k x 100k image (the trace takes 16 bytes a point)
 MAX_TRACE = 2 * 10**7
@@ -109,17 +114,31 @@ def _decompress(s: str, where: str) -> np.ndarray:
             more = bool(c & 0x20)
             p += 1
             k += 1
+            if more and k >= _MAX_GROUPS:
+                raise InputError(
+                    f"{where}: a number of the counts string runs over {_MAX_GROUPS} "
+                    "characters: no mask of at most 2^32 - 1 pixels has such a run"
+                )
             if not more and c & 0x10:
                 x |= -1 << (5 * k)
         if len(counts) > 2:
             x += counts[-2]
+        if abs(x) > MAX_PIXELS:
+            raise InputError(
+                f"{where}: a run of {x} pixels in the counts string; a mask has at most "
+                "2^32 - 1 pixels"
+            )
         counts.append(x)
     return np.asarray(counts, np.int64)
 
 
 def _size(value: Any, where: str) -> tuple[int, int]:
+    """``[h, w]`` (a list, tuple or 1-D array of two integers >= 0) as ints;
+    :class:`InputError` for anything else (a single number, None, a 0-d array)."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist() if value.ndim == 1 else None
     if (
-        not isinstance(value, (list, tuple, np.ndarray))
+        not isinstance(value, (list, tuple))
         or len(value) != 2
         or not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in value)
         or min(value) < 0
@@ -182,7 +201,12 @@ def rle_counts(rle: Mapping[str, Any], name: str = "rle") -> tuple[tuple[int, in
                 f"{name}['counts'] must be COCO's compressed string or a list of integers"
             )
         runs = runs.astype(np.int64)
-    if (runs < 0).any() or int(runs.sum()) != h * w:
+    if runs.size and (int(runs.min()) < 0 or int(runs.max()) > h * w):  # the sum could wrap
+        bad = int(runs.min()) if int(runs.min()) < 0 else int(runs.max())
+        raise InputError(
+            f"{name}: the runs must be >= 0 and add up to h * w = {h * w} pixels; one is {bad}"
+        )
+    if int(runs.sum()) != h * w:
         raise InputError(
             f"{name}: the runs must be >= 0 and add up to h * w = {h * w} pixels; they add "
             f"up to {int(runs.sum())}"
@@ -205,8 +229,23 @@ def rle_from_counts(counts: npt.ArrayLike, size: tuple[int, int]) -> dict[str, A
     -------
     dict
         ``{"size": [h, w], "counts": str}``.
+
+    Raises
+    ------
+    InputError
+        ``size`` not two integers >= 0 (a single number, None), ``counts`` not
+        integers, negative runs, or runs that do not add up to :math:`h w`.
+
+    Examples
+    --------
+    >>> rle_from_counts([1, 3], (2, 2))
+    {'size': [2, 2], 'counts': '13'}
+    >>> rle_from_counts([4], 4)
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: counts: size must be [height, width], two integers >= 0
     """
-    (h, w), runs = rle_counts({"size": list(size), "counts": counts}, "counts")
+    (h, w), runs = rle_counts({"size": size, "counts": counts}, "counts")
     return {"size": [h, w], "counts": _compress(runs)}
 
 
@@ -374,9 +413,19 @@ def rle_iou(
         wrong length.
     """
     dt, gt = _rle_list(dt, "dt"), _rle_list(gt, "gt")
-    crowd = np.zeros(len(gt), bool) if iscrowd is None else np.asarray(iscrowd)
-    if crowd.shape != (len(gt),) or crowd.dtype.kind not in "biu":
-        raise InputError(f"iscrowd must hold one 0/1 flag per ground truth ({len(gt)})")
+    try:
+        crowd = np.zeros(len(gt), bool) if iscrowd is None else np.asarray(iscrowd)
+    except (TypeError, ValueError):  # ragged lists
+        crowd = np.zeros(0, object)
+    if (
+        crowd.shape != (len(gt),)
+        or crowd.dtype.kind not in "biu"
+        or not np.isin(crowd, (0, 1)).all()
+    ):
+        raise InputError(
+            f"iscrowd must hold one 0/1 flag per ground truth ({len(gt)}); got "
+            f"{plain_repr(iscrowd)}"
+        )
     crowd = crowd.astype(bool)
     if not dt or not gt:
         return np.zeros((len(dt), len(gt)))
@@ -448,6 +497,11 @@ def polygon_to_rle(polygon: npt.ArrayLike, height: int, width: int) -> dict[str,
         raise InputError(
             "a polygon must be [x0, y0, x1, y1, ...] with at least 3 points (6 finite "
             f"numbers); got {plain_repr(polygon)}"
+        )
+    if np.abs(xy).max() > MAX_COORDINATE:
+        raise InputError(
+            f"a polygon's coordinates must stay within {MAX_COORDINATE:.0e} pixels; got "
+            f"{np.abs(xy).max():.3g} in {plain_repr(polygon)}: clip it to the {h} x {w} image"
         )
     # the outline is traced at 5x: refuse one whose trace would not fit in memory
     fine = np.rint(5.0 * xy)

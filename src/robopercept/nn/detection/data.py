@@ -54,6 +54,7 @@ import torch
 from robopercept._checks import as_path, check_bool, check_int, check_numeric, plain_repr
 from robopercept.errors import InputError
 from robopercept.imaging import read_image
+from robopercept.imaging.io import contained_path
 from robopercept.nn.coco.dataset import CocoDataset, coco_from_dict, read_coco_json
 from robopercept.nn.coco.folders import read_annotations
 from robopercept.nn.coco.rle import annotation_to_rle, rle_decode, rle_encode
@@ -321,6 +322,8 @@ class DetectionDataset:
         path: str | os.PathLike[str],
         images_dir: str | os.PathLike[str] | None = None,
         masks: bool = False,
+        *,
+        allow_outside: bool = False,
     ) -> DetectionDataset:
         """A COCO ground-truth JSON file and its images as a detection set (what
         ``robopercept nn detect train|eval --data FILE.json`` reads).
@@ -346,6 +349,12 @@ class DetectionDataset:
             rasterized at the image's size
             (:func:`~robopercept.nn.coco.rle.annotation_to_rle`, pycocotools' rule);
             what ``robopercept nn segment train --data FILE.json`` reads.
+        allow_outside : bool, default False
+            Read images whose ``file_name`` leads outside the images' folder
+            (``../../x.png``, an absolute path), which is refused by default
+            (:func:`~robopercept.imaging.io.contained_path`; the command line's
+            ``--allow-outside-paths``): a file from elsewhere cannot make the command
+            read files outside the data set.
 
         Returns
         -------
@@ -359,7 +368,8 @@ class DetectionDataset:
             without a ``segmentation`` (the messages name the command line's ``--data``
             and ``--images-dir``).
         FileFormatError
-            The file is not COCO JSON, or an image is unreadable.
+            The file is not COCO JSON, an image is unreadable, or a ``file_name`` leads
+            outside the images' folder (without ``allow_outside``).
 
         Examples
         --------
@@ -379,7 +389,9 @@ class DetectionDataset:
         p = as_path(path, "path (--data)")
         if not p.is_file():
             raise InputError(f"--data: COCO file {p} does not exist")
-        return cls._from_coco_dataset(read_coco_json(p), p, p.parent, images_dir, masks)
+        return cls._from_coco_dataset(
+            read_coco_json(p), p, p.parent, images_dir, masks, allow_outside
+        )
 
     @classmethod
     def from_annotations(
@@ -387,6 +399,8 @@ class DetectionDataset:
         path: str | os.PathLike[str],
         images_dir: str | os.PathLike[str] | None = None,
         masks: bool = False,
+        *,
+        allow_outside: bool = False,
     ) -> DetectionDataset:
         """A user's annotated images in any form an annotation tool writes (what
         ``robopercept nn detect|segment train|eval --data PATH`` reads): a COCO JSON
@@ -403,6 +417,10 @@ class DetectionDataset:
         masks : bool
             Also the instance masks (labelme polygons, VOC ``SegmentationObject``, COCO
             segmentations); a VOC XML folder has none.
+        allow_outside : bool, default False
+            Read images that the annotations place outside their folder (COCO
+            ``file_name``, labelme ``imagePath``, VOC ``<filename>``), as
+            :meth:`from_coco`; ``--allow-outside-paths``.
 
         Returns
         -------
@@ -413,7 +431,8 @@ class DetectionDataset:
         InputError
             Nothing there in any form, a missing image, ``masks`` with boxes only.
         FileFormatError
-            A file of the form that cannot be read.
+            A file of the form that cannot be read, or an image path outside the folder
+            (without ``allow_outside``).
 
         Examples
         --------
@@ -429,7 +448,7 @@ class DetectionDataset:
         >>> ds.boxes[0].tolist(), ds.classes
         ([[1.0, 2.0, 5.0, 6.0]], ('tree',))
         """
-        found = read_annotations(path)
+        found = read_annotations(path, allow_outside=allow_outside)
         if masks and found.form == "voc-xml":
             raise InputError(
                 f"--data {found.root}: Pascal-VOC XML files hold boxes, not masks; a "
@@ -437,7 +456,9 @@ class DetectionDataset:
                 "SegmentationObject folder"
             )
         where = found.root if found.form != "coco" else as_path(path)
-        return cls._from_coco_dataset(found.coco, where, found.root, images_dir, masks)
+        return cls._from_coco_dataset(
+            found.coco, where, found.root, images_dir, masks, allow_outside
+        )
 
     @classmethod
     def _from_coco_dataset(
@@ -447,9 +468,11 @@ class DetectionDataset:
         default_root: Any,
         images_dir: str | os.PathLike[str] | None,
         masks: bool,
+        allow_outside: bool = False,
     ) -> DetectionDataset:
         """The set of ``coco`` (read from ``p``) with its images under ``images_dir``
-        or ``default_root`` (:meth:`from_coco`)."""
+        or ``default_root`` (:meth:`from_coco`), each ``file_name`` inside that folder
+        unless ``allow_outside``."""
         if images_dir is None or (isinstance(images_dir, str) and not images_dir):
             root = default_root
         else:
@@ -457,13 +480,14 @@ class DetectionDataset:
         if not root.is_dir():
             raise InputError(f"--images-dir: {root} is not a folder")
         masks = check_bool(masks, "masks")
+        allow_outside = check_bool(allow_outside, "allow_outside (--allow-outside-paths)")
         if not coco.images:
             raise InputError(f"--data {p}: lists no images")
         label = {c.id: k + 1 for k, c in enumerate(coco.categories)}
         images, boxes, labels, all_masks = [], [], [], []
         segs = coco.segmentations or (None,) * len(coco.image_ids)
         for im in coco.images:
-            f = root / im.file_name
+            f = contained_path(root, im.file_name, f"{p}: image {im.id} file_name", allow_outside)
             if not f.is_file():
                 raise InputError(f"--images-dir: {f} (image {im.id} of {p}) does not exist")
             images.append(to_unit_float(read_image(f, mode="rgb")))

@@ -25,9 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import as_path, check_real, check_size, plain_repr
+from robopercept._checks import as_path, check_bool, check_real, check_size, plain_repr
 from robopercept.errors import InputError
 from robopercept.imaging import read_image
+from robopercept.imaging.io import contained_path
 from robopercept.imaging.warp import warp_perspective
 from robopercept.nn.coco.dataset import read_coco_json
 from robopercept.nn.data.datasets import to_unit_float
@@ -75,6 +76,8 @@ def pose_set_from_coco(
     images_dir: str | os.PathLike[str] | None = None,
     size: tuple[int, int] = (128, 128),
     padding: float = 1.25,
+    *,
+    allow_outside: bool = False,
 ) -> PoseDataset:
     """A COCO keypoint file's persons as top-down crops (module docstring): what
     ``robopercept nn pose train|eval --data FILE.json`` reads.
@@ -90,6 +93,10 @@ def pose_set_from_coco(
         The crops.
     padding : float
         The window's margin factor.
+    allow_outside : bool, default False
+        Read images whose ``file_name`` leads outside the images' folder
+        (``../../x.png``, an absolute path), refused by default
+        (:func:`~robopercept.imaging.io.contained_path`; ``--allow-outside-paths``).
 
     Returns
     -------
@@ -103,7 +110,8 @@ def pose_set_from_coco(
         No such file or folder, an image missing, no keypoint category, or no person
         with a labelled keypoint (the messages name ``--data`` and ``--images-dir``).
     FileFormatError
-        Not COCO JSON, an unreadable image.
+        Not COCO JSON, an unreadable image, a ``file_name`` outside the images' folder
+        (without ``allow_outside``).
 
     Examples
     --------
@@ -128,6 +136,7 @@ def pose_set_from_coco(
     if not root.is_dir():
         raise InputError(f"--images-dir: {root} is not a folder")
     w_out, h_out = check_size(size, "size (--size)", 1, 4096)
+    allow_outside = check_bool(allow_outside, "allow_outside (--allow-outside-paths)")
     coco = read_coco_json(p)
     cats = [c for c in coco.categories if c.keypoints]
     if not cats:
@@ -145,7 +154,8 @@ def pose_set_from_coco(
     for j in np.flatnonzero(keep):
         image_id = int(coco.image_ids[j])
         if image_id not in photos:
-            f = root / files[image_id]
+            what = f"{p}: image {image_id} file_name"
+            f = contained_path(root, files[image_id], what, allow_outside)
             if not f.is_file():
                 raise InputError(f"--images-dir: {f} (image {image_id} of {p}) does not exist")
             photos[image_id] = to_unit_float(read_image(f, mode="rgb"))

@@ -81,7 +81,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -90,8 +89,9 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import check_file, plain_repr
+from robopercept._checks import plain_repr
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import read_json
 from robopercept.nn.skeleton import MPII_16, Skeleton
 
 __all__ = [
@@ -270,12 +270,9 @@ class ImgaugAnnotation:
 
 
 def _load_json(path: str | os.PathLike[str], what: str) -> Any:
-    p = check_file(path, what)
-    try:
-        with open(p, encoding="utf-8") as f:
-            return json.load(f)
-    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise FileFormatError(f"{p}: not a JSON file ({type(exc).__name__}: {exc})") from None
+    """The JSON value of ``path`` under the one reading policy
+    (:func:`robopercept.fileio.read_json`: bounded nesting, typed errors)."""
+    return read_json(path, what)
 
 
 def _field(item: Any, key: str, where: str) -> Any:
