@@ -526,14 +526,26 @@ def test_write_realsense_recording_keeps_librealsense_out_of_this_process(tmp_pa
     assert (tmp_path / "c.db3").stat().st_size > 0
 
 
-def test_write_realsense_recording_names_what_failed_in_the_child(tmp_path):
+def test_write_realsense_recording_names_what_failed_in_the_child(tmp_path, monkeypatch):
     pytest.importorskip("pyrealsense2")
-    from robopercept.sources import SyntheticRGBDScene
+    from robopercept.sources import SyntheticRGBDScene, realsense
     from robopercept.sources.realsense import SourceError, write_realsense_recording
 
     frames = list(SyntheticRGBDScene(n_frames=2, depth_size=(64, 48), color_size=(80, 60)))
-    with pytest.raises(SourceError, match=r"librealsense failed writing .*no_dir"):
-        write_realsense_recording(tmp_path / "no_dir" / "x.db3", frames, pace=0.0)
+    # a missing folder no longer makes librealsense fail (issue 47 R59: the recording is
+    # written to a temporary name through fileio.atomic_path, which creates the folder);
+    # a recorder that writes part of its file and answers with librealsense's error
+    with monkeypatch.context() as m:
+        m.setattr(
+            realsense,
+            "_RECORDER",
+            "import sys, os; from robopercept.sources.realsense import _send; "
+            "open(sys.argv[1], 'wb').write(b'partial'); "
+            "_send(os.fdopen(1, 'wb'), b'E', ('', 'RuntimeError: Failed to setup storage'))",
+        )
+        with pytest.raises(SourceError, match=r"librealsense failed writing .*x\.db3: .*storage"):
+            write_realsense_recording(tmp_path / "no_dir" / "x.db3", frames, pace=0.0)
+    assert list((tmp_path / "no_dir").iterdir()) == []  # no partial recording left
     with pytest.raises(InputError, match="pace"):
         write_realsense_recording(tmp_path / "y.db3", frames, pace=-1.0)
 

@@ -67,6 +67,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--fps", type=float, default=30.0, help="frame rate for folders without timestamps"
     )
+    p.add_argument(
+        "--allow-outside-paths",
+        action="store_true",
+        help="read images that associations.txt, rgb.txt or depth.txt place outside "
+        "SRC_DIR (a name with '..' above it, or an absolute path); refused by default, so "
+        "that a folder from elsewhere cannot have other files of this machine copied into "
+        "OUT_DIR. Give it only for lists you trust",
+    )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_rgbd_import)
@@ -91,6 +99,7 @@ def run_rgbd_import(args: argparse.Namespace) -> int:
         match=args.match,
         fps=args.fps,
         progress=not (args.quiet or args.json),
+        allow_outside=args.allow_outside_paths,
     )
     if args.json:
         report = {

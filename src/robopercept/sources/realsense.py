@@ -29,8 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import check_real
+from robopercept._checks import as_path, check_real
 from robopercept.errors import FileFormatError, InputError, RoboperceptError
+from robopercept.fileio import atomic_path
 from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.transforms import se3
 from robopercept.sources.frames import RGBDFrame
@@ -1102,6 +1103,15 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
     (a fresh interpreter) that the frames are streamed to; this process holds no
     librealsense object.
 
+    The recording is written under a temporary name beside ``path``
+    (``.<name>.<pid>.tmp.db3``, :func:`robopercept.fileio.atomic_path`) and renamed to
+    ``path`` only once the recorder has finished: a recording interrupted in any way
+    (an error or Ctrl-C in ``frames``, the recorder failing or dying) leaves no file at
+    ``path`` (or the previous one there, intact), and its partial temporary file is
+    removed. Only a process killed outright can leave a temporary file behind, under
+    that name, never a short recording under ``path``. ``path``'s folder is created
+    if needed.
+
     Parameters
     ----------
     path : path
@@ -1118,10 +1128,13 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
     Raises
     ------
     InputError
-        No frames, or pyrealsense2 is not installed.
+        No frames, a ``path`` that cannot name a file, or pyrealsense2 is not installed.
     SourceError
         The recorder process failed or died (its last words are quoted).
+    WriteError
+        The finished recording could not be moved to ``path``.
     """
+    dest = as_path(path, "the recording's path")
     import_pyrealsense2()  # the missing extra is named here, not in the child
     it = iter(frames)
     try:
@@ -1129,9 +1142,24 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
     except StopIteration:
         raise InputError("no frames to record") from None
     pace = check_real(pace, "pace (seconds)", 0.0)
+    with atomic_path(dest) as tmp:
+        try:
+            return _record_in_child(tmp, dest, itertools.chain((first,), it), pace)
+        except BaseException:
+            # sqlite's side files of a recorder killed mid-write (atomic_path removes
+            # the temporary recording itself)
+            for side in ("-journal", "-wal", "-shm"):
+                with contextlib.suppress(OSError):
+                    tmp.with_name(tmp.name + side).unlink(missing_ok=True)
+            raise
+
+
+def _record_in_child(tmp: Path, dest: Path, frames: Iterator[RGBDFrame], pace: float) -> int:
+    """Stream ``frames`` to a recorder child process writing ``tmp``; the count of frames
+    pushed, or the child's error as a typed one (messages name ``dest``)."""
     with tempfile.TemporaryFile() as err:
         proc = subprocess.Popen(
-            [sys.executable, "-c", _RECORDER, str(path), repr(pace)],
+            [sys.executable, "-c", _RECORDER, str(tmp), repr(pace)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=err,
@@ -1140,7 +1168,7 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
         assert proc.stdin is not None and proc.stdout is not None
         try:
             try:
-                for frame in itertools.chain((first,), it):  # streamed, never all held
+                for frame in frames:  # streamed, never all held
                     _send(proc.stdin, b"F", frame)
                 _send(proc.stdin, b"D", None)
                 proc.stdin.close()
@@ -1158,6 +1186,6 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
             name, message = answer[1]
             if name in _TYPED:
                 raise _TYPED[name](message)
-            raise SourceError(f"librealsense failed writing {path}: {message}")
+            raise SourceError(f"librealsense failed writing {dest}: {message}")
         why, said = _how_it_died(code, err)
-        raise SourceError(f"the RealSense recorder process died writing {path} ({why}){said}")
+        raise SourceError(f"the RealSense recorder process died writing {dest} ({why}){said}")

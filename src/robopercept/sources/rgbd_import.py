@@ -63,7 +63,7 @@ from robopercept._checks import (
 )
 from robopercept.errors import FileFormatError, InputError
 from robopercept.geometry import CameraIntrinsics
-from robopercept.imaging.io import IMAGE_EXTENSIONS, read_image
+from robopercept.imaging.io import IMAGE_EXTENSIONS, contained_path, read_image
 from robopercept.sources.frames import RGBDFrame
 from robopercept.sources.tum import (
     associate_timestamps,
@@ -307,9 +307,18 @@ def _images(folder: Path) -> list[Path]:
     )
 
 
-def _association_pairs(path: Path) -> list[RGBDPair]:
+def _association_pairs(path: Path, allow_outside: bool) -> list[RGBDPair]:
+    """The pairs of a TUM association list, each file checked by
+    :func:`~robopercept.imaging.io.contained_path` (issue 47 R43)."""
+    expected = "expected 'timestamp rgb_file timestamp depth_file' lines"
+    try:  # as read_timestamp_list reads rgb.txt (issue 47 R48)
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{path}: not UTF-8 text (byte {exc.start}): {expected}") from None
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
     pairs = []
-    for n, line in enumerate(path.read_text().splitlines(), 1):
+    for n, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
@@ -320,6 +329,10 @@ def _association_pairs(path: Path) -> list[RGBDPair]:
             raise FileFormatError(
                 f"{path}:{n}: expected 'timestamp rgb_file timestamp depth_file'; got {line!r}"
             ) from None
+        if not (np.isfinite(t1) and np.isfinite(t2)):
+            raise FileFormatError(f"{path}:{n}: timestamps must be finite numbers; got {line!r}")
+        for name, col in ((f1, 2), (f2, 4)):
+            contained_path(path.parent, name, f"{path}:{n}: file (column {col})", allow_outside)
         first_is_depth = "depth" in f1.lower()
         if first_is_depth == ("depth" in f2.lower()):
             raise FileFormatError(
@@ -361,7 +374,11 @@ def _flat_pairs(folder: Path) -> list[RGBDPair]:
 
 
 def find_rgbd_pairs(
-    src: str | os.PathLike[str], *, match: str | None = None, max_difference: float = 0.02
+    src: str | os.PathLike[str],
+    *,
+    match: str | None = None,
+    max_difference: float = 0.02,
+    allow_outside: bool = False,
 ) -> tuple[str, list[RGBDPair]]:
     """Find the colour/depth pairs of a folder (the layouts of the module docstring).
 
@@ -377,6 +394,11 @@ def find_rgbd_pairs(
         ``"TUM*"``).
     max_difference : float
         ``rgb.txt``/``depth.txt``: largest colour/depth timestamp gap, seconds.
+    allow_outside : bool, default False
+        Take files that an association list, ``rgb.txt`` or ``depth.txt`` places outside
+        ``src`` (``../../x.png``, an absolute path): refused by default, as a folder from
+        elsewhere could name any file on the machine
+        (:func:`~robopercept.imaging.io.contained_path`).
 
     Returns
     -------
@@ -388,9 +410,12 @@ def find_rgbd_pairs(
     Raises
     ------
     FileFormatError
-        ``src`` is not a folder, or no pair is found (the message lists the layouts).
+        ``src`` is not a folder, no pair is found (the message lists the layouts), a
+        list that is not UTF-8 text or has a bad line, or a listed file outside ``src``
+        while ``allow_outside`` is False (the message names the line).
     """
     folder = as_path(src, "SRC_DIR")
+    allow_outside = check_bool(allow_outside, "allow_outside (--allow-outside-paths)")
     if match is not None and not isinstance(match, str):
         raise InputError(
             f"match (--match) must be a shell pattern string such as 'TUM*'; got "
@@ -402,11 +427,11 @@ def find_rgbd_pairs(
     layout, pairs = "pairs", []
     assoc = next((folder / n for n in ASSOCIATION_FILES if (folder / n).is_file()), None)
     if assoc is not None:
-        layout, pairs = "tum-associations", _association_pairs(assoc)
+        layout, pairs = "tum-associations", _association_pairs(assoc, allow_outside)
     elif (folder / "rgb.txt").is_file() and (folder / "depth.txt").is_file():
         triples = associate_timestamps(
-            read_timestamp_list(folder / "depth.txt"),
-            read_timestamp_list(folder / "rgb.txt"),
+            read_timestamp_list(folder / "depth.txt", allow_outside=allow_outside),
+            read_timestamp_list(folder / "rgb.txt", allow_outside=allow_outside),
             max_difference,
         )
         layout = "tum-lists"
@@ -542,6 +567,7 @@ def import_rgbd_folder(
     fps: float = 30.0,
     max_difference: float = 0.02,
     progress: bool = False,
+    allow_outside: bool = False,
 ) -> RGBDImportResult:
     """Write an RGB-D folder of another layout as a folder the plane tracker reads.
 
@@ -572,6 +598,11 @@ def import_rgbd_folder(
         TUM lists: largest colour/depth timestamp gap, seconds.
     progress : bool
         Show progress on stderr (:func:`robopercept.progress.progress_bar`).
+    allow_outside : bool, default False
+        Import images that the source's lists (``associations.txt``, ``rgb.txt``,
+        ``depth.txt``) place outside ``src``; refused by default (``rgbd-import
+        --allow-outside-paths``), so that a folder from elsewhere cannot have any file
+        of the machine copied into ``out``.
 
     Returns
     -------
@@ -580,7 +611,8 @@ def import_rgbd_folder(
     Raises
     ------
     FileFormatError
-        ``src`` missing or without pairs, or no pair readable.
+        ``src`` missing or without pairs, no pair readable, a list that is not UTF-8
+        text, or a listed file outside ``src`` (without ``allow_outside``).
     InputError
         Bad camera, depth scale or encoding; ``out`` equal to ``src``.
 
@@ -606,7 +638,9 @@ def import_rgbd_folder(
         camera_preset(preset)
     if intrinsics is not None:
         _check_intrinsics(intrinsics)
-    layout, pairs = find_rgbd_pairs(src_p, match=match, max_difference=max_difference)
+    layout, pairs = find_rgbd_pairs(
+        src_p, match=match, max_difference=max_difference, allow_outside=allow_outside
+    )
     if out_p.resolve() == src_p.resolve():
         raise InputError(f"OUT_DIR must differ from SRC_DIR ({src_p}): give a new folder")
     stamps = [p.timestamp for p in pairs]

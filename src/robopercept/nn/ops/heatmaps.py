@@ -50,6 +50,8 @@ import torch
 
 from robopercept._checks import check_choice, check_int, check_real, check_size, plain_repr
 from robopercept.errors import InputError
+from robopercept.fileio import nesting_depth
+from robopercept.nn._guards import check_allocation
 
 __all__ = [
     "DECODERS",
@@ -89,14 +91,25 @@ def keypoint_tensor(keypoints: Any, name: str = "keypoints") -> torch.Tensor:
     Raises
     ------
     InputError
-        Any other shape.
+        Any other shape, or values that are not numbers.
 
     Examples
     --------
     >>> keypoint_tensor([[[1.0, 2.0]]]).tolist()
     [[[1.0, 2.0, 2.0]]]
     """
-    k = torch.as_tensor(np.asarray(keypoints, dtype=np.float32))
+    try:
+        with np.errstate(over="ignore"):  # beyond float32: inf, a joint outside the image
+            a = np.asarray(keypoints.detach().cpu() if torch.is_tensor(keypoints) else keypoints)
+            if a.dtype.kind not in "biuf":
+                raise TypeError(a.dtype)
+            a = a.astype(np.float32)
+    except (TypeError, ValueError, OverflowError, RuntimeError, RecursionError):
+        raise InputError(
+            f"{name} must be numbers, (N, J, 3) rows (x, y, v) or (N, J, 2); got "
+            f"{_describe(keypoints)}"
+        ) from None
+    k = torch.as_tensor(a)
     if k.ndim != 3 or k.shape[-1] not in (2, 3) or k.shape[1] < 1:
         raise InputError(
             f"{name} must be (N, J, 3) rows (x, y, v) or (N, J, 2); got shape {tuple(k.shape)}"
@@ -114,6 +127,7 @@ def check_image_size(image_size: Any, stride: int) -> tuple[int, int]:
     image_size : (int, int)
         ``(width, height)`` pixels, 1 to 32768 each.
     stride : int
+        Image pixels per heatmap cell, 1 to 32768.
 
     Returns
     -------
@@ -122,13 +136,15 @@ def check_image_size(image_size: Any, stride: int) -> tuple[int, int]:
     Raises
     ------
     InputError
-        A size out of range, or a side that is not a multiple of ``stride``.
+        A size or stride out of range or not whole, or a side that is not a multiple of
+        ``stride``.
 
     Examples
     --------
     >>> check_image_size((64, 32), 16)
     (64, 32)
     """
+    stride = _check_stride(stride)
     w, h = check_size(image_size, "image_size", 1, 1 << 15)
     if w % stride or h % stride:
         raise InputError(
@@ -159,7 +175,7 @@ def check_float_tensor(value: Any, name: str, ndim: int, what: str) -> torch.Ten
     torch.Size([2, 3])
     """
     if not torch.is_tensor(value) or not value.is_floating_point() or value.ndim != ndim:
-        raise InputError(f"{name} must be a float torch.Tensor {what}; got {plain_repr(value)}")
+        raise InputError(f"{name} must be a float torch.Tensor {what}; got {_describe(value)}")
     return value
 
 
@@ -181,16 +197,25 @@ def check_permutation(value: Any, j: int) -> np.ndarray:
     >>> check_permutation([1, 0, 2], 3).tolist()
     [1, 0, 2]
     """
+    j = check_int(j, "the number of joints", 0)
     try:
         perm = np.asarray(value, dtype=np.int64).reshape(-1)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError, RecursionError):
         perm = np.zeros(0, np.int64)
     if perm.shape != (j,) or sorted(perm.tolist()) != list(range(j)):
         raise InputError(
             f"flip_permutation must be a permutation of the {j} joints (e.g. "
-            f"skeleton.flip_permutation()); got {plain_repr(value)}"
+            f"skeleton.flip_permutation()); got {_describe(value)}"
         )
     return perm
+
+
+def _check_stride(stride: Any) -> int:
+    """``stride`` as an int in [1, 32768] (image pixels per heatmap cell), or InputError."""
+    s = check_int(stride, "stride (image pixels per heatmap cell)", 1)
+    if s > 1 << 15:
+        raise InputError(f"stride must be at most 32768 pixels per heatmap cell; got {s}")
+    return s
 
 
 # ----------------------------------------------------------------------------- targets
@@ -222,17 +247,30 @@ def gaussian_heatmaps(
     weights : (N, J) float32 tensor
         1 for a labelled joint inside the image, else 0 (its heatmap is all 0).
 
+    Raises
+    ------
+    InputError
+        Keypoints not ``(N, J, 3)`` or ``(N, J, 2)`` numbers; a stride that is not a whole
+        number in [1, 32768] or does not divide ``image_size``; ``sigma`` not in
+        (0, 1000]; heatmaps over 1 GiB.
+
     Examples
     --------
     >>> hm, w = gaussian_heatmaps([[[6.0, 2.0, 2]]], (8, 8), stride=4)
     >>> hm.shape, float(hm[0, 0, 0, 1]), w.tolist()
     (torch.Size([1, 1, 2, 2]), 1.0, [[1.0]])
     """
+    stride = _check_stride(stride)
     k = keypoint_tensor(keypoints)
     w, h = check_image_size(image_size, stride)
-    stride = check_int(stride, "stride", 1)
     sigma = check_real(sigma, "sigma", 0.0, 1e3, low_inclusive=False)
     hw, hh = w // stride, h // stride
+    check_allocation(
+        k.shape[0] * k.shape[1] * hh * hw * 3,  # the map and the temporaries of its product
+        4,
+        f"({k.shape[0]}, {k.shape[1]}, {hh}, {hw}) heatmaps",
+        "use fewer keypoint sets, a smaller image_size or a larger stride",
+    )
     x, y, v = k[..., 0], k[..., 1], k[..., 2]
     ok = (v > 0) & torch.isfinite(x) & torch.isfinite(y) & (x >= 0) & (x < w) & (y >= 0) & (y < h)
     u = torch.where(ok, x / stride - 0.5, torch.zeros_like(x))
@@ -265,9 +303,16 @@ def decode_heatmaps(
     Returns
     -------
     keypoints : (N, J, 2) float64 ndarray
-        ``(x, y)`` pixels, :math:`x = s (u + \tfrac12)`.
+        ``(x, y)`` pixels, :math:`x = s (u + \tfrac12)`; ``(0, J, 2)`` for an empty batch.
     scores : (N, J) float64 ndarray
         The heatmap maximum.
+
+    Raises
+    ------
+    InputError
+        Heatmaps that are not a real ``(N, J, h, w)`` array with ``h, w >= 1``, or not
+        finite; a stride that is not a whole number in [1, 32768]; an unknown method; a
+        ``beta`` not in (0, 1e6].
 
     Examples
     --------
@@ -276,21 +321,24 @@ def decode_heatmaps(
     >>> np.round(kp, 6).tolist()
     [[[13.3, 6.9]]]
     """
-    hm = torch.as_tensor(np.asarray(heatmaps) if not torch.is_tensor(heatmaps) else heatmaps)
+    hm = _real_tensor(heatmaps, "heatmaps")
     if hm.ndim != 4 or hm.shape[-1] < 1 or hm.shape[-2] < 1:
         raise InputError(f"heatmaps must be (N, J, h, w); got shape {tuple(hm.shape)}")
     hm = hm.detach().to(torch.float64).cpu()
     if not torch.isfinite(hm).all():
         raise InputError("heatmaps must be finite; got NaN or inf (a diverged network?)")
-    stride = check_int(stride, "stride", 1)
+    stride = _check_stride(stride)
     check_choice(method, "method", DECODERS)
+    if method == "soft-argmax":
+        beta = check_real(beta, "beta", 0.0, 1e6, low_inclusive=False)
     n, j, h, w = hm.shape
-    flat = hm.reshape(n, j, -1)
+    if n * j == 0:  # an empty batch, or no joint (issue 47 R53)
+        return np.zeros((n, j, 2)), np.zeros((n, j))
+    flat = hm.reshape(n, j, h * w)
     score, idx = flat.max(-1)
     row = (idx // w).to(torch.float64)
     col = (idx % w).to(torch.float64)
     if method == "soft-argmax":
-        beta = check_real(beta, "beta", 0.0, 1e6, low_inclusive=False)
         p = torch.softmax(beta * flat, -1).reshape(n, j, h, w)
         col = (p.sum(-2) * torch.arange(w, dtype=torch.float64)).sum(-1)
         row = (p.sum(-1) * torch.arange(h, dtype=torch.float64)).sum(-1)
@@ -320,6 +368,34 @@ def decode_heatmaps(
         row = row + offsets[1]
     kp = torch.stack([(col + 0.5) * stride, (row + 0.5) * stride], -1)
     return kp.numpy(), score.numpy()
+
+
+def _describe(value: Any) -> str:
+    """A short description of an unusable array-like for a message: its repr when short
+    and flat enough to take, else its type (a deeply nested list has no repr)."""
+    if isinstance(value, (list, tuple)) and nesting_depth(value, 8) >= 8:
+        return f"a {type(value).__name__} nested more than 8 deep"
+    text = plain_repr(value)
+    return text if len(text) <= 80 else f"{text[:77]}..."
+
+
+def _real_tensor(value: Any, name: str) -> torch.Tensor:
+    """``value`` (a tensor or array_like of real numbers) as a tensor, or InputError."""
+    if torch.is_tensor(value):
+        t = value
+    else:
+        try:
+            a = np.asarray(value)
+        except (TypeError, ValueError, OverflowError, RecursionError):
+            a = np.zeros(0, dtype=object)
+        if a.dtype.kind not in "biuf":
+            raise InputError(
+                f"{name} must be a tensor or array of real numbers; got {_describe(value)}"
+            )
+        t = torch.as_tensor(a)
+    if t.is_complex():
+        raise InputError(f"{name} must be real; got {t.dtype}")
+    return t
 
 
 # ----------------------------------------------------------------------------- loss
@@ -356,12 +432,18 @@ def heatmap_loss(
     check_float_tensor(output, "output", 4, "(N, J, h, w)")
     check_float_tensor(target, "target", 4, "(N, J, h, w)")
     check_float_tensor(weight, "weight", 2, "(N, J)")
-    if output.shape != target.shape or weight.shape != output.shape[:2]:
+    if (
+        output.shape != target.shape
+        or weight.shape != output.shape[:2]
+        or min(output.shape[2:]) < 1
+    ):
         raise InputError(
             f"output {tuple(output.shape)}, target {tuple(target.shape)} and weight "
-            f"{tuple(weight.shape)} must be (N, J, h, w), (N, J, h, w) and (N, J)"
+            f"{tuple(weight.shape)} must be (N, J, h, w), (N, J, h, w) and (N, J), h, w >= 1"
         )
     if kind == "mse":
+        if weight.numel() == 0:  # no joint to weigh: 0, not the NaN mean of nothing
+            return (output * 0.0).sum()
         return (((output - target) ** 2).mean((-1, -2)) * weight).mean()
     q = target.flatten(2)
     q = q / q.sum(-1, keepdim=True).clamp_min(1e-12)
@@ -389,10 +471,15 @@ def heatmap_probabilities(maps: torch.Tensor, kind: str) -> torch.Tensor:
     >>> float(heatmap_probabilities(torch.zeros(1, 1, 2, 2), "softmax").sum())
     1.0
     """
+    check_float_tensor(maps, "maps", 4, "(N, J, h, w)")
+    if not isinstance(kind, str):
+        raise InputError(f"kind must be a heatmap kind {HEATMAP_LOSSES}; got {_describe(kind)}")
     if kind != "softmax":
         return maps
     n, j, h, w = maps.shape
-    return torch.softmax(maps.reshape(n, j, -1), -1).reshape(n, j, h, w)
+    if min(h, w) < 1:
+        raise InputError(f"maps must have h, w >= 1; got shape {tuple(maps.shape)}")
+    return torch.softmax(maps.reshape(n, j, h * w), -1).reshape(n, j, h, w)
 
 
 def flip_heatmaps(maps: torch.Tensor, permutation: torch.Tensor) -> torch.Tensor:
@@ -415,4 +502,8 @@ def flip_heatmaps(maps: torch.Tensor, permutation: torch.Tensor) -> torch.Tensor
     >>> flip_heatmaps(m, torch.tensor([1, 0])).tolist()
     [[[[3.0, 2.0]], [[1.0, 0.0]]]]
     """
-    return maps.flip(-1)[:, permutation]
+    check_float_tensor(maps, "maps", 4, "(N, J, h, w)")
+    if torch.is_tensor(permutation):
+        permutation = permutation.detach().cpu()
+    perm = torch.from_numpy(check_permutation(permutation, maps.shape[1])).to(maps.device)
+    return maps.flip(-1)[:, perm]

@@ -86,6 +86,14 @@ def _output_size(value: Any) -> tuple[int, int]:
     return ph, pw
 
 
+def _outside(start: torch.Tensor, size: torch.Tensor, length: int) -> torch.Tensor:
+    """Whether every sample of regions ``[start, start + size]`` along one axis lies
+    outside ``[-1, length]``, where RoI Align counts them as 0."""
+    lo = torch.minimum(start, start + size)
+    hi = torch.maximum(start, start + size)
+    return (lo > length) | (hi < -1.0)
+
+
 def _align_weights(
     start: torch.Tensor, size: torch.Tensor, bins: int, grid: torch.Tensor, length: int
 ) -> torch.Tensor:
@@ -106,7 +114,9 @@ def _align_weights(
     )
     used = s[None, None, :] < grid[:, None, None]
     inside = (y >= -1.0) & (y <= length)
-    y = y.clamp(min=0)
+    # clamped before the conversion to integers: a sample beyond the map (weight 0, or
+    # the last cell's) of a huge box would overflow int64 (issue 47 R50)
+    y = y.clamp(0, length)
     low = y.floor().long()
     top = low >= length - 1
     low = torch.where(top, torch.full_like(low, length - 1), low)
@@ -163,6 +173,14 @@ def roi_align(
     Returns
     -------
     (K, C, P, Q) torch.Tensor
+        A region whose samples all lie beyond the map is 0, however far (``1e31``).
+
+    Raises
+    ------
+    InputError
+        Bad features, boxes, sizes or parameters; adaptive sampling (``sampling_ratio``
+        <= 0) of a box so large that a bin would take over :math:`2^{30}` samples per
+        side (give a positive ``sampling_ratio``); a computation over 1 GiB.
 
     Examples
     --------
@@ -191,12 +209,32 @@ def roi_align(
     rh = r[:, 3] - r[:, 1]
     if not aligned:
         rw, rh = rw.clamp(min=1.0), rh.clamp(min=1.0)
+    if not bool(torch.isfinite(torch.stack([rw, rh])).all() and torch.isfinite(r).all()):
+        raise InputError(
+            "boxes times spatial_scale must be finite in float64; got coordinates beyond "
+            f"1.8e308 (boxes up to {float(rois.detach().abs().max()):.3g}, spatial_scale "
+            f"{scale:g}): drop those rows first"
+        )
     if ratio > 0:
         gh = torch.full((K,), ratio, dtype=torch.long)
         gw = gh
     else:
-        gh = torch.ceil(rh / P).long()
-        gw = torch.ceil(rw / Q).long()
+        # a region whose samples all fall outside the map (beyond the -1 and H, W
+        # margins) is 0 whatever its grid: one sample per bin says so
+        out = _outside(r[:, 1], rh, H) | _outside(r[:, 0], rw, W)
+        one = torch.ones_like(rh)
+        # in float first: a huge box's grid overflows int64 (issue 47 R50)
+        gh_f = torch.where(out, one, torch.ceil(rh / P))
+        gw_f = torch.where(out, one, torch.ceil(rw / Q))
+        most = max(float(gh_f.max()), float(gw_f.max())) if K else 1.0
+        if most > 2**30:
+            raise InputError(
+                f"adaptive sampling (sampling_ratio <= 0) takes ceil(box side / output "
+                f"size) = {most:.3g} samples per bin side for the largest box (in "
+                "feature-map cells); give a positive sampling_ratio (2 is usual) or "
+                "smaller boxes"
+            )
+        gh, gw = gh_f.long(), gw_f.long()
     gmax = max(int(gh.max()) if K else 1, int(gw.max()) if K else 1, 1)
     check_allocation(
         K * max(P * max(H, gmax), Q * max(W, gmax)) * 2 + K * C * P * W,
