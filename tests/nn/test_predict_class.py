@@ -12,7 +12,8 @@ pytest.importorskip("torch")
 from robopercept.errors import FileFormatError, InputError
 from robopercept.imaging import write_image
 from robopercept.nn import load_predictor
-from robopercept.nn.classification.run import load_run, predict
+from robopercept.nn.classification.run import predict
+from robopercept.nn.classification.saved import load_run
 from robopercept.nn.cloud.data import read_cloud_file, sample_cloud
 from robopercept.nn.cloud.run import classify_cloud_file
 from robopercept.nn.cloud.train import load_cloud_model, predict_clouds

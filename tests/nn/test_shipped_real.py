@@ -142,7 +142,7 @@ def test_nuclei_maskrcnn_finds_the_held_out_nuclei():
 def test_digits_classifier_on_its_test_split():
     # the split of `robopercept nn train --data digits` with seed 0 (train_run's):
     # stratified 70/15/15; the test images were never trained on nor chosen on
-    from robopercept.nn.classification.run import load_run
+    from robopercept.nn.classification.saved import load_run
     from robopercept.nn.data.datasets import load_digits, stratified_split
     from robopercept.nn.train.fit import evaluate
 

@@ -129,7 +129,7 @@ def check_module(model: Any, name: str = "model") -> nn.Module:
     ------
     InputError
         Anything else (a checkpoint path: load it with
-        ``robopercept.nn.classification.run.load_run``).
+        ``robopercept.nn.classification.saved.load_run``).
     """
     from torch import nn
 
@@ -138,7 +138,7 @@ def check_module(model: Any, name: str = "model") -> nn.Module:
             f"{name} must be a torch.nn.Module "
             "(e.g. robopercept.nn.classification.models.build_model(...)); "
             f"got {type(model).__name__} {plain_repr(model)[:60]}: for a checkpoint file, "
-            "load the model with robopercept.nn.classification.run.load_run"
+            "load the model with robopercept.nn.classification.saved.load_run"
         )
     return model
 

@@ -28,6 +28,7 @@ The three kinds:
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +45,7 @@ from robopercept._checks import (
     check_real,
     plain_repr,
 )
-from robopercept.errors import InputError
+from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import strict_json
 from robopercept.imaging import read_image, write_image
 from robopercept.nn.cloud.train import CLOUD_MODELS
@@ -55,7 +56,7 @@ from robopercept.nn.detection.tta import TestTimeAugmentation
 from robopercept.nn.detection.zoo import DETECTORS, detect_arrays, load_detector
 from robopercept.nn.pose.inference import pose_arrays
 from robopercept.nn.pose.library import default_pose_library
-from robopercept.nn.pose.networks import load_pose_model
+from robopercept.nn.pose.networks import POSE_MODELS, load_pose_model
 from robopercept.nn.predict_class import CLASS_KINDS, ClassPredictor, load_class_predictor
 from robopercept.nn.segmentation.data import percentile_normalize
 from robopercept.nn.segmentation.networks import (
@@ -88,6 +89,8 @@ IMAGE_KINDS = ("detect", "segment", "pose")
 _DEFAULT_SCORE = {"detect": 0.3, "segment": 0.5, "pose": 0.0}
 #: the views of ``tta`` (:data:`robopercept.nn.detection.tta.TTA_VIEWS`)
 _TTA = ("hflip", "flips", "dihedral")
+#: the largest tiling window a checkpoint may store
+_MAX_TILE = 1 << 15
 
 
 def _class_name(classes: list[str], label: int) -> str:
@@ -408,7 +411,9 @@ class ImagePrediction:
         ['x.png']
         """
 
-        out = Path(out_dir)
+        out = as_path(out_dir, "out_dir (-o/--out)")
+        if not isinstance(stem, str) or not stem:
+            raise InputError(f"stem must be a file name stem (str); got {plain_repr(stem)[:60]}")
         written = []
         for name, pic in self.pictures(stem).items():
             palette = voc_palette() if name.endswith("_labels.png") else None
@@ -773,7 +778,8 @@ def load_image_predictor(
     }
 
     def settle(info: dict[str, Any]) -> dict[str, Any]:
-        """The threshold and tiling of a loaded model."""
+        """The threshold and tiling of a loaded model (its entries checked first)."""
+        _check_image_info(info, path)
         cal = info.get("calibration") or {}
         window = int(info.get("tile") or 0) if tile is None else tile
         return {
@@ -817,6 +823,79 @@ def load_image_predictor(
     )
 
 
+def _real(value: Any, low: float, high: float) -> bool:
+    """Whether ``value`` is a real number (not a bool) in ``[low, high]``."""
+    return (
+        isinstance(value, int | float)
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and low <= value <= high
+    )
+
+
+def _check_image_info(info: dict[str, Any], path: Path) -> None:
+    """The entries a checkpoint stores for prediction, checked before any is used:
+    ``calibration`` (``score_thresh``, ``match_median`` in [0, 1]), ``tile`` and
+    ``tile_overlap`` (:func:`~robopercept.nn.detection.tiling.check_tiling`),
+    ``input_normalize`` (``percentile`` ``[lo, hi]`` in [0, 100], ``clip``),
+    ``input_colour`` and ``canvas`` ``(h, w)``.
+
+    Raises
+    ------
+    FileFormatError
+        The first damaged entry, named with the file.
+    """
+
+    def bad(entry: str, want: str) -> FileFormatError:
+        got = info.get(entry)
+        shown = plain_repr(got) if isinstance(got, int | float | str | type(None)) else ""
+        return FileFormatError(
+            f"{path}: its {entry!r} must be {want}; got "
+            f"{shown[:60] or 'a ' + type(got).__name__}: the file is damaged"
+        )
+
+    cal = info.get("calibration")
+    if cal is not None:
+        if not isinstance(cal, dict):
+            raise bad("calibration", "a dict with score_thresh")
+        # an empty calibration is none; a stored one has its threshold
+        needed = ("score_thresh",) if cal else ()
+        for key in ("score_thresh", "match_median"):
+            if (key in cal or key in needed) and not _real(cal.get(key), 0, 1):
+                raise FileFormatError(
+                    f"{path}: its calibration {key} must be a number in [0, 1]; got "
+                    f"{plain_repr(cal.get(key))[:60]}: the file is damaged"
+                )
+    tile = info.get("tile")
+    if tile is not None and tile != 0:
+        if not isinstance(tile, int) or isinstance(tile, bool) or not 16 <= tile <= _MAX_TILE:
+            raise bad("tile", f"a window side from 16 to {_MAX_TILE} pixels")
+        try:
+            check_tiling(tile, info.get("tile_overlap"))
+        except InputError as exc:
+            raise bad("tile_overlap", f"pixels or a fraction under the tile ({exc})") from None
+    norm = info.get("input_normalize")
+    if norm:
+        pct = norm.get("percentile") if isinstance(norm, dict) else None
+        if (
+            not isinstance(pct, list | tuple)
+            or len(pct) != 2
+            or not all(_real(v, 0, 100) for v in pct)
+            or not pct[0] < pct[1]
+            or not isinstance(norm.get("clip", False), bool)
+        ):
+            raise bad("input_normalize", "{'percentile': [lo, hi] with 0 <= lo < hi <= 100}")
+    if not isinstance(info.get("input_colour"), str | type(None)):
+        raise bad("input_colour", "a name ('grey')")
+    canvas = info.get("canvas")
+    if canvas is not None and (
+        not isinstance(canvas, list | tuple)
+        or len(canvas) != 2
+        or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in canvas)
+    ):
+        raise bad("canvas", "the training images' size (h, w)")
+
+
 def _checkpoint_kind(model: str | os.PathLike[str]) -> str:
     """The kind a run folder's or checkpoint's model predicts (its ``kind`` entry; a
     classifier's run keeps its recorded ``architecture`` in ``checkpoint.best.pt``)."""
@@ -825,16 +904,18 @@ def _checkpoint_kind(model: str | os.PathLike[str]) -> str:
         p = p / BEST_CHECKPOINT
     path = resolve_model("detect", p)
     state = load_checkpoint(path)
-    name = state.get("kind") if isinstance(state, dict) else None
-    if "skeleton" in state:
-        return "pose"
+    name = state.get("kind")
+    if not isinstance(name, str):
+        name = None
+    if name in POSE_MODELS or (name is None and "skeleton" in state):
+        return "pose"  # (a Keypoint R-CNN also stores a skeleton: it is a detector)
     if name == "maskrcnn" or name in SEGMENTERS:
         return "segment"
     if name in DETECTORS:
         return "detect"
     if name in CLOUD_MODELS:
         return "cloud"
-    if "architecture" in state:  # what robopercept nn train records
+    if "architecture" in state and "kind" not in state:  # what robopercept nn train records
         return "classify"
     raise InputError(
         f"{path}: not a model robopercept saved (kind {plain_repr(name)}): give kind= one of "

@@ -2,7 +2,7 @@
 the two kinds :func:`robopercept.nn.predict.load_predictor` hands here.
 
 :func:`load_class_predictor` loads a shipped model by name or a run (an image
-classifier's run folder or checkpoint, :func:`~robopercept.nn.classification.run.load_run`;
+classifier's run folder or checkpoint, :func:`~robopercept.nn.classification.saved.load_run`;
 a point-cloud network's ``model.pt``,
 :func:`~robopercept.nn.cloud.train.load_cloud_model`) once; the
 :class:`ClassPredictor` it returns is called on a file, an array or a list of them and
@@ -27,7 +27,8 @@ from robopercept._checks import as_path, check_choice, check_int
 from robopercept.errors import InputError
 from robopercept.imaging import read_image, write_image
 from robopercept.nn._guards import check_device
-from robopercept.nn.classification.run import Architecture, class_probabilities, load_run
+from robopercept.nn.classification.run import class_probabilities
+from robopercept.nn.classification.saved import Architecture, load_run
 from robopercept.nn.cloud.data import sample_cloud
 from robopercept.nn.cloud.run import classify_cloud_file, load_cloud_model
 from robopercept.nn.cloud.train import cloud_model_spec, predict_clouds
@@ -129,7 +130,7 @@ class ClassPredictor:
         The shipped name or the checkpoint's path.
     model : torch.nn.Module
     info : Architecture or dict
-        classify: the run's :class:`~robopercept.nn.classification.run.Architecture`;
+        classify: the run's :class:`~robopercept.nn.classification.saved.Architecture`;
         cloud: :func:`~robopercept.nn.cloud.train.load_cloud_model`'s dict.
     trained_on : str
         What it learnt from (the shipped model's card; "your own data" otherwise).

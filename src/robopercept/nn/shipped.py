@@ -22,7 +22,7 @@ import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from robopercept._checks import check_choice, plain_repr
+from robopercept._checks import as_path, check_choice, plain_repr
 from robopercept.errors import InputError
 
 __all__ = [
@@ -400,6 +400,11 @@ def domain_line(kind: str, model: str | os.PathLike[str] | None) -> str:
     if isinstance(name, str) and name in SHIPPED[kind]:
         c = MODEL_CARDS[name]
         return f"model: {c.name} ({c.network}), trained on {c.trained_on}"
+    if not isinstance(name, str | os.PathLike):
+        raise InputError(
+            f"model must be a shipped name, a run folder or a model.pt path; got "
+            f"{plain_repr(name)[:60]}"
+        )
     return f"model: {os.fspath(name)} (your own run; its training data is what you gave it)"
 
 
@@ -496,10 +501,17 @@ def resolve_model(kind: str, model: str | os.PathLike[str] | None = None) -> Pat
             f"model must be a shipped name, a run folder or a model.pt path; got "
             f"{plain_repr(model)}"
         )
-    path = Path(model)
-    if path.is_dir():
-        path = path / "model.pt"
-    if not path.is_file():
+    path = as_path(model, "MODEL (a run folder or a model.pt)")
+    try:
+        if path.is_dir():
+            path = path / "model.pt"
+        found = path.is_file()
+    except OSError as exc:  # a folder that cannot be searched: EACCES, EIO
+        raise InputError(
+            f"MODEL: cannot read {path} ({exc.strerror or type(exc).__name__}): give a run "
+            f"folder, a model.pt or a shipped model ({', '.join(SHIPPED[kind])})"
+        ) from None
+    if not found:
         raise InputError(
             f"MODEL: no such file: {path}: give a run folder, a model.pt or a shipped model "
             f"({', '.join(SHIPPED[kind])})"

@@ -670,7 +670,8 @@ def _loaded(key: tuple[Any, ...], load: Callable[[], Any]) -> Any:
 
 
 def _run_nn_predict(src: Path, out: Path, opts: dict[str, Any]) -> dict[str, Any]:
-    from robopercept.nn.classification.run import load_run, predict_loaded
+    from robopercept.nn.classification.run import predict_loaded
+    from robopercept.nn.classification.saved import load_run
 
     model, arch = _loaded(("predict", opts["model"]), lambda: load_run(opts["model"]))
     pred = predict_loaded(model, arch, [src], top_k=opts["top_k"])[0]

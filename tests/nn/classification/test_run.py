@@ -12,14 +12,13 @@ torch = pytest.importorskip("torch")
 
 from robopercept.errors import FileFormatError, InputError  # noqa: E402
 from robopercept.nn.classification.run import (  # noqa: E402
-    Architecture,
     evaluate_run,
     load_data,
-    load_run,
     predict,
     train_ddp,
     train_run,
 )
+from robopercept.nn.classification.saved import Architecture, load_run  # noqa: E402
 from robopercept.nn.train.config import TrainConfig  # noqa: E402
 
 ARCH = Architecture(

@@ -27,8 +27,10 @@ model from the checkpoint alone.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import reprlib
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
@@ -49,12 +51,12 @@ from robopercept._checks import (
     check_real,
     plain_repr,
 )
-from robopercept.errors import FileFormatError, InputError
+from robopercept.errors import InputError
 from robopercept.fileio import strict_json
 from robopercept.imaging import read_image, rgb_to_gray, write_image
 from robopercept.learning.metrics import classification_report
-from robopercept.nn._guards import check_device
 from robopercept.nn.classification.models import MODELS, build_model
+from robopercept.nn.classification.saved import MAX_INPUT_SIDE, Architecture, load_run
 from robopercept.nn.core.summary import ModelSummary, summary
 from robopercept.nn.data.augment import Compose, Normalize, RandomAffine, RandomCrop
 from robopercept.nn.data.datasets import (
@@ -66,7 +68,6 @@ from robopercept.nn.data.datasets import (
     stratified_split,
     to_unit_float,
 )
-from robopercept.nn.shipped import SHIPPED_CLASSIFIERS, shipped_model_path
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import History, TrainConfig
 from robopercept.nn.train.distributed import (
@@ -83,14 +84,12 @@ __all__ = [
     "BUILTIN_DATA",
     "SHRINK_LIMIT",
     "SHRINK_WARNING",
-    "Architecture",
     "Prediction",
     "RunEvaluation",
     "TrainResult",
     "class_probabilities",
     "evaluate_run",
     "load_data",
-    "load_run",
     "model_summary",
     "predict",
     "predict_loaded",
@@ -100,77 +99,6 @@ __all__ = [
 
 #: data sets named instead of a folder
 BUILTIN_DATA = ("digits", "lfw")
-
-
-@dataclass(frozen=True)
-class Architecture:
-    """Everything needed to rebuild a run's model: ``Sequential(Normalize, builder(...))``.
-
-    Attributes
-    ----------
-    model : str
-        A name of :data:`robopercept.nn.classification.models.MODELS`.
-    kwargs : dict
-        The builder's other keyword arguments (JSON values).
-    in_channels, num_classes : int
-    input_size : (height, width)
-        The size the model was trained on (predict resizes to it).
-    classes : tuple of str
-        Class names, ``classes[k]`` for output ``k``.
-    mode : {'gray', 'rgb'}
-        How images are read (``'gray'`` for C = 1).
-    """
-
-    model: str
-    kwargs: dict[str, Any]
-    in_channels: int
-    num_classes: int
-    input_size: tuple[int, int]
-    classes: tuple[str, ...]
-    mode: str
-
-    def to_json(self) -> str:
-        """The JSON text stored in the checkpoints' ``"architecture"`` entry."""
-        return json.dumps({"robopercept_run": 1, **asdict(self)}, sort_keys=True)
-
-    @classmethod
-    def from_json(cls, text: Any, where: str = "checkpoint") -> Architecture:
-        """The inverse of :meth:`to_json`.
-
-        Raises
-        ------
-        FileFormatError
-            ``text`` is not the JSON of a run (a checkpoint not written by
-            :func:`train_run`, e.g. one of :func:`~robopercept.nn.train.fit.fit` alone).
-        """
-        try:
-            d = json.loads(text)
-            if not isinstance(d, dict) or d.pop("robopercept_run", None) != 1:
-                raise ValueError("no run marker")
-            arch = cls(
-                model=str(d["model"]),
-                kwargs=dict(d["kwargs"]),
-                in_channels=int(d["in_channels"]),
-                num_classes=int(d["num_classes"]),
-                input_size=(int(d["input_size"][0]), int(d["input_size"][1])),
-                classes=tuple(str(c) for c in d["classes"]),
-                mode=str(d["mode"]),
-            )
-        except (TypeError, ValueError, KeyError, IndexError):
-            raise FileFormatError(
-                f"{where}: records no model architecture (not written by `robopercept nn "
-                "train`): give the checkpoint.pt or checkpoint.best.pt of a run folder"
-            ) from None
-        if arch.model not in MODELS or len(arch.classes) != arch.num_classes:
-            raise FileFormatError(f"{where}: unknown or inconsistent architecture {text}")
-        return arch
-
-    def build(self) -> nn.Sequential:
-        """The untrained model: ``Sequential(Normalize(0, 1), builder(**kwargs))`` (the
-        normalization statistics are loaded with the weights)."""
-        c = self.in_channels
-        net = build_model(self.model, in_channels=c, num_classes=self.num_classes, **self.kwargs)
-        return nn.Sequential(Normalize(np.zeros(c), np.ones(c)), net)
 
 
 @dataclass(frozen=True)
@@ -413,8 +341,17 @@ def train_run(
     augment : bool
         Random shifts, rotations and scales of the training images (seeded).
     resume : bool
-        Continue the run in ``out_dir`` from its ``checkpoint.pt`` (same data, model and
-        configuration): ends as an uninterrupted run would.
+        Continue the run in ``out_dir`` from its ``checkpoint.pt``: ends as an
+        uninterrupted run would. Everything that defines the run must be as it was
+        started: ``data``, ``model``, ``model_kwargs``, ``mode``, ``size``,
+        ``fractions``, ``augment``, ``sync_batchnorm`` (with ``distributed``) and every
+        field of ``config`` (seed, optimizer, schedule, learning rate, batch size,
+        patience, ...), else :class:`~robopercept.errors.ArgumentError` (exit 2) names
+        the differing flags and ``--overwrite``. What may change: ``config.device``,
+        ``config.epochs`` (more epochs extend the run, not under the one-cycle schedule,
+        whose steps are fixed when it starts; see :func:`fit`), ``progress``,
+        the number of processes (``nn train --nproc``) and what the command prints
+        (``--json``, ``--quiet``).
     overwrite : bool
         Start afresh in a folder that already holds a run (refused otherwise).
     progress : bool
@@ -437,23 +374,46 @@ def train_run(
     Raises
     ------
     InputError
-        Unknown data or model, a bad split, ``resume`` without a checkpoint, a folder
-        holding a run without ``resume`` or ``overwrite``; errors of :func:`fit`.
+        Unknown data or model, a bad split, images larger than :data:`MAX_INPUT_SIDE`
+        pixels a side, ``resume`` without a checkpoint; errors of :func:`fit`.
+    ArgumentError
+        A folder holding a run without ``resume`` or ``overwrite``
+        (:class:`~robopercept.errors.RunExistsError`); ``resume`` under other options
+        than the run's.
     FileFormatError
-        A non-image file in the image folder; a checkpoint of another architecture when
-        resuming.
+        A non-image file in the image folder; when resuming, a checkpoint of another
+        architecture or with a damaged training state (the message names the entry).
     """
     cfg = config or TrainConfig()
     if model not in MODELS:
         raise InputError(f"unknown model {model!r} (--model): choose one of {', '.join(MODELS)}")
-    fr = tuple(float(f) for f in fractions)
+    try:
+        fr = tuple(float(f) for f in fractions)
+    except (TypeError, ValueError, OverflowError):
+        fr = ()
     if len(fr) != 3:
-        raise InputError(f"fractions must be (train, validation, test); got {fractions!r}")
+        raise InputError(
+            f"fractions must be (train, validation, test); got {reprlib.repr(fractions)}"
+        )
+    try:
+        if not isinstance(model_kwargs, (dict, type(None))):
+            raise TypeError
+        kwargs = json.loads(json.dumps(model_kwargs or {}, allow_nan=False))
+    except (TypeError, ValueError, RecursionError):
+        raise InputError(
+            "model_kwargs must be a dict of the builder's arguments as JSON values, e.g. "
+            f"{{'dropout': 0.2}}; got {reprlib.repr(model_kwargs)}"
+        ) from None
     out = Path(out_dir)
     ckpt = prepare_run_folder(out, resume=resume, overwrite=overwrite)
     ds = load_data(data, mode=mode, size=size)
-    train_idx, val_idx, test_idx = stratified_split(ds.labels, fr, rng=cfg.seed)
     c, h, w = ds.image_shape
+    if max(h, w) > MAX_INPUT_SIDE:
+        raise InputError(
+            f"--data {os.fspath(data)!r} has {w} x {h} images; a run takes at most "
+            f"{MAX_INPUT_SIDE} pixels a side: resize them with --size WxH"
+        )
+    train_idx, val_idx, test_idx = stratified_split(ds.labels, fr, rng=cfg.seed)
     transform = _augmentation(ds.image_shape, cfg.seed) if augment else None
     train = ds.subset(train_idx, transform=transform)
     val, test = ds.subset(val_idx), ds.subset(test_idx)
@@ -461,13 +421,31 @@ def train_run(
     std = np.where(std > 0, std, 1.0)  # a constant channel is only centred
     arch = Architecture(
         model=model,
-        kwargs=json.loads(json.dumps(model_kwargs or {})),
+        kwargs=kwargs,
         in_channels=c,
         num_classes=len(ds.classes),
         input_size=(h, w),
         classes=tuple(ds.classes),
         mode="gray" if c == 1 else "rgb",
     )
+    text = str(as_path(data, "--data (digits, lfw or an image folder)"))
+    options = {  # what defines the run besides the configuration (compared on resume)
+        "--data": text if text in BUILTIN_DATA else str(Path(text).resolve()),
+        "--model": model,
+        "--dropout (model_kwargs)": arch.kwargs,
+        "--gray": mode == "gray",
+        "--size": None if size is None else list(size),
+        "--split": list(fr),
+        "--augment": bool(augment),
+        "--per-process-bn": bool(distributed and not sync_batchnorm),
+    }
+    why = arch.input_size_refusal()
+    if why is not None:
+        raise InputError(
+            f"--model {model} cannot take the {w} x {h} images of --data "
+            f"{os.fspath(data)!r} ({why}): enlarge them with --size WxH or choose "
+            "--model resnet_small"
+        )
     torch.manual_seed(cfg.seed)  # the initial weights
     net = arch.build()
     net[0] = Normalize(mean, std)
@@ -481,13 +459,16 @@ def train_run(
             checkpoint=ckpt,
             resume=resume,
             architecture=arch.to_json(),
+            run_options=options,
             progress=progress,
             distributed=distributed,
             sync_batchnorm=sync_batchnorm,
         )
     except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the last epoch's history.csv too
         if ckpt.exists() and _rank(distributed) == 0:
-            History.from_dict(load_checkpoint(ckpt)["history"]).write_csv(out / "history.csv")
+            # never hide the interruption or the error behind a damaged checkpoint
+            with contextlib.suppress(Exception):
+                History.from_dict(load_checkpoint(ckpt)["history"]).write_csv(out / "history.csv")
         raise
     seconds = time.perf_counter() - t0
     if distributed:  # rank 0 evaluates and writes; the others receive its result
@@ -676,50 +657,6 @@ def train_ddp(
 
 
 # --------------------------------------------------------------------------- load, eval, predict
-
-
-def load_run(
-    checkpoint: str | os.PathLike[str], *, device: str | None = None
-) -> tuple[nn.Sequential, Architecture]:
-    """The model of a run, rebuilt from its checkpoint alone, in eval mode.
-
-    Parameters
-    ----------
-    checkpoint : path
-        ``checkpoint.pt`` or ``checkpoint.best.pt`` of a run folder, the folder itself
-        (its ``checkpoint.best.pt``), or a shipped classifier's name
-        (:data:`~robopercept.nn.shipped.SHIPPED_CLASSIFIERS`: ``"digits"``).
-    device : str, optional
-        Where to put the model (default: the CPU).
-
-    Returns
-    -------
-    model : nn.Sequential
-        ``Sequential(Normalize, classifier)``.
-    architecture : Architecture
-
-    Raises
-    ------
-    FileFormatError
-        Missing or unreadable file, no recorded architecture, or weights that do not fit
-        the recorded architecture.
-    """
-    if isinstance(checkpoint, str) and checkpoint in SHIPPED_CLASSIFIERS:
-        checkpoint = shipped_model_path("classify", checkpoint)
-    p = as_path(checkpoint, "the checkpoint (a run's checkpoint.pt or its folder)")
-    dev = check_device(device, "device (--device)")
-    if p.is_dir():
-        p = p / BEST_CHECKPOINT
-    if not p.exists():
-        raise FileFormatError(f"{p}: no such checkpoint")
-    state = load_checkpoint(p)
-    arch = Architecture.from_json(state.get("architecture"), str(p))
-    model = arch.build()
-    load_checkpoint(p, model)
-    model.eval()
-    if dev is not None:
-        model.to(dev)
-    return model, arch
 
 
 def evaluate_run(

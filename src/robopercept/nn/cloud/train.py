@@ -44,7 +44,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
-from robopercept.errors import InputError
+from robopercept.errors import FileFormatError, InputError
 from robopercept.nn._guards import check_count
 from robopercept.nn.cloud.data import CloudDataset, augment_clouds
 from robopercept.nn.cloud.dgcnn import DGCNN
@@ -385,7 +385,15 @@ def predict_clouds(
         )
     cat = None
     if category is not None:
-        cat = torch.as_tensor(np.asarray(category, dtype=np.int64).reshape(-1))
+        try:
+            arr = np.asarray(category)
+        except (TypeError, ValueError):  # ragged nesting
+            arr = np.zeros(0, object)
+        if arr.dtype.kind not in "iu" or arr.size == 0:
+            raise InputError(
+                f"category must be (B,) integer class indices; got {plain_repr(category)[:60]}"
+            )
+        cat = torch.as_tensor(arr.astype(np.int64).reshape(-1))
         if cat.shape[0] != x.shape[0]:
             raise InputError(f"category must give one class per cloud ({x.shape[0]})")
     m = None
@@ -620,12 +628,66 @@ def load_cloud_model(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str,
     Raises
     ------
     FileFormatError
-        Missing or unreadable file, or a checkpoint that is not a point-cloud network's.
+        Missing or unreadable file, a checkpoint that is not a point-cloud network's,
+        settings the network's class does not take or refuses, weights that do not fit
+        it (checked before loading:
+        :func:`~robopercept.nn.train.checkpoint.load_built_model`), or names, part
+        classes or a point count that do not fit it.
     """
-    return load_built_model(
+    model, info = load_built_model(
         path,
         CLOUD_MODELS,
         _build,
         "point-cloud network",
         "save_cloud_model or `robopercept nn cloud train`",
+        constructors={"pointnet": PointNet, "dgcnn": DGCNN},
     )
+    _check_cloud_info(info, cloud_model_spec(model), os.fspath(path))
+    return model, info
+
+
+#: the most points per cloud a checkpoint may ask the predictors to sample
+_MAX_POINTS = 1 << 20
+
+
+def _check_cloud_info(info: dict[str, Any], spec: CloudModelSpec, where: str) -> None:
+    """The names, part classes and point count :func:`save_cloud_model` stores beside
+    the weights, checked against the network (a damaged file: FileFormatError)."""
+
+    def names(key: str, n: int | None) -> list[str]:
+        value = info.get(key, [])
+        if (
+            not isinstance(value, list)
+            or not all(isinstance(v, str) for v in value)
+            or (n is not None and len(value) != n)
+        ):
+            want = f"{n} names" if n is not None else "a list of names"
+            raise FileFormatError(
+                f"{where}: its {key!r} must be {want} (str) for this {spec.task} network; "
+                f"got a {type(value).__name__}"
+                + (f" of {len(value)}" if isinstance(value, list) else "")
+                + ": the file is damaged"
+            )
+        return value
+
+    classes = names("class_names", spec.num_outputs if spec.task == "classify" else None)
+    parts = names("part_names", spec.num_outputs if spec.task == "segment" else None)
+    pcs = info.get("part_classes", [])
+    if (
+        not isinstance(pcs, list)
+        or len(pcs) not in (0, len(parts))
+        or not all(
+            isinstance(c, int) and not isinstance(c, bool) and 0 <= c < max(1, len(classes))
+            for c in pcs
+        )
+    ):
+        raise FileFormatError(
+            f"{where}: its 'part_classes' must give each of the {len(parts)} parts the index "
+            f"of its class (0 to {len(classes) - 1}): the file is damaged"
+        )
+    n = info.get("n_points", 1024)
+    if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= _MAX_POINTS:
+        raise FileFormatError(
+            f"{where}: its 'n_points' must be a point count from 1 to {_MAX_POINTS}; got "
+            f"{plain_repr(n)[:40]}: the file is damaged"
+        )

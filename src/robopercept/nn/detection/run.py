@@ -241,6 +241,7 @@ def load_detection_data(
     images_dir: str | os.PathLike[str] | None = None,
     model: str | None = None,
     evaluate: bool = False,
+    allow_outside: bool = False,
 ) -> tuple[DetectionDataset, DetectionDataset]:
     """The training and validation sets of ``data`` (``--data``).
 
@@ -277,6 +278,9 @@ def load_detection_data(
         The detector the data is for: ``"localizer"`` gets one digit per canvas.
     evaluate : bool
         The data is for evaluation: a COCO file is not split.
+    allow_outside : bool, default False
+        Your own annotations: read images they place outside their folder
+        (:func:`~robopercept.imaging.io.contained_path`; ``--allow-outside-paths``).
 
     Returns
     -------
@@ -324,7 +328,7 @@ def load_detection_data(
         return tiles.train, tiles.test
     path = Path(text)
     try:
-        ds = DetectionDataset.from_annotations(path, images_dir)
+        ds = DetectionDataset.from_annotations(path, images_dir, allow_outside=allow_outside)
     except ArgumentError:
         raise
     except InputError as exc:  # the file's or the folder's fault: a usage error
@@ -417,6 +421,7 @@ def train_run(
     images_dir: str | os.PathLike[str] | None = None,
     val_every: int | None = None,
     ema: float | None = None,
+    allow_outside: bool = False,
     resume: bool = False,
     overwrite: bool = False,
     progress: bool = True,
@@ -451,7 +456,7 @@ def train_run(
         Epochs, batch size, learning rate, seed (data, split and weights), device...
     width : int
         The backbone width (the detector's ``width`` setting).
-    images, size, images_dir
+    images, size, images_dir, allow_outside
         As :func:`load_detection_data`.
     val_every : int, optional
         Evaluate the validation split every this many epochs (default:
@@ -505,7 +510,13 @@ def train_run(
     text, _ = _check_source(data, images, images_dir, False)  # before the folder is made
     ckpt = prepare_run_folder(out, resume=resume, overwrite=overwrite)
     train, val = load_detection_data(
-        data, images=images, size=size, seed=cfg.seed, images_dir=images_dir, model=model
+        data,
+        images=images,
+        size=size,
+        seed=cfg.seed,
+        images_dir=images_dir,
+        model=model,
+        allow_outside=allow_outside,
     )
     if progress:
         print(
@@ -588,6 +599,7 @@ def evaluate_run(
     tta: str | None = None,
     device: str | None = None,
     out_dir: str | os.PathLike[str] | None = None,
+    allow_outside: bool = False,
 ) -> DetectionEvaluation:
     """COCO metrics of a trained detector on the validation split of a built-in set or on
     a whole COCO file (:func:`load_detection_data` with ``evaluate=True``).
@@ -603,7 +615,7 @@ def evaluate_run(
         :func:`~robopercept.nn.detection.zoo.save_detector`.
     data : str or path
         A name of :data:`BUILTIN_DATA`, a COCO JSON file or an annotation folder.
-    images, size, seed, images_dir
+    images, size, seed, images_dir, allow_outside
         As :func:`load_detection_data`.
     tta : {"hflip", "flips", "dihedral"}, optional
         Test-time augmentation (:class:`~robopercept.nn.detection.tta.TestTimeAugmentation`).
@@ -632,7 +644,13 @@ def evaluate_run(
     text = _text(data, "data (--data)")
     out = None if out_dir is None else as_path(out_dir, "out_dir (-o/--out)")
     _, val = load_detection_data(
-        data, images=images, size=size, seed=seed, images_dir=images_dir, evaluate=True
+        data,
+        images=images,
+        size=size,
+        seed=seed,
+        images_dir=images_dir,
+        evaluate=True,
+        allow_outside=allow_outside,
     )
     path = Path(label)
     if path.is_dir():

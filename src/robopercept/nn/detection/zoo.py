@@ -14,9 +14,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from robopercept._checks import check_int, plain_repr
+from robopercept._checks import plain_repr
 from robopercept.errors import InputError
-from robopercept.nn._guards import check_module
+from robopercept.nn._guards import check_count, check_module
 from robopercept.nn.data.datasets import to_unit_float
 from robopercept.nn.detection.fast_rcnn import FastRCNN
 from robopercept.nn.detection.faster_rcnn import FasterRCNN
@@ -89,7 +89,7 @@ def build_detector(
     if kind == "fast":
         settings = {"proposal_fn": selective_search_proposals, **settings}
     if seed is not None:
-        torch.manual_seed(check_int(seed, "seed", 0))
+        torch.manual_seed(check_count(seed, "seed", 0, 2**63 - 1))
     try:
         return cls(num_classes, **settings)
     except TypeError as exc:
@@ -136,8 +136,10 @@ def load_detector(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, An
     Raises
     ------
     FileFormatError
-        Missing or unreadable file, or a checkpoint without ``kind``/``classes``
-        (e.g. a classifier's).
+        Missing or unreadable file, a checkpoint without ``kind``/``classes`` (e.g. a
+        classifier's), settings the detector's class does not take or refuses, or
+        weights that do not fit it (checked before loading:
+        :func:`~robopercept.nn.train.checkpoint.load_built_model`).
     """
     return load_built_model(
         path,
@@ -145,6 +147,7 @@ def load_detector(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, An
         build_detector,
         "detector",
         "save_detector or `robopercept nn detect train`",
+        constructors=DETECTORS,
     )
 
 

@@ -35,10 +35,12 @@ from torch import nn
 
 from robopercept._checks import check_choice, check_int, check_real, plain_repr
 from robopercept.errors import FileFormatError, InputError
+from robopercept.nn._guards import MAX_LAYERS, check_allocation, check_count
+from robopercept.nn.core.backbones import MAX_CHANNELS
 from robopercept.nn.core.blocks import ConvBNAct, ResidualBlock
 from robopercept.nn.ops.heatmaps import HEATMAP_LOSSES, check_float_tensor, check_image_size
 from robopercept.nn.skeleton import Skeleton
-from robopercept.nn.train.checkpoint import load_built_model, save_built_model
+from robopercept.nn.train.checkpoint import check_state_dict, load_built_model, save_built_model
 
 __all__ = [
     "POSE_MODELS",
@@ -54,6 +56,8 @@ __all__ = [
 
 #: the network names of :func:`build_pose_model`
 POSE_MODELS = ("deeppose", "heatmap", "hrnet")
+#: the most joints a pose network predicts
+_MAX_JOINTS = 1024
 
 
 # ----------------------------------------------------------------------------- networks
@@ -97,9 +101,10 @@ class SimpleBaseline(nn.Module):
         self, num_joints: int, width: int = 16, in_channels: int = 3, heatmap: str = "softmax"
     ) -> None:
         super().__init__()
-        self.num_joints = check_int(num_joints, "num_joints", 1)
+        self.num_joints = check_count(num_joints, "num_joints", 1, _MAX_JOINTS)
         self.heatmap = check_choice(heatmap, "heatmap", HEATMAP_LOSSES)
-        w = check_int(width, "width", 1)
+        w = check_count(width, "width", 1, MAX_CHANNELS // 8)
+        in_channels = check_count(in_channels, "in_channels", 1, MAX_CHANNELS)
         self.encoder = nn.Sequential(
             ConvBNAct(in_channels, w, stride=2),
             ResidualBlock(w, w),
@@ -204,13 +209,27 @@ class HRNet(nn.Module):
         heatmap: str = "softmax",
     ) -> None:
         super().__init__()
-        self.num_joints = check_int(num_joints, "num_joints", 1)
+        self.num_joints = check_count(num_joints, "num_joints", 1, _MAX_JOINTS)
         self.heatmap = check_choice(heatmap, "heatmap", HEATMAP_LOSSES)
-        w = check_int(width, "width", 1)
-        nb = check_int(blocks, "blocks", 1)
-        mods = [check_int(m, "modules", 1) for m in modules]
-        if len(mods) != 2:
-            raise InputError(f"modules must be two counts (stages 2 and 3); got {list(modules)}")
+        w = check_count(width, "width", 1, MAX_CHANNELS // 4)
+        in_channels = check_count(in_channels, "in_channels", 1, MAX_CHANNELS)
+        nb = check_count(blocks, "blocks", 1, 64)
+        if isinstance(modules, (str, bytes)) or not isinstance(modules, Sequence):
+            raise InputError(
+                f"modules must be two counts (stages 2 and 3), e.g. (1, 2); got "
+                f"{plain_repr(modules)[:60]}"
+            )
+        if len(modules) != 2:
+            raise InputError(
+                f"modules must be two counts (stages 2 and 3); got {len(modules)} values"
+            )
+        mods = [check_count(m, "modules", 1, 64) for m in modules]
+        total = nb * (1 + 2 * mods[0] + 3 * mods[1])  # residual blocks in all branches
+        if total > MAX_LAYERS:
+            raise InputError(
+                f"blocks={nb} with modules={mods} makes {total} residual blocks; the limit "
+                f"is {MAX_LAYERS}: lower blocks or modules"
+            )
         self.stem = nn.Sequential(
             ConvBNAct(in_channels, w, stride=2),
             ConvBNAct(w, w, stride=2),
@@ -278,11 +297,19 @@ class DeepPose(nn.Module):
         in_channels: int = 3,
     ) -> None:
         super().__init__()
-        self.num_joints = check_int(num_joints, "num_joints", 1)
+        self.num_joints = check_count(num_joints, "num_joints", 1, _MAX_JOINTS)
         self.image_size = check_image_size(image_size, 16)
-        w = check_int(width, "width", 1)
-        hidden = check_int(hidden, "hidden", 1)
+        w = check_count(width, "width", 1, MAX_CHANNELS // 8)
+        hidden = check_count(hidden, "hidden", 1, 1 << 16)
+        in_channels = check_count(in_channels, "in_channels", 1, MAX_CHANNELS)
         p = check_real(dropout, "dropout", 0.0, 1.0, high_inclusive=False)
+        cells = (self.image_size[0] // 16) * (self.image_size[1] // 16)
+        check_allocation(
+            2 * w * cells * hidden,
+            4,
+            f"the regressor's weights ({2 * w * cells} x {hidden})",
+            "lower image_size, width or hidden",
+        )
         self.encoder = nn.Sequential(
             ConvBNAct(in_channels, w, stride=2),
             ResidualBlock(w, w),
@@ -291,7 +318,6 @@ class DeepPose(nn.Module):
             ResidualBlock(4 * w, 8 * w, stride=2),
             ConvBNAct(8 * w, 2 * w, 1),
         )
-        cells = (self.image_size[0] // 16) * (self.image_size[1] // 16)
         self.regressor = nn.Sequential(
             nn.Flatten(),
             nn.Linear(2 * w * cells, hidden),
@@ -335,10 +361,10 @@ class DeepPoseRefiner(nn.Module):
         self, num_joints: int, crop: float = 32.0, patch: int = 32, width: int = 16
     ) -> None:
         super().__init__()
-        self.num_joints = check_int(num_joints, "num_joints", 1)
+        self.num_joints = check_count(num_joints, "num_joints", 1, _MAX_JOINTS)
         self.crop = check_real(crop, "crop", 1.0, 1e5)
-        self.patch = check_int(patch, "patch", 8)
-        self.width = w = check_int(width, "width", 1)
+        self.patch = check_count(patch, "patch", 8, 1024)
+        self.width = w = check_count(width, "width", 1, MAX_CHANNELS // 4)
         self.net = nn.Sequential(
             ConvBNAct(3, w),
             ResidualBlock(w, 2 * w, stride=2),
@@ -376,7 +402,7 @@ def build_pose_model(
     """
     check_choice(name, "name", POSE_MODELS)
     if seed is not None:
-        torch.manual_seed(check_int(seed, "seed", 0))
+        torch.manual_seed(check_count(seed, "seed", 0, 2**63 - 1))
     if name == "heatmap":
         return SimpleBaseline(num_joints, **kwargs)
     if name == "hrnet":
@@ -417,6 +443,8 @@ def crop_patches(
     check_float_tensor(images, "images", 4, "(N, C, H, W)")
     check_float_tensor(centres, "centres", 3, "(N, K, 2) of (x, y)")
     n, _c, h, w = images.shape
+    if h == 0 or w == 0:
+        raise InputError(f"images must be at least 1 x 1 pixels; got shape {tuple(images.shape)}")
     if centres.shape[0] != n or centres.shape[2] != 2:
         raise InputError(
             f"centres must be ({n}, K, 2), (x, y) per window of each image; got "
@@ -515,7 +543,10 @@ def load_pose_model(path: Any) -> tuple[nn.Module, dict[str, Any]]:
     Raises
     ------
     FileFormatError
-        Missing or unreadable file, or a checkpoint that is not a pose network's.
+        Missing or unreadable file, a checkpoint that is not a pose network's, settings
+        the network's class does not take or refuses, a damaged skeleton or cascade
+        stage, or weights that do not fit (checked before loading:
+        :func:`~robopercept.nn.train.checkpoint.load_built_model`).
     """
     model, info = load_built_model(
         path,
@@ -523,17 +554,62 @@ def load_pose_model(path: Any) -> tuple[nn.Module, dict[str, Any]]:
         _build_from_joints,
         "pose network",
         "save_pose_model or `robopercept nn pose train`",
+        constructors={"heatmap": SimpleBaseline, "hrnet": HRNet, "deeppose": DeepPose},
     )
     try:
-        info["skeleton"] = Skeleton.from_dict(info["skeleton"])
-        stages = []
-        for s in info.get("refiners") or []:
-            r = DeepPoseRefiner(len(info["classes"]), **s["settings"])
-            r.load_state_dict(s["state"])
-            stages.append(r.eval())
-        info["refiners"] = stages
-    except (KeyError, TypeError, InputError, RuntimeError) as exc:
+        info["skeleton"] = Skeleton.from_dict(info.get("skeleton", {}))
+    except (KeyError, IndexError, TypeError, ValueError, OverflowError, InputError) as exc:
         raise FileFormatError(
-            f"{path}: a pose checkpoint without a valid skeleton or stages ({exc})"
+            f"{path}: a pose checkpoint without a valid skeleton ({str(exc)[:160]})"
         ) from None
+    if info["skeleton"].num_joints != len(info["classes"]):
+        raise FileFormatError(
+            f"{path}: its skeleton has {info['skeleton'].num_joints} joints but the network "
+            f"predicts {len(info['classes'])}: the file is damaged"
+        )
+    info["refiners"] = _load_refiners(info.get("refiners"), len(info["classes"]), str(path))
     return model, info
+
+
+#: the most cascade stages a DeepPose checkpoint may hold
+_MAX_STAGES = 16
+
+
+def _load_refiners(stages: Any, n_joints: int, where: str) -> list[DeepPoseRefiner]:
+    """The DeepPose cascade stages of a checkpoint (``[{"settings": ..., "state":
+    ...}]``), each checked as the network is: settings ``crop``, ``patch``, ``width``
+    only, built on the meta device first, the weights checked
+    (:func:`~robopercept.nn.train.checkpoint.check_state_dict`) before loading."""
+    if stages is None:
+        return []
+    if not isinstance(stages, list) or len(stages) > _MAX_STAGES:
+        raise FileFormatError(
+            f"{where}: its 'refiners' must be a list of at most {_MAX_STAGES} cascade stages; "
+            f"got a {type(stages).__name__}"
+            + (f" of {len(stages)}" if isinstance(stages, list) else "")
+        )
+    out = []
+    for i, stage in enumerate(stages):
+        settings = stage.get("settings") if isinstance(stage, dict) else None
+        if (
+            not isinstance(settings, dict)
+            or not set(settings) <= {"crop", "patch", "width"}
+            or "state" not in stage
+        ):
+            raise FileFormatError(
+                f"{where}: refiners[{i}] must be {{'settings': {{'crop', 'patch', 'width'}}, "
+                "'state': weights}: the file is damaged"
+            )
+        try:
+            with torch.device("meta"):  # the shapes alone: nothing allocated yet
+                probe = DeepPoseRefiner(n_joints, **settings)
+        except InputError as exc:
+            raise FileFormatError(f"{where}: refiners[{i}] has bad settings ({exc})") from None
+        check_state_dict(probe, stage["state"], f"{where} (refiners[{i}])")
+        r = DeepPoseRefiner(n_joints, **settings)
+        try:
+            r.load_state_dict(stage["state"])
+        except RuntimeError as exc:  # checked above; what torch still refuses
+            raise FileFormatError(f"{where}: refiners[{i}]: {str(exc)[:160]}") from None
+        out.append(r.eval())
+    return out

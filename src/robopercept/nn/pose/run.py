@@ -207,6 +207,7 @@ def load_pose_data(
     seed: int = 0,
     images_dir: str | os.PathLike[str] | None = None,
     evaluate: bool = False,
+    allow_outside: bool = False,
 ) -> tuple[PoseDataset, PoseDataset]:
     """The training and validation sets of a pose data set, as ``robopercept nn pose
     train|eval`` make them.
@@ -234,6 +235,9 @@ def load_pose_data(
         The COCO file's images (default: its folder).
     evaluate : bool
         The data is for evaluation: a COCO file is not split.
+    allow_outside : bool, default False
+        Your own annotations: read images they place outside their folder
+        (:func:`~robopercept.imaging.io.contained_path`; ``--allow-outside-paths``).
 
     Returns
     -------
@@ -253,7 +257,7 @@ def load_pose_data(
     """
     data, images, size, seed = _data_args(data, images, size, seed)
     if _is_coco(data):
-        full = pose_set_from_coco(data, images_dir, size)
+        full = pose_set_from_coco(data, images_dir, size, allow_outside=allow_outside)
         if check_bool(evaluate, "evaluate"):
             return full, full
         if len(full) < 2:
@@ -322,6 +326,7 @@ def train_run(
     resume: bool = False,
     overwrite: bool = False,
     progress: bool = True,
+    allow_outside: bool = False,
 ) -> PoseTrainResult:
     """Train pose network ``model`` on ``data`` and write the run folder ``out_dir``
     (module docstring).
@@ -355,6 +360,9 @@ def train_run(
         DeepPose: cascade stages after the network, 0 to 8 (ignored for the others).
     images_dir : path, optional
         A COCO file's images (default: its folder).
+    allow_outside : bool, default False
+        Your own annotations: read images they place outside their folder
+        (:func:`~robopercept.imaging.io.contained_path`; ``--allow-outside-paths``).
     resume : bool
         Continue the run in ``out_dir`` from its ``checkpoint.pt`` (same data, model and
         configuration): ends as an uninterrupted run would.
@@ -395,7 +403,14 @@ def train_run(
     progress = check_bool(progress, "progress")
     ckpt = prepare_run_folder(out_dir, resume=resume, overwrite=overwrite)
     out = ckpt.parent
-    train, val = load_pose_data(data, images=images, size=size, seed=seed, images_dir=images_dir)
+    train, val = load_pose_data(
+        data,
+        images=images,
+        size=size,
+        seed=seed,
+        images_dir=images_dir,
+        allow_outside=allow_outside,
+    )
     sk = train.skeleton
     if progress:
         print(
@@ -457,6 +472,7 @@ def evaluate_run(
     device: str | None = None,
     out_dir: str | os.PathLike[str] | None = None,
     images_dir: str | os.PathLike[str] | None = None,
+    allow_outside: bool = False,
 ) -> PoseRunEvaluation:
     """PCK and COCO keypoint AP of a trained pose network on the validation split of
     ``data`` (:func:`load_pose_data` with the same ``images``, ``size`` and ``seed`` as
@@ -478,6 +494,9 @@ def evaluate_run(
         A folder (created) for ``metrics.json`` (:attr:`PoseRunEvaluation.to_dict`).
     images_dir : path, optional
         A COCO file's images (default: its folder); the whole file is scored.
+    allow_outside : bool, default False
+        Your own annotations: read images they place outside their folder
+        (:func:`~robopercept.imaging.io.contained_path`; ``--allow-outside-paths``).
 
     Returns
     -------
@@ -501,7 +520,13 @@ def evaluate_run(
     if device is not None:
         net.to(resolve_device(device))
     _, val = load_pose_data(
-        data, images=images, size=size, seed=seed, images_dir=images_dir, evaluate=True
+        data,
+        images=images,
+        size=size,
+        seed=seed,
+        images_dir=images_dir,
+        evaluate=True,
+        allow_outside=allow_outside,
     )
     joints = tuple(info["skeleton"].joints)
     if joints != tuple(val.skeleton.joints):

@@ -38,7 +38,7 @@ from torch.nn import functional as F
 
 from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
-from robopercept.nn._guards import check_count
+from robopercept.nn._guards import MAX_PARAMETERS, check_count
 from robopercept.nn.coco.rle import rle_encode
 from robopercept.nn.core.backbones import MAX_CHANNELS, DetectionBackbone
 from robopercept.nn.core.blocks import ConvBNAct, check_input
@@ -125,6 +125,21 @@ class _Upsample(nn.Module):
         return self.conv(x)
 
 
+def _check_images(net: nn.Module, x: Any, in_channels: int) -> None:
+    """:func:`~robopercept.nn.core.blocks.check_input`, then an image of at least one
+    pixel per side in the network's own floating dtype (a float64 batch for float32
+    weights: ``x.float()``)."""
+    check_input(x, in_channels)
+    if x.shape[2] == 0 or x.shape[3] == 0:
+        raise InputError(f"x must hold images of at least 1 x 1 pixels; got shape {tuple(x.shape)}")
+    weight = next(net.parameters(), None)
+    if weight is not None and x.dtype != weight.dtype:
+        raise InputError(
+            f"x is {x.dtype} but the network's weights are {weight.dtype}: convert the "
+            f"images (x.to({weight.dtype})) or the network (net.to({weight.dtype}))"
+        )
+
+
 def _pad_to(x: torch.Tensor, multiple: int, training: bool) -> tuple[torch.Tensor, int, int]:
     """``x`` padded right and bottom to a multiple of ``multiple``, with its size;
     refuses a training batch whose coarsest map would hold one value per channel
@@ -167,6 +182,12 @@ class NaiveFCN(nn.Module):
         self.in_channels = check_count(in_channels, "in_channels", 1, MAX_CHANNELS)
         width = check_count(width, "width", 1, MAX_CHANNELS)
         depth = check_count(depth, "depth", 1, 256)
+        params = 9 * width * (self.in_channels + (depth - 1) * width)
+        if params > MAX_PARAMETERS:
+            raise InputError(
+                f"a NaiveFCN of depth {depth} and width {width} would have {params} weights; "
+                f"the limit is {MAX_PARAMETERS}: lower the width or the depth"
+            )
         layers: list[nn.Module] = []
         c = self.in_channels
         for _ in range(depth):
@@ -176,7 +197,7 @@ class NaiveFCN(nn.Module):
         self.classifier = nn.Conv2d(width, self.num_classes, 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        check_input(x, self.in_channels)
+        _check_images(self, x, self.in_channels)
         return self.classifier(self.features(x))
 
 
@@ -233,7 +254,7 @@ class FCN(nn.Module):
                 nn.init.zeros_(s.bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        check_input(x, 3)
+        _check_images(self, x, 3)
         x, h, w = _pad_to(x, 32, self.training)
         f8, f16, f32 = self.backbone(x)
         s = self.score32(f32)
@@ -293,6 +314,17 @@ class UNet(nn.Module):
                 "lower the width or the depth"
             )
         chans = [width << i for i in range(self.depth + 1)]
+        # double 3 x 3 convolutions down, at the bottom and up (skip + upsampled input)
+        params = sum(
+            9 * (c_in * c + c * c)
+            for c_in, c in zip([self.in_channels, *chans[:-1]], chans, strict=True)
+        )
+        params += sum(9 * 3 * c * c + 4 * 2 * c * c for c in chans[:-1])
+        if params > MAX_PARAMETERS:
+            raise InputError(
+                f"a UNet of width {width} and depth {self.depth} would have about {params} "
+                f"weights; the limit is {MAX_PARAMETERS}: lower the width or the depth"
+            )
         self.down = nn.ModuleList()
         c = self.in_channels
         for ch in chans[:-1]:
@@ -316,7 +348,7 @@ class UNet(nn.Module):
         self.classifier = nn.Conv2d(chans[0], self.num_classes, 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        check_input(x, self.in_channels)
+        _check_images(self, x, self.in_channels)
         x, h, w = _pad_to(x, 1 << self.depth, self.training)
         skips = []
         for block in self.down:
@@ -332,6 +364,11 @@ class UNet(nn.Module):
 def _check_logits_target(logits: Any, target: Any) -> tuple[torch.Tensor, torch.Tensor]:
     if not isinstance(logits, torch.Tensor) or logits.ndim != 4:
         raise InputError(f"logits must be a (N, K, H, W) tensor; got {plain_repr(logits)}")
+    if not logits.is_floating_point():
+        raise InputError(
+            f"logits must be floating point (the network's scores); got {logits.dtype}: "
+            "use logits.float()"
+        )
     if not isinstance(target, torch.Tensor) or target.dtype not in (
         torch.int64,
         torch.int32,
@@ -442,6 +479,14 @@ def dice_loss(
 
 #: the names :func:`build_segmenter` takes
 SEGMENTERS = ("naive", "fcn32s", "fcn16s", "fcn8s", "unet")
+#: the class of each name (an FCN's variant is in its name)
+_SEGMENTER_CLASSES: dict[str, type[nn.Module]] = {
+    "naive": NaiveFCN,
+    "fcn32s": FCN,
+    "fcn16s": FCN,
+    "fcn8s": FCN,
+    "unet": UNet,
+}
 
 
 def build_segmenter(name: str, num_classes: int, **kwargs: Any) -> nn.Module:
@@ -459,6 +504,11 @@ def build_segmenter(name: str, num_classes: int, **kwargs: Any) -> nn.Module:
         return NaiveFCN(num_classes, **kwargs)
     if name == "unet":
         return UNet(num_classes, **kwargs)
+    if "variant" in kwargs:
+        raise InputError(
+            f"the name {name!r} sets the FCN variant; got variant={plain_repr(kwargs['variant'])} "
+            "too: give the variant in the name only"
+        )
     return FCN(num_classes, variant=name[3:], **kwargs)
 
 
@@ -501,7 +551,9 @@ def load_segmenter(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, A
     Raises
     ------
     FileFormatError
-        Missing or unreadable file, or a checkpoint that is not a segmenter's.
+        Missing or unreadable file, a checkpoint that is not a segmenter's, settings
+        the network's class does not take or refuses, or weights that do not fit it
+        (checked before loading: :func:`~robopercept.nn.train.checkpoint.load_built_model`).
     """
 
     return load_built_model(
@@ -510,6 +562,7 @@ def load_segmenter(path: str | os.PathLike[str]) -> tuple[nn.Module, dict[str, A
         _build_from_classes,
         "segmenter",
         "save_segmenter or `robopercept nn segment train`",
+        constructors={name: _SEGMENTER_CLASSES[name] for name in SEGMENTERS},
     )
 
 
@@ -832,6 +885,7 @@ def coco_segmentation_results(
     """
     import numpy as np
 
+    image_id = check_int(image_id, "image_id")
     if (labels is None) == (detections is None):
         raise InputError("give either labels (semantic) or detections (instances)")
     out: list[dict[str, Any]] = []

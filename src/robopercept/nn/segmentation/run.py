@@ -260,6 +260,7 @@ def load_segmentation_data(
     seed: int = 0,
     images_dir: str | os.PathLike[str] | None = None,
     evaluate: bool = False,
+    allow_outside: bool = False,
 ) -> SegmentationSets:
     """The segmentation data ``data`` split into training and validation sets: a
     built-in set (:func:`~robopercept.nn.segmentation.data.segmentation_sets`: 80 % /
@@ -288,6 +289,9 @@ def load_segmentation_data(
         The data is for evaluation: your own annotations are not split (all of them
         are the validation set, and the training set too), as ``nn segment eval``
         scores a whole file.
+    allow_outside : bool, default False
+        Your own annotations: read images they place outside their folder
+        (:func:`~robopercept.imaging.io.contained_path`; ``--allow-outside-paths``).
 
     Returns
     -------
@@ -315,7 +319,9 @@ def load_segmentation_data(
     """
     name, n = _check_data_args(data, images, images_dir)
     if name == "own":
-        full = DetectionDataset.from_annotations(data, images_dir, masks=True)
+        full = DetectionDataset.from_annotations(
+            data, images_dir, masks=True, allow_outside=allow_outside
+        )
         train, val = (
             (full, full) if check_bool(evaluate, "evaluate") else full.split((0.8, 0.2), rng=seed)
         )

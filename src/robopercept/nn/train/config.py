@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import os
+import reprlib
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -192,10 +193,42 @@ class History:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> History:
-        """The inverse of :meth:`to_dict`."""
-        return cls(
-            **{k: d[k] for k in cls.__dataclass_fields__ if not k.startswith("_") and k in d}
-        )
+        """The inverse of :meth:`to_dict`, checked: the columns are lists of one length
+        (``epoch`` of integers, the others of real numbers, NaN allowed),
+        ``best_epoch`` an integer, ``stopped`` a str; missing entries take their
+        defaults.
+
+        Raises
+        ------
+        InputError
+            ``d`` is not such a record (the message names the entry).
+        """
+        if not isinstance(d, dict):
+            raise InputError(f"a history must be a dict of its columns; got {type(d).__name__}")
+        values = {k: d[k] for k in cls.__dataclass_fields__ if not k.startswith("_") and k in d}
+        for name in cls._COLUMNS:
+            column = values.get(name, [])
+            kinds = (int,) if name == "epoch" else (int, float)
+            if not isinstance(column, list) or not all(
+                isinstance(v, kinds) and not isinstance(v, bool) for v in column
+            ):
+                raise InputError(
+                    f"the history's {name!r} must be a list of numbers; got {reprlib.repr(column)}"
+                )
+            values[name] = list(column)
+        lengths = {len(values[name]) for name in cls._COLUMNS}
+        if len(lengths) > 1:
+            raise InputError(f"the history's columns differ in length ({sorted(lengths)})")
+        if type(values.get("best_epoch", -1)) is not int:
+            raise InputError(
+                f"the history's 'best_epoch' must be an integer; got "
+                f"{reprlib.repr(values['best_epoch'])}"
+            )
+        if not isinstance(values.get("stopped", ""), str):
+            raise InputError(
+                f"the history's 'stopped' must be a str; got {reprlib.repr(values['stopped'])}"
+            )
+        return cls(**values)
 
     def write_csv(self, path: str | os.PathLike[str]) -> Path:
         """One row per epoch: the columns of the class."""

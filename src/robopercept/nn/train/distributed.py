@@ -30,7 +30,10 @@ Rank 0 alone validates, evaluates the test split and writes the run folder (chec
 history, curves, metrics, confusion matrix); the other ranks wait for it. The process
 group is destroyed on the way out, error or not; an error or Ctrl-C on one rank stops
 them all (here the other processes are terminated; torchrun does the same for its
-workers) and the error is raised again in the launching process.
+workers) and the error is raised again in the launching process. A rank started here
+takes SIGTERM (how the launcher stops it, also when the launcher itself is stopped by
+Ctrl-C or SIGTERM) as Ctrl-C: its trainer's cleanup runs, so an interrupted ``nn train
+--nproc N`` keeps the same files as one process does.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ import dataclasses
 import datetime
 import os
 import pickle
+import signal
 import socket
 import tempfile
 import time
@@ -221,6 +225,10 @@ def _rank_main(
 
     torch.set_num_threads(job["threads"])
     if job["spawned"]:
+        # the launcher stops its ranks with SIGTERM (run_ranks, on an error, Ctrl-C or
+        # its own SIGTERM): raise KeyboardInterrupt as Ctrl-C does, so the trainer's
+        # cleanup runs (rank 0 writes the interrupted run's history) instead of dying
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
         os.environ["LOCAL_RANK"] = str(local_rank)
         rank, world = local_rank, job["nproc"]
         init = f"tcp://{job['addr']}:{job['port']}"

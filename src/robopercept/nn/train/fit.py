@@ -15,10 +15,13 @@ epoch, and ``resume`` ends where an uninterrupted run does.
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
-from collections.abc import Callable
+import reprlib
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,9 +30,11 @@ from torch import nn
 from torch.utils.data import DataLoader, Dataset
 
 from robopercept._checks import as_path, check_bool
-from robopercept.errors import InputError
+from robopercept.errors import ArgumentError, FileFormatError, InputError
+from robopercept.fileio import MAX_NESTING, nesting_depth
 from robopercept.learning.metrics import confusion_matrix
 from robopercept.nn._guards import check_count, check_dataset, check_module
+from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import (
     History,
     TrainConfig,
@@ -217,6 +222,100 @@ def _from_rank0(values: list[float], dev: torch.device) -> list[float]:
     return [float(v) for v in t.cpu()]
 
 
+#: the ``nn train`` flag of each :class:`TrainConfig` field that has one
+_FLAGS = {
+    "epochs": "--epochs",
+    "batch_size": "--batch-size",
+    "optimizer": "--optimizer",
+    "lr": "--lr",
+    "schedule": "--schedule",
+    "patience": "--patience",
+    "seed": "--seed",
+    "device": "--device",
+}
+
+
+def _check_run_options(options: Any) -> dict[str, Any]:
+    """``run_options`` as a plain dict of str to JSON values (``{}`` for None)."""
+    if options is None:
+        return {}
+    bad = InputError(
+        "run_options must be a dict of option names (str) to JSON values, e.g. "
+        f"{{'--data': 'digits'}}; got {reprlib.repr(options)}"
+    )
+    if not isinstance(options, Mapping) or not all(isinstance(k, str) for k in options):
+        raise bad
+    if nesting_depth(options) > MAX_NESTING:
+        raise bad
+    try:
+        plain = json.loads(json.dumps(dict(options), allow_nan=False))
+    except (TypeError, ValueError):
+        raise bad from None
+    return dict(plain)
+
+
+def _same(saved: Any, now: Any) -> bool:
+    """``saved`` (read from a checkpoint: anything) equals the JSON value ``now``."""
+    try:
+        return bool(json.dumps(saved, sort_keys=True) == json.dumps(now, sort_keys=True))
+    except (TypeError, ValueError, RecursionError):
+        return False
+
+
+def _check_resume(
+    checkpoint: Path, cfg: TrainConfig, architecture: str, options: dict[str, Any]
+) -> None:
+    """Refuse to resume the run of ``checkpoint`` under other options (``fit``'s
+    ``resume``): ArgumentError naming every difference and ``--overwrite``."""
+    state = load_checkpoint(checkpoint)
+    saved_cfg = state.get("config")
+    if not isinstance(saved_cfg, dict) or not all(isinstance(k, str) for k in saved_cfg):
+        raise FileFormatError(
+            f"{checkpoint}: its 'config' entry is damaged (not a configuration): start "
+            "afresh with --overwrite"
+        )
+    now = json.loads(json.dumps(asdict(cfg), default=str))
+    diffs: list[str] = []
+    for name, value in now.items():
+        if name == "device":
+            continue
+        if name == "epochs" and cfg.schedule != "onecycle":
+            continue
+        if name not in saved_cfg or _same(saved_cfg[name], value):
+            continue
+        flag = _FLAGS.get(name, name)
+        note = ""
+        if name == "epochs":
+            note = "; a one-cycle schedule spans the run's epochs: it cannot be extended"
+        diffs.append(f"{flag} ({reprlib.repr(saved_cfg[name])} in the run, {value!r} now{note})")
+    saved_options = state.get("run_options")
+    if saved_options is not None:
+        if not isinstance(saved_options, dict):
+            raise FileFormatError(
+                f"{checkpoint}: its 'run_options' entry is damaged (not a dict): start "
+                "afresh with --overwrite"
+            )
+        for name, value in options.items():
+            if name not in saved_options:
+                diffs.append(f"{name} (not recorded in the run, {value!r} now)")
+            elif not _same(saved_options[name], value):
+                diffs.append(
+                    f"{name} ({reprlib.repr(saved_options[name])} in the run, {value!r} now)"
+                )
+    saved_arch = state.get("architecture", "")
+    if not diffs and architecture and not _same(saved_arch, architecture):
+        diffs.append(
+            "the model (its architecture: the data's classes or image size, or the "
+            "model's settings, differ from the run's)"
+        )
+    if diffs:
+        raise ArgumentError(
+            f"--resume continues the run in {checkpoint.parent} with the options it was "
+            f"started with; these differ: {'; '.join(diffs)}. Give the run's values to "
+            "resume it, or start afresh with --overwrite"
+        )
+
+
 def fit(
     model: nn.Module,
     train: Dataset[Any],
@@ -226,6 +325,7 @@ def fit(
     checkpoint: str | os.PathLike[str] | None = None,
     resume: bool = False,
     architecture: str = "",
+    run_options: Mapping[str, Any] | None = None,
     progress: bool = True,
     distributed: bool = False,
     sync_batchnorm: bool = True,
@@ -245,9 +345,20 @@ def fit(
         Written after every epoch (model, optimizer, schedule, random states, history,
         config, ``architecture``); the best weights go to ``<name>.best.pt`` beside it.
     resume : bool
-        Continue from ``checkpoint`` (ends as the uninterrupted run would).
+        Continue from ``checkpoint`` (ends as the uninterrupted run would). The run must
+        go on as it was started: the checkpoint's configuration must equal ``config`` in
+        every field but ``device`` (where to train may change) and ``epochs`` (more
+        epochs extend a run, except under the ``"onecycle"`` schedule, whose steps are
+        fixed when it starts; a ``"cosine"`` schedule keeps the period of the epochs it
+        was made for, so past them its learning rate rises again), and
+        its ``architecture`` and ``run_options`` must equal these; otherwise
+        :class:`~robopercept.errors.ArgumentError` names every difference (by the
+        ``nn train`` flag where there is one) and ``--overwrite``.
     architecture : str
         Recorded in the checkpoint (named when loading into the wrong model).
+    run_options : dict of str to JSON values, optional
+        The caller's options that define the run (keys as the user knows them, e.g.
+        ``"--data"``), recorded in the checkpoint and compared on ``resume``.
     progress : bool
         A bar per epoch on stderr (:func:`robopercept.progress.progress_bar`).
     distributed : bool
@@ -279,6 +390,10 @@ def fit(
         Empty dataset, images not (C, H, W), labels out of range, or a loss that became
         NaN or infinite (lower the learning rate); ``distributed`` without a process
         group, or a batch size that the number of processes does not divide.
+    ArgumentError
+        ``resume`` with other options than the run's (see ``resume``).
+    FileFormatError
+        ``resume`` from a damaged checkpoint (the message names the entry).
     """
     model = check_module(model)
     if config is not None and not isinstance(config, TrainConfig):
@@ -294,11 +409,14 @@ def fit(
     resume = check_bool(resume, "resume")
     if not isinstance(architecture, str):
         raise InputError(f"architecture must be a str; got {architecture!r}")
+    options = _check_run_options(run_options)
     if resume and checkpoint is None:
         raise InputError("resume needs the checkpoint to resume from")
     distributed = check_bool(distributed, "distributed")
     sync_batchnorm = check_bool(sync_batchnorm, "sync_batchnorm")
     rank, world = _ranks(cfg) if distributed else (0, 1)
+    if resume and checkpoint is not None:
+        _check_resume(checkpoint, cfg, architecture, options)
     dev = resolve_device(cfg.device)
     # one process and rank 0 draw as before; the other ranks' dropout differs from rank 0's
     torch.manual_seed(cfg.seed if rank == 0 else (cfg.seed + rank) % 2**64)
@@ -399,9 +517,11 @@ def fit(
 
     def restore(state: dict[str, Any]) -> None:
         saved = History.from_dict(state["history"])
+        done = int(state["epochs_done"])
+        if len(saved.epoch) != done:
+            raise ValueError(f"{len(saved.epoch)} epochs recorded, {done} done")
         for f in fields(History):
             setattr(hist, f.name, getattr(saved, f.name))
-        done = int(state["epochs_done"])
         for k, prefixes in (cfg.unfreeze_at or {}).items():  # what the run had unfrozen
             if k <= done:
                 for name, param in model.named_parameters():
@@ -431,6 +551,7 @@ def fit(
                 "epoch": epoch,
                 "config": asdict(cfg),
                 "architecture": architecture,
+                "run_options": options,
             },
             best_extra={"architecture": architecture},
             resume=resume,

@@ -25,20 +25,23 @@ history).
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import math
 import os
+import reprlib
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import Any, TypeGuard
 
 import torch
 from torch import nn
 from torch.optim.swa_utils import AveragedModel
 
 from robopercept._checks import as_path, check_bool, check_real, plain_repr
-from robopercept.errors import FileFormatError, InputError
+from robopercept.errors import ArgumentError, FileFormatError, InputError
 from robopercept.nn._guards import check_count, check_module
 from robopercept.nn.train.checkpoint import load_checkpoint, save_checkpoint
 from robopercept.nn.train.config import (
@@ -294,7 +297,12 @@ def train_loop(
     InputError
         A loss that became NaN or infinite; ``resume`` without a checkpoint.
     FileFormatError
-        ``resume`` from a file that is not such a checkpoint, or of another model.
+        ``resume`` from a file that is not such a checkpoint, of another model, or with a
+        damaged or unfitting training state (epochs, best epoch and score, optimizer,
+        schedule, random states, history: the message names the entry and
+        ``--overwrite``).
+    ArgumentError
+        ``resume`` with ``epochs`` fewer than the checkpoint's completed epochs.
     """
     model = check_module(model)
     if not isinstance(optimizer, torch.optim.Optimizer):
@@ -368,38 +376,11 @@ def train_loop(
     best_state: dict[str, torch.Tensor] | None = None
     start = 0
     if resume and ckpt is not None:
-        state = load_checkpoint(ckpt)
-        if "epochs_done" not in state or "optimizer" not in state:
-            raise FileFormatError(
-                f"{ckpt}: not a checkpoint of a training run that can be resumed (no "
-                "optimizer state): start a new run"
-            )
-        if averaged is not None:
-            if "averaged" not in state:
-                raise FileFormatError(
-                    f"{ckpt}: the run kept no weight average; resume it without one"
-                )
-            model.load_state_dict(state["trained_model"])
-            averaged.load_state_dict(state["averaged"])
-        else:
-            load_checkpoint(ckpt, model)
-        optimizer.load_state_dict(state["optimizer"])
-        if schedule is not None and state.get("scheduler") is not None:
-            schedule.load_state_dict(state["scheduler"])
-        for name, g in gens.items():
-            g.set_state(state["generators"][name])
-        torch.set_rng_state(state["torch_rng_state"])
-        start = int(state["epochs_done"])
-        result = LoopResult(
-            start,
-            int(state["best_epoch"]),
-            float(state["best_score"]),
-            str(state.get("stopped", "")),
-        )
-        if validate is not None and best_path is not None and best_path.exists():
-            best_state = load_checkpoint(best_path)["model"]
-        if restore is not None:
-            restore(state)
+        result, best_state = _resume(
+            ckpt, model, kept, optimizer, schedule, averaged, gens, epochs, restore,
+            best_path if validate is not None else None,
+        )  # fmt: skip
+        start = result.epochs_done
     bar = progress_bar(total=epochs - start, desc=desc, unit="epoch", disable=not progress)
     try:
         with deterministic_algorithms():
@@ -480,6 +461,204 @@ def train_loop(
     return result
 
 
+#: what a damaged training state raises while it is restored
+_DAMAGE = (
+    TypeError,
+    ValueError,
+    KeyError,
+    IndexError,
+    AttributeError,
+    RuntimeError,
+    OverflowError,
+    RecursionError,
+)
+
+
+def _damaged(ckpt: Path, entry: str, detail: str) -> FileFormatError:
+    return FileFormatError(
+        f"{ckpt}: its {entry!r} entry is damaged or does not fit this run ({detail}): "
+        "resume with the options the run was started with, or start afresh with --overwrite"
+    )
+
+
+@contextlib.contextmanager
+def _entry(ckpt: Path, entry: str) -> Iterator[None]:
+    """Errors of restoring ``entry`` become :class:`FileFormatError` naming it."""
+    try:
+        yield
+    except FileFormatError:
+        raise
+    except _DAMAGE as exc:
+        lines = str(exc).strip().splitlines()
+        detail = f"{type(exc).__name__}: {lines[0][:200]}" if lines else type(exc).__name__
+        raise _damaged(ckpt, entry, detail) from None
+
+
+def _same_kind(fresh: Any, saved: Any, *, exact_keys: bool, depth: int = 0) -> bool:
+    """``saved`` has the structure of ``fresh``: the same keys (``exact_keys``) or a
+    value of the same kind for every key of both, lists and tuples of the same length,
+    finite numbers for numbers (``bool`` apart), equal strings, ``None`` for ``None``."""
+    if depth > 16:
+        return False
+    if isinstance(fresh, bool) or fresh is None or isinstance(fresh, str):
+        return type(saved) is type(fresh) and (not isinstance(fresh, str) or saved == fresh)
+    if isinstance(fresh, (int, float)):
+        return (
+            isinstance(saved, (int, float)) and not isinstance(saved, bool) and math.isfinite(saved)
+        )
+    if isinstance(fresh, torch.Tensor):
+        return isinstance(saved, torch.Tensor) and saved.shape == fresh.shape
+    if isinstance(fresh, dict):
+        if not isinstance(saved, dict) or (exact_keys and set(saved) != set(fresh)):
+            return False
+        return all(
+            _same_kind(fresh[k], saved[k], exact_keys=exact_keys, depth=depth + 1)
+            for k in set(fresh) & set(saved)
+        )
+    if isinstance(fresh, (list, tuple)):
+        return (
+            isinstance(saved, (list, tuple))
+            and len(saved) == len(fresh)
+            and all(
+                _same_kind(f, v, exact_keys=exact_keys, depth=depth + 1)
+                for f, v in zip(fresh, saved, strict=True)
+            )
+        )
+    return True  # a value torch keeps opaque (a function's place, ...)
+
+
+def _finite_tensors(values: Any) -> bool:
+    return all(
+        not (isinstance(v, torch.Tensor) and v.is_floating_point()) or bool(torch.isfinite(v).all())
+        for v in values
+    )
+
+
+def _check_optimizer(optimizer: torch.optim.Optimizer, fresh_groups: list[dict[str, Any]]) -> None:
+    """After ``load_state_dict``: the hyper-parameters of every group of the kind the
+    optimizer made, and a finite per-parameter state of each parameter's shape with
+    the entries its step reads (``exp_avg``... for Adam and AdamW)."""
+    for fresh, group in zip(fresh_groups, optimizer.param_groups, strict=True):
+        hyper = {k: v for k, v in fresh.items() if k != "params"}
+        loaded = {k: v for k, v in group.items() if k != "params"}
+        if not _same_kind(hyper, loaded, exact_keys=False):
+            raise ValueError(f"hyper-parameters {reprlib.repr(loaded)} are not of this optimizer")
+    needed: set[str] = set()
+    if isinstance(optimizer, (torch.optim.Adam, torch.optim.AdamW)):
+        needed = {"step", "exp_avg", "exp_avg_sq"}
+    for group in optimizer.param_groups:
+        for param in group["params"]:
+            st = optimizer.state.get(param)
+            if not st:
+                continue
+            if not isinstance(st, dict) or not needed <= set(st):
+                raise ValueError(f"a parameter's state lacks {sorted(needed)}")
+            for key, v in st.items():
+                if v is None:
+                    continue
+                if not isinstance(v, torch.Tensor) or not _finite_tensors([v]):
+                    raise ValueError(f"a parameter's {key!r} is not a finite tensor")
+                if v.ndim and v.shape != param.shape:
+                    raise ValueError(
+                        f"a parameter's {key!r} has shape {tuple(v.shape)}, the parameter "
+                        f"{tuple(param.shape)}"
+                    )
+
+
+def _count(ckpt: Path, state: dict[str, Any], entry: str, low: int, high: int) -> int:
+    v = state.get(entry)
+    if type(v) is not int or not low <= v <= high:
+        raise _damaged(ckpt, entry, f"an integer in {low}..{high} expected; got {reprlib.repr(v)}")
+    return v
+
+
+def _resume(
+    ckpt: Path,
+    model: nn.Module,
+    kept: nn.Module,
+    optimizer: torch.optim.Optimizer,
+    schedule: Any,
+    averaged: Any,
+    gens: dict[str, torch.Generator],
+    epochs: int,
+    restore: Callable[[dict[str, Any]], None] | None,
+    best_path: Path | None,
+) -> tuple[LoopResult, dict[str, torch.Tensor] | None]:
+    """Restore a :func:`train_loop` checkpoint, every entry checked (the weights by
+    :func:`load_checkpoint`); return the running result and the best weights."""
+    state = load_checkpoint(ckpt)
+    for entry in ("epochs_done", "optimizer"):
+        if entry not in state:
+            raise FileFormatError(
+                f"{ckpt}: not a checkpoint of a training run that can be resumed (no "
+                f"{entry!r} entry): start afresh with --overwrite"
+            )
+    done = _count(ckpt, state, "epochs_done", 0, 1 << 30)
+    best_epoch = _count(ckpt, state, "best_epoch", 0, done)
+    score = state.get("best_score")
+    if (
+        not isinstance(score, (int, float))
+        or isinstance(score, bool)
+        or math.isnan(score)
+        or score == math.inf
+    ):
+        raise _damaged(ckpt, "best_score", f"a number expected; got {reprlib.repr(score)}")
+    stopped = state.get("stopped", "")
+    if not isinstance(stopped, str):
+        raise _damaged(ckpt, "stopped", f"a str expected; got {reprlib.repr(stopped)}")
+    if done > epochs:
+        raise ArgumentError(
+            f"--epochs {epochs} is fewer than the {done} epochs the run in {ckpt.parent} has "
+            f"done: give --epochs {done} or more, or start afresh with --overwrite"
+        )
+    if averaged is not None:
+        if "averaged" not in state:
+            raise FileFormatError(f"{ckpt}: the run kept no weight average; resume it without one")
+        load_checkpoint(ckpt, kept)  # the average's weights: they fit and are finite
+        with _entry(ckpt, "trained_model"):
+            trained = state.get("trained_model")
+            if not isinstance(trained, dict) or not _finite_tensors(trained.values()):
+                raise ValueError("not a dict of finite tensors")
+            model.load_state_dict(trained)
+        with _entry(ckpt, "averaged"):
+            avg = state["averaged"]
+            if not isinstance(avg, dict) or not _finite_tensors(avg.values()):
+                raise ValueError("not a dict of finite tensors")
+            averaged.load_state_dict(avg)
+    else:
+        load_checkpoint(ckpt, model)
+    with _entry(ckpt, "optimizer"):
+        fresh = [dict(g) for g in optimizer.param_groups]
+        saved = state["optimizer"]
+        if not isinstance(saved, dict) or set(saved) != {"state", "param_groups"}:
+            raise ValueError("not an optimizer's state_dict")
+        optimizer.load_state_dict(saved)
+        _check_optimizer(optimizer, fresh)
+    if schedule is not None and state.get("scheduler") is not None:
+        with _entry(ckpt, "scheduler"):
+            saved = state["scheduler"]
+            if not _same_kind(schedule.state_dict(), saved, exact_keys=True):
+                raise ValueError(f"not the state of a {type(schedule).__name__}")
+            schedule.load_state_dict(saved)
+    with _entry(ckpt, "generators"):
+        saved_gens = state.get("generators")
+        if not isinstance(saved_gens, dict):
+            raise TypeError(f"a dict of generator states expected; got {reprlib.repr(saved_gens)}")
+        for name, g in gens.items():
+            g.set_state(saved_gens[name])
+    with _entry(ckpt, "torch_rng_state"):
+        torch.set_rng_state(state["torch_rng_state"])
+    best_state: dict[str, torch.Tensor] | None = None
+    if best_path is not None and best_path.exists():
+        probe = copy.deepcopy(kept)
+        load_checkpoint(best_path, probe)  # the best weights fit and are finite
+        best_state = probe.state_dict()
+    if restore is not None:
+        with _entry(ckpt, "history"):
+            restore(state)
+    return LoopResult(done, best_epoch, float(score), stopped), best_state
+
+
 def _loop_state(
     result: LoopResult,
     model: nn.Module,
@@ -531,12 +710,40 @@ class EpochHistory:
         }
 
     def load_dict(self, saved: Mapping[str, Any]) -> None:
-        """Take back what :meth:`to_dict` gave (a resumed run's history)."""
-        self.losses[:] = list(saved["losses"])
-        self.seconds[:] = list(saved["seconds"])
+        """Take back what :meth:`to_dict` gave (a resumed run's history), checked:
+        ``losses`` and ``seconds`` lists of numbers of one length, the validation scores
+        a dict of epoch (a decimal str) to number, ``best_epoch`` an integer.
+
+        Raises
+        ------
+        InputError
+            ``saved`` is not such a record (the message names the entry); nothing is
+            changed then.
+        """
+
+        def numbers(value: Any) -> TypeGuard[list[float]]:
+            return isinstance(value, list) and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+            )
+
+        if not isinstance(saved, Mapping):
+            raise InputError(f"a history must be a dict; got {type(saved).__name__}")
+        losses, seconds = saved.get("losses"), saved.get("seconds")
+        val, best = saved.get(self.val_name), saved.get("best_epoch")
+        if not numbers(losses) or not numbers(seconds) or len(losses) != len(seconds):
+            raise InputError("the history's 'losses' and 'seconds' must be lists of numbers")
+        if not isinstance(val, dict) or not all(
+            isinstance(k, str) and k.isdecimal() and len(k) < 12 and numbers([v])
+            for k, v in val.items()
+        ):
+            raise InputError(f"the history's {self.val_name!r} must map epochs to numbers")
+        if type(best) is not int:
+            raise InputError(f"the history's 'best_epoch' must be an integer; got {best!r:.80}")
+        self.losses[:] = list(losses)
+        self.seconds[:] = list(seconds)
         self.val.clear()
-        self.val.update({int(k): float(v) for k, v in saved[self.val_name].items()})
-        self.best_epoch = int(saved["best_epoch"])
+        self.val.update({int(k): float(v) for k, v in val.items()})
+        self.best_epoch = best
 
 
 def epoch_loop(
