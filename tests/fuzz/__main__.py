@@ -1,12 +1,16 @@
 """``python -m tests.fuzz``: the long fuzz campaign behind ``make fuzz``.
 
-Splits a time budget between the API fuzzer (:mod:`tests.fuzz.api`: hostile arguments
-for every public callable) and the readers' mutation fuzzer (:mod:`tests.fuzz.readers`:
-mutated real files for every reader), runs both in one
-:class:`~tests.fuzz.sandbox.Sandbox`, prints the summary table (per package and
-reader: inputs, typed errors, untyped errors, crashes, hangs, memory, peak MiB), the
-inputs that broke the contract and the callables skipped with their reasons, and writes
-everything as JSON.
+Splits a time budget between four parts: the API fuzzer (:mod:`tests.fuzz.api`:
+hostile arguments for every public callable), the flags fuzzer (:mod:`tests.fuzz.cli`:
+hostile flag values for the commands, through their real parsing and validation), the
+faults (:mod:`tests.fuzz.faults`: ``nn train`` and ``batch`` in child processes under
+signals, a killed worker, the scheduler gone and a full disk; every fault runs at least
+once, even past its share) and the readers' mutation fuzzer
+(:mod:`tests.fuzz.readers`: mutated real files for every reader, the rest of the
+budget). The first two and the readers run in one :class:`~tests.fuzz.sandbox.Sandbox`.
+It prints the summary table (per package, reader, command and fault: inputs, typed
+errors, untyped errors, crashes, hangs, memory, peak MiB), the inputs that broke the
+contract and the callables skipped with their reasons, and writes everything as JSON.
 
 Exit status: 0 when no input gave an untyped error, a crash, a hang or an allocation
 over its bound; 1 otherwise; 2 for bad arguments.
@@ -22,8 +26,13 @@ from pathlib import Path
 
 from tests.fuzz.report import Tally, format_findings, format_table, to_json, totals
 
-#: share of the budget the API campaign gets when both run (the rest: readers)
-API_SHARE = 0.6
+#: shares of the budget when every part runs (the readers get the rest)
+API_SHARE = 0.5
+FLAGS_SHARE = 0.12
+FAULTS_SHARE = 0.08
+
+#: the parts, in the order they run
+PARTS = ("api", "flags", "faults", "readers")
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -32,7 +41,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument(
         "--budget", type=float, default=1800.0, help="seconds for the whole campaign (default 1800)"
     )
-    ap.add_argument("--only", choices=("api", "readers"), help="run only one of the two campaigns")
+    ap.add_argument("--only", choices=PARTS, help="run only one of the four campaigns")
     ap.add_argument(
         "--json",
         type=Path,
@@ -62,7 +71,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parse_args(argv)
     from tests.fuzz.sandbox import Sandbox
 
-    if args.only != "readers":
+    if args.only in (None, "api"):
         from tests.fuzz import api  # makes the API campaign's scratch folder
 
         all_packages = api.PACKAGES
@@ -76,7 +85,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    api_budget = {"api": args.budget, "readers": 0.0}.get(args.only or "", args.budget * API_SHARE)
+    shares = {"api": API_SHARE, "flags": FLAGS_SHARE, "faults": FAULTS_SHARE}
+    budget = {p: (args.budget if args.only == p else 0.0) for p in PARTS}
+    if args.only is None:
+        budget.update({p: args.budget * share for p, share in shares.items()})
     t0 = time.monotonic()
 
     def log(line: str) -> None:
@@ -85,14 +97,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     tallies: list[Tally] = []
     skipped: dict[str, str] = {}
     broken: list[str] = []
+    disk = ""  # how the faults made a full disk: "tmpfs" or "rlimit"
     with Sandbox(timeout=args.timeout, memory_mb=args.memory_mb) as box:
-        if args.only != "readers":
-            log(f"API campaign: {api_budget:.0f} s over {len(packages)} packages")
+        if args.only in (None, "api"):
+            log(f"API campaign: {budget['api']:.0f} s over {len(packages)} packages")
             api_tallies, skipped, broken = api.run_api_campaign(
-                api_budget, args.seed, box, packages=packages, log=log
+                budget["api"], args.seed, box, packages=packages, log=log
             )
             tallies += api_tallies
-        if args.only != "api":
+        if args.only in (None, "flags"):
+            from tests.fuzz.cli import run_flags_campaign
+
+            log(f"flags campaign: {budget['flags']:.0f} s")
+            flag_tallies, flags_broken = run_flags_campaign(
+                budget["flags"], args.seed, box, log=log
+            )
+            tallies += flag_tallies
+            broken += flags_broken
+        if args.only in (None, "faults"):
+            from tests.fuzz.faults import disk_kind, run_faults_campaign
+
+            disk = disk_kind()
+            log(f"faults campaign: {budget['faults']:.0f} s (full disk: {disk})")
+            tallies += run_faults_campaign(budget["faults"], args.seed, log=log)
+        if args.only in (None, "readers"):
             from tests.fuzz.readers import run_readers_campaign
 
             left = args.budget - (time.monotonic() - t0)
@@ -122,6 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         only=args.only or "all",
         skipped=skipped,
         broken=broken,
+        full_disk=disk,
     )
     total = totals(tallies)
     print(

@@ -56,6 +56,7 @@ from tests.fuzz.strategies import Build, Layout, Recipe, describe, materialize, 
 
 __all__ = [
     "PACKAGES",
+    "PINNED",
     "SKIP",
     "VALID",
     "Fixture",
@@ -63,6 +64,7 @@ __all__ = [
     "build_plans",
     "draw_examples",
     "invoke",
+    "make_fixtures",
     "plan_seed",
     "preload",
     "role_of",
@@ -1077,7 +1079,10 @@ VALID: dict[str, dict[str, Any]] = {
         "device": "cpu",
     },
     "nn.classification.run.load_data": {"data": Fixture("images"), "size": (16, 16)},
-    "nn.classification.run.load_run": {"checkpoint": Fixture("run/checkpoint.pt"), "device": "cpu"},
+    "nn.classification.saved.load_run": {
+        "checkpoint": Fixture("run/checkpoint.pt"),
+        "device": "cpu",
+    },
     "nn.classification.run.predict": {
         "checkpoint": Fixture("run/checkpoint.pt"),
         "image_paths": [Fixture("image.png")],
@@ -1787,12 +1792,25 @@ def role_of(name: str, value: Any, annotation: Any = None) -> str:
         ``"image"`` (2-D or 3-D arrays at least 8x8), ``"points"`` (``(N, 2..4)``
         arrays, N >= 5), ``"array"`` (other arrays: matrices, vectors), ``"scalar"``,
         ``"flag"``, ``"choice"`` (a string), ``"tuple"`` (up to 4 numbers), ``"sequence"``,
-        ``"path"``, ``"cloud"``, ``"object"``, or ``"fixed"`` (callables: not attacked).
+        ``"path"``, ``"cloud"``, ``"tensor"`` (a torch tensor), ``"tensors"`` (a list of
+        them), ``"mesh"``, ``"object"``, or ``"fixed"`` (callables: not attacked).
     """
     if isinstance(value, Fixture):
         return "path"
     if isinstance(value, Build):
+        if value.target in _TENSOR_TARGETS:
+            return "tensor"
+        if value.target == "tests.fuzz.api:detector_value" and value.args == ("images",):
+            return "tensors"
+        if value.target.endswith(":TriangleMesh"):
+            return "mesh"
         return "cloud" if value.target.endswith(":PointCloud") else "object"
+    if (
+        isinstance(value, list)
+        and value
+        and all(isinstance(v, Build) and v.target in _TENSOR_TARGETS for v in value)
+    ):
+        return "tensors"
     if isinstance(value, str) and (
         value.startswith(str(WORKDIR)) or name in ("path", "out", "out_dir")
     ):
@@ -1878,6 +1896,19 @@ def strategy_for(role: str, like: Any) -> st.SearchStrategy[Any]:
         return hs.hostile_paths(str(OUT_DIR), like=like)
     if role == "cloud":
         return hs.hostile_clouds(like=like)
+    if role == "tensor":
+        values, dtype = tensor_like(like)
+        return hs.hostile_tensors(like=values, dtype=dtype)
+    if role == "tensors":
+        items = _tensor_items(like)
+        values, dtype = tensor_like(items[0])
+        return hs.hostile_sequences(like=items, item=hs.hostile_tensors(like=values, dtype=dtype))
+    if role == "mesh":
+        v, f = (*like.args, None, None)[:2] if isinstance(like, Build) else (None, None)
+        return hs.hostile_meshes(
+            vertices=v.array if isinstance(v, Layout) else v,
+            faces=f.array if isinstance(f, Layout) else f,
+        )
     if role == "frame":
         return st.one_of(hs.hostile_objects(), st.builds(_hostile_frame, hs.hostile_images()))
     if role == "frames":
@@ -1886,6 +1917,43 @@ def strategy_for(role: str, like: Any) -> st.SearchStrategy[Any]:
             st.builds(lambda f: [f], st.builds(_hostile_frame, hs.hostile_images())),
         )
     return hs.hostile_objects(like)
+
+
+#: the recipes of valid tensors (their role is ``"tensor"``)
+_TENSOR_TARGETS = frozenset({"tests.fuzz.api:torch_tensor", "tests.fuzz.api:torch_image"})
+
+
+def tensor_like(value: Any) -> tuple[np.ndarray, str]:
+    """The values (float64) and dtype of a valid tensor recipe, made without torch.
+
+    Parameters
+    ----------
+    value : Build
+        A :func:`torch_tensor` or :func:`torch_image` recipe.
+
+    Returns
+    -------
+    values : numpy.ndarray
+    dtype : str
+    """
+    if isinstance(value, Build) and value.target == "tests.fuzz.api:torch_tensor":
+        dtype = value.args[1] if len(value.args) > 1 else "float32"
+        return np.asarray(value.args[0], np.float64), str(dtype)
+    if isinstance(value, Build) and value.target == "tests.fuzz.api:torch_image":
+        shape = tuple(int(n) for n in value.args)
+        return np.random.default_rng(0).uniform(0, 1, shape), "float32"
+    return np.array([[0.0, 0, 4, 4], [1, 1, 5, 6], [2, 0, 7, 3]]), "float32"
+
+
+def _tensor_items(value: Any) -> list[Any]:
+    """The items of a valid list of tensors (a list of recipes, or the detectors' two
+    images)."""
+    if isinstance(value, list):
+        return value
+    return [
+        _b("tests.fuzz.api:torch_image", 3, 16, 16),
+        _b("tests.fuzz.api:torch_image", 3, 16, 24),
+    ]
 
 
 def _hostile_frame(image: Any) -> Build:
@@ -2239,8 +2307,10 @@ def run_plan(
     *,
     baseline: bool = True,
     confirm_timeout: float | None = None,
+    pinned: bool = True,
 ) -> PlanRun:
-    """Run the valid call of ``plan`` and ``n`` hostile inputs in ``sandbox``.
+    """Run the valid call of ``plan``, its :data:`PINNED` inputs and ``n`` hostile
+    inputs in ``sandbox``.
 
     A call over the sandbox's time limit is run once more with ``confirm_timeout``
     seconds (when given) and counted as a hang only if it runs over again: the first
@@ -2260,6 +2330,8 @@ def run_plan(
         in the tally).
     confirm_timeout : float, optional
         The limit of the second try of a call that hung; None: no second try.
+    pinned : bool
+        Also run the plan's :data:`PINNED` inputs (before the drawn ones; counted).
 
     Returns
     -------
@@ -2268,7 +2340,8 @@ def run_plan(
     base = _run(sandbox, functools.partial(invoke, plan), confirm_timeout) if baseline else None
     tally = Tally(plan.name, plan.package)
     run = PlanRun(plan, base, tally)
-    for param, value in draw_examples(plan, n, seed_):
+    examples = list(PINNED.get(plan.name, ())) if pinned else []
+    for param, value in [*examples, *draw_examples(plan, n, seed_)]:
         text = describe(value)
         outcome = _run(sandbox, functools.partial(invoke, plan, param, value), confirm_timeout)
         tally.add(outcome, param, text)
@@ -2281,6 +2354,46 @@ def _run(sandbox: Any, call: Any, confirm_timeout: float | None) -> Any:
     if outcome.kind == "hang" and confirm_timeout:
         outcome = sandbox.run(call, timeout=confirm_timeout)
     return outcome
+
+
+def _fixtures_in(value: Any) -> Iterator[Fixture]:
+    if isinstance(value, Fixture):
+        yield value
+    elif isinstance(value, Build):
+        for v in (*value.args, *(v for _, v in value.kwargs)):
+            yield from _fixtures_in(v)
+    elif isinstance(value, (list, tuple)):
+        for v in value:
+            yield from _fixtures_in(v)
+    elif isinstance(value, dict):
+        for v in value.values():
+            yield from _fixtures_in(v)
+
+
+def make_fixtures(plans: list[Plan]) -> list[str]:
+    """Make every fixture file the plans' valid calls read, here (in the parent), once.
+
+    A fixture is otherwise made on first use in the worker, inside a timed call: the
+    tiny training run behind ``run/checkpoint.pt`` takes a minute on a loaded machine
+    under tracemalloc, over the time limit, and its plans were then reported as valid
+    calls that hang. The sandbox's workers are forked from a clean fork server, so what
+    this process imports (torch) does not reach them.
+
+    Parameters
+    ----------
+    plans : list of Plan
+
+    Returns
+    -------
+    list of str
+        The fixtures' paths.
+    """
+    names = {}
+    for plan in plans:
+        for value in (plan.args, plan.kwargs, plan.init, plan.pre):
+            for fx in _fixtures_in(value):
+                names.setdefault(fx.name, fx)
+    return [fx.make() for _, fx in sorted(names.items())]
 
 
 def plan_seed(seed_: int, name: str, round_: int) -> int:
@@ -2304,8 +2417,9 @@ def run_api_campaign(
     """Fuzz every plan round-robin until ``budget_s`` seconds have passed.
 
     The valid call of every plan runs first. Then each round gives every plan ``batch``
-    new inputs (seeded by round; 2 in the first round), so that a short budget still
-    touches every callable and a long one goes deeper everywhere.
+    new inputs (seeded by round; 2 in the first round, with the plan's :data:`PINNED`
+    inputs), so that a short budget still touches every callable and a long one goes
+    deeper everywhere.
 
     Parameters
     ----------
@@ -2338,6 +2452,8 @@ def run_api_campaign(
     """
     start = time.monotonic()
     plans, skipped = build_plans(packages)
+    make_fixtures(plans)
+    start = time.monotonic()  # the budget is for the calls
     tallies = {p.name: Tally(p.name, p.package) for p in plans}
     broken: list[str] = []
     active = []
@@ -2365,6 +2481,7 @@ def run_api_campaign(
                 plan_seed(seed_, p.name, round_),
                 baseline=False,
                 confirm_timeout=confirm,
+                pinned=round_ == 0,
             )
             tallies[p.name].merge(r.tally)
         round_ += 1
@@ -3673,11 +3790,10 @@ VALID.update({"viz.disparity_picture": {"disparity": _MAP, "max_disparity": 8}})
 # nn.classification.run.predict_loaded (issue 31: batch nn-predict loads a run once per worker)
 def loaded_run(part: int) -> Any:
     """``load_run``'s model (0) or architecture (1) of a tiny digits run."""
-    from robopercept.nn.classification.run import load_run
+    from robopercept.nn.classification.saved import load_run
 
-    run = Path(tempfile.mkdtemp()) / "run"
-    _write_run(run)
-    return load_run(run / "checkpoint.pt", device="cpu")[part]
+    # the shared run fixture (made once), not a new training run per call
+    return load_run(Fixture("run/checkpoint.pt").make(), device="cpu")[part]
 
 
 VALID.update(
@@ -3906,3 +4022,52 @@ VALID.update(
 METHODS["nn.predict_class.ClassPrediction"] = ("record", "top", "picture", "write")
 METHODS["nn.predict_class.ClassPredictor"] = ("predict",)
 VALID["nn.segmentation.run.padded_class_maps"] = {"ds": _b("tests.fuzz.api:segmentation_val")}
+
+
+# -- issue 47: hostile inputs that every run tries, whatever the draw ---------------------
+# Values a random draw reaches rarely, from the campaign that found R50-R53: boxes with
+# corners at 1e31 (int64 overflow once scaled to feature-map cells), a stride of 0 or
+# None, a batch of no image, a bare number as a size. Each is run before the drawn
+# inputs of its plan (in `make test` and in the first round of `make fuzz`).
+_HUGE_ROI = hs.TensorOf(np.array([[0.0, 0.0, 0.0, 1e31, 1e31]]), "float64")
+_NEG_ROI = hs.TensorOf(np.array([[0.0, -1e31, -1e31, 4.0, 4.0]]), "float64")
+_HUGE_BOXES = hs.TensorOf(np.array([[0.0, 0.0, 1e31, 1e31], [1.0, 1.0, 5.0, 6.0]]), "float64")
+_EMPTY_FEATURES = _b("tests.fuzz.api:torch_image", 0, 2, 8, 8)
+PINNED: dict[str, tuple[tuple[str, Any], ...]] = {
+    "nn.ops.roi.roi_align": (  # R50
+        ("boxes", _HUGE_ROI),
+        ("boxes", _NEG_ROI),
+        ("input", _EMPTY_FEATURES),
+    ),
+    "nn.ops.roi.RoIAlign.forward": (("boxes", _HUGE_ROI),),  # R50
+    "nn.ops.roi.roi_pool": (("boxes", _HUGE_ROI), ("boxes", _NEG_ROI)),
+    "nn.ops.roi.RoIPool.forward": (("boxes", _HUGE_ROI),),
+    "nn.ops.roi.paste_masks": (("boxes", _HUGE_BOXES),),
+    "nn.ops.nms.nms": (("boxes", _HUGE_BOXES),),
+    "nn.ops.nms.batched_nms": (("boxes", _HUGE_BOXES),),
+    "nn.ops.boxes.box_iou": (("boxes1", _HUGE_BOXES),),
+    "nn.ops.boxes.generalized_box_iou": (("boxes1", _HUGE_BOXES),),
+    "nn.ops.boxes.box_area": (("boxes", _HUGE_BOXES),),
+    "nn.ops.anchors.BoxCoder.decode": (("boxes", _HUGE_BOXES),),
+    "nn.coco.rle.rle_from_counts": (("size", 7), ("size", None)),  # R51
+    "nn.ops.heatmaps.gaussian_heatmaps": (("stride", 0), ("stride", None)),  # R52
+    "nn.ops.heatmaps.decode_heatmaps": (  # R53
+        ("heatmaps", Layout(np.zeros((0, 2, 4, 5)))),
+        ("heatmaps", Layout(np.zeros((1, 0, 4, 5)))),
+        ("stride", 0),
+    ),
+    "nn.pose.inference.predict_heatmaps": (("images", Layout(np.zeros((0, 32, 32, 3)))),),
+}
+
+
+def state_dict_of(model: Any) -> dict[str, Any]:
+    """The state dict of a built model (check_state_dict's valid weights)."""
+    return dict(model.state_dict())
+
+
+# issue 47 (R39-R41): the one validation of every loader of weights
+VALID["nn.train.checkpoint.check_state_dict"] = {
+    "model": TINY_NET,
+    "weights": _b("tests.fuzz.api:state_dict_of", TINY_NET),
+    "where": "checkpoint.pt",
+}

@@ -25,6 +25,18 @@ on one copy and restored after each call, not copied per mutant); for a TUM fold
 of its files (``camera.json``, the lists, ``planes.csv``, an image) is mutated, removed,
 or a listed name made 300 characters long.
 
+The readers of issue 47 (:mod:`tests.fuzz.loaders` holds their targets, seeds and
+format-aware mutations) add: COCO, labelme, Pascal-VOC, MPII and imgaug annotations,
+COCO results, OpenCV ``FileStorage`` XML/YAML/JSON, ROS transforms, a TUM
+``camera.json``, the RGB-D importer's input folders, ModelNet folders, the shipped
+network checkpoints, a classification run folder and a batch ``OUT`` folder; mutations
+of a parsed JSON node, of XML (deep nesting, entity bombs) and YAML (alias bombs,
+``!!python`` tags), file names sent outside the dataset, and checkpoints rewritten
+field by field. A ``"folder"`` reader mutates one member file of a copy of its seed
+folder per mutant (or removes it); ``beside`` readers write the mutant next to the
+files it names; ``make`` prepares a seed in a fresh interpreter (a training run, a Dask
+batch).
+
 Each call runs in a :class:`~tests.fuzz.sandbox.Sandbox`. A call is bad when it ends
 ``untyped``, ``crash``, ``hang`` or ``memory`` (``MemoryError`` under the worker's
 ``RLIMIT_AS``), or when its traced peak allocation exceeds the bound of issue 25::
@@ -33,9 +45,10 @@ Each call runs in a :class:`~tests.fuzz.sandbox.Sandbox`. A call is bad when it 
             + 8 MiB
 
 The last term is a floor for what any call allocates whatever its input (parser
-objects, Python frames, a codec's tables); the middle term is "the decoded image's real
-size", taken from the unmutated seed so that a header that invents rows is caught.
-Such a call is counted as ``memory``.
+objects, Python frames, a codec's tables; a reader whose call also evaluates, trains or
+draws says a larger one); the middle term is "the decoded image's real size", taken
+from the unmutated seed with the same keyword arguments, so that a header that invents
+rows is caught. Such a call is counted as ``memory``.
 """
 
 from __future__ import annotations
@@ -44,9 +57,12 @@ import contextlib
 import dataclasses
 import io
 import json
+import os
 import re
 import shutil
 import struct
+import subprocess
+import sys
 import tempfile
 import time
 import zlib
@@ -57,6 +73,7 @@ from typing import Any
 
 import numpy as np
 
+from tests.fuzz import loaders as lf
 from tests.fuzz.report import Tally
 from tests.fuzz.sandbox import Outcome, Sandbox
 
@@ -75,6 +92,8 @@ __all__ = [
 
 #: the real data folder, ../shared/data from the repository root (as tests/conftest.py)
 DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+#: the repository root
+ROOT = Path(__file__).resolve().parents[2]
 #: the project's bundled files (the HOG face model)
 PACKAGE_DATA = Path(__file__).resolve().parents[2] / "src" / "robopercept" / "data"
 #: allocation every call may make whatever its input (see the module docstring)
@@ -164,7 +183,7 @@ def text_region(data: bytes, fmt: str) -> int:
     """End of the part of ``data`` that is text: a PCD header through its ``DATA``
     line, a PLY header through ``end_header``, a PNM header (magic, width, height,
     maxval); the whole file for text formats; 0 for binary formats."""
-    if fmt in ("text", "json", "yaml", "mot"):
+    if fmt in ("text", "json", "yaml", "mot", "xml", "list"):
         return len(data)
     if fmt == "pcd":
         m = re.search(rb"^DATA[^\n]*\n", data[:65536], re.M)
@@ -592,16 +611,32 @@ class Reader:
         What the sandbox calls with the mutant's path (``"module:function"``).
     fmt : str
         Format family for the text/header regions (``"pcd"``, ``"ply"``, ``"png"``,
-        ``"text"``, ...; ``"tum"`` for folders, ``"bag"`` for in-place patching).
+        ``"text"``, ``"json"``, ``"xml"``, ``"pt"`` ...; ``"auto"``: told by each seed's
+        suffix; ``"tum"`` and ``"folder"`` for folders, ``"bag"`` for in-place
+        patching).
     seeds : callable
         ``seeds(workdir) -> list[Path]``: the seed files (or folders); may write derived
         seeds into ``workdir``; an empty list skips the reader (no data).
     mutations : tuple of callable
-        The byte mutations (unused for ``"tum"`` and ``"bag"``).
+        The byte mutations (unused for ``"tum"``, ``"folder"``, ``"auto"`` and
+        ``"bag"``).
     kwargs : tuple of dict
         Keyword arguments cycled over the mutants (``read_image``'s ``mode``).
     timeout : float
         Seconds per call before it counts as a hang.
+    members : tuple of str
+        ``"folder"``: patterns (``fnmatch``, relative POSIX paths) of the files that are
+        mutated or removed, one per mutant in turn; the others are copied as they are.
+    beside : bool
+        Write each file mutant into its seed's folder (a copy in ``workdir``), where the
+        files it names lie (a COCO file's images, a results file's ground truth).
+    make : callable, optional
+        ``make(workdir)``, a module-level function run once in a fresh interpreter
+        before ``seeds`` (a training run, a Dask batch: kept out of the fuzzing
+        process).
+    floor : int
+        The bound's floor in bytes (:func:`judge`): what any call of the target
+        allocates whatever its input.
     """
 
     name: str
@@ -611,6 +646,10 @@ class Reader:
     mutations: tuple[Mutation, ...] = BINARY
     kwargs: tuple[dict[str, Any], ...] = ({},)
     timeout: float = 10.0
+    members: tuple[str, ...] = ()
+    beside: bool = False
+    make: Callable[[str], Any] | None = None
+    floor: int = FLOOR_BYTES
 
 
 def _real(*parts: str) -> list[Path]:
@@ -898,12 +937,21 @@ READERS: tuple[Reader, ...] = (
     Reader("realsense-bag", read_realsense, "bag", _bag_seeds, timeout=15.0),
     Reader("realsense-db3", read_realsense, "db3", lambda work: [], BINARY, timeout=15.0),
     Reader("flo", "robopercept.motion.flow_truth:read_flo", "flo", _flo_seeds, BINARY),
+    # ---- issue 47: annotations, calibration and camera files, folders, checkpoints, run
+    # folders and batch manifests (tests.fuzz.loaders.READER_SPECS)
+    *(
+        Reader(**{**spec, "mutations": lf.mutations(spec.get("mutations", "binary"))})
+        for spec in lf.READER_SPECS
+    ),
 )
 
 
 def _fmt_of(path: Path, reader: Reader) -> str:
-    """Format family of one file (a TUM member, an image by its extension)."""
+    """Format family of one file (a TUM or folder member, an image by its extension, a
+    file of an ``"auto"`` reader by its suffix)."""
     suffix = path.suffix.lower()
+    if reader.fmt in ("folder", "auto"):
+        return lf.member_format(path.name)
     if reader.fmt not in ("image", "tum"):
         return reader.fmt
     return {
@@ -917,6 +965,8 @@ def _fmt_of(path: Path, reader: Reader) -> str:
 
 
 def _mutations_for(fmt: str, reader: Reader) -> tuple[Mutation, ...]:
+    if reader.fmt in ("folder", "auto"):
+        return lf.mutations(fmt)
     if reader.fmt == "tum":
         return PNG if fmt == "png" else TEXT
     if fmt == "pnm":
@@ -979,10 +1029,12 @@ def _tree_size(path: Path) -> int:
     return path.stat().st_size if path.exists() else 0
 
 
-def judge(outcome: Outcome, size: int, decoded: int) -> tuple[Outcome, float]:
+def judge(
+    outcome: Outcome, size: int, decoded: int, floor: int = FLOOR_BYTES
+) -> tuple[Outcome, float]:
     """Apply the allocation bound of issue 25 to one reader call.
 
-    ``bound = 4 * size + decoded + FLOOR_BYTES``; an ``ok`` or ``typed`` outcome whose
+    ``bound = 4 * size + decoded + floor``; an ``ok`` or ``typed`` outcome whose
     traced peak exceeds it becomes ``kind="memory"``, ``error="over bound"``.
 
     Parameters
@@ -993,6 +1045,9 @@ def judge(outcome: Outcome, size: int, decoded: int) -> tuple[Outcome, float]:
         Bytes of the mutated file (of all files of a mutated folder).
     decoded : int
         Bytes the reader returns for the unmutated seed.
+    floor : int
+        What any call allocates whatever its input (:data:`FLOOR_BYTES` unless the
+        reader says more).
 
     Returns
     -------
@@ -1001,11 +1056,11 @@ def judge(outcome: Outcome, size: int, decoded: int) -> tuple[Outcome, float]:
     float
         The bound, MiB.
     """
-    bound = 4 * size + decoded + FLOOR_BYTES
+    bound = 4 * size + decoded + floor
     if outcome.kind in ("ok", "typed") and outcome.peak_mb * 2**20 > bound:
         msg = (
             f"peak {outcome.peak_mb:.1f} MiB > bound {bound / 2**20:.1f} MiB (4 x "
-            f"{size} B file + {decoded} B decoded + 8 MiB); was {outcome.kind} "
+            f"{size} B file + {decoded} B decoded + {floor / 2**20:g} MiB); was {outcome.kind} "
             f"{outcome.error} {outcome.message}"
         )
         outcome = dataclasses.replace(outcome, kind="memory", error="over bound", message=msg[:300])
@@ -1045,20 +1100,68 @@ class _Prepared:
     def __init__(self, reader: Reader, sandbox: Sandbox, work: Path) -> None:
         self.reader = reader
         self.work = work
-        self.seeds: list[tuple[Path, int]] = []
+        self.seeds: list[tuple[Path, list[int]]] = []
         self.failures: list[tuple[str, Outcome]] = []
+        if reader.make is not None:
+            self._make(reader.make, work)
         paths = reader.seeds(work)
         if reader.fmt == "db3":
             paths = self._db3(sandbox, work)
-        # every new worker reads the seeds once before its first measured call, so that
-        # imports and numba's kernel loading are not counted as a mutant's allocation
-        sandbox.warm([(reader.target, (str(p),), reader.kwargs[0]) for p in paths])
+        # every new worker reads the seeds once with each keyword set (untraced: torch's
+        # import took a minute under tracemalloc) before its first measured call, so
+        # that imports and numba's kernel loading are not counted as a mutant's time or
+        # allocation; the first time with a long limit (a kernel whose cache is stale
+        # compiles: 10 s and more)
+        for kwargs in reader.kwargs if paths else ():
+            first = (reader.target, (str(paths[0]),), kwargs)
+            sandbox.run(lf.untraced, first, timeout=300.0)
+        sandbox.warm(
+            [
+                (lf.untraced, (reader.target, (str(p),), kwargs), {})
+                for p in paths
+                for kwargs in reader.kwargs
+            ]
+        )
         for p in paths:
-            out = sandbox.run(reader.target, (str(p),), reader.kwargs[0], timeout=60.0)
-            if out.kind == "ok":
-                self.seeds.append((p, out.result_bytes))
+            decoded = []  # the bytes returned for the seed, per keyword set
+            for k, kwargs in enumerate(reader.kwargs):
+                out = sandbox.run(reader.target, (str(p),), kwargs, timeout=60.0)
+                if out.kind != "ok" and k == 0:
+                    self.failures.append((str(p), out))
+                    break
+                decoded.append(out.result_bytes if out.kind == "ok" else decoded[0])
             else:
-                self.failures.append((str(p), out))
+                self.seeds.append((p, decoded))
+
+    def _make(self, make: Callable[[str], Any], work: Path) -> None:
+        """Run ``make(work)`` in a fresh interpreter: a training run or a Dask cluster
+        (whose nanny processes a daemonic sandbox worker may not start) kept out of the
+        fuzzing process."""
+        code = f"import sys; from {make.__module__} import {make.__name__} as f; f(sys.argv[1])"
+        env = {
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+        }
+        t0 = time.perf_counter()
+        try:
+            done = subprocess.run(
+                [sys.executable, "-c", code, str(work)],
+                cwd=ROOT,
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
+        except subprocess.TimeoutExpired:
+            out = Outcome("hang", "timeout", "no end within 600 s", time.perf_counter() - t0, 0.0)
+            self.failures.append((f"{make.__name__}({work})", out))
+            return
+        if done.returncode:
+            tail = (done.stderr.strip().splitlines() or [""])[-1]
+            out = Outcome(
+                "crash", f"exit {done.returncode}", tail[:300], time.perf_counter() - t0, 0.0
+            )
+            self.failures.append((f"{make.__name__}({work})", out))
 
     def _db3(self, sandbox: Sandbox, work: Path) -> list[Path]:
         from robopercept.imaging import read_image
@@ -1073,13 +1176,46 @@ class _Prepared:
         return [path] if out.kind == "ok" and path.is_file() else []
 
 
+def _folder_mutant(
+    prep: _Prepared, path: Path, rng: np.random.Generator, i: int, campaign: bool
+) -> tuple[Path, str, str]:
+    """A copy of the seed folder ``path`` with one member (of ``reader.members``, in
+    turn) mutated by the mutations of its format, or removed: ``(folder, mutation,
+    detail)``."""
+    reader = prep.reader
+    mutant = prep.work / "mutants" / f"{path.name}_{i}"
+    shutil.rmtree(mutant, ignore_errors=True)
+    shutil.copytree(path, mutant, copy_function=shutil.copyfile)
+    members = sorted(
+        p.relative_to(mutant).as_posix()
+        for p in mutant.rglob("*")
+        if p.is_file() and lf.matches(p.relative_to(mutant).as_posix(), reader.members)
+    )
+    if not members:
+        return mutant, "none", "no member to mutate"
+    member = members[i % len(members)]
+    fmt = _fmt_of(Path(member), reader)
+    muts = _mutations_for(fmt, reader)
+    choice = (i // len(members)) % (len(muts) + 1)
+    file = mutant / member
+    if choice == len(muts):
+        file.unlink()
+        return mutant, f"{member}:removed", "file removed"
+    data, names, detail = _mutate(
+        file.read_bytes(), rng, muts, choice, fmt, _stack(i, len(muts), rng, campaign)
+    )
+    file.write_bytes(data)
+    return mutant, f"{member}:{names}", detail
+
+
 def _one(prep: _Prepared, sandbox: Sandbox, i: int, seed: int, campaign: bool) -> Mutant:
     """Make mutant ``i``, run it, restore whatever was patched."""
     reader = prep.reader
     rng = np.random.default_rng([seed, zlib.crc32(reader.name.encode()), i])
-    n_mut = 12 if reader.fmt in ("bag", "tum") else len(reader.mutations)
-    path, decoded = prep.seeds[(i + i // n_mut) % len(prep.seeds)]
+    n_mut = 12 if reader.fmt in ("bag", "tum", "folder") else len(reader.mutations)
+    path, decoded_per_kwargs = prep.seeds[(i + i // n_mut) % len(prep.seeds)]
     kwargs = reader.kwargs[i % len(reader.kwargs)]
+    decoded = decoded_per_kwargs[i % len(reader.kwargs)]
     target_dir = prep.work / "mutants"
     target_dir.mkdir(exist_ok=True)
     if reader.fmt == "bag":
@@ -1121,19 +1257,27 @@ def _one(prep: _Prepared, sandbox: Sandbox, i: int, seed: int, campaign: bool) -
         size = _tree_size(mutant)
         out = sandbox.run(reader.target, (str(mutant),), kwargs, timeout=reader.timeout)
         shutil.rmtree(mutant, ignore_errors=True)
+    elif reader.fmt == "folder":
+        mutant, mutation, detail = _folder_mutant(prep, path, rng, i, campaign)
+        size = _tree_size(mutant)
+        out = sandbox.run(reader.target, (str(mutant),), kwargs, timeout=reader.timeout)
+        shutil.rmtree(mutant, ignore_errors=True)
     else:
         fmt = _fmt_of(path, reader)
         muts = _mutations_for(fmt, reader)
         data, mutation, detail = _mutate(
             path.read_bytes(), rng, muts, i, fmt, _stack(i, len(muts), rng, campaign)
         )
-        mutant = target_dir / f"m{i % 4}{path.suffix}"
+        folder = path.parent if reader.beside else target_dir
+        mutant = folder / f"fuzz_m{i % 4}{path.suffix}"
         mutant.write_bytes(data)
         size = len(data)
         out = sandbox.run(reader.target, (str(mutant),), kwargs, timeout=reader.timeout)
+        if reader.beside:
+            mutant.unlink(missing_ok=True)
     if kwargs:
         detail += f"; {kwargs}"
-    out, bound = judge(out, size, decoded)
+    out, bound = judge(out, size, decoded, reader.floor)
     return Mutant(reader.name, path.name, i, mutation, detail, out, bound)
 
 
@@ -1146,6 +1290,7 @@ def fuzz_reader(
     budget_s: float | None = None,
     workdir: str | Path | None = None,
     campaign: bool = False,
+    at_least: int = 0,
 ) -> ReaderRun:
     """Run mutants ``0 .. n-1`` of ``reader`` (or as many as ``budget_s`` allows).
 
@@ -1164,6 +1309,9 @@ def fuzz_reader(
         Where seeds and mutants are written (a temporary folder when None).
     campaign : bool
         Stack 2-3 mutations on some inputs past the first ``4 M`` (long runs).
+    at_least : int
+        Run this many mutants even when ``budget_s`` is spent (by a slow preparation:
+        a training run, a cluster), so that every reader of a campaign is tried.
 
     Returns
     -------
@@ -1189,7 +1337,8 @@ def fuzz_reader(
         i = 0
         try:
             while prep.seeds and (n is None or i < n):
-                if budget_s is not None and time.perf_counter() - t0 > budget_s:
+                spent = budget_s is not None and time.perf_counter() - t0 > budget_s
+                if spent and i >= at_least:
                     break
                 m = _one(prep, sandbox, i, seed, campaign)
                 run.mutants.append(m)
@@ -1201,11 +1350,17 @@ def fuzz_reader(
     return run
 
 
+#: mutants every reader gets in a campaign, even past its share of the budget
+CAMPAIGN_AT_LEAST = 8
+
+
 def run_readers_campaign(
     budget_s: float, seed: int, sandbox: Sandbox, readers: Sequence[Reader] = READERS
 ) -> list[Tally]:
     """The readers' part of ``python -m tests.fuzz``: each reader gets an equal share of
-    ``budget_s`` (what a reader without data leaves goes to the next ones).
+    ``budget_s`` (what a reader without data leaves goes to the next ones), and at least
+    :data:`CAMPAIGN_AT_LEAST` mutants whatever its seeds took to prepare (a short budget
+    then runs over: every reader is tried).
 
     Parameters
     ----------
@@ -1230,7 +1385,13 @@ def run_readers_campaign(
             left = budget_s - (time.perf_counter() - t0)
             share = max(left / (len(readers) - k), 0.0)
             run = fuzz_reader(
-                reader, sandbox, seed=seed, budget_s=share, workdir=work, campaign=True
+                reader,
+                sandbox,
+                seed=seed,
+                budget_s=share,
+                workdir=work,
+                campaign=True,
+                at_least=CAMPAIGN_AT_LEAST,
             )
             shutil.rmtree(Path(work) / reader.name, ignore_errors=True)
             if run.tally is not None and (run.tally.inputs or run.seed_failures):

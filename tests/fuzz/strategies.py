@@ -23,7 +23,15 @@ whose own fuzzers use the same families):
   of lists;
 * scalars: nan, inf, -inf, -1, 0, 1e-162, 2**40, 2**63, True, None, ``"3"``,
   ``[1, 2]``, ``np.float32(2)``, ``np.int64(3)``, a complex number -- mixed with the
-  valid value and its neighbours, so valid-but-extreme combinations are tried too.
+  valid value and its neighbours, so valid-but-extreme combinations are tried too;
+* tensors (issue 47): the valid tensor with an empty leading dimension (a batch of 0),
+  NaN, +-inf, huge finite values (boxes with corners at 1e31, beyond what int64 holds
+  once scaled), another dtype (``int64``, ``bool``, ``float16``, ``bfloat16``,
+  ``float64``, ``uint8``), one dimension more or fewer, a non-contiguous or expanded
+  view, a tensor that requires grad, or a NumPy array, a list or None instead -- made
+  in the worker by :class:`TensorOf` (torch is imported there only);
+* meshes: a ``TriangleMesh`` built in the worker from hostile vertices or faces
+  (indices out of range or negative, float indices, no faces, NaN vertices).
 """
 
 from __future__ import annotations
@@ -40,19 +48,23 @@ __all__ = [
     "HOSTILE_SCALARS",
     "IMAGE_DTYPES",
     "LAYOUTS",
+    "TENSOR_DTYPES",
     "Build",
     "Layout",
     "Recipe",
+    "TensorOf",
     "hostile_arrays",
     "hostile_choices",
     "hostile_clouds",
     "hostile_flags",
     "hostile_images",
+    "hostile_meshes",
     "hostile_objects",
     "hostile_paths",
     "hostile_points",
     "hostile_scalars",
     "hostile_sequences",
+    "hostile_tensors",
     "hostile_tuples",
     "materialize",
 ]
@@ -195,6 +207,70 @@ class Build(Recipe):
     def __repr__(self) -> str:
         parts = [repr(a) for a in self.args] + [f"{k}={v!r}" for k, v in self.kwargs]
         return f"{self.target.rsplit(':', 1)[-1]}({', '.join(parts)})"
+
+
+#: the dtypes a tensor may come in (torch's names)
+TENSOR_DTYPES: tuple[str, ...] = (
+    "float32",
+    "float64",
+    "float16",
+    "bfloat16",
+    "int64",
+    "int32",
+    "uint8",
+    "bool",
+)
+
+#: the views a tensor may come as: as made, a non-contiguous view, an expanded view of
+#: its first row (zero strides), a leaf that requires grad
+TENSOR_LAYOUTS: tuple[str, ...] = ("c", "strided", "expand", "grad")
+
+
+@dataclass(frozen=True)
+class TensorOf(Recipe):
+    """A torch tensor made in the worker from an array (torch is imported there only).
+
+    Parameters
+    ----------
+    array : numpy.ndarray
+        The values (float64 for floating dtypes; NaN and inf are made 0 and the dtype's
+        extremes for the integer dtypes, as a user's cast would).
+    dtype : str
+        One of :data:`TENSOR_DTYPES`.
+    layout : str
+        One of :data:`TENSOR_LAYOUTS`.
+    """
+
+    array: np.ndarray
+    dtype: str = "float32"
+    layout: str = "c"
+
+    def make(self) -> Any:
+        """Return the tensor (called in the worker).
+
+        Returns
+        -------
+        torch.Tensor
+            Of :attr:`array`'s shape and values, in :attr:`dtype` and :attr:`layout`.
+        """
+        import torch
+
+        a = np.asarray(self.array)
+        if self.dtype == "bfloat16":
+            t = torch.from_numpy(_cast(a.astype(np.float64), "float32").copy()).to(torch.bfloat16)
+        else:
+            t = torch.from_numpy(_cast(a.astype(np.float64), self.dtype).copy())
+        if self.layout == "strided" and t.ndim >= 1:
+            t = t.repeat_interleave(2, dim=0)[::2]
+        elif self.layout == "expand" and t.ndim >= 1 and t.shape[0] > 0:
+            t = t[:1].expand(t.shape)
+        elif self.layout == "grad" and t.is_floating_point():
+            t = t.clone().requires_grad_(True)
+        return t
+
+    def __repr__(self) -> str:
+        inner = _describe(np.asarray(self.array, np.float64)).removeprefix("array(float64, ")
+        return f"tensor({self.dtype}, {inner}[{self.layout}]"
 
 
 def resolve(target: str) -> Any:
@@ -459,6 +535,171 @@ def hostile_clouds(draw: st.DrawFn, like: Any = None) -> Any:
     return Build("robopercept.pointcloud:PointCloud", (pts,))
 
 
+# --------------------------------------------------------------------------- tensors
+
+#: huge finite coordinates: beyond int64 once scaled (1e31: issue 47's R50), beyond the
+#: squared range of float32 (4.7e18), float32's largest (3e38), float64 only (1e300)
+HUGE_COORDINATES: tuple[float, ...] = (1e31, -1e31, 4.7e18, 3e38, 1e300)
+
+
+@st.composite
+def hostile_tensors(draw: st.DrawFn, like: Any = None, dtype: str = "float32") -> Any:
+    """Draw a hostile tensor argument (made in the worker, see :class:`TensorOf`).
+
+    Half of the draws keep the valid tensor's shape and change its values, dtype or
+    view, so that the attack reaches past the shape check.
+
+    Parameters
+    ----------
+    like : numpy.ndarray, optional
+        The values of the valid tensor (float64); default a ``(3, 4)`` array of boxes.
+    dtype : str
+        The valid tensor's dtype (one of :data:`TENSOR_DTYPES`).
+
+    Returns
+    -------
+    TensorOf or object
+        The valid values with NaN, +-inf or huge finite entries (boxes: every corner
+        scaled to one of :data:`HUGE_COORDINATES`, the batch-index column kept), an
+        empty leading dimension (a batch of 0) or an empty last one, another dtype, a
+        dimension more or fewer, a column more or fewer, a non-contiguous, expanded or
+        grad-requiring view; or a NumPy array, a list, None, a number where the tensor
+        goes.
+    """
+    base = (
+        np.asarray(like, np.float64)
+        if like is not None
+        else np.array([[0.0, 0, 4, 4], [1, 1, 5, 6], [2, 0, 7, 3]])
+    )
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    boxy = base.ndim == 2 and base.shape[-1] in (4, 5)
+    kind = draw(
+        st.sampled_from(
+            ["values", "values", "huge", "empty", "dtype", "dtype", "ndim", "cols", "view", "not"]
+        )
+    )
+    a, dt, layout = base.copy(), dtype, "c"
+    if kind == "values" and a.size:
+        how = draw(st.sampled_from(["nan", "inf", "-inf", "all_nan", "zeros", "negate", "swap"]))
+        flat = a.reshape(-1)
+        if how == "nan":
+            flat[rng.integers(0, flat.size)] = math.nan
+        elif how == "inf":
+            flat[rng.integers(0, flat.size)] = math.inf
+        elif how == "-inf":
+            flat[rng.integers(0, flat.size)] = -math.inf
+        elif how == "all_nan":
+            flat[:] = math.nan
+        elif how == "zeros":
+            flat[:] = 0.0
+        elif how == "negate":
+            flat *= -1.0
+        elif a.ndim >= 1 and a.shape[-1] >= 4:  # swap: corners out of order
+            a[..., [-4, -3, -2, -1]] = a[..., [-2, -1, -4, -3]]
+        if dt not in ("float32", "float64", "float16", "bfloat16"):
+            dt = "float32"  # NaN survives only in a floating dtype
+    elif kind == "huge":
+        big = draw(st.sampled_from(HUGE_COORDINATES))
+        dt = draw(st.sampled_from(["float64", "float64", "float32"]))
+        if boxy:  # corners kept in order: the far corner huge, or the near one
+            if big > 0:
+                a[:, -2:] = big
+            else:
+                a[:, -4:-2] = big
+            if draw(st.booleans()):  # one huge box among sane ones
+                a[1:] = base[1:]
+        elif a.size:
+            a.reshape(-1)[rng.integers(0, a.size)] = big
+    elif kind == "empty":
+        if a.ndim == 0:
+            a = np.zeros(0)
+        elif draw(st.booleans()) or a.ndim == 1:
+            a = np.zeros((0, *a.shape[1:]))
+        else:
+            a = np.zeros((*a.shape[:-1], 0))
+    elif kind == "dtype":
+        dt = draw(st.sampled_from([d for d in TENSOR_DTYPES if d != dtype]))
+    elif kind == "ndim":
+        pick = draw(st.sampled_from(["drop", "add", "scalar", "flat"]))
+        if pick == "drop" and a.ndim >= 1 and a.shape[0]:
+            a = a[0].copy()
+        elif pick == "add":
+            a = a[None].copy()
+        elif pick == "scalar":
+            a = np.asarray(a.reshape(-1)[0] if a.size else 1.0)
+        else:
+            a = a.reshape(-1).copy()
+    elif kind == "cols" and a.ndim >= 1:
+        if draw(st.booleans()) and a.shape[-1] > 1:
+            a = a[..., :-1].copy()
+        else:
+            a = np.concatenate([a, a[..., :1]], axis=-1)
+    elif kind == "view":
+        layout = draw(st.sampled_from(TENSOR_LAYOUTS[1:]))
+    elif kind == "not":
+        return draw(
+            st.sampled_from(
+                [Layout(base), base.tolist(), None, 3, "tensor", math.nan, [base.tolist()]]
+            )
+        )
+    return TensorOf(a, dt, layout)
+
+
+@st.composite
+def hostile_meshes(draw: st.DrawFn, vertices: Any = None, faces: Any = None) -> Any:
+    """Draw a hostile mesh argument: a ``TriangleMesh`` built in the worker from
+    hostile vertices or faces, or another object where the mesh goes.
+
+    Parameters
+    ----------
+    vertices : (V, 3) numpy.ndarray, optional
+        The valid mesh's vertices (default a tetrahedron).
+    faces : (F, 3) numpy.ndarray, optional
+        Its faces.
+
+    Returns
+    -------
+    Build or object
+        Faces with an index out of range (V, 2**40), negative, float indices, no
+        faces, a fourth column, or hostile vertices (NaN, 1e300, identical: zero
+        area); a point cloud, None or a list where the mesh goes.
+    """
+    v = (
+        np.asarray(vertices, np.float64)
+        if vertices is not None
+        else np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    )
+    f = (
+        np.asarray(faces, np.int64)
+        if faces is not None
+        else np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    )
+    target = "robopercept.pointcloud:TriangleMesh"
+    pick = draw(st.sampled_from(["faces", "faces", "vertices", "vertices", "zero", "other"]))
+    if pick == "faces":
+        how = draw(st.sampled_from(["range", "huge", "negative", "float", "empty", "cols"]))
+        bad = f.copy()
+        if how == "range":
+            bad[0, 0] = len(v)
+        elif how == "huge":
+            bad[0, 0] = 2**40
+        elif how == "negative":
+            bad[0, 0] = -1
+        elif how == "float":
+            return Build(target, (Layout(v), Layout(f.astype(np.float64) + 0.5)))
+        elif how == "empty":
+            bad = np.zeros((0, 3), np.int64)
+        else:
+            bad = np.concatenate([f, f[:, :1]], axis=1)
+        return Build(target, (Layout(v), Layout(bad)))
+    if pick == "vertices":
+        return Build(target, (draw(hostile_points(like=v)), Layout(f)))
+    if pick == "zero":  # every triangle of zero area
+        return Build(target, (Layout(np.zeros_like(v)), Layout(f)))
+    return draw(st.sampled_from([None, 3, [], Build("robopercept.pointcloud:PointCloud", (v,))]))
+
+
 # --------------------------------------------------------------------------- scalars
 
 
@@ -627,8 +868,18 @@ def _numeric_array(like: Any) -> bool:
 
 
 @st.composite
-def hostile_sequences(draw: st.DrawFn, like: Any = None) -> Any:
+def hostile_sequences(
+    draw: st.DrawFn, like: Any = None, item: st.SearchStrategy[Any] | None = None
+) -> Any:
     """A hostile sequence where a list of arrays or records is expected.
+
+    Parameters
+    ----------
+    like : sequence, optional
+        The valid sequence.
+    item : SearchStrategy, optional
+        Hostile values of one item (tensors for a list of tensors); default chosen by
+        the first item's type.
 
     Returns
     -------
@@ -648,7 +899,9 @@ def hostile_sequences(draw: st.DrawFn, like: Any = None) -> Any:
         return items + items
     if items:
         first = items[0]
-        if isinstance(first, np.ndarray) and first.ndim == 2 and first.shape[1] in (2, 3):
+        if item is not None:
+            bad = draw(item)
+        elif isinstance(first, np.ndarray) and first.ndim == 2 and first.shape[1] in (2, 3):
             bad = draw(hostile_points(like=first))
         elif isinstance(first, np.ndarray):
             bad = draw(hostile_arrays(like=first))
