@@ -12,7 +12,8 @@ device`` for ``ENOSPC``/``EDQUOT``).
 This is the one atomic writer of the package (checkpoints of ``nn.train.loop``, the
 outputs of ``pipelines.plane_outputs``).
 
-Reading, :func:`parse_json` / :func:`read_json` and :func:`check_nesting` are the one
+Reading, :func:`parse_json` / :func:`read_json`, :func:`parse_xml` and
+:func:`check_nesting` are the one
 policy for structured text (JSON, the OpenCV FileStorage YAML and XML, manifests,
 annotation files): a document nested deeper than :data:`MAX_NESTING` levels, or one that
 exhausts the parser's recursion, numbers with more digits than Python converts, invalid
@@ -20,7 +21,10 @@ UTF-8 or invalid JSON all give :class:`~robopercept.errors.FileFormatError` nami
 file, never ``RecursionError`` or ``ValueError`` from deep inside a reader. Real files
 nest a handful of levels (a COCO file 4, a calibration file 3); 64 leaves room for any
 hand-written configuration while every recursive walk of the value stays far from
-Python's recursion limit.
+Python's recursion limit. XML is parsed streaming and refused as soon as an element opens
+deeper than the limit (before the rest of the tree is built), and a DOCTYPE or ENTITY
+declaration is refused before parsing: no real file of these formats has one, and
+entity expansion ("billion laughs") turns a few kilobytes into gigabytes.
 """
 
 from __future__ import annotations
@@ -32,10 +36,13 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from robopercept._checks import check_file
 from robopercept.errors import FileFormatError, RoboperceptError
+
+if TYPE_CHECKING:
+    import xml.etree.ElementTree as ET
 
 __all__ = [
     "DISK_FULL_ERRNOS",
@@ -48,6 +55,7 @@ __all__ = [
     "nesting_depth",
     "nesting_error",
     "parse_json",
+    "parse_xml",
     "read_json",
     "strict_json",
     "write_error",
@@ -405,3 +413,110 @@ def read_json(path: str | os.PathLike[str], what: str, limit: int = MAX_NESTING)
     except OSError as exc:
         raise FileFormatError(f"{p}: cannot be read ({exc.strerror or exc})") from None
     return parse_json(raw, str(p), limit)
+
+
+_DTD_MARKS = tuple(
+    mark.encode(enc)
+    for mark in ("<!DOCTYPE", "<!ENTITY")
+    for enc in ("utf-8", "utf-16-le", "utf-16-be")
+)
+_XML_CHUNK = 1 << 16
+
+
+def _dtd_error(where: str) -> FileFormatError:
+    return FileFormatError(
+        f"{where}: has a DOCTYPE/ENTITY declaration; the files this reader knows have "
+        "none and they are refused (entity expansion); remove the declaration"
+    )
+
+
+def parse_xml(text: str | bytes, where: str, limit: int = MAX_NESTING) -> ET.Element:
+    """The root element of the XML document ``text`` under the reading policy of the
+    module docstring.
+
+    The document is parsed streaming, in chunks, by :class:`xml.etree.ElementTree.XMLParser`
+    (expat) with a tree builder that counts the open elements: parsing stops at the first
+    element more than ``limit`` levels below the root, before the rest of the tree is
+    built. This counts as :func:`check_nesting` counts the document's value: the root is
+    the document, an element with children one level of lists or mappings, a leaf a
+    scalar. A DOCTYPE or ENTITY declaration is refused before parsing (a raw byte
+    search, in UTF-8 and UTF-16) and again by the parser should it meet one.
+
+    Parameters
+    ----------
+    text : str or bytes
+        XML text; bytes are decoded as the XML declaration says (UTF-8 by default).
+    where : str
+        The file it came from, for messages.
+    limit : int, default MAX_NESTING
+        The deepest element nesting allowed below the root.
+
+    Returns
+    -------
+    xml.etree.ElementTree.Element
+
+    Raises
+    ------
+    FileFormatError
+        A DOCTYPE/ENTITY declaration, not well-formed XML, or nested deeper than
+        ``limit``.
+
+    Examples
+    --------
+    >>> parse_xml("<a><b>1</b></a>", "a.xml")[0].text
+    '1'
+    >>> parse_xml("<a>" * 100, "deep.xml")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.FileFormatError: deep.xml: nested more than 64 levels deep; no \
+file this reader knows nests that deep (is it the right file?)
+    """
+    import xml.etree.ElementTree as ET
+
+    if isinstance(text, str):
+        if "<!DOCTYPE" in text or "<!ENTITY" in text:
+            raise _dtd_error(where)
+    elif isinstance(text, bytes | bytearray):
+        if any(mark in text for mark in _DTD_MARKS):
+            raise _dtd_error(where)
+    else:
+        raise FileFormatError(f"{where}: expected XML text; got {type(text).__name__}")
+
+    class _Refused(Exception):
+        pass
+
+    class _Builder(ET.TreeBuilder):
+        depth = 0
+        refused: FileFormatError | None = None
+
+        def start(self, tag: Any, attrs: Any) -> ET.Element:
+            self.depth += 1
+            if self.depth > limit + 1:  # the root is the document, at level 0
+                self.refused = nesting_error(where, limit)
+                raise _Refused
+            return super().start(tag, attrs)
+
+        def end(self, tag: Any) -> ET.Element:
+            self.depth -= 1
+            return super().end(tag)
+
+        def doctype(self, name: Any, pubid: Any, system: Any) -> None:
+            self.refused = _dtd_error(where)
+            raise _Refused
+
+    builder = _Builder()
+    parser = ET.XMLParser(target=builder)
+    try:
+        for k in range(0, len(text), _XML_CHUNK):
+            parser.feed(text[k : k + _XML_CHUNK])
+        root = parser.close()
+    except _Refused:
+        assert builder.refused is not None
+        raise builder.refused from None
+    except ET.ParseError as exc:
+        raise FileFormatError(f"{where}: not well-formed XML ({exc})") from None
+    except (RecursionError, MemoryError, ValueError) as exc:
+        raise FileFormatError(f"{where}: not a readable XML document ({exc})") from None
+    if builder.refused is not None:  # an exception the parser swallowed
+        raise builder.refused
+    return root

@@ -84,3 +84,63 @@ def test_a_calibration_json_still_loads(tmp_path):
     p.write_text("{not json")
     with pytest.raises(FileFormatError, match=r"cam\.json: not valid JSON"):
         load_calibration(p)
+
+
+# -- E1-F2, E1-F7: entity bombs and numbers too long to convert ---------------------------
+
+
+def _bomb(levels: int = 7) -> str:
+    return (
+        '<?xml version="1.0"?>\n<!DOCTYPE lolz [\n <!ENTITY lol0 "lololololololololololol">\n'
+        + "".join(f' <!ENTITY lol{k} "{f"&lol{k - 1};" * 10}">\n' for k in range(1, levels + 1))
+        + f"]>\n<opencv_storage><a>&lol{levels};</a></opencv_storage>\n"
+    )
+
+
+@pytest.mark.parametrize("reader", [read_opencv_storage, load_calibration])
+def test_an_entity_bomb_is_refused_before_expansion(tmp_path, reader):
+    """E1-F2: expat expanded the bomb to 20 MiB before its amplification limit refused
+    it; the DOCTYPE is now refused before parsing, with a small peak."""
+    import tracemalloc
+
+    p = tmp_path / "bomb.xml"
+    p.write_text(_bomb())
+    tracemalloc.start()
+    try:
+        with pytest.raises(FileFormatError, match=r"bomb\.xml: has a DOCTYPE/ENTITY"):
+            reader(p)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 * 2**20
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: " + "9" * 5000 + "\n   cols: 1\n"
+        "   dt: d\n   data: [1]\n",
+        "%YAML:1.0\nn: " + "9" * 5000 + "\n",
+        "%YAML:1.0\nn: [1, -" + "9" * 5000 + "]\n",
+        '<?xml version="1.0"?><opencv_storage><n>' + "9" * 5000 + "</n></opencv_storage>",
+    ],
+    ids=["rows", "scalar", "flow", "xml"],
+)
+def test_an_integer_of_thousands_of_digits_is_a_file_format_error(tmp_path, text):
+    """E1-F7: a 5,000-digit integer was Python's ValueError (int max str digits)."""
+    p = tmp_path / "big.yml"
+    p.write_text(text)
+    with pytest.raises(FileFormatError, match=r"big\.yml.*an integer of 500\d digits"):
+        read_opencv_storage(p)
+
+
+def test_a_translation_too_large_for_a_float_is_a_file_format_error(tmp_path):
+    """E1-F7: a 400-digit integer translation was OverflowError in read_transform."""
+    p = tmp_path / "t.yaml"
+    p.write_text(
+        "header:\n  frame_id: a\nchild_frame_id: b\ntransform:\n  translation:\n"
+        f"    x: {'9' * 400}\n    y: 0\n    z: 0\n  rotation:\n    x: 0\n    y: 0\n"
+        "    z: 0\n    w: 1\n"
+    )
+    with pytest.raises(FileFormatError, match=r"t\.yaml: not a transform.*too large"):
+        read_transform(p)

@@ -21,7 +21,14 @@ import pytest
 from robopercept.cli.main import main
 from robopercept.errors import ArgumentError, FileFormatError, InputError
 from robopercept.imaging import sample_image_path
-from robopercept.pipelines.batch import MANIFEST, read_manifest, run_batch
+from robopercept.pipelines.batch import (
+    MANIFEST,
+    MAX_OUTPUTS,
+    MAX_WORKERS,
+    local_cluster,
+    read_manifest,
+    run_batch,
+)
 
 distributed = pytest.importorskip("distributed")
 
@@ -323,3 +330,44 @@ def test_accepted_forms_reach_the_connection(tmp_path, monkeypatch) -> None:
                       progress=False)  # fmt: skip
     assert seen == ["tcp://127.0.0.1:8786", "tcp://[::1]:8786", "tcp://node-1.cluster.local:1",
                     "tcp://worker_2:65535"]  # fmt: skip
+
+
+# -- E1-F6, N2: bounds on a manifest's outputs and on --workers ----------------------------
+
+
+def test_a_record_listing_too_many_outputs_is_refused_quickly(tmp_path) -> None:
+    """E1-F6: --resume checked each of 100,000 listed outputs (10 s)."""
+    import time
+
+    [src] = _inputs(tmp_path, "a")
+    out = tmp_path / "out"
+    many = [f"a/{k}.png" for k in range(MAX_OUTPUTS + 1)]
+    doc = {"job": "edges", "options": EDGES_OPTIONS, "items": [_record("a", src, outputs=many)]}
+    _earlier(out, doc, "a")
+    start = time.perf_counter()
+    with pytest.raises(FileFormatError, match=rf"items\[0\]\.outputs lists {MAX_OUTPUTS + 1} "):
+        run_batch("edges", [src], out, resume=True, progress=False)
+    assert time.perf_counter() - start < 2.0
+    doc["items"][0]["outputs"] = many[:MAX_OUTPUTS]  # the bound itself is read
+    _earlier(out, doc, "a")
+    assert len(read_manifest(out)["items"][0]["outputs"]) == MAX_OUTPUTS
+
+
+@pytest.mark.parametrize("workers", [MAX_WORKERS + 1, 2**63])
+def test_too_many_workers_are_refused_before_any_start(tmp_path, workers) -> None:
+    """N2: --workers had no upper bound (2**63 processes would be started)."""
+    with pytest.raises(InputError, match=rf"workers must be at most {MAX_WORKERS}"):
+        run_batch("edges", [sample_image_path()], tmp_path / "o", workers=workers, progress=False)
+    with pytest.raises(InputError, match=rf"workers must be at most {MAX_WORKERS}"):
+        local_cluster(workers)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("workers", [str(MAX_WORKERS + 1), "9" * 30, "9" * 5000])
+def test_the_command_refuses_too_many_workers_with_exit_2(tmp_path, capsys, workers) -> None:
+    argv = ["batch", "edges", str(sample_image_path()), "-o", str(tmp_path / "o"),
+            "--workers", workers]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--workers" in err and "internal error" not in err
+    assert not (tmp_path / "o").exists()

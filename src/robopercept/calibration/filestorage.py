@@ -40,7 +40,7 @@ import numpy as np
 
 from robopercept._checks import as_path, check_file, plain_repr
 from robopercept.errors import FileFormatError, InputError
-from robopercept.fileio import MAX_NESTING, check_nesting, nesting_error, parse_json
+from robopercept.fileio import MAX_NESTING, check_nesting, nesting_error, parse_json, parse_xml
 
 __all__ = ["read_opencv_storage", "write_opencv_storage"]
 
@@ -217,13 +217,19 @@ def _tagged(tag: str | None, node: Any, where: str) -> Any:
 # --------------------------------------------------------------------------- scalars
 
 
-def _scalar(token: str) -> Any:
+def _scalar(token: str, where: str) -> Any:
     """int, float (``.Inf``, ``.Nan``, ``1.``), None for ``~``, ``null`` or nothing,
-    else str."""
+    else str. An integer of more digits than Python converts (4300) is refused."""
     if not token:
         return None
     if _INT.match(token):
-        return int(token)
+        try:
+            return int(token)
+        except ValueError:  # over sys.get_int_max_str_digits()
+            raise FileFormatError(
+                f"{where}: an integer of {len(token)} digits; no value of a FileStorage "
+                "file has that many (is it the right file?)"
+            ) from None
     if _FLOAT.match(token):
         return float(token)
     low = token.lower()
@@ -447,7 +453,7 @@ def _value(
             if rest[end:].strip():
                 raise FileFormatError(f"{where}: text after a quoted string: {rest[end:]!r}")
         else:
-            value = _scalar(rest)
+            value = _scalar(rest, where)
         return _tagged(tag, value, where), k
     if k < len(lines) and (
         lines[k][1] > ind or (same_level_seq and lines[k][1] == ind and _is_item(lines[k][2]))
@@ -530,37 +536,19 @@ def _flow(text: str, k: int, where: str) -> tuple[Any, int]:
         return (mapping if c == "{" else seq), k + 1
     m = _FLOW_SCALAR.match(text, k)  # at k: no copy of the rest of the text
     assert m is not None
-    return _scalar(m.group(0).strip()), m.end()
+    return _scalar(m.group(0).strip(), where), m.end()
 
 
 # --------------------------------------------------------------------------- XML
 
 
 def _read_xml(text: str, name: str) -> dict[str, Any]:
-    import xml.etree.ElementTree as ET
-
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as exc:
-        raise FileFormatError(f"{name}: not well-formed XML ({exc})") from exc
-    _check_xml_depth(root, name)
+    root = parse_xml(text, name)  # no DTD, nesting bounded while parsing
     if root.tag != "opencv_storage":
         raise FileFormatError(
             f"{name}: the XML root is <{root.tag}>; an OpenCV FileStorage file has <opencv_storage>"
         )
     return {child.tag: _xml_node(child, name) for child in root}
-
-
-def _check_xml_depth(root: Any, name: str) -> None:
-    """Refuse an element tree deeper than :data:`~robopercept.fileio.MAX_NESTING`
-    levels below the root (walked without recursion) before :func:`_xml_node` recurses
-    into it."""
-    stack = [(root, 0)]
-    while stack:
-        e, depth = stack.pop()
-        if depth > MAX_NESTING:
-            raise nesting_error(name)
-        stack.extend((k, depth + 1) for k in e)
 
 
 def _xml_node(e: Any, name: str) -> Any:
@@ -573,7 +561,7 @@ def _xml_node(e: Any, name: str) -> Any:
         node = {k.tag: _xml_node(k, name) for k in kids}
         data = next((k for k in kids if k.tag == "data"), None)
         if data is not None:  # always a list, even of one number
-            node["data"] = [_scalar(t) for t in (data.text or "").split()]
+            node["data"] = [_scalar(t, where) for t in (data.text or "").split()]
         return _matrix(node, kind == "opencv-nd-matrix", where)
     if kids:
         if all(k.tag == "_" for k in kids):
@@ -585,7 +573,7 @@ def _xml_node(e: Any, name: str) -> Any:
         if m.group(1) is None:
             if '"' in m.group(2):
                 break
-            tokens.append(_scalar(m.group(2)))
+            tokens.append(_scalar(m.group(2), where))
         elif text[m.end() : m.end() + 1].strip():
             break  # a quote inside a quoted string (&quot; in the file)
         else:

@@ -279,7 +279,7 @@ def read_transform(path: str | Path) -> tuple[np.ndarray, str, str]:
         if not np.isfinite(vals).all():
             raise ValueError("translation and rotation must be finite numbers")
         R = rotation_from_quaternion(vals[3:])
-    except (KeyError, TypeError, ValueError, InputError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError, InputError) as exc:
         raise FileFormatError(
             f"{path}: not a transform (header.frame_id, child_frame_id, "
             f"transform.translation x y z, transform.rotation x y z w): {exc}"

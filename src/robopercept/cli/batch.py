@@ -18,9 +18,20 @@ from robopercept.cli._args import (
     positive_int,
 )
 from robopercept.errors import ArgumentError
-from robopercept.pipelines.batch import JOB_OPTIONS, JOBS
+from robopercept.pipelines.batch import JOB_OPTIONS, JOBS, MAX_WORKERS
 
 __all__ = ["register"]
+
+
+def _workers(text: str) -> int:
+    """A worker count in ``[1, MAX_WORKERS]`` (argparse type)."""
+    v = positive_int(text)
+    if v > MAX_WORKERS:
+        raise argparse.ArgumentTypeError(
+            f"must be at most {MAX_WORKERS} (each local worker is a process); got {v}: "
+            "give about the number of cores"
+        )
+    return v
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +62,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "workers must see the same files); tls://, ucx:// and others are refused",
     )
     p.add_argument(
-        "--workers", type=positive_int, default=2, help="local workers (default: %(default)s)"
+        "--workers",
+        type=_workers,
+        default=2,
+        help=f"local workers, 1 to {MAX_WORKERS} (default: %(default)s)",
     )
     p.add_argument(
         "--retries",

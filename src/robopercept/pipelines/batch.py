@@ -72,6 +72,8 @@ __all__ = [
     "JOBS",
     "JOB_OPTIONS",
     "MANIFEST",
+    "MAX_OUTPUTS",
+    "MAX_WORKERS",
     "REQUIRED",
     "STATUSES",
     "STEREO_PAIRS",
@@ -794,6 +796,17 @@ class BatchResult:
         }
 
 
+MAX_OUTPUTS = 10_000
+"""The most output files one item's manifest record may list: every job writes a
+handful, and ``--resume`` checks each listed file (a stat and a path resolution),
+so a damaged manifest listing millions would stall it."""
+
+MAX_WORKERS = 256
+"""The most local workers :func:`run_batch` and :func:`local_cluster` start: each is
+a process (about 100 MiB and a second to start); more than a few per core only
+thrashes, and an unbounded count (``--workers 1000000``) would exhaust the machine."""
+
+
 def read_manifest(out: str | os.PathLike[str]) -> dict[str, Any] | None:
     """The manifest ``OUT/batch.json`` of an earlier batch, checked, or None when absent.
 
@@ -801,9 +814,10 @@ def read_manifest(out: str | os.PathLike[str]) -> dict[str, Any] | None:
     every field :func:`run_batch` uses is checked: ``job`` a string, ``options`` (when
     present) an object with string keys, ``items`` a list of objects, each with ``item``
     (a non-empty string), ``input`` (a string), ``status`` (one of :data:`STATUSES`),
-    ``outputs`` (a list of strings) and, when present, ``attempts`` (an integer >= 0),
-    ``seconds`` (a number or null), ``worker`` and ``error`` (strings). Other keys
-    (the counts of :meth:`BatchResult.to_dict`, ``summary``) are not used.
+    ``outputs`` (a list of at most :data:`MAX_OUTPUTS` strings) and, when present,
+    ``attempts`` (an integer >= 0), ``seconds`` (a number or null), ``worker`` and
+    ``error`` (strings). Other keys (the counts of :meth:`BatchResult.to_dict`,
+    ``summary``) are not used.
 
     Parameters
     ----------
@@ -875,6 +889,12 @@ def read_manifest(out: str | os.PathLike[str]) -> dict[str, Any] | None:
         outputs = rec.get("outputs")
         if not isinstance(outputs, list) or not all(isinstance(o, str) for o in outputs):
             raise bad(f"{where}.outputs", "a list of strings", outputs)
+        if len(outputs) > MAX_OUTPUTS:
+            raise FileFormatError(
+                f"{path}: {where}.outputs lists {len(outputs)} files; a job writes at most "
+                f"{MAX_OUTPUTS} per item (--resume checks each one): the manifest is "
+                f"damaged (not as run_batch writes it): {fix}"
+            )
         for key, (ok, expected) in optional.items():
             if key in rec and not ok(rec[key]):
                 raise bad(f"{where}.{key}", expected, rec[key])
@@ -946,6 +966,20 @@ def _done(record: Mapping[str, Any], out: Path) -> bool:
     return True
 
 
+def _check_workers(workers: Any) -> int:
+    """``workers`` as an int in ``[1, MAX_WORKERS]``."""
+    from robopercept._checks import check_int
+
+    workers = check_int(workers, "workers", 1)
+    if workers > MAX_WORKERS:
+        raise InputError(
+            f"workers must be at most {MAX_WORKERS} (each local worker is a process of one "
+            f"thread); got {workers}: give about the number of cores "
+            f"({os.cpu_count() or 1} here)"
+        )
+    return workers
+
+
 def local_cluster(workers: int = 2) -> Any:
     """A :class:`distributed.LocalCluster` as ``run_batch(scheduler="local")`` starts it.
 
@@ -957,7 +991,7 @@ def local_cluster(workers: int = 2) -> Any:
     Parameters
     ----------
     workers : int
-        Worker processes, >= 1.
+        Worker processes, 1 to :data:`MAX_WORKERS`.
 
     Returns
     -------
@@ -978,9 +1012,7 @@ def local_cluster(workers: int = 2) -> Any:
     import dask
     from distributed import LocalCluster
 
-    from robopercept._checks import check_int
-
-    workers = check_int(workers, "workers", 1)
+    workers = _check_workers(workers)
     with warnings.catch_warnings(), dask.config.set(WORKER_CONFIG):
         # its health-check HTTP server tries port 8787 first
         warnings.filterwarnings("ignore", "Port .* is already in use", UserWarning)
@@ -1098,7 +1130,8 @@ def run_batch(
         whose workers share the file system. Other forms (``tls://``, ``ucx://``, no
         port) are refused before anything connects.
     workers : int
-        Workers of the local cluster (ignored for an address).
+        Workers of the local cluster, 1 to :data:`MAX_WORKERS` (ignored for an address,
+        but checked).
     retries : int
         More attempts at an item that raised (each resubmitted as a new task, which
         Dask may place on another worker); the record's ``attempts`` counts them.
@@ -1156,7 +1189,7 @@ def run_batch(
     from robopercept._checks import check_bool, check_int, check_real
 
     _check_job(job)
-    workers = check_int(workers, "workers", 1)
+    workers = _check_workers(workers)
     retries = check_int(retries, "retries", 0)
     connect_timeout = check_real(connect_timeout, "connect_timeout", 0.0, low_inclusive=False)
     delay = check_real(delay, "delay", 0.0)

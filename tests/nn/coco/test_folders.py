@@ -182,6 +182,13 @@ class TestVocSegmentation:
         with pytest.raises(InputError, match="needs SegmentationObject/"):
             read_voc_segmentation(tmp_path / "JPEGImages")
 
+    def test_class_names_not_utf8_is_a_file_format_error(self, tmp_path):
+        """E1-F3: a non-UTF-8 class_names.txt was a UnicodeDecodeError."""
+        self._folder(tmp_path)
+        (tmp_path / "class_names.txt").write_bytes(b"bg\n\xff\xfe cat\n")
+        with pytest.raises(FileFormatError, match=r"class_names\.txt: not UTF-8 text"):
+            read_voc_segmentation(tmp_path)
+
     @pytest.mark.realdata
     def test_matches_the_coco_export(self):
         """labelme's VOC export against its COCO export of the same polygons: the same

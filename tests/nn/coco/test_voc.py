@@ -37,7 +37,7 @@ class TestXml:
         with pytest.raises(FileFormatError, match="has no <size>"):
             read_voc_xml(p)
         p.write_text("plain text")
-        with pytest.raises(FileFormatError, match="not an XML file"):
+        with pytest.raises(FileFormatError, match="not well-formed XML"):
             read_voc_xml(p)
 
     def test_voc_to_coco(self, tmp_path):

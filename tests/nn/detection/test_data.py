@@ -258,3 +258,38 @@ def test_from_coco_errors_name_the_flags(tmp_path, shapes_set):
     g = _coco_folder(tmp_path, shapes_set.subset([0]), images=False)
     with pytest.raises(InputError, match=r"--images-dir: .*000001.png \(image 1 of .*\) does not"):
         DetectionDataset.from_coco(g)
+
+
+def test_from_coco_masks_peak_about_what_it_returns(tmp_path):
+    """E1-F1: the masks were decoded into a list, stacked, then copied to float64 by the
+    constructor's check: a peak of several times the returned masks. They are now
+    filled into one bool array that the set keeps."""
+    import json
+    import tracemalloc
+
+    from robopercept.imaging import write_image
+
+    h, w, k = 200, 300, 40
+    write_image(tmp_path / "a.png", np.zeros((h, w, 3), np.uint8))
+    anns = [
+        {"id": j + 1, "image_id": 1, "category_id": 1, "bbox": [j, j, 100, 100], "iscrowd": 0,
+         "area": 1e4, "segmentation": [[j, j, j + 100, j, j + 100, j + 100, j, j + 100]]}
+        for j in range(k)
+    ]  # fmt: skip
+    gt = {
+        "images": [{"id": 1, "file_name": "a.png", "width": w, "height": h}],
+        "categories": [{"id": 1, "name": "x"}],
+        "annotations": anns,
+    }
+    f = tmp_path / "gt.json"
+    f.write_text(json.dumps(gt))
+    tracemalloc.start()
+    try:
+        ds = DetectionDataset.from_coco(f, masks=True)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert ds.masks is not None and ds.masks[0].shape == (k, h, w)
+    assert ds.masks[0].dtype == bool and ds.masks[0][:, 50, 50].all()
+    returned = ds.masks[0].nbytes + ds.images[0].nbytes
+    assert peak < returned + 2 * 2**20, (peak / 2**20, returned / 2**20)

@@ -333,7 +333,15 @@ def _class_names(folder: Path) -> tuple[str, ...]:
     f = folder / "class_names.txt"
     if not f.is_file():
         return VOC_CLASSES
-    names = tuple(line.strip() for line in f.read_text(encoding="utf-8").splitlines())
+    try:
+        text = f.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(
+            f"{f}: not UTF-8 text ({exc}); save it as UTF-8, one class name per line"
+        ) from None
+    except OSError as exc:
+        raise FileFormatError(f"{f}: cannot be read ({exc.strerror or exc})") from None
+    names = tuple(line.strip() for line in text.splitlines())
     return tuple(n for n in names if n) or VOC_CLASSES
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from robopercept._checks import check_bool, check_file, check_numeric, check_real
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import parse_xml
 from robopercept.nn.coco._fields import category_list, readonly
 from robopercept.nn.coco.dataset import CocoCategory, CocoDataset, CocoImage, as_coco_dataset
 from robopercept.nn.coco.results import CocoResults, as_coco_results
@@ -100,7 +101,9 @@ def read_voc_xml(path: str | os.PathLike[str]) -> VocAnnotation:
     Raises
     ------
     FileFormatError
-        Not a file, not XML, a root other than ``<annotation>``, a DTD, a missing tag,
+        Not a file, not XML, a root other than ``<annotation>``, a DTD, nested deeper
+        than :data:`robopercept.fileio.MAX_NESTING` (:func:`~robopercept.fileio.parse_xml`),
+        a missing tag,
         a coordinate that is not a finite number, ``xmax < xmin`` or ``ymax < ymin``.
 
     Examples
@@ -115,16 +118,11 @@ def read_voc_xml(path: str | os.PathLike[str]) -> VocAnnotation:
     VocObject(name='tree', bbox=(1.0, 2.0, 5.0, 6.0), difficult=False, truncated=False)
     """
     p = check_file(path, "a Pascal-VOC XML file")
-    raw = p.read_bytes()
-    if b"<!DOCTYPE" in raw or b"<!ENTITY" in raw:
-        raise FileFormatError(
-            f"{p}: has a DOCTYPE/ENTITY declaration; VOC files have none and they are "
-            "refused (entity expansion)"
-        )
     try:
-        root = ET.fromstring(raw)
-    except ET.ParseError as exc:
-        raise FileFormatError(f"{p}: not an XML file ({exc})") from None
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    root = parse_xml(raw, str(p))  # no DTD (entity expansion), nesting bounded
     if root.tag != "annotation":
         raise FileFormatError(f"{p}: the root element is <{root.tag}>, not <annotation>")
     where = str(p)

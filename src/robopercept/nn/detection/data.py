@@ -497,15 +497,17 @@ class DetectionDataset:
             labels.append([label[int(c)] for c in coco.category_ids[sel]])
             if masks:
                 h, w = images[-1].shape[:2]
-                one = []
-                for j in np.flatnonzero(sel):
+                picked = np.flatnonzero(sel)
+                # filled in place: no list of masks, no stacked copy (peak = the result)
+                one = np.empty((len(picked), h, w), dtype=bool)
+                for t, j in enumerate(picked):
                     if segs[j] is None:
                         raise InputError(
                             f"--data {p}: annotation {j + 1} of image {im.id} has no "
                             "segmentation: a segmenter needs masks"
                         )
-                    one.append(rle_decode(annotation_to_rle(segs[j], h, w)).astype(bool))
-                all_masks.append(np.array(one, bool).reshape(-1, h, w))
+                    one[t] = rle_decode(annotation_to_rle(segs[j], h, w))
+                all_masks.append(one)
         return cls(
             images,
             boxes,
@@ -805,12 +807,18 @@ def _check_labels(labels: Any, name: str, k: int, n_classes: int) -> np.ndarray:
 
 
 def _check_masks(masks: Any, name: str, k: int, shape: tuple[int, ...]) -> np.ndarray:
-    m = check_numeric(masks, name)
+    """``masks`` as a ``(k, *shape)`` bool array; a bool array of that shape is kept as
+    it is (no copy: masks are the largest arrays of a set), any other numeric one is
+    compared with 0 without a float64 copy."""
+    if isinstance(masks, np.ndarray) and masks.dtype.kind in "biuf":
+        m = masks
+    else:
+        m = check_numeric(masks, name)
     if m.size == 0:
         m = m.reshape(0, *shape)
     if m.shape != (k, *shape):
         raise InputError(f"{name} must be (K, H, W) = {(k, *shape)}; got {m.shape}")
-    return m != 0
+    return m if m.dtype == bool else m != 0
 
 
 def _check_keypoints(value: Any, name: str, k: int) -> np.ndarray:
