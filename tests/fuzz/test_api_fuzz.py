@@ -59,12 +59,7 @@ KNOWN_FATAL: dict[str, str] = {}
 #: (issue 47: found by this fuzzer, being fixed), with the defect: each must still give
 #: one (strict: once fixed, the entry must go), and any untyped error of a callable not
 #: listed here fails at once
-KNOWN_UNTYPED: dict[str, str] = {
-    "nn.pose.inference.predict_heatmaps": "issue 47, new: a batch of 0 images gives "
-    "numpy's ValueError 'need at least one array to concatenate' (R53's sibling)",
-    "nn.pose.lifting.LiftingMLP.forward": "issue 47, new: a tensor of another dtype (int64, "
-    "float64) gives torch's RuntimeError 'mat1 and mat2 must have the same dtype'",
-}
+KNOWN_UNTYPED: dict[str, str] = {}
 
 
 @pytest.fixture(scope="module")

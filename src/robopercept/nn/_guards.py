@@ -28,6 +28,7 @@ __all__ = [
     "check_device",
     "check_float_dtype",
     "check_module",
+    "check_tensor_dtype",
 ]
 
 #: the largest single array (bytes) a parameter may make a function build: 1 GiB
@@ -237,6 +238,65 @@ def check_float_dtype(dtype: Any, name: str = "dtype") -> torch.dtype:
             f"got {plain_repr(dtype)[:60]}"
         )
     return dtype
+
+
+def check_tensor_dtype(x: Any, module: nn.Module, name: str = "x") -> torch.Tensor:
+    """Return ``x`` after checking that it is a floating-point tensor of the dtype of
+    ``module``'s weights (torch's own layers raise RuntimeError on a mismatch).
+
+    Parameters
+    ----------
+    x : torch.Tensor
+        A network's input.
+    module : torch.nn.Module
+        The network; a module without parameters takes any floating dtype.
+    name : str
+        The argument named in the message.
+
+    Returns
+    -------
+    torch.Tensor
+        ``x`` itself.
+
+    Raises
+    ------
+    InputError
+        Not a tensor, not floating point (int64, bool, complex: ``x.float()``), another
+        floating dtype than the weights (``x.to(dtype)`` or ``module.to(dtype)``), or on
+        another device than the weights.
+
+    Examples
+    --------
+    >>> import torch
+    >>> check_tensor_dtype(torch.zeros(2, 3), torch.nn.Linear(3, 1)).dtype
+    torch.float32
+    >>> check_tensor_dtype(torch.zeros(2, 3).double(), torch.nn.Linear(3, 1))
+    ... # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: x is torch.float64 but the network's weights are ...
+    """
+    import torch
+
+    if not isinstance(x, torch.Tensor):
+        raise InputError(
+            f"{name} must be a torch.Tensor; got {type(x).__name__}: use "
+            "torch.from_numpy(array).float()"
+        )
+    if not x.is_floating_point():
+        raise InputError(f"{name} must be floating point; got {x.dtype}: use {name}.float()")
+    weight = next(module.parameters(), None)
+    if weight is not None and x.dtype != weight.dtype:
+        raise InputError(
+            f"{name} is {x.dtype} but the network's weights are {weight.dtype}: convert the "
+            f"input ({name}.to({weight.dtype})) or the network (net.to({x.dtype}))"
+        )
+    if weight is not None and x.device != weight.device:
+        raise InputError(
+            f"{name} is on {x.device} but the network on {weight.device}: use "
+            f"{name}.to('{weight.device}')"
+        )
+    return x
 
 
 def check_dataset(data: Any, name: str) -> Any:

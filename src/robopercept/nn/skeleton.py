@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import plain_repr
+from robopercept._checks import check_int, plain_repr
 from robopercept.errors import InputError
 
 __all__ = ["COCO_17", "MPII_16", "Skeleton", "skeleton_from_coco_category"]
@@ -176,7 +176,7 @@ class Skeleton:
         elif isinstance(root, str):
             r = self.index(root)
         else:
-            r = int(root)
+            r = check_int(root, "root")
             if not 0 <= r < n:
                 raise InputError(f"root must be a joint index 0..{n - 1}; got {root}")
         parent = np.full(n, -2, dtype=np.int64)

@@ -52,3 +52,14 @@ def test_pose_arrays_maps_keypoints_back_through_the_letterbox():
         pose_arrays(_Blob(1), [np.zeros((5, 40, 3))])
     with pytest.raises(InputError, match=r"\(H, W\) or \(H, W, 3\)"):
         pose_arrays(_Blob(1), [np.zeros((3, 40, 40))])
+
+
+def test_predict_heatmaps_on_no_images_gives_empty_results():
+    # fuzz finding N1: a batch of 0 images gave numpy's "need at least one array"
+    from robopercept.nn.pose.inference import predict_heatmaps
+
+    kp, sc, hm = predict_heatmaps(_Blob(2), np.zeros((0, 32, 32, 3)))
+    assert kp.shape == (0, 2, 2) and sc.shape == (0, 2)
+    assert hm is not None and hm.shape == (0, 2, 8, 8)
+    kp, sc = predict_keypoints(_Blob(2), np.zeros((0, 32, 32, 3)), flip_permutation=[1, 0])
+    assert kp.shape == (0, 2, 2) and sc.shape == (0, 2)

@@ -716,19 +716,59 @@ def model_summary(model: str, input_shape: Sequence[int], num_classes: int) -> M
     Raises
     ------
     InputError
-        An unknown model (``--model``) or a shape the model cannot take.
+        An unknown model (``--model``), a shape that is not three positive integers, or
+        an image smaller than the model's pooling layers can take (the message gives the
+        smallest ``--input`` side).
 
     Examples
     --------
     >>> model_summary("vgg_small", (1, 8, 8), 10).output_shape
     (1, 10)
     """
-    if model not in MODELS:
-        raise InputError(f"unknown model {model!r} (--model): choose one of {', '.join(MODELS)}")
-    if not isinstance(input_shape, (list, tuple)) or len(input_shape) != 3:
-        raise InputError(f"input_shape must be (C, H, W) (--input); got {plain_repr(input_shape)}")
+    if not isinstance(model, str) or model not in MODELS:
+        raise InputError(
+            f"unknown model {plain_repr(model)} (--model): choose one of {', '.join(MODELS)}"
+        )
+    if (
+        not isinstance(input_shape, (list, tuple))
+        or len(input_shape) != 3
+        or any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) for v in input_shape)
+        or min(input_shape) < 1
+    ):
+        raise InputError(
+            "input_shape must be (C, H, W), three positive integers (--input C,H,W, e.g. "
+            f"1,8,8); got {plain_repr(input_shape)}"
+        )
     net = build_model(model, in_channels=int(input_shape[0]), num_classes=num_classes)
+    h, w = int(input_shape[1]), int(input_shape[2])
+    if min(_output_side(net, h), _output_side(net, w)) < 1:
+        least = next(s for s in range(1, 1 << 16) if _output_side(net, s) >= 1)
+        raise InputError(
+            f"{model} cannot take an image of height {h} and width {w} (--input "
+            f"{input_shape[0]},{h},{w}): its "
+            f"pooling layers need at least {least} px per side; give --input "
+            f"{input_shape[0]},{max(h, least)},{max(w, least)} or larger"
+        )
     return summary(net, input_shape)
+
+
+def _output_side(net: nn.Module, side: int) -> int:
+    """The side of ``net``'s feature map for an input side of ``side``, along the chain of
+    its convolutions and pools (a parallel branch is followed as if in series: every
+    layer here keeps or shrinks the side, so a side that stays >= 1 does so in any
+    order); below 1 the network cannot take the input."""
+    for m in net.modules():
+        if isinstance(m, (nn.Conv2d, nn.MaxPool2d, nn.AvgPool2d)):
+            k, s, p = (
+                int(v[0]) if isinstance(v, tuple) else int(v)  # type: ignore[arg-type]
+                for v in (m.kernel_size, m.stride, m.padding)
+            )
+            d = m.dilation if isinstance(m, (nn.Conv2d, nn.MaxPool2d)) else 1
+            d = int(d[0]) if isinstance(d, tuple) else int(d)
+            side = (side + 2 * p - d * (k - 1) - 1) // s + 1
+            if side < 1:
+                return side
+    return side
 
 
 def predict(

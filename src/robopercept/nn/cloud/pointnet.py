@@ -416,6 +416,7 @@ class MaskedBatchNorm(nn.BatchNorm1d):
         if not x.is_floating_point():
             raise InputError(f"x must be floating point; got {x.dtype}: use x.float()")
         _check_mask_shape(mask, x)
+        _match_model(self, x)
         return self._normalize(x, mask)
 
     def _normalize(self, x: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:

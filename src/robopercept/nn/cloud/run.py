@@ -61,6 +61,7 @@ from robopercept._checks import (
     plain_repr,
 )
 from robopercept.errors import ArgumentError, InputError
+from robopercept.fileio import WriteError, atomic_write, describe_write_error, strict_json
 from robopercept.imaging import write_image
 from robopercept.nn._guards import check_count
 from robopercept.nn.cloud.data import read_cloud_file, read_cloud_folder
@@ -150,6 +151,11 @@ def cloud_sets(
     shapes = check_count(shapes, "shapes", 1, 1_000_000)
     n_points = check_count(n_points, "n_points", 1, 1 << 20)
     seed = check_count(seed, "seed", 0, 2**31 - 1)
+    if not isinstance(data, (str, os.PathLike)):
+        raise InputError(
+            "data must be shapes, shapes-partial, shapes-noisy or a folder path "
+            f"root/<class>/*.off (--data); got {plain_repr(data)[:60]}"
+        )
     if data in ("shapes", "shapes-partial", "shapes-noisy"):
         variant = "clean" if data == "shapes" else data.split("-")[1]
         small = max(1, shapes // 10)
@@ -158,7 +164,7 @@ def cloud_sets(
             for i, n in enumerate((shapes, small, small))
         ]
         return CloudSets(sets[0], sets[1], sets[2], data)
-    root = Path(data)
+    root = as_path(data, "data (--data)")
     if not root.is_dir():
         raise InputError(
             f"data must be shapes, shapes-partial, shapes-noisy or a folder root/<class>/*.off; "
@@ -264,8 +270,11 @@ def _write_metrics(
     out: Path, metrics: dict[str, Any], ev: CloudEvaluation, names: list[str]
 ) -> list[Path]:
     """Write ``metrics.json`` and ``confusion.png`` (classes, or parts) into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=1))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file in the way, a read-only parent
+        raise WriteError(describe_write_error(out, exc), exc.errno, str(out)) from None
+    atomic_write(out / "metrics.json", json.dumps(strict_json(metrics), indent=1))
     k = len(names)
     pic = confusion_picture(ev.confusion[:k, :k], names, title=metrics.get("title", ""))
     return [out / "metrics.json", write_image(out / "confusion.png", pic)]
@@ -496,6 +505,9 @@ def evaluate_run(
     n_points = check_count(n_points, "n_points (--points)", 1, 1 << 20)
     seed = check_count(seed, "seed (--seed)", 0, 2**31 - 1)
     progress = check_bool(progress, "progress")
+    out = None if out_dir is None else as_path(out_dir, "out_dir (-o/--out)")
+    if out is not None and out.exists() and not out.is_dir():
+        raise InputError(f"-o/--out {out} is a file; give a folder")
     net, info = load_cloud_model(path)
     if device:
         net.to(resolve_device(device))
@@ -519,8 +531,7 @@ def evaluate_run(
         "title": f"{given.name} on {name}: test",
     }
     files: dict[str, Path] = {}
-    if out_dir is not None:
-        out = as_path(out_dir, "out_dir (-o/--out)")
+    if out is not None:
         files = {p.name: p for p in _write_metrics(out, metrics, ev, names)}
     return CloudRunEvaluation(ev, metrics, files)
 

@@ -43,7 +43,14 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_numeric,
+    check_real,
+    plain_repr,
+)
 from robopercept.errors import FileFormatError, InputError
 from robopercept.nn._guards import check_count
 from robopercept.nn.cloud.data import CloudDataset, augment_clouds
@@ -480,10 +487,10 @@ def part_ious(
     ...           np.array([0, 0, 1]))
     array([0.58333333])
     """
-    pred = np.asarray(pred)
-    parts = np.asarray(parts)
-    labels = np.asarray(labels)
-    part_classes = np.asarray(part_classes)
+    pred = check_numeric(pred, "pred")
+    parts = check_numeric(parts, "parts")
+    labels = check_numeric(labels, "labels")
+    part_classes = check_numeric(part_classes, "part_classes").reshape(-1)
     if pred.shape != parts.shape or pred.ndim != 2 or labels.shape != (pred.shape[0],):
         raise InputError(
             f"pred and parts must be (M, N) and labels (M,); got {pred.shape}, {parts.shape}, "

@@ -28,7 +28,7 @@ from torch.nn import functional as F
 
 from robopercept._checks import check_real, plain_repr
 from robopercept.errors import InputError
-from robopercept.nn._guards import check_count
+from robopercept.nn._guards import check_count, check_tensor_dtype
 from robopercept.nn.core.backbones import MAX_CHANNELS
 from robopercept.nn.detection.base import clip_boxes, init_conv
 from robopercept.nn.detection.targets import match_boxes, sample_balanced
@@ -301,6 +301,7 @@ class RegionProposalNetwork(nn.Module):
                 f"features must be an (N, {c}, h, w) float torch.Tensor; got "
                 + plain_repr(features)
             )
+        check_tensor_dtype(features, self, "features")
         n = int(features.shape[0])
         checked = _check_sizes(sizes, n)
         tgts = _check_box_targets(targets, n) if self.training else None

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import check_real
+from robopercept._checks import check_int, check_numeric, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.geometry.boxes import box_iou_matrix
 
@@ -107,6 +107,33 @@ def _matches(
     return hit
 
 
+def _image_arrays(item: Any, where: str, scored: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(boxes (D, 4), labels (D,), scores (D,))`` of one image's dict, checked: a dict
+    with those keys, numeric, finite boxes and scores of one length (no scores: zeros)."""
+    keys = ("boxes", "labels", "scores") if scored else ("boxes", "labels")
+    if not isinstance(item, Mapping) or any(k not in item for k in keys):
+        raise InputError(
+            f"{where} must be a dict with {', '.join(map(repr, keys))}; got {plain_repr(item)[:80]}"
+        )
+    boxes = check_numeric(item["boxes"], f"{where}['boxes']")
+    labels = check_numeric(item["labels"], f"{where}['labels']").reshape(-1)
+    scores = check_numeric(item["scores"], f"{where}['scores']").reshape(-1) if scored else None
+    if boxes.size % 4 or (boxes.ndim != 2 and boxes.size):
+        raise InputError(f"{where}['boxes'] must be (D, 4) xyxy; got shape {boxes.shape}")
+    boxes = boxes.reshape(-1, 4)
+    n = len(boxes)
+    if scores is None:
+        scores = np.zeros(n)
+    if len(labels) != n or len(scores) != n:
+        raise InputError(
+            f"{where} must hold one label{' and one score' if scored else ''} per box; got "
+            f"{n} boxes, {len(labels)} labels" + (f", {len(scores)} scores" if scored else "")
+        )
+    if not (np.isfinite(boxes).all() and np.isfinite(scores).all()):
+        raise InputError(f"{where} holds NaN or inf boxes or scores: drop those entries")
+    return boxes, labels, scores
+
+
 def choose_score_threshold(
     detections: Sequence[Mapping[str, Any]],
     truths: Sequence[Mapping[str, Any]],
@@ -145,19 +172,23 @@ def choose_score_threshold(
     (0.6, 0.8, 0.6666666666666666, 1.0)
     """
     iou = check_real(iou, "iou", 1e-9, 1.0)
+    for name, value in (("detections", detections), ("truths", truths)):
+        if not isinstance(value, (list, tuple)):
+            raise InputError(
+                f"{name} must be a list of per-image dicts (boxes, labels[, scores]); got "
+                f"{plain_repr(value)[:60]}"
+            )
     if len(detections) != len(truths):
         raise InputError(
             f"detections ({len(detections)} images) and truths ({len(truths)}) must pair up"
         )
     hits, scores = [], []
     n_true = 0
-    for d, t in zip(detections, truths, strict=True):
-        b = np.asarray(d["boxes"], np.float64).reshape(-1, 4)
-        s = np.asarray(d["scores"], np.float64).reshape(-1)
-        lab = np.asarray(d["labels"]).reshape(-1)
-        tb = np.asarray(t["boxes"], np.float64).reshape(-1, 4)
+    for i, (d, t) in enumerate(zip(detections, truths, strict=True)):
+        b, lab, s = _image_arrays(d, f"detections[{i}]", scored=True)
+        tb, tl, _ = _image_arrays(t, f"truths[{i}]", scored=False)
         n_true += len(tb)
-        hits.append(_matches(b, lab, s, tb, np.asarray(t["labels"]).reshape(-1), iou))
+        hits.append(_matches(b, lab, s, tb, tl, iou))
         scores.append(s)
     if n_true == 0:
         raise InputError("the validation images hold no true box: nothing to choose a threshold on")
@@ -196,12 +227,17 @@ def f1_threshold(
     >>> t.score_thresh, round(t.f1, 3)  # all four: P 3/4, R 1; the top two: P 1, R 2/3
     (0.2, 0.857)
     """
-    sc = np.asarray(scores, np.float64).reshape(-1)
-    hit = np.asarray(hits, bool).reshape(-1)
+    sc = check_numeric(scores, "scores").reshape(-1)
+    hit = check_numeric(hits, "hits").reshape(-1).astype(bool)
     if sc.shape != hit.shape:
         raise InputError(f"scores {sc.shape} and hits {hit.shape} must have the same length")
+    if not np.isfinite(sc).all():
+        raise InputError("scores hold NaN or inf: drop those entries")
+    positives = check_int(positives, "positives")
     if positives < 1:
         raise InputError("positives must be >= 1: nothing to choose a threshold on")
+    iou = check_real(iou, "iou", 0.0, 1.0)
+    images = check_int(images, "images", 0)
     if not len(sc):
         return ScoreThreshold(1.0, 0.0, 0.0, 0.0, 0.0, iou, images, positives)
     order = np.argsort(-sc, kind="stable")
@@ -257,11 +293,23 @@ def domain_warning(
     warning: trees scores at most 0.20 here (threshold 0.40, true detections on validation
     0.70): this input may lie outside what it was trained on (aerial tree crowns)
     """
+    if calibration is None:
+        return None
+    if not isinstance(calibration, Mapping):
+        raise InputError(
+            "calibration must be a dict with 'score_thresh' (ScoreThreshold.to_dict()) or "
+            f"None; got {plain_repr(calibration)[:60]}"
+        )
     if not calibration:
         return None
-    top = float(best)
-    thr = float(calibration["score_thresh"])
-    med = float(calibration.get("match_median", 0.0))
+    top = check_real(best, "best")
+    if "score_thresh" not in calibration:
+        raise InputError(
+            f"calibration must hold 'score_thresh'; got keys {sorted(map(str, calibration))}"
+        )
+    thr = check_real(calibration["score_thresh"], "calibration['score_thresh']")
+    med = check_real(calibration.get("match_median", 0.0), "calibration['match_median']")
+    model_name, trained_on = str(model_name), str(trained_on)
     if top >= thr and top >= 0.5 * med:
         return None
     return (

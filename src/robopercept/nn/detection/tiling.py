@@ -36,9 +36,11 @@ import torch
 
 from robopercept._checks import check_int, check_real
 from robopercept.errors import InputError
+from robopercept.nn._guards import check_count
 from robopercept.nn.ops.nms import batched_nms
 
 __all__ = [
+    "MAX_TILED_SIDE",
     "TILE_OVERLAP",
     "check_tiling",
     "detect_tiled",
@@ -49,6 +51,11 @@ __all__ = [
 
 #: the default overlap of two windows, as a fraction of the window side
 TILE_OVERLAP = 0.25
+
+
+#: the longest image side tiled (pixels): a 1 Mpx-wide mosaic; beyond it the window list
+#: alone would not fit in memory
+MAX_TILED_SIDE = 1 << 20
 
 
 def tile_origins(length: int, tile: int, overlap: int) -> list[int]:
@@ -73,7 +80,8 @@ def tile_origins(length: int, tile: int, overlap: int) -> list[int]:
     Raises
     ------
     InputError
-        A size below 1 or an overlap outside ``[0, tile)``.
+        A size below 1, a ``length`` beyond :data:`MAX_TILED_SIDE` or an overlap outside
+        ``[0, tile)``.
 
     Examples
     --------
@@ -84,7 +92,7 @@ def tile_origins(length: int, tile: int, overlap: int) -> list[int]:
     >>> tile_origins(250, 400, 100)
     [0]
     """
-    length = check_int(length, "length", 1)
+    length = check_count(length, "length (the image side)", 1, MAX_TILED_SIDE)
     tile = check_int(tile, "tile (--tile)", 1)
     overlap = check_int(overlap, "overlap (--overlap)", 0)
     if overlap >= tile:

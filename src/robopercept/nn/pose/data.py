@@ -577,8 +577,14 @@ class PoseDataset:
         rng: int | np.random.Generator | None = 0,
     ) -> tuple[PoseDataset, ...]:
         """A seeded random split into parts of the given fractions (summing to 1)."""
-        fr = np.asarray(fractions, dtype=np.float64)
-        if fr.ndim != 1 or fr.size < 1 or np.any(fr < 0) or abs(fr.sum() - 1) > 1e-9:
+        fr = check_numeric(fractions, "fractions")
+        if (
+            fr.ndim != 1
+            or fr.size < 1
+            or not np.isfinite(fr).all()
+            or np.any(fr < 0)
+            or abs(fr.sum() - 1) > 1e-9
+        ):
             raise InputError(f"fractions must be non-negative and sum to 1; got {fractions}")
         order = as_rng(rng).permutation(len(self))
         cuts = np.round(np.cumsum(fr)[:-1] * len(self)).astype(int)

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from torch import nn
 
-from robopercept._checks import check_bool, plain_repr
+from robopercept._checks import check_bool, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn.coco.evaluate import evaluate_detections
 from robopercept.nn.detection.thresholds import ScoreThreshold, f1_threshold
@@ -145,6 +145,14 @@ def joint_threshold(
     sk = skeleton if skeleton is not None else getattr(data, "skeleton", None)
     if not isinstance(sk, Skeleton):
         raise InputError(f"skeleton must be a Skeleton; got {plain_repr(sk)}")
+    alpha = check_real(alpha, "alpha", 0.0, low_inclusive=False)
+    if not isinstance(refiners, (list, tuple)) or not all(
+        isinstance(r, DeepPoseRefiner) for r in refiners
+    ):
+        raise InputError(
+            "refiners must be a list of DeepPoseRefiner stages (one stage: [stage]); got "
+            f"{plain_repr(refiners)[:60]}"
+        )
     perm = sk.flip_permutation() if check_bool(flip, "flip") else None
     pred, scores = predict_keypoints(model, x, flip_permutation=perm)
     if refiners:

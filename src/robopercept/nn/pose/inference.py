@@ -212,7 +212,9 @@ def predict_heatmaps(
         size = j or int(np.asarray(flip_permutation).size)
         perm = torch.as_tensor(check_permutation(flip_permutation, size))
     regression = getattr(model, "output", "heatmaps") == "coordinates"
-    for i in range(0, len(x), batch_size):
+    # an empty batch still runs once (on 0 images), so that the empty results have the
+    # network's shapes: (0, J, 2), (0, J) and (0, J, h, w)
+    for i in range(0, max(len(x), 1), batch_size):
         xb = x[i : i + batch_size].to(dev)
         out = model(xb)
         if regression:
@@ -263,9 +265,16 @@ def refine_keypoints(
     (N, J, 2) ndarray
     """
     x = image_batch(images)
-    kp = torch.as_tensor(np.asarray(keypoints, dtype=np.float32))
+    kp = torch.as_tensor(check_numeric(keypoints, "keypoints").astype(np.float32))
     if kp.ndim != 3 or kp.shape[0] != len(x) or kp.shape[-1] != 2:
         raise InputError(f"keypoints must be (N, J, 2) for the N images; got {tuple(kp.shape)}")
+    if not bool(torch.isfinite(kp).all()):
+        raise InputError("keypoints hold NaN or inf: give every joint a finite estimate")
+    if not isinstance(refiners, (list, tuple)):
+        raise InputError(
+            "refiners must be a list of DeepPoseRefiner stages (one stage: [stage]); got "
+            f"{plain_repr(refiners)[:60]}"
+        )
     for stage in refiners:
         if not isinstance(stage, DeepPoseRefiner):
             raise InputError(f"refiners must be DeepPoseRefiner stages; got {plain_repr(stage)}")

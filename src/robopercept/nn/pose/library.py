@@ -22,6 +22,7 @@ from scipy.spatial import cKDTree
 
 from robopercept._checks import check_choice, check_int, plain_repr
 from robopercept.errors import InputError
+from robopercept.nn._guards import check_allocation
 from robopercept.nn.pose.data import random_poses_3d
 from robopercept.nn.pose.views import (
     CENTERS,
@@ -271,5 +272,13 @@ def default_pose_library(
             "joints (robopercept nn pose train --data figures)"
         )
     n = check_int(poses, "poses", 1)
+    views = check_int(views_per_pose, "views_per_pose", 1)
+    # each library entry: 16 joints in 3-D (the pose) and 2-D (its view), float64
+    check_allocation(
+        n * views * MPII_16.num_joints * 5,
+        8,
+        f"a library of {n} poses x {views} views",
+        "lower poses or views_per_pose (the default library: 2000 x 16)",
+    )
     seed = check_seed(rng, "rng")
     return PoseLibrary(random_poses_3d(n, rng=seed), views_per_pose=views_per_pose, rng=seed, k=k)

@@ -47,7 +47,7 @@ from robopercept._checks import (
     check_real,
 )
 from robopercept.errors import InputError
-from robopercept.nn._guards import MAX_LAYERS, check_allocation, check_count
+from robopercept.nn._guards import MAX_LAYERS, check_allocation, check_count, check_tensor_dtype
 from robopercept.nn.pose.views import (
     CENTERS,
     PELVIS,
@@ -430,6 +430,7 @@ class LiftingMLP(nn.Module):
                 f"x must be a (B, {2 * self.num_joints}) tensor of standardized 2-D joints; "
                 f"got {got}: for image joints use lift()"
             )
+        check_tensor_dtype(x, self)
         return self.head(self.blocks(self.stem(x)))
 
     def _inputs(self, kp: np.ndarray) -> torch.Tensor:

@@ -223,7 +223,15 @@ def train_pose(
     if val is not None:
         vx, vkp, vboxes = pose_data_arrays(val, "val")
     sigma = check_real(sigma, "sigma", 0.0, 1e3, low_inclusive=False)
+    pck_alpha = check_real(pck_alpha, "pck_alpha", 0.0, low_inclusive=False)
     check_bool(augment, "augment")
+    if skeleton is not None and (
+        not isinstance(skeleton, Skeleton) or skeleton.num_joints != kp.shape[1]
+    ):
+        raise InputError(
+            f"skeleton must be a Skeleton of the data's {kp.shape[1]} joints (e.g. "
+            f"robopercept.nn.skeleton.MPII_16) or None; got {plain_repr(skeleton)[:60]}"
+        )
     perm = None if skeleton is None else skeleton.flip_permutation()
     dev = resolve_device(cfg.device)
     torch.manual_seed(cfg.seed)

@@ -198,6 +198,12 @@ class NaiveFCN(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         _check_images(self, x, self.in_channels)
+        if self.training and x.shape[0] * x.shape[2] * x.shape[3] == 1:
+            raise InputError(
+                "a batch of one 1 x 1 image is too small to train on: batch norm needs more "
+                "than one value per channel; use batches of 2 or more, or larger images "
+                "(model.eval() for inference)"
+            )
         return self.classifier(self.features(x))
 
 

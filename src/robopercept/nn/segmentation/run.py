@@ -61,7 +61,7 @@ from torch import nn
 from robopercept._checks import as_path, check_bool, check_choice, check_int, plain_repr
 from robopercept.errors import InputError
 from robopercept.imaging import write_image
-from robopercept.nn._guards import check_module
+from robopercept.nn._guards import check_allocation, check_module
 from robopercept.nn.detection.data import DetectionDataset
 from robopercept.nn.detection.mask_rcnn import MaskRCNN
 from robopercept.nn.detection.train import (
@@ -407,7 +407,8 @@ def padded_class_maps(
     Raises
     ------
     InputError
-        A set without masks, an image larger than ``canvas``.
+        A set without masks, an image larger than ``canvas``, a canvas whose arrays would
+        take more than 1 GiB (:data:`~robopercept.nn._guards.MAX_BYTES`).
 
     Examples
     --------
@@ -424,6 +425,13 @@ def padded_class_maps(
         h, w = (check_int(v, "canvas (H, W)", 1) for v in canvas)
     else:
         raise InputError(f"canvas must be (H, W) pixels; got {plain_repr(canvas)}")
+    # per pixel: 3 float32 colours and one int64 class
+    check_allocation(
+        len(ds) * h * w,
+        3 * 4 + 8,
+        f"{len(ds)} padded images and class maps of {h} x {w}",
+        "give a smaller canvas (H, W), or crop or tile the largest images",
+    )
     images = np.zeros((len(ds), h, w, 3), np.float32)
     maps = np.full((len(ds), h, w), VOID, np.int64)
     for i, im in enumerate(ds.images):

@@ -53,8 +53,9 @@ from typing import Any
 
 import torch
 
-from robopercept._checks import check_choice, check_int, check_real, plain_repr
+from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
 from robopercept.errors import InputError
+from robopercept.nn._guards import check_count, check_device, check_float_dtype
 from robopercept.nn.train.config import TrainConfig
 
 __all__ = [
@@ -404,6 +405,28 @@ class SyncBatchNorm(torch.nn.modules.batchnorm._BatchNorm):
     >>> bool(torch.allclose(bn(x), ref(x), atol=1e-6))  # one process: BatchNorm2d
     True
     """
+
+    def __init__(
+        self,
+        num_features: int,
+        eps: float = 1e-5,
+        momentum: float | None = 0.1,
+        affine: bool = True,
+        track_running_stats: bool = True,
+        device: Any = None,
+        dtype: Any = None,
+    ) -> None:
+        """As :class:`torch.nn.BatchNorm2d`'s, each argument checked: ``num_features``
+        in 1 .. 65536, ``eps`` > 0, ``momentum`` in [0, 1] or None, a device this machine
+        has and a floating-point dtype (:class:`InputError` otherwise)."""
+        n = check_count(num_features, "num_features", 1, 2**16)
+        e = check_real(eps, "eps", 0.0, 1.0, low_inclusive=False)
+        m = None if momentum is None else check_real(momentum, "momentum", 0.0, 1.0)
+        a = check_bool(affine, "affine")
+        t = check_bool(track_running_stats, "track_running_stats")
+        dev = check_device(device)
+        dt = None if dtype is None else check_float_dtype(dtype)
+        super().__init__(n, e, m, a, t, device=dev, dtype=dt)  # type: ignore[arg-type]
 
     def _check_input_dim(self, input: torch.Tensor) -> None:
         if input.dim() < 2:

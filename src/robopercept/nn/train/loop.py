@@ -42,7 +42,7 @@ from torch.optim.swa_utils import AveragedModel
 
 from robopercept._checks import as_path, check_bool, check_real, plain_repr
 from robopercept.errors import ArgumentError, FileFormatError, InputError
-from robopercept.nn._guards import check_count, check_module
+from robopercept.nn._guards import check_allocation, check_count, check_module
 from robopercept.nn.train.checkpoint import load_checkpoint, save_checkpoint
 from robopercept.nn.train.config import (
     TrainConfig,
@@ -805,10 +805,13 @@ def epoch_loop(
     Raises
     ------
     InputError
-        A loss became NaN or infinite (lower the learning rate).
+        A loss became NaN or infinite (lower the learning rate); ``n`` beyond what one
+        shuffle of the indices may take (1 GiB: 2**27 samples).
     """
     model = check_module(model)
     n = check_count(n, "n (training samples)", 1, 1 << 40)
+    # every epoch shuffles the n indices (torch.randperm: int64)
+    check_allocation(n, 8, f"the shuffle of n={n} samples", "train on fewer samples")
     if not isinstance(cfg, TrainConfig):
         raise InputError(f"cfg must be a TrainConfig; got {plain_repr(cfg)}")
     if not isinstance(generator, torch.Generator):

@@ -25,9 +25,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from robopercept._checks import as_path, check_bool
+from robopercept._checks import as_path, check_bool, plain_repr
 from robopercept.errors import InputError, RunExistsError
-from robopercept.fileio import atomic_path, strict_json
+from robopercept.fileio import MAX_NESTING, atomic_path, nesting_depth, strict_json
 
 __all__ = ["BEST_CHECKPOINT", "CHECKPOINT", "prepare_run_folder", "write_json"]
 
@@ -103,6 +103,19 @@ def write_json(path: str | os.PathLike[str], value: Any) -> Path:
     """Write ``value`` as indented, strict JSON (NaN and infinities as null,
     :func:`robopercept.fileio.strict_json`) atomically; return the path."""
     p = as_path(path, "path")
+    if nesting_depth(value, MAX_NESTING) > MAX_NESTING:
+        raise InputError(
+            f"value nests more than {MAX_NESTING} levels deep (or holds itself): no run "
+            "record is that deep; write flat dicts and lists"
+        )
+    try:
+        text = json.dumps(strict_json(value), indent=1) + "\n"
+    except (TypeError, ValueError) as exc:  # an array, a set, an object; a cycle
+        raise InputError(
+            f"value must be JSON data (dicts with str keys, lists, str, numbers, bool, None); "
+            f"got {type(value).__name__} {plain_repr(value)[:60]} ({exc}): convert arrays with "
+            ".tolist()"
+        ) from None
     with atomic_path(p) as tmp:
-        Path(tmp).write_text(json.dumps(strict_json(value), indent=1) + "\n")
+        Path(tmp).write_text(text)
     return p
