@@ -303,3 +303,27 @@ def test_cloud_evaluate_run_refuses_an_out_dir_that_is_a_file(tmp_path):
     out.write_text("x")
     with pytest.raises(InputError, match=r"-o/--out .* is a file; give a folder"):
         evaluate_run(tmp_path / "model.pt", "shapes", shapes=1, n_points=8, out_dir=out)
+
+
+def test_rpn_refuses_a_feature_map_without_cells():
+    # make fuzz (issue 47): a (2, 4, 2, 0) map reached torch's conv "kernel size can't
+    # be greater than actual input size"
+    from robopercept.nn.detection.rpn import RegionProposalNetwork
+    from robopercept.nn.ops.anchors import AnchorGenerator
+
+    rpn = RegionProposalNetwork(4, AnchorGenerator(((8.0,),), ((1.0,),))).eval()
+    with pytest.raises(InputError, match="at least one cell"):
+        rpn(torch.zeros(2, 4, 2, 0), (16, 16), [(16, 16), (16, 16)])
+
+
+def test_hostile_titles_and_stereo_lists_are_input_errors():
+    # make fuzz (issue 47): panels_picture(titles=None) and find_board_pairs(right=None)
+    from robopercept.calibration import find_board_pairs
+    from robopercept.viz.segmentation import panels_picture
+
+    pic = np.zeros((8, 8, 3), np.uint8)
+    for bad in (None, float("nan"), "ab"):
+        with pytest.raises(InputError, match="titles must be a list"):
+            panels_picture([pic, pic], bad)
+    with pytest.raises(InputError, match="left and right must be sequences"):
+        find_board_pairs([pic], None, (3, 4))

@@ -94,7 +94,13 @@ def find_board_pairs(
         right, (str, os.PathLike, np.ndarray)
     ):
         raise InputError("left and right must be sequences of images or image files")
-    left, right = list(left), list(right)
+    try:
+        left, right = list(left), list(right)
+    except TypeError:
+        raise InputError(
+            "left and right must be sequences of images or image files; got "
+            f"{type(left).__name__} and {type(right).__name__}"
+        ) from None
     if len(left) != len(right):
         raise InputError(
             f"{len(left)} left images but {len(right)} right images: give one right image "

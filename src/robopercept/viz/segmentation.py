@@ -264,6 +264,11 @@ def panels_picture(
     72
     """
     pics = [to_rgb8(p) for p in pictures]
+    if isinstance(titles, str) or not isinstance(titles, Sequence):
+        raise InputError(
+            f"titles must be a list of strings, one per picture; got {plain_repr(titles)}"
+        )
+    titles = [str(t) for t in titles]
     if not pics or len(titles) != len(pics):
         raise InputError(
             f"give one title per picture; got {len(pics)} pictures and {len(titles)} titles"

@@ -302,6 +302,12 @@ class RegionProposalNetwork(nn.Module):
                 + plain_repr(features)
             )
         check_tensor_dtype(features, self, "features")
+        if features.shape[2] < 1 or features.shape[3] < 1:
+            raise InputError(
+                "features must have at least one cell (h, w >= 1); got a "
+                f"{tuple(features.shape)} map: the images are smaller than the backbone's "
+                "stride"
+            )
         n = int(features.shape[0])
         checked = _check_sizes(sizes, n)
         tgts = _check_box_targets(targets, n) if self.training else None
