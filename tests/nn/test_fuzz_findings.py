@@ -327,3 +327,14 @@ def test_hostile_titles_and_stereo_lists_are_input_errors():
             panels_picture([pic, pic], bad)
     with pytest.raises(InputError, match="left and right must be sequences"):
         find_board_pairs([pic], None, (3, 4))
+
+
+def test_disparity_picture_checks_its_numbers():
+    # the API rerun after make fuzz (issue 47): min_disparity=[1, 2] raised TypeError
+    from robopercept.viz import disparity_picture
+
+    d = np.tile(np.linspace(0.0, 16.0, 40), (30, 1))
+    for kw in ({"min_disparity": [1, 2]}, {"max_disparity": "x"}, {"lr_check": [1]}):
+        with pytest.raises(InputError):
+            disparity_picture(d, **kw)
+    assert disparity_picture(d, max_disparity=16, lr_check=1.0).shape == (877, 1280, 3)

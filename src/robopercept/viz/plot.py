@@ -738,14 +738,17 @@ def disparity_picture(
     h, w = arr.shape
     width = 1280
     height = int(np.clip(0.82 * width * h / max(w, 1) + 90, 360, 1080))
-    check = "off" if lr_check is None else f"{lr_check:g} px"
+    lo = check_real(min_disparity, "min_disparity")
+    hi = None if max_disparity is None else check_real(max_disparity, "max_disparity")
+    lr = None if lr_check is None else check_real(lr_check, "lr_check")
+    check = "off" if lr is None else f"{lr:g} px"
     return scalar_map_picture(
         arr,
         cmap="turbo",
         label="disparity [px] (near: high)",
         title=f"{method} disparity, left-right check {check}",
-        vmin=float(min_disparity),
-        vmax=None if max_disparity is None else float(max_disparity),
+        vmin=lo,
+        vmax=hi,
         width=width,
         height=height,
     )
