@@ -338,3 +338,15 @@ def test_disparity_picture_checks_its_numbers():
         with pytest.raises(InputError):
             disparity_picture(d, **kw)
     assert disparity_picture(d, max_disparity=16, lr_check=1.0).shape == (877, 1280, 3)
+
+
+def test_class_overlay_and_panels_check_their_arguments():
+    # the second API rerun (seed 1) after make fuzz (issue 47)
+    from robopercept.viz.segmentation import class_overlay, panels_picture
+
+    img = np.zeros((8, 8, 3), np.uint8)
+    with pytest.raises(InputError, match="ignore_index"):
+        class_overlay(img, np.zeros((8, 8), int), ["bg"], ignore_index=[1, 2])
+    for bad in (None, 3, img):
+        with pytest.raises(InputError, match="pictures must be a list"):
+            panels_picture(bad, ["a"])

@@ -101,6 +101,8 @@ def class_overlay(
         raise InputError(f"classes must be a non-empty list of names; got {plain_repr(classes)}")
     a = check_real(alpha, "alpha", 0.0, 1.0)
     side = check_int(min_side, "min_side", 1)
+    if ignore_index is not None:
+        ignore_index = check_int(ignore_index, "ignore_index")
     void = lab == ignore_index if ignore_index is not None else np.zeros(lab.shape, bool)
     bad = (~void) & ((lab < 0) | (lab > len(names)))
     if bad.any():
@@ -263,6 +265,10 @@ def panels_picture(
     >>> panels_picture([np.zeros((40, 30, 3), np.uint8)] * 2, ["a", "b"]).shape[1]
     72
     """
+    if isinstance(pictures, np.ndarray) or not isinstance(pictures, Sequence):
+        raise InputError(
+            f"pictures must be a list of images, one per panel; got {plain_repr(pictures)}"
+        )
     pics = [to_rgb8(p) for p in pictures]
     if isinstance(titles, str) or not isinstance(titles, Sequence):
         raise InputError(
