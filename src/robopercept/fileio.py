@@ -57,6 +57,7 @@ __all__ = [
     "parse_json",
     "parse_xml",
     "read_json",
+    "read_text",
     "strict_json",
     "write_error",
 ]
@@ -520,3 +521,29 @@ file this reader knows nests that deep (is it the right file?)
     if builder.refused is not None:  # an exception the parser swallowed
         raise builder.refused
     return root
+
+
+def read_text(path: str | os.PathLike[str], expected: str) -> str:
+    """The UTF-8 text of the file ``path`` (a byte-order mark allowed), for readers of
+    line-based lists (association lists, class-name files).
+
+    Parameters
+    ----------
+    path : path-like
+    expected : str
+        What the file should hold, ending the message of a bad file
+        (``"expected 'timestamp file' lines"``).
+
+    Raises
+    ------
+    FileFormatError
+        ``"<path>: not UTF-8 text (byte N): <expected>"``, or ``cannot read`` with the
+        system's reason.
+    """
+    p = Path(path)
+    try:
+        return p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{p}: not UTF-8 text (byte {exc.start}): {expected}") from None
+    except OSError as exc:
+        raise FileFormatError(f"{p}: cannot read ({exc.strerror or exc})") from None

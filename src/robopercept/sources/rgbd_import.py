@@ -62,6 +62,7 @@ from robopercept._checks import (
     plain_repr,
 )
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import read_text
 from robopercept.geometry import CameraIntrinsics
 from robopercept.imaging.io import IMAGE_EXTENSIONS, contained_path, read_image
 from robopercept.sources.frames import RGBDFrame
@@ -311,12 +312,7 @@ def _association_pairs(path: Path, allow_outside: bool) -> list[RGBDPair]:
     """The pairs of a TUM association list, each file checked by
     :func:`~robopercept.imaging.io.contained_path` (issue 47 R43)."""
     expected = "expected 'timestamp rgb_file timestamp depth_file' lines"
-    try:  # as read_timestamp_list reads rgb.txt (issue 47 R48)
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(f"{path}: not UTF-8 text (byte {exc.start}): {expected}") from None
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    text = read_text(path, expected)  # issue 47 R48
     pairs = []
     for n, line in enumerate(text.splitlines(), 1):
         line = line.strip()

@@ -46,6 +46,7 @@ import numpy as np
 
 from robopercept._checks import as_path, check_bool, plain_repr
 from robopercept.errors import FileFormatError, InputError
+from robopercept.fileio import read_text
 from robopercept.imaging.io import IMAGE_EXTENSIONS, contained_path, read_image
 from robopercept.nn.coco._fields import category_list, load_json, readonly
 from robopercept.nn.coco.dataset import CocoCategory, CocoDataset, CocoImage, read_coco_json
@@ -333,14 +334,7 @@ def _class_names(folder: Path) -> tuple[str, ...]:
     f = folder / "class_names.txt"
     if not f.is_file():
         return VOC_CLASSES
-    try:
-        text = f.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(
-            f"{f}: not UTF-8 text ({exc}); save it as UTF-8, one class name per line"
-        ) from None
-    except OSError as exc:
-        raise FileFormatError(f"{f}: cannot be read ({exc.strerror or exc})") from None
+    text = read_text(f, "save it as UTF-8, one class name per line")
     names = tuple(line.strip() for line in text.splitlines())
     return tuple(n for n in names if n) or VOC_CLASSES
 
