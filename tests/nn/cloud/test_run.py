@@ -107,6 +107,16 @@ def test_cloud_sets_of_shapes_and_folders(tmp_path):
         cloud_sets(str(tmp_path / "missing"))
 
 
+def test_cloud_sets_test_only_makes_the_same_test_split_alone():
+    full = cloud_sets("shapes-noisy", shapes=20, n_points=16, seed=3)
+    alone = cloud_sets("shapes-noisy", shapes=20, n_points=16, seed=3, test_only=True)
+    assert alone.train is None and alone.val is None
+    assert np.array_equal(alone.test.points, full.test.points)
+    assert np.array_equal(alone.test.labels, full.test.labels)
+    with pytest.raises(InputError, match="test_only"):
+        cloud_sets("shapes", shapes=1, n_points=8, test_only="yes")
+
+
 @pytest.mark.realdata
 def test_modelnet_layout_keeps_its_test_split():
     root = data_path("pointcloud_cls", "ModelNet10")

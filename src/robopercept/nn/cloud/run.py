@@ -108,7 +108,8 @@ _MIN_TRAIN = 2
 @dataclass(frozen=True)
 class CloudSets:
     """The training, validation and test splits of :func:`cloud_sets` (``val`` None
-    when the folder is too small to hold clouds out for it)."""
+    when the folder is too small to hold clouds out for it; ``train`` and ``val`` None
+    for procedural data asked ``test_only``)."""
 
     train: Any
     val: Any
@@ -123,6 +124,7 @@ def cloud_sets(
     n_points: int = 1024,
     seed: int = 0,
     progress: bool = False,
+    test_only: bool = False,
 ) -> CloudSets:
     """The splits a command trains and scores on.
 
@@ -138,6 +140,10 @@ def cloud_sets(
     split (``val`` None: training keeps its last epoch), as Keras trains without
     ``validation_split``.
 
+    ``test_only`` makes only the test split of procedural data (each split has its own
+    seed, so it is the same test split; evaluation does not pay for the training
+    split, ten times larger). A folder is read and split as for training either way.
+
     Returns
     -------
     CloudSets
@@ -149,6 +155,7 @@ def cloud_sets(
         count).
     """
     shapes = check_count(shapes, "shapes", 1, 1_000_000)
+    test_only = check_bool(test_only, "test_only")
     n_points = check_count(n_points, "n_points", 1, 1 << 20)
     seed = check_count(seed, "seed", 0, 2**31 - 1)
     if not isinstance(data, (str, os.PathLike)):
@@ -161,6 +168,8 @@ def cloud_sets(
         small = max(1, shapes // 10)
         sets = [
             procedural_shapes(n, n_points, variant=variant, rng=seed * 3 + i, progress=progress)
+            if i == 2 or not test_only
+            else None
             for i, n in enumerate((shapes, small, small))
         ]
         return CloudSets(sets[0], sets[1], sets[2], data)
@@ -257,11 +266,20 @@ def _data_name(data: Any) -> str:
     return os.fspath(data)
 
 
-def _load_sets(data: str, shapes: int, n_points: int, seed: int, progress: bool) -> CloudSets:
+def _load_sets(
+    data: str, shapes: int, n_points: int, seed: int, progress: bool, test_only: bool = False
+) -> CloudSets:
     """:func:`cloud_sets`, its errors an :class:`~robopercept.errors.ArgumentError`
     starting with ``--data`` (exit 2 on the command line)."""
     try:
-        return cloud_sets(data, shapes=shapes, n_points=n_points, seed=seed, progress=progress)
+        return cloud_sets(
+            data,
+            shapes=shapes,
+            n_points=n_points,
+            seed=seed,
+            progress=progress,
+            test_only=test_only,
+        )
     except InputError as exc:
         raise ArgumentError(f"--data: {exc}") from None
 
@@ -511,7 +529,7 @@ def evaluate_run(
     net, info = load_cloud_model(path)
     if device:
         net.to(resolve_device(device))
-    sets = _load_sets(name, shapes, n_points, seed, progress)
+    sets = _load_sets(name, shapes, n_points, seed, progress, test_only=True)
     if list(sets.test.class_names) != list(info["class_names"]):
         raise ArgumentError(
             f"--data: its classes {list(sets.test.class_names)} are not the model's "

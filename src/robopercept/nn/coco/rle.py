@@ -96,7 +96,41 @@ def _compress(counts: np.ndarray) -> str:
 
 
 def _decompress(s: str, where: str) -> np.ndarray:
-    """Run lengths of COCO's string form (``rleFrString``)."""
+    """Run lengths of COCO's string form (``rleFrString``), vectorized.
+
+    Each number is a little-endian run of 5-bit groups (``c - 48``; bit 0x20: another
+    group follows; bit 0x10 of the last group: negative, sign-extended), and from the
+    third number on each is a difference to the number two before it: the runs at odd
+    places are the cumulative sum of the odd numbers, those at even places from the
+    third on of the even numbers. A string with anything unusual (a character outside
+    ``'0'``..``'o'``, a number cut short or of 12 groups or more, a run beyond
+    :data:`MAX_PIXELS`) goes to :func:`_decompress_loop`, which names the first
+    problem exactly as a character-by-character reading meets it.
+    """
+    codes = np.frombuffer(s.encode("utf-32-le"), "<u4").astype(np.int64) - 48
+    if codes.size == 0:
+        return np.zeros(0, np.int64)
+    if codes.min() < 0 or codes.max() >= 64 or codes[-1] & 0x20:
+        return _decompress_loop(s, where)
+    ends = np.flatnonzero((codes & 0x20) == 0)
+    starts = np.concatenate(([0], ends[:-1] + 1))
+    lengths = ends - starts + 1
+    if lengths.max() >= 12:  # 5 x 12 bits and more do not fit int64 after the shift
+        return _decompress_loop(s, where)
+    place = np.arange(codes.size) - np.repeat(starts, lengths)
+    x = np.add.reduceat((codes & 0x1F) << (5 * place), starts)
+    x -= np.where(codes[ends] & 0x10, np.left_shift(1, 5 * lengths), 0)
+    counts = x.copy()
+    counts[1::2] = np.cumsum(x[1::2])
+    counts[2::2] = np.cumsum(x[2::2])
+    if np.abs(counts).max() > MAX_PIXELS:
+        return _decompress_loop(s, where)
+    return counts
+
+
+def _decompress_loop(s: str, where: str) -> np.ndarray:
+    """:func:`_decompress` character by character (``rleFrString`` as written), with
+    an :class:`InputError` for the first problem met."""
     counts: list[int] = []
     p, n = 0, len(s)
     while p < n:
