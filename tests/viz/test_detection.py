@@ -43,6 +43,7 @@ def test_detections_grid_cells_and_gaps():
         ),
         (lambda: detections_grid([], []), r"images must be a non-empty list"),
         (lambda: detections_grid([np.zeros((4, 4))], []), r"boxes must be a list with one"),
+        (lambda: detections_grid([np.zeros((4, 4))], None), r"boxes must be a list with one"),
         (lambda: draw_detections(np.zeros((8, 8)), [[0, 0, 4, 4]], [0]), r"integers in \[1,"),
     ],
 )

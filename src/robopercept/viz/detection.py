@@ -189,7 +189,9 @@ def detections_grid(
         )
     n = len(images)
     for name, value in (("boxes", boxes), ("labels", labels), ("masks", masks)):
-        if value is not None and (not isinstance(value, (list, tuple)) or len(value) != n):
+        if (value is not None or name == "boxes") and (
+            not isinstance(value, (list, tuple)) or len(value) != n
+        ):
             raise InputError(f"{name} must be a list with one entry per image ({n})")
     for i, im in enumerate(images):
         if not isinstance(im, np.ndarray) or im.ndim not in (2, 3):
