@@ -14,7 +14,7 @@ from robopercept.depth import (
     sample_colors,
     texture_coordinates,
 )
-from robopercept.depth.rgbd import project_to_color
+from robopercept.depth.rgbd import DepthScaleWarning, project_to_color
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics, apply, project, se3
 from robopercept.geometry.camera import compiled_params
@@ -312,4 +312,5 @@ def test_valid_edge_arguments_still_work():
     # a depth scale of numpy type, and a tiny positive one: z = s * D, not 0 or NaN
     pts = depth_to_points(_DEPTH, _K, np.float32(0.001), organized=np.True_)
     assert pts[1, 1, 2] == pytest.approx(1.0)
-    assert depth_to_points(_DEPTH, _K, 1e-300)[1, 1, 2] == pytest.approx(1e-297)
+    with pytest.warns(DepthScaleWarning, match="implausible"):  # 1e-297 m: issue 48
+        assert depth_to_points(_DEPTH, _K, 1e-300)[1, 1, 2] == pytest.approx(1e-297)

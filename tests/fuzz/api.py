@@ -637,6 +637,8 @@ VALID: dict[str, dict[str, Any]] = {
         "T_color_depth": np.eye(4),
         "depth_scale": 0.001,
     },
+    "depth.depth_scale_warning": {"depth": DEPTH_U16, "depth_scale": 0.001},
+    "depth.plausible_depth": {"median_m": 1.5},
     "depth.align_color_to_depth": {
         "color_image": IMG_RGB,
         "depth": DEPTH_U16,

@@ -15,10 +15,13 @@ the texture coordinate is the colour pixel divided by the image size,
 
 from __future__ import annotations
 
+import math
+import warnings
+
 import numpy as np
 from numba import njit
 
-from robopercept._checks import check_bool, check_numeric, check_real
+from robopercept._checks import check_bool, check_numeric, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.geometry import CameraIntrinsics, apply, deproject, project
 from robopercept.geometry.camera import compiled_params, distort_point
@@ -26,13 +29,17 @@ from robopercept.geometry.transforms import check_transform
 
 __all__ = [
     "MAX_PIXELS",
+    "PLAUSIBLE_DEPTH_M",
+    "DepthScaleWarning",
     "align_color_to_depth",
     "align_depth_to_color",
     "check_depth",
     "check_intrinsics",
     "check_pixels",
+    "depth_scale_warning",
     "depth_to_points",
     "pixel_rays",
+    "plausible_depth",
     "project_to_color",
     "sample_colors",
     "texture_coordinates",
@@ -42,6 +49,130 @@ __all__ = [
 #: most pixels a camera may have where a function allocates per-pixel arrays for it
 #: (2**26: 8K video has 2**25; the rays of 2**26 pixels take 1.5 GiB)
 MAX_PIXELS = 1 << 26
+
+
+#: median depths (metres) of the measured pixels plausible for an RGB-D camera, both
+#: inclusive: a median outside means a wrong depth scale (units per metre given as metres
+#: per unit, metres given as millimetres, ...). The rule of ``rgbd-import``'s warning.
+PLAUSIBLE_DEPTH_M = (0.1, 20.0)
+
+# about this many pixels (a regular grid of rows and columns) give the median of
+# depth_scale_warning: 19,200 on a 640x480 image, a fraction of a millisecond
+_MEDIAN_PIXELS = 1 << 14
+
+
+class DepthScaleWarning(UserWarning):
+    """A depth image whose median depth is implausible for the depth scale given
+    (:data:`PLAUSIBLE_DEPTH_M`); silence it with
+    ``warnings.simplefilter("ignore", DepthScaleWarning)``."""
+
+
+def plausible_depth(median_m: float) -> bool:
+    """Whether ``median_m``, the median depth in metres of a frame's measured pixels, is
+    plausible for an RGB-D camera: inside :data:`PLAUSIBLE_DEPTH_M` (0.1 to 20 m).
+
+    Parameters
+    ----------
+    median_m : float
+
+    Returns
+    -------
+    bool
+        False for NaN.
+
+    Raises
+    ------
+    InputError
+        ``median_m`` not a real number.
+
+    Examples
+    --------
+    >>> plausible_depth(1.9), plausible_depth(9500.0)
+    (True, False)
+    """
+    if isinstance(median_m, (bool, np.bool_)) or not isinstance(
+        median_m, (int, float, np.integer, np.floating)
+    ):
+        raise InputError(f"median_m must be a real number (metres); got {plain_repr(median_m)}")
+    lo, hi = PLAUSIBLE_DEPTH_M
+    return bool(lo <= median_m <= hi)
+
+
+def depth_scale_warning(depth: np.ndarray, depth_scale: float) -> str | None:
+    """The warning for a depth image whose median depth is implausible at
+    ``depth_scale``, naming the fix; None when it is plausible (or nothing is measured).
+
+    The median is taken over the measured pixels (finite, > 0) of a regular grid of
+    rows and columns, about 16k pixels (every 4th row and column of a 640x480 image),
+    and judged by :func:`plausible_depth`. The fix offered is the first of
+    ``1 / depth_scale`` (units per metre given where metres per unit are meant, TUM's
+    5000 for instance), 0.001 (millimetres), 1/5000 (TUM) and 1 (metres) that brings
+    the median into :data:`PLAUSIBLE_DEPTH_M`.
+
+    Parameters
+    ----------
+    depth : (H, W) ndarray
+        Raw depth, as :func:`depth_to_points` takes it.
+    depth_scale : float
+        Metres per unit (> 0).
+
+    Returns
+    -------
+    str or None
+
+    Raises
+    ------
+    InputError
+        ``depth`` not a 2-D numeric array, ``depth_scale`` not > 0.
+
+    Examples
+    --------
+    >>> tum = np.full((480, 640), 9500, dtype=np.uint16)  # 1.9 m in TUM's 1/5000 m units
+    >>> print(depth_scale_warning(tum, 5000))  # doctest: +NORMALIZE_WHITESPACE
+    median depth 4.75e+07 m of the measured pixels is implausible for an RGB-D camera
+    (0.1 to 20 m) at depth_scale=5000 metres per unit: units per metre given? use
+    depth_scale=0.0002 (1/5000)
+    >>> depth_scale_warning(tum, 1 / 5000) is None
+    True
+    """
+    d = check_numeric(depth, "depth")
+    if d.ndim != 2:
+        raise InputError(f"depth must be a 2-D (H, W) image; got shape {d.shape}")
+    s = check_real(depth_scale, "depth_scale (metres per unit)", 0.0, low_inclusive=False)
+    return _scale_message(d, s)
+
+
+def _scale_message(depth: np.ndarray, depth_scale: float) -> str | None:
+    """:func:`depth_scale_warning` for a checked ``(H, W)`` numeric depth and scale > 0."""
+    h, w = depth.shape
+    step = max(1, math.isqrt(h * w // _MEDIAN_PIXELS))
+    with np.errstate(over="ignore", invalid="ignore"):
+        z = depth[::step, ::step].astype(np.float64) * depth_scale
+    z = z[np.isfinite(z) & (z > 0)]
+    if z.size == 0:
+        return None
+    median = float(np.median(z))
+    if plausible_depth(median):
+        return None
+    lo, hi = PLAUSIBLE_DEPTH_M
+    raw = median / depth_scale
+    candidates = [(1.0 / depth_scale, f"1/{depth_scale:g}")] if depth_scale > 1 else []
+    candidates += [(0.001, "millimetres"), (1 / 5000, "TUM, 5000 units per metre")]
+    candidates += [(1.0, "depth already in metres")]
+    fix = next(
+        (
+            f"use depth_scale={c:.4g} ({why})"
+            for c, why in candidates
+            if c != depth_scale and plausible_depth(raw * c)
+        ),
+        "check the depth image and its scale",
+    )
+    if depth_scale > 1 and fix.endswith(f"(1/{depth_scale:g})"):
+        fix = "units per metre given? " + fix
+    return (
+        f"median depth {median:.3g} m of the measured pixels is implausible for an RGB-D "
+        f"camera ({lo:g} to {hi:g} m) at depth_scale={depth_scale:g} metres per unit: {fix}"
+    )
 
 
 def check_pixels(k: CameraIntrinsics, name: str) -> None:
@@ -153,11 +284,24 @@ def depth_to_points(
     -------
     ndarray
         float64 points in the depth camera frame, metres. Equal to the vertices of
-        ``rs2::pointcloud`` where the depth is valid.
+        ``rs2::pointcloud`` where the depth is valid, and to Open3D's
+        ``PointCloud.create_from_depth_image`` with ``depth_scale = 1 / depth_scale``
+        (Open3D counts units per metre: TUM's 5000 there is ``1 / 5000`` here).
+
+    Warns
+    -----
+    DepthScaleWarning
+        When the median depth of the measured pixels is implausible for an RGB-D camera
+        (outside 0.1 to 20 m, ``rgbd-import``'s rule): the message names the likely
+        depth scale (:func:`depth_scale_warning`), e.g. ``depth_scale=0.0002`` when
+        TUM's 5000 units per metre were given.
     """
     d = check_depth(depth, intrinsics)
     s = check_real(depth_scale, "depth_scale (metres per unit)", 0.0, low_inclusive=False)
     organized = check_bool(organized, "organized")
+    message = _scale_message(d, s)
+    if message is not None:
+        warnings.warn(message, DepthScaleWarning, stacklevel=2)
     z = d.astype(np.float64) * s
     valid = np.isfinite(z) & (z > 0)
     if organized:

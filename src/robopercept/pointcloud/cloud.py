@@ -12,7 +12,7 @@ import numpy.typing as npt
 from robopercept._checks import check_int, check_points, plain_repr
 from robopercept.errors import InputError
 
-__all__ = ["PointCloud", "check_cloud"]
+__all__ = ["PointCloud", "check_cloud", "resolve_alias"]
 
 
 def _optional(value: npt.ArrayLike | None, name: str, n: int) -> np.ndarray | None:
@@ -22,6 +22,39 @@ def _optional(value: npt.ArrayLike | None, name: str, n: int) -> np.ndarray | No
     if arr.shape[0] != n:
         raise InputError(f"{name} must have one row per point ({n}); got {arr.shape[0]} rows")
     return arr
+
+
+def _colors(value: npt.ArrayLike | None, n: int) -> np.ndarray | None:
+    """``(N, 3)`` float64 RGB in [0, 1]: uint8 arrays are divided by 255; anything else
+    must already lie in [0, 1] (InputError with the fix otherwise)."""
+    if value is None:
+        return None
+    eight_bit = isinstance(value, np.ndarray) and value.dtype == np.uint8
+    arr = _optional(value, "colors", n)
+    if arr is None:  # pragma: no cover - value is not None here
+        return None
+    if eight_bit:
+        return arr / 255.0
+    if arr.size == 0:
+        return arr
+    lo, hi = float(arr.min()), float(arr.max())  # NaN propagates into both
+    if lo >= 0.0 and hi <= 1.0:
+        return arr
+    kind = value.dtype if isinstance(value, np.ndarray) else "values"
+    if np.isnan(lo) or np.isnan(hi):
+        fix = "colors must be finite RGB in [0, 1]; got NaN: give missing colours a value"
+        raise InputError(f"{fix} (np.nan_to_num(colors)) or drop those points")
+    if lo >= 0.0 and hi <= 255.0 and bool((arr == np.round(arr)).all()):
+        raise InputError(
+            f"colors must be RGB floats in [0, 1] or a uint8 array (0..255, divided by "
+            f"255); got {kind} up to {hi:g}, 8-bit values: pass colors.astype(np.uint8) "
+            "or colors / 255.0"
+        )
+    raise InputError(
+        f"colors must be RGB floats in [0, 1] or a uint8 array (0..255); got {kind} from "
+        f"{lo:g} to {hi:g}: scale them into [0, 1] (colors / 255.0 for 8-bit values, "
+        "colors / 65535.0 for 16-bit ones)"
+    )
 
 
 _LABEL_RANGE = 2**63 - 1
@@ -61,7 +94,10 @@ class PointCloud:
     points : (N, 3) float64 ndarray
         Coordinates in metres (camera frame: x right, y down, z forward).
     colors : (N, 3) float64 ndarray or None
-        RGB in [0, 1], as Open3D stores them.
+        RGB in [0, 1], as Open3D stores them. A ``uint8`` array (0..255, as images and
+        ``cv2`` give them) is divided by 255 on the way in; any other array must already
+        lie in [0, 1] (values up to 255, or NaN, are refused with the fix, so 8-bit
+        colours given as floats never become 200.0 and a white PLY).
     normals : (N, 3) float64 ndarray or None
         Unit normals.
     shape : (H, W) or None
@@ -82,6 +118,9 @@ class PointCloud:
     >>> tagged = PointCloud(np.zeros((3, 3)), labels=[0, 1, 1])
     >>> tagged.select([2, 0]).labels
     array([1, 0])
+    >>> red = np.array([[255, 0, 0]], dtype=np.uint8)
+    >>> PointCloud(np.zeros((1, 3)), colors=red).colors
+    array([[1., 0., 0.]])
     """
 
     points: np.ndarray
@@ -94,7 +133,7 @@ class PointCloud:
         pts = check_points(self.points, "points", 3)
         object.__setattr__(self, "points", pts)
         n = pts.shape[0]
-        object.__setattr__(self, "colors", _optional(self.colors, "colors", n))
+        object.__setattr__(self, "colors", _colors(self.colors, n))
         object.__setattr__(self, "normals", _optional(self.normals, "normals", n))
         object.__setattr__(self, "labels", _labels(self.labels, n))
         if self.shape is not None:
@@ -170,12 +209,10 @@ class PointCloud:
         # three column tests: ~10x faster than np.isfinite(p).all(axis=1)
         return np.isfinite(p[:, 0]) & np.isfinite(p[:, 1]) & np.isfinite(p[:, 2])
 
-    def with_colors(self, colors: np.ndarray | None) -> PointCloud:
-        """A copy with ``colors`` replaced (RGB in [0, 1], or uint8 which is scaled)."""
-        if colors is not None:
-            c = np.asarray(colors)
-            colors = c / 255.0 if c.dtype == np.uint8 else c
-        return replace(self, colors=colors)
+    def with_colors(self, colors: npt.ArrayLike | None) -> PointCloud:
+        """A copy with ``colors`` replaced: RGB floats in [0, 1], or a uint8 array
+        (0..255) which is divided by 255, as in the constructor."""
+        return replace(self, colors=colors)  # type: ignore[arg-type]
 
     def with_normals(self, normals: np.ndarray | None) -> PointCloud:
         """A copy with ``normals`` replaced."""
@@ -250,3 +287,46 @@ def check_cloud(cloud: object) -> PointCloud:
             "wrap an (N, 3) array with PointCloud(points)"
         )
     return cloud
+
+
+def resolve_alias(value: Any, name: str, alias_value: Any, alias_name: str) -> Any:
+    """The value of a keyword given under its own ``name`` or under another library's
+    spelling ``alias_name`` (Open3D's ``nb_neighbors`` for ``k``, ...); ``None`` stands
+    for "not given".
+
+    Parameters
+    ----------
+    value : object
+        The value under ``name`` (None when not given).
+    name : str
+    alias_value : object
+        The value under ``alias_name`` (None when not given).
+    alias_name : str
+
+    Returns
+    -------
+    object
+        Whichever was given; None when neither was.
+
+    Raises
+    ------
+    InputError
+        Both were given, naming both spellings.
+
+    Examples
+    --------
+    >>> resolve_alias(None, "k", 20, "nb_neighbors")
+    20
+    >>> resolve_alias(30, "k", 20, "nb_neighbors")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: give k or its Open3D spelling nb_neighbors, not both ...
+    """
+    if alias_value is None:
+        return value
+    if value is not None:
+        raise InputError(
+            f"give {name} or its Open3D spelling {alias_name}, not both (got {name}="
+            f"{plain_repr(value)} and {alias_name}={plain_repr(alias_value)}): drop one"
+        )
+    return alias_value

@@ -6,6 +6,12 @@ are never kept: they are dropped first and do not appear in ``indices``. Neighbo
 queries go through k-d trees from libraries: nanoflann (``pynanoflann``, the engine
 Open3D's ``KDTreeFlann`` wraps) for the k-nearest queries of
 :func:`statistical_outlier_removal`, ``scipy.spatial.cKDTree`` for radius counts.
+
+Open3D's keyword names are accepted as keyword-only aliases: ``nb_neighbors`` for
+``k`` (``remove_statistical_outlier(nb_neighbors, std_ratio)``) and ``nb_points`` for
+``min_neighbors`` (``remove_radius_outlier(nb_points, radius)``); ``std_ratio``,
+``radius`` and ``voxel_size`` are spelled as in Open3D already. Giving both spellings
+of one is an InputError.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from robopercept._checks import check_int, check_real
 from robopercept.errors import InputError
-from robopercept.pointcloud.cloud import PointCloud, check_cloud
+from robopercept.pointcloud.cloud import PointCloud, check_cloud, resolve_alias
 
 __all__ = [
     "pass_through",
@@ -358,7 +364,11 @@ def _knn_mean_distance(
 
 
 def statistical_outlier_removal(
-    cloud: PointCloud, k: int = 50, std_ratio: float = 1.0
+    cloud: PointCloud,
+    k: int | None = None,
+    std_ratio: float = 1.0,
+    *,
+    nb_neighbors: int | None = None,
 ) -> tuple[PointCloud, np.ndarray]:
     r"""Drop points whose mean distance to their neighbours is unusually large.
 
@@ -387,19 +397,38 @@ def statistical_outlier_removal(
     Parameters
     ----------
     cloud : PointCloud
-    k : int
-        Neighbours per point, >= 2.
+    k : int, default 50
+        Neighbours per point, >= 2. Open3D's spelling: ``nb_neighbors=``.
     std_ratio : float
         >= 0.
+    nb_neighbors : int, optional
+        Keyword-only alias (Open3D's name) of ``k``.
 
     Returns
     -------
     cloud : PointCloud
     indices : (M,) int64 ndarray
         Kept input positions, in input order.
+
+    Raises
+    ------
+    InputError
+        Not a PointCloud, ``k`` < 2, ``std_ratio`` < 0, or both ``k`` and
+        ``nb_neighbors``.
+
+    Examples
+    --------
+    The point far from the others is dropped (Open3D's keyword names work too):
+
+    >>> from robopercept.pointcloud import PointCloud
+    >>> pts = np.vstack([np.random.default_rng(0).normal(0, 0.01, (50, 3)), [[1, 1, 1]]])
+    >>> _, kept = statistical_outlier_removal(PointCloud(pts), nb_neighbors=10, std_ratio=2.0)
+    >>> 50 in kept
+    False
     """
     cloud = check_cloud(cloud)
-    k = check_int(k, "k", 2)
+    k = resolve_alias(k, "k", nb_neighbors, "nb_neighbors")
+    k = check_int(50 if k is None else k, "k", 2)
     ratio = check_real(std_ratio, "std_ratio", 0.0)
     finite = cloud.finite_mask()
     fin = None if finite.all() else np.flatnonzero(finite)  # None: no copy of the points
@@ -419,13 +448,19 @@ def statistical_outlier_removal(
 
 
 def radius_outlier_removal(
-    cloud: PointCloud, radius: float, min_neighbors: int
+    cloud: PointCloud,
+    radius: float,
+    min_neighbors: int | None = None,
+    *,
+    nb_points: int | None = None,
 ) -> tuple[PointCloud, np.ndarray]:
     """Keep points with at least ``min_neighbors`` other points within ``radius``.
 
     The point itself is not counted. Matches Open3D's
     ``remove_radius_outlier(nb_points=min_neighbors, radius)`` index for index (checked
-    on the PCL table scene) and PCL's ``RadiusOutlierRemoval``.
+    on the PCL table scene and office scene) and PCL's ``RadiusOutlierRemoval``;
+    Open3D's call ``radius_outlier_removal(cloud, nb_points=16, radius=0.05)`` works as
+    written.
 
     Parameters
     ----------
@@ -433,16 +468,38 @@ def radius_outlier_removal(
     radius : float
         > 0.
     min_neighbors : int
-        >= 0.
+        >= 0; required (here or as ``nb_points``). Open3D's spelling: ``nb_points=``.
+    nb_points : int, optional
+        Keyword-only alias (Open3D's name) of ``min_neighbors``.
 
     Returns
     -------
     cloud : PointCloud
     indices : (M,) int64 ndarray
+
+    Raises
+    ------
+    InputError
+        Not a PointCloud, ``radius`` not > 0, ``min_neighbors`` missing or < 0, or
+        both ``min_neighbors`` and ``nb_points``.
     """
     cloud = check_cloud(cloud)
+    if isinstance(min_neighbors, float) and isinstance(radius, (int, np.integer)):
+        raise InputError(
+            f"radius_outlier_removal takes (cloud, radius, min_neighbors); got radius="
+            f"{radius} and min_neighbors={min_neighbors}: Open3D's order (nb_points, "
+            f"radius)? write radius_outlier_removal(cloud, {min_neighbors}, {radius}) or "
+            f"use keywords (nb_points={radius}, radius={min_neighbors})"
+        )
     r = check_real(radius, "radius", 0.0, low_inclusive=False)
-    need = check_int(min_neighbors, "min_neighbors", 0)
+    need = resolve_alias(min_neighbors, "min_neighbors", nb_points, "nb_points")
+    if need is None:
+        raise InputError(
+            "min_neighbors is required: the fewest other points within radius that a "
+            "kept point has (Open3D's nb_points= is accepted too), e.g. "
+            "radius_outlier_removal(cloud, 0.05, 16)"
+        )
+    need = check_int(need, "min_neighbors", 0)
     fin = _finite_index(cloud)
     if fin.size == 0:
         return PointCloud(np.empty((0, 3))), fin

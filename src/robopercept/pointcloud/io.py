@@ -449,6 +449,25 @@ def ply_element_counts(raw_head: bytes, size: int, path: Path) -> dict[str, int]
     return counts
 
 
+def _ply_colors(c: np.ndarray, path: Path) -> np.ndarray:
+    """``(N, 3)`` PLY colour columns as RGB in [0, 1]: integer properties (uchar, as
+    every writer stores them) are 0..255 and divided by 255; float ones in [0, 1] are
+    kept, and float ones in [0, 255] are divided by 255 as Open3D does with any type."""
+    if c.size == 0:
+        return c.astype(np.float64)
+    lo, hi = float(c.min()), float(c.max())
+    if c.dtype.kind in "iu" or (c.dtype.kind == "f" and hi > 1.0):
+        if 0.0 <= lo and hi <= 255.0:
+            return c.astype(np.float64) / 255.0
+    elif 0.0 <= lo and hi <= 1.0:
+        return c.astype(np.float64)
+    raise _fail(
+        path,
+        f"colour values run from {lo:g} to {hi:g}; PLY colours must be 0..255 "
+        "(or floats in [0, 1])",
+    )
+
+
 def _read_ply(path: Path) -> PointCloud:
     try:
         from plyfile import PlyData
@@ -484,8 +503,7 @@ def _read_ply(path: Path) -> PointCloud:
     colors = None
     for r, g, b in (("red", "green", "blue"), ("r", "g", "b")):
         if {r, g, b} <= set(names):
-            c = np.column_stack([v[r], v[g], v[b]])
-            colors = c / 255.0 if c.dtype.kind in "iu" else c.astype(np.float64)
+            colors = _ply_colors(np.column_stack([v[r], v[g], v[b]]), path)
             break
     normals = None
     if {"nx", "ny", "nz"} <= set(names):
@@ -531,6 +549,9 @@ def _records(
 
 
 def _colors8(cloud: PointCloud) -> np.ndarray:
+    """(N, 3) uint32 8-bit colours ``rint(255 c)`` of the cloud's [0, 1] colours (the
+    inverse of the readers' ``v / 255``: uint8 colours given to :class:`PointCloud`
+    come back exactly)."""
     return np.clip(np.rint(cloud.colors * 255.0), 0, 255).astype(np.uint32)  # type: ignore[operator]
 
 
@@ -589,9 +610,10 @@ def read_point_cloud(path: str | os.PathLike[str]) -> PointCloud:
     Returns
     -------
     PointCloud
-        Colours in [0, 1] when the file has them (PLY ``red green blue``, PCD
-        ``rgb``/``rgba``), normals when it has ``nx ny nz`` / ``normal_x ...``, labels
-        (int64) when it has a ``label`` field.
+        Colours in [0, 1] when the file has them (PLY ``red green blue``: integer
+        values 0..255 divided by 255, float values kept when in [0, 1] and divided by
+        255 when in [0, 255] as Open3D does; PCD ``rgb``/``rgba``), normals when it has
+        ``nx ny nz`` / ``normal_x ...``, labels (int64) when it has a ``label`` field.
 
     Raises
     ------
@@ -640,7 +662,9 @@ def write_point_cloud(path: str | os.PathLike[str], cloud: PointCloud, binary: b
     Fields in order: ``x y z``, the normals (PLY ``nx ny nz``, PCD ``normal_x normal_y
     normal_z``), the colours (PLY ``red green blue`` uchar, PCD packed ``rgb`` uint32),
     and :attr:`PointCloud.labels` as ``label`` (PLY ``int``, PCD ``U 4``, PCL's
-    ``PointXYZRGBL`` layout).
+    ``PointXYZRGBL`` layout). The 8-bit colours are ``rint(255 c)`` of the [0, 1]
+    colours, so a cloud made with uint8 colours is written with exactly those values
+    (and Open3D's ``read_point_cloud`` reads them as ``v / 255``, as ours does).
 
     Parameters
     ----------

@@ -61,6 +61,7 @@ from robopercept._checks import (
     check_reals,
     plain_repr,
 )
+from robopercept.depth.rgbd import DepthScaleWarning, plausible_depth
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import read_text
 from robopercept.geometry import CameraIntrinsics
@@ -677,11 +678,12 @@ def import_rgbd_folder(
                     if valid.size
                     else (0.0, 0.0, 0.0)
                 )
-                if not 0.1 <= state["range"][1] <= 20.0:
+                if not plausible_depth(state["range"][1]):
                     warnings.warn(
                         f"{pair.name}: median depth {state['range'][1]:.3g} m is implausible "
                         f"for an RGB-D camera: check --depth-scale ({units:g} units per "
                         "metre) and --depth-encoding",
+                        DepthScaleWarning,
                         stacklevel=3,
                     )
             k: CameraIntrinsics = state["camera"]
