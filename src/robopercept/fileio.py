@@ -435,13 +435,16 @@ def parse_xml(text: str | bytes, where: str, limit: int = MAX_NESTING) -> ET.Ele
     """The root element of the XML document ``text`` under the reading policy of the
     module docstring.
 
-    The document is parsed streaming, in chunks, by :class:`xml.etree.ElementTree.XMLParser`
-    (expat) with a tree builder that counts the open elements: parsing stops at the first
-    element more than ``limit`` levels below the root, before the rest of the tree is
-    built. This counts as :func:`check_nesting` counts the document's value: the root is
-    the document, an element with children one level of lists or mappings, a leaf a
-    scalar. A DOCTYPE or ENTITY declaration is refused before parsing (a raw byte
-    search, in UTF-8 and UTF-16) and again by the parser should it meet one.
+    The document is parsed streaming, in chunks, by ``defusedxml``'s
+    :class:`~defusedxml.ElementTree.DefusedXMLParser` (the standard library's
+    :class:`xml.etree.ElementTree.XMLParser` over expat, with DTDs, entity declarations
+    and external references forbidden) and a tree builder that counts the open
+    elements: parsing stops at the first element more than ``limit`` levels below the
+    root, before the rest of the tree is built. This counts as :func:`check_nesting`
+    counts the document's value: the root is the document, an element with children one
+    level of lists or mappings, a leaf a scalar. A DOCTYPE or ENTITY declaration is
+    refused before parsing (a raw byte search, in UTF-8 and UTF-16) and again by
+    ``defusedxml`` should the search miss one (another encoding).
 
     Parameters
     ----------
@@ -474,6 +477,9 @@ file this reader knows nests that deep (is it the right file?)
     """
     import xml.etree.ElementTree as ET
 
+    import defusedxml
+    from defusedxml.ElementTree import DefusedXMLParser
+
     if isinstance(text, str):
         if "<!DOCTYPE" in text or "<!ENTITY" in text:
             raise _dtd_error(where)
@@ -501,12 +507,8 @@ file this reader knows nests that deep (is it the right file?)
             self.depth -= 1
             return super().end(tag)
 
-        def doctype(self, name: Any, pubid: Any, system: Any) -> None:
-            self.refused = _dtd_error(where)
-            raise _Refused
-
     builder = _Builder()
-    parser = ET.XMLParser(target=builder)
+    parser = DefusedXMLParser(target=builder, forbid_dtd=True)
     try:
         for k in range(0, len(text), _XML_CHUNK):
             parser.feed(text[k : k + _XML_CHUNK])
@@ -514,6 +516,8 @@ file this reader knows nests that deep (is it the right file?)
     except _Refused:
         assert builder.refused is not None
         raise builder.refused from None
+    except defusedxml.DefusedXmlException:  # a DTD, an entity, an external reference
+        raise _dtd_error(where) from None
     except ET.ParseError as exc:
         raise FileFormatError(f"{where}: not well-formed XML ({exc})") from None
     except (RecursionError, MemoryError, ValueError) as exc:

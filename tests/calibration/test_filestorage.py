@@ -256,8 +256,9 @@ def test_load_calibration_opencv_sample_result():
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        ("%YAML:1.0\na: 1\n   b: 2\n", "line 3: unexpected indentation"),
-        ("%YAML:1.0\na: [1, 2\n", "unbalanced brackets"),
+        # PyYAML's messages (issue 48), with the file and the line
+        ("%YAML:1.0\na: 1\n   b: 2\n", "line 3: mapping values are not allowed here"),
+        ("%YAML:1.0\na: [1, 2\n", r"expected ',' or '\]'.*flow sequence at line 2"),
         ("%YAML:1.0\nm: !!opencv-matrix\n   rows: 2\n   cols: 2\n   dt: d\n   data: [1, 2]\n",
          "needs 4 numbers"),
         ("%YAML:1.0\nm: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: q\n   data: [1]\n",

@@ -15,28 +15,34 @@ double quotes. :func:`read_opencv_storage` reads both, and plain YAML of the sam
   (what ``cv2.FileStorage.getNode(name).mat()`` returns); an ``!!opencv-nd-matrix``
   takes its ``sizes``;
 - mappings become dicts, sequences lists, numbers int or float (``.Inf``, ``.Nan``
-  included), anything else a string.
+  included), an empty value None, anything else a string (``yes``, ``null`` and ``~``
+  too, as ``cv2.FileStorage`` reads them).
+
+YAML is parsed by PyYAML (a :class:`yaml.SafeLoader` subclass that blanks the
+``%YAML:1.0`` line, constructs the two matrix tags and resolves plain scalars as OpenCV
+does); XML by the standard library's ElementTree behind ``defusedxml``
+(:func:`robopercept.fileio.parse_xml`: no DTD or entities); JSON by
+:func:`robopercept.fileio.parse_json`. All three refuse a document nested deeper than
+:data:`~robopercept.fileio.MAX_NESTING` while they parse it, and every malformed file is a
+:class:`~robopercept.errors.FileFormatError` naming the file (and, for YAML, the line).
+YAML anchors and aliases are refused: OpenCV never writes them, and an alias can make a
+few lines stand for billions of values.
 
 :func:`write_opencv_storage` writes the YAML form (``%YAML:1.0``, ``!!opencv-matrix``
 nodes), which ``cv2.FileStorage(path, cv2.FILE_STORAGE_READ)`` and
 :func:`read_opencv_storage` read back.
-
-The YAML reader covers what ``cv2.FileStorage`` writes and common hand-written YAML:
-block mappings and sequences by indentation (``- key: value`` items included), flow
-``[...]`` and ``{...}`` collections over several lines, quoted and plain scalars, ``#``
-comments and the ``---`` / ``...`` document markers. Anchors, aliases and block
-scalars (``|``, ``>``) are refused with :class:`~robopercept.errors.FileFormatError`.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
+import yaml
 
 from robopercept._checks import as_path, check_file, plain_repr
 from robopercept.errors import FileFormatError, InputError
@@ -46,14 +52,12 @@ __all__ = ["read_opencv_storage", "write_opencv_storage"]
 
 _DTYPES = {"u": np.uint8, "c": np.int8, "w": np.uint16, "s": np.int16, "i": np.int32,
            "f": np.float32, "d": np.float64, "h": np.float16}  # fmt: skip
-_INT = re.compile(r"[-+]?\d+\Z")
+_INT = re.compile(r"[-+]?(?:0[xX][0-9a-fA-F]+|\d+)\Z")  # C's strtol(text, &end, 0)
+_BASED = re.compile(r"(?:^|\s)[-+]?0[0-9xX]")  # hex or octal among decimal numbers
 _FLOAT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\Z")
 _SPECIAL = {".inf": np.inf, "+.inf": np.inf, "-.inf": -np.inf, ".nan": np.nan}
+_SPECIAL_TEXT = re.compile(r"([-+]?\.inf|\.nan)\Z", re.IGNORECASE)
 _XML_TOKEN = re.compile(r'"([^"]*)"|(\S+)')  # XML strings have no backslash escapes
-_NOT_IN_KEY = re.compile(r"[\[\]{},#]")  # a plain block key holds none of these
-_TAG = re.compile(r"!\S*")
-_FLOW_KEY = re.compile(r"[^:,}\]]*")
-_FLOW_SCALAR = re.compile(r"[^,\]}]*")
 
 
 def read_opencv_storage(path: str | Path) -> dict[str, Any]:
@@ -70,7 +74,9 @@ def read_opencv_storage(path: str | Path) -> dict[str, Any]:
     -------
     dict
         Top-level names to values: matrices as ndarrays (see the module docstring),
-        nested mappings as dicts, sequences as lists, scalars as int, float or str.
+        nested mappings as dicts, sequences as lists, scalars as int, float or str (None
+        for an empty value). A name repeated (or appended by ``FILE_STORAGE_APPEND``)
+        keeps its first value, as ``cv2.FileStorage.getNode`` finds it.
         ``cv2.FileStorage(path, cv2.FILE_STORAGE_READ).getNode(name)`` gives the same
         values (``.mat()``, ``.real()``, ``.string()``).
 
@@ -119,12 +125,7 @@ def read_opencv_storage(path: str | Path) -> dict[str, Any]:
         if not isinstance(data, dict):
             raise FileFormatError(f"{p}: expected a JSON object at the top")
         return {k: _typed(v, str(p)) for k, v in data.items()}
-    node = _read_yaml(text, str(p))
-    if node is None:
-        return {}
-    if not isinstance(node, dict):
-        raise FileFormatError(f"{p}: expected a mapping (name: value) at the top of the file")
-    return node
+    return _read_yaml(text, str(p))
 
 
 # --------------------------------------------------------------------------- matrices
@@ -165,8 +166,9 @@ def _matrix(node: Any, nd: bool, where: str) -> np.ndarray:
     if dtype.kind in "iu":
         info = np.iinfo(dtype.name)
         bad = ~np.isfinite(data) | (data != np.round(data)) | (data < info.min) | (data > info.max)
-    else:
-        bad = np.isfinite(data) & (np.abs(data) > np.finfo(dtype.name).max)
+    else:  # what overflows when cast (cv2 writes FLT_MAX as 3.40282347e+38, above it)
+        with np.errstate(over="ignore"):
+            bad = np.isfinite(data) & ~np.isfinite(data.astype(dtype))
     if bad.any():
         raise FileFormatError(
             f"{where}: matrix data {float(data[bad][0])!r} does not fit its element type "
@@ -176,6 +178,7 @@ def _matrix(node: Any, nd: bool, where: str) -> np.ndarray:
 
 
 _MAX_CHANNELS = 512  # OpenCV's CV_CN_MAX
+_MAX_DIGITS = 4300  # Python's default sys.get_int_max_str_digits()
 _MAX_EXTENT = 2**31 - 1  # OpenCV's Mat sizes are int
 
 
@@ -206,337 +209,321 @@ def _typed(node: Any, where: str) -> Any:
     return node
 
 
-def _tagged(tag: str | None, node: Any, where: str) -> Any:
-    if tag == "!!opencv-matrix":
-        return _matrix(node, False, where)
-    if tag == "!!opencv-nd-matrix":
-        return _matrix(node, True, where)
-    return node  # other tags (sparse matrices, !!str, ...) keep their plain value
-
-
 # --------------------------------------------------------------------------- scalars
 
 
 def _scalar(token: str, where: str) -> Any:
-    """int, float (``.Inf``, ``.Nan``, ``1.``), None for ``~``, ``null`` or nothing,
-    else str. An integer of more digits than Python converts (4300) is refused."""
+    """One XML token as ``cv2.FileStorage`` reads it: int (``0x1F`` hex and ``010``
+    octal too), float (``1.``, ``.5``, ``4e1``, ``.Inf``, ``.Nan``), None for nothing,
+    else str (``yes``, ``null`` and ``~`` included). An integer of more digits than
+    Python converts (4300) is refused."""
     if not token:
         return None
     if _INT.match(token):
-        try:
-            return int(token)
-        except ValueError:  # over sys.get_int_max_str_digits()
-            raise FileFormatError(
-                f"{where}: an integer of {len(token)} digits; no value of a FileStorage "
-                "file has that many (is it the right file?)"
-            ) from None
+        return _integer(token, where)
     if _FLOAT.match(token):
         return float(token)
-    low = token.lower()
-    if low in _SPECIAL:
-        return _SPECIAL[low]
-    if low in ("~", "null"):
-        return None
-    return token
+    return _SPECIAL.get(token.lower(), token)
 
 
-def _unescape(body: str) -> str:
-    """Body of a double-quoted string: backslash escapes resolved."""
-    out, i = [], 0
-    table = {"n": "\n", "t": "\t", "r": "\r", "0": "\0", '"': '"', "\\": "\\", "/": "/"}
-    while i < len(body):
-        c = body[i]
-        if c == "\\" and i + 1 < len(body):
-            nxt = body[i + 1]
-            if nxt == "x" and i + 3 < len(body):
-                out.append(chr(int(body[i + 2 : i + 4], 16)))
-                i += 4
-                continue
-            out.append(table.get(nxt, nxt))
-            i += 2
-            continue
-        out.append(c)
-        i += 1
-    return "".join(out)
+def _integer(token: str, where: str) -> int:
+    """An integer as ``cv2.FileStorage`` reads it (C's ``strtol`` with base 0): ``0x1F``
+    is 31 and ``010`` is 8."""
+    body = token.lstrip("+-")
+    octal = body[:1] == "0" and len(body) > 1 and not body.strip("01234567")
+    base = 16 if body[1:2] in ("x", "X") else 8 if octal else 10
+    try:
+        if len(body) > _MAX_DIGITS:  # Python's bound for decimal, for hex and octal too
+            raise ValueError
+        return int(token, base)
+    except ValueError:  # over sys.get_int_max_str_digits()
+        raise FileFormatError(
+            f"{where}: an integer of {len(token)} digits; no value of a FileStorage "
+            "file has that many (is it the right file?)"
+        ) from None
 
 
 # --------------------------------------------------------------------------- YAML
 
-
-def _strip_comment(line: str) -> str:
-    """The line without a ``#`` comment (one at the start or after a blank, outside
-    quotes)."""
-    quote, k = "", 0
-    while k < len(line):
-        c = line[k]
-        if quote:
-            if c == "\\" and quote == '"':
-                k += 1
-            elif c == quote:
-                quote = ""
-        elif c in "\"'" and (k == 0 or line[k - 1] in " \t[{,:-"):
-            quote = c
-        elif c == "#" and (k == 0 or line[k - 1] in " \t"):
-            return line[:k]
-        k += 1
-    return line
+# a leading "%YAML:1.0" (OpenCV's spelling, which YAML readers refuse) or "%YAML 1.x"
+# directive, after blank or comment lines; blanked so that line numbers stay
+_DIRECTIVE = re.compile(r"\A((?:[ \t]*(?:#[^\n]*)?\r?\n)*)%YAML[: \t][^\n]*")
+_YAML_TAG = "tag:yaml.org,2002:"
 
 
-def _brackets(text: str, depth: int = 0, quote: str = "") -> tuple[int, int, str]:
-    """Flow brackets ``[`` / ``{`` left open at the end of ``text`` (outside quotes),
-    the deepest they nest, and the quote left open; ``depth`` and ``quote`` continue
-    the scan of an earlier piece (a flow collection over several lines)."""
-    deepest, k = depth, 0
-    while k < len(text):
-        c = text[k]
-        if quote:
-            if c == "\\" and quote == '"':
-                k += 1
-            elif c == quote:
-                quote = ""
-        elif c in "\"'" and (k == 0 or text[k - 1] in " \t[{,:"):
-            quote = c
-        elif c in "[{":
-            depth += 1
-            deepest = max(deepest, depth)
-        elif c in "]}":
-            depth -= 1
-        k += 1
-    return depth, deepest, quote
+class _Dialect(  # type: ignore[misc]
+    yaml.composer.Composer, yaml.constructor.SafeConstructor, yaml.resolver.Resolver
+):
+    """PyYAML's composer, constructor and resolver for OpenCV's YAML dialect, over
+    either of PyYAML's parsers (:class:`_Loader`, :class:`_FastLoader`).
 
+    - Plain scalars resolve as ``cv2.FileStorage`` reads them (:func:`_scalar`):
+      integers (``0x1F`` hex, ``010`` octal, as C's ``strtol``), decimal floats and
+      ``.Inf`` / ``.Nan``; an empty value is None; all else is a string (no YAML 1.1
+      booleans, sexagesimal numbers or dates).
+    - ``!!opencv-matrix`` and ``!!opencv-nd-matrix`` nodes become ndarrays
+      (:func:`_matrix`); another tag keeps the value of its untagged node.
+    - Keys are strings (the text of a scalar key).
+    - Anchors and aliases are refused (an alias repeats a subtree: a few lines can
+      stand for a value of billions of nodes), and so are lists and mappings nested
+      deeper than :data:`~robopercept.fileio.MAX_NESTING` (plus one for a matrix's
+      ``data``), as the composer meets them, before its recursion goes deep.
+    """
 
-def _read_yaml(text: str, name: str) -> Any:
-    """Parse the YAML subset of the module docstring; None for an empty document."""
-    lines: list[tuple[int, int, str]] = []  # (line number, indent, content)
-    for no, raw in enumerate(text.splitlines(), 1):
-        s = _strip_comment(raw).rstrip()
-        body = s.lstrip(" ")
-        if not body or (not lines and body.startswith("%")) or body in ("---", "..."):
-            continue
-        if body.startswith("\t"):
+    yaml_implicit_resolvers: ClassVar[dict[Any, Any]] = {}  # PyYAML's class registries
+    yaml_constructors: ClassVar[dict[Any, Any]] = {}
+
+    def __init__(self, name: str) -> None:
+        yaml.composer.Composer.__init__(self)
+        yaml.constructor.SafeConstructor.__init__(self)
+        yaml.resolver.Resolver.__init__(self)
+        self.name = name
+        self.depth = 0
+
+    def at(self, item: Any) -> str:
+        """``"<file>: line N"`` of a node or an event."""
+        return f"{self.name}: line {item.start_mark.line + 1}"
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        event = self.peek_event()
+        if getattr(event, "anchor", None) is not None:
             raise FileFormatError(
-                f"{name}: line {no}: indented with a tab; YAML indents with spaces"
+                f"{self.at(event)}: anchors and aliases ('&' and '*') are not read in a "
+                "FileStorage file; write the value out where it is used"
             )
-        lines.append((no, len(s) - len(body), body))
-    logical: list[tuple[int, int, str]] = []
-    k = 0
-    while k < len(lines):  # a flow collection continues until its brackets close
-        no, ind, body = lines[k]
-        depth, deepest, quote = _brackets(body)
-        pieces = [body]
-        while depth > 0 and k + 1 < len(lines) and deepest <= MAX_NESTING:
-            k += 1
-            piece = " " + lines[k][2]
-            depth, more, quote = _brackets(piece, depth, quote)
-            deepest = max(deepest, more)
-            pieces.append(piece)
-        if deepest > MAX_NESTING:
-            raise nesting_error(f"{name}: line {no}")
-        if depth != 0:
-            raise FileFormatError(f"{name}: line {no}: unbalanced brackets")
-        logical.append((no, ind, "".join(pieces)))
-        k += 1
-    if not logical:
+        if type(event) is yaml.ScalarEvent:  # Composer.compose_scalar_node, inlined
+            self.get_event()
+            tag = event.tag
+            if tag is None or tag == "!":
+                tag = self.resolve(yaml.ScalarNode, event.value, event.implicit)
+            return yaml.ScalarNode(tag, event.value, event.start_mark, event.end_mark, event.style)
+        if not isinstance(event, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
+            return super().compose_node(parent, index)
+        self.depth += 1
+        try:
+            if self.depth > MAX_NESTING + 1:
+                raise nesting_error(self.at(event))
+            return super().compose_node(parent, index)
+        finally:
+            self.depth -= 1
+
+    def entries(self, node: Any, deep: bool = False, numbers: str = "") -> dict[str, Any]:
+        """The mapping ``node`` as a dict; the value of the key ``numbers``, when it is a
+        list of plain numbers (a matrix's ``data``), is read at once as float64."""
+        if not isinstance(node, yaml.MappingNode):
+            raise FileFormatError(f"{self.at(node)}: expected a mapping (name: value)")
+        out: dict[str, Any] = {}
+        for key, value in node.value:
+            if not isinstance(key, yaml.ScalarNode):
+                raise FileFormatError(f"{self.at(key)}: a key must be a name, not a list or map")
+            name = key.value
+            if (
+                node.flow_style
+                and not key.style  # plain (None, or "" from libyaml)
+                and ":" in name
+                and isinstance(value, yaml.ScalarNode)
+                and not value.style
+                and not value.value
+            ):
+                name, value = self.split_entry(key)
+            if name in out:
+                continue  # cv2.FileNode[name] finds the first of a repeated name
+            fast = _plain_numbers(value) if name == numbers else None
+            out[name] = self.construct_object(value, deep=deep) if fast is None else fast
+        return out
+
+    def split_entry(self, key: Any) -> tuple[str, Any]:
+        """``cv2.FileStorage`` writes a flow mapping with no blank after the colons,
+        ``{ x:1, y:a b, q:"it\\'s" }``, which YAML reads as keys (``"x:1"``) without
+        values: the name before the first colon and the scalar after it."""
+        name, text = key.value.split(":", 1)
+        if text[:1] in ("'", '"'):
+            sub = _Loader(text, self.name)
+            try:
+                value = sub.get_single_node()
+            finally:
+                sub.dispose()
+            if isinstance(value, yaml.ScalarNode):
+                return name, value
+        tag = self.resolve(yaml.ScalarNode, text, (True, False))
+        return name, yaml.ScalarNode(tag, text, key.start_mark, key.end_mark)
+
+    def make_map(self, node: Any) -> Iterator[dict[str, Any]]:
+        data: dict[str, Any] = {}
+        yield data  # PyYAML's two-step construction: no recursion per level
+        data.update(self.entries(node))
+
+    def make_seq(self, node: Any) -> Iterator[list[Any]]:
+        data: list[Any] = []
+        yield data
+        data.extend(self.construct_sequence(node))
+
+    def make_int(self, node: Any) -> int:
+        text = self.construct_scalar(node)
+        if not _INT.match(text):
+            raise FileFormatError(f"{self.at(node)}: !!int {text!r} is not an integer")
+        return _integer(text, self.at(node))
+
+    def make_float(self, node: Any) -> float:
+        text = self.construct_scalar(node)
+        if text.lower() in _SPECIAL:
+            return _SPECIAL[text.lower()]
+        if _INT.match(text):
+            value = _integer(text, self.at(node))
+            try:
+                return float(value)
+            except OverflowError:  # as C's strtod: out of range is infinite
+                return math.copysign(math.inf, value)
+        if not _FLOAT.match(text):
+            raise FileFormatError(f"{self.at(node)}: !!float {text!r} is not a number")
+        return float(text)
+
+    def make_null(self, node: Any) -> None:
         return None
-    _check_yaml_depth(logical, name)
+
+    def make_matrix(self, node: Any, nd: bool = False) -> np.ndarray:
+        mapping = isinstance(node, yaml.MappingNode)
+        entries = self.entries(node, deep=True, numbers="data") if mapping else None
+        return _matrix(entries, nd, self.at(node))
+
+    def make_other(self, node: Any) -> Any:
+        """Another tag (``!!opencv-sparse-matrix``, ``!!bool``, a local ``!tag``): the
+        value of the untagged node."""
+        if isinstance(node, yaml.SequenceNode):
+            return self.make_seq(node)
+        if isinstance(node, yaml.MappingNode):
+            return self.make_map(node)
+        tag = self.resolve(yaml.ScalarNode, node.value, (not node.style, False))
+        return self.yaml_constructors[tag](self, node)
+
+
+_Dialect.add_implicit_resolver(_YAML_TAG + "int", _INT, list("-+0123456789"))
+_Dialect.add_implicit_resolver(_YAML_TAG + "float", _FLOAT, list("-+0123456789."))
+_Dialect.add_implicit_resolver(_YAML_TAG + "float", _SPECIAL_TEXT, list("-+."))
+_Dialect.add_implicit_resolver(_YAML_TAG + "null", re.compile(r"\Z"), [""])
+for _tag, _make in (
+    ("str", yaml.SafeLoader.construct_yaml_str),
+    ("int", _Dialect.make_int),
+    ("float", _Dialect.make_float),
+    ("null", _Dialect.make_null),
+    ("seq", _Dialect.make_seq),
+    ("map", _Dialect.make_map),
+    ("opencv-matrix", _Dialect.make_matrix),
+    ("opencv-nd-matrix", lambda self, node: self.make_matrix(node, nd=True)),
+):
+    _Dialect.add_constructor(_YAML_TAG + _tag, _make)
+_Dialect.add_constructor(None, _Dialect.make_other)
+
+
+_NUMBER_TAGS = (_YAML_TAG + "int", _YAML_TAG + "float")
+
+
+def _plain_numbers(node: Any) -> np.ndarray | None:
+    """A sequence of plain decimal numbers as a float64 vector, in one pass (the bulk of
+    a large matrix); None when it holds anything else (``.Inf``, a string, a list)."""
+    if not isinstance(node, yaml.SequenceNode):
+        return None
+    items = node.value
+    if not all(type(v) is yaml.ScalarNode and v.tag in _NUMBER_TAGS for v in items):
+        return None
+    texts = [v.value for v in items]
+    if _BASED.search(" ".join(texts)):
+        return None  # 0x1F, 010: read one by one (float() would take 010 for 10)
     try:
-        node, k = _block(logical, 0, name)
-    except RecursionError:  # a safety net: _check_yaml_depth bounds the recursion
-        raise nesting_error(name) from None
-    if k != len(logical):
-        raise FileFormatError(f"{name}: line {logical[k][0]}: unexpected indentation")
-    return check_nesting(node, name)
-
-
-def _check_yaml_depth(lines: list[tuple[int, int, str]], name: str) -> None:
-    """Refuse, before the recursive parse, a document with a line nested past
-    :data:`~robopercept.fileio.MAX_NESTING` by a cheap count: the indentations open
-    above it and its own, plus its leading dashes (``- - x``), plus its flow brackets.
-    The count is within a factor 2 of the true depth (a sequence at its key's own
-    indentation adds a level without an indentation), so it bounds the parser's
-    recursion far below Python's limit; the exact depth is checked on the parsed
-    value (:func:`~robopercept.fileio.check_nesting`)."""
-    open_indents: list[int] = []
-    for no, ind, body in lines:
-        while open_indents and open_indents[-1] >= ind:
-            open_indents.pop()
-        open_indents.append(ind)
-        dashes = 0
-        rest = body
-        while _is_item(rest):
-            dashes += 1
-            rest = rest[1:].lstrip()
-        if len(open_indents) + dashes + _brackets(rest)[1] > MAX_NESTING:
-            raise nesting_error(f"{name}: line {no}")
-
-
-def _is_item(body: str) -> bool:
-    return body == "-" or body.startswith("- ")
-
-
-def _key_split(body: str) -> tuple[str, str] | None:
-    """``key: rest`` -> (key, rest), None when the line is no mapping entry."""
-    if body[:1] in "\"'":
-        close = body.find(body[0], 1)
-        if close > 0 and body[close + 1 : close + 2] == ":":
-            rest = body[close + 2 :]
-            if not rest or rest[0] == " ":
-                key = body[1:close]
-                return (_unescape(key) if body[0] == '"' else key), rest.strip()
+        return np.fromiter(map(float, texts), np.float64, len(texts))
+    except ValueError:
         return None
-    # the key runs to the first ':' (a key holds none) followed by a blank or the end;
-    # no brackets, commas or '#' before it (a scan, not a backtracking pattern)
-    colon = body.find(":")
-    after = body[colon + 1 : colon + 2]
-    if colon < 1 or (after and not after.isspace()) or _NOT_IN_KEY.search(body, 0, colon):
-        return None
-    return body[:colon].rstrip(), body[colon + 1 :].strip()
 
 
-def _block(lines: list[tuple[int, int, str]], k: int, name: str) -> tuple[Any, int]:
-    """The block node starting at ``lines[k]`` (a sequence or a mapping, by its first
-    line) and the index after it."""
-    no, ind, body = lines[k]
-    if _is_item(body):
-        items: list[Any] = []
-        while k < len(lines) and lines[k][1] == ind and _is_item(lines[k][2]):
-            no, _, body = lines[k]
-            rest = body[1:].strip()
-            if rest and rest[0] not in "[{" and (_is_item(rest) or _key_split(rest) is not None):
-                # "- key: value" or "- - item": a block whose lines line up after the dash
-                lines[k] = (no, ind + len(body) - len(rest), rest)
-                value, k = _block(lines, k, name)
-            else:
-                value, k = _value(lines, k + 1, ind, rest, no, name)
-            items.append(value)
-        return items, k
+class _Loader(  # type: ignore[misc]
+    yaml.reader.Reader, yaml.scanner.Scanner, yaml.parser.Parser, _Dialect
+):
+    """The dialect over PyYAML's pure-Python parser, where ``\\'`` in a double-quoted
+    string is an apostrophe (OpenCV's writer escapes it: ``"it\\'s"``)."""
+
+    ESCAPE_REPLACEMENTS: ClassVar[dict[str, str]] = {
+        **yaml.scanner.Scanner.ESCAPE_REPLACEMENTS,
+        "'": "'",
+    }
+
+    def __init__(self, text: str, name: str) -> None:
+        yaml.reader.Reader.__init__(self, text)
+        yaml.scanner.Scanner.__init__(self)
+        yaml.parser.Parser.__init__(self)
+        _Dialect.__init__(self, name)
+
+
+if yaml.__with_libyaml__:
+    from yaml.cyaml import CParser
+
+    class _FastLoader(_Dialect, CParser):  # type: ignore[misc]
+        """The dialect over libyaml's parser (PyYAML's C extension): the events come
+        from C, several times faster on a large matrix; a file it refuses is read again
+        by :class:`_Loader` (which also takes OpenCV's ``\\'`` escape)."""
+
+        def __init__(self, text: str, name: str) -> None:
+            CParser.__init__(self, text)
+            _Dialect.__init__(self, name)
+
+    _LOADERS: tuple[type[_Dialect], ...] = (_FastLoader, _Loader)
+else:  # pragma: no cover (PyYAML built without libyaml)
+    _LOADERS = (_Loader,)
+
+
+def _read_yaml(text: str, name: str) -> dict[str, Any]:
+    """The top-level mapping of a FileStorage YAML file. Several documents (what
+    ``cv2.FILE_STORAGE_APPEND`` writes) merge, the first of a repeated name winning, as
+    ``cv2.FileStorage.getNode`` looks names up in each document in turn."""
+    text = _DIRECTIVE.sub(r"\1", text, count=1)
+    for k, loader_class in enumerate(_LOADERS, 1):
+        loader = None
+        try:
+            loader = loader_class(text, name)  # type: ignore[call-arg]
+            return check_nesting(_documents(loader), name)
+        except yaml.MarkedYAMLError as exc:
+            if k == len(_LOADERS):
+                raise FileFormatError(_yaml_message(exc, name)) from None
+        except yaml.YAMLError as exc:  # a ReaderError: a character YAML does not allow
+            if k == len(_LOADERS):
+                what = f"{getattr(exc, 'reason', exc)} at character {getattr(exc, 'position', '?')}"
+                raise FileFormatError(f"{name}: not a YAML file ({what})") from None
+        except RecursionError:  # a safety net: compose_node bounds the recursion
+            raise nesting_error(name) from None
+        finally:
+            if loader is not None:
+                loader.dispose()
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _documents(loader: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    while k < len(lines) and lines[k][1] == ind:
-        no, _, body = lines[k]
-        if _is_item(body):
-            raise FileFormatError(f"{name}: line {no}: a sequence item inside a mapping")
-        split = _key_split(body)
-        if split is None:
-            raise FileFormatError(f"{name}: line {no}: expected 'name: value'; got {body!r}")
-        key, rest = split
-        value, k = _value(lines, k + 1, ind, rest, no, name, same_level_seq=True)
-        out[key] = value
-    return out, k
-
-
-def _value(
-    lines: list[tuple[int, int, str]],
-    k: int,
-    ind: int,
-    rest: str,
-    no: int,
-    name: str,
-    *,
-    same_level_seq: bool = False,
-) -> tuple[Any, int]:
-    """The value of an entry whose text after the key (or dash) is ``rest``: inline, or
-    the indented block from ``lines[k]`` on; returns it and the index after it."""
-    where = f"{name}: line {no}"
-    tag = None
-    if rest.startswith("!"):
-        tag, _, rest = rest.partition(" ")
-        rest = rest.strip()
-    if rest[:1] in ("&", "*", "|", ">"):
-        raise FileFormatError(f"{where}: anchors, aliases and block scalars are not supported")
-    if rest:
-        if rest[0] in "[{":
-            value, end = _flow(rest, 0, where)
-            if rest[end:].strip():
-                raise FileFormatError(f"{where}: text after a closed bracket: {rest[end:]!r}")
-        elif rest[0] in "\"'":
-            value, end = _quoted(rest, 0, where)
-            if rest[end:].strip():
-                raise FileFormatError(f"{where}: text after a quoted string: {rest[end:]!r}")
-        else:
-            value = _scalar(rest, where)
-        return _tagged(tag, value, where), k
-    if k < len(lines) and (
-        lines[k][1] > ind or (same_level_seq and lines[k][1] == ind and _is_item(lines[k][2]))
-    ):
-        value, k = _block(lines, k, name)
-        return _tagged(tag, value, where), k
-    return _tagged(tag, None, where), k
-
-
-def _quoted(text: str, k: int, where: str) -> tuple[str, int]:
-    q = text[k]
-    j = k + 1
-    while j < len(text):
-        if q == '"' and text[j] == "\\":
-            j += 2
+    while loader.check_node():
+        node = loader.get_node()
+        value = loader.construct_document(node)
+        if value is None:  # an empty document
             continue
-        if text[j] == q:
-            if q == "'" and text[j + 1 : j + 2] == "'":
-                j += 2
-                continue
-            body = text[k + 1 : j]
-            return (_unescape(body) if q == '"' else body.replace("''", "'")), j + 1
-        j += 1
-    raise FileFormatError(f"{where}: unterminated quoted string")
+        if not isinstance(value, dict):
+            raise FileFormatError(
+                f"{loader.at(node)}: expected a mapping (name: value) at the top of the "
+                f"file; found a {'list' if isinstance(value, list) else 'single value'}"
+            )
+        for key, item in value.items():
+            out.setdefault(key, item)
+    return out
 
 
-def _skip(text: str, k: int) -> int:
-    while k < len(text) and text[k] in " \t":
-        k += 1
-    return k
-
-
-def _flow(text: str, k: int, where: str) -> tuple[Any, int]:
-    """A flow node at ``text[k]``: ``[...]``, ``{...}``, a quoted or a plain scalar
-    (which ends at ``,``, ``]`` or ``}``)."""
-    k = _skip(text, k)
-    if k >= len(text):
-        raise FileFormatError(f"{where}: a value is missing")
-    c = text[k]
-    if c == "!":  # tags inside a flow collection, read in a loop (no recursion per tag)
-        tags = []
-        while k < len(text) and text[k] == "!":
-            m = _TAG.match(text, k)
-            assert m is not None
-            tags.append(m.group(0))
-            k = _skip(text, m.end())
-        value, end = _flow(text, k, where)
-        for tag in reversed(tags):
-            value = _tagged(tag, value, where)
-        return value, end
-    if c in "\"'":
-        return _quoted(text, k, where)
-    if c in "[{":
-        close = "]" if c == "[" else "}"
-        seq: list[Any] = []
-        mapping: dict[str, Any] = {}
-        k = _skip(text, k + 1)
-        while k < len(text) and text[k] != close:
-            if c == "{":
-                if text[k] in "\"'":
-                    key, k = _quoted(text, k, where)
-                else:
-                    m = _FLOW_KEY.match(text, k)
-                    assert m is not None
-                    key, k = m.group(0).strip(), m.end()
-                k = _skip(text, k)
-                if k >= len(text) or text[k] != ":":
-                    raise FileFormatError(f"{where}: expected ':' after {key!r} in {{...}}")
-                mapping[key], k = _flow(text, k + 1, where)
-            else:
-                item, k = _flow(text, k, where)
-                seq.append(item)
-            k = _skip(text, k)
-            if k < len(text) and text[k] == ",":
-                k = _skip(text, k + 1)
-            elif k < len(text) and text[k] != close:
-                raise FileFormatError(f"{where}: expected ',' or {close!r}; got {text[k]!r}")
-        if k >= len(text):
-            raise FileFormatError(f"{where}: {close!r} missing")
-        return (mapping if c == "{" else seq), k + 1
-    m = _FLOW_SCALAR.match(text, k)  # at k: no copy of the rest of the text
-    assert m is not None
-    return _scalar(m.group(0).strip(), where), m.end()
+def _yaml_message(exc: Any, name: str) -> str:
+    """PyYAML's error as one line naming the file and the line: ``"cam.yml: line 3:
+    mapping values are not allowed here"``."""
+    mark = exc.problem_mark or exc.context_mark
+    where = f"{name}: line {mark.line + 1}" if mark is not None else name
+    text = f"{where}: {exc.problem or exc.context or 'not valid YAML'}"
+    if exc.context and exc.problem:
+        line = f" at line {exc.context_mark.line + 1}" if exc.context_mark else ""
+        text += f" ({exc.context}{line})"
+    if "'\\t'" in text:
+        text += "; YAML indents with spaces, not tabs"
+    return text
 
 
 # --------------------------------------------------------------------------- XML
@@ -548,7 +535,17 @@ def _read_xml(text: str, name: str) -> dict[str, Any]:
         raise FileFormatError(
             f"{name}: the XML root is <{root.tag}>; an OpenCV FileStorage file has <opencv_storage>"
         )
-    return {child.tag: _xml_node(child, name) for child in root}
+    return _xml_map(root, name)
+
+
+def _xml_map(e: Any, name: str) -> dict[str, Any]:
+    """Named children as a dict; the first of a repeated name wins, as in
+    ``cv2.FileNode[name]`` (``FILE_STORAGE_APPEND`` adds names at the end)."""
+    out: dict[str, Any] = {}
+    for child in e:
+        if child.tag not in out:
+            out[child.tag] = _xml_node(child, name)
+    return out
 
 
 def _xml_node(e: Any, name: str) -> Any:
@@ -566,7 +563,7 @@ def _xml_node(e: Any, name: str) -> Any:
     if kids:
         if all(k.tag == "_" for k in kids):
             return [_xml_node(k, name) for k in kids]
-        return {k.tag: _xml_node(k, name) for k in kids}
+        return _xml_map(e, name)
     text = e.text or ""
     tokens: list[Any] = []
     for m in _XML_TOKEN.finditer(text):
