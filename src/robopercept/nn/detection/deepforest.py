@@ -33,6 +33,13 @@ DEEPFOREST_IMAGES = (
     "OSBS_029",
     "SOAP_061",
 )
+#: what the DeepForest folder is and holds, for messages: the NEON sample that the
+#: ``deepforest`` package ships (``deepforest/data/``)
+DEEPFOREST_FOLDER = (
+    "a folder holding the DeepForest NEON tree-crown sample: the .png image and its "
+    f"Pascal-VOC .xml boxes for each of {', '.join(DEEPFOREST_IMAGES)}, as the deepforest "
+    "package ships them in deepforest/data/"
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,9 +90,8 @@ def _check_folder(folder: Any) -> Any:
     path = as_path(folder, "folder")
     if not path.is_dir():
         raise InputError(
-            f"DeepForest folder {str(path)!r} does not exist or is not a folder: pass the "
-            "deepforest_neon folder (e.g. ../shared/data/detection/deepforest_neon) that "
-            f"holds {DEEPFOREST_IMAGES[0]}.png/.xml"
+            f"DeepForest folder {str(path)!r} does not exist or is not a folder: pass "
+            f"{DEEPFOREST_FOLDER}"
         )
     return path
 
@@ -129,7 +135,8 @@ def deepforest_strip(
     Parameters
     ----------
     folder : path-like
-        The ``deepforest_neon`` folder.
+        A folder holding the DeepForest NEON images and their Pascal-VOC boxes
+        (:data:`DEEPFOREST_IMAGES`).
     test_fraction : float
         Height of the strip as a fraction of the image height, in (0, 1).
     min_area_fraction : float
@@ -199,7 +206,9 @@ def deepforest_tiles(
     Parameters
     ----------
     folder : path-like
-        The ``deepforest_neon`` folder (``../shared/data/detection/deepforest_neon``).
+        A folder holding the DeepForest NEON images and their Pascal-VOC boxes
+        (``<stem>.png`` and ``<stem>.xml`` for each stem of :data:`DEEPFOREST_IMAGES`,
+        as the ``deepforest`` package ships them in ``deepforest/data/``).
     tile : int
         Tile side in pixels (64 to 2472).
     test_fraction : float

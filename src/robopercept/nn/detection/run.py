@@ -70,7 +70,7 @@ from robopercept.imaging import write_image
 from robopercept.nn._guards import check_device
 from robopercept.nn.coco.evaluate import CocoEvaluation, write_pr_curves
 from robopercept.nn.detection.data import DetectionDataset
-from robopercept.nn.detection.deepforest import deepforest_tiles
+from robopercept.nn.detection.deepforest import DEEPFOREST_FOLDER, deepforest_tiles
 from robopercept.nn.detection.synthetic import (
     digits_detection_set,
     procedural_detection_set,
@@ -216,8 +216,8 @@ def _check_source(data: Any, images: Any, images_dir: Any, evaluate: bool) -> tu
             folder = as_path(images_dir, "images_dir (--images-dir)")
         if folder is None or not folder.is_dir():
             raise ArgumentError(
-                f"--images-dir: --data trees needs the DeepForest NEON folder; got "
-                f"{images_dir!r} (e.g. ../shared/data/detection/deepforest_neon)"
+                f"--images-dir: --data trees needs the DeepForest NEON folder, "
+                f"{DEEPFOREST_FOLDER}; got {images_dir!r}"
             )
     else:
         path = Path(text)

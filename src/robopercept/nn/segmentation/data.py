@@ -27,8 +27,15 @@ __all__ = [
     "segmentation_sets",
 ]
 
-#: the files of the stardist_nuclei folder
+#: the files of the nuclei folder (StarDist's sample)
 NUCLEI_FILES = ("img2d.tif", "mask2d.tif")
+#: what the nuclei folder is and holds, for messages: the sample that the ``stardist``
+#: package ships (``stardist/data/images/``)
+NUCLEI_FOLDER = (
+    "a folder holding the StarDist nuclei sample: img2d.tif (a 512 x 512 fluorescence "
+    "image of the 2018 Data Science Bowl, BBBC038) and mask2d.tif (its instance labels), "
+    "as the stardist package ships them in stardist/data/images/"
+)
 
 
 def percentile_normalize(
@@ -103,14 +110,15 @@ class NucleiSplit:
 
 
 def nuclei_quadrants(folder: str | os.PathLike[str], test_quadrant: int = 3) -> NucleiSplit:
-    """The real fluorescence nuclei (``../shared/data/segmentation/stardist_nuclei``:
-    ``img2d.tif``, a 512 x 512 uint16 image, and ``mask2d.tif``, its instance labels,
-    125 nuclei) cut into four 256 x 256 quadrants: three to train on, one held out.
+    """The real fluorescence nuclei of StarDist's sample (``img2d.tif``, a 512 x 512
+    uint16 image of the 2018 Data Science Bowl, and ``mask2d.tif``, its instance labels,
+    125 nuclei; the ``stardist`` package ships both in ``stardist/data/images/``) cut into
+    four 256 x 256 quadrants: three to train on, one held out.
 
     Parameters
     ----------
     folder : path-like
-        The ``stardist_nuclei`` folder.
+        A folder holding ``img2d.tif`` and ``mask2d.tif`` (:data:`NUCLEI_FILES`).
     test_quadrant : int
         0 top left, 1 top right, 2 bottom left, 3 bottom right (the default).
 
@@ -127,11 +135,7 @@ def nuclei_quadrants(folder: str | os.PathLike[str], test_quadrant: int = 3) -> 
     """
     path = as_path(folder, "folder")
     if not path.is_dir():
-        raise InputError(
-            f"nuclei folder {str(path)!r} does not exist: pass the stardist_nuclei folder "
-            "(e.g. ../shared/data/segmentation/stardist_nuclei) holding img2d.tif and "
-            "mask2d.tif"
-        )
+        raise InputError(f"nuclei folder {str(path)!r} does not exist: pass {NUCLEI_FOLDER}")
     q = check_int(test_quadrant, "test_quadrant", 0)
     if q > 3:
         raise InputError(f"test_quadrant must be 0..3; got {q}")
@@ -218,10 +222,7 @@ def segmentation_sets(
         )
     if data == "nuclei":
         if folder is None:
-            raise InputError(
-                "the nuclei data needs its folder: pass the stardist_nuclei folder "
-                "(e.g. ../shared/data/segmentation/stardist_nuclei)"
-            )
+            raise InputError(f"the nuclei data needs its folder (folder=): {NUCLEI_FOLDER}")
         s = nuclei_quadrants(folder)
         train = DetectionDataset.from_instance_labels(
             list(np.clip(s.train_images, 0, 1)), list(s.train_instances), "nucleus"

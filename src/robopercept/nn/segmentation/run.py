@@ -72,6 +72,7 @@ from robopercept.nn.detection.train import (
 from robopercept.nn.detection.zoo import build_detector, detect_arrays, load_detector, save_detector
 from robopercept.nn.segmentation.data import (
     BUILTIN_SEGMENTATION_DATA,
+    NUCLEI_FOLDER,
     SegmentationSets,
     segmentation_sets,
 )
@@ -112,8 +113,6 @@ TASKS = ("semantic", "instance")
 RUN_FILES = ("model.pt", "history.json", "metrics.json", "samples.png")
 #: the U-Net's depth in a run (the other settings are the builders' defaults)
 _UNET_DEPTH = 4
-#: where the nuclei data lives in a checkout's shared data
-_NUCLEI_HINT = "../shared/data/segmentation/stardist_nuclei"
 
 
 # --------------------------------------------------------------------------- results
@@ -243,8 +242,7 @@ def _check_data_args(data: Any, images: Any, images_dir: Any) -> tuple[str, int]
         folder = None if images_dir is None else as_path(images_dir, "--images-dir")
         if folder is None or not folder.is_dir():
             raise InputError(
-                f"--images-dir: --data nuclei needs the stardist_nuclei folder; got "
-                f"{images_dir!r} (e.g. {_NUCLEI_HINT})"
+                f"--images-dir: --data nuclei needs {NUCLEI_FOLDER}; got {images_dir!r}"
             )
     n = check_int(images, "--images")
     if n < 2:
@@ -283,7 +281,8 @@ def load_segmentation_data(
     seed : int
         shapes / digits: the canvases and the split.
     images_dir : path, optional
-        nuclei: the ``stardist_nuclei`` folder (``img2d.tif``, ``mask2d.tif``); a COCO
+        nuclei: a folder holding StarDist's nuclei sample, ``img2d.tif`` and
+        ``mask2d.tif`` (:data:`~robopercept.nn.segmentation.data.NUCLEI_FOLDER`); a COCO
         file: its images' folder (default: the file's folder).
     evaluate : bool
         The data is for evaluation: your own annotations are not split (all of them
