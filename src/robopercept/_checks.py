@@ -34,6 +34,8 @@ __all__ = [
     "check_range",
     "check_shape",
     "plain_repr",
+    "resolve_alias",
+    "squeeze_point_axis",
 ]
 
 IMAGE_DTYPES = (np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64, np.bool_)
@@ -238,12 +240,46 @@ def check_int(value: npt.ArrayLike, name: str, minimum: int | None = None) -> in
     return v
 
 
+def squeeze_point_axis(arr: np.ndarray, dim: int | None) -> np.ndarray:
+    """OpenCV's ``(N, 1, dim)`` point vectors as ``(N, dim)``; any other array unchanged.
+
+    ``cv2.goodFeaturesToTrack``, ``cv2.findChessboardCorners``,
+    ``cv2.calcOpticalFlowPyrLK`` and ``cv2.perspectiveTransform`` hold N points of
+    ``dim`` coordinates as an ``(N, 1, dim)`` array (a column of 2- or 3-channel
+    elements); this view drops the middle axis so that a guard written for ``(N, dim)``
+    accepts them. ``dim=None`` squeezes any ``(N, 1, D)``. Returns a view, never a copy.
+
+    Parameters
+    ----------
+    arr : ndarray
+    dim : int or None
+        Coordinates per point the caller wants.
+
+    Returns
+    -------
+    ndarray
+        ``arr.reshape(N, dim)`` for an ``(N, 1, dim)`` array, else ``arr``.
+
+    Examples
+    --------
+    >>> squeeze_point_axis(np.zeros((5, 1, 2), np.float32), 2).shape
+    (5, 2)
+    >>> squeeze_point_axis(np.zeros((5, 2, 1)), 2).shape
+    (5, 2, 1)
+    """
+    if arr.ndim == 3 and arr.shape[1] == 1 and (dim is None or arr.shape[2] == dim):
+        return arr.reshape(arr.shape[0], arr.shape[2])
+    return arr
+
+
 def check_points(value: npt.ArrayLike, name: str = "points", dim: int | None = 3) -> np.ndarray:
     """Return ``value`` as a float64 ``(N, dim)`` array (NaN/inf allowed: callers decide).
 
-    ``dim=None`` accepts any number of columns.
+    ``dim=None`` accepts any number of columns. OpenCV's ``(N, 1, dim)`` point vectors
+    (``cv2.goodFeaturesToTrack``, ``cv2.findChessboardCorners``) are taken as
+    ``(N, dim)`` (:func:`squeeze_point_axis`).
     """
-    arr = _as_array(value, name)
+    arr = squeeze_point_axis(_as_array(value, name), dim)
     if arr.ndim != 2 or (dim is not None and arr.shape[1] != dim):
         want = f"(N, {dim})" if dim is not None else "(N, D)"
         hint = ""
@@ -251,7 +287,8 @@ def check_points(value: npt.ArrayLike, name: str = "points", dim: int | None = 3
             hint = f": points as columns? use {name}.T"
         elif dim is not None and arr.ndim == 1 and arr.size == dim:
             hint = f": a single point? use {name}[None, :]"
-        raise InputError(f"{name} must have shape {want}; got {arr.shape}{hint}")
+        alt = f" (or OpenCV's (N, 1, {dim}))" if dim is not None else ""
+        raise InputError(f"{name} must have shape {want}{alt}; got {arr.shape}{hint}")
     if arr.dtype.kind not in "biuf":
         raise InputError(f"{name} must be numeric; got dtype {arr.dtype}")
     return np.ascontiguousarray(arr, dtype=np.float64)
@@ -716,3 +753,50 @@ def check_size(
             "allowed here (the arrays would take several GiB): use a smaller size"
         )
     return w, h
+
+
+def resolve_alias(
+    value: Any, name: str, alias_value: Any, alias_name: str, library: str = "Open3D"
+) -> Any:
+    """The value of a keyword given under its own ``name`` or under another library's
+    spelling ``alias_name`` (Open3D's ``nb_neighbors`` for ``k``, ...); ``None`` stands
+    for "not given".
+
+    Parameters
+    ----------
+    value : object
+        The value under ``name`` (None when not given).
+    name : str
+    alias_value : object
+        The value under ``alias_name`` (None when not given).
+    alias_name : str
+    library : str
+        Whose spelling the alias is (``"Open3D"``, ``"OpenCV"``), for the message.
+
+    Returns
+    -------
+    object
+        Whichever was given; None when neither was.
+
+    Raises
+    ------
+    InputError
+        Both were given, naming both spellings.
+
+    Examples
+    --------
+    >>> resolve_alias(None, "k", 20, "nb_neighbors")
+    20
+    >>> resolve_alias(30, "k", 20, "nb_neighbors")
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.InputError: give k or its Open3D spelling nb_neighbors, not both ...
+    """
+    if alias_value is None:
+        return value
+    if value is not None:
+        raise InputError(
+            f"give {name} or its {library} spelling {alias_name}, not both (got {name}="
+            f"{plain_repr(value)} and {alias_name}={plain_repr(alias_value)}): drop one"
+        )
+    return alias_value

@@ -79,7 +79,7 @@ def test_no_inliers_runs_max_iterations(rng):
     ("kwargs", "match"),
     [
         ({"threshold": float("inf")}, "threshold must be finite"),
-        ({"threshold": None}, "threshold must be a real number"),
+        ({"threshold": "3"}, "threshold must be a real number"),
         ({"max_iterations": 2.5}, "max_iterations must be an integer"),
         ({"refine": "no"}, "refine must be True or False"),
     ],

@@ -1206,6 +1206,7 @@ METHODS: dict[str, tuple[str, ...]] = {
 INIT: dict[str, dict[str, Any]] = {
     "tracking.KalmanFilter": {"dim_x": 2, "dim_z": 2, "x": np.zeros(2), "P": np.eye(2)},
     "tracking.GatedTrack": {"dim": 4},
+    "learning.SVC": {"probability": True, "random_state": 0},  # predict_proba fuzzed too
 }
 
 #: calls made on the instance before the fuzzed method (valid warm-up)

@@ -48,6 +48,7 @@ CASES = {
     "svm-rbf": (lambda: SVC(C=3.0), "iris"),
     "svm-linear": (lambda: SVC(kernel="linear"), "iris"),
     "svm-poly-ovo": (lambda: SVC(kernel="poly", decision_function_shape="ovo"), "iris"),
+    "svm-probability": (lambda: SVC(probability=True, random_state=0), "iris"),
     "linear-svc": (lambda: LinearSVC(random_state=0, max_iter=200), "iris"),
     "lda-digits": (lambda: LDA(n_components=3, shrinkage=1e-3), "digits"),
     "tree-regressor": (lambda: DecisionTreeRegressor(max_depth=6, random_state=0), "wine"),

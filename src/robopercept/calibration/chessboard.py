@@ -37,6 +37,7 @@ diagonally. For symmetric boards the first corner is the one higher in the image
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +73,17 @@ _CONTRAST = 20.0  # grey levels (0-255 scale)
 class ChessboardDetection:
     """Result of :func:`find_chessboard_corners`.
 
+    It unpacks as the tuple of ``ok, corners = cv2.findChessboardCorners(gray, (9, 6))``:
+    ``ok, corners = find_chessboard_corners(gray, (9, 6))`` gives ``ok`` (bool) and,
+    when found, ``corners`` as OpenCV's ``(w * h, 1, 2)`` float32 array (ready for
+    ``cv2.cornerSubPix``, ``cv2.calibrateCamera`` and ``cv2.drawChessboardCorners``, and
+    taken by :func:`~robopercept.calibration.calibrate_camera`,
+    :func:`~robopercept.calibration.board_pose` and
+    :func:`~robopercept.estimation.find_homography`), or ``None`` when not found, as
+    OpenCV gives.
+    The attributes stay the primary interface: :attr:`corners` there is (w * h, 2)
+    float64, at full precision, and holds the partial lattice when not found.
+
     Attributes
     ----------
     found : bool
@@ -88,6 +100,11 @@ class ChessboardDetection:
     corners: np.ndarray
     pattern_size: tuple[int, int]
     reason: str = ""
+
+    def __iter__(self) -> Iterator[bool | np.ndarray | None]:
+        """``ok, corners``, the order of ``cv2.findChessboardCorners``'s result."""
+        corners = self.corners.astype(np.float32).reshape(-1, 1, 2) if self.found else None
+        return iter((bool(self.found), corners))
 
 
 def chessboard_points(pattern_size: tuple[int, int], square: float = 1.0) -> np.ndarray:
@@ -453,6 +470,8 @@ def find_chessboard_corners(
     -------
     ChessboardDetection
         ``found`` is False (with the reason) unless every inner corner was found.
+        Unpacks as ``ok, corners`` in the order of ``cv2.findChessboardCorners``
+        (corners ``(w * h, 1, 2)`` float32, or None when not found).
 
     Raises
     ------

@@ -45,6 +45,7 @@ centre is taken to be the one higher in the image.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -71,6 +72,13 @@ _MIN_REPEAT = 2
 class CircleGridDetection:
     """Result of :func:`find_circles_grid`.
 
+    It unpacks as the tuple of ``ok, centers = cv2.findCirclesGrid(gray, (4, 11),
+    flags=cv2.CALIB_CB_ASYMMETRIC_GRID)``: ``ok, centers = find_circles_grid(gray,
+    (4, 11))`` gives ``ok`` (bool) and, when found, ``centers`` as OpenCV's
+    ``(w * h, 1, 2)`` float32 array, or ``None`` when not found, as OpenCV gives. The
+    attributes stay the primary interface: :attr:`centers` there is (w * h, 2) float64
+    and holds the partial lattice when not found.
+
     Attributes
     ----------
     found : bool
@@ -95,6 +103,11 @@ class CircleGridDetection:
         """The centres, under the name the chessboard detection uses (for code and
         drawing that take either)."""
         return self.centers
+
+    def __iter__(self) -> Iterator[bool | np.ndarray | None]:
+        """``ok, centers``, the order of ``cv2.findCirclesGrid``'s result."""
+        centers = self.centers.astype(np.float32).reshape(-1, 1, 2) if self.found else None
+        return iter((bool(self.found), centers))
 
 
 def circles_grid_points(
@@ -351,7 +364,8 @@ def find_circles_grid(
     CircleGridDetection
         ``found`` is False (with the reason) unless every circle was found. Extra
         circles on the grid's extension (stray blobs) are left out; a grid larger than
-        ``pattern_size`` is not found.
+        ``pattern_size`` is not found. Unpacks as ``ok, centers`` in the order of
+        ``cv2.findCirclesGrid`` (centres ``(w * h, 1, 2)`` float32, or None).
 
     Raises
     ------

@@ -540,7 +540,7 @@ def homography_dlt(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     a[:, 1::2, 8] = v
     if n == 4:  # square system padded: the null vector of the 8x9 matrix
         a = np.concatenate([a, np.zeros((b, 1, 9))], axis=1)
-    _, _, vt = np.linalg.svd(a)
+    _, _, vt = np.linalg.svd(a, full_matrices=False)  # 9 columns: vt is (b, 9, 9) either way
     h = vt[:, -1].reshape(b, 3, 3)
     h = np.linalg.inv(td) @ h @ ts
     scale = h[:, 2:3, 2:3]

@@ -38,6 +38,7 @@ from robopercept._checks import (
     check_magnitude,
     check_numeric,
     check_real,
+    squeeze_point_axis,
 )
 from robopercept.errors import InputError
 
@@ -404,7 +405,7 @@ def min_area_rectangle(points: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, f
     >>> c.round(6).tolist(), h.round(6).tolist(), round(float(np.degrees(t)), 6)
     ([1.0, 1.0], [0.707107, 0.707107], 45.0)
     """
-    pts = check_numeric(points, "points")
+    pts = squeeze_point_axis(check_numeric(points, "points"), 2)  # OpenCV's (N, 1, 2) too
     if pts.ndim != 2 or pts.shape[1] != 2 or pts.shape[0] < 1:
         raise InputError(f"points must be (N, 2) with N >= 1; got shape {pts.shape}")
     pts = check_magnitude(check_finite(pts.astype(np.float64), "points"), "points", 1e150)

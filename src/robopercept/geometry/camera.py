@@ -48,7 +48,14 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_choice, check_int, check_numeric, check_real, plain_repr
+from robopercept._checks import (
+    check_choice,
+    check_int,
+    check_numeric,
+    check_real,
+    plain_repr,
+    squeeze_point_axis,
+)
 from robopercept.errors import DegenerateError, InputError
 
 __all__ = [
@@ -516,7 +523,7 @@ def undistort_points(
     >>> undistort_points([[370.0, 140.0]], K).tolist()
     [[0.1, -0.2]]
     """
-    xy = check_numeric(pixels, "pixels")
+    xy = squeeze_point_axis(check_numeric(pixels, "pixels"), 2)  # OpenCV's (N, 1, 2) too
     if xy.ndim != 2 or xy.shape[1] != 2:
         raise InputError(f"pixels must be (N, 2); got shape {xy.shape}")
     k = check_numeric(K, "K")

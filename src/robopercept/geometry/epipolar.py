@@ -22,12 +22,18 @@ coordinates into camera 2: :math:`X_2 = R X_1 + t`).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_magnitude, check_numeric, check_real
+from robopercept._checks import (
+    check_magnitude,
+    check_numeric,
+    check_real,
+    squeeze_point_axis,
+)
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation.models import Model, hartley_normalization
 from robopercept.geometry.transforms import check_matrix3
@@ -125,9 +131,12 @@ def fundamental_from_essential(
 
 
 def _points(x: npt.ArrayLike, name: str) -> np.ndarray:
-    p = check_numeric(x, name)
+    """(N, 2) or OpenCV's (N, 1, 2) points as a finite float64 (N, 2) array."""
+    p = squeeze_point_axis(check_numeric(x, name), 2)
     if p.ndim != 2 or p.shape[1] != 2:
-        raise InputError(f"{name} must be (N, 2) pixel coordinates; got shape {p.shape}")
+        raise InputError(
+            f"{name} must be (N, 2) pixel coordinates (or OpenCV's (N, 1, 2)); got shape {p.shape}"
+        )
     if not np.isfinite(p).all():
         raise InputError(f"{name} contains NaN or inf; drop those correspondences first")
     return check_magnitude(p, name, 1e150)
@@ -152,7 +161,8 @@ def _eight_point_batch(x1: np.ndarray, x2: np.ndarray, essential: bool) -> np.nd
     A = np.stack([u2 * u1, u2 * v1, u2, v2 * u1, v2 * v1, v2, u1, v1, one], axis=-1)
     if A.shape[1] < 9:  # pad to square: the null vector of the 8x9 system
         A = np.concatenate([A, np.zeros((A.shape[0], 9 - A.shape[1], 9))], axis=1)
-    _, _, vt = np.linalg.svd(A)
+    # thin SVD: V is all that is needed (the full U of an N x N system costs O(N^2))
+    _, _, vt = np.linalg.svd(A, full_matrices=False)
     F = vt[:, -1].reshape(-1, 3, 3)
     if essential:  # project after undoing the normalization, which would change E's shape
         F = t2.transpose(0, 2, 1) @ F @ t1
@@ -188,7 +198,7 @@ def eight_point(x1: npt.ArrayLike, x2: npt.ArrayLike, *, essential: bool = False
 
     Parameters
     ----------
-    x1, x2 : (N, 2) array_like
+    x1, x2 : (N, 2) or (N, 1, 2) array_like
         Corresponding points, N >= 8 (pixels for F; normalized coordinates
         :math:`K^{-1} x` for E).
     essential : bool
@@ -304,6 +314,14 @@ class EssentialModel(FundamentalModel):
 class FundamentalFit:
     """Result of :func:`find_fundamental` / :func:`find_essential`.
 
+    It unpacks as the tuple of ``F, mask = cv2.findFundamentalMat(x1, x2, cv2.FM_RANSAC)``
+    and ``E, mask = cv2.findEssentialMat(x1, x2, K)``: ``F, mask = find_fundamental(x1,
+    x2)`` gives ``F`` (3, 3) float64 and ``mask`` (N, 1) uint8, 1 for the inliers and 0
+    for the rest (OpenCV's shape and values). ``F`` is this object's matrix as it is, with
+    unit Frobenius norm (``cv2.findFundamentalMat`` scales F to ``F[2, 2] = 1``; both
+    are the same F up to scale; ``cv2.findEssentialMat``'s E has unit norm too). The
+    attributes stay the primary interface.
+
     Attributes
     ----------
     F : (3, 3) ndarray
@@ -318,6 +336,15 @@ class FundamentalFit:
     inliers: np.ndarray
     n_iterations: int
     residuals: np.ndarray
+
+    @property
+    def mask(self) -> np.ndarray:
+        """:attr:`inliers` as OpenCV's inlier mask: (N, 1) uint8, 1 for an inlier."""
+        return self.inliers.astype(np.uint8).reshape(-1, 1)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        """``F, mask``, the order of ``cv2.findFundamentalMat``'s result."""
+        return iter((self.F, self.mask))
 
 
 def _fit(
@@ -355,6 +382,43 @@ def find_fundamental(
     algorithm; ``"ransac"`` runs :func:`robopercept.estimation.ransac` with
     :class:`FundamentalModel` (Sampson distance below ``threshold`` pixels is an
     inlier), then refits on the inliers.
+
+    Parameters
+    ----------
+    x1, x2 : (N, 2) or (N, 1, 2) array_like
+        Corresponding pixels (OpenCV's ``(N, 1, 2)`` point vectors too).
+    method : {"ransac", "8point"}
+        ``cv2.FM_RANSAC`` or ``cv2.FM_8POINT``.
+    threshold : float
+        Inlier threshold on the Sampson distance, pixels.
+    probability : float
+        Confidence of RANSAC's adaptive stopping rule.
+    max_iterations : int
+        Upper bound on RANSAC samples.
+    rng : int, Generator or None
+        RANSAC's seed.
+
+    Returns
+    -------
+    FundamentalFit
+        Unpacks as ``F, mask`` in the order of ``cv2.findFundamentalMat``.
+
+    Raises
+    ------
+    DegenerateError
+        Fewer than 8 correspondences, or collinear points.
+    InputError
+        Points that are not finite (N, 2) arrays of one shape, or a bad parameter.
+
+    Examples
+    --------
+    >>> g = np.random.default_rng(0)
+    >>> X = g.uniform(-1, 1, (20, 3)) + [0, 0, 5]
+    >>> x1 = X[:, :2] / X[:, 2:]
+    >>> x2 = (X[:, :2] + [0.5, 0.0]) / X[:, 2:]
+    >>> F, mask = find_fundamental(x1, x2, method="8point")
+    >>> F.shape, mask.shape, mask.dtype.name
+    ((3, 3), (20, 1), 'uint8')
     """
     p1, p2 = _pairs(x1, x2)
     kw = {"probability": probability, "max_iterations": max_iterations, "rng": rng}
@@ -374,7 +438,31 @@ def find_essential(
 ) -> FundamentalFit:
     """Essential matrix from pixel correspondences of one calibrated camera ``K``
     (eight-point on :math:`K^{-1} x`; ``threshold`` in pixels, divided by the focal
-    length for the normalized residual, as ``cv2.findEssentialMat`` does)."""
+    length for the normalized residual, as ``cv2.findEssentialMat`` does).
+
+    Parameters
+    ----------
+    x1, x2 : (N, 2) or (N, 1, 2) array_like
+        Corresponding pixels (OpenCV's ``(N, 1, 2)`` point vectors too).
+    K : (3, 3) array_like
+        Camera matrix with positive focal lengths.
+    method, threshold, probability, max_iterations, rng
+        As :func:`find_fundamental`.
+
+    Returns
+    -------
+    FundamentalFit
+        ``F`` holds E (unit Frobenius norm, singular values (1, 1, 0) up to scale);
+        unpacks as ``E, mask`` in the order of ``cv2.findEssentialMat``.
+
+    Raises
+    ------
+    DegenerateError
+        Fewer than 8 correspondences, or collinear points.
+    InputError
+        Points that are not finite (N, 2) arrays of one shape, a bad ``K``, or a bad
+        parameter.
+    """
     k = check_matrix3(K, "K", invertible=True)
     if not (k[0, 0] > 0 and k[1, 1] > 0):
         raise InputError(
@@ -427,6 +515,13 @@ def epipoles(F: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 class RelativePose:
     """Result of :func:`decompose_essential`.
 
+    It unpacks as the tuple of ``retval, R, t, mask = cv2.recoverPose(E, x1, x2, K)``:
+    ``n, R, t, mask = decompose_essential(E, x1, x2, K)`` gives ``n`` (int) the number
+    of correspondences in front of both cameras, ``R`` (3, 3), ``t`` (3, 1) (OpenCV's
+    column) and ``mask`` (N, 1) uint8, 255 for a correspondence in front of both
+    cameras and 0 for the rest (the values ``cv2.recoverPose`` gives when no input mask
+    is passed). The attributes stay the primary interface (``t`` there is (3,)).
+
     Attributes
     ----------
     R : (3, 3) ndarray
@@ -443,6 +538,12 @@ class RelativePose:
     in_front: np.ndarray
     candidates: int
 
+    def __iter__(self) -> Iterator[int | np.ndarray]:
+        """``retval, R, t, mask``, the order of ``cv2.recoverPose``'s result."""
+        mask = np.where(self.in_front, 255, 0).astype(np.uint8).reshape(-1, 1)
+        n = int(np.count_nonzero(self.in_front))
+        return iter((n, self.R, np.asarray(self.t).reshape(3, 1), mask))
+
 
 def decompose_essential(
     E: npt.ArrayLike, x1: npt.ArrayLike, x2: npt.ArrayLike, K: npt.ArrayLike | None = None
@@ -458,9 +559,15 @@ def decompose_essential(
     Parameters
     ----------
     E : (3, 3) array_like
-    x1, x2 : (N, 2) array_like
-        Correspondences in pixels (with ``K``) or normalized coordinates (without).
+    x1, x2 : (N, 2) or (N, 1, 2) array_like
+        Correspondences in pixels (with ``K``) or normalized coordinates (without);
+        OpenCV's ``(N, 1, 2)`` point vectors too.
     K : (3, 3) array_like, optional
+
+    Returns
+    -------
+    RelativePose
+        Unpacks as ``retval, R, t, mask`` in the order of ``cv2.recoverPose``.
 
     Raises
     ------

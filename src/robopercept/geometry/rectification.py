@@ -30,7 +30,13 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_bool, check_magnitude, check_numeric, check_size
+from robopercept._checks import (
+    check_bool,
+    check_magnitude,
+    check_numeric,
+    check_size,
+    squeeze_point_axis,
+)
 from robopercept.errors import DegenerateError, InputError
 from robopercept.geometry.camera import check_distortion, distort, undistort_points
 from robopercept.geometry.transforms import (
@@ -197,8 +203,8 @@ def rectify_uncalibrated(
     from robopercept.geometry.epipolar import epipoles, skew
 
     Fm = check_matrix3(F, "F")
-    p1 = check_numeric(x1, "x1")
-    p2 = check_numeric(x2, "x2")
+    p1 = squeeze_point_axis(check_numeric(x1, "x1"), 2)  # OpenCV's (N, 1, 2) too
+    p2 = squeeze_point_axis(check_numeric(x2, "x2"), 2)
     if p1.ndim != 2 or p1.shape[1] != 2 or p2.shape != p1.shape:
         raise InputError(f"x1 and x2 must both be (N, 2); got {p1.shape} and {p2.shape}")
     for p, name in ((p1, "x1"), (p2, "x2")):

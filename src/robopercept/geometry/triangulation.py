@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from robopercept._checks import check_choice, check_finite, check_magnitude
+from robopercept._checks import check_choice, check_finite, check_magnitude, squeeze_point_axis
 from robopercept.errors import DegenerateError, InputError
 
 __all__ = ["triangulate"]
@@ -94,8 +94,8 @@ def triangulate(
     """
     check_choice(method, "method", ("dlt", "midpoint"))
     p1, p2 = _projection(P1, "P1"), _projection(P2, "P2")
-    a = np.asarray(x1)
-    b = np.asarray(x2)
+    a = squeeze_point_axis(np.asarray(x1), 2)  # OpenCV's (N, 1, 2) too
+    b = squeeze_point_axis(np.asarray(x2), 2)
     if a.ndim != 2 or a.shape[1] != 2 or b.shape != a.shape:
         raise InputError(f"x1 and x2 must both be (N, 2); got shapes {a.shape} and {b.shape}")
     for arr, name in ((a, "x1"), (b, "x2")):

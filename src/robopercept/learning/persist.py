@@ -29,7 +29,9 @@ It holds
                                     ``machine_sizes``, ``machine_sv``,
                                     ``machine_coef`` (the one-vs-one machines one
                                     after another), ``intercept``, ``gamma``,
-                                    ``n_iter``
+                                    ``n_iter``; ``prob_a``, ``prob_b`` (each
+                                    pair's Platt sigmoid) with
+                                    ``probability=True``
   LinearSVC                         ``coef``, ``intercept``
   LDA                               ``coef``, ``intercept``, ``means``, ``priors``,
                                     ``xbar``, ``scalings``,
@@ -379,6 +381,8 @@ def _encode(model: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
             gamma=np.array(model.gamma_, dtype=np.float64),
             n_iter=model.n_iter_,
         )
+        if hasattr(model, "probA_"):  # probability=True: each pair's Platt sigmoid
+            arrays.update(prob_a=model.probA_, prob_b=model.probB_)
     elif kind == "LinearSVC":
         arrays.update(coef=model.coef_, intercept=model.intercept_)
         attrs["n_iter_"] = int(model.n_iter_)
@@ -431,6 +435,9 @@ def _decode(kind: str, model: Any, a: _Arrays, d: int, attrs: dict[str, Any]) ->
         model.machine_support_ = [index[q] for q in parts]
         model.dual_coef_ = [coef[q] for q in parts]
         model.intercept_ = intercept
+        if "prob_a" in a.arrays or "prob_b" in a.arrays:
+            model.probA_ = a.get("prob_a", "f", (m,))
+            model.probB_ = a.get("prob_b", "f", (m,))
         if model.kernel == "linear":
             pairs = zip(model.machine_support_, model.dual_coef_, strict=True)
             model.coef_ = np.array([cf @ sv[i] for i, cf in pairs])

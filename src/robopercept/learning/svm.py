@@ -26,6 +26,32 @@ bias is the mean of :math:`y_i \nabla_i` over the free support vectors. Several
 classes are handled one-vs-one (a machine per pair of classes, prediction by votes;
 ``decision_function`` gives scikit-learn's one-vs-rest shaped scores by default).
 
+**Probabilities** (``SVC(probability=True)``, libsvm's and so scikit-learn's method).
+For each one-vs-one machine (classes :math:`a < b`) the decision values of its training
+samples are measured by 5-fold cross-validation (a machine trained on four fifths of
+the pair's samples, with the same kernel and C, scores the fifth; the folds are a
+random permutation drawn from ``random_state``), and Platt's sigmoid
+
+.. math::
+
+    r_{ab}(x) = P(a \mid a \text{ or } b, x) = \frac{1}{1 + \exp(A f_{ab}(x) + B)}
+
+(:math:`f_{ab}` the machine's decision value, positive for :math:`a`: minus
+``decision_function`` for two classes, the ``"ovo"`` column for more) is fitted to
+them by Newton's method with backtracking on the regularized cross-entropy with
+targets :math:`(N_+ + 1)/(N_+ + 2)` and :math:`1/(N_- + 2)` (Lin, Lin and Weng, 2007).
+Cross-validated rather than training decision values, because the training values of
+the support vectors sit at the margin by construction and would make the sigmoid
+over-confident. Two classes: :math:`p = (r_{ab}, 1 - r_{ab})`. More: the pairwise
+:math:`r_{ij}` (clipped to :math:`[10^{-7}, 1 - 10^{-7}]`) are coupled by Wu, Lin and
+Weng's (2004) second method, :math:`\min_p p^\top Q p` subject to
+:math:`\sum_i p_i = 1` with :math:`Q_{ii} = \sum_{j \ne i} r_{ji}^2`,
+:math:`Q_{ij} = -r_{ji} r_{ij}`, solved exactly from its linear KKT system (libsvm
+iterates to a tolerance of 0.005 / c). As in scikit-learn, the probabilities come from a
+separate model and can disagree with ``predict`` near the boundary, and the random
+folds make them depend on ``random_state``; ``decision_function`` and ``predict`` do
+not.
+
 :class:`LinearSVC` is the fast path for the linear kernel: dual coordinate descent
 (Hsieh et al., 2008, liblinear's solver) on the primal weight vector :math:`w`,
 one-vs-rest, with the hinge or squared hinge loss.
@@ -36,12 +62,14 @@ Matches ``sklearn.svm.SVC`` (same dual, same stopping rule) and ``LinearSVC``.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_bool, check_int, check_magnitude, check_real
+from robopercept._checks import check_bool, check_int, check_magnitude, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.learning._base import (
     ClassifierMixin,
@@ -49,6 +77,7 @@ from robopercept.learning._base import (
     RandomStateLike,
     check_max_iter,
     check_option,
+    not_fitted_error,
     seed_from,
 )
 
@@ -213,6 +242,209 @@ def _smo(K: np.ndarray, y: np.ndarray, C: float, tol: float, max_iter: int):
     return alpha, -rho, it
 
 
+_FOLDS = 5  # libsvm's cross-validation folds for the probability model
+_MIN_PROB = 1e-7  # libsvm's clip of the pairwise probabilities
+
+
+def _machine(K: np.ndarray, y: np.ndarray, C: float, tol: float, max_iter: int) -> tuple:
+    """Train one binary machine on the kernel matrix ``K``; returns (alpha y, bias)."""
+    alpha, bias, _ = _smo(np.ascontiguousarray(K), y, C, tol, max_iter)
+    return alpha * y, bias
+
+
+def _cv_decisions(
+    K: np.ndarray,
+    y: np.ndarray,
+    C: float,
+    tol: float,
+    max_iter: int,
+    rng: np.random.Generator,
+    folds: int = _FOLDS,
+) -> np.ndarray:
+    """Decision values of each sample from a machine that did not see it (libsvm's
+    ``svm_binary_svc_probability``).
+
+    The samples are shuffled by ``rng`` and cut into ``folds`` contiguous folds
+    (``i N / folds`` to ``(i + 1) N / folds``); each fold is scored by a machine trained
+    on the others. A fold whose training part holds one class only gets +1 or -1 (its
+    class's sign), and 0 when it is empty, as libsvm does.
+
+    Parameters
+    ----------
+    K : (N, N) ndarray
+        Kernel matrix of the samples.
+    y : (N,) ndarray
+        Labels in {-1, +1}.
+    C, tol, max_iter
+        As :class:`SVC`.
+    rng : numpy.random.Generator
+    folds : int
+
+    Returns
+    -------
+    (N,) ndarray
+        Decision values, positive for the +1 class.
+    """
+    n = y.size
+    perm = rng.permutation(n)
+    out = np.zeros(n)
+    for i in range(folds):
+        test = perm[i * n // folds : (i + 1) * n // folds]
+        train = np.setdiff1d(perm, test, assume_unique=True)
+        pos = int((y[train] > 0).sum())
+        neg = train.size - pos
+        if pos == 0 or neg == 0:
+            out[test] = 0.0 if train.size == 0 else (1.0 if neg == 0 else -1.0)
+            continue
+        coef, bias = _machine(K[np.ix_(train, train)], y[train], C, tol, max_iter)
+        out[test] = K[np.ix_(test, train)] @ coef + bias
+    return out
+
+
+def _sigmoid_loss(dec: np.ndarray, t: np.ndarray, A: float, B: float) -> float:
+    """Cross-entropy of targets ``t`` under :math:`p = 1 / (1 + e^{A f + B})`."""
+    z = dec * A + B
+    # t log(1 + e^-z) ... written stably for both signs of z: -t log p - (1-t) log(1-p)
+    return float(np.sum(t * z + np.logaddexp(0.0, -z)))
+
+
+def _platt_sigmoid(dec: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    r"""Fit Platt's sigmoid :math:`P(+1 \mid f) = 1 / (1 + \exp(A f + B))` to decision
+    values (libsvm's ``sigmoid_train``: Lin, Lin and Weng, 2007).
+
+    Minimizes the cross-entropy with the regularized targets
+    :math:`t_+ = (N_+ + 1) / (N_+ + 2)`, :math:`t_- = 1 / (N_- + 2)` by Newton's method
+    (Hessian plus :math:`10^{-12} I`) with a backtracking line search (sufficient
+    decrease :math:`10^{-4}`), from :math:`A = 0`, :math:`B = \log((N_- + 1) / (N_+ + 1))`,
+    stopping when both gradient entries are below :math:`10^{-5}` (100 steps at most).
+
+    Parameters
+    ----------
+    dec : (N,) ndarray
+        Decision values.
+    y : (N,) ndarray
+        Labels in {-1, +1}.
+
+    Returns
+    -------
+    A, B : float
+        ``A`` is negative when large decision values mean the +1 class.
+
+    Examples
+    --------
+    >>> A, B = _platt_sigmoid(np.array([-2.0, -1.0, -0.5, 0.5, 1.0, 2.0]),
+    ...                      np.array([-1, -1, 1, -1, 1, 1]))
+    >>> bool(A < 0), round(float(1 / (1 + np.exp(A * 2.0 + B))), 2)
+    (True, 0.78)
+    """
+    pos = float((y > 0).sum())
+    neg = float(y.size) - pos
+    t = np.where(y > 0, (pos + 1.0) / (pos + 2.0), 1.0 / (neg + 2.0))
+    A, B = 0.0, float(np.log((neg + 1.0) / (pos + 1.0)))
+    fval = _sigmoid_loss(dec, t, A, B)
+    for _ in range(100):
+        z = dec * A + B
+        p = np.exp(-np.logaddexp(0.0, z))  # 1 / (1 + e^z), stably
+        d2 = p * (1.0 - p)
+        h11 = 1e-12 + float(np.sum(dec * dec * d2))
+        h22 = 1e-12 + float(np.sum(d2))
+        h21 = float(np.sum(dec * d2))
+        d1 = t - p
+        g1 = float(np.sum(dec * d1))
+        g2 = float(np.sum(d1))
+        if abs(g1) < 1e-5 and abs(g2) < 1e-5:
+            break
+        det = h11 * h22 - h21 * h21
+        dA = -(h22 * g1 - h21 * g2) / det
+        dB = -(-h21 * g1 + h11 * g2) / det
+        gd = g1 * dA + g2 * dB
+        step = 1.0
+        while step >= 1e-10:
+            new_a, new_b = A + step * dA, B + step * dB
+            new_f = _sigmoid_loss(dec, t, new_a, new_b)
+            if new_f < fval + 1e-4 * step * gd:
+                A, B, fval = new_a, new_b, new_f
+                break
+            step /= 2.0
+        else:  # the line search failed: keep the last good point, as libsvm
+            break
+    return A, B
+
+
+def _couple_pairwise(r: np.ndarray) -> np.ndarray:
+    r"""Class probabilities from pairwise ones (Wu, Lin and Weng, 2004, method 2;
+    libsvm's ``multiclass_probability``).
+
+    Solves :math:`\min_p p^\top Q p` subject to :math:`\sum_i p_i = 1`, with
+    :math:`Q_{ii} = \sum_{j \ne i} r_{ji}^2` and :math:`Q_{ij} = -r_{ji} r_{ij}`, from
+    the linear system :math:`\begin{pmatrix} Q & 1 \\ 1^\top & 0 \end{pmatrix}
+    \binom{p}{b} = \binom{0}{1}` (its solution is non-negative; libsvm reaches it by
+    an iteration stopped at a tolerance of 0.005 / c).
+
+    Parameters
+    ----------
+    r : (N, c, c) ndarray
+        :math:`r_{ij} = P(i \mid i \text{ or } j)`, with :math:`r_{ji} = 1 - r_{ij}`
+        and entries in (0, 1); the diagonal is ignored.
+
+    Returns
+    -------
+    (N, c) ndarray
+        Rows sum to 1.
+
+    Examples
+    --------
+    >>> r = np.array([[[0, 0.5, 0.5], [0.5, 0, 0.5], [0.5, 0.5, 0]]])
+    >>> _couple_pairwise(r).round(6).tolist()
+    [[0.333333, 0.333333, 0.333333]]
+    """
+    n, c, _ = r.shape
+    off = ~np.eye(c, dtype=bool)
+    rt = np.swapaxes(r, 1, 2)  # rt[:, i, j] = r[:, j, i]
+    Q = np.where(off, -rt * r, 0.0)
+    Q[:, np.arange(c), np.arange(c)] = np.where(off, rt**2, 0.0).sum(axis=2)
+    M = np.zeros((n, c + 1, c + 1))
+    M[:, :c, :c] = Q
+    M[:, :c, c] = 1.0
+    M[:, c, :c] = 1.0
+    rhs = np.zeros((n, c + 1, 1))
+    rhs[:, c] = 1.0
+    p = np.linalg.solve(M, rhs)[:, :c, 0]
+    p = np.clip(p, 0.0, None)  # rounding only: the exact solution is non-negative
+    return p / p.sum(axis=1, keepdims=True)
+
+
+class _IfProbability:
+    """``predict_proba`` exists only on an :class:`SVC` with ``probability=True`` that is
+    unfitted or fitted with its probability model (scikit-learn's ``available_if``):
+    otherwise the attribute raises :class:`~robopercept.errors.NotFittedError`, an
+    ``AttributeError``, so ``hasattr(svc, "predict_proba")`` is False and code that
+    prefers probabilities falls back to ``decision_function``."""
+
+    def __init__(self, fn: Callable[..., np.ndarray]) -> None:
+        self.fn = fn
+        self.__doc__ = fn.__doc__
+        self.__name__ = fn.__name__
+
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
+        if obj is None:
+            return self.fn
+        # NotFittedError is an AttributeError (hasattr() is False) and a typed error
+        p = getattr(obj, "probability", False)
+        if not (isinstance(p, (bool, np.bool_)) and bool(p)):
+            raise not_fitted_error(
+                f"predict_proba is not available when probability={plain_repr(p)[:40]}: "
+                "build SVC(probability=True) before fit, or use decision_function"
+            )
+        if hasattr(obj, "support_vectors_") and not hasattr(obj, "probA_"):
+            raise not_fitted_error(
+                "predict_proba is not available: this SVC was fitted without its probability "
+                "model (probability=False at fit, or loaded from a file without it); fit "
+                "it again with probability=True, or use decision_function"
+            )
+        return self.fn.__get__(obj, owner)
+
+
 def _gamma(gamma: float | str, X: np.ndarray) -> float:
     if isinstance(gamma, str) and gamma == "scale":
         var = float(X.var())
@@ -242,6 +474,15 @@ class SVC(ClassifierMixin, Estimator):
     max_iter : int or None
         SMO steps per machine (None: ``max(10^7, 100 N)``, libsvm's bound).
     decision_function_shape : {"ovr", "ovo"}
+    probability : bool
+        Also fit the probability model (Platt scaling on 5-fold cross-validated
+        decision values, coupled over the pairs; see the module docstring), which
+        enables :meth:`predict_proba`, as ``sklearn.svm.SVC(probability=True)`` (which
+        scikit-learn 1.9 deprecates for ``CalibratedClassifierCV(SVC(),
+        ensemble=False)``; it stays here). Fitting trains 5 more machines per pair.
+    random_state : int, Generator, RandomState or None
+        Seed of the cross-validation folds of the probability model (unused without
+        ``probability``), scikit-learn's name.
 
     Attributes
     ----------
@@ -258,6 +499,18 @@ class SVC(ClassifierMixin, Estimator):
         The kernel's :math:`\\gamma` as used (``"scale"``, ``"auto"`` resolved).
     coef_ : (c (c - 1) / 2, d) ndarray, linear kernel only
     classes_ : (c,) ndarray
+    probA_, probB_ : (c (c - 1) / 2,) ndarray, with ``probability=True`` only
+        The sigmoid :math:`1 / (1 + \\exp(A f_{ab} + B))` of each pair of classes
+        (scikit-learn's names and orientation).
+
+    Examples
+    --------
+    >>> X = np.array([[0.0], [0.3], [0.6], [0.9], [2.0], [2.3], [2.6], [2.9]] * 2)
+    >>> y = np.array([0, 0, 0, 0, 1, 1, 1, 1] * 2)
+    >>> svc = SVC(probability=True, random_state=0).fit(X, y)
+    >>> p = svc.predict_proba([[0.0], [1.45], [3.0]])
+    >>> p.shape, bool(p[0, 0] > 0.5 > p[2, 0]), np.allclose(p.sum(axis=1), 1.0)
+    ((3, 2), True, True)
     """
 
     def __init__(
@@ -270,6 +523,8 @@ class SVC(ClassifierMixin, Estimator):
         tol: float = 1e-3,
         max_iter: int | None = None,
         decision_function_shape: str = "ovr",
+        probability: bool = False,
+        random_state: RandomStateLike = None,
     ) -> None:
         self.C = C
         self.kernel = kernel
@@ -279,6 +534,8 @@ class SVC(ClassifierMixin, Estimator):
         self.tol = tol
         self.max_iter = max_iter
         self.decision_function_shape = decision_function_shape
+        self.probability = probability
+        self.random_state = random_state
 
     def _kernel(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
         return kernel_matrix(A, B, self.kernel, self.gamma_, int(self.degree), float(self.coef0))
@@ -293,6 +550,8 @@ class SVC(ClassifierMixin, Estimator):
         check_option(self.decision_function_shape, "decision_function_shape", ("ovr", "ovo"))
         check_int(self.degree, "degree", 1)
         check_real(self.coef0, "coef0")
+        probability = check_bool(self.probability, "probability")
+        rng = seed_from(self._random_state())
         n = X.shape[0]
         max_iter = max(10_000_000, 100 * n) if self.max_iter is None else self.max_iter
         max_iter = check_max_iter(max_iter)
@@ -309,6 +568,7 @@ class SVC(ClassifierMixin, Estimator):
         machines = []
         used = np.zeros(n, dtype=bool)
         self.n_iter_ = np.zeros(len(pairs), dtype=np.int64)
+        sigmoids = []
         for k, (a, b) in enumerate(pairs):
             # binary: classes_[1] positive; one-vs-one: the first class of the pair
             pos = b if c == 2 else a
@@ -321,6 +581,10 @@ class SVC(ClassifierMixin, Estimator):
             machines.append((idx[sv], alpha[sv] * yy[sv], bias))
             used[idx[sv]] = True
             self.n_iter_[k] = iters
+            if probability:  # libsvm's orientation: +1 is the pair's first class, a
+                ya = np.where(codes[idx] == a, 1.0, -1.0)
+                dec = _cv_decisions(K[np.ix_(idx, idx)], ya, C, tol, max_iter, rng)
+                sigmoids.append(_platt_sigmoid(dec, ya))
         # support vectors sorted by class, then by index (scikit-learn's order)
         order = np.lexsort((np.arange(n), codes))
         self.support_ = order[used[order]]
@@ -331,6 +595,11 @@ class SVC(ClassifierMixin, Estimator):
         self.machine_support_ = [position[i] for i, _, _ in machines]
         self.dual_coef_ = [coef for _, coef, _ in machines]
         self.intercept_ = np.array([b for _, _, b in machines])
+        if probability:
+            self.probA_ = np.array([s[0] for s in sigmoids])
+            self.probB_ = np.array([s[1] for s in sigmoids])
+        elif hasattr(self, "probA_"):  # refitted without: forget the old model
+            del self.probA_, self.probB_
         if self.kernel == "linear":
             self.coef_ = np.array(
                 [
@@ -366,6 +635,51 @@ class SVC(ClassifierMixin, Estimator):
             votes[f[:, k] > 0, a] += 1
             votes[f[:, k] <= 0, b] += 1
         return votes + conf / (3 * (np.abs(conf) + 1))
+
+    @_IfProbability
+    def predict_proba(self, X: npt.ArrayLike) -> np.ndarray:
+        """Class probabilities ``(N, c)``, columns in the order of ``classes_``
+        (``sklearn.svm.SVC(probability=True).predict_proba``).
+
+        Each pair's sigmoid (``probA_``, ``probB_``) turns its decision value into
+        :math:`r_{ab}`, clipped to :math:`[10^{-7}, 1 - 10^{-7}]`; two classes give
+        :math:`(r_{01}, 1 - r_{01})`, more are coupled by Wu, Lin and Weng's method (see
+        the module docstring). Only on an SVC built with ``probability=True``:
+        otherwise the attribute does not exist, as in scikit-learn.
+
+        Parameters
+        ----------
+        X : (N, d) array_like
+
+        Returns
+        -------
+        (N, c) ndarray
+            Rows sum to 1. The argmax can differ from :meth:`predict` near the
+            boundary (a separate, cross-validated model), as in scikit-learn.
+
+        Raises
+        ------
+        NotFittedError
+            Before ``fit``.
+        InputError
+            ``X`` not a finite (N, d) matrix with the training's d.
+        """
+        if not hasattr(self, "probA_"):
+            raise not_fitted_error(
+                f"this {type(self).__name__} is not fitted yet; call fit(X, y) before predict_proba"
+            )
+        f = self._ovo(X)
+        c = self.classes_.size
+        dec = -f if c == 2 else f  # positive for the pair's first class (libsvm's sign)
+        z = dec * self.probA_ + self.probB_
+        r = np.clip(np.exp(-np.logaddexp(0.0, z)), _MIN_PROB, 1.0 - _MIN_PROB)
+        if c == 2:
+            return np.c_[r[:, 0], 1.0 - r[:, 0]]
+        pair = np.full((f.shape[0], c, c), 0.5)
+        for k, (a, b) in enumerate(itertools.combinations(range(c), 2)):
+            pair[:, a, b] = r[:, k]
+            pair[:, b, a] = 1.0 - r[:, k]
+        return _couple_pairwise(pair)
 
     def predict(self, X: npt.ArrayLike) -> np.ndarray:
         """The class with most one-vs-one votes (ties: the lower class)."""

@@ -12,7 +12,7 @@ import numpy.typing as npt
 from robopercept._checks import check_int, check_points, plain_repr
 from robopercept.errors import InputError
 
-__all__ = ["PointCloud", "check_cloud", "resolve_alias"]
+__all__ = ["PointCloud", "check_cloud"]
 
 
 def _optional(value: npt.ArrayLike | None, name: str, n: int) -> np.ndarray | None:
@@ -287,46 +287,3 @@ def check_cloud(cloud: object) -> PointCloud:
             "wrap an (N, 3) array with PointCloud(points)"
         )
     return cloud
-
-
-def resolve_alias(value: Any, name: str, alias_value: Any, alias_name: str) -> Any:
-    """The value of a keyword given under its own ``name`` or under another library's
-    spelling ``alias_name`` (Open3D's ``nb_neighbors`` for ``k``, ...); ``None`` stands
-    for "not given".
-
-    Parameters
-    ----------
-    value : object
-        The value under ``name`` (None when not given).
-    name : str
-    alias_value : object
-        The value under ``alias_name`` (None when not given).
-    alias_name : str
-
-    Returns
-    -------
-    object
-        Whichever was given; None when neither was.
-
-    Raises
-    ------
-    InputError
-        Both were given, naming both spellings.
-
-    Examples
-    --------
-    >>> resolve_alias(None, "k", 20, "nb_neighbors")
-    20
-    >>> resolve_alias(30, "k", 20, "nb_neighbors")
-    Traceback (most recent call last):
-    ...
-    robopercept.errors.InputError: give k or its Open3D spelling nb_neighbors, not both ...
-    """
-    if alias_value is None:
-        return value
-    if value is not None:
-        raise InputError(
-            f"give {name} or its Open3D spelling {alias_name}, not both (got {name}="
-            f"{plain_repr(value)} and {alias_name}={plain_repr(alias_value)}): drop one"
-        )
-    return alias_value

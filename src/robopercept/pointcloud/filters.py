@@ -25,9 +25,9 @@ import pynanoflann
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
-from robopercept._checks import check_int, check_real
+from robopercept._checks import check_int, check_real, resolve_alias
 from robopercept.errors import InputError
-from robopercept.pointcloud.cloud import PointCloud, check_cloud, resolve_alias
+from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = [
     "pass_through",

@@ -24,10 +24,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robopercept._checks import as_rng, check_int, check_magnitude, check_real
+from robopercept._checks import (
+    as_rng,
+    check_int,
+    check_magnitude,
+    check_real,
+    resolve_alias,
+)
 from robopercept.errors import DegenerateError, InputError
 from robopercept.estimation import Plane, PlaneModel, ransac
-from robopercept.pointcloud.cloud import PointCloud, check_cloud, resolve_alias
+from robopercept.pointcloud.cloud import PointCloud, check_cloud
 
 __all__ = ["PlaneSegment", "segment_plane", "segment_planes"]
 
