@@ -217,3 +217,40 @@ def test_issue25_huge_contrast_threshold_finds_no_keypoint():
     for c in (2.1e225, 2**63):
         f = sift(img, contrast_threshold=c)
         assert len(f.keypoints) == 0 and f.descriptors.shape == (0, 128)
+
+
+# issue 48: kp, des = sift(img) and kp[i] as cv2.KeyPoint
+def test_unpacks_as_detect_and_compute_and_records_match_cv2_keypoints(camera):
+    """``kp, des = sift(img)`` as ``detectAndCompute``; ``kp[i]`` carries OpenCV's
+    ``KeyPoint`` values for the same keypoint: pt (ours + OpenCV's 0.25 shift, 1e-2 px,
+    the pairing radius), angle in degrees (0.01 deg: OpenCV's float32 angle through our
+    float64 radians), size (1e-3), response (1e-4 relative) and octave (OpenCV's packed
+    octave read as a signed byte). Attribute access stays."""
+    features = sift(camera)
+    kp, des = features
+    assert kp is features.keypoints and des is features.descriptors
+    assert des.shape == (len(kp), 128) and len(features) == len(kp)
+    ck, _ = cv2.SIFT_create().detectAndCompute(camera, None)
+    tree = cKDTree(np.array([k.pt for k in ck]) - 0.25)
+    checked = 0
+    for rec in list(kp)[:200]:
+        for j in tree.query_ball_point(rec.pt, 0.01):
+            c = ck[j]
+            if (
+                abs((c.angle - rec.angle + 180) % 360 - 180) < 0.01
+                and abs(c.size - rec.size) < 1e-3
+            ):
+                octave = (c.octave & 255) - 256 * ((c.octave & 255) >= 128)
+                assert rec.octave == octave
+                assert rec.response == pytest.approx(c.response, rel=1e-4)
+                assert 0 <= rec.angle < 360
+                checked += 1
+                break
+    assert checked >= 0.99 * 200
+    assert kp[0].pt == tuple(kp.xy[0].tolist())
+    assert kp[0].angle == pytest.approx(np.rad2deg(kp.orientation[0]) % 360)
+
+
+def test_unpacking_an_empty_result():
+    kp, des = sift(np.zeros((32, 32), np.uint8))
+    assert len(kp) == 0 and des.shape == (0, 128) and list(kp) == []

@@ -434,7 +434,10 @@ _IMG = np.random.default_rng(25).uniform(0, 1, (24, 32)).astype(np.float32)
         (lambda: _im.gaussian_ksize(1e308), r"sigma=1e\+308.*at most 65535"),
         (lambda: _im.gaussian_kernel(1.5, 2**63 + 1), r"size asks for a kernel of"),
         (lambda: _im.gaussian_blur(_IMG, np.nan), r"sigma must be finite"),
-        (lambda: _im.gaussian_blur(_IMG, [1, 2]), r"sigma must be a real number"),
+        # issue 48: a pair as the second argument is OpenCV's ksize (was: a bad sigma)
+        (lambda: _im.gaussian_blur(_IMG, [1, 2]), r"ksize must be an odd integer"),
+        (lambda: _im.gaussian_blur(_IMG, [1.5, 2]), r"OpenCV's order image, ksize, sigmaX"),
+        (lambda: _im.gaussian_blur(_IMG, "1"), r"sigma must be a real number"),
         (lambda: _im.gaussian_blur(_IMG, 1.0, sigma_y="3"), r"sigma_y must be a real number"),
         (lambda: _im.gaussian_blur(_IMG, 1.0, ksize=(3, 1.5)), r"\(width, height\) of ints"),
         (lambda: _im.gaussian_blur(_IMG, 1.0, ksize=(np.inf, 3)), r"\(width, height\) of ints"),
@@ -492,3 +495,56 @@ def test_issue25_limits_still_work_at_their_edge():
     # an anchor given as NumPy ints still works, and the default anchor equals the centre
     a = _im.correlate(_IMG, np.ones((3, 3)), anchor=(np.int64(1), np.int64(1)))
     np.testing.assert_array_equal(a, _im.correlate(_IMG, np.ones((3, 3))))
+
+
+# issue 48: OpenCV's call shape gaussian_blur(img, (kw, kh), sigmaX)
+@pytest.mark.parametrize(
+    ("ksize", "sigma_x"), [((5, 5), 0), ((9, 9), 1.7), ((5, 9), 0), ((7, 3), 1.2)]
+)
+def test_gaussian_blur_opencv_positional_order_matches_opencv(camera, ksize, sigma_x):
+    """gaussian_blur(img, ksize, sigmaX) == cv2.GaussianBlur(img, ksize, sigmaX), the
+    tolerances of the tests above (float32 accumulation, 1e-6 on [0, 1] data; one grey
+    level and < 10% off-by-one for uint8), and the same array as our keyword form."""
+    f = camera.astype(np.float32) / 255.0
+    ours = gaussian_blur(f, ksize, sigma_x)
+    assert np.abs(ours - cv2.GaussianBlur(f, ksize, sigma_x)).max() <= 1e-6
+    np.testing.assert_array_equal(ours, gaussian_blur(f, sigma_x, ksize=ksize))
+    np.testing.assert_array_equal(ours, gaussian_blur(f, ksize=ksize, sigmaX=sigma_x))
+    out8 = gaussian_blur(camera, ksize, sigma_x)
+    diff = np.abs(out8.astype(int) - cv2.GaussianBlur(camera, ksize, sigma_x))
+    assert out8.dtype == np.uint8 and diff.max() <= 1 and diff.mean() < 0.1
+
+
+def test_gaussian_blur_opencv_forms_sigma_y_and_defaults(camera):
+    f = camera.astype(np.float64) / 255.0
+    ref = cv2.GaussianBlur(f, (7, 11), 1.1, sigmaY=2.3)
+    for ours in (
+        gaussian_blur(f, (7, 11), 1.1, sigmaY=2.3),
+        gaussian_blur(f, (7, 11), 1.1, sigma_y=2.3),
+        gaussian_blur(f, [7, 11], sigmaX=1.1, sigmaY=2.3),
+        gaussian_blur(f, np.array([7, 11]), 1.1, sigmaY=2.3),
+    ):
+        assert np.abs(ours - ref).max() <= 1e-12
+    # sigmaX left out: 0, taken from the size (OpenCV requires it; 0 is its usual value)
+    np.testing.assert_array_equal(gaussian_blur(f, (5, 5)), gaussian_blur(f, (5, 5), 0))
+    # our own forms are unchanged
+    np.testing.assert_array_equal(gaussian_blur(f, 1.5), gaussian_blur(f, sigma=1.5))
+    np.testing.assert_array_equal(gaussian_blur(f, 1.5), gaussian_blur(f, sigmaX=1.5))
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda f: gaussian_blur(f, 1.5, 2.0), "give sigma or its OpenCV spelling sigmaX"),
+        (lambda f: gaussian_blur(f, sigma=1.5, sigmaX=1.5), "not both"),
+        (lambda f: gaussian_blur(f, 1.0, sigma_y=1.0, sigmaY=2.0), "sigma_y or its OpenCV"),
+        (lambda f: gaussian_blur(f, (5, 5), 0, ksize=5), "ksize given twice"),
+        (lambda f: gaussian_blur(f), "needs sigma"),
+        (lambda f: gaussian_blur(f, (5, 5, 5), 0), "ksize"),
+        (lambda f: gaussian_blur(f, (4, 4), 0), "ksize must be an odd integer"),
+        (lambda f: gaussian_blur(f, (5, 5), -1.0), "sigma must be"),
+    ],
+)
+def test_gaussian_blur_both_spellings_and_bad_opencv_forms_are_input_errors(call, match):
+    with pytest.raises(InputError, match=match):
+        call(np.zeros((16, 16), np.float32))

@@ -189,3 +189,64 @@ def test_dense_flow_step_and_far_points():
     res = lucas_kanade(a, a, [[1e300, -1e300], [150.0, 130.0]])
     assert res.start[0].tolist() == [1e300, -1e300]
     assert res.reason[0] == FlowStatus.LEFT_IMAGE and res.status[1]
+
+
+# issue 48: p1, st, err = lucas_kanade(...) and OpenCV's (N, 1, 2) point vectors
+def _shifted_pair():
+    a = _texture(3)
+    b = np.roll(a, (1, 2), axis=(0, 1))  # content moves by (+2, +1) px
+    pts = np.array([[60.0, 70.0], [150.0, 120.0], [200.0, 90.0], [5.0, 5.0]])
+    return a, b, pts
+
+
+def test_unpacks_as_calc_optical_flow_pyr_lk_with_its_shapes():
+    """(N, 2) points: p1 (N, 2) float32, st (N, 1) uint8, err (N, 1) float32, as
+    cv2.calcOpticalFlowPyrLK gives for (N, 2) input; attribute access unchanged."""
+    a, b, pts = _shifted_pair()
+    res = lucas_kanade(a, b, pts)
+    p1, st, err = res
+    assert (p1.shape, p1.dtype, st.shape, st.dtype, err.shape, err.dtype) == (
+        (4, 2), np.float32, (4, 1), np.uint8, (4, 1), np.float32
+    )  # fmt: skip
+    np.testing.assert_array_equal(st[:, 0], res.status.astype(np.uint8))
+    np.testing.assert_allclose(p1, res.end, atol=1e-4)  # float32 rounding
+    np.testing.assert_allclose(err[:, 0], res.error, rtol=1e-6)
+    assert res.end.shape == (4, 2) and res.end.dtype == np.float64 and res.status.dtype == bool
+
+
+def test_opencv_point_vectors_are_accepted_and_kept_in_the_unpacked_result():
+    """(N, 1, 2) float32 points (cv2.goodFeaturesToTrack's output) give the same
+    tracks as (N, 2), p1 in the (N, 1, 2) layout, and OpenCV's tutorial idiom
+    ``p1[st == 1]`` works."""
+    a, b, pts = _shifted_pair()
+    p0 = pts.astype(np.float32)[:, None, :]
+    res = lucas_kanade(a, b, p0)
+    flat = lucas_kanade(a, b, pts.astype(np.float32))
+    np.testing.assert_array_equal(res.end, flat.end)
+    np.testing.assert_array_equal(res.status, flat.status)
+    assert res.start.shape == (4, 2)
+    p1, st, err = res
+    assert p1.shape == (4, 1, 2) and st.shape == (4, 1) and err.shape == (4, 1)
+    good_new, good_old = p1[st == 1], p0[st == 1]
+    assert good_new.shape == (int(st.sum()), 2) and st.sum() >= 3
+    np.testing.assert_allclose(np.median(good_new - good_old, axis=0), [2.0, 1.0], atol=0.02)
+    # initial guesses in OpenCV's layout too
+    again = lucas_kanade(a, b, p0, initial=p0 + np.float32(1.5))
+    np.testing.assert_allclose(again.end[again.status], res.end[again.status], atol=0.02)
+    with pytest.raises(InputError, match=r"OpenCV's \(N, 1, 2\)"):
+        lucas_kanade(a, b, np.zeros((4, 1, 3)))
+
+
+def test_unpacked_result_matches_opencv_shapes_and_values():
+    """Against cv2.calcOpticalFlowPyrLK on the same (N, 1, 2) input: the same shapes and
+    dtypes, the same status, end points within 0.01 px (OpenCV's 14-bit fixed point)."""
+    cv2 = pytest.importorskip("cv2")
+    a, b, pts = _shifted_pair()
+    a8, b8 = (np.round(v * 255).astype(np.uint8) for v in (a, b))
+    p0 = pts.astype(np.float32)[:3, None, :]  # the interior points
+    ref = cv2.calcOpticalFlowPyrLK(a8, b8, p0, None, winSize=(21, 21), maxLevel=3)
+    ours = tuple(lucas_kanade(a8, b8, p0, window=21, levels=3))
+    for o, r in zip(ours, ref, strict=True):
+        assert o.shape == r.shape and o.dtype == r.dtype
+    np.testing.assert_array_equal(ours[1], ref[1])
+    np.testing.assert_allclose(ours[0], ref[0], atol=0.01)

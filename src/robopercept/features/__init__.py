@@ -9,7 +9,7 @@ from robopercept.features.harris import (
     structure_tensor,
 )
 from robopercept.features.hog import cell_histograms, hog, hog_windows
-from robopercept.features.keypoints import Keypoints
+from robopercept.features.keypoints import KeyPoint, Keypoints
 from robopercept.features.matching import Matches, knn_match, match_descriptors
 from robopercept.features.selective_search import (
     SIMILARITIES,
@@ -23,6 +23,7 @@ __all__ = [
     "SIMILARITIES",
     "Features",
     "ImageMatch",
+    "KeyPoint",
     "Keypoints",
     "Matches",
     "Panorama",

@@ -35,15 +35,22 @@ OpenCV's conventions are kept so the two can be swapped: positions on the input 
 with pixel centres at integers (OpenCV's positions are 0.25 px too far right and down:
 it halves the doubled image's coordinates although doubled pixel :math:`c` lies at
 :math:`c/2 - 1/4`; ours are OpenCV's minus 0.25), ``scale`` = OpenCV's
-``KeyPoint.size`` (the diameter :math:`2\sigma` in input pixels), orientation =
-OpenCV's ``KeyPoint.angle`` in radians (from +x towards +y, image down),
-``response`` = :math:`|D(\hat x)|`, octave -1 for the doubled image.
+``KeyPoint.size`` (the diameter :math:`2\sigma` in input pixels), ``orientation`` =
+OpenCV's ``KeyPoint.angle`` converted to RADIANS (from +x towards +y, image down;
+``Keypoints[i].angle``, the :class:`~robopercept.features.keypoints.KeyPoint` record,
+gives it in degrees as OpenCV), ``response`` = :math:`|D(\hat x)|`, octave -1 for the
+doubled image (OpenCV's packed ``KeyPoint.octave`` read as a signed byte).
+
+The result unpacks as ``detectAndCompute``'s: ``kp, des = sift(img)`` as
+``kp, des = cv2.SIFT_create().detectAndCompute(img, None)``, and ``kp[0].pt`` is
+keypoint 0's ``(x, y)`` as ``cv2.KeyPoint.pt``.
 Gradient angles use OpenCV's polynomial ``atan2``.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,10 +86,26 @@ MIN_SIZE = 6
 class Features:
     """Keypoints and their descriptors, row i describing keypoint i.
 
+    It unpacks as the tuple of ``kp, des = cv2.SIFT_create().detectAndCompute(img,
+    None)``: ``kp, des = sift(img)`` gives the :class:`Keypoints` (``kp[0].pt``,
+    ``kp[0].angle`` in degrees, ``for k in kp``, as OpenCV's tuple of ``cv2.KeyPoint``)
+    and the ``(N, 128)`` descriptors. The attributes stay the primary interface;
+    ``len(features)`` is the number of keypoints (OpenCV has no such call), while
+    unpacking always gives the two parts. With no keypoint, ``des`` is an empty
+    ``(0, 128)`` array where OpenCV returns None.
+
     Attributes
     ----------
     keypoints : Keypoints
     descriptors : (N, D) ndarray
+
+    Examples
+    --------
+    >>> y, x = np.mgrid[0:64, 0:64]
+    >>> img = (200 * np.exp(-((x - 32) ** 2 + (y - 30) ** 2) / 50.0)).astype(np.uint8)
+    >>> kp, des = sift(img)
+    >>> [round(v) for v in kp[0].pt], des.shape[1]
+    ([32, 30], 128)
     """
 
     keypoints: Keypoints
@@ -90,6 +113,10 @@ class Features:
 
     def __len__(self) -> int:
         return len(self.keypoints)
+
+    def __iter__(self) -> Iterator[Keypoints | np.ndarray]:
+        """``keypoints, descriptors``: the order of ``cv2.Feature2D.detectAndCompute``."""
+        return iter((self.keypoints, self.descriptors))
 
 
 # ------------------------------------------------------------------------ scale space
@@ -543,8 +570,11 @@ def sift(
     Returns
     -------
     Features
-        ``keypoints`` (strongest first; see the module docstring for the units) and
-        ``descriptors`` (N, 128). No keypoints give empty arrays.
+        ``keypoints`` (strongest first; see the module docstring for the units:
+        ``keypoints.orientation`` in radians, ``keypoints[i].angle`` in degrees as
+        ``cv2.KeyPoint.angle``) and ``descriptors`` (N, 128). No keypoints give empty
+        arrays. Unpacks as ``kp, des = sift(img)``, OpenCV's
+        ``detectAndCompute`` order.
 
     Raises
     ------

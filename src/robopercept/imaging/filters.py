@@ -44,6 +44,7 @@ from robopercept._checks import (
     check_odd_size,
     check_real,
     plain_repr,
+    resolve_alias,
 )
 from robopercept.errors import InputError
 
@@ -738,19 +739,39 @@ def _pair(value: object, name: str) -> tuple[int, int]:
     return int(pair[0]), int(pair[1])
 
 
+def _is_size_pair(value: object) -> bool:
+    # OpenCV's ksize: a (width, height) tuple or list (or a 1-D array of two)
+    if isinstance(value, np.ndarray):
+        return value.ndim == 1
+    return isinstance(value, (tuple, list))
+
+
 def gaussian_blur(
     image: np.ndarray,
-    sigma: float,
+    sigma: float | tuple[int, int] | None = None,
+    sigmaX: float | None = None,
     *,
     ksize: int | tuple[int, int] | None = None,
     sigma_y: float | None = None,
     border: Border = "reflect101",
+    sigmaY: float | None = None,
 ) -> np.ndarray:
     r"""Gaussian smoothing, separable: :func:`gaussian_kernel` along x, then along y.
 
     .. math:: g = G_{\sigma_y} \star_y (G_{\sigma_x} \star_x f)
 
-    The same call as ``cv2.GaussianBlur(image, ksize, sigma, sigmaY=sigma_y)``, with the
+    Two call shapes, the same filter:
+
+    - ours, ``gaussian_blur(image, sigma, ksize=None, sigma_y=None)``: the size follows
+      from ``sigma`` unless given;
+    - OpenCV's positional order, ``gaussian_blur(image, (kw, kh), sigmaX)`` as
+      ``cv2.GaussianBlur(image, (kw, kh), sigmaX)``, told apart by the second argument
+      being a ``(width, height)`` pair; ``sigmaX`` may be left out (0: from the size),
+      and ``sigmaY=`` / ``sigma_y=`` follow by keyword (OpenCV's fourth positional is its
+      output array, so there is no positional ``sigmaY``). The keyword form
+      ``gaussian_blur(image, ksize=(5, 5), sigmaX=0)`` works too.
+
+    The same filter as ``cv2.GaussianBlur(image, ksize, sigma, sigmaY=sigma_y)``, with the
     same defaults: without ``ksize`` each axis' kernel size is :func:`gaussian_ksize`,
     ``round(2 t sigma + 1) | 1`` with ``t = 3`` for uint8 and ``t = 4`` for every other
     dtype (so ``gaussian_blur(f, 2.0)`` uses 13 taps on uint8 and 17 on float images);
@@ -762,15 +783,21 @@ def gaussian_blur(
     Parameters
     ----------
     image : (H, W) or (H, W, 3) ndarray
-    sigma : float
+    sigma : float or (width, height)
         Standard deviation along x (and y unless ``sigma_y``), >= 0; 0 takes it from
-        ``ksize``.
+        ``ksize``. A ``(width, height)`` pair here is OpenCV's ``ksize`` in OpenCV's
+        positional order (see above).
+    sigmaX : float, optional
+        OpenCV's name of ``sigma``: the third positional argument after an OpenCV
+        ``ksize`` pair, or a keyword alias of ``sigma``.
     ksize : int or (width, height), optional
         Odd kernel size for both axes, or per axis as OpenCV's ``(kw, kh)``; 0 (or None)
         for the automatic size above.
     sigma_y : float, optional
         Standard deviation along y; None or 0 means ``sigma``, as OpenCV's ``sigmaY=0``.
     border : {'reflect101', 'reflect', 'replicate', 'constant'}
+    sigmaY : float, optional
+        Keyword-only alias (OpenCV's name) of ``sigma_y``.
 
     Returns
     -------
@@ -780,8 +807,10 @@ def gaussian_blur(
     Raises
     ------
     InputError
-        If ``sigma`` (or ``sigma_y``) is negative, a ``ksize`` is even, or an axis has
-        neither a sigma nor a kernel size.
+        If ``sigma`` (or ``sigma_y``) is negative, a ``ksize`` is even, an axis has
+        neither a sigma nor a kernel size, no sigma is given at all, or one value is
+        given under both of its spellings (``sigma`` and ``sigmaX``, ``sigma_y`` and
+        ``sigmaY``, a positional ``(kw, kh)`` and ``ksize=``).
 
     Examples
     --------
@@ -795,11 +824,43 @@ def gaussian_blur(
            [0.0751, 0.1238, 0.0751]])
     >>> round(float(out.sum()), 12)
     1.0
+
+    OpenCV's order gives the same result:
+
+    >>> bool((gaussian_blur(img, (3, 3), 1.0) == out).all())
+    True
     """
     image = check_image(image)
     check_choice(border, "border", BORDERS)
+    if _is_size_pair(sigma):  # OpenCV's order: (image, ksize, sigmaX)
+        if ksize is not None:
+            raise InputError(
+                f"ksize given twice: {plain_repr(sigma)} as the second positional argument "
+                f"(OpenCV's order: image, ksize, sigmaX) and ksize={plain_repr(ksize)}: "
+                "drop one"
+            )
+        ksize = _pair(
+            tuple(sigma) if isinstance(sigma, np.ndarray) else sigma,
+            "ksize (a pair as the second argument: OpenCV's order image, ksize, sigmaX)",
+        )
+        sigma = 0.0 if sigmaX is None else sigmaX
+    else:
+        if sigma is not None and sigmaX is not None:
+            raise InputError(
+                f"give sigma or its OpenCV spelling sigmaX, not both (got sigma="
+                f"{plain_repr(sigma)} and sigmaX={plain_repr(sigmaX)}): a third positional "
+                "argument is OpenCV's sigmaX after a (width, height) ksize, as in "
+                "gaussian_blur(image, (5, 5), 0)"
+            )
+        sigma = sigmaX if sigma is None else sigma
+        if sigma is None:
+            raise InputError(
+                "gaussian_blur needs sigma (gaussian_blur(image, 1.5)) or OpenCV's ksize "
+                "and sigmaX (gaussian_blur(image, (5, 5), 0)); got neither"
+            )
+    sy_given = resolve_alias(sigma_y, "sigma_y", sigmaY, "sigmaY", "OpenCV")
     sx = check_real(sigma, "sigma", 0.0)
-    sy = sx if sigma_y is None else check_real(sigma_y, "sigma_y", 0.0)
+    sy = sx if sy_given is None else check_real(sy_given, "sigma_y", 0.0)
     if sy == 0.0:  # OpenCV: sigmaY <= 0 takes sigmaX
         sy = sx
     kw, kh = _pair(0 if ksize is None else ksize, "ksize")

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import enum
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -50,6 +51,7 @@ from robopercept._checks import (
     check_numeric,
     check_odd_size,
     check_real,
+    squeeze_point_axis,
 )
 from robopercept.errors import DegenerateError, InputError
 from robopercept.features.harris import good_features_to_track  # re-exported
@@ -85,6 +87,16 @@ class FlowStatus(enum.IntEnum):
 class SparseFlow:
     """Tracked points of :func:`lucas_kanade`.
 
+    It unpacks as the tuple of ``p1, st, err = cv2.calcOpticalFlowPyrLK(prev, next, p0,
+    None)``: ``p1, st, err = lucas_kanade(prev, next, p0)`` gives ``p1`` float32 in the
+    layout ``p0`` came in (``(N, 1, 2)`` for OpenCV's point vectors, as
+    ``cv2.goodFeaturesToTrack`` returns them, else ``(N, 2)``), ``st`` ``(N, 1)`` uint8 (1
+    where tracked) and ``err`` ``(N, 1)`` float32, OpenCV's shapes and dtypes, so that
+    ``p1[st == 1]`` picks the tracked end points as in OpenCV's tutorial. ``st`` is 0 also
+    for the failures OpenCV does not flag (:attr:`FlowStatus.NOT_CONVERGED`,
+    :attr:`FlowStatus.HIGH_RESIDUAL`). The attributes below stay the primary interface
+    ((N, 2) float64 positions, an (N,) bool status).
+
     Attributes
     ----------
     start, end : (N, 2) ndarray
@@ -99,6 +111,21 @@ class SparseFlow:
         Normalized smallest eigenvalue of :math:`S^T S` at the finest level.
     residual : (N,) ndarray
         ``error`` relative to the window's own contrast (its mean absolute deviation).
+    opencv_layout : bool
+        True when the points came as OpenCV's ``(N, 1, 2)`` array: the unpacked ``p1``
+        keeps that shape.
+
+    Examples
+    --------
+    >>> y, x = np.mgrid[0:64, 0:64]
+    >>> a = np.sin(x / 3.0) * np.cos(y / 4.0) * 0.4 + 0.5
+    >>> b = np.sin((x - 1) / 3.0) * np.cos(y / 4.0) * 0.4 + 0.5  # moved 1 px right
+    >>> p0 = np.array([[[30.0, 30.0]], [[20.0, 34.0]]], np.float32)  # (N, 1, 2)
+    >>> p1, st, err = lucas_kanade(a, b, p0)
+    >>> p1.shape, p1.dtype, st.ravel().tolist(), err.shape
+    ((2, 1, 2), dtype('float32'), [1, 1], (2, 1))
+    >>> (np.round(p1[st == 1] - p0[st == 1], 2) + 0.0).tolist()
+    [[1.0, 0.0], [1.0, 0.0]]
     """
 
     start: np.ndarray
@@ -108,6 +135,7 @@ class SparseFlow:
     error: np.ndarray
     min_eigenvalue: np.ndarray
     residual: np.ndarray
+    opencv_layout: bool = False
 
     @property
     def flow(self) -> np.ndarray:
@@ -116,6 +144,14 @@ class SparseFlow:
 
     def __len__(self) -> int:
         return int(self.status.size)
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        """``p1, st, err`` with the shapes and dtypes of ``cv2.calcOpticalFlowPyrLK``."""
+        n = len(self)
+        p1 = self.end.astype(np.float32).reshape((n, 1, 2) if self.opencv_layout else (n, 2))
+        st = self.status.astype(np.uint8).reshape(n, 1)
+        err = self.error.astype(np.float32).reshape(n, 1)
+        return iter((p1, st, err))
 
 
 _WORK = threading.local()
@@ -371,8 +407,9 @@ def lucas_kanade(
     ----------
     prev, next : (H, W) or (H, W, 3) ndarray
         The two frames (uint8, or float in [0, 1]); colour is converted to gray.
-    points : (N, 2) array_like
-        Positions ``(x, y)`` in ``prev``.
+    points : (N, 2) or (N, 1, 2) array_like
+        Positions ``(x, y)`` in ``prev``; OpenCV's ``(N, 1, 2)`` point vectors
+        (``cv2.goodFeaturesToTrack``'s output) too.
     window : int
         Odd window side in pixels (OpenCV's ``winSize``).
     levels : int
@@ -386,13 +423,15 @@ def lucas_kanade(
         window's contrast (mean absolute deviation from its mean). Two unrelated
         patches give about :math:`\sqrt 2`; a matched one, well under 1 (RubberWhale:
         median 0.11, largest 0.72). None keeps every converged track, as OpenCV.
-    initial : (N, 2) array_like, optional
+    initial : (N, 2) or (N, 1, 2) array_like, optional
         Starting guesses in ``next`` (default: the points themselves).
 
     Returns
     -------
     SparseFlow
         End positions, status, the reason of every failure, error and eigenvalue.
+        Unpacks as ``p1, st, err``, the result of ``cv2.calcOpticalFlowPyrLK(prev, next,
+        points, None, winSize=(window, window), maxLevel=levels)``, in OpenCV's shapes.
 
     Raises
     ------
@@ -418,14 +457,22 @@ def lucas_kanade(
     if max_residual is not None:
         max_residual = check_real(max_residual, "max_residual (or None)", 0.0, low_inclusive=False)
     pts = check_numeric(points, "points")
+    opencv_layout = pts.ndim == 3 and pts.shape[1:] == (1, 2)
     if pts.size == 0:
         pts = pts.reshape(0, 2)
+    pts = squeeze_point_axis(pts, 2)
     if pts.ndim != 2 or pts.shape[1] != 2:
-        raise InputError(f"points must be (N, 2) (x, y); got shape {pts.shape}")
+        raise InputError(
+            f"points must be (N, 2) (x, y) or OpenCV's (N, 1, 2); got shape {pts.shape}"
+        )
     if not np.isfinite(pts).all():
         raise InputError("points contain NaN or inf; drop them before tracking")
     n = pts.shape[0]
-    guess = pts.copy() if initial is None else check_numeric(initial, "initial").copy()
+    guess = (
+        pts.copy()
+        if initial is None
+        else squeeze_point_axis(check_numeric(initial, "initial"), 2).copy()
+    )
     if guess.shape != pts.shape:
         raise InputError(f"initial must have the shape of points {pts.shape}; got {guess.shape}")
     if not np.isfinite(guess).all():
@@ -461,7 +508,7 @@ def lucas_kanade(
             nxt = nxt * 2.0
     if max_residual is not None:
         reason[(reason == FlowStatus.TRACKED) & (rel > max_residual)] = FlowStatus.HIGH_RESIDUAL
-    return SparseFlow(pts, nxt, reason == FlowStatus.TRACKED, reason, err, eig, rel)
+    return SparseFlow(pts, nxt, reason == FlowStatus.TRACKED, reason, err, eig, rel, opencv_layout)
 
 
 def dense_flow(
