@@ -1,10 +1,16 @@
-"""RealSenseSource on the real recording and on recordings written at test time with a
-pyrealsense2 software device and its recorder."""
+"""RealSenseSource: recordings read with rosbags (no librealsense in this process),
+checked frame for frame against librealsense's own playback (pyrealsense2, in the
+librealsense worker process) on the real recording and on recordings written at test
+time: ``.db3`` by a pyrealsense2 software device and its recorder, ``.bag`` by rosbags in
+librealsense's ROS 1 layout (which librealsense plays back too)."""
 
 from __future__ import annotations
 
+import json
+import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -12,29 +18,36 @@ import pytest
 
 from robopercept.errors import FileFormatError, InputError
 from robopercept.pipelines import PlaneTracker
+from robopercept.sources.realsense import RealSenseSource, import_pyrealsense2
+from robopercept.sources.realsense_recording import RealSenseRecording, pair_nearest_color
 
-rs = pytest.importorskip("pyrealsense2")
+try:
+    import pyrealsense2 as rs
+except ImportError:  # the recordings' tests that need no reference still run
+    rs = None
 
-from robopercept.sources.realsense import (  # noqa: E402
-    RealSenseSource,
-    import_pyrealsense2,
-    intrinsics_from_rs,
-    transform_from_rs,
-)
+needs_rs = pytest.mark.skipif(rs is None, reason="pyrealsense2 (the reference) not installed")
 
 BAG = Path(__file__).parents[2] / ".." / "shared" / "data" / "rgbd" / "realsense_bag"
 BAG = BAG / "single_depth_color_640x480.bag"
 
 
-def _intr(w, h, model=rs.distortion.none):
+def _real_bag() -> Path:
+    if not BAG.exists():
+        pytest.skip(f"{BAG} absent")
+    return BAG
+
+
+def _intr(w, h, model=None):
     i = rs.intrinsics()
     i.width, i.height, i.fx, i.fy, i.ppx, i.ppy = w, h, 50.0, 51.0, w / 2 - 0.3, h / 2 + 0.2
-    i.model, i.coeffs = model, [0.0] * 5
+    i.model, i.coeffs = model or rs.distortion.none, [0.0] * 5
     return i
 
 
 def record(path, n=5, with_color=True, w=64, h=48):
-    """Write a .db3 recording of n depth (+ colour) frames through a software device."""
+    """Write a .db3 recording of n depth (+ colour) frames through a software device:
+    depth frame i is 1000 + i everywhere, colour frame i is (i, 200, i)."""
     dev = rs.software_device()
     ds = dev.add_sensor("Depth")
     vs = rs.video_stream()
@@ -91,12 +104,125 @@ def _record(pool, path, *args, **kwargs) -> None:
     pool.submit(record, str(path), *args, **kwargs).result(timeout=120)
 
 
+_RS_MODEL_NAMES = {
+    "none": "None",
+    "brown_conrady": "Brown Conrady",
+    "modified_brown_conrady": "Modified Brown Conrady",
+    "inverse_brown_conrady": "Inverse Brown Conrady",
+}
+
+
+def write_ros1_bag(path, frames, *, compression=None, color_encoding="rgb8", depth_size=None):
+    """Write ``frames`` as librealsense's ROS 1 recorder lays a ``.bag`` out (file
+    version 3), with rosbags' writer: stream info, CameraInfo, the Depth Units option,
+    the streams' transforms to their group's reference (depth: identity), then per frame
+    a mono16 depth and a colour Image (header stamp = the frame's time + 1 ms) with their
+    metadata. librealsense 2.59 plays these back (``test_recordings_equal_...``).
+    ``depth_size`` overrides the width and height of every depth image (a bad one)."""
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from scipy.spatial.transform import Rotation
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(
+        get_types_from_msg(
+            "uint32 fps\nstring encoding\nbool is_recommended\n", "realsense_msgs/msg/StreamInfo"
+        )
+    )
+    M = store.types
+    Header, Time, KV = M["std_msgs/msg/Header"], M["builtin_interfaces/msg/Time"], None
+    KV = M["diagnostic_msgs/msg/KeyValue"]
+    f0 = frames[0]
+
+    def caminfo(k):
+        K = np.array([k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1], np.float64)
+        roi = M["sensor_msgs/msg/RegionOfInterest"](0, 0, 0, 0, False)
+        return M["sensor_msgs/msg/CameraInfo"](
+            Header(0, Time(0, 0), ""), k.height, k.width, _RS_MODEL_NAMES[k.model],
+            np.array(k.coeffs, np.float64), K, np.zeros(9), np.zeros(12), 0, 0, roi,
+        )  # fmt: skip
+
+    def transform(T):
+        x, y, z, w = Rotation.from_matrix(T[:3, :3]).as_quat()
+        return M["geometry_msgs/msg/Transform"](
+            M["geometry_msgs/msg/Vector3"](*T[:3, 3]), M["geometry_msgs/msg/Quaternion"](x, y, z, w)
+        )
+
+    writer = Writer(Path(path))
+    if compression is not None:
+        writer.set_compression(getattr(Writer.CompressionFormat, compression.upper()))
+    with writer as w:
+
+        def put(conn, t, msg):
+            w.write(conn, t, store.serialize_ros1(msg, conn.msgtype))
+
+        def conn(topic, typ):
+            return w.add_connection(topic, typ, typestore=store)
+
+        d, c = "/device_0/sensor_0/Depth_0", "/device_0/sensor_1/Color_0"
+        put(conn("/file_version", "std_msgs/msg/UInt32"), 1, M["std_msgs/msg/UInt32"](3))
+        info = M["realsense_msgs/msg/StreamInfo"]
+        put(conn(d + "/info", info.__msgtype__), 1, info(30, "mono16", True))
+        put(
+            conn(d + "/info/camera_info", "sensor_msgs/msg/CameraInfo"),
+            1,
+            caminfo(f0.depth_intrinsics),
+        )
+        put(conn(c + "/info", info.__msgtype__), 1, info(30, color_encoding, True))
+        put(
+            conn(c + "/info/camera_info", "sensor_msgs/msg/CameraInfo"),
+            1,
+            caminfo(f0.color_intrinsics),
+        )
+        dev = conn("/device_0/info", "diagnostic_msgs/msg/KeyValue")
+        put(dev, 1, KV("Name", "Intel RealSense D435"))
+        put(dev, 1, KV("Serial Number", "000000000000"))
+        put(
+            conn("/device_0/sensor_0/info", "diagnostic_msgs/msg/KeyValue"),
+            1,
+            KV("Name", "Stereo Module"),
+        )
+        put(
+            conn("/device_0/sensor_1/info", "diagnostic_msgs/msg/KeyValue"),
+            1,
+            KV("Name", "RGB Camera"),
+        )
+        units = M["std_msgs/msg/Float32"](f0.depth_scale)
+        put(conn("/device_0/sensor_0/option/Depth Units/value", "std_msgs/msg/Float32"), 1, units)
+        put(conn(d + "/tf/0", "geometry_msgs/msg/Transform"), 1, transform(np.eye(4)))
+        put(conn(c + "/tf/0", "geometry_msgs/msg/Transform"), 1, transform(f0.T_color_depth))
+        images = {k: conn(k + "/image/data", "sensor_msgs/msg/Image") for k in (d, c)}
+        meta = {k: conn(k + "/image/metadata", "diagnostic_msgs/msg/KeyValue") for k in (d, c)}
+        for i, f in enumerate(frames):
+            ns = 1_000_000 + round(f.timestamp * 1e9)
+            stamp = Time(ns // 10**9, ns % 10**9)
+            h, wd = f.depth.shape if depth_size is None else depth_size[::-1]
+            pix = np.frombuffer(f.depth.astype("<u2").tobytes(), np.uint8)
+            img = M["sensor_msgs/msg/Image"](Header(i, stamp, "0"), h, wd, "mono16", 0, 2 * wd, pix)
+            put(images[d], ns, img)
+            h, wd, _ = f.color.shape
+            pix = np.ascontiguousarray(f.color).reshape(-1)
+            img = M["sensor_msgs/msg/Image"](Header(i, stamp, "0"), h, wd, "rgb8", 0, 3 * wd, pix)
+            put(images[c], ns + 1000, img)
+            for k, t in ((d, ns), (c, ns + 1000)):
+                put(meta[k], t, KV("timestamp_domain", "Hardware Clock"))
+                put(meta[k], t, KV("Frame Counter", str(i)))
+
+
+def _scene(n=6, depth=(64, 48), color=(80, 60)):
+    from robopercept.sources import SyntheticRGBDScene
+
+    return list(SyntheticRGBDScene(n_frames=n, depth_size=depth, color_size=color))
+
+
 def _bag_calibration(path: str):
     """Depth intrinsics and depth-to-colour transform of a recording, as librealsense's
     playback device reports them (in the librealsense worker process). The profiles are
     read without streaming: a pipeline started on the real bag here once aborted the
     worker inside librealsense (``malloc_consolidate(): invalid chunk size``), and no
     stream threads means nothing of that kind can run (same values as the pipeline's)."""
+    from robopercept.sources.realsense import intrinsics_from_rs, transform_from_rs
+
     dev = rs.context().load_device(path)
     dev.as_playback().set_real_time(False)
     profiles = {}
@@ -107,80 +233,226 @@ def _bag_calibration(path: str):
     return intrinsics_from_rs(d.get_intrinsics()), transform_from_rs(d.get_extrinsics_to(c))
 
 
+def _librealsense_playback(path: str) -> dict:
+    """Every frame of each stream as librealsense's playback device gives it (not in
+    real time, and paused while the sensors start, so that no frame is lost), with the
+    calibration its profiles and depth sensor report (in the librealsense worker)."""
+    from robopercept.sources.realsense import intrinsics_from_rs, transform_from_rs
+    from robopercept.sources.realsense_recording import rgb_from
+
+    dev = rs.context().load_device(path)
+    playback = dev.as_playback()
+    playback.set_real_time(False)
+    playback.pause()
+    sensors = list(dev.query_sensors())
+    profiles = {}
+    for sensor in sensors:
+        for p in sensor.get_stream_profiles():
+            profiles.setdefault(p.stream_type(), p.as_video_stream_profile())
+    d, c = profiles[rs.stream.depth], profiles[rs.stream.color]
+    out = {
+        "kd": intrinsics_from_rs(d.get_intrinsics()),
+        "kc": intrinsics_from_rs(c.get_intrinsics()),
+        "T": transform_from_rs(d.get_extrinsics_to(c)),
+        "scale": float(dev.first_depth_sensor().get_depth_scale()),
+        "depth": [],
+        "color": [],
+    }
+    queue = rs.frame_queue(10_000, keep_frames=True)
+    for s in sensors:
+        s.open(s.get_stream_profiles())
+    for s in sensors:
+        s.start(queue)
+    playback.resume()
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        ok, f = queue.try_wait_for_frame(300)
+        if not ok:
+            if playback.current_status() != rs.playback_status.playing:
+                break
+            continue
+        data = np.asanyarray(f.get_data()).copy()
+        if f.profile.stream_type() == rs.stream.depth:
+            out["depth"].append((f.get_frame_number(), f.get_timestamp(), data))
+        else:
+            fmt = str(f.profile.format()).split(".")[-1]
+            out["color"].append((f.get_timestamp(), np.ascontiguousarray(rgb_from(data, fmt))))
+    for s in sensors:
+        s.stop()
+        s.close()
+    return out
+
+
+def _nearest(t: float, stamps: list[float]) -> int:
+    """The index of the stamp nearest to ``t``, the earlier on a tie."""
+    return int(np.argmin(np.abs(np.asarray(stamps) - t)))
+
+
+@pytest.mark.parametrize("kind", ["real .bag", "software .db3", "synthetic .db3", "synthetic .bag"])
+@needs_rs
+def test_recordings_equal_librealsense_playback(kind, tmp_path, librealsense):
+    # every depth frame librealsense plays, in its order, with the same pixels and
+    # timestamps (get_timestamp, in ms: the header stamp of a ROS 1 bag, the metadata's
+    # timestamp in a ROS 2 .db3), paired with the colour frame librealsense plays
+    # nearest in time; intrinsics, extrinsics and depth scale to the last bit (float32)
+    truth = None
+    if kind == "real .bag":
+        path = _real_bag()
+    elif kind == "software .db3":
+        path = tmp_path / "rec.db3"
+        _record(librealsense, path, n=8)
+        truth = list(range(8))  # depth k with colour k
+    elif kind == "synthetic .db3":
+        from robopercept.sources.realsense import write_realsense_recording
+
+        path = tmp_path / "s.db3"
+        write_realsense_recording(path, _scene(), pace=0.02)
+    else:
+        path = tmp_path / "s.bag"
+        write_ros1_bag(path, _scene())
+        truth = list(range(6))
+    ref = librealsense.submit(_librealsense_playback, str(path)).result(timeout=120)
+    frames = list(RealSenseSource(path))
+    assert len(frames) == len(ref["depth"]) > 0
+    stamps = [t for t, _ in ref["color"]]
+    t0 = ref["depth"][0][1] / 1000.0
+    paired = []
+    for f, (_, ms, depth) in zip(frames, ref["depth"], strict=True):
+        assert np.array_equal(f.depth, depth)
+        # exact: both are get_timestamp() / 1000 minus the first's
+        assert f.timestamp == ms / 1000.0 - t0
+        j = _nearest(ms, stamps)
+        assert np.array_equal(f.color, ref["color"][j][1])
+        paired.append(j)
+        assert (f.depth_intrinsics, f.color_intrinsics) == (ref["kd"], ref["kc"])
+        np.testing.assert_array_equal(f.T_color_depth, ref["T"])
+        assert f.depth_scale == ref["scale"]
+    if truth is not None:
+        assert paired == truth
+    if kind == "synthetic .db3":  # librealsense's recorder may lose the first frameset
+        assert len(frames) >= 4
+
+
 @pytest.mark.realdata
+@needs_rs
 def test_real_recording(librealsense):
-    if not BAG.exists():
-        pytest.skip(f"{BAG} absent")
+    path = _real_bag()
     # the recording holds two depth frames (librealsense numbers 169 and 170, 166.7 ms
-    # apart) and one colour frame between them in time: each depth frame comes back
+    # apart) and one colour frame 102 ms before the first: each depth frame comes back
     # with it (a pipeline dropped the first depth frame, which came before any colour)
-    frames = list(RealSenseSource(BAG, timeout=1.0))
+    frames = list(RealSenseSource(path))
     assert len(frames) == 2
     assert np.array_equal(frames[0].color, frames[1].color)
     assert not np.array_equal(frames[0].depth, frames[1].depth)
     assert [f.index for f in frames] == [0, 1]
-    assert frames[1].timestamp == pytest.approx(0.166676, abs=1e-5)
+    assert frames[1].timestamp == pytest.approx(0.166676, abs=1e-9)
     f = frames[0]
     assert f.depth.shape == (480, 640) and f.depth.dtype == np.uint16
     assert f.color.shape == (480, 640, 3) and f.color.dtype == np.uint8
+    assert f.depth.flags.writeable and f.color.flags.c_contiguous
     assert f.depth_scale == pytest.approx(0.001)
     assert (f.depth > 0).mean() > 0.5
     # the intrinsics and extrinsics are librealsense's own, read back through pyrealsense2
-    k, T = librealsense.submit(_bag_calibration, str(BAG)).result(timeout=120)
+    k, T = librealsense.submit(_bag_calibration, str(path)).result(timeout=120)
     assert k == f.depth_intrinsics
-    np.testing.assert_allclose(T, f.T_color_depth)
+    np.testing.assert_array_equal(T, f.T_color_depth)
     # the tracker runs on it (no green board in this scene: a row, no crash)
     r = PlaneTracker().process(f)
     assert r.n_points == int((f.depth > 0).sum())
+    with pytest.raises(InputError, match="watchdog must be a positive"):
+        RealSenseSource(path, watchdog=0)
 
 
+@needs_rs
 def test_software_device_recording_plays_back_in_order_and_in_sync(tmp_path, librealsense):
-    # every recorded frame comes back, in order, each depth with its own colour: the
-    # player is non-real-time before the first frame (through a pipeline, the first
-    # framesets were often lost) and the syncer's split first pair is joined
+    # every recorded frame comes back, in order, each depth with its own colour (the
+    # recorder writes depth k before colour k, at the same frame timestamp)
     path = tmp_path / "rec.db3"
     _record(librealsense, path, n=8)
     src = RealSenseSource(path, timeout=1.0)
     frames = list(src)
     assert len(frames) == 8
     for j, f in enumerate(frames):
-        k = j
         assert f.index == j
-        assert (f.depth == 1000 + k).all()
-        assert (f.color[..., 0] == k).all() and (f.color[..., 1] == 200).all()
-        assert f.timestamp == pytest.approx(j / 30, abs=1e-3)
+        assert (f.depth == 1000 + j).all()
+        assert (f.color[..., 0] == j).all() and (f.color[..., 1] == 200).all()
+        assert f.timestamp == pytest.approx(j / 30, abs=1e-6)
     f = frames[0]
     assert f.color_intrinsics.model == "inverse_brown_conrady"
     assert (f.depth_intrinsics.fx, f.depth_intrinsics.fy) == (50.0, 51.0)
     np.testing.assert_allclose(f.T_color_depth[:3, 3], [0.015, 0.001, 0.0], atol=1e-7)
     assert src.skipped == []
+    assert len(list(RealSenseSource(path, max_frames=3))) == 3
+    assert [f.index for f in src] == list(range(8))  # a second pass plays it again
 
 
+@needs_rs
 def test_recording_without_colour_is_refused(tmp_path, librealsense):
     path = tmp_path / "depth_only.db3"
     _record(librealsense, path, n=2, with_color=False)
     with pytest.raises(InputError, match="no colour stream"):
-        list(RealSenseSource(path, timeout=1.0))
+        RealSenseSource(path)
 
 
-def test_missing_recording_and_missing_pyrealsense2(tmp_path, monkeypatch):
-    with pytest.raises(FileFormatError, match="not found"):
-        RealSenseSource(tmp_path / "nope.bag")
+def test_recordings_play_without_pyrealsense2(tmp_path, monkeypatch):
+    # issue 48: pyrealsense2 is needed for a live camera only
     monkeypatch.setitem(sys.modules, "pyrealsense2", None)
     with pytest.raises(InputError, match=r"robopercept\[realsense\]"):
         import_pyrealsense2()
     with pytest.raises(InputError, match=r"robopercept\[realsense\]"):
-        RealSenseSource(tmp_path / "x.bag")
+        RealSenseSource(None)  # a live camera
+    with pytest.raises(FileFormatError, match=r"nope\.bag: recording not found"):
+        RealSenseSource(tmp_path / "nope.bag")
+    write_ros1_bag(tmp_path / "s.bag", _scene(3))
+    frames = list(RealSenseSource(tmp_path / "s.bag"))
+    assert [f.index for f in frames] == [0, 1, 2]
+    if BAG.exists():
+        assert len(list(RealSenseSource(BAG))) == 2
 
 
+def _plane_track_without_pyrealsense2(source: Path, out: Path) -> subprocess.CompletedProcess:
+    """``python -m robopercept.cli.main plane-track --source SOURCE ... --json`` in a
+    fresh interpreter where ``import pyrealsense2`` fails."""
+    code = (
+        "import sys, runpy\n"
+        "sys.modules['pyrealsense2'] = None\n"
+        "try:\n"
+        "    import pyrealsense2\n"
+        "    raise SystemExit('pyrealsense2 is importable')\n"
+        "except ImportError:\n"
+        "    pass\n"
+        "sys.argv = ['robopercept'] + sys.argv[1:]\n"
+        "runpy.run_module('robopercept.cli.main', run_name='__main__')\n"
+    )
+    args = ["plane-track", "--source", str(source), "--out", str(out), "--no-video"]
+    return subprocess.run(
+        [sys.executable, "-c", code, *args, "--quiet", "--json"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_plane_track_on_a_bag_without_pyrealsense2(tmp_path):
+    # issue 48 acceptance: the synthetic board scene (small) as a librealsense-layout
+    # ROS 1 .bag, tracked by the CLI in an interpreter that cannot import pyrealsense2
+    frames = _scene(8, depth=(212, 120), color=(320, 180))
+    write_ros1_bag(tmp_path / "board.bag", frames, compression="lz4")
+    r = _plane_track_without_pyrealsense2(tmp_path / "board.bag", tmp_path / "out")
+    assert r.returncode == 0, r.stderr[-2000:]
+    summary = json.loads(r.stdout)["summary"]
+    assert summary["frames"] == 8 and summary["skipped_frames"] == 0
+    assert summary["measured_frames"] >= 6  # the board is found in (nearly) every frame
+    assert (tmp_path / "out" / "plane.csv").is_file()
+
+
+@needs_rs
 def test_write_realsense_recording_round_trips_calibration(tmp_path):
     # the synthetic scene's frames through the software device and recorder: the same
     # depth, colour, intrinsics (float32 in librealsense), extrinsics and depth scale
-    from robopercept.sources import SyntheticRGBDScene
     from robopercept.sources.realsense import write_realsense_recording
 
-    scene = SyntheticRGBDScene(n_frames=12, depth_size=(64, 48), color_size=(80, 60))
-    frames = list(scene)
+    frames = _scene(12)
     assert write_realsense_recording(tmp_path / "s.db3", frames) == 12
     back = list(RealSenseSource(tmp_path / "s.db3", timeout=1.0))
     # librealsense's recorder may lose frames at the ends of a short recording under
@@ -201,8 +473,87 @@ def test_write_realsense_recording_round_trips_calibration(tmp_path):
         write_realsense_recording(tmp_path / "e.db3", [])
 
 
-# issue 25: a .bag whose record length word is 0xFFFFFFFF made librealsense spin forever
-# (holding the GIL, deaf to Ctrl-C); the record structure is now checked first
+@pytest.mark.parametrize("compression", [None, "bz2", "lz4"])
+def test_ros1_chunk_compressions_read_alike(tmp_path, compression):
+    frames = _scene(4)
+    write_ros1_bag(tmp_path / "c.bag", frames, compression=compression)
+    back = list(RealSenseSource(tmp_path / "c.bag"))
+    assert len(back) == 4
+    for a, b in zip(back, frames, strict=True):
+        assert np.array_equal(a.depth, b.depth) and np.array_equal(a.color, b.color)
+        assert a.timestamp == pytest.approx(b.timestamp, abs=1e-9)
+    # through float32, as librealsense holds calibration
+    np.testing.assert_allclose(back[0].T_color_depth, frames[0].T_color_depth, atol=1e-7)
+    assert back[0].depth_intrinsics.fx == pytest.approx(frames[0].depth_intrinsics.fx, rel=1e-7)
+
+
+def test_unreadable_frames_are_skipped_and_counted(tmp_path):
+    # a depth image whose size is not its stream's: each frame is skipped, warned
+    # about and recorded, as every source does
+    write_ros1_bag(tmp_path / "size.bag", _scene(3), depth_size=(32, 48))
+    src = RealSenseSource(tmp_path / "size.bag")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        assert list(src) == []
+    assert [i for i, _ in src.skipped] == [0, 1, 2]
+    assert str(said[0].message) == "skipping frame 0: depth image is 32x48, not 64x48"
+    # colour in a format the frames cannot be converted from: refused when opened
+    write_ros1_bag(tmp_path / "yuyv.bag", _scene(2), color_encoding="yuyv")
+    with pytest.raises(InputError, match="colour stream format 'yuyv' is not supported"):
+        RealSenseSource(tmp_path / "yuyv.bag")
+
+
+@needs_rs
+def test_a_broken_png_frame_in_a_db3_is_skipped(tmp_path, librealsense):
+    import sqlite3
+
+    path = tmp_path / "png.db3"
+    _record(librealsense, path, n=4)
+    con = sqlite3.connect(path)
+    mid, data = con.execute(
+        "SELECT m.id, m.data FROM messages m JOIN topics t ON m.topic_id = t.id "
+        "WHERE t.name LIKE '%Depth_0/image/data%' ORDER BY m.timestamp LIMIT 1 OFFSET 2"
+    ).fetchone()
+    bad = bytearray(data)
+    at = bad.index(b"IDAT") + 8
+    bad[at : at + 16] = bytes(16)  # the zlib stream of the PNG
+    con.execute("UPDATE messages SET data = ? WHERE id = ?", (bytes(bad), mid))
+    con.commit()
+    con.close()
+    src = RealSenseSource(path)
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        frames = list(src)
+    assert [f.index for f in frames] == [0, 1, 3]
+    assert [i for i, _ in src.skipped] == [2]
+    assert any("skipping frame 2" in str(w.message) for w in said)
+    assert (frames[2].depth == 1003).all() and (frames[2].color[..., 0] == 3).all()
+
+
+def test_pairing_takes_the_colour_frame_nearest_in_time():
+    # the pairing on scripted events: depth k with colour k whichever comes first
+    ev = [("depth", 33.3 * k, f"d{k}") for k in range(4)]
+    col = [("color", 33.3 * k, f"c{k}") for k in range(4)]
+    order = [ev[0], col[0], ev[1], col[1], ev[2], col[2], col[3], ev[3]]
+    assert list(pair_nearest_color(order)) == [(f"d{k}", f"c{k}") for k in range(4)]
+    # the real bag's layout: depth, one colour frame 102 ms before it, depth 167 ms
+    # later: both depth frames get that colour frame (the second at the end)
+    bag = [("depth", 360815.089, "a"), ("color", 360713.523, "c"), ("depth", 360981.765, "b")]
+    assert list(pair_nearest_color(bag)) == [("a", "c"), ("b", "c")]
+    # between two colour frames, the nearer one (the earlier on a tie)
+    mid = [("color", 0.0, "c0"), ("depth", 20.0, "d"), ("color", 33.0, "c1")]
+    assert list(pair_nearest_color(mid)) == [("d", "c1")]
+    tie = [("color", 0.0, "c0"), ("depth", 10.0, "d"), ("color", 20.0, "c1")]
+    assert list(pair_nearest_color(tie)) == [("d", "c0")]
+    # no colour at all: paired with None (the reader skips and counts them), the oldest
+    # first once more than max_waiting wait
+    lone = [("depth", 10.0 * k, f"d{k}") for k in range(4)]
+    assert list(pair_nearest_color(lone, max_waiting=2)) == [(f"d{k}", None) for k in range(4)]
+
+
+# issue 25 / 48: damaged recordings are FileFormatErrors naming the file, now raised by
+# rosbags (or SQLite), which reads in this process and cannot crash or hang it as
+# librealsense did
 
 
 def _bag_length_words(data):
@@ -222,92 +573,112 @@ def _bag_length_words(data):
     return words
 
 
-def _play_in_child(path, timeout=60):
-    """Play a recording through RealSenseSource in a child process, so that a hang in
-    librealsense fails the test instead of blocking pytest; returns its last line."""
-    import subprocess
-
-    code = (
-        "import sys\n"
-        "from robopercept.sources.realsense import RealSenseSource\n"
-        "try:\n"
-        "    print(len(list(RealSenseSource(sys.argv[1], timeout=1.0))))\n"
-        "except Exception as e:\n"
-        "    print(type(e).__name__, e)\n"
+def _same_frames(a, b) -> bool:
+    return len(a) == len(b) and all(
+        np.array_equal(x.depth, y.depth)
+        and np.array_equal(x.color, y.color)
+        and x.timestamp == y.timestamp
+        and x.depth_intrinsics == y.depth_intrinsics
+        and np.array_equal(x.T_color_depth, y.T_color_depth)
+        for x, y in zip(a, b, strict=True)
     )
-    try:
-        r = subprocess.run(
-            [sys.executable, "-c", code, str(path)],
-            capture_output=True,
-            text=True,
-            timeout=timeout,
-        )
-    except subprocess.TimeoutExpired:
-        pytest.fail(f"playing {path} hung for {timeout} s")
-    assert r.returncode == 0, r.stderr
-    return r.stdout.strip().splitlines()[-1]
 
 
 @pytest.mark.realdata
-def test_bag_with_broken_length_words_is_refused_naming_the_offset(tmp_path):
-    from robopercept.sources.realsense import check_ros1_bag
-
-    if not BAG.exists():
-        pytest.skip(f"{BAG} absent")
-    data = BAG.read_bytes()
-    assert check_ros1_bag(BAG) == 147  # the real recording passes, record for record
+def test_bag_with_broken_length_words_is_refused_or_read_intact(tmp_path):
+    data = _real_bag().read_bytes()
+    good = list(RealSenseSource(BAG))
     words = _bag_length_words(data)
     # header_len and data_len of the bag header, the chunk and the first index record,
-    # then a sample of the rest
-    picks = words[:6] + words[6::37] + words[-2:]
-    for off in picks:
+    # then a sample of the rest: refused naming the file, or (a length rosbags never
+    # needs: the index records of topics not read) the very frames of the intact file
+    refused = 0
+    for off in words[:6] + words[6::11] + words[-2:]:
         bad = bytearray(data)
         bad[off : off + 4] = b"\xff\xff\xff\xff"
         path = tmp_path / f"ff_{off}.bag"
         path.write_bytes(bytes(bad))
-        with pytest.raises(FileFormatError, match=rf"ff_{off}\.bag: byte offset {off}: "):
-            RealSenseSource(path)  # refused before librealsense sees it
+        try:
+            frames = list(RealSenseSource(path))
+        except FileFormatError as exc:
+            assert f"ff_{off}.bag: " in str(exc)
+            refused += 1
+        else:
+            assert _same_frames(frames, good), off
+        path.unlink()
+    assert refused >= 20  # of 34 (220 of all 294 words)
     for n in (0, 12, 13, 100, 4117, 500_000, len(data) - 1):
         path = tmp_path / f"cut_{n}.bag"
         path.write_bytes(data[:n])
-        with pytest.raises(FileFormatError, match=rf"cut_{n}\.bag"):
+        with pytest.raises(FileFormatError, match=rf"cut_{n}\.bag: .*truncated or corrupt"):
             RealSenseSource(path)
-    # a header field whose length runs past its header, and a pointer to no record
+    # the chunk record's header_len set to 0xFFFFFFFF made librealsense 2.59 spin forever
+    chunk = words[2]
     bad = bytearray(data)
-    bad[13 + 4 : 13 + 8] = (1000).to_bytes(4, "little")
-    (tmp_path / "field.bag").write_bytes(bytes(bad))
-    with pytest.raises(FileFormatError, match="byte offset 17: header field length 1000"):
-        check_ros1_bag(tmp_path / "field.bag")
-    bad = bytearray(data)
-    i = data.index(b"index_pos=", 13) + len(b"index_pos=")
-    bad[i : i + 8] = (4118).to_bytes(8, "little")
-    (tmp_path / "pos.bag").write_bytes(bytes(bad))
-    with pytest.raises(FileFormatError, match="index_pos 4118 does not point at a record"):
-        check_ros1_bag(tmp_path / "pos.bag")
+    bad[chunk : chunk + 4] = b"\xff\xff\xff\xff"
+    (tmp_path / "hang.bag").write_bytes(bytes(bad))
+    t = time.monotonic()
+    with pytest.raises(FileFormatError, match=r"hang\.bag"):
+        list(RealSenseSource(tmp_path / "hang.bag"))
+    assert time.monotonic() - t < 5
 
 
 @pytest.mark.realdata
-def test_bag_that_hung_librealsense_now_fails_fast_and_a_good_one_plays(tmp_path, librealsense):
-    # the chunk record's header_len set to 0xFFFFFFFF: librealsense 2.59 spun forever
-    if not BAG.exists():
-        pytest.skip(f"{BAG} absent")
-    data = bytearray(BAG.read_bytes())
-    chunk = _bag_length_words(bytes(data))[2]
-    data[chunk : chunk + 4] = b"\xff\xff\xff\xff"
-    (tmp_path / "hang.bag").write_bytes(bytes(data))
-    line = _play_in_child(tmp_path / "hang.bag")
-    assert line.startswith("FileFormatError") and f"byte offset {chunk}" in line
-    assert _play_in_child(BAG) == "2"
+def test_bag_chunk_and_index_fields_are_checked(tmp_path):
+    import struct
+
+    data = _real_bag().read_bytes()
+    # the real bag: one lz4 chunk of 747,730 bytes holding 1,578,062 (2.1:1)
+    chunk = _bag_length_words(data)[2]
+    at = data.index(b"size=", chunk) + 5
+    assert struct.unpack_from("<I", data, at)[0] == 1_578_062
+
+    def patched(name, offset, new):
+        bad = bytearray(data)
+        bad[offset : offset + len(new)] = new
+        (tmp_path / name).write_bytes(bytes(bad))
+        return tmp_path / name
+
+    # uncompressed size beyond lz4's 255:1 (and the 1 GiB cap), or below half the data:
+    # refused before anything is decompressed
+    for v in (0xFFFFFFFF, 0x7FFFFFFF, 255 * 747_730 + 65, 0, 373_800):
+        p = patched(f"size_{v}.bag", at, struct.pack("<I", v))
+        with pytest.raises(
+            FileFormatError,
+            match=rf"size_{v}\.bag: byte offset {chunk}: lz4 chunk of 747730 bytes claims an "
+            rf"uncompressed size of {v} ",
+        ):
+            RealSenseSource(p)
+    # within lz4's bounds but not what the chunk holds: refused when it is read
+    for v, held in ((373_801, "more than 373801"), (1_578_063, "1578062, not 1578063")):
+        p = patched(f"ok_{v}.bag", at, struct.pack("<I", v))
+        with pytest.raises(FileFormatError, match=rf"ok_{v}\.bag: .*chunk holds {held} bytes"):
+            list(RealSenseSource(p))
+    # compression neither rosbags nor librealsense decodes
+    c = data.index(b"compression=lz4", chunk) + len(b"compression=")
+    with pytest.raises(FileFormatError, match=r"lz5\.bag: .*Compression 'lz5' is not supported"):
+        RealSenseSource(patched("lz5.bag", c, b"lz5"))
+    # an index record whose count disagrees with its data, or that is not an index
+    # record; one that names no connection leaves its topic (/file_version, not read)
+    # without messages: the frames are intact
+    idx = _bag_length_words(data)[4]  # the first index data record (conn 0, count 1)
+    cnt = data.index(b"count=", idx) + 6
+    op = data.index(b"op=\x04", idx) + 3
+    for name, offset, new in (("count.bag", cnt, struct.pack("<I", 2)), ("op.bag", op, b"\x02")):
+        with pytest.raises(FileFormatError, match=rf"{name}: not a readable RealSense .*check"):
+            list(RealSenseSource(patched(name, offset, new)))
+    conn = data.index(b"conn=", idx) + 5
+    bad = RealSenseSource(patched("conn.bag", conn, struct.pack("<I", 0x1234)))
+    assert _same_frames(list(bad), list(RealSenseSource(BAG)))
 
 
+@needs_rs
 def test_corrupt_db3_recording_gives_file_format_error(tmp_path, librealsense):
     import sqlite3
 
-    from robopercept.sources.realsense import check_db3_recording
-
     path = tmp_path / "rec.db3"
     _record(librealsense, path, n=2)
-    check_db3_recording(path)  # a sound recording passes
+    assert len(list(RealSenseSource(path))) == 2  # a sound recording plays
     data = path.read_bytes()
     for name, bad in (
         ("cut.db3", data[: len(data) // 2]),
@@ -317,49 +688,14 @@ def test_corrupt_db3_recording_gives_file_format_error(tmp_path, librealsense):
     ):
         (tmp_path / name).write_bytes(bad)
         with pytest.raises(FileFormatError, match=name) as info:
-            RealSenseSource(tmp_path / name)
+            RealSenseSource(tmp_path / name)  # at once, before any frame
         assert not isinstance(info.value, sqlite3.Error)
     con = sqlite3.connect(tmp_path / "other.db3")  # sound SQLite, not a ROS2 bag
     con.execute("CREATE TABLE t (x)")
     con.commit()
     con.close()
-    with pytest.raises(FileFormatError, match="no messages, topics table"):
+    with pytest.raises(FileFormatError, match=r"other\.db3: .*missing tables"):
         RealSenseSource(tmp_path / "other.db3")
-
-
-# issue 25: librealsense crashed (SIGSEGV) or hung on some corrupt recordings, taking
-# the process with it; recordings now play in a watched child process, and the bag
-# check also reads the chunk, index and connection fields librealsense trusts
-
-
-def _play_here_or_in_child(path, in_child=True, watchdog=10.0, timeout=90):
-    """Play ``path`` in a subprocess (so a crash or hang fails the test, not pytest):
-    with ``in_child`` through RealSenseSource (its own watched player process), else
-    through librealsense in that subprocess itself with the file checks off (what the
-    code did before the fix); returns (return code, last line), return code None on a
-    hang."""
-    import subprocess
-
-    code = (
-        "import sys\n"
-        "import robopercept.sources.realsense as m\n"
-        "from robopercept.sources.realsense import RealSenseSource\n"
-        "if sys.argv[3] == '0':\n"
-        "    m.check_db3_recording = m.check_ros1_bag = lambda path: 0\n"
-        "src = RealSenseSource(sys.argv[1], timeout=0.5, watchdog=float(sys.argv[2]))\n"
-        "frames = src if sys.argv[3] == '1' else src._frames_here()\n"
-        "try:\n"
-        "    print(len(list(frames)))\n"
-        "except Exception as e:\n"
-        "    print(type(e).__name__, e)\n"
-    )
-    cmd = [sys.executable, "-c", code, str(path), str(watchdog), "1" if in_child else "0"]
-    try:
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired:
-        return None, "hang"
-    lines = r.stdout.strip().splitlines()
-    return r.returncode, lines[-1] if lines else r.stderr[-300:]
 
 
 def _edit_db3(path, sql, *params):
@@ -371,9 +707,12 @@ def _edit_db3(path, sql, *params):
     con.close()
 
 
-def test_db3_whose_tf_message_crashed_librealsense_gives_file_format_error(tmp_path, librealsense):
-    # fuzz finding: a few flipped bits in a message blob gave SIGSEGV in pipeline.start;
-    # minimal form: one byte of the depth-to-colour transform string set to 0xAC
+@needs_rs
+def test_db3_messages_that_crashed_or_hung_librealsense_give_file_format_error(
+    tmp_path, librealsense
+):
+    # fuzz findings of issue 25, read in this process now: one byte of the
+    # depth-to-colour transform text set to 0xAC made librealsense segfault
     import sqlite3
 
     path = tmp_path / "tf.db3"
@@ -389,17 +728,9 @@ def test_db3_whose_tf_message_crashed_librealsense_gives_file_format_error(tmp_p
         bad = bytearray(data)
         bad[bad.index(b"rotation=1.000000,") + 17] = 0xAC  # the first ','
         _edit_db3(path, "UPDATE messages SET data = ? WHERE id = ?", bytes(bad), mid)
-    rc, line = _play_here_or_in_child(path, in_child=False)
-    assert rc == -11, (rc, line)  # librealsense itself segfaults on it
-    rc, line = _play_here_or_in_child(path)
-    assert rc == 0, line
-    assert line.startswith(f"FileFormatError librealsense crashed reading {path} at frame 0")
-    assert "SIGSEGV" in line
-
-
-def test_db3_that_hung_librealsense_is_refused_or_stopped_by_the_watchdog(tmp_path, librealsense):
-    # fuzz finding: a 32-bit word of the topics table set to 0x80000000 (a topic name
-    # with bytes 00 00 00 80 in it) made librealsense spin forever
+    with pytest.raises(FileFormatError, match=r"tf\.db3: .*/tf/ref_1.*0xac"):
+        RealSenseSource(path)
+    # ... and a topic name with the bytes 00 00 00 80 in it made it spin forever
     path = tmp_path / "name.db3"
     _record(librealsense, path, n=3)
     _edit_db3(
@@ -408,106 +739,10 @@ def test_db3_that_hung_librealsense_is_refused_or_stopped_by_the_watchdog(tmp_pa
         " AND id = (SELECT MIN(id) FROM topics WHERE name LIKE '%Frames_Queue_Size/value')",
         b"/device_0/sensor_0/opt\x00\x00\x00\x80Frames_Queue_Size/value",
     )
-    rc, line = _play_here_or_in_child(path, in_child=False, timeout=20)
-    assert rc is None, line  # librealsense itself hangs on it
-    # the check refuses it at once, naming the topic
-    with pytest.raises(FileFormatError, match=r"name\.db3: .*topic \d+ has a name that is not"):
-        RealSenseSource(path)
-    # and were it to pass the checks, the watchdog stops the player and says so
-    good = tmp_path / "good.db3"
-    _record(librealsense, good, n=2)
-    src = RealSenseSource(good, timeout=0.5, watchdog=3.0)
-    src.path = path
     t = time.monotonic()
-    with pytest.raises(
-        FileFormatError,
-        match=r"name\.db3: librealsense stopped responding for 3\.5 s reading frame 0",
-    ):
-        list(src)
-    assert time.monotonic() - t < 15
-
-
-@pytest.mark.realdata
-def test_bag_chunk_and_index_fields_are_checked(tmp_path):
-    import struct
-
-    from robopercept.sources.realsense import check_ros1_bag
-
-    if not BAG.exists():
-        pytest.skip(f"{BAG} absent")
-    data = BAG.read_bytes()
-    # the real bag: one lz4 chunk of 747,730 bytes holding 1,578,062 (2.1:1)
-    chunk = _bag_length_words(data)[2]
-    at = data.index(b"size=", chunk) + 5
-    assert struct.unpack_from("<I", data, at)[0] == 1_578_062
-
-    def patched(name, offset, new):
-        bad = bytearray(data)
-        bad[offset : offset + len(new)] = new
-        (tmp_path / name).write_bytes(bytes(bad))
-        return tmp_path / name
-
-    # uncompressed size beyond lz4's 255:1 (and the 1 GiB cap), or below half the data
-    for v in (0xFFFFFFFF, 0x7FFFFFFF, 255 * 747_730 + 65, 0, 373_800):
-        p = patched(f"size_{v}.bag", at, struct.pack("<I", v))
-        with pytest.raises(
-            FileFormatError,
-            match=rf"byte offset {chunk}: lz4 chunk of 747730 bytes claims an "
-            rf"uncompressed size of {v} ",
-        ):
-            RealSenseSource(p)
-    for v in (373_801, 1_578_062 + 1):  # within lz4's bounds: the check lets it through
-        check_ros1_bag(patched(f"ok_{v}.bag", at, struct.pack("<I", v)))
-    # compression librealsense does not decode
-    c = data.index(b"compression=lz4", chunk) + len(b"compression=")
-    with pytest.raises(FileFormatError, match=r"chunk compression b'lz5' is not one of"):
-        check_ros1_bag(patched("lz5.bag", c, b"lz5"))
-    # an index record whose count disagrees with its data, or names no connection
-    idx = _bag_length_words(data)[4]  # the first index data record (conn 0, count 1)
-    cnt = data.index(b"count=", idx) + 6
-    with pytest.raises(
-        FileFormatError, match=rf"byte offset {idx}: 2 index entries need 24 bytes, not 12"
-    ):
-        check_ros1_bag(patched("count.bag", cnt, struct.pack("<I", 2)))
-    conn = data.index(b"conn=", idx) + 5
-    with pytest.raises(
-        FileFormatError, match=rf"byte offset {idx}: connection 4660 is never declared"
-    ):
-        check_ros1_bag(patched("conn.bag", conn, struct.pack("<I", 0x1234)))
-    op = data.index(b"op=\x04", idx) + 3
-    with pytest.raises(
-        FileFormatError, match=rf"byte offset {idx}: record op 2 cannot sit outside"
-    ):
-        check_ros1_bag(patched("op.bag", op, b"\x02"))
-
-
-def _frames_in_process(path: str) -> list:
-    """RealSenseSource's frames read by librealsense in the calling process, with no
-    player process (run in the librealsense worker)."""
-    return list(RealSenseSource(path, timeout=1.0)._frames_here())
-
-
-@pytest.mark.realdata
-def test_real_bag_plays_in_the_child_as_it_did_in_process(librealsense):
-    # the frames through the player process are the frames librealsense gives in the
-    # process that reads them (the librealsense worker, not this one)
-    if not BAG.exists():
-        pytest.skip(f"{BAG} absent")
-    frames = list(RealSenseSource(BAG, timeout=1.0))
-    here = librealsense.submit(_frames_in_process, str(BAG)).result(timeout=120)
-    assert len(frames) == len(here) == 2
-    for a, b in zip(frames, here, strict=True):
-        _same_frame(a, b)
-    with pytest.raises(InputError, match="watchdog must be a positive"):
-        RealSenseSource(BAG, watchdog=0)
-
-
-def _same_frame(a, b) -> None:
-    assert np.array_equal(a.depth, b.depth) and np.array_equal(a.color, b.color)
-    assert a.depth.flags.writeable and a.color.flags.c_contiguous
-    assert (a.depth_intrinsics, a.color_intrinsics) == (b.depth_intrinsics, b.color_intrinsics)
-    np.testing.assert_array_equal(a.T_color_depth, b.T_color_depth)
-    assert (a.index, a.timestamp, a.depth_scale) == (b.index, b.timestamp, b.depth_scale)
+    with pytest.raises(FileFormatError, match=r"name\.db3: .*UnicodeDecodeError"):
+        RealSenseSource(path)
+    assert time.monotonic() - t < 5
 
 
 def test_write_realsense_recording_keeps_librealsense_out_of_this_process(tmp_path, monkeypatch):
@@ -515,23 +750,23 @@ def test_write_realsense_recording_keeps_librealsense_out_of_this_process(tmp_pa
     # process that held them, later and at random (CI died so): the recording is made in
     # a child process, so no SoftwareCamera is ever built here
     pytest.importorskip("pyrealsense2")
-    from robopercept.sources import SyntheticRGBDScene, realsense
+    from robopercept.sources import realsense
 
     def refuse(*args, **kwargs):
         raise AssertionError("a SoftwareCamera was built in the calling process")
 
     monkeypatch.setattr(realsense.SoftwareCamera, "__init__", refuse)
-    frames = list(SyntheticRGBDScene(n_frames=4, depth_size=(64, 48), color_size=(80, 60)))
+    frames = _scene(4, color=(80, 60))
     assert realsense.write_realsense_recording(tmp_path / "c.db3", frames, pace=0.0) == 4
     assert (tmp_path / "c.db3").stat().st_size > 0
 
 
 def test_write_realsense_recording_names_what_failed_in_the_child(tmp_path, monkeypatch):
     pytest.importorskip("pyrealsense2")
-    from robopercept.sources import SyntheticRGBDScene, realsense
+    from robopercept.sources import realsense
     from robopercept.sources.realsense import SourceError, write_realsense_recording
 
-    frames = list(SyntheticRGBDScene(n_frames=2, depth_size=(64, 48), color_size=(80, 60)))
+    frames = _scene(2)
     # a missing folder no longer makes librealsense fail (issue 47 R59: the recording is
     # written to a temporary name through fileio.atomic_path, which creates the folder);
     # a recorder that writes part of its file and answers with librealsense's error
@@ -550,77 +785,15 @@ def test_write_realsense_recording_names_what_failed_in_the_child(tmp_path, monk
         write_realsense_recording(tmp_path / "y.db3", frames, pace=-1.0)
 
 
-class _Frame:
-    """A stand-in for a librealsense frame: truthy, with a timestamp (ms) and a name."""
-
-    def __init__(self, name: str, ms: float) -> None:
-        self.name, self.ms = name, ms
-
-    def get_timestamp(self) -> float:
-        return self.ms
-
-
-class _Frameset:
-    def __init__(self, depth=None, color=None) -> None:
-        self.depth, self.color = depth, color
-
-    def get_depth_frame(self):
-        return self.depth
-
-    def get_color_frame(self):
-        return self.color
-
-
-class _Sync:
-    def __init__(self, sets) -> None:
-        self.sets = list(sets)
-
-    def try_wait_for_frames(self, ms):
-        return (True, self.sets.pop(0)) if self.sets else (False, None)
-
-
-def _pairs(sets, *, max_waiting: int = 8):
-    import collections
-
-    from robopercept.sources.realsense import _RecordingPlayer
-
-    player = _RecordingPlayer.__new__(_RecordingPlayer)
-    player.rs, player.sensors, player.playback = None, [], None
-    player.max_waiting = max_waiting
-    player.sync = _Sync(sets)
-    player.colors = collections.deque(maxlen=player.max_colors)
-    player.waiting = collections.deque()
-    player.ready = collections.deque()
-    out = []
-    while True:
-        ok, pair = player.try_wait_for_frames(10)
-        if not ok:
-            return out
-        out.append((pair[0].name, None if pair[1] is None else pair[1].name))
-
-
-def test_recording_player_pairs_each_depth_with_the_colour_nearest_in_time():
-    # no librealsense here: the pairing of _RecordingPlayer on scripted framesets.
-    # Under load a syncer may pass depth k on before colour k: depth k still gets
-    # colour k (the old rule, the last colour seen, gave it colour k - 1)
-    D = [_Frame(f"d{k}", 33.3 * k) for k in range(4)]
-    C = [_Frame(f"c{k}", 33.3 * k) for k in range(4)]
-    sets = [_Frameset(D[0]), _Frameset(color=C[0]), _Frameset(D[1], C[1])]
-    sets += [_Frameset(D[2]), _Frameset(color=C[2]), _Frameset(D[3]), _Frameset(color=C[3])]
-    assert _pairs(sets) == [("d0", "c0"), ("d1", "c1"), ("d2", "c2"), ("d3", "c3")]
-    # the real bag's layout: depth, one colour frame 30 ms later, depth 167 ms later:
-    # both depth frames get that colour frame (the second when the player stops)
-    bag = [_Frameset(_Frame("a", 0.0)), _Frameset(color=_Frame("c", 30.0))]
-    bag += [_Frameset(_Frame("b", 166.7))]
-    assert _pairs(bag) == [("a", "c"), ("b", "c")]
-    # between two colour frames, the nearer one (the earlier on a tie)
-    mid = [_Frameset(color=_Frame("c0", 0.0)), _Frameset(_Frame("d", 20.0))]
-    mid += [_Frameset(color=_Frame("c1", 33.0))]
-    assert _pairs(mid) == [("d", "c1")]
-    tie = [_Frameset(color=_Frame("c0", 0.0)), _Frameset(_Frame("d", 10.0))]
-    tie += [_Frameset(color=_Frame("c1", 20.0))]
-    assert _pairs(tie) == [("d", "c0")]
-    # no colour at all: passed on without colour (the reader skips and counts them),
-    # the oldest first once more than max_waiting wait
-    lone = [_Frameset(_Frame(f"d{k}", 10.0 * k)) for k in range(4)]
-    assert _pairs(lone, max_waiting=2) == [(f"d{k}", None) for k in range(4)]
+def test_recording_attributes_and_bad_paths(tmp_path):
+    write_ros1_bag(tmp_path / "s.bag", _scene(3))
+    rec = RealSenseRecording(tmp_path / "s.bag")
+    assert (rec.ros1, rec.depth_frames, rec.color_frames) == (True, 3, 3)
+    assert rec.depth_scale == pytest.approx(_scene(1)[0].depth_scale, rel=1e-7)
+    (tmp_path / "dir.bag").mkdir()
+    with pytest.raises(FileFormatError, match=r"dir\.bag: recording not found"):
+        RealSenseSource(tmp_path / "dir.bag")
+    with pytest.raises(InputError, match="NUL byte"):
+        RealSenseRecording("a\x00.bag")
+    with pytest.raises(InputError, match=r"device must be None .* got 3"):
+        RealSenseSource(3)  # type: ignore[arg-type]

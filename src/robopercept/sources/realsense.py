@@ -1,22 +1,23 @@
-"""RGB-D frames from an Intel RealSense camera or a recording of one (pyrealsense2).
+"""RGB-D frames from an Intel RealSense camera (pyrealsense2) or a recording of one
+(rosbags: no librealsense).
 
-pyrealsense2 is an optional dependency: ``pip install 'robopercept[realsense]'``.
-Recordings (``.bag``; ``.db3`` where the installed librealsense reads ROS 2 bags) are
-played back not in real time, so no frame is dropped however slow the consumer is.
-Intrinsics, the depth-to-colour extrinsics and the depth scale come from the stream
-profiles and the depth sensor, as the camera reports them.
+A live camera needs pyrealsense2, an optional dependency: ``pip install
+'robopercept[realsense]'``. Recordings (``.bag``: ROS 1, ``.db3``: ROS 2, as
+librealsense's recorder writes them) are read in this process with rosbags
+(:class:`~robopercept.sources.realsense_recording.RealSenseRecording`), without
+pyrealsense2: every recorded depth frame comes back, in order, with the colour frame
+nearest in time, and the intrinsics, depth-to-colour extrinsics and depth scale as
+librealsense's playback reports them. :func:`write_realsense_recording` writes
+recordings through librealsense's own recorder (pyrealsense2, in a child process).
 """
 
 from __future__ import annotations
 
-import collections
 import contextlib
 import itertools
 import os
 import pickle
-import select
 import signal
-import sqlite3
 import struct
 import subprocess
 import sys
@@ -29,19 +30,18 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import as_path, check_real
+from robopercept._checks import as_path, check_real, plain_repr
 from robopercept.errors import FileFormatError, InputError, RoboperceptError
 from robopercept.fileio import atomic_path
 from robopercept.geometry import CameraIntrinsics
 from robopercept.geometry.transforms import se3
 from robopercept.sources.frames import RGBDFrame
+from robopercept.sources.realsense_recording import RealSenseRecording, rgb_from
 
 __all__ = [
     "RealSenseSource",
     "SoftwareCamera",
     "SourceError",
-    "check_db3_recording",
-    "check_ros1_bag",
     "import_pyrealsense2",
     "write_realsense_recording",
 ]
@@ -52,6 +52,7 @@ _MODELS = {
     "modified_brown_conrady": "modified_brown_conrady",
     "inverse_brown_conrady": "inverse_brown_conrady",
 }
+_RECORDING_SUFFIXES = (".bag", ".db3")
 
 
 class SourceError(RoboperceptError, RuntimeError):
@@ -64,7 +65,8 @@ def import_pyrealsense2() -> Any:
         import pyrealsense2 as rs
     except ImportError:
         raise InputError(
-            "RealSense sources need pyrealsense2: pip install 'robopercept[realsense]'"
+            "RealSense cameras need pyrealsense2: pip install 'robopercept[realsense]' "
+            "(recordings, .bag and .db3, play without it)"
         ) from None
     return rs
 
@@ -92,318 +94,6 @@ def transform_from_rs(extr: Any) -> np.ndarray:
     return se3(r, np.asarray(extr.translation, dtype=np.float64))
 
 
-def _to_rgb(data: np.ndarray, fmt: str) -> np.ndarray:
-    if fmt == "rgb8":
-        return data
-    if fmt == "bgr8":
-        return data[..., ::-1]
-    if fmt == "rgba8":
-        return data[..., :3]
-    if fmt == "bgra8":
-        return data[..., 2::-1]
-    raise InputError(
-        f"colour stream format {fmt!r} is not supported; record colour as rgb8, bgr8, "
-        "rgba8 or bgra8"
-    )
-
-
-ROS1_BAG_MAGIC = b"#ROSBAG V2.0\n"
-_OP_CHUNK, _OP_BAG_HEADER, _OP_INDEX, _OP_CHUNK_INFO, _OP_CONNECTION = 5, 3, 4, 6, 7
-_OP_MESSAGE = 2
-#: chunk compressions librealsense's rosbag reader decodes
-BAG_COMPRESSIONS = (b"none", b"lz4", b"bz2")
-#: the largest uncompressed chunk accepted (ROS writes 768 KiB chunks; one message
-#: larger than that, a 4K colour image, makes a chunk of some 25 MB)
-MAX_BAG_CHUNK = 1 << 30
-#: LZ4's largest expansion (a run of one byte: 255 output bytes per input byte)
-_LZ4_MAX_RATIO = 255
-_U32 = struct.Struct("<I")
-
-
-def _bag_error(path: Path, offset: int, what: str) -> FileFormatError:
-    return FileFormatError(
-        f"{path}: byte offset {offset}: {what}; the recording is truncated or corrupt "
-        "(copy it again, or record it again)"
-    )
-
-
-def _bag_fields(path: Path, header: bytes, offset: int) -> dict[bytes, bytes]:
-    """The ``name=value`` fields of a ROS1 bag record header (each prefixed by its
-    length, a little-endian u32), checked against the header's length."""
-    fields: dict[bytes, bytes] = {}
-    i = 0
-    while i < len(header):
-        if len(header) - i < 4:
-            raise _bag_error(path, offset + i, "a header field length is cut short")
-        (n,) = _U32.unpack_from(header, i)
-        if n > len(header) - i - 4:
-            raise _bag_error(path, offset + i, f"header field length {n} runs past its header")
-        name, eq, value = header[i + 4 : i + 4 + n].partition(b"=")
-        if not eq or not name:
-            raise _bag_error(path, offset + i, "a header field is not name=value")
-        fields[name] = value
-        i += 4 + n
-    return fields
-
-
-def _u32_field(path: Path, fields: dict[bytes, bytes], name: bytes, off: int) -> int:
-    """The little-endian u32 header field ``name`` of the record at ``off``."""
-    raw = fields.get(name, b"")
-    if len(raw) != 4:
-        raise _bag_error(path, off, f"the {name.decode()} field is not 4 bytes")
-    return int(_U32.unpack(raw)[0])
-
-
-def _check_bag_record(
-    path: Path, f: Any, off: int, op: int, fields: dict[bytes, bytes], dlen: int, data_at: int
-) -> list[tuple[int, int]]:
-    """Check the header fields librealsense's rosbag reader trusts in one record (op
-    ``op`` at ``off``, ``dlen`` data bytes at ``data_at``); return the connection ids it
-    refers to, each with the offset to name if it was never declared.
-
-    - chunk (5): ``compression`` is none, lz4 or bz2; ``size`` (uncompressed) is at
-      most :data:`MAX_BAG_CHUNK`, equals ``data_len`` when uncompressed, and for lz4
-      lies within ``[data_len / 2 - 64, 255 data_len + 64]`` (lz4 stores incompressible
-      blocks raw, with 4-byte block headers; it expands at most 255:1);
-    - message data (2), connection (7), index data (4): a 4-byte ``conn``;
-    - index data (4): ``ver`` 1 and ``data_len == 12 count`` (time u64, offset u32);
-    - chunk info (6): ``ver`` 1, ``data_len == 8 count`` ((conn u32, count u32) pairs).
-    """
-    refs: list[tuple[int, int]] = []
-    if op == _OP_CHUNK:
-        comp = fields.get(b"compression", b"")
-        if comp not in BAG_COMPRESSIONS:
-            raise _bag_error(
-                path, off, f"chunk compression {comp!r} is not one of none, lz4 or bz2"
-            )
-        size = _u32_field(path, fields, b"size", off)
-        lo, hi = {
-            b"none": (dlen, dlen),
-            b"lz4": (dlen // 2 - 64, _LZ4_MAX_RATIO * dlen + 64),
-            b"bz2": (1, MAX_BAG_CHUNK),
-        }[comp]
-        if not lo <= size <= min(hi, MAX_BAG_CHUNK):
-            raise _bag_error(
-                path,
-                off,
-                f"{comp.decode()} chunk of {dlen} bytes claims an uncompressed size of {size}"
-                f" (expected {max(lo, 0)} to {min(hi, MAX_BAG_CHUNK)})",
-            )
-    elif op in (_OP_MESSAGE, _OP_INDEX):
-        refs.append((off, _u32_field(path, fields, b"conn", off)))
-    if op in (_OP_INDEX, _OP_CHUNK_INFO):
-        if _u32_field(path, fields, b"ver", off) != 1:
-            raise _bag_error(path, off, "index version is not 1")
-        count = _u32_field(path, fields, b"count", off)
-        width = 12 if op == _OP_INDEX else 8
-        if dlen != width * count:
-            raise _bag_error(
-                path, off, f"{count} index entries need {width * count} bytes, not {dlen}"
-            )
-        if op == _OP_CHUNK_INFO:
-            f.seek(data_at)
-            pairs = np.frombuffer(f.read(dlen), "<u4").reshape(-1, 2)
-            refs += [(off, int(c)) for c in pairs[:, 0]]
-    return refs
-
-
-def _walk_bag_records(
-    path: Path,
-    f: Any,
-    start: int,
-    end: int,
-    in_chunk: bool,
-    found: dict[int, int],
-    conns: set[int],
-    refs: list[tuple[int, int]],
-) -> None:
-    """Walk the records ``<header_len:u32><header><data_len:u32><data>`` that tile
-    ``[start, end)`` of the open file ``f``, checking every length against ``end`` and
-    each record's fields (:func:`_check_bag_record`); the records inside an
-    uncompressed chunk are walked too. ``found`` collects the offset and op code of
-    every top-level record, ``conns`` the connection ids declared, ``refs`` the
-    (offset, connection id) references to check against them."""
-    off = start
-    while off < end:
-        f.seek(off)
-        head = f.read(4)
-        if len(head) < 4 or end - off < 4:
-            raise _bag_error(path, off, "a record header length is cut short")
-        (hlen,) = _U32.unpack(head)
-        if hlen > end - off - 8:
-            raise _bag_error(
-                path, off, f"record header length {hlen} runs past the end ({end} bytes)"
-            )
-        header = f.read(hlen + 4)
-        if len(header) < hlen + 4:
-            raise _bag_error(path, off, "a record header is cut short")
-        fields = _bag_fields(path, header[:hlen], off + 4)
-        (dlen,) = _U32.unpack_from(header, hlen)
-        data_at = off + 8 + hlen
-        if dlen > end - data_at:
-            raise _bag_error(
-                path, off + 4 + hlen, f"record data length {dlen} runs past the end ({end} bytes)"
-            )
-        op = fields.get(b"op", b"")
-        if len(op) != 1:
-            raise _bag_error(path, off, "a record has no one-byte op field")
-        if in_chunk and op[0] not in (_OP_MESSAGE, _OP_CONNECTION):
-            raise _bag_error(path, off, f"record op {op[0]} cannot sit inside a chunk")
-        top = (_OP_BAG_HEADER, _OP_CHUNK, _OP_INDEX, _OP_CHUNK_INFO, _OP_CONNECTION)
-        if not in_chunk and op[0] not in top:
-            raise _bag_error(path, off, f"record op {op[0]} cannot sit outside a chunk")
-        refs += _check_bag_record(path, f, off, op[0], fields, dlen, data_at)
-        if op[0] == _OP_CONNECTION:
-            conns.add(_u32_field(path, fields, b"conn", off))
-        if not in_chunk:
-            found[off] = op[0]
-            if op[0] == _OP_CHUNK and fields.get(b"compression") == b"none":
-                _walk_bag_records(path, f, data_at, data_at + dlen, True, found, conns, refs)
-        off = data_at + dlen
-
-
-def check_ros1_bag(path: str | os.PathLike[str]) -> int:
-    """Check the record structure of a ROS1 bag (format 2.0, librealsense's ``.bag``)
-    before librealsense reads it, and return its number of top-level records.
-
-    The file is the magic ``#ROSBAG V2.0\\n`` followed by records
-    ``<header_len:u32><header><data_len:u32><data>`` (little-endian), each header a
-    sequence of ``<field_len:u32>name=value`` fields with a one-byte ``op``. Every length
-    is checked against what remains of the file (of the chunk, for the records inside an
-    uncompressed chunk), every header field must parse, the bag header's ``index_pos``
-    must point at a record, and every chunk-info ``chunk_pos`` at a chunk. Data is
-    skipped by seeking, so the check reads only the headers (about 1 ms for the 1 MB
-    sample recording). This is the file format of http://wiki.ros.org/Bags/Format/2.0;
-    librealsense's reader (ROS ``rosbag_storage``) trusts these lengths, and spins
-    forever on a length word of ``0xFFFFFFFF``.
-
-    Parameters
-    ----------
-    path : path
-        The ``.bag`` file.
-
-    Returns
-    -------
-    int
-        The number of top-level records.
-
-    Raises
-    ------
-    FileFormatError
-        Not a ROS1 bag v2.0, or a length, field or pointer that does not fit the file;
-        the message names the file and the byte offset.
-    """
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-        with path.open("rb") as f:
-            magic = f.read(len(ROS1_BAG_MAGIC))
-            if magic != ROS1_BAG_MAGIC:
-                raise FileFormatError(
-                    f"{path}: not a ROS1 bag (format 2.0): it starts with {magic!r}, not "
-                    f"{ROS1_BAG_MAGIC!r}; RealSense recordings are .bag (ROS1) or .db3 (ROS2)"
-                )
-            found: dict[int, int] = {}
-            conns: set[int] = set()
-            refs: list[tuple[int, int]] = []
-            _walk_bag_records(path, f, len(ROS1_BAG_MAGIC), size, False, found, conns, refs)
-            for off, conn in refs:
-                if conn not in conns:
-                    raise _bag_error(path, off, f"connection {conn} is never declared")
-            first = len(ROS1_BAG_MAGIC)
-            if found.get(first) != _OP_BAG_HEADER:
-                raise _bag_error(path, first, "the first record is not the bag header")
-            for off, op in found.items():
-                if op not in (_OP_BAG_HEADER, _OP_CHUNK_INFO):
-                    continue
-                f.seek(off)
-                (hlen,) = _U32.unpack(f.read(4))
-                fields = _bag_fields(path, f.read(hlen), off + 4)
-                name, want = (
-                    (b"index_pos", None) if op == _OP_BAG_HEADER else (b"chunk_pos", _OP_CHUNK)
-                )
-                raw = fields.get(name, b"")
-                if len(raw) != 8:
-                    raise _bag_error(path, off, f"the {name.decode()} field is not 8 bytes")
-                pos = int.from_bytes(raw, "little")
-                if want is None and pos == 0:
-                    continue  # a bag still being recorded (no index yet)
-                if pos not in found or (want is not None and found[pos] != want):
-                    raise _bag_error(path, off, f"{name.decode()} {pos} does not point at a record")
-    except OSError as exc:
-        if isinstance(exc, FileFormatError):
-            raise
-        raise FileFormatError(f"{path}: cannot read the recording: {exc}") from None
-    return len(found)
-
-
-SQLITE_MAGIC = b"SQLite format 3\x00"
-
-
-def check_db3_recording(path: str | os.PathLike[str]) -> None:
-    """Check that a ``.db3`` recording (a ROS2 bag, librealsense's SQLite storage) is a
-    sound SQLite database with the ROS2 tables, before librealsense reads it.
-
-    Runs SQLite's ``PRAGMA quick_check`` (every page and record well formed, O(N)) on
-    a read-only connection, looks for the ``topics`` and ``messages`` tables of
-    rosbag2's sqlite3 storage plugin, and checks that every topic's name and type are
-    printable ASCII (as ROS names are; librealsense hangs on some that are not). The
-    messages themselves are not parsed here: :class:`RealSenseSource` plays recordings
-    in a watched child process, which turns what librealsense does with a corrupt
-    message (a crash, a hang) into a :class:`FileFormatError`.
-
-    Parameters
-    ----------
-    path : path
-        The ``.db3`` file.
-
-    Raises
-    ------
-    FileFormatError
-        Not SQLite, a corrupt database, or no rosbag2 tables; the message names the file.
-    """
-    path = Path(path)
-    try:
-        with path.open("rb") as f:
-            magic = f.read(len(SQLITE_MAGIC))
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read the recording: {exc}") from None
-    if magic != SQLITE_MAGIC:
-        raise FileFormatError(
-            f"{path}: not an SQLite database (a ROS2 .db3 recording): it starts with "
-            f"{magic!r}; RealSense recordings are .bag (ROS1) or .db3 (ROS2)"
-        )
-    try:
-        con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
-        try:
-            check = con.execute("PRAGMA quick_check").fetchall()
-            tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master")}
-            con.text_factory = bytes
-            topics = (
-                con.execute("SELECT id, name, type FROM topics").fetchall()
-                if {"topics", "messages"} <= tables
-                else []
-            )
-        finally:
-            con.close()
-    except sqlite3.Error as exc:
-        raise FileFormatError(f"{path}: corrupt SQLite recording: {exc}") from None
-    if check != [("ok",)]:
-        raise FileFormatError(f"{path}: corrupt SQLite recording: {check[0][0]}")
-    missing = {"topics", "messages"} - tables
-    if missing:
-        raise FileFormatError(
-            f"{path}: not a ROS2 recording: no {', '.join(sorted(missing))} table"
-        )
-    for tid, name, typ in topics:  # librealsense hangs on some non-ASCII topic names
-        for what, text in (("name", name), ("type", typ)):
-            if not isinstance(text, bytes) or not all(32 <= c < 127 for c in text):
-                raise FileFormatError(
-                    f"{path}: corrupt SQLite recording: topic {tid} has a {what} that is "
-                    f"not printable ASCII ({text!r}); copy or record it again"
-                )
-
-
 class RealSenseSource:
     """Frames from a live RealSense camera or a recording.
 
@@ -417,39 +107,35 @@ class RealSenseSource:
     fps : int
         Live camera only.
     timeout : float
-        Seconds to wait for a frame before deciding the camera is gone (live), or
-        before asking the player whether the recording has ended (it has when the
-        player has stopped; while it still plays, the wait goes on, up to ``timeout +
-        watchdog`` seconds without a frame).
+        Live camera only: seconds to wait for a frame before deciding the camera is
+        gone (a recording is read from the file, with no waiting).
     max_frames : int, optional
         Stop after this many frames (a live camera never ends on its own).
     watchdog : float
-        Recordings: seconds beyond ``timeout`` to wait for the player process's next
-        message before deciding librealsense hangs (default 10; raise it for a
-        recording that is sound but slow to open).
+        Kept for compatibility and checked (> 0); unused since recordings are read with
+        rosbags in this process (it bounded the wait on librealsense's player process).
 
     Raises
     ------
     InputError
-        pyrealsense2 missing, a non-positive ``watchdog``, or a recording without a
-        depth or colour stream.
+        Live camera: pyrealsense2 missing. A non-positive ``watchdog``; a recording
+        without a depth or colour stream, or with colour in a format other than
+        ``rgb8``/``bgr8``/``rgba8``/``bgra8``.
     FileFormatError
-        A recording that cannot be opened, or whose structure is corrupt: checked by
-        :func:`check_ros1_bag` / :func:`check_db3_recording` before librealsense sees
-        it; while playing, librealsense crashing (``librealsense crashed reading FILE
-        at frame N``) or hanging (``stopped responding``) on a corrupt message.
+        A recording that is missing, truncated or corrupt (what rosbags or SQLite
+        cannot read, calibration no camera has), at once when opened; damage further in
+        stops iteration there, the frames before are yielded.
     SourceError
         Live camera: none connected, or none with the serial number given.
 
     Notes
     -----
-    On POSIX, recordings are played by librealsense in a child process
-    (:func:`_play_in_child`): a crash or an endless loop in librealsense on a corrupt
-    recording (which no check before playback can rule out: it trusts every message)
-    becomes a :class:`FileFormatError` after the frames read so far have been yielded.
-    The cost: about 0.45 s to start the player (an interpreter importing
-    pyrealsense2) and 1 to 2 ms per 640x480 frame (7.6 ms in process, 8.6 to 9.8 ms
-    through the pipe, on this project's 2-core machine).
+    A recording plays as librealsense's playback device does with ``set_real_time(False)``
+    (no frame dropped), read by
+    :class:`~robopercept.sources.realsense_recording.RealSenseRecording`: one frame per
+    recorded depth frame, in recording order, with the colour frame nearest in time
+    (:func:`~robopercept.sources.realsense_recording.pair_nearest_color`); an image that
+    cannot be decoded is skipped, warned about and recorded in ``skipped``.
 
     Iteration stops at the end of a recording; if a live camera stops delivering frames
     (unplugged), iteration raises :class:`SourceError`, which
@@ -467,17 +153,9 @@ class RealSenseSource:
         max_frames: int | None = None,
         watchdog: float = 10.0,
     ) -> None:
-        self.rs = import_pyrealsense2()
         self.device = device
         self.path: Path | None = None
-        if device is not None and Path(device).suffix.lower() in (".bag", ".db3"):
-            self.path = Path(device)
-            if not self.path.is_file():
-                raise FileFormatError(f"{self.path}: recording not found")
-            if self.path.suffix.lower() == ".bag":
-                check_ros1_bag(self.path)  # librealsense hangs on some corrupt bags
-            else:
-                check_db3_recording(self.path)
+        self.recording: RealSenseRecording | None = None
         self.depth_size = tuple(depth_size)
         self.color_size = tuple(color_size)
         self.fps = int(fps)
@@ -487,8 +165,18 @@ class RealSenseSource:
         if not self.watchdog > 0:
             raise InputError(f"watchdog must be a positive number of seconds; got {watchdog!r}")
         self.skipped: list[tuple[int, str]] = []
-        if self.path is None:
-            self._check_connected()
+        self.rs: Any = None  # pyrealsense2, for a live camera
+        if device is not None and not isinstance(device, (str, os.PathLike)):
+            raise InputError(
+                "device must be None (the first camera), a recording's path (.bag, .db3) "
+                f"or a camera's serial number (str); got {plain_repr(device)}"
+            )
+        if device is not None and Path(device).suffix.lower() in _RECORDING_SUFFIXES:
+            self.recording = RealSenseRecording(device)
+            self.path = self.recording.path
+            return
+        self.rs = import_pyrealsense2()
+        self._check_connected()
 
     def _check_connected(self) -> None:
         """Raise :class:`SourceError` now, not at the first frame, when no camera (or
@@ -511,119 +199,60 @@ class RealSenseSource:
                 f"{', '.join(serials)}"
             )
 
-    def _start(self) -> tuple[Any, Any, Any, Any, Any]:
-        """Start streaming: ``(waiter, depth_scale, depth_profile, colour_profile,
-        playback)``; ``waiter.try_wait_for_frames(ms)`` gives ``(ok, frameset)`` and
-        ``waiter.stop()`` ends it; ``playback`` is None for a live camera.
-
-        A live camera streams through a ``pipeline``. A recording is loaded as a
-        playback device whose player is switched to non-real-time (it waits for the
-        reader) *before* its sensors start into a ``syncer``: through a pipeline the
-        player starts in real time at ``start`` and the switch comes after it, and the
-        first framesets of a short recording were often lost in between."""
-        rs = self.rs
-        if self.path is None:
-            pipe, cfg = rs.pipeline(), rs.config()
-            if self.device is not None:
-                cfg.enable_device(str(self.device))
-            w, h = self.depth_size
-            cfg.enable_stream(rs.stream.depth, w, h, rs.format.z16, self.fps)
-            w, h = self.color_size
-            cfg.enable_stream(rs.stream.color, w, h, rs.format.rgb8, self.fps)
-            try:
-                profile = pipe.start(cfg)
-            except RuntimeError as exc:
-                raise FileFormatError(
-                    f"the RealSense camera: cannot start streaming: {exc}"
-                ) from None
-            scale = float(profile.get_device().first_depth_sensor().get_depth_scale())
-            dprof = profile.get_stream(rs.stream.depth).as_video_stream_profile()
-            cprof = profile.get_stream(rs.stream.color).as_video_stream_profile()
-            return pipe, scale, dprof, cprof, None
-        try:
-            dev = rs.context().load_device(str(self.path))
-            playback = dev.as_playback()
-            playback.set_real_time(False)
-            sensors = list(dev.query_sensors())
-            profiles = {p.stream_type(): p for s in sensors for p in s.get_stream_profiles()}
-        except RuntimeError as exc:
-            raise FileFormatError(f"{self.path}: cannot open the recording: {exc}") from None
-        for kind, name in ((rs.stream.depth, "depth"), (rs.stream.color, "colour")):
-            if kind not in profiles:
-                raise InputError(
-                    f"{self.path} has no {name} stream; the plane tracker needs depth and "
-                    "colour (record both)"
-                )
-        player = _RecordingPlayer(rs, sensors, playback)
-        try:
-            scale = float(dev.first_depth_sensor().get_depth_scale())
-        except RuntimeError as exc:
-            player.stop()
-            raise FileFormatError(f"{self.path}: no depth scale in the recording: {exc}") from None
-        dprof = profiles[rs.stream.depth].as_video_stream_profile()
-        cprof = profiles[rs.stream.color].as_video_stream_profile()
-        return player, scale, dprof, cprof, playback
-
     def __iter__(self) -> Iterator[RGBDFrame]:
-        if self.path is not None and os.name == "posix":
-            return _play_in_child(self)
-        return self._frames_here()
+        if self.recording is not None:
+            return self.recording.frames(self.max_frames, self.skipped)
+        return self._live_frames()
 
-    def _frames_here(self) -> Iterator[RGBDFrame]:
-        """The frames, read by librealsense in this process (a live camera; recordings
-        where no child process can be watched)."""
+    def _start(self) -> tuple[Any, float, Any, Any]:
+        """Start the live camera's pipeline: ``(pipeline, depth_scale, depth_profile,
+        colour_profile)``."""
         rs = self.rs
-        waiter, scale, dprof, cprof, playback = self._start()
+        pipe, cfg = rs.pipeline(), rs.config()
+        if self.device is not None:
+            cfg.enable_device(str(self.device))
+        w, h = self.depth_size
+        cfg.enable_stream(rs.stream.depth, w, h, rs.format.z16, self.fps)
+        w, h = self.color_size
+        cfg.enable_stream(rs.stream.color, w, h, rs.format.rgb8, self.fps)
+        try:
+            profile = pipe.start(cfg)
+        except RuntimeError as exc:
+            raise FileFormatError(f"the RealSense camera: cannot start streaming: {exc}") from None
+        scale = float(profile.get_device().first_depth_sensor().get_depth_scale())
+        dprof = profile.get_stream(rs.stream.depth).as_video_stream_profile()
+        cprof = profile.get_stream(rs.stream.color).as_video_stream_profile()
+        return pipe, scale, dprof, cprof
+
+    def _live_frames(self) -> Iterator[RGBDFrame]:
+        """The live camera's frames, read by librealsense in this process."""
+        pipe, scale, dprof, cprof = self._start()
         try:
             kd = intrinsics_from_rs(dprof.get_intrinsics())
             kc = intrinsics_from_rs(cprof.get_intrinsics())
             T = transform_from_rs(dprof.get_extrinsics_to(cprof))
             index = 0
             t0: float | None = None
-            last_number: int | None = None
-            silent = 0.0  # seconds waited since the last frameset
             while self.max_frames is None or index < self.max_frames:
                 try:
-                    ok, frames = waiter.try_wait_for_frames(int(self.timeout * 1000))
+                    ok, frames = pipe.try_wait_for_frames(int(self.timeout * 1000))
                 except RuntimeError as exc:
                     raise SourceError(f"the RealSense stream failed: {exc}") from None
                 if not ok:
-                    if playback is None:
-                        raise SourceError(
-                            f"no frame from the RealSense camera for {self.timeout:g} s "
-                            "(unplugged?)"
-                        )
-                    if playback.current_status() != rs.playback_status.playing:
-                        return  # the player has reached the end of the recording
-                    # still playing: the machine is slow, not the recording over (a
-                    # timeout alone cut recordings short under load)
-                    silent += self.timeout
-                    if silent >= self.timeout + self.watchdog:
-                        raise FileFormatError(
-                            f"{self.path}: librealsense stopped responding for {silent:g} s "
-                            f"reading frame {index} (a corrupt recording; if it is sound but "
-                            "slow to open, raise the watchdog)"
-                        )
-                    continue
-                silent = 0.0
-                if isinstance(frames, tuple):  # a recording: already split
-                    depth, color = frames
-                else:
-                    depth, color = frames.get_depth_frame(), frames.get_color_frame()
+                    raise SourceError(
+                        f"no frame from the RealSense camera for {self.timeout:g} s (unplugged?)"
+                    )
+                depth, color = frames.get_depth_frame(), frames.get_color_frame()
                 if not depth or not color:
                     reason = "frameset without both depth and colour"
                     warnings.warn(f"skipping frame {index}: {reason}", stacklevel=2)
                     self.skipped.append((index, reason))
                     index += 1
                     continue
-                number = depth.get_frame_number()
-                if self.path is not None and last_number is not None and number <= last_number:
-                    return  # playback wrapped around
-                last_number = number
                 ts = depth.get_timestamp() / 1000.0
                 t0 = ts if t0 is None else t0
                 fmt = str(color.profile.format()).split(".")[-1]
-                rgb = _to_rgb(np.asanyarray(color.get_data()), fmt)
+                rgb = rgb_from(np.asanyarray(color.get_data()), fmt)
                 yield RGBDFrame(
                     index,
                     ts - t0,
@@ -637,111 +266,16 @@ class RealSenseSource:
                 index += 1
         finally:
             try:
-                waiter.stop()
+                pipe.stop()
             except RuntimeError:  # pragma: no cover - already stopped
                 pass
 
 
-class _RecordingPlayer:
-    """The sensors of a playback device started into a ``syncer``, read as
-    ``(ok, (depth, colour))`` like a pipeline: one pair per recorded depth frame, in
-    order.
+# --------------------------------------------------------------- writing recordings
+# librealsense's recorder runs in a child process fed through a pipe: messages
+# <kind:c><meta_len:u64><n:u8><len_i:u64 x n><meta><buffers> (pickle protocol 5, the
+# pixels as raw out-of-band buffers)
 
-    A syncer passes a frame on alone until it has seen every stream (on each recording
-    here the first depth and the first colour frame come as two framesets), and under
-    load it may pass a depth frame on before the colour frame of the same instant. So
-    each depth frame waits until a colour frame at or after its timestamp has come
-    (or the player has stopped), and is then paired with the colour frame nearest to
-    it in time among those seen (the earlier one on a tie): recordings whose streams
-    share timestamps come back exactly paired, and a depth frame between two colour
-    frames gets the nearer, as a pipeline's syncer pairs them. Depth frames that come
-    after the last colour frame are paired with it when the player stops. At most
-    ``max_waiting`` depth frames wait: any beyond are paired with the nearest colour
-    frame seen so far, or passed on without colour (and skipped, counted, by the
-    reader) when there is none."""
-
-    max_waiting = 8
-    #: colour frames kept to pair the waiting depth frames with
-    max_colors = 4
-
-    def __init__(self, rs: Any, sensors: list[Any], playback: Any = None) -> None:
-        self.rs, self.sensors, self.playback = rs, sensors, playback
-        self.sync = rs.syncer()
-        self.colors: collections.deque[Any] = collections.deque(maxlen=self.max_colors)
-        self.waiting: collections.deque[Any] = collections.deque()  # depth, in order
-        self.ready: collections.deque[tuple[Any, Any]] = collections.deque()
-        opened: list[Any] = []
-        try:
-            for s in sensors:
-                s.open(s.get_stream_profiles())
-                opened.append(s)
-            for s in sensors:
-                s.start(self.sync)
-        except RuntimeError:
-            for s in opened:
-                with contextlib.suppress(RuntimeError):
-                    s.close()
-            raise
-
-    def _nearest(self, depth: Any) -> Any:
-        """The colour frame seen nearest in time to ``depth`` (None if none)."""
-        if not self.colors:
-            return None
-        t = depth.get_timestamp()
-        return min(self.colors, key=lambda c: abs(c.get_timestamp() - t))
-
-    def _release(self, flush: bool) -> None:
-        """Pair the waiting depth frames, front first, whose colour has come (all of
-        them with ``flush``; the oldest beyond ``max_waiting`` in any case)."""
-        latest = self.colors[-1].get_timestamp() if self.colors else None
-        while self.waiting:
-            front = self.waiting[0]
-            due = latest is not None and latest >= front.get_timestamp()
-            if not (due or flush or len(self.waiting) > self.max_waiting):
-                break
-            self.ready.append((self.waiting.popleft(), self._nearest(front)))
-
-    def _stopped(self) -> bool:
-        if self.playback is None:
-            return True
-        try:
-            return bool(self.playback.current_status() != self.rs.playback_status.playing)
-        except RuntimeError:  # pragma: no cover - a device already gone
-            return True
-
-    def try_wait_for_frames(self, ms: int) -> tuple[bool, tuple[Any, Any] | None]:
-        while True:
-            if self.ready:
-                return True, self.ready.popleft()
-            ok, frames = self.sync.try_wait_for_frames(ms)
-            if not ok:
-                if self.waiting and self._stopped():
-                    self._release(flush=True)  # no later colour frame will come
-                    continue
-                return False, None
-            depth, color = frames.get_depth_frame(), frames.get_color_frame()
-            if color:
-                self.colors.append(color)
-            if depth:
-                self.waiting.append(depth)
-            self._release(flush=False)
-
-    def stop(self) -> None:
-        for s in self.sensors:
-            with contextlib.suppress(RuntimeError):
-                s.stop()
-        for s in self.sensors:
-            with contextlib.suppress(RuntimeError):
-                s.close()
-
-
-#: the child process's entry point (a fresh interpreter: no fork of a process that holds
-#: locks or librealsense threads, and no re-import of the user's ``__main__``)
-_PLAYER = (
-    "import sys; from robopercept.sources.realsense import _player_main; "
-    "_player_main(int(sys.argv[1]), sys.argv[2], float(sys.argv[3]), int(sys.argv[4]), "
-    "float(sys.argv[5]))"
-)
 _HEAD = struct.Struct("<cQB")  # kind, length of the pickled part, number of raw buffers
 _TYPED = {"InputError": InputError, "FileFormatError": FileFormatError, "SourceError": SourceError}
 
@@ -778,172 +312,6 @@ def _send(out: Any, kind: bytes, obj: Any) -> None:
     for v in views:
         out.write(v)
     out.flush()
-
-
-def _player_main(
-    fd: int, path: str, timeout: float, max_frames: int, watchdog: float = 10.0
-) -> None:
-    """The child process of :func:`_play_in_child`: play the recording ``path`` with
-    librealsense and send every frame, skip and error up the pipe ``fd``; ``max_frames``
-    < 0 means all. Ends with ``os._exit`` (librealsense's teardown is not waited for)."""
-    out = os.fdopen(fd, "wb")
-    index = 0
-    try:
-        src = RealSenseSource.__new__(RealSenseSource)
-        src.rs, src.device, src.path = import_pyrealsense2(), path, Path(path)
-        src.timeout, src.max_frames = timeout, (None if max_frames < 0 else max_frames)
-        src.watchdog = watchdog
-        src.skipped = []
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the parent warns about skips
-            for frame in src._frames_here():
-                for skip in src.skipped[index:]:
-                    _send(out, b"K", skip)
-                index = len(src.skipped)
-                _send(out, b"F", frame)
-        for skip in src.skipped[index:]:
-            _send(out, b"K", skip)
-        _send(out, b"D", None)
-    except RoboperceptError as exc:
-        _send(out, b"E", (type(exc).__name__, str(exc)))
-    except Exception as exc:  # librealsense's own errors: named, typed by the parent
-        _send(out, b"E", ("", f"{type(exc).__name__}: {exc}"))
-    out.close()
-    os._exit(0)
-
-
-def _read_exact(fd: int, n: int, deadline: float) -> bytearray | None:
-    """``n`` bytes from the pipe ``fd``, waiting at most until ``deadline``
-    (``time.monotonic``); None at end of file; raises TimeoutError past the deadline."""
-    buf = bytearray(n)
-    view, got = memoryview(buf), 0
-    while got < n:
-        left = deadline - time.monotonic()
-        if left <= 0 or not select.select([fd], [], [], left)[0]:
-            raise TimeoutError
-        k = os.readv(fd, [view[got:]])
-        if k == 0:
-            return None
-        got += k
-    return buf
-
-
-def _play_in_child(src: RealSenseSource) -> Iterator[RGBDFrame]:
-    """Play ``src``'s recording in a child process, watched.
-
-    librealsense trusts what a recording says: some corrupt ``.bag`` / ``.db3`` files
-    make it crash (SIGSEGV) or spin forever holding the GIL, out of reach of Python's
-    exceptions, ``timeout`` and Ctrl-C. A fresh interpreter (``subprocess``, not
-    ``multiprocessing``: no re-import of the caller's ``__main__``, and it works from a
-    daemonic process) reads the recording with :meth:`RealSenseSource._frames_here` and
-    sends each frame up a pipe (pickle protocol 5, the pixels as raw buffers: one copy
-    each way). This process waits at most ``timeout + watchdog`` seconds for each
-    message, then kills the child (SIGKILL works while native code holds the GIL).
-
-    Yields
-    ------
-    RGBDFrame
-        The frames as :meth:`RealSenseSource._frames_here` makes them; skipped frames are
-        warned about and added to ``src.skipped``.
-
-    Raises
-    ------
-    FileFormatError
-        The child crashed (``librealsense crashed reading FILE at frame N``), hung, or
-        librealsense raised; the frames yielded before are the consumer's to keep.
-    InputError, SourceError
-        As raised by librealsense playback in the child (e.g. no colour stream).
-    """
-    import fcntl  # POSIX only, as is select() on a pipe
-
-    path = src.path
-    assert path is not None
-    r, w = os.pipe()
-    with contextlib.suppress(OSError, AttributeError):  # fewer wake-ups per frame (Linux)
-        fcntl.fcntl(w, fcntl.F_SETPIPE_SZ, 1 << 20)  # type: ignore[attr-defined]
-    args = [
-        str(path),
-        repr(src.timeout),
-        str(-1 if src.max_frames is None else src.max_frames),
-        repr(src.watchdog),
-    ]
-    err = tempfile.TemporaryFile()
-    try:
-        proc = subprocess.Popen(
-            [sys.executable, "-c", _PLAYER, str(w), *args],
-            pass_fds=(w,),
-            stdin=subprocess.DEVNULL,
-            stdout=err,
-            stderr=err,
-            env=_child_env(),
-        )
-    except OSError as exc:
-        os.close(r)
-        os.close(w)
-        err.close()
-        raise SourceError(f"cannot start the RealSense player process: {exc}") from None
-    os.close(w)
-    limit = src.timeout + src.watchdog
-    index, done = 0, False
-    try:
-        while True:
-            deadline = time.monotonic() + limit
-            try:
-                head = _read_exact(r, _HEAD.size, deadline)
-                if head is None:
-                    break
-                kind, n_meta, n_buf = _HEAD.unpack(head)
-                sizes = _read_exact(r, 8 * n_buf, deadline)
-                meta = _read_exact(r, n_meta, deadline)
-                lens = struct.unpack(f"<{n_buf}Q", sizes or b"")
-                bufs = [_read_exact(r, n, deadline) for n in lens]
-            except TimeoutError:
-                proc.kill()
-                raise FileFormatError(
-                    f"{path}: librealsense stopped responding for {limit:g} s reading frame "
-                    f"{index} (a corrupt recording; if it is sound but slow to open, raise "
-                    "the watchdog)"
-                ) from None
-            if meta is None or any(b is None for b in bufs):
-                break
-            obj = pickle.loads(meta, buffers=bufs)
-            if kind == b"F":
-                index = obj.index + 1
-                yield obj
-            elif kind == b"K":
-                warnings.warn(f"skipping frame {obj[0]}: {obj[1]}", stacklevel=2)
-                src.skipped.append(obj)
-                index = obj[0] + 1
-            elif kind == b"E":
-                name, message = obj
-                if name in _TYPED:
-                    raise _TYPED[name](message)
-                raise FileFormatError(f"{path}: librealsense failed at frame {index}: {message}")
-            else:  # b"D": the end of the recording
-                done = True
-                return
-        # the pipe closed before the end: the child died
-        try:
-            code = proc.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            code = proc.wait()
-        why, said = _how_it_died(code, err)
-        raise FileFormatError(
-            f"librealsense crashed reading {path} at frame {index} ({why}); the recording "
-            f"is corrupt (copy it again, or record it again){said}"
-        )
-    finally:
-        os.close(r)
-        if proc.poll() is None:
-            if not done:  # the consumer stopped early, or an error: no need to wait
-                proc.kill()
-            try:
-                proc.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-        err.close()
 
 
 def _rs_intrinsics(rs: Any, k: CameraIntrinsics) -> Any:
@@ -1099,7 +467,7 @@ def write_realsense_recording(path: str | os.PathLike[str], frames: Any, pace: f
 
     librealsense records from threads of its own, and tearing its software device down
     in a process that goes on (a test run, a notebook) is not safe: it can abort the
-    whole process later. So, as playback does, the recording is made in a child process
+    whole process later. So the recording is made in a child process
     (a fresh interpreter) that the frames are streamed to; this process holds no
     librealsense object.
 
