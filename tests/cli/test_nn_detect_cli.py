@@ -70,7 +70,10 @@ def test_train_writes_the_run_folder(run):
     assert hist["best_epoch"] == printed["best_epoch"] == max(val, key=lambda e: (val[e], -e))
     assert printed["stats"][0] == pytest.approx(val[hist["best_epoch"]], abs=1e-12)
     assert read_image(out / "pr_curves.png").shape[:2] == (1000, 1600)
-    assert read_image(out / "samples.png").shape[0] == 64
+    # two 64 x 64 validation images side by side, each enlarged 12 times to 768 (issue
+    # 48: read at 1080p), 8 px apart, under the legend and their titles
+    samples = read_image(out / "samples.png")
+    assert samples.shape[1] == 2 * 768 + 8 and 768 < samples.shape[0] < 900
 
 
 def test_metrics_equal_evaluate_detector_on_saved_model(run, capsys):

@@ -1,12 +1,15 @@
-"""Pictures of point clouds: a pinhole render with a z-buffer."""
+"""Pictures of point clouds: a pinhole render with a z-buffer, and a legend naming
+the colours (segments, planes, clusters) beside it."""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 
 from robopercept._checks import check_int, check_points, check_real, plain_repr
 from robopercept.errors import InputError
-from robopercept.viz.draw import check_color, check_picture_size
+from robopercept.viz.draw import check_color, check_picture_size, legend_panel
 
 __all__ = ["MAX_POINT_SIZE", "render_points"]
 
@@ -23,6 +26,7 @@ def render_points(
     fov_deg: float = 60.0,
     point_size: int = 2,
     background: tuple[int, int, int] = (255, 255, 255),
+    legend: Sequence[tuple[str, Sequence[int]]] | None = None,
 ) -> np.ndarray:
     r"""Render camera-frame points (x right, y down, z forward) as an RGB image.
 
@@ -45,10 +49,25 @@ def render_points(
         1 to :data:`MAX_POINT_SIZE`.
     background : RGB
         Three integers in 0..255.
+    legend : sequence of (str, RGB), optional
+        What the colours mean, e.g. ``[("unassigned", (128, 128, 128)), ("plane 1",
+        (...)), ("cluster 1", (...))]``: listed with a swatch each in a white panel to
+        the right of the render (:func:`~robopercept.viz.draw.legend_panel`), never
+        over the points, as Open3D's and matplotlib's legends name segment colours.
 
     Returns
     -------
     (H, W, 3) uint8 ndarray
+        ``(max(H, rows), W + panel, 3)`` with a legend.
+
+    Examples
+    --------
+    >>> pts = np.array([[0.0, 0.0, 2.0], [0.1, 0.0, 2.0]])
+    >>> render_points(pts, size=(64, 48)).shape
+    (48, 64, 3)
+    >>> pic = render_points(pts, size=(64, 48), legend=[("plane 1", (0, 0, 255))])
+    >>> pic.shape[0], pic.shape[1] > 64
+    (48, True)
     """
     p = check_points(points, "points", 3)
     if not isinstance(size, (tuple, list)) or len(size) != 2:
@@ -59,6 +78,8 @@ def render_points(
     if point_size > MAX_POINT_SIZE:
         raise InputError(f"point_size must be at most {MAX_POINT_SIZE}; got {point_size}")
     bg = check_color(background, "background")
+    if legend is not None:
+        legend_panel(np.zeros((1, 1), np.uint8), legend)  # (checks it before the work)
     c = None
     if colors is not None:
         c = np.asarray(colors) if isinstance(colors, np.ndarray) else check_points(colors, "colors")
@@ -70,7 +91,7 @@ def render_points(
     img[:] = bg
     front = np.isfinite(p).all(axis=1) & (p[:, 2] > 1e-6)
     if not front.any():
-        return img
+        return img if legend is None else legend_panel(img, legend)
     if c is None:
         z = p[front, 2]
         # z is in (1e-6, 1.8e308]: halves keep the range finite
@@ -97,4 +118,4 @@ def render_points(
             uu, vv = u + du, v + dv
             inside = (uu >= 0) & (uu < w) & (vv >= 0) & (vv < h)
             img[vv[inside], uu[inside]] = col8[inside]
-    return img
+    return img if legend is None else legend_panel(img, legend)

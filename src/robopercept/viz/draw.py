@@ -9,7 +9,9 @@ where that file is missing; its size follows the picture's height
 (:func:`label_size_for`: 24 px on a 1080p frame), so captions stay readable at any
 resolution. :func:`draw_label` is the one way labels (track ids, detection scores, blob
 ids) are written on images: on a filled box of the label's colour, in black or white,
-whichever contrasts more, kept inside the picture.
+whichever contrasts more, kept inside the picture; the captions of :func:`draw_boxes`
+never overlap (:func:`caption_boxes`). :func:`legend_panel` names colours in a panel
+beside a picture.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from robopercept._checks import (
     check_bool,
@@ -41,6 +44,7 @@ from robopercept.errors import InputError
 __all__ = [
     "MAX_PICTURE_PIXELS",
     "MAX_STROKE",
+    "caption_boxes",
     "check_color",
     "check_picture_size",
     "check_stroke",
@@ -56,6 +60,7 @@ __all__ = [
     "enlarge_picture",
     "label_font",
     "label_size_for",
+    "legend_panel",
     "pil_canvas",
     "to_rgb8",
 ]
@@ -608,31 +613,192 @@ def draw_lines(
     return np.asarray(pil)
 
 
+def _box_colors(color: Any, n: int) -> list[Color]:
+    """One colour per box: ``color`` is one ``(r, g, b)`` or an ``(N, 3)`` array of them."""
+    rows = None
+    if isinstance(color, np.ndarray) and color.ndim == 2:
+        rows = list(color)
+    elif (
+        isinstance(color, (list, tuple))
+        and len(color) > 0
+        and all(isinstance(c, (list, tuple, np.ndarray)) for c in color)
+    ):
+        rows = list(color)
+    if rows is None:
+        return [check_color(color)] * n
+    if len(rows) != n:
+        raise InputError(
+            f"color must be one (r, g, b) or one row per box ({n}); got {len(rows)} rows"
+        )
+    return [check_color(c, f"color[{i}]") for i, c in enumerate(rows)]
+
+
+def _overlaps(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> bool:
+    """Whether two inclusive pixel rectangles ``x0, y0, x1, y1`` share a pixel."""
+    return not (a[2] < b[0] or b[2] < a[0] or a[3] < b[1] or b[3] < a[1])
+
+
+#: how many label heights a caption may be stacked above or below its box's corner
+_STACK = 3
+
+
+def _caption_candidates(
+    box: tuple[float, float, float, float], bh: int
+) -> list[tuple[tuple[float, float], str]]:
+    """Where a caption of a box ``x0, y0, x1, y1`` (inclusive corners) may go, in order
+    of preference: ``(xy, anchor)`` of :func:`_label_box`."""
+    x0, y0, x1, y1 = box
+    above = [((x0, y0), "lb")] if y0 >= bh else []
+    first = [*above, ((x0, y0), "lt"), ((x0, y1 + 1), "lt"), ((x0, y1 + 1), "lb")]
+    right = [((x1 + 1, y0), "rb"), ((x1 + 1, y0), "rt")]
+    stacked = []
+    for k in range(1, _STACK + 1):
+        stacked += [((x0, y0 - k * bh), "lb"), ((x0, y1 + 1 + k * bh), "lt")]
+    return first + right + stacked
+
+
+def _place_captions(
+    texts: Sequence[str],
+    boxes: Sequence[tuple[float, float, float, float]],
+    font: Any,
+    canvas: tuple[int, int],
+) -> list[tuple[int, int, int, int, int, int] | None]:
+    """The :func:`_label_box` of each caption, placed so that no two overlap, or None
+    where no free place is left."""
+    placed: list[tuple[int, int, int, int]] = []
+    out: list[tuple[int, int, int, int, int, int] | None] = []
+    for text, box in zip(texts, boxes, strict=True):
+        bh = _label_box(text, font, (box[0], box[1]), "lt", canvas)[3]
+        found = None
+        for xy, anchor in _caption_candidates(box, bh):
+            spot = _label_box(text, font, xy, anchor, canvas)
+            rect = (spot[0], spot[1], spot[0] + spot[2] - 1, spot[1] + spot[3] - 1)
+            if not any(_overlaps(rect, r) for r in placed):
+                found = spot
+                placed.append(rect)
+                break
+        out.append(found)
+    return out
+
+
+def _drawn_corners(
+    b: np.ndarray, canvas: tuple[int, int], width: int
+) -> list[tuple[int, tuple[float, float, float, float]]]:
+    """The boxes ``(x, y, w, h)`` that :func:`draw_boxes` outlines, as ``(index,
+    (x0, y0, x1, y1))`` with inclusive corners, those far beyond the canvas moved onto
+    its margin; empty, non-finite and wholly outside boxes are left out."""
+    m = width + 2.0  # corners beyond the canvas by more than this are moved onto its margin
+    w, h = canvas
+    out = []
+    for i, (x, y, bw, bh) in enumerate(b):
+        x0, y0 = x, y
+        x1, y1 = x + (bw - 1), y + (bh - 1)
+        if not np.isfinite([x0, y0, x1, y1]).all():
+            continue
+        if x1 < x0 or y1 < y0 or x1 < -m or y1 < -m or x0 > w + m or y0 > h + m:
+            continue  # empty, or wholly outside
+        xs = np.clip([x0, x1], -m, w + m)
+        ys = np.clip([y0, y1], -m, h + m)
+        out.append((i, (float(xs[0]), float(ys[0]), float(xs[1]), float(ys[1]))))
+    return out
+
+
+def caption_boxes(
+    texts: Sequence[str],
+    boxes: npt.ArrayLike,
+    canvas: tuple[int, int],
+    *,
+    size: int | None = None,
+    width: int = 2,
+) -> list[tuple[int, int, int, int] | None]:
+    """Where :func:`draw_boxes` writes the captions of ``(x, y, w, h)`` boxes: each
+    caption's rectangle ``x0, y0, x1, y1`` (inclusive pixels), or None for a caption
+    left out.
+
+    Captions are placed in the order given (put the most important first), each at the
+    first of these places that no caption placed before it overlaps: above the box's
+    top-left corner (when there is room above), inside below its top edge, below its
+    bottom edge, inside above its bottom edge, above or inside its top-right corner,
+    then stacked up to three label heights above or below the box. A caption that
+    finds no free place is left out (the box is still drawn), so no two captions ever
+    overlap; every rectangle lies inside the canvas where the label fits in it.
+
+    Parameters
+    ----------
+    texts : sequence of str
+        One caption per box (one line; runs of white space become one space; an empty
+        one, or None, has no place).
+    boxes : (N, 4) array_like
+        ``x, y, width, height``.
+    canvas : (int, int)
+        The picture's ``(width, height)``.
+    size : int, optional
+        Font size in pixels (default :func:`label_size_for` of the canvas height).
+    width : int
+        The outline width (boxes far outside the canvas are moved onto a margin of
+        ``width + 2`` pixels, as they are drawn).
+
+    Returns
+    -------
+    list of (int, int, int, int) or None
+
+    Examples
+    --------
+    >>> r = caption_boxes(["a 0.9", "b 0.8"], [[100, 100, 40, 40], [104, 100, 40, 40]],
+    ...                   (640, 480))
+    >>> r[0][3] < 100, r[1][1] >= r[0][3] or r[1][0] > r[0][2]  # above; the second apart
+    (True, True)
+    """
+    b = check_xy(boxes, "boxes", 4)
+    if isinstance(texts, (str, bytes)) or not isinstance(texts, Sequence) or len(texts) != len(b):
+        raise InputError(
+            f"texts must be a sequence of captions, one per box ({len(b)}); got {plain_repr(texts)}"
+        )
+    if not isinstance(canvas, (tuple, list)) or len(canvas) != 2:
+        raise InputError(f"canvas must be the picture's (width, height); got {plain_repr(canvas)}")
+    w, h = check_picture_size(canvas[0], canvas[1], "canvas")
+    font = label_font(label_size_for(h) if size is None else int(check_stroke(size, "size")))
+    width = int(check_stroke(width, "width"))
+    words = ["" if t is None else " ".join(str(t).split()) for t in texts]
+    drawn = [(i, c) for i, c in _drawn_corners(b, (w, h), width) if words[i]]
+    keep = [i for i, _ in drawn]
+    spots = _place_captions([words[i] for i in keep], [c for _, c in drawn], font, (w, h))
+    out: list[tuple[int, int, int, int] | None] = [None] * len(b)
+    for i, spot in zip(keep, spots, strict=True):
+        if spot is not None:
+            out[i] = (spot[0], spot[1], spot[0] + spot[2] - 1, spot[1] + spot[3] - 1)
+    return out
+
+
 def draw_boxes(
     image: np.ndarray,
     boxes: np.ndarray,
     *,
-    color: Sequence[int] = (255, 255, 0),
+    color: Sequence[int] | np.ndarray = (255, 255, 0),
     width: int = 2,
     labels: Sequence[str] | None = None,
     label_size: int | None = None,
 ) -> np.ndarray:
     """Draw axis-aligned boxes ``(x, y, w, h)``, optionally captioned.
 
-    Captions are :func:`draw_label` labels in the box's colour on its top-left corner:
-    above the box, or just inside it where there is no room above; they are drawn after
-    all the boxes, so no outline crosses them.
+    Captions are :func:`draw_label` labels in the box's colour, drawn after all the
+    boxes (so no outline crosses them) and placed by :func:`caption_boxes`: above the
+    box's top-left corner, or just inside it where there is no room above, or, where
+    another caption is already there, at the next free place around the box; no two
+    captions overlap, and one that finds no free place is left out. Captions are
+    placed in the order of the boxes.
 
     Parameters
     ----------
     image : (H, W) or (H, W, 3) ndarray
     boxes : (N, 4) array_like
         ``x, y, width, height`` (OpenCV's ``Rect`` order).
-    color : (3,) ints
+    color : (3,) ints or (N, 3) ints
+        One colour for all the boxes, or one per box.
     width : int
         Outline width in ``[1, MAX_STROKE]`` pixels.
     labels : sequence of str, optional
-        One caption per box, drawn above its top-left corner.
+        One caption per box (an empty string or None: that box has none).
     label_size : int, optional
         Caption font size in pixels (default :func:`label_size_for` of the picture's
         height: 24 px at 1080p).
@@ -655,33 +821,27 @@ def draw_boxes(
             )
         if len(labels) != len(b):
             raise InputError(f"labels must have one entry per box ({len(b)}); got {len(labels)}")
-    col = check_color(color)
+    cols = _box_colors(color, len(b))
     width = int(check_stroke(width, "width"))
     if label_size is not None:
         label_size = int(check_stroke(label_size, "label_size"))
     pil, draw = pil_canvas(image)
-    m = width + 2.0  # corners beyond the canvas by more than this are moved onto its margin
-    captions: list[tuple[str, float, float]] = []
-    for i, (x, y, w, h) in enumerate(b):
-        x0, y0 = x, y
-        x1, y1 = x + (w - 1), y + (h - 1)
-        if not np.isfinite([x0, y0, x1, y1]).all():
-            continue
-        if x1 < x0 or y1 < y0 or x1 < -m or y1 < -m or x0 > pil.width + m or y0 > pil.height + m:
-            continue  # empty, or wholly outside
-        xs = np.clip([x0, x1], -m, pil.width + m)
-        ys = np.clip([y0, y1], -m, pil.height + m)
-        draw.rectangle([xs[0], ys[0], xs[1], ys[1]], outline=col, width=width)
-        if labels is not None:
-            captions.append((str(labels[i]), float(xs[0]), float(ys[0])))
+    captions: list[tuple[str, tuple[float, float, float, float], Color]] = []
+    for i, corners in _drawn_corners(b, (pil.width, pil.height), width):
+        draw.rectangle(list(corners), outline=cols[i], width=width)
+        text = "" if labels is None or labels[i] is None else " ".join(str(labels[i]).split())
+        if text:  # (one line; an empty caption is not drawn)
+            captions.append((text, corners, cols[i]))
     if captions:
         font = label_font(label_size_for(pil.height) if label_size is None else label_size)
         canvas = (pil.width, pil.height)
-        for text, x0, y0 in captions:
-            text = " ".join(text.split())  # (one line)
-            room = y0 >= _label_box(text, font, (x0, y0), "lb", canvas)[3]
-            anchor = "lb" if room else "lt"  # above the box, or inside below its top
-            _put_label(draw, canvas, text, (x0, y0), font, col, None, anchor)
+        spots = _place_captions([c[0] for c in captions], [c[1] for c in captions], font, canvas)
+        for (text, _, col), spot in zip(captions, spots, strict=True):
+            if spot is None:
+                continue
+            x, y, bw, bh, tx, ty = spot
+            draw.rectangle([x, y, x + bw - 1, y + bh - 1], fill=col)
+            draw.text((tx, ty), text, fill=_contrast(col), font=font, anchor="ls")
     return np.asarray(pil)
 
 
@@ -818,3 +978,85 @@ def draw_chessboard(
         for cx, cy in _visible_circles(pts[k : k + 1], r, pil.width, pil.height):
             draw.ellipse((cx - r, cy - r, cx + r, cy + r), outline=col, width=2)
     return np.asarray(pil)
+
+
+def legend_panel(
+    picture: np.ndarray,
+    entries: Sequence[tuple[str, Sequence[int]]],
+    *,
+    size: int | None = None,
+    empty: str = "nothing shown",
+) -> np.ndarray:
+    """``picture`` with a white panel on its right listing ``entries``: per row a
+    swatch of the colour (framed in black) and the name, in black; ``empty`` alone when
+    there is no entry. The legend never covers the picture (as matplotlib's
+    ``legend(loc="center left", bbox_to_anchor=(1, 0.5))``); the panel is as tall as
+    the picture, or taller when the list needs it (the picture then sits at the top).
+
+    Parameters
+    ----------
+    picture : (H, W) or (H, W, 3) ndarray
+    entries : sequence of (str, (3,) ints)
+        Name and colour of each row.
+    size : int, optional
+        Text height in pixels (default ``max(14, round(max(H, W) / 40))``: 48 px for a
+        1920-pixel picture).
+    empty : str
+        The text when ``entries`` is empty.
+
+    Returns
+    -------
+    (max(H, rows), W + panel width, 3) uint8 ndarray
+
+    Raises
+    ------
+    InputError
+        A bad picture, an entry that is not ``(name, colour)``, a bad size.
+
+    Examples
+    --------
+    >>> pic = legend_panel(np.zeros((100, 120), np.uint8), [("plane 1", (0, 0, 255))])
+    >>> pic.shape[0], pic.shape[1] > 120, pic[50, 60].tolist(), pic[5, -1].tolist()
+    (100, True, [0, 0, 0], [255, 255, 255])
+    """
+    pic = to_rgb8(picture)
+    if isinstance(entries, (str, bytes)) or not isinstance(entries, (Sequence, np.ndarray)):
+        raise InputError(
+            f"entries must be a list of (name, (r, g, b)) pairs; got {plain_repr(entries)}"
+        )
+    rows_in: list[tuple[str, Color]] = []
+    for i, e in enumerate(entries):
+        if not isinstance(e, (tuple, list)) or len(e) != 2:
+            raise InputError(f"entries[{i}] must be a (name, (r, g, b)) pair; got {plain_repr(e)}")
+        name = check_text(e[0], f"entries[{i}][0]")
+        rows_in.append((" ".join(name.split()), check_color(e[1], f"entries[{i}][1]")))
+    empty = check_text(empty, "empty")
+    size = (
+        int(max(14, round(max(pic.shape[:2]) / 40)))
+        if size is None
+        else int(check_stroke(size, "size"))
+    )
+    font = label_font(size)
+    rows: list[tuple[str, Color]] = rows_in or [(empty, (255, 255, 255))]
+    longest = max(len(n) for n, _ in rows)
+    measured = max(int(font.getlength(n)) for n, _ in rows) + int(size * 1.4)
+    width = max(int(size * (2 + 0.62 * longest)), measured + size // 2) + 2 * size
+    h = max(pic.shape[0], (len(rows) + 1) * int(size * 1.6))
+    check_picture_size(pic.shape[1] + width, h, "picture with its legend")
+    out = np.full((h, pic.shape[1] + width, 3), 255, np.uint8)
+    out[: pic.shape[0], : pic.shape[1]] = pic
+    x0 = pic.shape[1] + size // 2
+    tops = [size // 2 + int(i * size * 1.6) for i in range(len(rows))]
+    for y, (_, color) in zip(tops, rows_in, strict=False):
+        out[y : y + size, x0 : x0 + size] = 0  # a swatch with a black frame
+        out[y + 1 : y + size - 1, x0 + 1 : x0 + size - 1] = color
+    for y, (name, _) in zip(tops, rows, strict=True):
+        out = draw_text(
+            out,
+            name,
+            (x0 + (int(size * 1.4) if rows_in else 0), y - 1),
+            color=(0, 0, 0),
+            size=size,
+            background=None,
+        )
+    return out

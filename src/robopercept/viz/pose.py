@@ -62,6 +62,7 @@ __all__ = [
     "SIDE_COLORS",
     "draw_skeleton",
     "heatmap_grid",
+    "skeleton_3d_figure",
     "skeleton_3d_picture",
 ]
 
@@ -559,6 +560,117 @@ def _check_pose3d(value: Any, name: str, joints: int | None) -> np.ndarray:
     return check_magnitude(arr, name, 1e9)
 
 
+#: an axis seen within this foreshortening (the sine of its angle to the line of
+#: sight) has its tick labels hidden: they would pile up on one spot
+_FORESHORTENED = 0.35
+#: the pixels a tick label needs along its axis (a "-0.8" in matplotlib's 10 pt at
+#: 100 dpi is about 30 px wide), so that neighbours keep a gap
+_TICK_SPACING = 70.0
+
+
+def _axis_ticks(ax: Any, elev: float, azim: float, panel_px: float) -> list[str]:
+    """Give each axis of a 3-D panel seen from ``(elev, azim)`` (degrees) as many ticks
+    as its drawn length leaves room for (matplotlib's ``MaxNLocator``), and hide the
+    ticks and label of an axis seen nearly end-on; returns the hidden axes' names."""
+    from matplotlib.ticker import MaxNLocator, NullLocator
+
+    e, a = math.radians(elev), math.radians(azim)
+    sight = np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+    hidden = []
+    for k, (name, axis) in enumerate(zip("xyz", (ax.xaxis, ax.yaxis, ax.zaxis), strict=True)):
+        shown = math.sqrt(max(0.0, 1.0 - float(sight[k]) ** 2))  # the drawn fraction
+        if shown < _FORESHORTENED:
+            axis.set_major_locator(NullLocator())
+            axis.set_label_text("")
+            hidden.append(name)
+            continue
+        bins = int(min(6, max(2, panel_px * shown / _TICK_SPACING)))
+        axis.set_major_locator(MaxNLocator(nbins=bins, steps=[1, 2, 2.5, 5, 10]))
+    return hidden
+
+
+def skeleton_3d_figure(
+    joints3d: np.ndarray,
+    links: Sequence[tuple[int, int]] | np.ndarray,
+    views: Sequence[tuple[float, float]] = DEFAULT_VIEWS,
+    titles: Sequence[str] | None = None,
+    *,
+    reference: np.ndarray | None = None,
+    legend: tuple[str, str] = ("prediction", "ground truth"),
+    size: tuple[int, int] = (1200, 560),
+) -> Any:
+    """The matplotlib figure of :func:`skeleton_3d_picture` (same parameters), for a
+    caller who adds to it or saves it as a vector file (``fig.savefig("pose.svg")``).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        On an Agg canvas, ``size`` pixels at its dpi.
+
+    Examples
+    --------
+    >>> pose = np.array([[0.0, 0.0, 0.0], [0.0, -0.5, 0.0], [0.3, -0.9, 0.1]])
+    >>> fig = skeleton_3d_figure(pose, [(0, 1), (1, 2)], size=(400, 200))
+    >>> len(fig.axes)
+    2
+    """
+    pose = _check_pose3d(joints3d, "joints3d", None)
+    joints = pose.shape[0]
+    link = _check_links(links, max(joints, 1))
+    ref = None if reference is None else _check_pose3d(reference, "reference", joints)
+    angles = check_views(views)
+    if titles is None:
+        heads = [f"elevation {e:.0f}°, azimuth {a:.0f}°" for e, a in angles]
+    else:
+        heads = _names(titles, len(angles), "titles", "view")
+    if not isinstance(legend, (tuple, list)) or len(legend) != 2:
+        raise InputError(f"legend must be two names (pose, reference); got {legend!r}")
+    names = [check_text(n, f"legend[{i}]") for i, n in enumerate(legend)]
+    width, height = check_size(size, "size", 150, 4000, 12_000_000)
+    if width < 200:
+        raise InputError(f"size must be at least 200 pixels wide; got {width}")
+    fig = agg_figure(width, height, what="skeleton_3d_picture")
+    from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers "3d")
+
+    poses = [p for p in (ref, pose) if p is not None]
+    pts = np.concatenate(poses)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if len(pts):
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        mid, half = (lo + hi) / 2, max(float((hi - lo).max()) / 2 * 1.1, 1e-3)
+    else:
+        mid, half = np.zeros(3), 1.0
+    fig.subplots_adjust(left=0.02, right=0.95, bottom=0.1, top=0.92, wspace=0.15)
+    # the drawn length of a whole axis: about half the panel's smaller side, in pixels
+    panel_px = 0.5 * min(width / len(angles), height)
+    styles = [("#1f77b4", names[0], pose)]
+    if ref is not None:
+        styles.insert(0, ("#d62728", names[1], ref))
+    for k, ((elev, azim), head) in enumerate(zip(angles, heads, strict=True)):
+        ax = fig.add_subplot(1, len(angles), k + 1, projection="3d")
+        for color, label, p in styles:
+            ok = np.isfinite(p).all(axis=1)
+            ax.scatter(*p[ok].T, color=color, s=12, depthshade=False, label=label)
+            for i, j in link:
+                if ok[i] and ok[j]:
+                    ax.plot(*p[[i, j]].T, color=color, linewidth=2)
+        ax.set_xlim(mid[0] - half, mid[0] + half)
+        ax.set_ylim(mid[1] - half, mid[1] + half)
+        ax.set_zlim(mid[2] - half, mid[2] + half)
+        ax.set_box_aspect((1.0, 1.0, 1.0))
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_zlabel("z (m)")
+        ax.view_init(elev=elev, azim=azim)
+        hidden = _axis_ticks(ax, elev, azim, panel_px)
+        note = f"\n({', '.join(hidden)} along the line of sight)" if hidden else ""
+        ax.set_title(head + note)
+    if ref is not None:
+        handles, texts = fig.axes[0].get_legend_handles_labels()
+        fig.legend(handles[::-1], texts[::-1], loc="lower center", ncol=2)
+    return fig
+
+
 def skeleton_3d_picture(
     joints3d: np.ndarray,
     links: Sequence[tuple[int, int]] | np.ndarray,
@@ -577,6 +689,11 @@ def skeleton_3d_picture(
     prediction) is drawn in red under the pose in blue, with a legend. Joints with a
     NaN coordinate, and their links, are left out. Rendered off screen with
     matplotlib's Agg canvas (no pyplot, no window, no global state).
+
+    Tick labels stay apart: each axis gets as many ticks as its drawn length leaves
+    room for (matplotlib's ``MaxNLocator``, 2 to 6), and an axis seen nearly end-on
+    (less than 35 % of its length drawn, as ``y`` in the default front view) shows no
+    ticks or label, the panel's title naming it ("y along the line of sight").
 
     Parameters
     ----------
@@ -614,54 +731,7 @@ def skeleton_3d_picture(
     >>> skeleton_3d_picture(pose, [(0, 1), (1, 2)], size=(400, 200)).shape
     (200, 400, 3)
     """
-    pose = _check_pose3d(joints3d, "joints3d", None)
-    joints = pose.shape[0]
-    link = _check_links(links, max(joints, 1))
-    ref = None if reference is None else _check_pose3d(reference, "reference", joints)
-    angles = check_views(views)
-    if titles is None:
-        heads = [f"elevation {e:.0f}°, azimuth {a:.0f}°" for e, a in angles]
-    else:
-        heads = _names(titles, len(angles), "titles", "view")
-    if not isinstance(legend, (tuple, list)) or len(legend) != 2:
-        raise InputError(f"legend must be two names (pose, reference); got {legend!r}")
-    names = [check_text(n, f"legend[{i}]") for i, n in enumerate(legend)]
-    width, height = check_size(size, "size", 150, 4000, 12_000_000)
-    if width < 200:
-        raise InputError(f"size must be at least 200 pixels wide; got {width}")
-    fig = agg_figure(width, height, what="skeleton_3d_picture")
-    from mpl_toolkits.mplot3d import Axes3D  # noqa: F401  (registers "3d")
-
-    poses = [p for p in (ref, pose) if p is not None]
-    pts = np.concatenate(poses)
-    pts = pts[np.isfinite(pts).all(axis=1)]
-    if len(pts):
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        mid, half = (lo + hi) / 2, max(float((hi - lo).max()) / 2 * 1.1, 1e-3)
-    else:
-        mid, half = np.zeros(3), 1.0
-    fig.subplots_adjust(left=0.02, right=0.95, bottom=0.1, top=0.92, wspace=0.15)
-    styles = [("#1f77b4", names[0], pose)]
-    if ref is not None:
-        styles.insert(0, ("#d62728", names[1], ref))
-    for k, ((elev, azim), head) in enumerate(zip(angles, heads, strict=True)):
-        ax = fig.add_subplot(1, len(angles), k + 1, projection="3d")
-        for color, label, p in styles:
-            ok = np.isfinite(p).all(axis=1)
-            ax.scatter(*p[ok].T, color=color, s=12, depthshade=False, label=label)
-            for i, j in link:
-                if ok[i] and ok[j]:
-                    ax.plot(*p[[i, j]].T, color=color, linewidth=2)
-        ax.set_xlim(mid[0] - half, mid[0] + half)
-        ax.set_ylim(mid[1] - half, mid[1] + half)
-        ax.set_zlim(mid[2] - half, mid[2] + half)
-        ax.set_box_aspect((1.0, 1.0, 1.0))
-        ax.set_xlabel("x (m)")
-        ax.set_ylabel("y (m)")
-        ax.set_zlabel("z (m)")
-        ax.view_init(elev=elev, azim=azim)
-        ax.set_title(head)
-    if ref is not None:
-        handles, texts = fig.axes[0].get_legend_handles_labels()
-        fig.legend(handles[::-1], texts[::-1], loc="lower center", ncol=2)
+    fig = skeleton_3d_figure(
+        joints3d, links, views, titles, reference=reference, legend=legend, size=size
+    )
     return figure_to_rgb(fig)

@@ -1,6 +1,6 @@
 """Pictures of segmentations: class overlays with a legend, instance overlays with one
-colour and an outline per instance, and side-by-side panels (prediction beside ground
-truth), readable at 1080p.
+colour and an outline per instance, blob overlays that keep the image visible, and
+panels side by side or in a grid (prediction above ground truth), readable at 1080p.
 
 A small image (the 128 x 128 canvases, a 256 x 256 tile) is enlarged first, by an
 integer factor with nearest-neighbour sampling (pixels stay sharp and labels exact),
@@ -19,12 +19,20 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from robopercept._checks import check_int, check_ndim, check_real, plain_repr
+from robopercept._checks import check_bool, check_int, check_ndim, check_real, plain_repr
 from robopercept.errors import InputError
 from robopercept.viz.colormap import label_colors, voc_palette
-from robopercept.viz.draw import check_picture_size, draw_text, enlarge_picture, to_rgb8
+from robopercept.viz.draw import (
+    MAX_STROKE,
+    check_picture_size,
+    draw_boxes,
+    draw_text,
+    enlarge_picture,
+    legend_panel,
+    to_rgb8,
+)
 
-__all__ = ["class_overlay", "instance_overlay", "panels_picture"]
+__all__ = ["blob_overlay", "class_overlay", "instance_overlay", "panels_picture"]
 
 #: the longer side a small picture is enlarged to (integer factors, nearest neighbour)
 MIN_SIDE = 512
@@ -125,29 +133,7 @@ def class_overlay(
 def _with_legend(pic: np.ndarray, entries: list[tuple[str, tuple[int, ...]]]) -> np.ndarray:
     """``pic`` with a white panel on its right listing ``entries`` (name, colour): a
     swatch and the name per row; "nothing segmented" when there is none."""
-    size = _font(pic)
-    rows = entries or [("nothing segmented", (255, 255, 255))]
-    longest = max(len(n) for n, _ in rows)
-    width = int(size * (2 + 0.62 * longest)) + 2 * size
-    h = max(pic.shape[0], (len(rows) + 1) * int(size * 1.6))
-    check_picture_size(pic.shape[1] + width, h, "overlay with its legend")
-    out = np.full((h, pic.shape[1] + width, 3), 255, np.uint8)
-    out[: pic.shape[0], : pic.shape[1]] = pic
-    x0 = pic.shape[1] + size // 2
-    tops = [size // 2 + int(i * size * 1.6) for i in range(len(rows))]
-    for y, (_, color) in zip(tops, entries, strict=False):
-        out[y : y + size, x0 : x0 + size] = 0  # a swatch with a black frame
-        out[y + 1 : y + size - 1, x0 + 1 : x0 + size - 1] = color
-    for y, (name, _) in zip(tops, rows, strict=True):
-        out = draw_text(
-            out,
-            name,
-            (x0 + (int(size * 1.4) if entries else 0), y - 1),
-            color=(0, 0, 0),
-            size=size,
-            background=None,
-        )
-    return out
+    return legend_panel(pic, entries, size=_font(pic), empty="nothing segmented")
 
 
 def _per_instance(values: Any, n: int, name: str, kinds: str) -> np.ndarray:
@@ -255,14 +241,38 @@ def instance_overlay(
 
 
 def panels_picture(
-    pictures: Sequence[np.ndarray], titles: Sequence[str], *, gap: int = 12
+    pictures: Sequence[np.ndarray],
+    titles: Sequence[str],
+    *,
+    gap: int = 12,
+    columns: int | None = None,
 ) -> np.ndarray:
-    """Pictures side by side on white, each under its title (prediction beside ground
-    truth, or one architecture beside another); shorter ones are padded at the bottom.
+    """Pictures on white, each under its title (prediction beside ground truth, or one
+    architecture beside another): side by side, or in a grid of ``columns`` per row
+    filled row by row (``columns=math.ceil(math.sqrt(n))`` gives a roughly square
+    sheet, as matplotlib's ``subplots`` grids are laid out). Each grid column is as
+    wide as its widest picture and each row as tall as its tallest; smaller pictures
+    sit at the top-left of their cell.
+
+    Parameters
+    ----------
+    pictures : sequence of (H, W) or (H, W, 3) ndarray
+    titles : sequence of str
+        One per picture.
+    gap : int
+        White pixels between columns and between rows (>= 0).
+    columns : int, optional
+        Pictures per row (>= 1); default all in one row.
+
+    Returns
+    -------
+    (H', W', 3) uint8 ndarray
 
     Examples
     --------
     >>> panels_picture([np.zeros((40, 30, 3), np.uint8)] * 2, ["a", "b"]).shape[1]
+    72
+    >>> panels_picture([np.zeros((40, 30, 3), np.uint8)] * 4, list("abcd"), columns=2).shape[1]
     72
     """
     if isinstance(pictures, np.ndarray) or not isinstance(pictures, Sequence):
@@ -280,15 +290,120 @@ def panels_picture(
             f"give one title per picture; got {len(pics)} pictures and {len(titles)} titles"
         )
     g = check_int(gap, "gap", 0)
+    n = len(pics)
+    cols = n if columns is None else min(check_int(columns, "columns", 1), n)
+    rows = -(-n // cols)
     size = _font(max(pics, key=lambda p: max(p.shape[:2])))
     cap = int(size * 1.6)
-    h = max(p.shape[0] for p in pics) + cap
-    w = sum(p.shape[1] for p in pics) + g * (len(pics) - 1)
+    col_w = [max(pics[i].shape[1] for i in range(c, n, cols)) for c in range(cols)]
+    row_h = [max(p.shape[0] for p in pics[r * cols : (r + 1) * cols]) for r in range(rows)]
+    w = sum(col_w) + g * (cols - 1)
+    h = sum(row_h) + (cap + g) * rows - g
     check_picture_size(w, h, "panels")
     out = np.full((h, w, 3), 255, np.uint8)
-    xs = np.cumsum([0] + [p.shape[1] + g for p in pics[:-1]])
-    for x, p in zip(xs, pics, strict=True):
-        out[cap : cap + p.shape[0], x : x + p.shape[1]] = p
-    for x, t in zip(xs, titles, strict=True):
-        out = draw_text(out, str(t), (int(x) + 2, 2), color=(0, 0, 0), size=size, background=None)
+    xs = np.cumsum([0] + [cw + g for cw in col_w[:-1]])
+    ys = np.cumsum([0] + [rh + cap + g for rh in row_h[:-1]])
+    for i, p in enumerate(pics):
+        x, y = int(xs[i % cols]), int(ys[i // cols])
+        out[y + cap : y + cap + p.shape[0], x : x + p.shape[1]] = p
+    for i, t in enumerate(titles):
+        x, y = int(xs[i % cols]), int(ys[i // cols])
+        out = draw_text(out, t, (x + 2, y + 2), color=(0, 0, 0), size=size, background=None)
     return out
+
+
+def blob_overlay(
+    image: Any,
+    labels: Any,
+    *,
+    alpha: float = 0.35,
+    outline: int | None = None,
+    boxes: bool = True,
+) -> np.ndarray:
+    """Connected components over their image, the image kept visible: each blob tinted
+    in its colour at ``alpha`` (``(1 - a) I + a c``), its border outlined in that
+    colour, and its bounding box drawn and captioned with its id; every other pixel is
+    the image's own. ``robopercept blobs -o`` draws this.
+
+    The blob colours are :func:`~robopercept.viz.colormap.label_colors` of the ids
+    (OpenCV's ``connectedComponentsWithStats`` examples paint each label a colour;
+    here the colour is blended so that the image shows through, as
+    ``skimage.color.label2rgb(labels, image, alpha=...)`` blends). Captions are
+    placed by :func:`~robopercept.viz.draw.caption_boxes`, so no two overlap.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+    labels : (H, W) int array_like
+        0 background, each positive id one blob (as
+        :func:`~robopercept.imaging.label_components` gives).
+    alpha : float
+        Opacity of the tint, in [0, 1] (0: outlines only).
+    outline : int, optional
+        Outline width in pixels (>= 0; default ``max(1, round(H / 540))``: 2 px at
+        1080p).
+    boxes : bool
+        Draw each blob's bounding box with its id.
+
+    Returns
+    -------
+    (H, W, 3) uint8 ndarray
+
+    Raises
+    ------
+    InputError
+        Labels of another shape, not integers, or negative; a bad alpha or width.
+
+    Examples
+    --------
+    >>> lab = np.zeros((40, 40), np.int32); lab[10:30, 10:30] = 1
+    >>> out = blob_overlay(np.full((40, 40), 100, np.uint8), lab, boxes=False)
+    >>> out[0, 0].tolist(), out[10, 20].tolist() == label_colors(np.array([1]))[0].tolist()
+    ([100, 100, 100], True)
+    """
+    img = to_rgb8(image)
+    lab = _labels_of(labels, img.shape[:2], "labels")
+    if (lab < 0).any():
+        raise InputError(
+            f"labels must be >= 0 (0 background, each positive id a blob); got {int(lab.min())}"
+        )
+    a = check_real(alpha, "alpha", 0.0, 1.0)
+    width = (
+        max(1, round(img.shape[0] / 540)) if outline is None else check_int(outline, "outline", 0)
+    )
+    if width > MAX_STROKE:
+        raise InputError(f"outline must be at most {MAX_STROKE} pixels; got {width}")
+    show_boxes = check_bool(boxes, "boxes")
+    ids = np.unique(lab[lab > 0])
+    if ids.size == 0:
+        return img
+    compact = np.zeros(lab.shape, np.int64)
+    fg = lab > 0
+    compact[fg] = np.searchsorted(ids, lab[fg]) + 1
+    colors = np.vstack([np.zeros((1, 3), np.uint8), label_colors(ids)])
+    out = img.astype(np.float64)
+    out[fg] = (1 - a) * out[fg] + a * colors[compact[fg]]
+    pic = np.round(out).astype(np.uint8)
+    if width > 0:
+        size = 2 * min(width, max(lab.shape)) + 1
+        hi = ndimage.grey_dilation(compact, size=(size, size), mode="constant", cval=0)
+        lo = ndimage.grey_erosion(compact, size=(size, size), mode="constant", cval=0)
+        border = fg & ((hi != compact) | (lo != compact))
+        pic[border] = colors[compact[border]]
+    if show_boxes:
+        slices = ndimage.find_objects(compact)
+        rects = np.array(
+            [
+                [s[1].start, s[0].start, s[1].stop - s[1].start, s[0].stop - s[0].start]
+                for s in slices
+            ],
+            dtype=np.float64,
+        )
+        pic = draw_boxes(
+            pic,
+            rects,
+            color=colors[1:],
+            width=max(1, width // 2) if width else 1,
+            labels=[str(int(k)) for k in ids],
+        )
+    return pic

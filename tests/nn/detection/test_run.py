@@ -151,7 +151,10 @@ def test_train_run_writes_the_run_folder(run):
     assert printed["epochs"] == 2 and printed["files"]["model.pt"] == str(out / "model.pt")
     assert json.loads(json.dumps(printed)) == printed  # JSON-ready
     assert read_image(out / "pr_curves.png").shape[:2] == (1000, 1600)
-    assert read_image(out / "samples.png").shape[0] == 64
+    # one 64 x 64 validation image, enlarged 12 times to 768 (issue 48: read at 1080p),
+    # under the legend and its title
+    samples = read_image(out / "samples.png")
+    assert samples.shape[1] == 768 and 768 < samples.shape[0] < 900
     # model.pt holds the kept weights: the metrics are its own on the validation split
     model, info = load_detector(out / "model.pt")
     assert info["kind"] == "fcos" and info["settings"] == {"width": 4}

@@ -32,8 +32,11 @@ writes the run folder:
 ``metrics.json``          the 12 COCO numbers on the validation split
 ``pr_curves.png``         precision-recall curves at IoU 0.5, per class
                           (:func:`~robopercept.nn.coco.evaluate.write_pr_curves`)
-``samples.png``           the detections (score >= 0.3) on the first four validation
-                          images side by side (:func:`robopercept.viz.detection.draw_detections`)
+``samples.png``           the first four validation images in a 2 x 2 grid, enlarged to
+                          read at 1080p, with the detections (score >= 0.3) and the
+                          ground truth in two colours and a legend, "nothing
+                          detected" where there is none
+                          (:func:`robopercept.viz.detection.detection_samples_picture`)
 ========================  =============================================================
 
 A folder that already holds a run (its ``checkpoint.pt``) is refused unless the run is
@@ -61,7 +64,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from torch import nn
 
 from robopercept._checks import as_path, check_bool, check_choice, check_int, check_real
@@ -82,7 +84,7 @@ from robopercept.nn.detection.zoo import build_detector, detect_arrays, load_det
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import TrainConfig
 from robopercept.nn.train.runs import prepare_run_folder
-from robopercept.viz.detection import draw_detections
+from robopercept.viz.detection import detection_samples_picture
 
 __all__ = [
     "BUILTIN_DATA",
@@ -345,21 +347,15 @@ def load_detection_data(
 
 
 def _write_samples(model: nn.Module, ds: DetectionDataset, path: Path, count: int = 4) -> Path:
-    """The detections (score >= 0.3) on the first ``count`` images of
-    ``ds``, drawn by :func:`robopercept.viz.detection.draw_detections`, side by side
-    (bottom-padded to the tallest, 4 black columns after each)."""
+    """The first ``count`` images of ``ds`` in a grid with their detections (score >=
+    0.3) and their ground truth, told apart by colour and named in a legend
+    (:func:`robopercept.viz.detection.detection_samples_picture`)."""
     n = min(count, len(ds))
-    pics = []
-    for im, d in zip(ds.images[:n], detect_arrays(model, list(ds.images[:n])), strict=True):
-        keep = d["scores"] >= _SAMPLE_SCORE
-        pics.append(
-            draw_detections(
-                im, d["boxes"][keep], d["labels"][keep], ds.classes, scores=d["scores"][keep]
-            )
-        )
-    h = max(p.shape[0] for p in pics)
-    row = [np.pad(p, ((0, h - p.shape[0]), (0, 4), (0, 0))) for p in pics]
-    return write_image(path, np.concatenate(row, axis=1))
+    images = list(ds.images[:n])
+    preds = detect_arrays(model, images)
+    truth = [{"boxes": ds.boxes[i], "labels": ds.labels[i]} for i in range(n)]
+    pic = detection_samples_picture(images, preds, truth, list(ds.classes), threshold=_SAMPLE_SCORE)
+    return write_image(path, pic)
 
 
 def _metrics(ev: CocoEvaluation, ds: DetectionDataset, extra: dict[str, Any]) -> dict[str, Any]:

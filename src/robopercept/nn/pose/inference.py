@@ -14,6 +14,7 @@ each move every joint by the displacement they predict from a window around it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -395,8 +396,9 @@ def samples_picture(
     count: int = 6,
 ) -> np.ndarray:
     """The first ``count`` images of a pose data set with the network's skeletons
-    (flip test, ``refiners`` applied), side by side and enlarged to read at 1080p: the
-    ``samples.png`` of ``robopercept nn pose train``.
+    (flip test, ``refiners`` applied), in a roughly square grid (``ceil(sqrt(count))``
+    columns) and enlarged to read at 1080p (six 128 x 128 images: a 1176 x 830 sheet):
+    the ``samples.png`` of ``robopercept nn pose train``.
 
     Returns
     -------
@@ -412,4 +414,5 @@ def samples_picture(
         draw_skeleton(im, r.keypoints, sk.links, flip_pairs=sk.flip_pairs, min_side=384)
         for im, r in zip(images, res, strict=True)
     ]
-    return panels_picture(pics, [f"image {i + 1}" for i in range(n)])
+    titles = [f"image {i + 1}" for i in range(n)]
+    return panels_picture(pics, titles, columns=math.ceil(math.sqrt(n)))

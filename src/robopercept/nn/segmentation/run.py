@@ -27,7 +27,7 @@ after the last), scores the kept weights on the validation split
                           epoch (``val_mIoU`` or ``val_mask_AP``) and ``best_epoch``
                           (written on Ctrl-C too, up to the last complete epoch)
 ``metrics.json``          the validation scores of the kept weights
-``samples.png``           prediction beside ground truth for the first three
+``samples.png``           prediction above ground truth for the first three
                           validation images (:func:`robopercept.viz.panels_picture`)
 ========================  =============================================================
 
@@ -506,31 +506,44 @@ def score_segmentation(model: nn.Module, val: Any, *, device: str | None = None)
 
 
 def _samples_picture(model: nn.Module, val: Any, count: int = 3) -> np.ndarray:
-    """Prediction beside ground truth for the first ``count`` images of ``val``: the
-    overlays of ``nn segment IMAGE`` (instances with score >= 0.5)."""
+    """The first ``count`` images of ``val`` in a grid: the predictions in the top row,
+    the ground truth under each (the overlays of ``nn segment IMAGE``, instances with
+    score >= 0.5), each enlarged to 384 pixels (a 1176 x 830 sheet for three 128 x 128
+    canvases, readable at 1080p)."""
     classes = list(val.classes)
     instance = isinstance(model, MaskRCNN)
-    pics, titles = [], []
-    for i in range(min(count, len(val))):
+    n = min(count, len(val))
+    preds, truths = [], []
+    for i in range(n):
         im = val.images[i]
         if instance:
             d = detect_arrays(model, [im])[0]
             keep = d["scores"] >= 0.5
-            pics.append(
+            preds.append(
                 instance_overlay(
                     im,
                     d["masks"][keep],
                     labels=d["labels"][keep],
                     classes=classes,
                     scores=d["scores"][keep],
+                    min_side=_SAMPLE_SIDE,
                 )
             )
-            pics.append(instance_overlay(im, val.masks[i], labels=val.labels[i], classes=classes))
+            truths.append(
+                instance_overlay(
+                    im, val.masks[i], labels=val.labels[i], classes=classes, min_side=_SAMPLE_SIDE
+                )
+            )
         else:
-            pics.append(class_overlay(im, segment_arrays(model, [im])[0], classes))
-            pics.append(class_overlay(im, val.class_maps()[i], classes))
-        titles += [f"prediction {i + 1}", f"ground truth {i + 1}"]
-    return panels_picture(pics, titles)
+            pred = segment_arrays(model, [im])[0]
+            preds.append(class_overlay(im, pred, classes, min_side=_SAMPLE_SIDE))
+            truths.append(class_overlay(im, val.class_maps()[i], classes, min_side=_SAMPLE_SIDE))
+    titles = [f"prediction {i + 1}" for i in range(n)] + [f"ground truth {i + 1}" for i in range(n)]
+    return panels_picture(preds + truths, titles, columns=n)
+
+
+#: the longer side the sample images of ``samples.png`` are enlarged to
+_SAMPLE_SIDE = 384
 
 
 # --------------------------------------------------------------------------- train
