@@ -218,6 +218,7 @@ FLAG_KINDS: dict[str, str] = {
             "--lift3d",
             "--heatmaps",
             "--no-lr-check",
+            "--l1-gradient",
         ],
         "switch",
     ),

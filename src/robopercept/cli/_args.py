@@ -18,17 +18,21 @@ import re
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from robopercept.errors import InputError
 
+if TYPE_CHECKING:
+    import numpy as np
+
 __all__ = [
+    "DefaultsHelpFormatter",
     "UsageError",
     "board_size",
     "box_xywh",
     "check_output",
     "cloud_output",
+    "default_text",
     "file_output",
     "flag_errors",
     "hsv",
@@ -49,6 +53,52 @@ __all__ = [
 
 class UsageError(Exception):
     """A command-line argument, or a combination of them, is wrong (exit code 2)."""
+
+
+# -- help ------------------------------------------------------------------------------
+def default_text(value: object) -> str | None:
+    """A flag's default as the user would type it, for its help; None when there is
+    nothing to show (None, False, an empty list, :data:`argparse.SUPPRESS`).
+
+    A tuple or list is written comma-separated (``--hsv-low 45,35,35``), a float
+    without a trailing ``.0`` only when it is whole (``1.0`` -> ``1``), anything else
+    as ``str``.
+
+    Examples
+    --------
+    >>> default_text((45, 35, 35)), default_text(1.0), default_text(0.02), default_text("iou")
+    ('45,35,35', '1', '0.02', 'iou')
+    >>> default_text(None), default_text(False), default_text([]), default_text(0)
+    (None, None, None, '0')
+    """
+    if value is None or value is False or value is argparse.SUPPRESS:
+        return None
+    if isinstance(value, (tuple, list)):
+        return ",".join(t for t in (default_text(v) for v in value) if t) or None
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return str(value)
+
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """The help formatter of every ``robopercept`` parser: an option's help ends with
+    ``(default: X)`` (:func:`default_text`) where it has a default worth showing and
+    its help does not already say it (the word "default" in it), as argparse's
+    :class:`argparse.ArgumentDefaultsHelpFormatter` does without the ``None``,
+    ``False`` and doubled defaults. Switches (``store_true``, ``store_false``, counts)
+    show none: their help says what giving them does."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text.lower() or action.nargs == 0:
+            return text
+        if not action.option_strings and action.nargs not in ("?", "*"):
+            return text  # a required positional has no default
+        shown = default_text(action.default)
+        if shown is None:
+            return text
+        shown = shown.replace("%", "%%")  # argparse expands %(name)s in help
+        return f"{text} (default: {shown})" if text else f"default: {shown}"
 
 
 def positive_int(text: str) -> int:

@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from robopercept.cli._args import positive_int, video_output
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["add_video_arguments", "finish", "open_source", "progress", "text_size"]
 

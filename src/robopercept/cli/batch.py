@@ -17,8 +17,9 @@ from robopercept.cli._args import (
     positive_float,
     positive_int,
 )
+from robopercept.cli._constants import BATCH_JOBS as JOBS
+from robopercept.cli._constants import BATCH_MAX_WORKERS as MAX_WORKERS
 from robopercept.errors import ArgumentError
-from robopercept.pipelines.batch import JOB_OPTIONS, JOBS, MAX_WORKERS
 
 __all__ = ["register"]
 
@@ -49,7 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "outputs), "
         "nn-predict, nn-detect, nn-segment, nn-pose (image -> prediction.json and the pictures "
         "of `robopercept nn predict|detect|segment|pose`), nn-cloud (PLY/PCD/OFF -> "
-        "prediction.json: the class and probabilities of `robopercept nn cloud`).",
+        "prediction.json: the class and probabilities of `robopercept nn cloud`). Dask's "
+        "logs (worker tracebacks among them) go to OUT/batch.log, never the terminal; a "
+        "failed item is one line on stderr.",
     )
     p.add_argument("job", choices=JOBS, help="the job run on each input")
     p.add_argument("inputs", nargs="+", metavar="INPUT", help="files, folders or globs")
@@ -184,7 +187,8 @@ _FLAGS = {
 )
 def run_batch_command(args: argparse.Namespace) -> int:
     """Run ``robopercept batch`` with the parsed ``args``; returns the exit status."""
-    from robopercept.pipelines.batch import run_batch
+    from robopercept.pipelines.batch import JOB_OPTIONS, run_batch
+    from robopercept.progress import format_rate
 
     options: dict[str, Any] = {}
     if args.no_lr_check:
@@ -220,11 +224,13 @@ def run_batch_command(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
     else:
+        ran = int(summary["ok"]) + int(summary["failed"])  # skipped items took no time
+        rate = format_rate(ran, float(summary["seconds"]), "item")
         print(
             f"batch {args.job}: {summary['ok']} ok, {summary['failed']} failed, "
             f"{summary['skipped']} skipped of {summary['items']} items on "
-            f"{summary['workers']} workers in {summary['seconds']:.1f} s "
-            f"({summary['items_per_second']:.2f} items/s) -> {summary['manifest']}"
+            f"{summary['workers']} workers in {summary['seconds']:.1f} s"
+            f"{f' ({rate})' if rate else ''} -> {summary['manifest']}"
         )
         for r in result.items:
             if r["status"] == "failed":

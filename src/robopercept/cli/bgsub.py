@@ -15,9 +15,7 @@ import sys
 import time
 from collections import deque
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from robopercept.cli._args import flag_errors, noise_filter, positive_int
 from robopercept.cli._video import (
@@ -27,6 +25,9 @@ from robopercept.cli._video import (
     progress,
     text_size,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["register"]
 
@@ -45,7 +46,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "red overlay with blob boxes.",
     )
     p.add_argument("video", help="video file or folder of images")
-    p.add_argument("--method", choices=BGSUB_METHODS, default="gaussian")
+    p.add_argument(
+        "--method",
+        choices=BGSUB_METHODS,
+        default="gaussian",
+        help="the background model or differencing scheme (the description above)",
+    )
     p.add_argument("--reference", default=None, help="static: image of the empty scene")
     p.add_argument(
         "--threshold",
@@ -66,7 +72,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--noise", type=noise_filter, default="median", help="median | open-close | none"
     )
-    p.add_argument("--noise-size", type=positive_int, default=3)
+    p.add_argument(
+        "--noise-size",
+        type=positive_int,
+        default=3,
+        help="side of the --noise filter's window (pixels)",
+    )
     p.add_argument("--min-area", type=positive_int, default=100, help="smallest blob (pixels)")
     p.add_argument("--gray", action="store_true", help="work on gray frames (faster)")
     p.add_argument(
@@ -135,6 +146,8 @@ def _bg_picture(
     layout: str,
     label: str = "background",
 ) -> np.ndarray:
+    import numpy as np
+
     from robopercept.viz import draw_boxes, draw_mask, draw_text
     from robopercept.viz.draw import to_rgb8
 
@@ -153,6 +166,8 @@ def _bg_picture(
 
 def run_bgsub(args: argparse.Namespace) -> int:
     """Run ``robopercept bgsub`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.imaging import SnapshotVideoWriter, write_image
     from robopercept.motion import detections_from_mask
 
@@ -267,6 +282,8 @@ def _json_report(
     >>> r["blobs_per_frame"], r["fps"], r["foreground_mean"]
     (1.0, 2.0, 0.5)
     """
+    import numpy as np
+
     n = len(per_frame)
     return {
         "command": "bgsub",

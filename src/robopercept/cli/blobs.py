@@ -31,7 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument("--invert", action="store_true", help="dark objects on a bright background")
     b.add_argument("--min-area", type=int, default=20, help="drop blobs smaller than this (pixels)")
-    b.add_argument("--connectivity", type=int, choices=(4, 8), default=8)
+    b.add_argument(
+        "--connectivity",
+        type=int,
+        choices=(4, 8),
+        default=8,
+        help="neighbours that join pixels into one blob: 4 (edges) or 8 (edges and corners)",
+    )
     b.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     b.add_argument(
         "-o",
@@ -46,8 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run_blobs(args: argparse.Namespace) -> int:
     """Run ``robopercept blobs`` with the parsed ``args``; returns the exit status."""
     from robopercept.imaging import blob_features, label_components, otsu_threshold, write_image
-    from robopercept.viz import draw_boxes, label_colors
-    from robopercept.viz.draw import to_rgb8
+    from robopercept.viz.segmentation import blob_overlay
 
     if args.min_area < 0:
         raise UsageError(f"--min-area must be >= 0; got {args.min_area}")
@@ -58,19 +63,8 @@ def run_blobs(args: argparse.Namespace) -> int:
     labels, _ = label_components(mask, args.connectivity, min_area=args.min_area)
     feats = blob_features(labels)
     records = feats.to_records()
-    if args.output:
-        colors = label_colors(labels)
-        kept = labels > 0
-        overlay = to_rgb8(gray)
-        overlay[kept] = colors[kept]
-        overlay = draw_boxes(
-            overlay,
-            feats.bbox,
-            color=(255, 255, 0),
-            width=max(1, round(gray.shape[0] / 540)),
-            labels=[str(r["label"]) for r in records],
-        )
-        write_image(args.output, overlay)
+    if args.output:  # the blobs tinted and outlined, the image visible around them
+        write_image(args.output, blob_overlay(gray, labels))
     if args.json:
         json.dump(
             {

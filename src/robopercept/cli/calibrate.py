@@ -9,11 +9,12 @@ import glob
 import json
 import sys
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from robopercept.cli._args import UsageError, board_size, file_output, flag_errors
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["register"]
 
@@ -35,10 +36,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "print the per-view reprojection errors and write the camera as JSON, OpenCV "
         "FileStorage YAML or ROS camera_info YAML (--format, or the extension of -o).",
     )
-    p.add_argument("images", nargs="+")
+    p.add_argument("images", nargs="+", help="chessboard photos: files or glob patterns")
     p.add_argument("--board", type=board_size, required=True, help="inner corners, e.g. 9x6")
     p.add_argument("--square", type=float, default=1.0, help="square side (sets the unit)")
-    p.add_argument("-o", "--output", type=file_output, default="camera.json")
+    p.add_argument(
+        "-o", "--output", type=file_output, default="camera.json", help="the camera file"
+    )
     p.add_argument("--format", choices=("json", "opencv", "ros"), default=None, help=_FORMAT_HELP)
     p.add_argument("--camera-name", default="camera", help="camera_name of a ROS file")
     p.add_argument("--overlays", default=None, help="folder for detection overlays")
@@ -64,7 +67,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     r.add_argument("--board", type=board_size, required=True, help="inner corners, e.g. 9x6")
     r.add_argument("--square", type=float, default=1.0, help="square side (sets T's unit)")
-    r.add_argument("-o", "--output", type=file_output, default="stereo.json")
+    r.add_argument(
+        "-o", "--output", type=file_output, default="stereo.json", help="the stereo rig file"
+    )
     r.add_argument(
         "--format",
         choices=("json", "opencv", "ros"),
@@ -139,8 +144,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "T_gripper_camera) or eye-to-hand (camera fixed, target on the gripper; X = "
         "T_base_camera)",
     )
-    q.add_argument("--method", choices=("tsai", "park", "daniilidis"), default="tsai")
-    q.add_argument("-o", "--output", type=file_output, default="handeye.json")
+    q.add_argument(
+        "--method",
+        choices=("tsai", "park", "daniilidis"),
+        default="tsai",
+        help="the closed-form start (Tsai-Lenz, Park-Martin or Daniilidis' dual "
+        "quaternions, as cv2.calibrateHandEye's), refined by Levenberg-Marquardt",
+    )
+    q.add_argument(
+        "-o", "--output", type=file_output, default="handeye.json", help="the result file"
+    )
     q.add_argument(
         "--format",
         choices=("json", "ros"),
@@ -171,6 +184,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Run ``robopercept calibrate`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.calibration import (
         calibrate_camera,
         chessboard_points,
@@ -306,6 +321,8 @@ def _image_list(specs: list[str], flag: str) -> list[str]:
 def run_stereo_calibrate(args: argparse.Namespace) -> int:
     """Run ``robopercept stereo-calibrate`` with the parsed ``args``; returns the exit
     status."""
+    import numpy as np
+
     from robopercept.calibration import (
         chessboard_points,
         find_board_pairs,
@@ -388,6 +405,8 @@ def run_stereo_calibrate(args: argparse.Namespace) -> int:
 
 
 def _matrix_file(path: str) -> np.ndarray:
+    import numpy as np
+
     from robopercept.errors import FileFormatError
 
     try:

@@ -9,8 +9,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from robopercept.cli._args import UsageError, flag_errors, image_output, numbers, pass_through
 
 __all__ = ["register"]
@@ -89,6 +87,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 )
 def run_cloud(args: argparse.Namespace) -> int:
     """Run ``robopercept cloud`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.pipelines.cloud import process_cloud
     from robopercept.pointcloud import read_point_cloud, write_point_cloud
     from robopercept.viz.colormap import label_colors
@@ -117,20 +117,30 @@ def run_cloud(args: argparse.Namespace) -> int:
         colors = cloud.colors
     labels = res.segment if segmented else cloud.labels
     write_point_cloud(out, cloud.with_colors(colors).with_labels(labels))
+    names: dict[int, str] = {}
+    if segmented:
+        n_planes = len(res.planes)
+        names = {
+            0: "unassigned",
+            **{i + 1: f"plane {i + 1}" for i in range(n_planes)},
+            **{n_planes + j + 1: f"cluster {j + 1}" for j in range(len(res.cluster_sizes))},
+        }
     if args.image:
         from robopercept.imaging import write_image
         from robopercept.viz import render_points
 
-        write_image(args.image, render_points(cloud.points, colors))
+        legend = None
+        if segmented:  # each segment's colour named beside the render
+            ids = np.array(sorted(names))
+            legend = [
+                (names[int(k)], tuple(int(v) for v in c))
+                for k, c in zip(ids, label_colors(ids, background=(128, 128, 128)), strict=True)
+            ]
+        write_image(args.image, render_points(cloud.points, colors, legend=legend))
     summary: dict[str, Any] = {"input": str(args.input), "output": str(out), "steps": res.steps}
     summary["label_field"] = labels is not None
     if segmented:
-        n_planes = len(res.planes)
-        summary["labels"] = {
-            "0": "unassigned",
-            **{str(i + 1): f"plane {i + 1}" for i in range(n_planes)},
-            **{str(n_planes + j + 1): f"cluster {j + 1}" for j in range(len(res.cluster_sizes))},
-        }
+        summary["labels"] = {str(k): v for k, v in names.items()}
     if args.image:
         summary["image"] = str(args.image)
     if args.json:
@@ -148,7 +158,7 @@ def run_cloud(args: argparse.Namespace) -> int:
     if res.cluster_sizes:
         print(f"clusters: {len(res.cluster_sizes)}, sizes {res.cluster_sizes}")
     if segmented:
-        names = ", ".join(f"{k} {v}" for k, v in summary["labels"].items())
-        print(f"label field: {names}")
+        listed = ", ".join(f"{k} {v}" for k, v in summary["labels"].items())
+        print(f"label field: {listed}")
     print(f"wrote {out}" + (f" and {args.image}" if args.image else ""))
     return 0

@@ -7,8 +7,6 @@ import json
 import sys
 import time
 
-import numpy as np
-
 from robopercept.cli._args import UsageError, flag_errors, image_output, load_gray
 
 __all__ = ["register"]
@@ -34,7 +32,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="edges.png",
         help="output image (default: %(default)s)",
     )
-    p.add_argument("--method", choices=("canny", "sobel", "log"), default="canny")
+    p.add_argument(
+        "--method",
+        choices=("canny", "sobel", "log"),
+        default="canny",
+        help="canny: thin edges by hysteresis between --low and --high; sobel: the gradient "
+        "magnitude (edges: pixels above a quarter of its peak); log: Laplacian-of-Gaussian "
+        "zero crossings",
+    )
     p.add_argument(
         "--low",
         type=float,
@@ -55,7 +60,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--sigma",
         type=float,
         default=1.0,
-        help="Gaussian sigma before differentiation (0: none; LoG scale)",
+        help="Gaussian sigma of the smoothing before differentiation (canny, sobel; 0: none; "
+        "cv2.Canny smooths nothing, as --sigma 0); log: its scale, > 0",
+    )
+    p.add_argument(
+        "--l1-gradient",
+        action="store_true",
+        help="canny: the L1 gradient norm |gx| + |gy| (cv2.Canny's default) instead of the "
+        "L2 norm; --sigma 0 --l1-gradient gives exactly cv2.Canny(image, low, high)",
     )
     p.add_argument("--overlay", action="store_true", help="draw edges in red over the image")
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
@@ -65,6 +77,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 @flag_errors(sigma="--sigma", low="--low", high="--high")
 def run_edges(args: argparse.Namespace) -> int:
     """Run ``robopercept edges`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.errors import InputError
     from robopercept.imaging import (
         canny,
@@ -99,9 +113,9 @@ def run_edges(args: argparse.Namespace) -> int:
                     f"levels: --low {low:.6g} --high {high:.6g}",
                     file=note,
                 )
-        edges = canny(gray, low, high, sigma=args.sigma)
+        edges = canny(gray, low, high, sigma=args.sigma, l2_gradient=not args.l1_gradient)
         out = edges.astype(np.uint8) * 255
-        params.update(low=low, high=high, units="grey levels")
+        params.update(low=low, high=high, units="grey levels", l2_gradient=not args.l1_gradient)
         what = "edge pixels"
     elif args.method == "sobel":
         work = gaussian_blur(gray.astype(np.float32), args.sigma) if args.sigma > 0 else gray

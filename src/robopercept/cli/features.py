@@ -8,8 +8,6 @@ import argparse
 import json
 import time
 
-import numpy as np
-
 from robopercept.cli._args import UsageError, flag_errors, image_output, load_gray
 
 __all__ = ["register"]
@@ -34,7 +32,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         default="features.png",
         help="output image (default: %(default)s)",
     )
-    p.add_argument("--detector", choices=DETECTORS, default="harris")
+    p.add_argument(
+        "--detector",
+        choices=DETECTORS,
+        default="harris",
+        help="Harris corners (det - k trace^2), Shi-Tomasi corners (the smaller "
+        "eigenvalue) or SIFT keypoints (difference-of-Gaussian extrema with scale and "
+        "orientation)",
+    )
     p.add_argument(
         "--max", type=int, default=500, help="at most this many keypoints (default: %(default)s)"
     )
@@ -103,15 +108,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="SIFT matches, a RANSAC homography and a feathered blend in A's frame.",
     )
     _pair_arguments(st, "panorama.png")
-    st.add_argument("--blend", choices=("feather", "average", "none"), default="feather")
+    st.add_argument(
+        "--blend",
+        choices=("feather", "average", "none"),
+        default="feather",
+        help="where the images overlap: feather (weights growing from each image's border "
+        "inwards), average (equal weights) or none (B covers A)",
+    )
     st.add_argument("--json", action="store_true", help="print counts, H and size as JSON")
     st.set_defaults(func=run_stitch)
 
 
 def _pair_arguments(p: argparse.ArgumentParser, output: str) -> None:
     # the two images, the output picture and the matching options of match / stitch
-    p.add_argument("image_a")
-    p.add_argument("image_b")
+    p.add_argument("image_a", help="first image, A")
+    p.add_argument("image_b", help="second image, B, overlapping A")
     p.add_argument(
         "-o",
         "--output",
@@ -132,6 +143,8 @@ def _pair_arguments(p: argparse.ArgumentParser, output: str) -> None:
 )
 def run_features(args: argparse.Namespace) -> int:
     """Run ``robopercept features`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.features import harris_corners
     from robopercept.imaging import write_image
     from robopercept.viz import draw_lines, draw_points
@@ -238,6 +251,8 @@ def _load_pair(args: argparse.Namespace):
 @flag_errors(ratio="--ratio", threshold="--threshold", max_matches="--max-matches")
 def run_match(args: argparse.Namespace) -> int:
     """Run ``robopercept match`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.features import match_images
     from robopercept.imaging import write_image
     from robopercept.viz.features import matches_picture
@@ -306,6 +321,8 @@ def run_match(args: argparse.Namespace) -> int:
 @flag_errors(ratio="--ratio", threshold="--threshold", blend="--blend")
 def run_stitch(args: argparse.Namespace) -> int:
     """Run ``robopercept stitch`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.features import stitch
     from robopercept.imaging import write_image
 

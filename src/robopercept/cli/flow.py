@@ -10,8 +10,6 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 from robopercept.cli._args import UsageError, check_output, flag_errors, positive_int
 from robopercept.cli._video import (
     add_video_arguments,
@@ -50,7 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("inputs", nargs="+", help="A B (two images) or VIDEO (file or folder)")
     p.add_argument("--window", type=int, default=21, help="odd window side (default 21)")
     p.add_argument("--levels", type=int, default=3, help="pyramid levels above the image")
-    p.add_argument("--max-corners", type=positive_int, default=500)
+    p.add_argument(
+        "--max-corners", type=positive_int, default=500, help="most Shi-Tomasi corners tracked"
+    )
     p.add_argument("--quality", type=float, default=0.01, help="Shi-Tomasi quality level")
     p.add_argument("--min-distance", type=float, default=7.0, help="corner spacing (px)")
     p.add_argument(
@@ -81,6 +81,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _flow_pair(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from robopercept.errors import DegenerateError, InputError
     from robopercept.imaging import read_image, write_image
     from robopercept.motion import (
@@ -207,6 +209,8 @@ def _flow_pair(args: argparse.Namespace) -> int:
 
 
 def _flow_video(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from robopercept.errors import FileFormatError
     from robopercept.imaging import SnapshotVideoWriter
     from robopercept.motion import KLTTracker
@@ -275,6 +279,8 @@ def _flow_video(args: argparse.Namespace) -> int:
 @flag_errors(**FLAGS)
 def run_flow(args: argparse.Namespace) -> int:
     """Run ``robopercept flow`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     if len(args.inputs) == 2:
         if args.output:
             check_output(args.output, "image")

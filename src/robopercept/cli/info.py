@@ -17,7 +17,7 @@ __all__ = ["packages", "register", "report", "report_dict"]
 _OPTIONAL = (
     ("torch", "torch", "deep", "CNNs, PointNet, DGCNN"),
     ("distributed", "dask[distributed]", "scale", "robopercept batch on a Dask cluster"),
-    ("pyrealsense2", "pyrealsense2", "realsense", "RealSense cameras and .bag recordings"),
+    ("pyrealsense2", "pyrealsense2", "realsense", "RealSense live camera (recordings need not)"),
     ("cv2", "opencv-contrib-python-headless", "dev", "reference for tests and benchmarks"),
     ("skimage", "scikit-image", "dev", "reference for tests"),
     ("sklearn", "scikit-learn", "dev", "reference for tests"),

@@ -11,9 +11,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from robopercept.cli._args import (
     UsageError,
@@ -23,6 +21,9 @@ from robopercept.cli._args import (
     image_size,
 )
 from robopercept.errors import InputError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["register"]
 
@@ -41,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "finds faces; --model loads one written by `robopercept train-hog`. The default "
         "threshold is the model's own, chosen on a held-out precision/recall curve.",
     )
-    d.add_argument("image")
+    d.add_argument("image", help="input image")
     d.add_argument(
         "-o", "--output", type=image_output, default="detections.png", help="output image"
     )
@@ -88,7 +89,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="threshold: highest F1, or best recall at --min-precision")  # fmt: skip
     t.add_argument("--min-precision", type=float, default=0.95,
                    help="--rule precision: the precision floor (default 0.95)")  # fmt: skip
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="the held-out split and the random negative windows",
+    )
     t.add_argument("--json", action="store_true", help="print the summary as JSON")
     t.set_defaults(func=run_train_hog)
 
@@ -108,15 +114,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Rand index when --label names true classes) and draws the clusters in 2-D (the "
         "two features, or the first two principal components).",
     )
-    c.add_argument("data")
-    c.add_argument("--method", choices=CLUSTER_METHODS, default="kmeans")
+    c.add_argument("data", help="CSV table with a header row")
+    c.add_argument(
+        "--method",
+        choices=CLUSTER_METHODS,
+        default="kmeans",
+        help="k-means (k = --clusters), mean-shift (--bandwidth) or DBSCAN (--eps, "
+        "--min-samples; noise rows get label -1)",
+    )
     c.add_argument("--label", help="a column of true classes: left out, and scored by ARI")
     c.add_argument("-k", "--clusters", type=int, default=3, help="k-means: k (default 3)")
     c.add_argument("--bandwidth", type=float, help="mean-shift: bandwidth (default: estimated)")
     c.add_argument("--eps", type=float, default=0.5, help="DBSCAN: radius (default 0.5)")
     c.add_argument("--min-samples", type=int, default=5, help="DBSCAN: core size (default 5)")
     c.add_argument("--standardize", action="store_true", help="scale features to unit variance")
-    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--seed", type=int, default=0, help="k-means: the initial centres")
     c.add_argument("-o", "--output", type=image_output, default="clusters.png", help="output image")
     c.add_argument(
         "--labels-out", type=file_output, help="write one cluster label per row to this CSV"
@@ -132,18 +144,31 @@ def register(sub: argparse._SubParsersAction) -> None:
         "confusion matrix, ROC AUC and average precision (one-vs-rest). Writes "
         "confusion.png, roc.png, pr.png and report.json into --output.",
     )
-    k.add_argument("train")
-    k.add_argument("test", nargs="?")
+    k.add_argument("train", help="CSV table with a header row: the training rows")
+    k.add_argument(
+        "test",
+        nargs="?",
+        help="CSV table of test rows, same columns (default: a stratified --test-size "
+        "share of TRAIN)",
+    )
     k.add_argument("--label", required=True, help="the column of classes")
-    k.add_argument("--model", choices=MODELS, default="forest")
+    k.add_argument(
+        "--model",
+        choices=MODELS,
+        default="forest",
+        help="decision tree (CART), random forest, support vector machine (--kernel, -C) "
+        "or linear discriminant analysis",
+    )
     k.add_argument("--test-size", type=float, default=0.25, help="held-out share (no TEST)")
     k.add_argument("--cv", type=int, default=0, help="also report k-fold CV accuracy on TRAIN")
     k.add_argument("--max-depth", type=int, help="tree/forest: depth limit")
     k.add_argument("--trees", type=int, default=100, help="forest: trees (default 100)")
     k.add_argument("-C", type=float, default=1.0, help="svm: box constraint (default 1)")
-    k.add_argument("--kernel", choices=("rbf", "linear", "poly"), default="rbf")
+    k.add_argument(
+        "--kernel", choices=("rbf", "linear", "poly"), default="rbf", help="svm: the kernel"
+    )
     k.add_argument("--standardize", action="store_true", help="scale features (fit on train)")
-    k.add_argument("--seed", type=int, default=0)
+    k.add_argument("--seed", type=int, default=0, help="the train/test split, the tree and forest")
     k.add_argument("-o", "--output", default="classify_out", help="output folder")
     k.add_argument(
         "--save",
@@ -180,8 +205,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         "the explained variance of each axis and writes the 2-D scatter, coloured by "
         "--label when given.",
     )
-    r.add_argument("data")
-    r.add_argument("--method", choices=("pca", "lda"), default="pca")
+    r.add_argument("data", help="CSV table with a header row")
+    r.add_argument(
+        "--method",
+        choices=("pca", "lda"),
+        default="pca",
+        help="PCA (largest variance, unsupervised) or LDA (best class separation, needs --label)",
+    )
     r.add_argument("--label", help="the column of classes (required by LDA)")
     r.add_argument("--standardize", action="store_true", help="PCA on unit-variance features")
     r.add_argument("-o", "--output", type=image_output, default="reduced.png", help="output image")
@@ -214,6 +244,8 @@ def _write(path: str | Path, image: np.ndarray) -> Path:
 @flag_errors(threshold="--threshold", min_size="--min-size", max_size="--max-size")
 def run_detect_hog(args: argparse.Namespace) -> int:
     """Run ``robopercept detect-hog`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.imaging import read_image
     from robopercept.learning.hog_detector import HogDetector, default_face_detector
     from robopercept.viz import draw_boxes
@@ -369,6 +401,8 @@ def run_train_hog(args: argparse.Namespace) -> int:
 # -- learn cluster --------------------------------------------------------------------
 def _to_2d(X: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, str, tuple[str, str]]:
     """The points drawn for ``X``, what they are, and the two axis labels."""
+    import numpy as np
+
     from robopercept.learning import PCA
 
     if X.shape[1] == 1:
@@ -386,6 +420,8 @@ def _to_2d(X: np.ndarray, names: Sequence[str]) -> tuple[np.ndarray, str, tuple[
 )
 def run_cluster(args: argparse.Namespace) -> int:
     """Run ``robopercept cluster`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.learning import (
         DBSCAN,
         KMeans,
@@ -488,6 +524,8 @@ def _model(args: argparse.Namespace) -> Any:
 )
 def run_classify(args: argparse.Namespace) -> int:
     """Run ``robopercept classify`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.learning import (
         SavedModel,
         confusion_table,

@@ -42,7 +42,7 @@ from collections.abc import Sequence
 from typing import Any, NoReturn, TextIO
 
 from robopercept import __version__
-from robopercept.cli._args import UsageError
+from robopercept.cli._args import DefaultsHelpFormatter, UsageError
 from robopercept.errors import ArgumentError, RoboperceptError
 
 __all__ = ["EXIT_ERROR", "EXIT_INTERNAL", "EXIT_USAGE", "build_parser", "main"]
@@ -85,6 +85,7 @@ class _ParserError(UsageError):
 
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)  # every help shows defaults
         super().__init__(*args, **kwargs)
         if self.prog != "robopercept":  # also after the command: robopercept edges --debug
             self.add_argument(

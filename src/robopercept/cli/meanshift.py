@@ -12,9 +12,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from robopercept.cli._args import (
     UsageError,
@@ -31,6 +29,9 @@ from robopercept.cli._video import (
     progress,
     text_size,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["register"]
 
@@ -51,7 +52,13 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="X,Y,W,H",
         help="target in frame 0 (default with --truth: its first box)",
     )
-    p.add_argument("--feature", choices=("hue", "rgb"), default="hue")
+    p.add_argument(
+        "--feature",
+        choices=("hue", "rgb"),
+        default="hue",
+        help="the target's histogram: of hue (as OpenCV's CamShift sample; pixels too grey "
+        "or dark left out), or of RGB colour",
+    )
     p.add_argument("--bins", type=positive_int, default=None, help="16 (hue) or 8 (rgb)")
     p.add_argument(
         "--min-saturation",
@@ -99,6 +106,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 )
 def run_meanshift(args: argparse.Namespace) -> int:
     """Run ``robopercept meanshift`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.tracking.metrics import read_vot_groundtruth
 
     if args.plot and not args.truth:
@@ -124,6 +133,8 @@ def run_meanshift(args: argparse.Namespace) -> int:
 def _track(args: argparse.Namespace) -> dict[str, Any]:
     """Track through the video, write the outputs, print the human summary (stdout);
     returns the JSON summary, with the frame indices and boxes under ``_boxes``."""
+    import numpy as np
+
     from robopercept.imaging import SnapshotVideoWriter
     from robopercept.tracking import MeanShiftTracker
     from robopercept.viz import draw_boxes, draw_text

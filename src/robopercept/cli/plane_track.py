@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from robopercept.cli._args import UsageError, hsv, positive_int
+from robopercept.cli._constants import SCENE_DISTRACTORS, SCENE_MOTIONS
 from robopercept.errors import InputError
 
 if TYPE_CHECKING:
@@ -64,9 +65,28 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES, help="synthetic: frames")
     p.add_argument("--seed", type=int, default=0, help="synthetic: scene seed")
     _scene_flags(p, prefix="synthetic: ")
-    p.add_argument("--hsv-low", type=hsv, default=(45, 35, 35), metavar="H,S,V")
-    p.add_argument("--hsv-high", type=hsv, default=(65, 255, 255), metavar="H,S,V")
-    p.add_argument("--hue-tolerance", type=float, default=None, help="hue as RANSAC feature")
+    p.add_argument(
+        "--hsv-low",
+        type=hsv,
+        default=(45, 35, 35),
+        metavar="H,S,V",
+        help="lower corner of the board's colour box on OpenCV's HSV scale (H 0..180, "
+        "degrees / 2; S and V 0..255); a hue above --hsv-high's wraps around red",
+    )
+    p.add_argument(
+        "--hsv-high",
+        type=hsv,
+        default=(65, 255, 255),
+        metavar="H,S,V",
+        help="upper corner of the board's colour box, as --hsv-low",
+    )
+    p.add_argument(
+        "--hue-tolerance",
+        type=float,
+        default=None,
+        help="also use hue as a RANSAC feature: an inlier's hue is within this many "
+        "OpenCV hue units of the sample's (default: geometry only)",
+    )
     _smooth_flag(p)
     p.add_argument("--no-video", action="store_true", help="skip tracking.mp4")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -81,8 +101,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "`robopercept plane-track --source OUT_DIR`.",
     )
     p.add_argument("out_dir", help="output folder")
-    p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--frames", type=positive_int, default=DEMO_FRAMES, help="frames to write")
+    p.add_argument("--seed", type=int, default=0, help="scene seed")
     _scene_flags(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -90,11 +110,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _scene_flags(p: argparse.ArgumentParser, prefix: str = "") -> None:
-    from robopercept.sources import DISTRACTORS, MOTIONS
-
     p.add_argument(
         "--motion",
-        choices=MOTIONS,
+        choices=SCENE_MOTIONS,
         default="smooth",
         help=f"{prefix}the board's motion profile (default smooth)",
     )
@@ -106,7 +124,7 @@ def _scene_flags(p: argparse.ArgumentParser, prefix: str = "") -> None:
     )
     p.add_argument(
         "--distractor",
-        choices=DISTRACTORS,
+        choices=SCENE_DISTRACTORS,
         default="box",
         help=f"{prefix}other green things: a small box, a patch on the wall, both or none",
     )

@@ -7,8 +7,7 @@ import argparse
 import json
 import time
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from robopercept.cli._args import (
     UsageError,
@@ -18,6 +17,9 @@ from robopercept.cli._args import (
     output_path,
     positive_int,
 )
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["register"]
 
@@ -34,11 +36,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         "writes the 3-D points z = f B / d with the left image's colours (disparities of "
         "1 px or less, whose depth is unknown to a factor of two, give no point).",
     )
-    p.add_argument("left")
-    p.add_argument("right")
-    p.add_argument("--method", choices=("sgm", "bm"), default="sgm")
-    p.add_argument("--max-disparity", type=positive_int, required=True, help="largest d")
-    p.add_argument("--min-disparity", type=int, default=0)
+    p.add_argument("left", help="left image of the rectified pair (the reference view)")
+    p.add_argument("right", help="right image of the pair")
+    p.add_argument(
+        "--method",
+        choices=("sgm", "bm"),
+        default="sgm",
+        help="semi-global matching (smoothness along --paths directions, as OpenCV's SGBM) "
+        "or block matching (the best --window match per pixel, as OpenCV's StereoBM)",
+    )
+    p.add_argument(
+        "--max-disparity",
+        type=positive_int,
+        required=True,
+        help="largest disparity d searched (pixels; a point at z has d = f B / z)",
+    )
+    p.add_argument(
+        "--min-disparity",
+        type=int,
+        default=0,
+        help="smallest disparity d searched (pixels; negative for converging cameras)",
+    )
     p.add_argument("--window", type=positive_int, default=9, help="bm: odd window side")
     p.add_argument("--cost", choices=("sad", "ssd", "ncc"), default="sad", help="bm cost")
     p.add_argument("--block", type=positive_int, default=5, help="sgm: cost block side")
@@ -115,6 +133,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 )
 def run_stereo(args: argparse.Namespace) -> int:
     """Run ``robopercept stereo`` with the parsed ``args``; returns the exit status."""
+    import numpy as np
+
     from robopercept.depth import bad_pixel_rate, block_matching, semi_global_matching
     from robopercept.errors import DegenerateError, InputError
     from robopercept.imaging import read_image, write_image
@@ -238,6 +258,8 @@ def _write_ply(
     disparity at the search's lower end is a boundary winner, one at 1 px or less has
     an unknown depth: :func:`~robopercept.depth.disparity_to_points`); returns the
     number of points and the largest z."""
+    import numpy as np
+
     from robopercept.depth import disparity_to_points, reprojection_matrix
     from robopercept.pointcloud import PointCloud, write_point_cloud
 

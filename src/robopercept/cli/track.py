@@ -14,8 +14,6 @@ import sys
 import time
 from typing import Any
 
-import numpy as np
-
 from robopercept.cli._args import (
     UsageError,
     file_output,
@@ -50,10 +48,33 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--results", type=file_output, default="tracks.txt", help="MOTChallenge results file"
     )
-    p.add_argument("--cost", choices=("iou", "mahalanobis", "euclidean"), default="iou")
-    p.add_argument("--gate", type=float, default=None, help="see MultiObjectTracker")
-    p.add_argument("--min-hits", type=int, default=3)
-    p.add_argument("--max-age", type=int, default=5)
+    p.add_argument(
+        "--cost",
+        choices=("iou", "mahalanobis", "euclidean"),
+        default="iou",
+        help="association cost between a track's predicted box and a detection: 1 - IoU, "
+        "the Kalman filter's Mahalanobis distance, or the centre distance in pixels",
+    )
+    p.add_argument(
+        "--gate",
+        type=float,
+        default=None,
+        help="the loosest match --cost allows: iou: least IoU (default 0.3); mahalanobis: "
+        "largest squared distance (default 13.28, chi-square 99 %%, 4 dof); euclidean: "
+        "largest centre distance in pixels (default 50)",
+    )
+    p.add_argument(
+        "--min-hits",
+        type=int,
+        default=3,
+        help="matches that confirm a track (only confirmed tracks are drawn and written)",
+    )
+    p.add_argument(
+        "--max-age",
+        type=int,
+        default=5,
+        help="frames a confirmed track coasts on its prediction without a match before it ends",
+    )
     p.add_argument("--min-area", type=positive_int, default=100, help="no det.txt: blob size")
     p.add_argument("--no-detections", action="store_true", help="do not draw the detections")
     p.add_argument(
@@ -124,6 +145,8 @@ def _classes(text: str) -> list[int] | None:
 def _track(args: argparse.Namespace) -> dict[str, Any]:
     """Track through the video, write the outputs, print the human summary (stdout);
     returns the JSON summary, with the frame numbers read under ``_numbers``."""
+    import numpy as np
+
     from robopercept.imaging import SnapshotVideoWriter
     from robopercept.pipelines import track_objects
     from robopercept.tracking import MultiObjectTracker, read_mot, write_mot
@@ -195,6 +218,8 @@ def _track(args: argparse.Namespace) -> dict[str, Any]:
 def _evaluate(args: argparse.Namespace, gt: Any, numbers: list[int]) -> dict[str, Any]:
     """``--gt``: score the results file over the frame ``numbers`` read (printed unless
     ``--json``)."""
+    import numpy as np
+
     from robopercept.tracking import read_mot
     from robopercept.tracking.metrics import evaluate_mot
 

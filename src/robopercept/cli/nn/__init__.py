@@ -24,9 +24,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``nn`` and its tasks to the subcommand parsers ``sub``."""
     p = sub.add_parser(
         "nn",
-        help="convolutional networks: train, evaluate, predict, summarize (needs torch)",
-        description="Small VGG, Inception and ResNet classifiers in PyTorch (extra deep: "
-        "pip install 'robopercept[deep]').",
+        help="neural networks: image classifiers, detectors, segmenters, pose and "
+        "point-cloud networks; train, evaluate, predict (needs torch)",
+        description="Neural networks in PyTorch (extra deep: pip install "
+        "'robopercept[deep]'): small VGG, Inception and ResNet image classifiers (train, "
+        "eval, predict, summary), object detectors (detect), semantic and instance "
+        "segmentation (segment), human pose (pose) and point-cloud networks (cloud), each "
+        "with shipped models (models lists them). Run a TASK with --help for its options.",
     )
     ns = p.add_subparsers(dest="nn_command", metavar="TASK", parser_class=type(p))
     ns.required = True

@@ -80,7 +80,12 @@ def register_forms(
         prefix_chars="\x00",
         add_help=False,
     )
-    d.add_argument("words", nargs="*")
+    d.add_argument(
+        "words",
+        nargs="*",
+        help=f"train ..., eval ..., or the images form; robopercept nn {name} --help shows "
+        "all three",
+    )
     d.set_defaults(func=run)
 
 

@@ -56,13 +56,29 @@ def register(ns: argparse._SubParsersAction) -> None:
     t.add_argument(
         "--data", required=True, help="digits, lfw, or a folder laid out as root/class/img.png"
     )
-    t.add_argument("--model", choices=MODEL_NAMES, default="resnet_small")
+    t.add_argument(
+        "--model",
+        choices=MODEL_NAMES,
+        default="resnet_small",
+        help="the network (robopercept nn summary MODEL prints its layers)",
+    )
     t.add_argument("--epochs", type=positive_int, default=30, help="most epochs (default 30)")
     t.add_argument("--lr", type=positive_float, default=1e-3, help="learning rate (default 1e-3)")
-    t.add_argument("--batch-size", type=positive_int, default=64, help="default 64")
-    t.add_argument("--optimizer", choices=("adamw", "sgd"), default="adamw")
     t.add_argument(
-        "--schedule", choices=("cosine", "step", "onecycle", "constant"), default="cosine"
+        "--batch-size", type=positive_int, default=64, help="images per step (default 64)"
+    )
+    t.add_argument(
+        "--optimizer",
+        choices=("adamw", "sgd"),
+        default="adamw",
+        help="AdamW, or SGD with momentum 0.9",
+    )
+    t.add_argument(
+        "--schedule",
+        choices=("cosine", "step", "onecycle", "constant"),
+        default="cosine",
+        help="learning rate over the epochs: cosine annealing to 0, steps down, one cycle "
+        "(warm-up then annealing, per batch) or constant",
     )
     t.add_argument(
         "--patience", type=positive_int, default=10, help="early stopping (default 10 epochs)"
@@ -105,14 +121,16 @@ def register(ns: argparse._SubParsersAction) -> None:
 
     e = ns.add_parser(
         "eval",
-        help="accuracy, per-class figures and confusion matrix of a trained model",
+        help="accuracy, per-class figures and confusion matrix of a trained classifier",
         description="Evaluate CHECKPOINT (a run's .pt file or its folder) on a whole data "
         "set; writes the confusion matrix picture. The built-in sets include the run's "
         "training images: metrics.json holds the held-out test figures.",
     )
-    e.add_argument("checkpoint")
+    e.add_argument("checkpoint", help="a run folder or its checkpoint (.pt)")
     e.add_argument("--data", required=True, help="digits, lfw, or an image folder")
-    e.add_argument("-o", "--output", type=image_output, default="confusion.png")
+    e.add_argument(
+        "-o", "--output", type=image_output, default="confusion.png", help="the confusion matrix"
+    )
     device_arg(e)
     e.add_argument("--json", action="store_true", help="print the figures as JSON")
     e.set_defaults(func=run_eval)
@@ -129,7 +147,7 @@ def register(ns: argparse._SubParsersAction) -> None:
         help="a run folder or its checkpoint, or a shipped classifier: digits (robopercept "
         "nn models describes it)",
     )
-    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument("images", nargs="+", metavar="IMAGE", help="images to classify")
     r.add_argument("--top-k", type=positive_int, default=3, help="classes per image (default 3)")
     device_arg(r)
     r.add_argument("--json", action="store_true", help="print the predictions as JSON")
@@ -140,7 +158,7 @@ def register(ns: argparse._SubParsersAction) -> None:
         help="per-layer output shapes, parameters and receptive fields of a model",
         description="Build MODEL (untrained) and print its layers for an input of C,H,W.",
     )
-    s.add_argument("model", choices=MODEL_NAMES)
+    s.add_argument("model", choices=MODEL_NAMES, help="the network")
     s.add_argument("--input", type=_chw, default=(1, 8, 8), help="C,H,W (default 1,8,8)")
     s.add_argument("--classes", type=positive_int, default=10, help="outputs (default 10)")
     s.add_argument("--json", action="store_true", help="print the table as JSON")

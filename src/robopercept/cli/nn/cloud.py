@@ -90,10 +90,23 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         "metrics.json (test split), confusion.png and the checkpoints.",
     )
     _data_args(t)
-    t.add_argument("--model", choices=CLOUD_CLI_MODELS, default="pointnet")
-    t.add_argument("--task", choices=("classify", "segment"), default="classify")
-    t.add_argument("--epochs", type=positive_int, default=20, help="default 20")
-    t.add_argument("--batch-size", type=positive_int, default=32, help="default 32")
+    t.add_argument(
+        "--model",
+        choices=CLOUD_CLI_MODELS,
+        default="pointnet",
+        help="PointNet (shared per-point MLPs, max pooling) or DGCNN (edge convolutions "
+        "over the --k nearest neighbours)",
+    )
+    t.add_argument(
+        "--task",
+        choices=("classify", "segment"),
+        default="classify",
+        help="one class per cloud, or a part label per point",
+    )
+    t.add_argument("--epochs", type=positive_int, default=20, help="most epochs (default 20)")
+    t.add_argument(
+        "--batch-size", type=positive_int, default=32, help="clouds per step (default 32)"
+    )
     t.add_argument("--lr", type=float, default=1e-3, help="AdamW learning rate (default 1e-3)")
     t.add_argument(
         "--width", type=float, default=0.5, help="pointnet: channel multiplier (default 0.5)"
@@ -105,7 +118,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Accuracy (or part mIoU) of a trained network (RUN folder or model.pt) "
         "on the test split of the data.",
     )
-    e.add_argument("model", metavar="RUN_OR_MODEL")
+    e.add_argument("model", metavar="RUN_OR_MODEL", help="a run folder or its model.pt")
     _data_args(e)
     e.add_argument("-o", "--out", help="folder for metrics.json and confusion.png")
     r = cls(
@@ -113,7 +126,12 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Classify each CLOUD (.ply/.pcd cloud or .off/.ply mesh); with -o, "
         f"write OUT/NAME.png (and OUT/NAME_parts.ply). {OUTPUT_NAMES_HELP}.",
     )
-    r.add_argument("clouds", nargs="+", metavar="CLOUD")
+    r.add_argument(
+        "clouds",
+        nargs="+",
+        metavar="CLOUD",
+        help="point clouds (.ply, .pcd) or meshes (.off, .ply)",
+    )
     r.add_argument("--model", help=shipped_help("cloud"))
     r.add_argument(
         "--segment",
@@ -132,7 +150,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         action="store_true",
         help='print {"model": LINE, "warnings": [], "results": [predictions]}',
     )
-    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return {"train": t, "eval": e, "images": r}
 
 

@@ -102,9 +102,16 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         "(validation split), pr_curves.png and samples.png.",
     )
     _data_args(t)
-    t.add_argument("--model", choices=DETECTOR_NAMES, default="fcos")
-    t.add_argument("--epochs", type=positive_int, default=30, help="default 30")
-    t.add_argument("--batch-size", type=positive_int, default=8, help="default 8")
+    t.add_argument(
+        "--model",
+        choices=DETECTOR_NAMES,
+        default="fcos",
+        help="FCOS (one stage, anchor-free), Faster R-CNN (region proposal network and RoI "
+        "heads), Fast R-CNN and R-CNN (selective-search proposals), or a one-object "
+        "localizer",
+    )
+    t.add_argument("--epochs", type=positive_int, default=30, help="most epochs (default 30)")
+    t.add_argument("--batch-size", type=positive_int, default=8, help="images per step (default 8)")
     t.add_argument("--lr", type=float, default=1e-3, help="AdamW learning rate (default 1e-3)")
     t.add_argument("--width", type=positive_int, default=16, help="backbone width (default 16)")
     t.add_argument(
@@ -128,7 +135,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="COCO metrics of a trained detector (RUN folder or model.pt) on the "
         "validation split of a built-in set or on a whole COCO file.",
     )
-    e.add_argument("model", metavar="RUN_OR_MODEL")
+    e.add_argument("model", metavar="RUN_OR_MODEL", help="a run folder or its model.pt")
     _data_args(e)
     e.add_argument("-o", "--out", help="folder for metrics.json and pr_curves.png")
     r = cls(
@@ -136,7 +143,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Detect objects in IMAGE... and draw boxes, labels and scores to "
         f"OUT/NAME.png. {OUTPUT_NAMES_HELP}.",
     )
-    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument("images", nargs="+", metavar="IMAGE", help="images to detect objects in")
     prediction_args(r, "detect", scores="detections", tiling=True)
     r.add_argument("-o", "--out", help="folder for the pictures")
     device_arg(r)
@@ -145,7 +152,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         action="store_true",
         help='print {"model": LINE, "warnings": [...], "results": [COCO results]}',
     )
-    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--quiet", action="store_true", help="no progress on stderr")
     for p in (e, r):  # the views of nn.detection.tta.TTA_VIEWS (torch is not imported here)
         p.add_argument(
             "--tta",

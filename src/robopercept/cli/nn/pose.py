@@ -88,9 +88,17 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         "(validation split) and samples.png.",
     )
     _data_args(t)
-    t.add_argument("--model", choices=POSE_CLI_MODELS, default="hrnet", help="default hrnet")
-    t.add_argument("--epochs", type=positive_int, default=20, help="default 20")
-    t.add_argument("--batch-size", type=positive_int, default=32, help="default 32")
+    t.add_argument(
+        "--model",
+        choices=POSE_CLI_MODELS,
+        default="hrnet",
+        help="HRNet (high-resolution heatmaps), SimpleBaseline (heatmap), or DeepPose "
+        "(joint coordinates regressed, --stages refinements) (default hrnet)",
+    )
+    t.add_argument("--epochs", type=positive_int, default=20, help="most epochs (default 20)")
+    t.add_argument(
+        "--batch-size", type=positive_int, default=32, help="images per step (default 32)"
+    )
     t.add_argument("--lr", type=float, default=3e-3, help="AdamW learning rate (default 3e-3)")
     t.add_argument("--width", type=positive_int, default=16, help="network width (default 16)")
     t.add_argument(
@@ -105,7 +113,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="PCK and COCO keypoint AP of a trained pose network (RUN folder or "
         "model.pt) on the validation split of the figures or on every person of a COCO file.",
     )
-    e.add_argument("model", metavar="RUN_OR_MODEL")
+    e.add_argument("model", metavar="RUN_OR_MODEL", help="a run folder or its model.pt")
     _data_args(e)
     e.add_argument("--no-flip", action="store_true", help="without the flip test")
     e.add_argument("-o", "--out", help="folder for metrics.json")
@@ -114,7 +122,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Find one person's joints in each IMAGE and write OUT/NAME.png. "
         f"{OUTPUT_NAMES_HELP}.",
     )
-    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument("images", nargs="+", metavar="IMAGE", help="images of one person each")
     prediction_args(r, "pose", scores="joints drawn", tiling=False)
     r.add_argument("-o", "--out", help="folder for the pictures")
     r.add_argument("--lift3d", action="store_true", help="also the 3-D pose (by matching)")
@@ -126,7 +134,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         action="store_true",
         help='print {"model": LINE, "warnings": [...], "results": [keypoints (and 3-D)]}',
     )
-    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return {"train": t, "eval": e, "images": r}
 
 

@@ -90,10 +90,20 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         "metrics.json (validation split), samples.png and the checkpoints.",
     )
     _data_args(t)
-    t.add_argument("--task", choices=("semantic", "instance"), default="semantic")
-    t.add_argument("--model", choices=SEGMENT_MODELS, default=None, help="default unet / maskrcnn")
-    t.add_argument("--epochs", type=positive_int, default=20, help="default 20")
-    t.add_argument("--batch-size", type=positive_int, default=8, help="default 8")
+    t.add_argument(
+        "--task",
+        choices=("semantic", "instance"),
+        default="semantic",
+        help="a class per pixel, or a mask per object",
+    )
+    t.add_argument(
+        "--model",
+        choices=SEGMENT_MODELS,
+        default=None,
+        help="the network (default unet for --task semantic, maskrcnn for instance)",
+    )
+    t.add_argument("--epochs", type=positive_int, default=20, help="most epochs (default 20)")
+    t.add_argument("--batch-size", type=positive_int, default=8, help="images per step (default 8)")
     t.add_argument("--lr", type=float, default=2e-3, help="AdamW learning rate (default 2e-3)")
     t.add_argument("--width", type=positive_int, default=16, help="network width (default 16)")
     run_folder_args(t)
@@ -102,7 +112,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Scores of a trained segmenter (RUN folder or model.pt) on the validation "
         "split of a built-in set.",
     )
-    e.add_argument("model", metavar="RUN_OR_MODEL")
+    e.add_argument("model", metavar="RUN_OR_MODEL", help="a run folder or its model.pt")
     _data_args(e)
     e.add_argument("-o", "--out", help="folder for metrics.json")
     r = cls(
@@ -110,7 +120,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         description="Segment IMAGE... and write OUT/NAME.png (overlay) and "
         f"OUT/NAME_labels.png. {OUTPUT_NAMES_HELP}.",
     )
-    r.add_argument("images", nargs="+", metavar="IMAGE")
+    r.add_argument("images", nargs="+", metavar="IMAGE", help="images to segment")
     prediction_args(r, "segment", scores="instances", tiling=True)
     r.add_argument("-o", "--out", help="folder for the pictures and label PNGs")
     device_arg(r)
@@ -119,7 +129,7 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         action="store_true",
         help='print {"model": LINE, "warnings": [...], "results": [COCO results, RLE masks]}',
     )
-    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--quiet", action="store_true", help="no progress on stderr")
     return {"train": t, "eval": e, "images": r}
 
 
