@@ -37,6 +37,19 @@ the manifest is written: the items done are kept, the others recorded ``failed``
 the reason, and ``resume`` finishes them. A Ctrl-C at any point, the cluster's start
 included, records every item not done ``cancelled``.
 
+Nothing of Dask reaches the terminal: while a batch runs, the log lines of Dask
+(scheduler, nannies, client, and workers in this process) go to ``OUT/batch.log``
+(:data:`LOG`, appended to by each run) with this module's own lines (the run's start
+and end, each failed attempt with the item's traceback); the worker processes of a
+local cluster write theirs there too (``Compute Failed`` and its traceback), from their
+start. The terminal (stderr) shows the progress bar and one line per failed item,
+``batch JOB: ITEM (INPUT) failed: ERROR`` with the error as the manifest records it.
+The worker processes of a local cluster never see a Ctrl-C: the terminal sends it to
+the whole process group, and the workers are started with SIGINT blocked, so this
+process alone stops the batch and closes them (no ``KeyboardInterrupt`` traceback from
+each; the command prints its one ``interrupted`` line). The workers of a cluster
+reached by address keep their own logs.
+
 Wall time of a batch of :math:`n` items on :math:`w` workers, each item taking
 :math:`t` seconds, is about
 
@@ -48,29 +61,35 @@ and :math:`c` the per-item scheduling overhead (``docs/scale.md`` has measured v
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import glob
 import ipaddress
 import json
+import logging
 import os
 import re
 import reprlib
 import shutil
+import signal
+import sys
+import threading
 import time
 import warnings
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from robopercept.errors import ArgumentError, FileFormatError, InputError, RoboperceptError
-from robopercept.fileio import atomic_write, read_json
+from robopercept.fileio import atomic_write, read_json, write_error
 from robopercept.imaging.io import IMAGE_EXTENSIONS
 
 __all__ = [
     "IMAGE_SUFFIXES",
     "JOBS",
     "JOB_OPTIONS",
+    "LOG",
     "MANIFEST",
     "MAX_OUTPUTS",
     "MAX_WORKERS",
@@ -109,6 +128,11 @@ JOBS = tuple(JOB_OPTIONS)
 REQUIRED = {"stereo": ("max_disparity",), "nn-predict": ("model",)}
 #: the manifest's file name inside ``OUT``
 MANIFEST = "batch.json"
+#: the log's file name inside ``OUT``: the Dask scheduler's, nannies' and local
+#: workers' log lines (``Compute Failed`` and its traceback among them), this
+#: process's Dask client lines, and one line per run, per failed attempt (with the
+#: item's traceback) and per interruption; appended to by every run (``--resume``)
+LOG = "batch.log"
 #: an item's states in the manifest
 STATUSES = ("pending", "ok", "failed", "skipped", "cancelled")
 #: files an image job takes from a folder
@@ -370,7 +394,8 @@ def find_inputs(job: str, inputs: Iterable[str | os.PathLike[str]]) -> list[Path
 
 def item_names(paths: Sequence[str | os.PathLike[str]]) -> list[str]:
     """One folder name per input: its file name without the suffix (a folder's name),
-    made unique with ``_2``, ``_3``, ... in the order given.
+    made unique with ``_2``, ``_3``, ... in the order given (and never :data:`MANIFEST`
+    or :data:`LOG`, the batch's own files).
 
     Parameters
     ----------
@@ -392,7 +417,7 @@ def item_names(paths: Sequence[str | os.PathLike[str]]) -> list[str]:
         base = (path.stem if path.suffix else path.name) or "item"
         base = base.replace(os.sep, "_").lstrip(".") or "item"
         name, k = base, 1
-        while name in taken or name == MANIFEST:
+        while name in taken or name in (MANIFEST, LOG):
             k += 1
             name = f"{base}_{k}"
         taken.add(name)
@@ -986,7 +1011,8 @@ def local_cluster(workers: int = 2) -> Any:
     ``workers`` processes of one thread each, no dashboard, worker logs at ERROR only,
     started with :data:`WORKER_CONFIG` (``MALLOC_TRIM_THRESHOLD_`` unset,
     ``NUMBA_NUM_THREADS=1`` in the workers; this process's environment is left as it
-    was). Close it (``close()`` or a ``with`` block) when done.
+    was). Close it (``close()`` or a ``with`` block) when done. (:func:`run_batch`
+    starts it with the workers' logs in ``OUT/batch.log`` and SIGINT blocked in them.)
 
     Parameters
     ----------
@@ -1044,11 +1070,227 @@ def _check_worker_env(client: Any) -> None:
         )
 
 
-def _connect(scheduler: str, workers: int, connect_timeout: float) -> tuple[Any, Any]:
-    """``(client, cluster)``: a new :func:`local_cluster` (cluster not None) or a client
-    of the cluster at ``scheduler``."""
-    import signal
+#: this module's log lines (a run's start and end, each failed attempt): into
+#: ``OUT/batch.log`` while a batch runs
+_log = logging.getLogger(__name__)
+#: the loggers of Dask and its stack whose lines go to ``OUT/batch.log`` instead of the
+#: terminal while a batch runs, with the levels Dask's own logging set-up gives them
+_DASK_LOGGERS = {
+    "distributed": "INFO",
+    "distributed.client": "WARNING",
+    "distributed.gc": "WARNING",
+    "tornado": "CRITICAL",
+    "tornado.application": "ERROR",
+    "bokeh": "ERROR",
+    "asyncio": "WARNING",
+}
+#: the environment variable that carries the workers' logging configuration (Dask
+#: reads ``DASK_*`` variables as configuration when a worker process imports it)
+_WORKER_LOGGING_ENV = "DASK_DISTRIBUTED__LOGGING"
 
+
+def _log_format() -> str:
+    import dask
+
+    return str(dask.config.get("distributed.admin.log-format"))
+
+
+def _file_handler(path: Path) -> logging.Handler:
+    """A handler appending to ``path``, with Dask's log format.
+
+    A :class:`logging.handlers.MemoryHandler` of capacity 1 in front of a
+    :class:`logging.FileHandler`: each record is written at once, and the handler is
+    no :class:`logging.StreamHandler`, whose level a cluster's ``silence_logs`` sets
+    to ERROR (``distributed.utils.silence_logging_cmgr``), which would keep the INFO
+    lines out of the file."""
+    import logging.handlers
+
+    file = logging.FileHandler(path, mode="a", encoding="utf-8", delay=True)
+    file.setFormatter(logging.Formatter(_log_format()))
+    # a log line that cannot be written (a full disk) is lost, not a traceback on the
+    # terminal; the manifest's own write reports the disk
+    file.handleError = lambda record: None  # type: ignore[method-assign]
+    return logging.handlers.MemoryHandler(1, flushLevel=logging.DEBUG, target=file)
+
+
+def _check_log(path: Path) -> None:
+    """Refuse a log ``path`` that is not a file this process can append to (a folder,
+    a link: a resumed batch's own log is appended to) before anything runs."""
+    if path.is_symlink() or (os.path.lexists(path) and not path.is_file()):
+        raise InputError(
+            f"{path}: exists and is not a file (a batch appends its log to {LOG}): "
+            "remove it, or choose another output folder"
+        )
+    try:
+        with open(path, "a", encoding="utf-8"):
+            pass
+    except OSError as exc:
+        raise write_error(path, exc) from None
+
+
+def _is_console(handler: logging.Handler) -> bool:
+    """A handler that writes to a stream (the terminal: stderr or stdout), not a file."""
+    return isinstance(handler, logging.StreamHandler) and not isinstance(
+        handler, logging.FileHandler
+    )
+
+
+@contextlib.contextmanager
+def _logs_to(path: Path) -> Iterator[None]:
+    """Inside the block, the log lines of Dask (:data:`_DASK_LOGGERS`: the scheduler and
+    nannies of a local cluster, workers in this process, the client) and of this
+    module go to the file ``path`` (appended to), not the terminal: their console
+    handlers are taken off and their lines do not propagate to the root logger's.
+    Other handlers (a file a user set up) stay. Everything is put back on leaving."""
+    handler = _file_handler(path)
+    saved = []
+    for name in (*_DASK_LOGGERS, __name__):
+        logger = logging.getLogger(name)
+        saved.append((logger, list(logger.handlers), logger.propagate, logger.level))
+        keep = [h for h in logger.handlers if not _is_console(h)]
+        if "." in name and name != __name__:  # its lines reach its parent's handlers
+            logger.handlers = keep
+        else:
+            logger.handlers = [*keep, handler]
+            logger.propagate = False
+    logging.getLogger(__name__).setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        for logger, handlers, propagate, level in saved:
+            logger.handlers = handlers
+            logger.propagate = propagate
+            logger.level = level
+        handler.close()  # flushes and closes the file
+        target = getattr(handler, "target", None)
+        if target is not None:
+            target.close()
+
+
+def _worker_log_config(path: Path) -> dict[str, Any]:
+    """The Dask configuration that sends the log lines of the local workers' processes
+    (from their start: the ``Compute Failed`` lines and tracebacks, and any library's
+    warnings logged there) to ``path``, appended to, instead of the terminal.
+
+    Dask configures a process's logging from ``distributed.logging`` when the process
+    imports it (``distributed.config.initialize_logging``), and reads ``DASK_*``
+    environment variables as configuration; the nanny puts
+    ``distributed.nanny.pre-spawn-environ`` into the environment of each worker process
+    it spawns. So the configuration is a :func:`logging.config.dictConfig` dictionary
+    in ``DASK_DISTRIBUTED__LOGGING`` there: :data:`_DASK_LOGGERS`' levels and a root
+    handler appending to the file (:func:`_file_handler`'s pair). Empty when the user
+    configured Dask's logging already (``distributed.logging-file-config`` or that
+    variable): theirs is kept."""
+    import dask
+
+    if _WORKER_LOGGING_ENV in os.environ or dask.config.get(
+        "distributed.logging-file-config", None
+    ):
+        return {}
+    config = {
+        "version": 1,
+        "disable_existing_loggers": False,
+        "formatters": {"dask": {"format": _log_format()}},
+        "handlers": {
+            "file": {
+                "class": "logging.FileHandler",
+                "filename": os.fspath(path.resolve()),
+                "mode": "a",
+                "encoding": "utf-8",
+                "delay": True,
+                "formatter": "dask",
+            },
+            "batch": {
+                "class": "logging.handlers.MemoryHandler",
+                "capacity": 1,
+                "flushLevel": "DEBUG",
+                "target": "file",
+            },
+        },
+        "loggers": {name: {"level": level} for name, level in _DASK_LOGGERS.items()},
+        "root": {"level": "WARNING", "handlers": ["batch"]},
+    }
+    return {f"distributed.nanny.pre-spawn-environ.{_WORKER_LOGGING_ENV}": repr(config)}
+
+
+def _without_sigint(start: Callable[[], Any], then: contextlib.ExitStack | None = None) -> Any:
+    """``start()`` run in a helper thread that blocks SIGINT; its result or exception.
+
+    A thread starts with its creator's signal mask and a process with the mask of the
+    thread that spawned it, kept across ``exec``. So the threads ``start()`` creates
+    (a local cluster's event loop, which spawns the worker processes) and those
+    processes have SIGINT blocked: a Ctrl-C at the terminal, which the terminal sends
+    to the whole process group, reaches this process alone, which stops the batch and
+    closes the cluster in order, instead of interrupting each worker (a
+    ``KeyboardInterrupt`` traceback from each, and ``Nanny failed to start`` when the
+    cluster was starting). The calling thread keeps SIGINT: a first Ctrl-C during the
+    start is handled by the caller (:class:`StopSignals` records it and the start
+    goes on); one that raises (a second) returns at once, the cluster is closed when
+    its start ends, and only then ``then`` (the batch's log file, which the closing
+    cluster still writes to: its callbacks move to the helper thread). Without
+    ``signal.pthread_sigmask`` (Windows) ``start()`` runs here.
+
+    The first multiprocessing queue of a process starts multiprocessing's resource
+    tracker, and ``multiprocessing.resource_tracker.ensure_running`` ends by
+    *unblocking* SIGINT and SIGTERM in the thread that started it (CPython 3.11 here),
+    which would be the cluster's event loop: so the tracker is started first, from the
+    calling thread."""
+    if not hasattr(signal, "pthread_sigmask"):
+        return start()
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
+    lock = threading.Lock()
+    box: dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            value = start()
+        except BaseException as exc:  # handed to the caller
+            value = None
+            box["error"] = exc
+        with lock:
+            box["value"] = value
+            abandoned = box.get("abandoned")
+        if abandoned is not None:
+            _close_quietly(value)
+            abandoned.close()
+
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        thread = threading.Thread(target=run, name="robopercept batch: cluster start", daemon=True)
+        thread.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+    try:
+        thread.join()
+    except BaseException:
+        with lock:
+            if "value" not in box:  # still starting: the helper closes it, then ``then``
+                box["abandoned"] = then.pop_all() if then is not None else contextlib.ExitStack()
+        if "abandoned" not in box:
+            _close_quietly(box["value"])
+        raise
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
+def _close_quietly(cluster: Any) -> None:
+    """Close an abandoned ``cluster`` (None: nothing), whatever its state: the process
+    may be exiting (Dask's own exit handler closing it at the same time), and the
+    batch already ends with the Ctrl-C that abandoned it."""
+    if cluster is not None:
+        with contextlib.suppress(BaseException):
+            cluster.close()
+
+
+def _connect(
+    scheduler: str, workers: int, connect_timeout: float, logs: contextlib.ExitStack
+) -> tuple[Any, Any]:
+    """``(client, cluster)``: a new :func:`local_cluster` (cluster not None) or a client
+    of the cluster at ``scheduler``. ``logs`` (the batch's log file) stays open until
+    a cluster whose start a second Ctrl-C abandoned has closed."""
     from distributed import Client
 
     from robopercept.pipelines.plane_outputs import StopSignals
@@ -1056,9 +1298,10 @@ def _connect(scheduler: str, workers: int, connect_timeout: float) -> tuple[Any,
     if scheduler == "local":
         # a Ctrl-C that interrupts the cluster's start leaves it half-built (its atexit
         # close then fails with a traceback): the first one waits for the start, then
-        # the cluster is closed and KeyboardInterrupt raised; a second one stops at once
+        # the cluster is closed and KeyboardInterrupt raised; a second one stops at once.
+        # The workers never see it (_without_sigint): this process stops them.
         with StopSignals((signal.SIGINT,)) as stop:
-            cluster = local_cluster(workers)
+            cluster = _without_sigint(lambda: local_cluster(workers), logs)
             try:
                 client = Client(cluster)
             except BaseException:
@@ -1149,7 +1392,10 @@ def run_batch(
         The job's options (:data:`JOB_OPTIONS`, :func:`run_item`), checked before the
         cluster starts (a model path, for instance, must exist here).
     progress : bool
-        A progress bar on stderr with items per second.
+        A progress bar on stderr with items per second, and one line per failed item
+        when its last attempt fails (``batch JOB: ITEM (INPUT) failed: ERROR``, the
+        manifest's ``error``). False: nothing on stderr. Dask's log lines go to
+        ``OUT/batch.log`` either way (:data:`LOG`).
     delay : float
         Seconds each item sleeps on its worker before it runs (to watch a batch, or to
         test fault tolerance); 0 by default.
@@ -1157,13 +1403,17 @@ def run_batch(
     Returns
     -------
     BatchResult
-        Also in ``OUT/batch.json``, rewritten atomically after each finished item.
+        Also in ``OUT/batch.json``, rewritten atomically after each finished item;
+        the log in ``OUT/batch.log``.
 
     Raises
     ------
     InputError
-        A bad argument, no input, an ``out`` that exists (refused), or a scheduler
+        A bad argument, no input, an ``out`` that exists (refused), an
+        ``OUT/batch.log`` that is not a file (a folder, a link), or a scheduler
         address that does not answer within ``connect_timeout``.
+    robopercept.fileio.WriteError
+        ``OUT/batch.log`` cannot be appended to (a read-only folder).
     ArgumentError
         A ``scheduler`` of another form than above; ``resume`` of a manifest that
         records another job or other options, or none (the message names
@@ -1216,6 +1466,7 @@ def run_batch(
     if previous is not None:  # checked before anything is written
         _check_resumable(previous, job, opts, out_path / MANIFEST)
     out_path.mkdir(parents=True, exist_ok=True)
+    _check_log(out_path / LOG)
     earlier = {(r["item"], r["input"]): r for r in (previous or {}).get("items", [])}
     records: list[dict[str, Any]] = []
     for name, p in zip(item_names(paths), paths, strict=True):
@@ -1272,20 +1523,33 @@ def run_batch(
         save()
 
     env_before: dict[str, str | None] = {}
+    # Dask's log lines (and the workers' tracebacks) go to OUT/batch.log, not the terminal
+    logs = contextlib.ExitStack()
     try:  # a Ctrl-C while dask loads or the cluster starts cancels every item
         import dask
         from distributed import as_completed
 
         from robopercept.progress import progress_bar
 
+        logs.enter_context(_logs_to(out_path / LOG))
+        _log.info(
+            "robopercept batch %s started: %d items to run of %d, on %s",
+            job, len(todo), len(records),
+            f"{workers} local workers" if scheduler == "local" else scheduler,
+        )  # fmt: skip
+        worker_logs = _worker_log_config(out_path / LOG) if scheduler == "local" else {}
         # Dask's nannies write their pre-spawn variables (OMP_NUM_THREADS=1, ...) into
         # this process's environment: put back what was there when the batch ends
         spawn_keys = set(dask.config.get("distributed.nanny.pre-spawn-environ"))
+        spawn_keys |= {k.rpartition(".")[2] for k in worker_logs}
         env_before = {k: os.environ.get(k) for k in spawn_keys}
-        client, cluster = _connect(scheduler, workers, connect_timeout)
-    except BaseException:
+        with dask.config.set(worker_logs):
+            client, cluster = _connect(scheduler, workers, connect_timeout, logs)
+    except BaseException as exc:
         _restore_env(env_before)
         cancel_pending()
+        _log.info("robopercept batch %s ended before it started: %s", job, _error_text(exc))
+        logs.close()
         raise
     address = (
         "the local Dask scheduler" if cluster is not None else f"the Dask scheduler at {scheduler}"
@@ -1323,19 +1587,29 @@ def run_batch(
                 raise SchedulerGoneError(address)  # finished below
             else:
                 cancelled = fut.status == "cancelled"
+                error = None if cancelled else fut.exception()
                 r["error"] = (
-                    f"the task was cancelled by {address}"
-                    if cancelled
-                    else _error_text(fut.exception())
+                    f"the task was cancelled by {address}" if cancelled else _error_text(error)
                 )
+                _log.error(
+                    "%s (%s): attempt %d of %d failed: %s",
+                    r["item"], r["input"], r["attempts"], retries + 1, r["error"],
+                    exc_info=None if error is None else (type(error), error, _traceback(fut)),
+                )  # fmt: skip
                 if r["attempts"] <= retries:
                     save()
                     submit(i)  # the record stays pending; the bar waits for it
                     continue
                 r.update(status="failed", outputs=[])
+                _say(bar, f"batch {job}: {r['item']} ({r['input']}) failed: {r['error']}")
             save()
             bar.update(1)
             bar.set_postfix(failed=result.count("failed"))
+        _log.info(
+            "robopercept batch %s done in %.1f s: %s",
+            job, time.perf_counter() - t0,
+            ", ".join(f"{result.count(s)} {s}" for s in ("ok", "failed", "skipped")),
+        )  # fmt: skip
     except BaseException as exc:
         gone = isinstance(exc, SchedulerGoneError) or (
             not isinstance(exc, KeyboardInterrupt | SystemExit | RoboperceptError)
@@ -1346,6 +1620,10 @@ def run_batch(
                 fut.cancel()
                 records[i]["status"] = "cancelled"
             cancel_pending()
+            _log.info(
+                "robopercept batch %s stopped (%s): %d items cancelled",
+                job, _error_text(exc), result.count("cancelled"),
+            )  # fmt: skip
             raise
         # the scheduler went away: what finished stays, the rest failed with the reason
         lost = f"SchedulerGoneError: {address} went away before the item finished"
@@ -1355,6 +1633,7 @@ def run_batch(
         save()
         n_done = sum(r["status"] in ("ok", "skipped") for r in records)
         how = "" if isinstance(exc, SchedulerGoneError) else f" ({_error_text(exc)})"
+        _log.error("robopercept batch %s: %s went away mid-batch%s", job, address, how)
         raise SchedulerGoneError(
             f"{address} went away mid-batch{how}: {n_done} of {len(records)} items done "
             f"and kept, the others recorded failed in {out_path / MANIFEST}: start the "
@@ -1363,12 +1642,35 @@ def run_batch(
         ) from None
     finally:
         bar.close()
-        client.close()
-        if cluster is not None:
-            cluster.close()
-        _restore_env(env_before)
+        try:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+        finally:
+            _restore_env(env_before)
+            logs.close()
     save()
     return result
+
+
+def _traceback(fut: Any) -> Any:
+    """The traceback of a failed future (None when Dask has none to give)."""
+    try:
+        return fut.traceback()
+    except Exception:  # the log loses the traceback, the batch goes on
+        return None
+
+
+def _say(bar: Any, line: str) -> None:
+    """Print ``line`` on stderr, above the progress ``bar`` when it is tqdm's."""
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a dependency
+        tqdm = None
+    if tqdm is not None and isinstance(bar, tqdm):
+        tqdm.write(line, file=sys.stderr)
+    elif not getattr(bar, "disable", False):
+        print(line, file=sys.stderr, flush=True)
 
 
 def _restore_env(saved: Mapping[str, str | None]) -> None:
