@@ -9,10 +9,12 @@ from __future__ import annotations
 __all__ = [
     "ArgumentError",
     "DegenerateError",
+    "EmptyResultError",
     "FileFormatError",
     "InputError",
     "NotFittedError",
     "RoboperceptError",
+    "RoboperceptWarning",
     "RunExistsError",
 ]
 
@@ -27,6 +29,22 @@ class InputError(RoboperceptError, ValueError):
     Subclasses :class:`ValueError` so that code written against NumPy or OpenCV
     conventions (``except ValueError``) keeps working.
     """
+
+
+class EmptyResultError(InputError):
+    """Valid arguments that leave nothing to return or write: a filter that removes
+    every point of a cloud, a video too short for the method. Raised before anything is
+    written, so no empty file is left behind; the command line reports it as an error
+    (exit 1). An :class:`InputError`, since the fix is another argument (a wider range,
+    a longer input)."""
+
+
+class RoboperceptWarning(UserWarning):
+    """A result was computed (and written) but looks implausible: a stereo pair that
+    looks swapped, no board found in any frame, a requested snapshot beyond the last
+    frame. The command line shows it as one line, ``robopercept: warning: ...``; in
+    Python, ``warnings.simplefilter("error", RoboperceptWarning)`` turns these into
+    errors."""
 
 
 class ArgumentError(InputError):

@@ -57,12 +57,13 @@ def add_video_arguments(
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def open_source(path: str, args: argparse.Namespace) -> Any:
+def open_source(path: str, args: argparse.Namespace, min_frames: int = 1) -> Any:
     """The :class:`~robopercept.sources.VideoSource` of ``path`` with ``--fps`` and
-    ``--max-frames``."""
+    ``--max-frames``, refused before anything is written when it holds fewer than
+    ``min_frames`` frames."""
     from robopercept.sources import VideoSource
 
-    return VideoSource(path, fps=args.fps, max_frames=args.max_frames)
+    return VideoSource(path, fps=args.fps, max_frames=args.max_frames, min_frames=min_frames)
 
 
 def text_size(image: np.ndarray) -> int:

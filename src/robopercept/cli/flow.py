@@ -216,7 +216,7 @@ def _flow_video(args: argparse.Namespace) -> int:
     from robopercept.motion import KLTTracker
     from robopercept.viz import draw_text, draw_trails, label_colors
 
-    source = open_source(args.inputs[0], args)
+    source = open_source(args.inputs[0], args, min_frames=2)  # tracks need two frames
     output = args.output or "flow.mp4"
     tracker = KLTTracker(
         args.max_corners,

@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from robopercept._checks import check_bool, check_numeric, check_real, plain_repr
-from robopercept.errors import InputError
+from robopercept.errors import InputError, RoboperceptWarning
 from robopercept.geometry import CameraIntrinsics, apply, deproject, project
 from robopercept.geometry.camera import compiled_params, distort_point
 from robopercept.geometry.transforms import check_transform
@@ -61,7 +61,7 @@ PLAUSIBLE_DEPTH_M = (0.1, 20.0)
 _MEDIAN_PIXELS = 1 << 14
 
 
-class DepthScaleWarning(UserWarning):
+class DepthScaleWarning(RoboperceptWarning):
     """A depth image whose median depth is implausible for the depth scale given
     (:data:`PLAUSIBLE_DEPTH_M`); silence it with
     ``warnings.simplefilter("ignore", DepthScaleWarning)``."""

@@ -44,9 +44,23 @@ bracketed, and the match may lie below the range (a pixel whose match left the r
 image, or a background beyond the range). Columns left of the search range take only
 the disparities that stay inside the right image (OpenCV marks the first
 ``numDisparities`` columns invalid instead).
+
+**Swapped images.** A pair given right first has its true disparities negative, outside
+every search range, and the matchers return noise: with the left-right check only part
+of the pixels survive (48.5 % on Middlebury cones by SGM, against 88 %). When fewer
+than :data:`SWAP_CHECK_BELOW` of the pixels are valid (or without the check, always),
+both matchers run a quick test, as an OpenCV user would by trying the other order:
+winner-takes-all SAD matching of the pair reduced to about 128 pixels wide, with a
+left-right check, in both orders (10-60 ms). When the
+exchanged order keeps at least 60 % of the pixels and 30 points more than the given one
+(on the eight Middlebury pairs of the tests the right order keeps 87-99 %, the wrong
+one 5-38 %), they warn with a :class:`~robopercept.errors.RoboperceptWarning` naming
+both shares; the disparities are returned as computed.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numba
 import numpy as np
@@ -62,7 +76,7 @@ from robopercept._checks import (
     check_real,
     check_size,
 )
-from robopercept.errors import DegenerateError, InputError
+from robopercept.errors import DegenerateError, InputError, RoboperceptWarning
 from robopercept.imaging.color import gray_255
 
 __all__ = [
@@ -541,6 +555,77 @@ def _median3(pad, out):  # pragma: no cover - compiled
             out[y, x] = buf[n // 2] if n % 2 == 1 else 0.5 * (buf[n // 2 - 1] + buf[n // 2])
 
 
+#: below this share of valid pixels (left-right check on), the matchers test the order
+SWAP_CHECK_BELOW = 0.7
+
+#: width (pixels) the swap test reduces the pair to
+_SWAP_WIDTH = 128
+
+
+def _order_score(A: np.ndarray, B: np.ndarray, D: int, win: int) -> float:
+    """Share of the pixels of ``A`` (columns ``D..``) whose winner-takes-all SAD match
+    in ``B`` over disparities ``0..D`` lies strictly inside the range and passes a 1-px
+    left-right check."""
+    from scipy.ndimage import uniform_filter
+
+    w = A.shape[1]
+    x = np.arange(w)
+    d = np.arange(D + 1)[:, None]
+    Bp = np.pad(B, ((0, 0), (D, 0)), mode="edge")
+    diff = np.abs(A[None] - Bp[:, x + D - d].transpose(1, 0, 2))  # |A(x) - B(x - d)|
+    cost = uniform_filter(diff, (1, win, win), mode="nearest")
+    cost = np.where((x >= d)[:, None, :], cost, np.inf)
+    dl = cost.argmin(0)
+    j = x + d  # the right pixel x' at disparity d is the left pixel x' + d
+    rc = np.take_along_axis(cost, np.broadcast_to(np.minimum(j, w - 1)[:, None, :], cost.shape), 2)
+    dr = np.where((j < w)[:, None, :], rc, np.inf).argmin(0)
+    back = np.take_along_axis(dr, np.clip(x[None, :] - dl, 0, w - 1), 1)
+    ok = (np.abs(back - dl) <= 1) & (dl > 0) & (dl < D)
+    return float(ok[:, D:].mean())
+
+
+def _order_scores(L: np.ndarray, R: np.ndarray, dmax: int) -> tuple[float, float] | None:
+    """How well the gray pair ``L``, ``R`` (0-255, checked) matches as given and with the
+    images exchanged: :func:`_order_score` of both orders on the pair reduced (block
+    means) to about :data:`_SWAP_WIDTH` pixels wide, disparities ``0..dmax`` scaled; None
+    when the reduced pair is too small to tell (fewer than 3 disparity steps, or a width
+    below 3 times the range). The right order keeps 87-99 % of the pixels on the
+    Middlebury pairs of the tests, the wrong one 5-38 %: true disparities of the wrong
+    order are negative, outside the range (what an OpenCV user checks by running
+    ``StereoSGBM`` on both orders)."""
+    h, w = L.shape
+    s = max(1, min(-(-w // _SWAP_WIDTH), dmax // 8))
+    D = -(-dmax // s)
+    h, w = h // s, w // s
+    if D < 3 or w < 3 * D or h < 5:
+        return None
+    A = L[: h * s, : w * s].reshape(h, s, w, s).mean(axis=(1, 3), dtype=np.float32)
+    B = R[: h * s, : w * s].reshape(h, s, w, s).mean(axis=(1, 3), dtype=np.float32)
+    return _order_score(A, B, D, 5), _order_score(B, A, D, 5)
+
+
+def _warn_if_swapped(
+    L: np.ndarray, R: np.ndarray, dmax: int, disp: np.ndarray, lr_check: float | None
+) -> None:
+    """Warn when the pair looks swapped (module docstring, "Swapped images")."""
+    valid = float(np.isfinite(disp).mean()) if lr_check is not None else None
+    if valid is not None and valid >= SWAP_CHECK_BELOW:
+        return
+    scores = _order_scores(L, R, dmax)
+    if scores is None:
+        return
+    given, exchanged = scores
+    if exchanged >= 0.6 and exchanged - given >= 0.3:
+        shown = "" if valid is None else f"{100 * valid:.1f}% of the pixels valid; "
+        warnings.warn(
+            f"left and right look swapped ({shown}a quick check matches {100 * given:.0f}% "
+            f"of the pixels as given, {100 * exchanged:.0f}% with the two images "
+            "exchanged): pass the left camera's image first (robopercept stereo LEFT RIGHT)",
+            RoboperceptWarning,
+            stacklevel=3,
+        )
+
+
 def _post(disp: np.ndarray, right: np.ndarray, lr_check: float | None, median: bool, dmin: int):
     if lr_check is not None:
         _lr_check(disp, right, float(lr_check))
@@ -666,7 +751,9 @@ def semi_global_matching(
     right_winners = np.empty((h, w), dtype=np.int32)
     _sgm_wta(s, int(min_disparity), float(uniqueness), bool(subpixel), lr_check is not None,
              disp, right_winners)  # fmt: skip
-    return _post(disp, right_winners, lr_check, median, int(min_disparity))
+    disp = _post(disp, right_winners, lr_check, median, int(min_disparity))
+    _warn_if_swapped(L, R, int(max_disparity), disp, lr_check)
+    return disp
 
 
 def disparity_to_depth(disparity: np.ndarray, focal: float, baseline: float) -> np.ndarray:
@@ -1048,4 +1135,6 @@ def block_matching(
     _bm_kernel(Li, Rr, int(min_disparity), r, mode, cols, costs, cints, sl, srr, vl, vrr,
                float(uniqueness), bool(subpixel), lr_check is not None, disp,
                right_winners)  # fmt: skip
-    return _post(disp, right_winners, lr_check, median, int(min_disparity))
+    disp = _post(disp, right_winners, lr_check, median, int(min_disparity))
+    _warn_if_swapped(L, R, int(max_disparity), disp, lr_check)
+    return disp

@@ -17,6 +17,7 @@ import os
 import re
 import struct
 import types
+import warnings
 import zlib
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
@@ -35,7 +36,7 @@ from robopercept._checks import (
     check_real,
     plain_repr,
 )
-from robopercept.errors import FileFormatError, InputError, RoboperceptError
+from robopercept.errors import FileFormatError, InputError, RoboperceptError, RoboperceptWarning
 
 _inflate_lib: types.ModuleType
 _inflate_errors: tuple[type[BaseException], ...]
@@ -1447,6 +1448,9 @@ class SnapshotVideoWriter:
     ``snapshots`` it is also written to ``<stem>_<index:06d>.png`` beside the video
     (``out.mp4`` -> ``out_000025.png``). Closing (also on leaving a ``with`` block after
     an error) completes the video, so what was written before an interruption is kept.
+    A snapshot index that no frame reached (``--snapshot 100`` on a 68-frame video) is
+    named in a :class:`~robopercept.errors.RoboperceptWarning` when the writer is
+    closed normally (not when a ``with`` block is left by an error).
 
     Parameters
     ----------
@@ -1487,19 +1491,64 @@ class SnapshotVideoWriter:
         self.snapshots = {check_int(i, "snapshots (each index)", 0) for i in snapshots}
         self.writer = VideoWriter(self.path, fps=fps)
         self.written: list[str] = []
+        self._saved: set[int] = set()
+        self._last: int | None = None  # the largest index added
+        self._checked = False
 
     def add(self, index: int, picture: np.ndarray) -> None:
         """Append ``picture`` (RGB uint8) to the video; save it too if ``index`` is a
         snapshot."""
         index = check_int(index, "index")
         self.writer.write(picture)
+        self._last = index if self._last is None else max(self._last, index)
         if index in self.snapshots:
             png = self.path.with_name(f"{self.path.stem}_{index:06d}.png")
             write_image(png, picture)
             self.written.append(str(png))
+            self._saved.add(index)
+
+    def missed_snapshots(self) -> list[int]:
+        """The snapshot indices no frame added so far had, in increasing order.
+
+        Examples
+        --------
+        >>> with SnapshotVideoWriter("out.mp4", 25.0, [0, 100]) as out:  # doctest: +SKIP
+        ...     out.add(0, np.zeros((48, 64, 3), np.uint8))
+        >>> out.missed_snapshots()  # doctest: +SKIP
+        [100]
+        """
+        return sorted(self.snapshots - self._saved)
 
     def close(self) -> None:
-        """Complete the video (and list it first in :attr:`written` if it has frames)."""
+        """Complete the video (and list it first in :attr:`written` if it has frames),
+        and warn (:class:`~robopercept.errors.RoboperceptWarning`, once) about the
+        snapshots that no frame reached, such as ``--snapshot 100`` on a 68-frame
+        video."""
+        self._close()
+        self._warn_missed()
+
+    def _warn_missed(self) -> None:
+        """The warning of :meth:`close` (at most once), attributed to the caller of
+        :meth:`close` or to the ``with`` statement."""
+        missed = self.missed_snapshots()
+        if missed and not self._checked:
+            self._checked = True
+            n = self.writer.frames_written
+            which = ", ".join(map(str, missed[:5])) + (", ..." if len(missed) > 5 else "")
+            frames = (
+                "no frame was written"
+                if self._last is None
+                else f"{n} {'frame was' if n == 1 else 'frames were'} written, indices up "
+                f"to {self._last}"
+            )
+            warnings.warn(
+                f"snapshot{'s' if len(missed) > 1 else ''} {which} (--snapshot) not saved: "
+                f"{frames} (snapshots are 0-based frame indices)",
+                RoboperceptWarning,
+                stacklevel=3,
+            )
+
+    def _close(self) -> None:
         self.writer.close()
         if self.writer.frames_written and str(self.path) not in self.written:
             self.written.insert(0, str(self.path))
@@ -1507,5 +1556,8 @@ class SnapshotVideoWriter:
     def __enter__(self) -> SnapshotVideoWriter:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        # after an error or Ctrl-C the missing snapshots are not news: only complete
+        self._close()
+        if exc_type is None:
+            self._warn_missed()

@@ -5,6 +5,12 @@ boxes, voxel grid, statistical outlier removal, RANSAC planes (largest first), E
 clusters of the points left off the planes. Every point ends with a segment label:
 0 unassigned, ``1..P`` the planes, ``P+1..`` the clusters (the PCL tutorial's
 "planar segmentation, then cluster extraction" recipe).
+
+A step that leaves no point at all (a pass-through box beside the cloud, a cloud with
+no finite point) stops the pipeline with an
+:class:`~robopercept.errors.EmptyResultError` naming the step and what the cloud held,
+rather than returning an empty result that would be written as an empty file; clusters
+and planes may find nothing (every point then keeps label 0).
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from robopercept._checks import check_int, check_real, plain_repr
-from robopercept.errors import InputError
+from robopercept.errors import EmptyResultError, InputError
 from robopercept.pointcloud import (
     PointCloud,
     euclidean_clusters,
@@ -73,6 +79,20 @@ def _parts(value: Any, name: str, n: int, form: str) -> tuple[Any, ...]:
     return tuple(value)
 
 
+def _emptied(name: str, box: bool, params: tuple, cloud: PointCloud) -> str:
+    """The message of a filter step ``name`` that removed all points of ``cloud``."""
+    n = len(cloud)
+    if not box:
+        return f"{name} removed all {n} points: nothing is left to process or write"
+    axis, lo, hi = params
+    values = cloud.points[:, "xyz".index(axis)]
+    return (
+        f"{name} (--pass-through {axis}:{lo:g}:{hi:g}) removed all {n} points: the cloud's "
+        f"{axis} spans {values.min():.4g} to {values.max():.4g}; nothing is left to process "
+        "or write: choose a range that overlaps it"
+    )
+
+
 def process_cloud(
     cloud: PointCloud,
     *,
@@ -114,6 +134,24 @@ def process_cloud(
         range (checked before any step runs; named as the steps name them, ``voxel_size``,
         ``k``, ``std_ratio``, ``max_planes``, ``threshold``, ``min_inliers``,
         ``tolerance``, ``min_size``, ``max_size``, ``min_value``, ``max_value``).
+    EmptyResultError
+        ``cloud`` has no finite point, or a filter step removed every point (the message
+        names the step and, for a pass-through box, the cloud's extent along its axis):
+        there is nothing to segment or write. PCL's ``PassThrough`` and Open3D's
+        ``crop`` return the empty cloud instead; here an empty result is always a
+        mistake in the parameters (metres vs millimetres, a swapped range).
+
+    Examples
+    --------
+    >>> from robopercept.pointcloud import PointCloud
+    >>> cloud = PointCloud(np.random.default_rng(0).uniform(0, 1, (100, 3)))
+    >>> res = process_cloud(cloud, boxes=[("z", 0.0, 0.5)])
+    >>> res.steps[1]["points_in"], res.steps[1]["points_out"] > 0
+    (100, True)
+    >>> process_cloud(cloud, boxes=[("z", 5.0, 6.0)])
+    Traceback (most recent call last):
+    ...
+    robopercept.errors.EmptyResultError: pass-through z [5, 6] ... removed all 100 points...
     """
     check_cloud(cloud)
     boxes = [_parts(b, "each pass-through box", 3, "(axis, low, high)") for b in _seq(boxes)]
@@ -147,6 +185,13 @@ def process_cloud(
     n_read = len(cloud)
     cloud = cloud.finite()
     step("read", n_read, len(cloud), t0, nonfinite_dropped=n_read - len(cloud))
+    if len(cloud) == 0:
+        raise EmptyResultError(
+            f"the cloud holds no finite point ({n_read} read, {n_read} not finite): nothing "
+            "to process or write"
+            if n_read
+            else "the cloud holds no point: nothing to process or write"
+        )
     filters: list[tuple[str, Any, tuple]] = [
         (f"pass-through {a} [{lo:g}, {hi:g}]", pass_through, (a, lo, hi)) for a, lo, hi in boxes
     ]
@@ -156,8 +201,11 @@ def process_cloud(
         filters.append((f"sor k={sor[0]} std={sor[1]:g}", statistical_outlier_removal, sor))
     for name, fn, params in filters:
         t0, n = time.perf_counter(), len(cloud)
-        cloud, _ = fn(cloud, *params)
-        step(name, n, len(cloud), t0)
+        kept, _ = fn(cloud, *params)
+        step(name, n, len(kept), t0)
+        if len(kept) == 0:
+            raise EmptyResultError(_emptied(name, fn is pass_through, params, cloud))
+        cloud = kept
 
     segment = np.zeros(len(cloud), dtype=np.int64)
     planes_out: list[dict[str, Any]] = []

@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from robopercept._checks import plain_repr
-from robopercept.errors import InputError, RoboperceptError
+from robopercept.errors import InputError, RoboperceptError, RoboperceptWarning
 from robopercept.fileio import WriteError, atomic_path, atomic_write, write_error
 from robopercept.geometry import apply, project
 from robopercept.imaging.io import VideoWriter
@@ -115,7 +115,8 @@ def annotate_frame(
     frame: RGBDFrame, result: PlaneTrackResult, extent: np.ndarray | None = None
 ) -> np.ndarray:
     """The colour image with the board's inliers (magenta), the tracked plane's outline
-    (yellow) and normal (cyan) and a status line.
+    (yellow) and normal (cyan) and a status line (with "no board found" when no plane
+    was measured in the frame).
 
     Parameters
     ----------
@@ -158,7 +159,9 @@ def annotate_frame(
         img = draw_lines(img, seg, color=(255, 220, 0), width=3)
         arrow = project(apply(T, np.array([center, center - 0.2 * n])), kc)
         img = draw_lines(img, arrow.reshape(1, 4), color=(0, 220, 255), width=3)
-    text = f"frame {result.index}  {result.status}  inliers {result.inliers}"
+    text = f"frame {result.index}  {result.status}  " + (
+        f"inliers {result.inliers}" if result.measured else "no board found"
+    )
     if np.isfinite(d):
         text += f"  n=({n[0]:+.3f}, {n[1]:+.3f}, {n[2]:+.3f})  d={d:.3f} m"
     text += f"  {result.ms['total']:.1f} ms"
@@ -588,6 +591,14 @@ def run_plane_tracking(
         timings are the tracker's own work per frame (:attr:`PlaneTrackResult.ms`); the
         wall time covers the source and the outputs too.
 
+    Warns
+    -----
+    RoboperceptWarning
+        No board was found in any frame of a run that was not stopped early: the
+        outputs are written (every row unmeasured) and the warning says whether the
+        board's colour was too rare or its pixels too scattered for a board
+        (``min_points``, ``min_solidity`` of :class:`PlaneTrackerConfig`).
+
     Notes
     -----
     While it runs (from the main thread), SIGINT and SIGTERM are handled by
@@ -674,4 +685,46 @@ def _finish(
     summary = outputs.summary(skipped=n_skipped, wall_seconds=round(wall, 3))
     final = outputs.close(summary.replace(stopped=stopped))
     assert final is not None
+    if final.frames and not final.measured_frames and final.stopped is None:
+        warnings.warn(_no_board_message(outputs.results, tracker.config), RoboperceptWarning,
+                      stacklevel=3)  # fmt: skip
     return final
+
+
+def _no_board_message(results: list[PlaneTrackResult], config: PlaneTrackerConfig) -> str:
+    """One line on a run in which no frame had a board: how many frames, and whether the
+    board's colour was too rare (fewer than ``min_points`` pixels on a plane) or its
+    pixels too scattered (solidity below ``min_solidity``), with the flags to check.
+
+    Examples
+    --------
+    >>> from robopercept.pipelines.plane_tracking import PlaneTrackResult
+    >>> from robopercept.tracking import TrackStatus
+    >>> nan3 = np.full(3, np.nan)
+    >>> r = PlaneTrackResult(0, 0.0, TrackStatus.LOST, False, False, nan3, np.nan, 0, nan3,
+    ...     np.nan, np.nan, np.zeros(0), 1000, 548, {}, np.zeros((0, 3)), solidity=0.009)
+    >>> print(_no_board_message([r, r], PlaneTrackerConfig()))  # doctest: +NORMALIZE_WHITESPACE
+    no board found in any of the 2 frames: the board-coloured pixels are scattered specks
+    (548 at most in a frame; the solidity of the best plane's inliers 0.009 at most, a
+    board's is 0.15 or more); check that the board is in view and its colour box
+    (hsv_low, hsv_high; --hsv-low, --hsv-high)
+    """
+    n = len(results)
+    most = max((r.n_green for r in results), default=0)
+    solid = [r.solidity for r in results if np.isfinite(r.solidity)]
+    frames = "the 1 frame" if n == 1 else f"any of the {n} frames"
+    if solid:
+        why = (
+            f"the board-coloured pixels are scattered specks ({most} at most in a frame; "
+            f"the solidity of the best plane's inliers {max(solid):.3g} at most, a "
+            f"board's is {config.min_solidity:g} or more)"
+        )
+    else:
+        why = (
+            f"too few board-coloured pixels ({most} at most in a frame; a board needs "
+            f"{config.min_points} on one plane)"
+        )
+    return (
+        f"no board found in {frames}: {why}; check that the board is in view and its "
+        "colour box (hsv_low, hsv_high; --hsv-low, --hsv-high)"
+    )

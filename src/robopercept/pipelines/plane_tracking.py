@@ -126,6 +126,10 @@ class PlaneTrackResult:
     smoothed : bool
         ``track_normal`` and ``track_d`` are fixed-lag smoothed (:meth:`PlaneTracker.push`)
         rather than filtered from the frames up to this one.
+    solidity : float
+        Solidity of the best plane's inliers in the depth image
+        (:attr:`PlaneMeasurement.solidity`; NaN when no plane had enough inliers): below
+        ``min_solidity`` they were scattered specks and no board was found.
     """
 
     index: int
@@ -145,6 +149,7 @@ class PlaneTrackResult:
     ms: dict[str, float]
     inlier_points: np.ndarray = field(repr=False)
     smoothed: bool = False
+    solidity: float = math.nan
 
     @property
     def detected(self) -> bool:
@@ -324,6 +329,7 @@ class PlaneTracker:
             n_green=m.n_colored,
             ms=ms,
             inlier_points=m.inlier_points,
+            solidity=m.solidity,
         )
 
     def run(self, frames: Iterable[RGBDFrame]) -> Iterator[PlaneTrackResult]:

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from robopercept._checks import as_path, check_int, check_real
-from robopercept.errors import FileFormatError
+from robopercept.errors import EmptyResultError, FileFormatError
 from robopercept.imaging.io import VideoReader, read_image
 
 __all__ = ["IMAGE_EXTENSIONS", "VideoSource"]
@@ -50,6 +50,11 @@ class VideoSource:
         Frame rate; default: the container's for a video, 25 for a folder.
     max_frames : int, optional
         Yield at most this many frames (the first ones).
+    min_frames : int
+        Refuse a source that would yield fewer frames than this (after ``max_frames``):
+        a method that compares frames, such as ``robopercept flow``'s point tracks,
+        passes 2, so a still image (ffmpeg reads a PNG as a one-frame video) or
+        ``--max-frames 1`` is refused before any output is written.
 
     Attributes
     ----------
@@ -68,7 +73,9 @@ class VideoSource:
         No such file or folder, a folder without images, or a video with no decodable
         frame.
     InputError
-        ``fps`` or ``max_frames`` not positive.
+        ``fps`` or ``max_frames`` not positive, ``min_frames`` not an integer >= 1.
+    EmptyResultError
+        Fewer than ``min_frames`` frames (an :class:`InputError` too).
 
     Examples
     --------
@@ -83,7 +90,9 @@ class VideoSource:
         *,
         fps: float | None = None,
         max_frames: int | None = None,
+        min_frames: int = 1,
     ) -> None:
+        min_frames = check_int(min_frames, "min_frames", 1)
         if fps is not None:
             fps = check_real(fps, "fps (--fps)", 0.0, low_inclusive=False)
         if max_frames is not None:
@@ -112,6 +121,16 @@ class VideoSource:
         else:
             raise FileFormatError(f"{self.path}: no such file or folder")
         self.total = total if max_frames is None else min(total, max_frames)
+        if self.total < min_frames:
+            if self.total == total:
+                still = " (a still image?)" if total == 1 and self._video is not None else ""
+                held = f"holds {total} frame{'s' if total != 1 else ''}{still}"
+                fix = f"give a video or a folder of {min_frames} images or more"
+            else:
+                held = f"gives {self.total} frame{'s' if self.total != 1 else ''} with "
+                held += f"max_frames (--max-frames) {max_frames}"
+                fix = f"allow {min_frames} frames or more"
+            raise EmptyResultError(f"{self.path} {held}; at least {min_frames} are needed: {fix}")
 
     def __len__(self) -> int:
         return self.total
