@@ -110,7 +110,9 @@ class DBSCAN(ClusterMixin, Estimator):
         search = _Neighbours(X, eps)
         step = search.chunk
         chunks = range(0, n, step)
-        bar = progress_bar(total=3 * len(chunks), desc="dbscan", disable=not self.progress)
+        bar = progress_bar(
+            total=3 * len(chunks), desc="dbscan", unit="block", disable=not self.progress
+        )
         # pass 1: neighbour counts; the pairs are kept while they fit in the budget so
         # that passes 2 and 3 need no second query
         counts = np.empty(n, dtype=np.int64)

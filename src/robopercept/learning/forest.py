@@ -115,6 +115,7 @@ class _BaseForest(Estimator):
                     pool.map(one, seeds.tolist()),
                     total=n_trees,
                     desc="random forest",
+                    unit="tree",
                     disable=not progress,
                 )
             )

@@ -285,7 +285,7 @@ class HogDetector:
             sizes.append(size)
             size *= scale_step
         boxes, scores = [], []
-        for size in progress_bar(sizes, desc="hog pyramid", disable=not progress):
+        for size in progress_bar(sizes, desc="hog pyramid", unit="scale", disable=not progress):
             scale = ww / size
             level = gray if abs(scale - 1.0) < 1e-9 else _rescale(gray, scale)
             if level.shape[0] < wh or level.shape[1] < ww:
@@ -707,7 +707,7 @@ def _fit_and_mine(
     ``pictures`` (the best windows above -0.5 of each, at most ``max_hard`` a round)."""
     ww, wh = det.window
     det.fit(np.r_[pos, neg], np.r_[np.ones(len(pos)), np.zeros(len(neg))], random_state=seed)
-    for _ in progress_bar(range(rounds), desc="hard negatives", disable=not progress):
+    for _ in progress_bar(range(rounds), desc="hard negatives", unit="round", disable=not progress):
         hard = []
         for pic in pictures:
             found = det.detect(pic, threshold=-0.5, stride=det.cell_size, nms_iou=0.5, max_size=200)

@@ -224,7 +224,9 @@ class MeanShift(ClusterMixin, Estimator):
         active = np.arange(pos.shape[0])
         block = int(max(1, _BLOCK_BYTES // (8 * X.shape[0])))
         n_iter = 0
-        bar = progress_bar(total=max_iter + 1, desc="mean shift", disable=not self.progress)
+        bar = progress_bar(
+            total=max_iter + 1, desc="mean shift", unit="iteration", disable=not self.progress
+        )
         for it in range(max_iter + 1):
             if active.size == 0:
                 break

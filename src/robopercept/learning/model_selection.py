@@ -391,7 +391,9 @@ def cross_val_score(
     splitter = _cv(cv, estimator)
     scores = []
     splits = list(splitter.split(X, y_arr))
-    for train, test in progress_bar(splits, desc="cross-validation", disable=not progress):
+    for train, test in progress_bar(
+        splits, desc="cross-validation", unit="fold", disable=not progress
+    ):
         est = clone(estimator)
         if y_arr is None:
             est.fit(X[train])
@@ -476,7 +478,7 @@ class GridSearch:
         """Cross-validate every candidate; the best (first on ties) wins."""
         results = []
         for params in progress_bar(
-            self._candidates(), desc="grid search", disable=not self.progress
+            self._candidates(), desc="grid search", unit="candidate", disable=not self.progress
         ):
             est = clone(self.estimator).set_params(**params)
             scores = cross_val_score(est, X, y, cv=self.cv, scoring=self.scoring)
