@@ -75,8 +75,11 @@ TIMEOUT = 240.0
 #: a fault lands while items are still running
 LAUNCHER = textwrap.dedent(
     """
-    import functools, os, sys
+    import functools, os, signal, sys
     if __name__ == "__main__":
+        # Ctrl-C as from a terminal: a campaign started in the background (`&` in a
+        # shell without job control) has SIGINT ignored, and its children inherit that
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         delay = float(os.environ.get("ROBOPERCEPT_FUZZ_DELAY") or 0)
         if delay:
             import robopercept.pipelines.batch as b
