@@ -797,3 +797,61 @@ def test_recording_attributes_and_bad_paths(tmp_path):
         RealSenseRecording("a\x00.bag")
     with pytest.raises(InputError, match=r"device must be None .* got 3"):
         RealSenseSource(3)  # type: ignore[arg-type]
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("record", [0, 1, 2])
+def test_a_lying_record_length_is_refused_before_rosbags_allocates_it(tmp_path, record):
+    """A top-level record whose header length says 0x7fffffff (rosbags would allocate
+    2 GiB to read it; found by the fuzz campaign) is a FileFormatError naming the record,
+    with at most a few MiB allocated."""
+    import tracemalloc
+
+    if not BAG.exists():
+        pytest.skip(f"{BAG} is not there")
+    data = bytearray(BAG.read_bytes())
+    pos = 13
+    for _ in range(record):  # skip whole records: header length, header, data length, data
+        n = int.from_bytes(data[pos : pos + 4], "little")
+        pos += 4 + n
+        n = int.from_bytes(data[pos : pos + 4], "little")
+        pos += 4 + n
+    data[pos : pos + 4] = (0x7FFFFFFF).to_bytes(4, "little")
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        with pytest.raises(FileFormatError, match=f"top-level record {record} says"):
+            RealSenseSource(str(bad))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 * 2**20
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("new_id", [0, 4, 6, 255])
+def test_a_changed_connection_id_gives_frames_or_a_file_format_error(tmp_path, new_id):
+    """A top-level record whose ``conn`` field names another connection (found by the
+    fuzz campaign: ``KeyError: 5`` escaped) reads as frames or a FileFormatError."""
+    if not BAG.exists():
+        pytest.skip(f"{BAG} is not there")
+    data = bytearray(BAG.read_bytes())
+    pos, changed = 13, 0
+    while pos < len(data):
+        start, n = pos + 4, int.from_bytes(data[pos : pos + 4], "little")
+        header = bytes(data[start : start + n])
+        at = header.find(b"conn=")
+        if at >= 0 and b"op=\x04" in header:  # an index record: change its connection
+            data[start + at + 5 : start + at + 9] = new_id.to_bytes(4, "little")
+            changed += 1
+        pos = start + n
+        pos += 4 + int.from_bytes(data[pos : pos + 4], "little")
+    assert changed
+    bad = tmp_path / "bad.bag"
+    bad.write_bytes(bytes(data))
+    try:
+        frames = list(RealSenseSource(str(bad), timeout=0.5, max_frames=20))
+    except FileFormatError:
+        return
+    assert all(f.depth.shape == (480, 640) for f in frames)

@@ -76,6 +76,7 @@ from robopercept.sources.frames import RGBDFrame
 __all__ = [
     "MAX_BAG_CHUNK",
     "RealSenseRecording",
+    "check_bag_records",
     "pair_nearest_color",
     "rgb_from",
 ]
@@ -364,9 +365,49 @@ def _quick_check(path: Path) -> None:
         raise FileFormatError(f"{path}: corrupt SQLite recording: {check[0][0]} ({_CORRUPT})")
 
 
+def check_bag_records(path: Path) -> None:
+    """Walk the top-level records of a ROS 1 bag (``#ROSBAG V2.0``, then records of a
+    4-byte header length, the header, a 4-byte data length and the data), checking each
+    length against the bytes left in the file, before rosbags reads them: rosbags
+    allocates what a header length says (2 GiB for a lying 0x7fffffff). Reads 8 bytes
+    a record; a bag has a few dozen top-level records (chunks, connections, indices).
+
+    Raises
+    ------
+    FileFormatError
+        A length that runs past the end of the file, naming the record and its offset.
+    """
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        pos = len(fh.read(13))  # the version line; rosbags checks its text
+        record = 0
+        while pos < size:
+            for part in ("header", "data"):
+                word = fh.read(4)
+                if len(word) < 4:
+                    raise FileFormatError(
+                        f"{path}: top-level record {record} at byte {pos} is cut short "
+                        f"(its {part} length); the recording is truncated or corrupt "
+                        f"({_CORRUPT})"
+                    )
+                n = int.from_bytes(word, "little")
+                pos += 4
+                if n > size - pos:
+                    raise FileFormatError(
+                        f"{path}: top-level record {record} says its {part} holds {n} "
+                        f"bytes at byte {pos}, but only {size - pos} are left; the "
+                        f"recording is truncated or corrupt ({_CORRUPT})"
+                    )
+                pos += n
+                fh.seek(pos)
+            record += 1
+
+
 def _open(path: Path, ros1: bool) -> Any:
     """An open rosbags reader of ``path``."""
     reader: Any
+    if ros1:
+        check_bag_records(path)
     with _reading(path, "opening it"):
         if ros1:
             from rosbags.rosbag1 import Reader
@@ -602,7 +643,7 @@ class RealSenseRecording:
         store = _typestore(self.ros1)
         messages = iter(reader.messages(conns)) if conns else iter(())
         for conn, _, raw in _guarded(self.path, messages):
-            if conn.id in seen:
+            if conn.id in seen or conn.id not in wanted:  # a damaged index's other topic
                 continue
             seen.add(conn.id)
             s, role = wanted[conn.id]
@@ -775,6 +816,8 @@ class RealSenseRecording:
             return kind, img.timestamp, img
 
         for conn, bag_time, raw in _guarded(self.path, iter(reader.messages(conns))):
+            if conn.id not in roles:  # a message on a topic not asked for (damaged index)
+                continue
             for kind in [k for k, img in pending.items() if img.bag_time < bag_time]:
                 yield finish(kind)
             kind, role = roles[conn.id]
