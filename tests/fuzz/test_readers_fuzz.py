@@ -368,3 +368,13 @@ def test_pt_content_rewrites_a_checkpoint_it_can_read_back(tmp_path):
     assert any(d.startswith("kind 'fcos' ->") for d in descs)
     assert any("model['0.std'] = 0" in d for d in descs)
     assert any("nan" in d for d in descs) and any("removed" in d for d in descs)
+
+
+def test_db3_with_a_schema_that_is_not_utf8_is_a_file_format_error(box):
+    """Mutant 157 of seed 5 (random bytes in the SQLite schema; found by a readers rerun)
+    made SQLite's integrity check raise UnicodeDecodeError; it is a FileFormatError."""
+    reader = next(r for r in rf.READERS if r.name == "realsense-db3")
+    run = rf.fuzz_reader(reader, box, n=158, seed=5, campaign=True)
+    hit = next(m for m in run.mutants if m.index == 157)
+    assert hit.outcome.kind in ("ok", "typed"), hit.outcome
+    assert run.tally.untyped == 0

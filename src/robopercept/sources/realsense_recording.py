@@ -355,11 +355,13 @@ def _quick_check(path: Path) -> None:
         )
     try:
         con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
+        # its report quotes damaged records, which need not be UTF-8
+        con.text_factory = lambda b: b.decode("utf-8", "replace")
         try:
             check = con.execute("PRAGMA quick_check").fetchall()
         finally:
             con.close()
-    except sqlite3.Error as exc:
+    except (sqlite3.Error, UnicodeDecodeError) as exc:  # a damaged schema need not be UTF-8
         raise FileFormatError(f"{path}: corrupt SQLite recording: {exc} ({_CORRUPT})") from None
     if check != [("ok",)]:
         raise FileFormatError(f"{path}: corrupt SQLite recording: {check[0][0]} ({_CORRUPT})")
