@@ -734,3 +734,52 @@ def test_palette_png_refusals(tmp_path):
         write_image(tmp_path / "x.png", np.zeros((2, 2), np.uint8), palette=[[1, 2]])
     with pytest.raises(InputError, match="mode must be"):
         read_image(rgb, mode="palette")
+
+
+_PROBE_SCRIPT = """
+import sys
+from robopercept.errors import FileFormatError
+from robopercept.imaging import read_image
+for path in sys.argv[1:]:
+    try:
+        read_image(path)
+    except FileFormatError:
+        pass
+    else:
+        raise SystemExit(path + " read")
+print(sorted(m for m in ("cv2", "tifffile") if m in sys.modules))
+"""
+
+
+def test_a_damaged_file_is_not_probed_by_every_imageio_plugin(tmp_path, rng):
+    """A file no decoder reads (one byte, random bytes, a cut JPEG) is refused by the
+    decoder its first bytes name, not by imageio's probe of every plugin, which imported
+    OpenCV and tifffile to try them (7-15 MiB at the first damaged file; found as an
+    over-bound allocation by the readers' fuzz campaign, rgbd-import #345)."""
+    import subprocess
+    import sys
+
+    one = tmp_path / "one.png"
+    one.write_bytes(b"\x89")
+    noise = tmp_path / "noise.jpg"
+    noise.write_bytes(rng.integers(0, 256, 3000, dtype=np.uint8).tobytes())
+    cut = tmp_path / "cut.jpg"
+    write_image(cut, rng.integers(0, 256, (32, 32, 3), dtype=np.uint8))
+    cut.write_bytes(cut.read_bytes()[:40])
+    done = subprocess.run(
+        [sys.executable, "-c", _PROBE_SCRIPT, str(one), str(noise), str(cut)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "[]"
+
+
+def test_tiff_goes_to_tifffile_and_the_rest_to_pillow(tmp_path, rng):
+    img = rng.integers(0, 65535, (12, 10), dtype=np.uint16)
+    write_image(tmp_path / "a.tif", img)
+    assert np.array_equal(read_image(tmp_path / "a.tif"), img)
+    rgb = rng.integers(0, 256, (12, 10, 3), dtype=np.uint8)
+    write_image(tmp_path / "a.bmp", rgb)
+    assert np.array_equal(read_image(tmp_path / "a.bmp"), rgb)

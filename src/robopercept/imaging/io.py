@@ -202,7 +202,10 @@ def _decode_image(p: Path, indexed: bool = False) -> np.ndarray:
 
     PNG goes through :func:`_read_png` (every PNG, so its data is checked against its
     header); a 16-bit PGM/PPM through :func:`_decode_netpbm16`; the rest through imageio
-    once :func:`_check_declared_size` has passed.
+    once :func:`_check_declared_size` has passed, with the plugin named by the file's
+    first bytes (:func:`_imageio_plugin`: tifffile for TIFF, Pillow for the rest), so that
+    a damaged file is never handed to imageio's probe of every plugin (which imports
+    OpenCV and tifffile to try them: megabytes, for a file none of them reads).
 
     Parameters
     ----------
@@ -239,7 +242,23 @@ def _decode_image(p: Path, indexed: bool = False) -> np.ndarray:
         img = _decode_netpbm16(p.read_bytes(), p)
         if img is not None:
             return img
-    return np.asarray(iio.imread(p))
+    return np.asarray(iio.imread(p, plugin=_imageio_plugin(head)))
+
+
+#: the first bytes of a TIFF file (little- and big-endian; BigTIFF has 43 for 42)
+_TIFF_SIGNATURES = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")
+
+
+def _imageio_plugin(head: bytes) -> str:
+    """The imageio plugin that decodes a non-PNG image file starting with ``head``:
+    ``"tifffile"`` for a TIFF signature (``II*\\0``, ``MM\\0*``, BigTIFF's), else
+    ``"pillow"``, which knows JPEG, BMP, PNM, GIF, WebP and more by their own
+    signatures and raises on anything else.
+
+    >>> _imageio_plugin(b"II*\\x00\\x08\\x00"), _imageio_plugin(b"\\xff\\xd8\\xff\\xe0")
+    ('tifffile', 'pillow')
+    """
+    return "tifffile" if head[:4] in _TIFF_SIGNATURES else "pillow"
 
 
 def sample_image_path() -> Path:
