@@ -1233,6 +1233,25 @@ ROLES: dict[str, dict[str, str]] = {
     "sources.write_tum_folder": {"frames": "frames"},
 }
 
+#: work-size parameters: how many images, shapes or figures a data generator makes.
+#: A count in the thousands is a valid request that takes minutes (the work asked for,
+#: not a hang), so their hostile values keep every invalid kind but bring valid counts
+#: down to :data:`~tests.fuzz.strategies.WORK_CAP` (role ``"work"``)
+WORK_SIZES: dict[str, tuple[str, ...]] = {
+    "nn.segmentation.data.segmentation_sets": ("n_images",),
+    "nn.pose.data.procedural_pose_set": ("n_images",),
+    "nn.pose.data.procedural_pose_scenes": ("n_images",),
+    "nn.pose.data.pose_sets": ("images", "val_images", "test_images"),
+    "nn.cloud.synthetic.procedural_shapes": ("n_per_class",),
+    "nn.cloud.run.cloud_sets": ("shapes",),
+    "nn.cloud.run.evaluate_run": ("shapes",),
+    "nn.detection.synthetic.procedural_detection_set": ("n_images",),
+    "nn.detection.synthetic.digits_detection_set": ("n_images",),
+    "nn.detection.synthetic.single_digit_set": ("n_images",),
+}
+for _name, _params in WORK_SIZES.items():
+    ROLES.setdefault(_name, {}).update(dict.fromkeys(_params, "work"))
+
 for _cls in (
     "RandomFlip",
     "RandomCrop",
@@ -1794,7 +1813,8 @@ def role_of(name: str, value: Any, annotation: Any = None) -> str:
     str
         ``"image"`` (2-D or 3-D arrays at least 8x8), ``"points"`` (``(N, 2..4)``
         arrays, N >= 5), ``"array"`` (other arrays: matrices, vectors), ``"scalar"``,
-        ``"flag"``, ``"choice"`` (a string), ``"tuple"`` (up to 4 numbers), ``"sequence"``,
+        ``"work"`` (a work-size count, set by :data:`WORK_SIZES`), ``"flag"``,
+        ``"choice"`` (a string), ``"tuple"`` (up to 4 numbers), ``"sequence"``,
         ``"path"``, ``"cloud"``, ``"tensor"`` (a torch tensor), ``"tensors"`` (a list of
         them), ``"mesh"``, ``"object"``, or ``"fixed"`` (callables: not attacked).
     """
@@ -1883,6 +1903,8 @@ def strategy_for(role: str, like: Any) -> st.SearchStrategy[Any]:
         return hs.hostile_arrays(like=like)
     if role == "scalar":
         return hs.hostile_scalars(like=like)
+    if role == "work":
+        return hs.hostile_work_sizes(like=like)
     if role == "flag":
         return hs.hostile_flags(like)
     if role == "choice":

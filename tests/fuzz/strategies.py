@@ -49,10 +49,12 @@ __all__ = [
     "IMAGE_DTYPES",
     "LAYOUTS",
     "TENSOR_DTYPES",
+    "WORK_CAP",
     "Build",
     "Layout",
     "Recipe",
     "TensorOf",
+    "cap_work",
     "hostile_arrays",
     "hostile_choices",
     "hostile_clouds",
@@ -66,6 +68,7 @@ __all__ = [
     "hostile_sequences",
     "hostile_tensors",
     "hostile_tuples",
+    "hostile_work_sizes",
     "materialize",
 ]
 
@@ -739,6 +742,39 @@ def hostile_scalars(draw: st.DrawFn, like: Any = None) -> Any:
     if pick == 3:
         return draw(st.integers(-(2**64), 2**64))
     return draw(st.sampled_from(HOSTILE_SCALARS))
+
+
+#: the largest amount of work a hostile value may ask of a work-size parameter (a count
+#: of images or shapes a generator makes): a valid request for 10,000 images takes
+#: minutes, which is the work asked for, not a hang
+WORK_CAP = 64
+
+
+def cap_work(value: Any) -> Any:
+    """``value`` with a valid-looking count above :data:`WORK_CAP` (an integer, or an
+    integral float, up to 2**32) brought down to :data:`WORK_CAP`; every other value
+    (negative, zero, NaN, bools, strings, counts of 2**32 and more, which must be
+    refused) unchanged.
+
+    >>> cap_work(9803), cap_work(2**40) == 2**40, cap_work(-1), cap_work(True), cap_work(7.0)
+    (64, True, -1, True, 7.0)
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        return value
+    v = float(value)
+    if math.isfinite(v) and v.is_integer() and WORK_CAP < v < 2**32:
+        return type(value)(WORK_CAP)
+    return value
+
+
+def hostile_work_sizes(like: Any = None) -> st.SearchStrategy[Any]:
+    """:func:`hostile_scalars` for a work-size parameter (``n_images`` of a data
+    generator): the same values, with counts that are valid but large brought down to
+    :data:`WORK_CAP` by :func:`cap_work`, so that a campaign's time limit judges the
+    code rather than the amount of work requested."""
+    return hostile_scalars(like=like).map(cap_work)
 
 
 def hostile_flags(like: Any = None) -> st.SearchStrategy[Any]:

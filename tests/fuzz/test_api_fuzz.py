@@ -213,6 +213,31 @@ def test_tensor_parameters_get_tensor_strategies(planned):
     assert roles["pointcloud.sample_surface"]["mesh"] == "mesh"
 
 
+def test_work_sizes_name_planned_parameters(planned):
+    """Every work-size parameter of api.WORK_SIZES is a planned parameter with role
+    "work", and a plan's other count parameters keep the scalar strategy."""
+    plans, _ = planned
+    roles = {p.name: dict(p.roles) for p in plans}
+    for name, params in api.WORK_SIZES.items():
+        assert name in roles, name
+        for param in params:
+            assert roles[name].get(param) == "work", (name, param)
+    assert roles["nn.detection.synthetic.digits_detection_set"]["max_iou"] == "scalar"
+
+
+def test_hostile_work_sizes_keep_invalid_counts_and_cap_valid_ones():
+    values = _draw(api.strategy_for("work", 2), 500)
+    ints = [v for v in values if isinstance(v, (int, np.integer)) and not isinstance(v, bool)]
+    # no valid count beyond the cap reaches the callable: the time limit judges the code
+    assert not [v for v in ints if hs.WORK_CAP < v < 2**32]
+    assert hs.WORK_CAP in ints  # large draws come as the cap itself
+    reprs = {repr(v) for v in values}
+    for v in (math.nan, -1, 0, None, "3", 2**40, 2**63, True):  # still hostile
+        assert repr(v) in reprs, v
+    floats = [v for v in values if isinstance(v, float) and math.isfinite(v)]
+    assert not [v for v in floats if v.is_integer() and hs.WORK_CAP < v < 2**32]
+
+
 def test_pinned_inputs_name_planned_parameters(planned):
     plans, _ = planned
     roles = {p.name: dict(p.roles) for p in plans}
