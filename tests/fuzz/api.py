@@ -1248,6 +1248,15 @@ WORK_SIZES: dict[str, tuple[str, ...]] = {
     "nn.detection.synthetic.procedural_detection_set": ("n_images",),
     "nn.detection.synthetic.digits_detection_set": ("n_images",),
     "nn.detection.synthetic.single_digit_set": ("n_images",),
+    "nn.detection.run.load_detection_data": ("images",),
+    "nn.detection.run.evaluate_run": ("images",),
+    "nn.segmentation.run.load_segmentation_data": ("images",),
+    "nn.segmentation.run.evaluate_run": ("images",),
+    "nn.pose.run.load_pose_data": ("images",),
+    "nn.pose.run.evaluate_run": ("images",),
+    # passes over the data: samples drawn per epoch, epochs of a small network
+    "nn.segmentation.networks.train_segmenter": ("samples_per_epoch",),
+    "nn.pose.lifting.train_lifter": ("epochs",),
 }
 for _name, _params in WORK_SIZES.items():
     ROLES.setdefault(_name, {}).update(dict.fromkeys(_params, "work"))
@@ -4082,6 +4091,15 @@ PINNED: dict[str, tuple[tuple[str, Any], ...]] = {
         ("stride", 0),
     ),
     "nn.pose.inference.predict_heatmaps": (("images", Layout(np.zeros((0, 32, 32, 3)))),),
+    # the third full campaign (94,246 inputs): untyped errors, typed since
+    "nn.train.distributed.SyncBatchNorm": (("device", Layout(np.eye(3))),),
+    "nn.segmentation.networks.train_segmenter": (
+        ("class_weights", "object"),
+        ("class_weights", [1.0, 2.0, 3.0]),
+        ("class_weights", [1.0, -1.0]),
+    ),
+    "nn.pose.evaluate.evaluate_pose": (("alphas", (0.05, [1, 2], 0.2)),),
+    "nn.cloud.train.save_cloud_model": (("part_classes", float("nan")), ("part_classes", [5])),
 }
 
 

@@ -182,7 +182,7 @@ def check_device(device: Any, name: str = "device") -> torch.device | None:
 
     if device is None:
         return None
-    if device == "auto":
+    if isinstance(device, str) and device == "auto":  # (an array's == is elementwise)
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     choices = "'auto', 'cpu', 'cuda', 'cuda:N' or 'mps'"
     if isinstance(device, torch.device):

@@ -602,7 +602,18 @@ def save_cloud_model(
             f"the network has {spec.num_outputs} outputs; got {len(outputs)} "
             f"{'class' if spec.task == 'classify' else 'part'} names"
         )
-    pcs = [] if part_classes is None else [int(v) for v in np.asarray(part_classes).ravel()]
+    pcs: list[int] = []
+    if part_classes is not None:
+        arr = check_numeric(part_classes, "part_classes").reshape(-1)
+        whole = np.isfinite(arr).all() and bool((arr == np.round(arr)).all())
+        if not whole or ((arr < 0) | (arr >= len(names))).any():
+            raise InputError(
+                f"part_classes must be class indices 0 .. {len(names) - 1}, one per part; "
+                f"got {plain_repr(part_classes)}"
+            )
+        if parts and arr.size != len(parts):
+            raise InputError(f"part_classes must give {len(parts)} classes, one per part name")
+        pcs = [int(v) for v in arr]
     settings = {k: v for k, v in spec.config.items() if k != "num_outputs"}
     return save_built_model(
         path,

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from torch import nn
 
-from robopercept._checks import check_bool, check_real, plain_repr
+from robopercept._checks import check_bool, check_real, check_reals, plain_repr
 from robopercept.errors import InputError
 from robopercept.nn.coco.evaluate import evaluate_detections
 from robopercept.nn.detection.thresholds import ScoreThreshold, f1_threshold
@@ -76,10 +76,12 @@ def evaluate_pose(
     flip : bool
         The flip test (heatmap networks; averaged coordinates for DeepPose).
     alphas : sequence of float
+        PCK thresholds, each > 0 (fractions of the box diagonal).
     skeleton : Skeleton, optional
         Default: the data set's (its flip pairs and sigmas).
     """
     x, kp, boxes = pose_data_arrays(data, "data")
+    alpha_values = check_reals(alphas, "alphas (PCK thresholds)", low=0.0)
     sk = skeleton if skeleton is not None else getattr(data, "skeleton", None)
     if not isinstance(sk, Skeleton):
         raise InputError(f"skeleton must be a Skeleton; got {plain_repr(sk)}")
@@ -91,7 +93,7 @@ def evaluate_pose(
     truth = kp.numpy().astype(np.float64)
     diag = bbox_diagonal(boxes, "xyxy")
     values = {}
-    for a in alphas:
+    for a in alpha_values:
         values[float(a)] = float(pck(pred, truth, None, float(a), diag).mean)
     per_joint = pck(pred, truth, None, 0.1, diag).per_joint
     results: list[Mapping[str, Any]] = [

@@ -36,7 +36,14 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from robopercept._checks import check_bool, check_choice, check_int, check_real, plain_repr
+from robopercept._checks import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_real,
+    check_reals,
+    plain_repr,
+)
 from robopercept.errors import InputError
 from robopercept.nn._guards import MAX_PARAMETERS, check_count
 from robopercept.nn.coco.rle import rle_encode
@@ -672,7 +679,7 @@ def train_segmenter(
     val : (images, masks), optional
     loss : {"ce", "dice", "ce+dice"}
     class_weights : sequence of K floats, optional
-        For the cross entropy.
+        For the cross entropy: one weight >= 0 per class of the network.
     ignore_index : int
     crop : int, optional
         Side of the random training window (at most the image's sides).
@@ -733,7 +740,10 @@ def train_segmenter(
     model.to(dev)
     gen = torch.Generator().manual_seed(cfg.seed)
     k = getattr(model, "num_classes", None)
-    weight = None if class_weights is None else torch.as_tensor(class_weights, dtype=torch.float32)
+    weight = None
+    if class_weights is not None:
+        cw = check_reals(class_weights, "class_weights", k if isinstance(k, int) else None, 0.0)
+        weight = torch.as_tensor(cw, dtype=torch.float32)
     steps = -(-per_epoch // cfg.batch_size)
     params = [p for p in model.parameters() if p.requires_grad]
     opt, sched = step_optimizer(params, cfg, steps)
