@@ -168,6 +168,20 @@ def test_interrupted_run_keeps_its_history_and_resumes(run, tmp_path):
     assert all(torch.equal(a[k], b[k]) for k in a)
 
 
+def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(run, tmp_path, monkeypatch):
+    # the faults campaign's SIGTERM after the last epoch, while model.pt was written
+    from robopercept.nn.cloud import run as cloud_run
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cloud_run, "save_cloud_model", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        train_run("shapes", tmp_path / "part", config=_cfg(), **TINY_RUN)
+    history = json.loads((tmp_path / "part" / "history.json").read_text())
+    assert history["losses"] == run.history.to_dict()["losses"]
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

@@ -187,6 +187,20 @@ def test_train_run_interrupted_keeps_history_and_resumes(run, tmp_path):
     assert res.metrics["stats"] == run.metrics["stats"]
 
 
+def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(run, tmp_path, monkeypatch):
+    # the faults campaign's SIGTERM after the last epoch, while model.pt was written
+    from robopercept.nn.detection import run as det_run
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(det_run, "save_detector", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _tiny(tmp_path / "part")
+    history = json.loads((tmp_path / "part" / "history.json").read_text())
+    assert history["losses"] == run.history.losses
+
+
 def test_train_run_bad_settings(tmp_path):
     with pytest.raises(InputError, match="model"):
         train_run("digits", tmp_path / "r", model="yolo")

@@ -178,6 +178,24 @@ def test_resume_after_ctrl_c_in_the_stages_retrains_them(whole, tmp_path, monkey
     assert res.metrics == whole[1].metrics and len(res.history["stages"]) == 1
 
 
+def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(whole, tmp_path, monkeypatch):
+    # the faults campaign's SIGTERM came after the last epoch, while model.pt was being
+    # written, and left no history.json (Ctrl-C during training leaves it)
+    out = tmp_path / "part"
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(pose_run, "save_pose_model", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            train_run("figures", out, **DATA, **DEEPPOSE)
+    history = json.loads((out / "history.json").read_text())
+    want = whole[1].history
+    assert history["network"]["losses"] == want["network"]["losses"]
+    assert [h["losses"] for h in history["stages"]] == [h["losses"] for h in want["stages"]]
+
+
 # --------------------------------------------------------------------------- eval
 
 

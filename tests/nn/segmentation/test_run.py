@@ -135,6 +135,20 @@ def test_train_run_ctrl_c_keeps_the_epoch_and_resume_ends_as_a_whole_run(run, tm
     assert resumed.metrics == run.metrics
 
 
+def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(run, tmp_path, monkeypatch):
+    # the faults campaign's SIGTERM after the last epoch, while model.pt was written
+    from robopercept.nn.segmentation import run as seg_run
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(seg_run, "save_segmenter", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        train_run("shapes", tmp_path / "part", **RUN)
+    history = json.loads((tmp_path / "part" / "history.json").read_text())
+    assert history["losses"] == json.loads(run.files["history.json"].read_text())["losses"]
+
+
 def test_train_run_takes_loaded_sets(tmp_path):
     sets = load_segmentation_data("shapes", **DATA)
     r = train_run(sets, tmp_path / "r", **{**RUN, "config": TrainConfig(epochs=1, device="cpu")})

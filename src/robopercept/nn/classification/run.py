@@ -464,6 +464,8 @@ def train_run(
             distributed=distributed,
             sync_batchnorm=sync_batchnorm,
         )
+        if _rank(distributed) == 0:  # before the model: a signal while it is saved
+            hist.write_csv(out / "history.csv")  # leaves the history, as during training
     except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the last epoch's history.csv too
         if ckpt.exists() and _rank(distributed) == 0:
             # never hide the interruption or the error behind a damaged checkpoint

@@ -435,6 +435,9 @@ def train_run(
         hist = train_cloud_model(
             net, train, cfg, val=val, progress=progress, checkpoint=ckpt, resume=resume
         )
+        # written before the model: a signal during the model's save must leave the
+        # history as one during training does
+        (out / "history.json").write_text(json.dumps(hist.to_dict(), indent=1))
     except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the history of the last epoch
         _history_so_far(ckpt, stamp, out / "history.json")
         raise
@@ -450,7 +453,6 @@ def train_run(
         shapes=shapes,
         seed=seed,
     )
-    (out / "history.json").write_text(json.dumps(hist.to_dict(), indent=1))
     ev = evaluate_cloud_model(net, test)
     names = list(train.part_names if segment else train.class_names)
     metrics = {

@@ -535,6 +535,18 @@ def train_run(
             val_every=val_every or max(1, cfg.epochs // 10),
             ema=ema,
         )
+        # written before the model: a signal during the model's save must leave the
+        # history as one during training does
+        (out / "history.json").write_text(
+            _history_json(
+                {
+                    "losses": hist.losses,
+                    "seconds": hist.seconds,
+                    "val": hist.val,
+                    "best_epoch": hist.best_epoch,
+                }
+            )
+        )
     except BaseException as exc:
         # Ctrl-C, SIGTERM: keep the history of the complete epochs beside their checkpoint
         if not isinstance(exc, Exception) and (resume or _stamp(ckpt) != before):
@@ -552,16 +564,6 @@ def train_run(
         size=list(size),
         seed=cfg.seed,
         epochs=cfg.epochs,
-    )
-    files["history.json"].write_text(
-        _history_json(
-            {
-                "losses": hist.losses,
-                "seconds": hist.seconds,
-                "val": hist.val,
-                "best_epoch": hist.best_epoch,
-            }
-        )
     )
     ev = evaluate_detector(net, val)
     extra = {"model": model, "data": text, "split": "validation", "best_epoch": hist.best_epoch}

@@ -435,6 +435,9 @@ def train_run(
                 net, train, stages, cfg, val=val, width=width, progress=progress
             )
             history["stages"] = [h.to_dict() for h in stage_hist]
+        # written before the model: a signal during the model's save must leave the
+        # history as one during training does (the faults campaign's SIGTERM did not)
+        _write_json(out / "history.json", history)
     except BaseException:  # Ctrl-C, SIGTERM, a failure: the last epoch is in checkpoint.pt
         partial = _interrupted_history(ckpt, hist)
         if partial is not None:
@@ -444,7 +447,6 @@ def train_run(
     files = {name: out / name for name in RUN_FILES}
     extra = {"data": data, "images": images, "size": list(size), "seed": seed}
     save_pose_model(files["model.pt"], net, model, settings, sk, refiners=refiners, **extra)
-    _write_json(files["history.json"], history)
     ev = evaluate_pose(net, val, refiners=refiners)
     metrics = {
         "model": model,

@@ -683,6 +683,9 @@ def train_run(
                 checkpoint=ckpt,
                 resume=resume,
             )
+        # written before the model: a signal during the model's save must leave the
+        # history as one during training does
+        (out / "history.json").write_text(json.dumps(_history_record(hist, instance), indent=1))
     except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the last epoch's history.json
         if ckpt.exists() and ckpt.stat().st_mtime_ns != before:  # an epoch of this run
             saved = load_checkpoint(ckpt)["history"]
@@ -696,7 +699,6 @@ def train_run(
     else:
         save_segmenter(files["model.pt"], net, name, settings, list(sets.classes), **extra)
     history = _history_record(hist, instance)
-    files["history.json"].write_text(json.dumps(history, indent=1))
     scores = score_segmentation(net, val, device=cfg.device)
     metrics = {
         "model": name,
