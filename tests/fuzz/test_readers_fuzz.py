@@ -281,6 +281,24 @@ def test_bag_with_a_lying_chunk_size_is_refused(box, tmp_path):
     assert (out.kind, out.error) == ("typed", "FileFormatError"), out
 
 
+def test_bag_whose_index_pos_points_into_a_chunk_is_refused_before_allocating(box, tmp_path):
+    """The third full campaign's mutant 324 flipped a bit of the bag header's index_pos:
+    rosbags jumped into a chunk and read its bytes as a 1.8 GiB header length. An
+    index_pos that is not a record's start is a FileFormatError, within the bound."""
+    bag = rf.DATA / "rgbd/realsense_bag/single_depth_color_640x480.bag"
+    if not bag.is_file():
+        pytest.skip(f"real data not available: {bag}")
+    data = bytearray(bag.read_bytes())
+    at = data.index(b"index_pos=") + len(b"index_pos=")
+    index_pos = struct.unpack_from("<Q", data, at)[0]
+    struct.pack_into("<Q", data, at, index_pos - 4096)  # inside the last chunk
+    path = tmp_path / "index_pos_in_a_chunk.bag"
+    path.write_bytes(bytes(data))
+    out = box.run(rf.read_realsense, (str(path),), timeout=15.0)
+    assert (out.kind, out.error) == ("typed", "FileFormatError"), out
+    assert out.peak_mb < 16 and "index starts at byte" in out.message
+
+
 # ------------------------------------------------------- issue 47's format-aware mutations
 
 

@@ -374,16 +374,25 @@ def check_bag_records(path: Path) -> None:
     allocates what a header length says (2 GiB for a lying 0x7fffffff). Reads 8 bytes
     a record; a bag has a few dozen top-level records (chunks, connections, indices).
 
+    The bag header record (the first) says where the index starts (``index_pos``), and
+    rosbags jumps there to read the connection records: that offset must be one of the
+    top-level records' starts, or a damaged ``index_pos`` sends rosbags into the middle
+    of a chunk, whose bytes it reads as lengths (1.8 GiB for one flipped bit).
+
     Raises
     ------
     FileFormatError
-        A length that runs past the end of the file, naming the record and its offset.
+        A length that runs past the end of the file, naming the record and its offset;
+        an ``index_pos`` that is not the start of a record.
     """
     size = path.stat().st_size
+    starts: set[int] = set()
+    index_pos: int | None = None
     with open(path, "rb") as fh:
         pos = len(fh.read(13))  # the version line; rosbags checks its text
         record = 0
         while pos < size:
+            starts.add(pos)
             for part in ("header", "data"):
                 word = fh.read(4)
                 if len(word) < 4:
@@ -400,9 +409,35 @@ def check_bag_records(path: Path) -> None:
                         f"bytes at byte {pos}, but only {size - pos} are left; the "
                         f"recording is truncated or corrupt ({_CORRUPT})"
                     )
+                if record == 0 and part == "header":
+                    index_pos = _bag_index_pos(fh.read(min(n, 4096)))
                 pos += n
                 fh.seek(pos)
             record += 1
+    if index_pos is not None and index_pos not in starts:
+        raise FileFormatError(
+            f"{path}: the bag header says the index starts at byte {index_pos}, where no "
+            f"record starts; the recording is truncated or corrupt ({_CORRUPT})"
+        )
+
+
+def _bag_index_pos(header: bytes) -> int | None:
+    """``index_pos`` of a ROS 1 bag header record's header (fields of a 4-byte length
+    and ``name=value``; the value a little-endian uint64), None when it has none.
+
+    >>> field = b"index_pos=" + (4117).to_bytes(8, "little")
+    >>> _bag_index_pos(len(field).to_bytes(4, "little") + field)
+    4117
+    """
+    at = 0
+    while at + 4 <= len(header):
+        n = int.from_bytes(header[at : at + 4], "little")
+        body = header[at + 4 : at + 4 + n]
+        at += 4 + n
+        name, eq, value = body.partition(b"=")
+        if eq and name == b"index_pos" and len(value) == 8:
+            return int.from_bytes(value, "little")
+    return None
 
 
 def _open(path: Path, ros1: bool) -> Any:
