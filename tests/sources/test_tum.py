@@ -54,6 +54,18 @@ def test_round_trip(tmp_path):
     assert cam["depth"].model == "brown_conrady"
 
 
+def test_a_cut_sequence_keeps_each_frames_truth(tmp_path):
+    """Frames 2 and 3 of a sequence (indices 2, 3) written alone read back as the
+    folder's frames 0 and 1, each with its own plane (the truth was keyed by the
+    scene's index, so a cut sequence read its frames against other frames' planes)."""
+    written = list(frames())[2:]
+    src = TUMFolderSource(write_tum_folder(tmp_path / "cut", written))
+    back = list(src)
+    assert sorted(src.planes) == [1]  # frame 2 has no plane
+    assert "plane" not in back[0].ground_truth
+    assert back[1].ground_truth["plane"][1] == pytest.approx(written[1].ground_truth["plane"][1])
+
+
 def test_association_by_nearest_timestamp(tmp_path):
     folder = write_tum_folder(tmp_path / "seq", frames(3))
     # shift the colour timestamps by 10 ms and drop one colour image from the list

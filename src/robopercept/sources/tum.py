@@ -7,7 +7,8 @@ Layout (the TUM benchmark's, plus two files of ours)::
     rgb/, depth/   the images
     camera.json    {"depth": {"width", "height", "fx", "fy", "cx", "cy", "model", "coeffs"},
                     "color": {same}, "T_color_depth": 4x4 list, "depth_scale": m per unit}
-    planes.csv     optional ground truth: "frame,nx,ny,nz,d" (n . x = d on the plane)
+    planes.csv     optional ground truth: "frame,nx,ny,nz,d" (n . x = d on the plane;
+                   frame: the position in the lists, from 0)
 
 ``robopercept rgbd-import`` (:mod:`robopercept.sources.rgbd_import`) writes this layout
 from other RGB-D folders; docs/tracking.md describes ``camera.json`` field by field.
@@ -451,7 +452,7 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
         writer.writerow(["frame", "nx", "ny", "nz", "d", "board_pixels"])
         wrote_camera = False
         has_planes = False
-        for f in frames:
+        for k, f in enumerate(frames):
             if not isinstance(f, RGBDFrame):
                 raise InputError(f"frames must be RGBDFrame objects; got {type(f).__name__}")
             if not wrote_camera:
@@ -473,7 +474,9 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
             if "plane" in f.ground_truth:
                 n, d = f.ground_truth["plane"]
                 pixels = f.ground_truth.get("valid_board_pixels", "")
-                writer.writerow([f.index, *(f"{v:.9g}" for v in n), f"{d:.9g}", pixels])
+                # the row of the k-th frame written: TUMFolderSource numbers the frames
+                # it reads from 0, whatever index they had (a sequence cut from a scene)
+                writer.writerow([k, *(f"{v:.9g}" for v in n), f"{d:.9g}", pixels])
                 planes.flush()
                 has_planes = True
     if not has_planes:
