@@ -470,3 +470,23 @@ def test_integral_float_sizes_and_numpy_scalars_still_work():
     f = scene.frame(0)
     assert f.depth.shape == (120, 212) and f.color.shape == (180, 320, 3)
     assert scene.depth_size == (212, 120) and type(scene.fps) is float
+
+
+def test_fields_of_view_set_the_focal_lengths():
+    """A Kinect-style 640x480 camera (62 deg for both streams), f = (w / 2) / tan(hfov / 2)."""
+    import math
+
+    from robopercept.errors import InputError
+
+    s = SyntheticRGBDScene(
+        n_frames=1, depth_size=(640, 480), color_size=(640, 480), depth_hfov=62.0, color_hfov=62.0
+    )
+    f = 320 / math.tan(math.radians(31.0))
+    assert s.depth_intrinsics.fx == pytest.approx(f) and s.color_intrinsics.fy == pytest.approx(f)
+    d435 = SyntheticRGBDScene(n_frames=1)
+    assert d435.depth_intrinsics.fx == pytest.approx(424 / math.tan(math.radians(43.5)))
+    frame = s.frame(0)
+    assert frame.depth.shape == (480, 640) and frame.ground_truth["valid_board_pixels"] > 500
+    for bad in (0.5, 180.0, float("nan"), "62"):
+        with pytest.raises(InputError, match="depth_hfov"):
+            SyntheticRGBDScene(n_frames=1, depth_hfov=bad)

@@ -573,6 +573,11 @@ class SyntheticRGBDScene:
         Green things that are not the board, one of :data:`DISTRACTORS`: ``"box"``
         (default, the small green box on the red box), ``"wall"`` (a 0.5 x 0.4 m green
         patch on the back wall), ``"both"`` or ``"none"``.
+    depth_hfov, color_hfov : float
+        Horizontal fields of view of the depth and colour cameras, degrees in (1, 170]
+        (D435: about 87 and 69, the defaults; a Kinect-style 640x480 camera such as
+        TUM's fr1 has about 62 for both). The focal lengths are
+        :math:`f = (w / 2) / \\tan(\\mathrm{hfov} / 2)` with square pixels.
 
     Examples
     --------
@@ -600,6 +605,8 @@ class SyntheticRGBDScene:
     motion: str = "smooth"
     occluder: bool = True
     distractor: str = "box"
+    depth_hfov: float = 87.0
+    color_hfov: float = 69.0
 
     def __post_init__(self) -> None:
         check_int(self.n_frames, "n_frames", 1)
@@ -624,11 +631,17 @@ class SyntheticRGBDScene:
             object.__setattr__(self, name, check_real(getattr(self, name), name, 0.0))
         for name in ("flying_pixel_rate", "dropout_rate"):
             object.__setattr__(self, name, check_real(getattr(self, name), name, 0.0, 1.0))
+        for name in ("depth_hfov", "color_hfov"):
+            object.__setattr__(
+                self,
+                name,
+                check_real(getattr(self, name), name, 1.0, 170.0, low_inclusive=False),
+            )
         wd, hd = self.depth_size
         wc, hc = self.color_size
-        # D435: depth HFOV about 87 deg, colour HFOV about 69 deg; square pixels
-        fd = (wd / 2) / math.tan(math.radians(87.0 / 2))
-        fc = (wc / 2) / math.tan(math.radians(69.0 / 2))
+        # D435 by default: depth HFOV about 87 deg, colour HFOV about 69 deg; square pixels
+        fd = (wd / 2) / math.tan(math.radians(self.depth_hfov / 2))
+        fc = (wc / 2) / math.tan(math.radians(self.color_hfov / 2))
         kd = CameraIntrinsics(wd, hd, fd, fd, (wd - 1) / 2 + 0.3, (hd - 1) / 2 - 0.4)
         kc = CameraIntrinsics(wc, hc, fc, fc, (wc - 1) / 2 - 0.6, (hc - 1) / 2 + 0.5)
         r = rotation_from_rotvec(np.array([0.002, -0.003, 0.001]))
