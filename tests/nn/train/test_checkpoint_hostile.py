@@ -13,6 +13,7 @@ checkpoint intact (R55).
 from __future__ import annotations
 
 import errno
+import io
 import math
 import os
 import signal
@@ -494,3 +495,33 @@ def test_every_cloud_network_round_trips(tmp_path, kind):
     net = build_cloud_model(kind, 2, seed=0, **s)
     p = save_cloud_model(tmp_path / "c.pt", net, ["a", "b"])
     assert type(load_cloud_model(p)[0]) is type(net)
+
+
+class _InterruptedFile(io.FileIO):
+    """A file whose third write is cut by Ctrl-C (or SIGTERM's exception)."""
+
+    def __init__(self, path, mode, stop):
+        super().__init__(path, mode)
+        self.writes, self.stop = 0, stop
+
+    def write(self, b):
+        self.writes += 1
+        if self.writes == 3:
+            raise self.stop
+        return super().write(b)
+
+
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, SystemExit])
+def test_an_interruption_during_the_write_goes_on_as_itself(tmp_path, monkeypatch, stop):
+    """Found by the faults campaign: Ctrl-C while torch.save wrote the checkpoint came out
+    as torch's RuntimeError ("unexpected pos"), so `nn pose train` exited 1, not 130."""
+    from robopercept.nn.train import checkpoint as ck
+
+    path = tmp_path / "c.pt"
+    ck.save_checkpoint(path, {"epoch": 1, "w": torch.zeros(4000)})
+    before = path.read_bytes()
+    monkeypatch.setattr(ck, "open", lambda p, mode: _InterruptedFile(p, mode, stop), raising=False)
+    with pytest.raises(stop):
+        ck.save_checkpoint(path, {"epoch": 2, "w": torch.ones(4000)})
+    assert path.read_bytes() == before  # the last complete checkpoint stays
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.pt"]  # no temporary left

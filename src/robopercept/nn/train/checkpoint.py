@@ -76,8 +76,28 @@ def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path
                 # context of torch's RuntimeError ("unexpected pos ...")
                 torch.save(state, f)
             except RuntimeError as exc:
+                # Ctrl-C or SIGTERM in the middle of the write reaches torch's writer
+                # as an exception of its Python file, which torch reports as "unexpected
+                # pos": the interruption goes on as itself (the faults campaign saw
+                # Ctrl-C end as an error, exit 1)
+                stop = _interruption_behind(exc)
+                if stop is not None:
+                    raise stop from None
                 raise _write_failure(p, exc) from exc
     return p
+
+
+def _interruption_behind(exc: BaseException) -> BaseException | None:
+    """The first ``KeyboardInterrupt`` (or other non-``Exception``: SIGTERM's, a
+    ``SystemExit``) in ``exc``'s chain of causes and contexts, or None."""
+    cause: BaseException | None = exc
+    for _ in range(16):
+        if cause is None:
+            return None
+        if not isinstance(cause, Exception):
+            return cause
+        cause = cause.__cause__ or cause.__context__
+    return None
 
 
 def _write_failure(path: Path, exc: RuntimeError) -> WriteError:
