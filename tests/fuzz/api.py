@@ -3298,6 +3298,7 @@ VALID["nn.train.loop.train_loop"] = {
     "progress": False,
 }
 VALID["nn.train.runs.prepare_run_folder"] = {"out_dir": _out("fuzz_run")}
+VALID["nn.train.runs.check_output_folder"] = {"value": _out("fuzz_eval")}
 VALID["nn.train.runs.write_json"] = {"path": _out("x.json"), "value": {"a": 1}}
 VALID["nn.classification.run.model_summary"] = {
     "model": "vgg_small",
@@ -4100,6 +4101,13 @@ PINNED: dict[str, tuple[tuple[str, Any], ...]] = {
     ),
     "nn.pose.evaluate.evaluate_pose": (("alphas", (0.05, [1, 2], 0.2)),),
     "nn.cloud.train.save_cloud_model": (("part_classes", float("nan")), ("part_classes", [5])),
+    # the fourth (128,109 inputs)
+    "nn.detection.run.evaluate_run": (("out_dir", Fixture("image.png")),),
+    "nn.segmentation.run.evaluate_run": (("out_dir", Fixture("image.png")),),
+    "nn.pose.run.evaluate_run": (("out_dir", Fixture("image.png")),),
+    "nn.cloud.run.evaluate_run": (("out_dir", Fixture("image.png")),),
+    "nn.pose.networks.save_pose_model": (("refiners", 3),),
+    "nn.pose.inference.pose_arrays": (("images", 3),),
 }
 
 

@@ -81,7 +81,7 @@ from robopercept.nn.cloud.train import (
 from robopercept.nn.shipped import BUILD_SHIPPED, SHIPPED_CLOUD_MODELS, shipped_model_path
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import TrainConfig, resolve_device
-from robopercept.nn.train.runs import prepare_run_folder
+from robopercept.nn.train.runs import check_output_folder, prepare_run_folder
 from robopercept.viz import confusion_picture
 
 __all__ = [
@@ -525,9 +525,7 @@ def evaluate_run(
     n_points = check_count(n_points, "n_points (--points)", 1, 1 << 20)
     seed = check_count(seed, "seed (--seed)", 0, 2**31 - 1)
     progress = check_bool(progress, "progress")
-    out = None if out_dir is None else as_path(out_dir, "out_dir (-o/--out)")
-    if out is not None and out.exists() and not out.is_dir():
-        raise InputError(f"-o/--out {out} is a file; give a folder")
+    out = check_output_folder(out_dir)
     net, info = load_cloud_model(path)
     if device:
         net.to(resolve_device(device))

@@ -83,7 +83,7 @@ from robopercept.nn.detection.tta import TTA_VIEWS, TestTimeAugmentation
 from robopercept.nn.detection.zoo import build_detector, detect_arrays, load_detector, save_detector
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import TrainConfig
-from robopercept.nn.train.runs import prepare_run_folder
+from robopercept.nn.train.runs import check_output_folder, prepare_run_folder
 from robopercept.viz.detection import detection_samples_picture
 
 __all__ = [
@@ -640,7 +640,7 @@ def evaluate_run(
     check_device(device, "device (--device)")
     label = _text(model, "model (RUN_OR_MODEL)")
     text = _text(data, "data (--data)")
-    out = None if out_dir is None else as_path(out_dir, "out_dir (-o/--out)")
+    out = check_output_folder(out_dir)
     _, val = load_detection_data(
         data,
         images=images,

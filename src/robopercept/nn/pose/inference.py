@@ -342,6 +342,9 @@ def pose_arrays(
         Images that are not 2-D/3-channel arrays, or smaller than 8 x 8 pixels.
     """
     w0, h0 = check_image_size(getattr(model, "image_size", input_size), 16)
+    stacked = isinstance(images, np.ndarray) and images.ndim >= 3  # (N, H, W[, 3])
+    if not stacked and (isinstance(images, (str, bytes)) or not isinstance(images, Sequence)):
+        raise InputError(f"images must be a list of (H, W[, 3]) arrays; got {plain_repr(images)}")
     batch, boxes, scales, offsets = [], [], [], []
     for i, im in enumerate(images):
         a = np.asarray(im)

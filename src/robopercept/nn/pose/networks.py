@@ -507,6 +507,10 @@ def save_pose_model(
     check_choice(name, "name", POSE_MODELS)
     if not isinstance(skeleton, Skeleton):
         raise InputError(f"skeleton must be a Skeleton; got {plain_repr(skeleton)}")
+    if isinstance(refiners, nn.Module) or not isinstance(refiners, (list, tuple)):
+        raise InputError(
+            f"refiners must be a list of DeepPoseRefiner stages; got {plain_repr(refiners)}"
+        )
     stages = []
     for r in refiners:
         if not isinstance(r, DeepPoseRefiner):

@@ -79,7 +79,7 @@ from robopercept.nn.pose.networks import (
 from robopercept.nn.pose.train import PoseHistory, train_cascade, train_pose
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import TrainConfig, resolve_device
-from robopercept.nn.train.runs import prepare_run_folder
+from robopercept.nn.train.runs import check_output_folder, prepare_run_folder
 
 __all__ = [
     "RUN_FILES",
@@ -515,7 +515,7 @@ def evaluate_run(
     path = model_path(model)
     data, images, size, seed = _data_args(data, images, size, seed)
     flip = check_bool(flip, "flip (--no-flip)")
-    out = as_path(out_dir, "-o/--out") if out_dir is not None else None
+    out = check_output_folder(out_dir)
     if out is not None and out.exists() and not out.is_dir():
         raise InputError(f"-o/--out {out} is a file; give a folder")
     net, info = load_pose_model(path)

@@ -86,7 +86,7 @@ from robopercept.nn.segmentation.networks import (
 )
 from robopercept.nn.train.checkpoint import load_checkpoint
 from robopercept.nn.train.config import TrainConfig, resolve_device
-from robopercept.nn.train.runs import prepare_run_folder
+from robopercept.nn.train.runs import check_output_folder, prepare_run_folder
 from robopercept.viz.segmentation import class_overlay, instance_overlay, panels_picture
 
 __all__ = [
@@ -792,7 +792,7 @@ folder or its model.pt)
     if list(sets.classes) != list(info["classes"]):  # by name, as the model numbers them
         val = sets.val.with_classes(list(info["classes"]))
         sets = SegmentationSets(sets.train, val, val.classes, sets.source)
-    folder = None if out_dir is None else as_path(out_dir, "-o/--out")
+    folder = check_output_folder(out_dir)
     scores = score_segmentation(net, sets.val, device=device)
     name = sets.source.get("data", data if isinstance(data, str) else None)
     files = {} if folder is None else {"metrics.json": folder / "metrics.json"}

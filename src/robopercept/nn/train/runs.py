@@ -29,12 +29,40 @@ from robopercept._checks import as_path, check_bool, plain_repr
 from robopercept.errors import InputError, RunExistsError
 from robopercept.fileio import MAX_NESTING, atomic_path, nesting_depth, strict_json
 
-__all__ = ["BEST_CHECKPOINT", "CHECKPOINT", "prepare_run_folder", "write_json"]
+__all__ = [
+    "BEST_CHECKPOINT",
+    "CHECKPOINT",
+    "check_output_folder",
+    "prepare_run_folder",
+    "write_json",
+]
 
 #: the last complete epoch of a run (what ``--resume`` continues)
 CHECKPOINT = "checkpoint.pt"
 #: the best epoch's weights
 BEST_CHECKPOINT = "checkpoint.best.pt"
+
+
+def check_output_folder(value: Any, flag: str = "-o/--out") -> Path | None:
+    """An evaluation's output folder (None stays None): a path that is not an existing
+    file (the folder is created when written).
+
+    Raises
+    ------
+    InputError
+        Not a path, or an existing file, naming ``flag``.
+
+    Examples
+    --------
+    >>> check_output_folder(None) is None
+    True
+    """
+    if value is None:
+        return None
+    out = as_path(value, f"out_dir ({flag})")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{flag} {out} is a file; give a folder")
+    return out
 
 
 def prepare_run_folder(
