@@ -1,0 +1,214 @@
+"""The plane tracker judged on many sequences, not one (issue 49): seeds x the five
+motion profiles x two cameras, with and without the occluder and green distractors,
+each read back through the TUM-folder path, every sequence against the raw fit it
+filters.
+
+Cameras (:data:`CAMERAS`): ``"640x480"``, a Kinect-style camera (depth and colour
+640x480, 62 deg horizontal field of view for both, depth scale 0.001), and
+``"848x480"``, the D435's depth stream with its 1280x720 colour stream (87 and 69 deg).
+
+A sequence (:class:`SweepCase`) is ``frames`` consecutive frames of the synthetic scene
+from a start chosen by its seed, so that the sweep sees every part of the 10 s loop
+(near, far, half out of view, the occluder's pass). Seed ``k`` sets the scene's noise,
+the jerky waypoints and hand-held tremor, the start, whether the occluder passes
+(``k`` even) and which green distractor stands in the scene (``none``, ``box``,
+``wall``, ``both`` in turn). The frames are written as a TUM folder
+(:func:`~robopercept.sources.write_tum_folder`) and read back
+(:class:`~robopercept.sources.TUMFolderSource`), the path a recorded sequence takes.
+
+The rule (:func:`meets_rule`, the issue's): tracked median and p95 of the angle and
+offset errors each at most the raw fit's, or within 5 % where the raw figure is under
+0.1 deg / 1 mm; tracked jitter below raw; at least 99 % of the frames with a visible
+board (>= 500 board pixels with depth) accepted.
+
+``python -m benchmarks.plane_sweep [--seeds N] [--frames N]`` runs the sweep and writes
+``benchmarks/results/plane_sweep.json``. Not yet in the test suite: the tracker does not
+meet the rule on every sequence (issue 49 is open), and a case takes 8-25 s on this
+machine, far over the suite's 3-minute share for 100 cases.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from robopercept.pipelines import PlaneTracker, PlaneTrackSummary, summarize
+from robopercept.sources import MOTIONS, SyntheticRGBDScene, TUMFolderSource, write_tum_folder
+
+#: the two cameras of the sweep: scene settings
+CAMERAS: dict[str, dict[str, Any]] = {
+    "640x480": {
+        "depth_size": (640, 480),
+        "color_size": (640, 480),
+        "depth_hfov": 62.0,
+        "color_hfov": 62.0,
+        "depth_scale": 0.001,
+    },
+    "848x480": {"depth_size": (848, 480), "color_size": (1280, 720)},
+}
+#: the distractors, in turn by seed
+DISTRACTOR_CYCLE = ("none", "box", "wall", "both")
+#: frames in one loop of the scene (10 s at 30 fps)
+LOOP_FRAMES = 300
+RESULTS = Path(__file__).parent / "results" / "plane_sweep.json"
+
+
+@dataclass(frozen=True)
+class SweepCase:
+    """One sequence of the sweep."""
+
+    seed: int
+    motion: str
+    camera: str
+    frames: int = 60
+
+    @property
+    def occluder(self) -> bool:
+        return self.seed % 2 == 0
+
+    @property
+    def distractor(self) -> str:
+        return DISTRACTOR_CYCLE[self.seed % len(DISTRACTOR_CYCLE)]
+
+    @property
+    def start(self) -> int:
+        """First frame: seeded; an occluder case starts where its pass (frames 180-216
+        of the loop) falls inside the sequence."""
+        rng = np.random.default_rng([self.seed, MOTIONS.index(self.motion)])
+        if self.occluder:
+            return int(rng.integers(max(0, 216 - self.frames), 180 + 1))
+        return int(rng.integers(0, LOOP_FRAMES - self.frames + 1))
+
+    def scene(self) -> SyntheticRGBDScene:
+        return SyntheticRGBDScene(
+            n_frames=LOOP_FRAMES,
+            seed=self.seed,
+            motion=self.motion,
+            occluder=self.occluder,
+            distractor=self.distractor,
+            **CAMERAS[self.camera],
+        )
+
+    @property
+    def name(self) -> str:
+        occ = "occluder" if self.occluder else "clear"
+        return f"{self.camera} {self.motion} seed {self.seed} ({occ}, {self.distractor})"
+
+
+def sweep_cases(seeds: int = 10, frames: int = 60) -> list[SweepCase]:
+    """Every case: ``seeds`` seeds x :data:`~robopercept.sources.MOTIONS` x
+    :data:`CAMERAS`."""
+    return [
+        SweepCase(seed, motion, camera, frames)
+        for camera in CAMERAS
+        for motion in MOTIONS
+        for seed in range(seeds)
+    ]
+
+
+def run_case(case: SweepCase, tmp: Path | None = None) -> tuple[PlaneTrackSummary, list[float]]:
+    """Track ``case`` read back from a TUM folder: its summary against the ground truth
+    and the tracker's milliseconds per frame."""
+    scene = case.scene()
+    frames = (scene.frame(case.start + i) for i in range(case.frames))
+    with tempfile.TemporaryDirectory(dir=tmp) as work:
+        folder = write_tum_folder(Path(work) / "seq", frames)
+        source = TUMFolderSource(folder)
+        tracker = PlaneTracker()
+        results, truths = [], []
+        for f, r in tracker.stream(source):
+            results.append(r)
+            truths.append(f.ground_truth)
+    return summarize(results, truths), [r.ms["total"] for r in results]
+
+
+def no_worse(tracked: float, raw: float, floor: float) -> bool:
+    """At most the raw fit's figure, or within 5 % of it where the raw fit is already
+    below ``floor`` (0.1 deg, 1 mm)."""
+    return tracked <= (1.05 * raw if raw < floor else raw)
+
+
+def rule_failures(summary: PlaneTrackSummary) -> list[str]:
+    """What of the rule ``summary`` breaks (empty: it meets it)."""
+    out = []
+    raw, trk = summary.raw, summary.tracked
+    for name, floor in (("angle_deg", 0.1), ("offset_mm", 1.0)):
+        r, t = getattr(raw, name), getattr(trk, name)
+        for q in ("median", "p95"):
+            if not no_worse(getattr(t, q), getattr(r, q), floor):
+                out.append(f"{name} {q} {getattr(t, q):.3f} > raw {getattr(r, q):.3f}")
+    jr, jt = summary.jitter_raw_deg, summary.jitter_tracked_deg
+    if jr is None or jt is None or not jt < jr:
+        out.append(f"jitter {jt} >= raw {jr}")
+    if summary.detection_rate is None or summary.detection_rate < 0.99:
+        out.append(f"accepted {summary.detection_rate} < 0.99")
+    return out
+
+
+def meets_rule(summary: PlaneTrackSummary) -> bool:
+    return not rule_failures(summary)
+
+
+def row(case: SweepCase, summary: PlaneTrackSummary, ms: list[float]) -> dict[str, Any]:
+    raw, trk = summary.raw, summary.tracked
+    return {
+        **asdict(case),
+        "start": case.start,
+        "occluder": case.occluder,
+        "distractor": case.distractor,
+        "evaluated": summary.evaluated_frames,
+        "accepted_rate": summary.detection_rate,
+        "raw_angle": [raw.angle_deg.median, raw.angle_deg.p95],
+        "tracked_angle": [trk.angle_deg.median, trk.angle_deg.p95],
+        "raw_offset_mm": [raw.offset_mm.median, raw.offset_mm.p95],
+        "tracked_offset_mm": [trk.offset_mm.median, trk.offset_mm.p95],
+        "jitter": [summary.jitter_raw_deg, summary.jitter_tracked_deg],
+        "ms_median": float(np.median(ms)),
+        "failures": rule_failures(summary),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.plane_sweep", description=__doc__)
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--frames", type=int, default=60)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    args = ap.parse_args(argv)
+    cases = [
+        SweepCase(c.seed + args.first_seed, c.motion, c.camera, c.frames)
+        for c in sweep_cases(args.seeds, args.frames)
+    ]
+    rows = []
+    t0 = time.perf_counter()
+    for i, case in enumerate(cases):
+        summary, ms = run_case(case)
+        rows.append(row(case, summary, ms))
+        bad = rows[-1]["failures"]
+        print(f"[{i + 1}/{len(cases)}] {case.name}: {'; '.join(bad) if bad else 'ok'}", flush=True)
+    failing = [r for r in rows if r["failures"]]
+    out = {
+        "seeds": args.seeds,
+        "first_seed": args.first_seed,
+        "frames": args.frames,
+        "cases": len(rows),
+        "failing": len(failing),
+        "seconds": round(time.perf_counter() - t0, 1),
+        "rows": rows,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(out, indent=1) + "\n")
+    print(f"{len(rows) - len(failing)}/{len(rows)} sequences meet the rule -> {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
