@@ -4078,7 +4078,10 @@ PINNED: dict[str, tuple[tuple[str, Any], ...]] = {
     "nn.ops.roi.roi_pool": (("boxes", _HUGE_ROI), ("boxes", _NEG_ROI)),
     "nn.ops.roi.RoIPool.forward": (("boxes", _HUGE_ROI),),
     "nn.ops.roi.paste_masks": (("boxes", _HUGE_BOXES),),
-    "nn.ops.nms.nms": (("boxes", _HUGE_BOXES),),
+    "nn.ops.nms.nms": (
+        ("boxes", _HUGE_BOXES),
+        ("boxes", hs.TensorOf(np.array([[0.0, 0, 4, 4], [1, 1, 5, 6], [2, 0, 7, 3]]), "bfloat16")),
+    ),
     "nn.ops.nms.batched_nms": (("boxes", _HUGE_BOXES),),
     "nn.ops.boxes.box_iou": (("boxes1", _HUGE_BOXES),),
     "nn.ops.boxes.generalized_box_iou": (("boxes1", _HUGE_BOXES),),

@@ -350,3 +350,14 @@ def test_class_overlay_and_panels_check_their_arguments():
     for bad in (None, 3, img):
         with pytest.raises(InputError, match="pictures must be a list"):
             panels_picture(bad, ["a"])
+
+
+def test_nms_takes_bfloat16_boxes_as_the_float32_ones():
+    # the fifth fuzz campaign: NumPy has no bfloat16, and nms raised torch's TypeError
+    from robopercept.nn.ops.nms import batched_nms, nms
+
+    b = torch.tensor([[0.0, 0, 10, 10], [1, 0, 11, 10], [20, 20, 30, 30]])
+    s = torch.tensor([0.9, 0.95, 0.5])
+    assert nms(b.bfloat16(), s, 0.5).tolist() == nms(b, s, 0.5).tolist() == [1, 2]
+    ids = torch.tensor([0, 1, 0])
+    assert batched_nms(b.bfloat16(), s, ids, 0.5).tolist() == [1, 0, 2]

@@ -54,7 +54,8 @@ def _greedy(
 ) -> torch.Tensor:
     """Greedy suppression over ``boxes[order]`` (already sorted); the kept entries of
     ``order``."""
-    b = np.ascontiguousarray(boxes[order].detach().cpu().numpy(), dtype=np.float64)
+    # in float64 before NumPy, which has no bfloat16 (the fifth fuzz campaign's TypeError)
+    b = np.ascontiguousarray(boxes[order].detach().to(torch.float64).cpu().numpy())
     if idxs is None:
         cls = np.zeros(b.shape[0], dtype=np.int64)
     else:
