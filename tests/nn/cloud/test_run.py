@@ -28,7 +28,7 @@ from robopercept.nn.cloud.train import (  # noqa: E402
 )
 from robopercept.nn.train.config import TrainConfig  # noqa: E402
 from robopercept.pointcloud import PointCloud, write_point_cloud  # noqa: E402
-from tests.cli.nn_runs import ctrl_c_after_first_epoch  # noqa: E402
+from tests.cli.nn_runs import ctrl_c, ctrl_c_after_first_epoch  # noqa: E402
 from tests.conftest import data_path  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
@@ -172,10 +172,7 @@ def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(run, tmp_pat
     # the faults campaign's SIGTERM after the last epoch, while model.pt was written
     from robopercept.nn.cloud import run as cloud_run
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(cloud_run, "save_cloud_model", interrupted)
+    monkeypatch.setattr(cloud_run, "save_cloud_model", ctrl_c)
     with pytest.raises(KeyboardInterrupt):
         train_run("shapes", tmp_path / "part", config=_cfg(), **TINY_RUN)
     history = json.loads((tmp_path / "part" / "history.json").read_text())

@@ -30,7 +30,7 @@ from robopercept.nn.detection.synthetic import (  # noqa: E402
 )
 from robopercept.nn.detection.train import evaluate_detector  # noqa: E402
 from robopercept.nn.detection.zoo import load_detector  # noqa: E402
-from tests.cli.nn_runs import ctrl_c_after_first_epoch, weights  # noqa: E402
+from tests.cli.nn_runs import ctrl_c, ctrl_c_after_first_epoch, weights  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -191,10 +191,7 @@ def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(run, tmp_pat
     # the faults campaign's SIGTERM after the last epoch, while model.pt was written
     from robopercept.nn.detection import run as det_run
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(det_run, "save_detector", interrupted)
+    monkeypatch.setattr(det_run, "save_detector", ctrl_c)
     with pytest.raises(KeyboardInterrupt):
         _tiny(tmp_path / "part")
     history = json.loads((tmp_path / "part" / "history.json").read_text())

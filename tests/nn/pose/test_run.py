@@ -28,7 +28,7 @@ from robopercept.nn.pose.run import (  # noqa: E402
 )
 from robopercept.nn.skeleton import COCO_17  # noqa: E402
 from robopercept.nn.train.config import TrainConfig  # noqa: E402
-from tests.cli.nn_runs import ctrl_c_after_first_epoch  # noqa: E402
+from tests.cli.nn_runs import ctrl_c, ctrl_c_after_first_epoch  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -164,11 +164,8 @@ def test_resume_after_ctrl_c_in_the_network_equals_the_whole_run(whole, tmp_path
 def test_resume_after_ctrl_c_in_the_stages_retrains_them(whole, tmp_path, monkeypatch):
     out = tmp_path / "part"
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
-
     with monkeypatch.context() as m:
-        m.setattr(pose_run, "train_cascade", interrupted)
+        m.setattr(pose_run, "train_cascade", ctrl_c)
         with pytest.raises(KeyboardInterrupt):
             train_run("figures", out, **DATA, **DEEPPOSE)
     history = json.loads((out / "history.json").read_text())
@@ -183,11 +180,8 @@ def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(whole, tmp_p
     # written, and left no history.json (Ctrl-C during training leaves it)
     out = tmp_path / "part"
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
-
     with monkeypatch.context() as m:
-        m.setattr(pose_run, "save_pose_model", interrupted)
+        m.setattr(pose_run, "save_pose_model", ctrl_c)
         with pytest.raises(KeyboardInterrupt):
             train_run("figures", out, **DATA, **DEEPPOSE)
     history = json.loads((out / "history.json").read_text())

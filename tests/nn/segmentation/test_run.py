@@ -28,7 +28,7 @@ from robopercept.nn.segmentation.run import (  # noqa: E402
     score_segmentation,
     train_run,
 )
-from tests.cli.nn_runs import ctrl_c_after_first_epoch, weights  # noqa: E402
+from tests.cli.nn_runs import ctrl_c, ctrl_c_after_first_epoch, weights  # noqa: E402
 
 pytestmark = pytest.mark.usefixtures("torch_one_thread")
 
@@ -139,10 +139,7 @@ def test_a_signal_while_the_model_is_saved_leaves_the_whole_history(run, tmp_pat
     # the faults campaign's SIGTERM after the last epoch, while model.pt was written
     from robopercept.nn.segmentation import run as seg_run
 
-    def interrupted(*args, **kwargs):
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(seg_run, "save_segmenter", interrupted)
+    monkeypatch.setattr(seg_run, "save_segmenter", ctrl_c)
     with pytest.raises(KeyboardInterrupt):
         train_run("shapes", tmp_path / "part", **RUN)
     history = json.loads((tmp_path / "part" / "history.json").read_text())

@@ -516,8 +516,6 @@ def evaluate_run(
     data, images, size, seed = _data_args(data, images, size, seed)
     flip = check_bool(flip, "flip (--no-flip)")
     out = check_output_folder(out_dir)
-    if out is not None and out.exists() and not out.is_dir():
-        raise InputError(f"-o/--out {out} is a file; give a folder")
     net, info = load_pose_model(path)
     if device is not None:
         net.to(resolve_device(device))

@@ -685,7 +685,8 @@ def train_run(
             )
         # written before the model: a signal during the model's save must leave the
         # history as one during training does
-        (out / "history.json").write_text(json.dumps(_history_record(hist, instance), indent=1))
+        history = _history_record(hist, instance)
+        (out / "history.json").write_text(json.dumps(history, indent=1))
     except BaseException:  # Ctrl-C, SIGTERM, a failure: keep the last epoch's history.json
         if ckpt.exists() and ckpt.stat().st_mtime_ns != before:  # an epoch of this run
             saved = load_checkpoint(ckpt)["history"]
@@ -698,7 +699,6 @@ def train_run(
         save_detector(files["model.pt"], net, "maskrcnn", settings, list(sets.classes), **extra)
     else:
         save_segmenter(files["model.pt"], net, name, settings, list(sets.classes), **extra)
-    history = _history_record(hist, instance)
     scores = score_segmentation(net, val, device=cfg.device)
     metrics = {
         "model": name,

@@ -80,21 +80,19 @@ def save_checkpoint(path: str | os.PathLike[str], state: dict[str, Any]) -> Path
                 # as an exception of its Python file, which torch reports as "unexpected
                 # pos": the interruption goes on as itself (the faults campaign saw
                 # Ctrl-C end as an error, exit 1)
-                stop = _interruption_behind(exc)
+                stop = _behind(exc, lambda e: not isinstance(e, Exception))
                 if stop is not None:
                     raise stop from None
                 raise _write_failure(p, exc) from exc
     return p
 
 
-def _interruption_behind(exc: BaseException) -> BaseException | None:
-    """The first ``KeyboardInterrupt`` (or other non-``Exception``: SIGTERM's, a
-    ``SystemExit``) in ``exc``'s chain of causes and contexts, or None."""
+def _behind(exc: BaseException, wanted: Callable[[BaseException], bool]) -> BaseException | None:
+    """The first exception of ``exc``'s chain of causes and contexts (itself included,
+    16 links at most) for which ``wanted`` is true, or None."""
     cause: BaseException | None = exc
     for _ in range(16):
-        if cause is None:
-            return None
-        if not isinstance(cause, Exception):
+        if cause is None or wanted(cause):
             return cause
         cause = cause.__cause__ or cause.__context__
     return None
@@ -103,11 +101,7 @@ def _interruption_behind(exc: BaseException) -> BaseException | None:
 def _write_failure(path: Path, exc: RuntimeError) -> WriteError:
     """The :class:`WriteError` of a ``torch.save`` that failed: the first
     :class:`OSError` behind torch's RuntimeError (a full disk: ``ENOSPC``, ``EFBIG``)."""
-    cause: BaseException | None = exc
-    for _ in range(16):
-        if cause is None or isinstance(cause, OSError):
-            break
-        cause = cause.__cause__ or cause.__context__
+    cause = _behind(exc, lambda e: isinstance(e, OSError))
     if isinstance(cause, OSError):
         return write_error(path, cause)
     return WriteError(describe_write_error(path, exc), None, os.fspath(path))
