@@ -3,10 +3,13 @@ masks and polygons (empty and full masks included), hand-computed cases, and ref
 
 from __future__ import annotations
 
+import tracemalloc
+
 import numpy as np
 import pytest
 
 from robopercept.errors import InputError
+from robopercept.nn.coco import rle as rle_module
 from robopercept.nn.coco.rle import (
     annotation_to_rle,
     polygon_to_rle,
@@ -139,6 +142,37 @@ def test_polygon_rasterization_equals_pycocotools():
         ref["counts"].decode()
     )
     assert rle_from_counts(runs, (10, 12))["counts"] == ref["counts"].decode()
+
+
+def test_edges_are_traced_in_pieces_with_the_same_result(monkeypatch):
+    # pieces of 7 points put piece boundaries inside the image on every edge
+    monkeypatch.setattr(rle_module, "_TRACE_PIECE", 7)
+    rng = np.random.default_rng(3)
+    for poly, h, w in _polygons(rng, 200):
+        ref = M.frPyObjects([poly.tolist()], h, w)[0]
+        assert polygon_to_rle(poly, h, w)["counts"] == ref["counts"].decode()
+
+
+def test_points_far_outside_the_image_rasterize_in_bounded_memory():
+    # fuzz finding: a duplicated byte range in a LabelMe file made one vertex x = 212,766
+    # on a 500 px image; the 5x trace of its edges (2 M points, 16 bytes each, and
+    # temporaries) took 150 MiB. Traced in pieces, memory stays near the piece size.
+    rng = np.random.default_rng(4)
+    for _ in range(6):
+        h, w = (int(v) for v in rng.integers(20, 90, 2))
+        p = np.column_stack([rng.uniform(0, w, 5), rng.uniform(0, h, 5)])
+        p[rng.integers(5)] = rng.choice([-1, 1], 2) * rng.uniform(1e5, 2.5e5, 2)
+        ref = M.frPyObjects([p.ravel().tolist()], h, w)[0]
+        tracemalloc.start()
+        try:
+            ours = polygon_to_rle(p.ravel(), h, w)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert ours["counts"] == ref["counts"].decode()
+        # a piece is 65,536 points: its int64 arrays and temporaries take ~5 MiB; the
+        # whole trace (over 5e5 points per edge here) would take over 40 MiB
+        assert peak < 12 * 2**20, peak / 2**20
 
 
 def test_a_square_covers_the_pixels_whose_centres_it_holds():

@@ -60,7 +60,8 @@ _MAX_GROUPS = 13
 #: works on int64 at 5x: far below its range; areas lose precision beyond it)
 MAX_COORDINATE = 1e15
 #: points of the longest polygon outline traced (on COCO's 5x grid): 4 M px of outline,
-#: 10 times the border of a 100k x 100k image (the trace takes 16 bytes a point)
+#: 10 times the border of a 100k x 100k image; it bounds the time (about 1 s), while the
+#: memory is bounded by tracing each edge in pieces
 MAX_TRACE = 2 * 10**7
 
 
@@ -537,7 +538,7 @@ def polygon_to_rle(polygon: npt.ArrayLike, height: int, width: int) -> dict[str,
             f"a polygon's coordinates must stay within {MAX_COORDINATE:.0e} pixels; got "
             f"{np.abs(xy).max():.3g} in {plain_repr(polygon)}: clip it to the {h} x {w} image"
         )
-    # the outline is traced at 5x: refuse one whose trace would not fit in memory
+    # the outline is traced at 5x: refuse one whose trace would take seconds
     fine = np.rint(5.0 * xy)
     steps = np.maximum(
         np.abs(np.diff(fine[0::2], append=fine[0])), np.abs(np.diff(fine[1::2], append=fine[1]))
@@ -566,36 +567,15 @@ def _polygon_runs(xy: np.ndarray, h: int, w: int) -> np.ndarray:
     x = np.trunc(scale * xy[0::2] + 0.5).astype(np.int64)
     y = np.trunc(scale * xy[1::2] + 0.5).astype(np.int64)
     x, y = np.append(x, x[0]), np.append(y, y[0])
-    us, vs = [], []
-    for j in range(k):
-        xs, xe, ys, ye = int(x[j]), int(x[j + 1]), int(y[j]), int(y[j + 1])
-        dx, dy = abs(xe - xs), abs(ys - ye)
-        flip = (dx >= dy and xs > xe) or (dx < dy and ys > ye)
-        if flip:
-            xs, xe, ys, ye = xe, xs, ye, ys
-        if dx >= dy:
-            s = (ye - ys) / dx if dx else 0.0
-            t = np.arange(dx + 1)
-            t = dx - t if flip else t
-            us.append(t + xs)
-            vs.append(np.trunc(ys + s * t + 0.5).astype(np.int64))
-        else:
-            s = (xe - xs) / dy
-            t = np.arange(dy + 1)
-            t = dy - t if flip else t
-            vs.append(t + ys)
-            us.append(np.trunc(xs + s * t + 0.5).astype(np.int64))
-    u, v = np.concatenate(us), np.concatenate(vs)
-    # where the trace moves to another fine column: the pixel column it crosses
-    c = np.flatnonzero(u[1:] != u[:-1]) + 1
-    xd = np.where(u[c] < u[c - 1], u[c], u[c] - 1).astype(np.float64)
-    xd = (xd + 0.5) / scale - 0.5
-    keep = (np.floor(xd) == xd) & (xd >= 0) & (xd <= w - 1)
-    yd = np.where(v[c] < v[c - 1], v[c], v[c - 1]).astype(np.float64)
-    yd = (yd + 0.5) / scale - 0.5
-    yd = np.ceil(np.clip(yd, 0, h))
-    a = (xd[keep] * h + yd[keep]).astype(np.int64)
-    a = np.sort(np.append(a, h * w))
+    # Each edge is traced from vertex j to vertex j + 1, so consecutive edges meet in
+    # one repeated point and every column crossing lies inside one edge: the edges are
+    # traced one at a time, in pieces of _TRACE_PIECE points, keeping only the crossings
+    # (at most one per image column per edge). Memory stays O(k w) however far outside
+    # the image the points lie.
+    found = [
+        _edge_crossings(int(x[j]), int(x[j + 1]), int(y[j]), int(y[j + 1]), h, w) for j in range(k)
+    ]
+    a = np.sort(np.concatenate([*found, np.array([h * w], np.int64)]))
     a = np.diff(a, prepend=0)
     # zero-length runs are dropped by joining the runs around them
     runs: list[int] = [int(a[0])]
@@ -610,6 +590,44 @@ def _polygon_runs(xy: np.ndarray, h: int, w: int) -> np.ndarray:
                 runs[-1] += int(a[i])
                 i += 1
     return np.asarray(runs, np.int64)
+
+
+#: points of an edge's trace held at once by _edge_crossings
+_TRACE_PIECE = 1 << 16
+
+
+def _edge_crossings(xs: int, xe: int, ys: int, ye: int, h: int, w: int) -> np.ndarray:
+    """Run boundaries ``column h + row`` where one traced edge crosses a pixel column."""
+    scale = 5.0
+    dx, dy = abs(xe - xs), abs(ys - ye)
+    flip = (dx >= dy and xs > xe) or (dx < dy and ys > ye)
+    if flip:
+        xs, xe, ys, ye = xe, xs, ye, ys
+    n = max(dx, dy)
+    out = []
+    for lo in range(0, n, _TRACE_PIECE):
+        # points lo .. hi of the trace, the first one shared with the previous piece
+        t = np.arange(lo, min(lo + _TRACE_PIECE, n) + 1)
+        t = n - t if flip else t
+        if dx >= dy:
+            s = (ye - ys) / dx if dx else 0.0
+            u = t + xs
+            v = np.trunc(ys + s * t + 0.5).astype(np.int64)
+        else:
+            s = (xe - xs) / dy
+            v = t + ys
+            u = np.trunc(xs + s * t + 0.5).astype(np.int64)
+        # where the trace moves to another fine column: the pixel column it crosses
+        c = np.flatnonzero(u[1:] != u[:-1]) + 1
+        xd = np.where(u[c] < u[c - 1], u[c], u[c] - 1).astype(np.float64)
+        xd = (xd + 0.5) / scale - 0.5
+        keep = (np.floor(xd) == xd) & (xd >= 0) & (xd <= w - 1)
+        c, xd = c[keep], xd[keep]
+        yd = np.where(v[c] < v[c - 1], v[c], v[c - 1]).astype(np.float64)
+        yd = (yd + 0.5) / scale - 0.5
+        yd = np.ceil(np.clip(yd, 0, h))
+        out.append((xd * h + yd).astype(np.int64))
+    return np.concatenate(out) if out else np.zeros(0, np.int64)
 
 
 def annotation_to_rle(segmentation: Any, height: int, width: int) -> dict[str, Any]:
