@@ -155,8 +155,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     total = totals(tallies)
     print(
         f"\n{total.inputs} inputs in {seconds:.0f} s: {total.untyped} untyped, "
-        f"{total.crashes} crashes, {total.hangs} hangs, {total.memory} memory; "
-        f"JSON: {args.json}"
+        f"{total.crashes} crashes, {total.hangs} hangs, {total.memory} memory "
+        f"({total.unconfirmed} unconfirmed over-bound peaks); JSON: {args.json}"
     )
     return 1 if total.bad or broken else 0
 

@@ -67,13 +67,16 @@ class Tally:
     ----------
     inputs, ok, typed, untyped, crashes, hangs, memory : int
         Counts by outcome kind; ``inputs`` is their sum.
+    unconfirmed : int
+        Over-bound peaks that a rerun of the same input in a fresh worker did not
+        reproduce (not in ``inputs``' sum: the rerun's outcome is counted).
     peak_mb : float
         The largest traced peak allocation of one call, MiB (calls that ran out of
         memory are left out: their peak is the allocation that was refused).
     seconds : float
         Time spent in calls, summed.
     findings : list of Finding
-        The first inputs of each bad kind.
+        The first inputs of each bad kind (and of the unconfirmed peaks).
     """
 
     target: str
@@ -86,6 +89,7 @@ class Tally:
     crashes: int = 0
     hangs: int = 0
     memory: int = 0
+    unconfirmed: int = 0
     peak_mb: float = 0.0
     seconds: float = 0.0
     findings: list[Finding] = field(default_factory=list)
@@ -138,6 +142,16 @@ class Tally:
                     )
                 )
 
+    def add_unconfirmed(self, parameter: str, value: str, message: str) -> None:
+        """Record an over-bound peak that a rerun of the same input in a fresh worker
+        did not reproduce (``tests.fuzz.readers``): not a finding, kept in view (the
+        first :attr:`keep` as findings of kind ``"unconfirmed memory"``)."""
+        self.unconfirmed += 1
+        if sum(f.kind == "unconfirmed memory" for f in self.findings) < self.keep:
+            self.findings.append(
+                Finding(self.target, "unconfirmed memory", "", parameter, value, message[:200])
+            )
+
     @property
     def bad(self) -> int:
         """Untyped errors, crashes, hangs and memory blow-ups together."""
@@ -145,7 +159,9 @@ class Tally:
 
     def merge(self, other: Tally) -> None:
         """Add ``other``'s counts and findings to this tally (same target)."""
-        for name in ("inputs", "ok", "typed", "untyped", "crashes", "hangs", "memory"):
+        for name in (
+            "inputs", "ok", "typed", "untyped", "crashes", "hangs", "memory", "unconfirmed"
+        ):  # fmt: skip
             setattr(self, name, getattr(self, name) + getattr(other, name))
         self.seconds += other.seconds
         self.peak_mb = max(self.peak_mb, other.peak_mb)
@@ -163,6 +179,7 @@ class Tally:
             "crashes": self.crashes,
             "hangs": self.hangs,
             "memory": self.memory,
+            "unconfirmed_memory": self.unconfirmed,
             "peak_mb": round(self.peak_mb, 2),
             "seconds": round(self.seconds, 3),
             "findings": [vars(f) for f in self.findings],

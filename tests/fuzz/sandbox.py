@@ -374,6 +374,11 @@ class Sandbox:
                 self._spawn()
                 break
 
+    def restart(self) -> None:
+        """Stop the worker; the next call starts a fresh one (warmed with the
+        :meth:`warm` calls)."""
+        self._kill()
+
     def _kill(self) -> None:
         proc, conn = self._proc, self._conn
         self._proc = self._conn = None

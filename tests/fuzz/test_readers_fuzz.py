@@ -263,7 +263,37 @@ def test_the_fuzzer_finds_an_over_allocation(box, tmp_path):
     run = rf.fuzz_reader(reader, box, n=3, seed=0, workdir=tmp_path)
     assert [m.outcome.kind for m in run.mutants] == ["memory"] * 3
     assert all(m.outcome.error == "over bound" and m.bound_mb < 8.1 for m in run.mutants)
-    assert run.tally.memory == 3
+    assert run.tally.memory == 3  # each confirmed by a rerun in a fresh worker
+    assert run.tally.unconfirmed == 0 and not any(m.unconfirmed for m in run.mutants)
+
+
+def _once_greedy_reader(path: str) -> None:
+    """Holds 32 MiB once: on the first mutant after ``once.flag`` is written beside
+    the mutants' folder (the flag is removed), like a peak that is not the reader's."""
+    flag = Path(path).parent.parent / "once.flag"
+    if flag.exists():
+        flag.unlink()
+        block = np.ones(32 * 2**20, np.uint8)
+        del block
+
+
+def test_an_over_allocation_that_a_fresh_worker_does_not_repeat_is_unconfirmed(box, tmp_path):
+    def seeds(work: Path) -> list[Path]:
+        (work / "n.txt").write_text("12 34\n")
+        (work / "once.flag").touch()
+        return [work / "n.txt"]
+
+    reader = rf.Reader("once", _once_greedy_reader, "text", seeds, rf.TEXT)
+    spawns = box.spawns
+    run = rf.fuzz_reader(reader, box, n=3, seed=0, workdir=tmp_path)
+    assert [m.outcome.kind for m in run.mutants] == ["ok"] * 3
+    first = run.mutants[0]
+    assert "peak 32.0 MiB > bound" in first.unconfirmed
+    assert "rerun in a fresh worker" in first.unconfirmed
+    assert not run.mutants[1].unconfirmed and box.spawns == spawns + 1
+    t = run.tally
+    assert (t.memory, t.unconfirmed, t.as_dict()["unconfirmed_memory"]) == (0, 1, 1)
+    assert [f.kind for f in t.findings] == ["unconfirmed memory"] and not t.bad
 
 
 @pytest.mark.realdata
