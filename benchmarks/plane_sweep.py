@@ -181,11 +181,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--frames", type=int, default=60)
     ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--camera", choices=list(CAMERAS), action="append", help="only these")
+    ap.add_argument("--motion", choices=list(MOTIONS), action="append", help="only these")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
     cases = [
         SweepCase(c.seed + args.first_seed, c.motion, c.camera, c.frames)
         for c in sweep_cases(args.seeds, args.frames)
+        if (not args.camera or c.camera in args.camera)
+        and (not args.motion or c.motion in args.motion)
     ]
     rows = []
     t0 = time.perf_counter()

@@ -224,6 +224,26 @@ def test_hand_built_case():
     assert_equals_library(sel, library_path(*args, (0, 0, 0), (180, 255, 255), 0.02), min_points=7)
 
 
+def test_a_growing_tolerance_keeps_far_points_behind_noisy_neighbours():
+    # four depth pixels land on one colour pixel; one of them is 5 cm nearer
+    k_depth = CameraIntrinsics(2, 2, 2.0, 2.0, 0.5, 0.5)
+    k_color = CameraIntrinsics(1, 1, 1.0, 1.0, 0.0, 0.0)
+    color = np.array([[[0, 255, 0]]], np.uint8)
+
+    def selected(near_mm: int, far_mm: int, grows: bool) -> list[int]:
+        depth = np.full((2, 2), far_mm, dtype=np.uint16)
+        depth[0, 0] = near_mm
+        sel = ColorRangeSelector(*GREEN, 0.02, occlusion_grows=grows)
+        return sel(depth, color, k_depth, k_color, np.eye(4), 0.001).pixels.tolist()
+
+    # at 3 m the tolerance is 0.02 * 3^2 = 18 cm: 5 cm of depth noise hides nothing
+    assert selected(2950, 3000, False) == [0]
+    assert selected(2950, 3000, True) == [0, 1, 2, 3]
+    # up to 1 m it is 2 cm either way; a real occluder 0.5 m nearer still hides at 3 m
+    assert selected(950, 1000, True) == [0]
+    assert selected(2500, 3000, True) == [0]
+
+
 def test_red_wraps_around():
     # a red colour pixel seen by a depth pixel: the colour image shifted one column left
     # (red moves to colour (1, 3) and (2, 2), seen by depth (1, 2) and (2, 1))

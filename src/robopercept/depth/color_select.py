@@ -12,7 +12,12 @@ For every depth pixel :math:`i = v W + u` with raw depth :math:`D_i > 0`:
    \operatorname{rint}(u_c)` when :math:`z_c > 0` and it lies inside the colour image.
 3. **Occlusion (z-buffer).** :math:`Z_j = \min_{k \to j} z_{c,k}` over the points landing on
    colour pixel :math:`j`; point :math:`i` is hidden there when
-   :math:`z_{c,i} > Z_j + \text{tol}` (``occlusion_tolerance``; None: no test).
+   :math:`z_{c,i} > Z_j + \text{tol}` (``occlusion_tolerance``; None: no test), or
+   with ``occlusion_grows`` :math:`z_{c,i} > Z_j + \text{tol} \max(1, z_{c,i}^2)`
+   (:math:`z` in metres): stereo depth noise grows as :math:`z^2`, and a fixed
+   tolerance hides the points whose noise puts them behind their neighbours, a
+   one-sided cut that biases whatever is fitted to the rest (at 2.4 m with 1.7 cm of
+   noise, a 2 cm tolerance tilted a board's plane by 0.6 deg).
 4. **Colour box.** :math:`(H, S, V)` of colour pixel :math:`j` on OpenCV's uint8 scale
    (:func:`~robopercept.imaging.rgb_to_hsv_pixel`, bit for bit
    ``cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)``); selected when
@@ -38,7 +43,7 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit, prange
 
-from robopercept._checks import check_real
+from robopercept._checks import check_bool, check_real
 from robopercept.depth.rgbd import (
     check_depth,
     check_intrinsics,
@@ -99,13 +104,14 @@ def _zbuffer_kernel(pix, zc, zbuf):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, parallel=True)
 def _select_kernel(
-    depth, rays, scale, rgb, pix, zc, zbuf, tol, low, high, out, hue, idx
+    depth, rays, scale, rgb, pix, zc, zbuf, tol, grow, low, high, out, hue, idx
 ):  # pragma: no cover - compiled
     # The points whose colour pixel is theirs (no other point nearer there by more than
-    # tol; tol < 0: no test) and whose HSV (OpenCV's uint8 conversion, bit for bit) lies
-    # in the box low..high (hue wraps around when low[0] > high[0]). Each row block
-    # writes from its own first pixel on, then the blocks are packed in order, so the
-    # result is in row-major order whatever the threads. Returns the number selected.
+    # tol, or tol z^2 beyond 1 m when grow; tol < 0: no test) and whose HSV (OpenCV's
+    # uint8 conversion, bit for bit) lies in the box low..high (hue wraps around when
+    # low[0] > high[0]). Each row block writes from its own first pixel on, then the
+    # blocks are packed in order, so the result is in row-major order whatever the
+    # threads. Returns the number selected.
     n = pix.shape[0]
     counts = np.zeros(_CHUNKS, dtype=np.int64)
     wrap = low[0] > high[0]
@@ -116,8 +122,10 @@ def _select_kernel(
             j = pix[i]
             if j < 0:
                 continue
-            if tol >= 0 and zc[i] > zbuf[j] + tol:
-                continue
+            if tol >= 0:
+                t = tol * zc[i] * zc[i] if grow and zc[i] > 1.0 else tol
+                if zc[i] > zbuf[j] + t:
+                    continue
             h, s, v = rgb_to_hsv_pixel(
                 np.int32(rgb[3 * j]), np.int32(rgb[3 * j + 1]), np.int32(rgb[3 * j + 2])
             )
@@ -246,6 +254,10 @@ class ColorRangeSelector:
     occlusion_tolerance : float or None
         Metres: a point is hidden when another one lands on its colour pixel more than
         this much nearer to the colour camera; None: no occlusion test.
+    occlusion_grows : bool
+        The tolerance grows like stereo depth noise, ``occlusion_tolerance * z**2``
+        beyond 1 m (see the module docstring); False (default): the same everywhere,
+        as ``texture_coordinates``.
 
     Raises
     ------
@@ -275,8 +287,10 @@ class ColorRangeSelector:
         hsv_low: npt.ArrayLike,
         hsv_high: npt.ArrayLike,
         occlusion_tolerance: float | None = 0.02,
+        occlusion_grows: bool = False,
     ) -> None:
         self.hsv_low, self.hsv_high = _check_hsv_bounds(hsv_low, hsv_high)
+        self.occlusion_grows = check_bool(occlusion_grows, "occlusion_grows")
         if occlusion_tolerance is not None:
             occlusion_tolerance = check_real(
                 occlusion_tolerance,
@@ -370,6 +384,7 @@ class ColorRangeSelector:
                 zc,
                 self._zbuf,
                 -1.0 if tol is None else tol,
+                self.occlusion_grows,
                 self.hsv_low,
                 self.hsv_high,
                 out,
