@@ -353,9 +353,9 @@ def off_plane_blobs(
 
     The inlier pixels are binned into ``cell`` x ``cell`` cells and the occupied cells
     labelled 8-connected (:func:`scipy.ndimage.label`). The plane
-    :math:`n^	op x = d` of the largest blob is fitted in inverse depth
+    :math:`n^\top x = d` of the largest blob is fitted in inverse depth
     (:func:`~robopercept.estimation.fit_plane_inverse_depth`) and each point's residual
-    taken in inverse depth, :math:`e = |d - n^	op x| / (d z)`, where stereo noise is
+    taken in inverse depth, :math:`e = |d - n^\top x| / (d z)`, where stereo noise is
     uniform. A blob of at least ``min_size`` points is off the plane when its mean
     :math:`e` exceeds ``ratio`` times the largest blob's (a neighbour beside the
     board's plane), or when its own plane's closest point :math:`\pi_b` differs from
@@ -425,8 +425,8 @@ def off_plane_blobs(
     ref = lab == big
     if int(sizes[big]) < 3:
         return None
-    fit = fit_plane_inverse_depth(points[idx], ref)
     p = points[idx]
+    fit = fit_plane_inverse_depth(p, ref)
     e = np.abs(fit.d - p @ fit.normal) / (fit.d * p[:, 2])
     mean = np.bincount(lab, weights=e, minlength=k + 1) / np.maximum(sizes, 1)
     off_label = (sizes >= min_size) & (mean > ratio * mean[big])
@@ -564,8 +564,8 @@ class PlaneMeasurer:
         hue: np.ndarray,
         index: int,
         predicted: np.ndarray | None,
-        pixels: np.ndarray | None = None,
-        shape: tuple[int, ...] | None = None,
+        pixels: np.ndarray,
+        shape: tuple[int, ...],
     ) -> tuple[np.ndarray, float, np.ndarray, np.ndarray, float] | None:
         # RANSAC, then the inverse-depth refits: (normal, d, floored covariance, inlier
         # mask, RANSAC's inlier share), or None with fewer than min_points
@@ -614,7 +614,7 @@ class PlaneMeasurer:
             inl = np.abs(pts @ normal - d) < thr
             if c.hue_tolerance is not None:
                 inl &= res.inliers  # the hue test of the hypothesis still applies
-        if pixels is not None and shape is not None and c.blob_residual_ratio is not None:
+        if c.blob_residual_ratio is not None:
             dropped = np.zeros(pts.shape[0], dtype=bool)
             for _ in range(2):  # a second pass: the corrected plane may take in new blobs
                 off = off_plane_blobs(
