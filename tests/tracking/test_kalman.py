@@ -19,6 +19,7 @@ from robopercept.tracking import (
     kf_predict,
     kf_update,
 )
+from robopercept.tracking.kalman import mahalanobis_logdet
 
 
 def test_scalar_hand_case():
@@ -254,3 +255,29 @@ def test_pure_steps_accept_scalars_and_agree_with_the_filter():
     kf.predict()
     kf.update([1.0])
     assert np.isfinite(kf.x).all() and np.isfinite(kf.P).all()
+
+
+def test_an_overflowed_covariance_is_a_degenerate_error_not_nan():
+    # LAPACK's potrf is called without scipy's finiteness scan (issue 49: the scan cost
+    # more than the 3x3 factorization): a covariance grown past float64 over many steps
+    # must still stop with a typed error, not factor into NaN
+    kf = KalmanFilter(1, 1, A=np.array([[1e100]]), Q=0.0, H=np.array([[1.0]]), R=1.0)
+    with np.errstate(over="ignore"):
+        for _ in range(4):
+            kf.predict()
+    assert not np.isfinite(kf.P).all()
+    with pytest.raises(DegenerateError, match="finite and positive definite"):
+        kf.update(np.array([0.0]))
+    with pytest.raises(DegenerateError, match="finite and positive definite"):
+        mahalanobis_logdet(np.array([[np.inf]]), np.array([1.0]))
+    with pytest.raises(DegenerateError, match="finite and positive definite"):
+        mahalanobis_logdet(np.array([[1.0, 2.0], [2.0, 1.0]]), np.array([1.0, 1.0]))
+    # and the factorization is scipy's, to the last bit
+    from scipy.linalg import cho_factor, cho_solve
+
+    S = np.array([[2.0, 0.3, 0.1], [0.3, 1.5, 0.2], [0.1, 0.2, 1.0]])
+    y = np.array([1.0, -2.0, 0.5])
+    d2, logdet = mahalanobis_logdet(S, y)
+    c = cho_factor(S)
+    assert d2 == float(y @ cho_solve(c, y))
+    assert logdet == 2.0 * float(np.log(np.diag(c[0])).sum())

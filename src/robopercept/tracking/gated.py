@@ -306,6 +306,7 @@ class _Filter:
             P[k : 2 * k, k : 2 * k] = np.eye(k) * config.initial_velocity_std**2
             filters.append(KalmanFilter(n, k, x=x, P=P, H=H, R=R))
         m = len(filters)
+        self._dt = math.nan  # the interval the filters' A, Q are built for
         self.imm: IMMEstimator | None = None
         self.kf: KalmanFilter | None = None
         if m == 1:
@@ -317,15 +318,20 @@ class _Filter:
             self.imm = IMMEstimator(filters, np.full(m, 1.0 / m), trans)
 
     def predict(self, dt: float) -> None:
-        models = []
-        for q in self.qs:
-            m = constant_velocity(self.k, dt, q, 1.0)
-            models.append(_lagged(m.A, m.Q, self.k, self.lag))
+        # the filters' own A, Q hold the models of the last dt, rebuilt only when the
+        # frame interval changes by more than a nanosecond (timestamps i / fps differ in
+        # their last bits from frame to frame)
+        if not abs(dt - self._dt) <= 1e-9:
+            filters = self.imm.filters if self.imm is not None else [self.kf]
+            for f, q in zip(filters, self.qs, strict=True):
+                m = constant_velocity(self.k, dt, q, 1.0)
+                f.A, f.Q = _lagged(m.A, m.Q, self.k, self.lag)  # type: ignore[union-attr]
+            self._dt = dt
         if self.imm is not None:
-            self.imm.predict(models)
+            self.imm.predict()
         else:
             assert self.kf is not None
-            self.kf.predict(A=models[0][0], Q=models[0][1])
+            self.kf.predict()
 
     def mahalanobis2(self, z: np.ndarray, R: np.ndarray) -> float:
         if self.imm is not None:

@@ -60,27 +60,14 @@ from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import cho_factor, cho_solve
 
 from robopercept._checks import check_magnitude, check_numeric, plain_repr
-from robopercept.errors import DegenerateError, InputError
-from robopercept.tracking.kalman import KalmanFilter
+from robopercept.errors import InputError
+from robopercept.tracking.kalman import KalmanFilter, mahalanobis_logdet
 
 __all__ = ["IMMEstimator"]
 
 _SUM_TOL = 1e-8  # how far from 1 a probability vector (or a row of M) may sum
-
-
-def _quad(S: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """``(y^T S^-1 y, log det S)`` through a Cholesky factorization of ``S``."""
-    try:
-        c = cho_factor(S)
-    except np.linalg.LinAlgError:
-        raise DegenerateError(
-            "an innovation covariance H P H^T + R is not positive definite: "
-            "check that every filter's R is positive definite"
-        ) from None
-    return float(y @ cho_solve(c, y)), 2.0 * float(np.log(np.diag(c[0])).sum())
 
 
 def _as_r(R: npt.ArrayLike | float | None) -> np.ndarray | None:
@@ -325,7 +312,7 @@ class IMMEstimator:
         zz, rr = check_numeric(z, "z"), _as_r(R)
         for j, f in enumerate(self.filters):
             res = f.update(zz, R=rr)
-            _, logdet = _quad(res.S, res.y)
+            _, logdet = mahalanobis_logdet(res.S, res.y)
             logl[j] = -0.5 * (res.mahalanobis2 + logdet + nz * np.log(2.0 * np.pi))
         self.log_likelihood = logl
         self.likelihood = np.exp(logl)
@@ -378,7 +365,7 @@ class IMMEstimator:
         best = np.inf
         for f in self.filters:
             y, S = f.innovation(check_numeric(z, "z"), R=_as_r(R))
-            best = min(best, _quad(S, y)[0])
+            best = min(best, mahalanobis_logdet(S, y)[0])
         return float(best)
 
     def innovation(
