@@ -360,3 +360,45 @@ def test_bad_scalars_and_cameras():
     ref = points_in_color_range(d, c, k, k, T, 0.001, *GREEN, occlusion_tolerance=0.02)
     got = points_in_color_range(d, c, k, k, T, 0.001, *GREEN, occlusion_tolerance=np.float32(0.02))
     np.testing.assert_array_equal(got.pixels, ref.pixels)
+
+
+# -- the fast paths (issue 49) ---------------------------------------------------------
+
+
+def test_distorted_depth_camera_equals_the_library_path(frames):
+    # a depth camera with lens distortion has rays that are not (rx[u], ry[v], 1): the
+    # selector must read its full ray table
+    f = frames[0]
+    k = dataclasses.replace(
+        f.depth_intrinsics, model="inverse_brown_conrady", coeffs=(0.1, -0.2, 1e-3, 2e-3, 0.05)
+    )
+    args = (f.depth, f.color, k, f.color_intrinsics, f.T_color_depth, f.depth_scale)
+    select = ColorRangeSelector(*GREEN)
+    sel = select(*args)
+    assert not select._separable
+    assert_equals_library(sel, library_path(*args, *GREEN, 0.02))
+    select(*_args(f))
+    assert select._separable  # the plain camera's rays are separable
+
+
+@pytest.mark.parametrize(("low", "high"), [GREEN, ((170, 50, 50), (10, 255, 255))])
+def test_box_table_equals_the_hsv_conversion(low, high):
+    # every 7th of the 2^24 colours: the table's bit against rgb_to_hsv + hsv_range_mask
+    keys = np.arange(0, 1 << 24, 7)
+    rgb = np.stack([keys >> 16, (keys >> 8) & 255, keys & 255], axis=-1).astype(np.uint8)
+    want = hsv_range_mask(rgb_to_hsv(rgb[:, None, :]), low, high)[:, 0]
+    table = cs._box_table(tuple(map(float, low)), tuple(map(float, high)))
+    got = (table[keys >> 3] >> (keys & 7)) & 1
+    np.testing.assert_array_equal(got.astype(bool), want)
+    assert 1000 < want.sum() < keys.size - 1000  # a box that selects some, not all
+
+
+def test_below_the_table_size_the_direct_test_gives_the_same(frames):
+    # the same frame cropped under _TABLE_PIXELS depth pixels takes the per-pixel HSV
+    # test; both equal the library path (the full frame takes the table)
+    f = frames[0]
+    h, w = 200, 300
+    assert h * w < cs._TABLE_PIXELS <= f.depth.size
+    k = dataclasses.replace(f.depth_intrinsics, width=w, height=h)
+    args = (f.depth[:h, :w].copy(), f.color, k, f.color_intrinsics, f.T_color_depth, f.depth_scale)
+    assert_equals_library(ColorRangeSelector(*GREEN)(*args), library_path(*args, *GREEN, 0.02))
