@@ -140,3 +140,48 @@ def test_issue25_huge_coordinates_are_refused_and_large_ones_fit():
     fit = fit_plane(pts * 1e140)  # within the bound: the same plane, scaled offset
     n = fit.plane.normal * np.sign(fit.plane.normal[2])
     np.testing.assert_allclose(n, np.array([-0.5, 0.25, 1.0]) / np.sqrt(1.3125), atol=1e-9)
+
+
+# -- the one-pass slab fit (issue 49) -----------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_slab_fit_equals_selecting_then_fitting(seed):
+    from robopercept.estimation import fit_plane_inverse_depth
+    from robopercept.estimation.least_squares import fit_plane_inverse_depth_slab
+
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:120, 0:160]
+    u, v = (xx.ravel() - 80) / 150.0, (yy.ravel() - 60) / 150.0
+    c = np.array([0.1, -0.2, 0.5]) * rng.uniform(0.8, 1.2, 3)  # 1/z = c.(u, v, 1)
+    w = c[0] * u + c[1] * v + c[2] + rng.normal(0, 2e-3, u.size)
+    z = 1.0 / w
+    z[rng.random(z.size) < 0.2] += rng.uniform(-0.5, 0.5)  # outliers
+    pts = np.column_stack([u * z, v * z, z])
+    normal = c / np.linalg.norm(c)
+    d = 1.0 / np.linalg.norm(c)
+    within = rng.random(z.size) < 0.9
+    for allowed in (None, within):
+        fit, inl = fit_plane_inverse_depth_slab(pts, normal, d, 0.02, allowed)
+        want = np.abs(pts @ normal - d) < 0.02
+        if allowed is not None:
+            want &= allowed
+        # the same test up to the order of three products: equal but for ties at the
+        # threshold's last bit (none here)
+        np.testing.assert_array_equal(inl, want)
+        ref = fit_plane_inverse_depth(pts, want)
+        # the same sums added in another order (per block): equal to rounding
+        np.testing.assert_allclose(fit.normal, ref.normal, rtol=0, atol=1e-12)
+        assert fit.d == pytest.approx(ref.d, rel=1e-12)
+        # the covariance's residual sum w'w - c'b cancels about six digits (its two
+        # terms agree to 1e-6): rounding in the sums shows at 1e-9 relative there
+        np.testing.assert_allclose(fit.covariance, ref.covariance, rtol=1e-6, atol=0)
+        assert fit.count == ref.count == int(want.sum())
+
+
+def test_slab_fit_with_too_few_inliers_is_degenerate():
+    from robopercept.estimation.least_squares import fit_plane_inverse_depth_slab
+
+    pts = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 1.0], [0.0, 0.1, 3.0]])
+    with pytest.raises(DegenerateError, match="at least 3"):
+        fit_plane_inverse_depth_slab(pts, np.array([0.0, 0.0, 1.0]), 1.0, 0.01)

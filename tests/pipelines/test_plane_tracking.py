@@ -487,3 +487,41 @@ def test_bad_predicted_plane_and_valid_edge_values():
     # normals of any finite scale give the same angle
     big = plane_errors(np.array([0, 0, 1e300]), 1.0, np.array([0, 1e-300, 1e-300]), 1.0)
     assert big[0] == pytest.approx(45.0)
+
+
+def test_ransac_scores_a_subsample_of_a_near_board(monkeypatch):
+    # issue 49: a board near a 640x480 camera has ~2 x 10^5 coloured points; RANSAC
+    # scores its hypotheses on at most ransac_points of them (every k-th), the inliers
+    # are then taken among every point, and the plane is the one measured with every
+    # point scored, to 0.01 deg and 0.1 mm
+    from robopercept.pipelines import plane_measure as pm
+
+    scene = SyntheticRGBDScene(
+        n_frames=300,
+        depth_size=(640, 480),
+        color_size=(640, 480),
+        depth_hfov=62.0,
+        color_hfov=62.0,
+        depth_scale=0.001,
+    )
+    frame = scene.frame(0)
+    seen: list[int] = []
+    real = pm.ransac
+
+    def spy(data, *args, **kwargs):
+        seen.append(data.shape[0])
+        return real(data, *args, **kwargs)
+
+    monkeypatch.setattr(pm, "ransac", spy)
+    sub = PlaneMeasurer().measure(frame)
+    full = PlaneMeasurer(PlaneMeasurerConfig(ransac_points=None)).measure(frame)
+    assert sub.n_colored > 150_000
+    assert seen == [
+        len(range(0, sub.n_colored, -(-sub.n_colored // 32768))),
+        full.n_colored,
+    ]
+    assert seen[0] <= 32768 and sub.inliers > 100_000  # inliers among every point
+    angle = np.degrees(np.arccos(min(1.0, abs(float(sub.normal @ full.normal)))))
+    assert angle < 0.01 and abs(sub.d - full.d) < 1e-4, (angle, sub.d - full.d)
+    with pytest.raises(InputError, match="ransac_points"):
+        PlaneMeasurerConfig(ransac_points=2)
