@@ -402,3 +402,17 @@ def test_below_the_table_size_the_direct_test_gives_the_same(frames):
     k = dataclasses.replace(f.depth_intrinsics, width=w, height=h)
     args = (f.depth[:h, :w].copy(), f.color, k, f.color_intrinsics, f.T_color_depth, f.depth_scale)
     assert_equals_library(ColorRangeSelector(*GREEN)(*args), library_path(*args, *GREEN, 0.02))
+
+
+def test_copy_false_gives_views_of_the_buffers_until_the_next_call(frames):
+    select = ColorRangeSelector(*GREEN)
+    kept = select(*_args(frames[0]))
+    view = select(*_args(frames[0]), copy=False)
+    for name in ("points", "hue", "pixels"):
+        np.testing.assert_array_equal(getattr(view, name), getattr(kept, name))
+    assert not np.shares_memory(kept.points, view.points)
+    later = select(*_args(frames[2]))  # the next call overwrites the views' buffers
+    assert np.shares_memory(view.points, select._work["out"])
+    assert not np.array_equal(view.pixels[: later.pixels.size], kept.pixels[: later.pixels.size])
+    with pytest.raises(InputError, match="copy"):
+        select(*_args(frames[0]), copy="no")

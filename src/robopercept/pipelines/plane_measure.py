@@ -346,7 +346,14 @@ def _pixel_solidity(pixels: np.ndarray, width: int) -> float:
     >>> round(_pixel_solidity(np.array([0, 9, 90, 99]), 10), 2)
     0.04
     """
-    return float(_solidity_kernel(np.asarray(pixels, dtype=np.int64), int(width)))
+    return pixel_solidity_masked(np.asarray(pixels, dtype=np.int64), None, width)
+
+
+def pixel_solidity_masked(pixels: np.ndarray, mask: np.ndarray | None, width: int) -> float:
+    """:func:`_pixel_solidity` of ``pixels[mask]`` (all of them with None), without
+    gathering them first."""
+    sel = np.zeros(1, dtype=np.bool_) if mask is None else np.asarray(mask, dtype=np.bool_)
+    return float(_solidity_kernel(pixels, sel, mask is not None, int(width)))
 
 
 @njit(cache=True, nogil=True)
@@ -355,26 +362,43 @@ def _cross(ox, oy, ax, ay, bx, by):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _solidity_kernel(pixels, width):  # pragma: no cover - compiled
+def _solidity_kernel(pixels, mask, use_mask, width):  # pragma: no cover - compiled
     # The row ends in (row, col) order, which is lexicographic: Andrew's monotone chain
     # builds the two halves of their hull in one pass each (O(rows), where scipy's
     # ConvexHull of the same points through qhull cost a millisecond a frame).
-    n = pixels.shape[0]
-    xs = np.empty(2 * n)
-    ys = np.empty(2 * n)
-    m = 0
-    i = 0
-    while i < n:
-        r = pixels[i] // width
-        j = i
-        while j + 1 < n and pixels[j + 1] // width == r:
-            j += 1
-        xs[m], ys[m] = pixels[i] - r * width, r
+    xs = np.empty(2 * pixels.shape[0])
+    ys = np.empty(2 * pixels.shape[0])
+    n = 0  # pixels counted
+    m = 0  # row ends stored
+    row = -1
+    first = last = 0
+    row_start = row_end = 0  # the current row's first pixel index and the next row's
+    for i in range(pixels.shape[0]):
+        if use_mask and not mask[i]:
+            continue
+        n += 1
+        p = pixels[i]
+        if p >= row_end:  # a new row (increasing pixels: one division per row)
+            r = p // width
+            row_start, row_end = r * width, (r + 1) * width
+        else:
+            r = row
+        col = p - row_start
+        if r != row:
+            if row >= 0:  # the previous row's ends
+                xs[m], ys[m] = first, row
+                m += 1
+                if last != first:
+                    xs[m], ys[m] = last, row
+                    m += 1
+            row, first = r, col
+        last = col
+    if row >= 0:
+        xs[m], ys[m] = first, row
         m += 1
-        if j > i:
-            xs[m], ys[m] = pixels[j] - r * width, r
+        if last != first:
+            xs[m], ys[m] = last, row
             m += 1
-        i = j + 1
     # lower then upper chain over the points sorted by (y, x)
     hx = np.empty(2 * m + 1)
     hy = np.empty(2 * m + 1)
@@ -595,6 +619,7 @@ class PlaneMeasurer:
             frame.color_intrinsics,
             frame.T_color_depth,
             frame.depth_scale,
+            copy=False,  # used up in this call: what is kept (the inliers) is copied
         )
         ms = dict(cp.ms)
         t0 = time.perf_counter()
@@ -605,7 +630,7 @@ class PlaneMeasurer:
             plane = None
         solidity = math.nan
         if plane is not None:
-            solidity = _pixel_solidity(cp.pixels[plane[3]], frame.depth.shape[1])
+            solidity = pixel_solidity_masked(cp.pixels, plane[3], frame.depth.shape[1])
             if solidity < self.config.min_solidity:
                 plane = None  # scattered specks on some plane: no board
         self._prev_ratio = None if plane is None else plane[4]
@@ -619,7 +644,16 @@ class PlaneMeasurer:
         normal, d, cov, inl, _ = plane
         n_in = int(inl.sum())
         return PlaneMeasurement(
-            True, normal, d, cov, n_in, cp.n_valid, pts.shape[0], pts[inl], ms, solidity
+            True,
+            normal,
+            d,
+            cov,
+            n_in,
+            cp.n_valid,
+            pts.shape[0],
+            np.compress(inl, pts, axis=0),
+            ms,
+            solidity,  # 4x faster than pts[inl]
         )
 
     def _fit(
