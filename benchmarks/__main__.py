@@ -43,6 +43,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         for r in records:
             target = "" if r.target_ratio is None else f"<={r.target_ratio:g}"
+            if r.target_ms is not None:
+                target += f" & <={r.target_ms:g} ms"
             print(
                 f"{r.name:<22} {r.case:<44} {r.ours_ms:>8.2f} {r.ref_ms:>8.2f} {r.ratio:>6.2f} "
                 f"{target:>6}  {r.accuracy} = {r.accuracy_value:.4g} (vs {r.reference})"
