@@ -388,7 +388,16 @@ def _estimation_cases() -> list[Case]:
     pts[:30] = rng.normal(size=(30, 3))
     keep = rng.random(200) < 0.6
     front = pts + np.array([0.0, 0.0, 2.0])  # in front of the camera for the inverse-depth fit
+    from robopercept.pipelines.plane_measure import pixel_solidity_masked
+
+    blob = np.zeros((12, 16), dtype=bool)
+    blob[2:9, 3:12] = True
+    blob[5, 14] = blob[10, 1] = True  # specks widen the hull
+    blob_pixels = np.flatnonzero(blob)
+    blob_keep = np.random.default_rng(5).random(blob_pixels.size) < 0.8
     return [
+        Case("pixel_solidity", lambda: pixel_solidity_masked(blob_pixels, None, 16)),
+        Case("pixel_solidity_mask", lambda: pixel_solidity_masked(blob_pixels, blob_keep, 16)),
         Case("inverse_depth_plane", lambda: fit_plane_inverse_depth(front, keep)),
         Case("scatter_matrix", lambda: scatter_matrix(pts)),
         Case("scatter_matrix_mask", lambda: scatter_matrix(pts, keep)),
@@ -446,7 +455,25 @@ def _depth_cases() -> list[Case]:
         assert out[0].pixels.size > 50 and out[1].pixels.size > 20
         return out
 
+    def box_table() -> np.ndarray:
+        # the HSV box's bit table for the colours with R = 37 and R = 200 (all 2^24 of
+        # them take minutes as Python), a box that wraps around and one that does not
+        from robopercept.depth import color_select
+
+        out = []
+        for low, high in [
+            ((150.0, 20.0, 20.0), (60.0, 255.0, 255.0)),
+            ((45.0, 35.0, 35.0), (65.0, 255.0, 255.0)),
+        ]:
+            lut = np.zeros(1 << 21, dtype=np.uint8)
+            for r in (37, 200):
+                color_select._box_table_kernel(np.array(low), np.array(high), r, r + 1, lut)
+            out.append(lut)
+        assert out[0].any() and out[1].any()
+        return np.concatenate(out)
+
     return [
+        Case("hsv_box_table", box_table),
         Case("census", lambda: census_transform(GRAY_U8, 5)),
         Case("sgm_8", lambda: semi_global_matching(left, right, 8, **sgm)),
         Case(

@@ -189,10 +189,10 @@ def _in_box(h, s, v, low, high):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _box_table_kernel(low, high, lut):  # pragma: no cover - compiled
+def _box_table_kernel(low, high, r0, r1, lut):  # pragma: no cover - compiled
     # bit (key & 7) of lut[key >> 3], key = R << 16 | G << 8 | B: whether that colour's
-    # HSV (rgb_to_hsv_pixel, OpenCV's bit for bit) lies in the box
-    for r in prange(256):
+    # HSV (rgb_to_hsv_pixel, OpenCV's bit for bit) lies in the box, for R in r0..r1-1
+    for r in prange(r0, r1):
         for g in range(256):
             for b8 in range(32):
                 byte = 0
@@ -208,7 +208,7 @@ def _box_table(low: tuple[float, float, float], high: tuple[float, float, float]
     """The HSV box as a 2 MiB bit table over every RGB colour (built once per box, in
     about 50 ms, and shared by the selectors of that box)."""
     lut = np.zeros(1 << 21, dtype=np.uint8)
-    _box_table_kernel(np.array(low), np.array(high), lut)
+    _box_table_kernel(np.array(low), np.array(high), 0, 256, lut)
     lut.setflags(write=False)
     return lut
 
