@@ -596,8 +596,17 @@ def check_magnitude(
         return arr
     if arr.dtype.kind in "iu" and smallest is None and np.iinfo(arr.dtype).max <= limit:
         return arr  # (uint8, uint16 images: nothing to look at)
-    a = np.abs(arr[np.isfinite(arr)] if arr.dtype.kind == "f" else arr.astype(np.float64))
-    m = float(a.max()) if a.size else 0.0
+    if arr.dtype.kind == "f":
+        # one pass when every value is finite (the usual case); gathering the finite
+        # values first cost 5 ms on 2 x 10^5 points. NaN or inf makes the maximum not
+        # finite: then the largest of the finite values, as the message needs
+        hi, lo = float(arr.max()), float(arr.min())  # no |arr| temporary
+        m = max(abs(hi), abs(lo))  # NaN when any value is NaN (max and min propagate it)
+        if not np.isfinite(m):
+            finite = np.abs(arr[np.isfinite(arr)])
+            m = float(finite.max()) if finite.size else 0.0
+    else:
+        m = float(np.abs(arr.astype(np.float64)).max())
     if m > limit:
         raise InputError(
             f"{name} has values up to {m:.3g}; values beyond {limit:.3g} overflow the "
