@@ -546,7 +546,7 @@ def fit_plane_inverse_depth_slab(
     >>> fit, inl = fit_plane_inverse_depth_slab(pts, np.array([0, 0, 1.0]), 2.1, 0.2)
     >>> ref = fit_plane_inverse_depth(pts, inl)
     >>> int(inl.sum()), bool(np.allclose(fit.normal, ref.normal, atol=1e-12))
-    (343, True)
+    (342, True)
     """
     pts = np.ascontiguousarray(points, dtype=np.float64)
     n = np.asarray(normal, dtype=np.float64)
