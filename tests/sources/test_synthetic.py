@@ -149,6 +149,37 @@ def test_scene_is_seeded_and_frames_are_independent_of_order():
     np.testing.assert_allclose([f.timestamp for f in frames], np.arange(5) / 30)
 
 
+@pytest.mark.parametrize("distractor", ["none", "both"])
+def test_still_scene_cast_once_renders_the_frames_of_one_full_pass(distractor):
+    # each frame casts its rays against the board and the occluder only, continuing
+    # from the hits on the still scene cast once per scene; with an empty still cache
+    # (no groups cast in advance) every frame is one pass over the whole scene, as
+    # before the cache. The two must agree to the bit, on frames with the occluder
+    # across the board (t = 0.6..0.72 of the loop) and without it.
+    kwargs = {"n_frames": 300, "seed": 2, "motion": "handheld", "distractor": distractor}
+    cached = SyntheticRGBDScene(**kwargs, **TINY)
+    full = SyntheticRGBDScene(**kwargs, **TINY)
+    full.frame(0)  # sets the rays (and the cache, replaced below)
+    n_d = full.depth_intrinsics.width * full.depth_intrinsics.height
+    n_c = full.color_intrinsics.width * full.color_intrinsics.height
+    empty = {
+        "groups": 0,
+        "rects": 0,
+        "z": np.full(n_d, np.inf),
+        "ids": np.full(n_d, -1, dtype=np.int64),
+        "seen": np.zeros(n_d, bool),
+        "tc": np.full(n_c, np.inf),
+        "idc": np.full(n_c, -1, dtype=np.int64),
+    }
+    object.__setattr__(full, "_still", empty)
+    for i in (0, 150, 190, 205):
+        a, b = cached.frame(i), full.frame(i)
+        assert np.array_equal(a.depth, b.depth)
+        assert np.array_equal(a.color, b.color)
+        assert np.array_equal(a.ground_truth["board_mask"], b.ground_truth["board_mask"])
+    assert cached._still["groups"] > 0  # the cache was used
+
+
 def test_the_board_is_occluded_briefly(scene):
     # the grey panel passes in front: no board pixel for a few frames around t = 0.66
     counts = [scene.frame(i).ground_truth["valid_board_pixels"] for i in range(190, 206, 3)]

@@ -86,6 +86,7 @@ import functools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit, prange
@@ -111,6 +112,7 @@ __all__ = [
 BOARD_COLOR = (60, 170, 60)  # OpenCV hue 60, saturation 165: inside the default HSV box
 _BOARD_SIZE = (0.60, 0.45)  # metres
 _ROOM = (-3.0, 3.0, -1.5, 1.2, 6.0)  # x min, x max, ceiling y, floor y, back wall z
+_MARGIN = 0.002  # metres: a point counts as seen by the right imager up to this short of it
 _LIGHT = np.array([0.3, -0.8, -0.5]) / np.linalg.norm([0.3, -0.8, -0.5])
 
 
@@ -146,14 +148,15 @@ def _hit(rects, j, ox, oy, oz, dx, dy, dz, t_max):  # pragma: no cover - compile
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _nearest(rects, groups, ox, oy, oz, dx, dy, dz, t_max):  # pragma: no cover - compiled
-    # groups: (start, stop, centre x, y, z, radius) of rectangles inside one bounding
-    # sphere (a box's six faces); a group is skipped when the ray misses its sphere or
-    # the sphere lies beyond the nearest hit so far
-    best = t_max
-    best_id = -1
+def _nearest(rects, groups, g0, ox, oy, oz, dx, dy, dz, best, best_id):  # pragma: no cover
+    # the nearest hit closer than `best` among groups g0, g0 + 1, ... (best_id: the hit
+    # so far, -1 for none); groups: (start, stop, centre x, y, z, radius) of rectangles
+    # inside one bounding sphere (a box's six faces); a group is skipped when the ray
+    # misses its sphere or the sphere lies beyond the nearest hit so far. Groups are
+    # visited in order and a hit must be strictly nearer, so continuing from g0 with the
+    # nearest hit among groups < g0 gives the same hit as one pass over all of them.
     dd = dx * dx + dy * dy + dz * dz
-    for g in range(groups.shape[0]):
+    for g in range(g0, groups.shape[0]):
         r = groups[g, 5]
         if r < np.inf:
             cx = groups[g, 2] - ox
@@ -177,19 +180,22 @@ def _nearest(rects, groups, ox, oy, oz, dx, dy, dz, t_max):  # pragma: no cover 
 
 
 @njit(cache=True, parallel=True)
-def _cast_kernel(origin, dirs, rects, groups, t_out, id_out):  # pragma: no cover - compiled
+def _cast_kernel(origin, dirs, rects, groups, g0, t_out, id_out):  # pragma: no cover - compiled
+    # t_out, id_out: in, the nearest hit among groups < g0 (inf, -1 for none); out, the
+    # nearest among all groups
     ox, oy, oz = origin[0], origin[1], origin[2]
     for i in prange(dirs.shape[0]):
         best, best_id = _nearest(
-            rects, groups, ox, oy, oz, dirs[i, 0], dirs[i, 1], dirs[i, 2], np.inf
+            rects, groups, g0, ox, oy, oz, dirs[i, 0], dirs[i, 1], dirs[i, 2], t_out[i], id_out[i]
         )
         t_out[i] = best
         id_out[i] = best_id
 
 
 @njit(cache=True, parallel=True)
-def _visible_kernel(origin, targets, rects, groups, margin, out):  # pragma: no cover
-    # out[i] &= no rectangle crosses the segment origin -> targets[i] (short of `margin`)
+def _visible_kernel(origin, targets, rects, groups, margin, start, out):  # pragma: no cover
+    # out[i] &= no rectangle of groups start[i], start[i] + 1, ... crosses the segment
+    # origin -> targets[i] (short of `margin`)
     ox, oy, oz = origin[0], origin[1], origin[2]
     for i in prange(targets.shape[0]):
         if not out[i]:
@@ -198,7 +204,7 @@ def _visible_kernel(origin, targets, rects, groups, margin, out):  # pragma: no 
         dy = targets[i, 1] - oy
         dz = targets[i, 2] - oz
         t_max = 1.0 - margin / math.sqrt(dx * dx + dy * dy + dz * dz)
-        if _nearest(rects, groups, ox, oy, oz, dx, dy, dz, t_max)[1] >= 0:
+        if _nearest(rects, groups, start[i], ox, oy, oz, dx, dy, dz, t_max, -1)[1] >= 0:
             out[i] = False
 
 
@@ -211,10 +217,15 @@ def _splitmix(z):  # pragma: no cover - compiled
 
 
 @njit(cache=True, parallel=True)
-def _shade_kernel(origin, dirs, rects, groups, colors, light, noise, key, out):  # pragma: no cover
+def _shade_kernel(
+    origin, dirs, rects, groups, g0, t0, id0, colors, light, noise, key, out
+):  # pragma: no cover - compiled
+    # t0, id0: the nearest hit of each ray among groups < g0 (inf, -1 for none)
     ox, oy, oz = origin[0], origin[1], origin[2]
     for i in prange(dirs.shape[0]):
-        best_id = _nearest(rects, groups, ox, oy, oz, dirs[i, 0], dirs[i, 1], dirs[i, 2], np.inf)[1]
+        best_id = _nearest(
+            rects, groups, g0, ox, oy, oz, dirs[i, 0], dirs[i, 1], dirs[i, 2], t0[i], id0[i]
+        )[1]
         if best_id < 0:
             for c in range(3):
                 out[i, c] = 0
@@ -652,6 +663,7 @@ class SyntheticRGBDScene:
         object.__setattr__(self, "_static", _static_scene(self.distractor))
         object.__setattr__(self, "_rays_d", None)
         object.__setattr__(self, "_rays_c", None)
+        object.__setattr__(self, "_still", None)
 
     # -------------------------------------------------------------- calibration
     @property
@@ -719,6 +731,8 @@ class SyntheticRGBDScene:
             object.__setattr__(
                 self, "_rays_c", np.ascontiguousarray(pixel_rays(kc) @ r_depth_color.T)
             )
+        if self._still is None:  # type: ignore[attr-defined]
+            object.__setattr__(self, "_still", self._cast_static(rects, groups))
         depth, board_mask = self._render_depth(rects, groups, board_id, rng)
         color = self._render_color(rects, groups, colors, rng)
         return RGBDFrame(
@@ -737,23 +751,68 @@ class SyntheticRGBDScene:
             },
         )
 
+    def _cast_static(self, rects: np.ndarray, groups: np.ndarray) -> dict[str, Any]:
+        """Cast every ray against the still part of the scene (the room, the boxes, the
+        distractors: the first ``len(self._static)`` groups), once; each frame then
+        casts against the moving board and occluder only, starting from these hits
+        (:func:`_nearest` continues a pass exactly)."""
+        n_groups = len(self._static)  # type: ignore[attr-defined]
+        still = groups[:n_groups]
+        rays_d, rays_c = self._rays_d, self._rays_c  # type: ignore[attr-defined]
+        z = np.full(rays_d.shape[0], np.inf)
+        ids = np.full(rays_d.shape[0], -1, dtype=np.int64)
+        _cast_kernel(np.zeros(3), rays_d, rects, still, 0, z, ids)
+        # whether the right imager sees each still hit past the still rectangles
+        hit = np.isfinite(z)
+        pts = rays_d * np.where(hit, z, 0.0)[:, None]
+        seen = self._right_sees(pts, hit)
+        zeros = np.zeros(rays_d.shape[0], dtype=np.int64)
+        _visible_kernel(self._right, pts, rects, still, _MARGIN, zeros, seen)
+        tc = np.full(rays_c.shape[0], np.inf)
+        idc = np.full(rays_c.shape[0], -1, dtype=np.int64)
+        origin = np.ascontiguousarray(invert(self._T)[:3, 3])  # type: ignore[attr-defined]
+        _cast_kernel(origin, rays_c, rects, still, 0, tc, idc)
+        return {
+            "groups": n_groups,
+            "rects": int(groups[n_groups - 1, 1]),
+            "z": z,
+            "ids": ids,
+            "seen": seen,
+            "tc": tc,
+            "idc": idc,
+        }
+
+    @property
+    def _right(self) -> np.ndarray:
+        return np.array([self.baseline, 0.0, 0.0])
+
+    def _right_sees(self, pts: np.ndarray, hit: np.ndarray) -> np.ndarray:
+        # hits inside the right imager's image
+        kd = self.depth_intrinsics
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u_right = kd.fx * (pts[:, 0] - self.baseline) / pts[:, 2] + kd.cx
+        return hit & (u_right >= -0.5) & (u_right <= kd.width - 0.5)
+
     def _render_depth(
         self, rects: np.ndarray, groups: np.ndarray, board_id: int, rng: np.random.Generator
     ) -> tuple[np.ndarray, np.ndarray]:
         kd = self.depth_intrinsics
         h, w = kd.height, kd.width
         rays = self._rays_d  # type: ignore[attr-defined]
-        z = np.empty(rays.shape[0])
-        ids = np.empty(rays.shape[0], dtype=np.int64)
-        _cast_kernel(np.zeros(3), rays, rects, groups, z, ids)
+        still = self._still  # type: ignore[attr-defined]
+        z = still["z"].copy()
+        ids = still["ids"].copy()
+        _cast_kernel(np.zeros(3), rays, rects, groups, still["groups"], z, ids)
         hit = np.isfinite(z)
         pts = rays * np.where(hit, z, 0.0)[:, None]
-        # the right imager must see the point: inside its image and not occluded
+        # the right imager must see the point: inside its image and not occluded; a hit
+        # on the still scene has its still occluders checked already
         f, b = kd.fx, self.baseline
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u_right = f * (pts[:, 0] - b) / pts[:, 2] + kd.cx
-        seen = hit & (u_right >= -0.5) & (u_right <= w - 0.5)
-        _visible_kernel(np.array([b, 0.0, 0.0]), pts, rects, groups, 0.002, seen)
+        seen = self._right_sees(pts, hit)
+        on_still = (ids >= 0) & (ids < still["rects"])
+        seen &= ~on_still | still["seen"]
+        start = np.where(on_still, still["groups"], 0)
+        _visible_kernel(self._right, pts, rects, groups, _MARGIN, start, seen)
         z = np.where(seen, z, 0.0).reshape(h, w)
         board_mask = (ids == board_id).reshape(h, w)
         # flying pixels: mix a depth edge's two sides
@@ -791,5 +850,7 @@ class SyntheticRGBDScene:
         key = np.uint64(rng.integers(0, 2**63))
         origin = np.ascontiguousarray(T_depth_color[:3, 3])
         noise = float(self.color_noise)
-        _shade_kernel(origin, rays, rects, groups, colors, _LIGHT, noise, key, out)
+        still = self._still  # type: ignore[attr-defined]
+        g0, t0, id0 = still["groups"], still["tc"], still["idc"]
+        _shade_kernel(origin, rays, rects, groups, g0, t0, id0, colors, _LIGHT, noise, key, out)
         return out.reshape(kc.height, kc.width, 3)
