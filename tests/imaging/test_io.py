@@ -136,6 +136,27 @@ def test_png_compression_level_is_lossless_and_checked(tmp_path, rng):
         write_image(tmp_path / "bad.png", img, png_compression=12)
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("channels", [1, 3, 4])
+def test_png_level_0_is_stored_unfiltered_and_read_by_pillow(tmp_path, rng, dtype, channels):
+    # level 0 is written by our encoder (Pillow filters every row even when it does not
+    # compress): rows of filter type none in stored deflate blocks, a file of the raw
+    # samples plus a few bytes, read back exactly by us and, for the types it holds, by
+    # Pillow
+    from PIL import Image
+
+    shape = (17, 23) if channels == 1 else (17, 23, channels)
+    img = rng.integers(0, np.iinfo(dtype).max + 1, shape).astype(dtype)
+    p = write_image(tmp_path / "s.png", img, png_compression=0)
+    assert np.array_equal(read_image(p), img)
+    data = p.read_bytes()
+    raw = img.nbytes + 17  # the samples and each row's filter byte
+    assert raw < len(data) < raw + 120
+    assert data[25] == {1: 0, 3: 2, 4: 6}[channels]  # IHDR colour type
+    if dtype == np.uint8 or channels == 1:
+        assert np.array_equal(np.asarray(Image.open(p)).astype(np.int64), img.astype(np.int64))
+
+
 def test_sample_image_path_is_the_bundled_box():
     from robopercept.imaging import sample_image_path
 

@@ -54,6 +54,19 @@ def test_round_trip(tmp_path):
     assert cam["depth"].model == "brown_conrady"
 
 
+def test_stored_frames_read_back_the_same(tmp_path):
+    # png_compression=0 (scratch folders: the plane sweep's) changes the files' size,
+    # not what is read back
+    written = list(frames())
+    a = write_tum_folder(tmp_path / "a", written)
+    b = write_tum_folder(tmp_path / "b", written, png_compression=0)
+    for fa, fb in zip(TUMFolderSource(a), TUMFolderSource(b), strict=True):
+        assert np.array_equal(fa.depth, fb.depth) and np.array_equal(fa.color, fb.color)
+    # the depth maps (values < 4096) compress; the random colours do not
+    size = {k: sum(f.stat().st_size for f in (tmp_path / k / "depth").iterdir()) for k in "ab"}
+    assert size["b"] > size["a"]
+
+
 def test_a_cut_sequence_keeps_each_frames_truth(tmp_path):
     """Frames 2 and 3 of a sequence (indices 2, 3) written alone read back as the
     folder's frames 0 and 1, each with its own plane (the truth was keyed by the
@@ -210,6 +223,14 @@ def test_bad_folders(tmp_path, damage, match):
         (lambda t: write_tum_folder(t / ("n" * 300), frames(1)), "file name too long"),
         (lambda t: write_tum_folder(t / "o", 3), "frames must be an iterable of RGBDFrame"),
         (lambda t: write_tum_folder(t / "o", [3]), "frames must be RGBDFrame objects"),
+        (
+            lambda t: write_tum_folder(t / "o", frames(1), png_compression=10),
+            "png_compression must be in 0..9",
+        ),
+        (
+            lambda t: write_tum_folder(t / "o", frames(1), png_compression=1.5),
+            "png_compression must be an integer",
+        ),
     ],
 )
 def test_bad_arguments_give_input_errors(tmp_path, call, words):

@@ -485,7 +485,8 @@ def write_image(
     image : (H, W), (H, W, 3) or (H, W, 4) ndarray, uint8 or uint16 (or bool: 0/255)
     png_compression : int, optional
         zlib level 0..9 for PNG (the writer's default when None; 1 is about 5x faster
-        than the default for 20% larger files, what sequences of frames want).
+        than the default for 20% larger files, what sequences of frames want; 0 stores
+        the rows unfiltered and uncompressed, at memory speed, for scratch files).
     palette : (n, 3) array-like of uint8, optional
         Write a palette PNG: ``image`` is then an (H, W) uint8 map of indices below
         ``n <= 256`` and index ``i`` shows as colour ``palette[i]`` (the label maps of
@@ -556,8 +557,12 @@ def write_image(
             im = Image.fromarray(np.ascontiguousarray(arr))  # mode "L"
             im.putpalette(pal.ravel().tolist())  # "L" -> "P", the values kept as indices
             im.save(p, format="PNG", compress_level=extra.get("compress_level", 6))
-        elif arr.dtype == np.uint16 and ext == ".png" and arr.ndim == 3:
-            p.write_bytes(_encode_png16(arr, extra.get("compress_level", 6)))
+        elif ext == ".png" and (
+            (arr.dtype == np.uint16 and arr.ndim == 3) or extra.get("compress_level") == 0
+        ):
+            # 16-bit colour (which imageio's Pillow cannot write), and stored files (at
+            # level 0 Pillow still filters every row: 20x slower than memory speed)
+            p.write_bytes(_encode_png(arr, extra.get("compress_level", 6)))
         elif arr.dtype == np.uint16 and ext in _PNM_EXTS:
             p.write_bytes(_encode_netpbm16(arr))
         else:
@@ -740,24 +745,35 @@ def _png_chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
 
 
-def _encode_png16(image: np.ndarray, level: int) -> bytes:
-    """A 16-bit RGB or RGBA PNG file (colour type 2 or 6, not interlaced).
+def _encode_png(image: np.ndarray, level: int) -> bytes:
+    """A PNG file of 8- or 16-bit gray, RGB or RGBA samples (not interlaced).
 
     Parameters
     ----------
-    image : (H, W, 3) or (H, W, 4) uint16 ndarray
+    image : (H, W), (H, W, 1), (H, W, 3) or (H, W, 4) uint8 or uint16 ndarray
     level : int
-        zlib compression level 0..9.
+        zlib compression level 0..9. Level 0 stores the rows unfiltered (filter type
+        none), as libpng does when it does not compress: filtering only helps a
+        compressor, and the file is then written at memory speed.
 
     Returns
     -------
     bytes
-        The whole file. Samples are stored big-endian, as the PNG specification says.
+        The whole file. 16-bit samples are stored big-endian, as the PNG specification
+        says.
     """
-    h, w, ch = image.shape
-    raw = np.ascontiguousarray(image, dtype=">u2").view(np.uint8).reshape(h, w * ch * 2)
-    idat = zlib.compress(_png_filter(raw, ch * 2).tobytes(), level)
-    ihdr = struct.pack(">IIBBBBB", w, h, 16, 6 if ch == 4 else 2, 0, 0, 0)
+    h, w = image.shape[:2]
+    ch = 1 if image.ndim == 2 else image.shape[2]
+    depth = 8 * image.dtype.itemsize
+    dtype = ">u2" if depth == 16 else np.uint8
+    raw = np.ascontiguousarray(image, dtype=dtype).view(np.uint8).reshape(h, w * ch * depth // 8)
+    if level == 0:
+        rows = np.zeros((h, raw.shape[1] + 1), np.uint8)
+        rows[:, 1:] = raw
+    else:
+        rows = _png_filter(raw, ch * depth // 8)
+    idat = zlib.compress(rows.tobytes(), level)
+    ihdr = struct.pack(">IIBBBBB", w, h, depth, {1: 0, 2: 4, 3: 2, 4: 6}[ch], 0, 0, 0)
     return (
         _PNG_SIGNATURE
         + _png_chunk(b"IHDR", ihdr)

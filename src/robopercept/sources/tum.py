@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import as_path, check_bool, check_real
+from robopercept._checks import as_path, check_bool, check_int, check_real
 from robopercept.depth.rgbd import check_intrinsics
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import parse_json
@@ -420,12 +420,24 @@ def camera_dict(k: CameraIntrinsics) -> dict[str, Any]:
     }
 
 
-def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) -> Path:
+def write_tum_folder(
+    path: str | os.PathLike[str], frames: Iterable[RGBDFrame], *, png_compression: int = 1
+) -> Path:
     """Write frames as a TUM folder with ``camera.json`` (from the first frame) and, when
     the frames carry ``ground_truth["plane"] = (n, d)``, ``planes.csv``.
 
     Files are written frame by frame, and the lists are flushed as they grow, so an
     interrupted write leaves a readable folder with the frames written so far.
+
+    Parameters
+    ----------
+    path : path-like
+        The folder (created).
+    frames : iterable of RGBDFrame
+    png_compression : int
+        zlib level 0..9 of the PNG files (:func:`~robopercept.imaging.write_image`): 1
+        (default) is fast with files 2-3x smaller than raw; 0 stores them uncompressed,
+        about 20x faster to write, for folders that are read once and deleted.
 
     Raises
     ------
@@ -434,6 +446,8 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
         ``frames`` is not an iterable of :class:`RGBDFrame`.
     """
     out = as_path(path, "the output folder")
+    if check_int(png_compression, "png_compression", 0) > 9:
+        raise InputError(f"png_compression must be in 0..9; got {png_compression}")
     if isinstance(frames, (str, bytes, RGBDFrame)) or not isinstance(frames, Iterable):
         raise InputError(
             f"frames must be an iterable of RGBDFrame objects; got {type(frames).__name__}"
@@ -465,8 +479,8 @@ def write_tum_folder(path: str | os.PathLike[str], frames: Iterable[RGBDFrame]) 
                 (out / "camera.json").write_text(json.dumps(cam, indent=2))
                 wrote_camera = True
             name = f"{f.timestamp:.6f}.png"
-            write_image(out / "depth" / name, f.depth, png_compression=1)
-            write_image(out / "rgb" / name, f.color, png_compression=1)
+            write_image(out / "depth" / name, f.depth, png_compression=png_compression)
+            write_image(out / "rgb" / name, f.color, png_compression=png_compression)
             depth_list.write(f"{f.timestamp:.6f} depth/{name}\n")
             rgb_list.write(f"{f.timestamp:.6f} rgb/{name}\n")
             depth_list.flush()
