@@ -208,6 +208,102 @@ def _visible_kernel(origin, targets, rects, groups, margin, start, out):  # prag
             out[i] = False
 
 
+@njit(cache=True, parallel=True)
+def _depth_kernel(
+    rays,
+    rects,
+    groups,
+    g0,
+    z_still,
+    id_still,
+    seen_still,
+    n_still,
+    fx,
+    cx,
+    width,
+    baseline,
+    margin,
+    z_out,
+    id_out,
+):  # pragma: no cover - compiled
+    # one frame's depth rays: the nearest hit continuing from the still scene's
+    # (_cast_kernel), kept where the right imager (at x = baseline) sees it, inside its
+    # image and not occluded (_visible_kernel; a hit on the still scene, rectangle id <
+    # n_still, has its still occluders known in seen_still); z_out 0 where unseen
+    for i in prange(rays.shape[0]):
+        dx, dy, dz = rays[i, 0], rays[i, 1], rays[i, 2]
+        t, best_id = _nearest(rects, groups, g0, 0.0, 0.0, 0.0, dx, dy, dz, z_still[i], id_still[i])
+        id_out[i] = best_id
+        z_out[i] = 0.0
+        if not t < np.inf:
+            continue
+        px, py, pz = dx * t, dy * t, dz * t
+        u = fx * (px - baseline) / pz + cx
+        if not (u >= -0.5 and u <= width - 0.5):
+            continue
+        start = 0
+        if 0 <= best_id < n_still:
+            if not seen_still[i]:
+                continue
+            start = g0
+        ex, ey, ez = px - baseline, py - 0.0, pz - 0.0
+        t_max = 1.0 - margin / math.sqrt(ex * ex + ey * ey + ez * ez)
+        if _nearest(rects, groups, start, baseline, 0.0, 0.0, ex, ey, ez, t_max, -1)[1] >= 0:
+            continue
+        z_out[i] = t
+
+
+@njit(cache=True)
+def _sensor_kernel(
+    z,
+    edge_draw,
+    mix_draw,
+    noise,
+    drop_draw,
+    fb,
+    fly_rate,
+    subpixel,
+    z_min,
+    z_max,
+    scale,
+    drop_rate,
+    out,
+):  # pragma: no cover - compiled
+    # the depth sensor's effects on true depths z (H, W), 0 where unseen, written to out
+    # (uint16 depth units): flying pixels (a pixel between two sides of a depth edge,
+    # |z_l - z_r| > 5 % of the nearer, takes a random mix of them with probability
+    # fly_rate), disparity noise, subpixel quantization of the disparity, the depth
+    # range, dropouts. The draws come from the frame's generator, as NumPy would use
+    # them elementwise: edge_draw, mix_draw (H, W - 2) and drop_draw (H, W) are uniform,
+    # noise (H, W) normal (scaled).
+    h, w = z.shape
+    for i in range(h):
+        for j in range(w):
+            zij = z[i, j]
+            if fly_rate > 0.0 and 1 <= j < w - 1:
+                left = z[i, j - 1]
+                right = z[i, j + 1]
+                if left > 0.0 and right > 0.0:
+                    if (
+                        abs(left - right) > 0.05 * min(left, right)
+                        and edge_draw[i, j - 1] < fly_rate
+                    ):
+                        a = mix_draw[i, j - 1]
+                        zij = a * left + (1 - a) * right
+            valid = zij > 0.0
+            disp = fb / (zij if valid else 1.0)
+            disp = disp + noise[i, j]
+            if subpixel > 0.0:
+                disp = np.rint(disp / subpixel) * subpixel
+            valid = valid and disp > 0.0
+            zq = fb / (disp if valid else 1.0)
+            valid = valid and zq >= z_min and zq <= z_max
+            if drop_rate > 0.0:
+                valid = valid and drop_draw[i, j] >= drop_rate
+            v = np.rint(zq / scale) if valid else 0.0
+            out[i, j] = np.uint16(min(max(v, 0.0), 65535.0))
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _splitmix(z):  # pragma: no cover - compiled
     z = z + np.uint64(0x9E3779B97F4A7C15)
@@ -800,45 +896,30 @@ class SyntheticRGBDScene:
         h, w = kd.height, kd.width
         rays = self._rays_d  # type: ignore[attr-defined]
         still = self._still  # type: ignore[attr-defined]
-        z = still["z"].copy()
-        ids = still["ids"].copy()
-        _cast_kernel(np.zeros(3), rays, rects, groups, still["groups"], z, ids)
-        hit = np.isfinite(z)
-        pts = rays * np.where(hit, z, 0.0)[:, None]
-        # the right imager must see the point: inside its image and not occluded; a hit
-        # on the still scene has its still occluders checked already
+        z = np.empty(rays.shape[0])
+        ids = np.empty(rays.shape[0], dtype=np.int64)
         f, b = kd.fx, self.baseline
-        seen = self._right_sees(pts, hit)
-        on_still = (ids >= 0) & (ids < still["rects"])
-        seen &= ~on_still | still["seen"]
-        start = np.where(on_still, still["groups"], 0)
-        _visible_kernel(self._right, pts, rects, groups, _MARGIN, start, seen)
-        z = np.where(seen, z, 0.0).reshape(h, w)
+        _depth_kernel(
+            rays, rects, groups, still["groups"], still["z"], still["ids"], still["seen"],
+            still["rects"], f, kd.cx, w, b, _MARGIN, z, ids,
+        )  # fmt: skip
+        z = z.reshape(h, w)
         board_mask = (ids == board_id).reshape(h, w)
-        # flying pixels: mix a depth edge's two sides
-        if self.flying_pixel_rate > 0:
-            zz = np.where(z > 0, z, np.nan)
-            left, right = zz[:, :-2], zz[:, 2:]
-            with np.errstate(invalid="ignore"):
-                edge = np.abs(left - right) > 0.05 * np.fmin(left, right)
-            edge &= rng.random(edge.shape) < self.flying_pixel_rate
-            a = rng.random(edge.shape)
-            mixed = a * left + (1 - a) * right
-            inner = z[:, 1:-1]
-            inner[edge] = mixed[edge]
-        # disparity noise, subpixel quantization, depth units
-        valid = z > 0
-        disp = f * b / np.where(valid, z, 1.0)
-        disp = disp + rng.normal(0.0, self.disparity_noise, disp.shape)
-        if self.subpixel > 0:
-            disp = np.round(disp / self.subpixel) * self.subpixel
-        valid &= disp > 0
-        zq = f * b / np.where(valid, disp, 1.0)
-        valid &= (zq >= self.min_depth) & (zq <= self.max_depth)
-        if self.dropout_rate > 0:
-            valid &= rng.random(valid.shape) >= self.dropout_rate
-        raw = np.where(valid, np.rint(zq / self.depth_scale), 0.0)
-        return np.clip(raw, 0, 65535).astype(np.uint16), board_mask
+        # the sensor's effects from seeded draws (in this order, whether or not used)
+        # applied in one compiled pass (:func:`_sensor_kernel`)
+        fly = self.flying_pixel_rate > 0
+        edge_draw = rng.random((h, w - 2)) if fly else np.zeros((1, 1))
+        mix_draw = rng.random((h, w - 2)) if fly else np.zeros((1, 1))
+        noise = rng.normal(0.0, self.disparity_noise, (h, w))
+        drop = self.dropout_rate > 0
+        drop_draw = rng.random((h, w)) if drop else np.zeros((1, 1))
+        out = np.empty((h, w), np.uint16)
+        _sensor_kernel(
+            z, edge_draw, mix_draw, noise, drop_draw, float(f * b), self.flying_pixel_rate,
+            float(self.subpixel), self.min_depth, self.max_depth, self.depth_scale,
+            self.dropout_rate, out,
+        )  # fmt: skip
+        return out, board_mask
 
     def _render_color(
         self, rects: np.ndarray, groups: np.ndarray, colors: np.ndarray, rng: np.random.Generator
