@@ -157,6 +157,30 @@ def test_png_level_0_is_stored_unfiltered_and_read_by_pillow(tmp_path, rng, dtyp
         assert np.array_equal(np.asarray(Image.open(p)).astype(np.int64), img.astype(np.int64))
 
 
+def test_stored_png_with_a_filtered_row_is_still_unfiltered(tmp_path, rng):
+    # the reader takes a file whose rows all have filter type 0 as it is; one row with
+    # filter "up" (type 2) must send it through the full decoder, which undoes it
+    import struct
+    import zlib
+
+    img = rng.integers(0, 256, (4, 5, 3), dtype=np.uint8)
+    rows = np.zeros((4, 16), np.uint8)
+    rows[:, 1:] = img.reshape(4, 15)
+    rows[2, 0] = 2
+    rows[2, 1:] = img[2].ravel() - img[1].ravel()  # uint8, modulo 256 as PNG's
+
+    def chunk(kind, data):
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    ihdr = struct.pack(">IIBBBBB", 5, 4, 8, 2, 0, 0, 0)
+    data = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+    data += chunk(b"IDAT", zlib.compress(rows.tobytes(), 0)) + chunk(b"IEND", b"")
+    (tmp_path / "f.png").write_bytes(data)
+    assert np.array_equal(read_image(tmp_path / "f.png"), img)
+
+
 def test_sample_image_path_is_the_bundled_box():
     from robopercept.imaging import sample_image_path
 

@@ -741,7 +741,7 @@ def _png_filter(raw: np.ndarray, bpp: int) -> np.ndarray:
 
 def _png_chunk(kind: bytes, data: bytes) -> bytes:
     """One PNG chunk: length, type, data and the CRC-32 of type and data (big-endian)."""
-    crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+    crc = zlib.crc32(data, zlib.crc32(kind)) & 0xFFFFFFFF  # no copy of kind + data
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
 
 
@@ -963,6 +963,16 @@ def _read_png(data: bytes, p: Path, indexed: bool = False) -> np.ndarray:
         )
     if depth == 16 and ctype in _PNG16_CHANNELS:
         return _decode_png16(stream, w, h, _PNG16_CHANNELS[ctype], p)
+    kinds = {kind for kind, _, _ in chunks}
+    if depth in (8, 16) and ctype in (0, 2, 6) and not interlace and b"tRNS" not in kinds:
+        # rows stored unfiltered (filter type 0 on every row, as write_image writes
+        # png_compression=0): the samples as they are, without a pass through Pillow
+        ch = _PNG_CHANNELS[ctype]
+        rows = np.frombuffer(stream, np.uint8, size).reshape(h, 1 + w * ch * depth // 8)
+        if not rows[:, 0].any():
+            samples = rows[:, 1:].view(">u2" if depth == 16 else np.uint8)
+            img = samples.astype(np.uint16 if depth == 16 else np.uint8)
+            return img.reshape((h, w) if ch == 1 else (h, w, ch))
     parts, stored = [data[:8]], _png_chunk(b"IDAT", zlib.compress(stream, 0))
     for kind, a, b in chunks:
         if kind != b"IDAT":
