@@ -22,10 +22,13 @@ offset errors each at most the raw fit's, or within 5 % where the raw figure is 
 board (>= 500 board pixels with depth) accepted.
 
 ``python -m benchmarks.plane_sweep [--seeds N] [--frames N] [--camera C] [--motion M]
-[--set NAME=JSON]`` runs the sweep (with other tracker settings) and writes
-``benchmarks/results/plane_sweep.json``. Not yet in the test suite: the tracker does not
-meet the rule on every sequence (issue 49 is open), and a case takes 8-25 s on this
-machine, far over the suite's 3-minute share for 100 cases.
+[--set NAME=JSON] [--out PATH]`` runs the sweep (with other tracker settings) and writes
+``benchmarks/results/plane_sweep.json``. The test suite runs the same cases with
+30-frame sequences (``tests/pipelines/plane_sweep_cases.py``; record:
+``--frames 30 --out benchmarks/results/plane_sweep_ci.json``), the sequences that do not
+yet meet the rule listed there as strict xfails (issue 49 is open). A frame costs about
+40 ms to render at 640x480 and 70 ms at 848x480 + 1280x720 colour (the still scene is
+cast once per sequence), 5-13 ms to write as stored PNG and 10-20 ms to read back.
 """
 
 from __future__ import annotations
@@ -83,10 +86,13 @@ class SweepCase:
     @property
     def start(self) -> int:
         """First frame: seeded; an occluder case starts where its pass (frames 180-216
-        of the loop) falls inside the sequence."""
+        of the loop) falls inside the sequence, or, for a sequence shorter than the
+        pass, where the sequence holds its middle and one of its ends."""
         rng = np.random.default_rng([self.seed, MOTIONS.index(self.motion)])
+        if self.occluder and self.frames >= 36:
+            return int(rng.integers(216 - self.frames, 180 + 1))
         if self.occluder:
-            return int(rng.integers(max(0, 216 - self.frames), 180 + 1))
+            return int(rng.integers(180 - self.frames // 2, 216 - self.frames // 2 + 1))
         return int(rng.integers(0, LOOP_FRAMES - self.frames + 1))
 
     def scene(self) -> SyntheticRGBDScene:
@@ -125,7 +131,7 @@ def run_case(
     scene = case.scene()
     frames = (scene.frame(case.start + i) for i in range(case.frames))
     with tempfile.TemporaryDirectory(dir=tmp) as work:
-        folder = write_tum_folder(Path(work) / "seq", frames)
+        folder = write_tum_folder(Path(work) / "seq", frames, png_compression=0)
         source = TUMFolderSource(folder)
         tracker = PlaneTracker(config)
         results, truths = [], []
@@ -152,9 +158,15 @@ def rule_failures(summary: PlaneTrackSummary) -> list[str]:
                 out.append(f"{name} {q} {getattr(t, q):.3f} > raw {getattr(r, q):.3f}")
     jr, jt = summary.jitter_raw_deg, summary.jitter_tracked_deg
     if jr is None or jt is None or not jt < jr:
-        out.append(f"jitter {jt} >= raw {jr}")
+        out.append(
+            "jitter "
+            + ("none" if jt is None else f"{jt:.5f}")
+            + " >= raw "
+            + ("none" if jr is None else f"{jr:.5f}")
+        )
     if summary.detection_rate is None or summary.detection_rate < 0.99:
-        out.append(f"accepted {summary.detection_rate} < 0.99")
+        rate = summary.detection_rate
+        out.append(f"accepted {'none' if rate is None else f'{rate:.3f}'} < 0.99")
     return out
 
 
