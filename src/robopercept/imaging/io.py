@@ -54,6 +54,7 @@ __all__ = [
     "VideoReader",
     "VideoWriter",
     "check_image_path",
+    "check_png_compression",
     "check_video_path",
     "contained_path",
     "output_stems",
@@ -66,6 +67,16 @@ __all__ = [
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm")
 #: containers that take the H.264 stream :class:`VideoWriter` encodes
 _VIDEO_EXTS = {".mp4", ".m4v", ".mov", ".mkv", ".avi"}
+
+
+def check_png_compression(level: int) -> int:
+    """Return ``level`` after checking that it is a zlib level 0..9, as
+    :func:`write_image`'s ``png_compression`` takes; callers that write many images
+    check it before the first."""
+    v = check_int(level, "png_compression", 0)
+    if v > 9:
+        raise InputError(f"png_compression must be in 0..9; got {v}")
+    return v
 
 
 def check_image_path(path: str | os.PathLike[str]) -> Path:
@@ -543,9 +554,7 @@ def write_image(
         )
     extra = {}
     if png_compression is not None:
-        level = check_int(png_compression, "png_compression", 0)
-        if level > 9:
-            raise InputError(f"png_compression must be in 0..9; got {level}")
+        level = check_png_compression(png_compression)
         if ext == ".png":
             extra["compress_level"] = level
     pal = None if palette is None else _check_palette(palette, arr, ext, p)

@@ -193,28 +193,12 @@ def _cast_kernel(origin, dirs, rects, groups, g0, t_out, id_out):  # pragma: no 
 
 
 @njit(cache=True, parallel=True)
-def _visible_kernel(origin, targets, rects, groups, margin, start, out):  # pragma: no cover
-    # out[i] &= no rectangle of groups start[i], start[i] + 1, ... crosses the segment
-    # origin -> targets[i] (short of `margin`)
-    ox, oy, oz = origin[0], origin[1], origin[2]
-    for i in prange(targets.shape[0]):
-        if not out[i]:
-            continue
-        dx = targets[i, 0] - ox
-        dy = targets[i, 1] - oy
-        dz = targets[i, 2] - oz
-        t_max = 1.0 - margin / math.sqrt(dx * dx + dy * dy + dz * dz)
-        if _nearest(rects, groups, start[i], ox, oy, oz, dx, dy, dz, t_max, -1)[1] >= 0:
-            out[i] = False
-
-
-@njit(cache=True, parallel=True)
 def _depth_kernel(
     rays,
     rects,
     groups,
     g0,
-    z_still,
+    t_still,
     id_still,
     seen_still,
     n_still,
@@ -223,18 +207,22 @@ def _depth_kernel(
     width,
     baseline,
     margin,
-    z_out,
+    t_out,
     id_out,
+    seen_out,
 ):  # pragma: no cover - compiled
-    # one frame's depth rays: the nearest hit continuing from the still scene's
-    # (_cast_kernel), kept where the right imager (at x = baseline) sees it, inside its
-    # image and not occluded (_visible_kernel; a hit on the still scene, rectangle id <
-    # n_still, has its still occluders known in seen_still); z_out 0 where unseen
+    # depth rays from the left imager (the origin): the nearest hit among groups g0, g0
+    # + 1, ... continuing from the hits among groups < g0 (t_still, id_still: inf, -1
+    # for none; see _nearest), and whether the right imager (at x = baseline) sees it:
+    # inside its image and no rectangle across the segment to it, short of `margin`. A
+    # hit on a rectangle id < n_still has its occluders among groups < g0 known in
+    # seen_still, so only groups from g0 are tested for it.
     for i in prange(rays.shape[0]):
         dx, dy, dz = rays[i, 0], rays[i, 1], rays[i, 2]
-        t, best_id = _nearest(rects, groups, g0, 0.0, 0.0, 0.0, dx, dy, dz, z_still[i], id_still[i])
+        t, best_id = _nearest(rects, groups, g0, 0.0, 0.0, 0.0, dx, dy, dz, t_still[i], id_still[i])
+        t_out[i] = t
         id_out[i] = best_id
-        z_out[i] = 0.0
+        seen_out[i] = False
         if not t < np.inf:
             continue
         px, py, pz = dx * t, dy * t, dz * t
@@ -248,9 +236,9 @@ def _depth_kernel(
             start = g0
         ex, ey, ez = px - baseline, py - 0.0, pz - 0.0
         t_max = 1.0 - margin / math.sqrt(ex * ex + ey * ey + ez * ez)
-        if _nearest(rects, groups, start, baseline, 0.0, 0.0, ex, ey, ez, t_max, -1)[1] >= 0:
-            continue
-        z_out[i] = t
+        seen_out[i] = (
+            _nearest(rects, groups, start, baseline, 0.0, 0.0, ex, ey, ez, t_max, -1)[1] < 0
+        )
 
 
 @njit(cache=True)
@@ -855,15 +843,10 @@ class SyntheticRGBDScene:
         n_groups = len(self._static)  # type: ignore[attr-defined]
         still = groups[:n_groups]
         rays_d, rays_c = self._rays_d, self._rays_c  # type: ignore[attr-defined]
-        z = np.full(rays_d.shape[0], np.inf)
-        ids = np.full(rays_d.shape[0], -1, dtype=np.int64)
-        _cast_kernel(np.zeros(3), rays_d, rects, still, 0, z, ids)
-        # whether the right imager sees each still hit past the still rectangles
-        hit = np.isfinite(z)
-        pts = rays_d * np.where(hit, z, 0.0)[:, None]
-        seen = self._right_sees(pts, hit)
-        zeros = np.zeros(rays_d.shape[0], dtype=np.int64)
-        _visible_kernel(self._right, pts, rects, still, _MARGIN, zeros, seen)
+        z, ids, seen = self._cast_depth(
+            rects, still, 0, np.full(rays_d.shape[0], np.inf),
+            np.full(rays_d.shape[0], -1, dtype=np.int64), np.zeros(0, bool), 0,
+        )  # fmt: skip
         tc = np.full(rays_c.shape[0], np.inf)
         idc = np.full(rays_c.shape[0], -1, dtype=np.int64)
         origin = np.ascontiguousarray(invert(self._T)[:3, 3])  # type: ignore[attr-defined]
@@ -878,32 +861,39 @@ class SyntheticRGBDScene:
             "idc": idc,
         }
 
-    @property
-    def _right(self) -> np.ndarray:
-        return np.array([self.baseline, 0.0, 0.0])
-
-    def _right_sees(self, pts: np.ndarray, hit: np.ndarray) -> np.ndarray:
-        # hits inside the right imager's image
-        kd = self.depth_intrinsics
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u_right = kd.fx * (pts[:, 0] - self.baseline) / pts[:, 2] + kd.cx
-        return hit & (u_right >= -0.5) & (u_right <= kd.width - 0.5)
+    def _cast_depth(
+        self,
+        rects: np.ndarray,
+        groups: np.ndarray,
+        g0: int,
+        t_still: np.ndarray,
+        id_still: np.ndarray,
+        seen_still: np.ndarray,
+        n_still: int,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # the depth rays' hits, rectangle ids and whether the right imager sees them
+        # (:func:`_depth_kernel`)
+        kd, rays = self.depth_intrinsics, self._rays_d  # type: ignore[attr-defined]
+        n = rays.shape[0]
+        t, ids, seen = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
+        _depth_kernel(
+            rays, rects, groups, g0, t_still, id_still, seen_still, n_still, kd.fx, kd.cx,
+            kd.width, self.baseline, _MARGIN, t, ids, seen,
+        )  # fmt: skip
+        return t, ids, seen
 
     def _render_depth(
         self, rects: np.ndarray, groups: np.ndarray, board_id: int, rng: np.random.Generator
     ) -> tuple[np.ndarray, np.ndarray]:
         kd = self.depth_intrinsics
         h, w = kd.height, kd.width
-        rays = self._rays_d  # type: ignore[attr-defined]
         still = self._still  # type: ignore[attr-defined]
-        z = np.empty(rays.shape[0])
-        ids = np.empty(rays.shape[0], dtype=np.int64)
-        f, b = kd.fx, self.baseline
-        _depth_kernel(
-            rays, rects, groups, still["groups"], still["z"], still["ids"], still["seen"],
-            still["rects"], f, kd.cx, w, b, _MARGIN, z, ids,
+        t, ids, seen = self._cast_depth(
+            rects, groups, still["groups"], still["z"], still["ids"], still["seen"],
+            still["rects"],
         )  # fmt: skip
-        z = z.reshape(h, w)
+        z = np.where(seen, t, 0.0).reshape(h, w)
+        f, b = kd.fx, self.baseline
         board_mask = (ids == board_id).reshape(h, w)
         # the sensor's effects from seeded draws (in this order, whether or not used)
         # applied in one compiled pass (:func:`_sensor_kernel`)

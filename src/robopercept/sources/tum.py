@@ -31,12 +31,17 @@ from typing import Any
 
 import numpy as np
 
-from robopercept._checks import as_path, check_bool, check_int, check_real
+from robopercept._checks import as_path, check_bool, check_real
 from robopercept.depth.rgbd import check_intrinsics
 from robopercept.errors import FileFormatError, InputError
 from robopercept.fileio import parse_json
 from robopercept.geometry import CameraIntrinsics
-from robopercept.imaging.io import contained_path, read_image, write_image
+from robopercept.imaging.io import (
+    check_png_compression,
+    contained_path,
+    read_image,
+    write_image,
+)
 from robopercept.sources.frames import RGBDFrame
 
 __all__ = [
@@ -446,8 +451,7 @@ def write_tum_folder(
         ``frames`` is not an iterable of :class:`RGBDFrame`.
     """
     out = as_path(path, "the output folder")
-    if check_int(png_compression, "png_compression", 0) > 9:
-        raise InputError(f"png_compression must be in 0..9; got {png_compression}")
+    check_png_compression(png_compression)
     if isinstance(frames, (str, bytes, RGBDFrame)) or not isinstance(frames, Iterable):
         raise InputError(
             f"frames must be an iterable of RGBDFrame objects; got {type(frames).__name__}"
