@@ -388,7 +388,8 @@ def _estimation_cases() -> list[Case]:
     pts[:30] = rng.normal(size=(30, 3))
     keep = rng.random(200) < 0.6
     front = pts + np.array([0.0, 0.0, 2.0])  # in front of the camera for the inverse-depth fit
-    from robopercept.pipelines.plane_measure import pixel_solidity_masked
+    from robopercept.estimation.least_squares import slab_inliers
+    from robopercept.pipelines.plane_measure import _take_rows, pixel_solidity_masked
 
     blob = np.zeros((12, 16), dtype=bool)
     blob[2:9, 3:12] = True
@@ -406,6 +407,10 @@ def _estimation_cases() -> list[Case]:
             lambda: ransac(pts, PlaneModel(), 0.05, scoring="msac", rng=0),
         ),
         Case("ransac_plane_ransac", lambda: ransac(pts, PlaneModel(), 0.05, rng=1)),
+        Case("slab_inliers", lambda: slab_inliers(front, np.array([0, 0, 1.0]), 2.0, 0.02, keep)),
+        Case("take_rows_mask", lambda: _take_rows(pts, mask=keep)),
+        Case("take_rows_step", lambda: [_take_rows(pts, step=k) for k in (1, 3, 7)]),
+        Case("take_rows_mask_4_columns", lambda: _take_rows(np.c_[pts, pts[:, 0]], mask=keep)),
     ]
 
 

@@ -135,6 +135,20 @@ def test_reused_selector_equals_fresh_ones(frames):
         assert np.isinf(select._zbuf).all()
 
 
+def test_without_hues_the_same_points(frames):
+    # hues=False (the plane measurement without a hue feature) skips only the hues
+    select = ColorRangeSelector(*GREEN)
+    for f in frames[:2]:
+        a = select(*_args(f))
+        b = select(*_args(f), hues=False)
+        assert b.hue is None and a.hue is not None and a.hue.size == a.points.shape[0]
+        np.testing.assert_array_equal(a.points, b.points)
+        np.testing.assert_array_equal(a.pixels, b.pixels)
+        assert a.n_valid == b.n_valid
+    with pytest.raises(InputError, match="hues"):
+        select(*_args(frames[0]), hues="no")
+
+
 def test_new_camera_sizes_are_followed(frames):
     # a second stream with other resolutions through the same selector
     select = ColorRangeSelector(*GREEN)

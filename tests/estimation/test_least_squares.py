@@ -185,3 +185,31 @@ def test_slab_fit_with_too_few_inliers_is_degenerate():
     pts = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 1.0], [0.0, 0.1, 3.0]])
     with pytest.raises(DegenerateError, match="at least 3"):
         fit_plane_inverse_depth_slab(pts, np.array([0.0, 0.0, 1.0]), 1.0, 0.01)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_slab_inliers_is_the_slab_fits_mask_to_the_bit(seed):
+    # the refit loop of the plane measurement asks slab_inliers whether the inliers
+    # change before it pays for the fit: the two tests must agree on every point, those
+    # whose residual falls on the threshold's last bits included
+    from robopercept.estimation.least_squares import fit_plane_inverse_depth_slab, slab_inliers
+
+    rng = np.random.default_rng(seed)
+    normal = rng.normal(size=3)
+    normal[2] = abs(normal[2]) + 1.0
+    normal /= np.linalg.norm(normal)
+    d, thr = rng.uniform(1.0, 3.0), rng.uniform(0.005, 0.05)
+    n = 20000
+    uv = rng.uniform(-0.6, 0.6, (n, 2))
+    on = d / (normal[0] * uv[:, 0] + normal[1] * uv[:, 1] + normal[2])  # z on the plane
+    # residuals spread over the slab and packed within a few ulps of its edge
+    edge_ulps = thr * (1 + rng.integers(-4, 5, n) * 2e-16)
+    off = np.where(rng.random(n) < 0.5, rng.uniform(-2, 2, n) * thr, edge_ulps)
+    off *= np.sign(rng.normal(size=n))
+    pts = np.column_stack([uv * on[:, None], on]) + off[:, None] * normal  # along the normal
+    within = rng.random(n) < 0.8
+    for allowed in (None, within):
+        _, inl = fit_plane_inverse_depth_slab(pts, normal, d, thr, allowed)
+        np.testing.assert_array_equal(slab_inliers(pts, normal, d, thr, allowed), inl)
+    edge = np.abs(np.abs(pts @ normal - d) - thr) < 1e-12
+    assert edge.sum() > 100  # the case reaches the threshold's last bits

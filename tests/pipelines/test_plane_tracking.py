@@ -525,3 +525,21 @@ def test_ransac_scores_a_subsample_of_a_near_board(monkeypatch):
     assert angle < 0.01 and abs(sub.d - full.d) < 1e-4, (angle, sub.d - full.d)
     with pytest.raises(InputError, match="ransac_points"):
         PlaneMeasurerConfig(ransac_points=2)
+
+
+def test_take_rows_is_numpys_selection_on_any_mask():
+    # the parallel row gather of the plane measurement: blocks copy from their offsets,
+    # and a block's rows after its last kept one must not spill into the next block's
+    from robopercept.pipelines.plane_measure import _take_rows
+
+    rng = np.random.default_rng(0)
+    for n in (0, 1, 63, 64, 65, 1000, 20011):
+        for cols in (3, 4):
+            a = rng.random((n, cols))
+            for p in (0.0, 0.05, 0.5, 0.95, 1.0):
+                m = rng.random(n) < p
+                np.testing.assert_array_equal(_take_rows(a, mask=m), a[m])
+            runs = np.repeat(rng.random(n // 50 + 1) < 0.5, 50)[:n]  # long runs
+            np.testing.assert_array_equal(_take_rows(a, mask=runs), a[runs])
+            for step in (1, 2, 5, 64, 10**6):
+                np.testing.assert_array_equal(_take_rows(a, step=step), a[::step])

@@ -28,25 +28,34 @@ For every depth pixel :math:`i = v W + u` with raw depth :math:`D_i > 0`:
 This is the library path ``depth_to_points`` -> ``texture_coordinates`` (z-buffer) ->
 ``sample_colors`` -> ``rgb_to_hsv`` -> ``hsv_range_mask``, point for point (same points,
 same order, same hues; tests/depth/test_color_select.py), fused into compiled passes:
-the projection (parallel), the z-buffer (serial: pixels collide) and the selection
-(parallel), so that only the selected points are stored. The parallel passes work in
-64 blocks of rows and pack the blocks in order, so the output is in row-major
-depth-pixel order on any thread count.
+the projection with the colour test (parallel), the z-buffer (serial: pixels collide)
+and the selection (parallel), so that only the selected points are stored. The
+parallel passes work in 64 blocks of rows and pack the blocks in order, so the output
+is in row-major depth-pixel order on any thread count.
 
-What makes them fast (issue 49; 640 x 480 depth and colour, 2 threads: the three passes
-from 7.1 to 3.1 ms):
+What makes them fast (issue 49; 640 x 480 depth and colour, 2 threads: the passes from
+7.1 to 3.1 ms, then to 2.3 ms):
 
 - The box test reads a 2 MiB bit table over all :math:`2^{24}` RGB colours, built once
   per box (about 50 ms) from the same HSV conversion; the conversion itself then runs
-  only for the selected points' hues. The HSV conversion of every pixel was 1.6 of the
-  selection pass's 2.0 ms. Images under 65,536 depth pixels skip the table.
+  only for the selected points' hues, and not at all with ``hues=False``. The HSV
+  conversion of every pixel was 1.6 of the selection pass's 2.0 ms. Images under
+  65,536 depth pixels skip the table.
+- The colour test runs in the projection pass, and only the points whose colour pixel
+  is in the box (the candidates) go on: only they can be selected, and only they need
+  the z-buffer, since the z-buffer at colour pixel :math:`j` is read only by the
+  points that land on :math:`j`, which are candidates exactly when :math:`j`'s colour
+  is in the box. The z-buffer, the selection and the reset then visit the candidates
+  instead of every pixel.
 - A depth camera without lens distortion has separable rays, :math:`(r_x[u], r_y[v],
   1)` (checked exactly when the rays are cached): the passes read two short tables
   instead of streaming :math:`3 H W` numbers.
 - The projection is split into a branch-free pass over each row (the rigid transform
-  and the divisions :math:`X / Z`, :math:`Y / Z`, which the compiler vectorizes) and a
-  per-pixel pass for the lens model, the rounding and the bounds: the same operations
-  in the same order as :func:`~robopercept.depth.project_to_color`, so the same bits.
+  and the divisions :math:`X / Z`, :math:`Y / Z`, which the compiler vectorizes), a
+  per-pixel pass for the lens model, and a branch-free pass for the rounding and the
+  bounds (every condition evaluated, then one select: three times faster than
+  testing them in turn): the same operations in the same order as
+  :func:`~robopercept.depth.project_to_color`, so the same bits.
 - The per-pixel work arrays are kept by the selector between calls (fresh ones cost a
   page fault every 4 KiB) and colour pixels are indexed in 32 bits where they fit.
 """
@@ -95,14 +104,45 @@ def _ray(i, r, col, separable, rx, ry, rays):  # pragma: no cover - compiled
     return rays[i, 0], rays[i, 1], rays[i, 2]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _in_box(h, s, v, low, high):  # pragma: no cover - compiled
+    # the HSV box test (hue wraps around when low[0] > high[0])
+    if s < low[1] or s > high[1] or v < low[2] or v > high[2]:
+        return False
+    if low[0] > high[0]:
+        return not (h < low[0] and h > high[0])
+    return not (h < low[0] or h > high[0])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _colour_in_box(rgb, j, low, high, use_lut, lut):  # pragma: no cover - compiled
+    # whether colour pixel j's HSV lies in the box: the bit table's bit, or the conversion
+    cr = np.int32(rgb[3 * j])
+    cg = np.int32(rgb[3 * j + 1])
+    cb = np.int32(rgb[3 * j + 2])
+    if use_lut:
+        key = (cr << 16) | (cg << 8) | cb
+        return (lut[key >> 3] >> (key & 7)) & 1 == 1
+    hh, ss, vv = rgb_to_hsv_pixel(cr, cg, cb)
+    return _in_box(hh, ss, vv, low, high)
+
+
+# fmt: off
 @njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def _project_kernel(
-    depth, w, separable, rx, ry, rays, scale, R, t, k, model, c, width, height, pix, zc
+    depth, w, separable, rx, ry, rays, scale, R, t, k, model, c, width, height,
+    rgb, low, high, use_lut, lut, cand, pix, zc, counts,
 ):  # pragma: no cover - compiled
+    # fmt: on
     # For every depth pixel i with depth: the point p = s D r(u, v), its colour pixel
-    # pix[i] = row * width + col (-1: no depth, behind the colour camera or outside its
-    # image) and its depth zc[i] in the colour frame. Pixels are independent: parallel,
-    # in blocks of whole rows. Returns the number of pixels with a depth.
+    # j = row * width + col (none: behind the colour camera or outside its image) and
+    # its depth in the colour frame; the pixels whose colour pixel is in the HSV box are
+    # the candidates, kept per block of rows from the block's first pixel on:
+    # cand[g] = i, pix[g] = j, zc[g] = depth at j, g in [a, a + counts[b]). Only they
+    # can be selected, and only they need the z-buffer: the z-buffer at j is read only
+    # by the points that land on j, and those are candidates exactly when j's colour is
+    # in the box. Pixels are independent: parallel, in blocks of whole rows. Returns the
+    # number of pixels with a depth.
     #
     # This is project_to_color split in two: a branch-free pass over the row (the
     # transform and the two divisions X / Z, Y / Z, which the compiler vectorizes; a
@@ -115,11 +155,15 @@ def _project_kernel(
     r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
     r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
     t0, t1, t2 = t[0], t[1], t[2]
+    f0, f1, f2, f3 = k[0], k[1], k[2], k[3]
     for b in prange(_CHUNKS):
         xn = np.empty(w)
         yn = np.empty(w)
         zn = np.empty(w)
+        jr = np.empty(w, dtype=np.int64)
         count = 0
+        a = (b * h // _CHUNKS) * w
+        g = a
         for r in range(b * h // _CHUNKS, (b + 1) * h // _CHUNKS):
             base = r * w
             # the row's points p = s D r (into the three row buffers) ...
@@ -150,42 +194,41 @@ def _project_kernel(
             if model != 0:
                 for q in range(w):
                     xn[q], yn[q] = distort_point(xn[q], yn[q], c, model)
+            # the colour pixels, branch-free (three times faster than testing each
+            # condition in turn: the compiler vectorizes it) ...
             for q in range(w):
-                i = base + q
-                d = depth[i]
-                j = -1
-                if d > 0 and d < np.inf:
-                    count += 1
-                    z = d * scale
-                    if z > 0 and z < np.inf and zn[q] > 0:
-                        x, y = xn[q], yn[q]
-                        col = np.rint(x * k[0] + k[2])
-                        row = np.rint(y * k[1] + k[3])
-                        if col >= 0 and col < width and row >= 0 and row < height:
-                            j = int(row) * width + int(col)
-                pix[i] = j
-                zc[i] = zn[q]
+                d = depth[base + q]
+                z = d * scale
+                col = np.rint(xn[q] * f0 + f2)
+                row = np.rint(yn[q] * f1 + f3)
+                has = (d > 0) & (d < np.inf)
+                count += has
+                ok = has & (z > 0) & (z < np.inf) & (zn[q] > 0)
+                ok = ok & (col >= 0) & (col < width) & (row >= 0) & (row < height)
+                jr[q] = np.int64(row) * width + np.int64(col) if ok else -1
+            # ... then the candidates: the pixels whose colour is in the box
+            for q in range(w):
+                j = jr[q]
+                if j >= 0 and _colour_in_box(rgb, j, low, high, use_lut, lut):
+                    cand[g] = base + q
+                    pix[g] = j
+                    zc[g] = zn[q]
+                    g += 1
         valid[b] = count
+        counts[b] = g - a
     return valid.sum()
 
 
 @njit(cache=True, nogil=True)
-def _zbuffer_kernel(pix, zc, zbuf):  # pragma: no cover - compiled
-    # nearest colour-frame depth per colour pixel (serial: pixels collide)
-    for i in range(pix.shape[0]):
-        j = pix[i]
-        if j >= 0 and zc[i] < zbuf[j]:
-            zbuf[j] = zc[i]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _in_box(h, s, v, low, high):  # pragma: no cover - compiled
-    # the HSV box test (hue wraps around when low[0] > high[0])
-    if s < low[1] or s > high[1] or v < low[2] or v > high[2]:
-        return False
-    if low[0] > high[0]:
-        return not (h < low[0] and h > high[0])
-    return not (h < low[0] or h > high[0])
+def _zbuffer_kernel(pix, zc, zbuf, w, h, counts):  # pragma: no cover - compiled
+    # nearest colour-frame depth per colour pixel over the candidates (serial: pixels
+    # collide)
+    for b in range(_CHUNKS):
+        a = (b * h // _CHUNKS) * w
+        for g in range(a, a + counts[b]):
+            j = pix[g]
+            if zc[g] < zbuf[j]:
+                zbuf[j] = zc[g]
 
 
 @njit(cache=True, nogil=True, parallel=True)
@@ -213,93 +256,64 @@ def _box_table(low: tuple[float, float, float], high: tuple[float, float, float]
     return lut
 
 
+# fmt: off
 @njit(cache=True, nogil=True, parallel=True)
 def _select_kernel(
-    depth,
-    w,
-    separable,
-    rx,
-    ry,
-    rays,
-    scale,
-    rgb,
-    pix,
-    zc,
-    zbuf,
-    tol,
-    grow,
-    low,
-    high,
-    use_lut,
-    lut,
-    out,
-    hue,
-    idx,
+    depth, w, separable, rx, ry, rays, scale, rgb, cand, pix, zc, counts, zbuf, tol, grow,
+    out, hues, hue,
 ):  # pragma: no cover - compiled
-    # The points whose colour pixel is theirs (no other point nearer there by more than
-    # tol, or tol z^2 beyond 1 m when grow; tol < 0: no test) and whose HSV (OpenCV's
-    # uint8 conversion, bit for bit) lies in the box low..high (hue wraps around when
-    # low[0] > high[0]), read from the box's bit table when use_lut. Each block of rows
-    # writes from its own first pixel on, then the blocks are packed in order, so the
-    # result is in row-major order whatever the threads. Returns the number selected.
+    # fmt: on
+    # The candidates whose colour pixel is theirs (no other point nearer there by more
+    # than tol, or tol z^2 beyond 1 m when grow; tol < 0: no test): their points and
+    # hues (OpenCV's uint8 conversion, bit for bit), their pixels back into cand. Each
+    # block writes from its own first candidate on (never past what it reads), then the
+    # blocks are packed in order, so the result is in row-major order whatever the
+    # threads. Returns the number selected.
     h = depth.shape[0] // w
-    counts = np.zeros(_CHUNKS, dtype=np.int64)
+    kept = np.zeros(_CHUNKS, dtype=np.int64)
     for b in prange(_CHUNKS):
         a = (b * h // _CHUNKS) * w
         g = a
-        for r in range(b * h // _CHUNKS, (b + 1) * h // _CHUNKS):
-            for q in range(w):
-                i = r * w + q
-                j = pix[i]
-                if j < 0:
+        for p in range(a, a + counts[b]):
+            j = pix[p]
+            if tol >= 0:
+                t = tol * zc[p] * zc[p] if grow and zc[p] > 1.0 else tol
+                if zc[p] > zbuf[j] + t:
                     continue
-                if tol >= 0:
-                    t = tol * zc[i] * zc[i] if grow and zc[i] > 1.0 else tol
-                    if zc[i] > zbuf[j] + t:
-                        continue
-                cr = np.int32(rgb[3 * j])
-                cg = np.int32(rgb[3 * j + 1])
-                cb = np.int32(rgb[3 * j + 2])
-                if use_lut:
-                    key = (cr << 16) | (cg << 8) | cb
-                    if not (lut[key >> 3] >> (key & 7)) & 1:
-                        continue
-                    hh = rgb_to_hsv_pixel(cr, cg, cb)[0]
-                else:
-                    hh, ss, vv = rgb_to_hsv_pixel(cr, cg, cb)
-                    if not _in_box(hh, ss, vv, low, high):
-                        continue
-                z = depth[i] * scale
-                ax, ay, az = _ray(i, r, q, separable, rx, ry, rays)
-                out[g, 0] = ax * z
-                out[g, 1] = ay * z
-                out[g, 2] = az * z
-                hue[g] = hh
-                idx[g] = i
-                g += 1
-        counts[b] = g - a
+            i = cand[p]
+            if hues:
+                cr, cg = np.int32(rgb[3 * j]), np.int32(rgb[3 * j + 1])
+                hue[g] = rgb_to_hsv_pixel(cr, cg, np.int32(rgb[3 * j + 2]))[0]
+            z = depth[i] * scale
+            ax, ay, az = _ray(i, i // w, i % w, separable, rx, ry, rays)
+            out[g, 0] = ax * z
+            out[g, 1] = ay * z
+            out[g, 2] = az * z
+            cand[g] = i
+            g += 1
+        kept[b] = g - a
     m = 0
     for b in range(_CHUNKS):
         a = (b * h // _CHUNKS) * w
-        for g in range(a, a + counts[b]):
+        for g in range(a, a + kept[b]):
             out[m, 0] = out[g, 0]
             out[m, 1] = out[g, 1]
             out[m, 2] = out[g, 2]
-            hue[m] = hue[g]
-            idx[m] = idx[g]
+            if hues:
+                hue[m] = hue[g]
+            cand[m] = cand[g]
             m += 1
     return m
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _reset_kernel(pix, zbuf):  # pragma: no cover - compiled
-    # back to +inf for the next call (only the touched pixels; racing writes store the
-    # same value)
-    n = pix.shape[0]
+def _reset_kernel(pix, zbuf, w, h, counts):  # pragma: no cover - compiled
+    # back to +inf for the next call (only the candidates' pixels; racing writes store
+    # the same value)
     for b in prange(_CHUNKS):
-        for i in range(b * n // _CHUNKS, (b + 1) * n // _CHUNKS):
-            if pix[i] >= 0:
-                zbuf[pix[i]] = np.inf
+        a = (b * h // _CHUNKS) * w
+        for g in range(a, a + counts[b]):
+            zbuf[pix[g]] = np.inf
 
 
 @dataclass(frozen=True)
@@ -311,20 +325,21 @@ class ColoredPoints:
     points : (M, 3) float64 ndarray
         Depth-camera-frame points, metres, in row-major depth-pixel order: exactly
         ``depth_to_points(depth, K_depth, depth_scale)`` at those pixels.
-    hue : (M,) float64 ndarray
+    hue : (M,) float64 ndarray or None
         OpenCV hue (0..180, integer-valued) of each point's colour pixel, as
-        ``rgb_to_hsv`` of the uint8 colour gives it.
+        ``rgb_to_hsv`` of the uint8 colour gives it (None when not asked for:
+        ``hues=False``).
     pixels : (M,) int64 ndarray
         The depth pixel of each point, ``row * width + col`` (increasing).
     n_valid : int
         Depth pixels with a depth (finite and > 0).
     ms : dict of str to float
-        Milliseconds of the two passes: ``"points"`` (projection and z-buffer) and
-        ``"color"`` (selection).
+        Milliseconds of the passes: ``"points"`` (projection, colour test and z-buffer)
+        and ``"color"`` (occlusion test and the selected points).
     """
 
     points: np.ndarray = field(repr=False)
-    hue: np.ndarray = field(repr=False)
+    hue: np.ndarray | None = field(repr=False)
     pixels: np.ndarray = field(repr=False)
     n_valid: int
     ms: dict[str, float]
@@ -484,6 +499,7 @@ class ColorRangeSelector:
         depth_scale: float,
         *,
         copy: bool = True,
+        hues: bool = True,
     ) -> ColoredPoints:
         """Select the points of one RGB-D frame.
 
@@ -507,6 +523,9 @@ class ColorRangeSelector:
             until its next call (for a caller done with them by then, as
             :class:`~robopercept.pipelines.PlaneMeasurer` is; a board near the camera
             has 2 x 10^5 points, and copying them out cost 1.5 ms a frame).
+        hues : bool
+            False: skip the selected points' hues (``hue`` is None), for a caller that
+            does not use them (the HSV conversion of 10^5 points takes 0.3 ms).
 
         Returns
         -------
@@ -515,6 +534,7 @@ class ColorRangeSelector:
         d, rgb, T, scale = _check_frame(
             depth, color, depth_intrinsics, color_intrinsics, T_color_depth, depth_scale
         )
+        copy, hues = check_bool(copy, "copy"), check_bool(hues, "hues")
         kc = color_intrinsics
         flat = np.ascontiguousarray(d).reshape(-1)
         rays = self._unit_rays(depth_intrinsics)
@@ -528,60 +548,34 @@ class ColorRangeSelector:
         use_lut = flat.shape[0] >= _TABLE_PIXELS
         lut = _box_table(tuple(self.hsv_low), tuple(self.hsv_high)) if use_lut else _NO_TABLE
         pix, zc, out, hue, idx = (buf[name] for name in ("pix", "zc", "out", "hue", "idx"))
+        flat_rgb = np.ascontiguousarray(rgb).reshape(-1)
+        h = depth_intrinsics.height
+        counts = np.zeros(_CHUNKS, dtype=np.int64)
         t0 = time.perf_counter()
         n_valid = _project_kernel(
-            flat,
-            w,
-            sep,
-            rx,
-            ry,
-            rays,
-            scale,
-            np.ascontiguousarray(T[:3, :3]),
-            np.ascontiguousarray(T[:3, 3]),
-            k,
-            model,
-            coeffs,
-            kc.width,
-            kc.height,
-            pix,
-            zc,
-        )
+            flat, w, sep, rx, ry, rays, scale,
+            np.ascontiguousarray(T[:3, :3]), np.ascontiguousarray(T[:3, 3]),
+            k, model, coeffs, kc.width, kc.height,
+            flat_rgb, self.hsv_low, self.hsv_high, use_lut, lut, idx, pix, zc, counts,
+        )  # fmt: skip
         try:
             if tol is not None:
-                _zbuffer_kernel(pix, zc, self._zbuf)
+                _zbuffer_kernel(pix, zc, self._zbuf, w, h, counts)
             t1 = time.perf_counter()
             m = _select_kernel(
-                flat,
-                w,
-                sep,
-                rx,
-                ry,
-                rays,
-                scale,
-                np.ascontiguousarray(rgb).reshape(-1),
-                pix,
-                zc,
-                self._zbuf,
-                -1.0 if tol is None else tol,
-                self.occlusion_grows,
-                self.hsv_low,
-                self.hsv_high,
-                use_lut,
-                lut,
-                out,
-                hue,
-                idx,
-            )
+                flat, w, sep, rx, ry, rays, scale, flat_rgb, idx, pix, zc, counts,
+                self._zbuf, -1.0 if tol is None else tol, self.occlusion_grows, out,
+                hues, hue,
+            )  # fmt: skip
         finally:
             if tol is not None:
-                _reset_kernel(pix, self._zbuf)
+                _reset_kernel(pix, self._zbuf, w, h, counts)
         t2 = time.perf_counter()
-        if check_bool(copy, "copy"):
+        if copy:
             out, hue, idx = out[:m].copy(), hue[:m].copy(), idx[:m].copy()
         return ColoredPoints(
             points=out[:m],
-            hue=hue[:m],
+            hue=hue[:m] if hues else None,
             pixels=idx[:m],
             n_valid=int(n_valid),
             ms={"points": (t1 - t0) * 1e3, "color": (t2 - t1) * 1e3},

@@ -42,6 +42,7 @@ __all__ = [
     "fit_plane_inverse_depth",
     "fit_plane_inverse_depth_slab",
     "scatter_matrix",
+    "slab_inliers",
 ]
 
 Method = Literal["total", "ordinary"]
@@ -494,6 +495,68 @@ def _slab_kernel(points, nx, ny, nz, d, threshold, within, use_within, out):  # 
         t += pm[blk]
     m = np.array([[t[0], t[1], t[2]], [t[1], t[3], t[4]], [t[2], t[4], t[5]]])
     return m, np.array([t[6], t[7], t[8]]), t[9], pc.sum()
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _slab_mask_kernel(
+    points, nx, ny, nz, d, threshold, within, use_within, out
+):  # pragma: no cover - compiled
+    # out[i] = |n.x_i - d| < threshold (and within[i]): _slab_kernel's test, the same
+    # expression, so the same bits
+    n = points.shape[0]
+    for blk in prange(_SLAB_BLOCKS):
+        for i in range(blk * n // _SLAB_BLOCKS, (blk + 1) * n // _SLAB_BLOCKS):
+            inside = abs(nx * points[i, 0] + ny * points[i, 1] + nz * points[i, 2] - d) < threshold
+            if use_within:
+                inside = inside and within[i]
+            out[i] = inside
+
+
+def slab_inliers(
+    points: np.ndarray,
+    normal: np.ndarray,
+    d: float,
+    threshold: float,
+    within: np.ndarray | None = None,
+) -> np.ndarray:
+    r"""The points within ``threshold`` of the plane :math:`n^\top x = d`: the inlier
+    mask of :func:`fit_plane_inverse_depth_slab`, bit for bit, without the fit.
+
+    ``np.abs(points @ normal - d) < threshold`` (``& within``) in one compiled pass, the
+    residual computed as the slab fit computes it. A refit loop asks it whether a new
+    plane changes the inliers before it pays for the fit's sums (when it does not, the
+    fit would be the same one).
+
+    Parameters
+    ----------
+    points : (N, 3) float64 ndarray
+        Camera-frame points (unchecked, as in a per-frame loop: the caller's).
+    normal : (3,) array_like
+    d : float
+        The plane.
+    threshold : float
+        Inlier distance.
+    within : (N,) bool ndarray, optional
+        Only these points may be inliers.
+
+    Returns
+    -------
+    (N,) bool ndarray
+
+    Examples
+    --------
+    >>> pts = np.array([[0.0, 0.0, 2.0], [0.1, 0.0, 2.05], [0.0, 0.1, 2.3]])
+    >>> slab_inliers(pts, np.array([0.0, 0.0, 1.0]), 2.0, 0.1).tolist()
+    [True, True, False]
+    """
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    n = np.asarray(normal, dtype=np.float64)
+    out = np.empty(pts.shape[0], dtype=np.bool_)
+    sel = np.zeros(1, dtype=np.bool_) if within is None else np.asarray(within, dtype=np.bool_)
+    _slab_mask_kernel(
+        pts, n[0], n[1], n[2], float(d), float(threshold), sel, within is not None, out
+    )
+    return out
 
 
 def fit_plane_inverse_depth_slab(
