@@ -205,7 +205,8 @@ def _project_kernel(
                 count += has
                 ok = has & (z > 0) & (z < np.inf) & (zn[q] > 0)
                 ok = ok & (col >= 0) & (col < width) & (row >= 0) & (row < height)
-                jr[q] = np.int64(row) * width + np.int64(col) if ok else -1
+                # (row * width + col is exact in float64: one conversion, not two)
+                jr[q] = np.int64(row * width + col) if ok else -1
             # ... then the candidates: the pixels whose colour is in the box
             for q in range(w):
                 j = jr[q]
