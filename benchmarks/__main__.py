@@ -17,7 +17,7 @@ BENCHMARKS = {
     "motion": "benchmarks.motion",
     "depth": "benchmarks.depth",
     "calibration": "benchmarks.calibration",
-    "detection": "benchmarks.detection",
+    "nn_ops": "benchmarks.nn_ops",
     "coco_eval": "benchmarks.coco_eval",
     "proposals": "benchmarks.proposals",
 }

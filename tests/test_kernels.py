@@ -665,6 +665,16 @@ def _geometry_cases() -> list[Case]:
                 greedy_nms(boxes, scores, 0.2, classes=classes),
             ],
         ),
+        # 64 boxes or more of a class: the grid of candidate pairs
+        Case(
+            "greedy_nms_grid",
+            lambda: [
+                greedy_nms(np.tile(boxes, (3, 1)) * [1, 1, 0.5, 0.5], np.tile(scores, 3), 0.3),
+                greedy_nms(
+                    np.tile(boxes, (4, 1)), np.tile(scores, 4), 0.2, classes=np.tile(classes, 4)
+                ),
+            ],
+        ),
     ]
 
 

@@ -105,6 +105,32 @@ def test_greedy_suppression_kernel_equals_numpy_reference():
             assert 0 < want.sum() < 200 or thr == 1.0
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_greedy_suppression_grid_equals_the_reference(seed):
+    # from 64 boxes of a class the kernel compares only pairs that share a grid cell:
+    # detector-like clusters, several classes, zero-size, huge and repeated boxes, and a
+    # non-finite coordinate (the plain loop) must all give the reference's decisions
+    from robopercept.geometry.boxes import greedy_suppression, greedy_suppression_reference
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(64, 1500)) if seed % 2 else 2600  # two classes of >= 64 boxes
+    centres = rng.uniform(50, 950, (max(1, n // 10), 2))
+    c = centres[rng.integers(0, centres.shape[0], n)] + rng.normal(0, 8, (n, 2))
+    sizes, odds = [0.0, 0.5, 5.0, 40.0, 90.0, 2000.0], [0.03, 0.02, 0.2, 0.4, 0.34, 0.01]
+    wh = rng.choice(sizes, (n, 2), p=odds)
+    corners = np.concatenate([c - wh / 2, c + wh / 2], 1)
+    corners[rng.random(n) < 0.05] = corners[0]  # repeats of the best box
+    if seed == 5:
+        corners[7, 2] = np.inf
+    areas = (corners[:, 2] - corners[:, 0]) * (corners[:, 3] - corners[:, 1])
+    spread = (rng.integers(0, 3, n) - 1) * 2**61  # ids too far apart for a counting sort
+    for cls in (np.zeros(n, np.int64), rng.integers(0, 2, n), rng.integers(-2, 40, n), spread):
+        for thr in (0.0, 0.3, 0.5, 0.7, 1.0):
+            want = greedy_suppression_reference(corners, areas, cls, thr)
+            got = greedy_suppression(np.ascontiguousarray(corners), areas, cls, thr)
+            np.testing.assert_array_equal(got, want)
+
+
 def test_greedy_nms_hand_case_ties_and_threshold():
     from robopercept.geometry import greedy_nms
 

@@ -279,12 +279,32 @@ def greedy_suppression_reference(
     return alive
 
 
+#: classes of at least this many boxes on average are suppressed one by one, each on
+#: its own grid (smaller ones share one grid and the class test)
+_CLASS_SIZE = 64
+#: a grid has at most this many cells a side (its cell: the boxes' median size, or
+#: this fraction of their extent, whichever is larger)
+_GRID_SIDE = 256
+
+
 @njit(cache=True)
 def greedy_suppression(
     corners: np.ndarray, areas: np.ndarray, classes: np.ndarray, iou_threshold: float
 ) -> np.ndarray:
-    """:func:`greedy_suppression_reference`, compiled: the same float64 arithmetic, in
-    the same order, so the two agree exactly.
+    """:func:`greedy_suppression_reference`, compiled: the same float64 arithmetic of
+    each pair, so the two agree exactly.
+
+    A kept box is compared only with the later boxes of its class that share a cell
+    of a uniform grid with it (each box listed in every cell its extent touches; the
+    cell is the boxes' median size): two boxes whose interiors meet share the cell of a
+    common point, and a pair that does not overlap has IoU 0, which suppresses nothing,
+    so skipping it changes no decision. On a detector's raw output (boxes clustered
+    around objects) this takes 1,000 boxes from 1.6-2.2 to 0.35 ms and 10,000 from 95
+    to 15 ms. The plain loop runs where a grid does not pay: fewer than 64 boxes of a
+    class, coordinates that are not finite, or boxes so unequal in size that they would
+    fill more than 16 cells each on average. Classes of 64 boxes or more on average
+    are suppressed one at a time, each on its own grid (boxes of different classes
+    never interact).
 
     Parameters
     ----------
@@ -306,24 +326,186 @@ def greedy_suppression(
     [True, False, True]
     """
     n = corners.shape[0]
+    if n >= 64 and np.isfinite(corners).all():
+        if (classes == classes[0]).all():
+            return _suppress_on_grid(corners, areas, classes, iou_threshold)
+        order = _stable_class_order(classes)
+        runs = 1 + np.count_nonzero(classes[order[1:]] != classes[order[:-1]])
+        if n < _CLASS_SIZE * runs:  # small classes: one grid, with the class test
+            return _suppress_on_grid(corners, areas, classes, iou_threshold)
+        # large classes, which never interact: each alone, in its order (gathered by
+        # hand: numba's fancy indexing costs more than the suppression of a class)
+        alive = np.ones(n, dtype=np.bool_)
+        sub, sub_areas, one = np.empty((n, 4)), np.empty(n), np.zeros(n, dtype=np.int64)
+        start = 0
+        while start < n:
+            stop = start + 1
+            while stop < n and classes[order[stop]] == classes[order[start]]:
+                stop += 1
+            m = stop - start
+            for k in range(m):
+                j = order[start + k]
+                sub[k, 0], sub[k, 1] = corners[j, 0], corners[j, 1]
+                sub[k, 2], sub[k, 3] = corners[j, 2], corners[j, 3]
+                sub_areas[k] = areas[j]
+            keep = _suppress_on_grid(sub[:m], sub_areas[:m], one[:m], iou_threshold)
+            for k in range(m):
+                alive[order[start + k]] = keep[k]
+            start = stop
+        return alive
+    return _suppress_plain(corners, areas, classes, iou_threshold)
+
+
+@njit(cache=True)
+def _stable_class_order(classes):  # pragma: no cover - compiled
+    # the indices grouped by class, in index order within a class: a counting sort
+    # where the ids span at most 4 N values (a mergesort's fifth), else a mergesort
+    n = classes.shape[0]
+    lo = classes.min()
+    span = classes.max() - lo  # negative where it wraps around (ids 2^63 apart)
+    if span < 0 or span > 4 * n:
+        return np.argsort(classes, kind="mergesort")
+    slot = np.zeros(span + 2, dtype=np.int64)
+    for i in range(n):
+        slot[classes[i] - lo + 1] += 1
+    for k in range(span + 1):
+        slot[k + 1] += slot[k]
+    order = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        k = classes[i] - lo
+        order[slot[k]] = i
+        slot[k] += 1
+    return order
+
+
+@njit(cache=True)
+def _suppress_plain(corners, areas, classes, thr):  # pragma: no cover - compiled
+    # the greedy loop over every later pair of the same class
+    n = corners.shape[0]
     alive = np.ones(n, dtype=np.bool_)
     for i in range(n):
         if not alive[i]:
             continue
-        x1, y1, x2, y2 = corners[i, 0], corners[i, 1], corners[i, 2], corners[i, 3]
+        x1, y1, x2, y2, a = corners[i, 0], corners[i, 1], corners[i, 2], corners[i, 3], areas[i]
         for j in range(i + 1, n):
-            if not alive[j] or classes[j] != classes[i]:
-                continue
-            w = min(x2, corners[j, 2]) - max(x1, corners[j, 0])
-            h = min(y2, corners[j, 3]) - max(y1, corners[j, 1])
-            iou = 0.0
-            if w > 0.0 and h > 0.0:
-                inter = w * h
-                union = areas[i] + areas[j] - inter
-                if union > 0.0:
-                    iou = inter / union
-            if not iou <= iou_threshold:
-                alive[j] = False
+            if alive[j] and classes[j] == classes[i]:
+                c = corners[j]
+                if _suppresses(x1, y1, x2, y2, a, c[0], c[1], c[2], c[3], areas[j], thr):
+                    alive[j] = False
+    return alive
+
+
+@njit(cache=True)
+def _suppress_on_grid(corners, areas, classes, thr):  # pragma: no cover - compiled
+    # the greedy loop on the grid where it pays, else over every later pair
+    n = corners.shape[0]
+    if n >= 64:
+        cells = _grid_cells(corners)
+        if cells.shape[0] > 0:
+            return _suppress_in_grid(corners, areas, classes, thr, cells)
+    return _suppress_plain(corners, areas, classes, thr)
+
+
+@njit(cache=True)
+def _suppresses(x1, y1, x2, y2, a, u1, v1, u2, v2, b, thr):  # pragma: no cover - compiled
+    # whether a kept box (x1, y1, x2, y2) of area a suppresses box (u1, v1, u2, v2) of
+    # area b: IoU > thr (scalars only: a call with array arguments pays reference
+    # counting, twice the cost of the test)
+    w = min(x2, u2) - max(x1, u1)
+    h = min(y2, v2) - max(y1, v1)
+    iou = 0.0
+    if w > 0.0 and h > 0.0:
+        inter = w * h
+        union = a + b - inter
+        if union > 0.0:
+            iou = inter / union
+    return not iou <= thr
+
+
+@njit(cache=True)
+def _grid_cells(corners):  # pragma: no cover - compiled
+    # (N, 4) int64 cell ranges (cx1, cy1, cx2, cy2) of each box, inclusive; an empty
+    # range (cx2 < cx1) for a box without interior, which overlaps nothing; a (0, 4)
+    # array where a grid does not pay (boxes too unequal in size, or all empty)
+    n = corners.shape[0]
+    x0, y0 = np.inf, np.inf
+    x1, y1 = -np.inf, -np.inf
+    sizes = np.empty(n)
+    m = 0
+    for i in range(n):
+        w = corners[i, 2] - corners[i, 0]
+        h = corners[i, 3] - corners[i, 1]
+        if w > 0.0 and h > 0.0:
+            x0, y0 = min(x0, corners[i, 0]), min(y0, corners[i, 1])
+            x1, y1 = max(x1, corners[i, 2]), max(y1, corners[i, 3])
+            sizes[m] = max(w, h)
+            m += 1
+    out = np.empty((0, 4), dtype=np.int64)
+    if m == 0:
+        return out
+    s = max(np.median(sizes[:m]), max(x1 - x0, y1 - y0) / _GRID_SIDE)
+    if not (s > 0.0 and s < np.inf):
+        return out
+    cells = np.empty((n, 4), dtype=np.int64)
+    total = 0
+    for i in range(n):
+        w = corners[i, 2] - corners[i, 0]
+        h = corners[i, 3] - corners[i, 1]
+        if w > 0.0 and h > 0.0:
+            a = int((corners[i, 0] - x0) / s)
+            b = int((corners[i, 1] - y0) / s)
+            c = min(int((corners[i, 2] - x0) / s), _GRID_SIDE)
+            d = min(int((corners[i, 3] - y0) / s), _GRID_SIDE)
+            cells[i, 0], cells[i, 1], cells[i, 2], cells[i, 3] = a, b, c, d
+            total += (c - a + 1) * (d - b + 1)
+        else:
+            cells[i, 0], cells[i, 1], cells[i, 2], cells[i, 3] = 0, 0, -1, -1
+    if total > 16 * n:
+        return out
+    return cells
+
+
+@njit(cache=True)
+def _suppress_in_grid(corners, areas, classes, thr, cells):  # pragma: no cover - compiled
+    # the greedy loop over the pairs of a class that share a grid cell (see
+    # greedy_suppression): which boxes are kept
+    n = corners.shape[0]
+    alive = np.ones(n, dtype=np.bool_)
+    side = max(cells[:, 2].max(), cells[:, 3].max()) + 1  # cells a side in use
+    count = np.zeros(side * side + 1, dtype=np.int64)
+    for i in range(n):
+        for cy in range(cells[i, 1], cells[i, 3] + 1):
+            for cx in range(cells[i, 0], cells[i, 2] + 1):
+                count[cy * side + cx + 1] += 1
+    for k in range(side * side):
+        count[k + 1] += count[k]
+    start = count[:-1].copy()  # each cell's next free slot, then its first box > i
+    members = np.empty(count[-1], dtype=np.int64)
+    for i in range(n):  # in index order: every cell's list ascends
+        for cy in range(cells[i, 1], cells[i, 3] + 1):
+            for cx in range(cells[i, 0], cells[i, 2] + 1):
+                k = cy * side + cx
+                members[start[k]] = i
+                start[k] += 1
+    first = count[:-1].copy()
+    seen = np.full(n, -1, dtype=np.int64)  # the kept box that last compared with j
+    for i in range(n):
+        if not alive[i]:
+            continue
+        x1, y1, x2, y2, a = corners[i, 0], corners[i, 1], corners[i, 2], corners[i, 3], areas[i]
+        for cy in range(cells[i, 1], cells[i, 3] + 1):
+            for cx in range(cells[i, 0], cells[i, 2] + 1):
+                k = cy * side + cx
+                while first[k] < count[k + 1] and members[first[k]] <= i:
+                    first[k] += 1  # boxes up to i are done with for good
+                for e in range(first[k], count[k + 1]):
+                    j = members[e]
+                    if seen[j] == i or not alive[j] or classes[j] != classes[i]:
+                        continue
+                    seen[j] = i
+                    c = corners[j]
+                    if _suppresses(x1, y1, x2, y2, a, c[0], c[1], c[2], c[3], areas[j], thr):
+                        alive[j] = False
     return alive
 
 
