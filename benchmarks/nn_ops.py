@@ -46,6 +46,7 @@ def _nms_case(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]
 
 def run(repeats: int) -> tuple[list[Record], dict]:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import numba
     import torch
     from onnx import TensorProto, helper
 
@@ -53,6 +54,7 @@ def run(repeats: int) -> tuple[list[Record], dict]:
     from robopercept.nn.ops.roi import roi_align
 
     torch.set_num_threads(1)
+    numba.set_num_threads(1)  # the compiled kernels single-threaded too
     rng = np.random.default_rng(0)
     records = []
     vi = helper.make_tensor_value_info
@@ -137,5 +139,5 @@ def run(repeats: int) -> tuple[list[Record], dict]:
             Record("roi_align", f"{K} RoIs, 64x50x50, 7x7, ratio 2, aligned={aligned}",
                    ours_ms, ref_ms, "onnxruntime RoiAlign", "max |difference|", err, 1.0)
         )  # fmt: skip
-    settings = {"threads": "torch 1, onnxruntime intra-op 1", "float": "float32"}
+    settings = {"threads": "torch 1, numba 1, onnxruntime intra-op 1", "float": "float32"}
     return records, settings

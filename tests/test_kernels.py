@@ -740,8 +740,21 @@ def _nn_cases() -> list[Case]:
     def pictorial() -> object:
         return pictorial_structures(costs, [1, -1, 1, 2], *springs, min_marginals=True)
 
+    from robopercept.nn.ops.roi import roi_align
+
+    feats = rng.normal(size=(2, 3, 9, 7))
+    rois = np.concatenate([rng.integers(0, 2, (8, 1)), xy[:8] / 4, xy[:8] / 4 + 3.0], axis=1)
+
+    def align() -> list[np.ndarray]:
+        t = torch.from_numpy
+        return [
+            roi_align(t(feats).float(), t(rois).float(), (2, 3), 0.5, 2, True).numpy(),
+            roi_align(t(feats), t(rois), 2, 1.0, 0, False).numpy(),
+        ]
+
     return [
         Case("batched_nms", nms),
+        Case("roi_align", align),
         Case("coco_matching", coco),
         Case("pictorial_structures", pictorial),
     ]

@@ -82,6 +82,25 @@ class TestRoIAlign:
         rows = torch.tensor([[0.0, 1, 1, 6, 5], [1, 0, 2, 3, 8], [1, 2, 2, 4, 4]]).double()
         torch.testing.assert_close(a, roi_align(xs, rows, 2, sampling_ratio=2))
 
+    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+    @pytest.mark.parametrize(("ratio", "aligned"), [(2, True), (0, False), (3, False)])
+    def test_compiled_forward_equals_the_differentiable_one(self, dtype, ratio, aligned):
+        # without a gradient to keep, roi_align runs a compiled kernel over each region's
+        # window; with one, the dense products: the two agree to float rounding (sums of
+        # the same weighted samples in another order, float64 accumulation in the kernel)
+        rng = np.random.default_rng(11)
+        x = torch.from_numpy(rng.normal(size=(2, 3, 17, 13))).to(dtype)
+        rois, bidx = random_rois(rng, 40, 2, 17 / 0.5)
+        rois[:3] *= 40  # far beyond the map: 0
+        rows = np.concatenate([bidx[:, None], rois], axis=1)
+        t = torch.from_numpy(rows).to(dtype)
+        fast = roi_align(x, t, (3, 4), 0.5, ratio, aligned)
+        slow = roi_align(x.clone().requires_grad_(True), t, (3, 4), 0.5, ratio, aligned)
+        assert fast.dtype == dtype and not fast.requires_grad and slow.requires_grad
+        tol = 1e-5 if dtype == torch.float32 else 1e-12
+        torch.testing.assert_close(fast, slow.detach(), rtol=0, atol=tol)
+        assert bool((fast[:3] == 0).all())
+
     def test_gradcheck(self):
         x = torch.randn(1, 2, 6, 5, dtype=torch.float64, requires_grad=True)
         rois = torch.tensor([[0.0, 0.3, 0.7, 4.1, 5.2], [0.0, 1.2, 0.1, 2.9, 3.3]]).double()

@@ -37,7 +37,9 @@ def _check_scores(scores: Any, n: int, name: str = "scores") -> torch.Tensor:
         raise InputError(f"{name} must have shape ({n},), one per box; got {tuple(scores.shape)}")
     if not scores.is_floating_point():
         raise InputError(f"{name} must be floating point; got {scores.dtype}: use {name}.float()")
-    if n and bool(torch.isnan(scores).any()):
+    s = scores.detach()
+    host = s.device.type == "cpu" and s.dtype in (torch.float32, torch.float64)
+    if n and bool(np.isnan(s.numpy()).any() if host else torch.isnan(s).any()):
         raise InputError(
             f"{name} must not hold NaN (a NaN score has no rank); got "
             f"{int(torch.isnan(scores).sum())}: drop them or use torch.nan_to_num({name}, nan=-inf)"
