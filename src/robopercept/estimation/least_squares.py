@@ -444,6 +444,12 @@ def _fit_from_moments(m: np.ndarray, b: np.ndarray, ww: float, count: int) -> De
 _SLAB_BLOCKS = 64  # point blocks of the parallel slab pass (sums added in block order)
 
 
+@njit(cache=True, nogil=True)
+def _in_slab(x, y, z, nx, ny, nz, d, threshold):  # pragma: no cover - compiled
+    # |n.x - d| < threshold: the slab fit's inlier test (scalars: inlined, no call cost)
+    return abs(nx * x + ny * y + nz * z - d) < threshold
+
+
 @njit(cache=True, nogil=True, parallel=True)
 def _slab_kernel(points, nx, ny, nz, d, threshold, within, use_within, out):  # pragma: no cover
     # out[i] = |n.x_i - d| < threshold (and within[i]); the inverse-depth moments of
@@ -459,7 +465,7 @@ def _slab_kernel(points, nx, ny, nz, d, threshold, within, use_within, out):  # 
             x = points[i, 0]
             y = points[i, 1]
             z = points[i, 2]
-            inside = abs(nx * x + ny * y + nz * z - d) < threshold
+            inside = _in_slab(x, y, z, nx, ny, nz, d, threshold)
             if use_within:
                 inside = inside and within[i]
             out[i] = inside
@@ -501,15 +507,13 @@ def _slab_kernel(points, nx, ny, nz, d, threshold, within, use_within, out):  # 
 def _slab_mask_kernel(
     points, nx, ny, nz, d, threshold, within, use_within, out
 ):  # pragma: no cover - compiled
-    # out[i] = |n.x_i - d| < threshold (and within[i]): _slab_kernel's test, the same
-    # expression, so the same bits
+    # out[i]: _slab_kernel's inlier test alone (the same function, so the same bits)
     n = points.shape[0]
     for blk in prange(_SLAB_BLOCKS):
         for i in range(blk * n // _SLAB_BLOCKS, (blk + 1) * n // _SLAB_BLOCKS):
-            inside = abs(nx * points[i, 0] + ny * points[i, 1] + nz * points[i, 2] - d) < threshold
-            if use_within:
-                inside = inside and within[i]
-            out[i] = inside
+            p = points[i]
+            inside = _in_slab(p[0], p[1], p[2], nx, ny, nz, d, threshold)
+            out[i] = inside and (not use_within or within[i])
 
 
 def slab_inliers(

@@ -21,7 +21,7 @@ import torch
 from robopercept._checks import check_int, check_real
 from robopercept.errors import InputError
 from robopercept.geometry.boxes import corners_and_areas, greedy_suppression
-from robopercept.nn.ops.boxes import check_boxes
+from robopercept.nn.ops.boxes import check_boxes, numpy_view
 
 __all__ = ["batched_nms", "nms", "non_max_suppression"]
 
@@ -37,9 +37,8 @@ def _check_scores(scores: Any, n: int, name: str = "scores") -> torch.Tensor:
         raise InputError(f"{name} must have shape ({n},), one per box; got {tuple(scores.shape)}")
     if not scores.is_floating_point():
         raise InputError(f"{name} must be floating point; got {scores.dtype}: use {name}.float()")
-    s = scores.detach()
-    host = s.device.type == "cpu" and s.dtype in (torch.float32, torch.float64)
-    if n and bool(np.isnan(s.numpy()).any() if host else torch.isnan(s).any()):
+    view = numpy_view(scores)
+    if n and bool(np.isnan(view).any() if view is not None else torch.isnan(scores).any()):
         raise InputError(
             f"{name} must not hold NaN (a NaN score has no rank); got "
             f"{int(torch.isnan(scores).sum())}: drop them or use torch.nan_to_num({name}, nan=-inf)"
