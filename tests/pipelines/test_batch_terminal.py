@@ -151,6 +151,31 @@ def test_logs_to_restores_the_handlers_even_on_an_error(tmp_path) -> None:
     assert "distributed.worker - ERROR - into the file" in (tmp_path / LOG).read_text()
 
 
+@pytest.mark.parametrize("name", ["tornado.application", "distributed.client"])
+def test_a_line_of_a_logger_dask_stops_propagating_goes_to_the_file(
+    tmp_path, capfd, name
+) -> None:
+    """Dask's logging set-up gives each of its loggers a console handler and stops it
+    propagating. Before: inside the block such a logger had no handler at all, and
+    logging's last resort printed its bare line on the terminal (a Ctrl-C landing as a
+    Dask call began: tornado's ``Exception in callback`` from ``distributed.utils.sync``).
+    """
+    logger = logging.getLogger(name)
+    saved = list(logger.handlers), logger.propagate
+    logger.handlers, logger.propagate = [logging.StreamHandler(sys.stderr)], False
+    try:
+        capfd.readouterr()
+        with batch._logs_to(tmp_path / LOG):
+            logger.error("Exception in callback functools.partial(cancel)")
+            assert logger.propagate is True
+        assert logger.propagate is False and len(logger.handlers) == 1  # put back
+    finally:
+        logger.handlers, logger.propagate = saved
+    assert capfd.readouterr().err == ""
+    text = (tmp_path / LOG).read_text(encoding="utf-8")
+    assert f"{name} - ERROR - Exception in callback functools.partial(cancel)" in text
+
+
 def test_the_worker_logging_configuration_sends_a_new_process_s_lines_to_the_file(
     tmp_path,
 ) -> None:

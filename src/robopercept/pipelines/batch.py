@@ -1149,7 +1149,11 @@ def _logs_to(path: Path) -> Iterator[None]:
         saved.append((logger, list(logger.handlers), logger.propagate, logger.level))
         keep = [h for h in logger.handlers if not _is_console(h)]
         if "." in name and name != __name__:  # its lines reach its parent's handlers
+            # (Dask's logging set-up stops them propagating: without this, a line of
+            # tornado.application, as a callback's error, went to logging's last-resort
+            # handler, which prints the bare message on the terminal)
             logger.handlers = keep
+            logger.propagate = True
         else:
             logger.handlers = [*keep, handler]
             logger.propagate = False
