@@ -152,9 +152,7 @@ def test_logs_to_restores_the_handlers_even_on_an_error(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("name", ["tornado.application", "distributed.client"])
-def test_a_line_of_a_logger_dask_stops_propagating_goes_to_the_file(
-    tmp_path, capfd, name
-) -> None:
+def test_a_line_of_a_logger_dask_stops_propagating_goes_to_the_file(tmp_path, capfd, name) -> None:
     """Dask's logging set-up gives each of its loggers a console handler and stops it
     propagating. Before: inside the block such a logger had no handler at all, and
     logging's last resort printed its bare line on the terminal (a Ctrl-C landing as a
