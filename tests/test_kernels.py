@@ -271,6 +271,8 @@ def _imaging_cases() -> list[Case]:
         Case("gaussian_blur_u8", lambda: gaussian_blur(GRAY_U8, 2.0, border="constant")),
         Case("box_filter", lambda: box_filter(GRAY_U8, (4, 3), normalize=False)),
         Case("box_filter_f32", lambda: box_filter(GRAY_F32, 5, border="replicate")),
+        Case("box_filter_u8", lambda: box_filter(GRAY_U8, (5, 3), border="constant")),
+        Case("box_filter_u8_rgb", lambda: box_filter(RGB_U8, 7)),
         Case("correlate_2d", lambda: correlate(GRAY, k5, border="reflect")),
         Case("correlate_2d_u8", lambda: correlate(GRAY_U8, k5, border="constant", cval=9)),
         Case("median_3", lambda: median_filter(GRAY_U8, 3)),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import cv2
 import numpy as np
 import pytest
@@ -287,6 +289,33 @@ def test_box_and_median_match_opencv(astronaut, camera):
     for k in (3, 5):
         np.testing.assert_array_equal(median_filter(camera, k), cv2.medianBlur(camera, k))
         np.testing.assert_array_equal(median_filter(astronaut, k), cv2.medianBlur(astronaut, k))
+
+
+@pytest.mark.parametrize("border", ["reflect101", "reflect", "replicate", "constant"])
+def test_uint8_box_in_integers_equals_the_float_path(border) -> None:
+    """The integer window sums of uint8 means (odd windows up to BOX_INT_MAX) give the
+    float32 separable path's output exactly: every odd (kw, kh), tiny and wide images,
+    saturated and random pixels."""
+    rng = np.random.default_rng(3)
+    sizes = range(1, _im.filters.BOX_INT_MAX + 1, 2)
+    for kw, kh in itertools.product(sizes, sizes):
+        kx, ky = np.full(kw, 1.0 / kw), np.full(kh, 1.0 / kh)
+        for shape in ((1, 1), (3, 2), (20, 17), (9, 31, 3)):
+            for image in (
+                rng.integers(0, 256, shape),
+                np.full(shape, 255),
+                rng.integers(250, 256, shape),
+            ):
+                image = image.astype(np.uint8)
+                want = separable_filter_unchecked(image, kx, ky, border, 0.0, np.uint8)
+                got = box_filter(image, (kw, kh), border=border)
+                np.testing.assert_array_equal(got, want, err_msg=f"{kw}x{kh} {shape}")
+
+
+def test_uint8_box_matches_opencv_exactly(astronaut, camera) -> None:
+    for image in (camera, astronaut):
+        for k in ((3, 3), (5, 5), (7, 3), (15, 15)):
+            np.testing.assert_array_equal(box_filter(image, k), cv2.blur(image, k))
 
 
 def test_log_matches_scipy(camera):

@@ -51,6 +51,7 @@ from robopercept.imaging.median_networks import median_rows
 
 __all__ = [
     "BORDERS",
+    "BOX_INT_MAX",
     "MAX_KERNEL_SIZE",
     "box_filter",
     "convolve",
@@ -887,6 +888,11 @@ def box_filter(
     Matches ``cv2.blur`` (``normalize=True``) and ``cv2.boxFilter``. With
     ``normalize=False`` the window sum is returned as float32 (float64 for float64 input).
 
+    A uint8 mean over an odd window up to :data:`BOX_INT_MAX` (15) keeps the window's
+    column sums in uint16, updated by one row in and one out per output row, so a pixel
+    costs the same for every window height; the means and their rounding are those of
+    the float32 separable path the other cases take (tested on every such window).
+
     Parameters
     ----------
     image : (H, W) or (H, W, 3) ndarray
@@ -908,12 +914,113 @@ def box_filter(
         if k < 1:
             raise InputError(f"{name} must be a positive integer; got {k!r}")
         _check_taps(k, name, "pass a smaller window")
+    if (
+        normalize and image.dtype == np.uint8 and kw % 2 == 1 and kh % 2 == 1
+        and max(kw, kh) <= BOX_INT_MAX
+    ):  # fmt: skip
+        # the window sums in integers: the same means, rounded the same way
+        src, channels = _as_rows(image)
+        h, w = image.shape[:2]
+        cidx = border_indices(w, kw // 2, kw // 2, border)
+        ridx = border_indices(h, kh // 2, kh // 2, border)
+        out = np.empty_like(src)
+        kernel = _box_u8_gray if channels == 1 else _box_u8_rgb
+        kernel(src, cidx, ridx, kw, kh, kw // 2, np.float32(1.0 / (kw * kh)), out)
+        return out.reshape(image.shape)
     scale_x = 1.0 / kw if normalize else 1.0
     scale_y = 1.0 / kh if normalize else 1.0
     kx = np.full(int(kw), scale_x)
     ky = np.full(int(kh), scale_y)
     out_dtype = image.dtype if normalize else _out_dtype(image, False)
     return separable_filter_unchecked(image, kx, ky, border, 0.0, out_dtype)
+
+
+#: the widest odd box window :func:`box_filter` sums in integers for uint8 images: the
+#: sum of up to 225 pixels fits uint16 (255 * 225 = 57,375), and the float32 path it
+#: replaces rounds every window mean the same way (its error, under (kw + kh) * 255 *
+#: 2**-24, stays below half the 1 / (kw kh) gap that keeps a mean off a rounding tie)
+BOX_INT_MAX = 15
+
+
+# fmt: off
+def _make_box_u8(stride: int) -> Callable[..., None]:
+    """Compile the uint8 box mean in integers for one channel count (1 or 3, a
+    compile-time constant so that LLVM vectorizes the passes)."""
+
+    @njit(cache=True, nogil=True)
+    def box(src, cidx, ridx, kw, kh, ax, scale, out):  # pragma: no cover - compiled
+        """out = floor(S * scale + 1/2), S the window sum, scale 1 / (kw kh) in float32
+        (S is exact in it); src, out: (H, W*C) uint8.
+
+        The window's column sums are kept in uint16 and updated by one row in and one
+        row out per output row; the horizontal taps add ``kw`` shifted column sums."""
+        s = stride
+        height, n = out.shape
+        m = cidx.shape[0] * s
+        col = np.zeros(n, np.uint16)
+        pad = np.empty(m, np.uint16)
+        acc = np.empty(n, np.uint16)
+        for i in range(kh):
+            r = ridx[i]
+            if r >= 0:
+                row = src[r]
+                for x in range(n):
+                    col[x] += row[x]
+        inner = pad[ax * s : ax * s + n]
+        half = np.float32(0.5)
+        for y in range(height):
+            r_in = ridx[y + kh - 1] if y > 0 else -1
+            r_out = ridx[y - 1] if y > 0 else -1
+            if r_in >= 0 and r_out >= 0:  # one row in, one out, and the copy, fused
+                new, old = src[r_in], src[r_out]
+                for x in range(n):
+                    v = col[x] + new[x] - old[x]
+                    col[x] = v
+                    inner[x] = v
+            else:
+                if r_in >= 0:
+                    new = src[r_in]
+                    for x in range(n):
+                        col[x] += new[x]
+                if r_out >= 0:
+                    old = src[r_out]
+                    for x in range(n):
+                        col[x] -= old[x]
+                for x in range(n):
+                    inner[x] = col[x]
+            for b in range(kw - 1):  # the padded columns: ax before, kw - 1 - ax after
+                p = b if b < ax else cidx.shape[0] - (kw - 1) + b
+                j = cidx[p]
+                for c in range(s):
+                    pad[p * s + c] = 0 if j < 0 else col[j * s + c]
+            o = out[y]
+            if kw == 3:  # the taps and the rounding in one pass
+                p0, p1, p2 = pad[:n], pad[s : s + n], pad[2 * s : 2 * s + n]
+                for x in range(n):
+                    v = np.uint16(p0[x] + p1[x] + p2[x])
+                    o[x] = np.int32(np.floor(np.float32(v) * scale + half))
+            elif kw == 5:
+                p0, p1, p2 = pad[:n], pad[s : s + n], pad[2 * s : 2 * s + n]
+                p3, p4 = pad[3 * s : 3 * s + n], pad[4 * s : 4 * s + n]
+                for x in range(n):
+                    v = np.uint16(p0[x] + p1[x] + p2[x] + p3[x] + p4[x])
+                    o[x] = np.int32(np.floor(np.float32(v) * scale + half))
+            else:
+                for x in range(n):
+                    acc[x] = pad[x]
+                for t in range(1, kw):
+                    seg = pad[t * s : t * s + n]
+                    for x in range(n):
+                        acc[x] += seg[x]
+                for x in range(n):
+                    o[x] = np.int32(np.floor(np.float32(acc[x]) * scale + half))
+
+    return box
+# fmt: on
+
+
+_box_u8_gray = _make_box_u8(1)
+_box_u8_rgb = _make_box_u8(3)
 
 
 @njit(cache=True, nogil=True)
