@@ -291,6 +291,30 @@ def test_box_and_median_match_opencv(astronaut, camera):
         np.testing.assert_array_equal(median_filter(astronaut, k), cv2.medianBlur(astronaut, k))
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_separable_sums_run_tap_by_tap_in_the_working_type(dtype) -> None:
+    """The kernel adds the taps one at a time in the working type, in kernel order
+    (four per pass over a row, the sum kept in a register: the same additions), so
+    its interior equals NumPy's tap-by-tap sums bit for bit."""
+    rng = np.random.default_rng(11)
+    for kw, kh in ((1, 1), (3, 5), (4, 13), (9, 2), (13, 13)):
+        image = rng.normal(size=(23, 37)).astype(dtype)
+        kx, ky = rng.normal(size=kw).astype(dtype), rng.normal(size=kh).astype(dtype)
+        ax, ay = kw // 2, kh // 2
+        rows = image[border_indices(23, ay, kh - 1 - ay, "reflect101")]
+        acc = ky[0] * rows[:23]
+        for k in range(1, kh):
+            acc = acc + ky[k] * rows[k : k + 23]
+        cols = acc[:, border_indices(37, ax, kw - 1 - ax, "reflect101")]
+        want = kx[0] * cols[:, :37]
+        for k in range(1, kw):
+            want = want + kx[k] * cols[:, k : k + 37]
+        got = separable_filter_unchecked(image, kx, ky)
+        inner = slice(ax, 37 - (kw - 1 - ax))  # the border pixels sum in float64
+        np.testing.assert_array_equal(got[:, inner], want[:, inner])
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
+
+
 @pytest.mark.parametrize("border", ["reflect101", "reflect", "replicate", "constant"])
 def test_uint8_box_in_integers_equals_the_float_path(border) -> None:
     """The integer window sums of uint8 means (odd windows up to BOX_INT_MAX) give the

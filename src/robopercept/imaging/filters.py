@@ -172,16 +172,30 @@ def _make_taps(stride: int) -> Callable[..., None]:
         lo = ax * s
         hi = (width - (n - 1 - ax)) * s
         if hi > lo:
-            w0 = kx[0]
             dst = res[lo:hi]
-            seg = acc[lo - ax * s :]
-            for x in range(hi - lo):
-                dst[x] = w0 * seg[x]
-            for k in range(1, n):
+            k = 0
+            while k < n:  # four taps per pass, as the vertical taps of the caller
+                if k + 4 <= n:
+                    sa, sb = acc[k * s :], acc[(k + 1) * s :]
+                    sc, sd = acc[(k + 2) * s :], acc[(k + 3) * s :]
+                    wa, wb, wc, wd = kx[k], kx[k + 1], kx[k + 2], kx[k + 3]
+                    if k == 0:
+                        for x in range(hi - lo):
+                            dst[x] = wa * sa[x] + wb * sb[x] + wc * sc[x] + wd * sd[x]
+                    else:
+                        for x in range(hi - lo):
+                            dst[x] = dst[x] + wa * sa[x] + wb * sb[x] + wc * sc[x] + wd * sd[x]
+                    k += 4
+                    continue
                 wk = kx[k]
-                seg = acc[lo + (k - ax) * s :]
-                for x in range(hi - lo):
-                    dst[x] += wk * seg[x]
+                seg = acc[k * s :]
+                if k == 0:
+                    for x in range(hi - lo):
+                        dst[x] = wk * seg[x]
+                else:
+                    for x in range(hi - lo):
+                        dst[x] += wk * seg[x]
+                k += 1
         else:
             lo = hi = 0
         nb = lo // s  # the border pixels only: left of lo, right of hi
@@ -230,27 +244,51 @@ def _separable_kernel(
     res = np.empty(length, dtype=kx.dtype)
     const_row = cval * ky.sum()
     direct = not is_int and out.dtype == acc.dtype
+    cast = acc.dtype.type
     for y in range(height):
-        r = ridx[y]
-        w0 = ky[0]
-        if r < 0:
-            for x in range(length):
-                acc[x] = w0 * cval
-        else:
-            srow = src[r]
-            for x in range(length):
-                acc[x] = w0 * srow[x]
-        for k in range(1, ny):
+        k = 0
+        while k < ny:
+            # four taps per pass over the row when their rows are inside the image: the
+            # sum stays in a register between them (the same additions in the same
+            # order as one pass per tap, so the same result, with a quarter of the
+            # loads and stores of acc)
+            if k + 4 <= ny and min(ridx[y + k : y + k + 4]) >= 0:
+                ra, rb = src[ridx[y + k]], src[ridx[y + k + 1]]
+                rc, rd = src[ridx[y + k + 2]], src[ridx[y + k + 3]]
+                wa, wb, wc, wd = ky[k], ky[k + 1], ky[k + 2], ky[k + 3]
+                if k == 0:
+                    for x in range(length):
+                        v = cast(wa * ra[x])  # rounded to acc's type at each step,
+                        v = cast(v + wb * rb[x])  # as the store of a pass per tap is
+                        v = cast(v + wc * rc[x])
+                        acc[x] = v + wd * rd[x]
+                else:
+                    for x in range(length):
+                        v = cast(acc[x] + wa * ra[x])
+                        v = cast(v + wb * rb[x])
+                        v = cast(v + wc * rc[x])
+                        acc[x] = v + wd * rd[x]
+                k += 4
+                continue
             r = ridx[y + k]
             wk = ky[k]
             if r < 0:
                 c = wk * cval
-                for x in range(length):
-                    acc[x] += c
+                if k == 0:
+                    for x in range(length):
+                        acc[x] = c
+                else:
+                    for x in range(length):
+                        acc[x] += c
             else:
                 srow = src[r]
-                for x in range(length):
-                    acc[x] += wk * srow[x]
+                if k == 0:
+                    for x in range(length):
+                        acc[x] = wk * srow[x]
+                else:
+                    for x in range(length):
+                        acc[x] += wk * srow[x]
+            k += 1
         if direct:  # float output: the taps write the output row itself
             _taps(acc, kx, ax, cidx, channels, const_row, out[y])
         else:
