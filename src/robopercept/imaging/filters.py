@@ -174,18 +174,31 @@ def _make_taps(stride: int) -> Callable[..., None]:
         if hi > lo:
             dst = res[lo:hi]
             k = 0
-            while k < n:  # four taps per pass, as the vertical taps of the caller
-                if k + 4 <= n:
+            while k < n:  # up to four taps per pass, as the vertical taps of the caller
+                g = min(4, n - k)
+                if g >= 2:
                     sa, sb = acc[k * s :], acc[(k + 1) * s :]
-                    sc, sd = acc[(k + 2) * s :], acc[(k + 3) * s :]
-                    wa, wb, wc, wd = kx[k], kx[k + 1], kx[k + 2], kx[k + 3]
-                    if k == 0:
+                    sc, sd = acc[(k + g - 2) * s :], acc[(k + g - 1) * s :]
+                    wa, wb, wc, wd = kx[k], kx[k + 1], kx[k + g - 2], kx[k + g - 1]
+                    if g == 4 and k == 0:
                         for x in range(hi - lo):
                             dst[x] = wa * sa[x] + wb * sb[x] + wc * sc[x] + wd * sd[x]
-                    else:
+                    elif g == 4:
                         for x in range(hi - lo):
                             dst[x] = dst[x] + wa * sa[x] + wb * sb[x] + wc * sc[x] + wd * sd[x]
-                    k += 4
+                    elif g == 3 and k == 0:  # (sc is sb)
+                        for x in range(hi - lo):
+                            dst[x] = wa * sa[x] + wb * sb[x] + wd * sd[x]
+                    elif g == 3:
+                        for x in range(hi - lo):
+                            dst[x] = dst[x] + wa * sa[x] + wb * sb[x] + wd * sd[x]
+                    elif k == 0:
+                        for x in range(hi - lo):
+                            dst[x] = wa * sa[x] + wb * sb[x]
+                    else:
+                        for x in range(hi - lo):
+                            dst[x] = dst[x] + wa * sa[x] + wb * sb[x]
+                    k += g
                     continue
                 wk = kx[k]
                 seg = acc[k * s :]
@@ -252,23 +265,43 @@ def _separable_kernel(
             # sum stays in a register between them (the same additions in the same
             # order as one pass per tap, so the same result, with a quarter of the
             # loads and stores of acc)
-            if k + 4 <= ny and min(ridx[y + k : y + k + 4]) >= 0:
+            g = min(4, ny - k)
+            if g >= 2 and min(ridx[y + k : y + k + g]) >= 0:
                 ra, rb = src[ridx[y + k]], src[ridx[y + k + 1]]
-                rc, rd = src[ridx[y + k + 2]], src[ridx[y + k + 3]]
-                wa, wb, wc, wd = ky[k], ky[k + 1], ky[k + 2], ky[k + 3]
-                if k == 0:
+                rc, rd = src[ridx[y + k + g - 2]], src[ridx[y + k + g - 1]]
+                wa, wb, wc, wd = ky[k], ky[k + 1], ky[k + g - 2], ky[k + g - 1]
+                first = k == 0
+                if g == 4 and first:
                     for x in range(length):
                         v = cast(wa * ra[x])  # rounded to acc's type at each step,
                         v = cast(v + wb * rb[x])  # as the store of a pass per tap is
                         v = cast(v + wc * rc[x])
                         acc[x] = v + wd * rd[x]
-                else:
+                elif g == 4:
                     for x in range(length):
                         v = cast(acc[x] + wa * ra[x])
                         v = cast(v + wb * rb[x])
                         v = cast(v + wc * rc[x])
                         acc[x] = v + wd * rd[x]
-                k += 4
+                elif g == 3 and first:  # (rc is rb: the last two taps are c and d)
+                    for x in range(length):
+                        v = cast(wa * ra[x])
+                        v = cast(v + wb * rb[x])
+                        acc[x] = v + wd * rd[x]
+                elif g == 3:
+                    for x in range(length):
+                        v = cast(acc[x] + wa * ra[x])
+                        v = cast(v + wb * rb[x])
+                        acc[x] = v + wd * rd[x]
+                elif first:
+                    for x in range(length):
+                        v = cast(wa * ra[x])
+                        acc[x] = v + wb * rb[x]
+                else:
+                    for x in range(length):
+                        v = cast(acc[x] + wa * ra[x])
+                        acc[x] = v + wb * rb[x]
+                k += g
                 continue
             r = ridx[y + k]
             wk = ky[k]
