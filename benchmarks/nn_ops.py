@@ -2,7 +2,7 @@
 :mod:`robopercept.nn.ops`) against onnxruntime's ``NonMaxSuppression`` and ``RoiAlign``
 operators on the same input (issue 50): NMS of 1,000, 2,000 and 10,000 boxes, batched
 (per-class) NMS of 2,000 and 10,000 boxes in 10 classes (onnxruntime's class axis), RoI
-Align. Paired in one process (``paired_ms``: the two alternate, median of the runs).
+Align, and RoI max pooling against ``MaxRoiPool``. Paired in one process (``paired_ms``: the two alternate, median of the runs).
 
 Both single-threaded. Batched NMS: onnxruntime takes a score per box and class, so
 each box scores in its own class and 0 in the others, with ``score_threshold`` 0
@@ -51,7 +51,7 @@ def run(repeats: int) -> tuple[list[Record], dict]:
     from onnx import TensorProto, helper
 
     from robopercept.nn.ops.nms import batched_nms, nms
-    from robopercept.nn.ops.roi import roi_align
+    from robopercept.nn.ops.roi import roi_align, roi_pool
 
     torch.set_num_threads(1)
     numba.set_num_threads(1)  # the compiled kernels single-threaded too
@@ -139,5 +139,29 @@ def run(repeats: int) -> tuple[list[Record], dict]:
             Record("roi_align", f"{K} RoIs, 64x50x50, 7x7, ratio 2, aligned={aligned}",
                    ours_ms, ref_ms, "onnxruntime RoiAlign", "max |difference|", err, 1.0)
         )  # fmt: skip
+    # RoI max pooling on the same map and regions, against onnxruntime's MaxRoiPool
+    r5 = np.concatenate([bidx[:, None].astype(np.float32), rois], 1)
+    pool_sess = _session(
+        helper.make_node("MaxRoiPool", ["X", "r"], ["Y"], pooled_shape=[7, 7],
+                         spatial_scale=1 / 16),
+        [vi("X", TensorProto.FLOAT, list(x.shape)), vi("r", TensorProto.FLOAT, [None, 5])],
+        [vi("Y", TensorProto.FLOAT, None)],
+        16,
+    )  # fmt: skip
+    tx, tr5 = torch.from_numpy(x), torch.from_numpy(r5)
+
+    def ours_rp():  # type: ignore[no-untyped-def]
+        with torch.no_grad():
+            return roi_pool(tx, tr5, 7, 1 / 16)
+
+    def ref_rp():  # type: ignore[no-untyped-def]
+        return pool_sess.run(None, {"X": x, "r": r5})[0]
+
+    same = float(np.array_equal(ours_rp().numpy(), ref_rp()))
+    ours_ms, ref_ms = paired_ms(ours_rp, ref_rp, repeats=repeats, warmup=1)
+    records.append(
+        Record("roi_pool", f"{K} RoIs, 64x50x50, 7x7", ours_ms, ref_ms,
+               "onnxruntime MaxRoiPool", "identical (1 = yes)", same, 1.0)
+    )  # fmt: skip
     settings = {"threads": "torch 1, numba 1, onnxruntime intra-op 1", "float": "float32"}
     return records, settings

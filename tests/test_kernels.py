@@ -745,7 +745,7 @@ def _nn_cases() -> list[Case]:
     def pictorial() -> object:
         return pictorial_structures(costs, [1, -1, 1, 2], *springs, min_marginals=True)
 
-    from robopercept.nn.ops.roi import roi_align
+    from robopercept.nn.ops.roi import roi_align, roi_pool
 
     feats = rng.normal(size=(2, 3, 9, 7))
     rois = np.concatenate([rng.integers(0, 2, (8, 1)), xy[:8] / 4, xy[:8] / 4 + 3.0], axis=1)
@@ -757,9 +757,17 @@ def _nn_cases() -> list[Case]:
             roi_align(t(feats), t(rois), 2, 1.0, 0, False).numpy(),
         ]
 
+    def pool() -> list[np.ndarray]:
+        t = torch.from_numpy
+        return [
+            roi_pool(t(feats).float(), t(rois).float(), (2, 3), 0.5).numpy(),
+            roi_pool(t(feats), t(rois), 2, 1.0).numpy(),
+        ]
+
     return [
         Case("batched_nms", nms),
         Case("roi_align", align),
+        Case("roi_pool", pool),
         Case("coco_matching", coco),
         Case("pictorial_structures", pictorial),
     ]

@@ -156,6 +156,50 @@ class TestRoIPool:
         rois = [torch.tensor([[0.0, 0.0, 4.0, 5.0], [1.0, 1.0, 2.0, 2.0]]).double()]
         assert torch.autograd.gradcheck(lambda t: roi_pool(t, rois, 2), (x,))
 
+    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+    def test_compiled_forward_equals_the_differentiable_one(self, dtype):
+        # without a gradient to keep, roi_pool runs a compiled kernel over each bin's
+        # window; with one, the gathered windows: a maximum is exact, so they are equal,
+        # NaN (propagated, as amax), infinities and empty bins (0) included
+        rng = np.random.default_rng(12)
+        x = torch.from_numpy(rng.normal(size=(2, 3, 17, 13))).to(dtype)
+        x[0, 1, 4:6, 3] = float("nan")
+        x[1, 0] = float("-inf")  # a whole map: its bins are -inf
+        x[1, 2, 9, 2] = float("inf")
+        rois, bidx = random_rois(rng, 60, 2, 17 / 0.5)
+        rois[:3] *= 40  # far beyond the map: empty bins
+        rows = torch.from_numpy(np.concatenate([bidx[:, None], rois], axis=1)).to(dtype)
+        fast = roi_pool(x, rows, (3, 4), 0.5)
+        slow = roi_pool(x.clone().requires_grad_(True), rows, (3, 4), 0.5)
+        assert fast.dtype == dtype and not fast.requires_grad and slow.requires_grad
+        torch.testing.assert_close(fast, slow.detach(), rtol=0, atol=0, equal_nan=True)
+        assert bool(fast.isnan().any()) and bool((fast[:3] == 0).all())
+        assert bool(fast.isneginf().any()) and bool(fast.isposinf().any())
+
+    def test_equals_onnxruntime_max_roi_pool(self):
+        ort = pytest.importorskip("onnxruntime")
+        from onnx import TensorProto, helper
+
+        rng = np.random.default_rng(13)
+        x = rng.normal(size=(2, 4, 15, 19)).astype(np.float32)
+        rois, bidx = random_rois(rng, 50, 2, 15 / 0.25)
+        rows = np.concatenate([bidx[:, None], rois], axis=1).astype(np.float32)
+        vi = helper.make_tensor_value_info
+        node = helper.make_node(
+            "MaxRoiPool", ["X", "r"], ["Y"], pooled_shape=[3, 2], spatial_scale=0.25
+        )
+        graph = helper.make_graph(
+            [node], "g",
+            [vi("X", TensorProto.FLOAT, list(x.shape)), vi("r", TensorProto.FLOAT, [None, 5])],
+            [vi("Y", TensorProto.FLOAT, None)],
+        )  # fmt: skip
+        model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 16)])
+        sess = ort.InferenceSession(model.SerializeToString(), providers=["CPUExecutionProvider"])
+        want = sess.run(None, {"X": x, "r": rows})[0]
+        with torch.no_grad():
+            got = roi_pool(torch.from_numpy(x), torch.from_numpy(rows), (3, 2), 0.25).numpy()
+        np.testing.assert_array_equal(got, want)
+
 
 # ------------------------------------------------------------------ bad input
 T4 = torch.tensor([[0.0, 0.0, 1.0, 1.0]])

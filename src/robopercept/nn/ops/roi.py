@@ -192,6 +192,44 @@ def _roi_align_kernel(x, bidx, r, rw, rh, gh, gw, out):  # pragma: no cover - co
                     out[k, c, p, q] = acc
 
 
+def _compiled_forward(x: torch.Tensor) -> bool:
+    """Whether a forward may run a compiled kernel instead of torch operations: a CPU
+    float32/float64 input whose result keeps no gradient (none wanted: no
+    ``requires_grad``, or ``torch.no_grad``/``inference_mode``), outside a trace or a
+    ``torch.compile`` (which record torch operations)."""
+    return (
+        x.device.type == "cpu"
+        and x.dtype in (torch.float32, torch.float64)
+        and not (torch.is_grad_enabled() and x.requires_grad)
+        and not torch.jit.is_tracing()
+        and not torch.compiler.is_compiling()
+    )
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _roi_pool_kernel(x, bidx, hs, he, ws, we, out):  # pragma: no cover - compiled
+    # RoI max pooling forward (parallel over regions): each bin's window of the map,
+    # channel by channel; an empty bin is 0; a NaN in the window gives NaN, as amax
+    C = x.shape[1]
+    K, _, P, Q = out.shape
+    for k in prange(K):
+        n = bidx[k]
+        for c in range(C):
+            for p in range(P):
+                for q in range(Q):
+                    if he[k, p] <= hs[k, p] or we[k, q] <= ws[k, q]:
+                        out[k, c, p, q] = 0.0
+                        continue
+                    m = x[n, c, hs[k, p], ws[k, q]]
+                    nan = False
+                    for row in range(hs[k, p], he[k, p]):
+                        for col in range(ws[k, q], we[k, q]):
+                            v = x[n, c, row, col]
+                            m = v if v > m else m  # branch-free, so it vectorizes
+                            nan |= v != v
+                    out[k, c, p, q] = np.nan if nan else m
+
+
 def roi_align(
     input: torch.Tensor,
     boxes: torch.Tensor | list[torch.Tensor],
@@ -309,13 +347,7 @@ def roi_align(
         f"the sampling of {K} regions",
         "use fewer or smaller boxes, a smaller spatial_scale, or a positive sampling_ratio",
     )
-    if (
-        x.device.type == "cpu"
-        and dt in (torch.float32, torch.float64)
-        and not (torch.is_grad_enabled() and x.requires_grad)
-        and not torch.jit.is_tracing()  # an export records torch operations
-        and not torch.compiler.is_compiling()
-    ):
+    if _compiled_forward(x):
         # no gradient wanted: the compiled forward (the regions' windows only, as
         # onnxruntime's kernel; the dense products below cost ten times the work)
         res = np.empty((K, C, P, Q), dtype=np.float32 if dt == torch.float32 else np.float64)
@@ -472,6 +504,9 @@ def roi_pool(
     :math:`x_1'` and clipped to the map (same in y), and holds the maximum there, or 0
     for an empty bin. Differentiable with respect to ``input`` (the gradient of a max
     goes to the arg-max; ties share it, where torchvision gives it to the first).
+    Without a gradient to keep, on a CPU float input, the forward is a compiled loop
+    over each bin's window (onnxruntime's ``MaxRoiPool``, equal to it; tested), not the
+    gathered windows the gradient needs.
 
     Parameters
     ----------
@@ -513,6 +548,13 @@ def roi_pool(
 
     hs, he = bands(r[:, 1], r[:, 3], P, H)
     ws, we = bands(r[:, 0], r[:, 2], Q, W)
+    if _compiled_forward(x):  # each bin's window only (as onnxruntime's MaxRoiPool)
+        res = np.empty((K, C, P, Q), dtype=np.float32 if x.dtype == torch.float32 else np.float64)
+        _roi_pool_kernel(
+            np.ascontiguousarray(x.detach().numpy()), bidx.cpu().numpy(), hs.numpy(),
+            he.numpy(), ws.numpy(), we.numpy(), res,
+        )  # fmt: skip
+        return torch.from_numpy(res)
     hb = max(int((he - hs).max()) if K else 1, 1)
     wb = max(int((we - ws).max()) if K else 1, 1)
     check_allocation(
