@@ -25,7 +25,7 @@ def _f1(a: np.ndarray, b: np.ndarray) -> float:
     return 2 * tp / max(np.count_nonzero(a) + np.count_nonzero(b), 1)
 
 
-def run(repeats: int = 51) -> tuple[list[Record], dict]:
+def run(repeats: int = 30) -> tuple[list[Record], dict]:
     cv2.setNumThreads(1)
     rgb, gray = test_image()
     gray_f = gray.astype(np.float32) / 255

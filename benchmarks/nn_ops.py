@@ -2,7 +2,9 @@
 :mod:`robopercept.nn.ops`) against onnxruntime's ``NonMaxSuppression`` and ``RoiAlign``
 operators on the same input (issue 50): NMS of 1,000, 2,000 and 10,000 boxes, batched
 (per-class) NMS of 2,000 and 10,000 boxes in 10 classes (onnxruntime's class axis), RoI
-Align, and RoI max pooling against ``MaxRoiPool``. Paired in one process (``paired_ms``: the two alternate, median of the runs).
+Align, and RoI max pooling against ``MaxRoiPool``; and one training epoch of our loops
+against a plain torch loop (:func:`training_records`). Paired in one process
+(``paired_ms``: the two alternate, median of the runs).
 
 Both single-threaded. Batched NMS: onnxruntime takes a score per box and class, so
 each box scores in its own class and 0 in the others, with ``score_threshold`` 0
@@ -163,5 +165,103 @@ def run(repeats: int) -> tuple[list[Record], dict]:
         Record("roi_pool", f"{K} RoIs, 64x50x50, 7x7", ours_ms, ref_ms,
                "onnxruntime MaxRoiPool", "identical (1 = yes)", same, 1.0)
     )  # fmt: skip
+    records += training_records(max(11, repeats // 3))
     settings = {"threads": "torch 1, numba 1, onnxruntime intra-op 1", "float": "float32"}
     return records, settings
+
+
+def training_records(repeats: int) -> list[Record]:
+    """One training epoch by our loops (:func:`~robopercept.nn.train.fit.fit`,
+        :func:`~robopercept.nn.detection.train.train_detector`) against a minimal loop of
+        plain torch on the same model, data, batches and optimizer (zero_grad, forward,
+        loss, backward, step; no checks, no figures, no progress), paired, each epoch from
+        the same initial weights. The digits CNN: ``resnet_small`` on the 1,797 scikit-learn
+        digits, batch 64, AdamW. FCOS (width 16) on 64 procedural 128 x 128 shapes
+        canvases, batch 8, AdamW with the cosine schedule stepped per batch and clipping at
+    10, as ``detection_figures``. The accuracy
+        column is the largest difference of a weight after the epoch (the loops draw the
+        same batches and take the same steps)."""
+    import copy
+
+    import torch
+    from torch.nn import functional
+
+    from robopercept.nn.classification.models import resnet_small
+    from robopercept.nn.classification.run import load_data
+    from robopercept.nn.detection.data import collate_detection
+    from robopercept.nn.detection.synthetic import procedural_detection_set
+    from robopercept.nn.detection.train import train_detector
+    from robopercept.nn.detection.zoo import build_detector
+    from robopercept.nn.train.config import TrainConfig
+    from robopercept.nn.train.fit import fit
+
+    def weights_gap(a: torch.nn.Module, b: torch.nn.Module) -> float:
+        pairs = zip(a.parameters(), b.parameters(), strict=True)
+        return max(float((p - q).detach().abs().max()) for p, q in pairs)
+
+    records = []
+    # the digits CNN
+    data = load_data("digits")
+    cfg = TrainConfig(epochs=1, batch_size=64, lr=3e-3, seed=0, device="cpu", patience=None)
+    torch.manual_seed(0)
+    model = resnet_small()
+    start = copy.deepcopy(model.state_dict())
+    ours_model, ref_model = copy.deepcopy(model), copy.deepcopy(model)
+
+    def ours_digits() -> None:
+        ours_model.load_state_dict(start)
+        fit(ours_model, data, None, cfg, progress=False)
+
+    def ref_digits() -> None:
+        ref_model.load_state_dict(start)
+        torch.manual_seed(0)
+        loader = torch.utils.data.DataLoader(
+            data, batch_size=64, shuffle=True, generator=torch.Generator().manual_seed(0)
+        )
+        opt = torch.optim.AdamW(ref_model.parameters(), lr=3e-3, weight_decay=1e-4)
+        ref_model.train()
+        for x, y in loader:
+            opt.zero_grad()
+            functional.cross_entropy(ref_model(x.float()), y.long()).backward()
+            opt.step()
+
+    ours_ms, ref_ms = paired_ms(ours_digits, ref_digits, repeats=repeats, warmup=1)
+    records.append(
+        Record("train_epoch", "digits CNN (resnet_small), 1,797 images, batch 64", ours_ms,
+               ref_ms, "a plain torch loop", "max |weight difference|",
+               weights_gap(ours_model, ref_model), 1.05)
+    )  # fmt: skip
+    # FCOS on the shapes
+    shapes = procedural_detection_set(64, (128, 128), rng=0)
+    dcfg = TrainConfig(epochs=1, batch_size=8, lr=2e-3, seed=0, device="cpu", clip_grad_norm=10.0)
+    det = build_detector("fcos", len(shapes.classes), seed=0, width=16, score_thresh=0.05)
+    start = copy.deepcopy(det.state_dict())
+    ours_det, ref_det = copy.deepcopy(det), copy.deepcopy(det)
+
+    def ours_fcos() -> None:
+        ours_det.load_state_dict(start)
+        train_detector(ours_det, shapes, dcfg, progress=False)
+
+    def ref_fcos() -> None:
+        ref_det.load_state_dict(start)
+        torch.manual_seed(0)
+        order = torch.randperm(len(shapes), generator=torch.Generator().manual_seed(0))
+        params = [p for p in ref_det.parameters() if p.requires_grad]
+        opt = torch.optim.AdamW(params, lr=2e-3, weight_decay=1e-4)
+        sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=len(range(0, 64, 8)))
+        ref_det.train()
+        for b in range(0, len(shapes), 8):
+            images, targets = collate_detection([shapes[int(j)] for j in order[b : b + 8]])
+            opt.zero_grad()
+            sum(ref_det(list(images), list(targets)).values()).backward()
+            torch.nn.utils.clip_grad_norm_(params, 10.0)
+            opt.step()
+            sched.step()  # the detectors' schedule steps per batch
+
+    ours_ms, ref_ms = paired_ms(ours_fcos, ref_fcos, repeats=repeats, warmup=1)
+    records.append(
+        Record("train_epoch", "FCOS (width 16), 64 shapes canvases, batch 8", ours_ms, ref_ms,
+               "a plain torch loop", "max |weight difference|",
+               weights_gap(ours_det, ref_det), 1.05)
+    )  # fmt: skip
+    return records
