@@ -27,6 +27,7 @@ row inside, so the inner loop vectorizes; an ``(H, W, C)`` image is seen as an
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import Literal
@@ -100,6 +101,13 @@ def border_indices(n: int, before: int, after: int, border: str) -> np.ndarray:
     (before + n + after,) int64 ndarray
         Index into ``0 .. n-1``, or ``-1`` where the constant value is used.
     """
+    return _border_map(n, before, after, border).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _border_map(n: int, before: int, after: int, border: str) -> np.ndarray:
+    """:func:`border_indices`, computed once per axis (an image's axes repeat from call
+    to call; the maps are a third of the Python-side time of a 3x3 filter)."""
     i = np.arange(-before, n + after, dtype=np.int64)
     if border == "constant":
         return np.where((i >= 0) & (i < n), i, -1)
@@ -1207,6 +1215,12 @@ def derivative_kernel(order: int, ksize: int) -> np.ndarray:
         raise InputError(
             f"derivative order must be in [0, {ksize - 1}] for ksize {ksize}; got {order}"
         )
+    return _derivative_taps(order, ksize).copy()
+
+
+@functools.lru_cache(maxsize=64)
+def _derivative_taps(order: int, ksize: int) -> np.ndarray:
+    """The taps of :func:`derivative_kernel` (checked arguments), computed once."""
     k = np.ones(1)
     for _ in range(ksize - order - 1):
         k = np.convolve(k, [1.0, 1.0])
