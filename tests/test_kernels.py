@@ -396,6 +396,13 @@ def _estimation_cases() -> list[Case]:
     from robopercept.estimation.least_squares import slab_inliers
     from robopercept.pipelines.plane_measure import _take_rows, pixel_solidity_masked
 
+    def slab_parallel(points: np.ndarray, within: np.ndarray) -> list[Any]:
+        from robopercept.estimation import least_squares
+
+        out = np.empty(points.shape[0], dtype=bool)
+        sums = least_squares._slab_kernel(points, 0.0, 0.0, 1.0, 2.0, 0.02, within, True, out)
+        return [*sums, out]
+
     blob = np.zeros((12, 16), dtype=bool)
     blob[2:9, 3:12] = True
     blob[5, 14] = blob[10, 1] = True  # specks widen the hull
@@ -413,6 +420,8 @@ def _estimation_cases() -> list[Case]:
         ),
         Case("ransac_plane_ransac", lambda: ransac(pts, PlaneModel(), 0.05, rng=1)),
         Case("slab_inliers", lambda: slab_inliers(front, np.array([0, 0, 1.0]), 2.0, 0.02, keep)),
+        # the slab fit's parallel kernel, which the fit runs only on >= 100,000 points
+        Case("slab_fit_parallel", lambda: slab_parallel(front, keep)),
         Case("take_rows_mask", lambda: _take_rows(pts, mask=keep)),
         Case("take_rows_step", lambda: [_take_rows(pts, step=k) for k in (1, 3, 7)]),
         Case("take_rows_mask_4_columns", lambda: _take_rows(np.c_[pts, pts[:, 0]], mask=keep)),

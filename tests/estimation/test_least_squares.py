@@ -213,3 +213,24 @@ def test_slab_inliers_is_the_slab_fits_mask_to_the_bit(seed):
         np.testing.assert_array_equal(slab_inliers(pts, normal, d, thr, allowed), inl)
     edge = np.abs(np.abs(pts @ normal - d) - thr) < 1e-12
     assert edge.sum() > 100  # the case reaches the threshold's last bits
+
+
+@pytest.mark.parametrize("n", [5, 1000, 130_001])
+def test_slab_fit_on_one_thread_is_the_parallel_fit_to_the_bit(n):
+    # fit_plane_inverse_depth_slab runs the serial twin below SLAB_PARALLEL_MIN points:
+    # the same blocks summed in the same order, so the same bits whichever it picks
+    from robopercept.estimation import least_squares as ls
+
+    rng = np.random.default_rng(n)
+    pts = rng.normal(size=(n, 3)) * [0.5, 0.5, 0.01] + [0.0, 0.0, 2.0]
+    pts[::7, 2] += rng.uniform(-0.1, 0.1, pts[::7].shape[0])
+    within = rng.random(n) < 0.9
+    for allowed, use in ((np.zeros(1, dtype=bool), False), (within, True)):
+        args = (pts, 0.01, -0.02, 0.9997, 2.0, 0.03, allowed, use)
+        out_p, out_s = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        par = ls._slab_kernel(*args, out_p)
+        ser = ls._slab_kernel_serial(*args, out_s)
+        np.testing.assert_array_equal(out_p, out_s)
+        for a, b in zip(par, ser, strict=True):
+            np.testing.assert_array_equal(a, b)
+        assert out_s.sum() > 0

@@ -383,7 +383,10 @@ class PlaneModel(Model[Plane]):
     # cache-sized blocks of points, every hypothesis of the batch scored on a block while
     # it is in cache, blocks in parallel
     def prepare(self, data: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return tuple(np.ascontiguousarray(data[:, i]) for i in range(3))  # type: ignore[return-value]
+        # the rows of one (3, N) copy: one allocation, not three (each of a few hundred
+        # kB came from fresh pages, 0.45 ms for 32768 points where one copy takes 0.06)
+        xyz = np.ascontiguousarray(data.T)
+        return xyz[0], xyz[1], xyz[2]
 
     def score(
         self, params: np.ndarray, prepared: Any, threshold: float, msac: bool

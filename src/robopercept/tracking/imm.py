@@ -312,8 +312,7 @@ class IMMEstimator:
         zz, rr = check_numeric(z, "z"), _as_r(R)
         for j, f in enumerate(self.filters):
             res = f.update(zz, R=rr)
-            _, logdet = mahalanobis_logdet(res.S, res.y)
-            logl[j] = -0.5 * (res.mahalanobis2 + logdet + nz * np.log(2.0 * np.pi))
+            logl[j] = -0.5 * (res.mahalanobis2 + res.log_det_s + nz * np.log(2.0 * np.pi))
         self.log_likelihood = logl
         self.likelihood = np.exp(logl)
         with np.errstate(divide="ignore"):

@@ -25,6 +25,7 @@ measurement when :math:`d^2` is below that law's ``probability`` quantile.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -63,7 +64,25 @@ __all__ = [
 MAX_DIM = 4096
 
 
+#: arrays up to this size are checked in Python (:func:`_small_ok`): NumPy's reductions
+#: cost microseconds each on the 3-vectors and 3x3 covariances of a per-frame track
+_SMALL = 64
+
+
+def _small_ok(a: np.ndarray) -> bool:
+    """Whether a float64 array of at most :data:`_SMALL` values is finite and within
+    1e150 (a NaN fails the comparison): one Python pass instead of three reductions."""
+    return a.size <= _SMALL and all(-1e150 <= v <= 1e150 for v in a.ravel().tolist())
+
+
 def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
+    if (
+        type(value) is np.ndarray
+        and value.dtype == np.float64
+        and value.shape == shape
+        and _small_ok(value)
+    ):
+        return value  # (what the checks below return for it)
     a = check_numeric(value, name)
     if a.ndim == 0:
         a = a * np.eye(shape[0]) if shape[0] == shape[1] else np.full(shape, float(a))
@@ -75,6 +94,9 @@ def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
 
 
 def _vec(value: object, name: str, n: int) -> np.ndarray:
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,):
+        if _small_ok(value):
+            return value
     a = check_numeric(value, name).reshape(-1)
     if a.shape != (n,):
         raise InputError(f"{name} must have {n} elements; got shape {np.shape(value)}")
@@ -128,6 +150,9 @@ class UpdateResult:
         Kalman gain.
     mahalanobis2 : float
         :math:`y^\\top S^{-1} y`.
+    log_det_s : float
+        :math:`\\log\\det S`, from the same Cholesky factor (the normalizer of the
+        innovation's Gaussian likelihood, which an IMM needs).
     """
 
     x: np.ndarray
@@ -136,6 +161,7 @@ class UpdateResult:
     S: np.ndarray
     K: np.ndarray
     mahalanobis2: float
+    log_det_s: float = math.nan
 
 
 def kf_predict(
@@ -245,7 +271,12 @@ def mahalanobis_logdet(S: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     (2.0, True)
     """
     c = _factor_s(S)
-    return float(y @ _solve_factored(c, y)), 2.0 * float(np.log(np.diag(c)).sum())
+    return float(y @ _solve_factored(c, y)), _log_det_factored(c)
+
+
+def _log_det_factored(c: np.ndarray) -> float:
+    """:math:`\\log\\det S = 2 \\sum_i \\log U_{ii}` from its Cholesky factor."""
+    return 2.0 * float(np.log(c.diagonal()).sum())
 
 
 def kf_update(
@@ -308,7 +339,7 @@ def _update(
     ikh = np.eye(P.shape[0]) - K @ H
     P = ikh @ P @ ikh.T + K @ R @ K.T if joseph else ikh @ P
     d2 = float(y @ _solve_factored(c, y))
-    return UpdateResult(x, P, y, S, K, d2)
+    return UpdateResult(x, P, y, S, K, d2, _log_det_factored(c))
 
 
 class KalmanFilter:
