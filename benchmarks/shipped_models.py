@@ -5,9 +5,10 @@ their model cards (run ``python -m benchmarks.shipped_models --only PART --seeds
 
 Parts (the card of each is :data:`robopercept.nn.shipped.MODEL_CARDS`):
 
-- ``trees``: FCOS trained exactly as ``detection_figures``' ``trees-fcos-blocks2`` (the
-  DeepForest NEON tiles above the held-out strip of YELL crop2, 85/15 train/validation
-  by the seed); then its score threshold chosen on the validation tiles
+- ``trees``: FCOS trained exactly as ``detection_figures``' ``trees-all`` (the
+  DeepForest NEON tiles above the held-out strip of YELL crop2 and those of the YELL
+  crop image, 85/15 train/validation by the seed); then its score threshold chosen on
+  the validation tiles
   (:func:`~robopercept.nn.detection.thresholds.choose_score_threshold`, F1 at IoU 0.5);
   then AP50 of the held-out strip run *as one image* (2299 x 495) through tiled
   inference (400 px windows, the training tile; overlap 100 px), as ``nn detect
@@ -59,7 +60,7 @@ from robopercept.nn.train.checkpoint import load_checkpoint, save_checkpoint
 from robopercept.nn.train.config import TrainConfig
 
 NAME = "shipped_models"
-TREES_PART = "trees-fcos-blocks2"
+TREES_PART = "trees-all"
 #: tiled inference of the trees model: its training tile, a quarter of it shared
 TREES_TILE, TREES_OVERLAP = 400, 100
 #: the nuclei models' window: the quadrant side they were trained and scored on
@@ -122,7 +123,7 @@ def coco_ap50(
 def calibrate_trees(path: Path, seed: int) -> dict[str, Any]:
     """Choose the trees model's score threshold on its validation tiles, measure the
     strip as one image and the other sites, and write them into the checkpoint at
-    ``path`` (which holds the trained model of ``trees-fcos-blocks2``, seed ``seed``)."""
+    ``path`` (which holds the trained model of ``TREES_PART``, seed ``seed``)."""
     model, info = load_detector(path)
     model.eval()
     spec = detection_figures.PARTS[TREES_PART]

@@ -112,7 +112,8 @@ _FIGURES_DATA = (
 _CLOUD_DATA = "generated point clouds of simple solids (sampled meshes); made by robopercept"
 _DEEPFOREST = (
     "DeepForest NEON aerial RGB orthophotos with hand-drawn tree-crown boxes, YELL crop2 "
-    "above its held-out strip (Weinstein et al.; from the PyPI wheel deepforest 2.1.0); "
+    "above its held-out strip and the YELL crop image (Weinstein et al.; from the PyPI "
+    "wheel deepforest 2.1.0); "
     "the images' terms are not stated upstream, only the weights are shipped"
 )
 _NUCLEI = (
@@ -144,8 +145,9 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "RGB aerial orthophotos at about 10 cm per pixel, crowns 15-70 px; trained on "
             "400 px tiles, larger images are tiled",
             400,
-            "AP50 0.47 on the 12 held-out tiles of YELL crop2; the strip as one image and "
-            "the other sites in docs/detection.md",
+            "AP50 0.47 on the 12 held-out tiles of YELL crop2, 0.51 on the strip as one "
+            "image (COCO cap 300; 0.39 under the default 100); other sites in "
+            "docs/detection.md",
             _SHIPPED_MODELS.format("trees", 2),
         ),
         ModelCard(

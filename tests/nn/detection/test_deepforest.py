@@ -109,6 +109,17 @@ def test_deepforest_tiles_hand_case(tmp_path):
     ds, i = origins[(128, 64)]
     np.testing.assert_array_equal(np.round(ds.images[i] * 255), big[64:80, 128:192])
     assert {k: len(v) for k, v in out.cross.items()} == {s: 1 for s in DEEPFOREST_IMAGES[1:]}
+    # train_extra: the 50 x 40 YELL crop is cut into tiles 64 wide -> one tile (0, 0) of
+    # 50 x 40 holding its box, appended to the training tiles and gone from the cross sets
+    more = deepforest_tiles(tmp_path, 64, test_fraction=0.2, train_extra=(DEEPFOREST_IMAGES[1],))
+    assert len(more.train) == len(out.train) + 1 and len(more.test) == len(out.test)
+    assert sorted(more.cross) == sorted(DEEPFOREST_IMAGES[2:])
+    assert more.train.meta[-1] == {"source": DEEPFOREST_IMAGES[1], "origin": (0, 0)}
+    assert more.train.boxes[-1].tolist() == [[0.0, 0.0, 10.0, 10.0]]
+    np.testing.assert_array_equal(np.round(more.train.images[-1] * 255), big[:40, :50])
+    for ds, extra in ((more.train, out.train), (more.test, out.test)):
+        for a, b in zip(ds.images[: len(extra)], extra.images, strict=True):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_deepforest_missing_folder(tmp_path):
@@ -122,6 +133,16 @@ def test_deepforest_missing_folder(tmp_path):
     "call, message",
     [
         (lambda: deepforest_tiles(".", tile=10), r"tile must be >= 64"),
+        (
+            lambda: deepforest_tiles(".", train_extra=(DEEPFOREST_IMAGES[0],)),
+            r"train_extra must name other DeepForest images",
+        ),
+        (
+            lambda: deepforest_tiles(".", train_extra=("OSBS_029", "OSBS_029")),
+            r"each once",
+        ),
+        (lambda: deepforest_tiles(".", train_extra="OSBS_029"), r"must be a tuple of"),
+        (lambda: deepforest_tiles(".", train_extra=([1],)), r"must name other"),
     ],
 )
 def test_bad_input(call, message):

@@ -49,7 +49,8 @@ class DeepForestTiles:
     Attributes
     ----------
     train, test : DetectionDataset
-        Tiles of the YELL crop2 image above the held-out strip, and tiles of the strip.
+        Tiles of the YELL crop2 image above the held-out strip (then those of the
+        ``train_extra`` images), and tiles of the strip.
     cross : dict of str to DetectionDataset
         Each other image whole (one image per set), by file stem: cross-image tests.
     strip_top : int
@@ -178,6 +179,7 @@ def deepforest_tiles(
     *,
     test_fraction: float = 0.2,
     min_area_fraction: float = 0.5,
+    train_extra: tuple[str, ...] = (),
 ) -> DeepForestTiles:
     """Real aerial tree crowns (DeepForest NEON, Pascal-VOC boxes) as tiles with a
     held-out spatial strip, plus the other images as cross-image tests.
@@ -201,7 +203,9 @@ def deepforest_tiles(
     cut into four near a tile corner may keep no piece). ``n_dropped`` counts the
     pieces left out.
     The other three images (YELL crop, OSBS_029, SOAP_061) are returned whole; every
-    class (``Tree``; ``Alive`` and ``Dead`` in SOAP_061) is one class ``"Tree"``.
+    class (``Tree``; ``Alive`` and ``Dead`` in SOAP_061) is one class ``"Tree"``. An
+    image named in ``train_extra`` is instead cut into tiles the same way (whole, from
+    its top-left corner) and added to the training set after the YELL crop2 tiles.
 
     Parameters
     ----------
@@ -215,6 +219,10 @@ def deepforest_tiles(
         Height of the held-out strip as a fraction of the image height, in (0, 1).
     min_area_fraction : float
         Smallest fraction of a box's area that must fall in a tile, in (0, 1].
+    train_extra : tuple of str
+        Stems of the other images (of ``DEEPFOREST_IMAGES[1:]``) to train on too, for
+        example ``("2019_YELL_2_541000_4977000_image_crop",)``: the same site as the
+        strip, 13 km away.
 
     Returns
     -------
@@ -232,25 +240,41 @@ def deepforest_tiles(
     if tile > 2472:
         raise InputError(f"tile must be in [64, 2472] pixels; got {tile}")
     frac = check_real(min_area_fraction, "min_area_fraction", 0.0, 1.0, low_inclusive=False)
+    if not isinstance(train_extra, (tuple, list)):
+        raise InputError(
+            f"train_extra must be a tuple of DeepForest image stems (of "
+            f"{DEEPFOREST_IMAGES[1:]}); got {type(train_extra).__name__}"
+        )
+    extra = tuple(train_extra)
+    if any(e not in DEEPFOREST_IMAGES[1:] for e in extra) or len(set(extra)) < len(extra):
+        raise InputError(
+            f"train_extra must name other DeepForest images, each once, of "
+            f"{DEEPFOREST_IMAGES[1:]}; got {extra!r}"
+        )
     stem = DEEPFOREST_IMAGES[0]
     image, src = _read_deepforest(path, stem)
-    h, w = image.shape[:2]
+    h = image.shape[0]
     strip_top = _strip_top(h, test_fraction)
     parts: dict[bool, dict[str, list[Any]]] = {
         t: {"images": [], "boxes": [], "names": [], "meta": []} for t in (False, True)
     }
     dropped = 0
-    for is_test, top, bottom in ((False, 0, strip_top), (True, strip_top, h)):
+    regions = [(stem, image, src, False, 0, strip_top), (stem, image, src, True, strip_top, h)]
+    for other in extra:
+        im, b = _read_deepforest(path, other)
+        regions.append((other, im, b, False, 0, im.shape[0]))
+    for name, im, boxes, is_test, top, bottom in regions:
+        width = im.shape[1]
         for y in range(top, bottom, tile):
-            for x in range(0, w, tile):
-                tw, th = min(tile, w - x), min(tile, bottom - y)
-                b, n = _clip_boxes(src, x, y, tw, th, frac)
+            for x in range(0, width, tile):
+                tw, th = min(tile, width - x), min(tile, bottom - y)
+                b, n = _clip_boxes(boxes, x, y, tw, th, frac)
                 dropped += n
                 p = parts[is_test]
-                p["images"].append(image[y : y + th, x : x + tw])
+                p["images"].append(im[y : y + th, x : x + tw])
                 p["boxes"].append(b)
-                p["names"].append(f"{stem}_x{x}_y{y}.png")
-                p["meta"].append({"source": stem, "origin": (x, y)})
+                p["names"].append(f"{name}_x{x}_y{y}.png")
+                p["meta"].append({"source": name, "origin": (x, y)})
     sets = {}
     next_id = 1
     for t in (False, True):
@@ -268,6 +292,8 @@ def deepforest_tiles(
         next_id += k
     cross = {}
     for other in DEEPFOREST_IMAGES[1:]:
+        if other in extra:
+            continue
         im, b = _read_deepforest(path, other)
         cross[other] = DetectionDataset(
             [im],
