@@ -833,7 +833,7 @@ def _predict_inputs(
     return paths, check_int(top_k, "top_k (--top-k)", 1)
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def predict_loaded(
     model: nn.Module,
     arch: Architecture,
@@ -887,7 +887,7 @@ def predict_loaded(
     return out
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def class_probabilities(
     model: nn.Module, arch: Architecture, image: np.ndarray
 ) -> tuple[np.ndarray, str | None]:

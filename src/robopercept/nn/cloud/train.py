@@ -348,7 +348,7 @@ def _as_batch(points: Any) -> tuple[torch.Tensor, bool]:
     return x, single
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def predict_clouds(
     model: nn.Module,
     points: Any,
@@ -508,7 +508,7 @@ def part_ious(
     return out
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def evaluate_cloud_model(model: nn.Module, data: Any, *, batch_size: int = 32) -> CloudEvaluation:
     """Score a classifier or part segmenter on a
     :class:`~robopercept.nn.cloud.data.CloudDataset` (eval mode, no augmentation).

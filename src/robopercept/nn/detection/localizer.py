@@ -170,7 +170,7 @@ class LocalizationResult:
     accuracy: float
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def evaluate_localizer(
     model: nn.Module, dataset: Any, *, batch_size: int = 32
 ) -> LocalizationResult:

@@ -152,7 +152,7 @@ def pose_data_arrays(data: Any, what: str) -> tuple[torch.Tensor, torch.Tensor, 
 
 
 # ----------------------------------------------------------------------------- inference
-@torch.no_grad()
+@torch.inference_mode()
 def predict_keypoints(
     model: nn.Module,
     images: Any,
@@ -188,7 +188,7 @@ def predict_keypoints(
     return kp, sc
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def predict_heatmaps(
     model: nn.Module,
     images: Any,
@@ -247,7 +247,7 @@ def predict_heatmaps(
     )
 
 
-@torch.no_grad()
+@torch.inference_mode()
 def refine_keypoints(
     images: Any, keypoints: npt.ArrayLike, refiners: Sequence[DeepPoseRefiner]
 ) -> np.ndarray:
