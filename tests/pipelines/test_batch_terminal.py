@@ -338,6 +338,46 @@ def test_ctrl_c_at_the_terminal_prints_one_line(tmp_path, when) -> None:
     assert mentions and all(" - robopercept.pipelines.batch - " in m for m in mentions), text
 
 
+@pytest.mark.parametrize("where", ["connected", "progress bar"])
+def test_a_ctrl_c_just_after_the_connection_closes_the_cluster_into_the_file(
+    tmp_path, capfd, monkeypatch, where
+) -> None:
+    """A Ctrl-C that lands once the client has connected but before the items are
+    submitted (as _connect returns, or while the progress bar is made) closes the
+    client and the cluster before the logging is restored: their shutdown lines go to
+    the log file. Before, the cluster was left to Dask's exit handler, whose lines
+    (``Closing Nanny``, ``Closing scheduler``) reached the terminal after
+    ``robopercept: interrupted`` (a flaky failure of the terminal test above)."""
+    inputs, out = _inputs(tmp_path), tmp_path / "out"
+    made = []
+    real_connect = batch._connect
+
+    def connect(*args):
+        client, cluster = real_connect(*args)
+        made.append(cluster)
+        if where == "connected":
+            raise KeyboardInterrupt
+        return client, cluster
+
+    def bar(**kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(batch, "_connect", connect)
+    if where == "progress bar":
+        monkeypatch.setattr("robopercept.progress.progress_bar", bar)
+    with pytest.raises(KeyboardInterrupt):
+        run_batch("edges", inputs, out, workers=1, retries=0, progress=False)
+    [cluster] = made
+    assert cluster.status.name == "closed"
+    err = capfd.readouterr().err
+    assert not [line for line in err.splitlines() if DASK_LINE.match(line)], err
+    text = (out / LOG).read_text(encoding="utf-8")
+    assert "distributed.scheduler - INFO - Closing scheduler" in text, text
+    items = json.loads((out / MANIFEST).read_text())["items"]
+    assert [r["status"] for r in items] == ["cancelled", "cancelled"]
+    assert batch._WORKER_LOGGING_ENV not in os.environ
+
+
 @pytest.mark.parametrize("kind", ["folder", "link"])
 def test_a_log_that_is_not_a_file_is_refused_before_anything_runs(tmp_path, kind) -> None:
     inputs, out = _inputs(tmp_path), tmp_path / "out"

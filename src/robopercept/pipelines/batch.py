@@ -1294,7 +1294,10 @@ def _connect(
 ) -> tuple[Any, Any]:
     """``(client, cluster)``: a new :func:`local_cluster` (cluster not None) or a client
     of the cluster at ``scheduler``. ``logs`` (the batch's log file) stays open until
-    a cluster whose start a second Ctrl-C abandoned has closed."""
+    a cluster whose start a second Ctrl-C abandoned has closed; the client and the
+    cluster are closed by ``logs.close()``, before the log file, from the moment they
+    exist (registered while Ctrl-C waits: one that lands as this returns closes them
+    too, their shutdown's lines still going to the file, not to the terminal at exit)."""
     from distributed import Client
 
     from robopercept.pipelines.plane_outputs import StopSignals
@@ -1306,18 +1309,16 @@ def _connect(
         # The workers never see it (_without_sigint): this process stops them.
         with StopSignals((signal.SIGINT,)) as stop:
             cluster = _without_sigint(lambda: local_cluster(workers), logs)
-            try:
-                client = Client(cluster)
-            except BaseException:
-                cluster.close()
-                raise
+            logs.callback(cluster.close)
+            client = Client(cluster)
+            logs.callback(client.close)  # runs first: the client goes before its cluster
         if stop.received:
-            client.close()
-            cluster.close()
-            raise KeyboardInterrupt
+            raise KeyboardInterrupt  # the caller's logs.close() closes both
         return client, cluster
     try:
-        return Client(scheduler, timeout=connect_timeout), None
+        client = Client(scheduler, timeout=connect_timeout)
+        logs.callback(client.close)
+        return client, None
     except (OSError, TimeoutError) as exc:
         raise InputError(
             f"--scheduler {scheduler}: no Dask scheduler answered within {connect_timeout:g} s "
@@ -1527,7 +1528,14 @@ def run_batch(
         save()
 
     env_before: dict[str, str | None] = {}
-    # Dask's log lines (and the workers' tracebacks) go to OUT/batch.log, not the terminal
+    address = (
+        "the local Dask scheduler" if scheduler == "local" else f"the Dask scheduler at {scheduler}"
+    )
+    futures: dict[Any, int] = {}
+    bar: Any = None
+    # Dask's log lines (and the workers' tracebacks) go to OUT/batch.log, not the terminal;
+    # logs.close() closes, in this order, the client and cluster (_connect), puts back
+    # the environment, and restores the logging
     logs = contextlib.ExitStack()
     try:  # a Ctrl-C while dask loads or the cluster starts cancels every item
         import dask
@@ -1547,20 +1555,14 @@ def run_batch(
         spawn_keys = set(dask.config.get("distributed.nanny.pre-spawn-environ"))
         spawn_keys |= {k.rpartition(".")[2] for k in worker_logs}
         env_before = {k: os.environ.get(k) for k in spawn_keys}
+        logs.callback(_restore_env, env_before)
         with dask.config.set(worker_logs):
             client, cluster = _connect(scheduler, workers, connect_timeout, logs)
     except BaseException as exc:
-        _restore_env(env_before)
         cancel_pending()
         _log.info("robopercept batch %s ended before it started: %s", job, _error_text(exc))
         logs.close()
         raise
-    address = (
-        "the local Dask scheduler" if cluster is not None else f"the Dask scheduler at {scheduler}"
-    )
-    futures: dict[Any, int] = {}
-    finished = as_completed()
-    bar = progress_bar(total=len(todo), unit="item", desc=f"batch {job}", disable=not progress)
 
     def submit(i: int) -> None:
         r = records[i]
@@ -1574,6 +1576,8 @@ def run_batch(
         finished.add(fut)
 
     try:
+        finished = as_completed()
+        bar = progress_bar(total=len(todo), unit="item", desc=f"batch {job}", disable=not progress)
         result.workers = len(client.scheduler_info().get("workers", {})) or workers
         if cluster is None:
             _check_worker_env(client)
@@ -1645,14 +1649,11 @@ def run_batch(
             "--resume (resume=True) to finish them"
         ) from None
     finally:
-        bar.close()
         try:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            if bar is not None:
+                bar.close()
         finally:
-            _restore_env(env_before)
-            logs.close()
+            logs.close()  # the client, the cluster, the environment, then the logging
     save()
     return result
 
