@@ -110,6 +110,32 @@ def test_tta_flag_equals_the_wrapper_in_eval_and_detect(run, tmp_path, capsys):
     assert [r["score"] for r in rows] == pytest.approx(d["scores"].tolist(), abs=1e-7)
 
 
+def test_tta_scales_and_none_reach_the_predictor(run, tmp_path, capsys):
+    """--tta identity --tta-scales 0.8 1 equals the wrapper at those scales; --tta none
+    equals the bare model; --tta-scales with --tta none is refused naming the flags."""
+    from robopercept.nn.detection.tta import TestTimeAugmentation
+    from robopercept.nn.detection.zoo import detect_arrays
+
+    out, _ = run
+    model, _ = load_detector(out / "model.pt")
+    image = (np.asarray(_val().images[1]) * 255).round().astype(np.uint8)
+    write_image(tmp_path / "c.png", image)
+    argv = ["nn", "detect", str(tmp_path / "c.png"), "--model", str(out), "--json"]
+    argv += ["--score-thresh", "0.0"]
+    assert main([*argv, "--tta", "identity", "--tta-scales", "0.8", "1"]) == 0
+    rows = json.loads(capsys.readouterr().out)["results"]
+    d = detect_arrays(TestTimeAugmentation(model, "identity", scales=(0.8, 1.0)), [image])[0]
+    assert len(rows) == len(d["scores"]) > 0
+    assert [r["score"] for r in rows] == pytest.approx(d["scores"].tolist(), abs=1e-7)
+    assert main([*argv, "--tta", "none"]) == 0
+    rows = json.loads(capsys.readouterr().out)["results"]
+    assert [r["score"] for r in rows] == pytest.approx(
+        detect_arrays(model, [image])[0]["scores"].tolist(), abs=1e-7
+    )
+    assert main([*argv, "--tta", "none", "--tta-scales", "1"]) == 2
+    assert "--tta-scales needs test-time augmentation: drop --tta none" in capsys.readouterr().err
+
+
 def test_eval_writes_metrics_and_curves(run, tmp_path, capsys):
     out, printed = run
     assert main(["nn", "detect", "eval", str(out / "model.pt"), *DATA, "-o", str(tmp_path)]) == 0

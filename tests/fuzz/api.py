@@ -2716,6 +2716,25 @@ VALID.update(
         },
         "nn.detection.tta.TestTimeAugmentation.forward": {"images": _DIMAGES},
         "nn.detection.tta.TestTimeAugmentation.predict": {"images": _DIMAGES},
+        "nn.detection.tta.check_scales": {"scales": [0.9, 1.0, 1.1]},
+        "nn.detection.tta.rescale_image": {
+            "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
+            "scale": 0.9,
+        },
+        "nn.detection.tta.resolve_tta": {
+            "stored": {"views": "flips", "scales": [0.9, 1.0], "iou_thresh": 0.55},
+            "views": "hflip",
+            "scales": [1.0, 1.1],
+        },
+        "nn.detection.tta.wrap_tta": {
+            "model": _b("tests.fuzz.api:detector_value", "fcos"),
+            "config": {"views": "hflip", "scales": [1.0, 1.1], "iou_thresh": None},
+        },
+        "nn.detection.tta.choose_tta": {
+            "model": _b("tests.fuzz.api:detector_value", "fcos"),
+            "dataset": _ONE_BOX,
+            "grid": [{"views": "hflip", "scales": (1.0, 0.9), "iou_thresh": None}],
+        },
         "nn.detection.augment.ScaleJitter": {"scale": (0.75, 1.33), "min_visible": 0.5},
         "nn.detection.augment.ScaleJitter.__call__": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),

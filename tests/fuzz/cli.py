@@ -171,6 +171,7 @@ FLAG_KINDS: dict[str, str] = {
     "--board": "size",
     "--split": "split",
     "--intrinsics": "list",
+    "--tta-scales": "real",
     "--input": "list",
     "--planes": "planes",
     **dict.fromkeys(

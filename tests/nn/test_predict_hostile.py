@@ -47,6 +47,12 @@ def _run(tmp_path, state, name="model.pt"):
         ({"input_colour": 3}, "'input_colour'"),
         ({"canvas": "ab"}, "'canvas'"),
         ({"canvas": [128]}, "'canvas'"),
+        ({"tta": "flips"}, "'tta' must be a test-time augmentation"),
+        ({"tta": {"views": "flips"}}, "'tta' must be a test-time augmentation"),
+        ({"tta": {"views": "spin", "scales": [1], "iou_thresh": None}}, "'tta'.*one of identity"),
+        ({"tta": {"views": "flips", "scales": [0], "iou_thresh": None}}, "'tta'.*in .0.25, 4"),
+        ({"tta": {"views": "flips", "scales": [1, 1], "iou_thresh": None}}, "'tta'"),
+        ({"tta": {"views": "flips", "scales": [1], "iou_thresh": 2}}, "'tta'.*None or in"),
     ],
 )
 def test_damaged_prediction_entries(tmp_path, fcos, entries, match):

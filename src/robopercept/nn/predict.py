@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,7 +53,13 @@ from robopercept.nn.cloud.train import CLOUD_MODELS
 from robopercept.nn.data.datasets import to_unit_float
 from robopercept.nn.detection.thresholds import domain_warning, input_warning
 from robopercept.nn.detection.tiling import check_tiling, detect_tiled, segment_tiled
-from robopercept.nn.detection.tta import TestTimeAugmentation
+from robopercept.nn.detection.tta import (
+    TTA_CHOICES,
+    TTA_SCALE_RANGE,
+    TTA_VIEWS,
+    resolve_tta,
+    wrap_tta,
+)
 from robopercept.nn.detection.zoo import DETECTORS, detect_arrays, load_detector
 from robopercept.nn.pose.inference import pose_arrays
 from robopercept.nn.pose.library import default_pose_library
@@ -87,8 +94,6 @@ __all__ = [
 IMAGE_KINDS = ("detect", "segment", "pose")
 #: the default ``score_thresh`` of each kind (those of the command-line forms)
 _DEFAULT_SCORE = {"detect": 0.3, "segment": 0.5, "pose": 0.0}
-#: the views of ``tta`` (:data:`robopercept.nn.detection.tta.TTA_VIEWS`)
-_TTA = ("hflip", "flips", "dihedral")
 #: the largest tiling window a checkpoint may store
 _MAX_TILE = 1 << 15
 
@@ -433,7 +438,8 @@ class ImagePredictor:
         The checkpoint read (None for a model built in memory).
     model : torch.nn.Module
         On its device; a detector wrapped in
-        :class:`~robopercept.nn.detection.tta.TestTimeAugmentation` with ``tta``.
+        :class:`~robopercept.nn.detection.tta.TestTimeAugmentation` when ``tta`` is
+        not None.
     info : dict
         The checkpoint without the weights (``classes``, or ``skeleton`` and
         ``refiners`` for pose; ``calibration`` and ``tile`` where stored).
@@ -456,6 +462,9 @@ class ImagePredictor:
         Pixels shared by neighbouring windows.
     name : str
         The model's name (a shipped name, or the checkpoint's path).
+    tta : dict or None
+        detect: the test-time augmentation run (``{"views", "scales", "iou_thresh"}``,
+        :func:`~robopercept.nn.detection.tta.resolve_tta`), None for none.
     trained_on : str
         What it learnt from (the shipped model's card; "your own data" otherwise).
 
@@ -479,6 +488,7 @@ class ImagePredictor:
     tile: int = 0
     overlap: int = 0
     name: str = ""
+    tta: dict[str, Any] | None = None
     trained_on: str = "your own data"
 
     @property
@@ -689,6 +699,7 @@ def load_image_predictor(
     device: str | None = None,
     score_thresh: float | None = None,
     tta: str | None = None,
+    tta_scales: Sequence[float] | None = None,
     flip: bool = True,
     heatmaps: bool = False,
     lift3d: bool = False,
@@ -714,10 +725,15 @@ def load_image_predictor(
         default the threshold stored with the model (chosen on its validation images,
         :func:`~robopercept.nn.detection.thresholds.choose_score_threshold`), else 0.3
         for detect and 0.5 for segment. Ignored for pose and semantic segmentation.
-    tta : {"hflip", "flips", "dihedral"}, optional
-        detect: test-time augmentation
-        (:class:`~robopercept.nn.detection.tta.TestTimeAugmentation`); ignored for the other
-        kinds.
+    tta : {"none", "identity", "hflip", "flips", "dihedral"}, optional
+        detect: the views of test-time augmentation
+        (:class:`~robopercept.nn.detection.tta.TestTimeAugmentation`); default the
+        augmentation the model ships with (the trees model's was chosen on its
+        validation tiles, with its score threshold after it), else none; ``"none"``
+        turns it off. Ignored for the other kinds.
+    tta_scales : sequence of float, optional
+        detect: the image scales of test-time augmentation (``--tta-scales``); default
+        the model's, else ``(1.0,)``.
     flip : bool
         pose: the flip test (average with the mirrored image); ignored otherwise.
     heatmaps : bool
@@ -762,7 +778,7 @@ def load_image_predictor(
     if tile is not None:
         tile = 0 if tile == 0 else check_int(tile, "tile (--tile)", 16)
     if tta is not None:
-        check_choice(tta, "tta", _TTA)
+        check_choice(tta, "tta (--tta)", TTA_CHOICES)
     flip = check_bool(flip, "flip")
     heatmaps = check_bool(heatmaps, "heatmaps")
     lift3d = check_bool(lift3d, "lift3d")
@@ -798,9 +814,9 @@ def load_image_predictor(
     if kind == "detect":
         net, info = load_detector(path)
         net.to(resolve_device(device))
-        if tta:
-            net = TestTimeAugmentation(net, tta)
-        return ImagePredictor(kind, path, net, info, **settle(info))
+        settings = settle(info)  # the stored tta checked first
+        config = resolve_tta(info.get("tta"), tta, tta_scales)
+        return ImagePredictor(kind, path, wrap_tta(net, config), info, tta=config, **settings)
     if kind == "segment":
         net, info, instance = load_segment_model(path)
         net.to(resolve_device(device))
@@ -837,8 +853,9 @@ def _check_image_info(info: dict[str, Any], path: Path) -> None:
     """The entries a checkpoint stores for prediction, checked before any is used:
     ``calibration`` (``score_thresh``, ``match_median`` in [0, 1]), ``tile`` and
     ``tile_overlap`` (:func:`~robopercept.nn.detection.tiling.check_tiling`),
-    ``input_normalize`` (``percentile`` ``[lo, hi]`` in [0, 100], ``clip``),
-    ``input_colour`` and ``canvas`` ``(h, w)``.
+    ``tta`` (:func:`~robopercept.nn.detection.tta.resolve_tta`), ``input_normalize``
+    (``percentile`` ``[lo, hi]`` in [0, 100], ``clip``), ``input_colour`` and ``canvas``
+    ``(h, w)``.
 
     Raises
     ------
@@ -874,6 +891,28 @@ def _check_image_info(info: dict[str, Any], path: Path) -> None:
             check_tiling(tile, info.get("tile_overlap"))
         except InputError as exc:
             raise bad("tile_overlap", f"pixels or a fraction under the tile ({exc})") from None
+    tta = info.get("tta")
+    if tta is not None:
+        lo, hi = TTA_SCALE_RANGE
+        scales = tta.get("scales") if isinstance(tta, dict) else None
+        iou = tta.get("iou_thresh") if isinstance(tta, dict) else None
+        if (
+            not isinstance(tta, dict)
+            or set(tta) != {"views", "scales", "iou_thresh"}
+            or not isinstance(tta["views"], str)
+            or tta["views"] not in TTA_VIEWS
+            or not isinstance(scales, list | tuple)
+            or not scales
+            or not all(_real(v, lo, hi) for v in scales)
+            or len(set(scales)) != len(scales)
+            or not (iou is None or _real(iou, 0, 1))
+        ):
+            raise bad(
+                "tta",
+                f"a test-time augmentation {{'views': one of {', '.join(TTA_VIEWS)}, "
+                f"'scales': distinct factors in [{lo:g}, {hi:g}], 'iou_thresh': None or "
+                "in [0, 1]}",
+            )
     norm = info.get("input_normalize")
     if norm:
         pct = norm.get("percentile") if isinstance(norm, dict) else None
@@ -939,7 +978,7 @@ def load_predictor(
         Default: the shipped model's, or read from the checkpoint.
     **options
         The keywords of :func:`load_image_predictor` (``device``, ``score_thresh``,
-        ``all_scores``, ``tile``, ``overlap``, ``tta``, ``flip``, ``heatmaps``,
+        ``all_scores``, ``tile``, ``overlap``, ``tta``, ``tta_scales``, ``flip``, ``heatmaps``,
         ``lift3d``), or for a classifier or point-cloud network those of
         :func:`~robopercept.nn.predict_class.load_class_predictor` (``device``,
         ``n_points``, ``seed``).

@@ -31,6 +31,9 @@ class _BrightBox(torch.nn.Module):
             )
         return out
 
+    def predict(self, images):
+        return self(images)
+
 
 class _Scripted(torch.nn.Module):
     """Returns scripted detections per call (one call per view, one image)."""
@@ -108,3 +111,92 @@ def test_tta_with_an_untrained_fcos_shapes_and_refusals():
         tta.train()([torch.rand(3, 32, 32)])
     with pytest.raises(InputError, match="views"):
         TestTimeAugmentation(model, "rotations")
+
+
+@pytest.mark.parametrize("views", ["identity", "hflip", "dihedral"])
+def test_tta_scales_map_back_onto_the_original_box(views):
+    """The bright box seen in copies scaled by 0.5, 1 and 2 (even factors on an
+    image of even sides: the resized box edges land on whole pixels, so the detector
+    stand-in is exact there) comes back as the original box in every view."""
+    from robopercept.nn.detection.tta import TestTimeAugmentation
+
+    image = torch.zeros(3, 20, 32)
+    image[:, 4:12, 6:24] = 1.0  # box (6, 4, 24, 12): even edges, halved exactly
+    tta = TestTimeAugmentation(_BrightBox(), views, scales=(0.5, 1.0, 2.0)).eval()
+    out = tta([image])[0]
+    torch.testing.assert_close(out["boxes"], torch.tensor([[6.0, 4.0, 24.0, 12.0]]))
+    assert out["scores"].tolist() == pytest.approx([0.9])  # every view and scale saw it
+
+
+def test_rescale_image_sizes_factors_and_antialias():
+    from robopercept.nn.detection.tta import rescale_image
+
+    image = torch.rand(3, 30, 41)
+    same, f = rescale_image(image, 1.0)
+    assert same is image and f.tolist() == [1.0, 1.0, 1.0, 1.0]
+    small, f = rescale_image(image, 0.9)
+    # round(30 * 0.9) = 27, round(41 * 0.9) = 36.9 -> 37: the factors are the sizes' own
+    assert small.shape == (3, 27, 37)
+    torch.testing.assert_close(f, torch.tensor([37 / 41, 27 / 30, 37 / 41, 27 / 30]))
+    # a constant image stays constant (bilinear and its antialiased shrink both average)
+    flat, _ = rescale_image(torch.full((3, 30, 41), 0.25), 0.8)
+    torch.testing.assert_close(flat, torch.full_like(flat, 0.25))
+    big, f = rescale_image(image, 1.1)
+    assert big.shape == (3, 33, 45) and big.dtype == image.dtype
+
+
+def test_resolve_tta_overrides_the_stored_configuration_option_by_option():
+    from robopercept.nn.detection.tta import resolve_tta
+
+    stored = {"views": "flips", "scales": [0.9, 1.0, 1.1], "iou_thresh": 0.55}
+    assert resolve_tta(stored) == {"views": "flips", "scales": (0.9, 1.0, 1.1), "iou_thresh": 0.55}
+    assert resolve_tta(stored, "hflip")["scales"] == (0.9, 1.0, 1.1)
+    assert resolve_tta(stored, scales=[1.0])["views"] == "flips"
+    assert resolve_tta(stored, "none") is None
+    assert resolve_tta(None) is None and resolve_tta(None, "identity") is None
+    assert resolve_tta(None, "hflip") == {"views": "hflip", "scales": (1.0,), "iou_thresh": None}
+    assert resolve_tta(None, scales=[2, 1])["scales"] == (2.0, 1.0)
+    with pytest.raises(InputError, match=r"--tta-scales needs .*drop --tta none"):
+        resolve_tta(stored, "none", [1.0])
+    with pytest.raises(InputError, match=r"tta \(--tta\) must be one of"):
+        resolve_tta(None, "rotations")
+    for bad in ([], [1.0, 1.0], [0.1], [5.0], ["x"], 3):
+        with pytest.raises(InputError, match="--tta-scales"):
+            resolve_tta(None, "hflip", bad)
+
+
+def test_choose_tta_takes_the_best_validation_ap_and_none_when_it_does_not_help():
+    """A detector exact in every view ties everywhere, and the tie goes to no
+    augmentation (fewest passes); one that misplaces boxes in mirrored views makes the
+    view sets with mirrors worse, and no augmentation is chosen."""
+    from robopercept.nn.detection.data import DetectionDataset
+    from robopercept.nn.detection.tta import TTA_GRID, choose_tta
+
+    images, boxes = [], []
+    for k in range(3):
+        im = torch.zeros(3, 40, 48)
+        x0, y0 = 4 + 5 * k, 6 + 3 * k
+        im[:, y0 : y0 + 12, x0 : x0 + 16] = 1.0
+        images.append(im.permute(1, 2, 0).numpy())
+        boxes.append([[x0, y0, x0 + 16, y0 + 12]])
+    ds = DetectionDataset(images, boxes, [[1]] * 3, ["bright"])
+
+    class Shifted(_BrightBox):
+        def forward(self, images):
+            out = super().forward(images)
+            for im, d in zip(images, out, strict=True):
+                if float(im[0, :, :24].sum()) < float(im[0, :, 24:].sum()):  # mirrored
+                    d["boxes"] = d["boxes"] + torch.tensor([6.0, 0, 6, 0])
+            return out
+
+    grid = [g for g in TTA_GRID if g["scales"] == (1.0,)]
+    config, table = choose_tta(_BrightBox(), ds, grid)
+    assert config is None and table[0]["passes"] == 1 and table[0]["AP"] == 1.0
+    assert len(table) == 1 + len(grid)
+    config, table = choose_tta(Shifted(), ds, grid)
+    mirrored = [r for r in table if r["config"] and r["config"]["views"] in ("hflip", "flips")]
+    # half or more of their views misplace the box: a worse AP; dihedral's quarter turns
+    # outvote the mirrors, so it ties with none (and the tie goes to one pass)
+    assert config is None and len(mirrored) == 4 and all(r["AP"] < 0.8 for r in mirrored)
+    with pytest.raises(InputError, match="DetectionDataset"):
+        choose_tta(_BrightBox(), [1, 2, 3])

@@ -153,13 +153,29 @@ def _parsers(cls: type[argparse.ArgumentParser]) -> dict[str, argparse.ArgumentP
         help='print {"model": LINE, "warnings": [...], "results": [COCO results]}',
     )
     r.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    for p in (e, r):  # the views of nn.detection.tta.TTA_VIEWS (torch is not imported here)
-        p.add_argument(
-            "--tta",
-            choices=("hflip", "flips", "dihedral"),
-            help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
-            "8 views: for top-down images) copies and fuse the boxes (default: none)",
-        )
+    # the views of nn.detection.tta.TTA_VIEWS and TTA_CHOICES (torch is not imported here)
+    e.add_argument(
+        "--tta",
+        choices=("hflip", "flips", "dihedral"),
+        help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
+        "8 views: for top-down images) copies and fuse the boxes (default: none)",
+    )
+    r.add_argument(
+        "--tta",
+        choices=("none", "identity", "hflip", "flips", "dihedral"),
+        help="test-time augmentation: detect in mirrored (flips) and turned (dihedral, "
+        "8 views: for top-down images) copies and fuse the boxes; default the model's own "
+        "(the trees model: flips at 3 scales, chosen on its validation tiles), else none; "
+        "none turns it off",
+    )
+    r.add_argument(
+        "--tta-scales",
+        type=float,
+        nargs="+",
+        metavar="S",
+        help="image scales of test-time augmentation, e.g. 0.9 1 1.1 (with --tta identity: "
+        "rescaled copies only); default the model's, else 1",
+    )
     return {"train": t, "eval": e, "images": r}
 
 
@@ -253,6 +269,8 @@ def _eval(args: argparse.Namespace) -> int:
 def _images(args: argparse.Namespace) -> int:
     from robopercept.nn.predict import load_image_predictor
 
+    if args.tta == "none" and args.tta_scales is not None:
+        raise UsageError("--tta-scales needs test-time augmentation: drop --tta none")
     model_path, stems = images_form_inputs(args, "detect", [".png"])
     line = print_model_line(args, "detect")
     predictor = load_image_predictor(
@@ -262,6 +280,7 @@ def _images(args: argparse.Namespace) -> int:
         score_thresh=args.score_thresh,
         all_scores=args.all_scores,
         tta=args.tta,
+        tta_scales=args.tta_scales,
         tile=args.tile,
         overlap=args.overlap,
     )
