@@ -7,15 +7,18 @@ Parts (the card of each is :data:`robopercept.nn.shipped.MODEL_CARDS`):
 
 - ``trees``: FCOS trained exactly as ``detection_figures``' ``trees-all`` (the
   DeepForest NEON tiles above the held-out strip of YELL crop2 and those of the YELL
-  crop image, 85/15 train/validation by the seed); then its score threshold chosen on
-  the validation tiles
+  crop image, 85/15 train/validation by the seed); then its test-time augmentation
+  chosen on the validation tiles (:func:`~robopercept.nn.detection.tta.choose_tta`:
+  the best COCO AP of :data:`~robopercept.nn.detection.tta.TTA_GRID`, or none), and
+  its score threshold on the same tiles through it
   (:func:`~robopercept.nn.detection.thresholds.choose_score_threshold`, F1 at IoU 0.5);
   then AP50 of the held-out strip run *as one image* (2299 x 495) through tiled
-  inference (400 px windows, the training tile; overlap 100 px), as ``nn detect
-  STRIP.png --model trees --all-scores`` runs it, and of the other sites' images
-  (OSBS_029, SOAP_061), each whole. The strip holds 127 crowns, more than COCO's
-  default 100 detections per image: the AP keeps up to 300 (``TREES_MAX_DETS``;
-  ``strip_AP50_coco100`` is the figure under the default cap).
+  inference (400 px windows, the training tile; overlap 100 px) and the augmentation,
+  as ``nn detect STRIP.png --model trees --all-scores`` runs it, of the 12 held-out
+  tiles and of the other sites' images (OSBS_029, SOAP_061), each whole; the same
+  without augmentation as ``no_tta_*``. The strip holds 127 crowns, more than COCO's
+  default 100 detections per image: ``strip_AP50`` keeps up to 300
+  (``TREES_MAX_DETS``), ``strip_AP50_coco100`` is the figure under the default cap.
 - ``nuclei``: the U-Net of ``segmentation_figures``' ``nuclei-unet`` (three quadrants
   of the StarDist image to train on, the fourth held out): foreground IoU and instance
   F1@0.5 of the held-out quadrant.
@@ -47,6 +50,7 @@ from robopercept.nn.detection.data import DetectionDataset
 from robopercept.nn.detection.deepforest import deepforest_strip
 from robopercept.nn.detection.tiling import detect_tiled
 from robopercept.nn.detection.train import evaluate_detector
+from robopercept.nn.detection.tta import choose_tta, wrap_tta
 from robopercept.nn.detection.zoo import (
     calibrate_detector,
     detect_arrays,
@@ -127,38 +131,55 @@ def calibrate_trees(path: Path, seed: int) -> dict[str, Any]:
     model, info = load_detector(path)
     model.eval()
     spec = detection_figures.PARTS[TREES_PART]
-    _, val, _, cross = spec["data"](spec["n"], seed)
-    cal = calibrate_detector(model, val)
+    _, val, tiles, cross = spec["data"](spec["n"], seed)
+    # the test-time augmentation first (on the validation tiles), then the threshold
+    # through it: fusion averages scores over the views, so it moves them
+    tta, tta_table = choose_tta(model, val)
+    net = wrap_tta(model, tta)
+    cal = calibrate_detector(net, val)
     strip = deepforest_strip(detection_figures.TREES)
     nms = float(model.nms_thresh)
-
-    def tiled(image: np.ndarray) -> dict[str, np.ndarray]:
-        return detect_tiled(
-            lambda im: detect_arrays(model, [im])[0], image, TREES_TILE, TREES_OVERLAP, nms
-        )
-
-    t0 = time.perf_counter()
-    strip_dets = [tiled(strip.images[0])]
-    seconds = time.perf_counter() - t0
-    test = {
-        "strip_AP50": round(coco_ap50(strip, strip_dets), 4),
-        "strip_AP50_coco100": round(coco_ap50(strip, strip_dets, (1, 10, 100)), 4),
-        **{
-            f"{name}_AP50": round(coco_ap50(ds, [tiled(im) for im in ds.images]), 4)
-            for name, ds in cross.items()
-            if name in ("OSBS_029", "SOAP_061")
-        },
+    others = {
+        "tiles": tiles,  # the 12 held-out tiles of YELL crop2 and YELL crop
+        **{k: v for k, v in cross.items() if k in ("OSBS_029", "SOAP_061")},
     }
+
+    def figures(detector: torch.nn.Module, prefix: str = "") -> tuple[dict[str, float], float]:
+        def tiled(image: np.ndarray) -> dict[str, np.ndarray]:
+            return detect_tiled(
+                lambda im: detect_arrays(detector, [im])[0], image, TREES_TILE, TREES_OVERLAP, nms
+            )
+
+        t0 = time.perf_counter()
+        strip_dets = [tiled(strip.images[0])]
+        seconds = time.perf_counter() - t0
+        out = {
+            f"{prefix}strip_AP50": round(coco_ap50(strip, strip_dets), 4),
+            f"{prefix}strip_AP50_coco100": round(coco_ap50(strip, strip_dets, (1, 10, 100)), 4),
+            **{
+                f"{prefix}{name}_AP50": round(coco_ap50(ds, [tiled(im) for im in ds.images]), 4)
+                for name, ds in others.items()
+            },
+        }
+        return out, seconds
+
+    test, seconds = figures(net)
+    if tta is not None:  # the same model without it, for the record
+        plain, plain_seconds = figures(model, "no_tta_")
+        test.update(plain, no_tta_strip_seconds=round(plain_seconds, 1))
     extra = {k: v for k, v in info.items() if k not in ("kind", "settings", "classes")}
     extra.update(
         calibration=cal.to_dict(),
+        tta=tta,
         tile=TREES_TILE,
         tile_overlap=TREES_OVERLAP,
         test={**info.get("test", {}), **test},
         built_by=built_by("trees", seed),
     )
     save_detector(path, model, info["kind"], info["settings"], info["classes"], **extra)
-    return {
+    return {  # (the row's "tta" is detection_figures' check of one view set)
+        "shipped_tta": tta,
+        "shipped_tta_table": tta_table[:6],
         "calibration": cal.to_dict(),
         "test": test,
         "strip_seconds": round(seconds, 1),

@@ -223,8 +223,10 @@ def test_bad_inputs_are_refused_with_the_fix(tmp_path):
         match=r"MODEL: no such file: .*model.pt.*\(nuclei, nuclei-maskrcnn, unet, maskrcnn\)",
     ):
         resolve_model("segment", tmp_path)  # a folder without model.pt
-    with pytest.raises(InputError, match="tta must be one of"):
+    with pytest.raises(InputError, match=r"tta \(--tta\) must be one of 'none', 'identity'"):
         load_image_predictor("detect", tta="rotate")
+    with pytest.raises(InputError, match="--tta-scales"):
+        load_image_predictor("detect", tta="hflip", tta_scales=[0.1])
     with pytest.raises(InputError, match="score_thresh"):
         load_image_predictor("detect", score_thresh=1.5)
     p = load_image_predictor("segment", device="cpu")
@@ -297,6 +299,35 @@ def test_tiling_follows_the_model_and_can_be_turned_off():
     assert p(canvas).image.shape == (100, 150, 3)
     with pytest.raises(InputError, match="--tile"):
         load_predictor("fcos", tile=8)
+
+
+def test_the_stored_tta_is_the_default_and_each_option_overrides_it():
+    """The trees model ships the augmentation chosen on its validation tiles (its
+    threshold was chosen through it); --tta none turns it off, --tta and --tta-scales
+    replace one option each; a model without one runs plain unless asked."""
+    from robopercept.nn import load_predictor
+    from robopercept.nn.detection.tta import TestTimeAugmentation
+    from robopercept.nn.train.checkpoint import load_checkpoint
+
+    stored = load_checkpoint(shipped_model_path("detect", "trees"))["tta"]
+    p = load_predictor("trees", device="cpu")
+    assert isinstance(p.model, TestTimeAugmentation)
+    assert p.tta == {**stored, "scales": tuple(stored["scales"])}
+    assert (p.model.views, p.model.scales) == (stored["views"], tuple(stored["scales"]))
+    off = load_predictor("trees", device="cpu", tta="none")
+    assert off.tta is None and not isinstance(off.model, TestTimeAugmentation)
+    assert load_predictor("trees", device="cpu", tta="hflip").tta["scales"] == p.tta["scales"]
+    assert load_predictor("trees", device="cpu", tta_scales=[1]).tta["views"] == stored["views"]
+    plain = load_predictor("fcos", device="cpu")
+    assert plain.tta is None and not isinstance(plain.model, TestTimeAugmentation)
+    assert load_predictor("fcos", device="cpu", tta_scales=[0.5, 1]).model.scales == (0.5, 1.0)
+    # the same detections as the wrapper built by hand, tiled like the predictor
+    image = np.random.default_rng(0).random((120, 90, 3))
+    hand = detect_arrays(TestTimeAugmentation(off.model, "flips", scales=(0.9, 1.0)), [image])
+    mine = load_predictor("trees", device="cpu", tta="flips", tta_scales=[0.9, 1], all_scores=True)
+    assert mine.tta["iou_thresh"] == stored["iou_thresh"]
+    if stored["iou_thresh"] is None:
+        np.testing.assert_array_equal(mine(image).boxes, hand[0]["boxes"])
 
 
 def test_load_predictor_reads_the_kind_of_every_model(tmp_path):

@@ -95,16 +95,19 @@ def test_trees_detector_on_the_held_out_strip_as_one_image(tmp_path, capsys):
     assert doc["model"] == domain_line("detect", "trees") and doc["warnings"] == []
     thresh = load_checkpoint(shipped_model_path("detect", "trees"))["calibration"]
     assert min(r["score"] for r in doc["results"]) >= thresh["score_thresh"]
-    # the COCO figure needs every score (a precision-recall curve); the strip holds 127
-    # crowns, more than COCO's default 100 detections per image, so up to 300 are kept
-    # (with the default cap the figure is 0.38: recall cannot pass 100 / 127)
+    # the COCO figure needs every score (a precision-recall curve), under COCO's default
+    # of 100 detections per image (the strip holds 127 crowns: recall cannot pass
+    # 100 / 127). The model runs with the test-time augmentation it ships with (flips
+    # at three scales, chosen on its validation tiles): without it the figure is 0.39
+    # (0.51 when 300 detections are kept), with it 0.51 (0.63)
     assert main(["nn", "detect", str(path), "--model", "trees", "--json", "--all-scores"]) == 0
     results = json.loads(capsys.readouterr().out)["results"]
     assert len(results) > 127
     gt = coco_to_dict(strip.to_coco(masks=False))
     assert gt["images"][0]["id"] == 1  # the command numbers its images from 1
-    ap50 = _ap50_pycocotools(gt, results, [1, 10, 300])
+    ap50 = _ap50_pycocotools(gt, results, [1, 10, 100])
     assert ap50 >= 0.45, ap50
+    assert _ap50_pycocotools(gt, results, [1, 10, 300]) >= ap50
 
 
 @pytest.mark.realdata

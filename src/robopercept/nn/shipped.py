@@ -145,9 +145,10 @@ MODEL_CARDS: dict[str, ModelCard] = {
             "RGB aerial orthophotos at about 10 cm per pixel, crowns 15-70 px; trained on "
             "400 px tiles, larger images are tiled",
             400,
-            "AP50 0.47 on the 12 held-out tiles of YELL crop2, 0.51 on the strip as one "
-            "image (COCO cap 300; 0.39 under the default 100); other sites in "
-            "docs/detection.md",
+            "AP50 0.62 on the 12 held-out tiles of YELL crop2, 0.51 on the strip as one "
+            "image (COCO's default cap of 100; 0.63 with 300), with the test-time "
+            "augmentation it ships with (flips at 3 scales, chosen on validation; "
+            "--tta none: 0.51 and 0.39); other sites in docs/detection.md",
             _SHIPPED_MODELS.format("trees", 2),
         ),
         ModelCard(
