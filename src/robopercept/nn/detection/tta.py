@@ -18,6 +18,7 @@ from robopercept._checks import check_choice, check_real
 from robopercept.errors import InputError
 from robopercept.nn._guards import check_count, check_module
 from robopercept.nn.detection.base import check_images
+from robopercept.nn.detection.train import evaluate_detector
 from robopercept.nn.ops.boxes import box_iou, dihedral_boxes
 from robopercept.nn.ops.nms import batched_nms
 
@@ -389,8 +390,6 @@ def choose_tta(
     table : list of dict
         Every configuration tried with its ``AP``, ``AP50`` and ``passes``, best first.
     """
-    from robopercept.nn.detection.train import evaluate_detector
-
     model = check_module(model)
     if not all(hasattr(dataset, a) for a in ("images", "boxes", "labels", "to_coco")):
         raise InputError(f"dataset must be a DetectionDataset; got {type(dataset).__name__}")
