@@ -2717,6 +2717,9 @@ VALID.update(
         "nn.detection.tta.TestTimeAugmentation.forward": {"images": _DIMAGES},
         "nn.detection.tta.TestTimeAugmentation.predict": {"images": _DIMAGES},
         "nn.detection.tta.check_scales": {"scales": [0.9, 1.0, 1.1]},
+        "nn.detection.tta.check_tta_config": {
+            "config": {"views": "flips", "scales": [0.9, 1.0], "iou_thresh": 0.55},
+        },
         "nn.detection.tta.rescale_image": {
             "image": _b("tests.fuzz.api:torch_image", 3, 16, 24),
             "scale": 0.9,

@@ -57,6 +57,7 @@ from robopercept.nn.detection.tta import (
     TTA_CHOICES,
     TTA_SCALE_RANGE,
     TTA_VIEWS,
+    check_tta_config,
     resolve_tta,
     wrap_tta,
 )
@@ -894,25 +895,15 @@ def _check_image_info(info: dict[str, Any], path: Path) -> None:
     tta = info.get("tta")
     if tta is not None:
         lo, hi = TTA_SCALE_RANGE
-        scales = tta.get("scales") if isinstance(tta, dict) else None
-        iou = tta.get("iou_thresh") if isinstance(tta, dict) else None
-        if (
-            not isinstance(tta, dict)
-            or set(tta) != {"views", "scales", "iou_thresh"}
-            or not isinstance(tta["views"], str)
-            or tta["views"] not in TTA_VIEWS
-            or not isinstance(scales, list | tuple)
-            or not scales
-            or not all(_real(v, lo, hi) for v in scales)
-            or len(set(scales)) != len(scales)
-            or not (iou is None or _real(iou, 0, 1))
-        ):
+        try:
+            check_tta_config(tta)
+        except InputError:
             raise bad(
                 "tta",
                 f"a test-time augmentation {{'views': one of {', '.join(TTA_VIEWS)}, "
                 f"'scales': distinct factors in [{lo:g}, {hi:g}], 'iou_thresh': None or "
                 "in [0, 1]}",
-            )
+            ) from None
     norm = info.get("input_normalize")
     if norm:
         pct = norm.get("percentile") if isinstance(norm, dict) else None

@@ -9,6 +9,7 @@ validation images (:func:`choose_tta`) and overridden option by option
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from numbers import Real
 from typing import Any
 
 import torch
@@ -29,6 +30,7 @@ __all__ = [
     "TTA_VIEWS",
     "TestTimeAugmentation",
     "check_scales",
+    "check_tta_config",
     "choose_tta",
     "rescale_image",
     "resolve_tta",
@@ -74,6 +76,8 @@ def check_scales(scales: Any) -> tuple[float, ...]:
         Empty, not numbers, out of range or repeated (``--tta-scales``).
     """
     try:
+        if not all(isinstance(s, Real) and not isinstance(s, bool) for s in scales):
+            raise TypeError
         out = tuple(float(s) for s in scales)
     except (TypeError, ValueError):
         raise InputError(
@@ -86,6 +90,39 @@ def check_scales(scales: Any) -> tuple[float, ...]:
             f"one; got {list(out)}"
         )
     return out
+
+
+def check_tta_config(config: Any) -> dict[str, Any]:
+    """A test-time augmentation configuration (a checkpoint's ``tta``, a row of
+    :data:`TTA_GRID`) checked: a mapping of exactly ``views`` (a name of
+    :data:`TTA_VIEWS`), ``scales`` (:func:`check_scales`) and ``iou_thresh`` (None, the
+    model's ``nms_thresh``, or a number in [0, 1]).
+
+    Returns
+    -------
+    dict
+        The same with ``scales`` a tuple of floats.
+
+    Raises
+    ------
+    InputError
+        Anything else.
+    """
+    keys = {"views", "scales", "iou_thresh"}
+    if not isinstance(config, Mapping) or set(config) != keys:
+        raise InputError(
+            "a test-time augmentation must be a dict of exactly views, scales and "
+            f"iou_thresh; got {type(config).__name__}"
+        )
+    views, iou = config["views"], config["iou_thresh"]
+    if not isinstance(views, str):
+        raise InputError(f"views must be one of {', '.join(TTA_VIEWS)}; got {views!r}")
+    check_choice(views, "views (--tta)", tuple(TTA_VIEWS))
+    return {
+        "views": views,
+        "scales": check_scales(config["scales"]),
+        "iou_thresh": None if iou is None else check_real(iou, "iou_thresh", 0.0, 1.0),
+    }
 
 
 def rescale_image(image: torch.Tensor, scale: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -208,11 +245,13 @@ class TestTimeAugmentation(nn.Module):
         ims = check_images(images)
         views = [(*view, scale) for scale in self.scales for view in TTA_VIEWS[self.views]]
         pooled: list[list[dict[str, torch.Tensor]]] = [[] for _ in ims]
+        scaled: dict[float, list[tuple[torch.Tensor, torch.Tensor]]] = {}
         with torch.no_grad():
             for v, (hflip, vflip, k, scale) in enumerate(views):
+                if scale not in scaled:  # each image resized once per scale
+                    scaled = {scale: [rescale_image(im, scale) for im in ims]}
                 seen, factors = [], []
-                for im in ims:
-                    x, f = rescale_image(im, scale)
+                for x, f in scaled[scale]:
                     dims = [d for d, on in ((-1, hflip), (-2, vflip)) if on]
                     x = torch.flip(x, dims) if dims else x
                     seen.append(torch.rot90(x, k, (-2, -1)) if k else x)
@@ -318,26 +357,21 @@ def resolve_tta(
     >>> resolve_tta(None, scales=[1.0]) is None
     True
     """
-    if stored is not None and not isinstance(stored, Mapping):
-        raise InputError(
-            f"stored must be a checkpoint's tta dict or None; got {type(stored).__name__}"
-        )
+    base = {} if stored is None else check_tta_config(stored)
     if views is not None:
         check_choice(views, "tta (--tta)", TTA_CHOICES)
     if views == "none":
         if scales is not None:
             raise InputError("--tta-scales needs test-time augmentation: drop --tta none")
         return None
-    base = dict(stored or {})
     chosen: str = views or base.get("views", "identity")
     check_choice(chosen, "tta (--tta)", tuple(TTA_VIEWS))
-    iou = base.get("iou_thresh")
     config: dict[str, Any] = {
         "views": chosen,
         "scales": check_scales(scales if scales is not None else base.get("scales", (1.0,))),
-        "iou_thresh": None if iou is None else check_real(iou, "iou_thresh", 0.0, 1.0),
+        "iou_thresh": base.get("iou_thresh"),
     }
-    if _passes(config) == 1 and config["scales"] == (1.0,):
+    if chosen == "identity" and config["scales"] == (1.0,):
         return None
     return config
 
@@ -347,11 +381,7 @@ def wrap_tta(model: nn.Module, config: Mapping[str, Any] | None) -> nn.Module:
     form), or ``model`` itself for None."""
     if config is None:
         return model
-    if not isinstance(config, Mapping) or not {"views", "scales", "iou_thresh"} <= set(config):
-        raise InputError(
-            "config must be None or a dict of views, scales and iou_thresh (resolve_tta's); "
-            f"got {type(config).__name__}"
-        )
+    config = check_tta_config(config)
     return TestTimeAugmentation(
         model, config["views"], scales=config["scales"], iou_thresh=config["iou_thresh"]
     )
@@ -393,12 +423,7 @@ def choose_tta(
     model = check_module(model)
     if not all(hasattr(dataset, a) for a in ("images", "boxes", "labels", "to_coco")):
         raise InputError(f"dataset must be a DetectionDataset; got {type(dataset).__name__}")
-    candidates: list[dict[str, Any] | None] = [None]
-    for g in grid:
-        c = resolve_tta(None, g["views"], g["scales"])
-        if c is not None:
-            c["iou_thresh"] = g.get("iou_thresh")
-            candidates.append(c)
+    candidates: list[dict[str, Any] | None] = [None, *(check_tta_config(g) for g in grid)]
     table: list[dict[str, Any]] = []
     was = model.training
     try:
