@@ -812,6 +812,12 @@ VALID: dict[str, dict[str, Any]] = {
         "lag": 2,
     },
     "tracking.read_mot": {"path": Fixture("mot.txt")},
+    "tracking.rts_smooth": {
+        "xs": np.array([[0.0, 1.0], [1.0, 1.0], [2.1, 1.0]]),
+        "Ps": np.stack([np.eye(2) * 0.1] * 3),
+        "As": np.stack([np.array([[1.0, 1.0], [0.0, 1.0]])] * 3),
+        "Qs": np.stack([np.eye(2) * 0.01] * 3),
+    },
     "tracking.write_mot": {
         "path": _out("mot.txt"),
         "rows": [(1, 1, (5.0, 5.0, 10.0, 10.0), 1.0), (2, 1, (6.0, 5.0, 10.0, 10.0), 0.9)],

@@ -18,6 +18,7 @@ from robopercept.tracking import (
     constant_velocity,
     kf_predict,
     kf_update,
+    rts_smooth,
 )
 from robopercept.tracking.kalman import mahalanobis_logdet
 
@@ -281,3 +282,84 @@ def test_an_overflowed_covariance_is_a_degenerate_error_not_nan():
     c = cho_factor(S)
     assert d2 == float(y @ cho_solve(c, y))
     assert logdet == 2.0 * float(np.log(np.diag(c[0])).sum())
+
+
+def _filtered_track(seed, steps=40, missing=()):
+    # a constant-velocity track in 2-D filtered by filterpy, with some steps unmeasured
+    rng = np.random.default_rng(seed)
+    fp = FpKF(dim_x=4, dim_z=2)
+    dt = 1 / 30
+    fp.F = constant_velocity(2, dt, 1.0, 1.0).A
+    fp.Q = constant_velocity(2, dt, 50.0, 1.0).Q
+    fp.H = np.hstack([np.eye(2), np.zeros((2, 2))])
+    fp.R = np.eye(2) * 1e-4
+    fp.P = np.eye(4)
+    truth = np.cumsum(rng.normal(0, 0.01, (steps, 2)), axis=0)
+    xs, Ps = [], []
+    for k in range(steps):
+        fp.predict()
+        if k not in missing:
+            fp.update(truth[k] + rng.normal(0, 1e-2, 2))
+        xs.append(fp.x.ravel().copy())
+        Ps.append(fp.P.copy())
+    Fs = np.repeat(fp.F[None], steps, axis=0)
+    Qs = np.repeat(fp.Q[None], steps, axis=0)
+    return fp, np.array(xs), np.array(Ps), Fs, Qs, truth
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_rts_smooth_matches_filterpy(seed):
+    # filterpy's rts_smoother inverts the predicted covariance where rts_smooth solves:
+    # the same smoother, equal to rounding (1e-9 relative on states of 1e-2)
+    fp, xs, Ps, Fs, Qs, _ = _filtered_track(seed, missing=(5, 6, 7))
+    ref_x, ref_P, _, _ = fp.rts_smoother(xs, Ps, Fs, Qs)
+    x, P = rts_smooth(xs, Ps, Fs, Qs)
+    np.testing.assert_allclose(x, ref_x, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(P, ref_P, rtol=1e-9, atol=1e-15)
+
+
+def test_rts_smooth_properties():
+    _, xs, Ps, Fs, Qs, truth = _filtered_track(3, steps=200)
+    x, P = rts_smooth(xs, Ps, Fs, Qs)
+    # the last step has no later measurement: it stays the filter's
+    assert np.array_equal(x[-1], xs[-1]) and np.array_equal(P[-1], Ps[-1])
+    # more information: every smoothed variance is at most the filtered one
+    assert (np.diagonal(P, axis1=1, axis2=2) <= np.diagonal(Ps, axis1=1, axis2=2) + 1e-18).all()
+    # and the smoothed positions are closer to the truth than the filtered ones (mean
+    # error ratio 0.78 to 0.90 over seeds 0-29 of this track)
+    err_s = np.linalg.norm(x[:, :2] - truth, axis=1).mean()
+    err_f = np.linalg.norm(xs[:, :2] - truth, axis=1).mean()
+    assert err_s < 0.95 * err_f
+    # one step: nothing to smooth
+    x1, P1 = rts_smooth(xs[:1], Ps[:1], Fs[:1], Qs[:1])
+    assert np.array_equal(x1, xs[:1]) and np.array_equal(P1, Ps[:1])
+
+
+@pytest.mark.parametrize(
+    "args, exc, match",
+    [
+        (
+            (np.zeros(3), np.zeros((3, 1, 1)), np.zeros((3, 1, 1)), np.zeros((3, 1, 1))),
+            InputError,
+            "xs must be",
+        ),
+        (
+            (np.zeros((3, 2)), np.zeros((2, 2, 2)), np.zeros((3, 2, 2)), np.zeros((3, 2, 2))),
+            InputError,
+            "Ps must have shape",
+        ),
+        (
+            (np.full((2, 1), np.nan), np.ones((2, 1, 1)), np.ones((2, 1, 1)), np.ones((2, 1, 1))),
+            InputError,
+            "xs must be finite",
+        ),
+        (
+            (np.zeros((2, 1)), np.zeros((2, 1, 1)), np.ones((2, 1, 1)), np.zeros((2, 1, 1))),
+            DegenerateError,
+            "singular",
+        ),
+    ],
+)
+def test_rts_smooth_bad_input(args, exc, match):
+    with pytest.raises(exc, match=match):
+        rts_smooth(*args)

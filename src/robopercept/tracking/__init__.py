@@ -17,6 +17,7 @@ from robopercept.tracking.kalman import (
     constant_velocity,
     kf_predict,
     kf_update,
+    rts_smooth,
 )
 from robopercept.tracking.meanshift import MeanShiftResult, MeanShiftTracker
 from robopercept.tracking.metrics import (
@@ -67,6 +68,7 @@ __all__ = [
     "polygons_to_boxes",
     "read_mot",
     "read_vot_groundtruth",
+    "rts_smooth",
     "select_ground_truth",
     "success_plot",
     "write_mot",

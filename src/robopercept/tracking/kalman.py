@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from scipy.linalg.lapack import dpotrf, dpotrs
 from scipy.stats import chi2
 
@@ -56,6 +57,7 @@ __all__ = [
     "kf_predict",
     "kf_update",
     "mahalanobis_logdet",
+    "rts_smooth",
 ]
 
 
@@ -573,6 +575,78 @@ class ExtendedKalmanFilter:
 
 
 # --------------------------------------------------------------------------- builders
+def rts_smooth(
+    xs: npt.ArrayLike, Ps: npt.ArrayLike, As: npt.ArrayLike, Qs: npt.ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    r"""Rauch-Tung-Striebel fixed-interval smoother: the estimates of every step from
+    all the measurements, before and after it.
+
+    From the filtered estimates :math:`(\hat x_k, P_k)` (after step :math:`k`'s update,
+    or its prediction where it had no measurement), backwards from the last step
+    (:math:`\hat x^s_T = \hat x_T`, :math:`P^s_T = P_T`):
+
+    .. math:: P^-_{k+1} = A_{k+1} P_k A_{k+1}^\top + Q_{k+1}, \qquad
+              C_k = P_k A_{k+1}^\top (P^-_{k+1})^{-1},
+
+    .. math:: \hat x^s_k = \hat x_k + C_k (\hat x^s_{k+1} - A_{k+1} \hat x_k), \qquad
+              P^s_k = P_k + C_k (P^s_{k+1} - P^-_{k+1}) C_k^\top.
+
+    Matches filterpy's ``KalmanFilter.rts_smoother`` (the same convention: ``As[k]``
+    and ``Qs[k]`` take step :math:`k - 1` to step :math:`k`, ``As[0]`` and ``Qs[0]`` are
+    not used), with :math:`C_k` from a linear solve instead of an inverse.
+
+    Parameters
+    ----------
+    xs : (T, n) array_like
+        Filtered states.
+    Ps : (T, n, n) array_like
+        Their covariances.
+    As, Qs : (T, n, n) array_like
+        Transition and process noise into each step.
+
+    Returns
+    -------
+    xs, Ps : (T, n) and (T, n, n) ndarray
+        The smoothed states and covariances.
+
+    Raises
+    ------
+    InputError
+        Shapes that disagree, non-finite values or values beyond 1e150.
+    DegenerateError
+        A predicted covariance :math:`P^-_{k+1}` that is singular.
+    """
+    x = check_numeric(xs, "xs")
+    if x.ndim != 2 or x.shape[0] < 1:
+        raise InputError(f"xs must be (T, n) filtered states, T >= 1; got shape {x.shape}")
+    t, n = x.shape
+    n = check_dim(n, "the state size xs.shape[1]")
+    mats = []
+    for name, value in (("Ps", Ps), ("As", As), ("Qs", Qs)):
+        a = check_numeric(value, name)
+        if a.shape != (t, n, n):
+            raise InputError(f"{name} must have shape {(t, n, n)} to match xs; got {a.shape}")
+        mats.append(a)
+    for name, a in (("xs", x), ("Ps", mats[0]), ("As", mats[1]), ("Qs", mats[2])):
+        if not np.isfinite(a).all():
+            raise InputError(f"{name} must be finite")
+        check_magnitude(a, name, 1e150)
+    P, A, Q = mats
+    x, P = x.copy(), P.copy()
+    for k in range(t - 2, -1, -1):
+        a = A[k + 1]
+        pp = a @ P[k] @ a.T + Q[k + 1]
+        try:
+            gain = np.linalg.solve(pp, a @ P[k]).T  # C = P A^T Pp^-1 (P, Pp symmetric)
+        except np.linalg.LinAlgError as exc:
+            raise DegenerateError(
+                f"the predicted covariance of step {k + 1} is singular: give a positive Q or P"
+            ) from exc
+        x[k] = x[k] + gain @ (x[k + 1] - a @ x[k])
+        P[k] = P[k] + gain @ (P[k + 1] - pp) @ gain.T
+    return x, P
+
+
 def _kinematic(order: int, dim: int, dt: float, q: float, r: float) -> KalmanFilter:
     """State ``[p (dim), v (dim), a (dim)]`` up to ``order``; position measured."""
     # bounds that keep A (dt^2 / 2), Q (q dt^4 / 4) and R below the 1e150 that
