@@ -653,7 +653,21 @@ def _pipeline_cases() -> list[Case]:
             object.__setattr__(r, "ms", {})
         return [frames, results]
 
-    return [Case("plane_tracker", track)]
+    def imm() -> list[Any]:
+        from robopercept.tracking import IMMEstimator, constant_velocity
+
+        filters = [constant_velocity(2, 0.1, q, 0.01) for q in (0.1, 10.0)]
+        est = IMMEstimator(filters, [0.5, 0.5], [[0.9, 0.1], [0.2, 0.8]])
+        out = []
+        for k in range(4):
+            est.predict()
+            z = np.array([0.3 * k, 0.1 * k * k])
+            out.append(est.mahalanobis2(z))
+            est.update(z)
+            out += [est.x.copy(), est.P.copy(), est.mu.copy()]
+        return out
+
+    return [Case("plane_tracker", track), Case("imm_bank", imm)]
 
 
 def _geometry_cases() -> list[Case]:

@@ -338,3 +338,35 @@ def test_hostile_arguments_are_refused_by_name(make, match):
     filters = [constant_velocity(1, 1.0, q, 1.0) for q in (0.01, 1.0)]
     with pytest.raises(InputError, match=match):
         make(filters)
+
+
+def test_filters_changed_between_steps_are_used():
+    # the IMM keeps the stacked states of its last step and hands each filter a row of
+    # them; a filter whose x or P is reassigned, or changed in place, or whose A is
+    # changed in place, between steps must be read afresh, exactly as a fresh IMM would
+    z = [np.array([0.1 * k, 0.2 * k]) for k in range(6)]
+    runs = []
+    for how in ("reference", "reassign", "in place"):
+        imm = IMMEstimator(cv_pair(), [0.5, 0.5], M2)
+        for k in range(6):
+            imm.predict()
+            imm.update(z[k])
+            if k == 2:
+                f = imm.filters[0]
+                if how == "reassign":
+                    f.x = f.x + 0.05
+                    f.P = f.P * 2.0
+                    f.A = f.A.copy()
+                    f.A[0, 2] *= 1.5
+                elif how == "in place":
+                    f.x += 0.05
+                    f.P *= 2.0
+                    f.A[0, 2] *= 1.5
+                else:
+                    f.x, f.P = f.x.copy() + 0.05, f.P.copy() * 2.0
+                    f.A = f.A.copy()
+                    f.A[0, 2] *= 1.5
+        runs.append((imm.x.copy(), imm.P.copy(), imm.mu.copy()))
+    for got in runs[1:]:
+        for a, b in zip(got, runs[0], strict=True):
+            np.testing.assert_array_equal(a, b)

@@ -60,14 +60,19 @@ from collections.abc import Sequence
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from robopercept._checks import check_magnitude, check_numeric, plain_repr
-from robopercept.errors import InputError
-from robopercept.tracking.kalman import KalmanFilter, mahalanobis_logdet
+from robopercept.errors import DegenerateError, InputError
+from robopercept.tracking.kalman import KalmanFilter
 
 __all__ = ["IMMEstimator"]
 
 _SUM_TOL = 1e-8  # how far from 1 a probability vector (or a row of M) may sum
+_NOT_PD = (
+    "the innovation covariance H P H^T + R is not finite and positive definite: "
+    "check that R is positive definite"
+)
 
 
 def _as_r(R: npt.ArrayLike | float | None) -> np.ndarray | None:
@@ -81,6 +86,133 @@ def _moments(weights: np.ndarray, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.nd
     x = weights @ xs
     d = xs - x
     return x, np.einsum("j,jab->ab", weights, Ps) + np.einsum("j,ja,jb->ab", weights, d, d)
+
+
+# -- the compiled bank steps ----------------------------------------------------------
+# A cycle of a tracker's IMM is a few dozen products of small matrices; as NumPy calls
+# each costs microseconds of dispatch, so the bank's prediction, update and gating
+# distance run compiled, every filter in one call (the same equations as
+# KalmanFilter.predict / update, Joseph form included, and the module docstring's
+# mixing; tests/tracking/test_imm.py holds them to filterpy's IMMEstimator).
+
+
+@njit(cache=True, nogil=True)
+def _chol(S):  # pragma: no cover - compiled
+    # lower Cholesky factor of a small symmetric S; ok False when S is not finite and
+    # positive definite
+    k = S.shape[0]
+    L = np.zeros((k, k))
+    for i in range(k):
+        for j in range(i + 1):
+            acc = S[i, j]
+            for m in range(j):
+                acc -= L[i, m] * L[j, m]
+            if i == j:
+                if not acc > 0.0 or not np.isfinite(acc):
+                    return L, False
+                L[i, i] = np.sqrt(acc)
+            else:
+                L[i, j] = acc / L[j, j]
+    return L, True
+
+
+@njit(cache=True, nogil=True)
+def _chol_solve(L, b):  # pragma: no cover - compiled
+    # S^-1 b for S = L L^T, b (k, m): forward then back substitution
+    k, m = b.shape
+    w = np.empty((k, m))
+    for c in range(m):
+        for i in range(k):
+            acc = b[i, c]
+            for j in range(i):
+                acc -= L[i, j] * w[j, c]
+            w[i, c] = acc / L[i, i]
+        for i in range(k - 1, -1, -1):
+            acc = w[i, c]
+            for j in range(i + 1, k):
+                acc -= L[j, i] * w[j, c]
+            w[i, c] = acc / L[i, i]
+    return w
+
+
+@njit(cache=True, nogil=True)
+def _predict_bank(omega, xs, Ps, As, Qs):  # pragma: no cover - compiled
+    # mixed initial conditions x0_j = sum_i omega_ij x_i,
+    # P0_j = sum_i omega_ij (P_i + (x_i - x0_j)(x_i - x0_j)^T), then each model's
+    # prediction A_j x0_j, A_j P0_j A_j^T + Q_j
+    r, n = xs.shape
+    out_x = np.empty((r, n))
+    out_P = np.empty((r, n, n))
+    for j in range(r):
+        x0 = np.zeros(n)
+        for i in range(r):
+            x0 += omega[i, j] * xs[i]
+        P0 = np.zeros((n, n))
+        for i in range(r):
+            d = xs[i] - x0
+            P0 += omega[i, j] * (Ps[i] + np.outer(d, d))
+        A = np.ascontiguousarray(As[j])
+        out_x[j] = A @ x0
+        out_P[j] = A @ P0 @ np.ascontiguousarray(A.T) + Qs[j]
+    return out_x, out_P
+
+
+@njit(cache=True, nogil=True)
+def _gate_bank(xs, Ps, z, Hs, Rs):  # pragma: no cover - compiled
+    # every model's squared Mahalanobis distance y^T S^-1 y, y = z - H x,
+    # S = H P H^T + R; ok False when an S is not positive definite
+    r = xs.shape[0]
+    k = z.shape[0]
+    d2 = np.empty(r)
+    for j in range(r):
+        H = np.ascontiguousarray(Hs[j])
+        y = z - H @ xs[j]
+        S = H @ Ps[j] @ np.ascontiguousarray(H.T) + Rs[j]
+        L, ok = _chol(S)
+        if not ok:
+            return d2, False
+        d2[j] = (y.reshape(1, k) @ _chol_solve(L, y.reshape(k, 1)))[0, 0]
+    return d2, True
+
+
+@njit(cache=True, nogil=True)
+def _update_bank(xs, Ps, z, Hs, Rs, joseph):  # pragma: no cover - compiled
+    # every model's Kalman update with z: K = P H^T S^-1, x + K y, the Joseph-form (or
+    # simple) covariance, and y^T S^-1 y and log det S for the likelihood
+    r, n = xs.shape
+    k = z.shape[0]
+    out_x = np.empty((r, n))
+    out_P = np.empty((r, n, n))
+    ys = np.empty((r, k))
+    Ss = np.empty((r, k, k))
+    Ks = np.empty((r, n, k))
+    d2 = np.empty(r)
+    logdet = np.empty(r)
+    eye = np.eye(n)
+    for j in range(r):
+        H = np.ascontiguousarray(Hs[j])
+        Ht = np.ascontiguousarray(H.T)
+        P = np.ascontiguousarray(Ps[j])
+        y = z - H @ xs[j]
+        PHt = P @ Ht
+        S = H @ PHt + Rs[j]
+        L, ok = _chol(S)
+        if not ok:
+            return out_x, out_P, ys, Ss, Ks, d2, logdet, False
+        K = np.ascontiguousarray(_chol_solve(L, np.ascontiguousarray(PHt.T)).T)
+        out_x[j] = xs[j] + K @ y
+        ikh = eye - K @ H
+        if joseph[j]:
+            R = np.ascontiguousarray(Rs[j])
+            out_P[j] = ikh @ P @ np.ascontiguousarray(ikh.T) + K @ R @ np.ascontiguousarray(K.T)
+        else:
+            out_P[j] = ikh @ P
+        ys[j] = y
+        Ss[j] = S
+        Ks[j] = K
+        d2[j] = (y.reshape(1, k) @ _chol_solve(L, y.reshape(k, 1)))[0, 0]
+        logdet[j] = 2.0 * np.log(np.diag(L)).sum()
+    return out_x, out_P, ys, Ss, Ks, d2, logdet, True
 
 
 class IMMEstimator:
@@ -187,6 +319,8 @@ class IMMEstimator:
                 "use M / M.sum(axis=1, keepdims=True) (or M.T if its columns sum to 1)"
             )
         self.filters = filters
+        self._bank: tuple[np.ndarray, np.ndarray, list[np.ndarray], list[np.ndarray]] | None
+        self._bank = None
         self.mu = mu_a / mu_a.sum()
         self.M = M_a
         self.cbar = np.zeros(r)
@@ -207,10 +341,53 @@ class IMMEstimator:
         self.omega = np.where(safe, num / np.where(safe, self.cbar, 1.0), self.mu[:, None])
 
     def _stack(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every filter's ``x`` and ``P`` stacked, (r, n) and (r, n, n): the arrays of
+        the last compiled step when the filters still hold its rows (nothing reassigned
+        their ``x`` or ``P`` since), else fresh stacks."""
+        bank = self._bank
+        if bank is not None and all(
+            f.x is bx and f.P is bP
+            for f, bx, bP in zip(self.filters, bank[2], bank[3], strict=True)
+        ):
+            return bank[0], bank[1]
         return (
             np.stack([f.x for f in self.filters]),
             np.stack([f.P for f in self.filters]),
         )
+
+    def _hand_out(self, xs: np.ndarray, Ps: np.ndarray) -> None:
+        """Give filter ``j`` rows ``xs[j]``, ``Ps[j]`` of a compiled step's output and
+        keep the stacks for the next :meth:`_stack`."""
+        rows_x, rows_P = list(xs), list(Ps)
+        for f, x, P in zip(self.filters, rows_x, rows_P, strict=True):
+            f.x, f.P = x, P
+        self._bank = (xs, Ps, rows_x, rows_P)
+
+    def _measurement(
+        self, z: npt.ArrayLike, R: npt.ArrayLike | float | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``z`` checked, and every filter's ``H`` and ``R`` (or this step's ``R``, a
+        scalar meaning that multiple of the identity) stacked: (k,), (r, k, n),
+        (r, k, k)."""
+        nz = self.filters[0].dim_z
+        zz = check_numeric(z, "z").reshape(-1)
+        if zz.shape != (nz,):
+            raise InputError(f"z must have {nz} elements; got shape {np.shape(z)}")
+        if not np.isfinite(zz).all():
+            raise InputError(f"z must be finite; got {plain_repr(z)[:80]}")
+        check_magnitude(zz, "z", 1e150)
+        Hs = np.stack([f.H for f in self.filters])
+        if R is None:
+            return zz, Hs, np.stack([f.R for f in self.filters])
+        rr = check_numeric(R, "R")
+        if rr.ndim == 0:
+            rr = rr * np.eye(nz)
+        if rr.shape != (nz, nz):
+            raise InputError(f"R must have shape {(nz, nz)}; got {rr.shape}")
+        if not np.isfinite(rr).all():
+            raise InputError("R must be finite")
+        check_magnitude(rr, "R", 1e150)
+        return zz, Hs, np.ascontiguousarray(np.broadcast_to(rr, (len(self.filters), nz, nz)))
 
     def _combine(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         xs, Ps = self._stack()
@@ -272,19 +449,34 @@ class IMMEstimator:
         if uu is not None and not np.isfinite(uu).all():
             raise InputError(f"u must be finite; got {plain_repr(u)[:80]}")
         xs, Ps = self._stack()
-        x0 = self.omega.T @ xs  # x0[j] = sum_i omega[i, j] x_i
-        d = xs[:, None, :] - x0[None, :, :]  # d[i, j] = x_i - x0_j
-        P0 = np.einsum("ij,iab->jab", self.omega, Ps) + np.einsum(
-            "ij,ija,ijb->jab", self.omega, d, d
-        )
-        for j, f in enumerate(self.filters):
-            f.x, f.P = x0[j].copy(), P0[j].copy()
-            ov = overrides[j]
-            if ov is None:
-                f.predict(uu)
-            else:
-                f.predict(uu, A=ov[0], Q=ov[1])
-        self.x, self.P = self._combine(self.cbar)
+        if uu is None:  # every filter in one compiled call
+            pairs = [
+                (f.A, f.Q) if ov is None else ov
+                for f, ov in zip(self.filters, overrides, strict=True)
+            ]
+            xs, Ps = _predict_bank(
+                self.omega,
+                xs,
+                Ps,
+                np.stack([a for a, _ in pairs]),
+                np.stack([q for _, q in pairs]),
+            )
+            self._hand_out(xs, Ps)
+        else:
+            x0 = self.omega.T @ xs  # x0[j] = sum_i omega[i, j] x_i
+            d = xs[:, None, :] - x0[None, :, :]  # d[i, j] = x_i - x0_j
+            P0 = np.einsum("ij,iab->jab", self.omega, Ps) + np.einsum(
+                "ij,ija,ijb->jab", self.omega, d, d
+            )
+            for j, f in enumerate(self.filters):
+                f.x, f.P = x0[j].copy(), P0[j].copy()
+                ov = overrides[j]
+                if ov is None:
+                    f.predict(uu)
+                else:
+                    f.predict(uu, A=ov[0], Q=ov[1])
+            xs, Ps = self._stack()
+        self.x, self.P = _moments(self.cbar, xs, Ps)
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
 
     def update(self, z: npt.ArrayLike, R: npt.ArrayLike | float | None = None) -> None:
@@ -306,13 +498,17 @@ class IMMEstimator:
         :math:`\mu = \bar c`. Then :math:`\bar c` and :math:`\omega` for the next step and
         the moment-matched ``x, P`` (module docstring, steps 3-4).
         """
-        r = len(self.filters)
-        logl = np.empty(r)
         nz = self.filters[0].dim_z
-        zz, rr = check_numeric(z, "z"), _as_r(R)
+        zz, Hs, Rs = self._measurement(z, R)
+        xs, Ps = self._stack()
+        joseph = np.array([f.joseph for f in self.filters])
+        xs, Ps, ys, Ss, Ks, d2, logdet, ok = _update_bank(xs, Ps, zz, Hs, Rs, joseph)
+        if not ok:
+            raise DegenerateError(_NOT_PD)
+        self._hand_out(xs, Ps)
         for j, f in enumerate(self.filters):
-            res = f.update(zz, R=rr)
-            logl[j] = -0.5 * (res.mahalanobis2 + res.log_det_s + nz * np.log(2.0 * np.pi))
+            f.y, f.S, f.K = ys[j], Ss[j], Ks[j]
+        logl = -0.5 * (d2 + logdet + nz * np.log(2.0 * np.pi))
         self.log_likelihood = logl
         self.likelihood = np.exp(logl)
         with np.errstate(divide="ignore"):
@@ -361,11 +557,12 @@ class IMMEstimator:
         -------
         float
         """
-        best = np.inf
-        for f in self.filters:
-            y, S = f.innovation(check_numeric(z, "z"), R=_as_r(R))
-            best = min(best, mahalanobis_logdet(S, y)[0])
-        return float(best)
+        zz, Hs, Rs = self._measurement(z, R)
+        xs, Ps = self._stack()
+        d2, ok = _gate_bank(xs, Ps, zz, Hs, Rs)
+        if not ok:
+            raise DegenerateError(_NOT_PD)
+        return float(d2.min())
 
     def innovation(
         self, z: npt.ArrayLike, R: npt.ArrayLike | float | None = None
