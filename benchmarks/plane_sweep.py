@@ -50,10 +50,12 @@ import numpy as np
 
 from robopercept.errors import InputError
 from robopercept.pipelines import (
+    ErrorStats,
     PlaneTracker,
     PlaneTrackerConfig,
     PlaneTrackResult,
     PlaneTrackSummary,
+    plane_errors,
     summarize,
 )
 from robopercept.sources import MOTIONS, SyntheticRGBDScene, TUMFolderSource, write_tum_folder
@@ -215,26 +217,35 @@ def hindsight_summary(
     if not np.isfinite(d).any():
         return summarize(results, truths)
     raw = summarize(results, truths).raw
+    # the frames summarize scores (a visible board), and their truths
+    seen = [
+        (i, t["plane"])
+        for i, t in enumerate(truths)
+        if "plane" in t and t.get("valid_board_pixels", 500) >= 500
+    ]
 
-    def score(rs: list[PlaneTrackResult], name: str) -> float:
-        got, ref = getattr(summarize(rs, truths).tracked, name), getattr(raw, name)
+    def score(normals: np.ndarray, ds: np.ndarray, name: str) -> float:
+        # the worse of the median and p95 ratios to the raw fit, errors as summarize's
+        errs = [plane_errors(normals[i], float(ds[i]), tn, td) for i, (tn, td) in seen]
+        got = ErrorStats.of(
+            [a for a, _ in errs] if name == "angle_deg" else [1e3 * e for _, e in errs]
+        )
+        ref = getattr(raw, name)
         return max(got.median / max(ref.median, 1e-12), got.p95 / max(ref.p95, 1e-12))
 
-    best_d = best_n = (math.inf, results)
+    track_n = np.array([r.track_normal for r in results])
+    track_d = np.array([r.track_d for r in results])
+    best_d, best_n = (math.inf, track_d), (math.inf, track_n)
     for order in HINDSIGHT_ORDERS:
         for q in HINDSIGHT_NOISES:
             sd = _smooth_series(ts, 1e3 * d, order, q)[:, 0] / 1e3
             sn = _smooth_series(ts, 1e3 * n, order, q)
             sn = sn / np.linalg.norm(sn, axis=1, keepdims=True)
-            rd = [
-                dataclasses.replace(r, track_d=float(v)) for r, v in zip(results, sd, strict=True)
-            ]
-            rn = [dataclasses.replace(r, track_normal=v) for r, v in zip(results, sn, strict=True)]
-            best_d = min(best_d, (score(rd, "offset_mm"), rd), key=lambda b: b[0])
-            best_n = min(best_n, (score(rn, "angle_deg"), rn), key=lambda b: b[0])
+            best_d = min(best_d, (score(track_n, sd, "offset_mm"), sd), key=lambda b: b[0])
+            best_n = min(best_n, (score(sn, track_d, "angle_deg"), sn), key=lambda b: b[0])
     both = [
-        dataclasses.replace(a, track_normal=b.track_normal)
-        for a, b in zip(best_d[1], best_n[1], strict=True)
+        dataclasses.replace(r, track_d=float(v), track_normal=m)
+        for r, v, m in zip(results, best_d[1], best_n[1], strict=True)
     ]
     return summarize(both, truths)
 

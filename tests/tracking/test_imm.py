@@ -287,6 +287,32 @@ def test_gating_and_innovation():
     np.testing.assert_array_equal(a.mu, b.mu)
 
 
+def test_gated_update_is_mahalanobis2_then_update():
+    # one pass: the distance returned is mahalanobis2's to the bit, a passing z updates
+    # exactly as update does, and a rejected z leaves the predicted estimator untouched
+    zk = np.array([2.0, -1.0])
+    a, b, c = (IMMEstimator(cv_pair(), [0.5, 0.5], M2) for _ in range(3))
+    for imm_ in (a, b, c):
+        imm_.filters[1].x = np.array([1.0, 1.0, 3.0, 0.0])
+        imm_.predict()
+    d2 = a.mahalanobis2(zk)
+    a.update(zk)
+    assert b.update(zk, gate=d2) == d2
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.P, b.P)
+    np.testing.assert_array_equal(a.mu, b.mu)
+    x0, P0, mu0 = c.x.copy(), c.P.copy(), c.mu.copy()
+    fx0 = [f.x.copy() for f in c.filters]
+    assert c.update(zk, gate=0.5 * d2) == d2
+    np.testing.assert_array_equal(c.x, x0)
+    np.testing.assert_array_equal(c.P, P0)
+    np.testing.assert_array_equal(c.mu, mu0)
+    for f, x in zip(c.filters, fx0, strict=True):
+        np.testing.assert_array_equal(f.x, x)
+    with pytest.raises(InputError, match="gate"):
+        c.update(zk, gate=-1.0)
+
+
 def test_bad_inputs():
     f2 = cv_pair()
     with pytest.raises(InputError, match="at least 2 filters"):

@@ -346,6 +346,16 @@ class _Filter:
             assert self.kf is not None
             self.kf.update(z, R=R)
 
+    def gated_update(self, z: np.ndarray, R: np.ndarray, gate: float) -> tuple[float, bool]:
+        """The squared distance of ``z`` and whether it passed ``gate`` (and updated)."""
+        if self.imm is not None:
+            d2 = self.imm.update(z, R=R, gate=gate)
+            return d2, d2 <= gate
+        d2 = self.mahalanobis2(z, R)
+        if d2 <= gate:
+            self.update(z, R)
+        return d2, d2 <= gate
+
     def skip(self) -> None:
         if self.imm is not None:
             self.imm.skip()
@@ -452,8 +462,7 @@ class GatedTrack:
         if n is None:
             return False
         cand = self._candidate
-        if cand is not None and cand.mahalanobis2(z, R) <= self._gate:
-            cand.update(z, R)
+        if cand is not None and cand.gated_update(z, R, self._gate)[1]:
             self._candidate_hits += 1
         else:
             self._candidate = _Filter(self.config, z, R)
@@ -516,9 +525,8 @@ class GatedTrack:
             if self._filter is None:
                 self._filter, status, accepted = _Filter(self.config, z, R), TrackStatus.NEW, True
             else:
-                d2 = self._filter.mahalanobis2(z, R)
-                if d2 <= self._gate:
-                    self._filter.update(z, R)
+                d2, passed = self._filter.gated_update(z, R, self._gate)
+                if passed:
                     status, accepted = TrackStatus.TRACKING, True
                 elif self._overwhelming(support, dominant) or self._reacquired(z, R):
                     self._filter = _Filter(self.config, z, R)

@@ -62,9 +62,9 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
-from robopercept._checks import check_magnitude, check_numeric, plain_repr
+from robopercept._checks import check_magnitude, check_numeric, check_real, plain_repr
 from robopercept.errors import DegenerateError, InputError
-from robopercept.tracking.kalman import KalmanFilter
+from robopercept.tracking.kalman import KalmanFilter, check_matrix, check_vector
 
 __all__ = ["IMMEstimator"]
 
@@ -73,11 +73,6 @@ _NOT_PD = (
     "the innovation covariance H P H^T + R is not finite and positive definite: "
     "check that R is positive definite"
 )
-
-
-def _as_r(R: npt.ArrayLike | float | None) -> np.ndarray | None:
-    """``R`` as a float array (0-d for a scalar, which the filters read as ``R I``)."""
-    return None if R is None else check_numeric(R, "R")
 
 
 def _moments(weights: np.ndarray, xs: np.ndarray, Ps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -167,7 +162,8 @@ def _gate_bank(xs, Ps, z, Hs, Rs):  # pragma: no cover - compiled
     for j in range(r):
         H = np.ascontiguousarray(Hs[j])
         y = z - H @ xs[j]
-        S = H @ Ps[j] @ np.ascontiguousarray(H.T) + Rs[j]
+        # H (P H^T), grouped as the update groups it, so the two give the same bits
+        S = H @ (np.ascontiguousarray(Ps[j]) @ np.ascontiguousarray(H.T)) + Rs[j]
         L, ok = _chol(S)
         if not ok:
             return d2, False
@@ -370,23 +366,11 @@ class IMMEstimator:
         scalar meaning that multiple of the identity) stacked: (k,), (r, k, n),
         (r, k, k)."""
         nz = self.filters[0].dim_z
-        zz = check_numeric(z, "z").reshape(-1)
-        if zz.shape != (nz,):
-            raise InputError(f"z must have {nz} elements; got shape {np.shape(z)}")
-        if not np.isfinite(zz).all():
-            raise InputError(f"z must be finite; got {plain_repr(z)[:80]}")
-        check_magnitude(zz, "z", 1e150)
+        zz = check_vector(z, "z", nz)
         Hs = np.stack([f.H for f in self.filters])
         if R is None:
             return zz, Hs, np.stack([f.R for f in self.filters])
-        rr = check_numeric(R, "R")
-        if rr.ndim == 0:
-            rr = rr * np.eye(nz)
-        if rr.shape != (nz, nz):
-            raise InputError(f"R must have shape {(nz, nz)}; got {rr.shape}")
-        if not np.isfinite(rr).all():
-            raise InputError("R must be finite")
-        check_magnitude(rr, "R", 1e150)
+        rr = check_matrix(R, "R", (nz, nz))
         return zz, Hs, np.ascontiguousarray(np.broadcast_to(rr, (len(self.filters), nz, nz)))
 
     def _combine(self, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -479,9 +463,15 @@ class IMMEstimator:
         self.x, self.P = _moments(self.cbar, xs, Ps)
         self.x_prior, self.P_prior = self.x.copy(), self.P.copy()
 
-    def update(self, z: npt.ArrayLike, R: npt.ArrayLike | float | None = None) -> None:
+    def update(
+        self,
+        z: npt.ArrayLike,
+        R: npt.ArrayLike | float | None = None,
+        *,
+        gate: float | None = None,
+    ) -> float:
         r"""Update every filter with ``z``, then the mode probabilities and the
-        combined estimate.
+        combined estimate; with ``gate``, only if ``z`` passes it.
 
         Parameters
         ----------
@@ -489,6 +479,17 @@ class IMMEstimator:
         R : (dim_z, dim_z) array_like or float, optional
             Measurement noise for this step, for every filter (a scalar is a multiple of
             the identity); default each filter's own ``R``.
+        gate : float, optional
+            Largest accepted :meth:`mahalanobis2` (e.g. a :math:`\chi^2_{d_z}` quantile).
+            When the smallest distance exceeds it nothing changes: the estimator stays
+            as :meth:`predict` left it (call :meth:`skip` to close the step as a miss).
+            One pass computes the distances and the updates, instead of
+            :meth:`mahalanobis2` then :meth:`update`.
+
+        Returns
+        -------
+        float
+            The smallest squared Mahalanobis distance of ``z``, as :meth:`mahalanobis2`.
 
         Notes
         -----
@@ -499,12 +500,16 @@ class IMMEstimator:
         the moment-matched ``x, P`` (module docstring, steps 3-4).
         """
         nz = self.filters[0].dim_z
+        limit = None if gate is None else check_real(gate, "gate", 0.0)
         zz, Hs, Rs = self._measurement(z, R)
         xs, Ps = self._stack()
         joseph = np.array([f.joseph for f in self.filters])
         xs, Ps, ys, Ss, Ks, d2, logdet, ok = _update_bank(xs, Ps, zz, Hs, Rs, joseph)
         if not ok:
             raise DegenerateError(_NOT_PD)
+        nearest = float(d2.min())
+        if limit is not None and not nearest <= limit:
+            return nearest
         self._hand_out(xs, Ps)
         for j, f in enumerate(self.filters):
             f.y, f.S, f.K = ys[j], Ss[j], Ks[j]
@@ -521,6 +526,7 @@ class IMMEstimator:
             self.mu = self.cbar.copy()
         self._mixing()
         self.x, self.P = self._combine(self.mu)
+        return nearest
 
     def skip(self) -> None:
         r"""A step without a measurement (missed detection), after :meth:`predict`.
@@ -590,8 +596,9 @@ class IMMEstimator:
         y : (dim_z,) ndarray
         S : (dim_z, dim_z) ndarray
         """
-        zz = check_numeric(z, "z").reshape(-1)
-        rr = _as_r(R)
+        nz = self.filters[0].dim_z
+        zz = check_vector(z, "z", nz)
+        rr = None if R is None else check_matrix(R, "R", (nz, nz))
         parts = [f.innovation(zz, R=rr) for f in self.filters]
         zhat = np.stack([zz - y for y, _ in parts])
         Ss = np.stack([S for _, S in parts])

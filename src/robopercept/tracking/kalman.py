@@ -77,7 +77,19 @@ def _small_ok(a: np.ndarray) -> bool:
     return a.size <= _SMALL and all(-1e150 <= v <= 1e150 for v in a.ravel().tolist())
 
 
-def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
+def check_matrix(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
+    """``value`` as a finite float64 matrix of ``shape`` within 1e150 in magnitude.
+
+    A scalar stands for that multiple of the identity (square shapes) or fills the
+    shape. The filters' check of ``P``, ``A``, ``Q``, ``H``, ``R``, ``B``; a float64
+    array of the right shape with at most 64 values is returned as it is after one
+    Python pass.
+
+    Raises
+    ------
+    InputError
+        Wrong shape, non-numeric, non-finite or beyond 1e150.
+    """
     if (
         type(value) is np.ndarray
         and value.dtype == np.float64
@@ -95,7 +107,16 @@ def _mat(value: object, name: str, shape: tuple[int, int]) -> np.ndarray:
     return check_magnitude(a, name, 1e150)  # squares beyond it overflow (S, y^T S^-1 y)
 
 
-def _vec(value: object, name: str, n: int) -> np.ndarray:
+def check_vector(value: object, name: str, n: int) -> np.ndarray:
+    """``value`` flattened to a finite float64 vector of ``n`` elements within 1e150.
+
+    The filters' check of ``x``, ``z`` and ``u``.
+
+    Raises
+    ------
+    InputError
+        Wrong size, non-numeric, non-finite or beyond 1e150.
+    """
     if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,):
         if _small_ok(value):
             return value
@@ -197,14 +218,14 @@ def kf_predict(
     """
     xx = check_numeric(x, "x").reshape(-1)
     n = check_dim(xx.size, "the state size len(x)")
-    xx = _vec(xx, "x", n)
-    P = _mat(P, "P", (n, n))
-    A = _mat(A, "A", (n, n))
-    Q = _mat(Q, "Q", (n, n))
+    xx = check_vector(xx, "x", n)
+    P = check_matrix(P, "P", (n, n))
+    A = check_matrix(A, "A", (n, n))
+    Q = check_matrix(Q, "Q", (n, n))
     if B is not None and u is not None:
         uu = check_numeric(u, "u").reshape(-1)
-        uu = _vec(uu, "u", uu.size)
-        return _predict(xx, P, A, Q, _mat(B, "B", (n, uu.size)), uu)
+        uu = check_vector(uu, "u", uu.size)
+        return _predict(xx, P, A, Q, check_matrix(B, "B", (n, uu.size)), uu)
     return _predict(xx, P, A, Q, None, None)
 
 
@@ -319,11 +340,11 @@ def kf_update(
     n = check_dim(xx.size, "the state size len(x)")
     m = check_dim(zz.size, "the measurement size len(z)")
     return _update(
-        _vec(xx, "x", n),
-        _mat(P, "P", (n, n)),
-        _vec(zz, "z", m),
-        _mat(H, "H", (m, n)),
-        _mat(R, "R", (m, m)),
+        check_vector(xx, "x", n),
+        check_matrix(P, "P", (n, n)),
+        check_vector(zz, "z", m),
+        check_matrix(H, "H", (m, n)),
+        check_matrix(R, "R", (m, m)),
         check_bool(joseph, "joseph"),
     )
 
@@ -401,13 +422,13 @@ class KalmanFilter:
             raise InputError("give A or F (the same matrix), not both")
         A = F if A is None else A
         nx, nz = self.dim_x, self.dim_z
-        self.x = np.zeros(nx) if x is None else _vec(x, "x", nx)
-        self.P = np.eye(nx) if P is None else _mat(P, "P", (nx, nx))
-        self.A = np.eye(nx) if A is None else _mat(A, "A", (nx, nx))
-        self.Q = np.eye(nx) if Q is None else _mat(Q, "Q", (nx, nx))
-        self.H = np.zeros((nz, nx)) if H is None else _mat(H, "H", (nz, nx))
-        self.R = np.eye(nz) if R is None else _mat(R, "R", (nz, nz))
-        self.B = None if B is None or self.dim_u == 0 else _mat(B, "B", (nx, self.dim_u))
+        self.x = np.zeros(nx) if x is None else check_vector(x, "x", nx)
+        self.P = np.eye(nx) if P is None else check_matrix(P, "P", (nx, nx))
+        self.A = np.eye(nx) if A is None else check_matrix(A, "A", (nx, nx))
+        self.Q = np.eye(nx) if Q is None else check_matrix(Q, "Q", (nx, nx))
+        self.H = np.zeros((nz, nx)) if H is None else check_matrix(H, "H", (nz, nx))
+        self.R = np.eye(nz) if R is None else check_matrix(R, "R", (nz, nz))
+        self.B = None if B is None or self.dim_u == 0 else check_matrix(B, "B", (nx, self.dim_u))
         self.joseph = check_bool(joseph, "joseph")
         self.y: np.ndarray | None = None
         self.S: np.ndarray | None = None
@@ -429,14 +450,14 @@ class KalmanFilter:
         """Propagate the state one step; ``A``, ``Q``, ``B`` override the model for this
         call only. Returns the prior ``(x, P)``."""
         nx = self.dim_x
-        a = self.A if A is None else _mat(A, "A", (nx, nx))
-        q = self.Q if Q is None else _mat(Q, "Q", (nx, nx))
+        a = self.A if A is None else check_matrix(A, "A", (nx, nx))
+        q = self.Q if Q is None else check_matrix(Q, "Q", (nx, nx))
         b, uu = None, None
         if u is not None:
             if self.dim_u == 0 and B is None:
                 raise InputError("this filter has no control input (dim_u=0)")
-            uu = _vec(u, "u", self.dim_u if self.dim_u else np.size(u))
-            b = self.B if B is None else _mat(B, "B", (nx, uu.size))
+            uu = check_vector(u, "u", self.dim_u if self.dim_u else np.size(u))
+            b = self.B if B is None else check_matrix(B, "B", (nx, uu.size))
             if b is None:
                 raise InputError("a control input needs B (set it or pass B=...)")
         self.x, self.P = _predict(self.x, self.P, a, q, b, uu)
@@ -445,9 +466,9 @@ class KalmanFilter:
     def _parts(
         self, z: np.ndarray, R: np.ndarray | float | None, H: np.ndarray | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        zz = _vec(z, "z", self.dim_z)
-        r = self.R if R is None else _mat(R, "R", (self.dim_z, self.dim_z))
-        h = self.H if H is None else _mat(H, "H", (self.dim_z, self.dim_x))
+        zz = check_vector(z, "z", self.dim_z)
+        r = self.R if R is None else check_matrix(R, "R", (self.dim_z, self.dim_z))
+        h = self.H if H is None else check_matrix(H, "H", (self.dim_z, self.dim_x))
         return zz, r, h
 
     def update(
@@ -542,32 +563,32 @@ class ExtendedKalmanFilter:
             )
         nx, nz = self.dim_x, self.dim_z
         self.f, self.F_jacobian, self.h, self.H_jacobian = f, F_jacobian, h, H_jacobian
-        self.x = np.zeros(nx) if x is None else _vec(x, "x", nx)
-        self.P = np.eye(nx) if P is None else _mat(P, "P", (nx, nx))
-        self.Q = np.eye(nx) if Q is None else _mat(Q, "Q", (nx, nx))
-        self.R = np.eye(nz) if R is None else _mat(R, "R", (nz, nz))
+        self.x = np.zeros(nx) if x is None else check_vector(x, "x", nx)
+        self.P = np.eye(nx) if P is None else check_matrix(P, "P", (nx, nx))
+        self.Q = np.eye(nx) if Q is None else check_matrix(Q, "Q", (nx, nx))
+        self.R = np.eye(nz) if R is None else check_matrix(R, "R", (nz, nz))
         self.joseph = check_bool(joseph, "joseph")
 
     def predict(
         self, u: np.ndarray | None = None, *, Q: np.ndarray | float | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Prior ``(x, P)``: ``x = f(x, u)``, ``P = F P F^T + Q`` (``Q`` for this call)."""
-        q = self.Q if Q is None else _mat(Q, "Q", (self.dim_x, self.dim_x))
+        q = self.Q if Q is None else check_matrix(Q, "Q", (self.dim_x, self.dim_x))
         if self.f is None:
             self.P = self.P + q
             return self.x, self.P
         nx = self.dim_x
-        jac = _mat(self.F_jacobian(self.x, u), "F_jacobian(x, u)", (nx, nx))  # type: ignore[misc]
-        self.x = _vec(self.f(self.x, u), "f(x, u)", self.dim_x)
+        jac = check_matrix(self.F_jacobian(self.x, u), "F_jacobian(x, u)", (nx, nx))  # type: ignore[misc]
+        self.x = check_vector(self.f(self.x, u), "f(x, u)", self.dim_x)
         self.P = jac @ self.P @ jac.T + q
         return self.x, self.P
 
     def update(self, z: np.ndarray, *, R: np.ndarray | float | None = None) -> UpdateResult:
         """Correct with ``z`` (``R`` for this call only)."""
-        zz = _vec(z, "z", self.dim_z)
-        r = self.R if R is None else _mat(R, "R", (self.dim_z, self.dim_z))
-        hj = _mat(self.H_jacobian(self.x), "H_jacobian(x)", (self.dim_z, self.dim_x))
-        hx = _vec(self.h(self.x), "h(x)", self.dim_z)
+        zz = check_vector(z, "z", self.dim_z)
+        r = self.R if R is None else check_matrix(R, "R", (self.dim_z, self.dim_z))
+        hj = check_matrix(self.H_jacobian(self.x), "H_jacobian(x)", (self.dim_z, self.dim_x))
+        hx = check_vector(self.h(self.x), "h(x)", self.dim_z)
         # the linear update around the prior, with y = z - h(x) instead of z - H x
         res = _update(self.x, self.P, zz - hx + hj @ self.x, hj, r, self.joseph)
         self.x, self.P = res.x, res.P
