@@ -281,6 +281,7 @@ def _imaging_cases() -> list[Case]:
         Case("median_5_rgb", lambda: median_filter(RGB_U8, 5)),
         Case("median_7", lambda: median_filter(GRAY_U8, 7)),
         Case("sobel", lambda: sobel(GRAY_U8, 1, 0, 5)),
+        Case("sobel_rgb_int16", lambda: sobel(RGB_U8, 0, 1, 3, border="constant")),
         Case("laplacian", lambda: laplacian(GRAY_F32, 3)),
         Case("canny", lambda: canny(GRAY_U8, 20, 60)),
         Case("canny_l1", lambda: canny(GRAY, 0.05, 0.2, l2_gradient=False)),

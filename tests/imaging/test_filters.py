@@ -601,3 +601,52 @@ def test_gaussian_blur_opencv_forms_sigma_y_and_defaults(camera):
 def test_gaussian_blur_both_spellings_and_bad_opencv_forms_are_input_errors(call, match):
     with pytest.raises(InputError, match=match):
         call(np.zeros((16, 16), np.float32))
+
+
+def _float_path(image, kx, ky, border, cval, ax=None, ay=None):
+    # the float32 separable kernel on its own, as before the integer path
+    work = np.dtype(np.float32)
+    src, channels, ax, cidx, ridx, out, is_int, lo, hi = _im.filters._plan(
+        image, kx.size, ky.size, ax, ay, border, work
+    )
+    _im.filters._separable_kernel(
+        src, kx.astype(work), ky.astype(work), ax, cidx, ridx, channels, work.type(cval), out,
+        is_int, lo, hi,
+    )  # fmt: skip
+    return out.reshape(image.shape)
+
+
+@pytest.mark.parametrize("border", ["reflect101", "reflect", "replicate", "constant"])
+def test_uint8_integer_taps_equal_the_float_path(border) -> None:
+    """uint8 images with integer taps (the derivatives) run in int16 and give the float32
+    path's output to the bit: every partial sum is an integer exact in float32. Tiny,
+    narrow and wide images, gray and RGB, saturated pixels, integer constants, anchors
+    off centre, and taps whose sums reach INT_TAPS_MAX."""
+    rng = np.random.default_rng(7)
+    d = derivative_kernel
+    pairs = [
+        (d(1, 3), d(0, 3)),
+        (d(0, 5), d(2, 5)),
+        (np.array([1.0, -2.0, 1.0]), np.array([3.0, 0.0, 0.0, 1.0, -1.0])),
+        (np.ones(7), np.ones(1)),
+        (np.array([2.0]), np.array([-1.0, 1.0])),
+        (np.full(2, 8.0), np.full(1, 8.0)),  # 128 = INT_TAPS_MAX: sums up to 32,640
+    ]
+    for (kx, ky), shape, cval in itertools.product(
+        pairs, [(1, 1), (2, 3), (5, 4), (17, 23), (9, 31, 3), (3, 2, 3)], (0.0, 7.0, 255.0)
+    ):
+        assert np.abs(kx).sum() * np.abs(ky).sum() <= _im.filters.INT_TAPS_MAX
+        for image in (rng.integers(0, 256, shape), np.full(shape, 255)):
+            image = image.astype(np.uint8)
+            for ax, ay in ((None, None), (0, ky.size - 1)):
+                got = separable_filter_unchecked(image, kx, ky, border, cval, np.float32, ax, ay)
+                want = _float_path(image, kx, ky, border, cval, ax, ay)
+                np.testing.assert_array_equal(got, want, err_msg=f"{kx} {ky} {shape} {cval}")
+    image = rng.integers(0, 256, (6, 5)).astype(np.uint8)
+    # what the integer path does not take: fractional taps or constants, sums too large
+    for kx, ky, cval in (
+        (np.array([0.5, 1.0]), np.ones(3), 0.0),
+        (np.ones(3), np.ones(3), 0.5),
+        (np.full(3, 11.0), np.ones(4), 0.0),
+    ):
+        assert _im.filters._integer_taps(image, kx, ky, cval, np.dtype(np.float32)) is None

@@ -23,6 +23,14 @@ integers as OpenCV does. Values are never rescaled.
 The two numba kernels below loop over the kernel taps outside and over a contiguous image
 row inside, so the inner loop vectorizes; an ``(H, W, C)`` image is seen as an
 ``(H, W*C)`` array whose horizontal tap stride is ``C``.
+
+Two uint8 paths run in 16-bit integer lanes (sixteen per AVX2 instruction, as OpenCV's
+uint8 kernels do) and give the float path's results to the bit:
+
+* integer taps to float32 (:func:`sobel`, second derivatives, unnormalized sums): both
+  passes in int16 and one conversion per pixel (:data:`INT_TAPS_MAX`);
+* :func:`box_filter`'s means: uint16 column sums and a rounded division by
+  multiply-high (:mod:`robopercept.imaging.fixed_point`).
 """
 
 from __future__ import annotations
@@ -48,6 +56,7 @@ from robopercept._checks import (
     resolve_alias,
 )
 from robopercept.errors import InputError
+from robopercept.imaging.fixed_point import mulhi_u16, rounding_divisor
 from robopercept.imaging.median_networks import median_rows
 
 __all__ = [
@@ -337,6 +346,109 @@ def _separable_kernel(
             _store_row(out[y], res, is_int, lo, hi)
 
 
+#: the largest sum of absolute integer taps (horizontal times vertical) that
+#: :func:`separable_filter_unchecked` runs in int16 for uint8 images: 255 times it
+#: fits int16 (Sobel 3x3: 8, 5x5: 96, the 2nd derivative 5x5: 64)
+INT_TAPS_MAX = 32767 // 255
+
+
+def _make_int_taps(stride: int) -> Callable[..., None]:
+    """Compile the all-integer separable filter for one tap stride (1 or 3)."""
+
+    @njit(cache=True, nogil=True)
+    def run(src, kyi, kxi, ax, cidx, ridx, cval, out):  # pragma: no cover - compiled
+        """out = float32 of the integer correlation of uint8 src with integer taps
+        (vertical kyi, horizontal kxi), every partial sum within int16; src: (H, W*C)
+        uint8, out: (H, W*C) float32; ``cval`` the integer outside a constant border.
+
+        The vertical taps sum source rows into an int16 row (sixteen lanes, one pass
+        for three taps), the horizontal taps sum that row's shifted slices in int16
+        and convert once to float32; the outputs whose window reaches past the row go
+        through the border map."""
+        s = stride
+        height, n = out.shape
+        ny, nx = kyi.shape[0], kxi.shape[0]
+        w = n // s
+        col = np.empty(n, np.int16)
+        row = np.empty(n, np.int16)
+        lo = ax * s
+        hi = max(lo, n - (nx - 1 - ax) * s)
+        m = hi - lo
+        for y in range(height):
+            inside = True
+            for k in range(ny):
+                inside = inside and ridx[y + k] >= 0
+            if ny == 3 and inside:
+                ra, rb, rc = src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]]
+                wa, wb, wc = kyi[0], kyi[1], kyi[2]
+                for x in range(n):
+                    col[x] = wa * ra[x] + wb * rb[x] + wc * rc[x]
+            else:
+                for x in range(n):
+                    col[x] = 0
+                for k in range(ny):
+                    r, wk = ridx[y + k], kyi[k]
+                    if r < 0:
+                        c = wk * cval
+                        for x in range(n):
+                            col[x] += c
+                    else:
+                        srow = src[r]
+                        for x in range(n):
+                            col[x] += wk * srow[x]
+            o = out[y]
+            inner = o[lo:hi]
+            if nx == 3:
+                c0, c1, c2 = col[:m], col[s : s + m], col[2 * s : 2 * s + m]
+                wa, wb, wc = kxi[0], kxi[1], kxi[2]
+                for x in range(m):
+                    inner[x] = np.int16(wa * c0[x] + wb * c1[x] + wc * c2[x])
+            else:
+                part = row[:m]
+                for x in range(m):
+                    part[x] = 0
+                for t in range(nx):
+                    seg, wt = col[t * s : t * s + m], kxi[t]
+                    for x in range(m):
+                        part[x] += wt * seg[x]
+                for x in range(m):
+                    inner[x] = part[x]
+            edges = nx - 1 if m > 0 else w
+            for b in range(edges):
+                px = b if b < ax or m == 0 else w - (nx - 1) + b
+                for c in range(s):
+                    total = 0
+                    for t in range(nx):
+                        j = cidx[px + t]
+                        v = cval * kyi.sum() if j < 0 else col[j * s + c]
+                        total += kxi[t] * v
+                    o[px * s + c] = total
+
+    return run
+
+
+_int_taps1 = _make_int_taps(1)
+_int_taps3 = _make_int_taps(3)
+
+
+def _integer_taps(
+    image: np.ndarray, kx: np.ndarray, ky: np.ndarray, cval: float, out_dtype: np.dtype
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """``kx, ky`` as int16 when the integer kernel gives the float path's result: a
+    uint8 image with 1 or 3 channels to float32, integer taps and ``cval``, and sums
+    within int16 (:data:`INT_TAPS_MAX`). Every partial sum of the float path is then
+    an integer below 2^24, exact in float32, so the two agree to the bit."""
+    if image.dtype != np.uint8 or out_dtype != np.float32 or image.size == 0:
+        return None
+    if (image.shape[2] if image.ndim == 3 else 1) not in (1, 3) or cval != round(cval):
+        return None
+    if not (np.array_equal(kx, np.round(kx)) and np.array_equal(ky, np.round(ky))):
+        return None
+    if np.abs(kx).sum() * np.abs(ky).sum() > INT_TAPS_MAX or not 0 <= cval <= 255:
+        return None
+    return kx.astype(np.int16), ky.astype(np.int16)
+
+
 @njit(cache=True, nogil=True)
 def _correlate_kernel(
     src, kernel, cidx, ridx, channels, cval, out, is_int, lo, hi
@@ -518,6 +630,11 @@ def separable_filter_unchecked(
     src, channels, ax, cidx, ridx, out, is_int, lo, hi = _plan(
         image, kx.size, ky.size, ax, ay, border, out_dtype
     )
+    taps = _integer_taps(image, kx, ky, cval, out_dtype)
+    if taps is not None:  # uint8 with integer taps (derivatives): int16, the same bits
+        kernel = _int_taps1 if channels == 1 else _int_taps3
+        kernel(src, taps[1], taps[0], ax, cidx, ridx, np.int16(cval), out)
+        return out.reshape(image.shape)
     kx, ky, cv = kx.astype(work), ky.astype(work), work.type(cval)
     _separable_kernel(src, kx, ky, ax, cidx, ridx, channels, cv, out, is_int, lo, hi)
     return out.reshape(image.shape)
@@ -967,10 +1084,13 @@ def box_filter(
     Matches ``cv2.blur`` (``normalize=True``) and ``cv2.boxFilter``. With
     ``normalize=False`` the window sum is returned as float32 (float64 for float64 input).
 
-    A uint8 mean over an odd window up to :data:`BOX_INT_MAX` (15) keeps the window's
-    column sums in uint16, updated by one row in and one out per output row, so a pixel
-    costs the same for every window height; the means and their rounding are those of
-    the float32 separable path the other cases take (tested on every such window).
+    A uint8 mean over an odd window from 3x3 up to :data:`BOX_INT_MAX` (15) keeps the
+    window's column sums in uint16, updated by one row in and one out per output row, so
+    a pixel costs the same for every window height, and divides by multiply-high
+    (:func:`~robopercept.imaging.fixed_point.rounding_divisor`, sixteen lanes at once);
+    the means are those of the float32 separable path the other cases take, the exact
+    :math:`\operatorname{round}(S / (k_w k_h))` (tested on every sum of every such
+    window).
 
     Parameters
     ----------
@@ -993,18 +1113,20 @@ def box_filter(
         if k < 1:
             raise InputError(f"{name} must be a positive integer; got {k!r}")
         _check_taps(k, name, "pass a smaller window")
-    if (
-        normalize and image.dtype == np.uint8 and kw % 2 == 1 and kh % 2 == 1
-        and max(kw, kh) <= BOX_INT_MAX
-    ):  # fmt: skip
-        # the window sums in integers: the same means, rounded the same way
+    divisor = (
+        rounding_divisor(kw * kh, 255 * kw * kh)
+        if normalize and image.dtype == np.uint8 and max(kw, kh) <= BOX_INT_MAX
+        else None
+    )
+    if divisor is not None:
+        # the window sums in integers, the means rounded by multiply-high
         src, channels = _as_rows(image)
         h, w = image.shape[:2]
-        cidx = border_indices(w, kw // 2, kw // 2, border)
-        ridx = border_indices(h, kh // 2, kh // 2, border)
+        cidx = _border_map(w, kw // 2, kw // 2, border)
+        ridx = _border_map(h, kh // 2, kh // 2, border)
         out = np.empty_like(src)
         kernel = _box_u8_gray if channels == 1 else _box_u8_rgb
-        kernel(src, cidx, ridx, kw, kh, kw // 2, np.float32(1.0 / (kw * kh)), out)
+        kernel(src, cidx, ridx, kw, kh, kw // 2, *divisor, out)
         return out.reshape(image.shape)
     scale_x = 1.0 / kw if normalize else 1.0
     scale_y = 1.0 / kh if normalize else 1.0
@@ -1015,9 +1137,10 @@ def box_filter(
 
 
 #: the widest odd box window :func:`box_filter` sums in integers for uint8 images: the
-#: sum of up to 225 pixels fits uint16 (255 * 225 = 57,375), and the float32 path it
-#: replaces rounds every window mean the same way (its error, under (kw + kh) * 255 *
-#: 2**-24, stays below half the 1 / (kw kh) gap that keeps a mean off a rounding tie)
+#: sum of up to 225 pixels fits uint16 (255 * 225 = 57,375, plus the rounding bias
+#: 112), and the float32 path it replaces rounds every window mean the same way (its
+#: error, under (kw + kh) * 255 * 2**-24, stays below half the 1 / (kw kh) gap that
+#: keeps a mean off a rounding tie)
 BOX_INT_MAX = 15
 
 
@@ -1027,35 +1150,35 @@ def _make_box_u8(stride: int) -> Callable[..., None]:
     compile-time constant so that LLVM vectorizes the passes)."""
 
     @njit(cache=True, nogil=True)
-    def box(src, cidx, ridx, kw, kh, ax, scale, out):  # pragma: no cover - compiled
-        """out = floor(S * scale + 1/2), S the window sum, scale 1 / (kw kh) in float32
-        (S is exact in it); src, out: (H, W*C) uint8.
+    def box(src, cidx, ridx, kw, kh, ax, bias, mult, shift, out):  # pragma: no cover
+        """out = round(S / (kw kh)) = mulhi_u16(S + bias, mult, shift) (constants from
+        rounding_divisor), S the window sum; src, out: (H, W*C) uint8.
 
         The window's column sums are kept in uint16 and updated by one row in and one
-        row out per output row; the horizontal taps add ``kw`` shifted column sums."""
+        row out per output row. Outputs whose window lies inside the row add ``kw``
+        shifted slices of the column sums; the ``kw - 1`` outputs at the row's ends
+        read the column sums through the border map."""
         s = stride
         height, n = out.shape
-        m = cidx.shape[0] * s
+        w = n // s
         col = np.zeros(n, np.uint16)
-        pad = np.empty(m, np.uint16)
-        acc = np.empty(n, np.uint16)
+        lo = ax * s  # the outputs [lo, hi) have their whole window inside the row
+        hi = max(lo, n - (kw - 1 - ax) * s)
+        m = hi - lo
+        acc = np.empty(m, np.uint16)
         for i in range(kh):
             r = ridx[i]
             if r >= 0:
                 row = src[r]
                 for x in range(n):
                     col[x] += row[x]
-        inner = pad[ax * s : ax * s + n]
-        half = np.float32(0.5)
         for y in range(height):
             r_in = ridx[y + kh - 1] if y > 0 else -1
             r_out = ridx[y - 1] if y > 0 else -1
-            if r_in >= 0 and r_out >= 0:  # one row in, one out, and the copy, fused
+            if r_in >= 0 and r_out >= 0:  # one row in, one out, fused
                 new, old = src[r_in], src[r_out]
                 for x in range(n):
-                    v = col[x] + new[x] - old[x]
-                    col[x] = v
-                    inner[x] = v
+                    col[x] = col[x] + new[x] - old[x]
             else:
                 if r_in >= 0:
                     new = src[r_in]
@@ -1065,34 +1188,40 @@ def _make_box_u8(stride: int) -> Callable[..., None]:
                     old = src[r_out]
                     for x in range(n):
                         col[x] -= old[x]
-                for x in range(n):
-                    inner[x] = col[x]
-            for b in range(kw - 1):  # the padded columns: ax before, kw - 1 - ax after
-                p = b if b < ax else cidx.shape[0] - (kw - 1) + b
-                j = cidx[p]
-                for c in range(s):
-                    pad[p * s + c] = 0 if j < 0 else col[j * s + c]
             o = out[y]
+            inner = o[lo:hi]
             if kw == 3:  # the taps and the rounding in one pass
-                p0, p1, p2 = pad[:n], pad[s : s + n], pad[2 * s : 2 * s + n]
-                for x in range(n):
-                    v = np.uint16(p0[x] + p1[x] + p2[x])
-                    o[x] = np.int32(np.floor(np.float32(v) * scale + half))
+                c0, c1, c2 = col[:m], col[s : s + m], col[2 * s : 2 * s + m]
+                for x in range(m):
+                    v = np.uint16(c0[x] + c1[x] + c2[x] + bias)
+                    inner[x] = np.uint8(mulhi_u16(v, mult, shift))
             elif kw == 5:
-                p0, p1, p2 = pad[:n], pad[s : s + n], pad[2 * s : 2 * s + n]
-                p3, p4 = pad[3 * s : 3 * s + n], pad[4 * s : 4 * s + n]
-                for x in range(n):
-                    v = np.uint16(p0[x] + p1[x] + p2[x] + p3[x] + p4[x])
-                    o[x] = np.int32(np.floor(np.float32(v) * scale + half))
+                c0, c1, c2 = col[:m], col[s : s + m], col[2 * s : 2 * s + m]
+                c3, c4 = col[3 * s : 3 * s + m], col[4 * s : 4 * s + m]
+                for x in range(m):
+                    v = np.uint16(c0[x] + c1[x] + c2[x] + c3[x] + c4[x] + bias)
+                    inner[x] = np.uint8(mulhi_u16(v, mult, shift))
             else:
-                for x in range(n):
-                    acc[x] = pad[x]
+                for x in range(m):
+                    acc[x] = col[x] + bias
                 for t in range(1, kw):
-                    seg = pad[t * s : t * s + n]
-                    for x in range(n):
+                    seg = col[t * s : t * s + m]
+                    for x in range(m):
                         acc[x] += seg[x]
-                for x in range(n):
-                    o[x] = np.int32(np.floor(np.float32(acc[x]) * scale + half))
+                for x in range(m):
+                    inner[x] = np.uint8(mulhi_u16(acc[x], mult, shift))
+            # the outputs whose window reaches past the row (every output of a row
+            # narrower than the window), through the border map
+            edges = kw - 1 if m > 0 else w
+            for b in range(edges):
+                px = b if b < ax or m == 0 else w - (kw - 1) + b
+                for c in range(s):
+                    total = np.uint16(bias)
+                    for t in range(kw):
+                        j = cidx[px + t]
+                        if j >= 0:
+                            total += col[j * s + c]
+                    o[px * s + c] = np.uint8(mulhi_u16(total, mult, shift))
 
     return box
 # fmt: on
