@@ -42,6 +42,11 @@ def test_every_zero_one_window(k) -> None:
     centres = (np.arange(len(counts)) * k + k // 2, k // 2)
     got = median_filter(image, k)[centres[1], centres[0]]
     np.testing.assert_array_equal(got, want.astype(np.uint8))
+    # one row above: the centres land on the first row of a pair (the 3x3 kernel does
+    # two rows at a time, inserting a different third row into each)
+    below = np.vstack([np.zeros((1, image.shape[1]), np.uint8), image])
+    got = median_filter(below, k)[centres[1] + 1, centres[0]]
+    np.testing.assert_array_equal(got, want.astype(np.uint8))
     # the same windows in each channel of an RGB image, shifted by one block
     rgb = np.stack([image, np.roll(image, k, axis=1), np.roll(image, -k, axis=1)], axis=-1)
     out = median_filter(rgb, k)[k // 2, centres[0]]
@@ -72,7 +77,7 @@ def test_the_kernel_body_is_the_generated_network() -> None:
     for line (regenerate it from the function if the network changes)."""
     ops, out = mn.median_network(5)
     want = [f"{name} = {kind}({a}, {b})" for name, kind, a, b in ops] + [f"o[x] = {out}"]
-    source = inspect.getsource(mn._make_median)
+    source = inspect.getsource(mn._make_median5)
     body = source.split("# median_network(5), written out\n", 1)[1]
     got = [line.strip() for line in body.splitlines()[: len(want)]]
     assert got == want

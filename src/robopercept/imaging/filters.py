@@ -1293,8 +1293,8 @@ def median_filter(
     src, channels = _as_rows(image)
     h, w = image.shape[:2]
     r = ksize // 2
-    cidx = border_indices(w, r, r, border)
-    ridx = border_indices(h, r, r, border)
+    cidx = _border_map(w, r, r, border)  # cached, read only
+    ridx = _border_map(h, r, r, border)
     out = np.empty_like(src)
     # 3x3 and 5x5: min/max networks, vectorized (exact: the same selection)
     if ksize <= 5 and channels in (1, 3):

@@ -11,7 +11,9 @@ Per output row, in two vectorized passes over contiguous arrays (LLVM turns each
 1. **Columns.** The ``k`` source rows of the window are sorted column by column into
    ``S[0] <= S[1] <= ... <= S[k-1]`` (a sorting network of 3 or 9 compare-exchanges per
    column), over the padded width: each column is sorted once and serves the ``k``
-   windows that contain it.
+   windows that contain it. The 3x3 kernel does two output rows at once: their shared
+   source rows are sorted as a pair and each row's third inserted into it (10 min/max
+   for the two rows instead of 12).
 2. **Windows.** For ``k = 3``, with the three sorted columns of a window,
 
    .. math:: \operatorname{med}_9 = \operatorname{med}_3\bigl(\max_j S_0[j],\;
@@ -126,59 +128,251 @@ def median_network(k: int) -> tuple[list[tuple[str, str, str, str]], str]:
 
 
 # fmt: off
-def _make_median(k: int, stride: int) -> Callable[..., None]:
-    """Compile the ``k x k`` median (3 or 5) for one tap stride (the channel count).
+def _make_median5(stride: int) -> Callable[..., None]:
+    """Compile the 5x5 median for one tap stride (the channel count).
 
     ``stride`` is frozen as a compile-time constant, so that LLVM vectorizes the passes
     (as :func:`robopercept.imaging.filters` does for its taps)."""
 
     @njit(cache=True, nogil=True)
     def median(src, cidx, ridx, channels, out):  # pragma: no cover - compiled
-        """out: the median of each k x k window of src, (H, W*C); cidx, ridx: the
+        """out: the median of each 5 x 5 window of src, (H, W*C); cidx, ridx: the
         padded column and row indices (border_indices)."""
         s = stride
         height, n = out.shape
-        r = k // 2
+        r = 2
         m = cidx.shape[0] * s  # the padded row length
         s0, s1, s2 = np.empty(m, src.dtype), np.empty(m, src.dtype), np.empty(m, src.dtype)
-        s3, s4 = np.empty(m if k == 5 else 0, src.dtype), np.empty(m if k == 5 else 0, src.dtype)
+        s3, s4 = np.empty(m, src.dtype), np.empty(m, src.dtype)
         for y in range(height):
             # 1. the window's rows, each column sorted (the interior, then the border)
             b0, b1, b2 = s0[r * s : r * s + n], s1[r * s : r * s + n], s2[r * s : r * s + n]
             b3, b4 = s3[r * s : r * s + n], s4[r * s : r * s + n]
-            if k == 3:
-                r0, r1, r2 = src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]]
-                for x in range(n):
-                    a, b, c = r0[x], r1[x], r2[x]
-                    a, b = min(a, b), max(a, b)
-                    b, c = min(b, c), max(b, c)
-                    a, b = min(a, b), max(a, b)
-                    b0[x], b1[x], b2[x] = a, b, c
-            else:
-                r0, r1, r2 = src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]]
-                r3, r4 = src[ridx[y + 3]], src[ridx[y + 4]]
-                for x in range(n):
-                    v0, v1, v2, v3, v4 = r0[x], r1[x], r2[x], r3[x], r4[x]
-                    v0, v1 = min(v0, v1), max(v0, v1)  # SORT5
-                    v3, v4 = min(v3, v4), max(v3, v4)
-                    v2, v4 = min(v2, v4), max(v2, v4)
-                    v2, v3 = min(v2, v3), max(v2, v3)
-                    v1, v4 = min(v1, v4), max(v1, v4)
-                    v0, v3 = min(v0, v3), max(v0, v3)
-                    v0, v2 = min(v0, v2), max(v0, v2)
-                    v1, v3 = min(v1, v3), max(v1, v3)
-                    v1, v2 = min(v1, v2), max(v1, v2)
-                    b0[x], b1[x], b2[x], b3[x], b4[x] = v0, v1, v2, v3, v4
+            r0, r1, r2 = src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]]
+            r3, r4 = src[ridx[y + 3]], src[ridx[y + 4]]
+            for x in range(n):
+                v0, v1, v2, v3, v4 = r0[x], r1[x], r2[x], r3[x], r4[x]
+                v0, v1 = min(v0, v1), max(v0, v1)  # SORT5
+                v3, v4 = min(v3, v4), max(v3, v4)
+                v2, v4 = min(v2, v4), max(v2, v4)
+                v2, v3 = min(v2, v3), max(v2, v3)
+                v1, v4 = min(v1, v4), max(v1, v4)
+                v0, v3 = min(v0, v3), max(v0, v3)
+                v0, v2 = min(v0, v2), max(v0, v2)
+                v1, v3 = min(v1, v3), max(v1, v3)
+                v1, v2 = min(v1, v2), max(v1, v2)
+                b0[x], b1[x], b2[x], b3[x], b4[x] = v0, v1, v2, v3, v4
             for b in range(2 * r):  # the r padded columns on each side
                 p = b if b < r else cidx.shape[0] - 2 * r + b
                 q = (cidx[p] + r) * s
                 for c in range(s):
                     s0[p * s + c], s1[p * s + c], s2[p * s + c] = s0[q + c], s1[q + c], s2[q + c]
-                    if k == 5:
-                        s3[p * s + c], s4[p * s + c] = s3[q + c], s4[q + c]
+                    s3[p * s + c], s4[p * s + c] = s3[q + c], s4[q + c]
             # 2. the windows
             o = out[y]
-            if k == 3:
+            C00, C01, C02, C03, C04 = s0[:n], s1[:n], s2[:n], s3[:n], s4[:n]
+            C10, C11, C12 = s0[s : s + n], s1[s : s + n], s2[s : s + n]
+            C13, C14 = s3[s : s + n], s4[s : s + n]
+            C20, C21, C22 = s0[2 * s : 2 * s + n], s1[2 * s : 2 * s + n], s2[2 * s : 2 * s + n]
+            C23, C24 = s3[2 * s : 2 * s + n], s4[2 * s : 2 * s + n]
+            C30, C31, C32 = s0[3 * s : 3 * s + n], s1[3 * s : 3 * s + n], s2[3 * s : 3 * s + n]
+            C33, C34 = s3[3 * s : 3 * s + n], s4[3 * s : 3 * s + n]
+            C40, C41, C42 = s0[4 * s : 4 * s + n], s1[4 * s : 4 * s + n], s2[4 * s : 4 * s + n]
+            C43, C44 = s3[4 * s : 4 * s + n], s4[4 * s : 4 * s + n]
+            for x in range(n):
+                c00, c01, c02, c03, c04 = C00[x], C01[x], C02[x], C03[x], C04[x]
+                c10, c11, c12, c13, c14 = C10[x], C11[x], C12[x], C13[x], C14[x]
+                c20, c21, c22, c23, c24 = C20[x], C21[x], C22[x], C23[x], C24[x]
+                c30, c31, c32, c33, c34 = C30[x], C31[x], C32[x], C33[x], C34[x]
+                c40, c41, c42, c43, c44 = C40[x], C41[x], C42[x], C43[x], C44[x]
+                # median_network(5), written out
+                t0 = min(c00, c10)
+                t1 = max(c00, c10)
+                t2 = min(c30, c40)
+                t3 = max(c30, c40)
+                t4 = min(c20, t3)
+                t5 = max(c20, t3)
+                t6 = max(t4, t2)
+                t7 = min(t1, t5)
+                t8 = max(t1, t5)
+                t9 = max(t0, t6)
+                t10 = max(t7, t9)
+                t11 = min(c01, c11)
+                t12 = max(c01, c11)
+                t13 = min(c31, c41)
+                t14 = max(c31, c41)
+                t15 = min(c21, t14)
+                t16 = max(c21, t14)
+                t17 = min(t15, t13)
+                t18 = max(t15, t13)
+                t19 = min(t12, t16)
+                t20 = max(t12, t16)
+                t21 = min(t11, t18)
+                t22 = max(t11, t18)
+                t23 = max(t21, t17)
+                t24 = min(t19, t22)
+                t25 = max(t19, t22)
+                t26 = max(t24, t23)
+                t27 = min(c02, c12)
+                t28 = max(c02, c12)
+                t29 = min(c32, c42)
+                t30 = max(c32, c42)
+                t31 = min(c22, t30)
+                t32 = max(c22, t30)
+                t33 = min(t31, t29)
+                t34 = max(t31, t29)
+                t35 = min(t28, t32)
+                t36 = min(t27, t34)
+                t37 = max(t27, t34)
+                t38 = max(t36, t33)
+                t39 = min(t35, t37)
+                t40 = max(t35, t37)
+                t41 = min(t39, t38)
+                t42 = max(t39, t38)
+                t43 = min(c03, c13)
+                t44 = max(c03, c13)
+                t45 = min(c33, c43)
+                t46 = max(c33, c43)
+                t47 = min(c23, t46)
+                t48 = max(c23, t46)
+                t49 = min(t47, t45)
+                t50 = max(t47, t45)
+                t51 = min(t44, t48)
+                t52 = min(t43, t50)
+                t53 = max(t43, t50)
+                t54 = min(t52, t49)
+                t55 = max(t52, t49)
+                t56 = min(t51, t53)
+                t57 = min(t56, t55)
+                t58 = max(t56, t55)
+                t59 = min(c04, c14)
+                t60 = max(c04, c14)
+                t61 = min(c34, c44)
+                t62 = max(c34, c44)
+                t63 = min(c24, t62)
+                t64 = max(c24, t62)
+                t65 = min(t63, t61)
+                t66 = max(t63, t61)
+                t67 = min(t60, t64)
+                t68 = min(t59, t66)
+                t69 = max(t59, t66)
+                t70 = min(t68, t65)
+                t71 = max(t68, t65)
+                t72 = min(t67, t69)
+                t73 = min(t72, t71)
+                t74 = min(t10, t8)
+                t75 = max(t10, t8)
+                t76 = min(t26, t25)
+                t77 = max(t26, t25)
+                t78 = min(t74, t76)
+                t79 = max(t74, t76)
+                t80 = min(t75, t77)
+                t81 = max(t75, t77)
+                t82 = min(t80, t79)
+                t83 = max(t80, t79)
+                t84 = min(t20, t41)
+                t85 = max(t20, t41)
+                t86 = min(t42, t40)
+                t87 = max(t42, t40)
+                t88 = min(t84, t86)
+                t89 = max(t84, t86)
+                t90 = min(t85, t87)
+                t91 = max(t85, t87)
+                t92 = min(t90, t89)
+                t93 = max(t90, t89)
+                t94 = min(t78, t88)
+                t95 = max(t78, t88)
+                t96 = min(t83, t93)
+                t97 = max(t83, t93)
+                t98 = min(t96, t95)
+                t99 = max(t96, t95)
+                t100 = min(t82, t92)
+                t101 = max(t82, t92)
+                t102 = min(t81, t91)
+                t103 = min(t102, t101)
+                t104 = max(t102, t101)
+                t105 = min(t100, t98)
+                t106 = max(t100, t98)
+                t107 = min(t103, t99)
+                t108 = max(t103, t99)
+                t109 = min(t104, t97)
+                t110 = max(t104, t97)
+                t111 = min(t54, t57)
+                t112 = max(t54, t57)
+                t113 = min(t58, t70)
+                t114 = max(t58, t70)
+                t115 = min(t111, t113)
+                t116 = max(t111, t113)
+                t117 = min(t112, t114)
+                t118 = max(t112, t114)
+                t119 = min(t117, t116)
+                t120 = max(t117, t116)
+                t121 = min(t115, t73)
+                t122 = max(t115, t73)
+                t123 = min(t120, t122)
+                t124 = max(t120, t122)
+                t125 = min(t119, t123)
+                t126 = max(t119, t123)
+                t127 = min(t118, t124)
+                t128 = max(t118, t124)
+                t129 = max(t94, t121)
+                t130 = min(t108, t128)
+                t131 = max(t130, t129)
+                t132 = max(t106, t126)
+                t133 = min(t110, t132)
+                t134 = min(t133, t131)
+                t135 = max(t105, t125)
+                t136 = min(t109, t135)
+                t137 = min(t107, t127)
+                t138 = max(t137, t136)
+                t139 = max(t138, t134)
+                o[x] = t139
+
+    return median
+# fmt: on
+
+
+def _make_median3(stride: int) -> Callable[..., None]:
+    """Compile the 3x3 median for one tap stride (the channel count), two output rows
+    at a time.
+
+    Output rows ``y`` and ``y + 1`` share the source rows ``y + 1`` and ``y + 2`` of
+    their windows: that pair is sorted once (one compare-exchange) and each row's third
+    source row is inserted into it (``min``, ``max`` and the median of three from a
+    sorted pair: four operations), 10 min/max for the two rows' sorted columns where
+    two separate 3-sorts take 12, and four source rows read instead of six."""
+
+    @njit(cache=True, nogil=True)
+    def median(src, cidx, ridx, channels, out):  # pragma: no cover - compiled
+        """out: the median of each 3 x 3 window of src, (H, W*C); cidx, ridx: the
+        padded column and row indices (border_indices)."""
+        s = stride
+        height, n = out.shape
+        m = cidx.shape[0] * s  # the padded row length
+        a0, a1, a2 = np.empty(m, src.dtype), np.empty(m, src.dtype), np.empty(m, src.dtype)
+        b0, b1, b2 = np.empty(m, src.dtype), np.empty(m, src.dtype), np.empty(m, src.dtype)
+        for y in range(0, height, 2):
+            two = y + 1 < height
+            # 1. the sorted columns of both rows' windows (the interior, then the border)
+            r0, r1, r2 = src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]]
+            r3 = src[ridx[y + 3]] if two else r2
+            lo_a, me_a, hi_a = a0[s : s + n], a1[s : s + n], a2[s : s + n]
+            lo_b, me_b, hi_b = b0[s : s + n], b1[s : s + n], b2[s : s + n]
+            for x in range(n):
+                p, q = min(r1[x], r2[x]), max(r1[x], r2[x])
+                a, d = r0[x], r3[x]
+                lo_a[x], me_a[x], hi_a[x] = min(a, p), max(p, min(a, q)), max(a, q)
+                lo_b[x], me_b[x], hi_b[x] = min(d, p), max(p, min(d, q)), max(d, q)
+            for b in range(2):  # the padded column on each side
+                p = 0 if b == 0 else cidx.shape[0] - 1
+                q = (cidx[p] + 1) * s
+                for c in range(s):
+                    a0[p * s + c], a1[p * s + c], a2[p * s + c] = a0[q + c], a1[q + c], a2[q + c]
+                    b0[p * s + c], b1[p * s + c], b2[p * s + c] = b0[q + c], b1[q + c], b2[q + c]
+            # 2. the windows: med3(max of the lows, med3 of the middles, min of the highs)
+            for row in range(2 if two else 1):
+                s0, s1, s2 = (a0, a1, a2) if row == 0 else (b0, b1, b2)
+                o = out[y + row]
                 lo0, lo1, lo2 = s0[:n], s0[s : s + n], s0[2 * s : 2 * s + n]
                 me0, me1, me2 = s1[:n], s1[s : s + n], s1[2 * s : 2 * s + n]
                 hi0, hi1, hi2 = s2[:n], s2[s : s + n], s2[2 * s : 2 * s + n]
@@ -188,173 +382,14 @@ def _make_median(k: int, stride: int) -> Callable[..., None]:
                     a, b, c = me0[x], me1[x], me2[x]
                     me = max(min(a, b), min(max(a, b), c))
                     o[x] = max(min(lo, me), min(max(lo, me), hi))
-            else:
-                C00, C01, C02, C03, C04 = s0[:n], s1[:n], s2[:n], s3[:n], s4[:n]
-                C10, C11, C12 = s0[s : s + n], s1[s : s + n], s2[s : s + n]
-                C13, C14 = s3[s : s + n], s4[s : s + n]
-                C20, C21, C22 = s0[2 * s : 2 * s + n], s1[2 * s : 2 * s + n], s2[2 * s : 2 * s + n]
-                C23, C24 = s3[2 * s : 2 * s + n], s4[2 * s : 2 * s + n]
-                C30, C31, C32 = s0[3 * s : 3 * s + n], s1[3 * s : 3 * s + n], s2[3 * s : 3 * s + n]
-                C33, C34 = s3[3 * s : 3 * s + n], s4[3 * s : 3 * s + n]
-                C40, C41, C42 = s0[4 * s : 4 * s + n], s1[4 * s : 4 * s + n], s2[4 * s : 4 * s + n]
-                C43, C44 = s3[4 * s : 4 * s + n], s4[4 * s : 4 * s + n]
-                for x in range(n):
-                    c00, c01, c02, c03, c04 = C00[x], C01[x], C02[x], C03[x], C04[x]
-                    c10, c11, c12, c13, c14 = C10[x], C11[x], C12[x], C13[x], C14[x]
-                    c20, c21, c22, c23, c24 = C20[x], C21[x], C22[x], C23[x], C24[x]
-                    c30, c31, c32, c33, c34 = C30[x], C31[x], C32[x], C33[x], C34[x]
-                    c40, c41, c42, c43, c44 = C40[x], C41[x], C42[x], C43[x], C44[x]
-                    # median_network(5), written out
-                    t0 = min(c00, c10)
-                    t1 = max(c00, c10)
-                    t2 = min(c30, c40)
-                    t3 = max(c30, c40)
-                    t4 = min(c20, t3)
-                    t5 = max(c20, t3)
-                    t6 = max(t4, t2)
-                    t7 = min(t1, t5)
-                    t8 = max(t1, t5)
-                    t9 = max(t0, t6)
-                    t10 = max(t7, t9)
-                    t11 = min(c01, c11)
-                    t12 = max(c01, c11)
-                    t13 = min(c31, c41)
-                    t14 = max(c31, c41)
-                    t15 = min(c21, t14)
-                    t16 = max(c21, t14)
-                    t17 = min(t15, t13)
-                    t18 = max(t15, t13)
-                    t19 = min(t12, t16)
-                    t20 = max(t12, t16)
-                    t21 = min(t11, t18)
-                    t22 = max(t11, t18)
-                    t23 = max(t21, t17)
-                    t24 = min(t19, t22)
-                    t25 = max(t19, t22)
-                    t26 = max(t24, t23)
-                    t27 = min(c02, c12)
-                    t28 = max(c02, c12)
-                    t29 = min(c32, c42)
-                    t30 = max(c32, c42)
-                    t31 = min(c22, t30)
-                    t32 = max(c22, t30)
-                    t33 = min(t31, t29)
-                    t34 = max(t31, t29)
-                    t35 = min(t28, t32)
-                    t36 = min(t27, t34)
-                    t37 = max(t27, t34)
-                    t38 = max(t36, t33)
-                    t39 = min(t35, t37)
-                    t40 = max(t35, t37)
-                    t41 = min(t39, t38)
-                    t42 = max(t39, t38)
-                    t43 = min(c03, c13)
-                    t44 = max(c03, c13)
-                    t45 = min(c33, c43)
-                    t46 = max(c33, c43)
-                    t47 = min(c23, t46)
-                    t48 = max(c23, t46)
-                    t49 = min(t47, t45)
-                    t50 = max(t47, t45)
-                    t51 = min(t44, t48)
-                    t52 = min(t43, t50)
-                    t53 = max(t43, t50)
-                    t54 = min(t52, t49)
-                    t55 = max(t52, t49)
-                    t56 = min(t51, t53)
-                    t57 = min(t56, t55)
-                    t58 = max(t56, t55)
-                    t59 = min(c04, c14)
-                    t60 = max(c04, c14)
-                    t61 = min(c34, c44)
-                    t62 = max(c34, c44)
-                    t63 = min(c24, t62)
-                    t64 = max(c24, t62)
-                    t65 = min(t63, t61)
-                    t66 = max(t63, t61)
-                    t67 = min(t60, t64)
-                    t68 = min(t59, t66)
-                    t69 = max(t59, t66)
-                    t70 = min(t68, t65)
-                    t71 = max(t68, t65)
-                    t72 = min(t67, t69)
-                    t73 = min(t72, t71)
-                    t74 = min(t10, t8)
-                    t75 = max(t10, t8)
-                    t76 = min(t26, t25)
-                    t77 = max(t26, t25)
-                    t78 = min(t74, t76)
-                    t79 = max(t74, t76)
-                    t80 = min(t75, t77)
-                    t81 = max(t75, t77)
-                    t82 = min(t80, t79)
-                    t83 = max(t80, t79)
-                    t84 = min(t20, t41)
-                    t85 = max(t20, t41)
-                    t86 = min(t42, t40)
-                    t87 = max(t42, t40)
-                    t88 = min(t84, t86)
-                    t89 = max(t84, t86)
-                    t90 = min(t85, t87)
-                    t91 = max(t85, t87)
-                    t92 = min(t90, t89)
-                    t93 = max(t90, t89)
-                    t94 = min(t78, t88)
-                    t95 = max(t78, t88)
-                    t96 = min(t83, t93)
-                    t97 = max(t83, t93)
-                    t98 = min(t96, t95)
-                    t99 = max(t96, t95)
-                    t100 = min(t82, t92)
-                    t101 = max(t82, t92)
-                    t102 = min(t81, t91)
-                    t103 = min(t102, t101)
-                    t104 = max(t102, t101)
-                    t105 = min(t100, t98)
-                    t106 = max(t100, t98)
-                    t107 = min(t103, t99)
-                    t108 = max(t103, t99)
-                    t109 = min(t104, t97)
-                    t110 = max(t104, t97)
-                    t111 = min(t54, t57)
-                    t112 = max(t54, t57)
-                    t113 = min(t58, t70)
-                    t114 = max(t58, t70)
-                    t115 = min(t111, t113)
-                    t116 = max(t111, t113)
-                    t117 = min(t112, t114)
-                    t118 = max(t112, t114)
-                    t119 = min(t117, t116)
-                    t120 = max(t117, t116)
-                    t121 = min(t115, t73)
-                    t122 = max(t115, t73)
-                    t123 = min(t120, t122)
-                    t124 = max(t120, t122)
-                    t125 = min(t119, t123)
-                    t126 = max(t119, t123)
-                    t127 = min(t118, t124)
-                    t128 = max(t118, t124)
-                    t129 = max(t94, t121)
-                    t130 = min(t108, t128)
-                    t131 = max(t130, t129)
-                    t132 = max(t106, t126)
-                    t133 = min(t110, t132)
-                    t134 = min(t133, t131)
-                    t135 = max(t105, t125)
-                    t136 = min(t109, t135)
-                    t137 = min(t107, t127)
-                    t138 = max(t137, t136)
-                    t139 = max(t138, t134)
-                    o[x] = t139
 
     return median
-# fmt: on
 
 
-_median3_gray = _make_median(3, 1)
-_median3_rgb = _make_median(3, 3)
-_median5_gray = _make_median(5, 1)
-_median5_rgb = _make_median(5, 3)
+_median3_gray = _make_median3(1)
+_median3_rgb = _make_median3(3)
+_median5_gray = _make_median5(1)
+_median5_rgb = _make_median5(3)
 
 
 def median_rows(
