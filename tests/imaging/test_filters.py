@@ -30,6 +30,7 @@ from robopercept.imaging import (
 from robopercept.imaging.filters import (
     MAX_KERNEL_SIZE,
     border_indices,
+    gaussian_kernel_fixed,
     separable_filter_unchecked,
 )
 
@@ -204,13 +205,10 @@ def test_gaussian_blur_matches_opencv(camera, astronaut, graf):
         f = img.astype(np.float32) / 255.0
         ref = cv2.GaussianBlur(f, (9, 9), 1.7)
         assert np.abs(gaussian_blur(f, 1.7, ksize=9) - ref).max() <= 1e-6
-        # uint8: OpenCV uses an 8-bit fixed-point kernel, so allow one grey level
+        # uint8: OpenCV's 8-bit fixed-point kernel and integer sums, to the bit
         out8 = gaussian_blur(img, 1.7, ksize=9)
         assert out8.dtype == np.uint8
-        diff = np.abs(out8.astype(int) - cv2.GaussianBlur(img, (9, 9), 1.7))
-        # at most one grey level anywhere; off-by-one on < 10% of pixels (rounding of
-        # the fixed-point kernel vs our float32 one)
-        assert diff.max() <= 1 and diff.mean() < 0.1
+        np.testing.assert_array_equal(out8, cv2.GaussianBlur(img, (9, 9), 1.7))
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -233,33 +231,31 @@ def test_gaussian_blur_default_size_matches_opencv_float(camera, astronaut, dtyp
 
 
 def test_gaussian_blur_default_size_matches_opencv_uint8(camera, astronaut):
-    """uint8 keeps OpenCV's 3-sigma size (13 taps at sigma 2). Tolerance: one grey level,
-    off-by-one on < 10% of pixels: OpenCV blurs 8-bit images with a fixed-point kernel,
-    we in float32 and round once. The wrong (4-sigma) size would change the kernel's
-    normalization and break the equality with cv2.GaussianBlur(img, (13, 13), 2.0) below."""
+    """uint8 keeps OpenCV's 3-sigma size (13 taps at sigma 2) and equals
+    cv2.GaussianBlur to the bit (the same fixed-point kernel, integer sums)."""
     for img in (camera, astronaut):
         ours = gaussian_blur(img, 2.0)
         assert ours.dtype == np.uint8
-        diff = np.abs(ours.astype(int) - cv2.GaussianBlur(img, (0, 0), 2.0))
-        assert diff.max() <= 1 and diff.mean() < 0.1
+        np.testing.assert_array_equal(ours, cv2.GaussianBlur(img, (0, 0), 2.0))
         np.testing.assert_array_equal(ours, gaussian_blur(img, 2.0, ksize=13))
-        assert not np.array_equal(ours, gaussian_blur(img, 2.0, ksize=17))
+    # (at 8 bits the 4-sigma kernel's extra taps round to 0: the size shows in the rule)
+    assert gaussian_ksize(2.0, np.uint8) == 13 and gaussian_ksize(2.0, np.float32) == 17
 
 
 @pytest.mark.parametrize("ksize", [3, 5, 7, 9, 11, (5, 9), (11, 3)])
 def test_gaussian_blur_sigma_zero_takes_sigma_from_ksize(camera, ksize):
     """sigma=0 with a ksize: sigma = 0.3 ((ksize - 1) / 2 - 1) + 0.8 per axis (OpenCV's
     fixed kernels up to 9 taps), as cv2.GaussianBlur(f, ksize, 0). Same tolerances as
-    above (float32 accumulation; one grey level for 8-bit)."""
+    above (float32 accumulation); 8-bit to the bit."""
     k = (ksize, ksize) if isinstance(ksize, int) else ksize
     f = camera.astype(np.float32) / 255.0
     assert np.abs(gaussian_blur(f, 0, ksize=ksize) - cv2.GaussianBlur(f, k, 0)).max() <= 1e-6
     f64 = f.astype(np.float64)
     ref = cv2.GaussianBlur(f64, k, 0)
     assert np.abs(gaussian_blur(f64, 0, ksize=ksize) - ref).max() <= 1e-12
-    ours8 = gaussian_blur(camera, 0, ksize=ksize).astype(int)
-    diff = np.abs(ours8 - cv2.GaussianBlur(camera, k, 0))
-    assert diff.max() <= 1 and diff.mean() < 0.1
+    np.testing.assert_array_equal(
+        gaussian_blur(camera, 0, ksize=ksize), cv2.GaussianBlur(camera, k, 0)
+    )
 
 
 @pytest.mark.parametrize("ksize", [1, 3, 5, 7])
@@ -451,7 +447,7 @@ class TestSeparableFilterUnchecked:
         g = gaussian_kernel(1.3, gaussian_ksize(1.3, dtype))  # gaussian_blur's size rule
         for border in ("reflect101", "reflect", "replicate", "constant"):
             blur = separable_filter_unchecked(img, g, g, border)
-            if len(shape) == 2 or shape[2] == 3:
+            if (len(shape) == 2 or shape[2] == 3) and dtype != np.uint8:
                 np.testing.assert_array_equal(blur, gaussian_blur(img, 1.3, border=border))
             kx, ky = np.array([1.0, -2.0, 0.5, 3.0]), np.array([0.25, 1.0, -1.0])
             out = np.float32 if dtype == np.uint8 else dtype
@@ -650,3 +646,44 @@ def test_uint8_integer_taps_equal_the_float_path(border) -> None:
         (np.full(3, 11.0), np.ones(4), 0.0),
     ):
         assert _im.filters._integer_taps(image, kx, ky, cval, np.dtype(np.float32)) is None
+
+
+@pytest.mark.parametrize("border", ["reflect101", "reflect", "replicate", "constant"])
+def test_uint8_gaussian_is_opencvs_to_the_bit(border) -> None:
+    """uint8 blurs equal cv2.GaussianBlur exactly: sigmas from the fixed small kernels
+    (sigma 0) to wide ones, automatic and given sizes, anisotropic sigmas, gray and RGB,
+    images narrower and shorter than the kernel, a single row."""
+    rng = np.random.default_rng(11)
+    images = [
+        rng.integers(0, 256, (37, 53)).astype(np.uint8),
+        rng.integers(0, 256, (29, 41, 3)).astype(np.uint8),
+        rng.integers(0, 256, (1, 17)).astype(np.uint8),
+        rng.integers(0, 256, (6, 3, 3)).astype(np.uint8),
+        np.full((9, 12), 255, np.uint8),
+    ]
+    cases = [(0.0, 3), (0.0, 9), (0.0, 11), (0.8, 0), (1.3, 0), (2.0, 13), (3.3, 21), (5.0, 0)]
+    for (sigma, k), img in itertools.product(cases, images):
+        ours = gaussian_blur(img, sigma, ksize=k or None, border=border)
+        ref = cv2.GaussianBlur(img, (k, k), sigma, borderType=CV_BORDER[border])
+        np.testing.assert_array_equal(ours, ref, err_msg=f"{sigma} {k} {img.shape}")
+    img = images[1]
+    ours = gaussian_blur(img, 1.0, sigma_y=2.5, border=border)
+    ref = cv2.GaussianBlur(img, (0, 0), 1.0, sigmaY=2.5, borderType=CV_BORDER[border])
+    np.testing.assert_array_equal(ours, ref)
+
+
+def test_gaussian_kernel_fixed() -> None:
+    # OpenCV's small kernels exactly; symmetric, summing to 2^bits, close to the float
+    # kernel (error diffusion keeps each partial sum within half a unit)
+    assert gaussian_kernel_fixed(0, 3).tolist() == [64, 128, 64]
+    assert gaussian_kernel_fixed(0, 9).tolist() == [4, 13, 30, 51, 60, 51, 30, 13, 4]
+    for sigma, n, bits in ((2.0, 13, 8), (0.7, 5, 8), (3.3, 21, 16), (0.0, 15, 8), (9.0, 7, 12)):
+        k = gaussian_kernel_fixed(sigma, n, bits)
+        assert k.sum() == 2**bits and (k == k[::-1]).all() and (k >= 0).all()
+        w = gaussian_kernel(sigma, n) * 2**bits
+        assert np.abs(np.cumsum(k - w)[: n // 2]).max() <= 0.5 + 1e-9
+    assert gaussian_kernel_fixed(1e-300, 5).tolist() == [0, 0, 256, 0, 0]  # an impulse
+    with pytest.raises(InputError, match="bits must be at most 32"):
+        gaussian_kernel_fixed(1.0, 5, 40)
+    with pytest.raises(InputError, match="odd"):
+        gaussian_kernel_fixed(1.0, 4)

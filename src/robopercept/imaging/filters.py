@@ -38,6 +38,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable
+from fractions import Fraction
 from typing import Literal
 
 import numpy as np
@@ -594,7 +595,8 @@ def separable_filter_unchecked(
     half up and saturated, as OpenCV does. The result equals
     ``correlate_separable(image, kx, ky, border=border, cval=cval)`` when ``out_dtype`` is
     float32 for integer input, and ``gaussian_blur(image, sigma, ksize=n)`` for
-    ``kx = ky = gaussian_kernel(sigma, n)`` and ``out_dtype=None``.
+    ``kx = ky = gaussian_kernel(sigma, n)``, ``out_dtype=None`` and a float image (a
+    uint8 image's blur uses OpenCV's fixed-point kernels instead).
 
     Parameters
     ----------
@@ -911,6 +913,159 @@ def gaussian_kernel(sigma: float, size: int | None = None) -> np.ndarray:
     return w / w.sum()
 
 
+def gaussian_kernel_fixed(sigma: float, size: int, bits: int = 8) -> np.ndarray:
+    r"""OpenCV's fixed-point Gaussian kernel: integer taps summing to :math:`2^{bits}`,
+    those of ``cv2.GaussianBlur`` on uint8 images (``bits = 8``).
+
+    OpenCV samples the Gaussian in float64 in its own order of operations
+    (``getGaussianKernelBitExact``): with :math:`s = -	frac18 / \sigma^2` and
+    :math:`t_i = \exp(s\, u_i^2)` at the doubled offsets :math:`u_i = 2 i + 1 - n`,
+    :math:`w_i = t_i / (2 \sum_{i < n/2} t_i + 1)` (the centre's :math:`t = 1`); for
+    :math:`\sigma \le 0` it takes :math:`\sigma = 0.15 n + 0.35` (one rounding, a fused
+    multiply-add) or, for :math:`n \le 9`, the fixed small kernels of
+    :func:`gaussian_kernel`. The taps are then rounded by error diffusion from the
+    outside in (``getGaussianKernelFixedPoint_ED``): :math:`a_i = 2^{bits} w_i + e`,
+    :math:`k_i = \operatorname{rint}(a_i)`, :math:`e = a_i - k_i`, mirrored, and the
+    centre takes what is left of :math:`2^{bits}`.
+
+    Parameters
+    ----------
+    sigma : float
+        Standard deviation, or 0 (from ``size``, as :func:`gaussian_kernel`).
+    size : int
+        Odd kernel length.
+    bits : int
+        Fraction bits, 1 to 32.
+
+    Returns
+    -------
+    (size,) int64 ndarray
+        Symmetric, summing to ``2**bits``.
+
+    Examples
+    --------
+    >>> gaussian_kernel_fixed(0, 5).tolist()
+    [16, 64, 96, 64, 16]
+    >>> int(gaussian_kernel_fixed(2.0, 13).sum())
+    256
+    """
+    sigma = check_real(sigma, "sigma", 0.0)
+    size = check_odd_size(size, "size")
+    _check_taps(size, "size", "pass a smaller odd size")
+    bits = check_int(bits, "bits", 1)
+    if bits > 32:
+        raise InputError(f"bits must be at most 32 (OpenCV's fixed-point kernels); got {bits}")
+    if sigma == 0.0 and size in _SMALL_GAUSSIAN:
+        w = np.array(_SMALL_GAUSSIAN[size], dtype=np.float64)
+    else:
+        if sigma == 0.0:  # 0.15 n + 0.35 rounded once, as OpenCV's mulAdd
+            sigma = float(Fraction(size) * Fraction(0.15) + Fraction(0.35))
+        with np.errstate(over="ignore", under="ignore", divide="ignore"):
+            scale = np.float64(-0.125) / np.float64(sigma * sigma)  # -inf on underflow: an impulse
+        half = size // 2
+        u = np.arange(1 - size, 0, 2, dtype=np.float64)  # the doubled offsets left of centre
+        with np.errstate(over="ignore", under="ignore"):
+            t = np.exp(u * u * scale)
+        total = 0.0
+        for v in t.tolist():  # summed in order, as OpenCV
+            total += v
+        inv = 1.0 / (total * 2.0 + 1.0)
+        w = np.empty(size, dtype=np.float64)
+        w[:half] = t * inv
+        w[half + 1 :] = w[:half][::-1]
+        w[half] = inv
+    one = 1 << bits
+    taps = np.empty(size, dtype=np.int64)
+    err, total_taps = 0.0, 0
+    for i in range(size // 2):
+        adjusted = float(w[i]) * one + err
+        k = int(np.rint(adjusted))  # cvRound: to nearest, ties to even
+        err = adjusted - k
+        taps[i] = taps[size - 1 - i] = k
+        total_taps += k
+    taps[size // 2] = one - 2 * total_taps
+    return taps
+
+
+def _make_gaussian_u8(stride: int) -> Callable[..., None]:
+    """Compile OpenCV's fixed-point uint8 Gaussian for one tap stride (1 or 3)."""
+
+    @njit(cache=True, nogil=True)
+    def blur(src, kx, ky, cidx, ridx, out):  # pragma: no cover - compiled
+        """out = (sum_i ky[i] sum_j kx[j] src[., .] + 2^15) >> 16 with integer taps of
+        sum 256 each (gaussian_kernel_fixed): exact, so the same as OpenCV's order
+        (horizontal first). src, out: (H, W*C) uint8; a border index -1 reads 0.
+
+        The vertical taps sum into uint16 (at most 255 * 256), the mirrored rows added
+        first and multiplied once; the horizontal taps into uint32, mirrored columns
+        likewise; sixteen and eight lanes."""
+        s = stride
+        height, n = out.shape
+        nx, ny = kx.shape[0], ky.shape[0]
+        ax, ay = nx // 2, ny // 2
+        col = np.zeros(cidx.shape[0] * s, np.uint16)  # one row's vertical sums, padded
+        acc = np.empty(n, np.uint32)
+        inner = col[ax * s : ax * s + n]
+        for y in range(height):
+            r, wc = ridx[y + ay], ky[ay]
+            if r >= 0:
+                row = src[r]
+                for x in range(n):
+                    inner[x] = wc * row[x]
+            else:
+                for x in range(n):
+                    inner[x] = 0
+            t = 0
+            while t < ay:
+                ra, rb, w = ridx[y + t], ridx[y + ny - 1 - t], ky[t]
+                if t + 1 < ay and min(ra, rb, ridx[y + t + 1], ridx[y + ny - 2 - t]) >= 0:
+                    # two mirrored pairs per pass (the sum stays in a register)
+                    a, b, v = src[ra], src[rb], ky[t + 1]
+                    c, d = src[ridx[y + t + 1]], src[ridx[y + ny - 2 - t]]
+                    for x in range(n):
+                        inner[x] += w * (np.uint16(a[x]) + b[x]) + v * (np.uint16(c[x]) + d[x])
+                    t += 2
+                    continue
+                if ra >= 0 and rb >= 0:
+                    a, b = src[ra], src[rb]
+                    for x in range(n):
+                        inner[x] += w * (np.uint16(a[x]) + b[x])
+                elif ra >= 0 or rb >= 0:
+                    a = src[max(ra, rb)]
+                    for x in range(n):
+                        inner[x] += w * a[x]
+                t += 1
+            for b in range(nx - 1):  # the padded columns: ax before, as many after
+                p = b if b < ax else cidx.shape[0] - (nx - 1) + b
+                j = cidx[p]
+                for c in range(s):
+                    col[p * s + c] = 0 if j < 0 else col[(j + ax) * s + c]
+            wc = np.uint32(kx[ax])
+            for x in range(n):
+                acc[x] = wc * inner[x]
+            t = 0
+            while t < ax:  # two mirrored pairs per pass, as above
+                w, lo, hi = kx[t], col[t * s : t * s + n], col[(nx - 1 - t) * s :]
+                if t + 1 < ax:
+                    v, lo2, hi2 = kx[t + 1], col[(t + 1) * s :], col[(nx - 2 - t) * s :]
+                    for x in range(n):
+                        acc[x] += w * (np.uint32(lo[x]) + hi[x]) + v * (np.uint32(lo2[x]) + hi2[x])
+                    t += 2
+                    continue
+                for x in range(n):
+                    acc[x] += w * (np.uint32(lo[x]) + hi[x])
+                t += 1
+            o = out[y]
+            for x in range(n):
+                o[x] = (acc[x] + 32768) >> 16
+
+    return blur
+
+
+_gaussian_u8_gray = _make_gaussian_u8(1)
+_gaussian_u8_rgb = _make_gaussian_u8(3)
+
+
 def _gaussian_axis(sigma: float, size: int, dtype: np.dtype, flag: str) -> np.ndarray:
     # the kernel of one axis of gaussian_blur: size 0 is automatic (OpenCV's rule)
     if size == 0:
@@ -976,7 +1131,10 @@ def gaussian_blur(
     ``sigma = 0`` with a ``ksize`` derives sigma from the size as
     :func:`gaussian_kernel` (``0.3 ((ksize - 1) / 2 - 1) + 0.8``, OpenCV's fixed kernels
     up to 9 taps). The result equals OpenCV's to float rounding for float input, and
-    within 1 grey level for uint8 (OpenCV uses an 8-bit fixed-point kernel there).
+    bit for bit for uint8: there OpenCV rounds each kernel to 8-bit fixed point
+    (:func:`gaussian_kernel_fixed`) and filters in integers, and so does this function
+    (vertical sums in uint16 and horizontal in uint32, mirrored taps added before their
+    one multiply).
 
     Parameters
     ----------
@@ -1067,6 +1225,17 @@ def gaussian_blur(
             _check_taps(check_odd_size(k, "ksize"), "ksize", "pass a smaller odd ksize")
     kx = _gaussian_axis(sx, kw, image.dtype, "kernel width")
     ky = kx if (sy, kh) == (sx, kw) else _gaussian_axis(sy, kh, image.dtype, "kernel height")
+    if image.dtype == np.uint8:
+        # OpenCV's fixed-point kernels in integers: its result to the bit
+        fx = gaussian_kernel_fixed(sx, kx.size).astype(np.uint16)
+        fy = fx if (sy, kh) == (sx, kw) else gaussian_kernel_fixed(sy, ky.size).astype(np.uint16)
+        src, channels = _as_rows(image)
+        h, w = image.shape[:2]
+        cidx = _border_map(w, fx.size // 2, fx.size // 2, border)
+        ridx = _border_map(h, fy.size // 2, fy.size // 2, border)
+        out = np.empty_like(src)
+        (_gaussian_u8_gray if channels == 1 else _gaussian_u8_rgb)(src, fx, fy, cidx, ridx, out)
+        return out.reshape(image.shape)
     return separable_filter_unchecked(image, kx, ky, border, 0.0, image.dtype)
 
 
