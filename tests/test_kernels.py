@@ -268,6 +268,10 @@ def _imaging_cases() -> list[Case]:
     return [
         Case("gaussian_blur_f64", lambda: gaussian_blur(GRAY, 1.2)),
         Case("gaussian_blur_f32", lambda: gaussian_blur(GRAY_F32, 0.8, sigma_y=1.5)),
+        Case(
+            "gaussian_blur_f32_rgb",
+            lambda: gaussian_blur(RGB_U8.astype(np.float32) / 255, 1.4, border="constant"),
+        ),
         Case("gaussian_blur_u8", lambda: gaussian_blur(GRAY_U8, 2.0, border="constant")),
         Case("gaussian_blur_u8_rgb", lambda: gaussian_blur(RGB_U8, 1.1, sigma_y=2.3)),
         Case("box_filter", lambda: box_filter(GRAY_U8, (4, 3), normalize=False)),
