@@ -987,147 +987,115 @@ def gaussian_kernel_fixed(sigma: float, size: int, bits: int = 8) -> np.ndarray:
     return taps
 
 
-def _make_gaussian_u8(stride: int) -> Callable[..., None]:
-    """Compile OpenCV's fixed-point uint8 Gaussian for one tap stride (1 or 3)."""
+def _make_gaussian(stride: int, integer: bool) -> Callable[..., None]:
+    """Compile the Gaussian for one tap stride (1 or 3), for uint8 (``integer``:
+    OpenCV's fixed-point taps) or float32/float64 images; both are compile-time
+    constants, so LLVM sees a literal stride and numba drops the other type's
+    branches."""
 
     @njit(cache=True, nogil=True)
     def blur(src, kx, ky, cidx, ridx, out):  # pragma: no cover - compiled
-        """out = (sum_i ky[i] sum_j kx[j] src[., .] + 2^15) >> 16 with integer taps of
-        sum 256 each (gaussian_kernel_fixed): exact, so the same as OpenCV's order
-        (horizontal first). src, out: (H, W*C) uint8; a border index -1 reads 0.
+        """out = kx (horizontal) o ky (vertical) correlation of src with symmetric
+        kernels; a border index -1 reads 0. src, out: (H, W*C).
 
-        The vertical taps sum into uint16 (at most 255 * 256), the mirrored rows added
-        first and multiplied once; the horizontal taps into uint32, mirrored columns
-        likewise; sixteen and eight lanes."""
+        Mirrored rows (and columns) are added before their one multiply, two pairs
+        per pass, as OpenCV's symmetric column and row filters do: a third fewer
+        operations than a multiply and an add per tap. uint8: integer taps of sum 256
+        each (gaussian_kernel_fixed), vertical sums in uint16 (at most 255 * 256),
+        horizontal in uint32, out = (sum + 2^15) >> 16, exact, so equal to OpenCV's
+        horizontal-first order; sixteen and eight lanes. Float: the image's type."""
         s = stride
         height, n = out.shape
         nx, ny = kx.shape[0], ky.shape[0]
         ax, ay = nx // 2, ny // 2
-        col = np.zeros(cidx.shape[0] * s, np.uint16)  # one row's vertical sums, padded
-        acc = np.empty(n, np.uint32)
+        # one row's vertical sums, padded by the border columns
+        col = np.zeros(cidx.shape[0] * s, np.uint16 if integer else src.dtype)
+        acc = np.empty(n if integer else 0, np.uint32)
+        zero = np.zeros(n, src.dtype)
+        wz = np.zeros(1, ky.dtype)[0]  # a weight 0 of the taps' type
         inner = col[ax * s : ax * s + n]
         for y in range(height):
-            r, wc = ridx[y + ay], ky[ay]
-            if r >= 0:
-                row = src[r]
+            # the centre row joins the first pass of mirrored pairs (taken out of the
+            # loop by LLVM: the test on `first` does not change within a row)
+            r = ridx[y + ay]
+            row, wc = (src[r] if r >= 0 else zero), ky[ay]
+            if ay == 0:
                 for x in range(n):
                     inner[x] = wc * row[x]
-            else:
-                for x in range(n):
-                    inner[x] = 0
-            t = 0
+            t, first = 0, True
             while t < ay:
+                # up to three mirrored pairs per pass; a pass of fewer repeats its
+                # first pair with weight 0
+                g = min(3, ay - t)
+                k2, k3 = (t + 1 if g == 3 else t), (t + g - 1)
                 ra, rb, w = ridx[y + t], ridx[y + ny - 1 - t], ky[t]
-                if t + 1 < ay and min(ra, rb, ridx[y + t + 1], ridx[y + ny - 2 - t]) >= 0:
-                    # two mirrored pairs per pass (the sum stays in a register)
-                    a, b, v = src[ra], src[rb], ky[t + 1]
-                    c, d = src[ridx[y + t + 1]], src[ridx[y + ny - 2 - t]]
+                rc, rd, v = ridx[y + k2], ridx[y + ny - 1 - k2], (ky[k2] if g == 3 else wz)
+                re, rf, u = ridx[y + k3], ridx[y + ny - 1 - k3], (ky[k3] if g >= 2 else wz)
+                a, b = (src[ra] if ra >= 0 else zero), (src[rb] if rb >= 0 else zero)
+                c, d = (src[rc] if rc >= 0 else zero), (src[rd] if rd >= 0 else zero)
+                e, f = (src[re] if re >= 0 else zero), (src[rf] if rf >= 0 else zero)
+                if integer:
                     for x in range(n):
-                        inner[x] += w * (np.uint16(a[x]) + b[x]) + v * (np.uint16(c[x]) + d[x])
-                    t += 2
-                    continue
-                if ra >= 0 and rb >= 0:
-                    a, b = src[ra], src[rb]
+                        base = wc * np.uint16(row[x]) if first else inner[x]
+                        inner[x] = (
+                            base
+                            + w * (np.uint16(a[x]) + b[x])
+                            + v * (np.uint16(c[x]) + d[x])
+                            + u * (np.uint16(e[x]) + f[x])
+                        )
+                else:
                     for x in range(n):
-                        inner[x] += w * (np.uint16(a[x]) + b[x])
-                elif ra >= 0 or rb >= 0:
-                    a = src[max(ra, rb)]
-                    for x in range(n):
-                        inner[x] += w * a[x]
-                t += 1
+                        base = wc * row[x] if first else inner[x]
+                        inner[x] = base + w * (a[x] + b[x]) + v * (c[x] + d[x]) + u * (e[x] + f[x])
+                t, first = t + g, False
             for b in range(nx - 1):  # the padded columns: ax before, as many after
                 p = b if b < ax else cidx.shape[0] - (nx - 1) + b
                 j = cidx[p]
                 for c in range(s):
                     col[p * s + c] = 0 if j < 0 else col[(j + ax) * s + c]
-            wc = np.uint32(kx[ax])
-            for x in range(n):
-                acc[x] = wc * inner[x]
-            t = 0
-            while t < ax:  # two mirrored pairs per pass, as above
-                w, lo, hi = kx[t], col[t * s : t * s + n], col[(nx - 1 - t) * s :]
-                if t + 1 < ax:
-                    v, lo2, hi2 = kx[t + 1], col[(t + 1) * s :], col[(nx - 2 - t) * s :]
-                    for x in range(n):
-                        acc[x] += w * (np.uint32(lo[x]) + hi[x]) + v * (np.uint32(lo2[x]) + hi2[x])
-                    t += 2
-                    continue
-                for x in range(n):
-                    acc[x] += w * (np.uint32(lo[x]) + hi[x])
-                t += 1
             o = out[y]
-            for x in range(n):
-                o[x] = (acc[x] + 32768) >> 16
-
-    return blur
-
-
-_gaussian_u8_gray = _make_gaussian_u8(1)
-_gaussian_u8_rgb = _make_gaussian_u8(3)
-
-
-def _make_gaussian_float(stride: int) -> Callable[..., None]:
-    """Compile the float32/float64 Gaussian for one tap stride (1 or 3)."""
-
-    @njit(cache=True, nogil=True)
-    def blur(src, kx, ky, cidx, ridx, out):  # pragma: no cover - compiled
-        """out = kx (horizontal) o ky (vertical) correlation of src with symmetric
-        kernels, in src's float type; a border index -1 reads 0. Mirrored rows (and
-        columns) are added before their one multiply, two pairs per pass, as OpenCV's
-        symmetric column and row filters do: a third fewer operations than a multiply
-        and an add per tap."""
-        s = stride
-        height, n = out.shape
-        nx, ny = kx.shape[0], ky.shape[0]
-        ax, ay = nx // 2, ny // 2
-        col = np.zeros(cidx.shape[0] * s, src.dtype)  # one row's vertical sums, padded
-        zero = np.zeros(n, src.dtype)
-        inner = col[ax * s : ax * s + n]
-        for y in range(height):
-            r = ridx[y + ay]
-            row, wc = (src[r] if r >= 0 else zero), ky[ay]
-            for x in range(n):
-                inner[x] = wc * row[x]
-            t = 0
-            while t < ay:
-                ra, rb, w = ridx[y + t], ridx[y + ny - 1 - t], ky[t]
-                a, b = (src[ra] if ra >= 0 else zero), (src[rb] if rb >= 0 else zero)
-                if t + 1 < ay:
-                    rc, rd, v = ridx[y + t + 1], ridx[y + ny - 2 - t], ky[t + 1]
-                    c, d = (src[rc] if rc >= 0 else zero), (src[rd] if rd >= 0 else zero)
-                    for x in range(n):
-                        inner[x] = inner[x] + w * (a[x] + b[x]) + v * (c[x] + d[x])
-                    t += 2
-                    continue
+            res = acc if integer else o  # the horizontal sums, passes as above
+            wc = kx[ax]
+            if ax == 0:
                 for x in range(n):
-                    inner[x] = inner[x] + w * (a[x] + b[x])
-                t += 1
-            for b in range(nx - 1):  # the padded columns: ax before, as many after
-                p = b if b < ax else cidx.shape[0] - (nx - 1) + b
-                j = cidx[p]
-                for c in range(s):
-                    col[p * s + c] = 0.0 if j < 0 else col[(j + ax) * s + c]
-            o, wc = out[y], kx[ax]
-            for x in range(n):
-                o[x] = wc * inner[x]
-            t = 0
+                    res[x] = wc * inner[x] if not integer else np.uint32(wc) * inner[x]
+            t, first = 0, True
             while t < ax:
+                g = min(3, ax - t)
+                k2, k3 = (t + 1 if g == 3 else t), (t + g - 1)
                 w, lo, hi = kx[t], col[t * s :], col[(nx - 1 - t) * s :]
-                if t + 1 < ax:
-                    v, lo2, hi2 = kx[t + 1], col[(t + 1) * s :], col[(nx - 2 - t) * s :]
+                v, lo2, hi2 = (kx[k2] if g == 3 else wz), col[k2 * s :], col[(nx - 1 - k2) * s :]
+                u, lo3, hi3 = (kx[k3] if g >= 2 else wz), col[k3 * s :], col[(nx - 1 - k3) * s :]
+                if integer:
                     for x in range(n):
-                        o[x] = o[x] + w * (lo[x] + hi[x]) + v * (lo2[x] + hi2[x])
-                    t += 2
-                    continue
+                        base = np.uint32(wc) * inner[x] if first else res[x]
+                        res[x] = (
+                            base
+                            + w * (np.uint32(lo[x]) + hi[x])
+                            + v * (np.uint32(lo2[x]) + hi2[x])
+                            + u * (np.uint32(lo3[x]) + hi3[x])
+                        )
+                else:
+                    for x in range(n):
+                        base = wc * inner[x] if first else res[x]
+                        res[x] = (
+                            base
+                            + w * (lo[x] + hi[x])
+                            + v * (lo2[x] + hi2[x])
+                            + u * (lo3[x] + hi3[x])
+                        )
+                t, first = t + g, False
+            if integer:
                 for x in range(n):
-                    o[x] = o[x] + w * (lo[x] + hi[x])
-                t += 1
+                    o[x] = (acc[x] + 32768) >> 16
 
     return blur
 
 
-_gaussian_float_gray = _make_gaussian_float(1)
-_gaussian_float_rgb = _make_gaussian_float(3)
+_gaussian_u8_gray = _make_gaussian(1, True)
+_gaussian_u8_rgb = _make_gaussian(3, True)
+_gaussian_float_gray = _make_gaussian(1, False)
+_gaussian_float_rgb = _make_gaussian(3, False)
 
 
 def _gaussian_axis(sigma: float, size: int, dtype: np.dtype, flag: str) -> np.ndarray:
