@@ -39,6 +39,7 @@ __all__ = [
 ]
 
 IMAGE_DTYPES = (np.uint8, np.uint16, np.int16, np.int32, np.float32, np.float64, np.bool_)
+_IMAGE_DTYPE_SET = frozenset(np.dtype(d) for d in IMAGE_DTYPES)
 
 
 def _as_array(value: npt.ArrayLike, name: str) -> np.ndarray:
@@ -86,6 +87,8 @@ def check_dtype(
 ) -> np.ndarray:
     """Return ``value`` as an array whose dtype is one of ``dtypes``."""
     arr = _as_array(value, name)
+    if dtypes is IMAGE_DTYPES and arr.dtype in _IMAGE_DTYPE_SET:
+        return arr  # (the common case, without building the dtypes each call)
     dtypes = tuple(np.dtype(d) for d in dtypes)
     if arr.dtype not in dtypes:
         names = ", ".join(d.name for d in dtypes)
