@@ -260,7 +260,9 @@ class IMMEstimator:
     >>> imm = IMMEstimator([slow, fast], mu=[0.9, 0.1], M=[[0.95, 0.05], [0.05, 0.95]])
     >>> for z in [0.0, 1.0, 2.0, 3.0, 10.0]:  # a jump in speed after z = 3
     ...     imm.predict()
-    ...     imm.update([z])
+    ...     d2 = imm.update([z])  # the measurement's squared distance, as mahalanobis2
+    >>> round(d2, 1)  # the jump is far from both models' predictions
+    10.5
     >>> imm.mu.round(2)  # the manoeuvring model explains the jump
     array([0.02, 0.98])
     """
