@@ -42,11 +42,18 @@ def test_every_zero_one_window(k) -> None:
     centres = (np.arange(len(counts)) * k + k // 2, k // 2)
     got = median_filter(image, k)[centres[1], centres[0]]
     np.testing.assert_array_equal(got, want.astype(np.uint8))
-    # one row above: the centres land on the first row of a pair (the 3x3 kernel does
-    # two rows at a time, inserting a different third row into each)
+    # one row lower, and at the top row (replicate border: the first row repeated),
+    # through the 3x3 kernel's other path (its first and last rows go row by row, the
+    # rows between in one flat loop)
     below = np.vstack([np.zeros((1, image.shape[1]), np.uint8), image])
     got = median_filter(below, k)[centres[1] + 1, centres[0]]
     np.testing.assert_array_equal(got, want.astype(np.uint8))
+    if k == 3:  # the top row's window is rows (0, 0, 1): column counts from 0, 2 or 3
+        top = median_filter(image[1:], k)[0, centres[0]]
+        doubled = image[1] * 2 + image[2]
+        np.testing.assert_array_equal(
+            top, (np.convolve(doubled, np.ones(3), "same")[centres[0]] >= 5)
+        )
     # the same windows in each channel of an RGB image, shifted by one block
     rgb = np.stack([image, np.roll(image, k, axis=1), np.roll(image, -k, axis=1)], axis=-1)
     out = median_filter(rgb, k)[k // 2, centres[0]]

@@ -5,30 +5,37 @@ at OpenCV's speed (``cv2.medianBlur`` sorts 3x3 and 5x5 windows by SIMD min/max
 networks too). Exact: a median is a selection, so every output equals the one of the
 insertion sort it replaces, for every dtype.
 
-Per output row, in two vectorized passes over contiguous arrays (LLVM turns each
-``min``/``max`` into one SIMD instruction, 32 uint8 lanes on AVX2):
+Both select the median from the window's columns sorted top to bottom
+(:math:`S_0 \le S_1 \le \dots \le S_{k-1}` in each column); LLVM turns each ``min`` /
+``max`` into one SIMD instruction (64 uint8 lanes on AVX-512).
 
-1. **Columns.** The ``k`` source rows of the window are sorted column by column into
-   ``S[0] <= S[1] <= ... <= S[k-1]`` (a sorting network of 3 or 9 compare-exchanges per
-   column), over the padded width: each column is sorted once and serves the ``k``
-   windows that contain it. The 3x3 kernel does two output rows at once: their shared
-   source rows are sorted as a pair and each row's third inserted into it (10 min/max
-   for the two rows instead of 12).
-2. **Windows.** For ``k = 3``, with the three sorted columns of a window,
+**3x3.** With the three sorted columns of a window,
 
-   .. math:: \operatorname{med}_9 = \operatorname{med}_3\bigl(\max_j S_0[j],\;
-             \operatorname{med}_3(S_1[j]),\; \min_j S_2[j]\bigr)
+.. math:: \operatorname{med}_9 = \operatorname{med}_3\bigl(\max_j S_0[j],\;
+          \operatorname{med}_3(S_1[j]),\; \min_j S_2[j]\bigr)
 
-   (the sorted-columns form of the 3x3 median, Paeth's and Smith's: 10 min/max per
-   pixel). For ``k = 5`` each rank row
-   ``S_i[x..x+4]`` of the window is sorted across its columns; the matrix then has
-   sorted rows and columns, so entry ``(i, j)`` has at least ``(i+1)(j+1) - 1`` values
-   at or below it and ``(5-i)(5-j) - 1`` at or above. Only the 13 entries with
-   ``(i+1)(j+1) <= 13`` and ``(5-i)(5-j) <= 13`` can be the median; 6 lie surely below
-   it and 6 surely above, so the median of 25 is the median of those 13. The row sorts
-   and a Batcher odd-even merge sort of the 13 (padded to 16 with :math:`+\infty`) are
-   pruned to the operations the median depends on: :func:`median_network` builds them
-   (140 min/max per pixel), and the kernel's body is that list written out.
+(the sorted-columns form of the 3x3 median, Paeth's and Smith's): 6 min/max to sort
+each of the three columns and 12 to combine them, all in registers from nine loads, as
+``cv2.medianBlur`` does with its 19-exchange network. The rows between the first and
+the last are one loop over the flat image (output ``i`` reads source ``i + d`` for the
+nine offsets ``d`` of its window), so no row pays a loop's setup; each row's first and
+last column, where that loop runs across a row's end, and the first and last rows are
+then rewritten through the border map.
+
+**5x5.** Per output row, in two vectorized passes over contiguous arrays:
+
+1. **Columns.** The five source rows of the window are sorted column by column into
+   ``S[0] <= ... <= S[4]`` (the 9-exchange sorting network), over the padded width:
+   each column is sorted once and serves the five windows that contain it.
+2. **Windows.** Each rank row ``S_i[x..x+4]`` of the window is sorted across its
+   columns; the matrix then has sorted rows and columns, so entry ``(i, j)`` has at
+   least ``(i+1)(j+1) - 1`` values at or below it and ``(5-i)(5-j) - 1`` at or above.
+   Only the 13 entries with ``(i+1)(j+1) <= 13`` and ``(5-i)(5-j) <= 13`` can be the
+   median; 6 lie surely below it and 6 surely above, so the median of 25 is the median
+   of those 13. The row sorts and a Batcher odd-even merge sort of the 13 (padded to 16
+   with :math:`+\infty`) are pruned to the operations the median depends on:
+   :func:`median_network` builds them (140 min/max per pixel), and the kernel's body is
+   that list written out.
 
 Correctness of the networks follows from the 0-1 principle (a min/max network that
 selects correctly on every 0/1 input does so on every input); the tests check every
@@ -332,15 +339,71 @@ def _make_median5(stride: int) -> Callable[..., None]:
 # fmt: on
 
 
-def _make_median3(stride: int) -> Callable[..., None]:
-    """Compile the 3x3 median for one tap stride (the channel count), two output rows
-    at a time.
+@njit(cache=True, nogil=True, inline="always")
+def _sort3(a, b, c):  # pragma: no cover - compiled
+    # a column of three, sorted: six min/max
+    lo, hi = min(a, b), max(a, b)
+    return min(lo, c), max(lo, min(hi, c)), max(hi, c)
 
-    Output rows ``y`` and ``y + 1`` share the source rows ``y + 1`` and ``y + 2`` of
-    their windows: that pair is sorted once (one compare-exchange) and each row's third
-    source row is inserted into it (``min``, ``max`` and the median of three from a
-    sorted pair: four operations), 10 min/max for the two rows' sorted columns where
-    two separate 3-sorts take 12, and four source rows read instead of six."""
+
+@njit(cache=True, nogil=True, inline="always")
+def _med9(l0, l1, l2, m0, m1, m2, h0, h1, h2):  # pragma: no cover - compiled
+    # the 3x3 median from its three sorted columns (lows l, middles m, highs h)
+    lo = max(max(l0, l1), l2)
+    hi = min(min(h0, h1), h2)
+    me = max(min(m0, m1), min(max(m0, m1), m2))
+    return max(min(lo, me), min(max(lo, me), hi))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _median3_span(t0, t1, t2, m0, m1, m2, b0, b1, b2, out, count):  # pragma: no cover
+    # out[x] = the median of the window whose top, middle and bottom rows are t, m, b
+    # (columns 0, 1, 2 of each), for x in 0..count-1: one vectorized loop
+    for x in range(count):
+        l0, c0, h0 = _sort3(t0[x], m0[x], b0[x])
+        l1, c1, h1 = _sort3(t1[x], m1[x], b1[x])
+        l2, c2, h2 = _sort3(t2[x], m2[x], b2[x])
+        out[x] = _med9(l0, l1, l2, c0, c1, c2, h0, h1, h2)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _median3_columns(r0, r1, r2, o, cidx, s, first, last):  # pragma: no cover - compiled
+    # output columns first and last of one row (every channel), through the border map
+    for xc in (first, last):
+        for c in range(s):
+            j0, j1, j2 = cidx[xc] * s + c, cidx[xc + 1] * s + c, cidx[xc + 2] * s + c
+            l0, c0, h0 = _sort3(r0[j0], r1[j0], r2[j0])
+            l1, c1, h1 = _sort3(r0[j1], r1[j1], r2[j1])
+            l2, c2, h2 = _sort3(r0[j2], r1[j2], r2[j2])
+            o[xc * s + c] = _med9(l0, l1, l2, c0, c1, c2, h0, h1, h2)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _median3_row(r0, r1, r2, o, cidx, s):  # pragma: no cover - compiled
+    # one output row from its three source rows: the interior, then the edge columns
+    n = o.shape[0]
+    w = n // s
+    if w >= 3:
+        m = n - 2 * s
+        _median3_span(
+            r0[:m], r0[s : s + m], r0[2 * s :], r1[:m], r1[s : s + m], r1[2 * s :],
+            r2[:m], r2[s : s + m], r2[2 * s :], o[s : s + m], m,
+        )  # fmt: skip
+        _median3_columns(r0, r1, r2, o, cidx, s, 0, w - 1)
+    else:
+        for xc in range(w):
+            _median3_columns(r0, r1, r2, o, cidx, s, xc, xc)
+
+
+def _make_median3(stride: int) -> Callable[..., None]:
+    """Compile the 3x3 median for one tap stride (the channel count).
+
+    The interior of the image, every row but the first and last, is one loop over the
+    flat array: output ``i`` reads source ``i + d`` for the nine offsets ``d`` of its
+    window (rows ``-n, 0, n`` apart, columns ``-s, 0, s``), so one vectorized loop runs
+    over all the rows with no per-row setup. The positions where that loop wraps from
+    one row's end to the next row's start (each row's first and last column) are then
+    rewritten through the border map, and so are the first and last rows."""
 
     @njit(cache=True, nogil=True)
     def median(src, cidx, ridx, channels, out):  # pragma: no cover - compiled
@@ -348,40 +411,23 @@ def _make_median3(stride: int) -> Callable[..., None]:
         padded column and row indices (border_indices)."""
         s = stride
         height, n = out.shape
-        m = cidx.shape[0] * s  # the padded row length
-        a0, a1, a2 = np.empty(m, src.dtype), np.empty(m, src.dtype), np.empty(m, src.dtype)
-        b0, b1, b2 = np.empty(m, src.dtype), np.empty(m, src.dtype), np.empty(m, src.dtype)
-        for y in range(0, height, 2):
-            two = y + 1 < height
-            # 1. the sorted columns of both rows' windows (the interior, then the border)
-            r0, r1, r2 = src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]]
-            r3 = src[ridx[y + 3]] if two else r2
-            lo_a, me_a, hi_a = a0[s : s + n], a1[s : s + n], a2[s : s + n]
-            lo_b, me_b, hi_b = b0[s : s + n], b1[s : s + n], b2[s : s + n]
-            for x in range(n):
-                p, q = min(r1[x], r2[x]), max(r1[x], r2[x])
-                a, d = r0[x], r3[x]
-                lo_a[x], me_a[x], hi_a[x] = min(a, p), max(p, min(a, q)), max(a, q)
-                lo_b[x], me_b[x], hi_b[x] = min(d, p), max(p, min(d, q)), max(d, q)
-            for b in range(2):  # the padded column on each side
-                p = 0 if b == 0 else cidx.shape[0] - 1
-                q = (cidx[p] + 1) * s
-                for c in range(s):
-                    a0[p * s + c], a1[p * s + c], a2[p * s + c] = a0[q + c], a1[q + c], a2[q + c]
-                    b0[p * s + c], b1[p * s + c], b2[p * s + c] = b0[q + c], b1[q + c], b2[q + c]
-            # 2. the windows: med3(max of the lows, med3 of the middles, min of the highs)
-            for row in range(2 if two else 1):
-                s0, s1, s2 = (a0, a1, a2) if row == 0 else (b0, b1, b2)
-                o = out[y + row]
-                lo0, lo1, lo2 = s0[:n], s0[s : s + n], s0[2 * s : 2 * s + n]
-                me0, me1, me2 = s1[:n], s1[s : s + n], s1[2 * s : 2 * s + n]
-                hi0, hi1, hi2 = s2[:n], s2[s : s + n], s2[2 * s : 2 * s + n]
-                for x in range(n):
-                    lo = max(max(lo0[x], lo1[x]), lo2[x])
-                    hi = min(min(hi0[x], hi1[x]), hi2[x])
-                    a, b, c = me0[x], me1[x], me2[x]
-                    me = max(min(a, b), min(max(a, b), c))
-                    o[x] = max(min(lo, me), min(max(lo, me), hi))
+        interior = height >= 3 and n >= 3 * s
+        if interior:
+            fs, fo = src.reshape(-1), out.reshape(-1)
+            a = n + s  # row 1, column 1: the first interior output
+            e = (height - 1) * n - s  # past row height - 2, column w - 2
+            _median3_span(
+                fs[a - n - s : e - n - s], fs[a - n : e - n], fs[a - n + s : e - n + s],
+                fs[a - s : e - s], fs[a:e], fs[a + s : e + s],
+                fs[a + n - s : e + n - s], fs[a + n : e + n], fs[a + n + s : e + n + s],
+                fo[a:e], e - a,
+            )  # fmt: skip
+            for y in range(1, height - 1):  # the columns where the flat loop wrapped
+                r0, r1, r2 = src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]]
+                _median3_columns(r0, r1, r2, out[y], cidx, s, 0, n // s - 1)
+        for y in range(height):
+            if not interior or y == 0 or y == height - 1:
+                _median3_row(src[ridx[y]], src[ridx[y + 1]], src[ridx[y + 2]], out[y], cidx, s)
 
     return median
 
