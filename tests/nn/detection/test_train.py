@@ -24,10 +24,25 @@ def test_resolve_device_and_deterministic_algorithms():
     assert resolve_device("cpu") == torch.device("cpu")
     with pytest.raises(InputError, match="device"):
         resolve_device("gpu7")
+    import torch.utils.deterministic as torch_deterministic
+
     before = torch.are_deterministic_algorithms_enabled()
     with deterministic_algorithms():
         assert torch.are_deterministic_algorithms_enabled()
+        assert torch.is_deterministic_algorithms_warn_only_enabled()
+        # torch.empty's NaN fill is off in the block (it cost 2-3 % of an epoch)
+        assert not torch_deterministic.fill_uninitialized_memory
     assert torch.are_deterministic_algorithms_enabled() == before
+    assert torch_deterministic.fill_uninitialized_memory  # torch's default, restored
+    # a caller's own settings come back as they were
+    torch.use_deterministic_algorithms(True)
+    try:
+        with deterministic_algorithms():
+            pass
+        assert torch.are_deterministic_algorithms_enabled()
+        assert not torch.is_deterministic_algorithms_warn_only_enabled()
+    finally:
+        torch.use_deterministic_algorithms(before)
 
 
 def test_seeded_determinism():

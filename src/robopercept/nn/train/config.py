@@ -292,15 +292,29 @@ def deterministic_algorithms() -> Iterator[None]:
     (``torch.use_deterministic_algorithms(True, warn_only=True)``), restored after:
     the same seed and thread count give bit-identical training runs on the CPU.
 
+    torch's companion setting ``torch.utils.deterministic.fill_uninitialized_memory``
+    (on by default with deterministic algorithms: every ``torch.empty`` is filled with
+    NaN, so that an operation that reads memory it never wrote gives the same result
+    every time) is turned off in the block. The fill cost 2-3 % of a training epoch of
+    the digits CNN (``python -m benchmarks nn_ops``), and only a faulty operation
+    reads memory it did not write; the trainers' seeded-determinism tests
+    (bit-identical runs) hold without it.
+
     Examples
     --------
     >>> with deterministic_algorithms():
     ...     torch.are_deterministic_algorithms_enabled()
     True
     """
+    import torch.utils.deterministic as torch_deterministic
+
     before = torch.are_deterministic_algorithms_enabled()
+    warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
+    fill = torch_deterministic.fill_uninitialized_memory
     torch.use_deterministic_algorithms(True, warn_only=True)
+    torch_deterministic.fill_uninitialized_memory = False
     try:
         yield
     finally:
-        torch.use_deterministic_algorithms(before)
+        torch.use_deterministic_algorithms(before, warn_only=warn_only)
+        torch_deterministic.fill_uninitialized_memory = fill
