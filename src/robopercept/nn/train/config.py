@@ -306,15 +306,16 @@ def deterministic_algorithms() -> Iterator[None]:
     ...     torch.are_deterministic_algorithms_enabled()
     True
     """
+    # a property of torch's module object, which its type stubs do not declare
     import torch.utils.deterministic as torch_deterministic
 
     before = torch.are_deterministic_algorithms_enabled()
     warn_only = torch.is_deterministic_algorithms_warn_only_enabled()
-    fill = torch_deterministic.fill_uninitialized_memory
+    fill = torch_deterministic.fill_uninitialized_memory  # type: ignore[attr-defined]
     torch.use_deterministic_algorithms(True, warn_only=True)
-    torch_deterministic.fill_uninitialized_memory = False
+    torch_deterministic.fill_uninitialized_memory = False  # type: ignore[attr-defined]
     try:
         yield
     finally:
         torch.use_deterministic_algorithms(before, warn_only=warn_only)
-        torch_deterministic.fill_uninitialized_memory = fill
+        torch_deterministic.fill_uninitialized_memory = fill  # type: ignore[attr-defined]
