@@ -1478,9 +1478,10 @@ def median_filter(
     """Median of each ``ksize x ksize`` window, per channel.
 
     Matches ``cv2.medianBlur(image, ksize)`` (which replicates the border) exactly.
-    ``ksize`` 3 and 5 run as vectorized min/max networks over column-sorted rows
-    (:mod:`robopercept.imaging.median_networks`, at or below ``cv2.medianBlur``'s
-    single-thread time for 5x5); wider windows sort each window by insertion.
+    ``ksize`` 3 and 5 run as vectorized min/max networks on the window's sorted
+    columns (:mod:`robopercept.imaging.median_networks`, at or below
+    ``cv2.medianBlur``'s single-thread time); wider windows sort each window by
+    insertion.
 
     Parameters
     ----------
