@@ -203,3 +203,32 @@ def test_lagged_model_edge_values_still_work():
     assert a.shape == q.shape == (10, 10)
     np.testing.assert_array_equal(a[4:6, :2], np.eye(2))  # p_{t-1} <- p_t
     assert q[4:, :].sum() == 0.0
+
+
+def test_recorded_intervals_reuse_their_models_and_give_the_same_track(monkeypatch):
+    # timestamps written to the microsecond (a TUM folder) make the interval flicker
+    # between a few floats (0.033333, 0.033334, ...): the bank's models are kept per
+    # interval, not rebuilt on every flicker, and the track is the one rebuilding gives
+    import robopercept.tracking.gated as gated
+
+    times = np.array([float(f"{i / 30:.6f}") for i in range(300)])
+    assert 2 < len(np.unique(np.diff(times))) < 30  # a few distinct intervals
+    rng = np.random.default_rng(3)
+    zs = [np.array([0.2 * np.sin(t), 0.1, 1.0 + 0.1 * t]) + rng.normal(0, 1e-3, 3) for t in times]
+
+    def run() -> tuple[list[np.ndarray], gated.GatedTrack]:
+        track = gated.GatedTrack(GatedTrackConfig(smoothing_lag=2), dim=3)
+        out = []
+        for t, z in zip(times, zs, strict=True):
+            track.predict(t)
+            out.append(track.step(z, R).position)
+        return out, track
+
+    kept, track = run()
+    models = track._filter._models  # the cache under test
+    assert len(models) == len(np.unique(np.diff(times)))  # one entry per interval
+    assert all(not a.flags.writeable for pair in next(iter(models.values())) for a in pair)
+    monkeypatch.setattr(gated, "_MODEL_CACHE", 0)  # every change of interval rebuilds
+    rebuilt, _ = run()
+    for a, b in zip(kept, rebuilt, strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -20,7 +20,7 @@ from robopercept.tracking import (
     kf_update,
     rts_smooth,
 )
-from robopercept.tracking.kalman import mahalanobis_logdet
+from robopercept.tracking.kalman import kinematic_matrices, mahalanobis_logdet
 
 
 def test_scalar_hand_case():
@@ -363,3 +363,35 @@ def test_rts_smooth_properties():
 def test_rts_smooth_bad_input(args, exc, match):
     with pytest.raises(exc, match=match):
         rts_smooth(*args)
+
+
+def test_kinematic_matrices_are_the_models_own_and_filterpys():
+    # the A and Q a running filter is given when its interval changes (GatedTrack): the
+    # arrays the model constructors build, bit for bit, and filterpy's white-noise Q
+    from robopercept.tracking import constant_acceleration, constant_position
+
+    builders = {0: constant_position, 1: constant_velocity, 2: constant_acceleration}
+    for order, build in builders.items():
+        for dim, dt, q in ((1, 0.5, 4.0), (3, 1 / 30, 500.0), (2, 0.033334, 0.0), (4, 7.0, 1e-3)):
+            A, Q = kinematic_matrices(order, dim, dt, q)
+            kf = build(dim, dt, q, 1.0)
+            assert A.shape == Q.shape == ((order + 1) * dim,) * 2
+            np.testing.assert_array_equal(A, kf.A)
+            np.testing.assert_array_equal(Q, kf.Q)
+    # one dimension: filterpy's Q_discrete_white_noise (dt 0.1, variance 2)
+    _, Q = kinematic_matrices(1, 1, 0.1, 2.0)
+    np.testing.assert_allclose(Q, Q_discrete_white_noise(2, dt=0.1, var=2.0), rtol=1e-15)
+    _, Q = kinematic_matrices(2, 1, 0.1, 2.0)
+    np.testing.assert_allclose(Q, Q_discrete_white_noise(3, dt=0.1, var=2.0), rtol=1e-15)
+    # the hand case: A = [[1, dt], [0, 1]], Q = q [dt^4/4, dt^3/2; dt^3/2, dt^2]
+    A, Q = kinematic_matrices(1, 1, 0.5, 4.0)
+    assert A.tolist() == [[1.0, 0.5], [0.0, 1.0]]
+    assert Q.tolist() == [[0.0625, 0.25], [0.25, 1.0]]
+    for call, match in (
+        (lambda: kinematic_matrices(3, 1, 1.0, 1.0), "order must be 0, 1 or 2"),
+        (lambda: kinematic_matrices(1, 1, 0.0, 1.0), "dt"),
+        (lambda: kinematic_matrices(1, 1, 1.0, -1.0), "q"),
+        (lambda: kinematic_matrices(1, 0, 1.0, 1.0), "dim"),
+    ):
+        with pytest.raises(InputError, match=match):
+            call()

@@ -80,7 +80,7 @@ from robopercept._checks import (
 )
 from robopercept.errors import InputError
 from robopercept.tracking.imm import IMMEstimator
-from robopercept.tracking.kalman import MAX_DIM, KalmanFilter, check_dim, constant_velocity
+from robopercept.tracking.kalman import MAX_DIM, KalmanFilter, check_dim, kinematic_matrices
 
 __all__ = ["GatedTrack", "GatedTrackConfig", "TrackStatus", "TrackStep", "lagged_model"]
 
@@ -281,6 +281,12 @@ def _lagged(A: np.ndarray, Q: np.ndarray, k: int, lag: int) -> tuple[np.ndarray,
     return a, q
 
 
+#: the most frame intervals a track keeps models for: a recording's timestamps, written
+#: to the microsecond (TUM), give a handful of distinct intervals (16 over 3,000 frames at
+#: 30 fps), each of which would otherwise rebuild every model of the bank
+_MODEL_CACHE = 64
+
+
 class _Filter:
     """The motion filter of one track: an IMM of constant-velocity models (one Kalman
     filter when a single process noise is given), on the state augmented with the last
@@ -307,6 +313,7 @@ class _Filter:
             filters.append(KalmanFilter(n, k, x=x, P=P, H=H, R=R))
         m = len(filters)
         self._dt = math.nan  # the interval the filters' A, Q are built for
+        self._models: dict[float, list[tuple[np.ndarray, np.ndarray]]] = {}  # by interval
         self.imm: IMMEstimator | None = None
         self.kf: KalmanFilter | None = None
         if m == 1:
@@ -323,9 +330,20 @@ class _Filter:
         # their last bits from frame to frame)
         if not abs(dt - self._dt) <= 1e-9:
             filters = self.imm.filters if self.imm is not None else [self.kf]
-            for f, q in zip(filters, self.qs, strict=True):
-                m = constant_velocity(self.k, dt, q, 1.0)
-                f.A, f.Q = _lagged(m.A, m.Q, self.k, self.lag)  # type: ignore[union-attr]
+            models = self._models.get(dt)
+            if models is None:  # the intervals a recording's timestamps give are few
+                if len(self._models) >= _MODEL_CACHE:
+                    self._models.clear()
+                models = [
+                    _lagged(*kinematic_matrices(1, self.k, dt, q), self.k, self.lag)
+                    for q in self.qs
+                ]  # constant velocity, with the lagged positions
+                for pair in models:  # shared by every later frame of this interval
+                    for a in pair:
+                        a.setflags(write=False)
+                self._models[dt] = models
+            for f, (A, Q) in zip(filters, models, strict=True):
+                f.A, f.Q = A, Q  # type: ignore[union-attr]
             self._dt = dt
         if self.imm is not None:
             self.imm.predict()

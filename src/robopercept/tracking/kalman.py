@@ -56,6 +56,7 @@ __all__ = [
     "constant_velocity",
     "kf_predict",
     "kf_update",
+    "kinematic_matrices",
     "mahalanobis_logdet",
     "rts_smooth",
 ]
@@ -668,13 +669,46 @@ def rts_smooth(
     return x, P
 
 
-def _kinematic(order: int, dim: int, dt: float, q: float, r: float) -> KalmanFilter:
-    """State ``[p (dim), v (dim), a (dim)]`` up to ``order``; position measured."""
+def kinematic_matrices(order: int, dim: int, dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    r"""The transition ``A`` and process noise ``Q`` of the kinematic models for one
+    interval: what :func:`constant_position` (``order`` 0), :func:`constant_velocity`
+    (1) and :func:`constant_acceleration` (2) build, without the filter around them (for
+    a running filter whose interval changed; the same arrays, bit for bit).
+
+    State ``[p, v, a]`` up to ``order``, each ``dim`` long:
+    :math:`A = a_1 \otimes I`, :math:`(a_1)_{ij} = \Delta t^{j-i} / (j-i)!` for
+    :math:`j \ge i`; :math:`Q = q\, G G^\top \otimes I`, :math:`G = [\Delta t^2 / 2,
+    \Delta t]` (order 1) or :math:`[\Delta t^2 / 2, \Delta t, 1]` (order 2), the
+    discrete white-noise acceleration models of Bar-Shalom (filterpy's
+    ``Q_discrete_white_noise``); order 0 is the random walk :math:`Q = q \Delta t I`.
+
+    Parameters
+    ----------
+    order : {0, 1, 2}
+    dim : int
+        Values per derivative (the measured position's size).
+    dt : float
+        The interval, > 0.
+    q : float
+        Process noise variance, >= 0.
+
+    Returns
+    -------
+    A, Q : ((order + 1) dim, (order + 1) dim) ndarray
+
+    Examples
+    --------
+    >>> A, Q = kinematic_matrices(1, 1, 0.5, 4.0)
+    >>> A.tolist(), Q.tolist()
+    ([[1.0, 0.5], [0.0, 1.0]], [[0.0625, 0.25], [0.25, 1.0]])
+    """
+    order = check_int(order, "order", 0)
+    if order > 2:
+        raise InputError(f"order must be 0, 1 or 2 (position, velocity, acceleration); got {order}")
     # bounds that keep A (dt^2 / 2), Q (q dt^4 / 4) and R below the 1e150 that
     # KalmanFilter accepts (their squares would overflow)
     dt = check_real(dt, "dt", 0.0, 1e12, low_inclusive=False)
     q = check_real(q, "q", 0.0, 1e100)
-    r = check_real(r, "r", 0.0, 1e150, low_inclusive=False)
     n = order + 1
     dim = check_dim(dim, "dim")
     if n * dim > MAX_DIM:
@@ -688,15 +722,31 @@ def _kinematic(order: int, dim: int, dt: float, q: float, r: float) -> KalmanFil
     a1 = np.zeros((n, n))
     for i in range(n):
         for j in range(i, n):
-            a1[i, j] = dt ** (j - i) / float(np.prod(np.arange(1, j - i + 1)))
+            a1[i, j] = dt ** (j - i) / float(math.factorial(j - i))
     if order == 0:
         q1 = np.array([[q * dt]])  # random walk: variance grows with time
     else:
         g = np.array([dt ** (2 - j) / (2.0 if j == 0 else 1.0) for j in range(n)])
         q1 = q * np.outer(g, g)
+    # a1 (x) I and q1 (x) I (Kronecker products; every entry of a1 and q1 is >= 0, so
+    # the blocks' off-diagonal zeros are +0.0 as np.kron gives them), written block
+    # diagonal by block diagonal: a third of np.kron's time, called on every change of
+    # a running filter's interval
+    idx = np.arange(dim)
+    A = np.zeros((n, dim, n, dim))
+    Q = np.zeros((n, dim, n, dim))
+    A[:, idx, :, idx] = a1
+    Q[:, idx, :, idx] = q1
+    return A.reshape(n * dim, n * dim), Q.reshape(n * dim, n * dim)
+
+
+def _kinematic(order: int, dim: int, dt: float, q: float, r: float) -> KalmanFilter:
+    """State ``[p (dim), v (dim), a (dim)]`` up to ``order``; position measured."""
+    A, Q = kinematic_matrices(order, dim, dt, q)
+    r = check_real(r, "r", 0.0, 1e150, low_inclusive=False)
+    dim = A.shape[0] // (order + 1)
+    n = order + 1
     eye = np.eye(dim)
-    A = np.kron(a1, eye)
-    Q = np.kron(q1, eye)
     H = np.zeros((dim, n * dim))
     H[:, :dim] = eye
     return KalmanFilter(n * dim, dim, A=A, Q=Q, H=H, R=r * eye, P=np.eye(n * dim))
