@@ -108,3 +108,6 @@ def test_bad_arguments() -> None:
     idx = np.arange(10) - 1
     with pytest.raises(ValueError, match="k 3 or 5 and 1 or 3 channels"):
         mn.median_rows(src, idx.clip(0, 3), idx.clip(0, 2)[:5], 2, 3, src.copy())
+    wide = np.zeros((3, 16), np.uint8)
+    with pytest.raises(ValueError, match="C-contiguous"):
+        mn.median_rows(wide[:, ::2], idx.clip(0, 7), idx.clip(0, 2)[:5], 1, 3, src.copy())

@@ -447,7 +447,7 @@ def median_rows(
     ----------
     src, out : (H, W*C) ndarray
         The image as rows (channels interleaved), and the output of the same shape and
-        dtype.
+        dtype, both C-contiguous.
     cidx, ridx : (W + k - 1,), (H + k - 1,) ndarray of int
         The source column and row of each padded position
         (:func:`robopercept.imaging.filters.border_indices`, a border without
@@ -457,6 +457,8 @@ def median_rows(
     k : int
         3 or 5.
     """
+    if not (src.flags.c_contiguous and out.flags.c_contiguous):
+        raise ValueError("median_rows takes C-contiguous src and out (np.ascontiguousarray)")
     if (k, channels) == (3, 1):
         _median3_gray(src, cidx, ridx, 1, out)
     elif (k, channels) == (3, 3):
