@@ -515,8 +515,8 @@ def roi_pool(
     Without a gradient to keep, on a CPU float input, the forward is a compiled loop
     over each bin's window (onnxruntime's ``MaxRoiPool``, equal to it; tested), not the
     gathered windows the gradient needs: the map is copied channels last (one pass over
-    it), so that each window cell's channels are one contiguous vector max (six times
-    onnxruntime's speed on 512 regions of a 64-channel map, ``python -m benchmarks
+    it), so that each window cell's channels are one contiguous vector max (about four
+    times onnxruntime's speed on 512 regions of a 64-channel map, ``python -m benchmarks
     nn_ops``).
 
     Parameters
