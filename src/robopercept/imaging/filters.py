@@ -1098,8 +1098,8 @@ _gaussian_float_gray = _make_gaussian(1, False)
 _gaussian_float_rgb = _make_gaussian(3, False)
 
 
-def _gaussian_axis(sigma: float, size: int, dtype: np.dtype, flag: str) -> np.ndarray:
-    # the kernel of one axis of gaussian_blur: size 0 is automatic (OpenCV's rule)
+def _gaussian_size(sigma: float, size: int, dtype: np.dtype, flag: str) -> int:
+    # the kernel size of one axis of gaussian_blur: size 0 is automatic (OpenCV's rule)
     if size == 0:
         if sigma == 0.0:
             raise InputError(
@@ -1107,7 +1107,18 @@ def _gaussian_axis(sigma: float, size: int, dtype: np.dtype, flag: str) -> np.nd
                 "ksize (e.g. ksize=5) or sigma > 0 (the size then follows OpenCV's rule)"
             )
         size = gaussian_ksize(sigma, dtype)
-    return gaussian_kernel(sigma, size)
+    return size
+
+
+@functools.lru_cache(maxsize=64)
+def _gaussian_taps(sigma: float, size: int, dtype: str) -> np.ndarray:
+    """The taps of one axis for :func:`gaussian_blur`'s compiled passes, computed once
+    per (sigma, size, image dtype): OpenCV's 8-bit fixed-point kernel as uint16 for
+    uint8 images, the float kernel in the image's type for float32 and float64 (the
+    kernels cost more than filtering a small image). Internal: never handed out."""
+    if dtype == "uint8":
+        return gaussian_kernel_fixed(sigma, size).astype(np.uint16)
+    return gaussian_kernel(sigma, size).astype(dtype)
 
 
 def _pair(value: object, name: str) -> tuple[int, int]:
@@ -1257,18 +1268,15 @@ def gaussian_blur(
     for k in (kw, kh):
         if k != 0:  # 0 is automatic, as OpenCV's (0, 0)
             _check_taps(check_odd_size(k, "ksize"), "ksize", "pass a smaller odd ksize")
-    kx = _gaussian_axis(sx, kw, image.dtype, "kernel width")
-    ky = kx if (sy, kh) == (sx, kw) else _gaussian_axis(sy, kh, image.dtype, "kernel height")
+    nx = _gaussian_size(sx, kw, image.dtype, "kernel width")
+    ny = nx if (sy, kh) == (sx, kw) else _gaussian_size(sy, kh, image.dtype, "kernel height")
     if image.dtype in (np.uint8, np.float32, np.float64):
         # mirrored taps added first, as OpenCV's symmetric filters; uint8 with OpenCV's
         # fixed-point kernels in integers (its result to the bit), float in the
         # image's type (within 3e-7 of OpenCV on [0, 1] float32 data)
         u8 = image.dtype == np.uint8
-        if u8:
-            tx = gaussian_kernel_fixed(sx, kx.size).astype(np.uint16)
-            ty = tx if ky is kx else gaussian_kernel_fixed(sy, ky.size).astype(np.uint16)
-        else:
-            tx, ty = kx.astype(image.dtype), ky.astype(image.dtype)
+        tx = _gaussian_taps(sx, nx, image.dtype.name)
+        ty = _gaussian_taps(sy, ny, image.dtype.name)
         src, channels = _as_rows(image)
         h, w = image.shape[:2]
         cidx = _border_map(w, tx.size // 2, tx.size // 2, border)
@@ -1281,6 +1289,8 @@ def gaussian_blur(
         )
         (gray if channels == 1 else rgb)(src, tx, ty, cidx, ridx, out)
         return out.reshape(image.shape)
+    kx = gaussian_kernel(sx, nx)
+    ky = kx if (sy, ny) == (sx, nx) else gaussian_kernel(sy, ny)
     return separable_filter_unchecked(image, kx, ky, border, 0.0, image.dtype)
 
 
