@@ -211,12 +211,6 @@ def _compiled_forward(x: torch.Tensor) -> bool:
     )
 
 
-def _channels_last(x: torch.Tensor) -> np.ndarray:
-    """The CPU map ``(N, C, H, W)`` the compiled forwards read, copied to ``(N, H, W, C)``
-    (one pass over it), so that a cell's channels are one contiguous vector."""
-    return np.ascontiguousarray(x.detach().numpy().transpose(0, 2, 3, 1))
-
-
 @njit(cache=True, nogil=True, parallel=True)
 def _roi_pool_kernel(xt, bidx, hs, he, ws, we, out):  # pragma: no cover - compiled
     # RoI max pooling forward (parallel over regions) on the channels-last map xt
@@ -372,7 +366,8 @@ def roi_align(
         # no gradient wanted: the compiled forward (the regions' windows only, as
         # onnxruntime's kernel; the dense products below cost ten times the work)
         res = np.empty((K, C, P, Q), dtype=np.float32 if dt == torch.float32 else np.float64)
-        xt = _channels_last(x)
+        # channels last, so that a cell's channels are one contiguous vector
+        xt = np.ascontiguousarray(x.detach().numpy().transpose(0, 2, 3, 1))
         _roi_align_kernel(
             xt, bidx.cpu().numpy(), r.numpy(), rw.numpy(), rh.numpy(), gh.numpy(),
             gw.numpy(), res,
@@ -575,7 +570,8 @@ def roi_pool(
     ws, we = bands(r[:, 0], r[:, 2], Q, W)
     if _compiled_forward(x):  # each bin's window only (as onnxruntime's MaxRoiPool)
         res = np.empty((K, C, P, Q), dtype=np.float32 if x.dtype == torch.float32 else np.float64)
-        xt = _channels_last(x)
+        # channels last, so that a window cell's channels are one contiguous vector
+        xt = np.ascontiguousarray(x.detach().numpy().transpose(0, 2, 3, 1))
         _roi_pool_kernel(
             xt, bidx.cpu().numpy(), hs.numpy(), he.numpy(), ws.numpy(), we.numpy(), res
         )
